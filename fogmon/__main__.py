@@ -1,0 +1,5 @@
+import sys
+
+from fogmon.cli import main
+
+sys.exit(main())

@@ -1,0 +1,6 @@
+"""User-facing errors: one line, no traceback, exit code 2 from the CLI."""
+
+
+class FogmonError(Exception):
+    """A user mistake or bad input. The message is one line naming what was wrong
+    (file, line, field where known); the CLI prints it and exits with code 2."""
