@@ -1,0 +1,199 @@
+"""Physical effects (CONTRACT section 2) as pure functions of time, aux channels and
+parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
+
+- mean-type: ``mean_rate_dph(effect, t_s, aux, fs_hz)`` -> deterministic deg/h
+  contribution (thermal_drift, periodic, glitches, bias_step, rate_ramp, scale_factor,
+  warm_up). Each is linear in its amplitude-type parameters, so a fitter can evaluate
+  it with one coefficient set to 1 to get a regressor.
+- white-level: ``white_level_dpsh(effect, t_s, aux)`` -> added ARW level in deg/sqrt(h)
+  per sample (vibration_noise, temperature_noise); the simulator scales one white
+  sequence by N0 + sum of these (floored at 0).
+- noise: ``noise_generator(effect, fs_hz, rng)`` -> a stateful generator (markov).
+- filter: ``BandwidthFilter(params, fs_hz)`` applied to the whole simulated rate.
+
+``lookback_s(effect)`` is how much earlier data a mean-type effect needs to be exact
+at the first sample of a chunk (the streaming simulator prepends that much).
+Time ``t_s`` is recording time in s (the recording's own clock with ``--like``).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import butter, lfilter, lfilter_zi, sosfilt, sosfilt_zi
+
+from fogmon.errors import FogmonError
+from fogmon.sim.model import EFFECT_KINDS, Effect
+from fogmon.sim.noise import GaussMarkov
+
+
+def _aux(effect: Effect, aux: dict) -> np.ndarray:
+    name = EFFECT_KINDS[effect.kind].aux
+    if name not in aux:
+        raise FogmonError(f"effect {effect.kind!r} needs the aux channel {name!r}, which the input lacks "
+                          f"(have: {', '.join(aux) or 'none'}); use --like a recording with that column "
+                          f"or a --scenario")
+    return np.asarray(aux[name], dtype=float)
+
+
+def _fs(t_s: np.ndarray, fs_hz: float | None) -> float:
+    if fs_hz:
+        return float(fs_hz)
+    if len(t_s) < 2:
+        raise ValueError("fs_hz is needed for fewer than two samples")
+    return 1.0 / float(np.median(np.diff(t_s)))
+
+
+def smoothed_temperature(t_s, temp_c, smooth_s: float) -> np.ndarray:
+    """Trailing moving average of temp_c (deg C) over the samples in (t - smooth_s, t];
+    shorter at the start of the array. smooth_s = 0 returns temp_c."""
+    t = np.asarray(t_s, dtype=float)
+    x = np.asarray(temp_c, dtype=float)
+    if smooth_s <= 0 or len(x) == 0:
+        return x.copy()
+    c = np.concatenate(([0.0], np.cumsum(x - x[0])))
+    hi = np.arange(1, len(x) + 1)
+    lo = np.searchsorted(t, t - smooth_s, side="right")
+    return x[0] + (c[hi] - c[lo]) / (hi - lo)
+
+
+def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0, diff_step_s: float = 1.0):
+    """(T, dT/dt, d2T/dt2) in deg C, deg C/s, deg C/s^2 on smoothed temperature, by
+    3-point backward differences with step h = diff_step_s (DESIGN 4.7):
+    dT = (3 T(t) - 4 T(t-h) + T(t-2h)) / 2h, d2T = (T(t) - 2 T(t-h) + T(t-2h)) / h^2,
+    T(t - h) interpolated on the sample times (held at the first sample before the start)."""
+    t = np.asarray(t_s, dtype=float)
+    ts = smoothed_temperature(t, temp_c, smooth_s)
+    h = float(diff_step_s)
+    t1 = np.interp(t - h, t, ts)
+    t2 = np.interp(t - 2 * h, t, ts)
+    return ts, (3 * ts - 4 * t1 + t2) / (2 * h), (ts - 2 * t1 + t2) / (h * h)
+
+
+def thermal_drift(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """K0(T) + K1 dT/dt + K2 d2T/dt2 (deg/h); K1, K2 take the *_pos values where
+    dT/dt * d2T/dt2 > 0 (heating or cooling accelerates) and *_neg elsewhere."""
+    ts, d1, d2 = temperature_derivatives(t_s, aux["temp_c"], p["smooth_s"], p["diff_step_s"])
+    pos = d1 * d2 > 0
+    k1 = np.where(pos, p["k1_pos"], p["k1_neg"])
+    k2 = np.where(pos, p["k2_pos"], p["k2_neg"])
+    k0 = np.polynomial.polynomial.polyval(ts, p["k0_poly_dph"]) if p["k0_poly_dph"] else 0.0
+    return k0 + k1 * d1 + k2 * d2
+
+
+def periodic(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """A sin(2 pi t / P + phase) deg/h."""
+    return p["amplitude_dph"] * np.sin(2 * np.pi * np.asarray(t_s, float) / p["period_s"] + p["phase_rad"])
+
+
+def glitches(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """Spikes: each amplitude on the one sample nearest its time (width_s = 0), or on
+    every sample in [t_i, t_i + width_s)."""
+    t = np.asarray(t_s, dtype=float)
+    out = np.zeros(len(t))
+    half = 0.5 / _fs(t, fs_hz) if p["width_s"] <= 0 and len(t) else 0.0
+    for ti, ai in zip(p["times_s"], p["amplitudes_dph"]):
+        if p["width_s"] > 0:
+            out[(t >= ti) & (t < ti + p["width_s"])] += ai
+        else:
+            out[(t >= ti - half) & (t < ti + half)] += ai
+    return out
+
+
+def bias_step(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """step_dph for t >= t_s (deg/h)."""
+    return np.where(np.asarray(t_s, float) >= p["t_s"], p["step_dph"], 0.0)
+
+
+def rate_ramp(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """slope (deg/h^2) * (t - t0) / 3600 for t >= t0 (deg/h)."""
+    dt = np.asarray(t_s, float) - p["t0_s"]
+    return np.where(dt >= 0, p["slope_dphh"] * dt / 3600.0, 0.0)
+
+
+def scale_factor(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """3600 rot_dps (ppm + sign(rot) asym_ppm / 2) 1e-6 (deg/h)."""
+    rot = np.asarray(aux["rot_dps"], dtype=float)
+    return 3600.0 * rot * (p["ppm"] + np.sign(rot) * p["asym_ppm"] / 2.0) * 1e-6
+
+
+def warm_up(t_s, aux, p, fs_hz=None) -> np.ndarray:
+    """A exp(-(t - t0) / tau) for t >= t0 (deg/h)."""
+    dt = np.asarray(t_s, float) - p["t0_s"]
+    return np.where(dt >= 0, p["amplitude_dph"] * np.exp(-np.maximum(dt, 0.0) / p["tau_s"]), 0.0)
+
+
+def vibration_noise(t_s, aux, p) -> np.ndarray:
+    """Added ARW level gain * vib_g (deg/sqrt(h))."""
+    return p["n_gain_dpsh_per_g"] * np.asarray(aux["vib_g"], dtype=float)
+
+
+def temperature_noise(t_s, aux, p) -> np.ndarray:
+    """Added ARW level gain * (temp_c - t_ref_c) (deg/sqrt(h))."""
+    return p["n_gain_dpsh_per_c"] * (np.asarray(aux["temp_c"], dtype=float) - p["t_ref_c"])
+
+
+MEAN_EFFECTS = {
+    "thermal_drift": thermal_drift, "periodic": periodic, "glitches": glitches,
+    "bias_step": bias_step, "rate_ramp": rate_ramp, "scale_factor": scale_factor, "warm_up": warm_up,
+}
+WHITE_LEVEL_EFFECTS = {"vibration_noise": vibration_noise, "temperature_noise": temperature_noise}
+
+
+def mean_rate_dph(effect: Effect, t_s, aux: dict, fs_hz: float | None = None) -> np.ndarray:
+    """Deterministic rate contribution (deg/h) of a mean-type effect at times t_s (s)."""
+    fn = MEAN_EFFECTS[effect.kind]
+    if EFFECT_KINDS[effect.kind].aux:
+        _aux(effect, aux)
+    return np.broadcast_to(fn(np.asarray(t_s, float), aux, effect.params, fs_hz), np.shape(t_s)).astype(float)
+
+
+def white_level_dpsh(effect: Effect, t_s, aux: dict) -> np.ndarray:
+    """Added white-noise level (deg/sqrt(h)) of a white-level effect at each sample."""
+    _aux(effect, aux)
+    return WHITE_LEVEL_EFFECTS[effect.kind](t_s, aux, effect.params)
+
+
+def noise_generator(effect: Effect, fs_hz: float, rng: np.random.Generator) -> GaussMarkov:
+    """Stateful generator of a noise-type effect (``markov``)."""
+    p = effect.params
+    return GaussMarkov(p["sigma_dph"], p["tau_c_s"], fs_hz, rng)
+
+
+def lookback_s(effect: Effect) -> float:
+    """History (s) a mean-type effect needs before a chunk to be exact on it."""
+    if effect.kind == "thermal_drift":
+        return effect.params["smooth_s"] + 2.0 * effect.params["diff_step_s"]
+    return 0.0
+
+
+class BandwidthFilter:
+    """The sensor's own low-pass: Butterworth (cutoff_hz, order) as second-order
+    sections, or FIR ``taps``; stateful across chunks, started in steady state for the
+    first input value (no start-up transient on a constant bias)."""
+
+    def __init__(self, params: dict, fs_hz: float):
+        if params["taps"]:
+            self.taps = np.asarray(params["taps"], dtype=float)
+            self.sos = None
+        else:
+            if params["cutoff_hz"] >= fs_hz / 2:
+                raise FogmonError(f"bandwidth: cutoff_hz {params['cutoff_hz']:g} must be below "
+                                  f"the Nyquist frequency {fs_hz / 2:g} Hz")
+            self.sos = butter(params["order"], params["cutoff_hz"], fs=fs_hz, output="sos")
+        self._zi = None
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if not len(x):
+            return x.copy()
+        if self.sos is not None:
+            if self._zi is None:
+                self._zi = sosfilt_zi(self.sos) * x[0]
+            y, self._zi = sosfilt(self.sos, x, zi=self._zi)
+        else:
+            if self._zi is None:
+                self._zi = lfilter_zi(self.taps, [1.0]) * x[0] if len(self.taps) > 1 else np.zeros(0)
+            if len(self.taps) > 1:
+                y, self._zi = lfilter(self.taps, [1.0], x, zi=self._zi)
+            else:
+                y = self.taps[0] * x
+        return y

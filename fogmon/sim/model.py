@@ -1,0 +1,347 @@
+"""Sensor model file (CONTRACT section 2): a TOML description of a gyro that
+``fogmon sim`` turns into a recording and ``fogmon explain`` compares recordings with.
+
+``load_model`` validates strictly: an unknown table, key or effect kind, a missing
+required parameter, a negative value where only >= 0 makes sense, or a units-suffix
+typo (``N_dph`` for ``N_dpsh``) is a one-line FogmonError naming the file and the key.
+``save_model`` writes every parameter (defaults included) so that a saved model loads
+back identically (``load_model(p) == model``).
+
+``EFFECT_KINDS`` is the effect catalogue: for each kind its parameters (units, default,
+constraint), the aux channel it needs and its nature:
+
+- ``"mean"``: a deterministic rate contribution in deg/h (``fogmon.sim.effects.mean_rate_dph``),
+  linear in its amplitude-type parameters;
+- ``"white_level"``: adds to the white-noise level N in deg/sqrt(h) sample by sample
+  (``fogmon.sim.effects.white_level_dpsh``); N = N0 + sum of these, the same white
+  sequence scaled;
+- ``"noise"``: an extra stochastic rate term (``markov``);
+- ``"filter"``: acts on the whole simulated rate (``bandwidth``).
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import os
+import tomllib
+from dataclasses import dataclass, field, fields
+
+import tomli_w
+
+from fogmon.errors import FogmonError
+
+#: IEEE-952 noise coefficient keys of the [noise] table and their units.
+NOISE_UNITS = {
+    "Q_arcsec": "arcsec (quantization noise)",
+    "N_dpsh": "deg/sqrt(h) (angle random walk)",
+    "B_dph": "deg/h (bias instability)",
+    "K_dphsh": "deg/h/sqrt(h) (rate random walk)",
+    "R_dphh": "deg/h^2 (rate ramp)",
+}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One effect parameter: ``unit`` (text), ``type`` ("float", "int" or "list" of
+    floats), ``check`` ("any", ">=0", ">0"), ``default`` (None: required) and ``doc``."""
+
+    unit: str
+    doc: str
+    type: str = "float"
+    check: str = "any"
+    default: object = None
+
+
+@dataclass(frozen=True)
+class EffectKind:
+    """Catalogue entry: parameters by name, aux channel needed (or None), nature
+    ("mean", "white_level", "noise", "filter") and a one-line description."""
+
+    params: dict
+    aux: str | None
+    nature: str
+    description: str
+
+    @property
+    def required(self) -> tuple[str, ...]:
+        return tuple(k for k, p in self.params.items() if p.default is None)
+
+
+EFFECT_KINDS: dict[str, EffectKind] = {
+    "thermal_drift": EffectKind(
+        {
+            "k0_poly_dph": Param("deg/h per degC^i", "K0(T) = sum_i c_i T^i, ascending powers of temp_c", "list"),
+            "k1_pos": Param("deg/h per degC/s", "K1 while dT/dt * d2T/dt2 > 0 (heating accelerates)"),
+            "k1_neg": Param("deg/h per degC/s", "K1 while dT/dt * d2T/dt2 <= 0 (heating decelerates)"),
+            "k2_pos": Param("deg/h per degC/s^2", "K2 while dT/dt * d2T/dt2 > 0"),
+            "k2_neg": Param("deg/h per degC/s^2", "K2 while dT/dt * d2T/dt2 <= 0"),
+            "smooth_s": Param("s", "trailing moving-average length applied to temp_c first", check=">=0", default=10.0),
+            "diff_step_s": Param("s", "step h of the 3-point backward differences", check=">0", default=1.0),
+        },
+        "temp_c", "mean",
+        "K0(T) + K1*dT/dt + K2*d2T/dt2 on smoothed temperature, K1/K2 by acceleration branch"),
+    "periodic": EffectKind(
+        {
+            "period_s": Param("s", "period of the sinusoid", check=">0"),
+            "amplitude_dph": Param("deg/h", "amplitude", check=">=0"),
+            "phase_rad": Param("rad", "phase at t = 0: A sin(2 pi t / P + phase)"),
+        },
+        None, "mean", "sinusoidal rate term (orbit, drill string, aliased vibration)"),
+    "glitches": EffectKind(
+        {
+            "times_s": Param("s", "glitch times", "list"),
+            "amplitudes_dph": Param("deg/h", "glitch amplitudes (same length as times_s)", "list"),
+            "width_s": Param("s", "glitch duration; 0: the one sample nearest each time", check=">=0", default=0.0),
+        },
+        None, "mean", "isolated spikes added to the samples at the given times"),
+    "bias_step": EffectKind(
+        {
+            "t_s": Param("s", "time of the step"),
+            "step_dph": Param("deg/h", "bias change for t >= t_s"),
+        },
+        None, "mean", "abrupt bias change (power interruption, shock)"),
+    "vibration_noise": EffectKind(
+        {"n_gain_dpsh_per_g": Param("deg/sqrt(h) per g", "N = N0 + gain * vib_g", check=">=0")},
+        "vib_g", "white_level", "white-noise level rising with vibration"),
+    "rate_ramp": EffectKind(
+        {
+            "slope_dphh": Param("deg/h^2", "rate += slope * (t - t0) / 3600 for t >= t0"),
+            "t0_s": Param("s", "start of the ramp"),
+        },
+        None, "mean", "linear drift of the rate"),
+    "scale_factor": EffectKind(
+        {
+            "ppm": Param("ppm", "scale-factor error (mean of positive and negative)"),
+            "asym_ppm": Param("ppm", "asymmetry: scale factor for rot_dps > 0 minus that for < 0"),
+        },
+        "rot_dps", "mean", "scale-factor error on the reference rotation: 3600 rot (ppm +- asym/2) 1e-6"),
+    "markov": EffectKind(
+        {
+            "tau_c_s": Param("s", "correlation time", check=">0"),
+            "sigma_dph": Param("deg/h", "standard deviation of the process", check=">=0"),
+        },
+        None, "noise", "first-order Gauss-Markov (exponentially correlated) rate noise"),
+    "temperature_noise": EffectKind(
+        {
+            "n_gain_dpsh_per_c": Param("deg/sqrt(h) per degC", "N = N0 + gain * (temp_c - t_ref_c), floored at 0"),
+            "t_ref_c": Param("degC", "reference temperature"),
+        },
+        "temp_c", "white_level", "white-noise level changing with temperature"),
+    "warm_up": EffectKind(
+        {
+            "amplitude_dph": Param("deg/h", "rate += A exp(-(t - t0) / tau) for t >= t0"),
+            "tau_s": Param("s", "settling time constant", check=">0"),
+            "t0_s": Param("s", "power-on (or power-cycle) time"),
+        },
+        None, "mean", "exponential settling after power-on"),
+    "bandwidth": EffectKind(
+        {
+            "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (with order; 0 when taps are given)", check=">=0", default=0.0),
+            "order": Param("", "Butterworth order (with cutoff_hz)", "int", ">=0", default=0),
+            "taps": Param("", "FIR coefficients instead of a Butterworth filter", "list", default=[]),
+        },
+        None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate"),
+}
+
+
+@dataclass
+class Noise:
+    """IEEE Std 952 noise coefficients: Q arcsec, N deg/sqrt(h), B deg/h,
+    K deg/h/sqrt(h), R deg/h^2 (all >= 0)."""
+
+    Q_arcsec: float = 0.0
+    N_dpsh: float = 0.0
+    B_dph: float = 0.0
+    K_dphsh: float = 0.0
+    R_dphh: float = 0.0
+
+
+@dataclass
+class Effect:
+    """A physical effect: ``kind`` from EFFECT_KINDS and its parameters by name."""
+
+    kind: str
+    params: dict = field(default_factory=dict)
+
+
+@dataclass
+class SensorModel:
+    """A simulated gyro: sample rate (Hz), constant bias (deg/h), IEEE-952 noise,
+    effects, and free-form ``meta`` strings (the optional [meta] table)."""
+
+    sample_rate_hz: float
+    bias_dph: float = 0.0
+    noise: Noise = field(default_factory=Noise)
+    effects: list[Effect] = field(default_factory=list)
+    meta: dict[str, str] = field(default_factory=dict)
+
+
+def _close(key: str, options) -> str:
+    m = difflib.get_close_matches(key, list(options), n=1, cutoff=0.5)
+    return f"; did you mean {m[0]!r}?" if m else ""
+
+
+def _number(v, where: str, check: str = "any", integer: bool = False):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise FogmonError(f"{where}: expected a number, got {v!r}")
+    if integer:
+        if isinstance(v, float) and not v.is_integer():
+            raise FogmonError(f"{where}: expected an integer, got {v!r}")
+        v = int(v)
+    else:
+        v = float(v)
+        if not math.isfinite(v):
+            raise FogmonError(f"{where}: must be a finite number, got {v!r}")
+    if check == ">=0" and v < 0:
+        raise FogmonError(f"{where}: must be >= 0, got {v!r}")
+    if check == ">0" and v <= 0:
+        raise FogmonError(f"{where}: must be > 0, got {v!r}")
+    return v
+
+
+def validate_effect(kind: str, params: dict, where: str = "effect") -> Effect:
+    """Check ``params`` against the catalogue and return a normalized Effect with every
+    default filled in (floats as float, lists as list[float]). ``where`` prefixes errors."""
+    if kind not in EFFECT_KINDS:
+        raise FogmonError(f"{where}: unknown effect kind {kind!r} "
+                          f"(known: {', '.join(EFFECT_KINDS)}){_close(str(kind), EFFECT_KINDS)}")
+    spec = EFFECT_KINDS[kind]
+    where = f"{where} ({kind})"
+    for k in params:
+        if k not in spec.params:
+            raise FogmonError(f"{where}: unknown parameter {k!r} (expected: {', '.join(spec.params)})"
+                              f"{_close(k, spec.params)}")
+    out = {}
+    for k, p in spec.params.items():
+        if k not in params:
+            if p.default is None:
+                raise FogmonError(f"{where}: missing parameter {k!r} ({p.unit}: {p.doc})")
+            out[k] = list(p.default) if isinstance(p.default, list) else p.default
+            continue
+        v = params[k]
+        if p.type == "list":
+            if not isinstance(v, (list, tuple)):
+                raise FogmonError(f"{where}: parameter {k!r} must be a list of numbers, got {v!r}")
+            out[k] = [_number(x, f"{where}: {k}[{i}]", p.check) for i, x in enumerate(v)]
+        else:
+            out[k] = _number(v, f"{where}: parameter {k!r}", p.check, integer=p.type == "int")
+    _check_effect(kind, out, where)
+    return Effect(kind, out)
+
+
+def _check_effect(kind: str, p: dict, where: str) -> None:
+    """Cross-parameter rules."""
+    if kind == "glitches" and len(p["times_s"]) != len(p["amplitudes_dph"]):
+        raise FogmonError(f"{where}: times_s and amplitudes_dph must have the same length "
+                          f"({len(p['times_s'])} vs {len(p['amplitudes_dph'])})")
+    if kind == "bandwidth":
+        butter = p["cutoff_hz"] > 0 or p["order"] > 0
+        if butter == bool(p["taps"]):
+            raise FogmonError(f"{where}: give either cutoff_hz and order (Butterworth) or taps (FIR), not "
+                              f"{'both' if butter else 'neither'}")
+        if butter and not (p["cutoff_hz"] > 0 and p["order"] >= 1):
+            raise FogmonError(f"{where}: a Butterworth filter needs cutoff_hz > 0 and order >= 1")
+
+
+def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
+    """Validate a SensorModel built in code (same rules as load_model); returns a
+    normalized copy."""
+    fs = _number(model.sample_rate_hz, f"{where}: [sensor] sample_rate_hz", ">0")
+    bias = _number(model.bias_dph, f"{where}: [sensor] bias_dph")
+    noise = Noise(**{f.name: _number(getattr(model.noise, f.name), f"{where}: [noise] {f.name}", ">=0")
+                     for f in fields(Noise)})
+    effects = [validate_effect(e.kind, e.params, f"{where}: [[effect]] #{i + 1}")
+               for i, e in enumerate(model.effects)]
+    for i, e in enumerate(effects):
+        if e.kind == "bandwidth" and e.params["cutoff_hz"] >= fs / 2:
+            raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
+                              f"Nyquist frequency {fs / 2:g} Hz, got {e.params['cutoff_hz']:g}")
+    return SensorModel(fs, bias, noise, effects, {str(k): str(v) for k, v in model.meta.items()})
+
+
+def _table(doc: dict, name: str, where: str) -> dict:
+    t = doc.get(name, {})
+    if not isinstance(t, dict):
+        raise FogmonError(f"{where}: [{name}] must be a table")
+    return t
+
+
+def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
+    """A validated SensorModel from the parsed TOML document."""
+    top = {"sensor", "noise", "effect", "meta"}
+    for k in doc:
+        if k not in top:
+            raise FogmonError(f"{where}: unknown table or key {k!r} (expected: [sensor], [noise], "
+                              f"[[effect]], [meta]){_close(k, top)}")
+    sensor = _table(doc, "sensor", where)
+    for k in sensor:
+        if k not in ("sample_rate_hz", "bias_dph"):
+            raise FogmonError(f"{where}: [sensor] unknown key {k!r} (expected: sample_rate_hz, bias_dph)"
+                              f"{_close(k, ('sample_rate_hz', 'bias_dph'))}")
+    if "sample_rate_hz" not in sensor:
+        raise FogmonError(f"{where}: [sensor] missing key 'sample_rate_hz' (Hz)")
+    noise = _table(doc, "noise", where)
+    for k in noise:
+        if k not in NOISE_UNITS:
+            raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
+                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
+    effects = doc.get("effect", [])
+    if not isinstance(effects, list):
+        raise FogmonError(f"{where}: 'effect' must be an array of tables: write [[effect]]")
+    elist = []
+    for i, e in enumerate(effects):
+        if not isinstance(e, dict) or "kind" not in e:
+            raise FogmonError(f"{where}: [[effect]] #{i + 1}: missing key 'kind'")
+        params = {k: v for k, v in e.items() if k != "kind"}
+        elist.append(Effect(e["kind"], params))
+    meta = _table(doc, "meta", where)
+    model = SensorModel(sensor["sample_rate_hz"], sensor.get("bias_dph", 0.0),
+                        Noise(**{k: noise[k] for k in noise}), elist, meta)
+    return validate_model(model, where)
+
+
+def model_to_dict(model: SensorModel) -> dict:
+    """The TOML document of a model (every parameter written)."""
+    model = validate_model(model)
+    doc: dict = {}
+    if model.meta:
+        doc["meta"] = dict(model.meta)
+    doc["sensor"] = {"sample_rate_hz": model.sample_rate_hz, "bias_dph": model.bias_dph}
+    doc["noise"] = {f.name: getattr(model.noise, f.name) for f in fields(Noise)}
+    if model.effects:
+        doc["effect"] = [{"kind": e.kind, **e.params} for e in model.effects]
+    return doc
+
+
+def load_model(path: str | os.PathLike) -> SensorModel:
+    """Read and validate a sensor model TOML file (CONTRACT section 2)."""
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    try:
+        with open(path, "rb") as fh:
+            doc = tomllib.load(fh)
+    except FileNotFoundError:
+        raise FogmonError(f"{path}: no such model file") from None
+    except IsADirectoryError:
+        raise FogmonError(f"{path}: is a directory, not a model file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise FogmonError(f"{name}: not valid TOML: {e}") from None
+    except UnicodeDecodeError:
+        raise FogmonError(f"{name}: not valid TOML: not UTF-8 text") from None
+    except OSError as e:
+        raise FogmonError(f"{path}: cannot read: {e.strerror}") from None
+    return model_from_dict(doc, name)
+
+
+def dumps_model(model: SensorModel) -> str:
+    """The TOML text of a model, with a header comment naming the units."""
+    head = ("# fogmon sensor model (CONTRACT section 2). Units: rate deg/h, time s; noise: "
+            + ", ".join(f"{k} {u.split(' (')[0]}" for k, u in NOISE_UNITS.items()) + "\n")
+    return head + tomli_w.dumps(model_to_dict(model))
+
+
+def save_model(model: SensorModel, path: str | os.PathLike) -> None:
+    """Write a model file that ``load_model`` reads back identically."""
+    text = dumps_model(model)
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+        fh.write(text)
