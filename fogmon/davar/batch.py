@@ -1,0 +1,95 @@
+"""Batch overlapping Allan deviation of a whole record (oadev) and of sliding windows
+(dadev, the dynamic Allan deviation), rate in deg/h, time in s.
+
+For each averaging factor m the squared overlapping terms are accumulated in one
+compensated cumulative sum and window sums are read off by differencing: O(N x M) for any
+number of windows and any hop. Prefix sums are double-double, so a large bias costs no
+precision; invalid samples (``valid`` False or NaN) exclude exactly the terms spanning them.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fogmon.davar import kernels
+from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
+from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.taus import tau_grid
+from fogmon.errors import FogmonError
+
+
+def _prepare(rate_dph, valid) -> tuple[np.ndarray, np.ndarray]:
+    y = np.ascontiguousarray(rate_dph, dtype=np.float64)
+    if y.ndim != 1:
+        raise FogmonError(f"rate_dph must be one-dimensional, got shape {y.shape}")
+    ok = np.isfinite(y)
+    if valid is not None:
+        valid = np.asarray(valid, dtype=bool)
+        if valid.shape != y.shape:
+            raise FogmonError(f"valid mask shape {valid.shape} does not match rate_dph shape {y.shape}")
+        ok &= valid
+    return y, ok
+
+
+def _samples(seconds: float, rate_hz: float, what: str) -> int:
+    n = int(round(seconds * rate_hz))
+    if not np.isfinite(seconds) or n < 1:
+        raise FogmonError(f"{what} must be at least one sample period, got {seconds} s")
+    return n
+
+
+def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 0.683):
+    """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
+    (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
+    (M,) or (..., M)) defaults to the dominant term of an IEEE-952 fit of each row."""
+    from fogmon.davar.fit import dominant_alpha, fit_avar  # fit depends on this module's outputs
+
+    counts = np.asarray(counts)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        adev = np.sqrt(np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan))
+    rows = adev.reshape(-1, adev.shape[-1])
+    crow = counts.reshape(rows.shape)
+    tau_m = np.asarray(m, dtype=np.float64)  # fits in units of tau0: alpha does not depend on the unit
+    if alpha is None:
+        alpha_rows = np.array([dominant_alpha(np.nan_to_num(fit_avar(tau_m, r**2, m, c, n_samples)[0]), tau_m)
+                               for r, c in zip(rows, crow)], dtype=np.int64).reshape(rows.shape)
+    else:
+        alpha_rows = np.broadcast_to(np.asarray(alpha, dtype=np.int64), adev.shape).reshape(rows.shape)
+    edf_gapless = np.array([edf_full(a, m, n_samples) for a in alpha_rows]).reshape(adev.shape)
+    edf = edf_effective(edf_gapless, m, n_samples, counts)
+    lo, hi = chi2_bounds(adev, edf, confidence)
+    return adev, lo, hi, edf
+
+
+def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float = 0.683,
+          alpha=None) -> AdevResult:
+    """Overlapping Allan deviation (deg/h) of a rate record ``rate_dph`` (deg/h) sampled at
+    ``rate_hz`` (Hz). ``taus``: see :func:`fogmon.davar.taus.tau_grid`. ``valid``: optional
+    mask; NaN samples are invalid too. Bounds: chi-square at ``confidence`` with Greenhall
+    EDF for noise type ``alpha`` (default: the dominant term of an IEEE-952 fit)."""
+    y, ok = _prepare(rate_dph, valid)
+    n = len(y)
+    m = tau_grid(rate_hz, n, taus)
+    ref = float(y[ok].mean()) if ok.any() else 0.0
+    hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, ref)
+    sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n)
+    adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence)
+    return AdevResult(m / rate_hz, m, adev, lo, hi, edf, counts[0], float(rate_hz), n, confidence)
+
+
+def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None, taus="octave",
+          valid=None, confidence: float = 0.683, t0_s: float = 0.0, alpha=None) -> DadevResult:
+    """Dynamic Allan deviation: overlapping ADEV (deg/h) of every window of ``window_s`` s,
+    windows starting every ``hop_s`` s (default window_s / 4) from the first sample at
+    time ``t0_s`` (s); only complete windows. Taus limited to window / 4."""
+    y, ok = _prepare(rate_dph, valid)
+    w = _samples(window_s, rate_hz, "window_s")
+    hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")
+    m = tau_grid(rate_hz, w, taus)
+    starts = np.arange(0, len(y) - w + 1, hop, dtype=np.int64)
+    ref = float(y[ok].mean()) if ok.any() else 0.0
+    hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, ref)
+    sums, counts = kernels.window_sums(hi_, lo_, bad, m, starts, w)
+    adev, lo, hi, edf = statistics(sums, counts, m, w, alpha, confidence)
+    end = starts + w - 1
+    return DadevResult(t0_s + (starts + (w - 1) / 2.0) / rate_hz, end, m / rate_hz, m, adev, lo, hi, edf,
+                       counts, float(rate_hz), w / rate_hz, hop / rate_hz, confidence)

@@ -1,0 +1,159 @@
+"""IEEE-952 noise-coefficient fit by iterated EDF-weighted NNLS (Fisher scoring).
+
+Model sigma^2(tau) = sum_n A_n tau^n, n = -2..2, A_n >= 0 (theory.POWERS). Each
+iteration solves a non-negative least-squares problem with weights
+nu_i / (2 sigma_model_i^4) - the inverse variance of sigma_hat_i^2 under the model, with
+nu_i the Greenhall EDF of the noise type that dominates the model at tau_i - which is
+Fisher scoring for the chi-square likelihood. Intervals come from the Fisher information
+of the final fit; a term is identifiable when its 95 % interval excludes zero.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import nnls
+from scipy.stats import norm
+
+from fogmon.davar.confidence import ALPHA_OF_TERM, edf_effective, edf_full
+from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
+
+NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
+IDENTIFY_Z = 1.959964
+"""A term is identifiable when A_n - IDENTIFY_Z * se(A_n) > 0 (95 % one-sided-ish)."""
+_MAX_ITER = 50
+_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """One IEEE-952 coefficient (unit in the attribute name): estimate ``value``,
+    interval ``lo``..``hi`` at the fit's confidence, ``identifiable`` False when the
+    record cannot tell the term from zero (then quote only ``hi`` as an upper limit).
+    Scalars for an AdevResult fit, arrays over windows for a DadevResult fit."""
+
+    value: np.ndarray | float
+    lo: np.ndarray | float
+    hi: np.ndarray | float
+    identifiable: np.ndarray | bool
+
+    def __str__(self) -> str:
+        if np.ndim(self.value):
+            return f"Coefficient(windows={np.size(self.value)}, identifiable={int(np.sum(self.identifiable))})"
+        if not self.identifiable:
+            return f"not identifiable (< {self.hi:.4g})"
+        return f"{self.value:.4g} [{self.lo:.4g}, {self.hi:.4g}]"
+
+
+@dataclass(frozen=True)
+class NoiseFit:
+    """Fitted IEEE-952 coefficients. ``avar_terms`` holds A_n ((deg/h)^2 s^-n, n = -2..2,
+    last axis), ``avar_se`` their standard errors; ``confidence`` the interval level."""
+
+    Q_arcsec: Coefficient
+    N_dpsh: Coefficient
+    B_dph: Coefficient
+    K_dphsh: Coefficient
+    R_dphh: Coefficient
+    avar_terms: np.ndarray
+    avar_se: np.ndarray
+    confidence: float
+
+    def model_adev_dph(self, tau_s) -> np.ndarray:
+        """Model Allan deviation (deg/h) at ``tau_s`` (s); shape (..., len(tau_s))."""
+        tau = np.asarray(tau_s, dtype=np.float64)
+        x = tau[..., None] ** POWERS
+        return np.sqrt(np.einsum("...n,tn->...t", self.avar_terms, np.atleast_2d(x)).reshape(
+            self.avar_terms.shape[:-1] + tau.shape))
+
+    def coefficients(self) -> dict[str, Coefficient]:
+        """Name (with unit) -> Coefficient, in the order Q, N, B, K, R."""
+        return {n: getattr(self, n) for n in NAMES}
+
+
+def dominant_alpha(avar_terms: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
+    """Noise type alpha per tau of the term that dominates sum_n A_n tau^n (0, white
+    rate noise, where the model is empty)."""
+    contrib = np.asarray(avar_terms)[..., None, :] * np.asarray(tau_s, dtype=np.float64)[:, None] ** POWERS
+    alpha = ALPHA_OF_TERM[np.argmax(contrib, axis=-1)]
+    return np.where(contrib.max(axis=-1) > 0, alpha, 0)
+
+
+def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    scale = np.linalg.norm(x, axis=0)
+    scale[scale == 0] = 1.0
+    b, _ = nnls(x / scale, y, maxiter=2000)
+    return b / scale
+
+
+def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
+    factors ``m``, valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
+    Returns (A_n, standard error of A_n), NaN when fewer than 2 usable taus."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    avar = np.asarray(avar, dtype=np.float64)
+    ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
+    if ok.sum() < 2:
+        return np.full(5, np.nan), np.full(5, np.nan)
+    tau, y, m_ok, nt = tau[ok], avar[ok], np.asarray(m)[ok], np.asarray(n_terms)[ok]
+    x = tau[:, None] ** POWERS
+    model = y.copy()
+    alpha = np.zeros(len(tau), dtype=np.int64)
+    a = np.zeros(5)
+    for _ in range(_MAX_ITER):
+        nu = edf_effective(edf_full(alpha, m_ok, n_samples), m_ok, n_samples, nt)
+        sw = np.sqrt(nu / 2.0) / model
+        a_new = _solve_nnls(x * sw[:, None], y * sw)
+        model_new = np.maximum(x @ a_new, 1e-300)
+        done = np.max(np.abs(model_new / model - 1.0)) < _RTOL
+        a, model = a_new, model_new
+        alpha = dominant_alpha(a, tau)
+        if done:
+            break
+    nu = edf_effective(edf_full(alpha, m_ok, n_samples), m_ok, n_samples, nt)
+    w = nu / (2.0 * model**2)
+    return a, _standard_errors(x, w, a > 0)
+
+
+def _standard_errors(x: np.ndarray, w: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Standard errors from the Fisher information X^T W X: free terms from the inverse
+    over the free set; each term held at zero from its Schur complement against it."""
+    scale = np.linalg.norm(x * np.sqrt(w)[:, None], axis=0)
+    scale[scale == 0] = 1.0
+    xs = x / scale
+    info = xs.T @ (w[:, None] * xs)
+    se = np.full(5, np.inf)
+    f = np.flatnonzero(free)
+    inv_ff = np.linalg.pinv(info[np.ix_(f, f)]) if f.size else np.zeros((0, 0))
+    if f.size:
+        se[f] = np.sqrt(np.maximum(np.diag(inv_ff), 0.0))
+    for n in np.flatnonzero(~free):
+        schur = info[n, n] - info[n, f] @ inv_ff @ info[f, n] if f.size else info[n, n]
+        se[n] = 1.0 / np.sqrt(schur) if schur > 1e-12 * info[n, n] else np.inf
+    return se / scale
+
+
+def _coefficients(a: np.ndarray, se: np.ndarray, confidence: float) -> list[Coefficient]:
+    z = norm.ppf(0.5 + confidence / 2.0)
+    value = avar_terms_to_coefficients(a)
+    lo = avar_terms_to_coefficients(np.maximum(a - z * se, 0.0))
+    hi = avar_terms_to_coefficients(np.where(np.isfinite(se), a + z * se, np.inf))
+    ident = (a - IDENTIFY_Z * se > 0) & np.isfinite(a)
+    return [Coefficient(*(v[..., i] if v.ndim > 1 else v[i].item() for v in (value, lo, hi, ident)))
+            for i in range(5)]
+
+
+def fit_noise(result: AdevResult | DadevResult, confidence: float = 0.683) -> NoiseFit:
+    """Fit IEEE-952 Q (arcsec), N (deg/sqrt(h)), B (deg/h), K (deg/h/sqrt(h)), R (deg/h^2)
+    to an AdevResult (scalar coefficients) or to every window of a DadevResult (arrays
+    over windows: the coefficient time series). Intervals at ``confidence``."""
+    avar = np.square(result.adev_dph)
+    if isinstance(result, DadevResult):
+        n = result.window_samples
+        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n) for i in range(len(result))]
+        a = np.array([f[0] for f in fits]).reshape(len(result), 5)
+        se = np.array([f[1] for f in fits]).reshape(len(result), 5)
+    else:
+        a, se = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples)
+    return NoiseFit(*_coefficients(a, se, confidence), avar_terms=a, avar_se=se, confidence=confidence)

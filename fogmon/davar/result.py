@@ -1,0 +1,66 @@
+"""Result types of the Allan-deviation engines (rate in deg/h, tau in s)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class AdevResult:
+    """Overlapping Allan deviation of one record or window.
+
+    Arrays over taus: ``tau_s`` (s), ``m`` (averaging factor, tau = m / rate_hz),
+    ``adev_dph`` (deg/h; NaN where no valid term), ``lo_dph``/``hi_dph`` (two-sided
+    ``confidence`` interval, deg/h), ``edf`` (equivalent degrees of freedom), ``n_terms``
+    (valid overlapping terms). Scalars: ``rate_hz`` (Hz), ``n_samples`` (samples in the
+    record, valid or not), ``confidence`` (0.683 = 1 sigma)."""
+
+    tau_s: np.ndarray
+    m: np.ndarray
+    adev_dph: np.ndarray
+    lo_dph: np.ndarray
+    hi_dph: np.ndarray
+    edf: np.ndarray
+    n_terms: np.ndarray
+    rate_hz: float
+    n_samples: int
+    confidence: float = 0.683
+
+
+@dataclass(frozen=True)
+class DadevResult:
+    """Dynamic Allan deviation: one overlapping ADEV per window.
+
+    ``t_s`` (s, window-centre times, shape T), ``end_index`` (index of each window's last
+    sample, T), ``tau_s``/``m`` (M), ``adev_dph``, ``lo_dph``, ``hi_dph`` (deg/h),
+    ``edf``, ``n_terms`` (T x M); ``rate_hz`` (Hz), ``window_s``, ``hop_s`` (s),
+    ``confidence``."""
+
+    t_s: np.ndarray
+    end_index: np.ndarray
+    tau_s: np.ndarray
+    m: np.ndarray
+    adev_dph: np.ndarray
+    lo_dph: np.ndarray
+    hi_dph: np.ndarray
+    edf: np.ndarray
+    n_terms: np.ndarray
+    rate_hz: float
+    window_s: float
+    hop_s: float
+    confidence: float = 0.683
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def window_samples(self) -> int:
+        """Window length in samples."""
+        return int(round(self.window_s * self.rate_hz))
+
+    def window(self, i: int) -> AdevResult:
+        """The ADEV of window ``i`` as an AdevResult."""
+        return AdevResult(self.tau_s, self.m, self.adev_dph[i], self.lo_dph[i], self.hi_dph[i],
+                          self.edf[i], self.n_terms[i], self.rate_hz, self.window_samples,
+                          self.confidence)
