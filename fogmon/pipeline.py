@@ -1,0 +1,411 @@
+"""The streaming pipeline shared by `fogmon replay` and `fogmon monitor`:
+source -> StreamingDadev (ring-buffer DAVAR) -> fit_noise per completed window -> sinks.
+
+A live gyro and a replay differ only in the source. Blocks are processed as they come
+(Python overhead per block, not per sample); every completed window (one per hop) is
+fitted with the IEEE-952 model and handed to the sinks with its recording time; the run
+ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl-C, and
+always closes the source and the sinks so the .rrd and the archive are complete.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections import Counter, deque
+from dataclasses import dataclass, field
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from fogmon.block import Block, Event
+from fogmon.errors import FogmonError
+
+#: IEEE-952 coefficients in the order they are shown, with their units.
+COEFFICIENTS = {"Q_arcsec": "arcsec", "N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h",
+                "K_dphsh": "deg/h/sqrt(h)", "R_dphh": "deg/h^2"}
+#: Default window bounds in samples (the window is a power of two inside these).
+MIN_WINDOW_SAMPLES = 2**10
+MAX_WINDOW_SAMPLES = 2**20
+#: Live default window in samples (65.5 s at 1 kHz, 655 s at 100 Hz).
+LIVE_WINDOW_SAMPLES = 2**16
+#: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
+OVERALL_MAX_SAMPLES = 2**23
+
+
+# ----------------------------------------------------------------------------- options
+def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options common to `fogmon replay` and `fogmon monitor`: engine, sinks, pacing."""
+    g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
+    g.add_argument("--window-s", type=_positive_float, metavar="W",
+                   help="window length in s. Default: replay: a quarter of the recording rounded "
+                        f"down to a power of two of samples, within {MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} "
+                        f"samples; live: {LIVE_WINDOW_SAMPLES} samples (65.5 s at 1 kHz)")
+    g.add_argument("--hop-s", type=_positive_float, metavar="H",
+                   help="a new ADEV + noise fit every H s of recording time (default: window/8)")
+    g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
+                   help="averaging times: octave (default), decade, all, an integer N (N log-spaced "
+                        "per decade) or comma-separated tau values in s; always tau <= window/4")
+    o = parser.add_argument_group("output (Rerun)")
+    o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
+                   "open it with `rerun OUT.rrd`")
+    o.add_argument("--connect", metavar="URL", nargs="?", const="rerun+http://127.0.0.1:9876/proxy",
+                   help="stream to a running Rerun viewer (default URL rerun+http://127.0.0.1:9876/proxy; "
+                        "start one with `rerun`)")
+    o.add_argument("--serve", action="store_true",
+                   help="host a Rerun gRPC server that viewers connect to (`rerun URL` as printed); "
+                        "keeps serving after a replay until Ctrl-C")
+    o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
+                   help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
+    o.add_argument("--port", type=int, default=9876, help="port --serve listens on (default 9876)")
+    o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    o.add_argument("--quiet", action="store_true", help="no console summary at the end")
+    p = parser.add_argument_group("pacing")
+    if "--duration-s" not in parser._option_string_actions:  # the source options may define it
+        p.add_argument("--duration-s", type=_positive_float, metavar="S",
+                       help="stop after S s of recording time")
+    if "--realtime" not in parser._option_string_actions:
+        p.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="X",
+                       help="pace a replay at X times real time (default X = 1 when given; "
+                            "without --realtime a replay runs as fast as it can)")
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return v
+
+
+def parse_taus(text: str):
+    """``--taus`` value -> what ``tau_grid`` takes: a grid name, an int per decade, or tau_s array."""
+    s = text.strip().lower()
+    if s in ("octave", "decade", "all"):
+        return s
+    if s.isdigit():
+        return int(s)
+    try:
+        tau_s = np.array([float(x) for x in s.split(",")], dtype=np.float64)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected octave, decade, all, an integer per decade or tau values in s, got {text!r}") from None
+    if not np.all(np.isfinite(tau_s) & (tau_s > 0)):
+        raise argparse.ArgumentTypeError(f"tau values must be finite and > 0 s, got {text!r}")
+    return tau_s
+
+
+def default_window_s(rate_hz: float, n_samples: int | None) -> float:
+    """Default window in s: for a record of ``n_samples`` a quarter of it rounded down to a
+    power of two of samples (within MIN..MAX_WINDOW_SAMPLES, never longer than the record);
+    live (``n_samples`` None) LIVE_WINDOW_SAMPLES."""
+    if n_samples is None:
+        return LIVE_WINDOW_SAMPLES / rate_hz
+    quarter = max(n_samples // 4, 1)
+    n = 2 ** int(math.floor(math.log2(quarter)))
+    n = min(max(n, MIN_WINDOW_SAMPLES), MAX_WINDOW_SAMPLES, n_samples)
+    return n / rate_hz
+
+
+# ----------------------------------------------------------------------------- sinks
+@dataclass(frozen=True)
+class StreamInfo:
+    """What sinks learn before the first block: source, sample rate (Hz), window/hop (s),
+    taus (s), auxiliary channel names."""
+
+    source_name: str
+    rate_hz: float
+    window_s: float
+    hop_s: float
+    tau_s: np.ndarray
+    aux_names: tuple[str, ...]
+
+
+class Sink:
+    """Receives the pipeline's outputs; every method is optional (no-op here). Sinks
+    finish in increasing ``finish_order`` (the console last, so it can name the files)."""
+
+    finish_order = 0
+
+    def start(self, info: StreamInfo) -> None: ...
+
+    def block(self, block: Block) -> None: ...
+
+    def frames(self, dadev, fit, t_end_s: np.ndarray) -> None:
+        """Completed windows: a DadevResult (T rows), its NoiseFit (arrays over T) and the
+        recording time (s) of each window's last sample."""
+
+    def events(self, events: Sequence[Event]) -> None: ...
+
+    def counters(self, t_s: float, counters: dict[str, int]) -> None: ...
+
+    def finish(self, summary: "Summary") -> None: ...
+
+
+@dataclass
+class Summary:
+    """The end-of-run account: what was processed, the whole-run ADEV and fit, counters."""
+
+    source_name: str
+    rate_hz: float
+    window_s: float
+    hop_s: float
+    n_samples: int = 0
+    n_invalid: int = 0
+    t_first_s: float = math.nan
+    t_last_s: float = math.nan
+    n_windows: int = 0
+    wall_s: float = 0.0
+    interrupted: bool = False
+    overall: object = None        # AdevResult of the whole run (the latest OVERALL_MAX_SAMPLES)
+    overall_fit: object = None    # NoiseFit of ``overall``
+    overall_first_s: float = math.nan
+    counters: dict[str, int] = field(default_factory=dict)
+    event_counts: dict[str, int] = field(default_factory=dict)
+    outputs: list[str] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        """Recording time covered, s."""
+        return (self.t_last_s - self.t_first_s + 1.0 / self.rate_hz) if self.n_samples else 0.0
+
+    @property
+    def speed_x(self) -> float:
+        """Recording time / wall time."""
+        return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
+
+
+# ----------------------------------------------------------------------------- jumps
+class JumpDetector:
+    """Coefficient-jump events: a coefficient whose interval in the newest window does not
+    overlap its interval in the latest window that shares no samples with it (independent
+    data). One event per coefficient per window length at most."""
+
+    def __init__(self, window_s: float):
+        self.window_s = window_s
+        self._hist: deque[tuple[float, dict]] = deque()   # (t_end_s, {name: (value, lo, hi)})
+        self._last_event: dict[str, float] = {}
+
+    def update(self, fit, t_end_s: np.ndarray) -> list[Event]:
+        out = []
+        for i, t in enumerate(t_end_s):
+            cur = {}
+            for name in COEFFICIENTS:
+                c = getattr(fit, name)
+                if bool(np.asarray(c.identifiable)[i]):
+                    cur[name] = (float(np.asarray(c.value)[i]), float(np.asarray(c.lo)[i]), float(np.asarray(c.hi)[i]))
+            h = self._hist
+            while len(h) > 1 and h[1][0] <= t - self.window_s:
+                h.popleft()
+            ref = h[0] if h and h[0][0] <= t - self.window_s else None
+            if ref is not None:
+                for name, (v, lo, hi) in cur.items():
+                    if name not in ref[1]:
+                        continue
+                    rv, rlo, rhi = ref[1][name]
+                    if (lo > rhi or hi < rlo) and t - self._last_event.get(name, -math.inf) >= self.window_s:
+                        self._last_event[name] = float(t)
+                        out.append(Event(float(t), "coef_jump",
+                                         f"{name} jumped from {rv:.4g} [{rlo:.4g}, {rhi:.4g}] to {v:.4g} "
+                                         f"[{lo:.4g}, {hi:.4g}] {COEFFICIENTS[name]} (window ending at {ref[0]:.1f} s "
+                                         f"vs {t:.1f} s)"))
+            self._hist.append((float(t), cur))
+        return out
+
+
+# ----------------------------------------------------------------------------- helpers
+def slice_block(b: Block, start: int, stop: int) -> Block:
+    """Samples ``start:stop`` of a block, with the events that fall in their time span
+    (the first slice also takes events before it, the last those after it)."""
+    n = len(b)
+    t0 = b.t_s[start] if start > 0 else -math.inf
+    t1 = b.t_s[stop] if stop < n else math.inf
+    ev = tuple(e for e in b.events if t0 <= e.t_s < t1)
+    return Block(b.t_s[start:stop], b.rate_dph[start:stop], b.valid[start:stop],
+                 {k: v[start:stop] for k, v in b.aux.items()}, ev)
+
+
+class _Progress:
+    """A one-line progress bar on stderr for replays (recording time / total)."""
+
+    def __init__(self, total_s: float, enabled: bool):
+        self.total_s, self.enabled = total_s, enabled and total_s > 0
+        self._last = 0.0
+
+    def update(self, done_s: float, wall_s: float, force: bool = False) -> None:
+        now = time.monotonic()
+        if not self.enabled or (not force and now - self._last < 0.2):
+            return
+        self._last = now
+        f = min(max(done_s / self.total_s, 0.0), 1.0)
+        bar = "#" * int(f * 30)
+        x = done_s / wall_s if wall_s > 0 else 0.0
+        sys.stderr.write(f"\r[{bar:<30}] {100 * f:5.1f}%  {done_s:9.1f}/{self.total_s:.1f} s  x{x:,.0f} real time ")
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+# ----------------------------------------------------------------------------- run
+def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] = (),
+                 sinks: Sequence[Sink] | None = None) -> Summary:
+    """Stream ``source`` through DAVAR and the noise fit into the sinks named by ``args``
+    (``--rrd``/``--connect``/``--serve`` and the console summary) plus ``extra_sinks``.
+    ``sinks`` replaces the sinks built from ``args`` (tests, notebooks). Returns the
+    Summary; the source and all sinks are closed whatever happens."""
+    from fogmon.davar.batch import oadev
+    from fogmon.davar.fit import fit_noise
+    from fogmon.davar.streaming import StreamingDadev
+    from fogmon.davar.taus import tau_grid
+
+    rate_hz = float(source.rate_hz)
+    total_n = record_samples(source)
+    window_s = getattr(args, "window_s", None) or default_window_s(rate_hz, total_n)
+    if total_n is not None and window_s * rate_hz > total_n:
+        raise FogmonError(f"--window-s {window_s:g} s is longer than the recording "
+                          f"({total_n / rate_hz:g} s = {total_n} samples)")
+    if window_s * rate_hz < 8:
+        raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {rate_hz:g} Hz")
+    hop_s = getattr(args, "hop_s", None) or window_s / 8
+    if hop_s * rate_hz < 1:
+        raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+    taus = getattr(args, "taus", "octave")
+    engine = StreamingDadev(rate_hz, window_s, taus=taus, hop_s=hop_s)
+    if sinks is None:
+        sinks = build_sinks(args)
+    sinks = [*sinks, *extra_sinks]
+    summary = Summary(source.name, rate_hz, window_s, hop_s)
+    jumps = JumpDetector(window_s)
+    duration_s = getattr(args, "duration_s", None)
+    realtime = getattr(args, "realtime", None)
+    progress = _Progress(total_n / rate_hz if total_n else 0.0,
+                         enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
+                         and (realtime is None or realtime > 1))
+    kept: list[np.ndarray] = []
+    kept_valid: list[np.ndarray] = []
+    kept_n = 0
+    event_counts: Counter = Counter()
+    started = False
+    wall0 = time.monotonic()
+    t_origin = None
+    done = False
+    try:
+        for big in source.blocks():
+            if not len(big):
+                _dispatch_events(sinks, big.events, event_counts)
+                continue
+            if t_origin is None:
+                t_origin = float(big.t_s[0])
+            if duration_s is not None:
+                stop = int(np.searchsorted(big.t_s, t_origin + duration_s - 0.5 / rate_hz, side="right"))
+                if stop < len(big):
+                    big, done = slice_block(big, 0, stop), True
+            for b in _paced(big, realtime, rate_hz):
+                if realtime:
+                    _sleep_until(wall0 + (float(b.t_s[-1]) - t_origin) / realtime)
+                if not started:
+                    m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
+                    info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux))
+                    for s in sinks:
+                        s.start(info)
+                    started = True
+                    summary.t_first_s = float(b.t_s[0])
+                summary.n_samples += len(b)
+                summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+                summary.t_last_s = float(b.t_s[-1])
+                for s in sinks:
+                    s.block(b)
+                _dispatch_events(sinks, b.events, event_counts)
+                res = engine.push(b.rate_dph, b.valid)
+                if len(res):
+                    fit = fit_noise(res)
+                    t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
+                    for s in sinks:
+                        s.frames(res, fit, t_end)
+                    summary.n_windows += len(res)
+                    _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
+                    counters = dict(getattr(source, "counters", {}) or {})
+                    for s in sinks:
+                        s.counters(float(t_end[-1]), counters)
+                kept.append(b.rate_dph)
+                kept_valid.append(b.valid)
+                kept_n += len(b)
+                while kept_n - len(kept[0]) >= OVERALL_MAX_SAMPLES:
+                    kept_n -= len(kept.pop(0))
+                    kept_valid.pop(0)
+                progress.update(summary.t_last_s - summary.t_first_s, time.monotonic() - wall0)
+            if done:
+                break
+    except KeyboardInterrupt:
+        summary.interrupted = True
+    finally:
+        progress.update(summary.t_last_s - summary.t_first_s if summary.n_samples else 0.0,
+                        time.monotonic() - wall0, force=True)
+        progress.close()
+        source.close()
+        summary.wall_s = time.monotonic() - wall0
+        summary.counters = dict(getattr(source, "counters", {}) or {})
+        summary.event_counts = dict(event_counts)
+        try:
+            if kept_n >= 8:
+                rate = np.concatenate(kept)
+                valid = np.concatenate(kept_valid)
+                summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
+                summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
+                summary.overall_fit = fit_noise(summary.overall)
+        finally:
+            for s in sorted(sinks, key=lambda k: getattr(k, "finish_order", 0)):
+                s.finish(summary)
+    return summary
+
+
+def record_samples(source) -> int | None:
+    """Length in samples of a finite source (a replay), None for a live one."""
+    n = getattr(source, "n_samples", None)
+    if n is None and getattr(source, "recording", None) is not None:
+        n = int(round(source.recording.duration_s * source.rate_hz))
+    return n
+
+
+def _dispatch_events(sinks, events, counts: Counter) -> None:
+    if not events:
+        return
+    counts.update(e.kind for e in events)
+    for s in sinks:
+        s.events(events)
+
+
+def _paced(b: Block, realtime: float | None, rate_hz: float):
+    """Split a block into pieces of <= 0.1 s of wall time when pacing, else pass it on."""
+    if not realtime:
+        yield b
+        return
+    step = max(1, int(0.1 * realtime * rate_hz))
+    for i in range(0, len(b), step):
+        yield slice_block(b, i, min(i + step, len(b)))
+
+
+def _sleep_until(wall: float) -> None:
+    d = wall - time.monotonic()
+    if d > 0:
+        time.sleep(d)
+
+
+def build_sinks(args: argparse.Namespace) -> list[Sink]:
+    """The sinks the command line asks for: Rerun (file and/or live) and the console."""
+    from fogmon.sinks.console import ConsoleSink
+
+    out: list[Sink] = []
+    rrd, connect, serve = getattr(args, "rrd", None), getattr(args, "connect", None), getattr(args, "serve", False)
+    if rrd or connect or serve:
+        from fogmon.sinks.rerun_sink import RerunSink
+        out.append(RerunSink(rrd_path=rrd, connect_url=connect, serve=serve,
+                             bind=getattr(args, "bind", "127.0.0.1"), port=getattr(args, "port", 9876)))
+    out.append(ConsoleSink(quiet=getattr(args, "quiet", False)))
+    return out

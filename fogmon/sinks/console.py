@@ -1,0 +1,82 @@
+"""Console sink: events as they happen (stderr, rate-limited) and the end-of-run summary
+(stdout): the whole-run Allan deviation with its confidence bounds, the IEEE-952
+coefficients with their intervals, and the counters."""
+from __future__ import annotations
+
+import math
+import sys
+from collections import Counter
+from typing import Sequence, TextIO
+
+from fogmon.block import Event
+from fogmon.pipeline import COEFFICIENTS, Sink, Summary
+
+#: Events of one kind printed as they happen before the rest are only counted.
+MAX_EVENTS_PER_KIND = 10
+
+
+def format_summary(s: Summary) -> str:
+    """The summary as text (units in every heading)."""
+    lines = []
+    state = "interrupted (Ctrl-C)" if s.interrupted else "done"
+    lines.append(f"fogmon: {state}: {s.source_name}")
+    lines.append(f"  {s.n_samples} samples at {s.rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
+                 f"({s.n_invalid} invalid/lost), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
+    lines.append(f"  {s.n_windows} DADEV windows of {s.window_s:g} s every {s.hop_s:g} s")
+    a = s.overall
+    if a is not None:
+        conf = getattr(a, "confidence", 0.683)
+        span = f"{s.overall_first_s:.2f}..{s.t_last_s:.2f} s"
+        lines.append("")
+        lines.append(f"Overall Allan deviation ({span}, {100 * conf:.1f} % confidence bounds):")
+        lines.append(f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}")
+        for i in range(len(a.tau_s)):
+            lines.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {a.lo_dph[i]:12.5g} {a.hi_dph[i]:12.5g} "
+                         f"{a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
+    f = s.overall_fit
+    if f is not None:
+        lines.append("")
+        lines.append("IEEE-952 noise coefficients (whole run, with intervals):")
+        for name, unit in COEFFICIENTS.items():
+            c = getattr(f, name)
+            if bool(c.identifiable):
+                lines.append(f"  {name:<9} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
+            else:
+                hi = float(c.hi)
+                bound = f" (upper bound {hi:.4g} {unit})" if math.isfinite(hi) else ""
+                lines.append(f"  {name:<9}   not identifiable from this record{bound}")
+    if s.counters or s.event_counts:
+        lines.append("")
+        lines.append("Counters:")
+        for k, v in {**s.counters, **{f"events.{k}": v for k, v in s.event_counts.items()}}.items():
+            lines.append(f"  {k:<24} {v}")
+    for o in s.outputs:
+        lines.append(f"Wrote {o} (open it with: rerun {o})")
+    return "\n".join(lines)
+
+
+class ConsoleSink(Sink):
+    """Prints events to ``err`` as they happen and the summary to ``out`` at the end."""
+
+    finish_order = 10
+
+    def __init__(self, quiet: bool = False, out: TextIO | None = None, err: TextIO | None = None):
+        self.quiet = quiet
+        self.out, self.err = out, err
+        self._seen: Counter = Counter()
+
+    def events(self, events: Sequence[Event]) -> None:
+        err = self.err or sys.stderr
+        for e in events:
+            self._seen[e.kind] += 1
+            n = self._seen[e.kind]
+            if n <= MAX_EVENTS_PER_KIND:
+                err.write(f"[{e.t_s:10.2f} s] {e.kind}: {e.message}\n")
+            elif n == MAX_EVENTS_PER_KIND + 1:
+                err.write(f"[{e.t_s:10.2f} s] {e.kind}: more of these are only counted (see the summary)\n")
+
+    def finish(self, summary: Summary) -> None:
+        if not self.quiet:
+            out = self.out or sys.stdout
+            out.write(format_summary(summary) + "\n")
+            out.flush()

@@ -1,0 +1,361 @@
+"""Rerun sink: the monitor's screen, live (gRPC) and/or headless (.rrd), rerun-sdk 0.41.
+
+Everything is on the ``time`` timeline = recording time in s (not wall clock), sent in
+columns (``send_columns``) so a 1 kHz gyro costs a few Python calls per flush.
+Entities (units in every name; "log10" said where the value is a log):
+
+- ``rate/rate_dph`` raw rate in deg/h. Above DISPLAY_MAX_HZ it is shown as the mean of
+  consecutive valid samples (decimated for display only; the engine sees every sample,
+  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels.
+- ``dadev/log10_adev_dph`` log10 of the ADEV (deg/h) at every tau, one row per window
+  (time = the window's last sample); ``dadev/heatmap_log10_adev_dph`` the latest
+  HEATMAP_WINDOWS windows as an image (rows: tau, largest at the top; columns: windows,
+  newest on the right).
+- ``adev_curve/*`` the current window's ADEV curve with its confidence bounds and the
+  fitted IEEE-952 model, drawn as x = log10(tau / s), y = log10(ADEV / (deg/h)) with a
+  labelled decade grid (plot views have no log axes).
+- ``coef/<name>`` each IEEE-952 coefficient with its interval (series value, lo, hi;
+  only windows where it is identifiable) - the "2-D diagram" of the MWD papers.
+- ``events`` a text log (gaps, CRC errors, reconnects, coefficient jumps);
+  ``counters/<name>`` the source's counters.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from typing import Sequence
+
+import numpy as np
+
+from fogmon.block import Block, Event
+from fogmon.errors import FogmonError
+from fogmon.pipeline import COEFFICIENTS, Sink, StreamInfo
+
+#: Raw rate and aux channels are shown at no more than this many points per second.
+DISPLAY_MAX_HZ = 100.0
+#: Columns (windows) in the DADEV heatmap image.
+HEATMAP_WINDOWS = 256
+#: Flush raw samples to Rerun at least this often (wall time, s) or every FLUSH_SAMPLES.
+FLUSH_WALL_S = 0.25
+FLUSH_SAMPLES = 1 << 16
+TIMELINE = "time"
+_LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
+           "reconnect": "WARN", "coef_jump": "INFO"}
+_COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
+                "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
+
+
+def blueprint(aux_names: Sequence[str] = ()):
+    """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
+    the five coefficient tracks and the event log."""
+    import rerun.blueprint as rrb
+
+    top = [rrb.TimeSeriesView(origin="/rate", name="Rate (deg/h) over recording time")]
+    if aux_names:
+        top.append(rrb.TimeSeriesView(origin="/aux", name="Aux channels (units in names)"))
+    middle = [
+        rrb.Spatial2DView(origin="/adev_curve", name="Current window: log10 ADEV (deg/h) vs log10 tau (s)"),
+        rrb.Tabs(
+            rrb.TensorView(origin="/dadev/heatmap_log10_adev_dph",
+                           name="DADEV heatmap: log10 ADEV (deg/h), tau (rows) x window (columns)",
+                           scalar_mapping=rrb.TensorScalarMapping(colormap="viridis")),
+            rrb.TimeSeriesView(origin="/dadev/log10_adev_dph", name="DADEV: log10 ADEV (deg/h) per tau over time"),
+        ),
+    ]
+    coefs = [rrb.TimeSeriesView(origin=f"/coef/{n}", name=f"{n} ({u}) with interval")
+             for n, u in COEFFICIENTS.items()]
+    bottom = [rrb.Vertical(*coefs), rrb.Vertical(
+        rrb.TextLogView(origin="/events", name="Events"),
+        rrb.TimeSeriesView(origin="/counters", name="Source counters"))]
+    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle),
+                                      rrb.Horizontal(*bottom, column_shares=[2, 1]),
+                                      row_shares=[1, 1.3, 2]),
+                         collapse_panels=True)
+
+
+def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[subprocess.Popen, str]:
+    """Start a headless Rerun gRPC server (`rerun --serve-grpc`) listening on ``bind:port``;
+    returns the process and the URL SDKs and viewers connect to."""
+    exe = shutil.which("rerun") or str(_venv_bin("rerun"))
+    proc = subprocess.Popen([exe, "--serve-grpc", "--bind", bind, "--port", str(port)],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            err = (proc.stderr.read() or b"").decode(errors="replace").strip().splitlines()
+            raise FogmonError(f"--serve: rerun server on {bind}:{port} exited: {err[-1] if err else proc.returncode}")
+        try:
+            with socket.create_connection((host, port), timeout=0.2):
+                return proc, f"rerun+http://{host}:{port}/proxy"
+        except OSError:
+            time.sleep(0.1)
+    proc.kill()
+    raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
+
+
+def _venv_bin(name: str):
+    from pathlib import Path
+    return Path(sys.executable).parent / name
+
+
+class _Decimator:
+    """Means of ``step`` consecutive samples (invalid/NaN ignored), carrying the remainder."""
+
+    def __init__(self, step: int):
+        self.step = step
+        self._t: list[np.ndarray] = []
+        self._v: dict[str, list[np.ndarray]] = {}
+
+    def push(self, t: np.ndarray, values: dict[str, np.ndarray]) -> None:
+        self._t.append(t)
+        for k, v in values.items():
+            self._v.setdefault(k, []).append(v)
+
+    def pending(self) -> int:
+        return sum(len(t) for t in self._t)
+
+    def take(self, final: bool = False) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """(times, {name: values}) of completed bins; time = first sample of each bin."""
+        if not self._t:
+            return np.zeros(0), {}
+        t = np.concatenate(self._t)
+        vals = {k: np.concatenate(v) for k, v in self._v.items()}
+        s = self.step
+        n_full = (len(t) // s) * s if not final else len(t)
+        keep = slice(n_full, None)
+        self._t = [t[keep]] if n_full < len(t) else []
+        self._v = {k: [v[keep]] for k, v in vals.items()} if n_full < len(t) else {}
+        if s == 1:
+            return t[:n_full], {k: v[:n_full] for k, v in vals.items()}
+        nb = -(-n_full // s)
+        pad = nb * s - n_full
+        tb = t[:n_full:s]
+        out = {}
+        for k, v in vals.items():
+            x = np.concatenate([v[:n_full], np.full(pad, np.nan)]).reshape(nb, s)
+            cnt = np.count_nonzero(np.isfinite(x), axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[k] = np.where(cnt > 0, np.nansum(x, axis=1) / np.maximum(cnt, 1), np.nan)
+        return tb, out
+
+
+class RerunSink(Sink):
+    """Streams the pipeline into Rerun: ``rrd_path`` (file), ``connect_url`` (a running
+    viewer or server), ``serve`` (start a localhost gRPC server on ``bind:port``), any
+    combination. ``recording_id`` fixes the Rerun recording id (tests)."""
+
+    def __init__(self, rrd_path: str | None = None, connect_url: str | None = None, serve: bool = False,
+                 bind: str = "127.0.0.1", port: int = 9876, recording_id: str | None = None,
+                 serve_wait: bool = True):
+        if not (rrd_path or connect_url or serve):
+            raise ValueError("RerunSink needs rrd_path, connect_url or serve")
+        self.rrd_path, self.connect_url, self.serve = rrd_path, connect_url, serve
+        self.bind, self.port, self.serve_wait = bind, port, serve_wait
+        self.recording_id = recording_id
+        self.server: subprocess.Popen | None = None
+        self.server_url: str | None = None
+        self.rec = None
+        self._heat: list[np.ndarray] = []
+        self._last_flush = time.monotonic()
+        self._grid_done = False
+        if rrd_path:
+            import os
+            d = os.path.dirname(os.path.abspath(rrd_path))
+            try:
+                os.makedirs(d, exist_ok=True)
+            except OSError as e:
+                raise FogmonError(f"--rrd {rrd_path}: cannot create folder {d}: {e.strerror}") from None
+            if os.path.isdir(rrd_path):
+                raise FogmonError(f"--rrd {rrd_path}: is a folder, give a file name like out/run.rrd")
+
+    # -- set-up ---------------------------------------------------------------
+    def start(self, info: StreamInfo) -> None:
+        import rerun as rr
+
+        self.info = info
+        self.step = max(1, int(math.ceil(info.rate_hz / DISPLAY_MAX_HZ)))
+        self.dec = _Decimator(self.step)
+        rec = rr.RecordingStream("fogmon", recording_id=self.recording_id)
+        bp = blueprint(info.aux_names)
+        sinks = []
+        if self.rrd_path:
+            sinks.append(rr.FileSink(self.rrd_path))
+        if self.serve:
+            self.server, self.server_url = start_grpc_server(self.bind, self.port)
+            print(f"fogmon: serving Rerun on {self.server_url} (open it with: rerun {self.server_url})",
+                  file=sys.stderr)
+            sinks.append(rr.GrpcSink(self.server_url))
+        if self.connect_url:
+            sinks.append(rr.GrpcSink(self.connect_url))
+        rec.set_sinks(*sinks, default_blueprint=bp)
+        self.rec = rec
+        self._log_static(info)
+
+    def _log_static(self, info: StreamInfo) -> None:
+        import rerun as rr
+
+        rec = self.rec
+        what = "rate_dph" if self.step == 1 else f"rate_dph (mean of {self.step} samples, display only)"
+        rec.log("rate/rate_dph", rr.SeriesLines(names=[what], widths=[1.0]), static=True)
+        for name in info.aux_names:
+            label = name if self.step == 1 else f"{name} (mean of {self.step} samples)"
+            rec.log(f"aux/{name}", rr.SeriesLines(names=[label]), static=True)
+        tau = info.tau_s
+        rec.log("dadev/log10_adev_dph", rr.SeriesLines(names=[f"tau={t:.4g} s" for t in tau]), static=True)
+        for n, u in COEFFICIENTS.items():
+            c = _COEF_COLORS[n]
+            rec.log(f"coef/{n}", rr.SeriesLines(names=[f"{n} ({u})", "lo", "hi"], colors=[c, c, c],
+                                                widths=[2.0, 0.7, 0.7]), static=True)
+        rec.log("session", rr.TextDocument(
+            f"source: {info.source_name}\nsample rate: {info.rate_hz:g} Hz\nwindow: {info.window_s:g} s, "
+            f"hop: {info.hop_s:g} s\ntaus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
+            f"source: {info.source_name}"), static=True)
+        # y up in the ADEV-curve view (2-D views have y pointing down).
+        rec.log("adev_curve", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+        if len(tau):
+            self._log_grid(np.log10(tau[0]), np.log10(tau[-1]))
+
+    def _log_grid(self, x0: float, x1: float, y0: float | None = None, y1: float | None = None) -> None:
+        """Decade grid lines with labels for the ADEV-curve view (static)."""
+        import rerun as rr
+
+        xs = np.arange(math.floor(x0), math.ceil(x1) + 1)
+        if y0 is None:
+            return
+        ys = np.arange(math.floor(y0), math.ceil(y1) + 1)
+        strips = [[[x, ys[0]], [x, ys[-1]]] for x in xs] + [[[xs[0], y], [xs[-1], y]] for y in ys]
+        self.rec.log("adev_curve/grid", rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=[0.004]), static=True)
+        labels = [f"tau {10.0**x:g} s" for x in xs] + [f"{10.0**y:g} deg/h" for y in ys]
+        pos = [[x, ys[0] - 0.15] for x in xs] + [[xs[0] - 0.3, y] for y in ys]
+        self.rec.log("adev_curve/grid_labels", rr.Points2D(pos, labels=labels, radii=[0.001],
+                                                            colors=[(150, 150, 150)]), static=True)
+        self._grid_done = True
+
+    # -- data -----------------------------------------------------------------
+    def block(self, block: Block) -> None:
+        rate = np.where(block.valid, block.rate_dph, np.nan)
+        self.dec.push(block.t_s, {"rate/rate_dph": rate, **{f"aux/{k}": v for k, v in block.aux.items()}})
+        if time.monotonic() - self._last_flush > FLUSH_WALL_S or self.dec.pending() >= FLUSH_SAMPLES:
+            self._flush_raw()
+
+    def _flush_raw(self, final: bool = False) -> None:
+        import rerun as rr
+
+        self._last_flush = time.monotonic()
+        t, vals = self.dec.take(final)
+        if not len(t):
+            return
+        for ent, v in vals.items():
+            ok = np.isfinite(v)
+            if not ok.any():
+                continue
+            self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
+                                  columns=rr.Scalars.columns(scalars=v[ok]))
+
+    def frames(self, dadev, fit, t_end_s: np.ndarray) -> None:
+        import rerun as rr
+
+        rec = self.rec
+        self._flush_raw()
+        idx = [rr.TimeColumn(TIMELINE, duration=t_end_s)]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log_adev = np.log10(np.asarray(dadev.adev_dph, dtype=np.float64))
+        rec.send_columns("dadev/log10_adev_dph", indexes=idx, columns=rr.Scalars.columns(scalars=log_adev))
+        for name in COEFFICIENTS:
+            c = getattr(fit, name)
+            v, lo, hi = (np.asarray(getattr(c, a), dtype=np.float64) for a in ("value", "lo", "hi"))
+            ok = np.asarray(c.identifiable, dtype=bool) & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
+            if ok.any():
+                rec.send_columns(f"coef/{name}", indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[ok])],
+                                 columns=rr.Scalars.columns(scalars=np.column_stack([v[ok], lo[ok], hi[ok]])))
+        # Heatmap and the current ADEV curve: one entry per window (a few per flush).
+        tau = np.asarray(dadev.tau_s, dtype=np.float64)
+        lx = np.log10(tau)
+        for i in range(len(t_end_s)):
+            self._heat.append(log_adev[i].astype(np.float32))
+            del self._heat[:-HEATMAP_WINDOWS]
+        rec.set_time(TIMELINE, duration=float(t_end_s[-1]))
+        heat = np.stack(self._heat, axis=1)[::-1]  # rows: largest tau on top
+        rec.log("dadev/heatmap_log10_adev_dph", rr.Tensor(
+            heat, dim_names=[f"tau {tau[-1]:.3g} s (top) .. {tau[0]:.3g} s (bottom)",
+                             f"window (newest right, hop {self.info.hop_s:g} s)"]))
+        for i in range(len(t_end_s)):
+            rec.set_time(TIMELINE, duration=float(t_end_s[i]))
+            self._log_curve(lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], fit, i, tau)
+
+    def _log_curve(self, lx, adev, lo, hi, fit, i, tau) -> None:
+        import rerun as rr
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ly, llo, lhi = (np.log10(np.asarray(a, dtype=np.float64)) for a in (adev, lo, hi))
+        ok = np.isfinite(ly)
+        if not ok.any():
+            return
+        if not self._grid_done:
+            lo_y = np.nanmin(np.where(np.isfinite(llo), llo, ly)[ok])
+            hi_y = np.nanmax(np.where(np.isfinite(lhi), lhi, ly)[ok])
+            self._log_grid(lx[0], lx[-1], lo_y - 1, hi_y + 1)
+        pts = np.column_stack([lx[ok], ly[ok]])
+        self.rec.log("adev_curve/adev_dph", rr.LineStrips2D([pts], colors=[(255, 255, 255)], radii=[0.01]),
+                     rr.Points2D(pts, radii=[0.025], colors=[(255, 255, 255)]))
+        b = ok & np.isfinite(llo) & np.isfinite(lhi)
+        self.rec.log("adev_curve/bounds", rr.LineStrips2D(
+            [np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]])],
+            colors=[(120, 160, 255)], radii=[0.006]))
+        try:
+            model = np.asarray(fit.model_adev_dph(tau), dtype=np.float64)
+            if model.ndim == 2:
+                model = model[i]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                lm = np.log10(model)
+            m_ok = np.isfinite(lm)
+            if m_ok.any():
+                self.rec.log("adev_curve/model_ieee952", rr.LineStrips2D(
+                    [np.column_stack([lx[m_ok], lm[m_ok]])], colors=[(255, 170, 0)], radii=[0.006]))
+        except (AttributeError, TypeError, ValueError, IndexError):
+            pass  # an engine without a vectorised model curve: the bounds and points still show
+
+    def events(self, events: Sequence[Event]) -> None:
+        import rerun as rr
+
+        if not events:
+            return
+        t = np.array([e.t_s for e in events], dtype=np.float64)
+        self.rec.send_columns("events", indexes=[rr.TimeColumn(TIMELINE, duration=t)],
+                              columns=rr.TextLog.columns(text=[f"{e.kind}: {e.message}" for e in events],
+                                                         level=[_LEVELS.get(e.kind, "INFO") for e in events]))
+
+    def counters(self, t_s: float, counters: dict[str, int]) -> None:
+        import rerun as rr
+
+        for k, v in counters.items():
+            self.rec.send_columns(f"counters/{k}", indexes=[rr.TimeColumn(TIMELINE, duration=[t_s])],
+                                  columns=rr.Scalars.columns(scalars=[float(v)]))
+
+    def finish(self, summary) -> None:
+        if self.rec is None:
+            return
+        self._flush_raw(final=True)
+        self.rec.flush()
+        if self.rrd_path:
+            summary.outputs.append(self.rrd_path)
+        if self.server is not None and self.serve_wait and not summary.interrupted:
+            print(f"fogmon: done; still serving {self.server_url} for viewers - press Ctrl-C to stop",
+                  file=sys.stderr)
+            try:
+                while self.server.poll() is None:
+                    time.sleep(0.5)
+            except KeyboardInterrupt:
+                pass
+        self.rec.disconnect()
+        if self.server is not None:
+            self.server.terminate()
+            try:
+                self.server.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.server.kill()
