@@ -1,0 +1,32 @@
+"""Serial protocol names (CONTRACT section 3) -> incremental byte decoders."""
+from __future__ import annotations
+
+from fogmon.errors import FogmonError
+from fogmon.sources import dsp3000, kvh, lines
+
+PROTOCOLS = ("kvh-a", "kvh-b", "kvh-c", "dsp3000", "lines")
+#: protocol -> (default baud, default sample rate Hz)
+DEFAULTS = {"kvh-a": (921600, kvh.DEFAULT_RATE_HZ), "kvh-b": (921600, kvh.DEFAULT_RATE_HZ),
+            "kvh-c": (921600, kvh.DEFAULT_RATE_HZ), "dsp3000": (38400, dsp3000.DEFAULT_RATE_HZ),
+            "lines": (115200, lines.DEFAULT_RATE_HZ)}
+
+
+def make_codec(protocol: str, rate_hz: float | None = None, kvh_rot: str | None = None,
+               kvh_units: str = "rad", axis: str = "z", columns: str = "rate_dph"):
+    """A fresh decoder for ``protocol``; ``rate_hz`` None takes the protocol default;
+    ``kvh_rot`` None takes 'delta' for KVH binary and 'rate' for DSP-3000."""
+    if protocol not in PROTOCOLS:
+        raise FogmonError(f"unknown protocol {protocol!r} (use one of {', '.join(PROTOCOLS)})")
+    fs = DEFAULTS[protocol][1] if rate_hz is None else float(rate_hz)
+    if protocol.startswith("kvh-"):
+        return kvh.KvhCodec(protocol[-1], kvh_rot or "delta", kvh_units, axis, fs)
+    if protocol == "dsp3000":
+        return dsp3000.Dsp3000Codec(kvh_rot or "rate", fs)
+    return lines.LinesCodec(columns, fs)
+
+
+def codec_from_options(opts: dict):
+    """Rebuild a decoder from its ``options()`` dict (raw-capture sidecar)."""
+    o = dict(opts)
+    return make_codec(o.pop("protocol"), **{k: v for k, v in o.items()
+                                             if k in ("rate_hz", "kvh_rot", "kvh_units", "axis", "columns")})

@@ -1,0 +1,176 @@
+"""KVH DSP-1750/1760/1775 binary output Formats A, B and C: an incremental, bounded-buffer
+decoder with resynchronisation.
+
+Wire formats (big-endian, DESIGN section 5):
+
+- A, 36 bytes: header ``FE 81 FF 55``, gyro x/y/z float32, accel x/y/z float32
+  (reserved on the 1760), status uint8 (bits 0-2: gyro x/y/z valid), sequence uint8
+  (0-127, wrapping), temperature int16 (deg C), CRC-32/MPEG-2 uint32.
+- B, 40 bytes: header ``... 56``, as A with a uint32 microsecond timestamp after the
+  accelerometers (before status).
+- C, 38 bytes: header ``... 57``, gyro, accel, one float32 multiplexed by sequence % 4
+  (0: temperature deg C, 1-3: magnetometer x/y/z gauss), status, sequence, CRC.
+
+The CRC (poly 0x04C11DB7, init 0xFFFFFFFF, no reflection, xorout 0) covers every byte
+before it, so the CRC of a whole good frame is 0. Resync: find the header, check the CRC,
+on failure drop one byte and rescan. Gyro values are delta angles (per sample) or rates,
+in rad or deg, as the device is configured; they are converted to deg/h here.
+"""
+from __future__ import annotations
+
+import binascii
+import math
+import struct
+
+import numpy as np
+
+from fogmon.errors import FogmonError
+from fogmon.sources.frames import Frames
+
+#: bit-reversal of every byte value, to run CRC-32/MPEG-2 through zlib's reflected CRC-32.
+_REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
+
+
+def crc32_mpeg2(data: bytes) -> int:
+    """CRC-32/MPEG-2 of ``data`` (poly 0x04C11DB7, init 0xFFFFFFFF, no reflection,
+    xorout 0). Computed with zlib's reflected CRC-32 on bit-reversed bytes (C speed):
+    reflecting input and output turns one into the other."""
+    r = binascii.crc32(bytes(data).translate(_REV8)) ^ 0xFFFFFFFF
+    return int(f"{r:032b}"[::-1], 2)
+
+
+def _crc_ok(frame: bytes) -> bool:
+    # CRC over a frame including its own big-endian CRC is 0 <=> reflected CRC == ~0.
+    return binascii.crc32(frame.translate(_REV8)) == 0xFFFFFFFF
+
+
+#: format letter -> (header, frame length, struct layout of the frame without CRC)
+FORMATS = {
+    "a": (b"\xfe\x81\xff\x55", 36, struct.Struct(">4x6fBBh")),
+    "b": (b"\xfe\x81\xff\x56", 40, struct.Struct(">4x6fIBBh")),
+    "c": (b"\xfe\x81\xff\x57", 38, struct.Struct(">4x7fBB")),
+}
+AXES = ("x", "y", "z")
+SEQ_MODULUS = 128
+DEFAULT_RATE_HZ = 1000.0
+
+
+def to_dph(value, mode: str, units: str, rate_hz: float):
+    """Gyro output -> deg/h. ``mode`` 'rate' (units/s) or 'delta' (units per sample at
+    ``rate_hz``), ``units`` 'deg' or 'rad'."""
+    scale = 3600.0 * (180.0 / math.pi if units == "rad" else 1.0)
+    if mode == "delta":
+        scale *= rate_hz
+    return np.asarray(value, dtype=np.float64) * scale
+
+
+class KvhCodec:
+    """Incremental decoder: ``feed(bytes) -> Frames``. Counters: ``frames_ok``,
+    ``crc_errors`` (a header whose frame failed the CRC), ``bytes_skipped`` (every byte
+    not part of a good frame). Invariant: bytes fed = frames_ok * frame length +
+    bytes_skipped + ``pending`` (at most one frame length - 1 bytes are held)."""
+
+    seq_modulus = SEQ_MODULUS
+
+    def __init__(self, fmt: str = "a", rot: str = "delta", units: str = "rad",
+                 axis: str = "z", rate_hz: float = DEFAULT_RATE_HZ) -> None:
+        fmt = fmt.lower()
+        if fmt not in FORMATS:
+            raise FogmonError(f"unknown KVH format {fmt!r} (use a, b or c)")
+        if rot not in ("rate", "delta"):
+            raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
+        if units not in ("deg", "rad"):
+            raise FogmonError(f"--kvh-units must be deg or rad, got {units!r}")
+        if axis not in AXES:
+            raise FogmonError(f"--axis must be x, y or z, got {axis!r}")
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
+        self.fmt, self.rot, self.units, self.axis, self.rate_hz = fmt, rot, units, axis, float(rate_hz)
+        self.protocol = f"kvh-{fmt}"
+        self.header, self.frame_len, self._layout = FORMATS[fmt]
+        self._axis_i = AXES.index(axis)
+        self.aux_names = ("temp_c",)
+        self.counters = {"frames_ok": 0, "crc_errors": 0, "bytes_skipped": 0}
+        self._buf = bytearray()
+        self._last_temp_c = math.nan  # format C: temperature arrives every 4th frame
+
+    @property
+    def pending(self) -> int:
+        """Bytes held waiting for the rest of a frame (< frame length)."""
+        return len(self._buf)
+
+    def options(self) -> dict:
+        """What is needed to rebuild this decoder (raw-capture sidecar)."""
+        return {"protocol": self.protocol, "kvh_rot": self.rot, "kvh_units": self.units,
+                "axis": self.axis, "rate_hz": self.rate_hz}
+
+    def describe(self) -> str:
+        return (f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}), axis {self.axis}, "
+                f"{self.rate_hz:g} Hz")
+
+    def feed(self, data: bytes) -> Frames:
+        buf = self._buf
+        buf += data
+        n = len(buf)
+        L, hdr, layout = self.frame_len, self.header, self._layout
+        seqs, gyro, valid, temps = [], [], [], []
+        ai, fmt = self._axis_i, self.fmt
+        crc_err = skipped = 0
+        i = 0
+        while True:
+            j = buf.find(hdr, i)
+            if j < 0:
+                keep = max(i, n - (len(hdr) - 1))  # a header may straddle the chunk end
+                skipped += keep - i
+                i = keep
+                break
+            skipped += j - i
+            if j + L > n:
+                i = j
+                break
+            frame = bytes(buf[j:j + L])
+            if not _crc_ok(frame):
+                crc_err += 1
+                skipped += 1
+                i = j + 1
+                continue
+            f = layout.unpack_from(frame)
+            if fmt == "a":
+                status, seq, temp = f[6], f[7], float(f[8])
+            elif fmt == "b":
+                status, seq, temp = f[7], f[8], float(f[9])
+            else:
+                status, seq = f[7], f[8]
+                if seq % 4 == 0:
+                    self._last_temp_c = float(f[6])
+                temp = self._last_temp_c
+            seqs.append(seq & 0x7F)
+            gyro.append(f[ai])
+            valid.append(bool(status >> ai & 1))
+            temps.append(temp)
+            i = j + L
+        del buf[:i]
+        c = self.counters
+        c["frames_ok"] += len(seqs)
+        c["crc_errors"] += crc_err
+        c["bytes_skipped"] += skipped
+        rate = to_dph(gyro, self.rot, self.units, self.rate_hz)
+        return Frames.from_lists(seqs, rate, valid, {"temp_c": temps})
+
+
+def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),
+                 status: int = 0x77, temp_c: float = 25.0, timestamp_us: int = 0) -> bytes:
+    """One valid frame (what a KVH device sends); for fake devices in tests and for
+    documentation. Format C carries ``temp_c`` only when seq % 4 == 0 (else 0.0 is sent
+    in the magnetometer slot)."""
+    hdr, _, _ = FORMATS[fmt]
+    g, a = [float(v) for v in gyro_xyz], [float(v) for v in accel_xyz]
+    if fmt == "a":
+        body = hdr + struct.pack(">6fBBh", *g, *a, status, seq & 0x7F, int(round(temp_c)))
+    elif fmt == "b":
+        body = hdr + struct.pack(">6fIBBh", *g, *a, timestamp_us & 0xFFFFFFFF, status, seq & 0x7F,
+                                 int(round(temp_c)))
+    else:
+        mux = float(temp_c) if seq % 4 == 0 else 0.0
+        body = hdr + struct.pack(">7fBB", *g, *a, mux, status, seq & 0x7F)
+    return body + struct.pack(">I", crc32_mpeg2(body))

@@ -1,0 +1,150 @@
+"""Command-line options for every source, and opening a live or replayed source from
+them (CONTRACT section 3). Used by ``fogmon monitor`` and ``fogmon replay``."""
+from __future__ import annotations
+
+import argparse
+import os
+
+from fogmon.errors import FogmonError
+from fogmon.sources.codecs import DEFAULTS, PROTOCOLS, make_codec
+
+CAN_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".log", ".mf4")
+
+
+def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") -> None:
+    """Add the source options. ``mode`` 'live' (monitor), 'replay' or 'both': live adds
+    ``--serial``/``--can`` and the port/bus options; replay adds ``--realtime`` and
+    ``--tolerate-bad-rows``; decoder options (``--protocol``, ``--dbc``...) go to both."""
+    live, replay = mode in ("live", "both"), mode in ("replay", "both")
+    g = parser.add_argument_group("serial gyro" if live else "raw serial capture decoding")
+    if live:
+        g.add_argument("--serial", metavar="PORT", help="serial port of the gyro (/dev/ttyUSB0, COM3, or a "
+                       "pyserial URL such as loop:// or socket://HOST:PORT); reopened with backoff if it disappears")
+        g.add_argument("--baud", type=int, metavar="B", help="baud rate (default per protocol: kvh-a/b/c 921600, "
+                       "dsp3000 38400, lines 115200)")
+    g.add_argument("--protocol", choices=PROTOCOLS, help="serial protocol: kvh-a|kvh-b|kvh-c = KVH DSP-1750/1760/1775 "
+                   "binary formats A/B/C, dsp3000 = KVH DSP-3000 ASCII (deg/s), lines = ASCII/CSV lines with "
+                   "--columns (default for --serial: kvh-a; a raw capture takes it from its .json sidecar)")
+    g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
+                   "angle (units per sample) (default: delta for kvh-*, rate for dsp3000)")
+    g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of KVH binary output (default: rad)")
+    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor (default: z)")
+    g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
+                   "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
+                   "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
+                   "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
+    g.add_argument("--rate-hz", type=float, metavar="HZ", help="sample rate in Hz where the protocol does not tell "
+                   "it (default: kvh-* 1000, dsp3000 100, lines 100; CAN: the DBC message cycle time)")
+    c = parser.add_argument_group("CAN gyro" if live else "CAN log decoding")
+    if live:
+        c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
+        c.add_argument("--interface", default="socketcan", metavar="I", help="python-can interface: socketcan, "
+                       "pcan, kvaser, vector, slcan, virtual, ... (default: socketcan)")
+        c.add_argument("--can-bitrate", type=int, metavar="BPS", help="CAN bit rate in bit/s, for interfaces "
+                       "that set it (default: leave the interface as configured)")
+    c.add_argument("--dbc", metavar="F", help="DBC file describing the gyro's CAN frames (see "
+                   "fogmon/data/gyro_example.dbc)")
+    c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "
+                   "holding --can-rate; required if several do)")
+    c.add_argument("--can-rate", metavar="SIGNAL", default="rate", help="DBC signal with the angular rate "
+                   "(default: rate); its DBC unit (deg/h, deg/s, rad/s, deg, rad, arcsec) sets the conversion")
+    c.add_argument("--can-rate-unit", metavar="UNIT", help="override the rate signal's DBC unit: deg/h, deg/s, "
+                   "rad/s (rates) or deg, rad, arcsec (angle per sample)")
+    c.add_argument("--can-temp", metavar="SIGNAL", help="DBC signal with the temperature in deg C "
+                   "(default: temperature if the message has it)")
+    c.add_argument("--can-counter", metavar="SIGNAL", help="DBC signal with the rolling counter used for gap "
+                   "detection (default: counter if the message has it)")
+    c.add_argument("--can-valid", metavar="SIGNAL", help="DBC signal that is nonzero when the sample is valid "
+                   "(default: valid if the message has it)")
+    if replay:
+        r = parser.add_argument_group("replay pacing")
+        r.add_argument("--realtime", nargs="?", type=float, const=1.0, default=None, metavar="X",
+                       help="replay at the recorded speed, or X times it (default: as fast as possible)")
+        r.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
+                       "instead of stopping at the first one")
+
+
+def _get(args, name, default=None):
+    v = getattr(args, name, None)
+    return default if v is None else v
+
+
+def codec_options(args) -> dict:
+    """Decoder options given on the command line (None = not given)."""
+    return {"protocol": _get(args, "protocol"), "rate_hz": _get(args, "rate_hz"),
+            "kvh_rot": _get(args, "kvh_rot"), "kvh_units": _get(args, "kvh_units"),
+            "axis": _get(args, "axis"), "columns": _get(args, "columns")}
+
+
+def can_options(args) -> dict:
+    """CAN decoding options given on the command line."""
+    return {"message": _get(args, "can_message"), "rate_signal": _get(args, "can_rate", "rate"),
+            "rate_unit": _get(args, "can_rate_unit"), "temp_signal": _get(args, "can_temp"),
+            "counter_signal": _get(args, "can_counter"), "valid_signal": _get(args, "can_valid"),
+            "rate_hz": _get(args, "rate_hz")}
+
+
+def open_live_source(args):
+    """The live source named by ``--serial`` or ``--can`` (exactly one)."""
+    serial_port, can_channel = _get(args, "serial"), _get(args, "can")
+    if bool(serial_port) == bool(can_channel):
+        raise FogmonError("give exactly one of --serial PORT or --can CHANNEL")
+    if serial_port:
+        from fogmon.sources.serial_source import SerialSource
+        o = codec_options(args)
+        protocol = o.pop("protocol") or "kvh-a"
+        codec = make_codec(protocol, **{k: v for k, v in o.items() if v is not None})
+        return SerialSource(serial_port, _get(args, "baud", DEFAULTS[protocol][0]), codec)
+    from fogmon.sources.can_source import CanSource, load_dbc
+    if not _get(args, "dbc"):
+        raise FogmonError("--can needs --dbc F describing the gyro's frames (example: fogmon/data/gyro_example.dbc)")
+    return CanSource(can_channel, _get(args, "interface", "socketcan"), load_dbc(args.dbc),
+                     bitrate=_get(args, "can_bitrate"), dbc_path=args.dbc, **can_options(args))
+
+
+def _sniff(path: str) -> str:
+    """'replay-log', 'can-csv' or 'other' from the first non-empty line."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError as e:
+        raise FogmonError(f"{path}: cannot read: {e.strerror}") from None
+    for raw in head.splitlines():
+        s = raw.strip()
+        if not s:
+            continue
+        if s.startswith(b"# fogmon replay log") or (b"time_s" in s and b"rate_dph" in s):
+            return "replay-log"
+        if s.startswith(b"timestamp,arbitration_id"):
+            return "can-csv"
+        if s.startswith(b"#"):
+            continue
+        return "other"
+    return "other"
+
+
+def open_replay_source(path: str, args):
+    """A source replaying ``path``: a replay-log CSV, a raw serial capture (protocol from
+    ``--protocol`` or its ``.json`` sidecar), or a CAN log (.asc .blf .trc .csv .log with
+    ``--dbc`` or a sidecar). Paced by ``--realtime [X]``."""
+    from fogmon.sources.replay import ReplayLogSource, open_raw_capture, read_sidecar
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FogmonError(f"{path}: no such file")
+    if os.path.isdir(path):
+        raise FogmonError(f"{path}: is a directory (give the replay log, capture or CAN log inside it)")
+    speed = _get(args, "realtime")
+    if speed is not None and not speed > 0:
+        raise FogmonError(f"--realtime must be > 0, got {speed}")
+    side = read_sidecar(path)
+    ext = os.path.splitext(path)[1].lower()
+    kind = _sniff(path) if not side else side.get("kind")
+    if kind == "can" or ext in CAN_LOG_SUFFIXES or kind == "can-csv":
+        from fogmon.sources.can_source import open_can_log
+        return open_can_log(path, _get(args, "dbc"), can_options(args), side, speed)
+    if kind == "serial" or (_get(args, "protocol") and kind != "replay-log"):
+        return open_raw_capture(path, codec_options(args), speed)
+    if kind == "replay-log" or ext == ".csv":
+        return ReplayLogSource(path, speed, tolerate=bool(_get(args, "tolerate_bad_rows", False)))
+    raise FogmonError(f"{path}: not a replay log; for a raw serial capture give --protocol "
+                      f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with --dbc")
