@@ -37,25 +37,53 @@ def _samples(seconds: float, rate_hz: float, what: str) -> int:
     return n
 
 
-def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 0.683):
-    """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
-    (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
-    (M,) or (..., M)) defaults to the dominant term of an IEEE-952 fit of each row."""
-    from fogmon.davar.fit import dominant_alpha, fit_avar  # fit depends on this module's outputs
+def row_alpha(sums, counts, m, n_samples: int) -> np.ndarray:
+    """Noise type alpha per tau for one window: the dominant term of an IEEE-952 fit to
+    its Allan variance (sums of squared terms and valid-term counts over m)."""
+    from fogmon.davar.fit import dominant_alpha, fit_avar  # fit needs this module's results
 
     counts = np.asarray(counts)
     with np.errstate(invalid="ignore", divide="ignore"):
+        avar = np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan)
+    tau_m = np.asarray(m, dtype=np.float64)  # tau in units of tau0: alpha does not depend on the unit
+    return dominant_alpha(np.nan_to_num(fit_avar(tau_m, avar, m, counts, n_samples)[0]), tau_m)
+
+
+def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
+    """Noise type per (window, tau) for windows ending at ``ends``: refitted (row_alpha)
+    on the first window at least ``every`` samples after the previous refit and held in
+    between, so batch and streaming engines pick the same windows. ``prev`` is
+    (alpha, end) of the last refit before these windows, or None. Returns
+    (alpha (T x M), (alpha, end) of the last refit)."""
+    alpha_now, end_now = (np.zeros(len(m), dtype=np.int64), None) if prev is None else prev
+    if len(ends) == 0:
+        return np.zeros((0, len(m)), dtype=np.int64), (alpha_now, end_now)
+    seg_start, seg_alpha = [0], [alpha_now]
+    r = 0 if end_now is None else int(np.searchsorted(ends, end_now + every))
+    while r < len(ends):
+        alpha_now, end_now = row_alpha(sums[r], counts[r], m, n_samples), int(ends[r])
+        seg_start.append(r)
+        seg_alpha.append(alpha_now)
+        r = int(np.searchsorted(ends, end_now + every))
+    seg = np.searchsorted(np.array(seg_start), np.arange(len(ends)), side="right") - 1
+    return np.array(seg_alpha, dtype=np.int64)[seg], (alpha_now, end_now)
+
+
+def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 0.683):
+    """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
+    (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
+    (M,) or (..., M)) defaults to the dominant term of an IEEE-952 fit of each window."""
+    sums = np.asarray(sums, dtype=np.float64)
+    counts = np.asarray(counts)
+    with np.errstate(invalid="ignore", divide="ignore"):
         adev = np.sqrt(np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan))
-    rows = adev.reshape(-1, adev.shape[-1])
-    crow = counts.reshape(rows.shape)
-    tau_m = np.asarray(m, dtype=np.float64)  # fits in units of tau0: alpha does not depend on the unit
     if alpha is None:
-        alpha_rows = np.array([dominant_alpha(np.nan_to_num(fit_avar(tau_m, r**2, m, c, n_samples)[0]), tau_m)
-                               for r, c in zip(rows, crow)], dtype=np.int64).reshape(rows.shape)
-    else:
-        alpha_rows = np.broadcast_to(np.asarray(alpha, dtype=np.int64), adev.shape).reshape(rows.shape)
-    edf_gapless = np.array([edf_full(a, m, n_samples) for a in alpha_rows]).reshape(adev.shape)
-    edf = edf_effective(edf_gapless, m, n_samples, counts)
+        rows = [row_alpha(s, c, m, n_samples) for s, c in zip(sums.reshape(-1, len(m)), counts.reshape(-1, len(m)))]
+        alpha = np.array(rows, dtype=np.int64).reshape(adev.shape)
+    alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), adev.shape).reshape(-1, len(m))
+    uniq, inv = np.unique(alpha, axis=0, return_inverse=True)
+    edf_gapless = np.array([edf_full(a, m, n_samples) for a in uniq]).reshape(len(uniq), len(m))
+    edf = edf_effective(edf_gapless[inv.ravel()].reshape(adev.shape), m, n_samples, counts)
     lo, hi = chi2_bounds(adev, edf, confidence)
     return adev, lo, hi, edf
 
@@ -80,7 +108,8 @@ def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None,
           valid=None, confidence: float = 0.683, t0_s: float = 0.0, alpha=None) -> DadevResult:
     """Dynamic Allan deviation: overlapping ADEV (deg/h) of every window of ``window_s`` s,
     windows starting every ``hop_s`` s (default window_s / 4) from the first sample at
-    time ``t0_s`` (s); only complete windows. Taus limited to window / 4."""
+    time ``t0_s`` (s); only complete windows. Taus limited to window / 4. The default
+    ``alpha`` is refitted every max(hop, window / 4) samples (see :func:`alpha_rows`)."""
     y, ok = _prepare(rate_dph, valid)
     w = _samples(window_s, rate_hz, "window_s")
     hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")
@@ -89,7 +118,9 @@ def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None,
     ref = float(y[ok].mean()) if ok.any() else 0.0
     hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, ref)
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, starts, w)
-    adev, lo, hi, edf = statistics(sums, counts, m, w, alpha, confidence)
     end = starts + w - 1
+    if alpha is None:
+        alpha, _ = alpha_rows(sums, counts, end, m, w, max(hop, w // 4))
+    adev, lo, hi, edf = statistics(sums, counts, m, w, alpha, confidence)
     return DadevResult(t0_s + (starts + (w - 1) / 2.0) / rate_hz, end, m / rate_hz, m, adev, lo, hi, edf,
                        counts, float(rate_hz), w / rate_hz, hop / rate_hz, confidence)

@@ -60,6 +60,7 @@ def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = 0.683) ->
     f_hi = np.full(adev.shape, np.nan)
     if ok.any():
         u, inv = np.unique(edf[ok], return_inverse=True)
-        f_lo[ok] = np.sqrt(u / chi2.ppf(q_hi, u))[inv]
-        f_hi[ok] = np.sqrt(u / chi2.ppf(q_lo, u))[inv]
+        with np.errstate(divide="ignore", over="ignore"):  # tiny EDF: hi is +inf
+            f_lo[ok] = np.sqrt(u / chi2.ppf(q_hi, u))[inv]
+            f_hi[ok] = np.sqrt(u / chi2.ppf(q_lo, u))[inv]
     return adev * f_lo, adev * f_hi

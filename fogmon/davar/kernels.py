@@ -94,3 +94,93 @@ def window_sums(hi, lo, bad, ms, starts, w):
                 c += e
                 cnt += 1
     return sums, counts
+
+
+@njit(cache=True)
+def stream_append(y, valid, yraw, vraw, psum, bad, length, ref):
+    """Append samples to the linear buffer: raw values, validity, prefix sums of
+    ``y - ref`` over valid samples and prefix counts of invalid samples."""
+    s = psum[length]
+    b = bad[length]
+    for i in range(y.shape[0]):
+        p = length + i
+        yraw[p] = y[i]
+        vraw[p] = valid[i]
+        if valid[i]:
+            s += y[i] - ref
+        else:
+            b += 1
+        psum[p + 1] = s
+        bad[p + 1] = b
+
+
+@njit(cache=True)
+def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, out_sums, out_counts):
+    """Slide the window over buffer positions ``first .. first + n_new - 1`` (already
+    appended; the buffer holds at least the ``w - 1`` samples before ``first`` or starts
+    at the record's first sample, position 0 then meaning absolute index 0). For every m
+    the term ending at each new sample enters and the term starting at the sample that
+    left leaves; at the buffer positions ``emit_pos`` (increasing) the current sums and
+    counts are written to the rows of ``out_sums``/``out_counts``."""
+    n_emit = emit_pos.shape[0]
+    for k in range(ms.shape[0]):
+        m = ms[k]
+        s = sum_s[k]
+        c = sum_c[k]
+        n = cnt[k]
+        e = 0
+        for p in range(first, first + n_new):
+            jn = p - 2 * m + 1
+            if jn >= 0 and bad[p + 1] == bad[jn]:
+                t = ((psum[p + 1] - psum[p + 1 - m]) - (psum[p + 1 - m] - psum[jn])) / m
+                s, err = _two_sum(s, t * t)
+                c += err
+                n += 1
+            jo = p - w
+            if jo >= 0 and bad[jo + 2 * m] == bad[jo]:
+                t = ((psum[jo + 2 * m] - psum[jo + m]) - (psum[jo + m] - psum[jo])) / m
+                s, err = _two_sum(s, -(t * t))
+                c += err
+                n -= 1
+            if e < n_emit and emit_pos[e] == p:
+                out_sums[e, k] = s + c
+                out_counts[e, k] = n
+                e += 1
+        sum_s[k] = s
+        sum_c[k] = c
+        cnt[k] = n
+
+
+@njit(cache=True)
+def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt):
+    """Keep the last ``w`` samples at the buffer front, re-reference them to their valid
+    mean, rebuild prefix sums and recompute every window sum exactly. Returns the new
+    reference level (deg/h)."""
+    off = length - w
+    total = 0.0
+    nv = 0
+    for i in range(w):
+        yraw[i] = yraw[off + i]
+        vraw[i] = vraw[off + i]
+        if vraw[i]:
+            total += yraw[i]
+            nv += 1
+    ref = total / nv if nv > 0 else 0.0
+    psum[0] = 0.0
+    bad[0] = 0
+    stream_append(yraw[:w].copy(), vraw[:w].copy(), yraw, vraw, psum, bad, 0, ref)
+    for k in range(ms.shape[0]):
+        m = ms[k]
+        s = 0.0
+        c = 0.0
+        n = 0
+        for j in range(w - 2 * m + 1):
+            if bad[j + 2 * m] == bad[j]:
+                t = ((psum[j + 2 * m] - psum[j + m]) - (psum[j + m] - psum[j])) / m
+                s, err = _two_sum(s, t * t)
+                c += err
+                n += 1
+        sum_s[k] = s
+        sum_c[k] = c
+        cnt[k] = n
+    return ref

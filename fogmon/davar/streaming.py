@@ -1,0 +1,108 @@
+"""Streaming dynamic Allan deviation (Galleani's fast DAVAR recursion), rate in deg/h.
+
+Per averaging factor m the engine keeps the compensated sum of squared overlapping terms
+in the current window and the count of valid ones. A new sample adds the term ending at
+it and removes the term starting at the sample that left: O(M) work per sample for M
+taus, whatever the window length. Terms come from prefix sums of (rate - reference
+level) in a linear buffer of ``window + reanchor`` samples; when it is full the last
+window is moved to the front, re-referenced to its mean and every sum recomputed exactly
+(O(window x M) every ``reanchor`` samples), so float drift and cancellation stay bounded
+over any run length. Emitting a window is reading the sums: hop 1 costs no more than
+hop 1024 in the engine.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fogmon.davar import kernels
+from fogmon.davar.batch import _prepare, _samples, alpha_rows, row_alpha, statistics
+from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.taus import tau_grid
+
+
+class StreamingDadev:
+    """Sliding-window overlapping ADEV of a rate stream sampled at ``rate_hz`` (Hz) over
+    windows of ``window_s`` (s), emitted every ``hop_s`` (s, default window_s / 4) once
+    the first window is complete. ``alpha``: noise type per tau for the confidence
+    bounds (default: dominant term of an IEEE-952 fit, refreshed at most every
+    max(hop, window / 4) samples). ``reanchor``: samples between exact recomputes
+    (default max(4 x window, 4096))."""
+
+    def __init__(self, rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
+                 confidence: float = 0.683, alpha=None, reanchor: int | None = None):
+        self.rate_hz = float(rate_hz)
+        self.window = _samples(window_s, rate_hz, "window_s")
+        self.hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")
+        self.m = tau_grid(rate_hz, self.window, taus)
+        self.confidence = confidence
+        self.alpha = None if alpha is None else np.broadcast_to(np.asarray(alpha, np.int64), self.m.shape)
+        self.reanchor = int(reanchor) if reanchor is not None else max(4 * self.window, 4096)
+        cap = self.window + self.reanchor
+        self._y = np.zeros(cap)
+        self._v = np.zeros(cap, dtype=np.bool_)
+        self._p = np.zeros(cap + 1)
+        self._bad = np.zeros(cap + 1, dtype=np.int64)
+        self._len = 0  # samples in the buffer
+        self._base = 0  # absolute index of buffer position 0
+        self._ref = 0.0  # reference level (deg/h) subtracted before the prefix sums
+        self._ref_set = False
+        nm = len(self.m)
+        self._s = np.zeros(nm)
+        self._c = np.zeros(nm)
+        self._n = np.zeros(nm, dtype=np.int64)
+        self._alpha_prev = None  # (alpha, end index) of the last fitted window, see batch.alpha_rows
+
+    @property
+    def n_pushed(self) -> int:
+        """Samples pushed so far."""
+        return self._base + self._len
+
+    def push(self, rate_dph, valid=None) -> DadevResult:
+        """Feed samples (deg/h; ``valid`` mask optional, NaN is invalid). Returns the
+        windows completed at hop boundaries inside this block (possibly zero rows);
+        ``end_index`` counts samples from the first push."""
+        y, ok = _prepare(rate_dph, valid)
+        w, cap = self.window, len(self._y)
+        nm = len(self.m)
+        a0 = self.n_pushed
+        first_end = max(a0, w - 1)
+        k0 = -(-(first_end - (w - 1)) // self.hop)
+        ends = np.arange(w - 1 + k0 * self.hop, a0 + len(y), self.hop, dtype=np.int64)
+        sums = np.empty((len(ends), nm))
+        counts = np.empty((len(ends), nm), dtype=np.int64)
+        i = 0
+        row = 0
+        while i < len(y):
+            if self._len == cap:
+                self._ref = kernels.stream_reanchor(self._y, self._v, self._p, self._bad, self._len, w,
+                                                    self.m, self._s, self._c, self._n)
+                self._base += self._len - w
+                self._len = w
+            take = min(len(y) - i, cap - self._len)
+            yc, vc = y[i:i + take], ok[i:i + take]
+            if not self._ref_set and vc.any():
+                self._ref = float(yc[vc].mean())
+                self._ref_set = True
+            kernels.stream_append(yc, vc, self._y, self._v, self._p, self._bad, self._len, self._ref)
+            row_end = row + int(np.searchsorted(ends[row:], self._base + self._len + take))
+            kernels.stream_update(self._len, take, w, self.m, self._p, self._bad, self._s, self._c, self._n,
+                                  ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end])
+            self._len += take
+            i += take
+            row = row_end
+        alpha = self.alpha
+        if alpha is None:
+            alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop, w // 4),
+                                                 self._alpha_prev)
+        adev, lo, hi, edf = statistics(sums, counts, self.m, w, alpha, self.confidence)
+        return DadevResult((ends - (w - 1) / 2.0) / self.rate_hz, ends, self.m / self.rate_hz, self.m,
+                           adev, lo, hi, edf, counts, self.rate_hz, w / self.rate_hz,
+                           self.hop / self.rate_hz, self.confidence)
+
+    def current(self) -> AdevResult:
+        """Overlapping ADEV of the current (possibly still filling) window."""
+        n = min(self.n_pushed, self.window)
+        alpha = self.alpha if self.alpha is not None else row_alpha(self._s + self._c, self._n, self.m, n)
+        adev, lo, hi, edf = statistics(self._s + self._c, self._n, self.m, n, alpha, self.confidence)
+        return AdevResult(self.m / self.rate_hz, self.m, adev, lo, hi, edf, self._n.copy(), self.rate_hz, n,
+                          self.confidence)
