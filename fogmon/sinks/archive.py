@@ -28,6 +28,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
+from fogmon.pipeline import Sink
 from fogmon.recording import append_replay_rows, write_replay_header
 from fogmon.sources.replay import CAPTURE_FORMAT, SIDECAR_SUFFIX
 
@@ -48,10 +49,11 @@ class _KeepOpen(io.StringIO):
         pass
 
 
-class Archive:
+class Archive(Sink):
     """Archive of ``source`` under ``directory`` (created; must not hold an archive yet).
-    ``write(block)`` takes the decoded blocks; the source feeds the raw capture through
-    the tap methods ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s)``
+    A pipeline sink (``run_pipeline(source, args, extra_sinks=[archive])``): ``block``
+    (= ``write``) takes the decoded blocks, ``finish`` closes; the source feeds the raw capture through
+    the tap methods ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
     (registered with ``source.add_tap(archive)``). Counters: ``rows_written``,
     ``rows_without_aux`` (valid samples whose aux channel was not yet known, e.g. KVH
     format C before its first temperature frame; not written), ``raw_bytes``,
@@ -117,6 +119,15 @@ class Archive:
             self.counters["rows_written"] += int(keep.sum())
         self._maybe_flush()
 
+    def block(self, block: Block) -> None:
+        self.write(block)
+
+    def finish(self, summary) -> None:
+        self.close()
+        outputs = getattr(summary, "outputs", None)
+        if outputs is not None:
+            outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples)")
+
     # -- raw capture taps (called by the source) --------------------------------------
     def raw(self, data: bytes) -> None:
         self._cap_buf += data
@@ -128,11 +139,13 @@ class Archive:
         self.counters["raw_frames"] += 1
         self._maybe_flush()
 
-    def outage(self, elapsed_s: float) -> None:
-        """The source lost its device for ``elapsed_s`` s; recorded in the sidecar at the
-        current byte offset of the serial capture."""
-        if self._spec is not None:
-            self._spec["breaks"].append({"offset": self.counters["raw_bytes"], "elapsed_s": float(elapsed_s)})
+    def outage(self, elapsed_s: float, missing_est: float) -> None:
+        """The source heard nothing for ``elapsed_s`` s, about ``missing_est`` samples
+        lost; recorded in the sidecar at the current byte offset of the serial capture
+        (a CAN log carries its own timestamps)."""
+        if self._spec is not None and self._spec.get("kind") == "serial":
+            self._spec["breaks"].append({"offset": self.counters["raw_bytes"], "missing_est": float(missing_est),
+                                         "elapsed_s": float(elapsed_s)})
             self._write_sidecar()
         self.flush()
 

@@ -4,8 +4,9 @@ placeholders, so gaps are flagged, never joined.
 A sample's grid index advances by one per frame; when the device's sequence counter
 jumps by d (modulo its wrap), d - 1 placeholders (valid False, rate and aux NaN) are
 inserted. After an outage (port unplugged, CAN bus lost, a silent stretch in a log) the
-caller says how long it lasted; the number of missing samples is then the count closest
-to that duration that agrees with the counter, or the duration alone without a counter.
+caller estimates from the clock how many samples were lost; the number inserted is then
+the count closest to that estimate that agrees with the counter (exact while the clock
+is within half a counter wrap), or the rounded estimate without a counter.
 """
 from __future__ import annotations
 
@@ -30,21 +31,21 @@ class GridAssembler:
         self.t0_s = float(t0_s)
         self.next_index = 0          # grid index of the next sample
         self._last_seq: int | None = None
-        self._break_s: float | None = None
+        self._break_est: float | None = None
         self.counters = {"seq_gaps": 0, "samples_missing": 0, "invalid_samples": 0}
 
-    def mark_break(self, elapsed_s: float) -> None:
-        """An outage: ``elapsed_s`` (s) passed between the last frame before it and the
-        first frame after it. Applied when the next frame arrives."""
-        self._break_s = float(elapsed_s)
+    def mark_break(self, missing_est: float) -> None:
+        """An outage before the next frame, in which about ``missing_est`` samples were
+        lost (from the clock: elapsed s x rate Hz minus the frames that did arrive)."""
+        self._break_est = float(missing_est)
 
     def _missing_before_first(self, seq0: int) -> int:
         M = self.seq_modulus
-        if self._last_seq is None and self._break_s is None:
+        if self._last_seq is None and self._break_est is None:
             return 0
-        if self._break_s is not None:
-            est = max(0.0, self._break_s * self.rate_hz - 1.0)
-            self._break_s = None
+        if self._break_est is not None:
+            est = max(0.0, self._break_est)
+            self._break_est = None
             if M is None or seq0 < 0 or self._last_seq is None:
                 return int(round(est))
             d = (seq0 - self._last_seq) % M  # missing = d - 1 + j*M for the j closest to est

@@ -13,8 +13,9 @@ CAN_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".log", ".mf4")
 
 def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") -> None:
     """Add the source options. ``mode`` 'live' (monitor), 'replay' or 'both': live adds
-    ``--serial``/``--can`` and the port/bus options; replay adds ``--realtime`` and
-    ``--tolerate-bad-rows``; decoder options (``--protocol``, ``--dbc``...) go to both."""
+    ``--serial``/``--can`` and the port/bus options; replay adds ``--tolerate-bad-rows``;
+    decoder options (``--protocol``, ``--dbc``...) go to both. Pacing (``--realtime``) and
+    ``--duration-s`` belong to the pipeline (fogmon.pipeline)."""
     live, replay = mode in ("live", "both"), mode in ("replay", "both")
     g = parser.add_argument_group("serial gyro" if live else "raw serial capture decoding")
     if live:
@@ -57,10 +58,7 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     c.add_argument("--can-valid", metavar="SIGNAL", help="DBC signal that is nonzero when the sample is valid "
                    "(default: valid if the message has it)")
     if replay:
-        r = parser.add_argument_group("replay pacing")
-        r.add_argument("--realtime", nargs="?", type=float, const=1.0, default=None, metavar="X",
-                       help="replay at the recorded speed, or X times it (default: as fast as possible)")
-        r.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
+        parser.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
                        "instead of stopping at the first one")
 
 
@@ -126,16 +124,14 @@ def _sniff(path: str) -> str:
 def open_replay_source(path: str, args):
     """A source replaying ``path``: a replay-log CSV, a raw serial capture (protocol from
     ``--protocol`` or its ``.json`` sidecar), or a CAN log (.asc .blf .trc .csv .log with
-    ``--dbc`` or a sidecar). Paced by ``--realtime [X]``."""
+    ``--dbc`` or a sidecar). Not paced: the pipeline paces (``--realtime``)."""
     from fogmon.sources.replay import ReplayLogSource, open_raw_capture, read_sidecar
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
     if os.path.isdir(path):
         raise FogmonError(f"{path}: is a directory (give the replay log, capture or CAN log inside it)")
-    speed = _get(args, "realtime")
-    if speed is not None and not speed > 0:
-        raise FogmonError(f"--realtime must be > 0, got {speed}")
+    speed = None
     side = read_sidecar(path)
     ext = os.path.splitext(path)[1].lower()
     kind = _sniff(path) if not side else side.get("kind")

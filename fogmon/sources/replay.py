@@ -4,7 +4,7 @@ source would, as fast as possible or paced at the recorded speed x N.
 
 A raw capture ``X`` may have a sidecar ``X.json`` (written by the archive) naming the
 protocol and decoder options and the outages seen while recording
-(``"breaks": [{"offset": byte offset, "elapsed_s": s}, ...]``), so that replaying it
+(``"breaks": [{"offset": byte offset, "missing_est": samples, "elapsed_s": s}, ...]``), so that replaying it
 gives exactly the samples the live monitor saw."""
 from __future__ import annotations
 
@@ -101,7 +101,7 @@ def read_sidecar(path: str) -> dict | None:
 class RawCaptureSource:
     """Bytes a serial device sent, decoded again. ``options`` are the decoder options
     (``protocol``, ``rate_hz``, ``kvh_rot``, ``kvh_units``, ``axis``, ``columns``);
-    ``breaks`` the outages [(byte offset, elapsed s)]. Counters: the decoder's and the
+    ``breaks`` the outages [(byte offset, estimated samples lost)]. Counters: the decoder's and the
     grid's (see GridAssembler)."""
 
     CHUNK = 1 << 16
@@ -147,8 +147,8 @@ class RawCaptureSource:
                     self._pacer.wait(float(b.t_s[0]))
                     yield b
                 if at_break:
-                    off, elapsed = breaks.pop(0)
-                    self.grid.mark_break(elapsed)
+                    off, est = breaks.pop(0)
+                    self.grid.mark_break(est)
 
     def codec_bytes(self) -> int:
         """Typical bytes per sample (for paced chunk sizes)."""
@@ -167,5 +167,8 @@ def open_raw_capture(path: str, overrides: dict | None = None, speed: float | No
     if "protocol" not in opts:
         raise FogmonError(f"{path}: a raw serial capture needs --protocol "
                           f"(or a {os.path.basename(path)}{SIDECAR_SUFFIX} sidecar naming it)")
-    breaks = [(b["offset"], b["elapsed_s"]) for b in side.get("breaks", [])]
+    try:
+        breaks = [(int(b["offset"]), float(b["missing_est"])) for b in side.get("breaks", [])]
+    except (KeyError, TypeError, ValueError):
+        raise FogmonError(f"{path}{SIDECAR_SUFFIX}: field breaks: each needs offset and missing_est") from None
     return RawCaptureSource(path, opts, breaks, speed)
