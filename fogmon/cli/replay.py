@@ -4,10 +4,9 @@ or paced with --realtime."""
 from __future__ import annotations
 
 import argparse
-import os
 
-from fogmon.errors import FogmonError
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
+from fogmon.sources.open import add_source_arguments, open_replay_source
 
 EPILOG = """examples:
   fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd out/lasergyro.rrd
@@ -26,38 +25,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="RECORDING",
                         help="replay-log CSV (time_s, rate_dph, ...), raw serial capture (with --protocol) "
                              "or CAN log .asc/.blf/.trc/.csv/.log (with --dbc)")
-    opener = _source_module()
-    if opener is not None:
-        opener.add_source_arguments(parser)
-    else:
-        parser.add_argument("--protocol", help="protocol of a raw serial capture (needs the drivers)")
-        parser.add_argument("--dbc", help="DBC file describing the CAN frames (needs the drivers)")
+    add_source_arguments(parser, mode="replay")
     add_pipeline_arguments(parser)
 
 
-def _source_module():
-    try:
-        from fogmon.sources import open as opener
-    except ImportError:
-        return None
-    return opener
-
-
-def open_source(args: argparse.Namespace):
-    """The replay source for ``args.recording``."""
-    path = args.recording
-    if not os.path.exists(path):
-        raise FogmonError(f"{path}: no such file")
-    opener = _source_module()
-    if opener is not None:
-        return opener.open_replay_source(path, args)
-    if getattr(args, "protocol", None) or getattr(args, "dbc", None):
-        raise FogmonError("--protocol/--dbc replays need fogmon.sources.open, which is not installed")
-    from fogmon.sources.replay import ReplayLogSource
-    return ReplayLogSource(path, speed=getattr(args, "realtime", None))
-
-
 def run(args: argparse.Namespace) -> int:
-    source = open_source(args)
+    source = open_replay_source(args.recording, args)
     summary = run_pipeline(source, args)
     return 130 if summary.interrupted else 0

@@ -1,0 +1,196 @@
+"""The streaming pipeline: what the sinks receive equals the batch engine on the same data."""
+from __future__ import annotations
+
+import argparse
+import io
+import time
+
+import numpy as np
+import pytest
+
+from fogmon.block import Block, Event
+from fogmon.davar.batch import dadev, oadev
+from fogmon.davar.fit import fit_noise
+from fogmon.pipeline import (COEFFICIENTS, JumpDetector, Sink, add_pipeline_arguments, default_window_s,
+                             parse_taus, run_pipeline, slice_block)
+from fogmon.sinks.console import ConsoleSink, format_summary
+
+
+class ListSource:
+    """A finite source serving pre-made blocks (block sizes chosen by the test)."""
+
+    def __init__(self, t, rate, sizes, rate_hz, aux=None, events=(), interrupt_after=None):
+        self.name, self.rate_hz, self.counters = "test source", rate_hz, {"frames_ok": 0}
+        self.n_samples = len(t)
+        self._t, self._r, self._sizes, self._aux = t, rate, sizes, aux or {}
+        self._events, self._interrupt_after = events, interrupt_after
+        self.closed = False
+
+    def blocks(self):
+        i = 0
+        for k, n in enumerate(self._sizes):
+            if self._interrupt_after is not None and k == self._interrupt_after:
+                raise KeyboardInterrupt
+            sl = slice(i, i + n)
+            ev = tuple(e for e in self._events if self._t[sl][0] <= e.t_s <= self._t[sl][-1])
+            self.counters["frames_ok"] += n
+            yield Block.make(self._t[sl], self._r[sl], aux={k2: v[sl] for k2, v in self._aux.items()}, events=ev)
+            i += n
+
+    def close(self):
+        self.closed = True
+
+
+class Collect(Sink):
+    def __init__(self):
+        self.info, self.frames_, self.blocks, self.events_, self.summary = None, [], [], [], None
+
+    def start(self, info):
+        self.info = info
+
+    def block(self, b):
+        self.blocks.append(b)
+
+    def frames(self, d, fit, t_end):
+        self.frames_.append((d, fit, t_end))
+
+    def events(self, ev):
+        self.events_.extend(ev)
+
+    def finish(self, summary):
+        self.summary = summary
+
+
+def _args(**kw):
+    p = argparse.ArgumentParser()
+    add_pipeline_arguments(p)
+    a = p.parse_args([])
+    a.no_progress = True
+    for k, v in kw.items():
+        setattr(a, k, v)
+    return a
+
+
+def _white(n, fs, seed=1, t0=0.0):
+    rng = np.random.default_rng(seed)
+    return t0 + np.arange(n) / fs, 3.0 + 60 * 0.05 * np.sqrt(fs) * rng.standard_normal(n)
+
+
+def test_frames_equal_batch_dadev_and_fit_with_gaps_and_odd_blocks():
+    fs, n = 100.0, 30_000
+    t, r = _white(n, fs, t0=12.5)
+    r[5000:5037] = np.nan        # a gap: invalid placeholders
+    sizes = [1, 999, 4096, 17, 8000, 3]
+    sizes.append(n - sum(sizes))
+    sink = Collect()
+    src = ListSource(t, r, sizes, fs)
+    summary = run_pipeline(src, _args(window_s=40.96, hop_s=5.12), sinks=[sink])
+    ref = dadev(r, fs, 40.96, 5.12, valid=np.isfinite(r), t0_s=12.5)
+    got = np.concatenate([d.adev_dph for d, _, _ in sink.frames_])
+    t_end = np.concatenate([te for _, _, te in sink.frames_])
+    assert got.shape == ref.adev_dph.shape == (len(ref), len(ref.tau_s))
+    np.testing.assert_allclose(got, ref.adev_dph, rtol=1e-9)
+    np.testing.assert_allclose(t_end, 12.5 + ref.end_index / fs, rtol=0, atol=1e-9)
+    ref_fit = fit_noise(ref)
+    for name in COEFFICIENTS:
+        v = np.concatenate([np.atleast_1d(getattr(f, name).value) for _, f, _ in sink.frames_])
+        np.testing.assert_allclose(v, getattr(ref_fit, name).value, rtol=1e-6, atol=1e-12)
+    assert summary.n_samples == n and summary.n_invalid == 37 and summary.n_windows == len(ref)
+    assert src.closed and sink.summary is summary
+    ov = oadev(r, fs, valid=np.isfinite(r))
+    np.testing.assert_allclose(summary.overall.adev_dph, ov.adev_dph, rtol=1e-12)
+    np.testing.assert_allclose(sink.info.tau_s, ref.tau_s)
+
+
+def test_default_window_is_a_power_of_two_quarter_of_the_record():
+    assert default_window_s(100.0, 184_718) == 32768 / 100.0
+    assert default_window_s(1000.0, 3_600_000) == 2**19 / 1000.0
+    assert default_window_s(1000.0, 10**9) == 2**20 / 1000.0
+    assert default_window_s(100.0, 2000) == 1024 / 100.0      # the minimum
+    assert default_window_s(100.0, 500) == 500 / 100.0        # never longer than the record
+    assert default_window_s(1000.0, None) == 65.536           # live
+
+
+def test_parse_taus():
+    assert parse_taus("octave") == "octave" and parse_taus("8") == 8
+    np.testing.assert_array_equal(parse_taus("0.1,1,10"), [0.1, 1, 10])
+    with pytest.raises(argparse.ArgumentTypeError):
+        parse_taus("1,x")
+    with pytest.raises(argparse.ArgumentTypeError):
+        parse_taus("-1")
+
+
+def test_duration_stops_at_exact_sample_count_and_interrupt_is_clean():
+    fs, n = 200.0, 20_000
+    t, r = _white(n, fs)
+    sink = Collect()
+    s = run_pipeline(ListSource(t, r, [3000] * 6 + [2000], fs), _args(duration_s=12.0, window_s=2.0), sinks=[sink])
+    assert s.n_samples == 2400 and not s.interrupted
+    assert sum(len(b) for b in sink.blocks) == 2400
+    src = ListSource(t, r, [3000] * 6 + [2000], fs, interrupt_after=2)
+    s = run_pipeline(src, _args(window_s=2.0), sinks=[sink])
+    assert s.interrupted and s.n_samples == 6000 and src.closed and sink.summary is s
+    np.testing.assert_allclose(s.overall.adev_dph, oadev(r[:6000], fs).adev_dph, rtol=1e-12)
+
+
+def test_realtime_paces_recording_time():
+    fs = 100.0
+    t, r = _white(100, fs)  # 1 s of recording
+    t0 = time.monotonic()
+    run_pipeline(ListSource(t, r, [100], fs), _args(window_s=0.32, realtime=5.0), sinks=[Collect()])
+    assert 0.99 / 5.0 - 0.02 <= time.monotonic() - t0 < 1.0
+
+
+def test_events_pass_through_and_slice_keeps_them():
+    fs = 100.0
+    t, r = _white(3000, fs)
+    ev = [Event(5.0, "crc_error", "bad CRC"), Event(17.3, "gap", "3 samples lost")]
+    sink = Collect()
+    s = run_pipeline(ListSource(t, r, [1000, 1000, 1000], fs, events=ev), _args(window_s=5.12), sinks=[sink])
+    assert [e.kind for e in sink.events_ if e.kind != "coef_jump"] == ["crc_error", "gap"]
+    assert s.event_counts["crc_error"] == 1 and s.event_counts["gap"] == 1
+    b = Block.make(t[:10], r[:10], events=[Event(t[3], "gap", "x")])
+    assert slice_block(b, 0, 3).events == () and len(slice_block(b, 3, 10).events) == 1
+
+
+class _C:
+    def __init__(self, v, lo, hi, ok=True):
+        self.value, self.lo, self.hi = np.array(v, float), np.array(lo, float), np.array(hi, float)
+        self.identifiable = np.full(len(self.value), ok)
+
+
+class _Fit:
+    def __init__(self, n_vals, n_lo, n_hi):
+        k = len(n_vals)
+        for name in COEFFICIENTS:
+            setattr(self, name, _C(np.ones(k), np.zeros(k), 2 * np.ones(k), ok=False))
+        self.N_dpsh = _C(n_vals, n_lo, n_hi)
+
+
+def test_jump_detector_compares_with_the_last_independent_window():
+    j = JumpDetector(window_s=10.0)
+    # N steady for 30 s then jumps to 3x with non-overlapping intervals; hop 2.5 s.
+    t = np.arange(2.5, 60.1, 2.5)
+    v = np.where(t < 30, 1.0, 3.0)
+    ev = j.update(_Fit(v, v * 0.9, v * 1.1), t)
+    assert len(ev) == 1 and ev[0].kind == "coef_jump" and "N_dpsh" in ev[0].message
+    assert 30.0 <= ev[0].t_s < 40.0
+    # overlapping intervals: no event
+    j = JumpDetector(window_s=10.0)
+    assert j.update(_Fit(v, v * 0.2, v * 5), t) == []
+
+
+def test_console_summary_lists_adev_bounds_and_coefficients():
+    fs = 100.0
+    t, r = _white(20_000, fs)
+    buf = io.StringIO()
+    s = run_pipeline(ListSource(t, r, [20_000], fs), _args(window_s=40.96),
+                     sinks=[ConsoleSink(out=buf, err=io.StringIO())])
+    text = buf.getvalue()
+    assert text == format_summary(s) + "\n"
+    assert "tau_s" in text and "lo_dph" in text and "hi_dph" in text
+    a = s.overall
+    assert f"{a.adev_dph[0]:12.5g}" in text and f"{a.hi_dph[-1]:12.5g}" in text
+    n = s.overall_fit.N_dpsh
+    assert bool(n.identifiable) and f"N_dpsh    = {float(n.value):.4g} deg/sqrt(h)" in text
+    assert abs(float(n.value) - 0.05) < 0.005      # the simulated white noise, N = 0.05 deg/sqrt(h)

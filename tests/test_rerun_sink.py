@@ -1,0 +1,168 @@
+"""The Rerun sink: the .rrd read back holds exactly what the engine computed, and a live
+gRPC receiver gets the same data as the file."""
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from fogmon.block import Block, Event
+from fogmon.davar.batch import dadev
+from fogmon.davar.fit import fit_noise
+from fogmon.pipeline import COEFFICIENTS, run_pipeline
+from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server
+
+from test_pipeline import ListSource, _args, _white
+
+
+def read_scalars(path, entity):
+    """(times in s, values rows) of a Scalars entity in an .rrd."""
+    ts, vals = [], []
+    for ch in RrdReader(path).stream().filter(content=entity, is_static=False):
+        rb = ch.to_record_batch()
+        if "Scalars:scalars" not in rb.schema.names:
+            continue
+        ts += list(rb.column("time").cast(pa.int64()).to_numpy() / 1e9)
+        vals += rb.column("Scalars:scalars").to_pylist()
+    order = np.argsort(ts, kind="stable")
+    return np.array(ts)[order], np.array(vals, dtype=np.float64)[order]
+
+
+def read_texts(path, entity):
+    out = []
+    for ch in RrdReader(path).stream().filter(content=entity, is_static=False):
+        d = ch.to_record_batch().to_pydict()
+        out += [x[0] for x in d.get("TextLog:text", [])]
+    return out
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def run_rrd(tmp_path_factory):
+    fs, n = 100.0, 40_000
+    t, r = _white(n, fs, seed=7, t0=3.0)
+    r[20_000:20_050] = np.nan
+    temp = 25 + 0.001 * np.arange(n)
+    ev = [Event(100.0, "crc_error", "frame 42: bad CRC")]
+    path = str(tmp_path_factory.mktemp("rrd") / "sub" / "run.rrd")
+    src = ListSource(t, r, [7000] * 5 + [5000], fs, aux={"temp_c": temp}, events=ev)
+    summary = run_pipeline(src, _args(window_s=81.92, hop_s=10.24), sinks=[RerunSink(rrd_path=path)])
+    return path, t, r, temp, summary
+
+
+def test_rrd_dadev_and_coefficients_equal_the_engine(run_rrd):
+    path, t, r, _, summary = run_rrd
+    ref = dadev(r, 100.0, 81.92, 10.24, valid=np.isfinite(r), t0_s=3.0)
+    ts, logadev = read_scalars(path, "/dadev/log10_adev_dph")
+    assert logadev.shape == ref.adev_dph.shape and summary.n_windows == len(ref)
+    np.testing.assert_allclose(ts, 3.0 + ref.end_index / 100.0, atol=1e-9)
+    np.testing.assert_allclose(10.0 ** logadev, ref.adev_dph, rtol=1e-12)
+    fit = fit_noise(ref)
+    for name in COEFFICIENTS:
+        c = getattr(fit, name)
+        ok = np.asarray(c.identifiable) & np.isfinite(c.value) & np.isfinite(c.lo) & np.isfinite(c.hi)
+        tc, vals = read_scalars(path, f"/coef/{name}")
+        assert len(tc) == int(ok.sum())
+        if ok.any():
+            np.testing.assert_allclose(tc, ts[ok], atol=1e-9)
+            np.testing.assert_allclose(vals, np.column_stack([c.value[ok], c.lo[ok], c.hi[ok]]), rtol=1e-6)
+    assert int(np.asarray(fit.N_dpsh.identifiable).sum()) == len(ref)  # white noise: N in every window
+
+
+def test_rrd_raw_rate_aux_and_events(run_rrd):
+    path, t, r, temp, _ = run_rrd
+    tr, rate = read_scalars(path, "/rate/rate_dph")
+    ok = np.isfinite(r)
+    assert len(tr) == ok.sum()                      # 100 Hz: not decimated; gaps not drawn
+    np.testing.assert_allclose(tr, t[ok], atol=1e-9)
+    np.testing.assert_array_equal(rate[:, 0], r[ok])
+    ta, tv = read_scalars(path, "/aux/temp_c")
+    np.testing.assert_array_equal(tv[:, 0], temp)
+    texts = read_texts(path, "/events")
+    assert any("crc_error: frame 42: bad CRC" == x for x in texts)
+
+
+def test_decimator_means_valid_samples_across_pushes():
+    d = _Decimator(10)
+    t = np.arange(35) / 1000.0
+    v = np.arange(35, dtype=float)
+    v[12] = np.nan
+    d.push(t[:13], {"x": v[:13]})
+    d.push(t[13:], {"x": v[13:]})
+    tb, out = d.take()
+    np.testing.assert_allclose(tb, [0.0, 0.010, 0.020])
+    np.testing.assert_allclose(out["x"], [4.5, np.mean([10, 11, 13, 14, 15, 16, 17, 18, 19]), 24.5])
+    tb, out = d.take(final=True)
+    np.testing.assert_allclose(out["x"], [32.0])
+
+
+def test_1khz_rate_is_decimated_for_display_only(tmp_path):
+    fs = 1000.0
+    t, r = _white(20_000, fs)
+    path = str(tmp_path / "k.rrd")
+    s = run_pipeline(ListSource(t, r, [4096] * 4 + [20_000 - 4 * 4096], fs), _args(window_s=4.096),
+                     sinks=[RerunSink(rrd_path=path)])
+    tr, rate = read_scalars(path, "/rate/rate_dph")
+    assert len(tr) == 2000
+    np.testing.assert_allclose(rate[:, 0], r.reshape(-1, 10).mean(axis=1), rtol=1e-12)
+    _, logadev = read_scalars(path, "/dadev/log10_adev_dph")
+    assert logadev.shape[0] == s.n_windows and logadev.shape[1] == 11   # m = 1, 2, .., 1024 = 4096 // 4
+
+
+def test_live_grpc_receiver_gets_the_same_data_as_the_file(tmp_path):
+    rerun_exe = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
+    port = _free_port()
+    live = str(tmp_path / "live.rrd")
+    recv = subprocess.Popen([rerun_exe, "--bind", "127.0.0.1", "--port", str(port), "--save", live],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "rerun receiver did not start"
+                time.sleep(0.1)
+        fs = 100.0
+        t, r = _white(12_000, fs, seed=3)
+        file_ = str(tmp_path / "file.rrd")
+        run_pipeline(ListSource(t, r, [3000] * 4, fs), _args(window_s=20.48),
+                     sinks=[RerunSink(rrd_path=file_, connect_url=f"rerun+http://127.0.0.1:{port}/proxy")])
+        time.sleep(1.0)
+    finally:
+        recv.terminate()
+        recv.wait(timeout=10)
+    for ent in ("/dadev/log10_adev_dph", "/coef/N_dpsh", "/rate/rate_dph"):
+        tf, vf = read_scalars(file_, ent)
+        tl, vl = read_scalars(live, ent)
+        assert len(tf) > 0
+        np.testing.assert_array_equal(tl, tf)
+        np.testing.assert_array_equal(vl, vf)
+
+
+def test_serve_binds_localhost_by_default():
+    port = _free_port()
+    proc, url = start_grpc_server("127.0.0.1", port)
+    try:
+        assert url == f"rerun+http://127.0.0.1:{port}/proxy"
+        out = subprocess.run(["ss", "-ltn"], capture_output=True, text=True).stdout if shutil.which("ss") else ""
+        if out:
+            assert f"127.0.0.1:{port}" in out and f"0.0.0.0:{port}" not in out
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
