@@ -122,12 +122,11 @@ class RandomWalk:
     def __init__(self, K_dphsh: float, fs_hz: float, rng: np.random.Generator):
         self.step = float(K_dphsh) / 60.0 * math.sqrt(1.0 / fs_hz)
         self.rng = rng
-        self._x = 0.0
+        self._zi = np.zeros(1)
 
     def generate(self, n: int) -> np.ndarray:
-        x = self._x + np.cumsum(self.step * self.rng.standard_normal(n))
-        if n:
-            self._x = float(x[-1])
+        # a sequential recursion (not cumsum) so any chunking gives identical bits
+        x, self._zi = lfilter([1.0], [1.0, -1.0], self.step * self.rng.standard_normal(n), zi=self._zi)
         return x
 
 

@@ -1,0 +1,104 @@
+"""``fogmon sim``: simulate a sensor model (TOML, CONTRACT section 2) into a replay log
+(CONTRACT section 1), optionally --like a recording or driven by a --scenario."""
+from __future__ import annotations
+
+import argparse
+import itertools
+import os
+import sys
+
+import numpy as np
+
+from fogmon.errors import FogmonError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", required=True, metavar="MODEL.toml",
+                   help="sensor model file (CONTRACT section 2): rates deg/h, IEEE-952 noise Q_arcsec, "
+                   "N_dpsh deg/sqrt(h), B_dph deg/h, K_dphsh deg/h/sqrt(h), R_dphh deg/h^2, [[effect]] tables")
+    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (CONTRACT section 1)")
+    p.add_argument("--like", metavar="RECORDING.csv", help="take the time base (sample times, gaps, sample rate) "
+                   "and every aux column (temp_c, rot_dps, vib_g, ...) from this replay log, exactly")
+    p.add_argument("--duration-s", type=float, metavar="D", help="length in s (required without --like/--scenario; "
+                   "with --like: only the first D s of the recording; with --scenario mwd/orbit: its length)")
+    p.add_argument("--seed", type=int, metavar="S", help="random seed (default: fresh entropy, written to the "
+                   "output's metadata so the run can be repeated)")
+    p.add_argument("--scenario", choices=("mwd", "chamber", "orbit"), help="generate the aux channels when there "
+                   "is no recording: mwd = drilling run (stands, connections with pumps off, geothermal heating, "
+                   "vibration, string rotation), chamber = thermal-chamber plateaus joined by 1 C/min ramps, "
+                   "orbit = 5580 s orbit heating and orbital rate; see docs/sim.md for every parameter")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario parameter (repeatable), e.g. --set rop_mph=10 --set stick_slip=true; "
+                   "lists as --set plateaus_c=20,-40,60")
+
+
+def _overrides(items: list[str]) -> dict[str, str]:
+    out = {}
+    for it in items:
+        if "=" not in it:
+            raise FogmonError(f"--set {it!r}: expected KEY=VALUE")
+        k, v = it.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def _first_seconds(rec, duration_s: float):
+    from fogmon.recording import Recording
+    keep = rec.t_s < rec.t_s[0] + duration_s - 0.5 / rec.sample_rate_hz
+    if not keep.any():
+        raise FogmonError(f"--duration-s {duration_s:g} is shorter than one sample of {rec.name}")
+    return Recording(rec.t_s[keep], rec.rate_dph[keep], {k: v[keep] for k, v in rec.aux.items()},
+                     dict(rec.meta), rec.path)
+
+
+def run(args) -> int:
+    from fogmon.recording import append_replay_rows, read_replay_log, write_replay_header
+    from fogmon.sim.model import load_model
+    from fogmon.sim.scenarios import make_scenario
+    from fogmon.sim.simulate import iter_simulate
+
+    model = load_model(args.model)
+    if args.duration_s is not None and not args.duration_s > 0:
+        raise FogmonError(f"--duration-s must be > 0, got {args.duration_s:g}")
+    if args.set and not args.scenario:
+        raise FogmonError("--set needs --scenario")
+    if args.like and args.scenario:
+        raise FogmonError("give --like or --scenario, not both")
+    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy)
+    meta = {"sensor": f"fogmon sim of {os.path.basename(args.model)}", "model": args.model, "seed": str(seed)}
+    like = aux = aux_t = None
+    duration = args.duration_s
+    if args.like:
+        like = read_replay_log(args.like)
+        if duration is not None:
+            like = _first_seconds(like, duration)
+            duration = None
+        meta["like"] = args.like
+        if abs(like.sample_rate_hz - model.sample_rate_hz) > 1e-9 * model.sample_rate_hz:
+            print(f"fogmon sim: note: simulating at the recording's {like.sample_rate_hz:g} Hz, not the model's "
+                  f"{model.sample_rate_hz:g} Hz (the noise coefficients hold at any rate)", file=sys.stderr)
+    elif args.scenario:
+        sc = make_scenario(args.scenario, _overrides(args.set), duration, seed)
+        aux, aux_t = sc.aux, sc.t_s
+        meta.update(sc.meta)
+        if args.set:
+            meta["scenario_set"] = " ".join(args.set)
+    elif duration is None:
+        raise FogmonError("give --duration-s, --like RECORDING or --scenario")
+    info: dict = {}
+    blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info)
+    first = next(blocks)
+    n = 0
+    out_meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
+    try:
+        fh = open(args.out, "w", encoding="utf-8", newline="\n")
+    except OSError as e:
+        raise FogmonError(f"{args.out}: cannot write: {e.strerror}") from None
+    with fh:
+        write_replay_header(fh, list(first.aux), out_meta)
+        for b in itertools.chain([first], blocks):
+            v = b.valid
+            append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
+            n += int(v.sum())
+    print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
+    return 0

@@ -1,0 +1,192 @@
+"""Turn a SensorModel into samples: batch (``simulate`` -> Recording) or streaming
+(``iter_simulate`` -> Blocks of bounded size, same numbers for the same seed).
+
+The gyro reads (CONTRACT section 2)
+    bias_dph + 3600 rot_dps + Q + N(t) white + B flicker + K random walk + R ramp
+    + markov terms + mean-type effects,
+then passes through the ``bandwidth`` filters, if any. N(t) = N0 + the white-level
+effects (vibration_noise, temperature_noise), floored at 0, scales one white sequence.
+
+Time base and aux channels come from, in order of precedence:
+- ``like``: a Recording; its sample times and every aux column are copied exactly.
+  Missing samples (time gaps) are simulated on the uniform grid (aux interpolated
+  there) so that the noise and the filters run continuously, and left out of the
+  output (invalid placeholders in the streamed blocks).
+- ``aux`` (+ optional ``aux_t_s``): aux channels sampled at ``aux_t_s`` (default: the
+  model's sample times from 0); they are interpolated linearly onto the sample times.
+  This is how the scenario generators (fogmon.sim.scenarios) drive a simulation.
+- ``duration_s`` alone: no aux channels.
+
+Random streams: one SeedSequence(seed) spawns an independent stream per term (Q, N,
+B, K, then one per effect), so adding an effect does not change the other terms'
+realization. ``seed=None`` picks fresh entropy and reports it in ``meta['seed']``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Iterator
+
+import numpy as np
+
+from fogmon.block import Block
+from fogmon.errors import FogmonError
+from fogmon.recording import Recording
+from fogmon.sim import effects as fx
+from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
+from fogmon.sim.noise import (Flicker, RandomWalk, WhiteAngle, WhiteRate,
+                              default_flicker_tau_hi_s, ramp_dph)
+
+#: samples per streamed block by default (bounded memory; about 30 MB of work arrays)
+CHUNK_SAMPLES = 65536
+
+
+class _Plan:
+    """Where the samples come from: grid size, times, aux, which grid points exist."""
+
+    def __init__(self, model: SensorModel, duration_s, like, aux, aux_t_s):
+        self.fs = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
+        self.like = like
+        if like is not None:
+            self.idx = like.grid_index()
+            self.n = int(self.idx[-1]) + 1 if len(self.idx) else 0
+            self.t0 = float(like.t_s[0])
+            self.src_t = like.t_s
+            self.src_aux = like.aux
+            if duration_s is not None:
+                raise FogmonError("give either a recording to simulate like, or a duration, not both")
+        elif aux:
+            self.src_aux = {k: np.asarray(v, dtype=float) for k, v in aux.items()}
+            lens = {len(v) for v in self.src_aux.values()}
+            if len(lens) != 1:
+                raise FogmonError("aux channels must all have the same length")
+            m = lens.pop()
+            self.src_t = (np.arange(m) / self.fs if aux_t_s is None else np.asarray(aux_t_s, dtype=float))
+            if len(self.src_t) != m or m < 1:
+                raise FogmonError("aux_t_s must have one time per aux sample (and at least one)")
+            self.t0 = float(self.src_t[0])
+            step = float(self.src_t[1] - self.src_t[0]) if m > 1 and aux_t_s is not None else 1.0 / self.fs
+            span = float(self.src_t[-1] - self.src_t[0]) + step
+            self.n = int(round((duration_s if duration_s is not None else span) * self.fs))
+            self.idx = None
+        else:
+            self.src_t, self.src_aux, self.t0, self.idx = None, {}, 0.0, None
+            if duration_s is not None and not (duration_s > 0 and math.isfinite(duration_s)):
+                raise FogmonError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
+            self.n = None if duration_s is None else int(round(duration_s * self.fs))
+        if self.n is not None and self.n < 1:
+            raise FogmonError("nothing to simulate: the duration is shorter than one sample period")
+
+    @property
+    def duration_s(self) -> float | None:
+        return None if self.n is None else self.n / self.fs
+
+    def chunk(self, k0: int, k1: int):
+        """(t_s, aux, present) on grid samples [k0, k1): times, aux channels and the
+        mask of samples that exist in the output."""
+        k = np.arange(k0, k1)
+        t = self.t0 + k / self.fs
+        present = np.ones(len(k), dtype=bool)
+        aux = {}
+        if self.like is not None:
+            lo, hi = np.searchsorted(self.idx, [k0, k1])
+            pos = self.idx[lo:hi] - k0
+            present[:] = False
+            present[pos] = True
+            t[pos] = self.src_t[lo:hi]
+            for name, v in self.src_aux.items():
+                a = np.interp(t, self.src_t, v) if not present.all() else np.empty(len(k))
+                a[pos] = v[lo:hi]
+                aux[name] = a
+        elif self.src_aux:
+            for name, v in self.src_aux.items():
+                aux[name] = np.interp(t, self.src_t, v)
+        return t, aux, present
+
+
+def _check_aux(model: SensorModel, plan: _Plan) -> None:
+    have = set(plan.src_aux)
+    for i, e in enumerate(model.effects):
+        need = EFFECT_KINDS[e.kind].aux
+        if need and need not in have:
+            raise FogmonError(f"model effect #{i + 1} ({e.kind}) needs the aux channel {need!r}, which the "
+                              f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate --like a "
+                              f"recording with that column or use a --scenario")
+
+
+def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Recording | None = None,
+                  aux: dict | None = None, seed: int | None = None, aux_t_s=None,
+                  chunk_samples: int = CHUNK_SAMPLES, meta_out: dict | None = None) -> Iterator[Block]:
+    """Yield the simulation as Blocks of at most ``chunk_samples`` samples (t_s in s,
+    rate_dph in deg/h, aux channels). Infinite when neither a duration, a recording nor
+    aux channels bound it. ``meta_out`` (a dict) receives sample_rate_hz and seed."""
+    model = validate_model(model)
+    plan = _Plan(model, duration_s, like, aux, aux_t_s)
+    _check_aux(model, plan)
+    fs = plan.fs
+    ss = np.random.SeedSequence(seed)
+    if meta_out is not None:
+        meta_out.update(sample_rate_hz=f"{fs:g}", seed=str(ss.entropy))
+    rngs = [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))]
+    nz = model.noise
+    q = WhiteAngle(nz.Q_arcsec, fs, rngs[0]) if nz.Q_arcsec > 0 else None
+    white = WhiteRate(fs, rngs[1])
+    levels = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "white_level"]
+    b = (Flicker(nz.B_dph, fs, rngs[2], default_flicker_tau_hi_s(fs, plan.duration_s))
+         if nz.B_dph > 0 else None)
+    k = RandomWalk(nz.K_dphsh, fs, rngs[3]) if nz.K_dphsh > 0 else None
+    noises = [fx.noise_generator(e, fs, rngs[4 + i]) for i, e in enumerate(model.effects)
+              if EFFECT_KINDS[e.kind].nature == "noise"]
+    means = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "mean"]
+    filters = [fx.BandwidthFilter(e.params, fs) for e in model.effects if EFFECT_KINDS[e.kind].nature == "filter"]
+    back = int(math.ceil(max([fx.lookback_s(e) for e in means] + [0.0]) * fs)) + 2
+    k0 = 0
+    while plan.n is None or k0 < plan.n:
+        k1 = k0 + chunk_samples if plan.n is None else min(plan.n, k0 + chunk_samples)
+        t, aux_c, present = plan.chunk(k0, k1)
+        n = k1 - k0
+        rate = np.full(n, model.bias_dph)
+        if "rot_dps" in aux_c:
+            rate += 3600.0 * aux_c["rot_dps"]
+        level = np.full(n, nz.N_dpsh)
+        for e in levels:
+            level = level + fx.white_level_dpsh(e, t, aux_c)
+        if nz.N_dpsh > 0 or levels:
+            rate += white.generate(n, np.maximum(level, 0.0))
+        for gen in (q, b, k, *noises):
+            if gen is not None:
+                rate += gen.generate(n)
+        if nz.R_dphh:
+            rate += ramp_dph(nz.R_dphh, t - plan.t0)
+        if means:
+            kb = max(0, k0 - back)
+            te, auxe, _ = plan.chunk(kb, k1) if kb < k0 else (t, aux_c, None)
+            for e in means:
+                rate += fx.mean_rate_dph(e, te, auxe, fs)[k0 - kb:]
+        for f in filters:
+            rate = f.apply(rate)
+        rate[~present] = np.nan
+        out_aux = {name: np.where(present, a, np.nan) for name, a in aux_c.items()}
+        yield Block(t, rate, present.copy(), out_aux)
+        k0 = k1
+
+
+def simulate(model: SensorModel, duration_s: float | None = None, like: Recording | None = None,
+             aux: dict | None = None, seed: int | None = None, aux_t_s=None,
+             meta: dict | None = None) -> Recording:
+    """The whole simulation as a Recording (valid samples only; ``meta`` gets
+    sample_rate_hz and seed added). Same numbers as concatenating ``iter_simulate``."""
+    if like is None and not aux and duration_s is None:
+        raise FogmonError("simulate needs a duration, a recording to simulate like, or aux channels")
+    info: dict = {}
+    ts, rs, auxs = [], [], {}
+    for blk in iter_simulate(model, duration_s, like, aux, seed, aux_t_s, meta_out=info):
+        v = blk.valid
+        ts.append(blk.t_s[v])
+        rs.append(blk.rate_dph[v])
+        for name, a in blk.aux.items():
+            auxs.setdefault(name, []).append(a[v])
+    full_meta = {**info, **(meta or {})}
+    full_meta["sample_rate_hz"] = info["sample_rate_hz"]
+    full_meta["seed"] = info["seed"]
+    return Recording(np.concatenate(ts), np.concatenate(rs),
+                     {k: np.concatenate(v) for k, v in auxs.items()}, full_meta)

@@ -1,0 +1,53 @@
+"""A simulated gyro as a live source (fogmon.sources.base.Source): streams
+``fogmon.sim.simulate.iter_simulate`` block by block in bounded memory, as fast as
+possible or paced at real time x ``speed``. Endless when neither a duration, a
+recording (``like``) nor aux channels bound it; ``close()`` stops it."""
+from __future__ import annotations
+
+from typing import Iterator
+
+from fogmon.block import Block
+from fogmon.recording import Recording
+from fogmon.sim.model import SensorModel, load_model
+from fogmon.sim.simulate import CHUNK_SAMPLES, iter_simulate
+from fogmon.sources.pacing import Pacer
+
+#: block length (s) when paced, as for the replay sources
+PACED_BLOCK_S = 0.1
+
+
+class SimulatedSource:
+    """Source yielding a simulation of ``model`` (a SensorModel or a model file path).
+    Counters: ``samples`` (valid samples yielded), ``blocks``, ``samples_missing``
+    (gap placeholders copied from a ``like`` recording)."""
+
+    def __init__(self, model: SensorModel | str, duration_s: float | None = None, like: Recording | None = None,
+                 aux: dict | None = None, aux_t_s=None, seed: int | None = None, speed: float | None = None) -> None:
+        if not isinstance(model, SensorModel):
+            path = str(model)
+            model = load_model(path)
+            self.name = f"simulated gyro ({path})"
+        else:
+            self.name = "simulated gyro"
+        self.model = model
+        self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
+        self.meta: dict = {}
+        chunk = max(1, int(round(PACED_BLOCK_S * self.rate_hz * speed))) if speed else CHUNK_SAMPLES
+        self._it = iter_simulate(model, duration_s, like, aux, seed, aux_t_s, chunk_samples=chunk, meta_out=self.meta)
+        self._pacer = Pacer(speed)
+        self.counters = {"samples": 0, "blocks": 0, "samples_missing": 0}
+        self._closed = False
+
+    def blocks(self) -> Iterator[Block]:
+        for b in self._it:
+            if self._closed:
+                return
+            self._pacer.wait(float(b.t_s[0]))
+            nv = int(b.valid.sum())
+            self.counters["samples"] += nv
+            self.counters["samples_missing"] += len(b) - nv
+            self.counters["blocks"] += 1
+            yield b
+
+    def close(self) -> None:
+        self._closed = True
