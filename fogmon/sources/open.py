@@ -47,7 +47,7 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
                    "fogmon/data/gyro_example.dbc)")
     c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "
                    "holding --can-rate; required if several do)")
-    c.add_argument("--can-rate", metavar="SIGNAL", default="rate", help="DBC signal with the angular rate "
+    c.add_argument("--can-rate", metavar="SIGNAL", help="DBC signal with the angular rate "
                    "(default: rate); its DBC unit (deg/h, deg/s, rad/s, deg, rad, arcsec) sets the conversion")
     c.add_argument("--can-rate-unit", metavar="UNIT", help="override the rate signal's DBC unit: deg/h, deg/s, "
                    "rad/s (rates) or deg, rad, arcsec (angle per sample)")
@@ -76,7 +76,7 @@ def codec_options(args) -> dict:
 
 def can_options(args) -> dict:
     """CAN decoding options given on the command line."""
-    return {"message": _get(args, "can_message"), "rate_signal": _get(args, "can_rate", "rate"),
+    return {"message": _get(args, "can_message"), "rate_signal": _get(args, "can_rate"),
             "rate_unit": _get(args, "can_rate_unit"), "temp_signal": _get(args, "can_temp"),
             "counter_signal": _get(args, "can_counter"), "valid_signal": _get(args, "can_valid"),
             "rate_hz": _get(args, "rate_hz")}
@@ -131,16 +131,15 @@ def open_replay_source(path: str, args):
         raise FogmonError(f"{path}: no such file")
     if os.path.isdir(path):
         raise FogmonError(f"{path}: is a directory (give the replay log, capture or CAN log inside it)")
-    speed = None
     side = read_sidecar(path)
     ext = os.path.splitext(path)[1].lower()
     kind = _sniff(path) if not side else side.get("kind")
     if kind == "can" or ext in CAN_LOG_SUFFIXES or kind == "can-csv":
         from fogmon.sources.can_source import open_can_log
-        return open_can_log(path, _get(args, "dbc"), can_options(args), side, speed)
+        return open_can_log(path, _get(args, "dbc"), can_options(args), side)
     if kind == "serial" or (_get(args, "protocol") and kind != "replay-log"):
-        return open_raw_capture(path, codec_options(args), speed)
+        return open_raw_capture(path, codec_options(args))
     if kind == "replay-log" or ext == ".csv":
-        return ReplayLogSource(path, speed, tolerate=bool(_get(args, "tolerate_bad_rows", False)))
+        return ReplayLogSource(path, tolerate=bool(_get(args, "tolerate_bad_rows", False)))
     raise FogmonError(f"{path}: not a replay log; for a raw serial capture give --protocol "
                       f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with --dbc")

@@ -1,0 +1,336 @@
+"""A gyro on a CAN bus (python-can + cantools) and its logs.
+
+The user describes the gyro's frame in a DBC file; options name the message and the
+signals for rate, temperature, counter and validity (defaults: the signals called
+``rate``, ``temperature``, ``counter``, ``valid``; see fogmon/data/gyro_example.dbc).
+The rate signal's DBC unit (deg/h, deg/s, rad/s, or deg, rad, arcsec per sample) sets
+the conversion to deg/h. Lost frames are found from the rolling counter (its wrap is
+2**bit length) and from the frames' timestamps (a silence longer than half a counter
+wrap, or 0.5 s without a counter, is an outage whose length the timestamps give).
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from fogmon.block import Block, Event
+from fogmon.errors import FogmonError
+from fogmon.sources.frames import Frames
+from fogmon.sources.grid import GridAssembler, concat_blocks
+
+STALL_S = 0.5
+_D = 180.0 / math.pi
+#: DBC unit (lower case, spaces removed) -> (mode, deg/h per unit; per s for deltas)
+RATE_UNITS = {"deg/h": ("rate", 1.0), "dph": ("rate", 1.0), "°/h": ("rate", 1.0),
+              "deg/s": ("rate", 3600.0), "dps": ("rate", 3600.0), "°/s": ("rate", 3600.0),
+              "rad/s": ("rate", 3600.0 * _D), "deg": ("delta", 3600.0), "°": ("delta", 3600.0),
+              "rad": ("delta", 3600.0 * _D), "arcsec": ("delta", 1.0)}
+
+
+def load_dbc(path: str):
+    """A cantools database from a DBC file, or a one-line FogmonError."""
+    import cantools
+    try:
+        return cantools.database.load_file(path, database_format="dbc")
+    except FileNotFoundError:
+        raise FogmonError(f"--dbc {path}: no such file") from None
+    except Exception as e:  # cantools raises several parser error types
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"--dbc {path}: not a valid DBC file: {msg}") from None
+
+
+class CanDecoder:
+    """CAN frames -> Frames for one DBC message. Counters: ``frames_ok``,
+    ``bad_frames`` (the message's id but undecodable, e.g. wrong length), ``other_frames``
+    (other ids, ignored)."""
+
+    def __init__(self, db, message: str | None = None, rate_signal: str | None = None, rate_unit: str | None = None,
+                 temp_signal: str | None = None, counter_signal: str | None = None,
+                 valid_signal: str | None = None, rate_hz: float | None = None) -> None:
+        rate_signal = rate_signal or "rate"
+        if message:
+            try:
+                msg = db.get_message_by_name(message)
+            except KeyError:
+                raise FogmonError(f"--can-message {message!r} is not in the DBC (it has: "
+                                  f"{', '.join(m.name for m in db.messages)})") from None
+        else:
+            having = [m for m in db.messages if any(s.name == rate_signal for s in m.signals)]
+            if len(having) != 1:
+                raise FogmonError(f"--can-rate {rate_signal!r}: {'no' if not having else len(having)} DBC "
+                                  f"messages carry it; name the signal with --can-rate and the message with "
+                                  f"--can-message")
+            msg = having[0]
+        names = {s.name: s for s in msg.signals}
+
+        def pick(opt: str, given: str | None, default: str) -> str | None:
+            if given is None:
+                return default if default in names else None
+            if given not in names:
+                raise FogmonError(f"--{opt} {given!r}: message {msg.name} has no such signal "
+                                  f"(it has: {', '.join(names)})")
+            return given
+
+        if rate_signal not in names:
+            raise FogmonError(f"--can-rate {rate_signal!r}: message {msg.name} has no such signal "
+                              f"(it has: {', '.join(names)})")
+        self.message = msg
+        self.rate_signal = rate_signal
+        self.temp_signal = pick("can-temp", temp_signal, "temperature")
+        self.counter_signal = pick("can-counter", counter_signal, "counter")
+        self.valid_signal = pick("can-valid", valid_signal, "valid")
+        unit = rate_unit or names[rate_signal].unit or ""
+        key = unit.strip().lower().replace(" ", "")
+        if key not in RATE_UNITS:
+            raise FogmonError(f"rate signal {msg.name}.{rate_signal} has unit {unit!r}: give --can-rate-unit "
+                              f"(one of {', '.join(k for k in RATE_UNITS if k.isascii())})")
+        self.rate_unit = unit
+        if rate_hz is None:
+            if not msg.cycle_time:
+                raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give --rate-hz")
+            rate_hz = 1000.0 / msg.cycle_time
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
+        self.rate_hz = float(rate_hz)
+        mode, dph = RATE_UNITS[key]
+        self._scale = dph * (self.rate_hz if mode == "delta" else 1.0)
+        self.seq_modulus = 2 ** names[self.counter_signal].length if self.counter_signal else None
+        self.aux_names = ("temp_c",) if self.temp_signal else ()
+        self.counters = {"frames_ok": 0, "bad_frames": 0, "other_frames": 0}
+        self._stall_s = min(STALL_S, 0.5 * self.seq_modulus / self.rate_hz) if self.seq_modulus else STALL_S
+        self._last_ts: float | None = None
+
+    def options(self) -> dict:
+        return {"message": self.message.name, "rate_signal": self.rate_signal, "rate_unit": self.rate_unit,
+                "temp_signal": self.temp_signal, "counter_signal": self.counter_signal,
+                "valid_signal": self.valid_signal, "rate_hz": self.rate_hz}
+
+    def describe(self) -> str:
+        return f"CAN {self.message.name}.{self.rate_signal} ({self.rate_unit}), {self.rate_hz:g} Hz"
+
+    def feed(self, msgs: Iterable) -> list[tuple[float | None, Frames]]:
+        """Decode ``msgs`` (can.Message, in order): segments of frames, each with the
+        estimated samples lost before it (None = no outage)."""
+        fid = self.message.frame_id
+        segs: list[tuple[float | None, Frames]] = []
+        cur: dict[str, list] = {"seq": [], "rate": [], "valid": [], "temp": []}
+        brk = None
+
+        def close_seg():
+            if cur["seq"]:
+                aux = {"temp_c": cur["temp"]} if self.temp_signal else {}
+                segs.append((brk, Frames.from_lists(cur["seq"], np.asarray(cur["rate"]) * self._scale,
+                                                    cur["valid"], aux)))
+                for v in cur.values():
+                    v.clear()
+
+        c = self.counters
+        for m in msgs:
+            if m.arbitration_id != fid or m.is_error_frame or m.is_remote_frame:
+                c["other_frames"] += 1
+                continue
+            try:
+                d = self.message.decode(bytes(m.data), decode_choices=False)
+                rate = float(d[self.rate_signal])
+                temp = float(d[self.temp_signal]) if self.temp_signal else 0.0
+                seq = int(d[self.counter_signal]) if self.counter_signal else -1
+                ok = bool(d[self.valid_signal]) if self.valid_signal else True
+            except Exception:  # cantools: wrong length, bad multiplexer id, ...
+                c["bad_frames"] += 1
+                continue
+            ts = float(m.timestamp)
+            if self._last_ts is not None and ts - self._last_ts > self._stall_s:
+                close_seg()
+                brk = (ts - self._last_ts) * self.rate_hz - 1.0
+            self._last_ts = ts
+            c["frames_ok"] += 1
+            cur["seq"].append(seq % self.seq_modulus if self.seq_modulus else -1)
+            cur["rate"].append(rate)
+            cur["valid"].append(ok)
+            cur["temp"].append(temp)
+        close_seg()
+        return segs
+
+
+def _push_segments(grid: GridAssembler, segs, events) -> Block:
+    blocks = []
+    for i, (brk, frames) in enumerate(segs):
+        if brk is not None:
+            grid.mark_break(brk)
+        blocks.append(grid.push(frames, events if i == 0 else ()))
+    if not blocks:
+        return grid.push(Frames.empty(grid.aux_names), events)
+    return concat_blocks(blocks)
+
+
+class CanSource:
+    """Live CAN gyro on any python-can interface. Reopens the bus with backoff when it
+    fails (``disconnect``/``reconnect`` events). Taps (the archive) get every frame
+    received via ``tap.frame(msg)``. Counters: the decoder's, the grid's,
+    ``disconnects``, ``reconnects``."""
+
+    def __init__(self, channel: str, interface: str, db, bitrate: int | None = None, dbc_path: str | None = None,
+                 block_s: float = 0.1, idle_s: float = 0.5, backoff_s=(0.05, 2.0), **decoder_options) -> None:
+        self.channel, self.interface, self.bitrate, self.dbc_path = channel, interface, bitrate, dbc_path
+        self.decoder = CanDecoder(db, **decoder_options)
+        self.rate_hz = self.decoder.rate_hz
+        self.aux_names = self.decoder.aux_names
+        self.grid = GridAssembler(self.rate_hz, self.decoder.seq_modulus, self.aux_names)
+        self.name = f"{self.decoder.describe()} on {interface}:{channel}"
+        self.block_s, self.idle_s, self.backoff_s = block_s, idle_s, backoff_s
+        self._taps: list = []
+        self._bus = None
+        self._reader: int | None = None
+        self._stop = threading.Event()
+        self._own = {"disconnects": 0, "reconnects": 0}
+
+    @property
+    def counters(self) -> dict[str, int]:
+        return {**self.decoder.counters, **self.grid.counters, **self._own}
+
+    def capture_spec(self) -> dict:
+        return {"kind": "can", **self.decoder.options(), "dbc_path": self.dbc_path,
+                "channel": self.channel, "interface": self.interface}
+
+    def add_tap(self, tap) -> None:
+        self._taps.append(tap)
+
+    def _open(self):
+        import can
+        kw = {"bitrate": self.bitrate} if self.bitrate else {}
+        return can.Bus(interface=self.interface, channel=self.channel, **kw)
+
+    def blocks(self) -> Iterator[Block]:
+        import can
+        try:
+            self._bus = self._open()
+        except (can.CanError, OSError, ValueError, ImportError) as e:
+            raise FogmonError(f"--can {self.channel} --interface {self.interface}: cannot open: {e}") from None
+        self._reader = threading.get_ident()
+        try:
+            yield from self._run(can)
+        finally:
+            self._close_bus()
+            self._reader = None
+
+    def _run(self, can) -> Iterator[Block]:
+        msgs, events = [], []
+        last_yield = time.monotonic()
+        backoff, next_try, down_since = self.backoff_s[0], 0.0, 0.0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if self._bus is None:
+                if now >= next_try:
+                    try:
+                        self._bus = self._open()
+                    except (can.CanError, OSError, ValueError):
+                        next_try, backoff = now + backoff, min(2 * backoff, self.backoff_s[1])
+                    else:
+                        self._own["reconnects"] += 1
+                        backoff = self.backoff_s[0]
+                        events.append(Event(self.grid.t_next_s, "reconnect",
+                                            f"CAN {self.channel} back after {now - down_since:.2f} s"))
+                else:
+                    self._stop.wait(min(0.02, next_try - now))
+            else:
+                try:
+                    m = self._bus.recv(timeout=0.05)
+                except (can.CanError, OSError) as e:
+                    self._own["disconnects"] += 1
+                    down_since = time.monotonic()
+                    events.append(Event(self.grid.t_next_s, "disconnect", f"CAN {self.channel} lost ({e}); retrying"))
+                    self._close_bus()
+                    next_try = down_since + backoff
+                    continue
+                if m is not None:
+                    for tap in self._taps:
+                        tap.frame(m)
+                    msgs.append(m)
+            now = time.monotonic()
+            if now - last_yield >= self.block_s and (msgs or events) or now - last_yield >= self.idle_s:
+                yield _push_segments(self.grid, self.decoder.feed(msgs), events)
+                msgs, events, last_yield = [], [], now
+        if msgs or events:
+            yield _push_segments(self.grid, self.decoder.feed(msgs), events)
+
+    def _close_bus(self) -> None:
+        if self._bus is not None:
+            try:
+                self._bus.shutdown()
+            except Exception:  # a dead bus may fail to shut down; it is gone either way
+                pass
+            self._bus = None
+
+    def close(self) -> None:
+        """Stop and release the bus (thread-safe, as SerialSource.close)."""
+        self._stop.set()
+        if self._reader in (None, threading.get_ident()):
+            self._close_bus()
+
+
+class CanLogSource:
+    """A CAN log python-can reads (.asc .blf .trc .csv .log .mf4) decoded with a DBC."""
+
+    CHUNK = 4096
+
+    def __init__(self, path: str, db, **decoder_options) -> None:
+        self.path = path
+        self.decoder = CanDecoder(db, **decoder_options)
+        self.rate_hz = self.decoder.rate_hz
+        self.aux_names = self.decoder.aux_names
+        self.grid = GridAssembler(self.rate_hz, self.decoder.seq_modulus, self.aux_names)
+        self.name = f"CAN log {os.path.basename(path)}: {self.decoder.describe()}"
+        self._closed = False
+
+    @property
+    def counters(self) -> dict[str, int]:
+        return {**self.decoder.counters, **self.grid.counters}
+
+    def blocks(self) -> Iterator[Block]:
+        import can
+        try:
+            reader = can.LogReader(self.path)
+        except Exception as e:  # unknown suffix, unreadable header, ...
+            raise FogmonError(f"{self.path}: cannot read as a CAN log: {e}") from None
+        it = iter(reader)
+        try:
+            while not self._closed:
+                chunk = []
+                try:
+                    for m in it:
+                        chunk.append(m)
+                        if len(chunk) >= self.CHUNK:
+                            break
+                except Exception as e:  # a corrupt log: say where, do not trace back
+                    raise FogmonError(f"{self.path}: unreadable CAN log after "
+                                      f"{self.decoder.counters['frames_ok']} frames: {e}") from None
+                if not chunk:
+                    return
+                b = _push_segments(self.grid, self.decoder.feed(chunk), ())
+                if len(b):
+                    yield b
+        finally:
+            reader.stop()
+
+    def close(self) -> None:
+        self._closed = True
+
+
+def open_can_log(path: str, dbc: str | None, options: dict, sidecar: dict | None) -> CanLogSource:
+    """A CAN log source; decoder options from the sidecar (archive) overridden by the
+    command line; the DBC from ``--dbc`` or the sidecar's copy."""
+    opts = {}
+    if sidecar:
+        opts.update({k: sidecar[k] for k in ("message", "rate_signal", "rate_unit", "temp_signal",
+                                              "counter_signal", "valid_signal", "rate_hz") if sidecar.get(k) is not None})
+        if not dbc and sidecar.get("dbc"):
+            dbc = os.path.join(os.path.dirname(os.path.abspath(path)), sidecar["dbc"])
+    opts.update({k: v for k, v in options.items() if v is not None})
+    if not dbc:
+        raise FogmonError(f"{path}: a CAN log needs --dbc F describing the gyro's frames")
+    return CanLogSource(path, load_dbc(dbc), **opts)
