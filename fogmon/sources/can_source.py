@@ -198,7 +198,9 @@ class CanSource:
                 "channel": self.channel, "interface": self.interface}
 
     def add_tap(self, tap) -> None:
-        self._taps.append(tap)
+        """``tap.frame(msg)`` gets every frame received (adding a tap twice is a no-op)."""
+        if tap not in self._taps:
+            self._taps.append(tap)
 
     def _open(self):
         import can

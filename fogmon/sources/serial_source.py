@@ -58,8 +58,9 @@ class SerialSource:
 
     def add_tap(self, tap) -> None:
         """``tap.raw(bytes)`` gets every byte received, ``tap.outage(elapsed_s,
-        missing_est)`` every outage, in stream order."""
-        self._taps.append(tap)
+        missing_est)`` every outage, in stream order (adding a tap twice is a no-op)."""
+        if tap not in self._taps:
+            self._taps.append(tap)
 
     def _open(self):
         return serial.serial_for_url(self.port, baudrate=self.baud, timeout=READ_TIMEOUT_S)
