@@ -80,6 +80,8 @@ class GaussMarkov:
         self._zi = np.array([self.a * x_prev])
 
     def generate(self, n: int) -> np.ndarray:
+        if n == 0:  # lfilter returns a wrong final state for empty input
+            return np.zeros(0)
         e = self.rng.standard_normal(n)
         y, self._zi = lfilter([self.b], [1.0, -self.a], e, zi=self._zi)
         return y
@@ -125,6 +127,8 @@ class RandomWalk:
         self._zi = np.zeros(1)
 
     def generate(self, n: int) -> np.ndarray:
+        if n == 0:
+            return np.zeros(0)
         # a sequential recursion (not cumsum) so any chunking gives identical bits
         x, self._zi = lfilter([1.0], [1.0, -1.0], self.step * self.rng.standard_normal(n), zi=self._zi)
         return x

@@ -1,0 +1,136 @@
+"""Sensor model file: round trip, catalogue, and one-line errors for bad files."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from fogmon.errors import FogmonError
+from fogmon.sim.model import (EFFECT_KINDS, Effect, Noise, SensorModel, dumps_model, load_model,
+                              save_model, validate_effect, validate_model)
+
+DATA = Path(__file__).resolve().parents[1] / "fogmon" / "data"
+
+EVERY_KIND = [
+    Effect("thermal_drift", {"k0_poly_dph": [0.1, 0.01, -3.3e-5], "k1_pos": 41.0, "k1_neg": 20.5,
+                             "k2_pos": 1e3, "k2_neg": -7.25, "smooth_s": 5.0, "diff_step_s": 0.5}),
+    Effect("periodic", {"period_s": 5580.0, "amplitude_dph": 0.2, "phase_rad": -1.2345678901234567}),
+    Effect("glitches", {"times_s": [10.0, 20.5], "amplitudes_dph": [5.0, -3.0], "width_s": 0.0}),
+    Effect("bias_step", {"t_s": 100.0, "step_dph": -0.3}),
+    Effect("vibration_noise", {"n_gain_dpsh_per_g": 0.004}),
+    Effect("rate_ramp", {"slope_dphh": -0.1, "t0_s": 50.0}),
+    Effect("scale_factor", {"ppm": 30.0, "asym_ppm": 5.0}),
+    Effect("markov", {"tau_c_s": 30.0, "sigma_dph": 0.1}),
+    Effect("temperature_noise", {"n_gain_dpsh_per_c": 0.0002, "t_ref_c": 25.0}),
+    Effect("warm_up", {"amplitude_dph": 1.0, "tau_s": 300.0, "t0_s": 0.0}),
+    Effect("bandwidth", {"cutoff_hz": 20.0, "order": 2, "taps": []}),
+    Effect("bandwidth", {"cutoff_hz": 0.0, "order": 0, "taps": [0.25, 0.5, 0.25]}),
+]
+
+
+def full_model() -> SensorModel:
+    return SensorModel(100.0, 0.1 + 0.2, Noise(0.01, 0.05, 0.02, 0.003, 1e-4), list(EVERY_KIND),
+                       {"fitted_by": "fogmon explain"})
+
+
+def test_catalogue_covers_contract_kinds_and_names_aux_and_nature():
+    contract = {"thermal_drift", "periodic", "glitches", "bias_step", "vibration_noise", "rate_ramp",
+                "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth"}
+    assert set(EFFECT_KINDS) == contract
+    assert EFFECT_KINDS["thermal_drift"].aux == "temp_c"
+    assert EFFECT_KINDS["vibration_noise"].aux == "vib_g"
+    assert EFFECT_KINDS["scale_factor"].aux == "rot_dps"
+    assert EFFECT_KINDS["periodic"].aux is None
+    assert EFFECT_KINDS["markov"].nature == "noise"
+    assert EFFECT_KINDS["vibration_noise"].nature == "white_level"
+    assert EFFECT_KINDS["bandwidth"].nature == "filter"
+    assert EFFECT_KINDS["thermal_drift"].nature == "mean"
+    assert EFFECT_KINDS["periodic"].required == ("period_s", "amplitude_dph", "phase_rad")
+    assert EFFECT_KINDS["thermal_drift"].params["k1_pos"].unit == "deg/h per degC/s"
+
+
+def test_round_trip_every_kind_loads_back_identically(tmp_path):
+    m = full_model()
+    p = tmp_path / "m.toml"
+    save_model(m, p)
+    back = load_model(p)
+    assert back == validate_model(m)
+    assert back.bias_dph == 0.1 + 0.2  # exact float repr
+    assert back.effects[1].params["phase_rad"] == -1.2345678901234567
+    save_model(back, tmp_path / "m2.toml")
+    assert (tmp_path / "m2.toml").read_text() == p.read_text()
+
+
+def test_defaults_filled_and_ints_become_floats():
+    e = validate_effect("thermal_drift", {"k0_poly_dph": [0, 1], "k1_pos": 1, "k1_neg": 2, "k2_pos": 0, "k2_neg": 0})
+    assert e.params["smooth_s"] == 10.0 and e.params["diff_step_s"] == 1.0
+    assert e.params["k0_poly_dph"] == [0.0, 1.0] and isinstance(e.params["k1_pos"], float)
+
+
+@pytest.mark.parametrize("name", ["example_model.toml", "example_mwd_model.toml", "example_chamber_model.toml"])
+def test_example_models_load(name):
+    m = load_model(DATA / name)
+    assert m.sample_rate_hz > 0 and m.noise.N_dpsh > 0
+
+
+BAD = {
+    "unknown kind": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "thermal_drfit"\n',
+                     ["bad.toml", "[[effect]] #1", "unknown effect kind 'thermal_drfit'", "thermal_drift"]),
+    "missing parameter": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "periodic"\namplitude_dph = 1.0\n'
+                          'phase_rad = 0.0\n', ["bad.toml", "periodic", "missing parameter 'period_s'"]),
+    "negative parameter": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "markov"\ntau_c_s = -3.0\n'
+                           'sigma_dph = 0.1\n', ["bad.toml", "markov", "'tau_c_s'", "> 0"]),
+    "negative noise": ('[sensor]\nsample_rate_hz = 100\n[noise]\nB_dph = -0.1\n', ["bad.toml", "[noise] B_dph", ">= 0"]),
+    "wrong units name": ('[sensor]\nsample_rate_hz = 100\n[noise]\nN_dph = 0.1\n',
+                         ["bad.toml", "[noise]", "unknown key 'N_dph'", "did you mean 'N_dpsh'"]),
+    "wrong units in effect": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "periodic"\nperiod_min = 10.0\n'
+                              'amplitude_dph = 1.0\nphase_rad = 0.0\n', ["bad.toml", "unknown parameter 'period_min'",
+                                                                          "did you mean 'period_s'"]),
+    "missing rate": ('[sensor]\nbias_dph = 1\n', ["bad.toml", "[sensor]", "sample_rate_hz"]),
+    "unknown table": ('[sensor]\nsample_rate_hz = 100\n[noize]\nN_dpsh = 1\n', ["bad.toml", "'noize'", "[noise]"]),
+    "not toml": ('[sensor\nsample_rate_hz = 100\n', ["bad.toml", "not valid TOML", "line 1"]),
+    "string number": ('[sensor]\nsample_rate_hz = "100"\n', ["bad.toml", "sample_rate_hz", "expected a number"]),
+    "glitch lengths": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "glitches"\ntimes_s = [1.0, 2.0]\n'
+                       'amplitudes_dph = [1.0]\n', ["bad.toml", "glitches", "same length"]),
+    "bandwidth both": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "bandwidth"\ncutoff_hz = 10.0\norder = 2\n'
+                       'taps = [0.5, 0.5]\n', ["bad.toml", "bandwidth", "not both"]),
+    "bandwidth nyquist": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "bandwidth"\ncutoff_hz = 60.0\n'
+                          'order = 2\n', ["bad.toml", "Nyquist"]),
+    "effect without kind": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nperiod_s = 1.0\n', ["bad.toml", "'kind'"]),
+    "nan": ('[sensor]\nsample_rate_hz = 100\nbias_dph = nan\n', ["bad.toml", "bias_dph", "finite"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_model_files_fail_with_one_clear_line(tmp_path, case):
+    text, needles = BAD[case]
+    p = tmp_path / "bad.toml"
+    p.write_text(text)
+    with pytest.raises(FogmonError) as ei:
+        load_model(p)
+    msg = str(ei.value)
+    assert "\n" not in msg
+    for n in needles:
+        assert n in msg, (n, msg)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(FogmonError, match="no such model file"):
+        load_model(tmp_path / "nope.toml")
+
+
+def test_cli_bad_model_exit_2_one_line_no_traceback(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text(BAD["wrong units name"][0])
+    r = subprocess.run([sys.executable, "-m", "fogmon", "sim", "--model", str(p), "--out", str(tmp_path / "o.csv"),
+                        "--duration-s", "1"], capture_output=True, text=True)
+    assert r.returncode == 2
+    assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr
+    assert "N_dph" in r.stderr and "bad.toml" in r.stderr
+
+
+def test_dumps_names_units():
+    text = dumps_model(SensorModel(10.0))
+    assert "N_dpsh deg/sqrt(h)" in text and "sample_rate_hz = 10.0" in text
