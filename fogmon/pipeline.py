@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import queue
 import sys
+import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -30,6 +32,8 @@ MIN_WINDOW_SAMPLES = 2**10
 MAX_WINDOW_SAMPLES = 2**20
 #: Live default window in samples (65.5 s at 1 kHz, 655 s at 100 Hz).
 LIVE_WINDOW_SAMPLES = 2**16
+#: A live run with --duration-s also stops this long (s) after that much wall time.
+LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
 OVERALL_MAX_SAMPLES = 2**23
 
@@ -140,7 +144,7 @@ class Sink:
 
     def events(self, events: Sequence[Event]) -> None: ...
 
-    def counters(self, t_s: float, counters: dict[str, int]) -> None: ...
+    def source_counters(self, t_s: float, counters: dict[str, int]) -> None: ...
 
     def finish(self, summary: "Summary") -> None: ...
 
@@ -160,6 +164,7 @@ class Summary:
     n_windows: int = 0
     wall_s: float = 0.0
     interrupted: bool = False
+    failed: bool = False          # stopped by an error (reported by the caller, no summary)
     overall: object = None        # AdevResult of the whole run (the latest OVERALL_MAX_SAMPLES)
     overall_fit: object = None    # NoiseFit of ``overall``
     overall_first_s: float = math.nan
@@ -296,7 +301,10 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     t_origin = None
     done = False
     try:
-        for big in source.blocks():
+        _warm_up(rate_hz, window_s, hop_s, taus)
+        for big in (source.blocks() if total_n is not None else _threaded_blocks(source)):
+            if duration_s is not None and total_n is None and time.monotonic() - wall0 > duration_s + LIVE_WALL_SLACK_S:
+                break  # a live source that stalls still stops on time (wall clock)
             if not len(big):
                 _dispatch_events(sinks, big.events, event_counts)
                 continue
@@ -332,7 +340,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                     _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
                     counters = dict(getattr(source, "counters", {}) or {})
                     for s in sinks:
-                        s.counters(float(t_end[-1]), counters)
+                        s.source_counters(float(t_end[-1]), counters)
                 kept.append(b.rate_dph)
                 kept_valid.append(b.valid)
                 kept_n += len(b)
@@ -344,6 +352,9 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                 break
     except KeyboardInterrupt:
         summary.interrupted = True
+    except BaseException:
+        summary.failed = True
+        raise
     finally:
         progress.update(summary.t_last_s - summary.t_first_s if summary.n_samples else 0.0,
                         time.monotonic() - wall0, force=True)
@@ -371,6 +382,55 @@ def record_samples(source) -> int | None:
     if n is None and getattr(source, "recording", None) is not None:
         n = int(round(source.recording.duration_s * source.rate_hz))
     return n
+
+
+def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:
+    """Compile/load the engine's kernels on a throw-away instance before the source is
+    opened, so a live device is not left unread while they compile."""
+    from fogmon.davar.fit import fit_noise
+    from fogmon.davar.streaming import StreamingDadev
+
+    n = int(round(window_s * rate_hz)) + int(round(hop_s * rate_hz))
+    if n > 1 << 22:
+        return
+    res = StreamingDadev(rate_hz, window_s, taus=taus, hop_s=hop_s).push(
+        np.random.default_rng(0).standard_normal(n))
+    if len(res):
+        fit_noise(res)
+
+
+class _SourceError:
+    def __init__(self, exc: BaseException):
+        self.exc = exc
+
+
+def _threaded_blocks(source):
+    """Iterate a live source's blocks in a reader thread, so DAVAR, fits and Rerun never
+    keep the device unread (an OS serial buffer holds ~0.1 s of a 1 kHz KVH). The queue is
+    unbounded: nothing is dropped; if processing fell behind, the backlog would grow."""
+    q: queue.Queue = queue.Queue()
+    done = object()
+
+    def reader():
+        try:
+            for b in source.blocks():
+                q.put(b)
+        except BaseException as e:  # handed to the consumer thread
+            q.put(_SourceError(e))
+        finally:
+            q.put(done)
+
+    threading.Thread(target=reader, name="fogmon-source-reader", daemon=True).start()
+    while True:
+        try:
+            item = q.get(timeout=0.25)
+        except queue.Empty:
+            continue
+        if item is done:
+            return
+        if isinstance(item, _SourceError):
+            raise item.exc
+        yield item
 
 
 def _dispatch_events(sinks, events, counts: Counter) -> None:

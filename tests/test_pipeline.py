@@ -98,7 +98,7 @@ def test_frames_equal_batch_dadev_and_fit_with_gaps_and_odd_blocks():
     assert summary.n_samples == n and summary.n_invalid == 37 and summary.n_windows == len(ref)
     assert src.closed and sink.summary is summary
     ov = oadev(r, fs, valid=np.isfinite(r))
-    np.testing.assert_allclose(summary.overall.adev_dph, ov.adev_dph, rtol=1e-12)
+    np.testing.assert_allclose(summary.overall.adev_dph, ov.adev_dph, rtol=1e-12)  # the same batch call
     np.testing.assert_allclose(sink.info.tau_s, ref.tau_s)
 
 

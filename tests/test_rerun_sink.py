@@ -17,11 +17,10 @@ from rerun.chunk import RrdReader
 
 from fogmon.block import Block, Event
 from fogmon.davar.batch import dadev
-from fogmon.davar.fit import fit_noise
 from fogmon.pipeline import COEFFICIENTS, run_pipeline
 from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server
 
-from test_pipeline import ListSource, _args, _white
+from test_pipeline import Collect, ListSource, _args, _white
 
 
 def read_scalars(path, entity):
@@ -60,31 +59,42 @@ def run_rrd(tmp_path_factory):
     ev = [Event(100.0, "crc_error", "frame 42: bad CRC")]
     path = str(tmp_path_factory.mktemp("rrd") / "sub" / "run.rrd")
     src = ListSource(t, r, [7000] * 5 + [5000], fs, aux={"temp_c": temp}, events=ev)
-    summary = run_pipeline(src, _args(window_s=81.92, hop_s=10.24), sinks=[RerunSink(rrd_path=path)])
-    return path, t, r, temp, summary
+    engine_out = Collect()
+    summary = run_pipeline(src, _args(window_s=81.92, hop_s=10.24), sinks=[RerunSink(rrd_path=path), engine_out])
+    return path, t, r, temp, summary, engine_out
+
+
+def _cat(frames, get):
+    return np.concatenate([np.atleast_1d(get(d, f, te)) for d, f, te in frames], axis=0)
 
 
 def test_rrd_dadev_and_coefficients_equal_the_engine(run_rrd):
-    path, t, r, _, summary = run_rrd
-    ref = dadev(r, 100.0, 81.92, 10.24, valid=np.isfinite(r), t0_s=3.0)
+    path, t, r, _, summary, engine_out = run_rrd
+    fr = engine_out.frames_
     ts, logadev = read_scalars(path, "/dadev/log10_adev_dph")
-    assert logadev.shape == ref.adev_dph.shape and summary.n_windows == len(ref)
-    np.testing.assert_allclose(ts, 3.0 + ref.end_index / 100.0, atol=1e-9)
-    np.testing.assert_allclose(10.0 ** logadev, ref.adev_dph, rtol=1e-12)
-    fit = fit_noise(ref)
+    adev = _cat(fr, lambda d, f, te: d.adev_dph)
+    t_end = _cat(fr, lambda d, f, te: te)
+    assert logadev.shape == adev.shape == (summary.n_windows, 12)  # 8192-sample windows: m = 1 .. 2048
+    np.testing.assert_allclose(ts, t_end, atol=1e-9)
+    np.testing.assert_allclose(10.0 ** logadev, adev, rtol=1e-14)
+    # ... and the engine (streaming) agrees with the batch DADEV on the same input
+    ref = dadev(r, 100.0, 81.92, 10.24, valid=np.isfinite(r), t0_s=3.0)
+    np.testing.assert_allclose(adev, ref.adev_dph, rtol=1e-9)
+    np.testing.assert_allclose(t_end, 3.0 + ref.end_index / 100.0, atol=1e-9)
     for name in COEFFICIENTS:
-        c = getattr(fit, name)
-        ok = np.asarray(c.identifiable) & np.isfinite(c.value) & np.isfinite(c.lo) & np.isfinite(c.hi)
+        v, lo, hi, ok = (_cat(fr, lambda d, f, te, a=a: np.asarray(getattr(getattr(f, name), a)))
+                         for a in ("value", "lo", "hi", "identifiable"))
+        ok = ok.astype(bool) & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
         tc, vals = read_scalars(path, f"/coef/{name}")
         assert len(tc) == int(ok.sum())
         if ok.any():
-            np.testing.assert_allclose(tc, ts[ok], atol=1e-9)
-            np.testing.assert_allclose(vals, np.column_stack([c.value[ok], c.lo[ok], c.hi[ok]]), rtol=1e-6)
-    assert int(np.asarray(fit.N_dpsh.identifiable).sum()) == len(ref)  # white noise: N in every window
+            np.testing.assert_allclose(tc, t_end[ok], atol=1e-9)
+            np.testing.assert_array_equal(vals, np.column_stack([v[ok], lo[ok], hi[ok]]))
+    assert len(read_scalars(path, "/coef/N_dpsh")[0]) == summary.n_windows  # white noise: N in every window
 
 
 def test_rrd_raw_rate_aux_and_events(run_rrd):
-    path, t, r, temp, _ = run_rrd
+    path, t, r, temp, _, _ = run_rrd
     tr, rate = read_scalars(path, "/rate/rate_dph")
     ok = np.isfinite(r)
     assert len(tr) == ok.sum()                      # 100 Hz: not decimated; gaps not drawn

@@ -51,7 +51,7 @@ def format_summary(s: Summary) -> str:
         for k, v in {**s.counters, **{f"events.{k}": v for k, v in s.event_counts.items()}}.items():
             lines.append(f"  {k:<24} {v}")
     for o in s.outputs:
-        lines.append(f"Wrote {o} (open it with: rerun {o})")
+        lines.append(f"Wrote {o} (open it with: rerun {o})" if o.endswith(".rrd") else f"Wrote {o}")
     return "\n".join(lines)
 
 
@@ -76,7 +76,7 @@ class ConsoleSink(Sink):
                 err.write(f"[{e.t_s:10.2f} s] {e.kind}: more of these are only counted (see the summary)\n")
 
     def finish(self, summary: Summary) -> None:
-        if not self.quiet:
+        if not self.quiet and not summary.failed:
             out = self.out or sys.stdout
             out.write(format_summary(summary) + "\n")
             out.flush()

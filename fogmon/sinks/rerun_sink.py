@@ -330,7 +330,7 @@ class RerunSink(Sink):
                               columns=rr.TextLog.columns(text=[f"{e.kind}: {e.message}" for e in events],
                                                          level=[_LEVELS.get(e.kind, "INFO") for e in events]))
 
-    def counters(self, t_s: float, counters: dict[str, int]) -> None:
+    def source_counters(self, t_s: float, counters: dict[str, int]) -> None:
         import rerun as rr
 
         for k, v in counters.items():

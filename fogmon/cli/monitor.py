@@ -1,0 +1,48 @@
+"""`fogmon monitor --serial PORT | --can CHANNEL`: monitor a live gyro. Every decoded
+sample and the raw input are archived (``--archive DIR``, default a new time-stamped
+folder) so nothing is lost, while DAVAR, the noise fit and Rerun run as in a replay."""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+
+from fogmon.pipeline import add_pipeline_arguments, run_pipeline
+from fogmon.sinks.archive import Archive, default_archive_dir
+from fogmon.sources.open import add_source_arguments, open_live_source
+
+EPILOG = """examples:
+  fogmon monitor --serial /dev/ttyUSB0 --protocol kvh-a --connect        # into a running `rerun` viewer
+  fogmon monitor --serial /dev/ttyUSB0 --protocol dsp3000 --serve --duration-s 3600
+  fogmon monitor --can can0 --dbc gyro.dbc --rrd out/run.rrd --archive runs/2026-11-21
+
+Stop with Ctrl-C (or --duration-s): the archive and the .rrd are closed cleanly and the
+summary printed. The archive holds samples.csv (a replay log) and the raw input, both
+replayable with `fogmon replay`. Rates in deg/h, times in s, coefficients in IEEE-952
+units. Exit code 0 on success (also after Ctrl-C), 2 on bad usage or input."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = EPILOG
+    add_source_arguments(parser, mode="live")
+    parser.add_argument("--archive", metavar="DIR",
+                        help="folder for the archive (samples.csv + raw capture); default: a new "
+                             "fogmon-archive-YYYYmmddTHHMMSSZ folder in the current directory")
+    add_pipeline_arguments(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    source = open_live_source(args)
+    directory = args.archive or default_archive_dir(".")
+    existed = os.path.exists(directory)
+    archive = Archive(directory, source)
+    if hasattr(source, "add_tap"):
+        source.add_tap(archive)
+    try:
+        run_pipeline(source, args, extra_sinks=[archive])
+    except BaseException:
+        if not existed and not archive.counters["rows_written"] and not archive.counters["raw_bytes"]:
+            shutil.rmtree(directory, ignore_errors=True)  # nothing was received: leave no empty archive
+        raise
+    return 0

@@ -1,0 +1,58 @@
+"""A fake KVH DSP-1760 (binary format A, 1000 Hz) on a pseudo-terminal, for the monitor
+tests and benchmarks/bench_pipeline.py: ``python tests/monitor_fake_kvh.py [SECONDS]``
+prints the device path (the pty's slave side) on stdout and sends frames at the device's
+pace (10 frames every 10 ms) until SECONDS have passed or it is killed.
+
+The z gyro sends delta angles in rad: a constant 15 deg/h plus white angle-rate noise
+of N = 0.05 deg/sqrt(h) (per-sample rate std 60 N sqrt(fs) deg/h)."""
+from __future__ import annotations
+
+import os
+import sys
+import time
+import tty
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from fogmon.sources.kvh import encode_frame  # noqa: E402
+
+RATE_HZ = 1000
+BIAS_DPH = 15.0
+N_DPSH = 0.05
+DPH_TO_RAD_PER_SAMPLE = np.pi / 180.0 / 3600.0 / RATE_HZ
+
+
+def frames(n0: int, n: int, rng: np.random.Generator) -> bytes:
+    """Frames n0 .. n0+n-1 (sequence numbers wrap at 128)."""
+    rate = BIAS_DPH + 60 * N_DPSH * np.sqrt(RATE_HZ) * rng.standard_normal(n)
+    return b"".join(encode_frame("a", (n0 + i) % 128, (0.0, 0.0, r * DPH_TO_RAD_PER_SAMPLE), temp_c=31)
+                    for i, r in enumerate(rate))
+
+
+def open_pty() -> tuple[int, int, str]:
+    """(master fd, slave fd, slave path) of a raw pty pair."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    tty.setraw(master)
+    return master, slave, os.ttyname(slave)
+
+
+def run(seconds: float) -> None:
+    master, slave, path = open_pty()
+    print(path, flush=True)
+    rng = np.random.default_rng(0)
+    t0 = time.monotonic()
+    n = 0
+    while time.monotonic() - t0 < seconds:
+        due = int((time.monotonic() - t0) * RATE_HZ)
+        if due > n:
+            view = memoryview(frames(n, due - n, rng))
+            while view:  # the pty buffer holds ~20 kB: block rather than drop bytes
+                view = view[os.write(master, view):]
+            n = due
+        time.sleep(0.01)
+
+
+if __name__ == "__main__":
+    run(float(sys.argv[1]) if len(sys.argv) > 1 else 1e9)

@@ -1,0 +1,75 @@
+"""`fogmon monitor` on a fake 1 kHz KVH DSP-1760 (pty): archive, .rrd, summary, errors;
+replaying its archive gives the same DADEV the live run logged."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fogmon.cli import main
+from fogmon.recording import read_replay_log
+
+from test_rerun_sink import read_scalars
+
+HERE = Path(__file__).resolve().parent
+
+
+@pytest.fixture
+def fake_kvh():
+    p = subprocess.Popen([sys.executable, str(HERE / "monitor_fake_kvh.py"), "30"], stdout=subprocess.PIPE, text=True)
+    try:
+        yield p.stdout.readline().strip()
+    finally:
+        p.kill()
+        p.wait(timeout=10)
+
+
+def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_path, capsys):
+    arch, rrd = tmp_path / "arch", tmp_path / "live.rrd"
+    rc = main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(arch),
+               "--rrd", str(rrd), "--window-s", "0.512", "--hop-s", "0.128", "--no-progress"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "2000 samples at 1000 Hz = 2.00 s" in out and f"Wrote archive {arch}" in out
+    rec = read_replay_log(arch / "samples.csv")
+    assert rec.sample_rate_hz == 1000.0 and list(rec.aux) == ["temp_c"] and np.all(rec.aux["temp_c"] == 31)
+    assert len(rec) <= 2000 and rec.t_s[-1] == pytest.approx(1.999)
+    # N of the fake device is 0.05 deg/sqrt(h): the whole-run fit finds it
+    line = next(l for l in out.splitlines() if l.strip().startswith("N_dpsh"))
+    assert abs(float(line.split("=")[1].split()[0]) - 0.05) < 0.005
+    t_live, live = read_scalars(str(rrd), "/dadev/log10_adev_dph")
+    assert live.shape == (12, 8)      # (2000 - 512) // 128 + 1 windows; m = 1 .. 128
+    t_rate, _ = read_scalars(str(rrd), "/rate/rate_dph")
+    assert len(t_rate) <= 200         # 1 kHz shown as means of 10 samples
+    replay = tmp_path / "replay.rrd"
+    assert main(["replay", str(arch / "samples.csv"), "--rrd", str(replay), "--window-s", "0.512",
+                 "--hop-s", "0.128", "--no-progress", "--quiet"]) == 0
+    t_rep, rep = read_scalars(str(replay), "/dadev/log10_adev_dph")
+    np.testing.assert_allclose(t_rep, t_live, atol=1e-9)
+    np.testing.assert_allclose(rep, live, rtol=1e-12)
+
+
+def test_monitor_needs_a_source(capsys):
+    assert main(["monitor", "--duration-s", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "fogmon monitor: error: give exactly one of --serial PORT or --can CHANNEL"
+
+
+def test_monitor_bad_port_is_one_line_and_leaves_no_archive(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["monitor", "--serial", str(tmp_path / "ttyNONE"), "--duration-s", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"fogmon monitor: error: --serial {tmp_path / 'ttyNONE'}: cannot open")
+    assert len(err.splitlines()) == 1 and list(tmp_path.iterdir()) == []
+
+
+def test_monitor_help(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["monitor", "--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    for opt in ("--serial", "--can", "--archive", "--duration-s", "--rrd", "--connect", "--serve", "--bind"):
+        assert opt in out
