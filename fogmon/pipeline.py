@@ -32,6 +32,8 @@ MIN_WINDOW_SAMPLES = 2**10
 MAX_WINDOW_SAMPLES = 2**20
 #: Live default window in samples (65.5 s at 1 kHz, 655 s at 100 Hz).
 LIVE_WINDOW_SAMPLES = 2**16
+#: A coefficient-jump event needs a change of more than this many combined standard errors.
+JUMP_Z = 5.0
 #: A live run with --duration-s also stops this long (s) after that much wall time.
 LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
@@ -185,38 +187,48 @@ class Summary:
 
 # ----------------------------------------------------------------------------- jumps
 class JumpDetector:
-    """Coefficient-jump events: a coefficient whose interval in the newest window does not
-    overlap its interval in the latest window that shares no samples with it (independent
-    data). One event per coefficient per window length at most."""
+    """Coefficient-jump events: a coefficient whose newest estimate differs from its
+    estimate in the latest window that shares no samples with it (independent data) by
+    more than JUMP_Z combined standard errors (each taken from the fit's interval:
+    half-width / z of the fit's confidence). At 1 sigma, intervals of two independent
+    windows fail to overlap 16 % of the time by chance; at 5 sigma once in ~2 million
+    pairs. At most one event per coefficient per window length."""
 
     def __init__(self, window_s: float):
         self.window_s = window_s
-        self._hist: deque[tuple[float, dict]] = deque()   # (t_end_s, {name: (value, lo, hi)})
+        self._hist: deque[tuple[float, dict]] = deque()   # (t_end_s, {name: (value, lo, hi, se)})
         self._last_event: dict[str, float] = {}
 
     def update(self, fit, t_end_s: np.ndarray) -> list[Event]:
+        from scipy.stats import norm
+
+        z_conf = float(norm.ppf(0.5 + getattr(fit, "confidence", 0.683) / 2))
+        cols = {}
+        for name in COEFFICIENTS:
+            c = getattr(fit, name)
+            cols[name] = [np.atleast_1d(np.asarray(getattr(c, a), dtype=np.float64))
+                          for a in ("value", "lo", "hi", "identifiable")]
         out = []
         for i, t in enumerate(t_end_s):
             cur = {}
-            for name in COEFFICIENTS:
-                c = getattr(fit, name)
-                if bool(np.asarray(c.identifiable)[i]):
-                    cur[name] = (float(np.asarray(c.value)[i]), float(np.asarray(c.lo)[i]), float(np.asarray(c.hi)[i]))
+            for name, (v, lo, hi, ok) in cols.items():
+                if ok[i] and np.isfinite(lo[i]) and np.isfinite(hi[i]):
+                    cur[name] = (v[i], lo[i], hi[i], (hi[i] - lo[i]) / (2 * z_conf))
             h = self._hist
             while len(h) > 1 and h[1][0] <= t - self.window_s:
                 h.popleft()
             ref = h[0] if h and h[0][0] <= t - self.window_s else None
-            if ref is not None:
-                for name, (v, lo, hi) in cur.items():
-                    if name not in ref[1]:
-                        continue
-                    rv, rlo, rhi = ref[1][name]
-                    if (lo > rhi or hi < rlo) and t - self._last_event.get(name, -math.inf) >= self.window_s:
-                        self._last_event[name] = float(t)
-                        out.append(Event(float(t), "coef_jump",
-                                         f"{name} jumped from {rv:.4g} [{rlo:.4g}, {rhi:.4g}] to {v:.4g} "
-                                         f"[{lo:.4g}, {hi:.4g}] {COEFFICIENTS[name]} (window ending at {ref[0]:.1f} s "
-                                         f"vs {t:.1f} s)"))
+            for name, (v, lo, hi, se) in (cur.items() if ref is not None else ()):
+                if name not in ref[1]:
+                    continue
+                rv, rlo, rhi, rse = ref[1][name]
+                z = abs(v - rv) / max(np.hypot(se, rse), 1e-300)
+                if z > JUMP_Z and t - self._last_event.get(name, -math.inf) >= self.window_s:
+                    self._last_event[name] = float(t)
+                    out.append(Event(float(t), "coef_jump",
+                                     f"{name} jumped from {rv:.4g} [{rlo:.4g}, {rhi:.4g}] to {v:.4g} [{lo:.4g}, "
+                                     f"{hi:.4g}] {COEFFICIENTS[name]} ({z:.1f} sigma; windows ending at "
+                                     f"{ref[0]:.1f} s and {t:.1f} s)"))
             self._hist.append((float(t), cur))
         return out
 

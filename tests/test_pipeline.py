@@ -168,16 +168,16 @@ class _Fit:
 
 
 def test_jump_detector_compares_with_the_last_independent_window():
-    j = JumpDetector(window_s=10.0)
-    # N steady for 30 s then jumps to 3x with non-overlapping intervals; hop 2.5 s.
+    # N steady for 30 s then jumps to 3x; 1-sigma intervals +-10 % (z = 2 / hypot(0.1, 0.3) = 6.3)
     t = np.arange(2.5, 60.1, 2.5)
     v = np.where(t < 30, 1.0, 3.0)
-    ev = j.update(_Fit(v, v * 0.9, v * 1.1), t)
-    assert len(ev) == 1 and ev[0].kind == "coef_jump" and "N_dpsh" in ev[0].message
-    assert 30.0 <= ev[0].t_s < 40.0
-    # overlapping intervals: no event
     j = JumpDetector(window_s=10.0)
-    assert j.update(_Fit(v, v * 0.2, v * 5), t) == []
+    ev = j.update(_Fit(v, v * 0.9, v * 1.1), t)
+    assert len(ev) == 1 and ev[0].kind == "coef_jump" and "N_dpsh" in ev[0].message and "6.3 sigma" in ev[0].message
+    assert ev[0].t_s == 30.0             # the first window after the jump; the reference ended at 20 s
+    # intervals that do not overlap at 1 sigma but only a 4-sigma change: no event
+    v = np.where(t < 30, 1.0, 1.4)
+    assert JumpDetector(window_s=10.0).update(_Fit(v, v - 0.07, v + 0.07), t) == []
 
 
 def test_console_summary_lists_adev_bounds_and_coefficients():

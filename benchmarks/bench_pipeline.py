@@ -1,0 +1,133 @@
+"""Pipeline benchmark (prints numbers; not a test).
+
+1. Replay of one hour of 1 kHz gyro data (3.6 M samples) into an .rrd, through the whole
+   pipeline (StreamingDadev, a noise fit per window, Rerun sink, console summary):
+   seconds and x real time (target >= 300x), measured (a) from memory and (b) as the
+   `fogmon replay` command on a replay-log CSV (CSV parsing included), beside the batch
+   `dadev` of the same data (a reference measured in the same run).
+2. `fogmon monitor` on a fake 1 kHz KVH DSP-1760 (format A on a pty, tests/monitor_fake_kvh.py)
+   writing an .rrd and the archive: CPU share of one core in steady state (target < 5 %).
+
+Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--skip-monitor]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+
+from fogmon.block import Block  # noqa: E402
+from fogmon.davar.batch import dadev  # noqa: E402
+from fogmon.pipeline import add_pipeline_arguments, run_pipeline  # noqa: E402
+from fogmon.recording import write_replay_log  # noqa: E402
+
+FS = 1000.0
+N = 3_600_000
+BLOCK = 8192
+
+
+class MemorySource:
+    """One hour of 1 kHz white noise (N = 0.05 deg/sqrt(h)) plus 10 deg/h bias, in blocks."""
+
+    def __init__(self, rate):
+        self.name, self.rate_hz, self.counters, self.n_samples = "memory (1 h at 1 kHz)", FS, {}, len(rate)
+        self._rate = rate
+
+    def blocks(self):
+        for i in range(0, len(self._rate), BLOCK):
+            r = self._rate[i:i + BLOCK]
+            yield Block.make(np.arange(i, i + len(r)) / FS, r, aux={"temp_c": np.full(len(r), 25.0)})
+
+    def close(self):
+        pass
+
+
+def _args(argv):
+    p = argparse.ArgumentParser()
+    add_pipeline_arguments(p)
+    return p.parse_args(argv)
+
+
+def bench_replay(tmp: str) -> None:
+    rng = np.random.default_rng(1)
+    rate = 10.0 + 60 * 0.05 * np.sqrt(FS) * rng.standard_normal(N)
+    t0 = time.perf_counter()
+    ref = dadev(rate, FS, 2**19 / FS, 2**16 / FS)
+    t_batch = time.perf_counter() - t0
+    rrd = os.path.join(tmp, "mem.rrd")
+    t0 = time.perf_counter()
+    s = run_pipeline(MemorySource(rate), _args(["--rrd", rrd, "--no-progress", "--quiet"]))
+    t_mem = time.perf_counter() - t0
+    assert s.n_windows == len(ref), (s.n_windows, len(ref))
+    print(f"replay 1 h of 1 kHz ({N:,} samples, window {s.window_s:g} s, hop {s.hop_s:g} s, "
+          f"{s.n_windows} windows) into {os.path.getsize(rrd) / 1e6:.1f} MB .rrd:")
+    print(f"  (a) pipeline from memory   : {t_mem:6.2f} s = x{3600 / t_mem:,.0f} real time "
+          f"(target >= 300x: {'PASS' if 3600 / t_mem >= 300 else 'FAIL'})")
+    print(f"      reference: batch dadev of the same data {t_batch:.2f} s; pipeline / batch = {t_mem / t_batch:.1f}")
+    csv = os.path.join(tmp, "hour.csv")
+    write_replay_log(csv, np.arange(N) / FS, rate, meta={"sample_rate_hz": FS})
+    rrd2 = os.path.join(tmp, "cli.rrd")
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, "-m", "fogmon", "replay", csv, "--rrd", rrd2, "--no-progress", "--quiet"],
+                       capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    t_cli = time.perf_counter() - t0
+    if p.returncode:
+        print(p.stderr)
+    print(f"  (b) `fogmon replay` of a {os.path.getsize(csv) / 1e6:.0f} MB CSV (parse + start-up included): "
+          f"{t_cli:6.2f} s = x{3600 / t_cli:,.0f} real time (target >= 300x: {'PASS' if 3600 / t_cli >= 300 else 'FAIL'})")
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process (all its threads)."""
+    with open(f"/proc/{pid}/stat") as fh:
+        f = fh.read().rsplit(")", 1)[1].split()
+    return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def bench_monitor(tmp: str, seconds: float) -> None:
+    dev = subprocess.Popen([sys.executable, str(ROOT / "tests" / "monitor_fake_kvh.py"), str(seconds + 30)],
+                           stdout=subprocess.PIPE, text=True)
+    port = dev.stdout.readline().strip()
+    mon = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", port, "--protocol", "kvh-a",
+                            "--duration-s", str(seconds + 5), "--archive", os.path.join(tmp, "arch"),
+                            "--rrd", os.path.join(tmp, "live.rrd"), "--no-progress"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        time.sleep(5.0)                      # start-up (imports, kernel compile/cache load) excluded
+        c0, w0 = _cpu_s(mon.pid), time.monotonic()
+        time.sleep(seconds)
+        c1, w1 = _cpu_s(mon.pid), time.monotonic()
+        out, err = mon.communicate(timeout=60)
+    finally:
+        dev.kill()
+        dev.wait()
+    share = 100 * (c1 - c0) / (w1 - w0)
+    gaps = next((l.split()[-1] for l in out.splitlines() if l.strip().startswith("samples_missing")), "?")
+    print(f"monitor, fake KVH DSP-1760 format A at 1 kHz on a pty, --rrd + archive, {w1 - w0:.0f} s steady state:")
+    print(f"  CPU {share:.1f} % of one core (target < 5 %: {'PASS' if share < 5 else 'FAIL'}); "
+          f"samples_missing {gaps}; exit {mon.returncode}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--monitor-s", type=float, default=30.0, help="steady-state seconds to measure the monitor")
+    ap.add_argument("--skip-monitor", action="store_true")
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        bench_replay(tmp)
+        if not a.skip_monitor:
+            bench_monitor(tmp, a.monitor_s)
+
+
+if __name__ == "__main__":
+    main()
