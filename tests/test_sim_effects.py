@@ -200,3 +200,23 @@ def test_bandwidth_pulls_adev_below_white_line_over_first_taus_only():
 def test_bandwidth_starts_in_steady_state():
     rec = simulate(SensorModel(FS, 5.0, Noise(), [eff("bandwidth", cutoff_hz=1.0, order=4)]), duration_s=10.0, seed=1)
     assert np.allclose(rec.rate_dph, 5.0, rtol=1e-9)
+
+
+def test_thermal_drift_signature_in_dadev_follows_the_chamber_ramps():
+    """k1 = 40 deg/h per degC/s on a chamber cycle (1 C/min ramps): windows holding a
+    ramp corner show a large long-tau excess, windows deep in a plateau sit on the white
+    line."""
+    from fogmon.sim.scenarios import ChamberParams, thermal_chamber
+    sc = thermal_chamber(ChamberParams(plateaus_c=(20.0, 0.0, 20.0), dwell_s=1800.0, lag1_s=20.0, lag2_s=40.0))
+    m = SensorModel(10.0, 0.0, Noise(N_dpsh=0.001), [eff("thermal_drift", k0_poly_dph=[], k1_pos=40.0, k1_neg=40.0,
+                                                         k2_pos=0.0, k2_neg=0.0)])
+    rec = simulate(m, aux=sc.aux, aux_t_s=sc.t_s, seed=1)
+    d = dadev(rec.rate_dph, 10.0, window_s=600.0, hop_s=150.0, taus="octave", alpha=0)
+    j = np.argmin(np.abs(d.tau_s - 51.2))
+    white = 0.06 / np.sqrt(d.tau_s[j])
+    corners = np.array([1800.0, 3000.0, 4800.0, 6000.0])  # ramp starts/ends (20 min ramps)
+    dist = np.min(np.abs(d.t_s[:, None] - corners[None, :]), axis=1)
+    near, far = dist < 150.0, dist > 700.0
+    assert near.any() and far.any()
+    assert np.all(d.adev_dph[near, j] > 5 * white)
+    assert np.all(d.adev_dph[far, j] < 1.3 * white)
