@@ -32,6 +32,8 @@ MIN_WINDOW_SAMPLES = 2**10
 MAX_WINDOW_SAMPLES = 2**20
 #: Live default window in samples (65.5 s at 1 kHz, 655 s at 100 Hz).
 LIVE_WINDOW_SAMPLES = 2**16
+#: What DAVAR analyses when the recording has a reference rotation.
+ERROR_EXPR = "rate_dph - 3600 x rot_dps"
 #: A coefficient-jump event needs a change of more than this many combined standard errors.
 JUMP_Z = 5.0
 #: A live run with --duration-s also stops this long (s) after that much wall time.
@@ -50,6 +52,10 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
                         f"samples; live: {LIVE_WINDOW_SAMPLES} samples (65.5 s at 1 kHz)")
     g.add_argument("--hop-s", type=_positive_float, metavar="H",
                    help="a new ADEV + noise fit every H s of recording time (default: window/8)")
+    g.add_argument("--raw-rate", action="store_true",
+                   help="analyse rate_dph as recorded even when the recording has rot_dps; by default "
+                        "DAVAR and the fits see the gyro's error rate_dph - 3600 x rot_dps (deg/h) "
+                        "against the reference rotation")
     g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
                    help="averaging times: octave (default), decade, all, an integer N (N log-spaced "
                         "per decade) or comma-separated tau values in s; always tau <= window/4")
@@ -128,6 +134,8 @@ class StreamInfo:
     hop_s: float
     tau_s: np.ndarray
     aux_names: tuple[str, ...]
+    #: what DAVAR analyses: "rate_dph", or "rate_dph - 3600 x rot_dps" (error vs reference rotation)
+    analysed: str = "rate_dph"
 
 
 class Sink:
@@ -166,6 +174,7 @@ class Summary:
     n_windows: int = 0
     wall_s: float = 0.0
     interrupted: bool = False
+    analysed: str = "rate_dph"    # what DAVAR analysed (see StreamInfo.analysed)
     failed: bool = False          # stopped by an error (reported by the caller, no summary)
     overall: object = None        # AdevResult of the whole run (the latest OVERALL_MAX_SAMPLES)
     overall_fit: object = None    # NoiseFit of ``overall``
@@ -312,6 +321,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     wall0 = time.monotonic()
     t_origin = None
     done = False
+    use_ref = False
     try:
         _warm_up(rate_hz, window_s, hop_s, taus)
         for big in (source.blocks() if total_n is not None else _threaded_blocks(source)):
@@ -331,7 +341,10 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                     _sleep_until(wall0 + (float(b.t_s[-1]) - t_origin) / realtime)
                 if not started:
                     m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
-                    info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux))
+                    use_ref = "rot_dps" in b.aux and not getattr(args, "raw_rate", False)
+                    summary.analysed = ERROR_EXPR if use_ref else "rate_dph"
+                    info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux),
+                                      summary.analysed)
                     for s in sinks:
                         s.start(info)
                     started = True
@@ -342,7 +355,8 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                 for s in sinks:
                     s.block(b)
                 _dispatch_events(sinks, b.events, event_counts)
-                res = engine.push(b.rate_dph, b.valid)
+                y = analysed_rate(b) if use_ref else b.rate_dph
+                res = engine.push(y, b.valid & np.isfinite(y))
                 if len(res):
                     fit = fit_noise(res)
                     t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
@@ -353,7 +367,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                     counters = dict(getattr(source, "counters", {}) or {})
                     for s in sinks:
                         s.source_counters(float(t_end[-1]), counters)
-                kept.append(b.rate_dph)
+                kept.append(y)
                 kept_valid.append(b.valid)
                 kept_n += len(b)
                 while kept_n - len(kept[0]) >= OVERALL_MAX_SAMPLES:
@@ -386,6 +400,12 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
             for s in sorted(sinks, key=lambda k: getattr(k, "finish_order", 0)):
                 s.finish(summary)
     return summary
+
+
+def analysed_rate(b: Block) -> np.ndarray:
+    """The gyro's error against the reference rotation, deg/h: rate_dph - 3600 x rot_dps
+    (NaN where rot_dps is unknown, so those samples count as invalid)."""
+    return b.rate_dph - 3600.0 * b.aux["rot_dps"]
 
 
 def record_samples(source) -> int | None:

@@ -194,3 +194,21 @@ def test_console_summary_lists_adev_bounds_and_coefficients():
     n = s.overall_fit.N_dpsh
     assert bool(n.identifiable) and f"N_dpsh    = {float(n.value):.4g} deg/sqrt(h)" in text
     assert abs(float(n.value) - 0.05) < 0.005      # the simulated white noise, N = 0.05 deg/sqrt(h)
+
+
+def test_reference_rotation_is_subtracted_unless_raw_rate():
+    fs, n = 100.0, 16_384
+    t, r = _white(n, fs, seed=9)
+    rot = np.where(t < 80, 0.0, 720.0)                  # string starts turning at 80 s (720 deg/s)
+    rot[100:105] = np.nan                              # reference unknown: those samples are invalid
+    meas = r + 3600.0 * np.nan_to_num(rot)
+    sink = Collect()
+    s = run_pipeline(ListSource(t, meas, [4096] * 4, fs, aux={"rot_dps": rot}), _args(window_s=40.96), sinks=[sink])
+    assert s.analysed == "rate_dph - 3600 x rot_dps" and sink.info.analysed == s.analysed
+    err = meas - 3600.0 * rot
+    ref = dadev(err, fs, 40.96, 40.96 / 8, valid=np.isfinite(err))
+    np.testing.assert_allclose(np.concatenate([d.adev_dph for d, _, _ in sink.frames_]), ref.adev_dph, rtol=1e-9)
+    s = run_pipeline(ListSource(t, meas, [4096] * 4, fs, aux={"rot_dps": rot}), _args(window_s=40.96, raw_rate=True),
+                     sinks=[Collect()])
+    assert s.analysed == "rate_dph" and s.overall.adev_dph[-1] > 1e5   # the 2.6e6 deg/h step dominates
+

@@ -23,6 +23,9 @@ def format_summary(s: Summary) -> str:
     lines.append(f"  {s.n_samples} samples at {s.rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
                  f"({s.n_invalid} invalid/lost), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
     lines.append(f"  {s.n_windows} DADEV windows of {s.window_s:g} s every {s.hop_s:g} s")
+    if s.analysed != "rate_dph":
+        lines.append(f"  analysed: {s.analysed} (deg/h), the gyro's error against the reference rotation "
+                     f"(--raw-rate for rate_dph itself)")
     a = s.overall
     if a is not None:
         conf = getattr(a, "confidence", 0.683)

@@ -4,7 +4,8 @@ Everything is on the ``time`` timeline = recording time in s (not wall clock), s
 columns (``send_columns``) so a 1 kHz gyro costs a few Python calls per flush.
 Entities (units in every name; "log10" said where the value is a log):
 
-- ``rate/rate_dph`` raw rate in deg/h. Above DISPLAY_MAX_HZ it is shown as the mean of
+- ``rate/rate_dph`` raw rate in deg/h (and ``rate/error_dph`` = rate_dph - 3600 x rot_dps,
+  what DAVAR analyses, when the recording has a reference rotation). Above DISPLAY_MAX_HZ it is shown as the mean of
   consecutive valid samples (decimated for display only; the engine sees every sample,
   the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels.
 - ``dadev/log10_adev_dph`` log10 of the ADEV (deg/h) at every tau, one row per window
@@ -202,6 +203,8 @@ class RerunSink(Sink):
         rec = self.rec
         what = "rate_dph" if self.step == 1 else f"rate_dph (mean of {self.step} samples, display only)"
         rec.log("rate/rate_dph", rr.SeriesLines(names=[what], widths=[1.0]), static=True)
+        if info.analysed != "rate_dph":
+            rec.log("rate/error_dph", rr.SeriesLines(names=[f"{info.analysed} (analysed)"]), static=True)
         for name in info.aux_names:
             label = name if self.step == 1 else f"{name} (mean of {self.step} samples)"
             rec.log(f"aux/{name}", rr.SeriesLines(names=[label]), static=True)
@@ -212,7 +215,7 @@ class RerunSink(Sink):
             rec.log(f"coef/{n}", rr.SeriesLines(names=[f"{n} ({u})", "lo", "hi"], colors=[c, c, c],
                                                 widths=[2.0, 0.7, 0.7]), static=True)
         rec.log("session", rr.TextDocument(
-            f"source: {info.source_name}\nsample rate: {info.rate_hz:g} Hz\nwindow: {info.window_s:g} s, "
+            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\nwindow: {info.window_s:g} s, "
             f"hop: {info.hop_s:g} s\ntaus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
         # y up in the ADEV-curve view (2-D views have y pointing down).
@@ -239,7 +242,10 @@ class RerunSink(Sink):
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
         rate = np.where(block.valid, block.rate_dph, np.nan)
-        self.dec.push(block.t_s, {"rate/rate_dph": rate, **{f"aux/{k}": v for k, v in block.aux.items()}})
+        chans = {"rate/rate_dph": rate, **{f"aux/{k}": v for k, v in block.aux.items()}}
+        if self.info.analysed != "rate_dph":
+            chans["rate/error_dph"] = rate - 3600.0 * block.aux["rot_dps"]
+        self.dec.push(block.t_s, chans)
         if time.monotonic() - self._last_flush > FLUSH_WALL_S or self.dec.pending() >= FLUSH_SAMPLES:
             self._flush_raw()
 
