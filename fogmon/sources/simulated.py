@@ -4,7 +4,10 @@ possible or paced at real time x ``speed``. Endless when neither a duration, a
 recording (``like``) nor aux channels bound it; ``close()`` stops it."""
 from __future__ import annotations
 
+import os
 from typing import Iterator
+
+import numpy as np
 
 from fogmon.block import Block
 from fogmon.recording import Recording
@@ -23,15 +26,19 @@ class SimulatedSource:
 
     def __init__(self, model: SensorModel | str, duration_s: float | None = None, like: Recording | None = None,
                  aux: dict | None = None, aux_t_s=None, seed: int | None = None, speed: float | None = None) -> None:
+        what = "model"
         if not isinstance(model, SensorModel):
-            path = str(model)
-            model = load_model(path)
-            self.name = f"simulated gyro ({path})"
-        else:
-            self.name = "simulated gyro"
+            what = os.path.basename(str(model))
+            model = load_model(model)
+        self.seed = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
+        self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
         self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
+        #: length in samples when bounded (None: endless), as fogmon.pipeline.record_samples reads it
+        self.n_samples = (int(round(duration_s * self.rate_hz)) if duration_s is not None
+                          else len(like.to_block()) if like is not None else None)
         self.meta: dict = {}
+        seed = self.seed
         chunk = max(1, int(round(PACED_BLOCK_S * self.rate_hz * speed))) if speed else CHUNK_SAMPLES
         self._it = iter_simulate(model, duration_s, like, aux, seed, aux_t_s, chunk_samples=chunk, meta_out=self.meta)
         self._pacer = Pacer(speed)
