@@ -131,6 +131,9 @@ def open_replay_source(path: str, args):
         raise FogmonError(f"{path}: no such file")
     if os.path.isdir(path):
         raise FogmonError(f"{path}: is a directory (give the replay log, capture or CAN log inside it)")
+    if os.path.splitext(path)[1].lower() == ".toml":  # a sensor model: stream its simulation (endless)
+        from fogmon.sources.simulated import SimulatedSource
+        return SimulatedSource(path)
     side = read_sidecar(path)
     ext = os.path.splitext(path)[1].lower()
     kind = _sniff(path) if not side else side.get("kind")
