@@ -73,19 +73,25 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
     (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
     (M,) or (..., M)) defaults to the dominant term of an IEEE-952 fit of each window."""
-    sums = np.asarray(sums, dtype=np.float64)
-    counts = np.asarray(counts)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        adev = np.sqrt(np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan))
+    shape = np.shape(sums)
+    nm = len(m)
+    sums = np.asarray(sums, dtype=np.float64).reshape(-1, nm)
+    counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
     if alpha is None:
-        rows = [row_alpha(s, c, m, n_samples) for s, c in zip(sums.reshape(-1, len(m)), counts.reshape(-1, len(m)))]
-        alpha = np.array(rows, dtype=np.int64).reshape(adev.shape)
-    alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), adev.shape).reshape(-1, len(m))
-    uniq, inv = np.unique(alpha, axis=0, return_inverse=True)
-    edf_gapless = np.array([edf_full(a, m, n_samples) for a in uniq]).reshape(len(uniq), len(m))
-    edf = edf_effective(edf_gapless[inv.ravel()].reshape(adev.shape), m, n_samples, counts)
-    lo, hi = chi2_bounds(adev, edf, confidence)
-    return adev, lo, hi, edf
+        alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts)], dtype=np.int64)
+    alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), shape).reshape(-1, nm)
+    # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
+    new_run = np.ones(len(alpha), dtype=bool)
+    new_run[1:] = np.any(alpha[1:] != alpha[:-1], axis=1)
+    run = np.cumsum(new_run) - 1
+    edf_gapless = np.array([edf_full(a, m, n_samples) for a in alpha[new_run]]).reshape(-1, nm)
+    f_lo, f_hi = chi2_bounds(np.ones_like(edf_gapless), edf_gapless, confidence)
+    full = n_samples - 2 * np.asarray(m, dtype=np.int64) + 1
+    adev, lo, hi, edf, gapped = kernels.frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi)
+    if gapped.any():
+        edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])
+        lo[gapped], hi[gapped] = chi2_bounds(adev[gapped], edf[gapped], confidence)
+    return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))
 
 
 def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float = 0.683,

@@ -20,6 +20,26 @@ def _two_sum(s, x):
     return t, (s - (t - bp)) + (x - bp)
 
 
+@njit(cache=True, fastmath=True)
+def _block_sum(x, i0, i1):
+    s = 0.0
+    for i in range(i0, i1):
+        s += x[i]
+    return s
+
+
+@njit(cache=True)
+def _sum_nonneg(x, n):
+    """Sum of the non-negative x[:n] as (s, c): SIMD sums of 256-element blocks (relative
+    error <= 256 eps, no cancellation with non-negative terms) accumulated by TwoSum."""
+    s = 0.0
+    c = 0.0
+    for i0 in range(0, n, 256):
+        s, r = _two_sum(s, _block_sum(x, i0, min(i0 + 256, n)))
+        c += r
+    return s, c
+
+
 @njit(cache=True)
 def prefix_sums_dd(y, valid, ref):
     """Double-double prefix sums of ``y - ref`` over valid samples (``hi``, ``lo``, n+1 each)
@@ -114,41 +134,122 @@ def stream_append(y, valid, yraw, vraw, psum, bad, length, ref):
         bad[p + 1] = b
 
 
+@njit(cache=True, inline="always")
+def _sq_term(psum, bad, j, m):
+    """Squared term of factor m starting at buffer position j, 0 when it spans a gap;
+    and 1 or 0 for its validity."""
+    t = ((psum[j + 2 * m] - psum[j + m]) - (psum[j + m] - psum[j])) / m
+    ok = bad[j + 2 * m] == bad[j]
+    return (t * t if ok else 0.0), (1 if ok else 0)
+
+
+_TILE = 1024  # samples per tile of the streaming update: the deltas of 4 taus stay in L1
+
+
+@njit(cache=True, inline="always")
+def _tile_deltas(psum, bad, m, w, first, n, d, dn):
+    """Per new sample at buffer positions first..first+n-1: d = (entering term)^2 -
+    (leaving term)^2 and dn = change in valid-term count. Vectorisable fast path when no
+    invalid sample touches the tile's terms."""
+    inv = 1.0 / m
+    a_in = first - 2 * m + 1
+    a_out = first - w
+    if bad[first + n] == bad[a_in] and bad[a_out + n - 1 + 2 * m] == bad[a_out]:
+        # unit-stride slices indexed by a loop counter: no wrap-around checks, SIMD
+        p0, p1, p2 = psum[a_in:a_in + n], psum[a_in + m:a_in + m + n], psum[a_in + 2 * m:a_in + 2 * m + n]
+        q0, q1, q2 = psum[a_out:a_out + n], psum[a_out + m:a_out + m + n], psum[a_out + 2 * m:a_out + 2 * m + n]
+        for i in range(n):
+            t_in = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
+            t_out = ((q2[i] - q1[i]) - (q1[i] - q0[i])) * inv
+            d[i] = t_in * t_in - t_out * t_out
+            dn[i] = 0
+    else:
+        for i in range(n):
+            x_in, v_in = _sq_term(psum, bad, a_in + i, m)
+            x_out, v_out = _sq_term(psum, bad, a_out + i, m)
+            d[i] = x_in - x_out
+            dn[i] = v_in - v_out
+
+
 @njit(cache=True)
 def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, out_sums, out_counts):
     """Slide the window over buffer positions ``first .. first + n_new - 1`` (already
-    appended; the buffer holds at least the ``w - 1`` samples before ``first`` or starts
-    at the record's first sample, position 0 then meaning absolute index 0). For every m
-    the term ending at each new sample enters and the term starting at the sample that
-    left leaves; at the buffer positions ``emit_pos`` (increasing) the current sums and
-    counts are written to the rows of ``out_sums``/``out_counts``."""
-    n_emit = emit_pos.shape[0]
-    for k in range(ms.shape[0]):
+    appended; the buffer holds at least the ``w`` samples before ``first`` or starts at
+    the record's first sample, position 0 then meaning absolute index 0). For every m the
+    term ending at each new sample enters and the term starting at the sample that left
+    leaves; the running sums are compensated (TwoSum). At the buffer positions
+    ``emit_pos`` (increasing) the current sums and counts are written to the rows of
+    ``out_sums``/``out_counts``. Steady state runs in tiles, 4 taus at a time: a
+    vectorised pass for the term deltas, then 4 interleaved compensated sums."""
+    nm = ms.shape[0]
+    stop = first + n_new
+    e_head = 0
+    # head: the first window is still filling, terms only enter
+    for k in range(nm):
         m = ms[k]
-        s = sum_s[k]
-        c = sum_c[k]
-        n = cnt[k]
         e = 0
-        for p in range(first, first + n_new):
-            jn = p - 2 * m + 1
-            if jn >= 0 and bad[p + 1] == bad[jn]:
-                t = ((psum[p + 1] - psum[p + 1 - m]) - (psum[p + 1 - m] - psum[jn])) / m
-                s, err = _two_sum(s, t * t)
-                c += err
-                n += 1
-            jo = p - w
-            if jo >= 0 and bad[jo + 2 * m] == bad[jo]:
-                t = ((psum[jo + 2 * m] - psum[jo + m]) - (psum[jo + m] - psum[jo])) / m
-                s, err = _two_sum(s, -(t * t))
-                c += err
-                n -= 1
-            if e < n_emit and emit_pos[e] == p:
-                out_sums[e, k] = s + c
-                out_counts[e, k] = n
+        p = first
+        while p < stop and p < w:
+            if p - 2 * m + 1 >= 0:
+                x, v = _sq_term(psum, bad, p - 2 * m + 1, m)
+                s, err = _two_sum(sum_s[k], x)
+                sum_s[k] = s
+                sum_c[k] += err
+                cnt[k] += v
+            if e < emit_pos.shape[0] and emit_pos[e] == p:
+                out_sums[e, k] = sum_s[k] + sum_c[k]
+                out_counts[e, k] = cnt[k]
                 e += 1
-        sum_s[k] = s
-        sum_c[k] = c
-        cnt[k] = n
+            p += 1
+        e_head = e
+    start = max(first, w)
+    d = np.empty((4, _TILE))
+    dn = np.empty((4, _TILE), np.int64)
+    e_tile = e_head
+    for t0 in range(start, stop, _TILE):
+        n = min(_TILE, stop - t0)
+        e_end = e_tile
+        while e_end < emit_pos.shape[0] and emit_pos[e_end] < t0 + n:
+            e_end += 1
+        for g in range(0, nm, 4):
+            k0, k1, k2, k3 = g, min(g + 1, nm - 1), min(g + 2, nm - 1), min(g + 3, nm - 1)
+            _tile_deltas(psum, bad, ms[k0], w, t0, n, d[0], dn[0])
+            _tile_deltas(psum, bad, ms[k1], w, t0, n, d[1], dn[1])
+            _tile_deltas(psum, bad, ms[k2], w, t0, n, d[2], dn[2])
+            _tile_deltas(psum, bad, ms[k3], w, t0, n, d[3], dn[3])
+            s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
+            c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
+            n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
+            e = e_tile
+            for i in range(n):
+                s0, r0 = _two_sum(s0, d[0, i])
+                s1, r1 = _two_sum(s1, d[1, i])
+                s2, r2 = _two_sum(s2, d[2, i])
+                s3, r3 = _two_sum(s3, d[3, i])
+                c0 += r0
+                c1 += r1
+                c2 += r2
+                c3 += r3
+                n0 += dn[0, i]
+                n1 += dn[1, i]
+                n2 += dn[2, i]
+                n3 += dn[3, i]
+                if e < e_end and emit_pos[e] == t0 + i:
+                    out_sums[e, k0] = s0 + c0
+                    out_sums[e, k1] = s1 + c1
+                    out_sums[e, k2] = s2 + c2
+                    out_sums[e, k3] = s3 + c3
+                    out_counts[e, k0] = n0
+                    out_counts[e, k1] = n1
+                    out_counts[e, k2] = n2
+                    out_counts[e, k3] = n3
+                    e += 1
+            # duplicated slots (k clipped to nm - 1) hold the same values: write in reverse
+            sum_s[k3], sum_c[k3], cnt[k3] = s3, c3, n3
+            sum_s[k2], sum_c[k2], cnt[k2] = s2, c2, n2
+            sum_s[k1], sum_c[k1], cnt[k1] = s1, c1, n1
+            sum_s[k0], sum_c[k0], cnt[k0] = s0, c0, n0
+        e_tile = e_end
 
 
 @njit(cache=True)
@@ -169,18 +270,47 @@ def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt):
     psum[0] = 0.0
     bad[0] = 0
     stream_append(yraw[:w].copy(), vraw[:w].copy(), yraw, vraw, psum, bad, 0, ref)
+    d = np.empty(w)
     for k in range(ms.shape[0]):
         m = ms[k]
-        s = 0.0
-        c = 0.0
-        n = 0
-        for j in range(w - 2 * m + 1):
-            if bad[j + 2 * m] == bad[j]:
-                t = ((psum[j + 2 * m] - psum[j + m]) - (psum[j + m] - psum[j])) / m
-                s, err = _two_sum(s, t * t)
-                c += err
-                n += 1
-        sum_s[k] = s
-        sum_c[k] = c
+        nt = w - 2 * m + 1
+        if bad[w] == bad[0]:
+            p0, p1, p2 = psum[0:nt], psum[m:m + nt], psum[2 * m:2 * m + nt]
+            inv = 1.0 / m
+            for j in range(nt):
+                t = ((p2[j] - p1[j]) - (p1[j] - p0[j])) * inv
+                d[j] = t * t
+            n = nt
+        else:
+            n = 0
+            for j in range(nt):
+                d[j], v = _sq_term(psum, bad, j, m)
+                n += v
+        sum_s[k], sum_c[k] = _sum_nonneg(d, nt)
         cnt[k] = n
     return ref
+
+
+@njit(cache=True)
+def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
+    """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
+    terms), bounds and EDF from the gap-free tables of the row's alpha run; returns
+    (adev, lo, hi, edf, gapped) where ``gapped`` marks entries with fewer than ``full``
+    terms, whose EDF and bounds the caller recomputes."""
+    nt, nm = sums.shape
+    adev = np.empty((nt, nm))
+    lo = np.empty((nt, nm))
+    hi = np.empty((nt, nm))
+    edf = np.empty((nt, nm))
+    gapped = np.zeros((nt, nm), np.bool_)
+    for i in range(nt):
+        r = run[i]
+        for k in range(nm):
+            n = counts[i, k]
+            a = np.sqrt(max(sums[i, k], 0.0) / (2.0 * n)) if n > 0 else np.nan
+            adev[i, k] = a
+            lo[i, k] = a * f_lo[r, k]
+            hi[i, k] = a * f_hi[r, k]
+            edf[i, k] = edf_gapless[r, k]
+            gapped[i, k] = n != full[k]
+    return adev, lo, hi, edf, gapped
