@@ -78,7 +78,7 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     sums = np.asarray(sums, dtype=np.float64).reshape(-1, nm)
     counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
     if alpha is None:
-        alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts)], dtype=np.int64)
+        alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts)], dtype=np.int64).reshape(shape)
     alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), shape).reshape(-1, nm)
     # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
     new_run = np.ones(len(alpha), dtype=bool)
