@@ -80,7 +80,7 @@ def test_gaps_drop_exactly_the_spanning_terms():
             assert k >= 512 and np.isnan(res.adev_dph[i])
     # an explicit mask works the same as NaN placeholders
     y2 = np.where(valid, y, 1e9)
-    assert np.array_equal(oadev(y2, FS, valid=valid).adev_dph, oadev(y, FS).adev_dph)
+    assert np.array_equal(oadev(y2, FS, valid=valid).adev_dph, oadev(y, FS).adev_dph, equal_nan=True)
 
 
 def test_dadev_gap_windows():
