@@ -1,9 +1,6 @@
 """simulate / iter_simulate / `fogmon sim` / SimulatedSource / scenarios."""
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -95,13 +92,14 @@ def test_cli_duration_and_scenario(tmp_path):
     (["--like", "/nonexistent.csv"], "no such file"),
     (["--duration-s", "-1"], "must be > 0"),
 ])
-def test_cli_errors_are_one_line_exit_2(tmp_path, argv, needle):
+def test_cli_errors_are_one_line_exit_2(tmp_path, capsys, argv, needle):
+    """In-process (an unexpected exception would propagate and fail the test);
+    tests/test_sim_model.py runs the same path in a subprocess."""
     model = tmp_path / "m.toml"
     save_model(MWD, model)
-    r = subprocess.run([sys.executable, "-m", "fogmon", "sim", "--model", str(model), "--out",
-                        str(tmp_path / "o.csv"), *argv], capture_output=True, text=True)
-    assert r.returncode == 2 and "Traceback" not in r.stderr
-    assert r.stderr.strip().count("\n") == 0 and needle in r.stderr, r.stderr
+    assert cli_main(["sim", "--model", str(model), "--out", str(tmp_path / "o.csv"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().count("\n") == 0 and needle in err, err
 
 
 def test_simulated_source_streams_the_same_numbers():
