@@ -12,7 +12,7 @@ Entities (units in every name; "log10" said where the value is a log):
   (time = the window's last sample); ``dadev/heatmap_log10_adev_dph`` the latest
   HEATMAP_WINDOWS windows as an image (rows: tau, largest at the top; columns: windows,
   newest on the right).
-- ``adev_curve/*`` the current window's ADEV curve with its confidence bounds and the
+- ``adev_curve/log10/*`` the current window's ADEV curve with its confidence bounds and the
   fitted IEEE-952 model, drawn as x = log10(tau / s), y = log10(ADEV / (deg/h)) with a
   labelled decade grid (plot views have no log axes).
 - ``coef/<name>`` each IEEE-952 coefficient with its interval (series value, lo, hi;
@@ -44,38 +44,69 @@ HEATMAP_WINDOWS = 256
 FLUSH_WALL_S = 0.25
 FLUSH_SAMPLES = 1 << 16
 TIMELINE = "time"
+#: Entity of the ADEV curve (x = log10 tau/s, y = log10 ADEV/(deg/h)), drawn CURVE_X/Y_SCALE
+#: view units per decade (2-D views keep a 1:1 aspect, the panel is wide).
+CURVE = "adev_curve/log10"
+CURVE_X_SCALE = 250.0
+CURVE_Y_SCALE = 100.0
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO"}
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
 
 
-def blueprint(aux_names: Sequence[str] = ()):
+def blueprint(aux_names: Sequence[str] = (), curve_bounds=None):
     """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
-    the five coefficient tracks and the event log."""
+    the five coefficient tracks and the event log. Time-series views show the whole
+    recording with linked time axes; the time cursor follows the newest data.
+    ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the ADEV-curve view."""
     import rerun.blueprint as rrb
 
-    top = [rrb.TimeSeriesView(origin="/rate", name="Rate (deg/h) over recording time")]
+    top = [_series("/rate", "Rate (deg/h) over recording time")]
     if aux_names:
-        top.append(rrb.TimeSeriesView(origin="/aux", name="Aux channels (units in names)"))
+        top.append(_series("/aux", "Aux channels (units in names)"))
+    bounds = None
+    if curve_bounds is not None:
+        (x0, x1), (y0, y1) = curve_bounds
+        bounds = rrb.VisualBounds2D(x_range=[CURVE_X_SCALE * (x0 - 0.5), CURVE_X_SCALE * (x1 + 0.2)],
+                                    y_range=[-CURVE_Y_SCALE * (y1 + 0.3), -CURVE_Y_SCALE * (y0 - 0.6)])
     middle = [
-        rrb.Spatial2DView(origin="/adev_curve", name="Current window: log10 ADEV (deg/h) vs log10 tau (s)"),
+        rrb.Spatial2DView(origin="/adev_curve", name="Current window: log10 ADEV (deg/h) vs log10 tau (s)",
+                          visual_bounds=bounds),
         rrb.Tabs(
             rrb.TensorView(origin="/dadev/heatmap_log10_adev_dph",
                            name="DADEV heatmap: log10 ADEV (deg/h), tau (rows) x window (columns)",
                            scalar_mapping=rrb.TensorScalarMapping(colormap="viridis")),
-            rrb.TimeSeriesView(origin="/dadev/log10_adev_dph", name="DADEV: log10 ADEV (deg/h) per tau over time"),
+            _series("/dadev/log10_adev_dph", "DADEV: log10 ADEV (deg/h) per tau over time"),
         ),
     ]
-    coefs = [rrb.TimeSeriesView(origin=f"/coef/{n}", name=f"{n} ({u}) with interval")
-             for n, u in COEFFICIENTS.items()]
+    coefs = [_series(f"/coef/{n}", f"{n} ({u}) with interval") for n, u in COEFFICIENTS.items()]
     bottom = [rrb.Vertical(*coefs), rrb.Vertical(
         rrb.TextLogView(origin="/events", name="Events"),
-        rrb.TimeSeriesView(origin="/counters", name="Source counters"))]
+        _series("/counters", "Source counters"))]
     return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle),
                                       rrb.Horizontal(*bottom, column_shares=[2, 1]),
-                                      row_shares=[1, 1.3, 2]),
+                                      row_shares=[1, 1.6, 2]),
+                         rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
                          collapse_panels=True)
+
+
+def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
+    """Decades (log10 deg/h) to frame the ADEV curve, guessed from the first samples:
+    the ADEV at tau0 is about their standard deviation; longer taus fall at most 0.3
+    decade per octave (quantization noise) or rise with rate random walk."""
+    sd = float(np.std(rate_dph)) if len(rate_dph) > 1 else 0.0
+    top = math.ceil(math.log10(sd * 1.5)) if sd > 0 and math.isfinite(sd) else 2
+    return top - max(3, math.ceil(0.3 * n_taus)), top + 1
+
+
+def _series(origin: str, name: str):
+    """A time-series view of the whole recording."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    shown = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
+    return rrb.TimeSeriesView(origin=origin, name=name, axis_x=rrb.TimeAxis(view_range=shown))
 
 
 def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[subprocess.Popen, str]:
@@ -163,7 +194,7 @@ class RerunSink(Sink):
         self.rec = None
         self._heat: list[np.ndarray] = []
         self._last_flush = time.monotonic()
-        self._grid_done = False
+        self._pending_events: list[Event] = []
         if rrd_path:
             import os
             d = os.path.dirname(os.path.abspath(rrd_path))
@@ -176,13 +207,20 @@ class RerunSink(Sink):
 
     # -- set-up ---------------------------------------------------------------
     def start(self, info: StreamInfo) -> None:
-        import rerun as rr
-
         self.info = info
         self.step = max(1, int(math.ceil(info.rate_hz / DISPLAY_MAX_HZ)))
         self.dec = _Decimator(self.step)
+
+    def _setup(self, first: Block) -> None:
+        """Open the sinks and send the blueprint; the first block frames the ADEV view."""
+        import rerun as rr
+
+        info = self.info
         rec = rr.RecordingStream("fogmon", recording_id=self.recording_id)
-        bp = blueprint(info.aux_names)
+        tau = info.tau_s
+        x_dec = (math.floor(np.log10(tau[0])), math.ceil(np.log10(tau[-1]))) if len(tau) else (-2, 2)
+        y_dec = _adev_decades(first.rate_dph[first.valid], len(tau))
+        bp = blueprint(info.aux_names, (x_dec, y_dec))
         sinks = []
         if self.rrd_path:
             sinks.append(rr.FileSink(self.rrd_path))
@@ -196,6 +234,9 @@ class RerunSink(Sink):
         rec.set_sinks(*sinks, default_blueprint=bp)
         self.rec = rec
         self._log_static(info)
+        self._log_grid(x_dec, y_dec)
+        pending, self._pending_events = self._pending_events, []
+        self.events(pending)
 
     def _log_static(self, info: StreamInfo) -> None:
         import rerun as rr
@@ -219,28 +260,26 @@ class RerunSink(Sink):
             f"hop: {info.hop_s:g} s\ntaus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
         # y up in the ADEV-curve view (2-D views have y pointing down).
-        rec.log("adev_curve", rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
-        if len(tau):
-            self._log_grid(np.log10(tau[0]), np.log10(tau[-1]))
+        rec.log(CURVE, rr.Transform3D(scale=[CURVE_X_SCALE, -CURVE_Y_SCALE, 1.0]), static=True)
 
-    def _log_grid(self, x0: float, x1: float, y0: float | None = None, y1: float | None = None) -> None:
+    def _log_grid(self, x_dec: tuple[int, int], y_dec: tuple[int, int]) -> None:
         """Decade grid lines with labels for the ADEV-curve view (static)."""
         import rerun as rr
 
-        xs = np.arange(math.floor(x0), math.ceil(x1) + 1)
-        if y0 is None:
-            return
-        ys = np.arange(math.floor(y0), math.ceil(y1) + 1)
+        xs = np.arange(x_dec[0], x_dec[1] + 1)
+        ys = np.arange(y_dec[0], y_dec[1] + 1)
         strips = [[[x, ys[0]], [x, ys[-1]]] for x in xs] + [[[xs[0], y], [xs[-1], y]] for y in ys]
-        self.rec.log("adev_curve/grid", rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=[0.004]), static=True)
-        labels = [f"tau {10.0**x:g} s" for x in xs] + [f"{10.0**y:g} deg/h" for y in ys]
-        pos = [[x, ys[0] - 0.15] for x in xs] + [[xs[0] - 0.3, y] for y in ys]
-        self.rec.log("adev_curve/grid_labels", rr.Points2D(pos, labels=labels, radii=[0.001],
+        self.rec.log(f"{CURVE}/grid", rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=rr.Radius.ui_points(0.5)),
+                     static=True)
+        labels = [f"{10.0**x:g} s" for x in xs] + [f"{10.0**y:g} deg/h" for y in ys]
+        pos = [[x, ys[0] - 0.2] for x in xs] + [[xs[0] - 0.25, y] for y in ys]
+        self.rec.log(f"{CURVE}/grid_labels", rr.Points2D(pos, labels=labels, radii=rr.Radius.ui_points(0.5),
                                                             colors=[(150, 150, 150)]), static=True)
-        self._grid_done = True
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
+        if self.rec is None:
+            self._setup(block)
         rate = np.where(block.valid, block.rate_dph, np.nan)
         chans = {"rate/rate_dph": rate, **{f"aux/{k}": v for k, v in block.aux.items()}}
         if self.info.analysed != "rate_dph":
@@ -302,17 +341,13 @@ class RerunSink(Sink):
         ok = np.isfinite(ly)
         if not ok.any():
             return
-        if not self._grid_done:
-            lo_y = np.nanmin(np.where(np.isfinite(llo), llo, ly)[ok])
-            hi_y = np.nanmax(np.where(np.isfinite(lhi), lhi, ly)[ok])
-            self._log_grid(lx[0], lx[-1], lo_y - 1, hi_y + 1)
         pts = np.column_stack([lx[ok], ly[ok]])
-        self.rec.log("adev_curve/adev_dph", rr.LineStrips2D([pts], colors=[(255, 255, 255)], radii=[0.01]),
-                     rr.Points2D(pts, radii=[0.025], colors=[(255, 255, 255)]))
+        self.rec.log(f"{CURVE}/adev_dph", rr.LineStrips2D([pts], colors=[(255, 255, 255)], radii=rr.Radius.ui_points(1.5)),
+                     rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[(255, 255, 255)]))
         b = ok & np.isfinite(llo) & np.isfinite(lhi)
-        self.rec.log("adev_curve/bounds", rr.LineStrips2D(
+        self.rec.log(f"{CURVE}/bounds", rr.LineStrips2D(
             [np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]])],
-            colors=[(120, 160, 255)], radii=[0.006]))
+            colors=[(120, 160, 255)], radii=rr.Radius.ui_points(1.0)))
         try:
             model = np.asarray(fit.model_adev_dph(tau), dtype=np.float64)
             if model.ndim == 2:
@@ -321,8 +356,8 @@ class RerunSink(Sink):
                 lm = np.log10(model)
             m_ok = np.isfinite(lm)
             if m_ok.any():
-                self.rec.log("adev_curve/model_ieee952", rr.LineStrips2D(
-                    [np.column_stack([lx[m_ok], lm[m_ok]])], colors=[(255, 170, 0)], radii=[0.006]))
+                self.rec.log(f"{CURVE}/model_ieee952", rr.LineStrips2D(
+                    [np.column_stack([lx[m_ok], lm[m_ok]])], colors=[(255, 170, 0)], radii=rr.Radius.ui_points(1.0)))
         except (AttributeError, TypeError, ValueError, IndexError):
             pass  # an engine without a vectorised model curve: the bounds and points still show
 
@@ -330,6 +365,9 @@ class RerunSink(Sink):
         import rerun as rr
 
         if not events:
+            return
+        if self.rec is None:   # before the first sample (e.g. a source reconnecting)
+            self._pending_events.extend(events)
             return
         t = np.array([e.t_s for e in events], dtype=np.float64)
         self.rec.send_columns("events", indexes=[rr.TimeColumn(TIMELINE, duration=t)],
