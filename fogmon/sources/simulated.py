@@ -36,7 +36,7 @@ class SimulatedSource:
         self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
         #: length in samples when bounded (None: endless), as fogmon.pipeline.record_samples reads it
         self.n_samples = (int(round(duration_s * self.rate_hz)) if duration_s is not None
-                          else len(like.to_block()) if like is not None else None)
+                          else int(like.grid_index()[-1]) + 1 if like is not None else None)
         self.meta: dict = {}
         seed = self.seed
         chunk = max(1, int(round(PACED_BLOCK_S * self.rate_hz * speed))) if speed else CHUNK_SAMPLES
