@@ -134,3 +134,56 @@ def test_cli_bad_model_exit_2_one_line_no_traceback(tmp_path):
 def test_dumps_names_units():
     text = dumps_model(SensorModel(10.0))
     assert "N_dpsh deg/sqrt(h)" in text and "sample_rate_hz = 10.0" in text
+
+
+def _effect_strategy():
+    from hypothesis import strategies as st
+
+    def params_for(kind):
+        spec = EFFECT_KINDS[kind]
+        fields_ = {}
+        for name, p in spec.params.items():
+            lo = {"any": None, ">=0": 0.0, ">0": 1e-6}[p.check]
+            num = st.floats(min_value=lo, max_value=1e9, allow_nan=False, allow_infinity=False)
+            if p.type == "list":
+                fields_[name] = st.lists(num, max_size=4)
+            elif p.type == "int":
+                fields_[name] = st.integers(min_value=1, max_value=8)
+            else:
+                fields_[name] = num
+        return st.fixed_dictionaries(fields_)
+
+    def build(kind):
+        if kind == "bandwidth":
+            return st.one_of(
+                st.builds(lambda c, o: Effect(kind, {"cutoff_hz": c, "order": o, "taps": []}),
+                          st.floats(1e-3, 49.0), st.integers(1, 8)),
+                st.builds(lambda t: Effect(kind, {"cutoff_hz": 0.0, "order": 0, "taps": t}),
+                          st.lists(st.floats(-1, 1), min_size=1, max_size=5)))
+        if kind == "glitches":
+            return st.integers(0, 4).flatmap(lambda n: st.builds(
+                lambda ts, am: Effect(kind, {"times_s": ts, "amplitudes_dph": am, "width_s": 0.0}),
+                st.lists(st.floats(0, 1e6), min_size=n, max_size=n), st.lists(st.floats(-1e3, 1e3), min_size=n, max_size=n)))
+        return params_for(kind).map(lambda p: Effect(kind, p))
+
+    return st.sampled_from(sorted(EFFECT_KINDS)).flatmap(build)
+
+
+def test_round_trip_property(tmp_path_factory):
+    """Any valid model (random effects of every kind, arbitrary finite floats) saved by
+    fogmon loads back identically."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    pos = st.floats(min_value=0.0, max_value=1e6, allow_nan=False)
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.floats(min_value=100.0, max_value=1e5), st.floats(-1e6, 1e6), st.tuples(pos, pos, pos, pos, pos),
+           st.lists(_effect_strategy(), max_size=4))
+    def check(fs, bias, nz, effects):
+        m = validate_model(SensorModel(fs, bias, Noise(*nz), effects))
+        p = tmp_path_factory.mktemp("rt") / "m.toml"
+        save_model(m, p)
+        assert load_model(p) == m
+
+    check()
