@@ -13,7 +13,8 @@ Under one directory:
 
 Files are written in whole lines/chunks straight to the OS at least every ``flush_s``
 (default 0.5 s), so a SIGKILL loses at most the last ``flush_s`` of data and never
-leaves a half-written CSV row.
+leaves a half-written CSV row. The raw taps may be called from the source's reader
+thread: the raw capture keeps being written even while the consumer is slow.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import io
 import json
 import os
 import shutil
+import threading
 import time
 from datetime import datetime, timezone
 
@@ -72,6 +74,7 @@ class Archive(Sink):
         self.source = source
         self.flush_s = float(flush_s)
         self._clock = clock
+        self._lock = threading.RLock()
         self._last_flush = clock()
         self.started_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
         self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
@@ -104,6 +107,10 @@ class Archive(Sink):
     # -- decoded samples -------------------------------------------------------------
     def write(self, block: Block) -> None:
         """Append the valid samples of ``block`` to the replay log."""
+        with self._lock:
+            self._write(block)
+
+    def _write(self, block: Block) -> None:
         if self._aux_names is None and len(block):
             self._aux_names = list(block.aux)
             meta = {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
@@ -130,24 +137,27 @@ class Archive(Sink):
 
     # -- raw capture taps (called by the source) --------------------------------------
     def raw(self, data: bytes) -> None:
-        self._cap_buf += data
-        self.counters["raw_bytes"] += len(data)
-        self._maybe_flush()
+        with self._lock:
+            self._cap_buf += data
+            self.counters["raw_bytes"] += len(data)
+            self._maybe_flush()
 
     def frame(self, msg) -> None:
-        self._can_writer.on_message_received(msg)
-        self.counters["raw_frames"] += 1
-        self._maybe_flush()
+        with self._lock:
+            self._can_writer.on_message_received(msg)
+            self.counters["raw_frames"] += 1
+            self._maybe_flush()
 
     def outage(self, elapsed_s: float, missing_est: float) -> None:
         """The source heard nothing for ``elapsed_s`` s, about ``missing_est`` samples
         lost; recorded in the sidecar at the current byte offset of the serial capture
         (a CAN log carries its own timestamps)."""
-        if self._spec is not None and self._spec.get("kind") == "serial":
-            self._spec["breaks"].append({"offset": self.counters["raw_bytes"], "missing_est": float(missing_est),
-                                         "elapsed_s": float(elapsed_s)})
-            self._write_sidecar()
-        self.flush()
+        with self._lock:
+            if self._spec is not None and self._spec.get("kind") == "serial":
+                self._spec["breaks"].append({"offset": self.counters["raw_bytes"], "missing_est": float(missing_est),
+                                             "elapsed_s": float(elapsed_s)})
+                self._write_sidecar()
+            self.flush()
 
     # -- disk ----------------------------------------------------------------------------
     def _write_sidecar(self) -> None:
@@ -160,10 +170,16 @@ class Archive(Sink):
 
     def _maybe_flush(self) -> None:
         if self._clock() - self._last_flush >= self.flush_s:
-            self.flush()
+            self._flush()
 
     def flush(self) -> None:
         """Hand everything buffered to the OS (survives a SIGKILL of this process)."""
+        with self._lock:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._csv_fd is None:
+            return
         self._last_flush = self._clock()
         text = self._csv_buf.getvalue()
         if text:
@@ -180,15 +196,17 @@ class Archive(Sink):
             self._cap_buf.clear()
 
     def close(self) -> None:
-        if self._csv_fd is None:
-            return
-        if self._can_writer is not None:
-            self._can_writer.stop()      # writes the ASC end line into our buffer
-        self.flush()
-        os.close(self._csv_fd)
-        if self._cap_fd is not None:
-            os.close(self._cap_fd)
-        self._csv_fd = self._cap_fd = None
+        """Flush and close the files (idempotent); taps called later are ignored."""
+        with self._lock:
+            if self._csv_fd is None:
+                return
+            if self._can_writer is not None:
+                self._can_writer.stop()      # writes the ASC end line into our buffer
+            self._flush()
+            os.close(self._csv_fd)
+            if self._cap_fd is not None:
+                os.close(self._cap_fd)
+            self._csv_fd = self._cap_fd = None
 
     def __enter__(self) -> "Archive":
         return self
