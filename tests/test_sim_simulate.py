@@ -186,6 +186,8 @@ def test_missing_aux_for_effect_is_a_clear_error():
         simulate(MWD, aux={"temp_c": np.zeros(10), "rot_dps": np.zeros(10)})
     with pytest.raises(FogmonError, match="duration"):
         simulate(SensorModel(10.0))
+    with pytest.raises(FogmonError, match="longer than the aux channels"):
+        simulate(SensorModel(10.0), duration_s=2.0, aux={"temp_c": np.zeros(10)})
 
 
 def test_like_at_other_rate_uses_the_recording_rate():

@@ -66,6 +66,9 @@ class _Plan:
             self.t0 = float(self.src_t[0])
             step = float(self.src_t[1] - self.src_t[0]) if m > 1 and aux_t_s is not None else 1.0 / self.fs
             span = float(self.src_t[-1] - self.src_t[0]) + step
+            if duration_s is not None and duration_s > span + 1e-9 * span:
+                raise FogmonError(f"duration_s {duration_s:g} s is longer than the aux channels "
+                                  f"({span:g} s); they would have to be invented")
             self.n = int(round((duration_s if duration_s is not None else span) * self.fs))
             self.idx = None
         else:
