@@ -87,51 +87,84 @@ def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return b / scale
 
 
-def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
-    """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
-    factors ``m``, valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
-    Returns (A_n, standard error of A_n), NaN when fewer than 2 usable taus."""
-    tau = np.asarray(tau_s, dtype=np.float64)
-    avar = np.asarray(avar, dtype=np.float64)
-    ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
-    if ok.sum() < 2:
-        return np.full(5, np.nan), np.full(5, np.nan)
-    tau, y, m_ok, nt = tau[ok], avar[ok], np.asarray(m)[ok], np.asarray(n_terms)[ok]
-    x = tau[:, None] ** POWERS
+# Correlation of overlapping Allan variances one octave apart, by dominant noise type
+# alpha (measured on 300 simulated records of 2^16 samples each: white angle 0.5, white
+# rate 0.55, flicker 0.68, random walk 0.88); k octaves apart it falls as rho^(k^1.6)
+# (measured two octaves apart: 0.18, 0.30, 0.67 for white, flicker, random walk).
+_RHO_OF_ALPHA = {2: 0.5, 0: 0.55, -1: 0.68, -2: 0.88}
+
+
+def _scoring(x, cols, tau, y, m, nt, n_samples):
+    """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x): returns
+    (A >= 0 over all 5 terms, model, nu, alpha at the final model)."""
     model = y.copy()
-    alpha = np.zeros(len(tau), dtype=np.int64)
+    alpha = np.zeros(len(y), dtype=np.int64)
     a = np.zeros(5)
     for _ in range(_MAX_ITER):
-        nu = edf_effective(edf_full(alpha, m_ok, n_samples), m_ok, n_samples, nt)
+        nu = edf_effective(edf_full(alpha, m, n_samples), m, n_samples, nt)
         sw = np.sqrt(nu / 2.0) / model
-        a_new = _solve_nnls(x * sw[:, None], y * sw)
+        a_new = np.zeros(5)
+        a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], y * sw)
         model_new = np.maximum(x @ a_new, 1e-300)
         done = np.max(np.abs(model_new / model - 1.0)) < _RTOL
         a, model = a_new, model_new
         alpha = dominant_alpha(a, tau)
         if done:
             break
-    nu = edf_effective(edf_full(alpha, m_ok, n_samples), m_ok, n_samples, nt)
+    nu = edf_effective(edf_full(alpha, m, n_samples), m, n_samples, nt)
+    return a, model, nu, alpha
+
+
+def _sandwich_se(x, model, nu, alpha, m, cols) -> np.ndarray:
+    """Standard errors of A over ``cols`` for the EDF-weighted estimator, with the
+    correlation of Allan variances at neighbouring taus (sandwich covariance)."""
+    xs = x[:, cols]
+    scale = np.linalg.norm(xs, axis=0)
+    xs = xs / scale
     w = nu / (2.0 * model**2)
-    return a, _standard_errors(x, w, a > 0)
+    sd = model * np.sqrt(2.0 / nu)
+    rho = np.sqrt(np.array([_RHO_OF_ALPHA.get(int(a), 0.55) for a in alpha]))
+    octaves = np.abs(np.log2(m[:, None] / m[None, :])) ** 1.6
+    cov_y = np.outer(sd, sd) * np.outer(rho, rho) ** octaves
+    wx = w[:, None] * xs
+    bread = np.linalg.pinv(xs.T @ wx)
+    cov = bread @ (wx.T @ cov_y @ wx) @ bread
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)) / scale
 
 
-def _standard_errors(x: np.ndarray, w: np.ndarray, free: np.ndarray) -> np.ndarray:
-    """Standard errors from the Fisher information X^T W X: free terms from the inverse
-    over the free set; each term held at zero from its Schur complement against it."""
-    scale = np.linalg.norm(x * np.sqrt(w)[:, None], axis=0)
-    scale[scale == 0] = 1.0
-    xs = x / scale
-    info = xs.T @ (w[:, None] * xs)
-    se = np.full(5, np.inf)
-    f = np.flatnonzero(free)
-    inv_ff = np.linalg.pinv(info[np.ix_(f, f)]) if f.size else np.zeros((0, 0))
-    if f.size:
-        se[f] = np.sqrt(np.maximum(np.diag(inv_ff), 0.0))
-    for n in np.flatnonzero(~free):
-        schur = info[n, n] - info[n, f] @ inv_ff @ info[f, n] if f.size else info[n, n]
-        se[n] = 1.0 / np.sqrt(schur) if schur > 1e-12 * info[n, n] else np.inf
-    return se / scale
+def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
+    factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
+
+    Fisher scoring with all five terms, then backward elimination: while a fitted term's
+    95 % interval reaches zero, the weakest one is dropped and the rest refitted. Returns
+    (A_n, standard error of A_n); dropped terms have A_n = 0 and the standard error they
+    would have if fitted alongside the others. NaN when fewer than 2 usable taus."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    avar = np.asarray(avar, dtype=np.float64)
+    ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
+    if ok.sum() < 2:
+        return np.full(5, np.nan), np.full(5, np.nan)
+    tau, y, nt = tau[ok], avar[ok], np.asarray(n_terms)[ok]
+    m_int = np.asarray(m, dtype=np.int64)[ok]
+    m_f = m_int.astype(np.float64)
+    x = tau[:, None] ** POWERS
+    active = np.ones(5, dtype=bool)
+    while True:
+        a, model, nu, alpha = _scoring(x, active, tau, y, m_int, nt, n_samples)
+        free = a > 0
+        se = np.full(5, np.inf)
+        if free.any():
+            se[free] = _sandwich_se(x, model, nu, alpha, m_f, free)
+        weak = free & (a - IDENTIFY_Z * se <= 0)
+        if not weak.any():
+            break
+        active[np.flatnonzero(weak)[np.argmin(a[weak] / se[weak])]] = False
+    for n in np.flatnonzero(~free):  # upper limits: the term's error if fitted with the others
+        cols = free.copy()
+        cols[n] = True
+        se[n] = _sandwich_se(x, model, nu, alpha, m_f, cols)[int(np.sum(cols[:n]))]
+    return a, se
 
 
 def _coefficients(a: np.ndarray, se: np.ndarray, confidence: float) -> list[Coefficient]:
