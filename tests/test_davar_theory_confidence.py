@@ -1,0 +1,74 @@
+"""IEEE-952 closed forms, Greenhall EDF and chi-square bounds against references."""
+import allantools
+import numpy as np
+import pytest
+from allantools.ci import confidence_interval, edf_greenhall
+
+from fogmon.davar.batch import oadev
+from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
+from fogmon.davar.theory import adev_model, markov_adev, sinusoid_adev
+
+
+def test_ieee952_read_offs():
+    # N = sigma(1 h) in deg/sqrt(h) <=> sigma(tau) = 60 N / sqrt(tau) (tau in s)
+    assert adev_model(3600.0, N_dpsh=0.01) == pytest.approx(0.01)
+    assert adev_model(1.0, N_dpsh=0.01) == pytest.approx(0.6)
+    assert adev_model(10.0, Q_arcsec=2.0) == pytest.approx(np.sqrt(3) * 2.0 / 10.0)
+    assert adev_model(123.0, B_dph=1.0) == pytest.approx(0.6643, abs=1e-4)  # flicker floor
+    assert adev_model(3.0 * 3600.0, K_dphsh=0.5) == pytest.approx(0.5)  # K = sigma(3 h)
+    assert adev_model(np.sqrt(2) * 3600.0, R_dphh=2.0) == pytest.approx(2.0)  # R = sigma(sqrt2 h)
+    both = adev_model([1.0, 100.0], N_dpsh=0.01, B_dph=0.1)
+    assert both == pytest.approx(np.sqrt([0.36 + 0.4412712 * 0.01, 0.0036 + 0.4412712 * 0.01]), rel=1e-6)
+
+
+def test_markov_and_sinusoid_peaks():
+    tau = np.geomspace(0.01, 100, 200001)
+    mk = markov_adev(tau, 2.0, 1.0)
+    assert mk.max() == pytest.approx(0.618 * 2.0, rel=2e-3) and tau[mk.argmax()] == pytest.approx(1.89, rel=5e-3)
+    sn = sinusoid_adev(tau, 3.0, 10.0)
+    assert sn.max() == pytest.approx(0.725 * 3.0, rel=2e-3) and tau[sn.argmax()] == pytest.approx(3.71, rel=5e-3)
+
+
+def test_markov_formula_matches_simulated_ar1():
+    rng = np.random.default_rng(0)
+    n, fs, tc, sig = 400000, 10.0, 2.0, 1.5
+    a = np.exp(-1 / (fs * tc))
+    from scipy.signal import lfilter
+    y = lfilter([np.sqrt(1 - a * a) * sig], [1, -a], rng.normal(size=n))
+    res = oadev(y, fs, taus=[1.0, 4.0, 16.0])
+    # sampled AR(1) differs from the continuous formula by O(tau0 / tau); 3 % with 1-sigma noise
+    assert np.allclose(res.adev_dph, markov_adev(res.tau_s, sig, tc), rtol=0.03)
+
+
+def test_edf_is_greenhall_and_scales_with_gaps():
+    m = np.array([1, 3, 16, 250])
+    for alpha in (2, 0, -1, -2):
+        want = [edf_greenhall(alpha, 2, int(k), 1001, overlapping=True, modified=False) for k in m]
+        assert np.allclose(edf_full(alpha, m, 1000), want, rtol=1e-12)
+    full = edf_full(0, m, 1000)
+    e = edf_effective(full, m, 1000, np.array([999, 0, 484, 1]))  # 999 = all terms at m = 1
+    assert e[0] == pytest.approx(full[0]) and np.isnan(e[1])
+    assert e[2] == pytest.approx(full[2] * 484 / 969) and e[3] == pytest.approx(full[3] / 501)
+
+
+def test_chi2_bounds_match_allantools():
+    dev = np.array([1.0, 2.0, 0.5, 3.0])
+    edf = np.array([3.0, 17.5, 1000.0, 17.5])
+    lo, hi = chi2_bounds(dev, edf, 0.683)
+    for d, e, l, h in zip(dev, edf, lo, hi):
+        rl, rh = confidence_interval(d, e, ci=0.683)
+        assert l == pytest.approx(rl, rel=1e-12) and h == pytest.approx(rh, rel=1e-12)
+    lo95, hi95 = chi2_bounds(dev, edf, 0.95)
+    assert np.all(lo95 < lo) and np.all(hi95 > hi)
+
+
+def test_oadev_bounds_use_the_fitted_noise_type():
+    rng = np.random.default_rng(1)
+    y = rng.normal(size=200000) + np.cumsum(rng.normal(size=200000)) * 0.01
+    res = oadev(y, 1.0, taus="octave")
+    explicit = oadev(y, 1.0, taus="octave", alpha=np.where(res.m < 300, 0, -2))
+    # white rate dominates short taus, random walk long ones: the fitted alpha picks them
+    assert np.allclose(res.edf[res.m < 64], explicit.edf[res.m < 64])
+    assert np.allclose(res.edf[res.m > 4000], explicit.edf[res.m > 4000])
+    tau, dev, err, n = allantools.oadev(y, rate=1.0, data_type="freq", taus=res.tau_s)
+    assert np.all(res.lo_dph < dev) and np.all(dev < res.hi_dph)
