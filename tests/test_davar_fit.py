@@ -1,0 +1,70 @@
+"""IEEE-952 fit: exact recovery from model curves, simulated records, DADEV windows."""
+import numpy as np
+import pytest
+
+from fogmon.davar.batch import dadev, oadev
+from fogmon.davar.fit import NAMES, fit_noise
+from fogmon.davar.result import AdevResult
+from fogmon.davar.theory import adev_model
+
+FS = 100.0
+
+
+def exact_result(n_samples, **coef) -> AdevResult:
+    """An AdevResult whose ADEV is exactly the IEEE-952 model (octave taus)."""
+    m = 2 ** np.arange(int(np.log2(n_samples // 4)) + 1)
+    tau = m / FS
+    adev = adev_model(tau, **coef)
+    nt = n_samples - 2 * m + 1
+    return AdevResult(tau, m, adev, adev, adev, np.ones(len(m)), nt, FS, n_samples)
+
+
+def test_exact_model_curve_is_recovered():
+    # each term dominates about a decade or more of the 116-day record's taus
+    truth = {"Q_arcsec": 0.02, "N_dpsh": 0.003, "B_dph": 0.02, "K_dphsh": 0.05, "R_dphh": 0.005}
+    fit = fit_noise(exact_result(2**30, **truth))
+    for name, value in truth.items():
+        c = getattr(fit, name)
+        assert c.value == pytest.approx(value, rel=1e-4), name  # NNLS solver tolerance
+        assert c.lo < value < c.hi and c.identifiable, name
+    tau = np.array([0.1, 10.0, 1000.0])
+    assert fit.model_adev_dph(tau) == pytest.approx(adev_model(tau, **truth), rel=1e-6)
+
+
+def test_absent_terms_are_flagged_with_an_upper_limit():
+    fit = fit_noise(exact_result(2**22, N_dpsh=0.003, B_dph=0.02))
+    for name in ("Q_arcsec", "K_dphsh", "R_dphh"):
+        c = getattr(fit, name)
+        assert not c.identifiable and c.value == 0.0 and c.lo == 0.0 and 0 < c.hi < np.inf
+        assert str(c).startswith("not identifiable (< ")
+    assert fit.N_dpsh.identifiable and fit.B_dph.identifiable
+
+
+def test_simulated_white_and_random_walk_record():
+    rng = np.random.default_rng(3)
+    n, N, K = 2**21, 0.004, 0.3
+    y = rng.normal(size=n) * 60 * N * np.sqrt(FS) + np.cumsum(rng.normal(size=n)) * K / 60 / np.sqrt(FS)
+    fit = fit_noise(oadev(y, FS))
+    assert fit.N_dpsh.identifiable and fit.K_dphsh.identifiable
+    # within 4 standard errors (interval half-width at 68 % ~ 1 standard error)
+    for c, truth in ((fit.N_dpsh, N), (fit.K_dphsh, K)):
+        assert abs(c.value - truth) <= 4 * (c.hi - c.lo) / 2
+    assert fit.N_dpsh.value == pytest.approx(N, rel=0.01)
+    assert not fit.Q_arcsec.identifiable and not fit.R_dphh.identifiable
+
+
+def test_dadev_fit_gives_coefficient_time_series():
+    rng = np.random.default_rng(4)
+    n = 200000
+    level = np.where(np.arange(n) < n // 2, 0.002, 0.006)  # ARW triples halfway
+    y = rng.normal(size=n) * 60 * level * np.sqrt(FS)
+    d = dadev(y, FS, window_s=200.0, hop_s=100.0)
+    fit = fit_noise(d)
+    assert fit.N_dpsh.value.shape == (len(d),) and fit.avar_terms.shape == (len(d), 5)
+    early = d.end_index < n // 2
+    late = d.end_index - 20000 + 1 >= n // 2
+    assert np.allclose(fit.N_dpsh.value[early], 0.002, rtol=0.05)
+    assert np.allclose(fit.N_dpsh.value[late], 0.006, rtol=0.05)
+    assert np.all(fit.N_dpsh.identifiable[early | late])
+    assert set(fit.coefficients()) == set(NAMES)
+    assert fit.model_adev_dph(d.tau_s).shape == d.adev_dph.shape
