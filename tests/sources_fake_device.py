@@ -40,6 +40,16 @@ def stream(n: int, faults: dict[int, str] | None = None, start: int = 0, fmt: st
     return b"".join(out), intact
 
 
+def write_all(fd: int, data: bytes) -> None:
+    """Write every byte to ``fd`` (a pty master accepts partial writes when full)."""
+    view = memoryview(data)
+    while view:
+        try:
+            view = view[os.write(fd, view):]
+        except BlockingIOError:
+            time.sleep(0.001)
+
+
 def has_open(pid: int, tty_path: str) -> bool:
     """Whether process ``pid`` holds ``tty_path`` open (Linux /proc)."""
     try:
@@ -90,7 +100,7 @@ class FakeKvh:
         due = int((time.monotonic() - t0) * self.rate_hz)
         with self.lock:
             if self.master is not None and due > k_next:
-                os.write(self.master, b"".join(frame_k(k) for k in range(k_next, due)))
+                write_all(self.master, b"".join(frame_k(k) for k in range(k_next, due)))
                 self.sent.extend(range(k_next, due))
         return max(due, k_next)
 

@@ -15,7 +15,7 @@ from fogmon.sinks.archive import Archive, run_archived
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
-from sources_fake_device import FakeKvh, has_open, stream
+from sources_fake_device import FakeKvh, has_open, stream, write_all
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -69,8 +69,8 @@ def test_pty_fake_device_exact_accounting():
         while not has_open(os.getpid(), path):
             time.sleep(0.01)
         time.sleep(0.1)
-        for i in range(0, len(data), 500):      # uneven chunks, frames split across writes
-            os.write(master, data[i:i + 500])
+        for i in range(0, len(data), 70):      # ~200 frames/s, frames split across writes
+            write_all(master, data[i:i + 70])
             time.sleep(0.01)
 
     th = threading.Thread(target=device)
