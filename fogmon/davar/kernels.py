@@ -20,24 +20,32 @@ def _two_sum(s, x):
     return t, (s - (t - bp)) + (x - bp)
 
 
-@njit(cache=True, fastmath=True)
-def _block_sum(x, i0, i1):
-    s = 0.0
-    for i in range(i0, i1):
-        s += x[i]
-    return s
-
-
 @njit(cache=True)
-def _sum_nonneg(x, n):
-    """Sum of the non-negative x[:n] as (s, c): SIMD sums of 256-element blocks (relative
-    error <= 256 eps, no cancellation with non-negative terms) accumulated by TwoSum."""
-    s = 0.0
-    c = 0.0
-    for i0 in range(0, n, 256):
-        s, r = _two_sum(s, _block_sum(x, i0, min(i0 + 256, n)))
-        c += r
-    return s, c
+def _compensated_sum(x, n):
+    """Sum of x[:n] as (s, c) with s + c accurate to ~eps^2 relative to sum |x| (so a
+    huge term that later leaves a window leaves no residue): four interleaved TwoSum
+    chains for instruction-level parallelism, then combined."""
+    s0 = s1 = s2 = s3 = 0.0
+    c0 = c1 = c2 = c3 = 0.0
+    n4 = n - n % 4
+    for i in range(0, n4, 4):
+        s0, r0 = _two_sum(s0, x[i])
+        s1, r1 = _two_sum(s1, x[i + 1])
+        s2, r2 = _two_sum(s2, x[i + 2])
+        s3, r3 = _two_sum(s3, x[i + 3])
+        c0 += r0
+        c1 += r1
+        c2 += r2
+        c3 += r3
+    for i in range(n4, n):
+        s0, r0 = _two_sum(s0, x[i])
+        c0 += r0
+    s, r = _two_sum(s0, s1)
+    c = c0 + c1 + c2 + c3 + r
+    s, r = _two_sum(s, s2)
+    c += r
+    s, r = _two_sum(s, s3)
+    return s, c + r
 
 
 @njit(cache=True)
@@ -147,10 +155,10 @@ _TILE = 1024  # samples per tile of the streaming update: the deltas of 4 taus s
 
 
 @njit(cache=True, inline="always")
-def _tile_deltas(psum, bad, m, w, first, n, d, dn):
-    """Per new sample at buffer positions first..first+n-1: d = (entering term)^2 -
-    (leaving term)^2 and dn = change in valid-term count. Vectorisable fast path when no
-    invalid sample touches the tile's terms."""
+def _tile_deltas(psum, bad, m, w, first, n, d, de, dn):
+    """Per new sample at buffer positions first..first+n-1: d + de = (entering term)^2 -
+    (leaving term)^2 exactly (TwoSum) and dn = change in valid-term count. Vectorisable
+    fast path when no invalid sample touches the tile's terms."""
     inv = 1.0 / m
     a_in = first - 2 * m + 1
     a_out = first - w
@@ -161,13 +169,13 @@ def _tile_deltas(psum, bad, m, w, first, n, d, dn):
         for i in range(n):
             t_in = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
             t_out = ((q2[i] - q1[i]) - (q1[i] - q0[i])) * inv
-            d[i] = t_in * t_in - t_out * t_out
+            d[i], de[i] = _two_sum(t_in * t_in, -(t_out * t_out))
             dn[i] = 0
     else:
         for i in range(n):
             x_in, v_in = _sq_term(psum, bad, a_in + i, m)
             x_out, v_out = _sq_term(psum, bad, a_out + i, m)
-            d[i] = x_in - x_out
+            d[i], de[i] = _two_sum(x_in, -x_out)
             dn[i] = v_in - v_out
 
 
@@ -204,6 +212,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
         e_head = e
     start = max(first, w)
     d = np.empty((4, _TILE))
+    de = np.empty((4, _TILE))
     dn = np.empty((4, _TILE), np.int64)
     e_tile = e_head
     for t0 in range(start, stop, _TILE):
@@ -213,10 +222,10 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
             e_end += 1
         for g in range(0, nm, 4):
             k0, k1, k2, k3 = g, min(g + 1, nm - 1), min(g + 2, nm - 1), min(g + 3, nm - 1)
-            _tile_deltas(psum, bad, ms[k0], w, t0, n, d[0], dn[0])
-            _tile_deltas(psum, bad, ms[k1], w, t0, n, d[1], dn[1])
-            _tile_deltas(psum, bad, ms[k2], w, t0, n, d[2], dn[2])
-            _tile_deltas(psum, bad, ms[k3], w, t0, n, d[3], dn[3])
+            _tile_deltas(psum, bad, ms[k0], w, t0, n, d[0], de[0], dn[0])
+            _tile_deltas(psum, bad, ms[k1], w, t0, n, d[1], de[1], dn[1])
+            _tile_deltas(psum, bad, ms[k2], w, t0, n, d[2], de[2], dn[2])
+            _tile_deltas(psum, bad, ms[k3], w, t0, n, d[3], de[3], dn[3])
             s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
             c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
             n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
@@ -226,10 +235,10 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
                 s1, r1 = _two_sum(s1, d[1, i])
                 s2, r2 = _two_sum(s2, d[2, i])
                 s3, r3 = _two_sum(s3, d[3, i])
-                c0 += r0
-                c1 += r1
-                c2 += r2
-                c3 += r3
+                c0 += r0 + de[0, i]
+                c1 += r1 + de[1, i]
+                c2 += r2 + de[2, i]
+                c3 += r3 + de[3, i]
                 n0 += dn[0, i]
                 n1 += dn[1, i]
                 n2 += dn[2, i]
@@ -286,7 +295,7 @@ def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt):
             for j in range(nt):
                 d[j], v = _sq_term(psum, bad, j, m)
                 n += v
-        sum_s[k], sum_c[k] = _sum_nonneg(d, nt)
+        sum_s[k], sum_c[k] = _compensated_sum(d, nt)
         cnt[k] = n
     return ref
 
