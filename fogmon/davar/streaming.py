@@ -61,17 +61,29 @@ class StreamingDadev:
         """Feed samples (deg/h; ``valid`` mask optional, NaN is invalid). Returns the
         windows completed at hop boundaries inside this block (possibly zero rows);
         ``end_index`` counts samples from the first push."""
+        ends, sums, counts = self.advance(rate_dph, valid)
+        w = self.window
+        alpha = self.alpha
+        if alpha is None:
+            alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop, w // 4),
+                                                 self._alpha_prev)
+        adev, lo, hi, edf = statistics(sums, counts, self.m, w, alpha, self.confidence)
+        return DadevResult((ends - (w - 1) / 2.0) / self.rate_hz, ends, self.m / self.rate_hz, self.m,
+                           adev, lo, hi, edf, counts, self.rate_hz, w / self.rate_hz,
+                           self.hop / self.rate_hz, self.confidence)
+
+    def advance(self, rate_dph, valid=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The engine alone: feed samples like :meth:`push` and return, for the windows
+        completed at hop boundaries, (end_index (T), sums of squared terms (deg/h)^2
+        (T x M), valid-term counts (T x M)); Allan variance = sums / (2 counts)."""
         y, ok = _prepare(rate_dph, valid)
         w, cap = self.window, len(self._y)
-        nm = len(self.m)
         a0 = self.n_pushed
-        first_end = max(a0, w - 1)
-        k0 = -(-(first_end - (w - 1)) // self.hop)
+        k0 = -(-(max(a0, w - 1) - (w - 1)) // self.hop)
         ends = np.arange(w - 1 + k0 * self.hop, a0 + len(y), self.hop, dtype=np.int64)
-        sums = np.empty((len(ends), nm))
-        counts = np.empty((len(ends), nm), dtype=np.int64)
-        i = 0
-        row = 0
+        sums = np.empty((len(ends), len(self.m)))
+        counts = np.empty((len(ends), len(self.m)), dtype=np.int64)
+        i = row = 0
         while i < len(y):
             if self._len == cap:
                 self._ref = kernels.stream_reanchor(self._y, self._v, self._p, self._bad, self._len, w,
@@ -90,14 +102,7 @@ class StreamingDadev:
             self._len += take
             i += take
             row = row_end
-        alpha = self.alpha
-        if alpha is None:
-            alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop, w // 4),
-                                                 self._alpha_prev)
-        adev, lo, hi, edf = statistics(sums, counts, self.m, w, alpha, self.confidence)
-        return DadevResult((ends - (w - 1) / 2.0) / self.rate_hz, ends, self.m / self.rate_hz, self.m,
-                           adev, lo, hi, edf, counts, self.rate_hz, w / self.rate_hz,
-                           self.hop / self.rate_hz, self.confidence)
+        return ends, sums, counts
 
     def current(self) -> AdevResult:
         """Overlapping ADEV of the current (possibly still filling) window."""
