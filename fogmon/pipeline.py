@@ -43,8 +43,9 @@ OVERALL_MAX_SAMPLES = 2**23
 
 
 # ----------------------------------------------------------------------------- options
-def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options common to `fogmon replay` and `fogmon monitor`: engine, sinks, pacing."""
+def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True) -> None:
+    """Options of `fogmon replay` and `fogmon monitor` (``replay=False``: no --realtime):
+    engine, sinks, pacing."""
     g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
     g.add_argument("--window-s", type=_positive_float, metavar="W",
                    help="window length in s. Default: replay: a quarter of the recording rounded "
@@ -77,7 +78,7 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser) -> None:
     if "--duration-s" not in parser._option_string_actions:  # the source options may define it
         p.add_argument("--duration-s", type=_positive_float, metavar="S",
                        help="stop after S s of recording time")
-    if "--realtime" not in parser._option_string_actions:
+    if replay and "--realtime" not in parser._option_string_actions:
         p.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="X",
                        help="pace a replay at X times real time (default X = 1 when given; "
                             "without --realtime a replay runs as fast as it can)")
@@ -322,9 +323,11 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     t_origin = None
     done = False
     use_ref = False
+    reader = None
     try:
         _warm_up(rate_hz, window_s, hop_s, taus)
-        for big in (source.blocks() if total_n is not None else _threaded_blocks(source)):
+        reader = _ThreadedBlocks(source) if total_n is None else None
+        for big in (reader if reader is not None else source.blocks()):
             if duration_s is not None and total_n is None and time.monotonic() - wall0 > duration_s + LIVE_WALL_SLACK_S:
                 break  # a live source that stalls still stops on time (wall clock)
             if not len(big):
@@ -386,6 +389,8 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                         time.monotonic() - wall0, force=True)
         progress.close()
         source.close()
+        if reader is not None:
+            reader.join()
         summary.wall_s = time.monotonic() - wall0
         summary.counters = dict(getattr(source, "counters", {}) or {})
         summary.event_counts = dict(event_counts)
@@ -431,38 +436,43 @@ def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:
         fit_noise(res)
 
 
-class _SourceError:
-    def __init__(self, exc: BaseException):
-        self.exc = exc
-
-
-def _threaded_blocks(source):
+class _ThreadedBlocks:
     """Iterate a live source's blocks in a reader thread, so DAVAR, fits and Rerun never
     keep the device unread (an OS serial buffer holds ~0.1 s of a 1 kHz KVH). The queue is
-    unbounded: nothing is dropped; if processing fell behind, the backlog would grow."""
-    q: queue.Queue = queue.Queue()
-    done = object()
+    unbounded: nothing is dropped; if processing fell behind, the backlog would grow.
+    ``join()`` after ``source.close()`` waits for the reader to finish."""
 
-    def reader():
+    _DONE = object()
+
+    def __init__(self, source):
+        self._source = source
+        self._q: queue.Queue = queue.Queue()
+        self._thread = threading.Thread(target=self._read, name="fogmon-source-reader", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
         try:
-            for b in source.blocks():
-                q.put(b)
+            for b in self._source.blocks():
+                self._q.put(b)
         except BaseException as e:  # handed to the consumer thread
-            q.put(_SourceError(e))
+            self._q.put(e)
         finally:
-            q.put(done)
+            self._q.put(self._DONE)
 
-    threading.Thread(target=reader, name="fogmon-source-reader", daemon=True).start()
-    while True:
-        try:
-            item = q.get(timeout=0.25)
-        except queue.Empty:
-            continue
-        if item is done:
-            return
-        if isinstance(item, _SourceError):
-            raise item.exc
-        yield item
+    def __iter__(self):
+        while True:
+            try:
+                item = self._q.get(timeout=0.25)
+            except queue.Empty:
+                continue
+            if item is self._DONE:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+
+    def join(self, timeout_s: float = 10.0) -> None:
+        self._thread.join(timeout_s)
 
 
 def _dispatch_events(sinks, events, counts: Counter) -> None:

@@ -8,6 +8,7 @@ of N = 0.05 deg/sqrt(h) (per-sample rate std 60 N sqrt(fs) deg/h)."""
 from __future__ import annotations
 
 import os
+import select
 import sys
 import time
 import tty
@@ -35,6 +36,7 @@ def open_pty() -> tuple[int, int, str]:
     master, slave = os.openpty()
     tty.setraw(slave)
     tty.setraw(master)
+    os.set_blocking(master, False)
     return master, slave, os.ttyname(slave)
 
 
@@ -48,8 +50,9 @@ def run(seconds: float) -> None:
         due = int((time.monotonic() - t0) * RATE_HZ)
         if due > n:
             view = memoryview(frames(n, due - n, rng))
-            while view:  # the pty buffer holds ~20 kB: block rather than drop bytes
-                view = view[os.write(master, view):]
+            while view and time.monotonic() - t0 < seconds:  # the pty holds ~20 kB: wait, do not drop
+                if select.select([], [master], [], 0.1)[1]:
+                    view = view[os.write(master, view):]
             n = due
         time.sleep(0.01)
 

@@ -2,8 +2,11 @@
 replaying its archive gives the same DADEV the live run logged."""
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -73,3 +76,28 @@ def test_monitor_help(capsys):
     out = capsys.readouterr().out
     for opt in ("--serial", "--can", "--archive", "--duration-s", "--rrd", "--connect", "--serve", "--bind"):
         assert opt in out
+
+
+def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
+    env = {**os.environ, "PYTHONPATH": str(HERE.parent)}
+    arch, rrd = tmp_path / "arch", tmp_path / "c.rrd"
+    p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", fake_kvh, "--protocol", "kvh-a",
+                          "--archive", str(arch), "--rrd", str(rrd), "--window-s", "0.512", "--no-progress"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 60
+        while not (arch / "samples.csv").exists() or (arch / "samples.csv").stat().st_size < 40_000:
+            assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else ""
+            time.sleep(0.1)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, err
+    assert "fogmon: interrupted (Ctrl-C)" in out and "Traceback" not in err
+    n = int(next(l for l in out.splitlines() if "samples at 1000 Hz" in l).split()[0])
+    rec = read_replay_log(arch / "samples.csv")      # complete rows only, readable
+    assert len(rec) >= n - 1000                      # the archive flushes at least every 0.5 s
+    t, _ = read_scalars(str(rrd), "/rate/rate_dph")
+    assert len(t) > 0

@@ -29,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archive", metavar="DIR",
                         help="folder for the archive (samples.csv + raw capture); default: a new "
                              "fogmon-archive-YYYYmmddTHHMMSSZ folder in the current directory")
-    add_pipeline_arguments(parser)
+    add_pipeline_arguments(parser, replay=False)
 
 
 def run(args: argparse.Namespace) -> int:

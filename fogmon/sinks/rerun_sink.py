@@ -23,7 +23,9 @@ Entities (units in every name; "log10" said where the value is a log):
 from __future__ import annotations
 
 import math
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -113,7 +115,8 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
     """Start a headless Rerun gRPC server (`rerun --serve-grpc`) listening on ``bind:port``;
     returns the process and the URL SDKs and viewers connect to."""
     exe = shutil.which("rerun") or str(_venv_bin("rerun"))
-    proc = subprocess.Popen([exe, "--serve-grpc", "--bind", bind, "--port", str(port)],
+    # own process group: the `rerun` launcher starts the real binary as its child
+    proc = subprocess.Popen([exe, "--serve-grpc", "--bind", bind, "--port", str(port)], start_new_session=True,
                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
     deadline = time.monotonic() + timeout_s
@@ -126,8 +129,22 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
                 return proc, f"rerun+http://{host}:{port}/proxy"
         except OSError:
             time.sleep(0.1)
-    proc.kill()
+    stop_process_group(proc)
     raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
+
+
+def stop_process_group(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
+    """Terminate a process started with ``start_new_session=True`` and all its children."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=timeout_s)
+            return
+        except subprocess.TimeoutExpired:
+            continue
 
 
 def _venv_bin(name: str):
@@ -398,8 +415,4 @@ class RerunSink(Sink):
                 pass
         self.rec.disconnect()
         if self.server is not None:
-            self.server.terminate()
-            try:
-                self.server.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                self.server.kill()
+            stop_process_group(self.server)
