@@ -16,6 +16,9 @@ COMMANDS = {
     "replay": "stream a recording (replay log, raw serial capture, CAN log) through DAVAR into Rerun",
     "monitor": "monitor a live gyro on a serial port or CAN bus, archive everything, stream to Rerun",
     "explain": "locate where a recording and a sensor model disagree, name and fit the missing physics",
+    "thermal": "calibrate thermal drift K0(T) + K1 dT/dt + K2 d2T/dt2 from a recording with temp_c and correct it",
+    "inorbit": "in-orbit evaluation: ARW from Pauta-cleaned differences, per-orbit bias instability, wavelet bands",
+    "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
 }
 
 
