@@ -311,7 +311,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     jumps = JumpDetector(window_s)
     duration_s = getattr(args, "duration_s", None)
     realtime = getattr(args, "realtime", None)
-    progress = _Progress(total_n / rate_hz if total_n else 0.0,
+    progress = _Progress(min(total_n / rate_hz, duration_s or math.inf) if total_n else 0.0,
                          enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
                          and (realtime is None or realtime > 1))
     kept: list[np.ndarray] = []
@@ -325,8 +325,9 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     use_ref = False
     reader = None
     try:
-        _warm_up(rate_hz, window_s, hop_s, taus)
-        reader = _ThreadedBlocks(source) if total_n is None else None
+        if total_n is None:  # live: compile before the device is opened, then read it in a thread
+            _warm_up(rate_hz, window_s, hop_s, taus)
+            reader = _ThreadedBlocks(source)
         for big in (reader if reader is not None else source.blocks()):
             if duration_s is not None and total_n is None and time.monotonic() - wall0 > duration_s + LIVE_WALL_SLACK_S:
                 break  # a live source that stalls still stops on time (wall clock)

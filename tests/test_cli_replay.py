@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -102,3 +104,43 @@ def test_readme_default_command_end_to_end(tmp_path):
     # the real gyro's published character (PROVENANCE.txt): OADEV(z) 34 deg/h at 0.01 s
     line = next(l for l in p.stdout.splitlines() if l.split()[:1] == ["0.01"])
     assert abs(float(line.split()[1]) - 34.17) < 0.01
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")
+def test_replay_serve_feeds_a_late_viewer_and_stops_on_ctrl_c(small_log, tmp_path):
+    """--serve (localhost) keeps serving after the replay; a viewer connecting late still
+    gets everything the file sink got; Ctrl-C then ends it with exit 0."""
+    from test_rerun_sink import _free_port
+    from fogmon.sinks.rerun_sink import stop_process_group
+
+    port = _free_port()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    file_ = tmp_path / "f.rrd"
+    p = subprocess.Popen([sys.executable, "-m", "fogmon", "replay", str(small_log[0]), "--serve", "--port", str(port),
+                          "--rrd", str(file_), "--window-s", "40.96", "--no-progress", "--quiet"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    recv = None
+    try:
+        line = ""
+        while "still serving" not in line:
+            line = p.stderr.readline()
+            assert line or p.poll() is None, "replay ended before serving"
+        got = tmp_path / "viewer.rrd"
+        recv = subprocess.Popen([str(Path(sys.executable).parent / "rerun"), "--port", str(_free_port()), "--save",
+                                 str(got), f"rerun+http://127.0.0.1:{port}/proxy"], start_new_session=True,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        want = read_scalars(str(file_), "/dadev/log10_adev_dph")
+        deadline = time.monotonic() + 30
+        while True:
+            time.sleep(0.5)
+            have = read_scalars(str(got), "/dadev/log10_adev_dph") if got.exists() else ([], [])
+            if len(have[0]) == len(want[0]) or time.monotonic() > deadline:
+                break
+        np.testing.assert_array_equal(have[1], want[1])
+        p.send_signal(signal.SIGINT)
+        assert p.wait(timeout=30) == 0
+    finally:
+        if recv is not None:
+            stop_process_group(recv)
+        if p.poll() is None:
+            p.kill()
