@@ -123,6 +123,8 @@ def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Rec
     rate_dph in deg/h, aux channels). Infinite when neither a duration, a recording nor
     aux channels bound it. ``meta_out`` (a dict) receives sample_rate_hz and seed."""
     model = validate_model(model)
+    if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
     plan = _Plan(model, duration_s, like, aux, aux_t_s)
     _check_aux(model, plan)
     fs = plan.fs

@@ -10,6 +10,7 @@ from typing import Iterator
 import numpy as np
 
 from fogmon.block import Block
+from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim.model import SensorModel, load_model
 from fogmon.sim.simulate import CHUNK_SAMPLES, iter_simulate
@@ -30,6 +31,8 @@ class SimulatedSource:
         if not isinstance(model, SensorModel):
             what = os.path.basename(str(model))
             model = load_model(model)
+        if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
+            raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
         self.seed = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
