@@ -36,7 +36,8 @@ LIVE_WINDOW_SAMPLES = 2**16
 ERROR_EXPR = "rate_dph - 3600 x rot_dps"
 #: A coefficient-jump event needs a change of more than this many combined standard errors.
 JUMP_Z = 5.0
-#: A live run with --duration-s also stops this long (s) after that much wall time.
+#: A live run with --duration-s also stops this long (s, or 10 % more) after that much wall
+#: time from opening the source, should the device stall.
 LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
 OVERALL_MAX_SAMPLES = 2**23
@@ -328,8 +329,10 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         if total_n is None:  # live: compile before the device is opened, then read it in a thread
             _warm_up(rate_hz, window_s, hop_s, taus)
             reader = _ThreadedBlocks(source)
+        wall_start = time.monotonic()
         for big in (reader if reader is not None else source.blocks()):
-            if duration_s is not None and total_n is None and time.monotonic() - wall0 > duration_s + LIVE_WALL_SLACK_S:
+            if duration_s is not None and total_n is None and \
+                    time.monotonic() - wall_start > duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s):
                 break  # a live source that stalls still stops on time (wall clock)
             if not len(big):
                 _dispatch_events(sinks, big.events, event_counts)
