@@ -15,7 +15,7 @@ from fogmon.sinks.archive import Archive, run_archived
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
-from sources_fake_device import FakeKvh, has_open, stream, write_all
+from sources_fake_device import FakeKvh, stream, write_all
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -66,9 +66,9 @@ def test_pty_fake_device_exact_accounting():
     src = SerialSource(path, 921600, KvhCodec("a", "rate", "deg", "z", FS))
 
     def device():
-        while not has_open(os.getpid(), path):
-            time.sleep(0.01)
-        time.sleep(0.1)
+        while src._thread is None:         # the reader runs once the port is open and flushed
+            time.sleep(0.005)
+        time.sleep(0.05)
         for i in range(0, len(data), 70):      # ~200 frames/s, frames split across writes
             write_all(master, data[i:i + 70])
             time.sleep(0.01)
@@ -97,22 +97,25 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     archive = Archive(str(tmp_path / "archive"), src)
     stop = threading.Event()
 
-    def wait_open():   # pyserial flushes input while opening: "connected" starts after that
-        while not has_open(os.getpid(), dev.tty):
+    def wait_open(reconnects):   # pyserial flushes input while opening: "connected" starts after that
+        while src._thread is None or src.counters["reconnects"] < reconnects:
             time.sleep(0.005)
-        time.sleep(0.1)
+        time.sleep(0.05)
 
     def device():
-        wait_open()
+        wait_open(0)
         t0 = time.monotonic()
         k = 0
         while time.monotonic() - t0 < 0.8:
             k = dev.send_due(t0, k)
             time.sleep(0.01)
+        t_end = time.monotonic() + 5       # pull the cable once the bytes on the wire have arrived
+        while src.counters["frames_ok"] < len(dev.sent) and time.monotonic() < t_end:
+            time.sleep(0.005)
         dev.unplug()
         time.sleep(0.7)                          # > half a counter wrap (0.32 s): only the clock can tell
         dev.plug()
-        wait_open()
+        wait_open(1)
         k = max(k, int((time.monotonic() - t0) * FS))      # the gyro kept counting while unplugged
         while time.monotonic() - t0 < 2.6:
             k = dev.send_due(t0, k)
@@ -134,7 +137,7 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     dev.close()
     rec = read_replay_log(archive.replay_log_path)
     ks = np.rint(rec.rate_dph / 3600).astype(int)
-    assert list(ks) == dev.sent                                   # every sample sent while connected
+    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for b in blocks for e in b.events])                         # every sample sent while connected
     k0 = dev.sent[0]
     assert np.array_equal(np.rint(rec.t_s * FS).astype(int), ks - k0)   # outage kept as a gap of the right length
     assert counters["disconnects"] == 1 and counters["reconnects"] == 1
