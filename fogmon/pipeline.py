@@ -315,9 +315,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     progress = _Progress(min(total_n / rate_hz, duration_s or math.inf) if total_n else 0.0,
                          enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
                          and (realtime is None or realtime > 1))
-    kept: list[np.ndarray] = []
-    kept_valid: list[np.ndarray] = []
-    kept_n = 0
+    tail = _Tail(OVERALL_MAX_SAMPLES)
     event_counts: Counter = Counter()
     started = False
     wall0 = time.monotonic()
@@ -374,12 +372,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                     counters = dict(getattr(source, "counters", {}) or {})
                     for s in sinks:
                         s.source_counters(float(t_end[-1]), counters)
-                kept.append(y)
-                kept_valid.append(b.valid)
-                kept_n += len(b)
-                while kept_n - len(kept[0]) >= OVERALL_MAX_SAMPLES:
-                    kept_n -= len(kept.pop(0))
-                    kept_valid.pop(0)
+                tail.push(y, b.valid)
                 progress.update(summary.t_last_s - summary.t_first_s, time.monotonic() - wall0)
             if done:
                 break
@@ -399,9 +392,8 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         summary.counters = dict(getattr(source, "counters", {}) or {})
         summary.event_counts = dict(event_counts)
         try:
-            if kept_n >= 8:
-                rate = np.concatenate(kept)
-                valid = np.concatenate(kept_valid)
+            rate, valid = tail.arrays()
+            if len(rate) >= 8:
                 summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
                 summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
                 summary.overall_fit = fit_noise(summary.overall)
@@ -409,6 +401,26 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
             for s in sorted(sinks, key=lambda k: getattr(k, "finish_order", 0)):
                 s.finish(summary)
     return summary
+
+
+class _Tail:
+    """The latest ``n_max`` (or a little more) samples and valid flags, for the whole-run ADEV."""
+
+    def __init__(self, n_max: int):
+        self.n_max = n_max
+        self._parts: deque[tuple[np.ndarray, np.ndarray]] = deque()
+        self._n = 0
+
+    def push(self, rate: np.ndarray, valid: np.ndarray) -> None:
+        self._parts.append((rate, valid))
+        self._n += len(rate)
+        while self._n - len(self._parts[0][0]) >= self.n_max:
+            self._n -= len(self._parts.popleft()[0])
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self._parts:
+            return np.zeros(0), np.zeros(0, bool)
+        return (np.concatenate([r for r, _ in self._parts]), np.concatenate([v for _, v in self._parts]))
 
 
 def analysed_rate(b: Block) -> np.ndarray:
