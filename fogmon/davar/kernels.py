@@ -158,7 +158,8 @@ _TILE = 1024  # samples per tile of the streaming update: the deltas of 4 taus s
 def _tile_deltas(psum, bad, m, w, first, n, d, de, dn):
     """Per new sample at buffer positions first..first+n-1: d + de = (entering term)^2 -
     (leaving term)^2 exactly (TwoSum) and dn = change in valid-term count. Vectorisable
-    fast path when no invalid sample touches the tile's terms."""
+    fast path when no invalid sample touches the tile's terms; returns True when some dn
+    may be non-zero."""
     inv = 1.0 / m
     a_in = first - 2 * m + 1
     a_out = first - w
@@ -170,13 +171,15 @@ def _tile_deltas(psum, bad, m, w, first, n, d, de, dn):
             t_in = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
             t_out = ((q2[i] - q1[i]) - (q1[i] - q0[i])) * inv
             d[i], de[i] = _two_sum(t_in * t_in, -(t_out * t_out))
-            dn[i] = 0
+            dn[i] = 0  # read when another tau of the group has gaps
+        return False
     else:
         for i in range(n):
             x_in, v_in = _sq_term(psum, bad, a_in + i, m)
             x_out, v_out = _sq_term(psum, bad, a_out + i, m)
             d[i], de[i] = _two_sum(x_in, -x_out)
             dn[i] = v_in - v_out
+        return True
 
 
 @njit(cache=True)
@@ -188,7 +191,8 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
     leaves; the running sums are compensated (TwoSum). At the buffer positions
     ``emit_pos`` (increasing) the current sums and counts are written to the rows of
     ``out_sums``/``out_counts``. Steady state runs in tiles, 4 taus at a time: a
-    vectorised pass for the term deltas, then 4 interleaved compensated sums."""
+    vectorised pass for the term deltas, then 4 interleaved compensated sums, run
+    branch-free between emission points."""
     nm = ms.shape[0]
     stop = first + n_new
     e_head = 0
@@ -222,28 +226,36 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
             e_end += 1
         for g in range(0, nm, 4):
             k0, k1, k2, k3 = g, min(g + 1, nm - 1), min(g + 2, nm - 1), min(g + 3, nm - 1)
-            _tile_deltas(psum, bad, ms[k0], w, t0, n, d[0], de[0], dn[0])
-            _tile_deltas(psum, bad, ms[k1], w, t0, n, d[1], de[1], dn[1])
-            _tile_deltas(psum, bad, ms[k2], w, t0, n, d[2], de[2], dn[2])
-            _tile_deltas(psum, bad, ms[k3], w, t0, n, d[3], de[3], dn[3])
+            has_dn = _tile_deltas(psum, bad, ms[k0], w, t0, n, d[0], de[0], dn[0])
+            has_dn |= _tile_deltas(psum, bad, ms[k1], w, t0, n, d[1], de[1], dn[1])
+            has_dn |= _tile_deltas(psum, bad, ms[k2], w, t0, n, d[2], de[2], dn[2])
+            has_dn |= _tile_deltas(psum, bad, ms[k3], w, t0, n, d[3], de[3], dn[3])
             s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
             c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
             n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
             e = e_tile
-            for i in range(n):
-                s0, r0 = _two_sum(s0, d[0, i])
-                s1, r1 = _two_sum(s1, d[1, i])
-                s2, r2 = _two_sum(s2, d[2, i])
-                s3, r3 = _two_sum(s3, d[3, i])
-                c0 += r0 + de[0, i]
-                c1 += r1 + de[1, i]
-                c2 += r2 + de[2, i]
-                c3 += r3 + de[3, i]
-                n0 += dn[0, i]
-                n1 += dn[1, i]
-                n2 += dn[2, i]
-                n3 += dn[3, i]
-                if e < e_end and emit_pos[e] == t0 + i:
+            da, db, dc, dd = d[0], d[1], d[2], d[3]
+            ea, eb, ec, ed = de[0], de[1], de[2], de[3]
+            i0 = 0
+            while i0 < n:
+                # run up to the next emission point (or the tile end) without branches
+                i1 = n if e >= e_end else min(n, emit_pos[e] - t0 + 1)
+                for i in range(i0, i1):
+                    s0, r0 = _two_sum(s0, da[i])
+                    s1, r1 = _two_sum(s1, db[i])
+                    s2, r2 = _two_sum(s2, dc[i])
+                    s3, r3 = _two_sum(s3, dd[i])
+                    c0 += r0 + ea[i]
+                    c1 += r1 + eb[i]
+                    c2 += r2 + ec[i]
+                    c3 += r3 + ed[i]
+                if has_dn:
+                    for i in range(i0, i1):
+                        n0 += dn[0, i]
+                        n1 += dn[1, i]
+                        n2 += dn[2, i]
+                        n3 += dn[3, i]
+                if i1 < n or (e < e_end and emit_pos[e] == t0 + n - 1):
                     out_sums[e, k0] = s0 + c0
                     out_sums[e, k1] = s1 + c1
                     out_sums[e, k2] = s2 + c2
@@ -253,6 +265,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
                     out_counts[e, k2] = n2
                     out_counts[e, k3] = n3
                     e += 1
+                i0 = i1
             # duplicated slots (k clipped to nm - 1) hold the same values: write in reverse
             sum_s[k3], sum_c[k3], cnt[k3] = s3, c3, n3
             sum_s[k2], sum_c[k2], cnt[k2] = s2, c2, n2
