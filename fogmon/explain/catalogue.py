@@ -1,0 +1,496 @@
+"""Candidate physics (CONTRACT section 2 effect kinds), each fitted to the current
+residual and scored by a likelihood-ratio statistic ``gain`` with ``k`` free
+parameters (scanned nonlinear ones included), so that forward selection can compare
+them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.
+
+- Mean-type effects (thermal_drift, periodic, glitches, bias_step, rate_ramp,
+  scale_factor, warm_up) are linear in their amplitude-type coefficients: regressors
+  come from the simulator's own effect functions with one coefficient set to 1, fitted
+  by Whittle GLS (fitting.py) with the calibrated noise PSD; nonlinear parameters
+  (period, step time, ramp start, settling time) by scans.
+- markov and bandwidth change the noise PSD: Whittle likelihood of the residual's
+  binned periodogram under the model PSD with and without the term.
+- vibration_noise and temperature_noise change the white-noise level over time:
+  per-segment white level (from the Allan variance at tau0) regressed on the segment
+  mean of vib_g / temp_c.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from fogmon.explain import detectors
+from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, filter_gain2, markov_psd,
+                                    model_psd, rfft_omega)
+from fogmon.sim import effects as fx
+from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, validate_effect
+
+
+@dataclass
+class Context:
+    """What every candidate sees: uniform time grid ``t_s`` (s), gap-filled aux channels,
+    ``valid`` mask, sample rate, current residual ``y`` (deg/h, 0 where invalid), the
+    current stochastic model, the calibrated Whittle GLS and the residual's DFT."""
+
+    t_s: np.ndarray
+    aux: dict
+    valid: np.ndarray
+    fs_hz: float
+    y: np.ndarray
+    stoch: SensorModel
+    wh: Whittle
+    Yf: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def penalty(self) -> float:
+        return math.log(max(int(self.valid.sum()), 2))
+
+
+@dataclass
+class Candidate:
+    """A fitted effect: full parameters, standard errors of the fitted ones, the
+    likelihood-ratio ``gain``, parameter count ``k``, its deterministic rate (deg/h, for
+    mean-type effects) and the design used (for the held-out check), plus evidence."""
+
+    kind: str
+    params: dict
+    se: dict
+    gain: float
+    k: int
+    evidence: str
+    rate: np.ndarray | None = None
+    design: np.ndarray | None = None
+    heldout: Callable | None = field(default=None, repr=False)
+
+    @property
+    def nature(self) -> str:
+        return EFFECT_KINDS[self.kind].nature
+
+    def bic_gain(self, penalty: float) -> float:
+        return self.gain - self.k * penalty
+
+    def effect(self) -> Effect:
+        return validate_effect(self.kind, self.params, "fitted effect")
+
+
+def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
+    """Rate (deg/h) of a mean-type effect with the given parameters on the context grid."""
+    return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.fs_hz)
+
+
+def _gls_columns(ctx: Context, X: np.ndarray):
+    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    return fit
+
+
+def _fmt(x: float, se: float) -> str:
+    return f"{x:.4g} +- {se:.2g}"
+
+
+# ---------------------------------------------------------------- mean-type
+def periodic(ctx: Context) -> Candidate | None:
+    """Strongest line of the PSD-weighted periodogram (periods 3 samples .. duration/3),
+    frequency refined by golden-section search on the GLS chi-square."""
+    n = ctx.n
+    P = np.abs(ctx.Yf) ** 2 / (n * ctx.wh.S)
+    P[:3] = 0.0
+    P[-1] = 0.0
+    k = int(np.argmax(P))
+    t = ctx.t_s
+    tr = t - t[0]
+
+    def cols(f):
+        return np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
+
+    def g(f):
+        return ctx.wh.gls(ctx.wh.fft(cols(f)), ctx.Yf).chi2_gain
+
+    lo, hi = (k - 1) * ctx.fs_hz / n, (k + 1) * ctx.fs_hz / n
+    r = (math.sqrt(5) - 1) / 2
+    a, b = lo, hi
+    c, d = b - r * (b - a), a + r * (b - a)
+    gc, gd = g(c), g(d)
+    for _ in range(14):
+        if gc > gd:
+            b, d, gd = d, c, gc
+            c = b - r * (b - a)
+            gc = g(c)
+        else:
+            a, c, gc = c, d, gd
+            d = a + r * (b - a)
+            gd = g(d)
+    f = c if gc > gd else d
+    X = cols(f)
+    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    h = 0.02 * ctx.fs_hz / n
+    curv = (2 * fit.chi2_gain - g(f + h) - g(f - h)) / h ** 2
+    se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
+    sa, ca = fit.beta
+    amp = math.hypot(sa, ca)
+    # A sin(2 pi f (t - t0) + ph0) = A sin(2 pi f t + phase) with phase = ph0 - 2 pi f t0
+    phase = math.remainder(math.atan2(ca, sa) - 2 * np.pi * f * t[0], 2 * np.pi)
+    period = 1.0 / f
+    se_amp = float(np.sqrt(np.mean(fit.se ** 2)))
+    params = {"period_s": period, "amplitude_dph": amp, "phase_rad": phase}
+    ev = (f"periodogram line at {period:.6g} s (PSD-weighted power {P[k]:.3g}x the noise), "
+          f"amplitude {_fmt(amp, se_amp)} deg/h")
+    return Candidate("periodic", params, {"period_s": se_f / f ** 2, "amplitude_dph": se_amp,
+                                          "phase_rad": se_amp / max(amp, 1e-300)},
+                     fit.chi2_gain, 3, ev, X @ fit.beta, X)
+
+
+def bias_step(ctx: Context) -> Candidate | None:
+    """Best single bias step over 1 %..99 % of the record (exact GLS scan)."""
+    n = ctx.n
+    n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, int(0.01 * n), int(0.99 * n))
+    X = (np.arange(n) >= n0).astype(float)[:, None]
+    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    t_step = float(ctx.t_s[n0] - 0.5 / ctx.fs_hz)
+    params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
+    ev = f"change-point scan: bias step of {_fmt(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
+    return Candidate("bias_step", params, {"step_dph": float(fit.se[0])}, fit.chi2_gain, 2, ev,
+                     X @ fit.beta, X)
+
+
+def _scan_1d(ctx: Context, make: Callable[[float], np.ndarray], grid: np.ndarray, refine: int = 8):
+    """Best value of a nonlinear parameter on ``grid`` then on a finer grid around it."""
+    gains = [ctx.wh.gls(ctx.wh.fft(make(v)), ctx.Yf).chi2_gain for v in grid]
+    i = int(np.argmax(gains))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    fine = np.linspace(lo, hi, refine + 2)[1:-1]
+    g2 = [ctx.wh.gls(ctx.wh.fft(make(v)), ctx.Yf).chi2_gain for v in fine]
+    j = int(np.argmax(g2))
+    return (fine[j], g2[j]) if g2[j] > gains[i] else (grid[i], gains[i])
+
+
+def rate_ramp(ctx: Context) -> Candidate | None:
+    """Linear rate drift starting at t0 (scanned over 0..90 % of the record)."""
+    t = ctx.t_s
+    T = t[-1] - t[0]
+
+    def make(t0):
+        return (np.maximum(t - t0, 0.0) / 3600.0)[:, None]
+
+    t0, _ = _scan_1d(ctx, make, t[0] + T * np.linspace(0.0, 0.9, 16))
+    X = make(t0)
+    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    params = {"slope_dphh": float(fit.beta[0]), "t0_s": float(t0)}
+    ev = f"trend regression: rate slope {_fmt(fit.beta[0], fit.se[0])} deg/h^2 from t = {t0:.6g} s"
+    return Candidate("rate_ramp", params, {"slope_dphh": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
+
+
+def warm_up(ctx: Context) -> Candidate | None:
+    """Exponential settling from the start of the record, time constant scanned on a
+    log grid from 10 samples to half the record."""
+    t = ctx.t_s
+    T = t[-1] - t[0]
+    t0 = float(t[0])
+
+    def make(ltau):
+        return np.exp(-(t - t0) / math.exp(ltau))[:, None]
+
+    ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(10.0 / ctx.fs_hz), math.log(T / 2), 14))
+    X = make(ltau)
+    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    tau = math.exp(ltau)
+    params = {"amplitude_dph": float(fit.beta[0]), "tau_s": tau, "t0_s": t0}
+    ev = f"settling fit: A = {_fmt(fit.beta[0], fit.se[0])} deg/h, tau = {tau:.4g} s from t = {t0:.6g} s"
+    return Candidate("warm_up", params, {"amplitude_dph": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
+
+
+def scale_factor(ctx: Context) -> Candidate | None:
+    """Scale-factor error on rot_dps: symmetric, and with asymmetry (better BIC wins)."""
+    rot = ctx.aux.get("rot_dps")
+    if rot is None or not np.nanstd(rot) > 0:
+        return None
+    c_ppm = unit_rate("scale_factor", {"ppm": 1.0, "asym_ppm": 0.0}, ctx)
+    c_asym = unit_rate("scale_factor", {"ppm": 0.0, "asym_ppm": 1.0}, ctx)
+    best = None
+    for X, names in ((c_ppm[:, None], ("ppm",)), (np.column_stack((c_ppm, c_asym)), ("ppm", "asym_ppm"))):
+        fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+        if best is None or fit.chi2_gain - len(names) * ctx.penalty > best[0].chi2_gain - len(best[2]) * ctx.penalty:
+            best = (fit, X, names)
+    fit, X, names = best
+    params = {"ppm": 0.0, "asym_ppm": 0.0}
+    se = {}
+    for i, nm in enumerate(names):
+        params[nm] = float(fit.beta[i])
+        se[nm] = float(fit.se[i])
+    ev = ("regression on 3600 rot_dps: " + ", ".join(f"{nm} {_fmt(params[nm], se[nm])}" for nm in names)
+          + f" (rotation rate std {np.nanstd(rot):.3g} deg/s)")
+    return Candidate("scale_factor", params, se, fit.chi2_gain, len(names), ev, X @ fit.beta, X)
+
+
+THERMAL_VARIANTS = {
+    "K0 linear, K1, K2": (("k0_1",), ("k1",), ("k2",)),
+    "K0 quadratic, K1, K2": (("k0_1", "k0_2"), ("k1",), ("k2",)),
+    "K0 quadratic, K1/K2 by branch": (("k0_1", "k0_2"), ("k1_pos", "k1_neg"), ("k2_pos", "k2_neg")),
+}
+
+
+def thermal_drift(ctx: Context) -> Candidate | None:
+    """K0(T) + K1 dT/dt + K2 d2T/dt2 (the simulator's definition, default smoothing);
+    three nested variants, the best BIC wins."""
+    temp = ctx.aux.get("temp_c")
+    if temp is None or not np.nanstd(temp) > 0:
+        return None
+    zero = {"k0_poly_dph": [], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0}
+    unit = {
+        "k0_1": {**zero, "k0_poly_dph": [0.0, 1.0]}, "k0_2": {**zero, "k0_poly_dph": [0.0, 0.0, 1.0]},
+        "k1_pos": {**zero, "k1_pos": 1.0}, "k1_neg": {**zero, "k1_neg": 1.0},
+        "k2_pos": {**zero, "k2_pos": 1.0}, "k2_neg": {**zero, "k2_neg": 1.0},
+    }
+    cols = {k: unit_rate("thermal_drift", p, ctx) for k, p in unit.items()}
+    cols["k1"] = cols["k1_pos"] + cols["k1_neg"]
+    cols["k2"] = cols["k2_pos"] + cols["k2_neg"]
+    fcols = {k: ctx.wh.fft(v) for k, v in cols.items()}
+    best = None
+    for label, groups in THERMAL_VARIANTS.items():
+        names = [nm for g in groups for nm in g]
+        fit = ctx.wh.gls(np.column_stack([fcols[nm] for nm in names]), ctx.Yf)
+        score = fit.chi2_gain - len(names) * ctx.penalty
+        if best is None or score > best[0]:
+            best = (score, fit, names, label)
+    _, fit, names, label = best
+    X = np.column_stack([cols[nm] for nm in names])
+    v = dict(zip(names, fit.beta.tolist()))
+    s = dict(zip(names, fit.se.tolist()))
+    c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
+    rate = X @ fit.beta
+    k0_part = X[:, :2] @ np.array([c1, c2]) if "k0_2" in v else X[:, 0] * c1
+    c0 = -float(np.mean(k0_part[ctx.valid]))
+    params = {"k0_poly_dph": [c0, c1, c2] if "k0_2" in v else [c0, c1],
+              "k1_pos": v.get("k1_pos", v.get("k1", 0.0)), "k1_neg": v.get("k1_neg", v.get("k1", 0.0)),
+              "k2_pos": v.get("k2_pos", v.get("k2", 0.0)), "k2_neg": v.get("k2_neg", v.get("k2", 0.0))}
+    se = {"k0_c1": s.get("k0_1"), "k1_pos": s.get("k1_pos", s.get("k1")), "k1_neg": s.get("k1_neg", s.get("k1")),
+          "k2_pos": s.get("k2_pos", s.get("k2")), "k2_neg": s.get("k2_neg", s.get("k2"))}
+    if "k0_2" in s:
+        se["k0_c2"] = s["k0_2"]
+    pp = float(np.ptp(rate[ctx.valid]))
+    ev = (f"regression on temperature and its derivatives ({label}): "
+          + ", ".join(f"{nm} {_fmt(v[nm], s[nm])}" for nm in names)
+          + f"; predicted drift {pp:.3g} deg/h peak-to-peak over a {np.nanmax(temp) - np.nanmin(temp):.3g} degC span")
+    return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names), ev, rate + c0, X)
+
+
+def glitches(ctx: Context) -> Candidate | None:
+    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale,
+    Bonferroni threshold over all samples (1 % family-wise)."""
+    amp, z = detectors.spike_scan(ctx.wh, ctx.Yf)
+    thr = detectors.bonferroni_z(int(ctx.valid.sum()))
+    idx = detectors.find_spikes(z, thr)
+    if not len(idx):
+        return None
+    times = (ctx.t_s[idx]).tolist()
+    amps = amp[idx].tolist()
+    rate = np.zeros(ctx.n)
+    rate[idx] = amp[idx]
+    gain = float(np.sum(z[idx] ** 2))
+    zmax = float(np.max(np.abs(z[idx])))
+    ev = (f"robust spike test: {len(idx)} sample(s) beyond |z| = {thr:.2f} (1 % family-wise over "
+          f"{int(ctx.valid.sum())} samples), largest |z| = {zmax:.1f}, amplitudes "
+          f"{np.min(np.abs(amps)):.3g}..{np.max(np.abs(amps)):.3g} deg/h")
+    se = {"amplitudes_dph": float(1.0 / math.sqrt(np.sum(ctx.wh.w)))}
+    return Candidate("glitches", {"times_s": times, "amplitudes_dph": amps}, se, gain, 2 * len(idx), ev,
+                     rate, None)
+
+
+MEAN_CANDIDATES = {
+    "periodic": periodic, "bias_step": bias_step, "rate_ramp": rate_ramp, "warm_up": warm_up,
+    "scale_factor": scale_factor, "thermal_drift": thermal_drift, "glitches": glitches,
+}
+
+
+# ---------------------------------------------------------------- noise-type
+def _periodogram(ctx: Context) -> BinnedPeriodogram:
+    return BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid, ctx.y, 0.0)), ctx.n)
+
+
+def white_rms_dpsh(model: SensorModel, ctx: Context) -> float:
+    """RMS over the record of the white level N(t) = N0 + white-level effects (deg/sqrt(h))."""
+    level = np.full(ctx.n, model.noise.N_dpsh)
+    for e in model.effects:
+        if EFFECT_KINDS[e.kind].nature == "white_level":
+            level = level + fx.white_level_dpsh(e, ctx.t_s, ctx.aux)
+    return float(np.sqrt(np.mean(np.maximum(level, 0.0) ** 2)))
+
+
+def _stoch_psd(ctx: Context, bp: BinnedPeriodogram) -> np.ndarray:
+    return model_psd(ctx.stoch, bp.omega, ctx.n, white_rms_dpsh(ctx.stoch, ctx))
+
+
+def markov(ctx: Context) -> Candidate | None:
+    """Gauss-Markov term: Whittle likelihood over a log grid of correlation times
+    (5 samples .. duration/20), variance by Newton steps (>= 0). A best fit at the
+    longest correlation time is refused (a drift, left to the mean-type effects), and at
+    the shortest (a white-noise level change, left to the white-level effects)."""
+    bp = _periodogram(ctx)
+    S0 = _stoch_psd(ctx, bp)
+    d0 = bp.deviance(S0)
+    T = ctx.n / ctx.fs_hz
+    best = None
+    grid = np.geomspace(5.0 / ctx.fs_hz, T / 20.0, 36)
+    for tc in grid:
+        P = markov_psd(bp.omega, ctx.fs_hz, 1.0, tc)
+        v = _newton_variance(bp, S0, P)
+        if v <= 0:
+            continue
+        g = d0 - bp.deviance(S0 + v * P)
+        if best is None or g > best[0]:
+            best = (g, tc, v)
+    if best is None or best[1] >= grid[-1] or best[1] <= grid[0]:
+        return None  # at the grid's ends it is a drift or a white-noise level, not a Gauss-Markov term
+    g, tc, v = best
+    sigma = math.sqrt(v)
+    # se of sigma from the curvature in v
+    P = markov_psd(bp.omega, ctx.fs_hz, 1.0, tc)
+    S = S0 + v * P
+    info = float(np.sum(bp.count * P ** 2 / S ** 2))
+    se_sigma = math.sqrt(1.0 / info) / (2 * sigma) if info > 0 else float("nan")
+    ev = (f"Whittle fit of the residual spectrum: Gauss-Markov sigma {_fmt(sigma, se_sigma)} deg/h, "
+          f"correlation time {tc:.4g} s (ADEV hump {0.618 * sigma:.3g} deg/h near tau = {1.89 * tc:.3g} s)")
+    return Candidate("markov", {"tau_c_s": float(tc), "sigma_dph": sigma}, {"sigma_dph": se_sigma}, g, 2, ev)
+
+
+def _newton_variance(bp: BinnedPeriodogram, S0: np.ndarray, P: np.ndarray) -> float:
+    v = 0.0
+    for _ in range(30):
+        S = S0 + v * P
+        g1 = float(np.sum(bp.count * P * (1.0 / S - bp.I / S ** 2)))
+        g2 = float(np.sum(bp.count * P ** 2 * (-1.0 / S ** 2 + 2.0 * bp.I / S ** 3)))
+        if g2 <= 0:
+            break
+        v_new = max(v - g1 / g2, 0.0)
+        if abs(v_new - v) <= 1e-9 * max(v_new, 1e-300):
+            v = v_new
+            break
+        v = v_new
+    return v
+
+
+def bandwidth(ctx: Context) -> Candidate | None:
+    """The sensor's own low-pass: Butterworth order 1..4, cutoff on a log grid from
+    fs/500 to 0.49 fs, by Whittle likelihood of the residual spectrum."""
+    if any(e.kind == "bandwidth" for e in ctx.stoch.effects):
+        return None
+    bp = _periodogram(ctx)
+    S0 = _stoch_psd(ctx, bp)
+    d0 = bp.deviance(S0)
+    def gain(order, fc):
+        p = {"cutoff_hz": float(fc), "order": int(order), "taps": []}
+        return d0 - bp.deviance(S0 * filter_gain2(p, ctx.fs_hz, bp.omega)), p
+
+    best = None
+    grid = np.geomspace(ctx.fs_hz / 500.0, 0.49 * ctx.fs_hz, 48)
+    for order in (1, 2, 3, 4):
+        for i, fc in enumerate(grid):
+            g, p = gain(order, fc)
+            if best is None or g > best[0]:
+                best = (g, p, i)
+    g0, p0, i = best
+    for fc in np.geomspace(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], 15):
+        g, p = gain(p0["order"], fc)
+        if g > best[0]:
+            best = (g, p, i)
+    best = best[:2]
+    g, p = best
+    ev = (f"Whittle fit of the residual spectrum: high frequencies fall below the model, as a "
+          f"Butterworth low-pass of order {p['order']} at {p['cutoff_hz']:.4g} Hz")
+    return Candidate("bandwidth", p, {}, g, 2, ev)
+
+
+def _segment_levels(ctx: Context, seg: int):
+    """Per-segment white level N (deg/sqrt(h)) from the Allan variance at tau0, and
+    segment index boundaries."""
+    y = np.where(ctx.valid, ctx.y, np.nan)
+    d = np.diff(y)
+    nseg = (len(d)) // seg
+    d = d[: nseg * seg].reshape(nseg, seg)
+    with np.errstate(invalid="ignore"):
+        av1 = np.nanmean(d ** 2, axis=1) / 2.0
+    w = rfft_omega(4096)
+    stoch_noN = _replace_white(ctx.stoch, 0.0)
+    c_other = avar1_of_psd(model_psd(stoch_noN, w, ctx.n), 4096)
+    c_white = avar1_of_psd(model_psd(_replace_white(ctx.stoch, 1.0, drop_other=True), w, ctx.n), 4096)
+    lev = np.sqrt(np.maximum(av1 - c_other, 0.0) / c_white)
+    return lev, nseg
+
+
+def _replace_white(model: SensorModel, N: float, drop_other: bool = False) -> SensorModel:
+    from fogmon.sim.model import Noise
+    nz = model.noise
+    noise = Noise(0.0, N, 0.0, 0.0, 0.0) if drop_other else Noise(nz.Q_arcsec, N, nz.B_dph, nz.K_dphsh, nz.R_dphh)
+    eff = [e for e in model.effects if e.kind == "bandwidth" or (not drop_other and e.kind == "markov")]
+    return SensorModel(model.sample_rate_hz, model.bias_dph, noise, eff)
+
+
+def _ols(x: np.ndarray, y: np.ndarray):
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = x[ok], y[ok]
+    X = np.column_stack((np.ones(len(x)), x))
+    beta, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ beta
+    s2 = float(r @ r) / max(len(x) - 2, 1)
+    cov = s2 * np.linalg.pinv(X.T @ X)
+    return beta, np.sqrt(np.diag(cov)), s2
+
+
+def _white_level(ctx: Context, kind: str, channel: str) -> Candidate | None:
+    a = ctx.aux.get(channel)
+    if a is None or not np.nanstd(a) > 0 or any(e.kind == kind for e in ctx.stoch.effects):
+        return None
+    seg = max(16, ctx.n // 2000)
+    lev, nseg = _segment_levels(ctx, seg)
+    if nseg < 20:
+        return None
+    x = np.nanmean(a[: nseg * seg].reshape(nseg, seg), axis=1)
+    beta, se, s2 = _ols(x, lev)
+    tstat = beta[1] / se[1] if se[1] > 0 else 0.0
+    N0 = ctx.stoch.noise.N_dpsh
+    if kind == "vibration_noise":
+        if beta[1] <= 0:
+            return None
+        params = {"n_gain_dpsh_per_g": float(beta[1])}
+        sep = {"n_gain_dpsh_per_g": float(se[1])}
+        what = f"N = {beta[0]:.4g} + {_fmt(beta[1], se[1])} * vib_g deg/sqrt(h)"
+    else:
+        t_ref = (N0 - beta[0]) / beta[1] if beta[1] != 0 else float(np.nanmean(a))
+        params = {"n_gain_dpsh_per_c": float(beta[1]), "t_ref_c": float(t_ref)}
+        sep = {"n_gain_dpsh_per_c": float(se[1])}
+        what = f"N = {beta[0]:.4g} + {_fmt(beta[1], se[1])} * temp_c deg/sqrt(h)"
+
+    def heldout():
+        h = nseg // 2
+        res = []
+        for fit_sl, test_sl in ((slice(0, h), slice(h, nseg)), (slice(h, nseg), slice(0, h))):
+            bf, _, _ = _ols(x[fit_sl], lev[fit_sl])
+            xt, lt = x[test_sl], lev[test_sl]
+            ok = np.isfinite(xt) & np.isfinite(lt)
+            base = lt[ok] - np.mean(lt[ok])
+            pred = lt[ok] - (bf[0] + bf[1] * xt[ok])
+            pred = pred - np.mean(pred)
+            res.append((float(base @ base - pred @ pred) / s2, float(np.var(xt[ok]) * ok.sum() * bf[1] ** 2 / s2)))
+        return res
+
+    ev = (f"white level per {seg / ctx.fs_hz:.3g} s segment (ADEV at tau0) regressed on the segment mean of "
+          f"{channel}: {what}, t = {tstat:.1f} over {nseg} segments")
+    return Candidate(kind, params, sep, float(tstat ** 2), 1, ev, heldout=heldout)
+
+
+def vibration_noise(ctx: Context) -> Candidate | None:
+    return _white_level(ctx, "vibration_noise", "vib_g")
+
+
+def temperature_noise(ctx: Context) -> Candidate | None:
+    return _white_level(ctx, "temperature_noise", "temp_c")
+
+
+NOISE_CANDIDATES = {"markov": markov, "bandwidth": bandwidth, "vibration_noise": vibration_noise,
+                    "temperature_noise": temperature_noise}

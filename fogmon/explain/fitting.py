@@ -1,0 +1,220 @@
+"""Frequency-domain generalized least squares (Whittle) for effects that are linear in
+their coefficients, with the noise PSD of the sensor model as weights.
+
+For a residual y (deg/h, n samples) and design columns X (n x p), with Y_k, X_k their
+DFTs and S_k the two-sided noise PSD in (deg/h)^2 per unit normalized frequency
+(sum_k S_k / n = per-sample variance), the Whittle chi-square is
+
+    chi2(beta) = sum_{k != 0} |Y_k - X_k beta|^2 / (n S_k)
+
+summed over all n bins (rfft bins weighted 2, the Nyquist bin 1). The DC bin is left
+out: the recording's bias is unknown. Minimizing gives beta = A^-1 b with
+A = Re(X^H W X), b = Re(X^H W Y); cov(beta) = A^-1; the drop in chi2 is b^T A^-1 b,
+which is chi-square with p degrees of freedom when the effect is absent (a
+likelihood-ratio statistic).
+
+The model's PSD is calibrated to the recording in octave bands holding >= 32 bins
+(band median of |Y_k|^2 / (n S_k), divided by ln 2, the median of a unit exponential):
+a wrong white-noise level or an unmodelled noise hump then cannot masquerade as a
+deterministic effect. Bands below 32 bins (the slowest frequencies, where drifts live)
+keep the lowest calibrated band's factor.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+MIN_BAND_BINS = 32
+
+
+def rfft_omega(n: int) -> np.ndarray:
+    """Angular normalized frequencies 2 pi k / n of the rfft bins (rad/sample)."""
+    return 2.0 * np.pi * np.arange(n // 2 + 1) / n
+
+
+def noise_psd(omega: np.ndarray, fs_hz: float, Q_arcsec: float = 0.0, N_dpsh: float = 0.0,
+              K_dphsh: float = 0.0, markov: tuple[tuple[float, float], ...] = ()) -> np.ndarray:
+    """Two-sided PSD in (deg/h)^2 per unit normalized frequency at angular normalized
+    frequencies ``omega`` (rad/sample) for IEEE-952 Q (arcsec), N (deg/sqrt(h)),
+    K (deg/h/sqrt(h)) and Gauss-Markov terms ``markov`` = ((sigma_dph, tau_c_s), ...)
+    (flicker B enters as a sum of such terms, see :func:`model_psd`). +inf at omega 0."""
+    w = np.asarray(omega, dtype=np.float64)
+    s2 = np.sin(w / 2.0) ** 2
+    with np.errstate(divide="ignore"):
+        S = np.full(len(w), (60.0 * N_dpsh) ** 2 * fs_hz)
+        S += 4.0 * s2 * (Q_arcsec * fs_hz) ** 2
+        if K_dphsh > 0:
+            S += (K_dphsh / 60.0) ** 2 / fs_hz / (4.0 * s2)
+        for sigma, tau_c in markov:
+            S += markov_psd(w, fs_hz, sigma, tau_c)
+    S[w == 0] = np.inf
+    return np.maximum(S, 1e-300)
+
+
+def markov_psd(omega: np.ndarray, fs_hz: float, sigma_dph: float, tau_c_s: float) -> np.ndarray:
+    """PSD of the sampled first-order Gauss-Markov process (AR(1), a = exp(-tau0/tau_c))."""
+    a = math.exp(-1.0 / (fs_hz * tau_c_s))
+    return sigma_dph ** 2 * (1.0 - a * a) / np.abs(1.0 - a * np.exp(-1j * omega)) ** 2
+
+
+def calibrate_psd(S: np.ndarray, Yf: np.ndarray, n: int) -> np.ndarray:
+    """``S`` scaled per octave band of bins to the periodogram |Y_k|^2 / n (band median /
+    ln 2); bands with fewer than MIN_BAND_BINS bins use the nearest calibrated band."""
+    ratio = (np.abs(Yf) ** 2 / n) / S
+    nb = len(S)
+    edges = [1]
+    while edges[-1] < nb:
+        edges.append(min(nb, edges[-1] * 2))
+    factors = np.ones(nb)
+    first_ok = None
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        if hi - lo < MIN_BAND_BINS:
+            continue
+        f = float(np.median(ratio[lo:hi])) / math.log(2.0)
+        f = min(max(f, 1e-3), 1e3)
+        factors[lo:hi] = f
+        if first_ok is None:
+            first_ok = (lo, f)
+    if first_ok is not None:
+        factors[1:first_ok[0]] = first_ok[1]
+    out = S * factors
+    out[0] = np.inf
+    return out
+
+
+@dataclass(frozen=True)
+class GlsFit:
+    """Result of a Whittle GLS fit: coefficients ``beta``, covariance ``cov`` and the
+    chi-square drop ``chi2_gain`` (likelihood-ratio statistic, p degrees of freedom)."""
+
+    beta: np.ndarray
+    cov: np.ndarray
+    chi2_gain: float
+
+    @property
+    def se(self) -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+
+
+class Whittle:
+    """Whittle GLS on an n-sample uniform record with noise PSD ``S`` at the rfft bins.
+
+    ``valid`` marks usable samples: invalid ones are zeroed in the residual and in every
+    design column, so they carry no information."""
+
+    def __init__(self, S: np.ndarray, n: int, valid: np.ndarray | None = None):
+        self.n = n
+        self.S = S
+        mult = np.full(len(S), 2.0)
+        mult[0] = 0.0
+        if n % 2 == 0:
+            mult[-1] = 1.0
+        self.w = mult / (n * S)
+        self.valid = None if valid is None or valid.all() else valid
+
+    def fft(self, x: np.ndarray) -> np.ndarray:
+        """DFT (rfft) of one column or of the columns of a 2-D array (n x p)."""
+        x = np.asarray(x, dtype=np.float64)
+        if self.valid is not None:
+            x = np.where(self.valid if x.ndim == 1 else self.valid[:, None], x, 0.0)
+        x = np.nan_to_num(x)
+        return np.fft.rfft(x, axis=0)
+
+    def gls(self, Xf: np.ndarray, Yf: np.ndarray) -> GlsFit:
+        """Fit Y = X beta (both already transformed by :meth:`fft`; Xf is bins x p)."""
+        Xf = Xf.reshape(len(self.w), -1)
+        WX = Xf * self.w[:, None]
+        A = np.real(WX.conj().T @ Xf)
+        b = np.real(WX.conj().T @ Yf)
+        try:
+            cov = np.linalg.pinv(A, rcond=1e-12, hermitian=True)
+        except np.linalg.LinAlgError:
+            cov = np.full_like(A, np.nan)
+        beta = cov @ b
+        return GlsFit(beta, cov, float(b @ beta))
+
+    def chi2(self, Rf: np.ndarray) -> float:
+        """Whittle chi-square of a transformed residual."""
+        return float(np.sum(self.w * np.abs(Rf) ** 2))
+
+    def gain_of(self, beta: np.ndarray, Xf: np.ndarray, Yf: np.ndarray) -> float:
+        """Chi-square drop on Y when the fixed ``beta`` (fitted elsewhere) is removed:
+        positive when the effect predicts this data (held-out check)."""
+        pred = Xf.reshape(len(self.w), -1) @ beta
+        return self.chi2(Yf) - self.chi2(Yf - pred)
+
+
+def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None) -> np.ndarray:
+    """Noise PSD (see :func:`noise_psd`) of a SensorModel's stochastic part at ``omega``
+    for an n-sample record: IEEE-952 terms (flicker as the simulator's exact sum of
+    Gauss-Markov terms), ``markov`` effects and ``bandwidth`` filters. ``white_dpsh``
+    overrides N (deg/sqrt(h)), e.g. with the RMS level of white-level effects."""
+    from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus
+
+    fs = float(model.sample_rate_hz)
+    nz = model.noise
+    markov = [(e.params["sigma_dph"], e.params["tau_c_s"]) for e in model.effects if e.kind == "markov"]
+    if nz.B_dph > 0:
+        sig = nz.B_dph * math.sqrt(math.log(2.0) / math.pi)
+        markov += [(sig, tc) for tc in flicker_taus(fs, default_flicker_tau_hi_s(fs, n / fs))]
+    S = noise_psd(omega, fs, nz.Q_arcsec, nz.N_dpsh if white_dpsh is None else white_dpsh, nz.K_dphsh,
+                  tuple(markov))
+    for e in model.effects:
+        if e.kind == "bandwidth":
+            S = S * filter_gain2(e.params, fs, omega)
+    return S
+
+
+def filter_gain2(params: dict, fs_hz: float, omega: np.ndarray) -> np.ndarray:
+    """|H|^2 of a ``bandwidth`` effect (Butterworth or FIR) at ``omega`` (rad/sample)."""
+    if params.get("taps"):
+        _, h = signal.freqz(params["taps"], [1.0], worN=omega)
+    else:
+        sos = signal.butter(int(params["order"]), params["cutoff_hz"], fs=fs_hz, output="sos")
+        _, h = signal.sosfreqz(sos, worN=omega)
+    return np.abs(h) ** 2
+
+
+def avar1_of_psd(S: np.ndarray, n: int) -> float:
+    """Allan variance at tau = tau0 implied by a PSD at the rfft bins:
+    2 * integral S(nu) sin^2(pi nu) dnu over the circle."""
+    w = rfft_omega(n)
+    mult = np.full(len(S), 2.0)
+    mult[0] = 0.0
+    if n % 2 == 0:
+        mult[-1] = 1.0
+    Sf = np.where(np.isfinite(S), S, 0.0)
+    return float(2.0 * np.sum(mult * Sf * np.sin(w / 2.0) ** 2) / n)
+
+
+class BinnedPeriodogram:
+    """Periodogram I_k = |Y_k|^2 / n averaged in ~``n_bins`` log-spaced frequency bins
+    (low bins kept single), for fast Whittle likelihoods of PSD models."""
+
+    def __init__(self, Yf: np.ndarray, n: int, n_bins: int = 1500):
+        k = np.arange(len(Yf))
+        mult = np.full(len(Yf), 2.0)
+        mult[0] = 0.0
+        if n % 2 == 0:
+            mult[-1] = 1.0
+        edges = np.unique(np.round(np.geomspace(1, len(Yf), n_bins)).astype(np.int64))
+        edges = np.concatenate((edges[edges < len(Yf)], [len(Yf)]))
+        I = np.abs(Yf) ** 2 / n
+        cw = np.concatenate(([0.0], np.cumsum(mult)))
+        ci = np.concatenate(([0.0], np.cumsum(mult * I)))
+        ck = np.concatenate(([0.0], np.cumsum(mult * k)))
+        lo, hi = edges[:-1], edges[1:]
+        self.count = cw[hi] - cw[lo]
+        keep = self.count > 0
+        self.count = self.count[keep]
+        self.I = (ci[hi] - ci[lo])[keep] / self.count
+        self.k = (ck[hi] - ck[lo])[keep] / self.count
+        self.n = n
+        self.omega = 2.0 * np.pi * self.k / n
+
+    def deviance(self, S: np.ndarray) -> float:
+        """-2 ln(Whittle likelihood) (up to a constant) of PSD values S at the bins."""
+        return float(np.sum(self.count * (np.log(S) + self.I / S)))

@@ -1,0 +1,262 @@
+"""Development set for `fogmon explain`: concealed effects with known truth, regenerated
+by seed (nothing large stored). One case per effect kind, a two-effect combination
+(the DESIGN 4.6 MWD case: thermal drift + vibration-driven ARW) and null cases.
+
+"Concealed": a deterministic effect's peak |contribution| is under half the per-sample
+noise standard deviation; a noise-type effect changes the raw standard deviation by
+under 5 %. Both are measured and printed for every case (columns conceal/raw_std).
+Sample rates 1-1000 Hz, durations 30 min - 12 h.
+
+Run:  python validation/explain_devset.py [--only NAME ...] [--seed S]
+Prints one row per case: found / named / parameter errors / score_before /
+score_after / PASS-FAIL, and exits 1 if any case fails.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fogmon.explain.explainer import Options, explain
+from fogmon.sim import effects as fx
+from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
+from fogmon.sim.scenarios import ChamberParams, MwdParams, mwd_run, thermal_chamber
+from fogmon.sim.simulate import simulate
+
+
+@dataclass
+class Case:
+    name: str
+    fs_hz: float
+    duration_s: float
+    noise: Noise
+    effects: list = field(default_factory=list)
+    scenario: str | None = None  # "mwd" | "chamber" | "table"
+
+
+def _white_std(noise: Noise, fs: float) -> float:
+    """Per-sample std (deg/h) of the model's Q + N noise (what hides an effect)."""
+    return math.sqrt((60.0 * noise.N_dpsh) ** 2 * fs + 2.0 * (noise.Q_arcsec * fs) ** 2)
+
+
+def cases() -> list[Case]:
+    """The development set (amplitudes stated relative to the per-sample noise std s)."""
+    fog = Noise(N_dpsh=0.01, B_dph=0.01)
+    s10 = _white_std(fog, 10.0)
+    s1 = _white_std(fog, 1.0)
+    s100 = _white_std(fog, 100.0)
+    rlg = Noise(Q_arcsec=2.0, N_dpsh=0.0005, B_dph=0.002)
+    srlg = _white_std(rlg, 100.0)
+    mwd = Noise(N_dpsh=0.05, B_dph=0.05)
+    smwd = _white_std(mwd, 100.0)
+    return [
+        Case("null_fog_10Hz_3h", 10.0, 3 * 3600.0, fog),
+        Case("null_rlg_100Hz_1h", 100.0, 3600.0, Noise(Q_arcsec=0.5, N_dpsh=0.002, B_dph=0.005, K_dphsh=0.01)),
+        Case("null_mwd_100Hz_2h", 100.0, 2 * 3600.0, mwd, scenario="mwd"),
+        Case("periodic_10Hz_3h", 10.0, 3 * 3600.0, fog,
+             [Effect("periodic", {"period_s": 600.0, "amplitude_dph": 0.2 * s10, "phase_rad": 1.0})]),
+        Case("bias_step_1Hz_12h", 1.0, 12 * 3600.0, fog,
+             [Effect("bias_step", {"t_s": 15000.0, "step_dph": 0.25 * s1})]),
+        Case("rate_ramp_100Hz_2h", 100.0, 2 * 3600.0, fog,
+             [Effect("rate_ramp", {"slope_dphh": 0.2 * s100, "t0_s": 1800.0})]),
+        Case("warm_up_10Hz_2h", 10.0, 2 * 3600.0, fog,
+             [Effect("warm_up", {"amplitude_dph": 0.45 * s10, "tau_s": 600.0, "t0_s": 0.0})]),
+        Case("glitches_100Hz_1h_rlg", 100.0, 3600.0, rlg,
+             [Effect("glitches", {"times_s": [310.0, 1234.5, 2000.0, 2777.7, 3333.0],
+                                  "amplitudes_dph": [0.4 * srlg, -0.35 * srlg, 0.3 * srlg, 0.45 * srlg,
+                                                     -0.4 * srlg]})]),
+        Case("thermal_drift_10Hz_chamber", 10.0, 0.0, fog,
+             [Effect("thermal_drift", {"k0_poly_dph": [0.0, 0.001 * s10], "k1_pos": 8.0 * s10,
+                                       "k1_neg": 4.0 * s10, "k2_pos": 0.0, "k2_neg": 0.0})], "chamber"),
+        Case("scale_factor_100Hz_1h_table", 100.0, 3600.0, fog,
+             [Effect("scale_factor", {"ppm": 20.0, "asym_ppm": 10.0})], "table"),
+        Case("markov_10Hz_2h", 10.0, 2 * 3600.0, fog,
+             [Effect("markov", {"tau_c_s": 30.0, "sigma_dph": 0.3 * s10})]),
+        Case("vibration_noise_100Hz_2h_mwd", 100.0, 2 * 3600.0, mwd,
+             [Effect("vibration_noise", {"n_gain_dpsh_per_g": 0.0006})], "mwd"),
+        Case("temperature_noise_10Hz_chamber", 10.0, 0.0, fog,
+             [Effect("temperature_noise", {"n_gain_dpsh_per_c": 0.000012, "t_ref_c": 20.0})], "chamber"),
+        Case("bandwidth_1000Hz_30min", 1000.0, 1800.0, Noise(N_dpsh=0.01, B_dph=0.02),
+             [Effect("bandwidth", {"cutoff_hz": 470.0, "order": 2})]),
+        Case("thermal+vibration_100Hz_3h_mwd", 100.0, 3 * 3600.0, mwd,
+             [Effect("thermal_drift", {"k0_poly_dph": [0.0, 0.002 * smwd], "k1_pos": 10.0 * smwd,
+                                       "k1_neg": 10.0 * smwd, "k2_pos": 0.0, "k2_neg": 0.0}),
+              Effect("vibration_noise", {"n_gain_dpsh_per_g": 0.0006})], "mwd"),
+    ]
+
+
+def build(case: Case, seed: int):
+    """(recording, base model, truth model) for a case."""
+    eff = [validate_effect(e.kind, e.params) for e in case.effects]
+    base = SensorModel(case.fs_hz, 1.5, case.noise, [])
+    truth = SensorModel(case.fs_hz, 1.5, case.noise, eff)
+    kw = {}
+    if case.scenario == "mwd":
+        sc = mwd_run(MwdParams(duration_s=case.duration_s), seed=seed)
+        kw = {"aux": sc.aux, "aux_t_s": sc.t_s, "duration_s": case.duration_s}
+    elif case.scenario == "chamber":
+        sc = thermal_chamber(ChamberParams(plateaus_c=(20.0, -20.0, 60.0, 20.0), dwell_s=1800.0,
+                                           ramp_c_per_min=1.0))
+        kw = {"aux": sc.aux, "aux_t_s": sc.t_s}
+    elif case.scenario == "table":  # rate table: +-20 deg/s sine (2 min period) plus +-10 deg/s dwells
+        t = np.arange(int(case.duration_s * 10)) / 10.0
+        rot = 20.0 * np.sin(2 * np.pi * t / 120.0) + 10.0 * np.sign(np.sin(2 * np.pi * t / 900.0))
+        kw = {"aux": {"rot_dps": rot}, "aux_t_s": t, "duration_s": case.duration_s}
+    else:
+        kw = {"duration_s": case.duration_s}
+    rec = simulate(truth, seed=seed, **kw)
+    rec.path = f"{case.name}.csv"
+    return rec, base, truth
+
+
+def concealment(case: Case, rec, base: SensorModel, truth: SensorModel, seed: int) -> tuple[float, float]:
+    """(largest deterministic |peak| / per-sample noise std, relative raw-std change)."""
+    s = _white_std(case.noise, case.fs_hz)
+    peak = 0.0
+    for e in truth.effects:
+        if EFFECT_KINDS[e.kind].nature == "mean":
+            r = fx.mean_rate_dph(e, rec.t_s, rec.aux, case.fs_hz)
+            peak = max(peak, float(np.max(np.abs(r - (np.mean(r) if e.kind != "glitches" else 0.0)))) / s)
+    noise_kinds = [e for e in truth.effects if EFFECT_KINDS[e.kind].nature != "mean"]
+    change = 0.0
+    if noise_kinds:
+        like = rec
+        with_n = SensorModel(case.fs_hz, 0.0, case.noise, noise_kinds)
+        without = SensorModel(case.fs_hz, 0.0, case.noise, [])
+        a = simulate(with_n, like=like, seed=seed + 1).rate_dph
+        b = simulate(without, like=like, seed=seed + 1).rate_dph
+        if "rot_dps" in like.aux:
+            a = a - 3600 * like.aux["rot_dps"]
+            b = b - 3600 * like.aux["rot_dps"]
+        change = float(np.std(a) / np.std(b) - 1.0)
+    return peak, change
+
+
+def _rel(a: float, b: float) -> float:
+    return abs(a - b) / abs(b) if b else abs(a)
+
+
+def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
+    """Compare the fitted effects with the truth; returns (texts, all within tolerance).
+
+    Tolerances (docs/explain.md): period 2 %, periodic amplitude 15 %; step time 2 % of
+    the duration, step 20 %; ramp slope 20 %; warm-up amplitude 20 %, tau 30 %; thermal
+    drift peak-to-peak after correction >= 5x smaller; scale factor 15 % of
+    |ppm| + |asym|; glitch times within 1 sample, amplitudes 25 %; markov sigma 20 %,
+    tau_c 40 %; white-level gains 25 %; bandwidth cutoff 25 %."""
+    fitted = {}
+    for a in res.accepted:
+        fitted.setdefault(a.cand.kind, a.cand)
+    out, ok = [], True
+    dur = rec.duration_s
+    for e in case.effects:
+        c = fitted.get(e.kind)
+        if c is None:
+            out.append(f"{e.kind}: not found")
+            ok = False
+            continue
+        p, q = e.params, c.params
+        checks = []
+        if e.kind == "periodic":
+            checks = [("period", _rel(q["period_s"], p["period_s"]), 0.02),
+                      ("amp", _rel(q["amplitude_dph"], p["amplitude_dph"]), 0.15)]
+        elif e.kind == "bias_step":
+            checks = [("t/dur", abs(q["t_s"] - p["t_s"]) / dur, 0.02), ("step", _rel(q["step_dph"], p["step_dph"]), 0.2)]
+        elif e.kind == "rate_ramp":
+            checks = [("slope", _rel(q["slope_dphh"], p["slope_dphh"]), 0.2)]
+        elif e.kind == "warm_up":
+            checks = [("amp", _rel(q["amplitude_dph"], p["amplitude_dph"]), 0.2), ("tau", _rel(q["tau_s"], p["tau_s"]), 0.3)]
+        elif e.kind == "thermal_drift":
+            t = rec.t_s
+            true = fx.mean_rate_dph(validate_effect(e.kind, p), t, rec.aux, case.fs_hz)
+            fit = fx.mean_rate_dph(c.effect(), t, rec.aux, case.fs_hz)
+            red = np.ptp(true) / max(np.ptp(true - fit), 1e-300)
+            checks = [("1/ptp_reduction", 1.0 / red, 0.2)]
+        elif e.kind == "scale_factor":
+            den = abs(p["ppm"]) + abs(p["asym_ppm"])
+            checks = [("ppm", abs(q["ppm"] - p["ppm"]) / den, 0.15), ("asym", abs(q["asym_ppm"] - p["asym_ppm"]) / den, 0.15)]
+        elif e.kind == "glitches":
+            tt = np.array(p["times_s"])
+            ft = np.array(q["times_s"])
+            fa = np.array(q["amplitudes_dph"])
+            worst_t, worst_a = 0.0, 0.0
+            for ti, ai in zip(tt, p["amplitudes_dph"]):
+                j = int(np.argmin(np.abs(ft - ti))) if len(ft) else -1
+                dt = abs(ft[j] - ti) * case.fs_hz if j >= 0 else np.inf
+                worst_t = max(worst_t, dt)
+                worst_a = max(worst_a, _rel(fa[j], ai) if j >= 0 else np.inf)
+            checks = [("dt/samples", worst_t, 1.0), ("amp", worst_a, 0.25),
+                      ("extra", float(len(ft) - len(tt)), 0.0)]
+        elif e.kind == "markov":
+            checks = [("sigma", _rel(q["sigma_dph"], p["sigma_dph"]), 0.2), ("tau_c", _rel(q["tau_c_s"], p["tau_c_s"]), 0.4)]
+        elif e.kind == "vibration_noise":
+            checks = [("gain", _rel(q["n_gain_dpsh_per_g"], p["n_gain_dpsh_per_g"]), 0.25)]
+        elif e.kind == "temperature_noise":
+            checks = [("gain", _rel(q["n_gain_dpsh_per_c"], p["n_gain_dpsh_per_c"]), 0.25)]
+        elif e.kind == "bandwidth":
+            checks = [("cutoff", _rel(q["cutoff_hz"], p["cutoff_hz"]), 0.25)]
+        for name, err, tol in checks:
+            good = err <= tol
+            ok &= good
+            out.append(f"{e.kind}.{name} {err:.3g}{'' if good else '(!)'}")
+    return out, ok
+
+
+def run_case(case: Case, seed: int, verbose: bool = False) -> dict:
+    rec, base, truth = build(case, seed)
+    peak, change = concealment(case, rec, base, truth, seed)
+    t0 = time.perf_counter()
+    res = explain(rec, base, Options(seed=seed + 100))
+    dt = time.perf_counter() - t0
+    truth_kinds = sorted(e.kind for e in case.effects)
+    found_kinds = sorted({a.cand.kind for a in res.accepted})
+    named = truth_kinds == found_kinds
+    errs, params_ok = param_errors(case, res, rec)
+    null = not case.effects
+    regions_after = len(res.after.regions)
+    sb, sa = res.before.score.value, res.after.score.value
+    if null:
+        ok = not res.accepted and not res.before.regions and sb <= 1.5
+    else:
+        ok = named and params_ok and sa <= 1.5 and sb > 1.5 and regions_after == 0
+    concealed = peak < 0.5 and abs(change) < 0.05
+    row = {"case": case.name, "n": len(rec), "conceal": f"{peak:.2f}s", "raw_std": f"{100 * change:+.1f}%",
+           "found": ",".join(found_kinds) or "-", "named": "yes" if named else "NO",
+           "params": "; ".join(errs) or "-", "score_before": sb, "score_after": sa,
+           "regions": f"{len(res.before.regions)}->{regions_after}", "time_s": dt,
+           "pass": ok and concealed}
+    if verbose:
+        for a in res.accepted:
+            print(f"   + {a.cand.kind} {a.cand.params} bic+{a.bic_gain:.0f} heldout: {a.heldout}")
+        for k, g, why in res.rejected:
+            print(f"   - {k} bic {g:.0f}: {why}")
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="*", help="case names (substring match)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("-v", "--verbose", action="store_true")
+    a = ap.parse_args(argv)
+    rows = []
+    for case in cases():
+        if a.only and not any(s in case.name for s in a.only):
+            continue
+        r = run_case(case, a.seed, a.verbose)
+        rows.append(r)
+        print(f"{r['case']:34s} n={r['n']:>8d} conceal={r['conceal']:>6s} raw_std={r['raw_std']:>6s} "
+              f"found={r['found']:28s} named={r['named']:3s} before={r['score_before']:7.2f} "
+              f"after={r['score_after']:5.2f} regions={r['regions']:6s} {r['time_s']:5.1f}s "
+              f"{'PASS' if r['pass'] else 'FAIL'}  [{r['params']}]", flush=True)
+    n_fail = sum(not r["pass"] for r in rows)
+    print(f"{len(rows) - n_fail}/{len(rows)} PASS")
+    return 1 if n_fail else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
