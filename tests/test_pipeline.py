@@ -212,3 +212,16 @@ def test_reference_rotation_is_subtracted_unless_raw_rate():
                      sinks=[Collect()])
     assert s.analysed == "rate_dph" and s.overall.adev_dph[-1] > 1e5   # the 2.6e6 deg/h step dominates
 
+
+def test_model_check_names_the_worst_tau():
+    from types import SimpleNamespace
+
+    from fogmon.sinks.console import model_check
+
+    a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]))
+    good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]))
+    assert model_check(a, good) == "  model check: the fitted model is within a factor 1.01 of the measured ADEV at every tau"
+    bad = SimpleNamespace(model_adev_dph=lambda tau: np.full(3, 1.0))
+    msg = model_check(a, bad)
+    assert msg.startswith("  model check: WARNING the fitted model is 5x above the measured ADEV at tau 100 s")
+

@@ -48,6 +48,9 @@ def format_summary(s: Summary) -> str:
                 hi = float(c.hi)
                 bound = f" (upper bound {hi:.4g} {unit})" if math.isfinite(hi) else ""
                 lines.append(f"  {name:<9}   not identifiable from this record{bound}")
+        check = model_check(a, f) if a is not None else None
+        if check is not None:
+            lines.append(check)
     if s.counters or s.event_counts:
         lines.append("")
         lines.append("Counters:")
@@ -56,6 +59,31 @@ def format_summary(s: Summary) -> str:
     for o in s.outputs:
         lines.append(f"Wrote {o} (open it with: rerun {o})" if o.endswith(".rrd") else f"Wrote {o}")
     return "\n".join(lines)
+
+
+#: The fitted model is reported as not describing the record beyond this ADEV ratio.
+MODEL_RATIO_WARN = 1.5
+
+
+def model_check(a, fit) -> str | None:
+    """One line comparing the fitted IEEE-952 model's ADEV with the measured one: the
+    largest ratio (either way) and its tau; a warning beyond MODEL_RATIO_WARN."""
+    import numpy as np
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.asarray(fit.model_adev_dph(a.tau_s), dtype=float) / np.asarray(a.adev_dph, dtype=float)
+    ok = np.isfinite(ratio) & (ratio > 0)
+    if not ok.any():
+        return None
+    worst = np.where(ok, np.abs(np.log(np.where(ok, ratio, 1.0))), -1.0)
+    i = int(np.argmax(worst))
+    r = float(max(ratio[i], 1 / ratio[i]))
+    side = "above" if ratio[i] > 1 else "below"
+    if r <= MODEL_RATIO_WARN:
+        return f"  model check: the fitted model is within a factor {r:.2f} of the measured ADEV at every tau"
+    return (f"  model check: WARNING the fitted model is {r:.3g}x {side} the measured ADEV at tau "
+            f"{a.tau_s[i]:.4g} s: the five IEEE-952 terms do not describe this record (periodic or "
+            f"vibration terms, non-stationarity) or the fit failed; read the coefficients with care")
 
 
 class ConsoleSink(Sink):
