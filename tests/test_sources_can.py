@@ -83,7 +83,7 @@ def test_virtual_bus_live_source_exact_accounting():
     done = threading.Event()
 
     def device():
-        while src._reader is None:
+        while src._thread is None:
             time.sleep(0.005)
         with can.Bus(interface="virtual", channel=ch, preserve_timestamps=True) as tx:
             for m in msgs:
@@ -147,7 +147,7 @@ def test_archive_of_can_source_replays_to_the_same_samples(tmp_path):
     done = threading.Event()
 
     def device():
-        while src._reader is None:
+        while src._thread is None:
             time.sleep(0.005)
         with can.Bus(interface="virtual", channel=ch, preserve_timestamps=True) as tx:
             for m in gyro_msgs(ks, t0=time.time(), invalid=(40,)):

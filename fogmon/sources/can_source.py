@@ -12,16 +12,16 @@ from __future__ import annotations
 
 import math
 import os
-import threading
-import time
 from typing import Iterable, Iterator
 
+import can
 import numpy as np
 
-from fogmon.block import Block, Event
+from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.sources.frames import Frames
 from fogmon.sources.grid import GridAssembler, concat_blocks
+from fogmon.sources.live import LiveSource
 
 STALL_S = 0.5
 _D = 180.0 / math.pi
@@ -168,26 +168,24 @@ def _push_segments(grid: GridAssembler, segs, events) -> Block:
     return concat_blocks(blocks)
 
 
-class CanSource:
-    """Live CAN gyro on any python-can interface. Reopens the bus with backoff when it
-    fails (``disconnect``/``reconnect`` events). Taps (the archive) get every frame
-    received via ``tap.frame(msg)``. Counters: the decoder's, the grid's,
-    ``disconnects``, ``reconnects``."""
+class CanSource(LiveSource):
+    """Live CAN gyro on any python-can interface, read by a reader thread that reopens
+    the bus with backoff when it fails (``disconnect``/``reconnect`` events; see
+    fogmon.sources.live). Taps (the archive) get every frame received via
+    ``tap.frame(msg)``. Counters: the decoder's, the grid's, ``disconnects``,
+    ``reconnects``."""
+
+    device_errors = (can.CanError, OSError, ValueError, ImportError)
 
     def __init__(self, channel: str, interface: str, db, bitrate: int | None = None, dbc_path: str | None = None,
                  block_s: float = 0.1, idle_s: float = 0.5, backoff_s=(0.05, 2.0), **decoder_options) -> None:
-        self.channel, self.interface, self.bitrate, self.dbc_path = channel, interface, bitrate, dbc_path
         self.decoder = CanDecoder(db, **decoder_options)
+        super().__init__(GridAssembler(self.decoder.rate_hz, self.decoder.seq_modulus, self.decoder.aux_names),
+                         block_s, idle_s, backoff_s)
+        self.channel, self.interface, self.bitrate, self.dbc_path = channel, interface, bitrate, dbc_path
         self.rate_hz = self.decoder.rate_hz
         self.aux_names = self.decoder.aux_names
-        self.grid = GridAssembler(self.rate_hz, self.decoder.seq_modulus, self.aux_names)
         self.name = f"{self.decoder.describe()} on {interface}:{channel}"
-        self.block_s, self.idle_s, self.backoff_s = block_s, idle_s, backoff_s
-        self._taps: list = []
-        self._bus = None
-        self._reader: int | None = None
-        self._stop = threading.Event()
-        self._own = {"disconnects": 0, "reconnects": 0}
 
     @property
     def counters(self) -> dict[str, int]:
@@ -197,82 +195,33 @@ class CanSource:
         return {"kind": "can", **self.decoder.options(), "dbc_path": self.dbc_path,
                 "channel": self.channel, "interface": self.interface}
 
-    def add_tap(self, tap) -> None:
-        """``tap.frame(msg)`` gets every frame received (adding a tap twice is a no-op)."""
-        if tap not in self._taps:
-            self._taps.append(tap)
+    def _what(self) -> str:
+        return f"--can {self.channel} --interface {self.interface}"
 
     def _open(self):
-        import can
         kw = {"bitrate": self.bitrate} if self.bitrate else {}
         return can.Bus(interface=self.interface, channel=self.channel, **kw)
 
-    def blocks(self) -> Iterator[Block]:
-        import can
+    def _close(self, bus) -> None:
         try:
-            self._bus = self._open()
-        except (can.CanError, OSError, ValueError, ImportError) as e:
-            raise FogmonError(f"--can {self.channel} --interface {self.interface}: cannot open: {e}") from None
-        self._reader = threading.get_ident()
-        try:
-            yield from self._run(can)
-        finally:
-            self._close_bus()
-            self._reader = None
+            bus.shutdown()
+        except Exception:  # a dead bus may fail to shut down; it is gone either way
+            pass
 
-    def _run(self, can) -> Iterator[Block]:
-        msgs, events = [], []
-        last_yield = time.monotonic()
-        backoff, next_try, down_since = self.backoff_s[0], 0.0, 0.0
-        while not self._stop.is_set():
-            now = time.monotonic()
-            if self._bus is None:
-                if now >= next_try:
-                    try:
-                        self._bus = self._open()
-                    except (can.CanError, OSError, ValueError):
-                        next_try, backoff = now + backoff, min(2 * backoff, self.backoff_s[1])
-                    else:
-                        self._own["reconnects"] += 1
-                        backoff = self.backoff_s[0]
-                        events.append(Event(self.grid.t_next_s, "reconnect",
-                                            f"CAN {self.channel} back after {now - down_since:.2f} s"))
-                else:
-                    self._stop.wait(min(0.02, next_try - now))
-            else:
-                try:
-                    m = self._bus.recv(timeout=0.05)
-                except (can.CanError, OSError) as e:
-                    self._own["disconnects"] += 1
-                    down_since = time.monotonic()
-                    events.append(Event(self.grid.t_next_s, "disconnect", f"CAN {self.channel} lost ({e}); retrying"))
-                    self._close_bus()
-                    next_try = down_since + backoff
-                    continue
-                if m is not None:
-                    for tap in self._taps:
-                        tap.frame(m)
-                    msgs.append(m)
-            now = time.monotonic()
-            if now - last_yield >= self.block_s and (msgs or events) or now - last_yield >= self.idle_s:
-                yield _push_segments(self.grid, self.decoder.feed(msgs), events)
-                msgs, events, last_yield = [], [], now
-        if msgs or events:
-            yield _push_segments(self.grid, self.decoder.feed(msgs), events)
-
-    def _close_bus(self) -> None:
-        if self._bus is not None:
-            try:
-                self._bus.shutdown()
-            except Exception:  # a dead bus may fail to shut down; it is gone either way
-                pass
-            self._bus = None
-
-    def close(self) -> None:
-        """Stop and release the bus (thread-safe, as SerialSource.close)."""
-        self._stop.set()
-        if self._reader in (None, threading.get_ident()):
-            self._close_bus()
+    def _read(self, bus) -> list:
+        m = bus.recv(timeout=0.05)
+        msgs = []
+        while m is not None:
+            msgs.append(m)
+            for tap in self._taps:
+                tap.frame(m)
+            m = bus.recv(timeout=0.0) if len(msgs) < 1024 else None
+        items = []
+        for brk, frames in self.decoder.feed(msgs):
+            if brk is not None:
+                items.append(("break", brk))
+            items.append(("frames", frames))
+        return items
 
 
 class CanLogSource:
@@ -294,7 +243,6 @@ class CanLogSource:
         return {**self.decoder.counters, **self.grid.counters}
 
     def blocks(self) -> Iterator[Block]:
-        import can
         try:
             reader = can.LogReader(self.path)
         except Exception as e:  # unknown suffix, unreadable header, ...
