@@ -1,7 +1,9 @@
 """A fake KVH DSP-1760 (binary format A, 1000 Hz) on a pseudo-terminal, for the monitor
 tests and benchmarks/bench_pipeline.py: ``python tests/monitor_fake_kvh.py [SECONDS]``
 prints the device path (the pty's slave side) on stdout and sends frames at the device's
-pace (10 frames every 10 ms) until SECONDS have passed or it is killed.
+pace (10 frames every 10 ms) until SECONDS have passed or it is killed;
+``python tests/monitor_fake_kvh.py SECONDS BAD_EVERY`` corrupts the CRC of every
+BAD_EVERY-th frame (as line noise would).
 
 The z gyro sends delta angles in rad: a constant 15 deg/h plus white angle-rate noise
 of N = 0.05 deg/sqrt(h) (per-sample rate std 60 N sqrt(fs) deg/h)."""
@@ -24,11 +26,16 @@ N_DPSH = 0.05
 DPH_TO_RAD_PER_SAMPLE = np.pi / 180.0 / 3600.0 / RATE_HZ
 
 
-def frames(n0: int, n: int, rng: np.random.Generator) -> bytes:
-    """Frames n0 .. n0+n-1 (sequence numbers wrap at 128)."""
+def frames(n0: int, n: int, rng: np.random.Generator, bad_every: int = 0) -> bytes:
+    """Frames n0 .. n0+n-1 (sequence numbers wrap at 128); every ``bad_every``-th with a bad CRC."""
     rate = BIAS_DPH + 60 * N_DPSH * np.sqrt(RATE_HZ) * rng.standard_normal(n)
-    return b"".join(encode_frame("a", (n0 + i) % 128, (0.0, 0.0, r * DPH_TO_RAD_PER_SAMPLE), temp_c=31)
-                    for i, r in enumerate(rate))
+    out = []
+    for i, r in enumerate(rate):
+        f = encode_frame("a", (n0 + i) % 128, (0.0, 0.0, r * DPH_TO_RAD_PER_SAMPLE), temp_c=31)
+        if bad_every and (n0 + i) % bad_every == bad_every - 1:
+            f = f[:-1] + bytes([f[-1] ^ 0xFF])
+        out.append(f)
+    return b"".join(out)
 
 
 def open_pty() -> tuple[int, int, str]:
@@ -40,7 +47,7 @@ def open_pty() -> tuple[int, int, str]:
     return master, slave, os.ttyname(slave)
 
 
-def run(seconds: float) -> None:
+def run(seconds: float, bad_every: int = 0) -> None:
     master, slave, path = open_pty()
     print(path, flush=True)
     rng = np.random.default_rng(0)
@@ -49,7 +56,7 @@ def run(seconds: float) -> None:
     while time.monotonic() - t0 < seconds:
         due = int((time.monotonic() - t0) * RATE_HZ)
         if due > n:
-            view = memoryview(frames(n, due - n, rng))
+            view = memoryview(frames(n, due - n, rng, bad_every))
             while view and time.monotonic() - t0 < seconds:  # the pty holds ~20 kB: wait, do not drop
                 if select.select([], [master], [], 0.1)[1]:
                     view = view[os.write(master, view):]
@@ -58,4 +65,4 @@ def run(seconds: float) -> None:
 
 
 if __name__ == "__main__":
-    run(float(sys.argv[1]) if len(sys.argv) > 1 else 1e9)
+    run(float(sys.argv[1]) if len(sys.argv) > 1 else 1e9, int(sys.argv[2]) if len(sys.argv) > 2 else 0)

@@ -225,3 +225,20 @@ def test_model_check_names_the_worst_tau():
     msg = model_check(a, bad)
     assert msg.startswith("  model check: WARNING the fitted model is 5x above the measured ADEV at tau 100 s")
 
+
+def test_crc_error_counter_growth_becomes_events():
+    fs = 100.0
+    t, r = _white(3000, fs)
+
+    class CrcSource(ListSource):
+        def blocks(self):
+            for k, b in enumerate(super().blocks()):
+                self.counters["crc_errors"] = [0, 2, 2][k]
+                yield b
+
+    sink = Collect()
+    s = run_pipeline(CrcSource(t, r, [1000] * 3, fs), _args(window_s=5.12), sinks=[sink])
+    crc = [e for e in sink.events_ if e.kind == "crc_error"]
+    assert [(e.t_s, e.message) for e in crc] == [(t[1999], "2 frame(s) failed the CRC (total 2)")]
+    assert s.event_counts["crc_error"] == 1
+
