@@ -3,6 +3,7 @@ not drift."""
 import numpy as np
 import pytest
 
+from fogmon.block import Block
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 
@@ -63,6 +64,15 @@ def test_current_is_the_last_window_and_the_filling_window():
     assert np.array_equal(cur.n_terms, ref.n_terms)
     assert np.max(np.abs(cur.adev_dph / ref.adev_dph - 1)) <= 1e-9
     assert np.max(np.abs(cur.lo_dph / ref.lo_dph - 1)) <= 1e-9
+
+
+def test_push_accepts_blocks():
+    y = rate(3000, 8)
+    valid = np.ones(3000, bool)
+    valid[100] = False
+    a = StreamingDadev(FS, 100.0, hop_s=10.0).push(Block.make(np.arange(3000) / FS, y, valid))
+    b = StreamingDadev(FS, 100.0, hop_s=10.0).push(y, valid)
+    assert len(a) == 21 and np.array_equal(a.adev_dph, b.adev_dph) and np.array_equal(a.n_terms, b.n_terms)
 
 
 def test_empty_push_and_no_window_yet():

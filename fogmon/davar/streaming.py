@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fogmon.block import Block
 from fogmon.davar import kernels
 from fogmon.davar.batch import _prepare, _samples, alpha_rows, row_alpha, statistics
 from fogmon.davar.result import AdevResult, DadevResult
@@ -58,7 +59,8 @@ class StreamingDadev:
         return self._base + self._len
 
     def push(self, rate_dph, valid=None) -> DadevResult:
-        """Feed samples (deg/h; ``valid`` mask optional, NaN is invalid). Returns the
+        """Feed samples: an array of rate in deg/h (``valid`` mask optional, NaN is
+        invalid) or a :class:`fogmon.block.Block` (its ``valid`` flags). Returns the
         windows completed at hop boundaries inside this block (possibly zero rows);
         ``end_index`` counts samples from the first push."""
         ends, sums, counts = self.advance(rate_dph, valid)
@@ -76,6 +78,8 @@ class StreamingDadev:
         """The engine alone: feed samples like :meth:`push` and return, for the windows
         completed at hop boundaries, (end_index (T), sums of squared terms (deg/h)^2
         (T x M), valid-term counts (T x M)); Allan variance = sums / (2 counts)."""
+        if isinstance(rate_dph, Block):
+            rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
         w, cap = self.window, len(self._y)
         a0 = self.n_pushed
