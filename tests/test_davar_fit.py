@@ -68,3 +68,15 @@ def test_dadev_fit_gives_coefficient_time_series():
     assert np.all(fit.N_dpsh.identifiable[early | late])
     assert set(fit.coefficients()) == set(NAMES)
     assert fit.model_adev_dph(d.tau_s).shape == d.adev_dph.shape
+
+
+def test_windows_without_data_fit_to_nan_not_identifiable():
+    y = np.random.default_rng(5).normal(size=20000)
+    y[5000:12000] = np.nan  # an outage longer than a window
+    d = dadev(y, 10.0, 200.0, 100.0)
+    fit = fit_noise(d)
+    empty = np.all(d.n_terms == 0, axis=1)
+    assert empty.sum() == 6
+    assert np.all(np.isnan(fit.N_dpsh.value[empty])) and not fit.N_dpsh.identifiable[empty].any()
+    # 1-sigma white rate level 1 deg/h per sample at 10 Hz: N = 1 / (60 sqrt(10))
+    assert np.allclose(fit.N_dpsh.value[~empty], 1 / (60 * np.sqrt(10.0)), rtol=0.08)
