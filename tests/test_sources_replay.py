@@ -68,6 +68,7 @@ def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
     r = np.concatenate([b.rate_dph for b in bl])
     assert list(np.rint(r[v] / 3600).astype(int)) == intact and len(v) == 300
     assert src.rate_hz == 200 and src.counters["crc_errors"] == 1 and src.counters["samples_missing"] == 2
+    assert [e.kind for b in bl for e in b.events].count("crc_error") == 1
     # a sidecar names the protocol; the command line still overrides it
     (tmp_path / "cap.bin.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "serial",
                                                        "protocol": "kvh-a", "kvh_rot": "rate", "kvh_units": "deg",

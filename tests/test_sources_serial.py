@@ -51,9 +51,11 @@ def test_loop_url_exact_accounting():
     src = SerialSource("loop://", 921600, KvhCodec("a", "rate", "deg", "z", FS), opener=lambda: port)
     th = threading.Thread(target=port.write, args=(data,))   # loop:// holds 4096 bytes: write while reading
     th.start()
-    _, t, rate, valid = collect(src, 256)
+    blocks, t, rate, valid = collect(src, 256)
     th.join()
     check_exact(src, t, rate, valid, intact)
+    crc = [e for b in blocks for e in b.events if e.kind == "crc_error"]
+    assert 1 <= len(crc) <= 4 and sum(int(e.message.split()[0]) for e in crc) == 4
 
 
 def test_pty_fake_device_exact_accounting():

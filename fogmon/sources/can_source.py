@@ -20,7 +20,7 @@ import numpy as np
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.sources.frames import Frames
-from fogmon.sources.grid import GridAssembler, concat_blocks
+from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 from fogmon.sources.live import LiveSource
 
 STALL_S = 0.5
@@ -188,6 +188,10 @@ class CanSource(LiveSource):
         self.name = f"{self.decoder.describe()} on {interface}:{channel}"
 
     @property
+    def decoder_counters(self) -> dict[str, int]:
+        return self.decoder.counters
+
+    @property
     def counters(self) -> dict[str, int]:
         return {**self.decoder.counters, **self.grid.counters, **self._own}
 
@@ -248,6 +252,7 @@ class CanLogSource:
         except Exception as e:  # unknown suffix, unreadable header, ...
             raise FogmonError(f"{self.path}: cannot read as a CAN log: {e}") from None
         it = iter(reader)
+        errors = ErrorEvents(self.decoder.counters)
         try:
             while not self._closed:
                 chunk = []
@@ -261,7 +266,8 @@ class CanLogSource:
                                       f"{self.decoder.counters['frames_ok']} frames: {e}") from None
                 if not chunk:
                     return
-                b = _push_segments(self.grid, self.decoder.feed(chunk), ())
+                segs = self.decoder.feed(chunk)
+                b = _push_segments(self.grid, segs, errors.poll(self.grid.t_next_s))
                 if len(b):
                     yield b
         finally:

@@ -17,6 +17,10 @@ from fogmon.sources.frames import Frames
 
 #: at most this many gap events per block; the rest are summarised in one event
 MAX_GAP_EVENTS = 5
+#: decoder error counter -> (event kind, what it counts)
+ERROR_COUNTERS = {"crc_errors": ("crc_error", "frame(s) failed the CRC"),
+                  "bad_lines": ("bad_input", "line(s) could not be parsed"),
+                  "bad_frames": ("bad_input", "CAN frame(s) of the gyro's message could not be decoded")}
 
 
 class GridAssembler:
@@ -116,3 +120,22 @@ def concat_blocks(blocks: list[Block]) -> Block:
                  np.concatenate([b.valid for b in blocks]),
                  {k: np.concatenate([b.aux[k] for b in blocks]) for k in blocks[0].aux},
                  tuple(e for b in blocks for e in b.events))
+
+
+class ErrorEvents:
+    """Decoder error counters -> events: ``poll(t_s)`` returns one event per counter that
+    grew since the last poll (so at most one per kind per block: rate-limited)."""
+
+    def __init__(self, counters: dict[str, int]) -> None:
+        self._counters = counters
+        self._last = {k: counters.get(k, 0) for k in ERROR_COUNTERS if k in counters}
+
+    def poll(self, t_s: float) -> list[Event]:
+        out = []
+        for k, last in self._last.items():
+            now = self._counters[k]
+            if now > last:
+                kind, what = ERROR_COUNTERS[k]
+                out.append(Event(t_s, kind, f"{now - last} {what} ({now} so far)"))
+                self._last[k] = now
+        return out

@@ -18,12 +18,13 @@ from typing import Iterator
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.sources.frames import Frames
-from fogmon.sources.grid import GridAssembler
+from fogmon.sources.grid import ErrorEvents, GridAssembler
 
 
 class LiveSource:
     """Base class. Subclasses set ``name``, ``rate_hz``, ``aux_names``, ``grid``, the
-    exception types meaning "device lost" (``device_errors``) and implement ``_open()``,
+    exception types meaning "device lost" (``device_errors``), ``decoder_counters`` (the
+    decoder's counters dict, for CRC/bad-input events) and implement ``_open()``,
     ``_read(handle) -> list of queue items`` (calling the taps), ``_close(handle)`` and
     ``_what()`` (the device, for messages and errors)."""
 
@@ -109,9 +110,11 @@ class LiveSource:
         events: list[Event] = []
         last_yield = self._clock()
         ended = False
+        errors = ErrorEvents(self.decoder_counters)
 
         def flush():
             nonlocal pending, events
+            events += errors.poll(self.grid.t_next_s)
             if pending or events:
                 out.append(self.grid.push(Frames.concat(pending, self.aux_names), events))
                 pending, events = [], []

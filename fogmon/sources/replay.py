@@ -18,7 +18,7 @@ from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
 from fogmon.sources.codecs import codec_from_options
-from fogmon.sources.grid import GridAssembler, MAX_GAP_EVENTS
+from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
 from fogmon.sources.pacing import Pacer
 
 #: samples per block when replaying as fast as possible
@@ -131,6 +131,7 @@ class RawCaptureSource:
             fh = open(self.path, "rb")
         except OSError as e:
             raise FogmonError(f"{self.path}: cannot read: {e.strerror}") from None
+        errors = ErrorEvents(self.codec.counters)
         with fh:
             while not self._closed:
                 end = pos + chunk
@@ -143,7 +144,7 @@ class RawCaptureSource:
                 pos += len(data)
                 frames = self.codec.feed(data)
                 if len(frames):
-                    b = self.grid.push(frames)
+                    b = self.grid.push(frames, errors.poll(self.grid.t_next_s))
                     self._pacer.wait(float(b.t_s[0]))
                     yield b
                 if at_break:

@@ -45,6 +45,10 @@ class SerialSource(LiveSource):
         self._need_break = False
 
     @property
+    def decoder_counters(self) -> dict[str, int]:
+        return self.codec.counters
+
+    @property
     def counters(self) -> dict[str, int]:
         return {**self.codec.counters, **self.grid.counters, **self._own}
 
