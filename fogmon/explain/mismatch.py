@@ -269,3 +269,12 @@ def score(z: np.ndarray, null: Null, spike_ratio: float, tests: float) -> Score:
     return Score(float(np.sqrt(np.mean(zm ** 2))) if len(zm) else 0.0,
                  float(np.max(np.abs(zm))) / null.gumbel.median if len(zm) else 0.0,
                  float(spike_ratio), float(tests))
+
+
+def compare_maps(cell_a: np.ndarray, cell_b: np.ndarray, null: Null) -> np.ndarray:
+    """z of the difference of two independent records' map cells (ln avar), using the
+    bootstrap spread: (a - b) / (sd sqrt(2)). Its largest |z| has the map's null law, so
+    a record is "inside the bootstrap bands" of another when it stays below
+    ``null.threshold`` (used to check that a re-simulation of the fitted model
+    reproduces the recording)."""
+    return (cell_a - cell_b) / (null.sd * math.sqrt(2.0))

@@ -1,0 +1,121 @@
+"""Whittle GLS, noise PSDs and matched detectors of fogmon.explain against independent
+references: time-domain least squares, IEEE-952 / exact AR(1) Allan variances, brute-force scans."""
+import math
+
+import numpy as np
+import pytest
+
+from fogmon.davar.theory import adev_model
+from fogmon.explain import detectors
+from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, calibrate_psd, markov_psd,
+                                    model_psd, noise_psd, rfft_omega)
+from fogmon.sim.model import Effect, Noise, SensorModel
+from fogmon.sim.noise import ar1_adev_exact
+
+
+def test_whittle_gls_with_white_psd_equals_ols_with_intercept():
+    rng = np.random.default_rng(0)
+    n = 2048
+    t = np.arange(n)
+    X = np.column_stack((np.sin(0.01 * t), (t > 700).astype(float), rng.standard_normal(n)))
+    y = X @ np.array([0.5, -0.2, 0.1]) + rng.standard_normal(n) + 3.0
+    wh = Whittle(noise_psd(rfft_omega(n), 1.0, N_dpsh=1 / 60), n)  # per-sample variance 1
+    fit = wh.gls(wh.fft(X), wh.fft(y))
+    A = np.column_stack((np.ones(n), X))
+    ref, *_ = np.linalg.lstsq(A, y, rcond=None)
+    assert np.allclose(fit.beta, ref[1:], atol=1e-10)
+    resid = y - A @ ref
+    rss0 = np.sum((y - y.mean()) ** 2)
+    assert fit.chi2_gain == pytest.approx(rss0 - resid @ resid, rel=1e-9)
+    cov = np.linalg.inv(A.T @ A)[1:, 1:]
+    assert np.allclose(fit.cov, cov, rtol=1e-8)
+
+
+@pytest.mark.parametrize("fs", [1.0, 100.0, 1000.0])
+def test_psd_integrates_to_ieee952_allan_variance_at_tau0(fs):
+    n = 1 << 14
+    w = rfft_omega(n)
+    for kw in ({"N_dpsh": 0.03}, {"Q_arcsec": 0.7}):
+        S = noise_psd(w, fs, **kw)
+        assert avar1_of_psd(S, n) == pytest.approx(adev_model(1 / fs, **kw) ** 2, rel=1e-9)
+    # per-sample variance of white rate noise: (60 N)^2 fs
+    S = noise_psd(w, fs, N_dpsh=0.03)
+    assert (2 * np.sum(S[1:-1]) + S[-1]) / n == pytest.approx((60 * 0.03) ** 2 * fs, rel=1e-3)
+
+
+def test_markov_psd_matches_exact_ar1_allan_variance():
+    fs, sigma, tc = 10.0, 0.4, 3.0
+    n = 1 << 16
+    S = markov_psd(rfft_omega(n), fs, sigma, tc)
+    S[0] = 0.0
+    assert avar1_of_psd(S, n) == pytest.approx(float(ar1_adev_exact(np.array([1.0]), sigma, tc, fs)[0]) ** 2, rel=1e-3)
+
+
+def test_model_psd_includes_filter_and_flicker():
+    fs = 100.0
+    m = SensorModel(fs, 0.0, Noise(N_dpsh=0.01, B_dph=1.0),
+                    [Effect("bandwidth", {"cutoff_hz": 20.0, "order": 2, "taps": []})])
+    w = rfft_omega(4096)
+    S = model_psd(m, w, 4096)
+    white = (60 * 0.01) ** 2 * fs
+    assert S[-1] < 1e-3 * white          # Butterworth zero at Nyquist
+    nu = 5 / 4096                        # flicker: two-sided B^2 / (2 pi nu) (h_-1 = B^2 / pi)
+    assert S[5] - white == pytest.approx(1.0 / (2 * np.pi * nu), rel=0.05)
+
+
+def test_calibration_rescales_a_wrong_white_level():
+    rng = np.random.default_rng(1)
+    n = 1 << 15
+    y = 2.0 * rng.standard_normal(n)      # variance 4, model says 1
+    S = noise_psd(rfft_omega(n), 1.0, N_dpsh=1 / 60)
+    Sc = calibrate_psd(S, np.fft.rfft(y), n)
+    assert np.median(Sc[1:] / S[1:]) == pytest.approx(4.0, rel=0.05)
+
+
+def test_binned_periodogram_deviance_is_minimal_at_the_true_level():
+    rng = np.random.default_rng(2)
+    n = 1 << 15
+    y = 1.5 * rng.standard_normal(n)
+    bp = BinnedPeriodogram(np.fft.rfft(y), n)
+    levels = np.linspace(1.5, 3.0, 31)
+    dev = [bp.deviance(np.full(len(bp.I), v)) for v in levels]
+    assert levels[int(np.argmin(dev))] == pytest.approx(2.25, abs=0.1)
+
+
+def test_step_scan_matches_brute_force_gls():
+    rng = np.random.default_rng(3)
+    n = 1500
+    y = rng.standard_normal(n) + 0.1 * np.cumsum(rng.standard_normal(n)) * 0.05
+    y[900:] += 0.4
+    S = noise_psd(rfft_omega(n), 1.0, N_dpsh=1 / 60, K_dphsh=60 * 0.005)
+    wh = Whittle(S, n)
+    Yf = wh.fft(y)
+    n0, step, gain = detectors.step_scan(wh, Yf, 10, n - 10)
+    brute = []
+    for k in range(10, n - 10):
+        X = (np.arange(n) >= k).astype(float)
+        brute.append(wh.gls(wh.fft(X), Yf).chi2_gain)
+    assert n0 == 10 + int(np.argmax(brute))
+    assert gain == pytest.approx(max(brute), rel=1e-8)
+    X = (np.arange(n) >= n0).astype(float)
+    assert step == pytest.approx(wh.gls(wh.fft(X), Yf).beta[0], rel=1e-8)
+
+
+def test_spike_scan_amplitude_equals_gls_with_a_delta_column():
+    rng = np.random.default_rng(4)
+    n = 4096
+    theta = rng.standard_normal(n + 1)   # quantization noise Q = 1 arcsec at 1 Hz: blue
+    y = np.diff(theta) + 0.01 * rng.standard_normal(n)
+    y[1234] += 1.0                       # below the raw-sample std (1.41) yet obvious to the GLS
+    S = noise_psd(rfft_omega(n), 1.0, Q_arcsec=1.0, N_dpsh=0.01 / 60)
+    wh = Whittle(S, n)
+    amp, z = detectors.spike_scan(wh, wh.fft(y))
+    X = np.zeros(n)
+    X[1234] = 1.0
+    assert amp[1234] == pytest.approx(wh.gls(wh.fft(X), wh.fft(y)).beta[0], rel=1e-8)
+    assert amp[1234] == pytest.approx(1.0, abs=3 * 0.145)  # GLS standard error 0.145
+    # blue noise: a spike lights up its neighbours; one detection, within 2 samples
+    peaks = detectors.find_spikes(z, 4.0)
+    assert len(peaks) == 1 and abs(int(peaks[0]) - 1234) <= 2
+    assert detectors.bonferroni_z(1_000_000) == pytest.approx(5.730, abs=0.005)  # isf(0.005 / 1e6)
+    assert detectors.expected_max_abs_z(1) == pytest.approx(0.6745, abs=1e-3)
