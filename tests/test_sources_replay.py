@@ -99,3 +99,16 @@ def test_not_a_replay_log_without_protocol(tmp_path, capsys):
     p.write_bytes(b"\xfe\x81" * 10)
     assert main(["replay", str(p), "--quiet"]) == 2
     assert "--protocol" in capsys.readouterr().err
+
+
+def test_pacer_waits_for_recording_time_over_speed():
+    from fogmon.sources.pacing import Pacer
+    now, slept = [0.0], []
+    p = Pacer(2.0, clock=lambda: now[0], sleep=slept.append)
+    p.wait(10.0)                 # sets the origin
+    p.wait(11.0)                 # 1 s of recording at x2 -> 0.5 s of wall time
+    now[0] = 0.2
+    p.wait(12.0)
+    assert slept == [0.5, pytest.approx(0.8)]
+    Pacer(None, sleep=slept.append).wait(5.0)
+    assert len(slept) == 2

@@ -102,7 +102,8 @@ class LiveSource:
         try:
             handle = self._open()
         except self.device_errors as e:
-            raise FogmonError(f"{self._what()}: cannot open: {str(e).splitlines()[0] if str(e) else e!r}") from None
+            why = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise FogmonError(f"{self._what()}: cannot open: {why}") from None
         self._thread = threading.Thread(target=self._read_loop, args=(handle,), name="fogmon-reader", daemon=True)
         self._thread.start()
         pending: list[Frames] = []
