@@ -12,6 +12,7 @@ import numpy as np
 
 from fogmon.davar import kernels
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
+from fogmon.davar.fit import dominant_alpha, fit_avar
 from fogmon.davar.result import AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 from fogmon.errors import FogmonError
@@ -40,8 +41,6 @@ def _samples(seconds: float, rate_hz: float, what: str) -> int:
 def row_alpha(sums, counts, m, n_samples: int) -> np.ndarray:
     """Noise type alpha per tau for one window: the dominant term of an IEEE-952 fit to
     its Allan variance (sums of squared terms and valid-term counts over m)."""
-    from fogmon.davar.fit import dominant_alpha, fit_avar  # fit needs this module's results
-
     counts = np.asarray(counts)
     with np.errstate(invalid="ignore", divide="ignore"):
         avar = np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan)
