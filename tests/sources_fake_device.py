@@ -40,14 +40,29 @@ def stream(n: int, faults: dict[int, str] | None = None, start: int = 0, fmt: st
     return b"".join(out), intact
 
 
-def write_all(fd: int, data: bytes) -> None:
-    """Write every byte to ``fd`` (a pty master accepts partial writes when full)."""
+def write_all(fd: int, data: bytes, timeout_s: float = 2.0) -> None:
+    """Write every byte to the non-blocking ``fd`` (a full pty master takes part of a
+    write); TimeoutError when nobody has read for ``timeout_s`` (the monitor is gone:
+    never block a test forever)."""
     view = memoryview(data)
+    deadline = time.monotonic() + timeout_s
     while view:
         try:
             view = view[os.write(fd, view):]
+            deadline = time.monotonic() + timeout_s
         except BlockingIOError:
+            if time.monotonic() > deadline:
+                raise TimeoutError("nobody reads the fake device's pty") from None
             time.sleep(0.001)
+
+
+def open_pty() -> tuple[int, int, str]:
+    """(non-blocking raw master fd, raw slave fd, slave path)."""
+    m, s = os.openpty()
+    tty.setraw(m)
+    tty.setraw(s)
+    os.set_blocking(m, False)
+    return m, s, os.ttyname(s)
 
 
 def has_open(pid: int, tty_path: str) -> bool:
@@ -80,10 +95,7 @@ class FakeKvh:
         self.plug()
 
     def plug(self) -> None:
-        m, s = os.openpty()
-        tty.setraw(m)
-        tty.setraw(s)
-        self.tty = os.ttyname(s)
+        m, s, self.tty = open_pty()
         os.symlink(self.tty, self.link)
         with self.lock:
             self.master, self.slave = m, s
@@ -96,7 +108,8 @@ class FakeKvh:
             self.master = self.slave = None
 
     def send_due(self, t0: float, k_next: int) -> int:
-        """Send every frame due by now (k < (now - t0) * rate); returns the next k."""
+        """Send every frame due by now (k < (now - t0) * rate); returns the next k.
+        TimeoutError (nothing recorded as sent) when the reader is gone."""
         due = int((time.monotonic() - t0) * self.rate_hz)
         with self.lock:
             if self.master is not None and due > k_next:

@@ -70,7 +70,10 @@ def run_device(dev, proc, until, t0=None, k=0):
         time.sleep(0.3)
         t0 = time.monotonic()
     while not until() and time.monotonic() - t0 < 60:
-        k = dev.send_due(t0, k)
+        try:
+            k = dev.send_due(t0, k)
+        except TimeoutError:        # the monitor stopped reading (it is finishing or gone)
+            break
         time.sleep(0.01)
     return t0, k
 

@@ -15,7 +15,7 @@ from fogmon.sinks.archive import Archive, run_archived
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
-from sources_fake_device import FakeKvh, stream, write_all
+from sources_fake_device import FakeKvh, open_pty, stream, write_all
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -60,11 +60,7 @@ def test_loop_url_exact_accounting():
 
 def test_pty_fake_device_exact_accounting():
     data, intact = stream(256, FAULTS)
-    master, slave = os.openpty()
-    import tty
-    tty.setraw(master)
-    tty.setraw(slave)
-    path = os.ttyname(slave)
+    master, slave, path = open_pty()
     src = SerialSource(path, 921600, KvhCodec("a", "rate", "deg", "z", FS))
 
     def device():

@@ -104,6 +104,7 @@ class LiveSource:
         except self.device_errors as e:
             why = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise FogmonError(f"{self._what()}: cannot open: {why}") from None
+        errors = ErrorEvents(self.decoder_counters)      # before the reader starts counting
         self._thread = threading.Thread(target=self._read_loop, args=(handle,), name="fogmon-reader", daemon=True)
         self._thread.start()
         pending: list[Frames] = []
@@ -111,7 +112,6 @@ class LiveSource:
         events: list[Event] = []
         last_yield = self._clock()
         ended = False
-        errors = ErrorEvents(self.decoder_counters)
 
         def flush():
             nonlocal pending, events
