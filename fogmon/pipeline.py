@@ -316,7 +316,6 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                          enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
                          and (realtime is None or realtime > 1))
     tail = _Tail(OVERALL_MAX_SAMPLES)
-    crc = CounterEvents()
     event_counts: Counter = Counter()
     started = False
     wall0 = time.monotonic()
@@ -342,6 +341,8 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                 stop = int(np.searchsorted(big.t_s, t_origin + duration_s - 0.5 / rate_hz, side="right"))
                 if stop < len(big):
                     big, done = slice_block(big, 0, stop), True
+                    if not stop:
+                        break
             for b in _paced(big, realtime, rate_hz):
                 if realtime:
                     _sleep_until(wall0 + (float(b.t_s[-1]) - t_origin) / realtime)
@@ -360,7 +361,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                 summary.t_last_s = float(b.t_s[-1])
                 for s in sinks:
                     s.block(b)
-                _dispatch_events(sinks, b.events + crc.check(source, float(b.t_s[-1])), event_counts)
+                _dispatch_events(sinks, b.events, event_counts)
                 y = analysed_rate(b) if use_ref else b.rate_dph
                 res = engine.push(y, b.valid & np.isfinite(y))
                 if len(res):
@@ -402,28 +403,6 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
             for s in sorted(sinks, key=lambda k: getattr(k, "finish_order", 0)):
                 s.finish(summary)
     return summary
-
-
-class CounterEvents:
-    """Events from source counters that only count (the codecs count CRC failures rather
-    than emitting events): one event per block in which a watched counter grew."""
-
-    #: counter name -> (event kind, what one count is)
-    WATCHED = {"crc_errors": ("crc_error", "frame(s) failed the CRC")}
-
-    def __init__(self):
-        self._last: dict[str, int] = {}
-
-    def check(self, source, t_s: float) -> tuple[Event, ...]:
-        counters = getattr(source, "counters", None) or {}
-        out = []
-        for name, (kind, what) in self.WATCHED.items():
-            if name in counters:
-                now, before = int(counters[name]), self._last.get(name, 0)
-                self._last[name] = now
-                if now > before:
-                    out.append(Event(t_s, kind, f"{now - before} {what} (total {now})"))
-        return tuple(out)
 
 
 class _Tail:

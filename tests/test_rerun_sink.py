@@ -39,8 +39,9 @@ def read_scalars(path, entity):
 def read_texts(path, entity):
     out = []
     for ch in RrdReader(path).stream().filter(content=entity, is_static=False):
-        d = ch.to_record_batch().to_pydict()
-        out += [x[0] for x in d.get("TextLog:text", [])]
+        rb = ch.to_record_batch()
+        if "TextLog:text" in rb.schema.names:
+            out += [x[0] for x in rb.column("TextLog:text").to_pylist()]
     return out
 
 
