@@ -102,6 +102,8 @@ def test_sigkill_loses_at_most_one_second(tmp_path):
     v = np.concatenate([b.rate_dph[b.valid] for b in cap.blocks()])
     kc = list(np.rint(v / 3600).astype(int))
     assert kc == sent[:len(kc)] and len(sent) - len(kc) <= FS
+    print(f"SIGKILL: {len(sent)} frames sent, replay log short by {len(sent) - len(ks)}, "
+          f"raw capture short by {len(sent) - len(kc)} samples at {FS:g} Hz")
 
 
 def test_monitor_duration_stops_by_itself(tmp_path):
