@@ -375,7 +375,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                     for s in sinks:
                         s.source_counters(float(t_end[-1]), counters)
                 tail.push(y, b.valid)
-                progress.update(summary.t_last_s - summary.t_first_s, time.monotonic() - wall0)
+                progress.update(summary.duration_s, time.monotonic() - wall0)
             if done:
                 break
     except KeyboardInterrupt:
@@ -384,8 +384,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         summary.failed = True
         raise
     finally:
-        progress.update(summary.t_last_s - summary.t_first_s if summary.n_samples else 0.0,
-                        time.monotonic() - wall0, force=True)
+        progress.update(summary.duration_s, time.monotonic() - wall0, force=True)
         progress.close()
         source.close()
         if reader is not None:
