@@ -57,14 +57,17 @@ _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
 
 
-def blueprint(aux_names: Sequence[str] = (), curve_bounds=None):
+def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False):
     """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
     the five coefficient tracks and the event log. Time-series views show the whole
     recording with linked time axes; the time cursor follows the newest data.
-    ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the ADEV-curve view."""
+    ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the ADEV-curve view;
+    ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate."""
     import rerun.blueprint as rrb
 
-    top = [_series("/rate", "Rate (deg/h) over recording time")]
+    top = [_series("/rate/rate_dph", "Rate (deg/h) over recording time")]
+    if error_rate:
+        top.append(_series("/rate/error_dph", "Error rate_dph - 3600 x rot_dps (deg/h), analysed"))
     if aux_names:
         top.append(_series("/aux", "Aux channels (units in names)"))
     bounds = None
@@ -84,7 +87,8 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None):
     ]
     coefs = [_series(f"/coef/{n}", f"{n} ({u}) with interval") for n, u in COEFFICIENTS.items()]
     bottom = [rrb.Vertical(*coefs), rrb.Vertical(
-        rrb.TextLogView(origin="/events", name="Events"),
+        rrb.Tabs(rrb.TextLogView(origin="/events", name="Events"),
+                 rrb.TextDocumentView(origin="/session", name="Session")),
         _series("/counters", "Source counters"))]
     return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle),
                                       rrb.Horizontal(*bottom, column_shares=[2, 1]),
@@ -196,16 +200,14 @@ class _Decimator:
 class RerunSink(Sink):
     """Streams the pipeline into Rerun: ``rrd_path`` (file), ``connect_url`` (a running
     viewer or server), ``serve`` (start a localhost gRPC server on ``bind:port``), any
-    combination. ``recording_id`` fixes the Rerun recording id (tests)."""
+    combination; with ``serve_wait`` a server keeps serving after the run until Ctrl-C."""
 
     def __init__(self, rrd_path: str | None = None, connect_url: str | None = None, serve: bool = False,
-                 bind: str = "127.0.0.1", port: int = 9876, recording_id: str | None = None,
-                 serve_wait: bool = True):
+                 bind: str = "127.0.0.1", port: int = 9876, serve_wait: bool = True):
         if not (rrd_path or connect_url or serve):
             raise ValueError("RerunSink needs rrd_path, connect_url or serve")
         self.rrd_path, self.connect_url, self.serve = rrd_path, connect_url, serve
         self.bind, self.port, self.serve_wait = bind, port, serve_wait
-        self.recording_id = recording_id
         self.server: subprocess.Popen | None = None
         self.server_url: str | None = None
         self.rec = None
@@ -213,7 +215,6 @@ class RerunSink(Sink):
         self._last_flush = time.monotonic()
         self._pending_events: list[Event] = []
         if rrd_path:
-            import os
             d = os.path.dirname(os.path.abspath(rrd_path))
             try:
                 os.makedirs(d, exist_ok=True)
@@ -233,11 +234,13 @@ class RerunSink(Sink):
         import rerun as rr
 
         info = self.info
-        rec = rr.RecordingStream("fogmon", recording_id=self.recording_id)
+        rec = rr.RecordingStream("fogmon")
         tau = info.tau_s
         x_dec = (math.floor(np.log10(tau[0])), math.ceil(np.log10(tau[-1]))) if len(tau) else (-2, 2)
-        y_dec = _adev_decades(first.rate_dph[first.valid], len(tau))
-        bp = blueprint(info.aux_names, (x_dec, y_dec))
+        error_rate = info.analysed != "rate_dph"
+        y = first.rate_dph - 3600.0 * first.aux["rot_dps"] if error_rate else first.rate_dph
+        y_dec = _adev_decades(y[first.valid & np.isfinite(y)], len(tau))
+        bp = blueprint(info.aux_names, (x_dec, y_dec), error_rate)
         sinks = []
         if self.rrd_path:
             sinks.append(rr.FileSink(self.rrd_path))
