@@ -115,7 +115,7 @@ def test_spike_scan_amplitude_equals_gls_with_a_delta_column():
     assert amp[1234] == pytest.approx(wh.gls(wh.fft(X), wh.fft(y)).beta[0], rel=1e-8)
     assert amp[1234] == pytest.approx(1.0, abs=3 * 0.145)  # GLS standard error 0.145
     # blue noise: a spike lights up its neighbours; one detection, within 2 samples
-    peaks = detectors.find_spikes(z, 4.0)
+    peaks = detectors.find_spikes(z, 4.0, min_sep=detectors.kernel_length(wh))
     assert len(peaks) == 1 and abs(int(peaks[0]) - 1234) <= 2
     assert detectors.bonferroni_z(1_000_000) == pytest.approx(5.730, abs=0.005)  # isf(0.005 / 1e6)
     assert detectors.expected_max_abs_z(1) == pytest.approx(0.6745, abs=1e-3)

@@ -233,7 +233,11 @@ def run_case(case: Case, seed: int, verbose: bool = False) -> dict:
         for a in res.accepted:
             print(f"   + {a.cand.kind} {a.cand.params} bic+{a.bic_gain:.0f} heldout: {a.heldout}")
         for k, g, why in res.rejected:
-            print(f"   - {k} bic {g:.0f}: {why}")
+            if "held-out" in why:
+                print(f"   - {k} bic {g:.0f}: {why}")
+        for label, a in (("before", res.before), ("after", res.after)):
+            for r in a.regions[:4]:
+                print(f"   {label} region {r.as_json()}")
     return row
 
 

@@ -285,7 +285,11 @@ def glitches(ctx: Context) -> Candidate | None:
     Bonferroni threshold over all samples (1 % family-wise)."""
     amp, z = detectors.spike_scan(ctx.wh, ctx.Yf)
     thr = detectors.bonferroni_z(int(ctx.valid.sum()))
-    idx = detectors.find_spikes(z, thr)
+    sep = detectors.kernel_length(ctx.wh)
+    z = z.copy()
+    z[:sep] = 0.0   # the circular matched filter wraps around at the ends
+    z[-sep:] = 0.0
+    idx = detectors.find_spikes(z, thr, min_sep=sep)
     if not len(idx):
         return None
     times = (ctx.t_s[idx]).tolist()
@@ -390,16 +394,19 @@ def bandwidth(ctx: Context) -> Candidate | None:
     best = None
     grid = np.geomspace(ctx.fs_hz / 500.0, 0.49 * ctx.fs_hz, 48)
     for order in (1, 2, 3, 4):
-        for i, fc in enumerate(grid):
-            g, p = gain(order, fc)
-            if best is None or g > best[0]:
-                best = (g, p, i)
-    g0, p0, i = best
-    for fc in np.geomspace(grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)], 15):
-        g, p = gain(p0["order"], fc)
-        if g > best[0]:
-            best = (g, p, i)
-    best = best[:2]
+        gains = [gain(order, fc)[0] for fc in grid]
+        i = int(np.argmax(gains))
+        a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, len(grid) - 1)])
+        r = (math.sqrt(5) - 1) / 2
+        for _ in range(30):  # golden section on log cutoff
+            c, d = b - r * (b - a), a + r * (b - a)
+            if gain(order, math.exp(c))[0] > gain(order, math.exp(d))[0]:
+                b = d
+            else:
+                a = c
+        g, p = gain(order, math.exp((a + b) / 2))
+        if best is None or g > best[0]:
+            best = (g, p)
     g, p = best
     ev = (f"Whittle fit of the residual spectrum: high frequencies fall below the model, as a "
           f"Butterworth low-pass of order {p['order']} at {p['cutoff_hz']:.4g} Hz")

@@ -7,6 +7,8 @@ Both scans cost a few FFTs of the record whatever its length.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import stats
 
@@ -55,23 +57,33 @@ def local_scale(z: np.ndarray, valid: np.ndarray | None, block: int = 4096) -> n
     return out
 
 
-def find_spikes(z: np.ndarray, threshold: float, max_spikes: int = 200) -> np.ndarray:
-    """Sample indices of spikes: the largest |z| of every run of consecutive samples
-    above ``threshold`` (one spike lights up its neighbours when the noise is blue), at
-    most ``max_spikes``, strongest first then sorted by index."""
-    above = np.abs(z) > threshold
-    if not above.any():
+def find_spikes(z: np.ndarray, threshold: float, max_spikes: int = 200, min_sep: int = 1) -> np.ndarray:
+    """Sample indices of spikes: local maxima of |z| above ``threshold``, strongest first,
+    each suppressing the samples within ``min_sep`` of it (a spike lights up its
+    neighbours when the noise is blue); at most ``max_spikes``, sorted by index."""
+    a = np.abs(z)
+    cand = np.flatnonzero(a > threshold)
+    if not len(cand):
         return np.zeros(0, dtype=np.int64)
-    d = np.diff(above.astype(np.int8))
-    starts = np.flatnonzero(d == 1) + 1
-    ends = np.flatnonzero(d == -1) + 1
-    if above[0]:
-        starts = np.concatenate(([0], starts))
-    if above[-1]:
-        ends = np.concatenate((ends, [len(z)]))
-    peaks = np.array([lo + int(np.argmax(np.abs(z[lo:hi]))) for lo, hi in zip(starts, ends)], dtype=np.int64)
-    peaks = peaks[np.argsort(-np.abs(z[peaks]))][:max_spikes]
-    return np.sort(peaks)
+    cand = cand[np.argsort(-a[cand])]
+    chosen: list[int] = []
+    for i in cand:
+        if all(abs(int(i) - j) > min_sep for j in chosen):
+            chosen.append(int(i))
+            if len(chosen) >= max_spikes:
+                break
+    return np.array(sorted(chosen), dtype=np.int64)
+
+
+def kernel_length(wh: Whittle) -> int:
+    """Half-width (samples) of the GLS matched filter's response to one spike: where the
+    inverse-PSD autocorrelation falls below 1/e of its peak (1 for white noise)."""
+    Z = 1.0 / wh.S
+    Z[0] = 0.0
+    r = np.fft.irfft(Z, wh.n)
+    r = r / r[0]
+    below = np.flatnonzero(np.abs(r[: wh.n // 2]) < math.exp(-1.0))
+    return int(max(1, below[0])) if len(below) else wh.n // 4
 
 
 def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float, float]:

@@ -220,6 +220,15 @@ def candidates(ctx: catalogue.Context, counts: dict, refused: set) -> list[catal
     return out
 
 
+def tiers(cands: list[catalogue.Candidate]) -> list[list[catalogue.Candidate]]:
+    """Selection order: effects tied to time structure or an aux channel (mean-type,
+    white-level) first; the broad spectral noise terms (markov, bandwidth) only when
+    none of those passes - a spectral term can always soak up part of a deterministic
+    signal's power, never the other way round."""
+    first = [c for c in cands if c.nature in ("mean", "white_level")]
+    return [first, [c for c in cands if c not in first]]
+
+
 def _heldout_mean(ctx: catalogue.Context, X: np.ndarray) -> tuple[bool, str]:
     """Fit on one half of the record, predict the other: wherever the half-fit is itself
     significant (chi2 gain > 9) and predicts a visible effect in the other half
@@ -293,16 +302,19 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     rejected: list[tuple[str, float, str]] = []
     while len(accepted) < opt.max_effects:
         chosen = None
-        for c in cands:
-            bg = c.bic_gain(ctx.penalty)
-            if bg <= 0:
+        for tier in tiers(cands):
+            for c in tier:
+                bg = c.bic_gain(ctx.penalty)
+                if bg <= 0:
+                    break
+                ok, note = _heldout(ctx, c)
+                if ok:
+                    chosen = (c, bg, note)
+                    break
+                rejected.append((c.kind, bg, f"failed the held-out check: {note}"))
+                refused.add(c.kind)
+            if chosen is not None:
                 break
-            ok, note = _heldout(ctx, c)
-            if ok:
-                chosen = (c, bg, note)
-                break
-            rejected.append((c.kind, bg, f"failed the held-out check: {note}"))
-            refused.add(c.kind)
         if chosen is None:
             break
         c, bg, note = chosen

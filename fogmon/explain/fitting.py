@@ -191,8 +191,9 @@ def avar1_of_psd(S: np.ndarray, n: int) -> float:
 
 
 class BinnedPeriodogram:
-    """Periodogram I_k = |Y_k|^2 / n averaged in ~``n_bins`` log-spaced frequency bins
-    (low bins kept single), for fast Whittle likelihoods of PSD models."""
+    """Periodogram I_k = |Y_k|^2 / n averaged in frequency bins (the union of ``n_bins``
+    log-spaced and ``n_bins`` equal-width bins: low bins kept single, none wider than
+    1/n_bins of the band), for fast Whittle likelihoods of PSD models."""
 
     def __init__(self, Yf: np.ndarray, n: int, n_bins: int = 1500):
         k = np.arange(len(Yf))
@@ -200,7 +201,8 @@ class BinnedPeriodogram:
         mult[0] = 0.0
         if n % 2 == 0:
             mult[-1] = 1.0
-        edges = np.unique(np.round(np.geomspace(1, len(Yf), n_bins)).astype(np.int64))
+        edges = np.unique(np.concatenate((np.round(np.geomspace(1, len(Yf), n_bins)),
+                                          np.round(np.linspace(1, len(Yf), n_bins)))).astype(np.int64))
         edges = np.concatenate((edges[edges < len(Yf)], [len(Yf)]))
         I = np.abs(Yf) ** 2 / n
         cw = np.concatenate(([0.0], np.cumsum(mult)))

@@ -125,10 +125,12 @@ class Gumbel:
 class Null:
     """Bootstrap null of the map and of the whole-record ADEV."""
 
-    mu: np.ndarray          # T x M mean ln avar
-    sd: np.ndarray          # M pooled sd of ln avar
+    mu: np.ndarray          # T x M ln of the mean avar
+    mu_u: np.ndarray        # T x M mean of u = (avar / mean avar)^(1/3)
+    sd: np.ndarray          # M pooled sd of u
     gumbel: Gumbel          # law of max |z| over the map
     mu_whole: np.ndarray    # M'
+    mu_u_whole: np.ndarray  # M'
     sd_whole: np.ndarray    # M'
     gumbel_whole: Gumbel
     n_replicates: int
@@ -152,28 +154,42 @@ def _pooled_sd(L: np.ndarray, mu: np.ndarray) -> np.ndarray:
 
 
 def build_null(cells: np.ndarray, whole: np.ndarray, alpha: float = 0.01) -> Null:
-    """Null from B replicates: ``cells`` (B x T x M) and ``whole`` (B x M') ln avar."""
+    """Null from B replicates: ``cells`` (B x T x M) and ``whole`` (B x M') ln avar.
+
+    Cells are compared on the Wilson-Hilferty scale u = (avar / mean avar)^(1/3), on
+    which a scaled chi-square is close to normal even with 3-5 degrees of freedom
+    (ln avar has a long lower tail there, which would make deficits at long taus
+    false alarms)."""
     B = cells.shape[0]
     if B < 8:
         raise ValueError("need at least 8 bootstrap replicates")
-    with np.errstate(invalid="ignore"):
-        mu = np.nanmean(cells, axis=0)
-        mu_w = np.nanmean(whole, axis=0)
-    sd = _pooled_sd(cells, mu) * math.sqrt(B / (B - 1.0))
-    sd_w = _pooled_sd(whole, mu_w) * math.sqrt(B / (B - 1.0))
+
+    def prep(L):
+        with np.errstate(invalid="ignore", over="ignore"):
+            mu = np.log(np.nanmean(np.exp(L - np.nanmax(L, axis=0)), axis=0)) + np.nanmax(L, axis=0)
+            U = np.exp((L - mu) / 3.0)
+            mu_u = np.nanmean(U, axis=0)
+        sd = _pooled_sd(U, mu_u) * math.sqrt(B / (B - 1.0))
+        return mu, mu_u, sd, U
+
+    mu, mu_u, sd, U = prep(cells)
+    mu_w, mu_uw, sd_w, Uw = prep(whole)
     infl = math.sqrt(1.0 + 1.0 / B)
-    loo = B / (B - 1.0)  # L_b - mean_{-b} = B/(B-1) (L_b - mean)
-    zc = loo * (cells - mu[None]) / (sd * infl)
-    zw = loo * (whole - mu_w[None]) / (sd_w * infl)
+    loo = B / (B - 1.0)  # U_b - mean_{-b} = B/(B-1) (U_b - mean)
+    zc = loo * (U - mu_u[None]) / (sd * infl)
+    zw = loo * (Uw - mu_uw[None]) / (sd_w * infl)
     maxc = np.nanmax(np.abs(zc).reshape(B, -1), axis=1)
     maxw = np.nanmax(np.abs(zw), axis=1)
-    return Null(mu, sd, Gumbel.fit(maxc), mu_w, sd_w, Gumbel.fit(maxw), B, alpha)
+    return Null(mu, mu_u, sd, Gumbel.fit(maxc), mu_w, mu_uw, sd_w, Gumbel.fit(maxw), B, alpha)
 
 
 def zscores(cell: np.ndarray, whole: np.ndarray, null: Null) -> tuple[np.ndarray, np.ndarray]:
     """z of the recording's map cells (T x M) and whole-record taus (M')."""
     infl = math.sqrt(1.0 + 1.0 / null.n_replicates)
-    return (cell - null.mu) / (null.sd * infl), (whole - null.mu_whole) / (null.sd_whole * infl)
+    with np.errstate(over="ignore", invalid="ignore"):
+        u = np.exp((cell - null.mu) / 3.0)
+        uw = np.exp((whole - null.mu_whole) / 3.0)
+    return (u - null.mu_u) / (null.sd * infl), (uw - null.mu_u_whole) / (null.sd_whole * infl)
 
 
 @dataclass(frozen=True)
@@ -204,8 +220,12 @@ class Region:
 
 def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> list[Region]:
     """Connected regions of the map above the family-wise threshold, plus whole-record
-    tau bands above theirs; strongest first."""
+    tau bands above theirs; strongest first. The ADEV ratio is recovered from z."""
     out: list[Region] = []
+    infl = math.sqrt(1 + 1 / null.n_replicates)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lnratio = 3.0 * np.log(np.maximum(null.mu_u + z * null.sd * infl, 1e-12))
+        lnratio_w = 3.0 * np.log(np.maximum(null.mu_u_whole + z_whole * null.sd_whole * infl, 1e-12))
     zz = np.nan_to_num(z)
     thr = null.threshold
     for sign in (1, -1):
@@ -213,7 +233,7 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
         for r in range(1, k + 1):
             wi, mi = np.nonzero(lab == r)
             vals = z[wi, mi]
-            d = (z[wi, mi] * null.sd[mi] * math.sqrt(1 + 1 / null.n_replicates))
+            d = lnratio[wi, mi]
             zmax = float(np.max(np.abs(vals)))
             out.append(Region(
                 grid.t0_s + grid.starts[wi.min()] / grid.fs_hz,
@@ -227,7 +247,7 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
         lab, k = ndimage.label(sign * zw > thr_w)
         for r in range(1, k + 1):
             mi = np.flatnonzero(lab == r)
-            d = z_whole[mi] * null.sd_whole[mi] * math.sqrt(1 + 1 / null.n_replicates)
+            d = lnratio_w[mi]
             zmax = float(np.max(np.abs(z_whole[mi])))
             out.append(Region(grid.t0_s, grid.t0_s + grid.n / grid.fs_hz, float(grid.tau_whole_s[mi.min()]),
                               float(grid.tau_whole_s[mi.max()]), sign, float(np.exp(np.mean(d) / 2.0)), zmax,
@@ -272,9 +292,13 @@ def score(z: np.ndarray, null: Null, spike_ratio: float, tests: float) -> Score:
 
 
 def compare_maps(cell_a: np.ndarray, cell_b: np.ndarray, null: Null) -> np.ndarray:
-    """z of the difference of two independent records' map cells (ln avar), using the
-    bootstrap spread: (a - b) / (sd sqrt(2)). Its largest |z| has the map's null law, so
+    """z of the difference of two independent records' map cells (ln avar), on the
+    null's u scale with the bootstrap spread: (u_a - u_b) / (sd sqrt(2)). Its largest
+    |z| has (close to) the map's null law, so
     a record is "inside the bootstrap bands" of another when it stays below
     ``null.threshold`` (used to check that a re-simulation of the fitted model
     reproduces the recording)."""
-    return (cell_a - cell_b) / (null.sd * math.sqrt(2.0))
+    with np.errstate(over="ignore", invalid="ignore"):
+        ua = np.exp((cell_a - null.mu) / 3.0)
+        ub = np.exp((cell_b - null.mu) / 3.0)
+    return (ua - ub) / (null.sd * math.sqrt(2.0))

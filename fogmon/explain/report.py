@@ -179,11 +179,13 @@ def write_outputs(res: Result, out_model: str | None, out_corrected: str | None)
 
 
 def _adev_band(a, null, fs):
+    """Whole-record ADEV (deg/h): null mean, family-wise band, recording."""
     infl = math.sqrt(1 + 1 / null.n_replicates)
-    mu = null.mu_whole
-    sd = null.sd_whole * infl
     thr = null.threshold_whole
-    return np.exp(mu / 2), np.exp((mu - thr * sd) / 2), np.exp((mu + thr * sd) / 2), np.exp(a.whole / 2)
+    lo_u = np.maximum(null.mu_u_whole - thr * null.sd_whole * infl, 1e-6)
+    hi_u = null.mu_u_whole + thr * null.sd_whole * infl
+    return (np.exp(null.mu_whole / 2), np.exp(null.mu_whole / 2) * lo_u ** 1.5,
+            np.exp(null.mu_whole / 2) * hi_u ** 1.5, np.exp(a.whole / 2))
 
 
 def write_png(res: Result, path: str) -> None:
