@@ -176,3 +176,16 @@ def test_serve_binds_localhost_by_default():
             assert f"127.0.0.1:{port}" in out and f"0.0.0.0:{port}" not in out
     finally:
         stop_process_group(proc)
+
+
+def test_error_rate_is_logged_beside_the_raw_rate(tmp_path):
+    fs = 10.0
+    t, r = _white(4000, fs, seed=4)
+    rot = np.where(t < 200, 0.0, 720.0)
+    path = str(tmp_path / "e.rrd")
+    run_pipeline(ListSource(t, r + 3600 * rot, [4000], fs, aux={"rot_dps": rot}), _args(window_s=51.2),
+                 sinks=[RerunSink(rrd_path=path)])
+    _, raw = read_scalars(path, "/rate/rate_dph")
+    _, err = read_scalars(path, "/rate/error_dph")
+    np.testing.assert_allclose(raw[:, 0], r + 3600 * rot)
+    np.testing.assert_allclose(err[:, 0], r, atol=1e-9)
