@@ -169,3 +169,50 @@ def test_archive_of_can_source_replays_to_the_same_samples(tmp_path):
     _, t, rate, valid, _ = gather(rep)
     np.testing.assert_allclose(t[valid], rec.t_s, rtol=1e-11)        # the log keeps 12 significant digits
     np.testing.assert_allclose(rate[valid], rec.rate_dph, rtol=1e-11)
+
+
+class FlakyBus:
+    """A bus that delivers its frames, then fails (adapter unplugged)."""
+
+    def __init__(self, msgs, fail_at_end):
+        self.msgs, self.fail = list(msgs), fail_at_end
+
+    def recv(self, timeout=None):
+        if self.msgs:
+            return self.msgs.pop(0)
+        if self.fail:
+            raise can.CanOperationError("adapter gone")
+        time.sleep(timeout or 0)
+        return None
+
+    def shutdown(self):
+        pass
+
+
+def test_can_adapter_lost_and_back_outage_measured_by_timestamps():
+    src = CanSource("x", "virtual", load_dbc(DBC), backoff_s=(0.01, 0.05))
+    # frames 0..99, adapter lost for 1.5 s (frames 100..249 never seen), frames 250..299
+    buses = [FlakyBus(gyro_msgs(range(100), extra=False), True), FlakyBus(gyro_msgs(range(250, 300), extra=False), False)]
+    attempts = []
+
+    def opener():
+        attempts.append(1)
+        if len(attempts) == 2:
+            raise can.CanInitializationError("not yet")   # first retry fails: backoff
+        return buses.pop(0)
+
+    src._open = opener
+    blocks, t_end = [], time.monotonic() + 10
+    for b in src.blocks():
+        blocks.append(b)
+        if sum(len(x) for x in blocks) >= 300 or time.monotonic() > t_end:
+            break
+    src.close()
+    valid = np.concatenate([b.valid for b in blocks])
+    rate = np.concatenate([b.rate_dph for b in blocks])
+    assert len(valid) == 300 and valid[:100].all() and not valid[100:250].any() and valid[250:].all()
+    np.testing.assert_allclose(rate[valid], 3.6 * np.r_[0:100, 250:300])
+    kinds = [e.kind for b in blocks for e in b.events]
+    assert kinds.count("disconnect") == 1 and kinds.count("reconnect") == 1 and "gap" in kinds
+    assert src.counters["disconnects"] == 1 and src.counters["reconnects"] == 1 and len(attempts) == 3
+    assert src.counters["samples_missing"] == 150

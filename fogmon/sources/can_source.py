@@ -219,7 +219,12 @@ class CanSource(LiveSource):
             msgs.append(m)
             for tap in self._taps:
                 tap.frame(m)
-            m = bus.recv(timeout=0.0) if len(msgs) < 1024 else None
+            if len(msgs) >= 1024:
+                break
+            try:
+                m = bus.recv(timeout=0.0)
+            except self.device_errors:   # keep what was read; the next call meets the error again
+                break
         items = []
         for brk, frames in self.decoder.feed(msgs):
             if brk is not None:
