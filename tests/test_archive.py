@@ -121,3 +121,13 @@ def test_monitor_duration_stops_by_itself(tmp_path):
     rec = read_replay_log(os.path.join(arch, "samples.csv"))
     assert len(rec) == int(FS)                                   # 1 s of recording time
     assert list(np.rint(rec.rate_dph / 3600).astype(int)) == dev.sent[:len(rec)]
+
+
+def test_valid_samples_without_aux_are_counted_not_written(tmp_path):
+    a = Archive(str(tmp_path / "a"), FakeSource())
+    b = block(0, 4)
+    b.aux["temp_c"][:2] = np.nan         # e.g. KVH format C before its first temperature frame
+    a.write(b)
+    a.close()
+    assert a.counters == {"rows_written": 2, "rows_without_aux": 2, "raw_bytes": 0, "raw_frames": 0}
+    np.testing.assert_allclose(read_replay_log(a.replay_log_path).t_s, [0.2, 0.3])

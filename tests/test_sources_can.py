@@ -11,6 +11,7 @@ from importlib import resources
 import can
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
@@ -216,3 +217,17 @@ def test_can_adapter_lost_and_back_outage_measured_by_timestamps():
     assert kinds.count("disconnect") == 1 and kinds.count("reconnect") == 1 and "gap" in kinds
     assert src.counters["disconnects"] == 1 and src.counters["reconnects"] == 1 and len(attempts) == 3
     assert src.counters["samples_missing"] == 150
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([0x100, 0x101, 0x200]), st.binary(max_size=8),
+                          st.floats(0, 1e3, allow_nan=False)), max_size=40))
+def test_property_can_decoder_never_raises_and_accounts(frames):
+    d = CanDecoder(load_dbc(DBC))
+    msgs = [can.Message(timestamp=ts, arbitration_id=i, is_extended_id=False, data=data) for i, data, ts in
+            sorted(frames, key=lambda f: f[2])]
+    segs = d.feed(msgs)
+    n = sum(len(f) for _, f in segs)
+    c = d.counters
+    assert n == c["frames_ok"] and c["frames_ok"] + c["bad_frames"] + c["other_frames"] == len(msgs)
+    assert all(np.isfinite(f.rate_dph).all() and ((f.seq >= 0) & (f.seq < 16)).all() for _, f in segs)
