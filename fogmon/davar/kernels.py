@@ -3,8 +3,9 @@
 Conventions: a *term* of averaging factor m starting at sample j is
 ``(sum y[j+m : j+2m] - sum y[j : j+m]) / m`` (deg/h), computed from prefix sums ``P`` of
 ``y - ref`` (invalid samples contribute 0). It is valid when the prefix count ``bad`` of
-invalid samples does not change over ``[j, j+2m)``. Running sums are compensated
-(Knuth TwoSum: ``s`` plus the accumulated rounding errors ``c``).
+invalid samples does not change over ``[j, j+2m)``. Window sums are kept as a
+compensated pair (Knuth TwoSum: ``s`` plus the accumulated rounding errors ``c``) with,
+in the streaming engine, a rigorous bound of the rounding they carry.
 """
 from __future__ import annotations
 
@@ -151,15 +152,17 @@ def _sq_term(psum, bad, j, m):
     return (t * t if ok else 0.0), (1 if ok else 0)
 
 
-_TILE = 1024  # samples per tile of the streaming update: the deltas of 4 taus stay in L1
+_TILE = 1024  # samples per tile of the streaming update: 4 taus' term arrays stay in L1
+_EPS = 2.0**-52
+_BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain path may accumulate
 
 
 @njit(cache=True, inline="always")
-def _tile_deltas(psum, bad, m, w, first, n, d, de, dn):
-    """Per new sample at buffer positions first..first+n-1: d + de = (entering term)^2 -
-    (leaving term)^2 exactly (TwoSum) and dn = change in valid-term count. Vectorisable
-    fast path when no invalid sample touches the tile's terms; returns True when some dn
-    may be non-zero."""
+def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
+    """For new samples at buffer positions first..first+n-1: squared entering and
+    leaving terms (0 when invalid) and the change in valid-term count. Vectorisable fast
+    path when no invalid sample touches the tile's terms; returns True when some dn may
+    be non-zero."""
     inv = 1.0 / m
     a_in = first - 2 * m + 1
     a_out = first - w
@@ -170,33 +173,86 @@ def _tile_deltas(psum, bad, m, w, first, n, d, de, dn):
         for i in range(n):
             t_in = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
             t_out = ((q2[i] - q1[i]) - (q1[i] - q0[i])) * inv
-            d[i], de[i] = _two_sum(t_in * t_in, -(t_out * t_out))
+            x_in[i] = t_in * t_in
+            x_out[i] = t_out * t_out
             dn[i] = 0  # read when another tau of the group has gaps
         return False
-    else:
-        for i in range(n):
-            x_in, v_in = _sq_term(psum, bad, a_in + i, m)
-            x_out, v_out = _sq_term(psum, bad, a_out + i, m)
-            d[i], de[i] = _two_sum(x_in, -x_out)
-            dn[i] = v_in - v_out
-        return True
+    for i in range(n):
+        x_in[i], v_in = _sq_term(psum, bad, a_in + i, m)
+        x_out[i], v_out = _sq_term(psum, bad, a_out + i, m)
+        dn[i] = v_in - v_out
+    return True
+
+
+@njit(cache=True, fastmath=True)
+def _tile_totals(x_in, x_out, n):
+    """(sum of x_in - x_out, sum of x_in + x_out) over n samples, any order (SIMD)."""
+    d = 0.0
+    a = 0.0
+    for i in range(n):
+        d += x_in[i] - x_out[i]
+        a += x_in[i] + x_out[i]
+    return d, a
+
+
+@njit(cache=True, fastmath=True)
+def _block_sum(x, i0, i1):
+    s = 0.0
+    for i in range(i0, i1):
+        s += x[i]
+    return s
 
 
 @njit(cache=True)
-def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, out_sums, out_counts):
+def window_sum(psum, bad, start, w, m, scratch, exact):
+    """Recompute for the window of ``w`` samples from buffer position ``start``:
+    (s, c, count, bound) of the squared valid terms of factor m and a bound of the
+    rounding in s + c, (deg/h)^2. ``exact``: TwoSum for every term (bound ~ n eps^2 s,
+    so even a huge term that leaves later leaves no residue); else SIMD sums of 256-term
+    blocks (non-negative terms: bound 256 eps s) added by TwoSum."""
+    nt = w - 2 * m + 1
+    if bad[start + w] == bad[start]:
+        p0, p1, p2 = psum[start:start + nt], psum[start + m:start + m + nt], psum[start + 2 * m:start + 2 * m + nt]
+        inv = 1.0 / m
+        for j in range(nt):
+            t = ((p2[j] - p1[j]) - (p1[j] - p0[j])) * inv
+            scratch[j] = t * t
+        n = nt
+    else:
+        n = 0
+        for j in range(nt):
+            scratch[j], v = _sq_term(psum, bad, start + j, m)
+            n += v
+    if exact:
+        s, c = _compensated_sum(scratch, nt)
+        return s, c, n, nt * _EPS * _EPS * (s + c)
+    s = 0.0
+    c = 0.0
+    for i0 in range(0, nt, 256):
+        s, r = _two_sum(s, _block_sum(scratch, i0, min(i0 + 256, nt)))
+        c += r
+    return s, c, n, 256.0 * _EPS * (s + c)
+
+
+@njit(cache=True)
+def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
     """Slide the window over buffer positions ``first .. first + n_new - 1`` (already
     appended; the buffer holds at least the ``w`` samples before ``first`` or starts at
     the record's first sample, position 0 then meaning absolute index 0). For every m the
     term ending at each new sample enters and the term starting at the sample that left
-    leaves; the running sums are compensated (TwoSum). At the buffer positions
-    ``emit_pos`` (increasing) the current sums and counts are written to the rows of
-    ``out_sums``/``out_counts``. Steady state runs in tiles, 4 taus at a time: a
-    vectorised pass for the term deltas, then 4 interleaved compensated sums, run
-    branch-free between emission points."""
+    leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
+    are written to the rows of ``out_sums``/``out_counts``.
+
+    Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
+    squared terms and a SIMD sum of the tile's change, added to the compensated window
+    sum (s, c). ``err`` holds per m a rigorous bound of the rounding accumulated by those
+    plain sums; a tile that would take it above _BOUND_RTOL of the window sum (a huge
+    glitch leaving, a window drained by gaps) first recomputes its taus' window sums
+    exactly (O(window)) and is then accumulated term by term with TwoSum."""
     nm = ms.shape[0]
     stop = first + n_new
     e_head = 0
-    # head: the first window is still filling, terms only enter
+    # head: the first window is still filling, terms only enter (exact TwoSum)
     for k in range(nm):
         m = ms[k]
         e = 0
@@ -204,9 +260,9 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
         while p < stop and p < w:
             if p - 2 * m + 1 >= 0:
                 x, v = _sq_term(psum, bad, p - 2 * m + 1, m)
-                s, err = _two_sum(sum_s[k], x)
+                s, r = _two_sum(sum_s[k], x)
                 sum_s[k] = s
-                sum_c[k] += err
+                sum_c[k] += r
                 cnt[k] += v
             if e < emit_pos.shape[0] and emit_pos[e] == p:
                 out_sums[e, k] = sum_s[k] + sum_c[k]
@@ -215,9 +271,13 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
             p += 1
         e_head = e
     start = max(first, w)
-    d = np.empty((4, _TILE))
-    de = np.empty((4, _TILE))
+    xi = np.empty((4, _TILE))
+    xo = np.empty((4, _TILE))
     dn = np.empty((4, _TILE), np.int64)
+    tot = np.empty(4)
+    grow = np.empty(4)
+    ks = np.empty(4, np.int64)
+    scratch = np.empty(w)
     e_tile = e_head
     for t0 in range(start, stop, _TILE):
         n = min(_TILE, stop - t0)
@@ -225,57 +285,105 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, emit_pos, o
         while e_end < emit_pos.shape[0] and emit_pos[e_end] < t0 + n:
             e_end += 1
         for g in range(0, nm, 4):
-            k0, k1, k2, k3 = g, min(g + 1, nm - 1), min(g + 2, nm - 1), min(g + 3, nm - 1)
-            has_dn = _tile_deltas(psum, bad, ms[k0], w, t0, n, d[0], de[0], dn[0])
-            has_dn |= _tile_deltas(psum, bad, ms[k1], w, t0, n, d[1], de[1], dn[1])
-            has_dn |= _tile_deltas(psum, bad, ms[k2], w, t0, n, d[2], de[2], dn[2])
-            has_dn |= _tile_deltas(psum, bad, ms[k3], w, t0, n, d[3], de[3], dn[3])
-            s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
-            c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
-            n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
-            e = e_tile
-            da, db, dc, dd = d[0], d[1], d[2], d[3]
-            ea, eb, ec, ed = de[0], de[1], de[2], de[3]
-            i0 = 0
-            while i0 < n:
-                # run up to the next emission point (or the tile end) without branches
-                i1 = n if e >= e_end else min(n, emit_pos[e] - t0 + 1)
-                for i in range(i0, i1):
-                    s0, r0 = _two_sum(s0, da[i])
-                    s1, r1 = _two_sum(s1, db[i])
-                    s2, r2 = _two_sum(s2, dc[i])
-                    s3, r3 = _two_sum(s3, dd[i])
-                    c0 += r0 + ea[i]
-                    c1 += r1 + eb[i]
-                    c2 += r2 + ec[i]
-                    c3 += r3 + ed[i]
-                if has_dn:
-                    for i in range(i0, i1):
-                        n0 += dn[0, i]
-                        n1 += dn[1, i]
-                        n2 += dn[2, i]
-                        n3 += dn[3, i]
-                if i1 < n or (e < e_end and emit_pos[e] == t0 + n - 1):
-                    out_sums[e, k0] = s0 + c0
-                    out_sums[e, k1] = s1 + c1
-                    out_sums[e, k2] = s2 + c2
-                    out_sums[e, k3] = s3 + c3
-                    out_counts[e, k0] = n0
-                    out_counts[e, k1] = n1
-                    out_counts[e, k2] = n2
-                    out_counts[e, k3] = n3
-                    e += 1
-                i0 = i1
-            # duplicated slots (k clipped to nm - 1) hold the same values: write in reverse
-            sum_s[k3], sum_c[k3], cnt[k3] = s3, c3, n3
-            sum_s[k2], sum_c[k2], cnt[k2] = s2, c2, n2
-            sum_s[k1], sum_c[k1], cnt[k1] = s1, c1, n1
-            sum_s[k0], sum_c[k0], cnt[k0] = s0, c0, n0
+            has_dn = False
+            plain = True
+            for j in range(4):
+                k = min(g + j, nm - 1)  # slots past the last tau repeat it
+                ks[j] = k
+                has_dn |= _tile_terms(psum, bad, ms[k], w, t0, n, xi[j], xo[j], dn[j])
+                tot[j], mag = _tile_totals(xi[j], xo[j], n)
+                # rounding of the squares' differences, the tile sum and the emission scan
+                grow[j] = 3.0 * n * _EPS * mag
+                bound = err[k] + grow[j]
+                plain &= bound == 0.0 or bound <= _BOUND_RTOL * (sum_s[k] + sum_c[k] + tot[j])
+            if plain:
+                _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
+                            out_sums, out_counts)
+                for j in range(4):
+                    if j == 0 or ks[j] != ks[j - 1]:
+                        s, r = _two_sum(sum_s[ks[j]], tot[j])
+                        sum_s[ks[j]] = s
+                        sum_c[ks[j]] += r
+                        err[ks[j]] += grow[j]
+            else:
+                for j in range(4):
+                    if j == 0 or ks[j] != ks[j - 1]:
+                        k = ks[j]
+                        sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(psum, bad, t0 - w, w, ms[k], scratch,
+                                                                        True)
+                _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
+                                  out_sums, out_counts)
         e_tile = e_end
 
 
+@njit(cache=True, inline="always")
+def _counts_step(dn, i0, i1, n_):
+    for i in range(i0, i1):
+        n_[0] += dn[0, i]
+        n_[1] += dn[1, i]
+        n_[2] += dn[2, i]
+        n_[3] += dn[3, i]
+
+
 @njit(cache=True)
-def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt):
+def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, out_sums, out_counts):
+    """Write the windows emitted in a plain tile (running sums from the tile's start)
+    and advance the valid-term counts over the tile."""
+    n_ = np.empty(4, np.int64)
+    for j in range(4):
+        n_[j] = cnt[ks[j]]
+    p0 = p1 = p2 = p3 = 0.0
+    i0 = 0
+    for e in range(e0, e1):
+        i1 = emit_pos[e] - t0 + 1
+        for i in range(i0, i1):
+            p0 += xi[0, i] - xo[0, i]
+            p1 += xi[1, i] - xo[1, i]
+            p2 += xi[2, i] - xo[2, i]
+            p3 += xi[3, i] - xo[3, i]
+        if has_dn:
+            _counts_step(dn, i0, i1, n_)
+        k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
+        out_sums[e, k0] = sum_s[k0] + (sum_c[k0] + p0)
+        out_sums[e, k1] = sum_s[k1] + (sum_c[k1] + p1)
+        out_sums[e, k2] = sum_s[k2] + (sum_c[k2] + p2)
+        out_sums[e, k3] = sum_s[k3] + (sum_c[k3] + p3)
+        for j in range(4):
+            out_counts[e, ks[j]] = n_[j]
+        i0 = i1
+    if has_dn:
+        _counts_step(dn, i0, n, n_)
+    for j in range(4):
+        cnt[ks[j]] = n_[j]
+
+
+@njit(cache=True)
+def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, out_sums, out_counts):
+    """Term-by-term TwoSum accumulation of a tile, writing emitted windows on the way."""
+    for j in range(4):
+        if j > 0 and ks[j] == ks[j - 1]:
+            continue
+        k = ks[j]
+        s = sum_s[k]
+        c = sum_c[k]
+        n_ = cnt[k]
+        e = e0
+        for i in range(n):
+            d, de = _two_sum(xi[j, i], -xo[j, i])
+            s, r = _two_sum(s, d)
+            c += r + de
+            n_ += dn[j, i]
+            if e < e1 and emit_pos[e] == t0 + i:
+                out_sums[e, k] = s + c
+                out_counts[e, k] = n_
+                e += 1
+        sum_s[k] = s
+        sum_c[k] = c
+        cnt[k] = n_
+
+
+@njit(cache=True)
+def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt, err):
     """Keep the last ``w`` samples at the buffer front, re-reference them to their valid
     mean, rebuild prefix sums and recompute every window sum exactly. Returns the new
     reference level (deg/h)."""
@@ -292,24 +400,9 @@ def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt):
     psum[0] = 0.0
     bad[0] = 0
     stream_append(yraw[:w].copy(), vraw[:w].copy(), yraw, vraw, psum, bad, 0, ref)
-    d = np.empty(w)
+    scratch = np.empty(w)
     for k in range(ms.shape[0]):
-        m = ms[k]
-        nt = w - 2 * m + 1
-        if bad[w] == bad[0]:
-            p0, p1, p2 = psum[0:nt], psum[m:m + nt], psum[2 * m:2 * m + nt]
-            inv = 1.0 / m
-            for j in range(nt):
-                t = ((p2[j] - p1[j]) - (p1[j] - p0[j])) * inv
-                d[j] = t * t
-            n = nt
-        else:
-            n = 0
-            for j in range(nt):
-                d[j], v = _sq_term(psum, bad, j, m)
-                n += v
-        sum_s[k], sum_c[k] = _compensated_sum(d, nt)
-        cnt[k] = n
+        sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(psum, bad, 0, w, ms[k], scratch, False)
     return ref
 
 

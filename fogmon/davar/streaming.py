@@ -51,6 +51,7 @@ class StreamingDadev:
         self._s = np.zeros(nm)
         self._c = np.zeros(nm)
         self._n = np.zeros(nm, dtype=np.int64)
+        self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
         self._alpha_prev = None  # (alpha, end index) of the last fitted window, see batch.alpha_rows
 
     @property
@@ -91,7 +92,7 @@ class StreamingDadev:
         while i < len(y):
             if self._len == cap:
                 self._ref = kernels.stream_reanchor(self._y, self._v, self._p, self._bad, self._len, w,
-                                                    self.m, self._s, self._c, self._n)
+                                                    self.m, self._s, self._c, self._n, self._err)
                 self._base += self._len - w
                 self._len = w
             take = min(len(y) - i, cap - self._len)
@@ -102,7 +103,8 @@ class StreamingDadev:
             kernels.stream_append(yc, vc, self._y, self._v, self._p, self._bad, self._len, self._ref)
             row_end = row + int(np.searchsorted(ends[row:], self._base + self._len + take))
             kernels.stream_update(self._len, take, w, self.m, self._p, self._bad, self._s, self._c, self._n,
-                                  ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end])
+                                  self._err, ends[row:row_end] - self._base, sums[row:row_end],
+                                  counts[row:row_end])
             self._len += take
             i += take
             row = row_end
