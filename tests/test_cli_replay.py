@@ -62,6 +62,7 @@ def test_replay_taus_and_default_window(small_log, capsys):
     (["replay", "/nonexistent/run.csv"], "/nonexistent/run.csv: no such file"),
     (["replay", "{log}", "--window-s", "100000"], "--window-s 100000 s is longer than the recording"),
     (["replay", "{bad}"], "line 4, column rate_dph: not a number: 'abc'"),
+    (["replay", "{log}", "--connect", "rerun+http://127.0.0.1:1/proxy"], "no Rerun viewer listening at 127.0.0.1:1"),
 ])
 def test_replay_errors_are_one_line_exit_2(small_log, tmp_path, capsys, argv, message):
     bad = tmp_path / "bad.csv"

@@ -137,6 +137,25 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
     raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
 
 
+def _check_listening(url: str, timeout_s: float = 2.0) -> None:
+    """A one-line error unless something accepts TCP connections at the URL's host:port
+    (a Rerun SDK would otherwise wait, then block at the end, for a viewer that is not there)."""
+    from urllib.parse import urlsplit
+
+    try:
+        u = urlsplit(url)
+        host, port = u.hostname, u.port
+    except ValueError:
+        host = port = None
+    if not host or not port:
+        raise FogmonError(f"--connect {url}: expected a URL like rerun+http://127.0.0.1:9876/proxy")
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError:
+        raise FogmonError(f"--connect {url}: no Rerun viewer listening at {host}:{port} "
+                          f"(start one with `rerun`, or use --serve or --rrd)") from None
+
+
 def stop_process_group(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
     """Terminate a process started with ``start_new_session=True`` and all its children."""
     for sig in (signal.SIGTERM, signal.SIGKILL):
@@ -214,6 +233,8 @@ class RerunSink(Sink):
         self._heat: list[np.ndarray] = []
         self._last_flush = time.monotonic()
         self._pending_events: list[Event] = []
+        if connect_url:
+            _check_listening(connect_url)
         if rrd_path:
             d = os.path.dirname(os.path.abspath(rrd_path))
             try:
