@@ -122,6 +122,7 @@ def test_can_logs_written_by_python_can_replay_exactly(tmp_path, suffix):
         for m in gyro_msgs(ks):
             log.on_message_received(m)
     src = open_replay_source(path, args_for("--dbc", DBC))
+    assert src.n_samples == 300
     _, t, rate, valid, temp = gather(src)
     assert len(t) == 300 and np.allclose(t, np.arange(300) / FS)
     np.testing.assert_array_equal(np.flatnonzero(valid), ks)

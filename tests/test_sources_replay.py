@@ -69,6 +69,7 @@ def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
     assert list(np.rint(r[v] / 3600).astype(int)) == intact and len(v) == 300
     assert src.rate_hz == 200 and src.counters["crc_errors"] == 1 and src.counters["samples_missing"] == 2
     assert [e.kind for b in bl for e in b.events].count("crc_error") == 1
+    assert src.n_samples == 300
     # a sidecar names the protocol; the command line still overrides it
     (tmp_path / "cap.bin.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "serial",
                                                        "protocol": "kvh-a", "kvh_rot": "rate", "kvh_units": "deg",
@@ -89,7 +90,7 @@ def test_bad_sidecar_is_one_line_error(tmp_path):
 def test_dsp3000_capture_via_cli(tmp_path, capsys):
     p = tmp_path / "dsp.txt"
     p.write_bytes(b"".join(f"  {0.001 * (k % 7):.6f}   1\r\n".encode() for k in range(3000)))
-    assert main(["replay", str(p), "--protocol", "dsp3000", "--window-s", "4", "--no-progress"]) == 0
+    assert main(["replay", str(p), "--protocol", "dsp3000", "--no-progress"]) == 0   # default window from n_samples
     out = capsys.readouterr().out
     assert "3000" in out or "30.0" in out
 

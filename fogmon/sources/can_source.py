@@ -10,6 +10,7 @@ wrap, or 0.5 s without a counter, is an outage whose length the timestamps give)
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 from typing import Iterable, Iterator
@@ -240,6 +241,7 @@ class CanLogSource:
 
     def __init__(self, path: str, db, **decoder_options) -> None:
         self.path = path
+        self._db, self._options = db, decoder_options
         self.decoder = CanDecoder(db, **decoder_options)
         self.rate_hz = self.decoder.rate_hz
         self.aux_names = self.decoder.aux_names
@@ -250,6 +252,12 @@ class CanLogSource:
     @property
     def counters(self) -> dict[str, int]:
         return {**self.decoder.counters, **self.grid.counters}
+
+    @functools.cached_property
+    def n_samples(self) -> int:
+        """Samples on the grid, from a counting pass over the log (pipelines size their
+        default window with it)."""
+        return sum(len(b) for b in CanLogSource(self.path, self._db, **self._options).blocks())
 
     def blocks(self) -> Iterator[Block]:
         try:

@@ -8,6 +8,7 @@ protocol and decoder options and the outages seen while recording
 gives exactly the samples the live monitor saw."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 from typing import Iterator
@@ -110,6 +111,7 @@ class RawCaptureSource:
         if not os.path.isfile(path):
             raise FogmonError(f"{path}: no such file")
         self.path = path
+        self._options = dict(options)
         self.codec = codec_from_options(options)
         self.rate_hz = self.codec.rate_hz
         self.grid = GridAssembler(self.rate_hz, self.codec.seq_modulus, self.codec.aux_names)
@@ -122,6 +124,12 @@ class RawCaptureSource:
     @property
     def counters(self) -> dict[str, int]:
         return {**self.codec.counters, **self.grid.counters}
+
+    @functools.cached_property
+    def n_samples(self) -> int:
+        """Samples on the grid, from a counting pass over the file (pipelines size their
+        default window with it)."""
+        return sum(len(b) for b in RawCaptureSource(self.path, self._options, self._breaks).blocks())
 
     def blocks(self) -> Iterator[Block]:
         pos = 0
