@@ -1,6 +1,7 @@
 """Replay sources: a replay-log CSV (CONTRACT section 1) and a raw serial capture (the
 bytes a device sent, decoded again with its protocol). Both yield the same blocks a live
-source would, as fast as possible or paced at the recorded speed x N.
+source would, as fast as they can (the pipeline paces ``--realtime``; a replay log can
+also pace itself for use outside it).
 
 A raw capture ``X`` may have a sidecar ``X.json`` (written by the archive) naming the
 protocol and decoder options and the outages seen while recording
@@ -107,7 +108,7 @@ class RawCaptureSource:
 
     CHUNK = 1 << 16
 
-    def __init__(self, path: str, options: dict, breaks=(), speed: float | None = None) -> None:
+    def __init__(self, path: str, options: dict, breaks=()) -> None:
         if not os.path.isfile(path):
             raise FogmonError(f"{path}: no such file")
         self.path = path
@@ -117,8 +118,6 @@ class RawCaptureSource:
         self.grid = GridAssembler(self.rate_hz, self.codec.seq_modulus, self.codec.aux_names)
         self.name = f"raw capture {os.path.basename(path)}: {self.codec.describe()}"
         self._breaks = sorted((int(o), float(e)) for o, e in breaks)
-        self._pacer = Pacer(speed)
-        self._speed = speed
         self._closed = False
 
     @property
@@ -134,7 +133,7 @@ class RawCaptureSource:
     def blocks(self) -> Iterator[Block]:
         pos = 0
         breaks = list(self._breaks)
-        chunk = self.CHUNK if not self._speed else max(64, int(self.rate_hz * PACED_BLOCK_S * self.codec_bytes()))
+        chunk = self.CHUNK
         try:
             fh = open(self.path, "rb")
         except OSError as e:
@@ -152,22 +151,16 @@ class RawCaptureSource:
                 pos += len(data)
                 frames = self.codec.feed(data)
                 if len(frames):
-                    b = self.grid.push(frames, errors.poll(self.grid.t_next_s))
-                    self._pacer.wait(float(b.t_s[0]))
-                    yield b
+                    yield self.grid.push(frames, errors.poll(self.grid.t_next_s))
                 if at_break:
                     off, est = breaks.pop(0)
                     self.grid.mark_break(est)
-
-    def codec_bytes(self) -> int:
-        """Typical bytes per sample (for paced chunk sizes)."""
-        return getattr(self.codec, "frame_len", 24)
 
     def close(self) -> None:
         self._closed = True
 
 
-def open_raw_capture(path: str, overrides: dict | None = None, speed: float | None = None) -> RawCaptureSource:
+def open_raw_capture(path: str, overrides: dict | None = None) -> RawCaptureSource:
     """A raw capture with options from its sidecar, overridden by ``overrides`` (the
     command line); without a sidecar ``overrides['protocol']`` is required."""
     side = read_sidecar(path) or {}
@@ -180,4 +173,4 @@ def open_raw_capture(path: str, overrides: dict | None = None, speed: float | No
         breaks = [(int(b["offset"]), float(b["missing_est"])) for b in side.get("breaks", [])]
     except (KeyError, TypeError, ValueError):
         raise FogmonError(f"{path}{SIDECAR_SUFFIX}: field breaks: each needs offset and missing_est") from None
-    return RawCaptureSource(path, opts, breaks, speed)
+    return RawCaptureSource(path, opts, breaks)
