@@ -45,6 +45,8 @@ HEATMAP_WINDOWS = 256
 #: Flush raw samples to Rerun at least this often (wall time, s) or every FLUSH_SAMPLES.
 FLUSH_WALL_S = 0.25
 FLUSH_SAMPLES = 1 << 16
+#: At the end, wait at most this long (s) for Rerun to deliver everything.
+FLUSH_TIMEOUT_S = 30.0
 TIMELINE = "time"
 #: Entity of the ADEV curve (x = log10 tau/s, y = log10 ADEV/(deg/h)), drawn CURVE_X/Y_SCALE
 #: view units per decade (2-D views keep a 1:1 aspect, the panel is wide).
@@ -426,7 +428,10 @@ class RerunSink(Sink):
         if self.rec is None:
             return
         self._flush_raw(final=True)
-        self.rec.flush()
+        try:
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as e:  # a viewer that went away: the file sink is still complete
+            print(f"fogmon: warning: Rerun: {str(e).splitlines()[0]}", file=sys.stderr)
         if self.rrd_path:
             summary.outputs.append(self.rrd_path)
         if self.server is not None and self.serve_wait and not summary.interrupted:
@@ -437,6 +442,9 @@ class RerunSink(Sink):
                     time.sleep(0.5)
             except KeyboardInterrupt:
                 pass
-        self.rec.disconnect()
+        try:
+            self.rec.disconnect()
+        except RuntimeError as e:
+            print(f"fogmon: warning: Rerun: {str(e).splitlines()[0]}", file=sys.stderr)
         if self.server is not None:
             stop_process_group(self.server)
