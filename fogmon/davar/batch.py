@@ -8,6 +8,8 @@ precision; invalid samples (``valid`` False or NaN) exclude exactly the terms sp
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from fogmon.davar import kernels
@@ -68,6 +70,15 @@ def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
     return np.array(seg_alpha, dtype=np.int64)[seg], (alpha_now, end_now)
 
 
+@lru_cache(maxsize=256)
+def _gapless_tables(alpha: tuple, m: tuple, n_samples: int, confidence: float):
+    """Gap-free EDF per tau and the chi2 factors lo/sigma, hi/sigma (cached: streaming
+    asks for the same ones block after block)."""
+    edf = edf_full(np.array(alpha), np.array(m), n_samples)
+    f_lo, f_hi = chi2_bounds(np.ones_like(edf), edf, confidence)
+    return edf, f_lo, f_hi
+
+
 def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 0.683):
     """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
     (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
@@ -83,8 +94,8 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     new_run = np.ones(len(alpha), dtype=bool)
     new_run[1:] = np.any(alpha[1:] != alpha[:-1], axis=1)
     run = np.cumsum(new_run) - 1
-    edf_gapless = np.array([edf_full(a, m, n_samples) for a in alpha[new_run]]).reshape(-1, nm)
-    f_lo, f_hi = chi2_bounds(np.ones_like(edf_gapless), edf_gapless, confidence)
+    tables = [_gapless_tables(tuple(a), tuple(m), int(n_samples), float(confidence)) for a in alpha[new_run]]
+    edf_gapless, f_lo, f_hi = (np.array([t[i] for t in tables]).reshape(-1, nm) for i in range(3))
     full = n_samples - 2 * np.asarray(m, dtype=np.int64) + 1
     adev, lo, hi, edf, gapped = kernels.frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi)
     if gapped.any():

@@ -316,22 +316,14 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
         e_tile = e_end
 
 
-@njit(cache=True, inline="always")
-def _counts_step(dn, i0, i1, n_):
-    for i in range(i0, i1):
-        n_[0] += dn[0, i]
-        n_[1] += dn[1, i]
-        n_[2] += dn[2, i]
-        n_[3] += dn[3, i]
-
-
 @njit(cache=True)
 def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, out_sums, out_counts):
     """Write the windows emitted in a plain tile (running sums from the tile's start)
     and advance the valid-term counts over the tile."""
-    n_ = np.empty(4, np.int64)
-    for j in range(4):
-        n_[j] = cnt[ks[j]]
+    k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
+    s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
+    c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
+    n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
     p0 = p1 = p2 = p3 = 0.0
     i0 = 0
     for e in range(e0, e1):
@@ -341,20 +333,28 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, c
             p1 += xi[1, i] - xo[1, i]
             p2 += xi[2, i] - xo[2, i]
             p3 += xi[3, i] - xo[3, i]
-        if has_dn:
-            _counts_step(dn, i0, i1, n_)
-        k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
-        out_sums[e, k0] = sum_s[k0] + (sum_c[k0] + p0)
-        out_sums[e, k1] = sum_s[k1] + (sum_c[k1] + p1)
-        out_sums[e, k2] = sum_s[k2] + (sum_c[k2] + p2)
-        out_sums[e, k3] = sum_s[k3] + (sum_c[k3] + p3)
-        for j in range(4):
-            out_counts[e, ks[j]] = n_[j]
+            if has_dn:
+                n0 += dn[0, i]
+                n1 += dn[1, i]
+                n2 += dn[2, i]
+                n3 += dn[3, i]
+        out_sums[e, k0] = s0 + (c0 + p0)
+        out_sums[e, k1] = s1 + (c1 + p1)
+        out_sums[e, k2] = s2 + (c2 + p2)
+        out_sums[e, k3] = s3 + (c3 + p3)
+        out_counts[e, k0] = n0
+        out_counts[e, k1] = n1
+        out_counts[e, k2] = n2
+        out_counts[e, k3] = n3
         i0 = i1
     if has_dn:
-        _counts_step(dn, i0, n, n_)
-    for j in range(4):
-        cnt[ks[j]] = n_[j]
+        for i in range(i0, n):
+            n0 += dn[0, i]
+            n1 += dn[1, i]
+            n2 += dn[2, i]
+            n3 += dn[3, i]
+    # slots past the last tau repeat it with the same values
+    cnt[k3], cnt[k2], cnt[k1], cnt[k0] = n3, n2, n1, n0
 
 
 @njit(cache=True)
