@@ -63,11 +63,13 @@ def test_replay_taus_and_default_window(small_log, capsys):
     (["replay", "{log}", "--window-s", "100000"], "--window-s 100000 s is longer than the recording"),
     (["replay", "{bad}"], "line 4, column rate_dph: not a number: 'abc'"),
     (["replay", "{log}", "--connect", "rerun+http://127.0.0.1:1/proxy"], "no Rerun viewer listening at 127.0.0.1:1"),
+    (["replay", "{log}", "--rrd", "/proc/x.rrd"], "--rrd /proc/x.rrd: cannot write"),
+    (["replay", "{log}", "--rrd", "{tmp}"], "is a folder, give a file name like out/run.rrd"),
 ])
 def test_replay_errors_are_one_line_exit_2(small_log, tmp_path, capsys, argv, message):
     bad = tmp_path / "bad.csv"
     bad.write_text("# fogmon replay log v1\ntime_s,rate_dph\n0,1\n0.01,abc\n")
-    argv = [a.format(log=small_log[0], bad=bad) for a in argv]
+    argv = [a.format(log=small_log[0], bad=bad, tmp=tmp_path) for a in argv]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -245,6 +245,10 @@ class RerunSink(Sink):
                 raise FogmonError(f"--rrd {rrd_path}: cannot create folder {d}: {e.strerror}") from None
             if os.path.isdir(rrd_path):
                 raise FogmonError(f"--rrd {rrd_path}: is a folder, give a file name like out/run.rrd")
+            try:  # fail before the source is opened, not at the first sample
+                open(rrd_path, "wb").close()
+            except OSError as e:
+                raise FogmonError(f"--rrd {rrd_path}: cannot write: {e.strerror}") from None
 
     # -- set-up ---------------------------------------------------------------
     def start(self, info: StreamInfo) -> None:
