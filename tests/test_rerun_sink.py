@@ -2,7 +2,6 @@
 gRPC receiver gets the same data as the file."""
 from __future__ import annotations
 
-import os
 import shutil
 import socket
 import subprocess
@@ -15,7 +14,7 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from fogmon.block import Block, Event
+from fogmon.block import Event
 from fogmon.davar.batch import dadev
 from fogmon.pipeline import COEFFICIENTS, run_pipeline
 from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server, stop_process_group
