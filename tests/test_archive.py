@@ -32,7 +32,7 @@ def block(k0, n, valid=None):
 
 def test_archive_writes_valid_samples_and_flushes_by_time(tmp_path):
     now = [0.0]
-    a = Archive(str(tmp_path / "a"), FakeSource(), flush_s=0.5, clock=lambda: now[0])
+    a = Archive(str(tmp_path / "a"), FakeSource(), flush_s=0.5, clock=lambda: now[0], background_flush=False)
     a.write(block(0, 5, valid=[1, 1, 0, 1, 1]))
     assert os.path.getsize(a.replay_log_path) == 0          # buffered
     now[0] = 0.6
@@ -44,6 +44,16 @@ def test_archive_writes_valid_samples_and_flushes_by_time(tmp_path):
     assert rec.meta["sample_rate_hz"] == "10" and rec.meta["sensor"] == "fake gyro"
     a.close()
     assert a.counters["rows_written"] == 7
+
+
+def test_archive_flushes_in_the_background_when_no_data_flows(tmp_path):
+    a = Archive(str(tmp_path / "a"), FakeSource(), flush_s=0.05)
+    a.write(block(0, 3))
+    t_end = time.monotonic() + 5
+    while os.path.getsize(a.replay_log_path) == 0 and time.monotonic() < t_end:
+        time.sleep(0.01)
+    assert len(read_replay_log(a.replay_log_path)) == 3
+    a.close()
 
 
 def test_archive_refuses_to_overwrite(tmp_path):
@@ -131,3 +141,46 @@ def test_valid_samples_without_aux_are_counted_not_written(tmp_path):
     a.close()
     assert a.counters == {"rows_written": 2, "rows_without_aux": 2, "raw_bytes": 0, "raw_frames": 0}
     np.testing.assert_allclose(read_replay_log(a.replay_log_path).t_s, [0.2, 0.3])
+
+
+def test_monitor_unplug_replug_archives_every_sample_sent_while_connected(tmp_path):
+    dev = FakeKvh(str(tmp_path), FS)
+    arch = str(tmp_path / "arch")
+    raw = os.path.join(arch, "raw.bin")
+    proc = monitor(dev.link, arch)
+
+    def received_all():        # the archive's raw capture (flushed <= 0.5 s) holds every byte sent
+        return os.path.exists(raw) and os.path.getsize(raw) == 36 * len(dev.sent)
+
+    def wait(cond, what):
+        t_end = time.monotonic() + 30
+        while not cond():
+            assert proc.poll() is None and time.monotonic() < t_end, (what, proc.communicate() if proc.poll() else "")
+            time.sleep(0.01)
+
+    try:
+        t_stop = [None]
+        t0, k = run_device(dev, proc, until=lambda: len(dev.sent) >= 160)
+        wait(received_all, "bytes before the unplug")
+        old = dev.tty
+        dev.unplug()
+        wait(lambda: not has_open(proc.pid, old), "monitor notices the unplug")
+        time.sleep(0.5)
+        dev.plug()
+        wait(lambda: has_open(proc.pid, dev.tty), "monitor reopens")
+        time.sleep(0.3)                                      # open + input flush done
+        k = int((time.monotonic() - t0) * FS)                # the gyro kept counting meanwhile
+        t_stop[0] = time.monotonic() + 1.0
+        run_device(dev, proc, until=lambda: time.monotonic() > t_stop[0], t0=t0, k=k)
+        wait(received_all, "bytes after the replug")
+        proc.send_signal(signal.SIGINT)                      # Ctrl-C: clean stop
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        dev.close()
+    assert proc.returncode == 0
+    rec = read_replay_log(os.path.join(arch, "samples.csv"))
+    ks = list(np.rint(rec.rate_dph / 3600).astype(int))
+    assert ks == dev.sent
+    np.testing.assert_array_equal(np.rint(rec.t_s * FS).astype(int), np.array(ks) - ks[0])   # gap kept, right length

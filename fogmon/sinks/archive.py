@@ -12,8 +12,8 @@ Under one directory:
   ASC log of every frame received) plus ``frames.asc.json`` and a copy of the DBC.
 
 Files are written in whole lines/chunks straight to the OS at least every ``flush_s``
-(default 0.5 s), so a SIGKILL loses at most the last ``flush_s`` of data and never
-leaves a half-written CSV row. The raw taps may be called from the source's reader
+(default 0.5 s, by a background thread even when no data flows), so a SIGKILL loses at
+most the last ``flush_s`` of data and never leaves a half-written CSV row. The raw taps may be called from the source's reader
 thread: the raw capture keeps being written even while the consumer is slow.
 """
 from __future__ import annotations
@@ -61,7 +61,8 @@ class Archive(Sink):
     format C before its first temperature frame; not written), ``raw_bytes``,
     ``raw_frames``."""
 
-    def __init__(self, directory: str, source, flush_s: float = 0.5, clock=time.monotonic) -> None:
+    def __init__(self, directory: str, source, flush_s: float = 0.5, clock=time.monotonic,
+                 background_flush: bool = True) -> None:
         self.directory = os.fspath(directory)
         try:
             os.makedirs(self.directory, exist_ok=True)
@@ -103,6 +104,13 @@ class Archive(Sink):
             self._write_sidecar()
             if hasattr(source, "add_tap"):
                 source.add_tap(self)
+        self._closed = threading.Event()
+        if background_flush:
+            threading.Thread(target=self._flusher, name="fogmon-archive-flush", daemon=True).start()
+
+    def _flusher(self) -> None:
+        while not self._closed.wait(self.flush_s):
+            self.flush()
 
     # -- decoded samples -------------------------------------------------------------
     def write(self, block: Block) -> None:
@@ -197,6 +205,7 @@ class Archive(Sink):
 
     def close(self) -> None:
         """Flush and close the files (idempotent); taps called later are ignored."""
+        self._closed.set()
         with self._lock:
             if self._csv_fd is None:
                 return
