@@ -283,9 +283,9 @@ def thermal_drift(ctx: Context) -> Candidate | None:
 def glitches(ctx: Context) -> Candidate | None:
     """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale,
     Bonferroni threshold over all samples (1 % family-wise)."""
-    amp, z = detectors.spike_scan(ctx.wh, ctx.Yf)
-    thr = detectors.bonferroni_z(int(ctx.valid.sum()))
     sep = detectors.kernel_length(ctx.wh)
+    amp, z = detectors.spike_scan(ctx.wh, ctx.Yf, block=max(4096, 64 * sep))
+    thr = detectors.bonferroni_z(int(ctx.valid.sum()))
     z = z.copy()
     z[:sep] = 0.0   # the circular matched filter wraps around at the ends
     z[-sep:] = 0.0

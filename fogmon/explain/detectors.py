@@ -25,11 +25,12 @@ def expected_max_abs_z(n_tests: int) -> float:
     return float(stats.norm.isf((1.0 - 0.5 ** (1.0 / max(n_tests, 1))) / 2.0))
 
 
-def spike_scan(wh: Whittle, Yf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def spike_scan(wh: Whittle, Yf: np.ndarray, block: int = 4096) -> tuple[np.ndarray, np.ndarray]:
     """GLS amplitude (residual units) and z-statistic of a one-sample spike at every
     sample position (length n each); z is scaled by a local robust scale (MAD in blocks
     of 4096 samples) so that a mis-stated or time-varying noise level (vibration,
-    temperature) does not create spikes."""
+    temperature) does not create spikes. ``block`` should be many matched-filter
+    lengths (the z of neighbouring samples correlate over that length)."""
     Z = Yf / wh.S
     Z[0] = 0.0
     b = np.fft.irfft(Z, wh.n)
@@ -37,7 +38,7 @@ def spike_scan(wh: Whittle, Yf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     z = b / np.sqrt(A)
     if wh.valid is not None:
         z = np.where(wh.valid, z, 0.0)
-    return b / A, z / local_scale(z, wh.valid)
+    return b / A, z / local_scale(z, wh.valid, block)
 
 
 def local_scale(z: np.ndarray, valid: np.ndarray | None, block: int = 4096) -> np.ndarray:

@@ -199,7 +199,7 @@ def analyse(y: np.ndarray, ctx: catalogue.Context, null: mismatch.Null, grid: mi
     """Map, regions and score of residual ``y`` (candidates: the matched tests run on it)."""
     cell, whole = mismatch.log_avar(np.where(ctx.valid, y, np.nan), ctx.valid, grid)
     z, zw = mismatch.zscores(cell, whole, null)
-    _, zs = detectors.spike_scan(ctx.wh, ctx.Yf)
+    _, zs = detectors.spike_scan(ctx.wh, ctx.Yf, block=max(4096, 64 * detectors.kernel_length(ctx.wh)))
     nv = int(ctx.valid.sum())
     spike_ratio = float(np.max(np.abs(zs))) / detectors.expected_max_abs_z(nv) if nv else 0.0
     tests = max([math.sqrt(max(c.gain, 0.0) / (c.k * ctx.penalty)) for c in cands], default=0.0)

@@ -1,0 +1,39 @@
+"""Baseline model (no --model): the relative-ADEV NNLS fit against known simulated
+coefficients, and `fogmon explain` without a model on a stationary record."""
+import json
+
+import numpy as np
+import pytest
+
+from fogmon.cli import main
+from fogmon.davar.theory import adev_model
+from fogmon.explain.baseline import baseline_model, curve_noise_fit
+from fogmon.recording import write_replay_log
+from fogmon.sim.model import Noise, SensorModel
+from fogmon.sim.simulate import simulate
+
+
+def test_curve_fit_recovers_exact_ieee952_curve():
+    tau = 2.0 ** np.arange(-6, 12)
+    truth = dict(Q_arcsec=0.3, N_dpsh=0.01, B_dph=0.05, K_dphsh=0.5, R_dphh=2.0)
+    fit = curve_noise_fit(tau, adev_model(tau, **truth))
+    for k, v in truth.items():
+        assert fit[k] == pytest.approx(v, rel=1e-6)
+
+
+def test_baseline_of_a_simulated_record_has_its_q_and_n():
+    m = SensorModel(100.0, 3.0, Noise(Q_arcsec=0.3, N_dpsh=0.01), [])
+    b = baseline_model(simulate(m, duration_s=1800.0, seed=4))
+    assert b.noise.Q_arcsec == pytest.approx(0.3, rel=0.1)   # equal weight per octave, not minimum variance
+    assert b.noise.N_dpsh == pytest.approx(0.01, rel=0.1)
+    assert b.bias_dph == pytest.approx(3.0, abs=0.5) and b.effects == []
+
+
+def test_explain_without_model_on_stationary_noise_finds_nothing(tmp_path):
+    rec = simulate(SensorModel(10.0, 0.0, Noise(N_dpsh=0.01, Q_arcsec=0.05), []), duration_s=3600.0, seed=8)
+    p = tmp_path / "r.csv"
+    write_replay_log(p, rec.t_s, rec.rate_dph, {}, {"sample_rate_hz": "10"})
+    assert main(["explain", str(p), "--report", str(tmp_path / "r.json"), "--bootstrap", "30", "--quiet"]) == 0
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["model"].startswith("baseline") and rep["effects"] == [] and rep["mismatches"] == []
+    assert rep["baseline_model"]["N_dpsh"] == pytest.approx(0.01, rel=0.15)
