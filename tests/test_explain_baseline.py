@@ -25,7 +25,7 @@ def test_baseline_of_a_simulated_record_has_its_q_and_n():
     m = SensorModel(100.0, 3.0, Noise(Q_arcsec=0.3, N_dpsh=0.01), [])
     b = baseline_model(simulate(m, duration_s=1800.0, seed=4))
     assert b.noise.Q_arcsec == pytest.approx(0.3, rel=0.1)   # equal weight per octave, not minimum variance
-    assert b.noise.N_dpsh == pytest.approx(0.01, rel=0.1)
+    assert b.noise.N_dpsh == pytest.approx(0.01, rel=0.15)  # Q dominates every tau up to ~1 s here
     assert b.bias_dph == pytest.approx(3.0, abs=0.5) and b.effects == []
 
 

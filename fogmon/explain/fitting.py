@@ -192,17 +192,18 @@ def avar1_of_psd(S: np.ndarray, n: int) -> float:
 
 class BinnedPeriodogram:
     """Periodogram I_k = |Y_k|^2 / n averaged in frequency bins (the union of ``n_bins``
-    log-spaced and ``n_bins`` equal-width bins: low bins kept single, none wider than
-    1/n_bins of the band), for fast Whittle likelihoods of PSD models."""
+    log-spaced and ``n_linear`` equal-width bins: low bins kept single, none wider than
+    1/n_linear of the band, so a filter's fall-off near Nyquist is resolved), for fast
+    Whittle likelihoods of PSD models."""
 
-    def __init__(self, Yf: np.ndarray, n: int, n_bins: int = 1500):
+    def __init__(self, Yf: np.ndarray, n: int, n_bins: int = 1500, n_linear: int = 20000):
         k = np.arange(len(Yf))
         mult = np.full(len(Yf), 2.0)
         mult[0] = 0.0
         if n % 2 == 0:
             mult[-1] = 1.0
         edges = np.unique(np.concatenate((np.round(np.geomspace(1, len(Yf), n_bins)),
-                                          np.round(np.linspace(1, len(Yf), n_bins)))).astype(np.int64))
+                                          np.round(np.linspace(1, len(Yf), n_linear)))).astype(np.int64))
         edges = np.concatenate((edges[edges < len(Yf)], [len(Yf)]))
         I = np.abs(Yf) ** 2 / n
         cw = np.concatenate(([0.0], np.cumsum(mult)))
@@ -219,4 +220,5 @@ class BinnedPeriodogram:
 
     def deviance(self, S: np.ndarray) -> float:
         """-2 ln(Whittle likelihood) (up to a constant) of PSD values S at the bins."""
+        S = np.maximum(S, 1e-300)
         return float(np.sum(self.count * (np.log(S) + self.I / S)))
