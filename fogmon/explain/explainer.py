@@ -273,6 +273,16 @@ def _heldout(ctx: catalogue.Context, c: catalogue.Candidate) -> tuple[bool, str]
     return True, "n/a (spectral or spike fit on the whole record)"
 
 
+def _new_deficit(before: Analysis, after: Analysis) -> str | None:
+    """Tau band (text) of a whole-record deficit region present after a noise-type effect
+    was added but not before, or None."""
+    old = [(r.tau_min_s, r.tau_max_s) for r in before.regions if r.whole_record and r.sign < 0]
+    for r in after.regions:
+        if r.whole_record and r.sign < 0 and not any(lo <= r.tau_max_s and r.tau_min_s <= hi for lo, hi in old):
+            return f"{r.tau_min_s:.4g}..{r.tau_max_s:.4g}"
+    return None
+
+
 def explain(rec: Recording, model: SensorModel, options: Options | None = None,
             baseline: bool = False) -> Result:
     """Compare ``rec`` with ``model``, locate mismatches, select and fit missing physics."""
@@ -304,6 +314,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         chosen = None
         for tier in tiers(cands):
             for c in tier:
+                if c.kind in refused:
+                    continue
                 bg = c.bic_gain(ctx.penalty)
                 if bg <= 0:
                     break
@@ -318,16 +330,27 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         if chosen is None:
             break
         c, bg, note = chosen
-        counts[c.kind] = counts.get(c.kind, 0) + 1
         score_before = current.score.value
         if c.nature == "mean":
-            y = np.where(valid, y - c.rate, 0.0)
+            y_new, stoch_new, null_new = np.where(valid, y - c.rate, 0.0), stoch, null
         else:
-            stoch = SensorModel(stoch.sample_rate_hz, 0.0, stoch.noise, [*stoch.effects, c.effect()])
-            null = bootstrap(stoch, like, grid, B, opt.seed + 7919 * (len(accepted) + 1), opt.alpha, opt.workers)
-        ctx = _whittle(stoch, aux, t, valid, y)
-        cands = candidates(ctx, counts, refused)
-        current = analyse(y, ctx, null, grid, cands)
+            y_new = y
+            stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, stoch.noise, [*stoch.effects, c.effect()])
+            null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (len(accepted) + 1), opt.alpha,
+                                 opt.workers)
+        ctx_new = _whittle(stoch_new, aux, t, valid, y_new)
+        counts[c.kind] = counts.get(c.kind, 0) + 1
+        cands_new = candidates(ctx_new, counts, refused)
+        after = analyse(y_new, ctx_new, null_new, grid, cands_new)
+        overfit = _new_deficit(current, after) if c.nature != "mean" else None
+        if overfit is not None:
+            rejected.append((c.kind, bg, f"makes the model noisier than the recording at tau {overfit} s "
+                                         f"(the spectral fit trades long taus for short ones)"))
+            refused.add(c.kind)
+            counts[c.kind] -= 1
+            cands = [x for x in cands if x.kind != c.kind]
+            continue
+        y, stoch, null, ctx, cands, current = y_new, stoch_new, null_new, ctx_new, cands_new, after
         accepted.append(Accepted(c, bg, note, score_before, current.score.value))
     rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0]
