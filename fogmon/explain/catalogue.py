@@ -188,7 +188,7 @@ def rate_ramp(ctx: Context) -> Candidate | None:
 
 def warm_up(ctx: Context) -> Candidate | None:
     """Exponential settling from the start of the record, time constant scanned on a
-    log grid from 10 samples to half the record."""
+    log grid from max(10 samples, 3 matched-filter lengths) to half the record."""
     t = ctx.t_s
     T = t[-1] - t[0]
     t0 = float(t[0])
@@ -196,7 +196,10 @@ def warm_up(ctx: Context) -> Candidate | None:
     def make(ltau):
         return np.exp(-(t - t0) / math.exp(ltau))[:, None]
 
-    ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(10.0 / ctx.fs_hz), math.log(T / 2), 14))
+    # faster than a few matched-filter lengths it cannot be told from the record's ends
+    # (the circular GLS joins them) or from a glitch
+    tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.fs_hz
+    ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14))
     X = make(ltau)
     fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
     tau = math.exp(ltau)
@@ -230,6 +233,7 @@ def scale_factor(ctx: Context) -> Candidate | None:
 
 THERMAL_VARIANTS = {
     "K0 linear, K1, K2": (("k0_1",), ("k1",), ("k2",)),
+    "K0 linear, K1/K2 by branch": (("k0_1",), ("k1_pos", "k1_neg"), ("k2_pos", "k2_neg")),
     "K0 quadratic, K1, K2": (("k0_1", "k0_2"), ("k1",), ("k2",)),
     "K0 quadratic, K1/K2 by branch": (("k0_1", "k0_2"), ("k1_pos", "k1_neg"), ("k2_pos", "k2_neg")),
 }
@@ -286,9 +290,6 @@ def glitches(ctx: Context) -> Candidate | None:
     sep = detectors.kernel_length(ctx.wh)
     amp, z = detectors.spike_scan(ctx.wh, ctx.Yf, block=max(4096, 64 * sep))
     thr = detectors.bonferroni_z(int(ctx.valid.sum()))
-    z = z.copy()
-    z[:sep] = 0.0   # the circular matched filter wraps around at the ends
-    z[-sep:] = 0.0
     idx = detectors.find_spikes(z, thr, min_sep=sep)
     if not len(idx):
         return None

@@ -30,7 +30,9 @@ def spike_scan(wh: Whittle, Yf: np.ndarray, block: int = 4096) -> tuple[np.ndarr
     sample position (length n each); z is scaled by a local robust scale (MAD in blocks
     of 4096 samples) so that a mis-stated or time-varying noise level (vibration,
     temperature) does not create spikes. ``block`` should be many matched-filter
-    lengths (the z of neighbouring samples correlate over that length)."""
+    lengths (the z of neighbouring samples correlate over that length). z is 0 within
+    3 matched-filter lengths of either end, where the circular filter joins the
+    record's ends (an angle jump there looks like a spike in blue noise)."""
     Z = Yf / wh.S
     Z[0] = 0.0
     b = np.fft.irfft(Z, wh.n)
@@ -38,7 +40,11 @@ def spike_scan(wh: Whittle, Yf: np.ndarray, block: int = 4096) -> tuple[np.ndarr
     z = b / np.sqrt(A)
     if wh.valid is not None:
         z = np.where(wh.valid, z, 0.0)
-    return b / A, z / local_scale(z, wh.valid, block)
+    z = z / local_scale(z, wh.valid, block)
+    edge = min(3 * kernel_length(wh), wh.n // 10)
+    z[:edge] = 0.0   # the circular filter joins the record's ends: no test there
+    z[wh.n - edge:] = 0.0
+    return b / A, z
 
 
 def local_scale(z: np.ndarray, valid: np.ndarray | None, block: int = 4096) -> np.ndarray:
