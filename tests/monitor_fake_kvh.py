@@ -13,12 +13,12 @@ import os
 import select
 import sys
 import time
-import tty
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fogmon.sources.kvh import encode_frame  # noqa: E402
+from sources_fake_device import open_pty  # noqa: E402
 
 RATE_HZ = 1000
 BIAS_DPH = 15.0
@@ -36,15 +36,6 @@ def frames(n0: int, n: int, rng: np.random.Generator, bad_every: int = 0) -> byt
             f = f[:-1] + bytes([f[-1] ^ 0xFF])
         out.append(f)
     return b"".join(out)
-
-
-def open_pty() -> tuple[int, int, str]:
-    """(master fd, slave fd, slave path) of a raw pty pair."""
-    master, slave = os.openpty()
-    tty.setraw(slave)
-    tty.setraw(master)
-    os.set_blocking(master, False)
-    return master, slave, os.ttyname(slave)
 
 
 def run(seconds: float, bad_every: int = 0) -> None:
