@@ -338,7 +338,8 @@ def markov(ctx: Context) -> Candidate | None:
     the shortest (a white-noise level change, left to the white-level effects)."""
     bp = _periodogram(ctx)
     S0 = _stoch_psd(ctx, bp)
-    d0 = bp.deviance(S0)
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    d0 = bp.deviance(S0, floor)
     T = ctx.n / ctx.fs_hz
     best = None
     grid = np.geomspace(5.0 / ctx.fs_hz, T / 20.0, 36)
@@ -347,7 +348,7 @@ def markov(ctx: Context) -> Candidate | None:
         v = _newton_variance(bp, S0, P)
         if v <= 0:
             continue
-        g = d0 - bp.deviance(S0 + v * P)
+        g = d0 - bp.deviance(S0 + v * P, floor)
         if best is None or g > best[0]:
             best = (g, tc, v)
     if best is None or best[1] >= grid[-1] or best[1] <= grid[0]:
@@ -380,6 +381,10 @@ def _newton_variance(bp: BinnedPeriodogram, S0: np.ndarray, P: np.ndarray) -> fl
     return v
 
 
+#: PSD floor relative to the median model PSD in the spectral fits (periodogram leakage)
+LEAKAGE_FLOOR = 1e-4
+
+
 def bandwidth(ctx: Context) -> Candidate | None:
     """The sensor's own low-pass: Butterworth order 1..4, cutoff on a log grid from
     fs/500 to 0.49 fs, by Whittle likelihood of the residual spectrum."""
@@ -387,10 +392,12 @@ def bandwidth(ctx: Context) -> Candidate | None:
         return None
     bp = _periodogram(ctx)
     S0 = _stoch_psd(ctx, bp)
-    d0 = bp.deviance(S0)
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    d0 = bp.deviance(S0, floor)
+
     def gain(order, fc):
         p = {"cutoff_hz": float(fc), "order": int(order), "taps": []}
-        return d0 - bp.deviance(S0 * filter_gain2(p, ctx.fs_hz, bp.omega)), p
+        return d0 - bp.deviance(S0 * filter_gain2(p, ctx.fs_hz, bp.omega), floor), p
 
     best = None
     grid = np.geomspace(ctx.fs_hz / 500.0, 0.49 * ctx.fs_hz, 48)
