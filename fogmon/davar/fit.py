@@ -9,10 +9,10 @@ of the final fit; a term is identifiable when its 95 % interval excludes zero.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import nnls
+from scipy.optimize import brentq, nnls
 from scipy.stats import norm
 
 from fogmon.davar.confidence import ALPHA_OF_TERM, edf_effective, edf_full
@@ -23,6 +23,18 @@ NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
 IDENTIFY_Z = 1.959964
 """A term is identifiable when A_n - IDENTIFY_Z * se(A_n) > 0 (95 % one-sided-ish)."""
 _MAX_ITER = 50
+_MAX_ROBUST_ITER = 30
+_N_RUN_STARTS = 6
+MISFIT_FLOOR = 0.1
+"""Relative standard deviation of an Allan variance that the five terms may miss (model
+inadequacy); added in quadrature to sqrt(2 / nu) when residuals are standardized for
+the robust weights (not to the fit weights or the intervals)."""
+BIRGE_GATE = 4.0
+"""Reduced chi-square of the log residuals above which the fit estimates a model-inadequacy
+variance (clean power-law records stay below it: a record the terms describe is fitted
+with the pure EDF weights)."""
+TUKEY_C = 4.685
+"""Tukey biweight cut-off (95 % efficiency under normal residuals), in robust scale units."""
 _RTOL = 1e-9
 
 
@@ -49,7 +61,11 @@ class Coefficient:
 @dataclass(frozen=True)
 class NoiseFit:
     """Fitted IEEE-952 coefficients. ``avar_terms`` holds A_n ((deg/h)^2 s^-n, n = -2..2,
-    last axis), ``avar_se`` their standard errors; ``confidence`` the interval level."""
+    last axis), ``avar_se`` their standard errors; ``confidence`` the interval level.
+    ``misfit`` (bool, shape of the fitted ``adev_dph``) marks the taus the robust fit
+    rejected as not described by the five terms (periodic/vibration humps, steps);
+    ``worst_ratio`` (>= 1, per window for a DADEV fit) is the largest factor between the
+    model and the measured ADEV over the taus not flagged (NaN when nothing was fitted)."""
 
     Q_arcsec: Coefficient
     N_dpsh: Coefficient
@@ -59,6 +75,8 @@ class NoiseFit:
     avar_terms: np.ndarray
     avar_se: np.ndarray
     confidence: float
+    misfit: np.ndarray
+    worst_ratio: np.ndarray | float
 
     def model_adev_dph(self, tau_s) -> np.ndarray:
         """Model Allan deviation (deg/h) at ``tau_s`` (s); shape (..., len(tau_s))."""
@@ -94,15 +112,16 @@ def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 _RHO_OF_ALPHA = {2: 0.5, 0: 0.55, -1: 0.68, -2: 0.88}
 
 
-def _scoring(x, cols, tau, y, m, nt, n_samples):
-    """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x): returns
+def _scoring(x, cols, tau, y, m, nt, n_samples, rw, model=None, c2=0.0):
+    """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x) and robust
+    weights ``rw`` (0..1 per tau), starting from ``model`` (default the data): returns
     (A >= 0 over all 5 terms, model, nu, alpha at the final model)."""
-    model = y.copy()
+    model = y.copy() if model is None else model
     alpha = np.zeros(len(y), dtype=np.int64)
     a = np.zeros(5)
     for _ in range(_MAX_ITER):
         nu = edf_effective(edf_full(alpha, m, n_samples), m, n_samples, nt)
-        sw = np.sqrt(nu / 2.0) / model
+        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
         a_new = np.zeros(5)
         a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], y * sw)
         model_new = np.maximum(x @ a_new, 1e-300)
@@ -115,14 +134,66 @@ def _scoring(x, cols, tau, y, m, nt, n_samples):
     return a, model, nu, alpha
 
 
-def _sandwich_se(x, model, nu, alpha, m, cols) -> np.ndarray:
-    """Standard errors of A over ``cols`` for the EDF-weighted estimator, with the
-    correlation of Allan variances at neighbouring taus (sandwich covariance)."""
+def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tukey biweight weights and loss (0..1) of standardized residuals ``z``."""
+    u2 = np.minimum((z / TUKEY_C) ** 2, 1.0)
+    return (1.0 - u2) ** 2, 1.0 - (1.0 - u2) ** 3
+
+
+def _robust_scoring(x, cols, tau, y, m, nt, n_samples, starts):
+    """Fisher scoring iteratively reweighted by Tukey's biweight of the standardized log
+    residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
+    vector in ``starts`` in turn; keeps the solution with the least total Tukey loss (an
+    earlier start wins ties) and stops early when a solution rejects no tau. Returns
+    (A, model, nu, alpha, robust weights, model-inadequacy variance c2)."""
+    best, best_loss = None, np.inf
+    for rw in starts:
+        model, c2 = None, 0.0
+        for _ in range(_MAX_ROBUST_ITER):
+            a, model, nu, alpha = _scoring(x, cols, tau, y, m, nt, n_samples, rw, model, c2)
+            r = np.log(y / model)
+            rw_new, loss = _tukey(r / np.sqrt(2.0 / nu + MISFIT_FLOOR**2))
+            c2_new = _excess_variance(r, 2.0 / nu, rw_new, int(np.sum(a > 0)))
+            done = np.max(np.abs(rw_new - rw)) < 1e-6 and abs(c2_new - c2) <= 1e-3 * c2
+            rw, c2 = rw_new, c2_new
+            if done:
+                break
+        if loss.sum() < best_loss - 1e-9:
+            best, best_loss = (a, model, nu, alpha, rw, c2), loss.sum()
+        if np.all(rw > 0):
+            break
+    return best
+
+
+def _excess_variance(r, v, rw, n_free: int) -> float:
+    """Model-inadequacy variance c2 of ln(Allan variance) (Paule-Mandel: the c2 >= 0 with
+    sum rw r^2 / (v + c2) = degrees of freedom) when the residuals ``r`` exceed their
+    sampling variances ``v`` by more than BIRGE_GATE (reduced chi-square); else 0."""
+    dof = max(int(np.sum(rw > 0)) - n_free, 1)
+    if np.sum(rw * r**2 / v) <= BIRGE_GATE * dof:
+        return 0.0
+    return float(brentq(lambda c2: np.sum(rw * r**2 / (v + c2)) - dof, 0.0, float(np.sum(rw * r**2))))
+
+
+def _starts(n: int) -> list[np.ndarray]:
+    """Robust starting weights: all taus, then up to _N_RUN_STARTS evenly spread runs of
+    half of them (so that a stretch the five terms cannot describe, e.g. a vibration
+    hump, cannot pull every start)."""
+    k = max((n + 1) // 2, min(n, 5))
+    first = np.unique(np.linspace(0, n - k, min(n - k + 1, _N_RUN_STARTS)).round().astype(int))
+    idx = np.arange(n)
+    return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
+
+
+def _sandwich_se(x, model, nu, alpha, m, cols, rw, c2) -> np.ndarray:
+    """Standard errors of A over ``cols`` for the EDF-weighted estimator with robust
+    weights ``rw`` and model-inadequacy variance ``c2``, with the correlation of Allan
+    variances at neighbouring taus (sandwich covariance)."""
     xs = x[:, cols]
     scale = np.linalg.norm(xs, axis=0)
     xs = xs / scale
-    w = nu / (2.0 * model**2)
-    sd = model * np.sqrt(2.0 / nu)
+    w = rw / ((2.0 / nu + c2) * model**2)
+    sd = model * np.sqrt(2.0 / nu + c2)
     rho = np.sqrt(np.array([_RHO_OF_ALPHA.get(int(a), 0.55) for a in alpha]))
     octaves = np.abs(np.log2(m[:, None] / m[None, :])) ** 1.6
     cov_y = np.outer(sd, sd) * np.outer(rho, rho) ** octaves
@@ -132,30 +203,35 @@ def _sandwich_se(x, model, nu, alpha, m, cols) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(cov), 0.0)) / scale
 
 
-def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
-    Fisher scoring with all five terms, then backward elimination: while a fitted term's
-    95 % interval reaches zero, the weakest one is dropped and the rest refitted. Returns
-    (A_n, standard error of A_n); dropped terms have A_n = 0 and the standard error they
-    would have if fitted alongside the others. NaN when fewer than 2 usable taus."""
+    Robust Fisher scoring (``_robust_scoring``) with all five terms, then backward
+    elimination: while a fitted term's 95 % interval reaches zero, the weakest one is
+    dropped and the rest refitted. Returns (A_n, standard error of A_n, misfit mask over
+    ``tau_s``: taus the robust weights reject, i.e. that the terms cannot describe);
+    dropped terms have A_n = 0 and the standard error they would have if fitted alongside
+    the others. A_n NaN when fewer than 2 usable taus."""
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
+    misfit = np.zeros(len(tau), dtype=bool)
     if ok.sum() < 2:
-        return np.full(5, np.nan), np.full(5, np.nan)
+        return np.full(5, np.nan), np.full(5, np.nan), misfit
     tau, y, nt = tau[ok], avar[ok], np.asarray(n_terms)[ok]
     m_int = np.asarray(m, dtype=np.int64)[ok]
     m_f = m_int.astype(np.float64)
     x = tau[:, None] ** POWERS
     active = np.ones(5, dtype=bool)
+    starts = _starts(len(y))
     while True:
-        a, model, nu, alpha = _scoring(x, active, tau, y, m_int, nt, n_samples)
+        a, model, nu, alpha, rw, c2 = _robust_scoring(x, active, tau, y, m_int, nt, n_samples, starts)
+        starts = [rw]
         free = a > 0
         se = np.full(5, np.inf)
         if free.any():
-            se[free] = _sandwich_se(x, model, nu, alpha, m_f, free)
+            se[free] = _sandwich_se(x, model, nu, alpha, m_f, free, rw, c2)
         weak = free & (a - IDENTIFY_Z * se <= 0)
         if not weak.any():
             break
@@ -163,8 +239,9 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
     for n in np.flatnonzero(~free):  # upper limits: the term's error if fitted with the others
         cols = free.copy()
         cols[n] = True
-        se[n] = _sandwich_se(x, model, nu, alpha, m_f, cols)[int(np.sum(cols[:n]))]
-    return a, se
+        se[n] = _sandwich_se(x, model, nu, alpha, m_f, cols, rw, c2)[int(np.sum(cols[:n]))]
+    misfit[ok] = rw == 0
+    return a, se, misfit
 
 
 def _coefficients(a: np.ndarray, se: np.ndarray, confidence: float) -> list[Coefficient]:
@@ -177,16 +254,30 @@ def _coefficients(a: np.ndarray, se: np.ndarray, confidence: float) -> list[Coef
             for i in range(5)]
 
 
+def _worst_ratio(model_adev: np.ndarray, adev: np.ndarray, misfit: np.ndarray) -> np.ndarray:
+    """Largest max(model/measured, measured/model) over usable, unflagged taus (last axis)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.abs(np.log(model_adev / adev))
+    r = np.where(np.isfinite(r) & ~misfit, r, -np.inf).max(axis=-1)
+    return np.where(np.isfinite(r), np.exp(r), np.nan)
+
+
 def fit_noise(result: AdevResult | DadevResult, confidence: float = 0.683) -> NoiseFit:
     """Fit IEEE-952 Q (arcsec), N (deg/sqrt(h)), B (deg/h), K (deg/h/sqrt(h)), R (deg/h^2)
     to an AdevResult (scalar coefficients) or to every window of a DadevResult (arrays
-    over windows: the coefficient time series). Intervals at ``confidence``."""
+    over windows: the coefficient time series). Intervals at ``confidence``; taus the
+    five terms cannot describe are down-weighted, flagged in ``misfit`` and left out of
+    ``worst_ratio``."""
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
         fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n) for i in range(len(result))]
         a = np.array([f[0] for f in fits]).reshape(len(result), 5)
         se = np.array([f[1] for f in fits]).reshape(len(result), 5)
+        misfit = np.array([f[2] for f in fits], dtype=bool).reshape(result.adev_dph.shape)
     else:
-        a, se = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples)
-    return NoiseFit(*_coefficients(a, se, confidence), avar_terms=a, avar_se=se, confidence=confidence)
+        a, se, misfit = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples)
+    fit = NoiseFit(*_coefficients(a, se, confidence), avar_terms=a, avar_se=se, confidence=confidence,
+                   misfit=misfit, worst_ratio=np.nan)
+    worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
+    return replace(fit, worst_ratio=worst if worst.ndim else float(worst))

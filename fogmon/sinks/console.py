@@ -66,24 +66,33 @@ MODEL_RATIO_WARN = 1.5
 
 
 def model_check(a, fit) -> str | None:
-    """One line comparing the fitted IEEE-952 model's ADEV with the measured one: the
-    largest ratio (either way) and its tau; a warning beyond MODEL_RATIO_WARN."""
+    """Lines comparing the fitted IEEE-952 model's ADEV with the measured one: the
+    largest ratio (either way) and its tau over the taus the fit describes (a warning
+    beyond MODEL_RATIO_WARN), then the taus the robust fit flagged (``fit.misfit``)."""
     import numpy as np
 
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.asarray(fit.model_adev_dph(a.tau_s), dtype=float) / np.asarray(a.adev_dph, dtype=float)
-    ok = np.isfinite(ratio) & (ratio > 0)
+    misfit = np.asarray(getattr(fit, "misfit", np.zeros(len(ratio), dtype=bool)), dtype=bool)
+    ok = np.isfinite(ratio) & (ratio > 0) & ~misfit
     if not ok.any():
         return None
     worst = np.where(ok, np.abs(np.log(np.where(ok, ratio, 1.0))), -1.0)
     i = int(np.argmax(worst))
     r = float(max(ratio[i], 1 / ratio[i]))
     side = "above" if ratio[i] > 1 else "below"
+    where = "every tau" if not misfit.any() else f"the {int(ok.sum())} taus it describes"
     if r <= MODEL_RATIO_WARN:
-        return f"  model check: the fitted model is within a factor {r:.2f} of the measured ADEV at every tau"
-    return (f"  model check: WARNING the fitted model is {r:.3g}x {side} the measured ADEV at tau "
-            f"{a.tau_s[i]:.4g} s: the five IEEE-952 terms do not describe this record (periodic or "
-            f"vibration terms, non-stationarity) or the fit failed; read the coefficients with care")
+        line = f"  model check: the fitted model is within a factor {r:.2f} of the measured ADEV at {where}"
+    else:
+        line = (f"  model check: WARNING the fitted model is {r:.3g}x {side} the measured ADEV at tau "
+                f"{a.tau_s[i]:.4g} s: the five IEEE-952 terms do not describe this record (periodic or "
+                f"vibration terms, non-stationarity) or the fit failed; read the coefficients with care")
+    if misfit.any():
+        taus = ", ".join(f"{t:.4g}" for t in np.asarray(a.tau_s)[misfit])
+        line += (f"\n  model check: tau {taus} s not described by the five terms (vibration or periodic "
+                 f"humps, quantization, steps): flagged and left out of the fit")
+    return line
 
 
 class ConsoleSink(Sink):
