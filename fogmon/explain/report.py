@@ -220,7 +220,7 @@ def write_png(res: Result, path: str) -> None:
         axx.set_xlabel("window centre time (s)")
         axx.set_ylabel("log10 tau (s)")
         axx.set_title(f"z-map {label} (|z| > {a.null.threshold:.2f} flagged, {len(a.regions)} region(s))")
-        fig.colorbar(im, ax=axx, label="z of ln Allan variance")
+        fig.colorbar(im, ax=axx, label="z of Allan variance (cube-root scale)")
     t = res.t_s
     step = max(1, len(t) // 4000)
     k = max(1, step)
