@@ -2,11 +2,13 @@
 
 The recording's dynamic Allan variance (DAVAR) on a (window, tau) grid is compared
 cell by cell with a parametric bootstrap of the model: B simulated records (same
-length, gaps and aux schedule) give, per cell, the mean of ln sigma^2 and, per tau,
-its spread pooled over windows (the spread of ln sigma^2 depends on the degrees of
-freedom, not on the level, so pooling stays right when the level varies in time).
+length, gaps and aux schedule) give, per cell, the mean Allan variance, and, per tau,
+the spread of u = (sigma^2 / mean)^(1/3) pooled over windows (Wilson-Hilferty: a scaled
+chi-square is close to normal on this scale even at 3-5 degrees of freedom, and the
+spread depends on the degrees of freedom, not on the level, so pooling stays right when
+the level varies in time).
 
-    z(t, tau) = (ln sigma^2_rec - mean) / (sd sqrt(1 + 1/B))
+    z(t, tau) = (u_rec - mean u) / (sd sqrt(1 + 1/B))
 
 The family-wise threshold comes from the bootstrap distribution of max |z| over the
 whole grid (each replicate scored leave-one-out, exactly like the recording), with a
