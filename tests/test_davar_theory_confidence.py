@@ -5,7 +5,7 @@ import pytest
 from allantools.ci import confidence_interval, edf_greenhall
 
 from fogmon.davar.batch import oadev
-from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
+from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full, edf_mixture
 from fogmon.davar.theory import adev_model, markov_adev, sinusoid_adev
 
 
@@ -72,3 +72,48 @@ def test_oadev_bounds_use_the_fitted_noise_type():
     assert np.allclose(res.edf[res.m > 4000], explicit.edf[res.m > 4000])
     tau, dev, err, n = allantools.oadev(y, rate=1.0, data_type="freq", taus=res.tau_s)
     assert np.all(res.lo_dph < dev) and np.all(dev < res.hi_dph)
+
+
+@pytest.mark.parametrize("n", [4096, 2**19])
+def test_mixture_edf_of_one_noise_type_is_greenhalls_where_his_is_exact(n):
+    m = np.array([1, 2, 3, 8, 33, 64, 200, 257, 1000, 5000, n // 4, n // 2])
+    m = m[2 * m <= n]
+    for k, alpha in enumerate((2, 0, -1, -2)):
+        frac = np.tile(np.eye(4)[k], (len(m), 1))
+        # white angle: all m (allantools has no EDF for a single term); white and random
+        # walk rate from m = 64 (below, Greenhall's continuous-time form is not the
+        # discrete one: see the Monte Carlo test); flicker: Greenhall's form everywhere
+        ok = {2: m < n // 2, 0: m >= 64, -1: m > 0, -2: m >= 64}[alpha]
+        ref = np.array([edf_greenhall(alpha, 2, int(q), n + 1, overlapping=True) for q in m[ok]])
+        # Greenhall's own large-m approximations (F = inf, tables) differ by up to 1.5 %
+        np.testing.assert_allclose(edf_mixture(frac, m, n)[ok], ref, rtol=0.016)
+
+
+def _monte_carlo_edf(y: np.ndarray, m: int) -> float:
+    """2 mean^2 / var of the overlapping Allan variance at m over the rows of ``y``."""
+    c = np.concatenate([np.zeros((len(y), 1)), np.cumsum(y, axis=1)], axis=1)
+    avar = 0.5 * np.mean(((c[:, 2 * m:] - 2 * c[:, m:-m] + c[:, :-2 * m]) / m) ** 2, axis=1)
+    return 2.0 * avar.mean() ** 2 / avar.var()
+
+
+@pytest.mark.parametrize("alpha, m, greenhall_off", [(0, 1, 0.15), (0, 8, -0.08), (-2, 1, -0.2), (-2, 2, -0.1)])
+def test_discrete_edf_matches_monte_carlo_where_greenhall_is_off(alpha, m, greenhall_off):
+    rng = np.random.default_rng(12)
+    e = rng.normal(size=(3000, 2048))
+    y = e if alpha == 0 else np.cumsum(e, axis=1)
+    mc = _monte_carlo_edf(y, m)
+    frac = np.eye(4)[1 if alpha == 0 else 3][None]
+    assert edf_mixture(frac, [m], 2048)[0] == pytest.approx(mc, rel=0.08)  # MC: 2.6 % standard error
+    g = edf_full(alpha, [m], 2048)[0]
+    assert (g / mc - 1) * np.sign(greenhall_off) > abs(greenhall_off) / 2  # the error this fixes
+
+
+def test_mixture_edf_matches_monte_carlo_of_white_angle_plus_white_rate():
+    # at m = 8 white angle noise (Allan variance 3 sx^2 / m^2, tau0 = 1) and white rate
+    # noise (1 / m) contribute equally: the EDF is about twice white rate's alone
+    rng = np.random.default_rng(11)
+    n, m, reps = 4096, 8, 3000
+    y = np.diff(rng.normal(size=(reps, n + 1)) * np.sqrt(m / 3.0), axis=1) + rng.normal(size=(reps, n))
+    mix = edf_mixture(np.array([[0.5, 0.5, 0.0, 0.0]]), [m], n)[0]
+    assert mix == pytest.approx(_monte_carlo_edf(y, m), rel=0.08)  # Monte Carlo: 2.6 % standard error
+    assert mix > 1.5 * edf_mixture(np.array([[0.0, 1.0, 0.0, 0.0]]), [m], n)[0]

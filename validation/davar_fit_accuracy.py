@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     print(f"{args.records} records of {n} samples at {FS_HZ:g} Hz ({n / FS_HZ / 3600:.2f} h), octave taus, "
           f"{time.perf_counter() - t0:.1f} s")
     print(f"{'term':10s} {'truth':>8s} {'median':>9s} {'med|err|%':>9s} {'rms err%':>9s} {'bias %':>8s} "
-          f"{'cover68%':>8s} {'ident%':>7s}")
+          f"{'cover68%':>8s} {'ident%':>7s} {'sd(z)':>6s}")
     ok = True
     limits = {"Q_arcsec": ("median", 0.5), "N_dpsh": ("median", 0.5), "B_dph": ("rms", 7.0)}
     for i, name in enumerate(names):
@@ -76,8 +76,11 @@ def main(argv=None) -> int:
         err = 100 * (val[:, i] / truth - 1)
         med_abs, rms, bias = np.median(np.abs(err)), np.sqrt(np.mean(err**2)), np.mean(err)
         cover = 100 * np.mean((lo[:, i] <= truth) & (truth <= hi[:, i]))
+        # z = error / 68 % half-width: sd(z) ~ 1 when the intervals have the right width
+        # (a less noisy check than coverage: +-10 % over 50 records against +-7 % coverage points)
+        sd_z = np.std((val[:, i] - truth) / ((hi[:, i] - lo[:, i]) / 2))
         print(f"{name:10s} {truth:8.3g} {np.median(val[:, i]):9.4g} {med_abs:9.3f} {rms:9.3f} {bias:8.3f} "
-              f"{cover:8.1f} {identified:7.1f}")
+              f"{cover:8.1f} {identified:7.1f} {sd_z:6.2f}")
         kind, limit = limits[name]
         good = (med_abs if kind == "median" else rms) <= limit and abs(bias) <= 2.0 and 60.0 <= cover <= 76.0
         print(f"  {kind} |error| <= {limit} %, |bias| <= 2 %, coverage 60-76 %: {'ok' if good else 'FAIL'}")

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import brentq, nnls
 from scipy.stats import norm
 
-from fogmon.davar.confidence import ALPHA_OF_TERM, edf_effective, edf_full
+from fogmon.davar.confidence import ALPHA_OF_TERM, edf_effective, edf_mixture
 from fogmon.davar.result import AdevResult, DadevResult
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
@@ -98,6 +98,21 @@ def dominant_alpha(avar_terms: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
     return np.where(contrib.max(axis=-1) > 0, alpha, 0)
 
 
+_MIX_CLASS = np.array([0, 1, 2, 3, 3])
+"""Noise class in confidence.MIX_ALPHAS of each term Q, N, B, K, R (R counted as random walk)."""
+
+
+def _nu(a: np.ndarray, tau, m, nt, n_samples: int) -> np.ndarray:
+    """EDF per tau of Allan variances whose noise is the mixture the model A predicts
+    (white rate noise where the model is still empty), scaled for gaps."""
+    contrib = a * np.asarray(tau, dtype=np.float64)[:, None] ** POWERS
+    total = contrib.sum(axis=1)
+    frac = np.zeros((len(total), 4))
+    np.add.at(frac.T, _MIX_CLASS, contrib.T / np.where(total > 0, total, 1.0))
+    frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
+    return edf_effective(edf_mixture(frac, m, n_samples), m, n_samples, nt)
+
+
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     scale = np.linalg.norm(x, axis=0)
     scale[scale == 0] = 1.0
@@ -120,7 +135,7 @@ def _scoring(x, cols, tau, y, m, nt, n_samples, rw, model=None, c2=0.0):
     alpha = np.zeros(len(y), dtype=np.int64)
     a = np.zeros(5)
     for _ in range(_MAX_ITER):
-        nu = edf_effective(edf_full(alpha, m, n_samples), m, n_samples, nt)
+        nu = _nu(a, tau, m, nt, n_samples)
         sw = np.sqrt(rw / (2.0 / nu + c2)) / model
         a_new = np.zeros(5)
         a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], y * sw)
@@ -130,7 +145,7 @@ def _scoring(x, cols, tau, y, m, nt, n_samples, rw, model=None, c2=0.0):
         alpha = dominant_alpha(a, tau)
         if done:
             break
-    nu = edf_effective(edf_full(alpha, m, n_samples), m, n_samples, nt)
+    nu = _nu(a, tau, m, nt, n_samples)
     return a, model, nu, alpha
 
 
