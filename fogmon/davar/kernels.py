@@ -154,6 +154,7 @@ def _sq_term(psum, bad, j, m):
 
 _TILE = 1024  # samples per tile of the streaming update: 4 taus' term arrays stay in L1
 _EPS = 2.0**-52
+_MAX_SEGMENTS = 8  # emission points per tile up to which windows come from segment sums
 _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain path may accumulate
 
 
@@ -185,13 +186,24 @@ def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
 
 
 @njit(cache=True, fastmath=True)
-def _tile_totals(x_in, x_out, n):
-    """(sum of x_in - x_out, sum of x_in + x_out) over n samples, any order (SIMD)."""
+def _tile_totals(x_in, x_out, n, cuts, n_cuts, seg):
+    """(sum of x_in - x_out, sum of x_in + x_out) over n samples, any order (SIMD); also
+    ``seg[c]`` = sum of x_in - x_out over cuts[c-1] <= i < cuts[c] (cuts[-1] = 0,
+    cuts[n_cuts] = n): the change up to each emission point, without a sequential scan."""
     d = 0.0
     a = 0.0
-    for i in range(n):
-        d += x_in[i] - x_out[i]
-        a += x_in[i] + x_out[i]
+    i0 = 0
+    for c in range(n_cuts + 1):
+        i1 = cuts[c] if c < n_cuts else n
+        u = x_in[i0:i1]  # slices indexed from 0: no wrap-around checks, SIMD
+        v = x_out[i0:i1]
+        sd = 0.0
+        for i in range(i1 - i0):
+            sd += u[i] - v[i]
+            a += u[i] + v[i]
+        seg[c] = sd
+        d += sd
+        i0 = i1
     return d, a
 
 
@@ -278,12 +290,17 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
     grow = np.empty(4)
     ks = np.empty(4, np.int64)
     scratch = np.empty(w)
+    cuts = np.empty(_TILE + 1, np.int64)
+    seg = np.empty((4, _TILE + 1))
     e_tile = e_head
     for t0 in range(start, stop, _TILE):
         n = min(_TILE, stop - t0)
         e_end = e_tile
         while e_end < emit_pos.shape[0] and emit_pos[e_end] < t0 + n:
+            cuts[e_end - e_tile] = emit_pos[e_end] - t0 + 1
             e_end += 1
+        # few emission points: windows from SIMD segment sums; many (small hops): one scan
+        n_cuts = e_end - e_tile if e_end - e_tile <= _MAX_SEGMENTS else 0
         for g in range(0, nm, 4):
             has_dn = False
             plain = True
@@ -291,16 +308,24 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
                 k = min(g + j, nm - 1)  # slots past the last tau repeat it
                 ks[j] = k
                 has_dn |= _tile_terms(psum, bad, ms[k], w, t0, n, xi[j], xo[j], dn[j])
-                tot[j], mag = _tile_totals(xi[j], xo[j], n)
+                tot[j], mag = _tile_totals(xi[j], xo[j], n, cuts, n_cuts, seg[j])
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
                 bound = err[k] + grow[j]
                 plain &= bound == 0.0 or bound <= _BOUND_RTOL * (sum_s[k] + sum_c[k] + tot[j])
             if plain:
-                _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
-                            out_sums, out_counts)
+                if has_dn or n_cuts < e_end - e_tile:
+                    _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
+                                out_sums, out_counts)
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
+                        if not (has_dn or n_cuts < e_end - e_tile):  # windows from the segment sums
+                            k = ks[j]
+                            run = 0.0
+                            for c in range(n_cuts):
+                                run += seg[j, c]
+                                out_sums[e_tile + c, k] = sum_s[k] + (sum_c[k] + run)
+                                out_counts[e_tile + c, k] = cnt[k]
                         s, r = _two_sum(sum_s[ks[j]], tot[j])
                         sum_s[ks[j]] = s
                         sum_c[ks[j]] += r
