@@ -162,8 +162,8 @@ _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain pat
 def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
     """For new samples at buffer positions first..first+n-1: squared entering and
     leaving terms (0 when invalid) and the change in valid-term count. Vectorisable fast
-    path when no invalid sample touches the tile's terms; returns True when some dn may
-    be non-zero."""
+    path when no invalid sample touches the tile's terms (then ``dn`` is left unwritten
+    and False returned); True when dn was written."""
     inv = 1.0 / m
     a_in = first - 2 * m + 1
     a_out = first - w
@@ -176,8 +176,7 @@ def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
             t_out = ((q2[i] - q1[i]) - (q1[i] - q0[i])) * inv
             x_in[i] = t_in * t_in
             x_out[i] = t_out * t_out
-            dn[i] = 0  # read when another tau of the group has gaps
-        return False
+        return False  # dn not written: the caller zeroes it if another tau of the group has gaps
     for i in range(n):
         x_in[i], v_in = _sq_term(psum, bad, a_in + i, m)
         x_out[i], v_out = _sq_term(psum, bad, a_out + i, m)
@@ -289,6 +288,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
     tot = np.empty(4)
     grow = np.empty(4)
     ks = np.empty(4, np.int64)
+    wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
     cuts = np.empty(_TILE + 1, np.int64)
     seg = np.empty((4, _TILE + 1))
@@ -307,12 +307,16 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
             for j in range(4):
                 k = min(g + j, nm - 1)  # slots past the last tau repeat it
                 ks[j] = k
-                has_dn |= _tile_terms(psum, bad, ms[k], w, t0, n, xi[j], xo[j], dn[j])
+                wrote[j] = _tile_terms(psum, bad, ms[k], w, t0, n, xi[j], xo[j], dn[j])
+                has_dn |= wrote[j]
                 tot[j], mag = _tile_totals(xi[j], xo[j], n, cuts, n_cuts, seg[j])
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
                 bound = err[k] + grow[j]
                 plain &= bound == 0.0 or bound <= _BOUND_RTOL * (sum_s[k] + sum_c[k] + tot[j])
+            for j in range(4 if has_dn or not plain else 0):  # dn is read: zero the unwritten rows
+                if not wrote[j]:
+                    dn[j, :n] = 0
             if plain:
                 if has_dn or n_cuts < e_end - e_tile:
                     _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
