@@ -121,15 +121,24 @@ def edf_mixture(fractions: np.ndarray, m, n_samples: int) -> np.ndarray:
     types'): exact discrete-time autocorrelations for white angle, white rate and random
     walk up to m = 256, Greenhall's (F = inf) beyond and for flicker. NaN where 2 m > n."""
     m = np.atleast_1d(np.asarray(m, dtype=np.int64))
-    c = _mixture_matrices(tuple(int(k) for k in m), int(n_samples))
+    return edf_mixture_from(fractions, mixture_matrices(m, n_samples), n_samples - 2 * m + 1)
+
+
+def edf_mixture_from(fractions: np.ndarray, matrices: np.ndarray, n_terms_full: np.ndarray) -> np.ndarray:
+    """``edf_mixture`` from precomputed ``mixture_matrices`` and gap-free term counts
+    n - 2m + 1 (for repeated evaluation inside a fit)."""
     f = np.asarray(fractions, dtype=np.float64)
     with np.errstate(invalid="ignore"):
-        return (n_samples - 2 * m + 1) / np.einsum("ti,tij,tj->t", f, c, f)
+        return n_terms_full / np.einsum("ti,tij,tj->t", f, matrices, f)
+
+
+def mixture_matrices(m, n_samples: int) -> np.ndarray:
+    """The (len(m), 4, 4) matrices of ``edf_mixture`` (NaN where 2 m > n_samples)."""
+    return _mixture_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
 @lru_cache(maxsize=256)
 def _mixture_matrices(m: tuple, n_samples: int) -> np.ndarray:
-    """_mixture_matrix for every m (NaN where 2 m > n_samples), shape (len(m), 4, 4)."""
     return np.array([_mixture_matrix(k, n_samples) if 2 * k <= n_samples else np.full((4, 4), np.nan)
                      for k in m]).reshape(len(m), 4, 4)
 

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.optimize import brentq, nnls
 from scipy.stats import norm
 
-from fogmon.davar.confidence import ALPHA_OF_TERM, edf_effective, edf_mixture
+from fogmon.davar.confidence import ALPHA_OF_TERM, edf_mixture_from, mixture_matrices
 from fogmon.davar.result import AdevResult, DadevResult
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
@@ -25,6 +25,8 @@ IDENTIFY_Z = 1.959964
 _MAX_ITER = 50
 _MAX_ROBUST_ITER = 30
 _N_RUN_STARTS = 6
+_RW_TOL = 1e-4  # robust weights converged
+_ROBUST_RTOL = 1e-6  # model convergence while the robust weights still move
 MISFIT_FLOOR = 0.1
 """Relative standard deviation of an Allan variance that the five terms may miss (model
 inadequacy); added in quadrature to sqrt(2 / nu) when residuals are standardized for
@@ -98,19 +100,28 @@ def dominant_alpha(avar_terms: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
     return np.where(contrib.max(axis=-1) > 0, alpha, 0)
 
 
-_MIX_CLASS = np.array([0, 1, 2, 3, 3])
-"""Noise class in confidence.MIX_ALPHAS of each term Q, N, B, K, R (R counted as random walk)."""
+_MIX_OF_TERM = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, 0, 0, 1]], dtype=np.float64)
+"""Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
 
 
-def _nu(a: np.ndarray, tau, m, nt, n_samples: int) -> np.ndarray:
-    """EDF per tau of Allan variances whose noise is the mixture the model A predicts
-    (white rate noise where the model is still empty), scaled for gaps."""
-    contrib = a * np.asarray(tau, dtype=np.float64)[:, None] ** POWERS
-    total = contrib.sum(axis=1)
-    frac = np.zeros((len(total), 4))
-    np.add.at(frac.T, _MIX_CLASS, contrib.T / np.where(total > 0, total, 1.0))
-    frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
-    return edf_effective(edf_mixture(frac, m, n_samples), m, n_samples, nt)
+class _EdfModel:
+    """EDF per tau of Allan variances whose noise is the mixture a model A predicts (white
+    rate noise where the model is still empty), scaled for gaps: the mixture matrices of
+    ``m`` and ``n_samples`` computed once per fit."""
+
+    def __init__(self, tau, m, n_terms, n_samples: int):
+        self.x = np.asarray(tau, dtype=np.float64)[:, None] ** POWERS
+        self.mats = mixture_matrices(m, n_samples)
+        full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
+        self.full = full.astype(np.float64)
+        self.gap_scale = np.asarray(n_terms) / full
+
+    def __call__(self, a: np.ndarray) -> np.ndarray:
+        contrib = self.x * a
+        total = contrib.sum(axis=1)
+        frac = (contrib @ _MIX_OF_TERM) / np.where(total > 0, total, 1.0)[:, None]
+        frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
+        return edf_mixture_from(frac, self.mats, self.full) * self.gap_scale
 
 
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -127,26 +138,27 @@ def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 _RHO_OF_ALPHA = {2: 0.5, 0: 0.55, -1: 0.68, -2: 0.88}
 
 
-def _scoring(x, cols, tau, y, m, nt, n_samples, rw, model=None, c2=0.0):
-    """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x) and robust
-    weights ``rw`` (0..1 per tau), starting from ``model`` (default the data): returns
-    (A >= 0 over all 5 terms, model, nu, alpha at the final model)."""
-    model = y.copy() if model is None else model
-    alpha = np.zeros(len(y), dtype=np.int64)
-    a = np.zeros(5)
+def _scoring(x, cols, tau, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
+    """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x), robust
+    weights ``rw`` (0..1 per tau), EDF model ``edf`` and model-inadequacy variance ``c2``,
+    from the terms ``a`` (default: the data as model), until the model moves less than
+    ``rtol``: returns (A >= 0 over all 5 terms, model, nu, alpha at the final model)."""
+    if a is None or not np.any(a[cols] > 0):
+        model, a = y.copy(), np.zeros(5)
+    else:
+        a = np.where(cols, a, 0.0)
+        model = np.maximum(x @ a, 1e-300)
     for _ in range(_MAX_ITER):
-        nu = _nu(a, tau, m, nt, n_samples)
+        nu = edf(a)
         sw = np.sqrt(rw / (2.0 / nu + c2)) / model
         a_new = np.zeros(5)
         a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], y * sw)
         model_new = np.maximum(x @ a_new, 1e-300)
-        done = np.max(np.abs(model_new / model - 1.0)) < _RTOL
+        done = np.max(np.abs(model_new / model - 1.0)) < rtol
         a, model = a_new, model_new
-        alpha = dominant_alpha(a, tau)
         if done:
             break
-    nu = _nu(a, tau, m, nt, n_samples)
-    return a, model, nu, alpha
+    return a, model, edf(a), dominant_alpha(a, tau)
 
 
 def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -155,29 +167,31 @@ def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (1.0 - u2) ** 2, 1.0 - (1.0 - u2) ** 3
 
 
-def _robust_scoring(x, cols, tau, y, m, nt, n_samples, starts):
+def _robust_scoring(x, cols, tau, y, edf, starts):
     """Fisher scoring iteratively reweighted by Tukey's biweight of the standardized log
     residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
     vector in ``starts`` in turn; keeps the solution with the least total Tukey loss (an
-    earlier start wins ties) and stops early when a solution rejects no tau. Returns
-    (A, model, nu, alpha, robust weights, model-inadequacy variance c2)."""
+    earlier start wins ties) and stops early when a solution rejects no tau; the winner
+    is then scored to full precision. Returns (A, model, nu, alpha, robust weights,
+    model-inadequacy variance c2)."""
     best, best_loss = None, np.inf
     for rw in starts:
-        model, c2 = None, 0.0
+        a, c2 = None, 0.0
         for _ in range(_MAX_ROBUST_ITER):
-            a, model, nu, alpha = _scoring(x, cols, tau, y, m, nt, n_samples, rw, model, c2)
+            a, model, nu, alpha = _scoring(x, cols, tau, y, edf, rw, a, c2, rtol=_ROBUST_RTOL)
             r = np.log(y / model)
             rw_new, loss = _tukey(r / np.sqrt(2.0 / nu + MISFIT_FLOOR**2))
             c2_new = _excess_variance(r, 2.0 / nu, rw_new, int(np.sum(a > 0)))
-            done = np.max(np.abs(rw_new - rw)) < 1e-6 and abs(c2_new - c2) <= 1e-3 * c2
+            done = np.max(np.abs(rw_new - rw)) < _RW_TOL and abs(c2_new - c2) <= 1e-3 * c2
             rw, c2 = rw_new, c2_new
             if done:
                 break
         if loss.sum() < best_loss - 1e-9:
-            best, best_loss = (a, model, nu, alpha, rw, c2), loss.sum()
+            best, best_loss = (a, rw, c2), loss.sum()
         if np.all(rw > 0):
             break
-    return best
+    a, rw, c2 = best
+    return (*_scoring(x, cols, tau, y, edf, rw, a, c2), rw, c2)
 
 
 def _excess_variance(r, v, rw, n_free: int) -> float:
@@ -240,8 +254,9 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
     x = tau[:, None] ** POWERS
     active = np.ones(5, dtype=bool)
     starts = _starts(len(y))
+    edf = _EdfModel(tau, m_int, nt, n_samples)
     while True:
-        a, model, nu, alpha, rw, c2 = _robust_scoring(x, active, tau, y, m_int, nt, n_samples, starts)
+        a, model, nu, alpha, rw, c2 = _robust_scoring(x, active, tau, y, edf, starts)
         starts = [rw]
         free = a > 0
         se = np.full(5, np.inf)
