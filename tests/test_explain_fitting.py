@@ -119,3 +119,19 @@ def test_spike_scan_amplitude_equals_gls_with_a_delta_column():
     assert len(peaks) == 1 and abs(int(peaks[0]) - 1234) <= 2
     assert detectors.bonferroni_z(1_000_000) == pytest.approx(5.730, abs=0.005)  # isf(0.005 / 1e6)
     assert detectors.expected_max_abs_z(1) == pytest.approx(0.6745, abs=1e-3)
+
+
+def test_spectral_lines_finds_an_incoherent_resonance_and_nothing_in_white_noise():
+    from scipy.signal import lfilter
+
+    from fogmon.explain.detectors import spectral_lines
+    fs, n = 100.0, 2 ** 17
+    rng = np.random.default_rng(21)
+    white = rng.normal(0.0, 1.0, n)
+    assert spectral_lines(white, fs, 0.05, 50.0) == []
+    # second-order resonance at 2.5 Hz (Q ~ 50): narrowband but random in phase, like vehicle sway
+    r, w0 = 1 - np.pi * 2.5 / fs / 50, 2 * np.pi * 2.5 / fs
+    sway = lfilter([1.0], [1.0, -2 * r * np.cos(w0), r * r], rng.normal(0.0, 0.05, n))
+    lines = spectral_lines(white + sway, fs, 0.05, 50.0)
+    assert lines and abs(lines[0][0] - 2.5) < 0.05 and lines[0][1] > 10
+    assert all(abs(f - lines[0][0]) > 0.1 * lines[0][0] for f, _ in lines[1:])

@@ -117,3 +117,35 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
     k = int(np.argmax(gain))
     n0 = sl.start + k
     return n0, float(b[n0] / A[n0]), float(gain[k])
+
+
+def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
+                   min_ratio: float = 10.0, max_lines: int = 3) -> list[tuple[float, float]]:
+    """Narrowband lines in ``y`` (deg/h) between f_lo_hz and f_hi_hz: local maxima of the
+    Welch PSD standing ``min_ratio`` times above the median PSD of that band (a
+    broadband noise shape has no such peak). Returns up to ``max_lines`` (frequency Hz,
+    peak / band median) pairs, strongest first. Invalid samples (NaN) are set to the
+    mean: this is a hint for the report, not a fit."""
+    from scipy.signal import find_peaks, welch
+
+    x = np.asarray(y, dtype=float)
+    ok = np.isfinite(x)
+    if ok.sum() < 256:
+        return []
+    x = np.where(ok, x - x[ok].mean(), 0.0)
+    f, p = welch(x, fs=fs_hz, nperseg=min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * fs_hz / max(f_lo_hz, 1e-9)))))))
+    band = (f >= f_lo_hz) & (f <= min(f_hi_hz, fs_hz / 2)) & (f > 0)
+    if band.sum() < 8:
+        return []
+    fb, pb = f[band], p[band]
+    med = float(np.median(pb))
+    if med <= 0:
+        return []
+    peaks, _ = find_peaks(pb, height=min_ratio * med)
+    best: list[int] = []
+    for i in sorted(peaks, key=lambda i: -pb[i]):  # one line per 10 % of frequency
+        if all(abs(fb[i] - fb[j]) > 0.1 * fb[j] for j in best):
+            best.append(i)
+        if len(best) == max_lines:
+            break
+    return [(float(fb[i]), float(pb[i] / med)) for i in best]

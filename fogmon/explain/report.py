@@ -13,6 +13,7 @@ import os
 
 import numpy as np
 
+from fogmon.explain.detectors import spectral_lines
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
 from fogmon.sim.model import save_model
@@ -97,7 +98,30 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
     else:
         parts.append("No catalogued effect passes BIC and the held-out check; the mismatch may come from "
                      "wrong noise coefficients or from physics outside the catalogue.")
+    hint = _line_hint(res, mism_after if res.accepted else mism)
+    if hint:
+        parts.append(hint)
     return " ".join(parts)
+
+
+def _line_hint(res: Result, left: list[dict]) -> str:
+    """For an excess no accepted effect explains: narrowband lines in the residual at the
+    frequencies that tau band responds to (a sinusoid of frequency f peaks in the ADEV
+    at tau = 0.371 / f), e.g. vehicle sway or drill-string vibration that is not one
+    coherent sinusoid over the record (so `periodic` cannot model it)."""
+    excess = [r for r in left if r["sign"] == "excess"]
+    if not excess:
+        return ""
+    r = excess[0]
+    fs = res.grid.fs_hz
+    lines = spectral_lines(res.residual_after, fs, 0.371 / (2.0 * r["tau_max_s"]), min(fs / 2, 0.371 / (0.5 * r["tau_min_s"])))
+    if not lines:
+        return ""
+    where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
+    return (f"The unexplained excess at tau {r['tau_min_s']:.3g}..{r['tau_max_s']:.3g} s goes with narrowband "
+            f"power in the residual at {where}: vibration or platform motion that is not one coherent "
+            f"sinusoid over the record (no catalogued effect models it); check the mounting and the "
+            f"vibration environment at those frequencies.")
 
 
 def build_report(res: Result, recording_path: str, model_path: str | None) -> dict:
