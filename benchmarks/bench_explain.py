@@ -13,8 +13,6 @@ import argparse
 import math
 import time
 
-import numpy as np
-
 from fogmon.davar.batch import dadev
 from fogmon.explain.explainer import Options, explain
 from fogmon.sim.model import Effect, Noise, SensorModel

@@ -16,8 +16,6 @@ from fogmon.errors import FogmonError
 
 MAGIC = "# fogmon replay log v1"
 REQUIRED = ("time_s", "rate_dph")
-#: Optional columns with a fixed meaning (CONTRACT section 1) and their units.
-KNOWN_AUX = {"temp_c": "deg C", "rot_dps": "deg/s", "vib_g": "g rms", "depth_m": "m"}
 
 
 @dataclass

@@ -7,7 +7,7 @@ import pytest
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import NAMES, fit_noise
 from fogmon.davar.result import AdevResult
-from fogmon.davar.theory import adev_model, sinusoid_adev
+from fogmon.davar.theory import adev_model
 from fogmon.recording import read_replay_log
 
 FS = 100.0

@@ -1,6 +1,5 @@
 """Whittle GLS, noise PSDs and matched detectors of fogmon.explain against independent
 references: time-domain least squares, IEEE-952 / exact AR(1) Allan variances, brute-force scans."""
-import math
 
 import numpy as np
 import pytest

@@ -85,11 +85,6 @@ def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
     return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.fs_hz)
 
 
-def _gls_columns(ctx: Context, X: np.ndarray):
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
-    return fit
-
-
 def _fmt(x: float, se: float) -> str:
     return f"{x:.4g} +- {se:.2g}"
 

@@ -29,7 +29,7 @@ from fogmon.explain import catalogue, detectors, mismatch
 from fogmon.explain.fitting import Whittle, calibrate_psd, model_psd, rfft_omega
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
-from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, validate_model
+from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import ramp_dph
 from fogmon.sim.simulate import iter_simulate
 

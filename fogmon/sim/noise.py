@@ -32,8 +32,10 @@ import math
 import numpy as np
 from scipy.signal import lfilter
 
+from fogmon.davar.theory import FLICKER_FACTOR
+
 #: flat flicker ADEV floor per unit B: sqrt(2 ln 2 / pi) = 0.6643
-FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
+FLICKER_FLOOR = math.sqrt(FLICKER_FACTOR)
 
 
 def white_std_dph(N_dpsh, fs_hz: float):
