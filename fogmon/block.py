@@ -50,6 +50,15 @@ class Block:
     def __len__(self) -> int:
         return len(self.t_s)
 
+    @property
+    def error_rate_dph(self) -> np.ndarray:
+        """The gyro's error against the reference rotation (CONTRACT 2: a gyro should read
+        3600 x rot_dps), deg/h: ``rate_dph - 3600 rot_dps``; ``rate_dph`` itself when the
+        block has no ``rot_dps``. NaN where either is unknown."""
+        if "rot_dps" not in self.aux:
+            return self.rate_dph
+        return self.rate_dph - 3600.0 * self.aux["rot_dps"]
+
     @staticmethod
     def make(t_s, rate_dph, valid=None, aux=None, events=()) -> "Block":
         """Build a block from array-likes; ``valid`` defaults to ``isfinite(rate)``;

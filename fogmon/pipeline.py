@@ -362,7 +362,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                 for s in sinks:
                     s.block(b)
                 _dispatch_events(sinks, b.events, event_counts)
-                y = analysed_rate(b) if use_ref else b.rate_dph
+                y = b.error_rate_dph if use_ref else b.rate_dph
                 res = engine.push(y, b.valid & np.isfinite(y))
                 if len(res):
                     fit = fit_noise(res)
@@ -424,10 +424,6 @@ class _Tail:
         return (np.concatenate([r for r, _ in self._parts]), np.concatenate([v for _, v in self._parts]))
 
 
-def analysed_rate(b: Block) -> np.ndarray:
-    """The gyro's error against the reference rotation, deg/h: rate_dph - 3600 x rot_dps
-    (NaN where rot_dps is unknown, so those samples count as invalid)."""
-    return b.rate_dph - 3600.0 * b.aux["rot_dps"]
 
 
 def record_samples(source) -> int | None:

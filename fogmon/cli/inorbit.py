@@ -26,7 +26,7 @@ def run(args) -> int:
         raise FogmonError(f"--pauta-k must be > 1, got {args.pauta_k}")
     rec = read_replay_log(args.recording)
     blk = rec.to_block()
-    rate = blk.rate_dph - 3600.0 * blk.aux["rot_dps"] if "rot_dps" in blk.aux else blk.rate_dph
+    rate = blk.error_rate_dph
     fs = rec.sample_rate_hz
     arw = arw_from_differences(rate, fs, args.pauta_k)  # differences across gaps are NaN, dropped
     print(f"in-orbit evaluation of {rec.name} ({len(rec)} samples at {fs:g} Hz, {rec.duration_s:.0f} s)")

@@ -42,9 +42,7 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
 def baseline_model(rec: Recording) -> SensorModel:
     """Stationary IEEE-952 model (no effects) fitted to ``rec``."""
     blk = rec.to_block()
-    y = blk.rate_dph.copy()
-    if "rot_dps" in blk.aux:
-        y = y - 3600.0 * blk.aux["rot_dps"]
+    y = blk.error_rate_dph
     ok = blk.valid & np.isfinite(y)
     if ok.sum() < 64:
         raise FogmonError(f"{rec.name}: too few valid samples ({int(ok.sum())}) to fit a baseline model")

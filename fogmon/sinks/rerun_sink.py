@@ -265,7 +265,7 @@ class RerunSink(Sink):
         tau = info.tau_s
         x_dec = (math.floor(np.log10(tau[0])), math.ceil(np.log10(tau[-1]))) if len(tau) else (-2, 2)
         error_rate = info.analysed != "rate_dph"
-        y = first.rate_dph - 3600.0 * first.aux["rot_dps"] if error_rate else first.rate_dph
+        y = first.error_rate_dph if error_rate else first.rate_dph
         y_dec = _adev_decades(y[first.valid & np.isfinite(y)], len(tau))
         bp = blueprint(info.aux_names, (x_dec, y_dec), error_rate)
         sinks = []
@@ -330,7 +330,7 @@ class RerunSink(Sink):
         rate = np.where(block.valid, block.rate_dph, np.nan)
         chans = {"rate/rate_dph": rate, **{f"aux/{k}": v for k, v in block.aux.items()}}
         if self.info.analysed != "rate_dph":
-            chans["rate/error_dph"] = rate - 3600.0 * block.aux["rot_dps"]
+            chans["rate/error_dph"] = np.where(block.valid, block.error_rate_dph, np.nan)
         self.dec.push(block.t_s, chans)
         if time.monotonic() - self._last_flush > FLUSH_WALL_S or self.dec.pending() >= FLUSH_SAMPLES:
             self._flush_raw()
