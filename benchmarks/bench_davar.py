@@ -1,7 +1,7 @@
 """Throughput of the DAVAR engines, measured against allantools in the same run.
 
 Prints samples/s of: the streaming engine (46 log-spaced taus, 2^16-sample window) at hop
-1 and hop 1024, both the engine alone (``StreamingDadev.advance``: window sums and counts)
+1 (running sums) and hop 1024 (recorded sums), both the engine alone (``StreamingDadev.advance``: window sums and counts)
 and with full frames (``push``: ADEV, chi-square bounds, EDF per window); the batch engine
 (``dadev``, hop 1024); recomputing ``allantools.oadev`` on every window at hop 1024; the
 ratios; and the resident memory growth over 1e7 streamed samples. Every figure is the

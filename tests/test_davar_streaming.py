@@ -47,21 +47,33 @@ def test_streaming_equals_batch_at_every_window(hop_s, reanchor):
         assert np.max(np.abs(got[k][ok] / ref[ok] - 1)) <= 1e-9, k
 
 
-def test_huge_glitches_and_gaps_leave_no_residue_in_any_window():
-    """1e6 deg/h glitches enter and leave a 2^16 window (the plain SIMD path must hand
-    over to exact recomputes); every emitted window still equals the batch engine."""
+@pytest.mark.parametrize("hop", [97, 37])  # recorded sums, running sums
+def test_huge_glitches_and_gaps_leave_no_residue_in_any_window(hop):
+    """1e6 deg/h glitches enter and leave a 2^16 window (running sums: the plain SIMD path
+    must hand over to exact recomputes; recorded sums: the cumulative sum carries them);
+    every emitted window still equals the batch engine."""
     n, w = 300000, 2**16
     y = rate(n, 9)
     valid = np.ones(n, bool)
     valid[n - w // 2:n - w // 2 + 7] = False
     y[[150000, n - w - 10, n - 100]] += 1e6
-    engine = StreamingDadev(1.0, w, hop_s=97, alpha=0)
+    engine = StreamingDadev(1.0, w, hop_s=hop, alpha=0)
     got = stream(engine, y, valid, seed=3)
-    ref = dadev(y, 1.0, w, 97, valid=valid, alpha=0)
+    ref = dadev(y, 1.0, w, hop, valid=valid, alpha=0)
     assert np.array_equal(got["n_terms"], ref.n_terms)
     assert np.nanmax(np.abs(got["adev_dph"] / ref.adev_dph - 1)) <= 1e-9
     cur = engine.current()
     assert np.max(np.abs(cur.adev_dph / oadev(y[-w:], 1.0, valid=valid[-w:]).adev_dph - 1)) <= 1e-9
+
+
+def test_hop_longer_than_the_window():
+    n = 20000
+    y = rate(n, 4)
+    batch = dadev(y, FS, 100.0, 130.0, taus=5)
+    got = stream(StreamingDadev(FS, 100.0, taus=5, hop_s=130.0), y, None, seed=2)
+    assert np.array_equal(got["end_index"], batch.end_index) and len(batch.end_index) == 15
+    assert np.array_equal(got["n_terms"], batch.n_terms)
+    assert np.max(np.abs(got["adev_dph"] / batch.adev_dph - 1)) <= 1e-9
 
 
 def test_current_is_the_last_window_and_the_filling_window():
@@ -102,15 +114,17 @@ def test_empty_push_and_no_window_yet():
     assert r.end_index.tolist() == [999]
 
 
-def test_no_drift_over_1e6_samples_with_a_1000_dph_bias():
-    """1e6 samples, 1000 deg/h bias, 2^14 window: the streamed final window equals an
-    exact recompute to 1e-9 (validation/davar_drift.py runs 1e8 samples)."""
-    n, w = 1_000_000, 2**14
+@pytest.mark.parametrize("hop", [2**14, 32])  # recorded sums, running sums
+def test_no_drift_over_1e6_samples_with_a_1000_dph_bias(hop):
+    """2^20 samples, 1000 deg/h bias, 2^14 window: the last emitted window equals an exact
+    recompute to 1e-9 (validation/davar_drift.py runs 1e8 samples)."""
+    n, w = 2**20, 2**14
     y = rate(n, 6)
     y[300000] += 1e6  # a huge glitch enters and leaves the window: no cancellation residue
-    engine = StreamingDadev(1.0, w, taus="octave", hop_s=w)
+    engine = StreamingDadev(1.0, w, taus="octave", hop_s=hop)
     for i in range(0, n, 65536):
-        engine.push(y[i:i + 65536])
-    cur = engine.current()
+        ends, sums, counts = engine.advance(y[i:i + 65536])
+    assert ends[-1] == n - 1
     ref = oadev(y[-w:], 1.0)
-    assert np.max(np.abs(cur.adev_dph / ref.adev_dph - 1)) <= 1e-9
+    assert np.array_equal(counts[-1], ref.n_terms)
+    assert np.max(np.abs(np.sqrt(sums[-1] / (2 * counts[-1])) / ref.adev_dph - 1)) <= 1e-9

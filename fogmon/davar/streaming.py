@@ -1,14 +1,19 @@
-"""Streaming dynamic Allan deviation (Galleani's fast DAVAR recursion), rate in deg/h.
+"""Streaming dynamic Allan deviation, rate in deg/h: O(M) work per sample for M taus,
+whatever the window length, and no per-window recomputation.
 
-Per averaging factor m the engine keeps the compensated sum of squared overlapping terms
-in the current window and the count of valid ones. A new sample adds the term ending at
-it and removes the term starting at the sample that left: O(M) work per sample for M
-taus, whatever the window length. Terms come from prefix sums of (rate - reference
-level) in a linear buffer of ``window + reanchor`` samples; when it is full the last
-window is moved to the front, re-referenced to its mean and every sum recomputed exactly
-(O(window x M) every ``reanchor`` samples), so float drift and cancellation stay bounded
-over any run length. Emitting a window is reading the sums: hop 1 costs no more than
-hop 1024 in the engine.
+Terms of factor m come from prefix sums of (rate - reference level) in a linear buffer of
+``window + reanchor`` samples; when it is full the last window moves to the front and is
+re-referenced to its mean, so an hours-long bias never costs precision. Two modes:
+
+- recorded sums (hop >= RECORD_MIN_HOP, the usual case): per m only the term ending at
+  each new sample is computed and added to a cumulative sum; the cumulative sum at each
+  future window's first term is recorded (window / hop records per tau) and a window's
+  sum is the cumulative sum at its last sample minus that record. Nothing ever leaves a
+  sum, so nothing cancels: no drift and no recompute, over any run length.
+- running sums (small hops, Galleani's fast DAVAR recursion): per m the window's sum; a
+  new sample adds the term ending at it and removes the term starting at the sample that
+  left. Re-anchoring recomputes every sum exactly, and a rounding bound forces exact
+  recomputes before a cancellation (a huge glitch leaving) could cost precision.
 """
 from __future__ import annotations
 
@@ -20,14 +25,16 @@ from fogmon.davar.batch import _prepare, _samples, alpha_rows, row_alpha, statis
 from fogmon.davar.result import AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 
+RECORD_MIN_HOP = 64  # samples; below it the window / hop records per tau would outgrow the buffer
+
 
 class StreamingDadev:
     """Sliding-window overlapping ADEV of a rate stream sampled at ``rate_hz`` (Hz) over
     windows of ``window_s`` (s), emitted every ``hop_s`` (s, default window_s / 4) once
     the first window is complete. ``alpha``: noise type per tau for the confidence
     bounds (default: dominant term of an IEEE-952 fit, refreshed at most every
-    max(hop, window / 4) samples). ``reanchor``: samples between exact recomputes
-    (default max(4 x window, 4096))."""
+    max(hop, window / 4) samples). ``reanchor``: samples between re-references (and,
+    with running sums, exact recomputes; default max(4 x window, 4096))."""
 
     def __init__(self, rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
                  confidence: float = 0.683, alpha=None, reanchor: int | None = None):
@@ -48,9 +55,16 @@ class StreamingDadev:
         self._ref = 0.0  # reference level (deg/h) subtracted before the prefix sums
         self._ref_set = False
         nm = len(self.m)
+        # recorded sums: the cumulative sum of squared terms (s + c) and valid-term count (n)
+        # per tau, and their records at the window starts to come; running sums: the window's
+        self._recorded = self.hop >= RECORD_MIN_HOP
         self._s = np.zeros(nm)
         self._c = np.zeros(nm)
         self._n = np.zeros(nm, dtype=np.int64)
+        ring = (self.window - 1) // self.hop + 2 if self._recorded else 0
+        self._rec_s = np.zeros((nm, ring))
+        self._rec_c = np.zeros((nm, ring))
+        self._rec_n = np.zeros((nm, ring), dtype=np.int64)
         self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
         self._alpha_prev = None  # (alpha, end index) of the last fitted window, see batch.alpha_rows
 
@@ -92,7 +106,8 @@ class StreamingDadev:
         while i < len(y):
             if self._len == cap:
                 self._ref = kernels.stream_reanchor(self._y, self._v, self._p, self._bad, self._len, w,
-                                                    self.m, self._s, self._c, self._n, self._err)
+                                                    self.m, self._s, self._c, self._n, self._err,
+                                                    not self._recorded)
                 self._base += self._len - w
                 self._len = w
             take = min(len(y) - i, cap - self._len)
@@ -102,18 +117,25 @@ class StreamingDadev:
                 self._ref_set = True
             kernels.stream_append(yc, vc, self._y, self._v, self._p, self._bad, self._len, self._ref)
             row_end = row + int(np.searchsorted(ends[row:], self._base + self._len + take))
-            kernels.stream_update(self._len, take, w, self.m, self._p, self._bad, self._s, self._c, self._n,
-                                  self._err, ends[row:row_end] - self._base, sums[row:row_end],
-                                  counts[row:row_end])
+            if self._recorded:
+                kernels.stream_record(self._len, take, self._base, w, self.hop, self.m, self._p, self._bad,
+                                      self._s, self._c, self._n, self._rec_s, self._rec_c, self._rec_n,
+                                      k0 + row, sums[row:row_end], counts[row:row_end])
+            else:
+                kernels.stream_update(self._len, take, w, self.m, self._p, self._bad, self._s, self._c,
+                                      self._n, self._err, ends[row:row_end] - self._base, sums[row:row_end],
+                                      counts[row:row_end])
             self._len += take
             i += take
             row = row_end
         return ends, sums, counts
 
     def current(self) -> AdevResult:
-        """Overlapping ADEV of the current (possibly still filling) window."""
+        """Overlapping ADEV of the current (possibly still filling) window, whatever the
+        hop: an exact recompute, O(window x taus)."""
         n = min(self.n_pushed, self.window)
-        alpha = self.alpha if self.alpha is not None else row_alpha(self._s + self._c, self._n, self.m, n)
-        adev, lo, hi, edf = statistics(self._s + self._c, self._n, self.m, n, alpha, self.confidence)
-        return AdevResult(self.m / self.rate_hz, self.m, adev, lo, hi, edf, self._n.copy(), self.rate_hz, n,
+        sums, counts = kernels.window_sums_exact(self._p, self._bad, self._len - n, n, self.m)
+        alpha = self.alpha if self.alpha is not None else row_alpha(sums, counts, self.m, n)
+        adev, lo, hi, edf = statistics(sums, counts, self.m, n, alpha, self.confidence)
+        return AdevResult(self.m / self.rate_hz, self.m, adev, lo, hi, edf, counts, self.rate_hz, n,
                           self.confidence)
