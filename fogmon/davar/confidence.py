@@ -4,6 +4,8 @@ sigma_hat^2 ~ sigma^2 chi2_nu / nu with nu from Greenhall & Riley's EDF algorith
 (``allantools.ci.edf_greenhall``, overlapping ADEV, d = 2). The noise type alpha
 (S_y ~ f^alpha) per tau comes from the dominant IEEE-952 term (``ALPHA_OF_TERM``) or from
 the caller. When gaps remove terms, nu is scaled by the fraction of terms still valid.
+For the noise fit: the EDF of a noise mixture (``edf_mixture``) and the exact covariance
+of Allan variance estimates across taus (``avar_relative_covariance``).
 """
 from __future__ import annotations
 
@@ -141,6 +143,106 @@ def mixture_matrices(m, n_samples: int) -> np.ndarray:
 def _mixture_matrices(m: tuple, n_samples: int) -> np.ndarray:
     return np.array([_mixture_matrix(k, n_samples) if 2 * k <= n_samples else np.full((4, 4), np.nan)
                      for k in m]).reshape(len(m), 4, 4)
+
+
+_SECOND_DIFF = np.array([1.0, -2.0, 1.0])
+"""An Allan term of factor m is (X[j + 2m] - 2 X[j + m] + X[j]) / m, X = cumsum(rate)."""
+_EXACT_SEGMENT = 48  # lag segments up to this long are summed term by term
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(12)
+
+
+def _phase_acv(t: np.ndarray, alpha: int) -> np.ndarray:
+    """Generalized autocovariance (up to a constant) of the phase X = cumsum(rate) at
+    lag ``t`` (samples) for rate noise type ``alpha`` 0, -1, -2: exact at integer lags
+    for discrete white rate (-|t|) and random-walk rate ((|t|^3 - |t|)) noise,
+    Greenhall's continuous t^2 ln|t| for flicker."""
+    a = np.abs(t)
+    if alpha == 0:
+        return -a
+    if alpha == -2:
+        return a**3 - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(a > 0, t * t * np.log(np.where(a > 0, a, 1.0)), 0.0)
+
+
+def _term_xcov(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
+    """Correlation of the Allan term of factor ``ma`` at j with that of ``mb`` at j + lag."""
+    def raw(lg, m1, m2):
+        off = (np.arange(3)[None, :] * m2 - np.arange(3)[:, None] * m1).ravel()
+        return (np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel() * _phase_acv(lg[..., None] + off, alpha)).sum(-1)
+    zero = np.zeros(1)
+    return raw(lag, ma, mb) / np.sqrt(raw(zero, ma, ma)[0] * raw(zero, mb, mb)[0])
+
+
+def _pair_count(lag: np.ndarray, ma_terms: int, mb_terms: int) -> np.ndarray:
+    """Number of term pairs (j, j + lag) with 0 <= j < ma_terms and 0 <= j + lag < mb_terms."""
+    return np.maximum(np.minimum(ma_terms, mb_terms - lag) - np.maximum(0, -lag), 0).astype(np.float64)
+
+
+def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
+    """C[k, l] = sum over lags of N(lag) rho_k(lag) rho_l(lag) for the overlapping Allan
+    variances of factors ma and mb (noise types MIX_ALPHAS; rho the cross-correlation of
+    their terms, N the number of term pairs at that lag): the relative covariance of the
+    two Allan variances of a mixture is 2 g'Cg / (M_a M_b), g_k = sqrt(f_a,k f_b,k).
+    Lags run over the terms' overlap (plus 4 max(ma, mb) for flicker's tail): summed
+    exactly on segments up to 48 lags between the kinks p ma - q mb, by 12-point
+    Gauss-Legendre (exact for the white and random-walk polynomials) on longer ones."""
+    n_a, n_b = n_samples - 2 * ma + 1, n_samples - 2 * mb + 1
+    kinks = (np.arange(3)[:, None] * ma - np.arange(3)[None, :] * mb).ravel()
+    lo = max(kinks.min() - 4 * max(ma, mb), -(n_a - 1))
+    hi = min(kinks.max() + 4 * max(ma, mb), n_b - 1) + 1
+    knots = np.unique(np.clip(np.concatenate([kinks, [lo, hi, 0, n_b - n_a]]), lo, hi))
+    lags, wts = [], []
+    for a, b in zip(knots[:-1], knots[1:]):
+        if b - a <= _EXACT_SEGMENT:
+            lags.append(np.arange(a, b, dtype=np.float64))
+            wts.append(np.ones(b - a))
+        else:  # the kink lag itself, then the smooth lags a + 1 .. b - 1 as an integral
+            half = 0.5 * (b - a - 1)
+            lags += [np.array([float(a)]), half * _GAUSS_X + 0.5 * (a + b)]
+            wts += [np.ones(1), half * _GAUSS_W]
+    lag = np.concatenate(lags)
+    w = np.concatenate(wts) * _pair_count(lag, n_a, n_b)
+    rho = [_term_xcov(lag, ma, mb, al) for al in MIX_ALPHAS[1:]]
+    # white angle noise: X is white, so terms correlate only at the kink lags
+    k_lag, inv = np.unique(kinks, return_inverse=True)
+    k_lag = k_lag.astype(np.float64)
+    rho_q = np.bincount(inv, weights=np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel(), minlength=len(k_lag)) / 6.0
+    w_q = _pair_count(k_lag, n_a, n_b)
+    c = np.empty((4, 4))
+    c[0, 0] = np.sum(w_q * rho_q**2)
+    for k, al in enumerate(MIX_ALPHAS[1:]):
+        c[0, k + 1] = c[k + 1, 0] = np.sum(w_q * rho_q * _term_xcov(k_lag, ma, mb, al))
+        for l in range(k, 3):
+            c[k + 1, l + 1] = c[l + 1, k + 1] = np.sum(w * rho[k] * rho[l])
+    return c
+
+
+def covariance_matrices(m, n_samples: int) -> np.ndarray:
+    """The (len(m), len(m), 4, 4) matrices ``_cross_matrix`` of every pair of averaging
+    factors ``m`` over ``n_samples`` gap-free rate samples (cached per grid; all 2 m <= n)."""
+    return _covariance_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
+
+
+@lru_cache(maxsize=64)
+def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
+    out = np.empty((len(m), len(m), 4, 4))
+    for a in range(len(m)):
+        for b in range(a, len(m)):
+            out[a, b] = out[b, a] = _cross_matrix(m[a], m[b], n_samples)
+    return out
+
+
+def avar_relative_covariance(fractions: np.ndarray, matrices: np.ndarray, n_terms_full: np.ndarray) -> np.ndarray:
+    """Covariance of overlapping Allan variance estimates across taus, relative to the
+    product of their expectations (T x T; diagonal 2 / EDF), for Gaussian noise whose
+    Allan variance at each tau is split by ``fractions`` (T x 4, MIX_ALPHAS) over white
+    angle, white rate, flicker and random-walk rate noise: exact (it is a quadratic form
+    in the data: cov = 2 tr(A S B S)), from ``covariance_matrices`` and the gap-free term
+    counts n - 2 m + 1."""
+    f = np.asarray(fractions, dtype=np.float64)
+    g = np.sqrt(f[:, None, :] * f[None, :, :])
+    return 2.0 * np.einsum("abk,abkl,abl->ab", g, matrices, g) / np.outer(n_terms_full, n_terms_full)
 
 
 @lru_cache(maxsize=64)

@@ -3,9 +3,11 @@
 Model sigma^2(tau) = sum_n A_n tau^n, n = -2..2, A_n >= 0 (theory.POWERS). Each
 iteration solves a non-negative least-squares problem with weights
 nu_i / (2 sigma_model_i^4) - the inverse variance of sigma_hat_i^2 under the model, with
-nu_i the Greenhall EDF of the noise type that dominates the model at tau_i - which is
-Fisher scoring for the chi-square likelihood. Intervals come from the Fisher information
-of the final fit; a term is identifiable when its 95 % interval excludes zero.
+nu_i the EDF of the noise mixture the model predicts at tau_i - which is Fisher scoring
+for the chi-square likelihood (made robust by Tukey reweighting). Standard errors come
+from the sandwich covariance of this estimator with the exact covariance of the Allan
+variances across taus for that mixture (confidence.avar_relative_covariance); a term is
+identifiable when its 95 % interval excludes zero.
 """
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ import numpy as np
 from scipy.optimize import brentq, nnls
 from scipy.stats import norm
 
-from fogmon.davar.confidence import ALPHA_OF_TERM, edf_mixture_from, mixture_matrices
+from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
+                                     edf_mixture_from, mixture_matrices)
 from fogmon.davar.result import AdevResult, DadevResult
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
@@ -104,24 +107,38 @@ _MIX_OF_TERM = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1],
 """Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
 
 
-class _EdfModel:
-    """EDF per tau of Allan variances whose noise is the mixture a model A predicts (white
-    rate noise where the model is still empty), scaled for gaps: the mixture matrices of
-    ``m`` and ``n_samples`` computed once per fit."""
+class _NoiseModel:
+    """Sampling statistics of the Allan variances of a record whose noise is the mixture a
+    model A predicts (white rate noise where the model is still empty): EDF per tau
+    (``__call__``) and relative covariance across taus (``relative_covariance``), both
+    scaled for gaps; the mixture matrices of ``m`` and ``n_samples`` computed once per fit,
+    the cross-tau ones only when first needed."""
 
     def __init__(self, tau, m, n_terms, n_samples: int):
         self.x = np.asarray(tau, dtype=np.float64)[:, None] ** POWERS
+        self.m, self.n_samples = m, n_samples
         self.mats = mixture_matrices(m, n_samples)
         full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
         self.full = full.astype(np.float64)
         self.gap_scale = np.asarray(n_terms) / full
 
-    def __call__(self, a: np.ndarray) -> np.ndarray:
+    def fractions(self, a: np.ndarray) -> np.ndarray:
+        """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per tau."""
         contrib = self.x * a
         total = contrib.sum(axis=1)
         frac = (contrib @ _MIX_OF_TERM) / np.where(total > 0, total, 1.0)[:, None]
         frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
-        return edf_mixture_from(frac, self.mats, self.full) * self.gap_scale
+        return frac
+
+    def __call__(self, a: np.ndarray) -> np.ndarray:
+        return edf_mixture_from(self.fractions(a), self.mats, self.full) * self.gap_scale
+
+    def relative_covariance(self, a: np.ndarray) -> np.ndarray:
+        """Covariance of the Allan variance estimates relative to the model (T x T); gaps
+        scale it by 1 / sqrt(gap_scale_i gap_scale_j), as they scale the EDF."""
+        cov = avar_relative_covariance(self.fractions(a), covariance_matrices(self.m, self.n_samples), self.full)
+        g = 1.0 / np.sqrt(self.gap_scale)
+        return cov * np.outer(g, g)
 
 
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -131,18 +148,11 @@ def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return b / scale
 
 
-# Correlation of overlapping Allan variances one octave apart, by dominant noise type
-# alpha (measured on 300 simulated records of 2^16 samples each: white angle 0.5, white
-# rate 0.55, flicker 0.68, random walk 0.88); k octaves apart it falls as rho^(k^1.6)
-# (measured two octaves apart: 0.18, 0.30, 0.67 for white, flicker, random walk).
-_RHO_OF_ALPHA = {2: 0.5, 0: 0.55, -1: 0.68, -2: 0.88}
-
-
-def _scoring(x, cols, tau, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
+def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
     """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x), robust
     weights ``rw`` (0..1 per tau), EDF model ``edf`` and model-inadequacy variance ``c2``,
     from the terms ``a`` (default: the data as model), until the model moves less than
-    ``rtol``: returns (A >= 0 over all 5 terms, model, nu, alpha at the final model)."""
+    ``rtol``: returns (A >= 0 over all 5 terms, model, nu at the final model)."""
     if a is None or not np.any(a[cols] > 0):
         model, a = y.copy(), np.zeros(5)
     else:
@@ -158,7 +168,7 @@ def _scoring(x, cols, tau, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
         a, model = a_new, model_new
         if done:
             break
-    return a, model, edf(a), dominant_alpha(a, tau)
+    return a, model, edf(a)
 
 
 def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -167,18 +177,18 @@ def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (1.0 - u2) ** 2, 1.0 - (1.0 - u2) ** 3
 
 
-def _robust_scoring(x, cols, tau, y, edf, starts):
+def _robust_scoring(x, cols, y, edf, starts):
     """Fisher scoring iteratively reweighted by Tukey's biweight of the standardized log
     residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
     vector in ``starts`` in turn; keeps the solution with the least total Tukey loss (an
     earlier start wins ties) and stops early when a solution rejects no tau; the winner
-    is then scored to full precision. Returns (A, model, nu, alpha, robust weights,
+    is then scored to full precision. Returns (A, model, nu, robust weights,
     model-inadequacy variance c2)."""
     best, best_loss = None, np.inf
     for rw in starts:
         a, c2 = None, 0.0
         for _ in range(_MAX_ROBUST_ITER):
-            a, model, nu, alpha = _scoring(x, cols, tau, y, edf, rw, a, c2, rtol=_ROBUST_RTOL)
+            a, model, nu = _scoring(x, cols, y, edf, rw, a, c2, rtol=_ROBUST_RTOL)
             r = np.log(y / model)
             rw_new, loss = _tukey(r / np.sqrt(2.0 / nu + MISFIT_FLOOR**2))
             c2_new = _excess_variance(r, 2.0 / nu, rw_new, int(np.sum(a > 0)))
@@ -191,7 +201,7 @@ def _robust_scoring(x, cols, tau, y, edf, starts):
         if np.all(rw > 0):
             break
     a, rw, c2 = best
-    return (*_scoring(x, cols, tau, y, edf, rw, a, c2), rw, c2)
+    return (*_scoring(x, cols, y, edf, rw, a, c2), rw, c2)
 
 
 def _excess_variance(r, v, rw, n_free: int) -> float:
@@ -214,18 +224,16 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def _sandwich_se(x, model, nu, alpha, m, cols, rw, c2) -> np.ndarray:
-    """Standard errors of A over ``cols`` for the EDF-weighted estimator with robust
-    weights ``rw`` and model-inadequacy variance ``c2``, with the correlation of Allan
-    variances at neighbouring taus (sandwich covariance)."""
+def _sandwich_se(x, model, rel_cov, cols, rw, nu, c2) -> np.ndarray:
+    """Standard errors of A over ``cols`` for the EDF-weighted estimator (weights
+    rw / ((2 / nu + c2) model^2)) from the sandwich covariance with the exact covariance
+    of the Allan variances across taus ``rel_cov`` (relative to the model) plus the
+    model-inadequacy variance ``c2`` (relative, independent per tau)."""
     xs = x[:, cols]
     scale = np.linalg.norm(xs, axis=0)
     xs = xs / scale
     w = rw / ((2.0 / nu + c2) * model**2)
-    sd = model * np.sqrt(2.0 / nu + c2)
-    rho = np.sqrt(np.array([_RHO_OF_ALPHA.get(int(a), 0.55) for a in alpha]))
-    octaves = np.abs(np.log2(m[:, None] / m[None, :])) ** 1.6
-    cov_y = np.outer(sd, sd) * np.outer(rho, rho) ** octaves
+    cov_y = np.outer(model, model) * (rel_cov + c2 * np.eye(len(model)))
     wx = w[:, None] * xs
     bread = np.linalg.pinv(xs.T @ wx)
     cov = bread @ (wx.T @ cov_y @ wx) @ bread
@@ -250,18 +258,18 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
         return np.full(5, np.nan), np.full(5, np.nan), misfit
     tau, y, nt = tau[ok], avar[ok], np.asarray(n_terms)[ok]
     m_int = np.asarray(m, dtype=np.int64)[ok]
-    m_f = m_int.astype(np.float64)
     x = tau[:, None] ** POWERS
     active = np.ones(5, dtype=bool)
     starts = _starts(len(y))
-    edf = _EdfModel(tau, m_int, nt, n_samples)
+    edf = _NoiseModel(tau, m_int, nt, n_samples)
     while True:
-        a, model, nu, alpha, rw, c2 = _robust_scoring(x, active, tau, y, edf, starts)
+        a, model, nu, rw, c2 = _robust_scoring(x, active, y, edf, starts)
         starts = [rw]
         free = a > 0
         se = np.full(5, np.inf)
+        rel_cov = edf.relative_covariance(a)
         if free.any():
-            se[free] = _sandwich_se(x, model, nu, alpha, m_f, free, rw, c2)
+            se[free] = _sandwich_se(x, model, rel_cov, free, rw, nu, c2)
         weak = free & (a - IDENTIFY_Z * se <= 0)
         if not weak.any():
             break
@@ -269,7 +277,7 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
     for n in np.flatnonzero(~free):  # upper limits: the term's error if fitted with the others
         cols = free.copy()
         cols[n] = True
-        se[n] = _sandwich_se(x, model, nu, alpha, m_f, cols, rw, c2)[int(np.sum(cols[:n]))]
+        se[n] = _sandwich_se(x, model, rel_cov, cols, rw, nu, c2)[int(np.sum(cols[:n]))]
     misfit[ok] = rw == 0
     return a, se, misfit
 

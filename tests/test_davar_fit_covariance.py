@@ -1,0 +1,72 @@
+"""Covariance of overlapping Allan variances across taus (the fit's sandwich intervals):
+exact quadratic-form reference, Monte Carlo, and agreement with the mixture EDF."""
+import numpy as np
+import pytest
+from scipy.signal import fftconvolve
+
+from fogmon.davar.confidence import avar_relative_covariance, covariance_matrices, edf_mixture
+
+
+def _term_matrix(m: int, n: int) -> np.ndarray:
+    """Rows: the overlapping Allan terms of factor m as filters of n rate samples."""
+    d = np.zeros((n - 2 * m + 1, n))
+    for j in range(n - 2 * m + 1):
+        d[j, j:j + m], d[j, j + m:j + 2 * m] = -1.0 / m, 1.0 / m
+    return d
+
+
+def test_relative_covariance_equals_the_exact_quadratic_form():
+    # q_m = y'A_m y with A_m = D_m'D_m / (2 M): cov(q_a, q_b) = 2 tr(A_a S A_b S), E q = tr(A S);
+    # S = sum of white angle (D D'), white rate (I) and random-walk rate (L L') covariances
+    n = 256
+    m = np.array([1, 2, 3, 7, 16, 30, 50, 64])  # 30-64: lag segments past 48, the quadrature path
+    diff = np.eye(n, n + 1, 1) - np.eye(n, n + 1)
+    walk = np.tril(np.ones((n, n)))
+    parts = [diff @ diff.T, np.eye(n), 1e-3 * walk @ walk.T]
+    a = [_term_matrix(k, n).T @ _term_matrix(k, n) / (2.0 * (n - 2 * k + 1)) for k in m]
+    s = sum(parts)
+    mean = np.array([np.trace(ak @ s) for ak in a])
+    b = [ak @ s for ak in a]
+    ref = np.array([[2.0 * np.sum(bi * bj.T) for bj in b] for bi in b]) / np.outer(mean, mean)
+    frac = np.array([[np.trace(ak @ p) for p in parts] for ak in a]) / mean[:, None]
+    assert np.all(frac.max(axis=0) > 0.5)  # each class dominates some taus: a real mixture
+    frac = np.column_stack([frac[:, 0], frac[:, 1], np.zeros(len(m)), frac[:, 2]])
+    got = avar_relative_covariance(frac, covariance_matrices(m, n), n - 2 * m + 1)
+    np.testing.assert_allclose(got, ref, rtol=5e-4)  # measured 1.2e-4: midpoint error of the quadrature
+
+
+def _avars(y: np.ndarray, m: np.ndarray) -> np.ndarray:
+    c = np.concatenate([np.zeros((len(y), 1)), np.cumsum(y, axis=1)], axis=1)
+    return np.array([0.5 * np.mean(((c[:, 2 * k:] - 2 * c[:, k:-k] + c[:, :-2 * k]) / k) ** 2, axis=1)
+                     for k in m]).T
+
+
+def test_flicker_correlation_across_octaves_matches_monte_carlo():
+    # Kasdin's discrete flicker; the continuous (Greenhall) form holds from m ~ 16
+    rng = np.random.default_rng(21)
+    n, reps = 4096, 1500
+    m = np.array([16, 32, 64, 128, 256])
+    k = np.arange(1, n)
+    h = np.concatenate([[1.0], np.cumprod((k - 0.5) / k)])
+    y = fftconvolve(rng.normal(size=(reps, n)), h[None, :], axes=1)[:, :n]
+    q = _avars(y, m)
+    emp = np.corrcoef(q.T)
+    got = avar_relative_covariance(np.tile([0.0, 0.0, 1.0, 0.0], (len(m), 1)), covariance_matrices(m, n),
+                                   n - 2 * m + 1)
+    corr = got / np.sqrt(np.outer(np.diag(got), np.diag(got)))
+    # Monte Carlo standard error of a correlation ~ (1 - rho^2) / sqrt(reps) <= 0.026
+    np.testing.assert_allclose(corr[np.triu_indices(len(m), 1)], emp[np.triu_indices(len(m), 1)], atol=0.08)
+    assert corr[0, 1] == pytest.approx(0.68, abs=0.05) and corr[0, 2] == pytest.approx(0.33, abs=0.05)
+    var_ratio = np.var(q / q.mean(axis=0), axis=0) / np.diag(got)
+    assert np.all(np.abs(var_ratio - 1.0) < 0.12)  # variance of a variance: ~4 % standard error
+
+
+def test_diagonal_is_the_mixture_edf():
+    n = 2**16
+    m = 2 ** np.arange(15)
+    rng = np.random.default_rng(2)
+    frac = rng.dirichlet(np.ones(4), size=len(m))
+    frac[:8, 2] = 0.0  # flicker: Greenhall's finite-m form below m = 256, the continuous one here
+    frac /= frac.sum(axis=1, keepdims=True)
+    cov = avar_relative_covariance(frac, covariance_matrices(m, n), n - 2 * m + 1)
+    np.testing.assert_allclose(2.0 / np.diag(cov), edf_mixture(frac, m, n), rtol=5e-3)
