@@ -156,7 +156,6 @@ def _sq_term(psum, bad, j, m):
 
 _TILE = 1024  # samples per tile of the streaming update: 4 taus' term arrays stay in L1
 _EPS = 2.0**-52
-_MAX_SEGMENTS = 8  # emission points per tile up to which windows come from segment sums
 _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain path may accumulate
 
 
@@ -187,24 +186,13 @@ def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
 
 
 @njit(cache=True, fastmath=True)
-def _tile_totals(x_in, x_out, n, cuts, n_cuts, seg):
-    """(sum of x_in - x_out, sum of x_in + x_out) over n samples, any order (SIMD); also
-    ``seg[c]`` = sum of x_in - x_out over cuts[c-1] <= i < cuts[c] (cuts[-1] = 0,
-    cuts[n_cuts] = n): the change up to each emission point, without a sequential scan."""
+def _tile_totals(x_in, x_out, n):
+    """(sum of x_in - x_out, sum of x_in + x_out) over n samples, in any order (SIMD)."""
     d = 0.0
     a = 0.0
-    i0 = 0
-    for c in range(n_cuts + 1):
-        i1 = cuts[c] if c < n_cuts else n
-        u = x_in[i0:i1]  # slices indexed from 0: no wrap-around checks, SIMD
-        v = x_out[i0:i1]
-        sd = 0.0
-        for i in range(i1 - i0):
-            sd += u[i] - v[i]
-            a += u[i] + v[i]
-        seg[c] = sd
-        d += sd
-        i0 = i1
+    for i in range(n):
+        d += x_in[i] - x_out[i]
+        a += x_in[i] + x_out[i]
     return d, a
 
 
@@ -249,7 +237,7 @@ def window_sum(psum, bad, start, w, m, scratch, exact):
 
 @njit(cache=True)
 def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
-    """Slide the window over buffer positions ``first .. first + n_new - 1`` (already
+    """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over buffer positions ``first .. first + n_new - 1`` (already
     appended; the buffer holds at least the ``w`` samples before ``first`` or starts at
     the record's first sample, position 0 then meaning absolute index 0). For every m the
     term ending at each new sample enters and the term starting at the sample that left
@@ -292,17 +280,12 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
     ks = np.empty(4, np.int64)
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
-    cuts = np.empty(_TILE + 1, np.int64)
-    seg = np.empty((4, _TILE + 1))
     e_tile = e_head
     for t0 in range(start, stop, _TILE):
         n = min(_TILE, stop - t0)
         e_end = e_tile
         while e_end < emit_pos.shape[0] and emit_pos[e_end] < t0 + n:
-            cuts[e_end - e_tile] = emit_pos[e_end] - t0 + 1
             e_end += 1
-        # few emission points: windows from SIMD segment sums; many (small hops): one scan
-        n_cuts = e_end - e_tile if e_end - e_tile <= _MAX_SEGMENTS else 0
         for g in range(0, nm, 4):
             has_dn = False
             plain = True
@@ -311,7 +294,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
                 ks[j] = k
                 wrote[j] = _tile_terms(psum, bad, ms[k], w, t0, n, xi[j], xo[j], dn[j])
                 has_dn |= wrote[j]
-                tot[j], mag = _tile_totals(xi[j], xo[j], n, cuts, n_cuts, seg[j])
+                tot[j], mag = _tile_totals(xi[j], xo[j], n)
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
                 bound = err[k] + grow[j]
@@ -320,18 +303,11 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
                 if not wrote[j]:
                     dn[j, :n] = 0
             if plain:
-                if has_dn or n_cuts < e_end - e_tile:
+                if has_dn or e_end > e_tile:
                     _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
                                 out_sums, out_counts)
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
-                        if not (has_dn or n_cuts < e_end - e_tile):  # windows from the segment sums
-                            k = ks[j]
-                            run = 0.0
-                            for c in range(n_cuts):
-                                run += seg[j, c]
-                                out_sums[e_tile + c, k] = sum_s[k] + (sum_c[k] + run)
-                                out_counts[e_tile + c, k] = cnt[k]
                         s, r = _two_sum(sum_s[ks[j]], tot[j])
                         sum_s[ks[j]] = s
                         sum_c[ks[j]] += r
