@@ -107,24 +107,44 @@ _MIX_OF_TERM = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1],
 """Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
 
 
+SKELETON_PER_OCTAVE = 4
+"""Above m = 16 the cross-tau correlation is computed on at most this many taus per octave
+(``_skeleton``): denser grids ("all": n / 4 taus) share the correlations of the nearest."""
+
+
+def _skeleton(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Taus on which the fit computes the exact cross-tau correlation: every m <= 16, above
+    that m rounded to SKELETON_PER_OCTAVE per octave (a grid no denser is kept as is).
+    Returns (skeleton m, index of each m's skeleton tau)."""
+    m = np.asarray(m, dtype=np.int64)
+    step = np.log2(m) * SKELETON_PER_OCTAVE
+    dense = np.any((m[1:] > 16) & (np.diff(step) < 1.0)) if len(m) > 1 else False
+    near = np.where(m <= 16, m, np.round(2.0 ** (np.round(step) / SKELETON_PER_OCTAVE)).astype(np.int64))
+    return np.unique(near if dense else m, return_inverse=True)
+
+
 class _NoiseModel:
     """Sampling statistics of the Allan variances of a record whose noise is the mixture a
     model A predicts (white rate noise where the model is still empty): EDF per tau
-    (``__call__``) and relative covariance across taus (``relative_covariance``), both
-    scaled for gaps; the mixture matrices of ``m`` and ``n_samples`` computed once per fit,
-    the cross-tau ones only when first needed."""
+    (``__call__``, scaled for gaps) and covariance across taus relative to the model
+    (``relative_covariance``); the mixture matrices of ``m`` and ``n_samples`` computed
+    once per fit, the cross-tau ones (cached per grid) only when first needed."""
 
     def __init__(self, tau, m, n_terms, n_samples: int):
-        self.x = np.asarray(tau, dtype=np.float64)[:, None] ** POWERS
-        self.m, self.n_samples = m, n_samples
+        tau = np.asarray(tau, dtype=np.float64)
+        self.x = tau[:, None] ** POWERS
+        self.n_samples = n_samples
         self.mats = mixture_matrices(m, n_samples)
         full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
         self.full = full.astype(np.float64)
         self.gap_scale = np.asarray(n_terms) / full
+        self.skel_m, self.skel_of = _skeleton(m)
+        self.skel_x = (self.skel_m * (tau[0] / m[0]))[:, None] ** POWERS
 
-    def fractions(self, a: np.ndarray) -> np.ndarray:
-        """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per tau."""
-        contrib = self.x * a
+    def fractions(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
+        """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per
+        tau (rows of ``x``, default the fitted taus)."""
+        contrib = (self.x if x is None else x) * a
         total = contrib.sum(axis=1)
         frac = (contrib @ _MIX_OF_TERM) / np.where(total > 0, total, 1.0)[:, None]
         frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
@@ -134,11 +154,17 @@ class _NoiseModel:
         return edf_mixture_from(self.fractions(a), self.mats, self.full) * self.gap_scale
 
     def relative_covariance(self, a: np.ndarray) -> np.ndarray:
-        """Covariance of the Allan variance estimates relative to the model (T x T); gaps
-        scale it by 1 / sqrt(gap_scale_i gap_scale_j), as they scale the EDF."""
-        cov = avar_relative_covariance(self.fractions(a), covariance_matrices(self.m, self.n_samples), self.full)
-        g = 1.0 / np.sqrt(self.gap_scale)
-        return cov * np.outer(g, g)
+        """Covariance of the Allan variance estimates relative to the model (T x T): the
+        exact cross-tau correlation (``confidence.avar_relative_covariance``, on the
+        skeleton taus) times the standard deviations sqrt(2 / EDF) (gaps included)."""
+        cov = avar_relative_covariance(self.fractions(a, self.skel_x),
+                                       covariance_matrices(self.skel_m, self.n_samples),
+                                       self.n_samples - 2.0 * self.skel_m + 1)
+        sd = np.sqrt(np.diag(cov))
+        corr = (cov / np.outer(sd, sd))[np.ix_(self.skel_of, self.skel_of)]
+        np.fill_diagonal(corr, 1.0)
+        v = np.sqrt(2.0 / self(a))
+        return corr * np.outer(v, v)
 
 
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
