@@ -126,9 +126,9 @@ def _skeleton(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class _NoiseModel:
     """Sampling statistics of the Allan variances of a record whose noise is the mixture a
     model A predicts (white rate noise where the model is still empty): EDF per tau
-    (``__call__``, scaled for gaps) and covariance across taus relative to the model
-    (``relative_covariance``); the mixture matrices of ``m`` and ``n_samples`` computed
-    once per fit, the cross-tau ones (cached per grid) only when first needed."""
+    (``__call__``, scaled for gaps) and correlation across taus (``correlation``); the
+    mixture matrices of ``m`` and ``n_samples`` computed once per fit, the cross-tau ones
+    (cached per grid) only when first needed."""
 
     def __init__(self, tau, m, n_terms, n_samples: int):
         tau = np.asarray(tau, dtype=np.float64)
@@ -153,18 +153,17 @@ class _NoiseModel:
     def __call__(self, a: np.ndarray) -> np.ndarray:
         return edf_mixture_from(self.fractions(a), self.mats, self.full) * self.gap_scale
 
-    def relative_covariance(self, a: np.ndarray) -> np.ndarray:
-        """Covariance of the Allan variance estimates relative to the model (T x T): the
-        exact cross-tau correlation (``confidence.avar_relative_covariance``, on the
-        skeleton taus) times the standard deviations sqrt(2 / EDF) (gaps included)."""
+    def correlation(self, a: np.ndarray) -> np.ndarray:
+        """Correlation of the Allan variance estimates across the fitted taus (T x T):
+        exact for the model's mixture (``confidence.avar_relative_covariance``), computed
+        on the skeleton taus."""
         cov = avar_relative_covariance(self.fractions(a, self.skel_x),
                                        covariance_matrices(self.skel_m, self.n_samples),
                                        self.n_samples - 2.0 * self.skel_m + 1)
         sd = np.sqrt(np.diag(cov))
         corr = (cov / np.outer(sd, sd))[np.ix_(self.skel_of, self.skel_of)]
         np.fill_diagonal(corr, 1.0)
-        v = np.sqrt(2.0 / self(a))
-        return corr * np.outer(v, v)
+        return corr
 
 
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -250,16 +249,18 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def _sandwich_se(x, model, rel_cov, cols, rw, nu, c2) -> np.ndarray:
+def _sandwich_se(x, model, corr, cols, rw, nu, c2) -> np.ndarray:
     """Standard errors of A over ``cols`` for the EDF-weighted estimator (weights
-    rw / ((2 / nu + c2) model^2)) from the sandwich covariance with the exact covariance
-    of the Allan variances across taus ``rel_cov`` (relative to the model) plus the
-    model-inadequacy variance ``c2`` (relative, independent per tau)."""
+    rw / ((2 / nu + c2) model^2)): sandwich covariance with the Allan variances' standard
+    deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and their exact
+    correlation across taus ``corr`` (applied to the inadequacy part too: a misfit is
+    smooth in tau)."""
     xs = x[:, cols]
     scale = np.linalg.norm(xs, axis=0)
     xs = xs / scale
     w = rw / ((2.0 / nu + c2) * model**2)
-    cov_y = np.outer(model, model) * (rel_cov + c2 * np.eye(len(model)))
+    sd = model * np.sqrt(2.0 / nu + c2)
+    cov_y = np.outer(sd, sd) * corr
     wx = w[:, None] * xs
     bread = np.linalg.pinv(xs.T @ wx)
     cov = bread @ (wx.T @ cov_y @ wx) @ bread
@@ -293,9 +294,9 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
         starts = [rw]
         free = a > 0
         se = np.full(5, np.inf)
-        rel_cov = edf.relative_covariance(a)
+        corr = edf.correlation(a)
         if free.any():
-            se[free] = _sandwich_se(x, model, rel_cov, free, rw, nu, c2)
+            se[free] = _sandwich_se(x, model, corr, free, rw, nu, c2)
         weak = free & (a - IDENTIFY_Z * se <= 0)
         if not weak.any():
             break
@@ -303,7 +304,7 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
     for n in np.flatnonzero(~free):  # upper limits: the term's error if fitted with the others
         cols = free.copy()
         cols[n] = True
-        se[n] = _sandwich_se(x, model, rel_cov, cols, rw, nu, c2)[int(np.sum(cols[:n]))]
+        se[n] = _sandwich_se(x, model, corr, cols, rw, nu, c2)[int(np.sum(cols[:n]))]
     misfit[ok] = rw == 0
     return a, se, misfit
 
