@@ -148,8 +148,9 @@ def stream_append(y, valid, yraw, vraw, psum, bad, length, ref):
 @njit(cache=True, inline="always")
 def _sq_term(psum, bad, j, m):
     """Squared term of factor m starting at buffer position j, 0 when it spans a gap;
-    and 1 or 0 for its validity."""
-    t = ((psum[j + 2 * m] - psum[j + m]) - (psum[j + m] - psum[j])) / m
+    and 1 or 0 for its validity. Bit-identical to the vectorised passes (``* (1 / m)``),
+    so that a term entering one way and leaving the other cancels exactly."""
+    t = ((psum[j + 2 * m] - psum[j + m]) - (psum[j + m] - psum[j])) * (1.0 / m)
     ok = bad[j + 2 * m] == bad[j]
     return (t * t if ok else 0.0), (1 if ok else 0)
 
@@ -277,6 +278,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
     dn = np.empty((4, _TILE), np.int64)
     tot = np.empty(4)
     grow = np.empty(4)
+    bnd = np.empty(4)
     ks = np.empty(4, np.int64)
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
@@ -297,15 +299,16 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
                 tot[j], mag = _tile_totals(xi[j], xo[j], n)
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
-                bound = err[k] + grow[j]
-                plain &= bound == 0.0 or bound <= _BOUND_RTOL * (sum_s[k] + sum_c[k] + tot[j])
-            for j in range(4 if has_dn or not plain else 0):  # dn is read: zero the unwritten rows
+                plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
+            for j in range(4 if has_dn or not plain or e_end > e_tile else 0):  # dn may be read: zero unwritten rows
                 if not wrote[j]:
                     dn[j, :n] = 0
+            if plain and (has_dn or e_end > e_tile):  # the bound must also hold at every emitted window
+                for j in range(4):
+                    bnd[j] = err[ks[j]] + grow[j]
+                plain = _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
+                                    cnt, out_sums, out_counts)
             if plain:
-                if has_dn or e_end > e_tile:
-                    _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
-                                out_sums, out_counts)
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
                         s, r = _two_sum(sum_s[ks[j]], tot[j])
@@ -324,9 +327,11 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
 
 
 @njit(cache=True)
-def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, out_sums, out_counts):
-    """Write the windows emitted in a plain tile (running sums from the tile's start)
-    and advance the valid-term counts over the tile."""
+def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, out_sums, out_counts):
+    """Write the windows emitted in a plain tile (running sums from the tile's start) and
+    advance the valid-term counts over the tile. Returns False, changing no state, when
+    an emitted window's sum is too small for the rounding bound ``bnd`` (per slot) of
+    the plain sums (a huge term left inside the tile): the caller redoes the tile exactly."""
     k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
     s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
     c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
@@ -345,10 +350,13 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, c
                 n1 += dn[1, i]
                 n2 += dn[2, i]
                 n3 += dn[3, i]
-        out_sums[e, k0] = s0 + (c0 + p0)
-        out_sums[e, k1] = s1 + (c1 + p1)
-        out_sums[e, k2] = s2 + (c2 + p2)
-        out_sums[e, k3] = s3 + (c3 + p3)
+        w0, w1, w2, w3 = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
+        if not (_within(bnd[0], w0) and _within(bnd[1], w1) and _within(bnd[2], w2) and _within(bnd[3], w3)):
+            return False
+        out_sums[e, k0] = w0
+        out_sums[e, k1] = w1
+        out_sums[e, k2] = w2
+        out_sums[e, k3] = w3
         out_counts[e, k0] = n0
         out_counts[e, k1] = n1
         out_counts[e, k2] = n2
@@ -362,6 +370,13 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, c
             n3 += dn[3, i]
     # slots past the last tau repeat it with the same values
     cnt[k3], cnt[k2], cnt[k1], cnt[k0] = n3, n2, n1, n0
+    return True
+
+
+@njit(cache=True, inline="always")
+def _within(bound, window_sum):
+    """A rounding bound small enough for a window sum (deg/h)^2."""
+    return bound == 0.0 or bound <= _BOUND_RTOL * window_sum
 
 
 @njit(cache=True)
