@@ -238,9 +238,10 @@ def window_sum(psum, bad, start, w, m, scratch, exact):
 
 @njit(cache=True)
 def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
-    """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over buffer positions ``first .. first + n_new - 1`` (already
-    appended; the buffer holds at least the ``w`` samples before ``first`` or starts at
-    the record's first sample, position 0 then meaning absolute index 0). For every m the
+    """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
+    buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
+    least the ``w`` samples before ``first`` or starts at the record's first sample,
+    position 0 then meaning absolute index 0). For every m the
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``.
@@ -300,7 +301,8 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
                 plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
-            for j in range(4 if has_dn or not plain or e_end > e_tile else 0):  # dn may be read: zero unwritten rows
+            # dn is read by the emission scan and the exact path: zero the unwritten rows
+            for j in range(4 if has_dn or not plain or e_end > e_tile else 0):
                 if not wrote[j]:
                     dn[j, :n] = 0
             if plain and (has_dn or e_end > e_tile):  # the bound must also hold at every emitted window
