@@ -23,6 +23,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from fogmon.block import Block, Event
+from fogmon.cli.values import number, positive
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
 from fogmon.errors import FogmonError, FogmonWarning
 
@@ -50,13 +51,13 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
     """Options of `fogmon replay` and `fogmon monitor` (``replay=False``: no --realtime):
     engine, sinks, pacing."""
     g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
-    g.add_argument("--window-s", type=_positive_float, metavar="W",
+    g.add_argument("--window-s", type=positive, metavar="W",
                    help="window length in s. Default: replay: a quarter of the recording (of its first "
                         "--duration-s s) rounded down to a power of two of samples, within "
                         f"{MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} samples; live: {LIVE_WINDOW_SAMPLES} samples "
                         "(65.5 s at 1 kHz, 655.4 s at 100 Hz), or that rule applied to --duration-s when it "
                         "gives a shorter window")
-    g.add_argument("--hop-s", type=_positive_float, metavar="H",
+    g.add_argument("--hop-s", type=positive, metavar="H",
                    help="a new ADEV + noise fit every H s of recording time, at most the window "
                         "(default: window/8)")
     g.add_argument("--raw-rate", action="store_true",
@@ -80,37 +81,17 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "keeps serving after a replay until Ctrl-C")
     o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
                    help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
-    o.add_argument("--port", type=_port, default=9876, help="port --serve listens on, 1..65535 (default 9876)")
+    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876, help="port --serve listens on, 1..65535 (default 9876)")
     o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     o.add_argument("--quiet", action="store_true", help="no console summary at the end")
     p = parser.add_argument_group("pacing")
     if "--duration-s" not in parser._option_string_actions:  # the source options may define it
-        p.add_argument("--duration-s", type=_positive_float, metavar="S",
+        p.add_argument("--duration-s", type=positive, metavar="S",
                        help="stop after S s of recording time")
     if replay and "--realtime" not in parser._option_string_actions:
-        p.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="X",
+        p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
                        help="pace a replay at X times real time (default X = 1 when given; "
                             "without --realtime a replay runs as fast as it can)")
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return v
-
-
-def _port(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 1 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"a TCP port is 1..65535, got {text!r}")
-    return v
 
 
 def parse_taus(text: str):
