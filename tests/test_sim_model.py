@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.sim.model import (EFFECT_KINDS, Effect, Noise, SensorModel, dumps_model, load_model,
                               save_model, validate_effect, validate_model)
@@ -153,6 +154,52 @@ def test_cli_model_missing_a_noise_key_exit_2_naming_file_and_key(tmp_path):
     assert r.returncode == 2 and not out.exists()
     assert r.stderr == ("fogmon sim: error: gyro.toml: [noise] missing N_dpsh [deg/sqrt(h) (angle random walk)]: "
                         "every IEEE-952 term is required (0.0 for a term the gyro does not have)\n")
+
+
+EXAMPLE = str(DATA / "example_model.toml")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--duration-s", "-1"], "argument --duration-s: must be a finite number > 0, got '-1'"),
+    (["--duration-s", "inf"], "argument --duration-s: must be a finite number > 0, got 'inf'"),
+    (["--duration-s", "nan"], "argument --duration-s: must be a finite number > 0, got 'nan'"),
+    (["--duration-s", "1", "--seed", "-3"], "argument --seed: must be an integer >= 0, got '-3'"),
+    (["--duration-s", "1", "--seed", "1.5"], "argument --seed: must be an integer >= 0, got '1.5'"),
+])
+def test_cli_sim_bad_values_are_usage_errors(tmp_path, capsys, argv, message):
+    out = tmp_path / "o.csv"
+    with pytest.raises(SystemExit) as e:
+        main(["sim", "--model", EXAMPLE, "--out", str(out), *argv])
+    assert e.value.code == 2 and not out.exists()
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"fogmon: error: {message}"
+
+
+@pytest.mark.parametrize("out, extra, message", [
+    ("{tmp}/nodir/o.csv", [], "--out {tmp}/nodir/o.csv: folder {tmp}/nodir does not exist"),
+    ("{tmp}", [], "--out {tmp}: is a folder, give a file name"),
+    ("/proc/o.csv", [], "--out /proc/o.csv: cannot write: No such file or directory"),
+    ("{tmp}/like.csv", ["--like", "{tmp}/like.csv"], "--out {tmp}/like.csv: is the input {tmp}/like.csv; write to "
+                                                    "another file"),
+    ("{tmp}/o.csv", ["--duration-s", "1e15"], "--out {tmp}/o.csv: 1e+17 samples take at least 4e+17 bytes, the "
+                                              "folder has "),
+    ("{tmp}/o.csv", ["--scenario", "orbit", "--duration-s", "0.5"], "scenario orbit: duration_s 0.5 s holds fewer "
+                                                                    "than 2 samples at rate_hz 1 Hz"),
+    ("{tmp}/o.csv", ["--scenario", "chamber", "--set", "plateaus_c=20,nan"], "scenario chamber: parameter plateaus_c: "
+                                                                             "bad value '20,nan'"),
+])
+def test_cli_sim_bad_outputs_fail_at_once_and_create_nothing(tmp_path, capsys, out, extra, message):
+    from fogmon.recording import write_replay_log
+    like = tmp_path / "like.csv"
+    write_replay_log(like, [0.0, 0.01, 0.02], [1.0, 2.0, 3.0], meta={"sample_rate_hz": 100})
+    before = sorted(tmp_path.iterdir())
+    fmt = {"tmp": tmp_path}
+    argv = ["sim", "--model", EXAMPLE, "--out", out.format(**fmt), *[a.format(**fmt) for a in extra]]
+    if not extra:
+        argv += ["--duration-s", "1"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon sim: error: {message.format(**fmt)}") and err.count("\n") == 1
+    assert sorted(tmp_path.iterdir()) == before and like.read_text().endswith("0.02,3\n")
 
 
 def test_dumps_names_units():
