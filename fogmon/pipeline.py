@@ -147,7 +147,7 @@ def window_and_hop(args: argparse.Namespace, rate_hz: float, total_n: int | None
         if total_n is None:  # live: the live window unless --duration-s asks for a shorter run
             window_s = min(window_s, default_window_s(rate_hz, None))
     if n_run is not None and window_s * rate_hz > n_run:
-        what = "the recording" if n_run == total_n else "the run (--duration-s)"
+        what = "the recording" if n_run == total_n else "the --duration-s run"
         raise FogmonError(f"--window-s {window_s:g} s is longer than {what} "
                           f"({n_run / rate_hz:g} s = {n_run} samples)")
     if window_s * rate_hz < 8:

@@ -92,7 +92,7 @@ def test_replay_bad_option_values_are_usage_errors(log, capsys, argv, message):
     (["--window-s", "20", "--hop-s", "30"], "--hop-s 30 s is longer than the window (20 s): the samples between "
                                             "windows would never be analysed"),
     (["--window-s", "1000"], "--window-s 1000 s is longer than the recording (240 s = 12000 samples)"),
-    (["--duration-s", "60", "--window-s", "100"], "--window-s 100 s is longer than the run (--duration-s) "
+    (["--duration-s", "60", "--window-s", "100"], "--window-s 100 s is longer than the --duration-s run "
                                                   "(60 s = 3000 samples)"),
     (["--duration-s", "0.001"], "--duration-s 0.001 s is shorter than one sample at 50 Hz"),
     (["--duration-s", "0.1"], "--duration-s leaves 5 samples at 50 Hz: an Allan deviation needs at least 8"),
