@@ -4,6 +4,7 @@ warning, a silent device exits 1 with one line, a run shorter than one window sa
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -133,6 +134,37 @@ def test_silent_can_bus_exits_1_with_one_line_and_leaves_nothing(tmp_path, capsy
     assert line.startswith(f"fogmon monitor: nothing was received from CAN GYRO_RATE.rate (deg/s), 100 Hz on "
                            f"virtual:{ch} in ") and line.endswith(" s; no archive written")
     assert not arch.exists()
+
+
+def test_can_bus_with_only_foreign_frames_exits_1_naming_what_arrived(tmp_path, capsys):
+    import threading
+
+    import can
+
+    ch = f"foreign-{uuid.uuid4().hex}"
+    arch = tmp_path / "arch"
+    stop = threading.Event()
+
+    def send():  # frames the DBC does not describe, until the monitor has finished
+        with can.Bus(interface="virtual", channel=ch) as bus:
+            while not stop.is_set():
+                bus.send(can.Message(arbitration_id=0x7FF, data=bytes(8), is_extended_id=False))
+                stop.wait(0.01)
+
+    sender = threading.Thread(target=send, daemon=True)
+    sender.start()
+    try:
+        rc = main(["monitor", "--can", ch, "--interface", "virtual", "--dbc", DBC, "--duration-s", "1",
+                   "--archive", str(arch), "--no-progress"])
+    finally:
+        stop.set()
+        sender.join(10)
+    cap = capsys.readouterr()
+    assert rc == 1 and cap.out == "" and len(cap.err.splitlines()) == 1
+    assert re.fullmatch(rf"fogmon monitor: no sample decoded from CAN GYRO_RATE\.rate \(deg/s\), 100 Hz on "
+                        rf"virtual:{ch} in [\d.]+ s although [\d,]+ CAN frames arrived \(other_frames [\d,]+\): check "
+                        rf"--protocol/--baud or --dbc/--can-message; the raw input is in {arch}\n", cap.err), cap.err
+    assert (arch / "frames.asc").stat().st_size > 0
 
 
 def test_run_shorter_than_the_window_says_why():
