@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import os
 import sys
@@ -113,7 +114,8 @@ def run(args) -> int:
                 append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
                 n += int(v.sum())
     except BaseException:
-        os.remove(args.out)  # no half-written replay log
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(args.out)  # no half-written replay log
         raise
     print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
     return 0
