@@ -15,6 +15,7 @@ import queue
 import sys
 import threading
 import time
+import warnings
 from collections import Counter, deque
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
@@ -22,7 +23,9 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from fogmon.block import Block, Event
-from fogmon.errors import FogmonError
+from fogmon.cli.values import number, positive
+from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
+from fogmon.errors import FogmonError, FogmonWarning
 
 #: IEEE-952 coefficients in the order they are shown, with their units.
 COEFFICIENTS = {"Q_arcsec": "arcsec", "N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h",
@@ -48,19 +51,25 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
     """Options of `fogmon replay` and `fogmon monitor` (``replay=False``: no --realtime):
     engine, sinks, pacing."""
     g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
-    g.add_argument("--window-s", type=_positive_float, metavar="W",
-                   help="window length in s. Default: replay: a quarter of the recording rounded "
-                        f"down to a power of two of samples, within {MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} "
-                        f"samples; live: {LIVE_WINDOW_SAMPLES} samples (65.5 s at 1 kHz)")
-    g.add_argument("--hop-s", type=_positive_float, metavar="H",
-                   help="a new ADEV + noise fit every H s of recording time (default: window/8)")
+    g.add_argument("--window-s", type=positive, metavar="W",
+                   help="window length in s. Default: replay: a quarter of the recording (of its first "
+                        "--duration-s s) rounded down to a power of two of samples, within "
+                        f"{MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} samples; live: {LIVE_WINDOW_SAMPLES} samples "
+                        "(65.5 s at 1 kHz, 655.4 s at 100 Hz), or that rule applied to --duration-s when it "
+                        "gives a shorter window")
+    g.add_argument("--hop-s", type=positive, metavar="H",
+                   help="a new ADEV + noise fit every H s of recording time, at most the window "
+                        "(default: window/8)")
     g.add_argument("--raw-rate", action="store_true",
                    help="analyse rate_dph as recorded even when the recording has rot_dps; by default "
                         "DAVAR and the fits see the gyro's error rate_dph - 3600 x rot_dps (deg/h) "
                         "against the reference rotation")
     g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
-                   help="averaging times: octave (default), decade, all, an integer N (N log-spaced "
-                        "per decade) or comma-separated tau values in s; always tau <= window/4")
+                   help="averaging times: octave (default), decade, all, an integer N = "
+                        f"1..{MAX_PER_DECADE} (N log-spaced per decade), or tau values in s written with a "
+                        "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
+                        "one sample <= tau <= window/4 can be computed: other values are left out with a "
+                        "warning")
     o = parser.add_argument_group("output (Rerun)")
     o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
                    "open it with `rerun OUT.rrd`")
@@ -72,36 +81,30 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "keeps serving after a replay until Ctrl-C")
     o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
                    help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
-    o.add_argument("--port", type=int, default=9876, help="port --serve listens on (default 9876)")
+    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876, help="port --serve listens on, 1..65535 (default 9876)")
     o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     o.add_argument("--quiet", action="store_true", help="no console summary at the end")
     p = parser.add_argument_group("pacing")
     if "--duration-s" not in parser._option_string_actions:  # the source options may define it
-        p.add_argument("--duration-s", type=_positive_float, metavar="S",
+        p.add_argument("--duration-s", type=positive, metavar="S",
                        help="stop after S s of recording time")
     if replay and "--realtime" not in parser._option_string_actions:
-        p.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="X",
+        p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
                        help="pace a replay at X times real time (default X = 1 when given; "
                             "without --realtime a replay runs as fast as it can)")
 
 
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
-    return v
-
-
 def parse_taus(text: str):
-    """``--taus`` value -> what ``tau_grid`` takes: a grid name, an int per decade, or tau_s array."""
+    """``--taus`` value -> what ``tau_grid`` takes: a grid name, an int per decade
+    (1..MAX_PER_DECADE), or a tau_s array (values with a decimal point or comma-separated)."""
     s = text.strip().lower()
     if s in ("octave", "decade", "all"):
         return s
     if s.isdigit():
-        return int(s)
+        try:
+            return check_per_decade(int(s))
+        except FogmonError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
     try:
         tau_s = np.array([float(x) for x in s.split(",")], dtype=np.float64)
     except ValueError:
@@ -122,6 +125,40 @@ def default_window_s(rate_hz: float, n_samples: int | None) -> float:
     n = 2 ** int(math.floor(math.log2(quarter)))
     n = min(max(n, MIN_WINDOW_SAMPLES), MAX_WINDOW_SAMPLES, n_samples)
     return n / rate_hz
+
+
+def window_and_hop(args: argparse.Namespace, rate_hz: float, total_n: int | None) -> tuple[float, float]:
+    """Window and hop (s) from ``--window-s``/``--hop-s`` or their defaults, checked
+    against the sample rate and the samples the run will have (the record's ``total_n``,
+    None when live, cut to ``--duration-s``); FogmonError naming the option otherwise."""
+    duration_s = getattr(args, "duration_s", None)
+    n_run = total_n
+    if duration_s is not None:
+        n_cut = round(duration_s * rate_hz)
+        if n_cut < 1:
+            raise FogmonError(f"--duration-s {duration_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+        n_run = n_cut if total_n is None else min(total_n, n_cut)
+    if n_run is not None and n_run < 8:
+        what = "the recording has" if n_run == total_n else "--duration-s leaves"
+        raise FogmonError(f"{what} {n_run} samples at {rate_hz:g} Hz: an Allan deviation needs at least 8")
+    window_s = getattr(args, "window_s", None)
+    if window_s is None:
+        window_s = default_window_s(rate_hz, n_run)
+        if total_n is None:  # live: the live window unless --duration-s asks for a shorter run
+            window_s = min(window_s, default_window_s(rate_hz, None))
+    if n_run is not None and window_s * rate_hz > n_run:
+        what = "the recording" if n_run == total_n else "the --duration-s run"
+        raise FogmonError(f"--window-s {window_s:g} s is longer than {what} "
+                          f"({n_run / rate_hz:g} s = {n_run} samples)")
+    if window_s * rate_hz < 8:
+        raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {rate_hz:g} Hz")
+    hop_s = getattr(args, "hop_s", None) or window_s / 8
+    if hop_s * rate_hz < 1:
+        raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+    if hop_s > window_s:
+        raise FogmonError(f"--hop-s {hop_s:g} s is longer than the window ({window_s:g} s): the samples "
+                          f"between windows would never be analysed")
+    return window_s, hop_s
 
 
 # ----------------------------------------------------------------------------- sinks
@@ -175,6 +212,7 @@ class Summary:
     t_last_s: float = math.nan
     n_windows: int = 0
     wall_s: float = 0.0
+    source_wall_s: float = 0.0    # wall time from opening the source to the end of the run, s
     interrupted: bool = False
     analysed: str = "rate_dph"    # what DAVAR analysed (see StreamInfo.analysed)
     failed: bool = False          # stopped by an error (reported by the caller, no summary)
@@ -294,15 +332,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
 
     rate_hz = float(source.rate_hz)
     total_n = record_samples(source)
-    window_s = getattr(args, "window_s", None) or default_window_s(rate_hz, total_n)
-    if total_n is not None and window_s * rate_hz > total_n:
-        raise FogmonError(f"--window-s {window_s:g} s is longer than the recording "
-                          f"({total_n / rate_hz:g} s = {total_n} samples)")
-    if window_s * rate_hz < 8:
-        raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {rate_hz:g} Hz")
-    hop_s = getattr(args, "hop_s", None) or window_s / 8
-    if hop_s * rate_hz < 1:
-        raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+    window_s, hop_s = window_and_hop(args, rate_hz, total_n)
     taus = getattr(args, "taus", "octave")
     engine = StreamingDadev(rate_hz, window_s, taus=taus, hop_s=hop_s)
     if sinks is None:
@@ -318,7 +348,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     tail = _Tail(OVERALL_MAX_SAMPLES)
     event_counts: Counter = Counter()
     started = False
-    wall0 = time.monotonic()
+    wall0 = wall_start = time.monotonic()
     t_origin = None
     done = False
     use_ref = False
@@ -390,14 +420,19 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         if reader is not None:
             reader.join()
         summary.wall_s = time.monotonic() - wall0
+        summary.source_wall_s = time.monotonic() - wall_start
         summary.counters = dict(getattr(source, "counters", {}) or {})
         summary.event_counts = dict(event_counts)
         try:
             rate, valid = tail.arrays()
             if len(rate) >= 8:
-                summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
-                summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
-                summary.overall_fit = fit_noise(summary.overall)
+                try:
+                    summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
+                except FogmonError as e:  # a run shorter than the window can be too short for every tau
+                    warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning)
+                else:
+                    summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
+                    summary.overall_fit = fit_noise(summary.overall)
         finally:
             for s in sorted(sinks, key=lambda k: getattr(k, "finish_order", 0)):
                 s.finish(summary)

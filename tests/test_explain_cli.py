@@ -55,15 +55,22 @@ def test_concealed_periodic_is_found_fitted_and_removed(tmp_path, capsys):
     line = np.sin(2 * np.pi * raw.t_s / 300.0 + 0.7)
     assert abs(np.dot(raw.rate_dph - raw.rate_dph.mean(), line)) / np.dot(line, line) > 0.2 * SIGMA
     assert abs(np.dot(cor.rate_dph - cor.rate_dph.mean(), line)) / np.dot(line, line) < 0.03 * SIGMA
-    out = capsys.readouterr().out
-    assert "score before" in out and "periodic" in out
+    cap = capsys.readouterr()
+    assert "score before" in cap.out and "periodic" in cap.out
+    stages = cap.err.splitlines()     # progress on stderr: stages as lines (the bar only on a terminal)
+    assert stages[:3] == [f"fogmon explain: reading {rec}",
+                          "fogmon explain: bootstrap null: 30 simulations of the model like the recording",
+                          "fogmon explain: mismatch map and candidate effects"]
+    assert stages[3].startswith("fogmon explain: effect 1: periodic (score ")
+    assert stages[-1] == f"fogmon explain: writing {rep_p}"
 
 
-def test_null_recording_gives_no_effect_and_no_region(tmp_path):
+def test_null_recording_gives_no_effect_and_no_region(tmp_path, capsys):
     rec, model = _write(tmp_path, [], seed=11)
     rep_p = tmp_path / "rep.json"
     assert main(["explain", str(rec), "--model", str(model), "--report", str(rep_p), "--bootstrap", "30",
                  "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")    # --quiet: no progress, no summary
     rep = json.loads(rep_p.read_text())
     assert rep["effects"] == [] and rep["mismatches"] == []
     assert rep["score_before"] <= 1.5 and "explains the recording" in rep["verdict"]
@@ -86,7 +93,7 @@ def test_fitted_model_resimulated_like_the_recording_stays_inside_the_bootstrap_
 
 
 def _err(capsys, argv):
-    rc = main(argv)
+    rc = main([*argv, "--quiet"])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and "\n" not in err and "Traceback" not in err
     return err
@@ -106,3 +113,55 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
     assert "too short for the 1000 s map window" in _err(
         capsys, ["explain", str(rec), "--model", str(model), "--report", rep, "--window-s", "1000"])
     assert "no such file" in _err(capsys, ["explain", str(tmp_path / "nope.csv"), "--report", rep])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--bootstrap", "100000000"], "argument --bootstrap: must be an integer in 8..10000, got '100000000'"),
+    (["--bootstrap", "7"], "argument --bootstrap: must be an integer in 8..10000, got '7'"),
+    (["--seed", "-1"], "argument --seed: must be an integer >= 0, got '-1'"),
+    (["--max-effects", "-1"], "argument --max-effects: must be an integer >= 0, got '-1'"),
+    (["--window-s", "inf"], "argument --window-s: must be a finite number > 0, got 'inf'"),
+    (["--alpha", "nan"], "argument --alpha: must be a finite number > 0 and <= 0.5, got 'nan'"),
+])
+def test_bad_option_values_are_usage_errors(tmp_path, capsys, argv, message):
+    with pytest.raises(SystemExit) as e:
+        main(["explain", str(tmp_path / "rec.csv"), "--report", str(tmp_path / "r.json"), *argv])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"fogmon: error: {message}"
+
+
+@pytest.mark.parametrize("opts, message", [
+    (["--report", "{tmp}/no/r.json"], "--report {tmp}/no/r.json: folder {tmp}/no does not exist"),
+    (["--report", "{tmp}"], "--report {tmp}: is a folder, give a file name"),
+    (["--report", "/proc/r.json"], "--report /proc/r.json: cannot write: No such file or directory"),
+    (["--report", "{tmp}/r.json", "--out-model", "{tmp}"], "--out-model {tmp}: is a folder, give a file name"),
+    (["--report", "{tmp}/r.json", "--rrd", "{tmp}/no/e.rrd"], "--rrd {tmp}/no/e.rrd: folder {tmp}/no does not "
+                                                               "exist"),
+    (["--report", "{tmp}/r.json", "--out-corrected", "{tmp}/rec.csv"], "--out-corrected {tmp}/rec.csv: is the "
+                                                                       "input {tmp}/rec.csv; write to another file"),
+    (["--report", "{tmp}/r.json", "--out-model", "{tmp}/r.json"], "--out-model {tmp}/r.json: also given as --report"),
+])
+def test_unwritable_outputs_fail_before_any_work_and_create_nothing(tmp_path, capsys, opts, message):
+    rec, _ = _write(tmp_path, [], duration_s=600.0)
+    before = sorted(tmp_path.iterdir())
+    opts = [o.format(tmp=tmp_path) for o in opts]
+    assert main(["explain", str(rec), *opts]) == 2
+    assert capsys.readouterr().err == f"fogmon explain: error: {message.format(tmp=tmp_path)}\n"  # no stage ran
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def test_progress_bar_on_a_terminal():
+    import io
+    from fogmon.cli.explain import StageProgress
+
+    s = io.StringIO()
+    p = StageProgress(s, bar=True)
+    p("bootstrap null: 3 simulations")
+    for i in range(1, 4):
+        p("bootstrap", i, 3)
+    p("writing r.json")
+    assert s.getvalue() == ("fogmon explain: bootstrap null: 3 simulations\n"
+                            "\r  [##########                    ] 1/3 bootstrap"
+                            "\r  [####################          ] 2/3 bootstrap"
+                            "\r  [##############################] 3/3 bootstrap\n"
+                            "fogmon explain: writing r.json\n")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.sim.model import (EFFECT_KINDS, Effect, Noise, SensorModel, dumps_model, load_model,
                               save_model, validate_effect, validate_model)
@@ -69,37 +70,50 @@ def test_defaults_filled_and_ints_become_floats():
     assert e.params["k0_poly_dph"] == [0.0, 1.0] and isinstance(e.params["k1_pos"], float)
 
 
-@pytest.mark.parametrize("name", ["example_model.toml", "example_mwd_model.toml", "example_chamber_model.toml"])
-def test_example_models_load(name):
-    m = load_model(DATA / name)
+@pytest.mark.parametrize("path", sorted(DATA.glob("*.toml")) + sorted((DATA.parents[1] / "replay_logs").glob("*.toml")),
+                         ids=lambda p: p.name)
+def test_bundled_models_load(path):
+    m = load_model(path)
     assert m.sample_rate_hz > 0 and m.noise.N_dpsh > 0
 
 
+#: a complete [noise] table, for the cases that are about something else
+NOISE = "[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.01\nB_dph = 0.0\nK_dphsh = 0.0\nR_dphh = 0.0\n"
+S100 = "[sensor]\nsample_rate_hz = 100\n"
 BAD = {
-    "unknown kind": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "thermal_drfit"\n',
+    "unknown kind": (S100 + NOISE + '[[effect]]\nkind = "thermal_drfit"\n',
                      ["bad.toml", "[[effect]] #1", "unknown effect kind 'thermal_drfit'", "thermal_drift"]),
-    "missing parameter": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "periodic"\namplitude_dph = 1.0\n'
-                          'phase_rad = 0.0\n', ["bad.toml", "periodic", "missing parameter 'period_s'"]),
-    "negative parameter": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "markov"\ntau_c_s = -3.0\n'
-                           'sigma_dph = 0.1\n', ["bad.toml", "markov", "'tau_c_s'", "> 0"]),
-    "negative noise": ('[sensor]\nsample_rate_hz = 100\n[noise]\nB_dph = -0.1\n', ["bad.toml", "[noise] B_dph", ">= 0"]),
-    "wrong units name": ('[sensor]\nsample_rate_hz = 100\n[noise]\nN_dph = 0.1\n',
+    "missing parameter": (S100 + NOISE + '[[effect]]\nkind = "periodic"\namplitude_dph = 1.0\nphase_rad = 0.0\n',
+                          ["bad.toml", "periodic", "missing parameter 'period_s'"]),
+    "negative parameter": (S100 + NOISE + '[[effect]]\nkind = "markov"\ntau_c_s = -3.0\nsigma_dph = 0.1\n',
+                           ["bad.toml", "markov", "'tau_c_s'", "> 0"]),
+    "negative noise": (S100 + NOISE.replace("B_dph = 0.0", "B_dph = -0.1"), ["bad.toml", "[noise] B_dph", ">= 0"]),
+    "wrong units name": (S100 + NOISE.replace("N_dpsh", "N_dph"),
                          ["bad.toml", "[noise]", "unknown key 'N_dph'", "did you mean 'N_dpsh'"]),
-    "wrong units in effect": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "periodic"\nperiod_min = 10.0\n'
+    "missing noise key": (S100 + NOISE.replace("N_dpsh = 0.01\n", ""),
+                          ["bad.toml: [noise] missing N_dpsh [deg/sqrt(h) (angle random walk)]: every IEEE-952 term "
+                           "is required (0.0 for a term the gyro does not have)"]),
+    "missing noise keys": (S100 + "[noise]\nN_dpsh = 0.01\n", ["bad.toml: [noise] missing Q_arcsec [", "B_dph [",
+                                                               "K_dphsh [", "R_dphh ["]),
+    "no noise table": (S100, ["bad.toml: no [noise] table: give Q_arcsec, N_dpsh, B_dph, K_dphsh, R_dphh"]),
+    "wrong units in effect": (S100 + NOISE + '[[effect]]\nkind = "periodic"\nperiod_min = 10.0\n'
                               'amplitude_dph = 1.0\nphase_rad = 0.0\n', ["bad.toml", "unknown parameter 'period_min'",
                                                                           "did you mean 'period_s'"]),
-    "missing rate": ('[sensor]\nbias_dph = 1\n', ["bad.toml", "[sensor]", "sample_rate_hz"]),
-    "unknown table": ('[sensor]\nsample_rate_hz = 100\n[noize]\nN_dpsh = 1\n', ["bad.toml", "'noize'", "[noise]"]),
+    "missing rate": ("[sensor]\nbias_dph = 1\n" + NOISE, ["bad.toml", "[sensor]", "sample_rate_hz"]),
+    "unknown table": (S100 + NOISE + "[noize]\nN_dpsh = 1\n", ["bad.toml", "'noize'", "[noise]"]),
     "not toml": ('[sensor\nsample_rate_hz = 100\n', ["bad.toml", "not valid TOML", "line 1"]),
-    "string number": ('[sensor]\nsample_rate_hz = "100"\n', ["bad.toml", "sample_rate_hz", "expected a number"]),
-    "glitch lengths": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "glitches"\ntimes_s = [1.0, 2.0]\n'
-                       'amplitudes_dph = [1.0]\n', ["bad.toml", "glitches", "same length"]),
-    "bandwidth both": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "bandwidth"\ncutoff_hz = 10.0\norder = 2\n'
+    "string number": ('[sensor]\nsample_rate_hz = "100"\n' + NOISE, ["bad.toml", "sample_rate_hz", "expected a number"]),
+    "glitch lengths": (S100 + NOISE + '[[effect]]\nkind = "glitches"\ntimes_s = [1.0, 2.0]\namplitudes_dph = [1.0]\n',
+                       ["bad.toml", "glitches", "same length"]),
+    "bandwidth both": (S100 + NOISE + '[[effect]]\nkind = "bandwidth"\ncutoff_hz = 10.0\norder = 2\n'
                        'taps = [0.5, 0.5]\n', ["bad.toml", "bandwidth", "not both"]),
-    "bandwidth nyquist": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nkind = "bandwidth"\ncutoff_hz = 60.0\n'
-                          'order = 2\n', ["bad.toml", "Nyquist"]),
-    "effect without kind": ('[sensor]\nsample_rate_hz = 100\n[[effect]]\nperiod_s = 1.0\n', ["bad.toml", "'kind'"]),
-    "nan": ('[sensor]\nsample_rate_hz = 100\nbias_dph = nan\n', ["bad.toml", "bias_dph", "finite"]),
+    "bandwidth nyquist": (S100 + NOISE + '[[effect]]\nkind = "bandwidth"\ncutoff_hz = 60.0\norder = 2\n',
+                          ["bad.toml", "Nyquist"]),
+    "scale factor of 100 %": (S100 + NOISE + '[[effect]]\nkind = "scale_factor"\nppm = -1e6\nasym_ppm = 0.0\n',
+                              ["bad.toml: [[effect]] #1 (scale_factor): |ppm| + |asym_ppm|/2 = 1e+06 ppm",
+                               "wrong unit"]),
+    "effect without kind": (S100 + NOISE + '[[effect]]\nperiod_s = 1.0\n', ["bad.toml", "'kind'"]),
+    "nan": ('[sensor]\nsample_rate_hz = 100\nbias_dph = nan\n' + NOISE, ["bad.toml", "bias_dph", "finite"]),
 }
 
 
@@ -131,6 +145,63 @@ def test_cli_bad_model_exit_2_one_line_no_traceback(tmp_path):
     assert "N_dph" in r.stderr and "bad.toml" in r.stderr
 
 
+def test_cli_model_missing_a_noise_key_exit_2_naming_file_and_key(tmp_path):
+    p = tmp_path / "gyro.toml"
+    p.write_text(BAD["missing noise key"][0])
+    out = tmp_path / "o.csv"
+    r = subprocess.run([sys.executable, "-m", "fogmon", "sim", "--model", str(p), "--out", str(out),
+                        "--duration-s", "1"], capture_output=True, text=True)
+    assert r.returncode == 2 and not out.exists()
+    assert r.stderr == ("fogmon sim: error: gyro.toml: [noise] missing N_dpsh [deg/sqrt(h) (angle random walk)]: "
+                        "every IEEE-952 term is required (0.0 for a term the gyro does not have)\n")
+
+
+EXAMPLE = str(DATA / "example_model.toml")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--duration-s", "-1"], "argument --duration-s: must be a finite number > 0, got '-1'"),
+    (["--duration-s", "inf"], "argument --duration-s: must be a finite number > 0, got 'inf'"),
+    (["--duration-s", "nan"], "argument --duration-s: must be a finite number > 0, got 'nan'"),
+    (["--duration-s", "1", "--seed", "-3"], "argument --seed: must be an integer >= 0, got '-3'"),
+    (["--duration-s", "1", "--seed", "1.5"], "argument --seed: must be an integer >= 0, got '1.5'"),
+])
+def test_cli_sim_bad_values_are_usage_errors(tmp_path, capsys, argv, message):
+    out = tmp_path / "o.csv"
+    with pytest.raises(SystemExit) as e:
+        main(["sim", "--model", EXAMPLE, "--out", str(out), *argv])
+    assert e.value.code == 2 and not out.exists()
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"fogmon: error: {message}"
+
+
+@pytest.mark.parametrize("out, extra, message", [
+    ("{tmp}/nodir/o.csv", [], "--out {tmp}/nodir/o.csv: folder {tmp}/nodir does not exist"),
+    ("{tmp}", [], "--out {tmp}: is a folder, give a file name"),
+    ("/proc/o.csv", [], "--out /proc/o.csv: cannot write: No such file or directory"),
+    ("{tmp}/like.csv", ["--like", "{tmp}/like.csv"], "--out {tmp}/like.csv: is the input {tmp}/like.csv; write to "
+                                                    "another file"),
+    ("{tmp}/o.csv", ["--duration-s", "1e15"], "--out {tmp}/o.csv: 1e+17 samples take at least 4e+17 bytes, the "
+                                              "folder has "),
+    ("{tmp}/o.csv", ["--scenario", "orbit", "--duration-s", "0.5"], "scenario orbit: duration_s 0.5 s holds fewer "
+                                                                    "than 2 samples at rate_hz 1 Hz"),
+    ("{tmp}/o.csv", ["--scenario", "chamber", "--set", "plateaus_c=20,nan"], "scenario chamber: parameter plateaus_c: "
+                                                                             "bad value '20,nan'"),
+])
+def test_cli_sim_bad_outputs_fail_at_once_and_create_nothing(tmp_path, capsys, out, extra, message):
+    from fogmon.recording import write_replay_log
+    like = tmp_path / "like.csv"
+    write_replay_log(like, [0.0, 0.01, 0.02], [1.0, 2.0, 3.0], meta={"sample_rate_hz": 100})
+    before = sorted(tmp_path.iterdir())
+    fmt = {"tmp": tmp_path}
+    argv = ["sim", "--model", EXAMPLE, "--out", out.format(**fmt), *[a.format(**fmt) for a in extra]]
+    if not extra:
+        argv += ["--duration-s", "1"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon sim: error: {message.format(**fmt)}") and err.count("\n") == 1
+    assert sorted(tmp_path.iterdir()) == before and like.read_text().endswith("0.02,3\n")
+
+
 def test_dumps_names_units():
     text = dumps_model(SensorModel(10.0))
     assert "N_dpsh deg/sqrt(h)" in text and "sample_rate_hz = 10.0" in text
@@ -144,7 +215,9 @@ def _effect_strategy():
         fields_ = {}
         for name, p in spec.params.items():
             lo = {"any": None, ">=0": 0.0, ">0": 1e-6}[p.check]
-            num = st.floats(min_value=lo, max_value=1e9, allow_nan=False, allow_infinity=False)
+            hi = 4e5 if kind == "scale_factor" else 1e9   # |ppm| + |asym_ppm|/2 < 1e6
+            lo = -hi if kind == "scale_factor" else lo
+            num = st.floats(min_value=lo, max_value=hi, allow_nan=False, allow_infinity=False)
             if p.type == "list":
                 fields_[name] = st.lists(num, max_size=4)
             elif p.type == "int":

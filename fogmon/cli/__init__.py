@@ -6,9 +6,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+import warnings
 
 from fogmon import __version__
-from fogmon.errors import FogmonError
+from fogmon.errors import FogmonError, FogmonWarning
 
 #: sub-command -> one-line help
 COMMANDS = {
@@ -44,11 +45,25 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     return p
 
 
+def _one_line_warnings(command: str, show):
+    """A ``warnings.showwarning`` that prints FogmonWarnings as one line on stderr and
+    hands other warnings to ``show``."""
+    def showwarning(message, category, *args, **kwargs):
+        if issubclass(category, FogmonWarning):
+            print(f"fogmon {command}: warning: {message}", file=sys.stderr)
+        else:
+            show(message, category, *args, **kwargs)
+    return showwarning
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv).parse_args(argv)
     try:
-        return int(importlib.import_module(f"fogmon.cli.{args.command}").run(args) or 0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("default", FogmonWarning)  # each distinct warning once
+            warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
+            return int(importlib.import_module(f"fogmon.cli.{args.command}").run(args) or 0)
     except FogmonError as e:
         print(f"fogmon {args.command}: error: {e}", file=sys.stderr)
         return 2

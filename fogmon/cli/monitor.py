@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import sys
 
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
 from fogmon.sinks.archive import Archive, default_archive_dir
@@ -19,7 +20,9 @@ EPILOG = """examples:
 Stop with Ctrl-C (or --duration-s): the archive and the .rrd are closed cleanly and the
 summary printed. The archive holds samples.csv (a replay log) and the raw input, both
 replayable with `fogmon replay`. Rates in deg/h, times in s, coefficients in IEEE-952
-units. Exit code 0 on success (also after Ctrl-C), 2 on bad usage or input."""
+units. Exit code 0 on success (also after Ctrl-C), 1 when no sample arrived from the
+device (one line says what did arrive, if anything; an archive folder the run created
+is removed when nothing at all arrived), 2 on bad usage or input."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,10 +42,33 @@ def run(args: argparse.Namespace) -> int:
     archive = Archive(directory, source)
     if hasattr(source, "add_tap"):
         source.add_tap(archive)
+
+    def remove_if_empty() -> bool:
+        """Leave no archive folder this run created when nothing at all was received."""
+        c = archive.counters
+        if existed or c["rows_written"] or c["raw_bytes"] or c["raw_frames"]:
+            return False
+        shutil.rmtree(directory, ignore_errors=True)
+        return True
+
     try:
-        run_pipeline(source, args, extra_sinks=[archive])
+        summary = run_pipeline(source, args, extra_sinks=[archive])
     except BaseException:
-        if not existed and not archive.counters["rows_written"] and not archive.counters["raw_bytes"]:
-            shutil.rmtree(directory, ignore_errors=True)  # nothing was received: leave no empty archive
+        remove_if_empty()
         raise
+    if not summary.n_samples:
+        print(f"fogmon monitor: {nothing_received(summary, archive, remove_if_empty())}", file=sys.stderr)
+        return 1
     return 0
+
+
+def nothing_received(summary, archive: Archive, removed: bool) -> str:
+    """The one line for a run that gave no sample: what did arrive, and where it is."""
+    c = archive.counters
+    what = f"{c['raw_frames']:,} CAN frames" if c["raw_frames"] else f"{c['raw_bytes']:,} bytes" if c["raw_bytes"] else ""
+    src = f"{summary.source_name} in {summary.source_wall_s:.1f} s"
+    if not what:
+        return f"nothing was received from {src}" + ("; no archive written" if removed else "")
+    seen = ", ".join(f"{k} {v:,}" for k, v in summary.counters.items() if v)
+    return (f"no sample decoded from {src} although {what} arrived ({seen or 'no frame recognised'}): "
+            f"check --protocol/--baud or --dbc/--can-message; the raw input is in {archive.directory}")

@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import os
 import sys
 
 import numpy as np
 
+from fogmon.cli.outputs import check_outputs
+from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+
+#: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
+#: needs more than the free space of the output's folder at this rate cannot be written.
+MIN_ROW_BYTES = 4
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -19,9 +26,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (CONTRACT section 1)")
     p.add_argument("--like", metavar="RECORDING.csv", help="take the time base (sample times, gaps, sample rate) "
                    "and every aux column (temp_c, rot_dps, vib_g, ...) from this replay log, exactly")
-    p.add_argument("--duration-s", type=float, metavar="D", help="length in s (required without --like/--scenario; "
+    p.add_argument("--duration-s", type=positive, metavar="D", help="length in s (required without --like/--scenario; "
                    "with --like: only the first D s of the recording; with --scenario mwd/orbit: its length)")
-    p.add_argument("--seed", type=int, metavar="S", help="random seed (default: fresh entropy, written to the "
+    p.add_argument("--seed", type=number(0, integer=True), metavar="S", help="random seed, an integer >= 0 "
+                   "(default: fresh entropy, written to the "
                    "output's metadata so the run can be repeated)")
     p.add_argument("--scenario", choices=("mwd", "chamber", "orbit"), help="generate the aux channels when there "
                    "is no recording: mwd = drilling run (stands, connections with pumps off, geothermal heating, "
@@ -57,9 +65,8 @@ def run(args) -> int:
     from fogmon.sim.scenarios import make_scenario
     from fogmon.sim.simulate import iter_simulate
 
+    check_outputs({"--out": args.out}, inputs=[args.model, args.like])
     model = load_model(args.model)
-    if args.duration_s is not None and not args.duration_s > 0:
-        raise FogmonError(f"--duration-s must be > 0, got {args.duration_s:g}")
     if args.set and not args.scenario:
         raise FogmonError("--set needs --scenario")
     if args.like and args.scenario:
@@ -77,28 +84,48 @@ def run(args) -> int:
         if abs(like.sample_rate_hz - model.sample_rate_hz) > 1e-9 * model.sample_rate_hz:
             print(f"fogmon sim: note: simulating at the recording's {like.sample_rate_hz:g} Hz, not the model's "
                   f"{model.sample_rate_hz:g} Hz (the noise coefficients hold at any rate)", file=sys.stderr)
+        n_expected = len(like)
     elif args.scenario:
-        sc = make_scenario(args.scenario, _overrides(args.set), duration, seed)
+        try:
+            sc = make_scenario(args.scenario, _overrides(args.set), duration, seed)
+        except MemoryError:
+            raise FogmonError(f"--scenario {args.scenario}: not enough memory for its aux channels: lower "
+                              f"rate_hz or the duration") from None
         aux, aux_t = sc.aux, sc.t_s
         meta.update(sc.meta)
         if args.set:
             meta["scenario_set"] = " ".join(args.set)
+        n_expected = (sc.t_s[-1] - sc.t_s[0]) * model.sample_rate_hz
     elif duration is None:
         raise FogmonError("give --duration-s, --like RECORDING or --scenario")
+    else:
+        n_expected = duration * model.sample_rate_hz
+    _check_space(args.out, n_expected)
     info: dict = {}
     blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info)
     first = next(blocks)
     n = 0
     out_meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
     try:
-        fh = open(args.out, "w", encoding="utf-8", newline="\n")
-    except OSError as e:
-        raise FogmonError(f"{args.out}: cannot write: {e.strerror}") from None
-    with fh:
-        write_replay_header(fh, list(first.aux), out_meta)
-        for b in itertools.chain([first], blocks):
-            v = b.valid
-            append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
-            n += int(v.sum())
+        with open(args.out, "w", encoding="utf-8", newline="\n") as fh:
+            write_replay_header(fh, list(first.aux), out_meta)
+            for b in itertools.chain([first], blocks):
+                v = b.valid
+                append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
+                n += int(v.sum())
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(args.out)  # no half-written replay log
+        raise
     print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
     return 0
+
+
+def _check_space(path: str, n_samples: float) -> None:
+    """FogmonError when ``n_samples`` rows cannot fit in the free space of ``path``'s folder."""
+    import shutil
+
+    free = shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
+    if n_samples * MIN_ROW_BYTES > free:
+        raise FogmonError(f"--out {path}: {n_samples:.3g} samples take at least {n_samples * MIN_ROW_BYTES:.3g} "
+                          f"bytes, the folder has {free:.3g} bytes free: shorten --duration-s")

@@ -4,14 +4,20 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 
 import numpy as np
+
+from fogmon.cli.values import number
+from fogmon.errors import FogmonError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--up", required=True, metavar="UP.csv", help="replay log, sensing axis pointing up")
     p.add_argument("--down", required=True, metavar="DOWN.csv", help="replay log, sensing axis pointing down")
-    p.add_argument("--lat-deg", required=True, type=float, help="latitude of the test site, deg")
+    p.add_argument("--lat-deg", required=True, type=number(-90, 90),
+                   help="latitude of the test site, deg, -90..90 (south negative); near the equator the "
+                        "vertical Earth rate is too small to calibrate a scale factor and the command says so")
 
 
 def _mean_and_sigma(path: str) -> tuple[float, float, str]:
@@ -29,9 +35,11 @@ def _mean_and_sigma(path: str) -> tuple[float, float, str]:
 def run(args) -> int:
     from fogmon.methods.earthrate import updown_calibration
 
+    if os.path.exists(args.up) and os.path.exists(args.down) and os.path.samefile(args.up, args.down):
+        raise FogmonError(f"--up {args.up} and --down {args.down} are the same file")
     up, s_up, n_up = _mean_and_sigma(args.up)
     down, s_down, n_down = _mean_and_sigma(args.down)
-    r = updown_calibration(up, down, args.lat_deg, max(s_up, s_down))
+    r = updown_calibration(up, down, args.lat_deg, max(s_up, s_down), (f"--up {args.up}", f"--down {args.down}"))
     print(f"up/down Earth-rate calibration at latitude {args.lat_deg:g} deg "
           f"(vertical Earth rate {r['earth_vertical_dph']:.4f} deg/h)")
     print(f"  mean output: up ({n_up}) {up:+.5f} deg/h, down ({n_down}) {down:+.5f} deg/h")

@@ -1,21 +1,44 @@
 """Averaging-time grids: averaging factors m (tau = m / rate_hz, tau in s)."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
-from fogmon.errors import FogmonError
+from fogmon.errors import FogmonError, FogmonWarning
 
 # Stable32's "decade" grid: 1, 2, 4 per decade.
 _DECADE_STEPS = (1, 2, 4)
+#: Most taus per decade an integer ``taus`` may ask for: neighbours are then 7 % apart,
+#: denser grids add no independent information (use "all" for every m). Above it an
+#: integer is far more likely meant as one tau in s (``--taus 1000``) and is refused.
+MAX_PER_DECADE = 32
+
+
+def check_per_decade(k: int) -> int:
+    """``k`` taus per decade if 1 <= k <= MAX_PER_DECADE, else a FogmonError telling how
+    to ask for one tau of k s instead."""
+    if not 1 <= k <= MAX_PER_DECADE:
+        raise FogmonError(f"taus {k}: an integer is a number of taus per decade, 1..{MAX_PER_DECADE}; "
+                          f"for one tau of {k} s give it as {k}.0 (tau values in s have a decimal point "
+                          f"or are comma-separated)")
+    return k
+
+
+def _list_s(tau_s) -> str:
+    return ("tau " if len(tau_s) == 1 else "taus ") + ", ".join(f"{t:g}" for t in tau_s) + " s"
 
 
 def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
     """Averaging factors m (int64, sorted, unique) for ``n_max`` samples at ``rate_hz`` Hz.
 
     ``taus`` is ``"octave"`` (m = 1, 2, 4, ...), ``"decade"`` (1, 2, 4, 10, 20, 40, ...),
-    ``"all"`` (every m), an int k (k log-spaced m per decade), or an array of tau in s
-    (rounded to the nearest m). Every grid is limited to 1 <= m <= n_max // 4, beyond
-    which the Allan deviation has too few degrees of freedom to mean anything.
+    ``"all"`` (every m), an int k (k log-spaced m per decade, 1 <= k <= MAX_PER_DECADE),
+    or an array of tau in s (rounded to the nearest m). Every grid is limited to
+    1 <= m <= n_max // 4, beyond which the Allan deviation has too few degrees of freedom
+    to mean anything: requested tau values outside it (shorter than half a sample, longer
+    than n_max / 4 samples) are left out with a FogmonWarning naming them, and a
+    FogmonError if none is left.
     """
     if not rate_hz > 0:
         raise FogmonError(f"sample rate must be > 0 Hz, got {rate_hz}")
@@ -32,14 +55,20 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
         else:
             raise FogmonError(f"taus must be 'octave', 'decade', 'all', an int per decade or tau values in s, got {taus!r}")
     elif isinstance(taus, (int, np.integer)) and not isinstance(taus, bool):
-        if taus < 1:
-            raise FogmonError(f"taus per decade must be >= 1, got {taus}")
-        k = np.arange(int(np.floor(np.log10(m_max) * taus)) + 1)
-        m = np.round(10.0 ** (k / taus))
+        k = check_per_decade(int(taus))
+        m = np.round(10.0 ** (np.arange(int(np.floor(np.log10(m_max) * k)) + 1) / k))
     else:
         tau_s = np.atleast_1d(np.asarray(taus, dtype=np.float64))
         if tau_s.size == 0 or not np.all(np.isfinite(tau_s)) or np.any(tau_s <= 0):
             raise FogmonError("tau values must be finite and > 0 s")
-        m = np.maximum(np.round(tau_s * rate_hz), 1)
+        m = np.round(tau_s * rate_hz)
+        short, long_ = tau_s[m < 1], tau_s[m > m_max]
+        limits = (f"an Allan deviation needs tau from one sample to n/4 samples, {1 / rate_hz:g} .. "
+                  f"{m_max / rate_hz:g} s (n = {int(n_max)} samples at {rate_hz:g} Hz, tau rounded to whole samples)")
+        if short.size + long_.size == tau_s.size:
+            what = "cannot" if tau_s.size == 1 else "none can"
+            raise FogmonError(f"requested {_list_s(tau_s)}: {what} be computed: {limits}")
+        if short.size or long_.size:
+            warnings.warn(f"{_list_s(np.concatenate([short, long_]))} left out: {limits}", FogmonWarning)
     m = np.unique(np.asarray(m, dtype=np.int64))
     return m[(m >= 1) & (m <= m_max)]

@@ -21,6 +21,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 import multiprocessing as mp
+from typing import Callable
 
 import numpy as np
 
@@ -149,32 +150,48 @@ def stochastic_part(model: SensorModel) -> SensorModel:
 
 
 # ---------------------------------------------------------------- bootstrap
-def _replicates(args) -> tuple[np.ndarray, np.ndarray]:
-    model, like, grid, seeds = args
-    cells, wholes = [], []
-    for s in seeds:
-        r = np.concatenate([b.rate_dph for b in iter_simulate(model, like=like, seed=int(s),
-                                                              chunk_samples=1 << 18)])
-        c, w = mismatch.log_avar(r, np.isfinite(r), grid)
-        cells.append(c)
-        wholes.append(w)
-    return np.array(cells), np.array(wholes)
+#: Progress callback: ``progress(stage, done, total)``; total 0 announces a stage, else
+#: ``done`` of ``total`` steps of it are complete.
+Progress = Callable[[str, int, int], None]
+
+
+def _replicate(model: SensorModel, like: Recording, grid: mismatch.Grid, seed) -> tuple[np.ndarray, np.ndarray]:
+    """ln avar of the map cells and the whole record of one simulation of ``model``."""
+    r = np.concatenate([b.rate_dph for b in iter_simulate(model, like=like, seed=int(seed), chunk_samples=1 << 18)])
+    return mismatch.log_avar(r, np.isfinite(r), grid)
+
+
+_SHARED: tuple = ()  # (model, like, grid) in a bootstrap worker process, inherited by fork
+
+
+def _init_worker(shared: tuple) -> None:
+    global _SHARED
+    _SHARED = shared
+
+
+def _replicate_in_worker(seed) -> tuple[np.ndarray, np.ndarray]:
+    return _replicate(*_SHARED, seed)
 
 
 def bootstrap(stoch: SensorModel, like: Recording, grid: mismatch.Grid, n_boot: int, seed: int,
-              alpha: float, workers: int) -> mismatch.Null:
-    """Parametric bootstrap null: ``n_boot`` simulations of ``stoch`` like the recording."""
+              alpha: float, workers: int, progress: Progress | None = None) -> mismatch.Null:
+    """Parametric bootstrap null: ``n_boot`` simulations of ``stoch`` like the recording,
+    reported to ``progress`` replicate by replicate."""
     seeds = np.random.SeedSequence(seed).generate_state(n_boot)
     nw = max(1, min(workers or os.cpu_count() or 1, n_boot))
-    chunks = [(stoch, like, grid, seeds[i::nw]) for i in range(nw)]
+    report = progress or (lambda stage, done, total: None)
+    parts = []
     if nw == 1 or grid.n * n_boot < 2_000_000:
-        parts = [_replicates(c) for c in chunks]
+        for s in seeds:
+            parts.append(_replicate(stoch, like, grid, s))
+            report("bootstrap", len(parts), n_boot)
     else:
-        with ProcessPoolExecutor(nw, mp_context=mp.get_context("fork")) as ex:
-            parts = list(ex.map(_replicates, chunks))
-    cells = np.concatenate([p[0] for p in parts])
-    wholes = np.concatenate([p[1] for p in parts])
-    return mismatch.build_null(cells, wholes, alpha)
+        with ProcessPoolExecutor(nw, mp_context=mp.get_context("fork"), initializer=_init_worker,
+                                 initargs=((stoch, like, grid),)) as ex:
+            for part in ex.map(_replicate_in_worker, seeds):
+                parts.append(part)
+                report("bootstrap", len(parts), n_boot)
+    return mismatch.build_null(np.array([c for c, _ in parts]), np.array([w for _, w in parts]), alpha)
 
 
 def default_n_boot(n: int) -> int:
@@ -291,9 +308,11 @@ def _new_deficit(before: Analysis, after: Analysis) -> str | None:
 
 
 def explain(rec: Recording, model: SensorModel, options: Options | None = None,
-            baseline: bool = False) -> Result:
-    """Compare ``rec`` with ``model``, locate mismatches, select and fit missing physics."""
+            baseline: bool = False, progress: Progress | None = None) -> Result:
+    """Compare ``rec`` with ``model``, locate mismatches, select and fit missing physics;
+    stages and bootstrap replicates are reported to ``progress``."""
     opt = options or Options()
+    report = progress or (lambda stage, done, total: None)
     model = validate_model(model)
     check_inputs(rec, model, opt.window_s)
     t, raw, valid, aux = _grid_arrays(rec)
@@ -308,7 +327,9 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                      {"sample_rate_hz": repr(fs)}, rec.path)
     B = opt.n_boot or default_n_boot(n)
     stoch = stochastic_part(model)
-    null = bootstrap(stoch, like, grid, B, opt.seed, opt.alpha, opt.workers)
+    report(f"bootstrap null: {B} simulations of the model like the recording", 0, 0)
+    null = bootstrap(stoch, like, grid, B, opt.seed, opt.alpha, opt.workers, progress)
+    report("mismatch map and candidate effects", 0, 0)
     ctx = _whittle(stoch, aux, t, valid, y0)
     counts: dict[str, int] = {}
     refused: set[str] = set()
@@ -343,8 +364,9 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         else:
             y_new = y
             stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, stoch.noise, [*stoch.effects, c.effect()])
+            report(f"bootstrap null with {c.kind} added: {B} simulations", 0, 0)
             null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (len(accepted) + 1), opt.alpha,
-                                 opt.workers)
+                                 opt.workers, progress)
         ctx_new = _whittle(stoch_new, aux, t, valid, y_new)
         counts[c.kind] = counts.get(c.kind, 0) + 1
         cands_new = candidates(ctx_new, counts, refused)
@@ -359,6 +381,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
             continue
         y, stoch, null, ctx, cands, current = y_new, stoch_new, null_new, ctx_new, cands_new, after
         accepted.append(Accepted(c, bg, note, score_before, current.score.value))
+        report(f"effect {len(accepted)}: {c.kind} (score {score_before:.3g} -> {current.score.value:.3g})", 0, 0)
     rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0]
     fitted = SensorModel(model.sample_rate_hz, model.bias_dph, model.noise,

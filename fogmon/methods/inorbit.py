@@ -18,6 +18,9 @@ from fogmon.errors import FogmonError
 
 #: Orbit period of the in-orbit paper's spacecraft, s.
 ORBIT_PERIOD_S = 5580.0
+#: The iterated k-sigma Pauta criterion keeps a nonzero share of Gaussian data only for
+#: k > sqrt(3) (the truncated-normal std factor tends to a / sqrt(3) as a -> 0).
+PAUTA_K_MIN = math.sqrt(3.0)
 
 
 def _truncated_std_factor(a: float) -> float:
@@ -42,6 +45,8 @@ def pauta_mask(x, k: float = 3.0, max_iter: int = 50) -> np.ndarray:
 def pauta_consistency(k: float = 3.0) -> float:
     """Factor by which the iterated k-sigma Pauta criterion shrinks the std of Gaussian
     data: the fixed point a = k f(a) with f the truncated-normal std factor."""
+    if not PAUTA_K_MIN < k < math.inf:
+        raise FogmonError(f"Pauta k must be finite and > sqrt(3) = {PAUTA_K_MIN:.4g}, got {k}")
     a = brentq(lambda a: a - k * _truncated_std_factor(a), 1e-3, k)
     return _truncated_std_factor(a)
 

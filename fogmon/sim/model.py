@@ -2,8 +2,9 @@
 ``fogmon sim`` turns into a recording and ``fogmon explain`` compares recordings with.
 
 ``load_model`` validates strictly: an unknown table, key or effect kind, a missing
-required parameter, a negative value where only >= 0 makes sense, or a units-suffix
-typo (``N_dph`` for ``N_dpsh``) is a one-line FogmonError naming the file and the key.
+required parameter (every [noise] key is required: no silent 0), a negative value where
+only >= 0 makes sense, a value outside its physical range, or a units-suffix typo
+(``N_dph`` for ``N_dpsh``) is a one-line FogmonError naming the file and the key.
 ``save_model`` writes every parameter (defaults included) so that a saved model loads
 back identically (``load_model(p) == model``).
 
@@ -234,6 +235,11 @@ def _check_effect(kind: str, p: dict, where: str) -> None:
     if kind == "glitches" and len(p["times_s"]) != len(p["amplitudes_dph"]):
         raise FogmonError(f"{where}: times_s and amplitudes_dph must have the same length "
                           f"({len(p['times_s'])} vs {len(p['amplitudes_dph'])})")
+    if kind == "scale_factor":
+        worst = abs(p["ppm"]) + abs(p["asym_ppm"]) / 2
+        if worst >= 1e6:
+            raise FogmonError(f"{where}: |ppm| + |asym_ppm|/2 = {worst:g} ppm; a scale-factor error of 100 % "
+                              f"(1e6 ppm) or more makes the gyro read zero or the wrong sign: a wrong unit?")
     if kind == "bandwidth":
         butter = p["cutoff_hz"] > 0 or p["order"] > 0
         if butter == bool(p["taps"]):
@@ -280,11 +286,18 @@ def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
                               f"{_close(k, ('sample_rate_hz', 'bias_dph'))}")
     if "sample_rate_hz" not in sensor:
         raise FogmonError(f"{where}: [sensor] missing key 'sample_rate_hz' (Hz)")
+    if "noise" not in doc:
+        raise FogmonError(f"{where}: no [noise] table: give {', '.join(NOISE_UNITS)} "
+                          f"(IEEE-952 terms; 0.0 for a term the gyro does not have)")
     noise = _table(doc, "noise", where)
     for k in noise:
         if k not in NOISE_UNITS:
             raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
                               f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
+    missing = [k for k in NOISE_UNITS if k not in noise]
+    if missing:
+        raise FogmonError(f"{where}: [noise] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
+                          f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
     effects = doc.get("effect", [])
     if not isinstance(effects, list):
         raise FogmonError(f"{where}: 'effect' must be an array of tables: write [[effect]]")

@@ -189,7 +189,7 @@ def scenario_params(name: str, overrides: dict[str, str], duration_s: float | No
                 v = text.lower() in ("true", "1", "yes")
             elif isinstance(default, tuple):
                 v = tuple(float(x) for x in text.replace(";", ",").split(",") if x.strip())
-                if len(v) < 1:
+                if len(v) < 1 or not all(math.isfinite(x) for x in v):
                     raise ValueError
             else:
                 v = float(text)
@@ -209,6 +209,9 @@ def scenario_params(name: str, overrides: dict[str, str], duration_s: float | No
     for k in ("rate_hz", "lag1_s", "lag2_s", "lag_s", "period_s", "rop_mph", "stand_length_m", "ramp_c_per_min"):
         if k in known and getattr(params, k) <= 0:
             raise FogmonError(f"scenario {name}: parameter {k} must be > 0")
+    if "duration_s" in known and params.duration_s * params.rate_hz < 2:
+        raise FogmonError(f"scenario {name}: duration_s {params.duration_s:g} s holds fewer than 2 samples at "
+                          f"rate_hz {params.rate_hz:g} Hz")
     return params
 
 

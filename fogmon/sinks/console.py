@@ -9,7 +9,7 @@ from collections import Counter
 from typing import Sequence, TextIO
 
 from fogmon.block import Event
-from fogmon.pipeline import COEFFICIENTS, Sink, Summary
+from fogmon.pipeline import COEFFICIENTS, Sink, Summary, default_window_s
 
 #: Events of one kind printed as they happen before the rest are only counted.
 MAX_EVENTS_PER_KIND = 10
@@ -23,6 +23,8 @@ def format_summary(s: Summary) -> str:
     lines.append(f"  {s.n_samples} samples at {s.rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
                  f"({s.n_invalid} invalid/lost), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
     lines.append(f"  {s.n_windows} DADEV windows of {s.window_s:g} s every {s.hop_s:g} s")
+    if not s.n_windows:
+        lines.append(f"  {no_windows_reason(s)}")
     if s.analysed != "rate_dph":
         lines.append(f"  analysed: {s.analysed} (deg/h), the gyro's error against the reference rotation "
                      f"(--raw-rate for rate_dph itself)")
@@ -59,6 +61,16 @@ def format_summary(s: Summary) -> str:
     for o in s.outputs:
         lines.append(f"Wrote {o} (open it with: rerun {o})" if o.endswith(".rrd") else f"Wrote {o}")
     return "\n".join(lines)
+
+
+def no_windows_reason(s: Summary) -> str:
+    """Why a run of at least one sample gave no DADEV window (it was shorter than one
+    window) and the --window-s that would give some."""
+    w = round(s.window_s * s.rate_hz)
+    run_s = s.n_samples / s.rate_hz
+    return (f"no DADEV window: the window is {w} samples = {s.window_s:g} s at {s.rate_hz:g} Hz and the run had "
+            f"{s.n_samples:,} samples ({run_s:g} s); use --window-s {default_window_s(s.rate_hz, s.n_samples):g} "
+            f"(or any window up to {run_s:g} s)")
 
 
 #: The fitted model is reported as not describing the record beyond this ADEV ratio.
@@ -116,7 +128,8 @@ class ConsoleSink(Sink):
                 err.write(f"[{e.t_s:10.2f} s] {e.kind}: more of these are only counted (see the summary)\n")
 
     def finish(self, summary: Summary) -> None:
-        if not self.quiet and not summary.failed:
+        """The summary, unless quiet, failed, or empty (no sample: the command says so)."""
+        if not self.quiet and not summary.failed and summary.n_samples:
             out = self.out or sys.stdout
             out.write(format_summary(summary) + "\n")
             out.flush()

@@ -1,0 +1,33 @@
+"""argparse value types with their ranges: a wrong value (nan, inf, out of range, wrong
+type) is a usage error naming the option (exit 2) before any work starts."""
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def number(lo: float | None = None, hi: float | None = None, *, integer: bool = False, above: bool = False):
+    """argparse ``type=``: a finite float (an int with ``integer``) with lo <= v <= hi
+    (lo < v with ``above``); None leaves a side open."""
+    kind = "an integer" if integer else "a finite number"
+    if lo is not None and hi is not None and not above:
+        rule = f"{kind} in {lo:g}..{hi:g}"
+    else:
+        bounds = ([f"{'>' if above else '>='} {lo:g}"] if lo is not None else []) + \
+            ([f"<= {hi:g}"] if hi is not None else [])
+        rule = f"{kind} {' and '.join(bounds)}".strip()
+
+    def parse(text: str):
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}") from None
+        if not (math.isfinite(v) and (lo is None or (v > lo if above else v >= lo)) and (hi is None or v <= hi)):
+            raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
+        return v
+
+    return parse
+
+
+#: > 0 and finite: lengths, durations, rates.
+positive = number(0, above=True)
