@@ -10,7 +10,8 @@ sha256 is checked, and it is converted to a replay log v1 (CONTRACT section 1: t
 s, rate_dph in deg/h) under DIR (default $FOGMON_REALDATA or /work/realdata). The sha256
 of each written file is compared with the manifest; exit 1 on any mismatch or missing
 snapshot. ``--describe`` also prints the raw-data statistics the manifest's evidence
-quotes (block standard deviations, the moving-RMS peak, gaps, > 8 MAD outliers).
+quotes (block standard deviations, the moving-RMS peak, the spectrum, gaps, > 8 MAD
+outliers).
 
 Readers beyond fogmon's own dependencies, needed only here: pymseed (miniSEED) and
 pyulog (PX4 ULog), both on PyPI. The fetched data is never committed (GPL-3.0 data among
@@ -175,6 +176,16 @@ def describe(entry: dict, path: Path) -> None:
     sd = np.array([np.std(r[np.isfinite(r)]) if np.isfinite(r).sum() > 1 else np.nan for r in blocks])
     print(f"  {b / fs:g}-s block standard deviations (original units): "
           + " ".join(f"{v / scale:.3g}" for v in sd))
+    from scipy.signal import welch
+
+    f, psd = welch(np.where(ok, y - med, 0.0), fs=fs, nperseg=min(4096, len(y) // 4))
+    rel = psd / np.median(psd[1:])
+    edges = fs / 2 / 2.0 ** np.arange(9)[::-1]
+    bands = [f"{a:.3g}-{b:.3g} Hz {np.mean(rel[(f >= a) & (f < b)]):.2g}" for a, b in zip(edges[:-1], edges[1:])
+             if np.any((f >= a) & (f < b))]
+    i = int(np.argmax(np.where(f > 0.05, rel, 0)))
+    print(f"  Welch PSD / its median, octave bands: {'; '.join(bands)}; strongest peak above 0.05 Hz "
+          f"{rel[i]:.3g}x at {f[i]:.4g} Hz; 0.9-1 x Nyquist {np.mean(rel[f >= 0.45 * fs]):.2g}")
     dev2 = np.where(ok, (y - med) ** 2, 0.0)
     ker = np.ones(b)
     rms = np.sqrt(np.convolve(dev2, ker, "same") / np.maximum(np.convolve(ok.astype(float), ker, "same"), 1))
