@@ -4,8 +4,9 @@ source -> StreamingDadev (ring-buffer DAVAR) -> fit_noise per completed window -
 A live gyro and a replay differ only in the source. Blocks are processed as they come
 (Python overhead per block, not per sample); every completed window (one per hop) is
 fitted with the IEEE-952 model and handed to the sinks with its recording time; the run
-ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl-C, and
-always closes the source and the sinks so the .rrd and the archive are complete.
+ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl-C
+(SIGTERM, SIGHUP: fogmon.stopping), and always closes the source and the sinks so the
+.rrd and the archive are complete.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from fogmon import stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 
@@ -346,36 +348,37 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
             for b in _paced(big, realtime, rate_hz):
                 if realtime:
                     _sleep_until(wall0 + (float(b.t_s[-1]) - t_origin) / realtime)
-                if not started:
-                    m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
-                    use_ref = "rot_dps" in b.aux and not getattr(args, "raw_rate", False)
-                    summary.analysed = ERROR_EXPR if use_ref else "rate_dph"
-                    info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux),
-                                      summary.analysed)
+                with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
+                    if not started:
+                        m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
+                        use_ref = "rot_dps" in b.aux and not getattr(args, "raw_rate", False)
+                        summary.analysed = ERROR_EXPR if use_ref else "rate_dph"
+                        info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux),
+                                          summary.analysed)
+                        for s in sinks:
+                            s.start(info)
+                        started = True
+                        summary.t_first_s = float(b.t_s[0])
+                    summary.n_samples += len(b)
+                    summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+                    summary.t_last_s = float(b.t_s[-1])
                     for s in sinks:
-                        s.start(info)
-                    started = True
-                    summary.t_first_s = float(b.t_s[0])
-                summary.n_samples += len(b)
-                summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
-                summary.t_last_s = float(b.t_s[-1])
-                for s in sinks:
-                    s.block(b)
-                _dispatch_events(sinks, b.events, event_counts)
-                y = b.error_rate_dph if use_ref else b.rate_dph
-                res = engine.push(y, b.valid & np.isfinite(y))
-                if len(res):
-                    fit = fit_noise(res)
-                    t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
-                    for s in sinks:
-                        s.frames(res, fit, t_end)
-                    summary.n_windows += len(res)
-                    _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
-                    counters = dict(getattr(source, "counters", {}) or {})
-                    for s in sinks:
-                        s.source_counters(float(t_end[-1]), counters)
-                tail.push(y, b.valid)
-                progress.update(summary.duration_s, time.monotonic() - wall0)
+                        s.block(b)
+                    _dispatch_events(sinks, b.events, event_counts)
+                    y = b.error_rate_dph if use_ref else b.rate_dph
+                    res = engine.push(y, b.valid & np.isfinite(y))
+                    if len(res):
+                        fit = fit_noise(res)
+                        t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
+                        for s in sinks:
+                            s.frames(res, fit, t_end)
+                        summary.n_windows += len(res)
+                        _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
+                        counters = dict(getattr(source, "counters", {}) or {})
+                        for s in sinks:
+                            s.source_counters(float(t_end[-1]), counters)
+                    tail.push(y, b.valid)
+                    progress.update(summary.duration_s, time.monotonic() - wall0)
             if done:
                 break
     except KeyboardInterrupt:
@@ -384,6 +387,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         summary.failed = True
         raise
     finally:
+        stopping.closing()  # a further Ctrl-C/SIGTERM must not cut the outputs short
         progress.update(summary.duration_s, time.monotonic() - wall0, force=True)
         progress.close()
         source.close()

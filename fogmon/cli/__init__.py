@@ -7,7 +7,7 @@ import argparse
 import importlib
 import sys
 
-from fogmon import __version__
+from fogmon import __version__, stopping
 from fogmon.errors import FogmonError
 
 #: sub-command -> one-line help
@@ -48,13 +48,14 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv).parse_args(argv)
     try:
-        return int(importlib.import_module(f"fogmon.cli.{args.command}").run(args) or 0)
+        with stopping.installed():  # SIGTERM and SIGHUP stop a command as Ctrl-C does
+            return int(importlib.import_module(f"fogmon.cli.{args.command}").run(args) or 0)
     except FogmonError as e:
         print(f"fogmon {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"fogmon {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"fogmon {args.command}: interrupted ({stopping.stop_name()})", file=sys.stderr)
+        return stopping.interrupted_exit_code()
 
 
 if __name__ == "__main__":
