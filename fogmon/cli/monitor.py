@@ -4,8 +4,6 @@ folder) so nothing is lost, while DAVAR, the noise fit and Rerun run as in a rep
 from __future__ import annotations
 
 import argparse
-import os
-import shutil
 
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
 from fogmon.sinks.archive import Archive, default_archive_dir
@@ -16,10 +14,13 @@ EPILOG = """examples:
   fogmon monitor --serial /dev/ttyUSB0 --protocol dsp3000 --serve --duration-s 3600
   fogmon monitor --can can0 --dbc gyro.dbc --rrd out/run.rrd --archive runs/2026-11-21
 
-Stop with Ctrl-C (or --duration-s): the archive and the .rrd are closed cleanly and the
-summary printed. The archive holds samples.csv (a replay log) and the raw input, both
-replayable with `fogmon replay`. Rates in deg/h, times in s, coefficients in IEEE-952
-units. Exit code 0 on success (also after Ctrl-C), 2 on bad usage or input."""
+Stop with Ctrl-C, SIGTERM or SIGHUP (or --duration-s): the archive and the .rrd are
+closed cleanly and the summary printed. The archive holds pieces of --rotate-s s
+(default one hour): samples-0001.csv, ... (replay logs) and the raw input (raw-0001.bin
++ .json or frames-0001.asc + .json); `fogmon replay DIR` replays them all as one
+recording, `fogmon replay DIR/samples-0002.csv` one piece. Rates in deg/h, times in s,
+coefficients in IEEE-952 units. Exit code 0 on success (also after Ctrl-C, SIGTERM or
+SIGHUP: stopping is how a live run ends), 2 on bad usage or input."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,22 +28,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG
     add_source_arguments(parser, mode="live")
     parser.add_argument("--archive", metavar="DIR",
-                        help="folder for the archive (samples.csv + raw capture); default: a new "
+                        help="folder for the archive (samples-NNNN.csv + raw capture pieces); default: a new "
                              "fogmon-archive-YYYYmmddTHHMMSSZ folder in the current directory")
     add_pipeline_arguments(parser, replay=False)
 
 
 def run(args: argparse.Namespace) -> int:
     source = open_live_source(args)
-    directory = args.archive or default_archive_dir(".")
-    existed = os.path.exists(directory)
-    archive = Archive(directory, source)
-    if hasattr(source, "add_tap"):
-        source.add_tap(archive)
+    archive = Archive(args.archive or default_archive_dir("."), source)
     try:
         run_pipeline(source, args, extra_sinks=[archive])
-    except BaseException:
-        if not existed and not archive.counters["rows_written"] and not archive.counters["raw_bytes"]:
-            shutil.rmtree(directory, ignore_errors=True)  # nothing was received: leave no empty archive
-        raise
+    finally:
+        archive.close()   # also when the run never started; a folder it created and left empty goes
     return 0
