@@ -106,8 +106,11 @@ def _positive_float(text: str) -> float:
 
 def _rotate_s(text: str) -> float | None:
     """``--rotate-s``: S > 0, or 0 for no rotation (None)."""
-    if text.strip() in ("0", "0.0"):
-        return None
+    try:
+        if float(text) == 0:
+            return None
+    except ValueError:
+        pass
     return _positive_float(text)
 
 

@@ -42,9 +42,13 @@ def _handler(signum: int, frame) -> None:
 @contextlib.contextmanager
 def installed() -> Iterator[None]:
     """Stop signals handled as described above while the block runs (the CLI's command);
-    the previous handlers are restored afterwards."""
-    previous = {sig: signal.signal(sig, _handler) for sig in STOP_SIGNALS}
+    the previous handlers are restored afterwards. Outside the main thread (where Python
+    cannot install handlers) nothing changes."""
     _state.update(received=None, shield=0, pending=False, closing=False)
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, _handler) for sig in STOP_SIGNALS}
     try:
         yield
     finally:
