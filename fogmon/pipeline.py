@@ -4,8 +4,10 @@ source -> StreamingDadev (ring-buffer DAVAR) -> fit_noise per completed window -
 A live gyro and a replay differ only in the source. Blocks are processed as they come
 (Python overhead per block, not per sample); every completed window (one per hop) is
 fitted with the IEEE-952 model and handed to the sinks with its recording time; the run
-ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl-C, and
-always closes the source and the sinks so the .rrd and the archive are complete.
+ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl-C
+(SIGTERM, SIGHUP: fogmon.stopping), and always closes the source and the sinks so the
+.rrd and the archive are complete. With ``--rotate-s`` blocks are cut where a new piece
+of the outputs begins and the sinks are told (``Sink.rotate``) before its first block.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from fogmon import stopping
 from fogmon.block import Block, Event
 from fogmon.cli.values import number, positive
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
@@ -82,6 +85,12 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
     o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
                    help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
     o.add_argument("--port", type=number(1, 65535, integer=True), default=9876, help="port --serve listens on, 1..65535 (default 9876)")
+    o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None if replay else 3600.0,
+                   help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of S s of recording time "
+                         "each (default: one file)" if replay else
+                         "start new output files every S s of recording time: the archive's samples-NNNN.csv "
+                         "and raw capture pieces, and the .rrd as OUT-NNNN.rrd (default 3600 = hourly; "
+                         "0 = one piece)"))
     o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     o.add_argument("--quiet", action="store_true", help="no console summary at the end")
     p = parser.add_argument_group("pacing")
@@ -92,6 +101,16 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
         p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
                        help="pace a replay at X times real time (default X = 1 when given; "
                             "without --realtime a replay runs as fast as it can)")
+
+
+def _rotate_s(text: str) -> float | None:
+    """``--rotate-s``: S > 0, or 0 for no rotation (None)."""
+    try:
+        if float(text) == 0:
+            return None
+    except ValueError:
+        pass
+    return positive(text)
 
 
 def parse_taus(text: str):
@@ -192,6 +211,10 @@ class Sink:
         recording time (s) of each window's last sample."""
 
     def events(self, events: Sequence[Event]) -> None: ...
+
+    def rotate(self, piece: int, t_s: float) -> None:
+        """Piece ``piece`` (from 1) of the outputs begins with the next block, at recording
+        time ``t_s`` (--rotate-s)."""
 
     def source_counters(self, t_s: float, counters: dict[str, int]) -> None: ...
 
@@ -334,6 +357,11 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     total_n = record_samples(source)
     window_s, hop_s = window_and_hop(args, rate_hz, total_n)
     taus = getattr(args, "taus", "octave")
+    rotate_s = getattr(args, "rotate_s", None)
+    piece_n = int(round(rotate_s * rate_hz)) if rotate_s else None
+    if piece_n is not None and piece_n < 1:
+        raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+    piece = 1
     engine = StreamingDadev(rate_hz, window_s, taus=taus, hop_s=hop_s)
     if sinks is None:
         sinks = build_sinks(args)
@@ -373,39 +401,44 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                     big, done = slice_block(big, 0, stop), True
                     if not stop:
                         break
-            for b in _paced(big, realtime, rate_hz):
+            for b_piece, b in _at_seams(_paced(big, realtime, rate_hz), t_origin, rate_hz, piece_n):
                 if realtime:
                     _sleep_until(wall0 + (float(b.t_s[-1]) - t_origin) / realtime)
-                if not started:
-                    m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
-                    use_ref = "rot_dps" in b.aux and not getattr(args, "raw_rate", False)
-                    summary.analysed = ERROR_EXPR if use_ref else "rate_dph"
-                    info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux),
-                                      summary.analysed)
+                with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
+                    if not started:
+                        m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
+                        use_ref = "rot_dps" in b.aux and not getattr(args, "raw_rate", False)
+                        summary.analysed = ERROR_EXPR if use_ref else "rate_dph"
+                        info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux),
+                                          summary.analysed)
+                        for s in sinks:
+                            s.start(info)
+                        started = True
+                        summary.t_first_s = float(b.t_s[0])
+                    if b_piece != piece:
+                        piece = b_piece
+                        for s in sinks:
+                            s.rotate(piece, float(b.t_s[0]))
+                    summary.n_samples += len(b)
+                    summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+                    summary.t_last_s = float(b.t_s[-1])
                     for s in sinks:
-                        s.start(info)
-                    started = True
-                    summary.t_first_s = float(b.t_s[0])
-                summary.n_samples += len(b)
-                summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
-                summary.t_last_s = float(b.t_s[-1])
-                for s in sinks:
-                    s.block(b)
-                _dispatch_events(sinks, b.events, event_counts)
-                y = b.error_rate_dph if use_ref else b.rate_dph
-                res = engine.push(y, b.valid & np.isfinite(y))
-                if len(res):
-                    fit = fit_noise(res)
-                    t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
-                    for s in sinks:
-                        s.frames(res, fit, t_end)
-                    summary.n_windows += len(res)
-                    _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
-                    counters = dict(getattr(source, "counters", {}) or {})
-                    for s in sinks:
-                        s.source_counters(float(t_end[-1]), counters)
-                tail.push(y, b.valid)
-                progress.update(summary.duration_s, time.monotonic() - wall0)
+                        s.block(b)
+                    _dispatch_events(sinks, b.events, event_counts)
+                    y = b.error_rate_dph if use_ref else b.rate_dph
+                    res = engine.push(y, b.valid & np.isfinite(y))
+                    if len(res):
+                        fit = fit_noise(res)
+                        t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
+                        for s in sinks:
+                            s.frames(res, fit, t_end)
+                        summary.n_windows += len(res)
+                        _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
+                        counters = dict(getattr(source, "counters", {}) or {})
+                        for s in sinks:
+                            s.source_counters(float(t_end[-1]), counters)
+                    tail.push(y, b.valid)
+                    progress.update(summary.duration_s, time.monotonic() - wall0)
             if done:
                 break
     except KeyboardInterrupt:
@@ -414,6 +447,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         summary.failed = True
         raise
     finally:
+        stopping.closing()  # a further Ctrl-C/SIGTERM must not cut the outputs short
         progress.update(summary.duration_s, time.monotonic() - wall0, force=True)
         progress.close()
         source.close()
@@ -541,6 +575,19 @@ def _paced(b: Block, realtime: float | None, rate_hz: float):
         yield slice_block(b, i, min(i + step, len(b)))
 
 
+def _at_seams(blocks: Iterable[Block], t_origin: float, rate_hz: float, piece_n: int | None):
+    """(piece, block) pairs, blocks cut where a new piece of ``piece_n`` samples begins
+    (piece 1 starts at ``t_origin``; ``piece_n`` None: one piece)."""
+    for b in blocks:
+        if not piece_n:
+            yield 1, b
+            continue
+        k = np.rint((b.t_s - t_origin) * rate_hz).astype(np.int64) // piece_n
+        cuts = [0, *(np.flatnonzero(np.diff(k)) + 1), len(b)]
+        for i, j in zip(cuts[:-1], cuts[1:]):
+            yield int(k[i]) + 1, (b if j - i == len(b) else slice_block(b, i, j))
+
+
 def _sleep_until(wall: float) -> None:
     d = wall - time.monotonic()
     if d > 0:
@@ -556,6 +603,7 @@ def build_sinks(args: argparse.Namespace) -> list[Sink]:
     if rrd or connect or serve:
         from fogmon.sinks.rerun_sink import RerunSink
         out.append(RerunSink(rrd_path=rrd, connect_url=connect, serve=serve,
-                             bind=getattr(args, "bind", "127.0.0.1"), port=getattr(args, "port", 9876)))
+                             bind=getattr(args, "bind", "127.0.0.1"), port=getattr(args, "port", 9876),
+                             rotate=bool(getattr(args, "rotate_s", None))))
     out.append(ConsoleSink(quiet=getattr(args, "quiet", False)))
     return out

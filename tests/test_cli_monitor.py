@@ -39,12 +39,13 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     assert rc == 0
     out = capsys.readouterr().out
     assert "2000 samples at 1000 Hz = 2.00 s" in out and f"Wrote archive {arch}" in out
-    rec = read_replay_log(arch / "samples.csv")
+    rec = read_replay_log(arch / "samples-0001.csv")
     assert rec.sample_rate_hz == 1000.0 and list(rec.aux) == ["temp_c"] and np.all(rec.aux["temp_c"] == 31)
     assert len(rec) <= 2000 and rec.t_s[-1] == pytest.approx(1.999)
     # N of the fake device is 0.05 deg/sqrt(h): the whole-run fit finds it
     line = next(l for l in out.splitlines() if l.strip().startswith("N_dpsh"))
     assert abs(float(line.split("=")[1].split()[0]) - 0.05) < 0.005
+    rrd = tmp_path / "live-0001.rrd"   # the first hourly piece (--rotate-s 3600)
     t_live, live = read_scalars(str(rrd), "/dadev/log10_adev_dph")
     assert live.shape == (12, 8)      # (2000 - 512) // 128 + 1 windows; m = 1 .. 128
     t_rate, _ = read_scalars(str(rrd), "/rate/rate_dph")
@@ -54,7 +55,7 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     texts = read_texts(str(rrd), "/events")
     assert sum(int(x.split()[1]) for x in texts if x.startswith("crc_error:")) == crc
     replay = tmp_path / "replay.rrd"
-    assert main(["replay", str(arch / "samples.csv"), "--rrd", str(replay), "--window-s", "0.512",
+    assert main(["replay", str(arch), "--rrd", str(replay), "--window-s", "0.512",
                  "--hop-s", "0.128", "--no-progress", "--quiet"]) == 0
     t_rep, rep = read_scalars(str(replay), "/dadev/log10_adev_dph")
     np.testing.assert_allclose(t_rep, t_live, atol=1e-9)
@@ -92,7 +93,7 @@ def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         deadline = time.monotonic() + 60
-        while not (arch / "samples.csv").exists() or (arch / "samples.csv").stat().st_size < 40_000:
+        while not (arch / "samples-0001.csv").exists() or (arch / "samples-0001.csv").stat().st_size < 40_000:
             assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else ""
             time.sleep(0.1)
         p.send_signal(signal.SIGINT)
@@ -103,7 +104,7 @@ def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
     assert p.returncode == 0, err
     assert "fogmon: interrupted (Ctrl-C)" in out and "Traceback" not in err
     n = int(next(l for l in out.splitlines() if "samples at 1000 Hz" in l).split()[0])
-    rec = read_replay_log(arch / "samples.csv")      # complete rows only, readable
+    rec = read_replay_log(arch / "samples-0001.csv")  # complete rows only, readable
     assert len(rec) >= n - 1000                      # the archive flushes at least every 0.5 s
-    t, _ = read_scalars(str(rrd), "/rate/rate_dph")
+    t, _ = read_scalars(str(tmp_path / "c-0001.rrd"), "/rate/rate_dph")
     assert len(t) > 0

@@ -1,8 +1,12 @@
-"""`fogmon replay`: exit codes, one-line errors, the README's default command end to end."""
+"""`fogmon replay`: exit codes, one-line errors, the README's default command end to end;
+stop signals; the --serve server's life; sidecars checked field by field and confined to
+their folder."""
 from __future__ import annotations
 
+import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -15,9 +19,16 @@ from fogmon.cli import main
 from fogmon.davar.batch import dadev
 from fogmon.recording import write_replay_log
 
-from test_rerun_sink import read_scalars
+from test_rerun_sink import process_groups, read_scalars  # noqa: F401 (a fixture)
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def fogmon_process(*argv, **kw):
+    """`python -m fogmon ...` in its own session (the process_groups fixture kills it)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, "-m", "fogmon", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env, start_new_session=True, **kw)
 
 
 @pytest.fixture
@@ -109,41 +120,143 @@ def test_readme_default_command_end_to_end(tmp_path):
     assert abs(float(line.split()[1]) - 34.17) < 0.01
 
 
-@pytest.mark.filterwarnings("ignore:RRD file has no footer")
-def test_replay_serve_feeds_a_late_viewer_and_stops_on_ctrl_c(small_log, tmp_path):
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")   # the viewer's file is read while it writes
+def test_replay_serve_feeds_a_late_viewer_and_stops_on_ctrl_c(small_log, tmp_path, process_groups):
     """--serve (localhost) keeps serving after the replay; a viewer connecting late still
-    gets everything the file sink got; Ctrl-C then ends it with exit 0."""
-    from test_rerun_sink import _free_port
-    from fogmon.sinks.rerun_sink import stop_process_group
+    gets everything the file sink got; Ctrl-C then ends it with exit 0 and stops the server."""
+    from test_rerun_sink import _free_port, listening, wait_until
 
     port = _free_port()
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
     file_ = tmp_path / "f.rrd"
-    p = subprocess.Popen([sys.executable, "-m", "fogmon", "replay", str(small_log[0]), "--serve", "--port", str(port),
-                          "--rrd", str(file_), "--window-s", "40.96", "--no-progress", "--quiet"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    recv = None
-    try:
-        line = ""
-        while "still serving" not in line:
-            line = p.stderr.readline()
-            assert line or p.poll() is None, "replay ended before serving"
-        got = tmp_path / "viewer.rrd"
-        recv = subprocess.Popen([str(Path(sys.executable).parent / "rerun"), "--port", str(_free_port()), "--save",
-                                 str(got), f"rerun+http://127.0.0.1:{port}/proxy"], start_new_session=True,
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        want = read_scalars(str(file_), "/dadev/log10_adev_dph")
-        deadline = time.monotonic() + 30
-        while True:
-            time.sleep(0.5)
-            have = read_scalars(str(got), "/dadev/log10_adev_dph") if got.exists() else ([], [])
-            if len(have[0]) == len(want[0]) or time.monotonic() > deadline:
-                break
-        np.testing.assert_array_equal(have[1], want[1])
-        p.send_signal(signal.SIGINT)
-        assert p.wait(timeout=30) == 0
-    finally:
-        if recv is not None:
-            stop_process_group(recv)
-        if p.poll() is None:
-            p.kill()
+    p = fogmon_process("replay", str(small_log[0]), "--serve", "--port", str(port), "--rrd", str(file_),
+                       "--window-s", "40.96", "--no-progress", "--quiet")
+    process_groups.append(p)
+    line = ""
+    while "still serving" not in line:
+        line = p.stderr.readline()
+        assert line or p.poll() is None, "replay ended before serving"
+    got = tmp_path / "viewer.rrd"
+    process_groups.append(subprocess.Popen(
+        [str(Path(sys.executable).parent / "rerun"), "--port", str(_free_port()), "--save", str(got),
+         f"rerun+http://127.0.0.1:{port}/proxy"], start_new_session=True, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL))
+    want = read_scalars(str(file_), "/dadev/log10_adev_dph")
+
+    def viewer_has_all():
+        try:
+            return len(read_scalars(str(got), "/dadev/log10_adev_dph")[0]) == len(want[0])
+        except (OSError, ValueError):   # not written yet, or no recording in it yet
+            return False
+
+    wait_until(viewer_has_all, "the late viewer did not get every window")
+    np.testing.assert_array_equal(read_scalars(str(got), "/dadev/log10_adev_dph")[1], want[1])
+    p.send_signal(signal.SIGINT)
+    assert p.wait(timeout=30) == 0
+    assert not listening(port)
+
+
+@pytest.fixture
+def gap_log(tmp_path):
+    """60 s at 50 Hz of white noise with a 0.2 s time gap at t = 1 s (its event says the replay is under way)."""
+    fs, n = 50.0, 3000
+    t = np.arange(n) / fs
+    keep = (t < 1.0) | (t >= 1.2)
+    rate = 60 * 0.1 * np.sqrt(fs) * np.random.default_rng(3).standard_normal(n)
+    path = tmp_path / "gap.csv"
+    write_replay_log(path, t[keep], rate[keep], {}, {"sample_rate_hz": fs})
+    return path
+
+
+@pytest.mark.filterwarnings("error:RRD file has no footer")
+@pytest.mark.parametrize("sig, name", [(signal.SIGTERM, "SIGTERM"), (signal.SIGHUP, "SIGHUP"),
+                                       (signal.SIGINT, "Ctrl-C")])
+def test_stop_signals_end_a_realtime_replay_cleanly(gap_log, tmp_path, process_groups, sig, name):
+    out_rrd = tmp_path / "r.rrd"
+    p = fogmon_process("replay", str(gap_log), "--realtime", "--rrd", str(out_rrd), "--window-s", "5.12",
+                       "--no-progress")
+    process_groups.append(p)
+    line = ""
+    while "gap:" not in line:                 # the replay is under way (recording time 1 s)
+        line = p.stderr.readline()
+        assert line or p.poll() is None, "replay ended before its first event"
+    p.send_signal(sig)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 128 + sig and "Traceback" not in err, err
+    assert f"fogmon: interrupted ({name})" in out and f"Wrote {out_rrd}" in out
+    line = next(x for x in out.splitlines() if "samples at 50 Hz" in x)
+    n, invalid = int(line.split()[0]), int(line.split("(")[1].split()[0])
+    t, rate = read_scalars(str(out_rrd), "/rate/rate_dph")      # complete (a footer), every sample processed
+    assert 50 <= n < 3000 and len(t) == n - invalid
+
+
+def test_sigkill_of_a_serving_replay_frees_the_port(small_log, process_groups):
+    """The --serve server dies with fogmon even on SIGKILL; the next --serve on the port works."""
+    from test_rerun_sink import _free_port, listening, wait_until
+
+    port = _free_port()
+    p = fogmon_process("replay", str(small_log[0]), "--serve", "--port", str(port), "--window-s", "40.96",
+                       "--no-progress", "--quiet")
+    process_groups.append(p)
+    line = ""
+    while "still serving" not in line:
+        line = p.stderr.readline()
+        assert line or p.poll() is None, "replay ended before serving"
+    assert listening(port) == {"127.0.0.1"}
+    p.kill()
+    p.wait()
+    wait_until(lambda: not listening(port), f"port {port} still taken after SIGKILL of fogmon")
+
+
+def test_serve_on_a_busy_port_exits_2_with_one_line_and_leaves_nothing(small_log, tmp_path, capsys):
+    from test_rerun_sink import _free_port
+
+    port = _free_port()
+    out = tmp_path / "o.rrd"
+    with socket.create_server(("127.0.0.1", port)):             # a stale server on the port
+        assert main(["replay", str(small_log[0]), "--serve", "--port", str(port), "--rrd", str(out),
+                     "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon replay: error: --serve: port {port} on 127.0.0.1 is already in use")
+    assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+SIDECAR_OK = {"format": "fogmon capture v1", "kind": "serial", "protocol": "kvh-a", "rate_hz": 200.0,
+              "kvh_rot": "rate", "kvh_units": "deg", "axis": "z", "breaks": []}
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"rate_hz": "fast"}, "field rate_hz: expected a number > 0, got 'fast'"),
+    ({"protocol": "kvh-x"}, "field protocol: expected one of kvh-a, kvh-b, kvh-c, dsp3000, lines, got 'kvh-x'"),
+    ({"breaks": [{"offset": -3, "missing_est": 1}]}, "field breaks: item 0: expected"),
+    ({"breaks": {"offset": 3}}, "field breaks: expected a list"),
+    ({"kind": None}, "field kind: missing"),
+    ({"format": "something else"}, "not a fogmon capture sidecar"),
+    ({"kvh_units": 3}, "field kvh_units: expected one of deg, rad, got 3"),
+])
+def test_a_malformed_sidecar_is_one_line_naming_file_and_field(tmp_path, capsys, change, message):
+    from sources_fake_device import stream
+
+    cap = tmp_path / "raw-0001.bin"
+    cap.write_bytes(stream(50)[0])
+    side = {k: v for k, v in {**SIDECAR_OK, **change}.items() if v is not None}
+    (tmp_path / "raw-0001.bin.json").write_text(json.dumps(side))
+    for target in (cap, tmp_path):                               # the piece, and the archive folder
+        assert main(["replay", str(target), "--no-progress", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"fogmon replay: error: {cap}.json: ") and message in err, err
+        assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("dbc", ["/etc/passwd", "../outside.dbc", "sub/../../outside.dbc", "link.dbc"])
+def test_a_sidecar_cannot_name_a_file_outside_its_folder(tmp_path, capsys, dbc):
+    arch = tmp_path / "arch"
+    arch.mkdir()
+    (tmp_path / "outside.dbc").write_text("root:x:0:0:secret\n")
+    (arch / "link.dbc").symlink_to(tmp_path / "outside.dbc")
+    (arch / "frames-0001.asc").write_text("date Mon Nov 23 10:00:00.000 am 2026\nbase hex  timestamps absolute\n")
+    (arch / "frames-0001.asc.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "can",
+                                                            "rate_hz": 100.0, "dbc": dbc}))
+    assert main(["replay", str(arch / "frames-0001.asc"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon replay: error: {arch}/frames-0001.asc.json: field dbc: ")
+    assert len(err.strip().splitlines()) == 1 and "root:" not in err and "secret" not in err

@@ -1,8 +1,12 @@
 """The Rerun sink: the .rrd read back holds exactly what the engine computed, and a live
-gRPC receiver gets the same data as the file."""
+gRPC receiver gets the same data as the file; --rotate-s pieces; the --serve server's
+life (only where asked, never on a busy port, never outliving fogmon); no empty .rrd."""
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -16,7 +20,8 @@ from rerun.chunk import RrdReader
 
 from fogmon.block import Event
 from fogmon.davar.batch import dadev
-from fogmon.pipeline import COEFFICIENTS, run_pipeline
+from fogmon.errors import FogmonError
+from fogmon.pipeline import COEFFICIENTS, Summary, run_pipeline
 from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server, stop_process_group
 
 from test_pipeline import Collect, ListSource, _args, _white
@@ -165,16 +170,110 @@ def test_live_grpc_receiver_gets_the_same_data_as_the_file(tmp_path):
         np.testing.assert_array_equal(vl, vf)
 
 
-def test_serve_binds_localhost_by_default():
+def listening(port):
+    """IPv4 addresses with a socket listening on ``port`` (Linux /proc/net/tcp)."""
+    out = set()
+    with open("/proc/net/tcp") as fh:
+        for line in fh.readlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            addr, p = local.split(":")
+            if state == "0A" and int(p, 16) == port:          # 0A = LISTEN
+                out.add(socket.inet_ntoa(bytes.fromhex(addr)[::-1]))
+    return out
+
+
+def wait_until(cond, what, timeout_s=30.0):
+    """Poll ``cond`` (the deadline only guards against a hang; it is not what is tested)."""
+    deadline = time.monotonic() + timeout_s
+    while not cond():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def process_groups():
+    """Processes a test starts (in their own session): killed with their group at the end,
+    so a failing test leaves no server behind."""
+    procs = []
+    yield procs
+    for p in procs:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+        p.wait(timeout=30)
+
+
+@pytest.mark.parametrize("bind", ["127.0.0.1", "0.0.0.0"])
+def test_serve_listens_only_where_asked(bind):
     port = _free_port()
-    proc, url = start_grpc_server("127.0.0.1", port)
+    proc, url = start_grpc_server(bind, port)
     try:
         assert url == f"rerun+http://127.0.0.1:{port}/proxy"
-        out = subprocess.run(["ss", "-ltn"], capture_output=True, text=True).stdout if shutil.which("ss") else ""
-        if out:
-            assert f"127.0.0.1:{port}" in out and f"0.0.0.0:{port}" not in out
+        assert listening(port) == {bind}
     finally:
         stop_process_group(proc)
+    assert listening(port) == set()
+
+
+def test_serve_on_a_busy_port_is_one_line_before_anything_starts(tmp_path):
+    port = _free_port()
+    with socket.create_server(("127.0.0.1", port)):            # a stale server holds the port
+        with pytest.raises(FogmonError, match=f"--serve: port {port} on 127.0.0.1 is already in use"):
+            RerunSink(rrd_path=str(tmp_path / "x.rrd"), serve=True, port=port)
+        with pytest.raises(FogmonError, match="already in use"):
+            RerunSink(serve=True, bind="0.0.0.0", port=port)    # the wildcard address conflicts too
+    assert list(tmp_path.iterdir()) == []                       # the .rrd probe is gone
+
+
+def test_the_server_dies_with_fogmon_even_on_sigkill(process_groups):
+    """The rerun server is fogmon's own child (not the launcher's grandchild) with a death
+    signal: SIGKILL of the process that started it frees the port."""
+    port = _free_port()
+    code = ("import sys; from fogmon.sinks.rerun_sink import start_grpc_server; "
+            f"p, url = start_grpc_server('127.0.0.1', {port}); print(p.pid, flush=True); sys.stdin.read()")
+    parent = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True, start_new_session=True)
+    process_groups.append(parent)
+    server_pid = int(parent.stdout.readline())
+    assert listening(port) == {"127.0.0.1"}
+    assert open(f"/proc/{server_pid}/cmdline", "rb").read().split(b"\0")[1] == b"--serve-grpc"
+    parent.kill()
+    parent.wait()
+    wait_until(lambda: not listening(port), "the server outlived its parent")
+    wait_until(lambda: not os.path.exists(f"/proc/{server_pid}") or
+               open(f"/proc/{server_pid}/stat").read().split()[2] == "Z", "the server process is still there")
+
+
+def test_no_rrd_is_left_when_no_sample_came(tmp_path):
+    fresh, kept = tmp_path / "new.rrd", tmp_path / "old.rrd"
+    kept.write_bytes(b"an earlier recording")
+    for path in (fresh, kept):
+        sink = RerunSink(rrd_path=str(path))
+        sink.finish(Summary("x", 10.0, 1.0, 1.0))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.rrd"] and kept.read_bytes() == b"an earlier recording"
+
+
+@pytest.mark.filterwarnings("error:RRD file has no footer")
+def test_rotated_rrd_pieces_are_complete_recordings_that_join(tmp_path):
+    fs, n = 100.0, 40_000
+    t, r = _white(n, fs, seed=9)
+    one, rot = str(tmp_path / "one.rrd"), str(tmp_path / "rot.rrd")
+    run_pipeline(ListSource(t, r, [7000] * 5 + [5000], fs), _args(window_s=40.96), sinks=[RerunSink(rrd_path=one)])
+    s = run_pipeline(ListSource(t, r, [7000] * 5 + [5000], fs), _args(window_s=40.96, rotate_s=100.0),
+                     sinks=[RerunSink(rrd_path=rot, rotate=True)])
+    pieces = [str(tmp_path / f"rot-000{k}.rrd") for k in range(1, 5)]
+    assert sorted(str(p) for p in tmp_path.glob("rot-*.rrd")) == pieces
+    assert s.outputs == [f"{pieces[0]} .. {pieces[-1]} (4 pieces)"]
+    assert len({e.recording_id for p in pieces for e in RrdReader(p).recordings()}) == 1   # the viewer joins them
+    for k, piece in enumerate(pieces):
+        tr, rate = read_scalars(piece, "/rate/rate_dph")
+        np.testing.assert_allclose(tr, t[k * 10_000:(k + 1) * 10_000], atol=1e-8)  # its 100 s, every sample
+        td, _ = read_scalars(piece, "/dadev/log10_adev_dph")
+        assert len(td) and np.all((td >= 100 * k) & (td < 100 * (k + 1)))     # windows ending in it
+        assert list(RrdReader(piece).stream().filter(content="/session", is_static=True))   # its own static data
+    joined = [np.concatenate(x) for x in zip(*(read_scalars(p, "/dadev/log10_adev_dph") for p in pieces))]
+    t1, v1 = read_scalars(one, "/dadev/log10_adev_dph")
+    np.testing.assert_array_equal(joined[0], t1)
+    np.testing.assert_allclose(joined[1], v1, rtol=1e-12)       # blocks cut at the seams: same windows
 
 
 def test_error_rate_is_logged_beside_the_raw_rate(tmp_path):

@@ -8,7 +8,7 @@ import importlib
 import sys
 import warnings
 
-from fogmon import __version__
+from fogmon import __version__, stopping
 from fogmon.errors import FogmonError, FogmonWarning
 
 #: sub-command -> one-line help
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv).parse_args(argv)
     try:
-        with warnings.catch_warnings():
+        with stopping.installed(), warnings.catch_warnings():  # SIGTERM/SIGHUP stop a command as Ctrl-C does
             warnings.simplefilter("default", FogmonWarning)  # each distinct warning once
             warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
             return int(importlib.import_module(f"fogmon.cli.{args.command}").run(args) or 0)
@@ -68,8 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fogmon {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"fogmon {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"fogmon {args.command}: interrupted ({stopping.stop_name()})", file=sys.stderr)
+        return stopping.interrupted_exit_code()
 
 
 if __name__ == "__main__":

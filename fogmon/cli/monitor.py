@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
 import sys
 
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
@@ -17,12 +16,15 @@ EPILOG = """examples:
   fogmon monitor --serial /dev/ttyUSB0 --protocol dsp3000 --serve --duration-s 3600
   fogmon monitor --can can0 --dbc gyro.dbc --rrd out/run.rrd --archive runs/2026-11-21
 
-Stop with Ctrl-C (or --duration-s): the archive and the .rrd are closed cleanly and the
-summary printed. The archive holds samples.csv (a replay log) and the raw input, both
-replayable with `fogmon replay`. Rates in deg/h, times in s, coefficients in IEEE-952
-units. Exit code 0 on success (also after Ctrl-C), 1 when no sample arrived from the
-device (one line says what did arrive, if anything; an archive folder the run created
-is removed when nothing at all arrived), 2 on bad usage or input."""
+Stop with Ctrl-C, SIGTERM or SIGHUP (or --duration-s): the archive and the .rrd are
+closed cleanly and the summary printed. The archive holds pieces of --rotate-s s
+(default one hour): samples-0001.csv, ... (replay logs) and the raw input (raw-0001.bin
++ .json or frames-0001.asc + .json); `fogmon replay DIR` replays them all as one
+recording, `fogmon replay DIR/samples-0002.csv` one piece. Rates in deg/h, times in s,
+coefficients in IEEE-952 units. Exit code 0 on success (also after Ctrl-C, SIGTERM or
+SIGHUP: stopping is how a live run ends), 1 when no sample arrived from the device (one
+line says what did arrive, if anything; an archive folder the run created is removed
+when nothing at all arrived), 2 on bad usage or input."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -30,41 +32,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG
     add_source_arguments(parser, mode="live")
     parser.add_argument("--archive", metavar="DIR",
-                        help="folder for the archive (samples.csv + raw capture); default: a new "
+                        help="folder for the archive (samples-NNNN.csv + raw capture pieces); default: a new "
                              "fogmon-archive-YYYYmmddTHHMMSSZ folder in the current directory")
     add_pipeline_arguments(parser, replay=False)
 
 
 def run(args: argparse.Namespace) -> int:
     source = open_live_source(args)
-    directory = args.archive or default_archive_dir(".")
-    existed = os.path.exists(directory)
-    archive = Archive(directory, source)
-    if hasattr(source, "add_tap"):
-        source.add_tap(archive)
-
-    def remove_if_empty() -> bool:
-        """Leave no archive folder this run created when nothing at all was received."""
-        c = archive.counters
-        if existed or c["rows_written"] or c["raw_bytes"] or c["raw_frames"]:
-            return False
-        shutil.rmtree(directory, ignore_errors=True)
-        return True
-
+    archive = Archive(args.archive or default_archive_dir("."), source)
     try:
         summary = run_pipeline(source, args, extra_sinks=[archive])
-    except BaseException:
-        remove_if_empty()
-        raise
+    finally:
+        archive.close()   # also when the run never started; a folder it created and left empty goes
     if not summary.n_samples:
-        print(f"fogmon monitor: {nothing_received(summary, archive, remove_if_empty())}", file=sys.stderr)
+        print(f"fogmon monitor: {nothing_received(summary, archive)}", file=sys.stderr)
         return 1
     return 0
 
 
-def nothing_received(summary, archive: Archive, removed: bool) -> str:
+def nothing_received(summary, archive: Archive) -> str:
     """The one line for a run that gave no sample: what did arrive, and where it is."""
     c = archive.counters
+    removed = not os.path.isdir(archive.directory)
     what = f"{c['raw_frames']:,} CAN frames" if c["raw_frames"] else f"{c['raw_bytes']:,} bytes" if c["raw_bytes"] else ""
     src = f"{summary.source_name} in {summary.source_wall_s:.1f} s"
     if not what:

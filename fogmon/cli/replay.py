@@ -7,24 +7,29 @@ import argparse
 
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
 from fogmon.sources.open import add_source_arguments, open_replay_source
+from fogmon.stopping import interrupted_exit_code
 
 EPILOG = """examples:
   fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd out/lasergyro.rrd
   fogmon replay run.csv --connect            # into a running viewer (start it with: rerun)
   fogmon replay run.csv --serve --realtime 10
   fogmon replay run.csv --window-s 600 --hop-s 60 --taus 8 --rrd out/run.rrd
+  fogmon replay runs/fogmon-archive-20261121T080000Z --rrd week.rrd --rotate-s 86400   # a whole archive
 
 Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
 B deg/h, K deg/h/sqrt(h), R deg/h^2). Without --rrd/--connect/--serve only the console
-summary is printed. Exit code 0 on success, 2 on bad usage or input, 130 if interrupted."""
+summary is printed. Ctrl-C, SIGTERM and SIGHUP stop it cleanly (the .rrd is complete).
+Exit code 0 on success, 2 on bad usage or input, 128 + the signal if stopped (130 after
+Ctrl-C, 143 after SIGTERM, 129 after SIGHUP)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
     parser.add_argument("recording", metavar="RECORDING",
-                        help="replay-log CSV (time_s, rate_dph, ...), raw serial capture (with --protocol) "
-                             "or CAN log .asc/.blf/.trc/.csv/.log (with --dbc)")
+                        help="replay-log CSV (time_s, rate_dph, ...), raw serial capture (with --protocol), "
+                             "CAN log .asc/.blf/.trc/.csv/.log (with --dbc), or an archive folder of `fogmon "
+                             "monitor` (all its pieces as one recording)")
     add_source_arguments(parser, mode="replay")
     add_pipeline_arguments(parser)
 
@@ -32,4 +37,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     source = open_replay_source(args.recording, args)
     summary = run_pipeline(source, args)
-    return 130 if summary.interrupted else 0
+    return interrupted_exit_code() if summary.interrupted else 0

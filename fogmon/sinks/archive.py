@@ -1,23 +1,32 @@
 """The archive: while monitoring, everything a live source delivers goes to disk, so
 nothing is lost.
 
-Under one directory:
+Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.pieces:
+piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
-- ``samples.csv``: the decoded samples as a replay log (CONTRACT section 1). Valid
-  samples only (a replay log holds no NaN); lost and invalid samples show as time gaps,
-  which every reader turns back into invalid placeholders.
+- ``samples-NNNN.csv``: the decoded samples as a replay log (CONTRACT section 1), each
+  piece complete with magic line, metadata (``piece: N``) and header. Valid samples only
+  (a replay log holds no NaN); lost and invalid samples show as time gaps, which every
+  reader turns back into invalid placeholders.
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
-  serial gyro ``raw.bin`` (the bytes exactly as received) plus ``raw.bin.json`` (protocol,
-  decoder options, outages as byte offsets); for a CAN gyro ``frames.asc`` (python-can
-  ASC log of every frame received) plus ``frames.asc.json`` and a copy of the DBC.
+  serial gyro ``raw-NNNN.bin`` (the bytes exactly as received) plus ``raw-NNNN.bin.json``
+  (protocol, decoder options, outages as byte offsets in that piece); for a CAN gyro
+  ``frames-NNNN.asc`` (python-can ASC log of every frame received) plus
+  ``frames-NNNN.asc.json`` and one copy of the DBC. A raw piece begins at a frame
+  boundary (where the decoder holds no partial frame) a little after the samples piece
+  of the same number (by the input read but not yet processed when the pipeline reached
+  the seam): concatenated, the raw pieces are exactly the byte stream received.
 
-Files are written in whole lines/chunks straight to the OS at least every ``flush_s``
-(default 0.5 s, by a background thread even when no data flows), so a SIGKILL loses at
-most the last ``flush_s`` of data and never leaves a half-written CSV row. The raw taps may be called from the source's reader
-thread: the raw capture keeps being written even while the consumer is slow.
+Files are created with their first data (a run that received nothing leaves no file,
+and no folder it created) and written in whole lines/chunks straight to the OS at least
+every ``flush_s`` (default 0.5 s, by a background thread even when no data flows), so a
+SIGKILL loses at most the last ``flush_s`` of data and never leaves a half-written CSV
+row. The raw taps may be called from the source's reader thread: the raw capture keeps
+being written even while the consumer is slow.
 """
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -30,6 +39,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
+from fogmon.pieces import find_pieces, piece_path
 from fogmon.pipeline import Sink
 from fogmon.recording import append_replay_rows, write_replay_header
 from fogmon.sources.replay import CAPTURE_FORMAT, SIDECAR_SUFFIX
@@ -52,26 +62,30 @@ class _KeepOpen(io.StringIO):
 
 
 class Archive(Sink):
-    """Archive of ``source`` under ``directory`` (created; must not hold an archive yet).
-    A pipeline sink (``run_pipeline(source, args, extra_sinks=[archive])``): ``block``
-    (= ``write``) takes the decoded blocks, ``finish`` closes; the source feeds the raw capture through
-    the tap methods ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
-    (registered with ``source.add_tap(archive)``). Counters: ``rows_written``,
-    ``rows_without_aux`` (valid samples whose aux channel was not yet known, e.g. KVH
-    format C before its first temperature frame; not written), ``raw_bytes``,
-    ``raw_frames``."""
+    """Archive of ``source`` under ``directory`` (created if needed; must not hold an
+    archive yet). A pipeline sink (``run_pipeline(source, args, extra_sinks=[archive])``):
+    ``block`` (= ``write``) takes the decoded blocks, ``rotate`` starts the next piece,
+    ``finish`` closes; the source feeds the raw capture through the tap methods
+    ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
+    (registered here with ``source.add_tap``). ``replay_log_path`` and ``capture_path``
+    name the current piece's files. Counters: ``rows_written``, ``rows_without_aux``
+    (valid samples whose aux channel was not yet known, e.g. KVH format C before its
+    first temperature frame; not written), ``raw_bytes``, ``raw_frames``."""
 
     def __init__(self, directory: str, source, flush_s: float = 0.5, clock=time.monotonic,
                  background_flush: bool = True) -> None:
         self.directory = os.fspath(directory)
+        self._created_dir = not os.path.isdir(self.directory)
         try:
             os.makedirs(self.directory, exist_ok=True)
         except OSError as e:
             raise FogmonError(f"--archive {self.directory}: cannot create: {e.strerror}") from None
-        self.replay_log_path = os.path.join(self.directory, REPLAY_LOG)
-        if os.path.exists(self.replay_log_path):
-            raise FogmonError(f"--archive {self.directory}: already holds an archive ({REPLAY_LOG}); "
+        held = [p for name in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE) for p in find_pieces(self.directory, name)]
+        if held:
+            raise FogmonError(f"--archive {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
                               f"give a new folder")
+        if not os.access(self.directory, os.W_OK):
+            raise FogmonError(f"--archive {self.directory}: cannot write there")
         self.source = source
         self.flush_s = float(flush_s)
         self._clock = clock
@@ -79,29 +93,26 @@ class Archive(Sink):
         self._last_flush = clock()
         self.started_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
         self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
-        self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self.piece = 1
+        self._pieces: set[int] = set()          # pieces that have a file
+        self._done = False
+        self._csv_fd = None
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
-        spec = dict(source.capture_spec()) if hasattr(source, "capture_spec") else None
-        self._spec = spec
+        self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
+        base = dict(source.capture_spec()) if hasattr(source, "capture_spec") else None
+        self._dbc = base.pop("dbc_path", None) if base else None
+        self._spec_base = base
+        self._spec = None                        # the current capture piece's sidecar
         self._cap_fd = None
+        self._cap_buf = bytearray()
+        self._cap_written = 0                    # bytes of the current capture piece on disk
+        self._cut_pending = False                # start a new capture piece at the next frame boundary
         self._can_writer = None
         self.capture_path = None
-        if spec is not None:
-            kind = spec.get("kind")
-            self.capture_path = os.path.join(self.directory, SERIAL_CAPTURE if kind == "serial" else CAN_CAPTURE)
-            self._cap_fd = os.open(self.capture_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-            self._cap_buf = bytearray()
-            if kind == "can":
-                import can
-                self._can_text = _KeepOpen()
-                self._can_writer = can.ASCWriter(self._can_text)
-                dbc = spec.pop("dbc_path", None)
-                if dbc:
-                    shutil.copyfile(dbc, os.path.join(self.directory, os.path.basename(dbc)))
-                    spec["dbc"] = os.path.basename(dbc)
-            spec.update({"format": CAPTURE_FORMAT, "started_utc": self.started_utc, "breaks": []})
-            self._write_sidecar()
+        if base is not None:
+            self._capture_name = SERIAL_CAPTURE if base.get("kind") == "serial" else CAN_CAPTURE
+            self.capture_path = os.path.join(self.directory, piece_path(self._capture_name, 1))
             if hasattr(source, "add_tap"):
                 source.add_tap(self)
         self._closed = threading.Event()
@@ -121,51 +132,132 @@ class Archive(Sink):
     def _write(self, block: Block) -> None:
         if self._aux_names is None and len(block):
             self._aux_names = list(block.aux)
-            meta = {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
-                    "started_utc": self.started_utc}
-            write_replay_header(self._csv_buf, self._aux_names, meta)
-        if len(block):
+        if len(block) and not self._done:
             keep = block.valid.copy()
             for k in self._aux_names:
                 keep &= np.isfinite(block.aux[k])
             self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
-            append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
-                               {k: block.aux[k][keep] for k in self._aux_names})
-            self.counters["rows_written"] += int(keep.sum())
+            if keep.any():
+                if self._csv_fd is None:
+                    self._open_replay_log()
+                append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
+                                   {k: block.aux[k][keep] for k in self._aux_names})
+                self.counters["rows_written"] += int(keep.sum())
         self._maybe_flush()
+
+    def _open_replay_log(self) -> None:
+        self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
+        self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self._pieces.add(self.piece)
+        meta = {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
+                "started_utc": self.started_utc, "piece": self.piece}
+        write_replay_header(self._csv_buf, self._aux_names, meta)
+
+    def _close_replay_log(self) -> None:
+        self._flush()
+        if self._csv_fd is not None:
+            os.close(self._csv_fd)
+            self._csv_fd = None
 
     def block(self, block: Block) -> None:
         self.write(block)
 
+    def rotate(self, piece: int, t_s: float) -> None:
+        """Piece ``piece`` begins: the replay log goes on in a new file now, the raw
+        capture at its next frame boundary."""
+        with self._lock:
+            self._close_replay_log()
+            self.piece = piece
+            self._cut_pending = self._cap_fd is not None
+
     def finish(self, summary) -> None:
         self.close()
         outputs = getattr(summary, "outputs", None)
-        if outputs is not None:
-            outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples)")
+        if outputs is not None and self._pieces:
+            n = len(self._pieces)
+            outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
+                           + (f" in {n} pieces)" if n > 1 else ")"))
 
     # -- raw capture taps (called by the source) --------------------------------------
     def raw(self, data: bytes) -> None:
         with self._lock:
-            self._cap_buf += data
+            self._append_raw(data)
             self.counters["raw_bytes"] += len(data)
             self._maybe_flush()
 
     def frame(self, msg) -> None:
         with self._lock:
-            self._can_writer.on_message_received(msg)
+            self._append_frame(msg)
             self.counters["raw_frames"] += 1
             self._maybe_flush()
 
     def outage(self, elapsed_s: float, missing_est: float) -> None:
         """The source heard nothing for ``elapsed_s`` s, about ``missing_est`` samples
         lost; recorded in the sidecar at the current byte offset of the serial capture
-        (a CAN log carries its own timestamps)."""
+        piece (a CAN log carries its own timestamps)."""
         with self._lock:
-            if self._spec is not None and self._spec.get("kind") == "serial":
-                self._spec["breaks"].append({"offset": self.counters["raw_bytes"], "missing_est": float(missing_est),
+            if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
+                self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing_est),
                                              "elapsed_s": float(elapsed_s)})
                 self._write_sidecar()
             self.flush()
+
+    # -- capture pieces --------------------------------------------------------------------
+    def _append_raw(self, data: bytes) -> None:
+        """Serial bytes into the capture; a pending cut happens where the decoder, which
+        has just been fed ``data``, holds no partial frame (else at a later call)."""
+        at = len(data) - self.source.codec.pending if self._cut_pending else -1
+        if at >= 0:                              # (< 0: the frame under way began in an earlier chunk)
+            if at and self._open_capture():
+                self._cap_buf += data[:at]
+            self._close_capture()
+            data = data[at:]
+        if data and self._open_capture():
+            self._cap_buf += data
+
+    def _append_frame(self, msg) -> None:
+        if self._cut_pending:
+            self._close_capture()
+        if self._open_capture():
+            self._can_writer.on_message_received(msg)
+
+    def _open_capture(self) -> bool:
+        """Make sure the current capture piece is open (False once the archive is closed)."""
+        if self._done:
+            return False
+        if self._cap_fd is not None:
+            return True
+        self.capture_path = os.path.join(self.directory, piece_path(self._capture_name, self.piece))
+        self._cap_fd = os.open(self.capture_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self._cap_written = 0
+        self._pieces.add(self.piece)
+        self._spec = {**self._spec_base, "format": CAPTURE_FORMAT, "started_utc": self.started_utc,
+                      "piece": self.piece, "breaks": []}
+        if self._spec_base["kind"] == "can":
+            import can
+            self._can_text = _KeepOpen()
+            self._can_writer = can.ASCWriter(self._can_text)
+            if self._dbc:
+                name = os.path.basename(self._dbc)
+                if not os.path.exists(os.path.join(self.directory, name)):
+                    shutil.copyfile(self._dbc, os.path.join(self.directory, name))
+                self._spec["dbc"] = name
+        self._write_sidecar()
+        return True
+
+    def _close_capture(self) -> None:
+        self._cut_pending = False
+        if self._cap_fd is None:
+            return
+        if self._can_writer is not None:
+            self._can_writer.stop()              # writes the ASC end line into our buffer
+        self._flush()
+        os.close(self._cap_fd)
+        self._cap_fd = self._can_writer = None
+
+    def _cap_offset(self) -> int:
+        """Bytes in the current serial capture piece so far."""
+        return self._cap_written + len(self._cap_buf)
 
     # -- disk ----------------------------------------------------------------------------
     def _write_sidecar(self) -> None:
@@ -186,36 +278,38 @@ class Archive(Sink):
             self._flush()
 
     def _flush(self) -> None:
-        if self._csv_fd is None:
-            return
         self._last_flush = self._clock()
-        text = self._csv_buf.getvalue()
-        if text:
-            _write_all(self._csv_fd, text.encode("utf-8"))
-            self._csv_buf = io.StringIO()
+        if self._csv_fd is not None:
+            text = self._csv_buf.getvalue()
+            if text:
+                _write_all(self._csv_fd, text.encode("utf-8"))
+                self._csv_buf = io.StringIO()
+        if self._cap_fd is None:
+            return
         if self._can_writer is not None:
             t = self._can_text.getvalue()
             if t:
                 _write_all(self._cap_fd, t.encode("ascii"))
                 self._can_text.seek(0)
                 self._can_text.truncate()
-        elif self._cap_fd is not None and self._cap_buf:
+        elif self._cap_buf:
             _write_all(self._cap_fd, bytes(self._cap_buf))
+            self._cap_written += len(self._cap_buf)
             self._cap_buf.clear()
 
     def close(self) -> None:
-        """Flush and close the files (idempotent); taps called later are ignored."""
+        """Flush and close the files (idempotent); taps called later are ignored. A
+        folder this archive created and left empty is removed."""
         self._closed.set()
         with self._lock:
-            if self._csv_fd is None:
+            if self._done:
                 return
-            if self._can_writer is not None:
-                self._can_writer.stop()      # writes the ASC end line into our buffer
-            self._flush()
-            os.close(self._csv_fd)
-            if self._cap_fd is not None:
-                os.close(self._cap_fd)
-            self._csv_fd = self._cap_fd = None
+            self._close_replay_log()
+            self._close_capture()
+            self._done = True
+        if self._created_dir and not self._pieces:
+            with contextlib.suppress(OSError):
+                os.rmdir(self.directory)
 
     def __enter__(self) -> "Archive":
         return self

@@ -10,6 +10,7 @@ from typing import Sequence, TextIO
 
 from fogmon.block import Event
 from fogmon.pipeline import COEFFICIENTS, Sink, Summary, default_window_s
+from fogmon.stopping import stop_name
 
 #: Events of one kind printed as they happen before the rest are only counted.
 MAX_EVENTS_PER_KIND = 10
@@ -18,7 +19,7 @@ MAX_EVENTS_PER_KIND = 10
 def format_summary(s: Summary) -> str:
     """The summary as text (units in every heading)."""
     lines = []
-    state = "interrupted (Ctrl-C)" if s.interrupted else "done"
+    state = f"interrupted ({stop_name()})" if s.interrupted else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
     lines.append(f"  {s.n_samples} samples at {s.rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
                  f"({s.n_invalid} invalid/lost), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")

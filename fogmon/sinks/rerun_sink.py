@@ -22,20 +22,26 @@ Entities (units in every name; "log10" said where the value is a log):
 """
 from __future__ import annotations
 
+import contextlib
+import errno
 import math
 import os
-import shutil
+import re
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+import uuid
 from typing import Sequence
 
 import numpy as np
 
+from fogmon import stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
+from fogmon.pieces import piece_path
 from fogmon.pipeline import COEFFICIENTS, Sink, StreamInfo
 
 #: Raw rate and aux channels are shown at no more than this many points per second.
@@ -55,6 +61,7 @@ CURVE_X_SCALE = 250.0
 CURVE_Y_SCALE = 100.0
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO"}
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
 
@@ -119,24 +126,86 @@ def _series(origin: str, name: str):
 
 def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[subprocess.Popen, str]:
     """Start a headless Rerun gRPC server (`rerun --serve-grpc`) listening on ``bind:port``;
-    returns the process and the URL SDKs and viewers connect to."""
-    exe = shutil.which("rerun") or str(_venv_bin("rerun"))
-    # own process group: the `rerun` launcher starts the real binary as its child
-    proc = subprocess.Popen([exe, "--serve-grpc", "--bind", bind, "--port", str(port)], start_new_session=True,
-                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    returns the process and the URL SDKs and viewers connect to. A port already in use
+    is a one-line FogmonError before anything starts. The server is the rerun binary
+    itself (not the Python launcher, which would run it as a grandchild), in its own
+    process group, and on Linux dies with the thread that started it, even when fogmon
+    is killed with SIGKILL (prctl PR_SET_PDEATHSIG): no server is ever left behind."""
+    check_port_free(bind, port)
+    log = tempfile.TemporaryFile()   # not a pipe: a long-running server must never block on its log
+    proc = subprocess.Popen([_rerun_binary(), "--serve-grpc", "--bind", bind, "--port", str(port)],
+                            start_new_session=True, preexec_fn=_die_with_parent(), stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=log)
     host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            err = (proc.stderr.read() or b"").decode(errors="replace").strip().splitlines()
-            raise FogmonError(f"--serve: rerun server on {bind}:{port} exited: {err[-1] if err else proc.returncode}")
+    try:
+        with log:
+            while time.monotonic() < deadline:
+                if proc.poll() is not None:
+                    log.seek(0)
+                    lines = _ANSI.sub("", log.read().decode(errors="replace")).strip().splitlines()
+                    raise FogmonError(f"--serve: rerun server on {bind}:{port} exited: "
+                                      f"{lines[-1].strip() if lines else proc.returncode}")
+                try:
+                    with socket.create_connection((host, port), timeout=0.2):
+                        if proc.poll() is None:      # our server answered, not one that held the port
+                            return proc, f"rerun+http://{host}:{port}/proxy"
+                except OSError:
+                    time.sleep(0.1)
+        raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
+    except BaseException:   # also Ctrl-C while waiting: leave no server behind
+        stop_process_group(proc)
+        raise
+
+
+def check_port_free(bind: str, port: int) -> None:
+    """A one-line FogmonError unless a server could listen on ``bind:port`` now."""
+    try:
+        family, kind, proto, _, addr = socket.getaddrinfo(bind or None, port, type=socket.SOCK_STREAM,
+                                                          flags=socket.AI_PASSIVE)[0]
+    except socket.gaierror as e:
+        raise FogmonError(f"--bind {bind}: not an address to listen on ({e.strerror})") from None
+    with socket.socket(family, kind, proto) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as servers do: TIME_WAIT is no conflict
         try:
-            with socket.create_connection((host, port), timeout=0.2):
-                return proc, f"rerun+http://{host}:{port}/proxy"
-        except OSError:
-            time.sleep(0.1)
-    stop_process_group(proc)
-    raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
+            s.bind(addr)
+        except OSError as e:
+            if e.errno == errno.EADDRINUSE:
+                raise FogmonError(f"--serve: port {port} on {bind} is already in use (another fogmon --serve or "
+                                  f"Rerun server/viewer; to send to a running viewer use --connect); stop it or "
+                                  f"give another --port") from None
+            raise FogmonError(f"--serve: cannot listen on {bind}:{port}: {e.strerror}") from None
+
+
+def _rerun_binary() -> str:
+    """The rerun executable shipped with rerun-sdk (what its `rerun` launcher runs), or
+    RERUN_CLI_PATH as the launcher honours it."""
+    import rerun_cli
+
+    exe = os.environ.get("RERUN_CLI_PATH") or os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
+    if not os.path.isfile(exe):
+        raise FogmonError(f"--serve: the rerun executable of rerun-sdk is missing ({exe})")
+    return exe
+
+
+def _die_with_parent():
+    """A ``preexec_fn`` (Linux; None elsewhere) giving the child SIGKILL when the thread
+    that started it ends, which includes fogmon being killed. Everything it calls is
+    resolved before the fork."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+    parent = os.getpid()
+    pr_set_pdeathsig, sigkill = 1, int(signal.SIGKILL)
+
+    def preexec() -> None:
+        prctl(pr_set_pdeathsig, sigkill)
+        if os.getppid() != parent:   # fogmon died before the death signal was armed
+            os._exit(1)
+
+    return preexec
 
 
 def _check_listening(url: str, timeout_s: float = 2.0) -> None:
@@ -170,11 +239,6 @@ def stop_process_group(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
             return
         except subprocess.TimeoutExpired:
             continue
-
-
-def _venv_bin(name: str):
-    from pathlib import Path
-    return Path(sys.executable).parent / name
 
 
 class _Decimator:
@@ -218,37 +282,93 @@ class _Decimator:
         return tb, out
 
 
+class _Streams:
+    """The Rerun recording streams that get every call: ``live`` (gRPC: --serve, --connect)
+    and ``file`` (the current .rrd piece, replaced at each --rotate-s seam)."""
+
+    def __init__(self) -> None:
+        self.live = self.file = None
+
+    def all(self) -> list:
+        return [r for r in (self.live, self.file) if r is not None]
+
+    def log(self, *args, **kwargs) -> None:
+        for r in self.all():
+            r.log(*args, **kwargs)
+
+    def send_columns(self, *args, **kwargs) -> None:
+        for r in self.all():
+            r.send_columns(*args, **kwargs)
+
+    def set_time(self, *args, **kwargs) -> None:
+        for r in self.all():
+            r.set_time(*args, **kwargs)
+
+
 class RerunSink(Sink):
-    """Streams the pipeline into Rerun: ``rrd_path`` (file), ``connect_url`` (a running
-    viewer or server), ``serve`` (start a localhost gRPC server on ``bind:port``), any
-    combination; with ``serve_wait`` a server keeps serving after the run until Ctrl-C."""
+    """Streams the pipeline into Rerun: ``rrd_path`` (file; with ``rotate`` one file per
+    piece, named by fogmon.pieces: OUT-0001.rrd, ..., each a complete recording with the
+    blueprint, all with one recording id so the viewer joins them), ``connect_url`` (a
+    running viewer or server), ``serve`` (start a gRPC server on ``bind:port``), any
+    combination; with ``serve_wait`` a server keeps serving after the run until Ctrl-C
+    (or SIGTERM, SIGHUP). Problems with the outputs (a folder given as --rrd, an
+    unwritable path, a busy port, no viewer at the URL) are one-line errors here, before
+    any data; a run that delivers no sample leaves no .rrd behind."""
 
     def __init__(self, rrd_path: str | None = None, connect_url: str | None = None, serve: bool = False,
-                 bind: str = "127.0.0.1", port: int = 9876, serve_wait: bool = True):
+                 bind: str = "127.0.0.1", port: int = 9876, serve_wait: bool = True, rotate: bool = False):
         if not (rrd_path or connect_url or serve):
             raise ValueError("RerunSink needs rrd_path, connect_url or serve")
         self.rrd_path, self.connect_url, self.serve = rrd_path, connect_url, serve
-        self.bind, self.port, self.serve_wait = bind, port, serve_wait
+        self.bind, self.port, self.serve_wait, self.rotate_files = bind, port, serve_wait, rotate
         self.server: subprocess.Popen | None = None
         self.server_url: str | None = None
-        self.rec = None
+        self.rec: _Streams | None = None
+        self.pieces: list[str] = []          # .rrd files written (one unless rotate)
+        self._recording_id = str(uuid.uuid4())
+        self._piece = 1
+        self._probe: str | None = None       # an empty file made to test --rrd, removed if no data came
         self._heat: list[np.ndarray] = []
         self._last_flush = time.monotonic()
         self._pending_events: list[Event] = []
         if connect_url:
             _check_listening(connect_url)
         if rrd_path:
-            d = os.path.dirname(os.path.abspath(rrd_path))
+            self._check_rrd()
+        if serve:
             try:
-                os.makedirs(d, exist_ok=True)
-            except OSError as e:
-                raise FogmonError(f"--rrd {rrd_path}: cannot create folder {d}: {e.strerror}") from None
-            if os.path.isdir(rrd_path):
-                raise FogmonError(f"--rrd {rrd_path}: is a folder, give a file name like out/run.rrd")
-            try:  # fail before the source is opened, not at the first sample
-                open(rrd_path, "wb").close()
-            except OSError as e:
-                raise FogmonError(f"--rrd {rrd_path}: cannot write: {e.strerror}") from None
+                self.server, self.server_url = start_grpc_server(bind, port)
+            except BaseException:
+                self._discard_probe()
+                raise
+            print(f"fogmon: serving Rerun on {self.server_url} (open it with: rerun {self.server_url})",
+                  file=sys.stderr)
+
+    def _piece_path(self) -> str:
+        return piece_path(self.rrd_path, self._piece) if self.rotate_files else self.rrd_path
+
+    def _check_rrd(self) -> None:
+        """Fail before the source is opened, not at the first sample."""
+        path = self._piece_path()
+        d = os.path.dirname(os.path.abspath(path))
+        try:
+            os.makedirs(d, exist_ok=True)
+        except OSError as e:
+            raise FogmonError(f"--rrd {self.rrd_path}: cannot create folder {d}: {e.strerror}") from None
+        if os.path.isdir(path):
+            raise FogmonError(f"--rrd {self.rrd_path}: is a folder, give a file name like out/run.rrd")
+        existed = os.path.exists(path)
+        try:
+            open(path, "ab").close()
+        except OSError as e:
+            raise FogmonError(f"--rrd {self.rrd_path}: cannot write: {e.strerror}") from None
+        self._probe = None if existed else path
+
+    def _discard_probe(self) -> None:
+        if self._probe is not None:
+            with contextlib.suppress(OSError):
+                os.remove(self._probe)
+            self._probe = None
 
     # -- set-up ---------------------------------------------------------------
     def start(self, info: StreamInfo) -> None:
@@ -257,38 +377,41 @@ class RerunSink(Sink):
         self.dec = _Decimator(self.step)
 
     def _setup(self, first: Block) -> None:
-        """Open the sinks and send the blueprint; the first block frames the ADEV view."""
+        """Open the streams and send the blueprint; the first block frames the ADEV view."""
         import rerun as rr
 
         info = self.info
-        rec = rr.RecordingStream("fogmon")
         tau = info.tau_s
         x_dec = (math.floor(np.log10(tau[0])), math.ceil(np.log10(tau[-1]))) if len(tau) else (-2, 2)
         error_rate = info.analysed != "rate_dph"
         y = first.error_rate_dph if error_rate else first.rate_dph
-        y_dec = _adev_decades(y[first.valid & np.isfinite(y)], len(tau))
-        bp = blueprint(info.aux_names, (x_dec, y_dec), error_rate)
-        sinks = []
+        self._decades = (x_dec, _adev_decades(y[first.valid & np.isfinite(y)], len(tau)))
+        self._blueprint = blueprint(info.aux_names, self._decades, error_rate)
+        self.rec = _Streams()
+        live = [rr.GrpcSink(url) for url in (self.server_url, self.connect_url) if url]
+        if live:
+            self.rec.live = rr.RecordingStream("fogmon", recording_id=self._recording_id)
+            self.rec.live.set_sinks(*live, default_blueprint=self._blueprint)
         if self.rrd_path:
-            sinks.append(rr.FileSink(self.rrd_path))
-        if self.serve:
-            self.server, self.server_url = start_grpc_server(self.bind, self.port)
-            print(f"fogmon: serving Rerun on {self.server_url} (open it with: rerun {self.server_url})",
-                  file=sys.stderr)
-            sinks.append(rr.GrpcSink(self.server_url))
-        if self.connect_url:
-            sinks.append(rr.GrpcSink(self.connect_url))
-        rec.set_sinks(*sinks, default_blueprint=bp)
-        self.rec = rec
-        self._log_static(info)
-        self._log_grid(x_dec, y_dec)
+            self._open_piece()
+        self._log_static(self.rec)
         pending, self._pending_events = self._pending_events, []
         self.events(pending)
 
-    def _log_static(self, info: StreamInfo) -> None:
+    def _open_piece(self) -> None:
         import rerun as rr
 
-        rec = self.rec
+        path = self._piece_path()
+        self.rec.file = rr.RecordingStream("fogmon", recording_id=self._recording_id)
+        self.rec.file.save(path, default_blueprint=self._blueprint)
+        self.pieces.append(path)
+        self._probe = None
+
+    def _log_static(self, rec) -> None:
+        """Series names and styles, the session text, the ADEV view's scale and grid."""
+        import rerun as rr
+
+        info = self.info
         what = "rate_dph" if self.step == 1 else f"rate_dph (mean of {self.step} samples, display only)"
         rec.log("rate/rate_dph", rr.SeriesLines(names=[what], widths=[1.0]), static=True)
         if info.analysed != "rate_dph":
@@ -308,20 +431,16 @@ class RerunSink(Sink):
             f"source: {info.source_name}"), static=True)
         # y up in the ADEV-curve view (2-D views have y pointing down).
         rec.log(CURVE, rr.Transform3D(scale=[CURVE_X_SCALE, -CURVE_Y_SCALE, 1.0]), static=True)
-
-    def _log_grid(self, x_dec: tuple[int, int], y_dec: tuple[int, int]) -> None:
-        """Decade grid lines with labels for the ADEV-curve view (static)."""
-        import rerun as rr
-
-        xs = np.arange(x_dec[0], x_dec[1] + 1)
-        ys = np.arange(y_dec[0], y_dec[1] + 1)
+        # decade grid lines with labels for the ADEV-curve view
+        (x0, x1), (y0, y1) = self._decades
+        xs, ys = np.arange(x0, x1 + 1), np.arange(y0, y1 + 1)
         strips = [[[x, ys[0]], [x, ys[-1]]] for x in xs] + [[[xs[0], y], [xs[-1], y]] for y in ys]
-        self.rec.log(f"{CURVE}/grid", rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=rr.Radius.ui_points(0.5)),
-                     static=True)
+        rec.log(f"{CURVE}/grid", rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=rr.Radius.ui_points(0.5)),
+                static=True)
         labels = [f"{10.0**x:g} s" for x in xs] + [f"{10.0**y:g} deg/h" for y in ys]
         pos = [[x, ys[0] - 0.2] for x in xs] + [[xs[0] - 0.25, y] for y in ys]
-        self.rec.log(f"{CURVE}/grid_labels", rr.Points2D(pos, labels=labels, radii=rr.Radius.ui_points(0.5),
-                                                            colors=[(150, 150, 150)]), static=True)
+        rec.log(f"{CURVE}/grid_labels", rr.Points2D(pos, labels=labels, radii=rr.Radius.ui_points(0.5),
+                                                       colors=[(150, 150, 150)]), static=True)
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
@@ -428,27 +547,56 @@ class RerunSink(Sink):
             self.rec.send_columns(f"counters/{k}", indexes=[rr.TimeColumn(TIMELINE, duration=[t_s])],
                                   columns=rr.Scalars.columns(scalars=[float(v)]))
 
-    def finish(self, summary) -> None:
-        if self.rec is None:
+    def rotate(self, piece: int, t_s: float) -> None:
+        """Close the current .rrd piece (complete, with its footer) and start the next;
+        the live stream goes on."""
+        if not (self.rotate_files and self.rec is not None and self.rec.file is not None):
             return
         self._flush_raw(final=True)
-        try:
-            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
-        except RuntimeError as e:  # a viewer that went away: the file sink is still complete
-            print(f"fogmon: warning: Rerun: {str(e).splitlines()[0]}", file=sys.stderr)
-        if self.rrd_path:
-            summary.outputs.append(self.rrd_path)
-        if self.server is not None and self.serve_wait and not summary.interrupted:
-            print(f"fogmon: done; still serving {self.server_url} for viewers - press Ctrl-C to stop",
-                  file=sys.stderr)
-            try:
-                while self.server.poll() is None:
-                    time.sleep(0.5)
-            except KeyboardInterrupt:
-                pass
-        try:
-            self.rec.disconnect()
-        except RuntimeError as e:
-            print(f"fogmon: warning: Rerun: {str(e).splitlines()[0]}", file=sys.stderr)
+        _close_stream(self.rec.file)
+        self._piece = piece
+        self._open_piece()
+        self._log_static(self.rec.file)
+
+    def finish(self, summary) -> None:
+        """Flush everything, complete the .rrd, keep serving a replay's viewers until
+        Ctrl-C, then stop the server; without any sample only clean up."""
+        if self.rec is None:
+            self._discard_probe()
+        else:
+            self._flush_raw(final=True)
+            if self.rec.file is not None:
+                _close_stream(self.rec.file)
+            if self.pieces:
+                summary.outputs.append(self.pieces[0] if len(self.pieces) == 1 else
+                                       f"{self.pieces[0]} .. {self.pieces[-1]} ({len(self.pieces)} pieces)")
+            if self.rec.live is not None:
+                _rerun_call(self.rec.live.flush, timeout_sec=FLUSH_TIMEOUT_S)
+                if self.server is not None and self.serve_wait and not summary.interrupted:
+                    self._serve_until_stopped()
+                _rerun_call(self.rec.live.disconnect)
         if self.server is not None:
             stop_process_group(self.server)
+
+    def _serve_until_stopped(self) -> None:
+        print(f"fogmon: done; still serving {self.server_url} for viewers - press Ctrl-C to stop", file=sys.stderr)
+        try:
+            while self.server.poll() is None and not stopping.stop_requested():
+                time.sleep(0.5)
+        except KeyboardInterrupt:   # Ctrl-C where fogmon's stop handlers are not installed
+            pass
+
+
+def _close_stream(rec) -> None:
+    """Deliver everything (at most FLUSH_TIMEOUT_S) and close: an .rrd gets its footer."""
+    _rerun_call(rec.flush, timeout_sec=FLUSH_TIMEOUT_S)
+    _rerun_call(rec.disconnect)
+
+
+def _rerun_call(fn, **kwargs) -> None:
+    """A Rerun call whose failure (a viewer that went away) is a warning: the file is
+    complete regardless."""
+    try:
+        fn(**kwargs)
+    except RuntimeError as e:
+        print(f"fogmon: warning: Rerun: {str(e).splitlines()[0]}", file=sys.stderr)

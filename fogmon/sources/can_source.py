@@ -235,18 +235,23 @@ class CanSource(LiveSource):
 
 
 class CanLogSource:
-    """A CAN log python-can reads (.asc .blf .trc .csv .log .mf4) decoded with a DBC."""
+    """A CAN log python-can reads (.asc .blf .trc .csv .log .mf4) decoded with a DBC; or
+    the pieces of one ASC log (an archive's frames-NNNN.asc), read in order with their
+    absolute timestamps so that one decoder sees one continuous stream of frames."""
 
     CHUNK = 4096
 
-    def __init__(self, path: str, db, **decoder_options) -> None:
-        self.path = path
+    def __init__(self, path: str | list[str], db, **decoder_options) -> None:
+        self.paths = [path] if isinstance(path, str) else list(path)
+        self.path = self.paths[0]
         self._db, self._options = db, decoder_options
         self.decoder = CanDecoder(db, **decoder_options)
         self.rate_hz = self.decoder.rate_hz
         self.aux_names = self.decoder.aux_names
         self.grid = GridAssembler(self.rate_hz, self.decoder.seq_modulus, self.aux_names)
-        self.name = f"CAN log {os.path.basename(path)}: {self.decoder.describe()}"
+        what = os.path.basename(self.path) + (
+            f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
+        self.name = f"CAN log {what}: {self.decoder.describe()}"
         self._closed = False
 
     @property
@@ -257,49 +262,54 @@ class CanLogSource:
     def n_samples(self) -> int:
         """Samples on the grid, from a counting pass over the log (pipelines size their
         default window with it)."""
-        return sum(len(b) for b in CanLogSource(self.path, self._db, **self._options).blocks())
+        return sum(len(b) for b in CanLogSource(self.paths, self._db, **self._options).blocks())
 
     def blocks(self) -> Iterator[Block]:
-        try:
-            reader = can.LogReader(self.path)
-        except Exception as e:  # unknown suffix, unreadable header, ...
-            raise FogmonError(f"{self.path}: cannot read as a CAN log: {e}") from None
-        it = iter(reader)
         errors = ErrorEvents(self.decoder.counters)
-        try:
-            while not self._closed:
-                chunk = []
-                try:
-                    for m in it:
-                        chunk.append(m)
-                        if len(chunk) >= self.CHUNK:
-                            break
-                except Exception as e:  # a corrupt log: say where, do not trace back
-                    raise FogmonError(f"{self.path}: unreadable CAN log after "
-                                      f"{self.decoder.counters['frames_ok']} frames: {e}") from None
-                if not chunk:
-                    return
-                segs = self.decoder.feed(chunk)
-                b = _push_segments(self.grid, segs, errors.poll(self.grid.t_next_s))
-                if len(b):
-                    yield b
-        finally:
-            reader.stop()
+        # pieces: absolute ASC timestamps, so the gap between two pieces is measured
+        kwargs = {"relative_timestamp": False} if len(self.paths) > 1 else {}
+        for path in self.paths:
+            try:
+                reader = can.LogReader(path, **kwargs)
+            except Exception as e:  # unknown suffix, unreadable header, ...
+                raise FogmonError(f"{path}: cannot read as a CAN log: {e}") from None
+            it = iter(reader)
+            try:
+                while not self._closed:
+                    chunk = []
+                    try:
+                        for m in it:
+                            chunk.append(m)
+                            if len(chunk) >= self.CHUNK:
+                                break
+                    except Exception as e:  # a corrupt log: say where, do not trace back
+                        raise FogmonError(f"{path}: unreadable CAN log after "
+                                          f"{self.decoder.counters['frames_ok']} frames: {e}") from None
+                    if not chunk:
+                        break
+                    segs = self.decoder.feed(chunk)
+                    b = _push_segments(self.grid, segs, errors.poll(self.grid.t_next_s))
+                    if len(b):
+                        yield b
+            finally:
+                reader.stop()
 
     def close(self) -> None:
         self._closed = True
 
 
-def open_can_log(path: str, dbc: str | None, options: dict, sidecar: dict | None) -> CanLogSource:
-    """A CAN log source; decoder options from the sidecar (archive) overridden by the
-    command line; the DBC from ``--dbc`` or the sidecar's copy."""
+def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar: dict | None) -> CanLogSource:
+    """A CAN log source (or the pieces of one ASC log, in order); decoder options from the
+    (first piece's) sidecar, overridden by the command line; the DBC from ``--dbc`` or the
+    sidecar's copy, which read_sidecar has confined to the sidecar's folder."""
+    first = path if isinstance(path, str) else path[0]
     opts = {}
     if sidecar:
         opts.update({k: sidecar[k] for k in ("message", "rate_signal", "rate_unit", "temp_signal",
                                               "counter_signal", "valid_signal", "rate_hz") if sidecar.get(k) is not None})
         if not dbc and sidecar.get("dbc"):
-            dbc = os.path.join(os.path.dirname(os.path.abspath(path)), sidecar["dbc"])
+            dbc = os.path.join(os.path.dirname(os.path.abspath(first)), sidecar["dbc"])
     opts.update({k: v for k, v in options.items() if v is not None})
     if not dbc:
-        raise FogmonError(f"{path}: a CAN log needs --dbc F describing the gyro's frames")
+        raise FogmonError(f"{first}: a CAN log needs --dbc F describing the gyro's frames")
     return CanLogSource(path, load_dbc(dbc), **opts)

@@ -123,14 +123,15 @@ def _sniff(path: str) -> str:
 
 def open_replay_source(path: str, args):
     """A source replaying ``path``: a replay-log CSV, a raw serial capture (protocol from
-    ``--protocol`` or its ``.json`` sidecar), or a CAN log (.asc .blf .trc .csv .log with
-    ``--dbc`` or a sidecar). Not paced: the pipeline paces (``--realtime``)."""
+    ``--protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc .csv .log with
+    ``--dbc`` or a sidecar), or an archive folder (``open_archive``). Not paced: the
+    pipeline paces (``--realtime``)."""
     from fogmon.sources.replay import ReplayLogSource, open_raw_capture, read_sidecar
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
     if os.path.isdir(path):
-        raise FogmonError(f"{path}: is a directory (give the replay log, capture or CAN log inside it)")
+        return open_archive(path, args)
     if os.path.splitext(path)[1].lower() == ".toml":  # a sensor model: stream its simulation (endless)
         from fogmon.sources.simulated import SimulatedSource
         return SimulatedSource(path)
@@ -146,3 +147,39 @@ def open_replay_source(path: str, args):
         return ReplayLogSource(path, tolerate=bool(_get(args, "tolerate_bad_rows", False)))
     raise FogmonError(f"{path}: not a replay log; for a raw serial capture give --protocol "
                       f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with --dbc")
+
+
+def open_archive(directory: str, args):
+    """An archive folder (fogmon monitor --archive) as one recording: its replay-log pieces
+    samples-NNNN.csv in order; or, when the folder has none or the command line gives
+    decoder options (--protocol, --kvh-*, --axis, --columns, --rate-hz, --dbc, --can-*)
+    to decode it again, its raw capture pieces (raw-NNNN.bin or frames-NNNN.asc) as one
+    stream. One piece alone is replayed by naming its file."""
+    from fogmon.pieces import find_pieces, piece_path
+    from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
+    from fogmon.sources.replay import ReplayLogSet, ReplayLogSource, open_raw_capture, read_sidecar
+
+    logs = find_pieces(directory, REPLAY_LOG)
+    serial, frames = find_pieces(directory, SERIAL_CAPTURE), find_pieces(directory, CAN_CAPTURE)
+    decode = any(v is not None for v in (*codec_options(args).values(), *can_options(args).values(),
+                                          _get(args, "dbc")))
+    if serial and (decode or not logs):
+        return open_raw_capture(serial, codec_options(args))
+    if frames and (decode or not logs):
+        from fogmon.sources.can_source import open_can_log
+        sides = [read_sidecar(p) or {} for p in frames]
+        fields = ("message", "rate_signal", "rate_unit", "temp_signal", "counter_signal", "valid_signal", "rate_hz",
+                  "dbc")
+        for p, side in zip(frames[1:], sides[1:]):
+            if any(side.get(k) != sides[0].get(k) for k in fields):
+                raise FogmonError(f"{p}: its sidecar's decoder options or DBC differ from {frames[0]}'s: "
+                                  f"not pieces of one CAN log")
+        return open_can_log(frames, _get(args, "dbc"), can_options(args), sides[0])
+    tolerate = bool(_get(args, "tolerate_bad_rows", False))
+    if len(logs) == 1:
+        return ReplayLogSource(logs[0], tolerate=tolerate)
+    if logs:
+        return ReplayLogSet(logs, tolerate=tolerate)
+    raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, {SERIAL_CAPTURE} "
+                      f"or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, raw capture "
+                      f"or CAN log")
