@@ -164,7 +164,7 @@ def test_can_bus_with_only_foreign_frames_exits_1_naming_what_arrived(tmp_path, 
     assert re.fullmatch(rf"fogmon monitor: no sample decoded from CAN GYRO_RATE\.rate \(deg/s\), 100 Hz on "
                         rf"virtual:{ch} in [\d.]+ s although [\d,]+ CAN frames arrived \(other_frames [\d,]+\): check "
                         rf"--protocol/--baud or --dbc/--can-message; the raw input is in {arch}\n", cap.err), cap.err
-    assert (arch / "frames.asc").stat().st_size > 0
+    assert (arch / "frames-0001.asc").stat().st_size > 0
 
 
 def test_run_shorter_than_the_window_says_why():
@@ -183,7 +183,7 @@ def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):  # noq
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         deadline = time.monotonic() + 60  # failure guard only: we wait for data in the archive
-        while not (arch / "samples.csv").exists() or (arch / "samples.csv").stat().st_size < 20_000:
+        while not (arch / "samples-0001.csv").exists() or (arch / "samples-0001.csv").stat().st_size < 20_000:
             assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else ""
             time.sleep(0.1)
         p.send_signal(signal.SIGINT)
