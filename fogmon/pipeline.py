@@ -384,12 +384,16 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     try:
         if total_n is None:  # live: compile before the device is opened, then read it in a thread
             _warm_up(rate_hz, window_s, hop_s, taus)
+            if duration_s is not None and hasattr(source, "limit"):
+                source.limit(live_samples(duration_s, rate_hz))  # nothing after the cut is read
             reader = _ThreadedBlocks(source)
         wall_start = time.monotonic()
+        wall_stop = None if duration_s is None or total_n is not None else \
+            wall_start + duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s)
         for big in (reader if reader is not None else source.blocks()):
-            if duration_s is not None and total_n is None and \
-                    time.monotonic() - wall_start > duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s):
-                break  # a live source that stalls still stops on time (wall clock)
+            if wall_stop is not None and time.monotonic() > wall_stop:
+                source.close()  # a live source that stalls still stops on time; what it read is kept
+                wall_stop = None
             if not len(big):
                 _dispatch_events(sinks, big.events, event_counts)
                 continue
@@ -415,16 +419,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                             s.start(info)
                         started = True
                         summary.t_first_s = float(b.t_s[0])
-                    if b_piece != piece:
-                        piece = b_piece
-                        for s in sinks:
-                            s.rotate(piece, float(b.t_s[0]))
-                    summary.n_samples += len(b)
-                    summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
-                    summary.t_last_s = float(b.t_s[-1])
-                    for s in sinks:
-                        s.block(b)
-                    _dispatch_events(sinks, b.events, event_counts)
+                    piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
                     y = b.error_rate_dph if use_ref else b.rate_dph
                     res = engine.push(y, b.valid & np.isfinite(y))
                     if len(res):
@@ -453,6 +448,13 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         source.close()
         if reader is not None:
             reader.join()
+            if started and not summary.failed and not done:  # read before the stop: archived, not analysed
+                for big in reader.backlog():
+                    if not len(big):
+                        _dispatch_events(sinks, big.events, event_counts)
+                        continue
+                    for b_piece, b in _at_seams([big], t_origin, rate_hz, piece_n):
+                        piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
         summary.wall_s = time.monotonic() - wall0
         summary.source_wall_s = time.monotonic() - wall_start
         summary.counters = dict(getattr(source, "counters", {}) or {})
@@ -493,6 +495,28 @@ class _Tail:
         return (np.concatenate([r for r, _ in self._parts]), np.concatenate([v for _, v in self._parts]))
 
 
+
+
+def _deliver(b: Block, b_piece: int, piece: int, sinks, summary: Summary, event_counts: Counter) -> int:
+    """Hand a block to the sinks (after ``rotate`` when it begins piece ``b_piece``) and
+    count it in the summary; returns the current piece."""
+    if b_piece != piece:
+        for s in sinks:
+            s.rotate(b_piece, float(b.t_s[0]))
+    if len(b):
+        summary.n_samples += len(b)
+        summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+        summary.t_last_s = float(b.t_s[-1])
+        for s in sinks:
+            s.block(b)
+    _dispatch_events(sinks, b.events, event_counts)
+    return b_piece
+
+
+def live_samples(duration_s: float, rate_hz: float) -> int:
+    """Samples of a live run of ``duration_s`` s from its first sample: those with
+    t - t_first <= duration_s - half a sample period (the replay cut, too)."""
+    return max(1, math.floor(duration_s * rate_hz - 0.5 + 1e-9) + 1)
 
 
 def record_samples(source) -> int | None:
@@ -555,6 +579,17 @@ class _ThreadedBlocks:
 
     def join(self, timeout_s: float = 10.0) -> None:
         self._thread.join(timeout_s)
+
+    def backlog(self) -> list[Block]:
+        """The blocks read but not yet taken (after ``join``), in order."""
+        out = []
+        while True:
+            try:
+                item = self._q.get_nowait()
+            except queue.Empty:
+                return out
+            if isinstance(item, Block) and (len(item) or item.events):
+                out.append(item)
 
 
 def _dispatch_events(sinks, events, counts: Counter) -> None:

@@ -93,6 +93,7 @@ class KvhCodec:
         self.counters = {"frames_ok": 0, "crc_errors": 0, "bytes_skipped": 0}
         self._buf = bytearray()
         self._last_temp_c = math.nan  # format C: temperature arrives every 4th frame
+        self._run = 0                 # bytes skipped since the last good frame
 
     @property
     def pending(self) -> int:
@@ -113,18 +114,21 @@ class KvhCodec:
         buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
-        seqs, gyro, valid, temps = [], [], [], []
+        seqs, gyro, valid, temps, runs = [], [], [], [], []
         ai, fmt = self._axis_i, self.fmt
         crc_err = skipped = 0
+        run = self._run
         i = 0
         while True:
             j = buf.find(hdr, i)
             if j < 0:
                 keep = max(i, n - (len(hdr) - 1))  # a header may straddle the chunk end
                 skipped += keep - i
+                run += keep - i
                 i = keep
                 break
             skipped += j - i
+            run += j - i
             if j + L > n:
                 i = j
                 break
@@ -132,6 +136,7 @@ class KvhCodec:
             if not _crc_ok(frame):
                 crc_err += 1
                 skipped += 1
+                run += 1
                 i = j + 1
                 continue
             f = layout.unpack_from(frame)
@@ -148,14 +153,17 @@ class KvhCodec:
             gyro.append(f[ai])
             valid.append(bool(status >> ai & 1))
             temps.append(temp)
+            runs.append(run)
+            run = 0
             i = j + L
         del buf[:i]
+        self._run = run
         c = self.counters
         c["frames_ok"] += len(seqs)
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
         rate = to_dph(gyro, self.rot, self.units, self.rate_hz)
-        return Frames.from_lists(seqs, rate, valid, {"temp_c": temps})
+        return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
 
 
 def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),
