@@ -84,15 +84,26 @@ class SerialSource(LiveSource):
             return self._apply(data, t), False
         saved = self._save()
         b = self._decode(data, t)
-        if self.grid.next_index <= self._limit:
+        if self.grid.next_index < self._limit:
             self._tap(data, b)
-            return b[0], self.grid.next_index == self._limit
-        lo, hi = 0, len(data) - 1          # the longest prefix that stays within the limit
+            return b[0], False
+        # the run ends in this chunk: at the end of the last frame that fits, so that nothing
+        # after it (garbage, CRC failures, a partial frame) is counted or archived
+
+        def index_after(p: int) -> int:
+            self._load(saved)
+            self._decode(data[:p], t)
+            return self.grid.next_index
+
+        lo, hi = 0, len(data)              # the longest prefix that stays within the limit
         while lo < hi:
             mid = (lo + hi + 1) // 2
-            self._load(saved)
-            self._decode(data[:mid], t)
-            lo, hi = (mid, hi) if self.grid.next_index <= self._limit else (lo, mid - 1)
+            lo, hi = (mid, hi) if index_after(mid) <= self._limit else (lo, mid - 1)
+        target = index_after(lo)
+        lo, hi = 0, lo                     # the shortest prefix that gets there
+        while lo < hi:
+            mid = (lo + hi) // 2
+            lo, hi = (lo, mid) if index_after(mid) >= target else (mid + 1, hi)
         self._load(saved)
         return self._apply(data[:lo], t) if lo else None, True
 
@@ -109,7 +120,7 @@ class SerialSource(LiveSource):
         if self._need_break and len(frames):
             if self._last_t is not None:    # (nothing came before the outage: no gap to place)
                 elapsed = t - self._last_t
-                outage = (elapsed, elapsed * self.rate_hz - len(frames))
+                outage = (elapsed, max(0.0, elapsed * self.rate_hz - len(frames)))
                 self.grid.mark_break(outage[1])
             self._need_break = False
         if not self._need_break:
