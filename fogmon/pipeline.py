@@ -42,8 +42,9 @@ LIVE_WINDOW_SAMPLES = 2**16
 ERROR_EXPR = "rate_dph - 3600 x rot_dps"
 #: A coefficient-jump event needs a change of more than this many combined standard errors.
 JUMP_Z = 5.0
-#: A live run with --duration-s also stops this long (s, or 10 % more) after that much wall
-#: time from opening the source, should the device stall.
+#: A live run with --duration-s also stops reading the device this long (s, or 10 % more)
+#: after that much wall time from opening the source, should the device fall silent (what
+#: was read is kept).
 LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
 OVERALL_MAX_SAMPLES = 2**23

@@ -14,6 +14,7 @@ import pytest
 
 from fogmon.cli import main
 from fogmon.recording import read_replay_log
+from fogmon.sources.replay import open_raw_capture
 
 from test_rerun_sink import read_scalars, read_texts
 
@@ -54,6 +55,14 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     assert crc >= 2                    # 2 s at 1 kHz, every 500th frame bad
     texts = read_texts(str(rrd), "/events")
     assert sum(int(x.split()[1]) for x in texts if x.startswith("crc_error:")) == crc
+    # the raw capture ends where samples.csv does (the --duration-s cut) and decodes to the same counters
+    raw = open_raw_capture(sorted(str(p) for p in arch.glob("raw-*.bin")))
+    rb = list(raw.blocks())
+    assert sum(len(b) for b in rb) == 2000
+    np.testing.assert_allclose(np.concatenate([b.t_s[b.valid] for b in rb]), rec.t_s, rtol=0, atol=1e-9)
+    summary = {l.split()[0]: int(l.split()[1]) for l in out.split("Counters:")[1].splitlines()[1:]
+               if len(l.split()) == 2 and l.split()[1].isdigit()}
+    assert all(summary[k] == v for k, v in raw.counters.items()), (summary, raw.counters)
     replay = tmp_path / "replay.rrd"
     assert main(["replay", str(arch), "--rrd", str(replay), "--window-s", "0.512",
                  "--hop-s", "0.128", "--no-progress", "--quiet"]) == 0

@@ -68,7 +68,9 @@ class KvhCodec:
     """Incremental decoder: ``feed(bytes) -> Frames``. Counters: ``frames_ok``,
     ``crc_errors`` (a header whose frame failed the CRC), ``bytes_skipped`` (every byte
     not part of a good frame). Invariant: bytes fed = frames_ok * frame length +
-    bytes_skipped + ``pending`` (at most one frame length - 1 bytes are held)."""
+    bytes_skipped + ``pending`` (at most one frame length - 1 bytes are held). Each
+    frame's ``skipped`` is the bytes skipped since the previous good frame (across
+    ``feed`` calls): 0 when the two are back to back (the time base relies on it)."""
 
     seq_modulus = SEQ_MODULUS
 
