@@ -448,9 +448,9 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         progress.close()
         source.close()
         if reader is not None:
-            reader.join()
+            backlog = reader.backlog()
             if started and not summary.failed and not done:  # read before the stop: archived, not analysed
-                for big in reader.backlog():
+                for big in backlog:
                     if not len(big):
                         _dispatch_events(sinks, big.events, event_counts)
                         continue
@@ -547,7 +547,7 @@ class _ThreadedBlocks:
     """Iterate a live source's blocks in a reader thread, so DAVAR, fits and Rerun never
     keep the device unread (an OS serial buffer holds ~0.1 s of a 1 kHz KVH). The queue is
     unbounded: nothing is dropped; if processing fell behind, the backlog would grow.
-    ``join()`` after ``source.close()`` waits for the reader to finish."""
+    ``backlog()`` after ``source.close()`` takes what is left once the reader is done."""
 
     _DONE = object()
 
@@ -578,19 +578,23 @@ class _ThreadedBlocks:
                 raise item
             yield item
 
-    def join(self, timeout_s: float = 10.0) -> None:
-        self._thread.join(timeout_s)
-
-    def backlog(self) -> list[Block]:
-        """The blocks read but not yet taken (after ``join``), in order."""
-        out = []
-        while True:
+    def backlog(self, timeout_s: float = 10.0) -> list[Block]:
+        """After ``source.close()``: the blocks not yet taken, in order, up to the source's
+        end (at most ``timeout_s`` s of waiting for it); an error after the stop is dropped."""
+        out: list[Block] = []
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
             try:
-                item = self._q.get_nowait()
+                item = self._q.get(timeout=0.05)
             except queue.Empty:
-                return out
+                if not self._thread.is_alive() and self._q.empty():
+                    break
+                continue
+            if item is self._DONE:
+                break
             if isinstance(item, Block) and (len(item) or item.events):
                 out.append(item)
+        return out
 
 
 def _dispatch_events(sinks, events, counts: Counter) -> None:

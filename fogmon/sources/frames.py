@@ -49,17 +49,3 @@ class Frames:
     @staticmethod
     def empty(aux_names=()) -> "Frames":
         return Frames.from_lists([], [], [], {k: [] for k in aux_names})
-
-    @staticmethod
-    def concat(parts: list["Frames"], aux_names=()) -> "Frames":
-        if not parts:
-            return Frames.empty(aux_names)
-        if len(parts) == 1:
-            return parts[0]
-        return Frames(np.concatenate([p.seq for p in parts]),
-                      np.concatenate([p.rate_dph for p in parts]),
-                      np.concatenate([p.valid for p in parts]),
-                      {k: np.concatenate([p.aux[k] for p in parts]) for k in parts[0].aux},
-                      None if all(p.skipped is None for p in parts) else
-                      np.concatenate([p.skipped_bytes() for p in parts]),
-                      parts[0].frame_bytes)
