@@ -1,7 +1,9 @@
-"""Serial source against fake KVH devices on loop:// and on a pty: exact accounting of
-corrupted, truncated, dropped frames and garbage; unplug and replug with the archive
-keeping every sample sent while connected; replay of the raw capture gives the same
-samples."""
+"""Serial source against fake KVH devices on loop://, on a pty and on a scripted port
+(reads and clock jumps given by the test): exact accounting of corrupted, truncated,
+dropped frames and garbage; the time base from the device (host stalls make no gap,
+vanished or garbled bytes the exact gap); counters equal to events and archive at a
+--duration-s cut; unplug and replug with the archive keeping every sample sent while
+connected; replay of the raw capture gives the same samples."""
 import os
 import threading
 import time
