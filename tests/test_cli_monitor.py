@@ -3,6 +3,7 @@ replaying its archive gives the same DADEV the live run logged."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -39,16 +40,19 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
                "--rrd", str(rrd), "--window-s", "0.512", "--hop-s", "0.128", "--no-progress"])
     assert rc == 0
     out = capsys.readouterr().out
-    assert "2000 samples at 1000 Hz = 2.00 s" in out and f"Wrote archive {arch}" in out
+    # 2 s = 2000 samples; 1999 when the run's last frame is one of the bad ones (its slot is only
+    # known to be lost from the next frame, which lies after the cut and is not read)
+    n = int(re.search(r"(\d+) samples at 1000 Hz", out).group(1))
+    assert n in (1999, 2000) and f"Wrote archive {arch}" in out
     rec = read_replay_log(arch / "samples-0001.csv")
     assert rec.sample_rate_hz == 1000.0 and list(rec.aux) == ["temp_c"] and np.all(rec.aux["temp_c"] == 31)
-    assert len(rec) <= 2000 and rec.t_s[-1] == pytest.approx(1.999)
+    assert len(rec) <= n and rec.t_s[-1] == pytest.approx((n - 1) / 1000)
     # N of the fake device is 0.05 deg/sqrt(h): the whole-run fit finds it
     line = next(l for l in out.splitlines() if l.strip().startswith("N_dpsh"))
     assert abs(float(line.split("=")[1].split()[0]) - 0.05) < 0.005
     rrd = tmp_path / "live-0001.rrd"   # the first hourly piece (--rotate-s 3600)
     t_live, live = read_scalars(str(rrd), "/dadev/log10_adev_dph")
-    assert live.shape == (12, 8)      # (2000 - 512) // 128 + 1 windows; m = 1 .. 128
+    assert live.shape == (12, 8)      # (n - 512) // 128 + 1 windows; m = 1 .. 128
     t_rate, _ = read_scalars(str(rrd), "/rate/rate_dph")
     assert len(t_rate) <= 200         # 1 kHz shown as means of 10 samples
     crc = int(next(l for l in out.splitlines() if l.strip().startswith("crc_errors")).split()[1])
@@ -58,7 +62,7 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     # the raw capture ends where samples.csv does (the --duration-s cut) and decodes to the same counters
     raw = open_raw_capture(sorted(str(p) for p in arch.glob("raw-*.bin")))
     rb = list(raw.blocks())
-    assert sum(len(b) for b in rb) == 2000
+    assert sum(len(b) for b in rb) == n
     np.testing.assert_allclose(np.concatenate([b.t_s[b.valid] for b in rb]), rec.t_s, rtol=0, atol=1e-9)
     summary = {l.split()[0]: int(l.split()[1]) for l in out.split("Counters:")[1].splitlines()[1:]
                if len(l.split()) == 2 and l.split()[1].isdigit()}
