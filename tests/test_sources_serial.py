@@ -4,6 +4,7 @@ dropped frames and garbage; the time base from the device (host stalls make no g
 vanished or garbled bytes the exact gap); counters equal to events and archive at a
 --duration-s cut; unplug and replug with the archive keeping every sample sent while
 connected; replay of the raw capture gives the same samples."""
+import json
 import os
 import threading
 import time
@@ -198,14 +199,19 @@ def split(data: bytes, sizes) -> list[bytes]:
 
 
 @pytest.mark.parametrize("stall_s", [0.01, 0.064, 0.1, 0.5, 2.0])
-def test_host_stall_with_a_continuous_stream_makes_no_gap(stall_s):
+def test_host_stall_with_a_continuous_stream_makes_no_gap(stall_s, tmp_path):
     """The host does not read for 10 ms .. 2 s (frames split anywhere): the bytes arrive
     late but continuous, so every frame lands on its own slot; only the device's own drop
-    (frame 300, the counter jumps) is a gap."""
+    (frame 300, the counter jumps) is a gap, and the capture's sidecar records no outage."""
     data, intact = stream(1000, {300: "drop"})
     chunks = split(data, [3000, 7777, 50, 4001, 9000, 36 * 200 + 5])
     stalls = [0.0, stall_s, stall_s, 0.0, stall_s, 2 * stall_s]
-    blocks, t, rate, valid = collect(scripted_source(chunks, stalls, fs=1000.0), 1000)   # a counter wrap: 128 ms
+    src = scripted_source(chunks, stalls, fs=1000.0)           # a counter wrap: 128 ms
+    archive = Archive(str(tmp_path / "arch"), src)
+    blocks, t, rate, valid = collect(src, 1000)
+    archive.close()
+    with open(archive.capture_path + ".json") as fh:
+        assert json.load(fh)["breaks"] == []
     ks = np.rint(rate[valid] / 3600).astype(int)
     assert list(ks) == intact and np.array_equal(np.rint(t[valid] * 1000).astype(int), ks)
     assert len(t) == 1000 and list(np.flatnonzero(~valid)) == [300]

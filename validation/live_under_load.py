@@ -17,6 +17,7 @@ process), or both; two CPU hogs run beside it all the time. The monitor runs
 - time-base error (largest |t_s x 1000 - k| over the archive, in samples: must be 0),
 - counters against the injected faults, against the events (the .rrd's event log) and
   against the raw capture decoded again (same samples as samples-NNNN.csv, same counters),
+  and no outage in the capture's sidecar (the port is never reopened),
 
 and PASS/FAIL. Exit code 0 when every run passes.
 
@@ -25,6 +26,7 @@ and PASS/FAIL. Exit code 0 when every run passes.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import re
@@ -276,6 +278,12 @@ def run_once(mode: str, args, workdir: str, connect_url: str | None) -> bool:
                ("frames_ok == archived rows", counters.get("frames_ok") == len(k_arch))]
     # the raw capture decoded again: the same samples and counters
     raws = find_pieces(arch, "raw.bin")
+    breaks = []
+    for p in raws:
+        with open(p + ".json", encoding="utf-8") as fh:
+            breaks += json.load(fh).get("breaks", [])
+    print(f"  outages in the raw capture's sidecar: {len(breaks)} (the port was never reopened)")
+    checks.append(("no outage in the sidecar", not breaks))
     try:
         rep = open_raw_capture(raws)
         blocks = list(rep.blocks())
