@@ -3,7 +3,7 @@ stationary IEEE-952 noise with drift, bias instability, rate ramps or glitches."
 import numpy as np
 import pytest
 
-from fogmon.motion import block_samples, find_motion, motion_mask
+from fogmon.motion import MotionGate, block_samples, find_motion, motion_mask
 from fogmon.sim.model import Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
@@ -53,3 +53,39 @@ def test_motion_over_most_of_the_record_is_still_found():
     spans = find_motion(t, r, np.ones(len(t), bool), FS)
     covered = motion_mask(t, spans)
     assert covered[moving].mean() > 0.95 and covered[~moving].mean() < 0.05
+
+
+def run_gate(t, r, valid, sizes):
+    gate, ys, vs, events, i = MotionGate(FS), [], [], [], 0
+    for n in sizes:
+        y, v, ev = gate.push(t[i:i + n], r[i:i + n], valid[i:i + n])
+        ys.append(y), vs.append(v), events.extend(ev)
+        i += n
+    y, v, ev = gate.flush()
+    ys.append(y), vs.append(v), events.extend(ev)
+    return gate, np.concatenate(ys), np.concatenate(vs), events
+
+
+@pytest.mark.parametrize("sizes", [[1000] * 180, [1] * 5000 + [8192] * 21 + [2968]])
+def test_live_gate_passes_stationary_noise_unchanged(sizes):
+    t, r = stationary(5)
+    valid = np.ones(len(t), bool)
+    valid[100:130] = False
+    gate, y, v, events = run_gate(t, r, valid, sizes)
+    assert events == [] and gate.spans == [] and gate.samples_excluded == 0
+    np.testing.assert_array_equal(y, r)
+    np.testing.assert_array_equal(v, valid)
+
+
+def test_live_gate_keeps_a_turn_out_of_the_analysis():
+    t, r = stationary(3)
+    turn = (t >= 600.0) & (t < 630.0)
+    r = r + 3600.0 * 5.0 * np.clip(np.minimum(t - 600.0, 630.0 - t) / 0.5, 0.0, 1.0)
+    gate, y, v, events = run_gate(t, r, np.ones(len(t), bool), [4096] * 43 + [len(t) - 4096 * 43])
+    np.testing.assert_array_equal(y, r)                     # every sample released, in order
+    assert not v[turn].any()                                # the turn is invalid for the engines
+    block = block_samples(FS)
+    assert np.count_nonzero(~v) < turn.sum() + 4 * block and gate.samples_excluded == np.count_nonzero(~v)
+    assert [e.kind for e in events] == ["platform_motion"] * 2
+    (span,) = gate.spans
+    assert abs(span.t_start_s - 600.0) < 2 * block / FS and abs(span.t_end_s - 630.0) < 2 * block / FS
