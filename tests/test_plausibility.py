@@ -291,3 +291,24 @@ def test_kvh_capture_with_garbage_floats(tmp_path, capsys):
         status[k] = 0x33                            # in the reference the device flags the sample invalid
     check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad), kvh_capture(tmp_path / "ref.bin", gz, status),
                    3, "--protocol", "kvh-a", "--rate-hz", str(fs))
+
+
+def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_path, capsys):
+    """What `fogmon monitor --max-rate-dph` stores: the archive's raw-capture sidecar holds
+    the gate in force, so replaying the capture gates the same samples."""
+    import argparse
+    from fogmon.sinks.archive import Archive
+    from fogmon.sources.open import add_source_arguments, open_live_source
+
+    parser = argparse.ArgumentParser()
+    add_source_arguments(parser, mode="live")
+    src = open_live_source(parser.parse_args(["--serial", "loop://", "--protocol", "dsp3000", "--max-rate-dph", "180"]))
+    data = b"0.01 1\r\n0.06 1\r\n-0.049 1\r\n" * 4    # 36, 216, -176.4 deg/h
+    with Archive(str(tmp_path / "arch"), src, background_flush=False) as a:
+        a.raw(data)
+        src.codec.feed(data)
+        cap = a.capture_path
+    assert json.loads((tmp_path / "arch" / "raw-0001.bin.json").read_text())["max_rate_dph"] == 180.0
+    assert main(["replay", cap, "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert counter(out, "implausible_samples") == 4 and "12 samples at 100 Hz" in out and "(4 invalid/lost)" in out
