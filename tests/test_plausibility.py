@@ -312,3 +312,19 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
     assert main(["replay", cap, "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert counter(out, "implausible_samples") == 4 and "12 samples at 100 Hz" in out and "(4 invalid/lost)" in out
+
+
+def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decoding_again(tmp_path):
+    from fogmon.sources.open import open_replay_source
+    from fogmon.sources.replay import ReplayLogSet
+    from test_sources_replay import args_for
+
+    t, r, fs = noisy(n=200)
+    for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):
+        write_replay_log(tmp_path / f"samples-000{k}.csv", t[sl], r[sl], {}, {"sample_rate_hz": fs, "piece": k})
+    kvh_capture(tmp_path / "raw-0001.bin", [1e-6] * 10, sidecar={})
+    src = open_replay_source(str(tmp_path), args_for("--max-rate-dph", "50"))
+    assert isinstance(src, ReplayLogSet)
+    valid = np.concatenate([b.valid for b in src.blocks()])
+    assert list(np.flatnonzero(~valid)) == list(np.flatnonzero(np.abs(r) > 50))
+    assert src.counters["implausible_samples"] == int(np.count_nonzero(np.abs(r) > 50)) > 0
