@@ -208,6 +208,7 @@ def test_replay_log_source_gates_each_block(tmp_path):
     assert src.counters["implausible_samples"] == 2
     ev = [e for b in bl for e in b.events]
     assert [e.kind for e in ev] == ["implausible"] and ev[0].message.endswith("(2 so far)")
+    assert ev[0].t_s == t[10]                       # at the first implausible sample
     src = ReplayLogSource(str(tmp_path / "x.csv"), max_abs_dph=1e40)
     assert all(b.valid.all() for b in src.blocks()) and src.counters["implausible_samples"] == 0
 

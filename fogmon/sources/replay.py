@@ -72,7 +72,8 @@ class ReplayLogSource:
             self._pacer.wait(float(t[0]))
             rate, n_bad = plausibility.gate(b.rate_dph[sl], self.max_abs_dph)
             self.counters[plausibility.COUNTER] += n_bad
-            events = _gap_events(t, ~present[sl], i > 0 and not present[i - 1]) + tuple(errors.poll(float(t[0])))
+            t_bad = float(t[np.argmax(np.isnan(rate) & b.valid[sl])])    # the first implausible sample's
+            events = _gap_events(t, ~present[sl], i > 0 and not present[i - 1]) + tuple(errors.poll(t_bad))
             yield Block(t, rate, b.valid[sl] & ~np.isnan(rate), {k: v[sl] for k, v in b.aux.items()}, events)
 
     def close(self) -> None:
