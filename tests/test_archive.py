@@ -17,7 +17,7 @@ from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sources.replay import open_raw_capture
-from sources_fake_device import FakeKvh, frame_k, has_open, stream
+from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, has_open, stream
 
 FS = 200.0
 
@@ -74,6 +74,7 @@ def test_archive_that_received_nothing_leaves_no_folder(tmp_path):
 def monitor(link, archive, *extra, quiet=True):
     return subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", link, "--protocol", "kvh-a",
                              "--kvh-rot", "rate", "--kvh-units", "deg", "--rate-hz", str(FS), "--archive", archive,
+                             "--max-rate-dph", str(MAX_RATE_DPH),
                              "--no-progress", *(["--quiet"] if quiet else []), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
@@ -260,7 +261,8 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path):
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
     arch, lead = tmp_path / "arch", 60
     port = PacedPort(data, 50, FS, lead, consumed=lambda: archive.counters["rows_written"])
-    src = SerialSource("fake", 921600, make_codec("kvh-a", kvh_rot="rate", kvh_units="deg", rate_hz=FS),
+    src = SerialSource("fake", 921600, make_codec("kvh-a", kvh_rot="rate", kvh_units="deg", rate_hz=FS,
+                                                                   max_rate_dph=MAX_RATE_DPH),
                        opener=lambda: port, clock=port.clock)
     archive = Archive(str(arch), src)
     run_pipeline(src, _args(window_s=0.64, rotate_s=1.0, duration_s=4.5), sinks=[], extra_sinks=[archive])
