@@ -13,6 +13,11 @@ import tty
 from fogmon.sources.kvh import encode_frame
 
 
+#: frame k carries k deg/s, beyond a real DSP-1760's range (+-490 deg/s) once k > 735: decoders of
+#: these streams lift the plausibility gate to this (deg/h) so that every frame stays a sample
+MAX_RATE_DPH = 1e9
+
+
 def frame_k(k: int, fmt: str = "a") -> bytes:
     return encode_frame(fmt, k % 128, (k, k, k), temp_c=20 + k % 7, timestamp_us=k * 1000)
 

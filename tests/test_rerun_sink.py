@@ -159,10 +159,18 @@ def test_live_grpc_receiver_gets_the_same_data_as_the_file(tmp_path):
         file_ = str(tmp_path / "file.rrd")
         run_pipeline(ListSource(t, r, [3000] * 4, fs), _args(window_s=20.48),
                      sinks=[RerunSink(rrd_path=file_, connect_url=f"rerun+http://127.0.0.1:{port}/proxy")])
-        time.sleep(1.0)
+        ents = ("/dadev/log10_adev_dph", "/coef/N_dpsh", "/rate/rate_dph")
+
+        def received_all():           # the receiver saves as data arrives: wait for the data, not a time
+            try:
+                return all(len(read_scalars(live, e)[0]) == len(read_scalars(file_, e)[0]) for e in ents)
+            except (OSError, ValueError):
+                return False
+
+        wait_until(received_all, "the live receiver did not get every row")
     finally:
         stop_process_group(recv)
-    for ent in ("/dadev/log10_adev_dph", "/coef/N_dpsh", "/rate/rate_dph"):
+    for ent in ents:
         tf, vf = read_scalars(file_, ent)
         tl, vl = read_scalars(live, ent)
         assert len(tf) > 0

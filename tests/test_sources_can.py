@@ -173,6 +173,32 @@ def test_archive_of_can_source_replays_to_the_same_samples(tmp_path):
     np.testing.assert_allclose(rate[valid], rec.rate_dph, rtol=1e-11)
 
 
+def test_decoder_gates_rates_beyond_max_rate_dph():
+    d = CanDecoder(load_dbc(DBC), max_rate_dph=100.0)      # frame k carries 3.6 k deg/h
+    (brk, f), = d.feed(gyro_msgs(range(40), invalid=(35,), extra=False))
+    assert brk is None and list(np.flatnonzero(np.isfinite(f.rate_dph))) == list(range(28))
+    assert d.counters["implausible_samples"] == 11                 # 28..39 but the flagged-invalid 35
+    assert d.options()["max_rate_dph"] == 100.0
+    assert CanDecoder(load_dbc(DBC)).max_rate_dph == 36_000_000    # generic: the DBC range +-2147 deg/s is inside
+
+
+def test_can_log_gate_from_its_sidecar_or_the_command_line(tmp_path):
+    import json
+    import shutil
+    path = tmp_path / "frames.asc"
+    with can.Logger(str(path)) as log:
+        for m in gyro_msgs(range(60), extra=False):
+            log.on_message_received(m)
+    shutil.copy(DBC, tmp_path / "gyro.dbc")
+    (tmp_path / "frames.asc.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "can",
+                                                          "dbc": "gyro.dbc", "max_rate_dph": 100.0}))
+    for argv, n_ok in (((), 28), (("--max-rate-dph", "180"), 51), (("--max-rate-dph", "1e6"), 60)):
+        src = open_replay_source(str(path), args_for(*argv))
+        _, _, rate, valid, _ = gather(src)
+        assert int(valid.sum()) == n_ok and np.isnan(rate[~valid]).all()
+        assert src.counters["implausible_samples"] == 60 - n_ok
+
+
 class FlakyBus:
     """A bus that delivers its frames, then fails (adapter unplugged)."""
 

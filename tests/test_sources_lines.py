@@ -10,6 +10,7 @@ from fogmon.errors import FogmonError
 from fogmon.sources.codecs import make_codec
 from fogmon.sources.dsp3000 import Dsp3000Codec
 from fogmon.sources.lines import LinesCodec, parse_columns
+from fogmon.sources.plausibility import KVH_DSP3000_MAX_ABS_DPH
 
 
 def test_dsp3000_lines():
@@ -18,7 +19,8 @@ def test_dsp3000_lines():
     f = c.feed(data)
     np.testing.assert_allclose(f.rate_dph, [0.015733 * 3600, -0.002 * 3600, 3.6])
     assert list(f.valid) == [True, False, True] and list(f.seq) == [-1, -1, -1]
-    assert c.counters == {"frames_ok": 3, "bad_lines": 1, "bytes_skipped": len(b"BOOT DSP-3000\r\n\r\n")}
+    assert c.counters == {"frames_ok": 3, "bad_lines": 1, "bytes_skipped": len(b"BOOT DSP-3000\r\n\r\n"),
+                          "implausible_samples": 0}
     assert c.pending == len(b"   0.5")
     f = c.feed(b"   1\r\n")
     assert f.rate_dph[0] == pytest.approx(1800.0)
@@ -76,5 +78,8 @@ def test_property_dsp3000_roundtrip_any_chunking(samples, chunk):
     c = Dsp3000Codec()
     out = [c.feed(data[i:i + chunk]) for i in range(0, len(data), chunk)]
     rate = np.concatenate([o.rate_dph for o in out]) if out else np.zeros(0)
-    np.testing.assert_allclose(rate, [float(f"{v:.6f}") * 3600 for v, _ in samples])
+    dph = [float(f"{v:.6f}") * 3600 for v, _ in samples]
+    plausible = [abs(r) <= KVH_DSP3000_MAX_ABS_DPH for r in dph]     # beyond the gate: NaN, counted if flagged valid
+    np.testing.assert_allclose(rate, [r if p else np.nan for r, p in zip(dph, plausible)])
     assert c.counters["bad_lines"] == 0
+    assert c.counters["implausible_samples"] == sum(ok and not p for (_, ok), p in zip(samples, plausible))

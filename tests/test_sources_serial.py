@@ -18,7 +18,7 @@ from fogmon.sinks.archive import Archive, run_archived
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
-from sources_fake_device import FakeKvh, frame_k, open_pty, stream, write_all
+from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -94,7 +94,7 @@ def test_cannot_open_is_one_line_error(tmp_path):
 
 def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path):
     dev = FakeKvh(str(tmp_path), FS)
-    src = SerialSource(dev.link, 921600, KvhCodec("a", "rate", "deg", "z", FS), backoff_s=(0.02, 0.2))
+    src = SerialSource(dev.link, 921600, KvhCodec("a", "rate", "deg", "z", FS, MAX_RATE_DPH), backoff_s=(0.02, 0.2))
     archive = Archive(str(tmp_path / "archive"), src)
     stop = threading.Event()
 
@@ -186,7 +186,7 @@ class ScriptedPort:
 
 def scripted_source(chunks, stalls_s=(), fs=FS):
     port = ScriptedPort(chunks, stalls_s)
-    return SerialSource("scripted", 921600, KvhCodec("a", "rate", "deg", "z", fs), opener=lambda: port,
+    return SerialSource("scripted", 921600, KvhCodec("a", "rate", "deg", "z", fs, MAX_RATE_DPH), opener=lambda: port,
                         clock=port.clock)
 
 

@@ -60,7 +60,8 @@ CURVE = "adev_curve/log10"
 CURVE_X_SCALE = 250.0
 CURVE_Y_SCALE = 100.0
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
-           "reconnect": "WARN", "coef_jump": "INFO"}
+           "reconnect": "WARN", "coef_jump": "INFO", "implausible": "WARN", "bad_input": "WARN",
+           "platform_motion": "WARN"}
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}

@@ -7,6 +7,8 @@ The rate signal's DBC unit (deg/h, deg/s, rad/s, or deg, rad, arcsec per sample)
 the conversion to deg/h. Lost frames are found from the rolling counter (its wrap is
 2**bit length) and from the frames' timestamps (a silence longer than half a counter
 wrap, or 0.5 s without a counter, is an outage whose length the timestamps give).
+Rates beyond ``--max-rate-dph`` (default the generic gate of fogmon.sources.plausibility,
+10,000 deg/s) make the sample invalid, counted as ``implausible_samples``.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
+from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
 from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 from fogmon.sources.live import LiveSource
@@ -48,11 +51,14 @@ def load_dbc(path: str):
 class CanDecoder:
     """CAN frames -> Frames for one DBC message. Counters: ``frames_ok``,
     ``bad_frames`` (the message's id but undecodable, e.g. wrong length), ``other_frames``
-    (other ids, ignored)."""
+    (other ids, ignored), ``implausible_samples`` (frames flagged valid whose rate is NaN,
+    inf or beyond ``max_rate_dph`` deg/h, None = plausibility.GENERIC_MAX_ABS_DPH: made
+    invalid)."""
 
     def __init__(self, db, message: str | None = None, rate_signal: str | None = None, rate_unit: str | None = None,
                  temp_signal: str | None = None, counter_signal: str | None = None,
-                 valid_signal: str | None = None, rate_hz: float | None = None) -> None:
+                 valid_signal: str | None = None, rate_hz: float | None = None,
+                 max_rate_dph: float | None = None) -> None:
         rate_signal = rate_signal or "rate"
         if message:
             try:
@@ -98,18 +104,19 @@ class CanDecoder:
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
         self.rate_hz = float(rate_hz)
+        self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
         mode, dph = RATE_UNITS[key]
         self._scale = dph * (self.rate_hz if mode == "delta" else 1.0)
         self.seq_modulus = 2 ** names[self.counter_signal].length if self.counter_signal else None
         self.aux_names = ("temp_c",) if self.temp_signal else ()
-        self.counters = {"frames_ok": 0, "bad_frames": 0, "other_frames": 0}
+        self.counters = {"frames_ok": 0, "bad_frames": 0, "other_frames": 0, plausibility.COUNTER: 0}
         self._stall_s = min(STALL_S, 0.5 * self.seq_modulus / self.rate_hz) if self.seq_modulus else STALL_S
         self._last_ts: float | None = None
 
     def options(self) -> dict:
         return {"message": self.message.name, "rate_signal": self.rate_signal, "rate_unit": self.rate_unit,
                 "temp_signal": self.temp_signal, "counter_signal": self.counter_signal,
-                "valid_signal": self.valid_signal, "rate_hz": self.rate_hz}
+                "valid_signal": self.valid_signal, "rate_hz": self.rate_hz, "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
         return f"CAN {self.message.name}.{self.rate_signal} ({self.rate_unit}), {self.rate_hz:g} Hz"
@@ -125,8 +132,11 @@ class CanDecoder:
         def close_seg():
             if cur["seq"]:
                 aux = {"temp_c": cur["temp"]} if self.temp_signal else {}
-                segs.append((brk, Frames.from_lists(cur["seq"], np.asarray(cur["rate"]) * self._scale,
-                                                    cur["valid"], aux)))
+                with np.errstate(over="ignore"):       # a garbage 1e308 becomes inf, then gated
+                    rate = np.asarray(cur["rate"], dtype=np.float64) * self._scale
+                rate, bad = plausibility.gate(rate, self.max_rate_dph, cur["valid"])
+                c[plausibility.COUNTER] += bad
+                segs.append((brk, Frames.from_lists(cur["seq"], rate, cur["valid"], aux)))
                 for v in cur.values():
                     v.clear()
 
@@ -306,7 +316,8 @@ def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar:
     opts = {}
     if sidecar:
         opts.update({k: sidecar[k] for k in ("message", "rate_signal", "rate_unit", "temp_signal",
-                                              "counter_signal", "valid_signal", "rate_hz") if sidecar.get(k) is not None})
+                                              "counter_signal", "valid_signal", "rate_hz", "max_rate_dph")
+                     if sidecar.get(k) is not None})
         if not dbc and sidecar.get("dbc"):
             dbc = os.path.join(os.path.dirname(os.path.abspath(first)), sidecar["dbc"])
     opts.update({k: v for k, v in options.items() if v is not None})

@@ -9,24 +9,28 @@ PROTOCOLS = ("kvh-a", "kvh-b", "kvh-c", "dsp3000", "lines")
 DEFAULTS = {"kvh-a": (921600, kvh.DEFAULT_RATE_HZ), "kvh-b": (921600, kvh.DEFAULT_RATE_HZ),
             "kvh-c": (921600, kvh.DEFAULT_RATE_HZ), "dsp3000": (38400, dsp3000.DEFAULT_RATE_HZ),
             "lines": (115200, lines.DEFAULT_RATE_HZ)}
+#: the decoder options (names of make_codec's parameters and of the codecs' options()),
+#: as a raw capture's sidecar records them so that its replay decodes and gates alike
+OPTION_KEYS = ("protocol", "rate_hz", "kvh_rot", "kvh_units", "axis", "columns", "max_rate_dph")
 
 
 def make_codec(protocol: str, rate_hz: float | None = None, kvh_rot: str | None = None,
-               kvh_units: str = "rad", axis: str = "z", columns: str = "rate_dph"):
+               kvh_units: str = "rad", axis: str = "z", columns: str = "rate_dph",
+               max_rate_dph: float | None = None):
     """A fresh decoder for ``protocol``; ``rate_hz`` None takes the protocol default;
-    ``kvh_rot`` None takes 'delta' for KVH binary and 'rate' for DSP-3000."""
+    ``kvh_rot`` None takes 'delta' for KVH binary and 'rate' for DSP-3000;
+    ``max_rate_dph`` (deg/h) None takes the device's gate (fogmon.sources.plausibility)."""
     if protocol not in PROTOCOLS:
         raise FogmonError(f"unknown protocol {protocol!r} (use one of {', '.join(PROTOCOLS)})")
     fs = DEFAULTS[protocol][1] if rate_hz is None else float(rate_hz)
     if protocol.startswith("kvh-"):
-        return kvh.KvhCodec(protocol[-1], kvh_rot or "delta", kvh_units, axis, fs)
+        return kvh.KvhCodec(protocol[-1], kvh_rot or "delta", kvh_units, axis, fs, max_rate_dph)
     if protocol == "dsp3000":
-        return dsp3000.Dsp3000Codec(kvh_rot or "rate", fs)
-    return lines.LinesCodec(columns, fs)
+        return dsp3000.Dsp3000Codec(kvh_rot or "rate", fs, max_rate_dph)
+    return lines.LinesCodec(columns, fs, max_rate_dph)
 
 
 def codec_from_options(opts: dict):
     """Rebuild a decoder from its ``options()`` dict (raw-capture sidecar)."""
     o = dict(opts)
-    return make_codec(o.pop("protocol"), **{k: v for k, v in o.items()
-                                             if k in ("rate_hz", "kvh_rot", "kvh_units", "axis", "columns")})
+    return make_codec(o.pop("protocol"), **{k: v for k, v in o.items() if k in OPTION_KEYS})

@@ -1,12 +1,14 @@
 """KVH DSP-3000 ASCII output: one line per sample, ``<value> <valid flag>`` such as
 ``"       0.015733   1\\r\\n"`` (38400 baud, ~100 Hz). The value is a rate in deg/s
 (``rot='rate'``, the CONTRACT default) or an incremental angle in deg per sample
-(``rot='delta'``); flag 1 = valid. No sequence counter: only outages are detected."""
+(``rot='delta'``); flag 1 = valid. No sequence counter: only outages are detected.
+Rates beyond the DSP-3000's range x margin (fogmon.sources.plausibility) are invalid."""
 from __future__ import annotations
 
 import math
 
 from fogmon.errors import FogmonError
+from fogmon.sources import plausibility
 from fogmon.sources.framing import LineFramer
 from fogmon.sources.frames import Frames
 from fogmon.sources.kvh import to_dph
@@ -16,27 +18,31 @@ DEFAULT_RATE_HZ = 100.0
 
 class Dsp3000Codec:
     """Incremental decoder. Counters: ``frames_ok`` (lines decoded), ``bad_lines``
-    (lines that are not ``value flag``), ``bytes_skipped`` (bytes of bad lines)."""
+    (lines that are not ``value flag``), ``bytes_skipped`` (bytes of bad lines),
+    ``implausible_samples`` (lines flagged valid whose rate is beyond ``max_rate_dph``
+    deg/h, None = the DSP-3000 range x margin: made invalid)."""
 
     seq_modulus = None
     protocol = "dsp3000"
     aux_names: tuple[str, ...] = ()
 
-    def __init__(self, rot: str = "rate", rate_hz: float = DEFAULT_RATE_HZ) -> None:
+    def __init__(self, rot: str = "rate", rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None) -> None:
         if rot not in ("rate", "delta"):
             raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
         self.rot, self.rate_hz = rot, float(rate_hz)
+        self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP3000_MAX_ABS_DPH)
         self._framer = LineFramer(64)
-        self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0}
+        self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
 
     @property
     def pending(self) -> int:
         return self._framer.pending
 
     def options(self) -> dict:
-        return {"protocol": self.protocol, "kvh_rot": self.rot, "rate_hz": self.rate_hz}
+        return {"protocol": self.protocol, "kvh_rot": self.rot, "rate_hz": self.rate_hz,
+                "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
         return f"KVH DSP-3000 ASCII ({'deg/s' if self.rot == 'rate' else 'deg per sample'}), {self.rate_hz:g} Hz"
@@ -65,4 +71,6 @@ class Dsp3000Codec:
         c["frames_ok"] += len(vals)
         c["bad_lines"] += bad + fr.dropped_lines - before[1]
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
-        return Frames.from_lists([-1] * len(vals), to_dph(vals, self.rot, "deg", self.rate_hz), valid)
+        rate, n = plausibility.gate(to_dph(vals, self.rot, "deg", self.rate_hz), self.max_rate_dph, valid)
+        c[plausibility.COUNTER] += n
+        return Frames.from_lists([-1] * len(vals), rate, valid)

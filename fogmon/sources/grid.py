@@ -25,14 +25,11 @@ from __future__ import annotations
 import numpy as np
 
 from fogmon.block import Block, Event
+from fogmon.errors import ERROR_COUNTERS
 from fogmon.sources.frames import Frames
 
 #: at most this many gap events per block; the rest are summarised in one event
 MAX_GAP_EVENTS = 5
-#: decoder error counter -> (event kind, what it counts)
-ERROR_COUNTERS = {"crc_errors": ("crc_error", "frame(s) failed the CRC"),
-                  "bad_lines": ("bad_input", "line(s) could not be parsed"),
-                  "bad_frames": ("bad_input", "CAN frame(s) of the gyro's message could not be decoded")}
 #: why samples were lost, by the rule that counted them (gap event messages)
 _WHY = ("sequence counter", "bytes skipped", "port reopened")
 

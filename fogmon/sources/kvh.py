@@ -14,7 +14,8 @@ Wire formats (big-endian, DESIGN section 5):
 The CRC (poly 0x04C11DB7, init 0xFFFFFFFF, no reflection, xorout 0) covers every byte
 before it, so the CRC of a whole good frame is 0. Resync: find the header, check the CRC,
 on failure drop one byte and rescan. Gyro values are delta angles (per sample) or rates,
-in rad or deg, as the device is configured; they are converted to deg/h here.
+in rad or deg, as the device is configured; they are converted to deg/h here and gated
+(fogmon.sources.plausibility): a CRC-valid frame can still carry a garbage float.
 """
 from __future__ import annotations
 
@@ -25,6 +26,7 @@ import struct
 import numpy as np
 
 from fogmon.errors import FogmonError
+from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
 
 #: bit-reversal of every byte value, to run CRC-32/MPEG-2 through zlib's reflected CRC-32.
@@ -61,21 +63,25 @@ def to_dph(value, mode: str, units: str, rate_hz: float):
     scale = 3600.0 * (180.0 / math.pi if units == "rad" else 1.0)
     if mode == "delta":
         scale *= rate_hz
-    return np.asarray(value, dtype=np.float64) * scale
+    with np.errstate(over="ignore"):    # a garbage 1e308 becomes inf (then gated), silently
+        return np.asarray(value, dtype=np.float64) * scale
 
 
 class KvhCodec:
     """Incremental decoder: ``feed(bytes) -> Frames``. Counters: ``frames_ok``,
     ``crc_errors`` (a header whose frame failed the CRC), ``bytes_skipped`` (every byte
-    not part of a good frame). Invariant: bytes fed = frames_ok * frame length +
-    bytes_skipped + ``pending`` (at most one frame length - 1 bytes are held). Each
-    frame's ``skipped`` is the bytes skipped since the previous good frame (across
-    ``feed`` calls): 0 when the two are back to back (the time base relies on it)."""
+    not part of a good frame), ``implausible_samples`` (frames flagged valid whose rate
+    is NaN, inf or beyond ``max_rate_dph`` deg/h: made invalid), ``implausible_temp_c``
+    (temperature readings outside plausibility.TEMP_RANGE_C: NaN). Invariant: bytes fed
+    = frames_ok * frame length + bytes_skipped + ``pending`` (at most one frame length -
+    1 bytes are held). ``max_rate_dph`` None: the DSP-17xx range x margin. Each frame's
+    ``skipped`` is the bytes skipped since the previous good frame (across ``feed``
+    calls): 0 when the two are back to back (the time base relies on it)."""
 
     seq_modulus = SEQ_MODULUS
 
     def __init__(self, fmt: str = "a", rot: str = "delta", units: str = "rad",
-                 axis: str = "z", rate_hz: float = DEFAULT_RATE_HZ) -> None:
+                 axis: str = "z", rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None) -> None:
         fmt = fmt.lower()
         if fmt not in FORMATS:
             raise FogmonError(f"unknown KVH format {fmt!r} (use a, b or c)")
@@ -88,11 +94,13 @@ class KvhCodec:
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
         self.fmt, self.rot, self.units, self.axis, self.rate_hz = fmt, rot, units, axis, float(rate_hz)
+        self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP17XX_MAX_ABS_DPH)
         self.protocol = f"kvh-{fmt}"
         self.header, self.frame_len, self._layout = FORMATS[fmt]
         self._axis_i = AXES.index(axis)
         self.aux_names = ("temp_c",)
-        self.counters = {"frames_ok": 0, "crc_errors": 0, "bytes_skipped": 0}
+        self.counters = {"frames_ok": 0, "crc_errors": 0, "bytes_skipped": 0,
+                         plausibility.COUNTER: 0, plausibility.TEMP_COUNTER: 0}
         self._buf = bytearray()
         self._last_temp_c = math.nan  # format C: temperature arrives every 4th frame
         self._run = 0                 # bytes skipped since the last good frame
@@ -105,7 +113,7 @@ class KvhCodec:
     def options(self) -> dict:
         """What is needed to rebuild this decoder (raw-capture sidecar)."""
         return {"protocol": self.protocol, "kvh_rot": self.rot, "kvh_units": self.units,
-                "axis": self.axis, "rate_hz": self.rate_hz}
+                "axis": self.axis, "rate_hz": self.rate_hz, "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
         return (f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}), axis {self.axis}, "
@@ -118,7 +126,8 @@ class KvhCodec:
         L, hdr, layout = self.frame_len, self.header, self._layout
         seqs, gyro, valid, temps, runs = [], [], [], [], []
         ai, fmt = self._axis_i, self.fmt
-        crc_err = skipped = 0
+        t_lo, t_hi = plausibility.TEMP_RANGE_C
+        crc_err = skipped = bad_temp = 0
         run = self._run
         i = 0
         while True:
@@ -148,8 +157,13 @@ class KvhCodec:
                 status, seq, temp = f[7], f[8], float(f[9])
             else:
                 status, seq = f[7], f[8]
-                if seq % 4 == 0:
-                    self._last_temp_c = float(f[6])
+                temp = float(f[6]) if seq % 4 == 0 else None
+            if temp is not None and not t_lo <= temp <= t_hi:   # NaN too
+                bad_temp += 1
+                temp = math.nan
+            if fmt == "c":
+                if temp is not None:
+                    self._last_temp_c = temp   # held until the next reading
                 temp = self._last_temp_c
             seqs.append(seq & 0x7F)
             gyro.append(f[ai])
@@ -164,7 +178,9 @@ class KvhCodec:
         c["frames_ok"] += len(seqs)
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
-        rate = to_dph(gyro, self.rot, self.units, self.rate_hz)
+        c[plausibility.TEMP_COUNTER] += bad_temp
+        rate, bad = plausibility.gate(to_dph(gyro, self.rot, self.units, self.rate_hz), self.max_rate_dph, valid)
+        c[plausibility.COUNTER] += bad
         return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
 
 

@@ -14,7 +14,9 @@ The column map (``--columns``) names each field in order:
   (``temp_c``, ``vib_g``, ``rot_dps``, ``depth_m`` have fixed meanings).
 
 Lines that do not parse (boot banners, a header row, truncated lines) are counted as
-``bad_lines``, their bytes as ``bytes_skipped``.
+``bad_lines``, their bytes as ``bytes_skipped``. A rate beyond ``--max-rate-dph`` (default
+the generic gate of fogmon.sources.plausibility, 10,000 deg/s) makes the sample invalid,
+counted as ``implausible_samples``.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ import math
 import re
 
 from fogmon.errors import FogmonError
+from fogmon.sources import plausibility
 from fogmon.sources.framing import LineFramer
 from fogmon.sources.frames import Frames
 
@@ -71,14 +74,17 @@ def parse_columns(spec: str) -> tuple[list[str], int | None]:
 
 class LinesCodec:
     """Incremental decoder for column-mapped lines. Counters: ``frames_ok``,
-    ``bad_lines``, ``bytes_skipped``."""
+    ``bad_lines``, ``bytes_skipped``, ``implausible_samples`` (valid samples whose rate
+    is beyond ``max_rate_dph`` deg/h, None = plausibility.GENERIC_MAX_ABS_DPH)."""
 
     protocol = "lines"
 
-    def __init__(self, columns: str = "rate_dph", rate_hz: float = DEFAULT_RATE_HZ) -> None:
+    def __init__(self, columns: str = "rate_dph", rate_hz: float = DEFAULT_RATE_HZ,
+                 max_rate_dph: float | None = None) -> None:
         if not (rate_hz > 0 and math.isfinite(rate_hz)):
             raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
         self.columns, self.rate_hz = columns, float(rate_hz)
+        self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
         self._names, mod = parse_columns(columns)
         has_seq = "seq" in self._names
         self.seq_modulus = (mod or 2 ** 62) if has_seq else None
@@ -87,14 +93,15 @@ class LinesCodec:
         self._scale = dph * (self.rate_hz if mode == "delta" else 1.0)
         self.aux_names = tuple(n for n in self._names if n not in ("-", "seq", "valid") and n not in RATE_COLUMNS)
         self._framer = LineFramer(512)
-        self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0}
+        self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
 
     @property
     def pending(self) -> int:
         return self._framer.pending
 
     def options(self) -> dict:
-        return {"protocol": self.protocol, "columns": self.columns, "rate_hz": self.rate_hz}
+        return {"protocol": self.protocol, "columns": self.columns, "rate_hz": self.rate_hz,
+                "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
         return f"ASCII lines [{self.columns}], {self.rate_hz:g} Hz"
@@ -136,4 +143,6 @@ class LinesCodec:
         c["frames_ok"] += len(rate)
         c["bad_lines"] += bad + fr.dropped_lines - before[1]
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
+        rate, n = plausibility.gate(rate, self.max_rate_dph, valid)
+        c[plausibility.COUNTER] += n
         return Frames.from_lists(seq, rate, valid, aux)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 
+from fogmon.cli.values import positive
 from fogmon.errors import FogmonError
+from fogmon.sources import plausibility as pl
 from fogmon.sources.codecs import DEFAULTS, PROTOCOLS, make_codec
 
 CAN_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".log", ".mf4")
@@ -57,6 +59,15 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
                    "detection (default: counter if the message has it)")
     c.add_argument("--can-valid", metavar="SIGNAL", help="DBC signal that is nonzero when the sample is valid "
                    "(default: valid if the message has it)")
+    parser.add_argument("--max-rate-dph", type=positive, metavar="X",
+                        help="plausibility gate in deg/h: a rate beyond +-X is a corrupt value, not data; the "
+                             "sample becomes invalid and is counted (implausible_samples) and reported. Default: "
+                             f"the device's full scale x {pl.MARGIN:g}: kvh-a/b/c "
+                             f"{pl.KVH_DSP17XX_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP17XX_FULL_SCALE_DPH / 3600:g} deg/s), "
+                             f"dsp3000 {pl.KVH_DSP3000_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP3000_FULL_SCALE_DPH / 3600:g} "
+                             f"deg/s); lines, CAN and replay logs {pl.GENERIC_MAX_ABS_DPH:,.0f} "
+                             f"({pl.GENERIC_MAX_ABS_DPH / 3600:,.0f} deg/s). Raw captures replay with the value "
+                             "their sidecar recorded unless given")
     if replay:
         parser.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
                        "instead of stopping at the first one")
@@ -71,7 +82,8 @@ def codec_options(args) -> dict:
     """Decoder options given on the command line (None = not given)."""
     return {"protocol": _get(args, "protocol"), "rate_hz": _get(args, "rate_hz"),
             "kvh_rot": _get(args, "kvh_rot"), "kvh_units": _get(args, "kvh_units"),
-            "axis": _get(args, "axis"), "columns": _get(args, "columns")}
+            "axis": _get(args, "axis"), "columns": _get(args, "columns"),
+            "max_rate_dph": _get(args, "max_rate_dph")}
 
 
 def can_options(args) -> dict:
@@ -79,7 +91,7 @@ def can_options(args) -> dict:
     return {"message": _get(args, "can_message"), "rate_signal": _get(args, "can_rate"),
             "rate_unit": _get(args, "can_rate_unit"), "temp_signal": _get(args, "can_temp"),
             "counter_signal": _get(args, "can_counter"), "valid_signal": _get(args, "can_valid"),
-            "rate_hz": _get(args, "rate_hz")}
+            "rate_hz": _get(args, "rate_hz"), "max_rate_dph": _get(args, "max_rate_dph")}
 
 
 def open_live_source(args):
@@ -144,7 +156,8 @@ def open_replay_source(path: str, args):
     if kind == "serial" or (_get(args, "protocol") and kind != "replay-log"):
         return open_raw_capture(path, codec_options(args))
     if kind == "replay-log" or ext == ".csv":
-        return ReplayLogSource(path, tolerate=bool(_get(args, "tolerate_bad_rows", False)))
+        return ReplayLogSource(path, tolerate=bool(_get(args, "tolerate_bad_rows", False)),
+                               max_abs_dph=_get(args, "max_rate_dph", pl.GENERIC_MAX_ABS_DPH))
     raise FogmonError(f"{path}: not a replay log; for a raw serial capture give --protocol "
                       f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with --dbc")
 
@@ -154,32 +167,34 @@ def open_archive(directory: str, args):
     samples-NNNN.csv in order; or, when the folder has none or the command line gives
     decoder options (--protocol, --kvh-*, --axis, --columns, --rate-hz, --dbc, --can-*)
     to decode it again, its raw capture pieces (raw-NNNN.bin or frames-NNNN.asc) as one
-    stream. One piece alone is replayed by naming its file."""
+    stream. One piece alone is replayed by naming its file. ``--max-rate-dph`` gates
+    whichever is replayed and does not by itself ask for decoding again."""
     from fogmon.pieces import find_pieces, piece_path
     from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
     from fogmon.sources.replay import ReplayLogSet, ReplayLogSource, open_raw_capture, read_sidecar
 
     logs = find_pieces(directory, REPLAY_LOG)
     serial, frames = find_pieces(directory, SERIAL_CAPTURE), find_pieces(directory, CAN_CAPTURE)
-    decode = any(v is not None for v in (*codec_options(args).values(), *can_options(args).values(),
-                                          _get(args, "dbc")))
+    decode = any(v is not None for k, v in (*codec_options(args).items(), *can_options(args).items(),
+                                            ("dbc", _get(args, "dbc"))) if k != "max_rate_dph")
     if serial and (decode or not logs):
         return open_raw_capture(serial, codec_options(args))
     if frames and (decode or not logs):
         from fogmon.sources.can_source import open_can_log
         sides = [read_sidecar(p) or {} for p in frames]
         fields = ("message", "rate_signal", "rate_unit", "temp_signal", "counter_signal", "valid_signal", "rate_hz",
-                  "dbc")
+                  "max_rate_dph", "dbc")
         for p, side in zip(frames[1:], sides[1:]):
             if any(side.get(k) != sides[0].get(k) for k in fields):
                 raise FogmonError(f"{p}: its sidecar's decoder options or DBC differ from {frames[0]}'s: "
                                   f"not pieces of one CAN log")
         return open_can_log(frames, _get(args, "dbc"), can_options(args), sides[0])
     tolerate = bool(_get(args, "tolerate_bad_rows", False))
+    max_abs_dph = _get(args, "max_rate_dph", pl.GENERIC_MAX_ABS_DPH)
     if len(logs) == 1:
-        return ReplayLogSource(logs[0], tolerate=tolerate)
+        return ReplayLogSource(logs[0], tolerate=tolerate, max_abs_dph=max_abs_dph)
     if logs:
-        return ReplayLogSet(logs, tolerate=tolerate)
+        return ReplayLogSet(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
     raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, {SERIAL_CAPTURE} "
                       f"or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, raw capture "
                       f"or CAN log")

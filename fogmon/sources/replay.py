@@ -20,7 +20,8 @@ import numpy as np
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
-from fogmon.sources.codecs import PROTOCOLS, codec_from_options
+from fogmon.sources import plausibility
+from fogmon.sources.codecs import OPTION_KEYS, PROTOCOLS, codec_from_options
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
 from fogmon.sources.pacing import Pacer
 
@@ -39,9 +40,11 @@ def _block_len(rate_hz: float, speed: float | None) -> int:
 class ReplayLogSource:
     """A replay-log CSV on its uniform grid: time gaps become invalid placeholders with a
     ``gap`` event. Counters: ``samples`` (rows), ``samples_missing``, ``seq_gaps``
-    (time gaps), ``skipped_rows`` (only with ``tolerate=True``)."""
+    (time gaps), ``skipped_rows`` (only with ``tolerate=True``), ``implausible_samples``
+    (rates beyond +-``max_abs_dph`` deg/h: made invalid, with an ``implausible`` event)."""
 
-    def __init__(self, path: str, speed: float | None = None, tolerate: bool = False) -> None:
+    def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
+                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH) -> None:
         rec = read_replay_log(path, tolerate=tolerate)
         self.recording = rec
         self.rate_hz = rec.sample_rate_hz
@@ -52,21 +55,26 @@ class ReplayLogSource:
         self.name = f"replay log {rec.name}" + (f" ({rec.meta['sensor']})" if "sensor" in rec.meta else "")
         starts = np.flatnonzero(~present[1:] & present[:-1]) + 1 if len(present) > 1 else np.zeros(0, int)
         self.counters = {"samples": len(rec), "samples_missing": int((~present).sum()),
-                         "seq_gaps": len(starts), "skipped_rows": rec.skipped_rows}
+                         "seq_gaps": len(starts), "skipped_rows": rec.skipped_rows, plausibility.COUNTER: 0}
+        self.max_abs_dph = float(max_abs_dph)
         self._pacer = Pacer(speed)
         self._n = _block_len(self.rate_hz, speed)
         self._closed = False
 
     def blocks(self) -> Iterator[Block]:
         b, present = self._block, self._present
+        errors = ErrorEvents(self.counters)
         for i in range(0, len(b), self._n):
             if self._closed:
                 return
             sl = slice(i, i + self._n)
             t = b.t_s[sl]
             self._pacer.wait(float(t[0]))
-            yield Block(t, b.rate_dph[sl], b.valid[sl], {k: v[sl] for k, v in b.aux.items()},
-                        _gap_events(t, ~present[sl], i > 0 and not present[i - 1]))
+            rate, n_bad = plausibility.gate(b.rate_dph[sl], self.max_abs_dph)
+            self.counters[plausibility.COUNTER] += n_bad
+            t_bad = float(t[np.argmax(np.isnan(rate) & b.valid[sl])])    # the first implausible sample's
+            events = _gap_events(t, ~present[sl], i > 0 and not present[i - 1]) + tuple(errors.poll(t_bad))
+            yield Block(t, rate, b.valid[sl] & ~np.isnan(rate), {k: v[sl] for k, v in b.aux.items()}, events)
 
     def close(self) -> None:
         self._closed = True
@@ -87,7 +95,7 @@ def _gap_events(t: np.ndarray, missing: np.ndarray, continues: bool) -> tuple[Ev
 
 
 #: The decoder options a serial capture's sidecar may hold (names of codec options()).
-DECODER_FIELDS = ("protocol", "rate_hz", "kvh_rot", "kvh_units", "axis", "columns")
+DECODER_FIELDS = OPTION_KEYS
 
 
 def _text(v, folder):
@@ -143,7 +151,7 @@ def _breaks(v, folder):
 SIDECAR_FIELDS = {
     "kind": _one_of("serial", "can"), "protocol": _one_of(*PROTOCOLS), "rate_hz": _number(0, True),
     "kvh_rot": _one_of("rate", "delta"), "kvh_units": _one_of("deg", "rad"), "axis": _one_of("x", "y", "z"),
-    "columns": _text, "breaks": _breaks, "piece": _count, "started_utc": _text,
+    "columns": _text, "max_rate_dph": _number(0, True), "breaks": _breaks, "piece": _count, "started_utc": _text,
     "port": _text, "baud": _count, "channel": _text_or_null, "interface": _text_or_null, "dbc": _file_in_folder,
     "message": _text_or_null, "rate_signal": _text_or_null, "rate_unit": _text_or_null,
     "temp_signal": _text_or_null, "counter_signal": _text_or_null, "valid_signal": _text_or_null,
@@ -277,9 +285,10 @@ class ReplayLogSet:
     as inside one log; pieces that overlap in time, or differ in sample rate or columns,
     are a one-line error. Counters: the pieces' summed, seam gaps included."""
 
-    def __init__(self, paths: Sequence[str], tolerate: bool = False) -> None:
-        self.paths, self._tolerate = list(paths), tolerate
-        self._first = ReplayLogSource(self.paths[0], tolerate=tolerate)
+    def __init__(self, paths: Sequence[str], tolerate: bool = False,
+                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH) -> None:
+        self.paths, self._tolerate, self._max_abs_dph = list(paths), tolerate, max_abs_dph
+        self._first = ReplayLogSource(self.paths[0], tolerate=tolerate, max_abs_dph=max_abs_dph)
         self.rate_hz = self._first.rate_hz
         self.name = f"replay log {os.path.basename(self.paths[0])} .. {os.path.basename(self.paths[-1])} " \
                     f"({len(self.paths)} pieces)"
@@ -292,7 +301,8 @@ class ReplayLogSet:
     def blocks(self) -> Iterator[Block]:
         t_end = aux = None
         for i, path in enumerate(self.paths):
-            src = self._first if i == 0 else ReplayLogSource(path, tolerate=self._tolerate)
+            src = self._first if i == 0 else ReplayLogSource(path, tolerate=self._tolerate,
+                                                             max_abs_dph=self._max_abs_dph)
             if src.rate_hz != self.rate_hz:
                 raise FogmonError(f"{path}: sample_rate_hz {src.rate_hz:g} differs from {self.paths[0]} "
                                   f"({self.rate_hz:g} Hz): not pieces of one recording")

@@ -1,0 +1,289 @@
+"""Platform motion: stretches where the measured rate moves far beyond the sensor's noise
+and nothing (no ``rot_dps`` reference) says why: a turntable, a vehicle, a person
+handling the unit, the ground shaking. Noise coefficients fitted over such a stretch
+describe the motion, not the gyro (a hand-turned FOG "identifies" R = 7e9 deg/h^2), so
+explain and the live pipeline keep them out of their fits and say so.
+
+The test, on blocks of ``block_samples(rate_hz)`` samples: a block moves when its mean
+rate departs from the local reference (a running median of block means over
+``REFERENCE_S``) by more than both
+
+- ``K_BLOCK`` x the block-to-block scatter of a quiet block mean (so it is not chance),
+- ``K_SAMPLE`` x the noise of a single sample (so it is not a slow wander or a small
+  sway that the noise analysis models itself: vibration lines, bias instability).
+
+Both scales are estimated from the quiet part of the recording itself (low quantiles, so
+motion over most of the record still leaves them right). Single-sample outliers (glitches)
+are not motion: samples beyond ``K_OUTLIER`` sample-sigmas of their block's median are left
+out of the block mean. A constant-rate plateau longer than half of ``REFERENCE_S`` cannot
+be told from a bias change and is not flagged (the reference follows it).
+"""
+from __future__ import annotations
+
+import warnings
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from fogmon.block import Event
+
+#: a block moves beyond K_BLOCK x the quiet scatter of block means ...
+K_BLOCK = 8.0
+#: ... and beyond K_SAMPLE x the noise of one sample (both must hold)
+K_SAMPLE = 3.0
+#: samples beyond this many sample-sigmas from their block median are outliers, not motion
+K_OUTLIER = 10.0
+#: the local reference: running median of block means over this long (s)
+REFERENCE_S = 300.0
+#: flagged blocks closer than this (s, or two blocks) form one span
+MERGE_S = 10.0
+#: the quiet scales are low quantiles over blocks (motion may cover most of a record)
+QUIET_QUANTILE = 0.25
+
+
+@dataclass(frozen=True)
+class MotionSpan:
+    """A stretch of platform motion: recording time ``t_start_s`` .. ``t_end_s`` (s) and
+    the largest departure of a block-mean rate from its reference, ``peak_dph`` (deg/h)."""
+    t_start_s: float
+    t_end_s: float
+    peak_dph: float
+
+
+def block_samples(rate_hz: float) -> int:
+    """Samples per test block: 0.25 s, at least 32 samples."""
+    return max(32, int(round(0.25 * rate_hz)))
+
+
+#: the standard deviation of a normal variable's middle 80 % is this fraction of sigma
+_TRIMMED_STD_80 = 0.6616
+
+
+def _robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
+    """Per row of ``y`` (blocks x samples, NaN = none): sigma of one sample (deg/h) from
+    the standard deviation of the middle 80 % of first differences (insensitive to a slow
+    trend and to a few outliers; unlike a MAD it stays right for quantized rates, where
+    most differences tie)."""
+    d = np.sort(np.diff(y, axis=1), axis=1)             # NaNs sort last
+    n = np.sum(np.isfinite(d), axis=1, keepdims=True)
+    k = n // 10
+    rank = np.arange(d.shape[1])
+    mid = np.where((rank >= k) & (rank < n - k), d, np.nan)
+    return np.nanstd(mid, axis=1) / _TRIMMED_STD_80 / np.sqrt(2.0)
+
+
+def _block_means(y: np.ndarray, sigma_1: float) -> np.ndarray:
+    """Robust mean rate (deg/h) of each row of ``y`` (blocks x samples, NaN = no sample):
+    samples beyond K_OUTLIER x ``sigma_1`` from the block median are left out; a block in
+    fast motion, where most samples are that far, keeps its median."""
+    with warnings.catch_warnings():          # all-NaN blocks (gaps) are expected
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean = np.nanmedian(y, axis=1)
+        kept = np.where(np.abs(y - mean[:, None]) > K_OUTLIER * sigma_1, np.nan, y)
+        ok = np.sum(np.isfinite(kept), axis=1) >= y.shape[1] // 4
+        mean[ok] = np.nanmean(kept[ok], axis=1)
+    return mean
+
+
+def _quiet_scales(sigmas: np.ndarray, means: np.ndarray) -> tuple[float, float]:
+    """(noise of one sample, quiet scatter of a block mean), deg/h, from low quantiles of
+    the per-block sample sigmas and of the steps between consecutive block means."""
+    sigma_1 = float(np.quantile(sigmas, QUIET_QUANTILE))
+    steps = np.abs(np.diff(means))
+    s_block = float(np.quantile(steps, QUIET_QUANTILE)) / 0.3186 / np.sqrt(2.0)
+    return sigma_1, s_block
+
+
+def _limit(sigma_1: float, s_block: float) -> float:
+    """Departure (deg/h) beyond which a block mean moves; NaN when the noise is unknown
+    or zero (a constant signal cannot be judged)."""
+    limit = max(K_BLOCK * s_block, K_SAMPLE * sigma_1)
+    return limit if np.isfinite(limit) and limit > 0 else float("nan")
+
+
+def _blocks(rate_dph: np.ndarray, valid: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(samples as blocks x m with NaN where invalid, whether each block has enough samples,
+    each block's sample sigma in deg/h)."""
+    y = np.where(valid, rate_dph, np.nan).reshape(-1, m).astype(np.float64)
+    enough = np.sum(np.isfinite(y), axis=1) >= m // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return y, enough, _robust_sigma_of_diffs(y)
+
+
+def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[MotionSpan]:
+    """The platform-motion spans of a recording on a uniform grid (``t_s`` in s,
+    ``rate_dph`` in deg/h with the reference rotation already removed, ``valid`` False
+    where there is no sample), in time order; empty for a stationary recording. The
+    reference of each block is centred on it (see ``MotionTracker`` for the causal one)."""
+    m = block_samples(rate_hz)
+    nb = len(rate_dph) // m
+    y, enough, sig = _blocks(rate_dph[:nb * m], np.asarray(valid)[:nb * m], m)
+    idx = np.flatnonzero(enough)
+    if len(idx) < 4:
+        return []
+    sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
+    mu = _block_means(y[idx], sigma_1)
+    limit = _limit(*_quiet_scales(sig[idx], mu))
+    if not np.isfinite(limit):
+        return []
+    dev = np.abs(mu - median_filter(mu, size=_reference_blocks(rate_hz), mode="nearest"))
+    moving = idx[dev > limit]
+    peak = np.zeros(nb)
+    peak[idx] = dev
+    gap = _merge_blocks(rate_hz)
+    dt, t0 = 1.0 / rate_hz, float(t_s[0])
+    out = []
+    for a, b in _runs(moving, gap):     # one block of margin each side: onsets begin inside the neighbours
+        a, b = max(0, a - 1), min(nb - 1, b + 1)
+        out.append(MotionSpan(t0 + a * m * dt, min(t0 + ((b + 1) * m - 1) * dt, float(t_s[-1])),
+                              float(peak[a:b + 1].max())))
+    return out
+
+
+def _reference_blocks(rate_hz: float) -> int:
+    """Blocks in the running-median reference (odd, at least 5)."""
+    return max(5, int(REFERENCE_S * rate_hz / block_samples(rate_hz))) | 1
+
+
+def _merge_blocks(rate_hz: float) -> int:
+    """Flagged blocks at most this many blocks apart belong to one span."""
+    return max(2, int(np.ceil(MERGE_S * rate_hz / block_samples(rate_hz))))
+
+
+def _runs(blocks: np.ndarray, gap: int) -> list[tuple[int, int]]:
+    """(first, last) of each run of sorted block indices with steps of at most ``gap``."""
+    out: list[tuple[int, int]] = []
+    for b in blocks:
+        if out and b - out[-1][1] <= gap:
+            out[-1] = (out[-1][0], int(b))
+        else:
+            out.append((int(b), int(b)))
+    return out
+
+
+class MotionGate:
+    """The live form of ``find_motion``: causal and bounded. ``push`` takes the analysed
+    rate (deg/h) of each incoming block and returns the samples it has judged, in order
+    and with the moving ones (plus one block of margin each side) made invalid, held back
+    by at most two test blocks, and ``platform_motion`` events at the start and end of
+    each span; ``flush`` releases the rest at the end of a run. Each test block's
+    reference is the median of the non-moving block means of the last REFERENCE_S / 2;
+    the quiet scales are low quantiles over the last ``HISTORY_S``, refreshed every
+    ``RESCALE_BLOCKS`` blocks; nothing is judged during the first ``WARMUP_BLOCKS``."""
+
+    HISTORY_S = 3600.0
+    WARMUP_BLOCKS = 16
+    RESCALE_BLOCKS = 64
+
+    def __init__(self, rate_hz: float) -> None:
+        self.m = block_samples(rate_hz)
+        n_hist = max(self.WARMUP_BLOCKS, int(self.HISTORY_S * rate_hz / self.m))
+        self._sig: deque[float] = deque(maxlen=n_hist)
+        self._means: deque[float] = deque(maxlen=n_hist)
+        self._ref: deque[float] = deque(maxlen=_reference_blocks(rate_hz) // 2 + 1)
+        self._gap = _merge_blocks(rate_hz)
+        self._limit = float("nan")
+        self._sigma_1 = float("nan")
+        self._n_judged = 0
+        self._t = np.empty(0)
+        self._y = np.empty(0)
+        self._v = np.empty(0, dtype=bool)
+        self._judged = 0                   # samples at the buffer's start already judged
+        self._span: list[float] | None = None      # open span: [t_start_s, t_end_s, peak_dph]
+        self._quiet_blocks = 0             # non-moving blocks since the open span's last moving one
+        self._mask_next = False            # the block after a span is margin
+        self.spans: list[MotionSpan] = []  # closed spans, for the run's summary
+        self.samples_excluded = 0
+
+    def push(self, t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, list[Event]]:
+        """(rate deg/h, valid) of the samples released now, and the events."""
+        self._t = np.concatenate([self._t, t_s])
+        self._y = np.concatenate([self._y, rate_dph])
+        self._v = np.concatenate([self._v, valid])
+        m, a = self.m, self._judged
+        nb = (len(self._y) - a) // m
+        events: list[Event] = []
+        if nb:
+            y, enough, sig = _blocks(self._y[a:a + nb * m], self._v[a:a + nb * m], m)
+            if np.isnan(self._sigma_1) and np.any(enough):
+                self._sigma_1 = float(np.quantile(sig[enough], QUIET_QUANTILE))
+            means = _block_means(y, self._sigma_1) if self._sigma_1 > 0 else np.nanmean(y, axis=1)
+            for k in range(nb):
+                if enough[k]:
+                    events += self._judge(a + k * m, float(sig[k]), float(means[k]))
+            self._judged = a + nb * m
+        y, v = self._take(max(0, self._judged - m))    # the last judged block stays: margin
+        return y, v, events
+
+    def _take(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        y, v = self._y[:n], self._v[:n]
+        self._t, self._y, self._v = self._t[n:], self._y[n:], self._v[n:]
+        self._judged = max(0, self._judged - n)
+        return y, v
+
+    def flush(self) -> tuple[np.ndarray, np.ndarray, list[Event]]:
+        """Everything still held (the last partial block is not judged), and the event
+        closing a span still open."""
+        events = [self._close(float(self._t[-1]) if len(self._t) else self._span[1])] if self._span else []
+        y, v = self._take(len(self._y))
+        return y, v, events
+
+    def _judge(self, a: int, sig: float, mean: float) -> list[Event]:
+        """Judge the block of samples a .. a+m of the buffer (sample sigma ``sig`` and
+        robust mean ``mean``, deg/h); the block before it is still held."""
+        m = self.m
+        t0, t1 = float(self._t[a]), float(self._t[a + m - 1])
+        self._sig.append(sig)
+        if self._n_judged % self.RESCALE_BLOCKS == 0 or self._n_judged == self.WARMUP_BLOCKS:
+            self._sigma_1 = float(np.quantile(self._sig, QUIET_QUANTILE))
+            if len(self._means) >= self.WARMUP_BLOCKS:
+                self._limit = _limit(*_quiet_scales(np.asarray(self._sig), np.asarray(self._means)))
+        self._n_judged += 1
+        dev = abs(mean - float(np.median(self._ref))) if self._ref else 0.0
+        self._means.append(mean)
+        moving = len(self._means) > self.WARMUP_BLOCKS and bool(dev > self._limit)   # NaN limit: never
+        out: list[Event] = []
+        if moving:
+            self._mask(max(0, a - m), a + m)            # this block and the one before it
+            if self._span is None:
+                self._span = [float(self._t[max(0, a - m)]), t1, dev]
+                out.append(Event(t0, "platform_motion",
+                                 f"platform motion: the rate leaves its reference by {dev:.4g} deg/h "
+                                 f"(limit {self._limit:.3g} deg/h); kept out of the noise analysis"))
+            else:
+                self._span[1], self._span[2] = t1, max(self._span[2], dev)
+            self._quiet_blocks, self._mask_next = 0, True
+        else:
+            self._ref.append(mean)
+            if self._mask_next:
+                self._mask(a, a + m)
+                self._span[1] = t1
+                self._mask_next = False
+            if self._span is not None:
+                self._quiet_blocks += 1
+                if self._quiet_blocks > self._gap:
+                    out.append(self._close(t1))
+        return out
+
+    def _mask(self, a: int, b: int) -> None:
+        self.samples_excluded += int(np.count_nonzero(self._v[a:b]))
+        self._v[a:b] = False
+
+    def _close(self, t_s: float) -> Event:
+        a, b, peak = self._span
+        self.spans.append(MotionSpan(a, b, peak))
+        self._span = None
+        return Event(t_s, "platform_motion", f"platform motion ended: {a:.3f} .. {b:.3f} s, "
+                     f"peak {peak:.4g} deg/h from the reference")
+
+
+def motion_mask(t_s: np.ndarray, spans: list[MotionSpan]) -> np.ndarray:
+    """True for the samples at ``t_s`` (s) inside any of ``spans``."""
+    mask = np.zeros(len(t_s), dtype=bool)
+    for s in spans:
+        mask |= (t_s >= s.t_start_s) & (t_s <= s.t_end_s)
+    return mask

@@ -1,0 +1,91 @@
+"""Platform motion: found where a simulated turntable turns (to a block), never in
+stationary IEEE-952 noise with drift, bias instability, rate ramps or glitches."""
+import numpy as np
+import pytest
+
+from fogmon.motion import MotionGate, block_samples, find_motion, motion_mask
+from fogmon.sim.model import Noise, SensorModel
+from fogmon.sim.simulate import simulate
+
+FS = 100.0
+
+
+def stationary(seed, duration_s=1800.0, noise=Noise(Q_arcsec=0.5, N_dpsh=0.05, B_dph=0.2, K_dphsh=0.5, R_dphh=2.0)):
+    rec = simulate(SensorModel(FS, 12.0, noise), duration_s=duration_s, seed=seed)
+    return rec.t_s, rec.rate_dph
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_stationary_noise_is_never_motion(seed):
+    t, r = stationary(seed)
+    assert find_motion(t, r, np.ones(len(t), bool), FS) == []
+
+
+def test_glitches_and_gaps_are_not_motion():
+    t, r = stationary(11)
+    rng = np.random.default_rng(2)
+    r = r.copy()
+    r[rng.choice(len(r), 200, replace=False)] += rng.choice([-1, 1], 200) * 1e6     # single-sample glitches
+    valid = np.ones(len(t), bool)
+    valid[5000:9000] = False                                                       # a 40 s gap
+    assert find_motion(t, r, valid, FS) == []
+
+
+def test_a_turntable_segment_is_found_to_a_block():
+    t, r = stationary(3)
+    turn = (t >= 600.0) & (t < 630.0)
+    profile = np.clip(np.minimum(t - 600.0, 630.0 - t) / 0.5, 0.0, 1.0)        # 10 deg/s^2 to 5 deg/s and back
+    r = r + 3600.0 * 5.0 * profile
+    spans = find_motion(t, r, np.ones(len(t), bool), FS)
+    assert len(spans) == 1
+    block = block_samples(FS) / FS
+    assert 600.0 - 2 * block <= spans[0].t_start_s <= 600.0 + 2 * block
+    assert 630.0 - 2 * block <= spans[0].t_end_s <= 630.0 + 2 * block
+    assert 0.9 * 18000 < spans[0].peak_dph <= 18000 * 1.01
+    mask = motion_mask(t, spans)
+    assert mask[turn].all() and mask.sum() < turn.sum() + 4 * block * FS
+
+
+def test_motion_over_most_of_the_record_is_still_found():
+    t, r = stationary(4, duration_s=300.0)
+    moving = (t > 40.0) & (t < 220.0)
+    r = r + np.where(moving, 3600.0 * 50.0 * np.sin(2 * np.pi * t / 7.0), 0.0)       # a person turning it
+    spans = find_motion(t, r, np.ones(len(t), bool), FS)
+    covered = motion_mask(t, spans)
+    assert covered[moving].mean() > 0.95 and covered[~moving].mean() < 0.05
+
+
+def run_gate(t, r, valid, sizes):
+    gate, ys, vs, events, i = MotionGate(FS), [], [], [], 0
+    for n in sizes:
+        y, v, ev = gate.push(t[i:i + n], r[i:i + n], valid[i:i + n])
+        ys.append(y), vs.append(v), events.extend(ev)
+        i += n
+    y, v, ev = gate.flush()
+    ys.append(y), vs.append(v), events.extend(ev)
+    return gate, np.concatenate(ys), np.concatenate(vs), events
+
+
+@pytest.mark.parametrize("sizes", [[1000] * 180, [1] * 5000 + [8192] * 21 + [2968]])
+def test_live_gate_passes_stationary_noise_unchanged(sizes):
+    t, r = stationary(5)
+    valid = np.ones(len(t), bool)
+    valid[100:130] = False
+    gate, y, v, events = run_gate(t, r, valid, sizes)
+    assert events == [] and gate.spans == [] and gate.samples_excluded == 0
+    np.testing.assert_array_equal(y, r)
+    np.testing.assert_array_equal(v, valid)
+
+
+def test_live_gate_keeps_a_turn_out_of_the_analysis():
+    t, r = stationary(3)
+    turn = (t >= 600.0) & (t < 630.0)
+    r = r + 3600.0 * 5.0 * np.clip(np.minimum(t - 600.0, 630.0 - t) / 0.5, 0.0, 1.0)
+    gate, y, v, events = run_gate(t, r, np.ones(len(t), bool), [4096] * 43 + [len(t) - 4096 * 43])
+    np.testing.assert_array_equal(y, r)                     # every sample released, in order
+    assert not v[turn].any()                                # the turn is invalid for the engines
+    block = block_samples(FS)
+    assert np.count_nonzero(~v) < turn.sum() + 4 * block and gate.samples_excluded == np.count_nonzero(~v)
+    assert [e.kind for e in events] == ["platform_motion"] * 2
+    (span,) = gate.spans
+    assert abs(span.t_start_s - 600.0) < 2 * block / FS and abs(span.t_end_s - 630.0) < 2 * block / FS
