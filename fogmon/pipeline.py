@@ -42,8 +42,9 @@ LIVE_WINDOW_SAMPLES = 2**16
 ERROR_EXPR = "rate_dph - 3600 x rot_dps"
 #: A coefficient-jump event needs a change of more than this many combined standard errors.
 JUMP_Z = 5.0
-#: A live run with --duration-s also stops this long (s, or 10 % more) after that much wall
-#: time from opening the source, should the device stall.
+#: A live run with --duration-s also stops reading the device this long (s, or 10 % more)
+#: after that much wall time from opening the source, should the device fall silent (what
+#: was read is kept).
 LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
 OVERALL_MAX_SAMPLES = 2**23
@@ -384,12 +385,16 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     try:
         if total_n is None:  # live: compile before the device is opened, then read it in a thread
             _warm_up(rate_hz, window_s, hop_s, taus)
+            if duration_s is not None and hasattr(source, "limit"):
+                source.limit(live_samples(duration_s, rate_hz))  # nothing after the cut is read
             reader = _ThreadedBlocks(source)
         wall_start = time.monotonic()
+        wall_stop = None if duration_s is None or total_n is not None else \
+            wall_start + duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s)
         for big in (reader if reader is not None else source.blocks()):
-            if duration_s is not None and total_n is None and \
-                    time.monotonic() - wall_start > duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s):
-                break  # a live source that stalls still stops on time (wall clock)
+            if wall_stop is not None and time.monotonic() > wall_stop:
+                source.close()  # a live source that stalls still stops on time; what it read is kept
+                wall_stop = None
             if not len(big):
                 _dispatch_events(sinks, big.events, event_counts)
                 continue
@@ -415,16 +420,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                             s.start(info)
                         started = True
                         summary.t_first_s = float(b.t_s[0])
-                    if b_piece != piece:
-                        piece = b_piece
-                        for s in sinks:
-                            s.rotate(piece, float(b.t_s[0]))
-                    summary.n_samples += len(b)
-                    summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
-                    summary.t_last_s = float(b.t_s[-1])
-                    for s in sinks:
-                        s.block(b)
-                    _dispatch_events(sinks, b.events, event_counts)
+                    piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
                     y = b.error_rate_dph if use_ref else b.rate_dph
                     res = engine.push(y, b.valid & np.isfinite(y))
                     if len(res):
@@ -452,7 +448,14 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         progress.close()
         source.close()
         if reader is not None:
-            reader.join()
+            backlog = reader.backlog()
+            if started and not summary.failed and not done:  # read before the stop: archived, not analysed
+                for big in backlog:
+                    if not len(big):
+                        _dispatch_events(sinks, big.events, event_counts)
+                        continue
+                    for b_piece, b in _at_seams([big], t_origin, rate_hz, piece_n):
+                        piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
         summary.wall_s = time.monotonic() - wall0
         summary.source_wall_s = time.monotonic() - wall_start
         summary.counters = dict(getattr(source, "counters", {}) or {})
@@ -495,6 +498,28 @@ class _Tail:
 
 
 
+def _deliver(b: Block, b_piece: int, piece: int, sinks, summary: Summary, event_counts: Counter) -> int:
+    """Hand a block to the sinks (after ``rotate`` when it begins piece ``b_piece``) and
+    count it in the summary; returns the current piece."""
+    if b_piece != piece:
+        for s in sinks:
+            s.rotate(b_piece, float(b.t_s[0]))
+    if len(b):
+        summary.n_samples += len(b)
+        summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+        summary.t_last_s = float(b.t_s[-1])
+        for s in sinks:
+            s.block(b)
+    _dispatch_events(sinks, b.events, event_counts)
+    return b_piece
+
+
+def live_samples(duration_s: float, rate_hz: float) -> int:
+    """Samples of a live run of ``duration_s`` s from its first sample: those with
+    t - t_first <= duration_s - half a sample period (the replay cut, too)."""
+    return max(1, math.floor(duration_s * rate_hz - 0.5 + 1e-9) + 1)
+
+
 def record_samples(source) -> int | None:
     """Length in samples of a finite source (a replay), None for a live one."""
     n = getattr(source, "n_samples", None)
@@ -522,7 +547,7 @@ class _ThreadedBlocks:
     """Iterate a live source's blocks in a reader thread, so DAVAR, fits and Rerun never
     keep the device unread (an OS serial buffer holds ~0.1 s of a 1 kHz KVH). The queue is
     unbounded: nothing is dropped; if processing fell behind, the backlog would grow.
-    ``join()`` after ``source.close()`` waits for the reader to finish."""
+    ``backlog()`` after ``source.close()`` takes what is left once the reader is done."""
 
     _DONE = object()
 
@@ -553,8 +578,23 @@ class _ThreadedBlocks:
                 raise item
             yield item
 
-    def join(self, timeout_s: float = 10.0) -> None:
-        self._thread.join(timeout_s)
+    def backlog(self, timeout_s: float = 10.0) -> list[Block]:
+        """After ``source.close()``: the blocks not yet taken, in order, up to the source's
+        end (at most ``timeout_s`` s of waiting for it); an error after the stop is dropped."""
+        out: list[Block] = []
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            try:
+                item = self._q.get(timeout=0.05)
+            except queue.Empty:
+                if not self._thread.is_alive() and self._q.empty():
+                    break
+                continue
+            if item is self._DONE:
+                break
+            if isinstance(item, Block) and (len(item) or item.events):
+                out.append(item)
+        return out
 
 
 def _dispatch_events(sinks, events, counts: Counter) -> None:

@@ -1,7 +1,10 @@
-"""Serial source against fake KVH devices on loop:// and on a pty: exact accounting of
-corrupted, truncated, dropped frames and garbage; unplug and replug with the archive
-keeping every sample sent while connected; replay of the raw capture gives the same
-samples."""
+"""Serial source against fake KVH devices on loop://, on a pty and on a scripted port
+(reads and clock jumps given by the test): exact accounting of corrupted, truncated,
+dropped frames and garbage; the time base from the device (host stalls make no gap,
+vanished or garbled bytes the exact gap); counters equal to events and archive at a
+--duration-s cut; unplug and replug with the archive keeping every sample sent while
+connected; replay of the raw capture gives the same samples."""
+import json
 import os
 import threading
 import time
@@ -15,7 +18,7 @@ from fogmon.sinks.archive import Archive, run_archived
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
-from sources_fake_device import MAX_RATE_DPH, FakeKvh, open_pty, stream, write_all
+from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -150,3 +153,127 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     r = np.concatenate([b.rate_dph for b in rb])
     np.testing.assert_array_equal(t[v], rec.t_s)
     np.testing.assert_array_equal(r[v], rec.rate_dph)
+
+
+# -- time base from the device; counters that agree ---------------------------------------
+class ScriptedPort:
+    """A serial port replaying ``chunks`` one per read, whose clock jumps by ``stalls_s[i]``
+    before read i (the host did not read for that long; the OS kept the bytes): the
+    source's timing is scripted, not measured, so nothing depends on the machine's load."""
+
+    def __init__(self, chunks: list[bytes], stalls_s=()):
+        self.chunks, self.stalls_s = list(chunks), list(stalls_s)
+        self.i, self.now_s = 0, 0.0
+
+    @property
+    def in_waiting(self):
+        return len(self.chunks[self.i]) if self.i < len(self.chunks) else 0
+
+    def read(self, n):
+        if self.i >= len(self.chunks):
+            time.sleep(0.001)          # the device has nothing more to say
+            return b""
+        self.now_s += (self.stalls_s[self.i] if self.i < len(self.stalls_s) else 0.0) + 0.001
+        self.i += 1
+        return self.chunks[self.i - 1]
+
+    def clock(self):
+        return self.now_s
+
+    def close(self):
+        pass
+
+
+def scripted_source(chunks, stalls_s=(), fs=FS):
+    port = ScriptedPort(chunks, stalls_s)
+    return SerialSource("scripted", 921600, KvhCodec("a", "rate", "deg", "z", fs, MAX_RATE_DPH), opener=lambda: port,
+                        clock=port.clock)
+
+
+def split(data: bytes, sizes) -> list[bytes]:
+    out, i = [], 0
+    for s in sizes:
+        out.append(data[i:i + s])
+        i += s
+    return [c for c in out if c] + ([data[i:]] if i < len(data) else [])
+
+
+@pytest.mark.parametrize("stall_s", [0.01, 0.064, 0.1, 0.5, 2.0])
+def test_host_stall_with_a_continuous_stream_makes_no_gap(stall_s, tmp_path):
+    """The host does not read for 10 ms .. 2 s (frames split anywhere): the bytes arrive
+    late but continuous, so every frame lands on its own slot; only the device's own drop
+    (frame 300, the counter jumps) is a gap, and the capture's sidecar records no outage."""
+    data, intact = stream(1000, {300: "drop"})
+    chunks = split(data, [3000, 7777, 50, 4001, 9000, 36 * 200 + 5])
+    stalls = [0.0, stall_s, stall_s, 0.0, stall_s, 2 * stall_s]
+    src = scripted_source(chunks, stalls, fs=1000.0)           # a counter wrap: 128 ms
+    archive = Archive(str(tmp_path / "arch"), src)
+    blocks, t, rate, valid = collect(src, 1000)
+    archive.close()
+    with open(archive.capture_path + ".json") as fh:
+        assert json.load(fh)["breaks"] == []
+    ks = np.rint(rate[valid] / 3600).astype(int)
+    assert list(ks) == intact and np.array_equal(np.rint(t[valid] * 1000).astype(int), ks)
+    assert len(t) == 1000 and list(np.flatnonzero(~valid)) == [300]
+    gaps = [e.message for b in blocks for e in b.events if e.kind == "gap"]
+    assert gaps == ["1 sample(s) lost at t=0.300000 s (sequence counter)"]
+
+
+def test_bytes_lost_give_the_exact_gap():
+    """Bytes vanish (frames 400..449 and part of 399 and 450: an OS buffer overrun) and
+    300 frames are garbled in place (frames 600..899, more than a counter wrap): the
+    skipped bytes and the counter give exactly 52 and 300 lost samples."""
+    frames = [frame_k(k) for k in range(1200)]
+    garbled = bytes((i * 7) % 200 + 1 for i in range(300 * 36))     # never 0xFE: no false header
+    data = b"".join(frames[:399]) + frames[399][:17] + frames[450][30:] + b"".join(frames[451:600]) \
+        + garbled + b"".join(frames[900:])
+    blocks, t, rate, valid = collect(scripted_source(split(data, [5000] * 9), [0.3] * 9), 1200)
+    ks = np.rint(rate[valid] / 3600).astype(int)
+    want = [k for k in range(1200) if not (399 <= k <= 450 or 600 <= k < 900)]
+    assert list(ks) == want and np.array_equal(np.rint(t[valid] * FS).astype(int), ks)
+    gaps = [e.message for b in blocks for e in b.events if e.kind == "gap"]
+    assert gaps == ["52 sample(s) lost at t=1.995000 s (bytes skipped)",
+                    "300 sample(s) lost at t=3.000000 s (bytes skipped)"]
+
+
+def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(tmp_path):
+    """A --duration-s run of 4.0 s (800 samples at 200 Hz) of a device that goes on
+    sending, with CRC failures, drops and garbage before and after the cut: every counter
+    equals the totals its events carry and what the archive holds, and the raw capture
+    decodes to exactly samples.csv with the same counters."""
+    from fogmon.pipeline import Sink, run_pipeline
+    from fogmon.sources.replay import open_raw_capture
+    from test_pipeline import _args
+
+    faults = {k: "corrupt" for k in (10, 11, 150, 151, 152, 420, 777, 799, 800, 830, 900)}
+    faults.update({k: "drop" for k in (50, 51, 500, 798, 850)})
+    faults.update({k: "garbage" for k in (60, 790, 810)})
+    data, intact = stream(1000, faults)
+
+    class Events(Sink):
+        def __init__(self):
+            self.got = []
+
+        def events(self, events):
+            self.got += list(events)
+
+    src = scripted_source(split(data, [997] * 40, ), [0.2] * 40)
+    archive = Archive(str(tmp_path / "arch"), src)
+    ev = Events()
+    summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev], extra_sinks=[archive])
+    c = summary.counters
+    assert summary.n_samples == 798                      # frames 798, 799 lost: the grid ends at 797
+    inside = [k for k in intact if k < 798]
+    rec = read_replay_log(archive.replay_log_path)
+    assert list(np.rint(rec.rate_dph / 3600).astype(int)) == inside
+    assert c["frames_ok"] == len(inside) == archive.counters["rows_written"]
+    assert c["crc_errors"] == 7 and c["samples_missing"] == 798 - len(inside) == 10 and c["seq_gaps"] == 6
+    crc = sum(int(e.message.split()[0]) for e in ev.got if e.kind == "crc_error")
+    lost = sum(int(e.message.split()[0]) for e in ev.got if e.kind == "gap")
+    assert (crc, lost, summary.event_counts["gap"]) == (c["crc_errors"], c["samples_missing"], c["seq_gaps"])
+    replay = open_raw_capture(archive.capture_path)
+    rb = list(replay.blocks())
+    v = np.concatenate([b.valid for b in rb])
+    assert sum(len(b) for b in rb) == summary.n_samples
+    np.testing.assert_array_equal(np.concatenate([b.t_s for b in rb])[v], rec.t_s)
+    assert {k: replay.counters[k] for k in replay.counters} == {k: c[k] for k in replay.counters}

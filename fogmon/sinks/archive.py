@@ -21,8 +21,10 @@ Files are created with their first data (a run that received nothing leaves no f
 and no folder it created) and written in whole lines/chunks straight to the OS at least
 every ``flush_s`` (default 0.5 s, by a background thread even when no data flows), so a
 SIGKILL loses at most the last ``flush_s`` of data and never leaves a half-written CSV
-row. The raw taps may be called from the source's reader thread: the raw capture keeps
-being written even while the consumer is slow.
+row. The raw taps may be called from another thread than the pipeline's (the source's
+decoding thread, right after it decoded those bytes): the raw capture keeps being written
+even while the pipeline is slow, and holds exactly the input the source decoded and
+counted (a ``--duration-s`` run ends it with the run's last frame).
 """
 from __future__ import annotations
 
@@ -192,9 +194,10 @@ class Archive(Sink):
             self._maybe_flush()
 
     def outage(self, elapsed_s: float, missing_est: float) -> None:
-        """The source heard nothing for ``elapsed_s`` s, about ``missing_est`` samples
-        lost; recorded in the sidecar at the current byte offset of the serial capture
-        piece (a CAN log carries its own timestamps)."""
+        """The source's port was closed and reopened: ``elapsed_s`` s since its last input,
+        about ``missing_est`` samples lost; recorded in the sidecar (``breaks``) at the
+        current byte offset of the serial capture piece, so a replay places the same gap
+        (a CAN log carries its own timestamps)."""
         with self._lock:
             if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
                 self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing_est),

@@ -1,12 +1,24 @@
 """Put decoded frames on the uniform sample grid: lost samples become invalid
 placeholders, so gaps are flagged, never joined.
 
-A sample's grid index advances by one per frame; when the device's sequence counter
-jumps by d (modulo its wrap), d - 1 placeholders (valid False, rate and aux NaN) are
-inserted. After an outage (port unplugged, CAN bus lost, a silent stretch in a log) the
-caller estimates from the clock how many samples were lost; the number inserted is then
-the count closest to that estimate that agrees with the counter (exact while the clock
-is within half a counter wrap), or the rounded estimate without a counter.
+Time comes from the device, never from the host's clock while the device is heard: a
+sample's grid index advances by one per frame. Between two good frames the number of
+samples lost is decided, in this order, by
+
+1. an outage (the port was closed and reopened, so the bytes sent meanwhile are gone):
+   the caller's estimate from the clock (elapsed s x rate Hz minus the frames that did
+   arrive), made exact by the sequence counter: the count closest to the estimate that
+   agrees with the counter (exact while the clock errs by less than half a counter wrap,
+   64 ms for a 1 kHz KVH), or the rounded estimate without a counter;
+2. otherwise the bytes: a continuous byte stream (no byte skipped, no CRC failure
+   between the two frames) means the device sent nothing in between, so the counter's
+   jump d gives (d - 1) mod wrap lost frames (a device-side drop), and without a counter
+   none; where bytes were skipped (garbage, a corrupted or truncated frame), they bound
+   the loss: skipped bytes / frame length frames at most, and the counter picks the
+   count closest to that among d - 1 + j x wrap (without a counter: the rounded ratio).
+
+A host stall (CPU load, GC, a slow sink) therefore never creates a gap: the OS buffers
+the bytes, and they arrive later but continuous.
 """
 from __future__ import annotations
 
@@ -18,11 +30,26 @@ from fogmon.sources.frames import Frames
 
 #: at most this many gap events per block; the rest are summarised in one event
 MAX_GAP_EVENTS = 5
+#: why samples were lost, by the rule that counted them (gap event messages)
+_WHY = ("sequence counter", "bytes skipped", "port reopened")
+
+
+def lost_frames(base: np.ndarray | None, skipped: np.ndarray, frame_bytes: int, modulus: int | None) -> np.ndarray:
+    """Frames lost before each frame of a byte stream (rule 2 of the module doc): ``base``
+    the counter's (d - 1) mod ``modulus`` (None without a counter), ``skipped`` the bytes
+    skipped before each frame, ``frame_bytes`` the protocol's frame length (0 = unknown:
+    skipped bytes then count nothing)."""
+    skipped = np.asarray(skipped, dtype=np.int64)
+    est = skipped / frame_bytes if frame_bytes else np.zeros(len(skipped))
+    if base is None:
+        return np.where(skipped > 0, np.rint(est), 0).astype(np.int64)
+    j = np.maximum(0, np.rint((est - base) / modulus)).astype(np.int64)
+    return np.where(skipped > 0, base + j * modulus, base).astype(np.int64)
 
 
 class GridAssembler:
     """Frames -> Blocks on the grid ``t_s = t0_s + k / rate_hz`` (s). Counters:
-    ``seq_gaps`` (counter jumps and outages), ``samples_missing`` (placeholders
+    ``seq_gaps`` (places where samples were lost), ``samples_missing`` (placeholders
     inserted), ``invalid_samples`` (frames the device flagged invalid)."""
 
     def __init__(self, rate_hz: float, seq_modulus: int | None, aux_names=(), t0_s: float = 0.0) -> None:
@@ -31,32 +58,34 @@ class GridAssembler:
         self.aux_names = tuple(aux_names)
         self.t0_s = float(t0_s)
         self.next_index = 0          # grid index of the next sample
+        self._started = False        # a frame has been placed
         self._last_seq: int | None = None
         self._break_est: float | None = None
         self.counters = {"seq_gaps": 0, "samples_missing": 0, "invalid_samples": 0}
 
     def mark_break(self, missing_est: float) -> None:
-        """An outage before the next frame, in which about ``missing_est`` samples were
-        lost (from the clock: elapsed s x rate Hz minus the frames that did arrive)."""
+        """An outage before the next frame (the port was closed and reopened), in which
+        about ``missing_est`` samples were lost (from the clock: elapsed s x rate Hz minus
+        the frames that did arrive)."""
         self._break_est = float(missing_est)
 
-    def _missing_before_first(self, seq0: int) -> int:
+    def _missing_before_first(self, seq0: int, skipped0: int, frame_bytes: int) -> tuple[int, int]:
+        """(samples lost before the first frame of a push, index into _WHY)."""
         M = self.seq_modulus
-        if self._last_seq is None and self._break_est is None:
-            return 0
+        if not self._started:
+            self._break_est = None
+            return 0, 0
         if self._break_est is not None:
             est = max(0.0, self._break_est)
             self._break_est = None
             if M is None or seq0 < 0 or self._last_seq is None:
-                return int(round(est))
-            d = (seq0 - self._last_seq) % M  # missing = d - 1 + j*M for the j closest to est
-            base = (d - 1) % M
+                return int(round(est)), 2
+            base = (seq0 - self._last_seq - 1) % M  # missing = base + j*M for the j closest to est
             j = max(0, int(round((est - base) / M)))
-            return base + j * M
-        if M is None or seq0 < 0:
-            return 0
-        d = (seq0 - self._last_seq) % M
-        return (d - 1) % M
+            return base + j * M, 2
+        counted = M is not None and seq0 >= 0 and self._last_seq is not None
+        base = np.array([(seq0 - self._last_seq - 1) % M]) if counted else None
+        return int(lost_frames(base, [skipped0], frame_bytes, M if counted else None)[0]), int(skipped0 > 0)
 
     def push(self, frames: Frames, events: list[Event] | tuple = ()) -> Block:
         """Place ``frames`` on the grid; returns the block (possibly empty) with gap
@@ -66,12 +95,16 @@ class GridAssembler:
         if n == 0:
             t = np.zeros(0)
             return Block(t, t.copy(), np.zeros(0, bool), {k: np.zeros(0) for k in self.aux_names}, tuple(evs))
-        seq = frames.seq
+        seq, skipped = frames.seq, frames.skipped_bytes()
         missing = np.zeros(n, dtype=np.int64)
-        missing[0] = self._missing_before_first(int(seq[0]))
+        why = (skipped > 0).astype(np.int64)
+        missing[0], why[0] = self._missing_before_first(int(seq[0]), int(skipped[0]), frames.frame_bytes)
         M = self.seq_modulus
-        if M is not None and n > 1 and seq[0] >= 0:
-            missing[1:] = (np.diff(seq) - 1) % M
+        if n > 1:
+            counted = M is not None and seq[0] >= 0
+            base = (np.diff(seq) - 1) % M if counted else None
+            missing[1:] = lost_frames(base, skipped[1:], frames.frame_bytes, M if counted else None)
+        self._started = True
         self._last_seq = int(seq[-1]) if seq[-1] >= 0 else None
         offs = np.arange(n) + np.cumsum(missing)          # output position of each frame
         total = int(offs[-1]) + 1
@@ -94,8 +127,7 @@ class GridAssembler:
         c["invalid_samples"] += int(n - valid[offs].sum())
         for g in gaps[:MAX_GAP_EVENTS]:
             tg = float(t[offs[g] - missing[g]])
-            evs.append(Event(tg, "gap", f"{int(missing[g])} sample(s) lost at t={tg:.6f} s "
-                                        f"(sequence counter or outage)"))
+            evs.append(Event(tg, "gap", f"{int(missing[g])} sample(s) lost at t={tg:.6f} s ({_WHY[why[g]]})"))
         if len(gaps) > MAX_GAP_EVENTS:
             rest = gaps[MAX_GAP_EVENTS:]
             evs.append(Event(float(t[offs[rest[0]]]), "gap",

@@ -74,7 +74,9 @@ class KvhCodec:
     is NaN, inf or beyond ``max_rate_dph`` deg/h: made invalid), ``implausible_temp_c``
     (temperature readings outside plausibility.TEMP_RANGE_C: NaN). Invariant: bytes fed
     = frames_ok * frame length + bytes_skipped + ``pending`` (at most one frame length -
-    1 bytes are held). ``max_rate_dph`` None: the DSP-17xx range x margin."""
+    1 bytes are held). ``max_rate_dph`` None: the DSP-17xx range x margin. Each frame's
+    ``skipped`` is the bytes skipped since the previous good frame (across ``feed``
+    calls): 0 when the two are back to back (the time base relies on it)."""
 
     seq_modulus = SEQ_MODULUS
 
@@ -101,6 +103,7 @@ class KvhCodec:
                          plausibility.COUNTER: 0, plausibility.TEMP_COUNTER: 0}
         self._buf = bytearray()
         self._last_temp_c = math.nan  # format C: temperature arrives every 4th frame
+        self._run = 0                 # bytes skipped since the last good frame
 
     @property
     def pending(self) -> int:
@@ -121,19 +124,22 @@ class KvhCodec:
         buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
-        seqs, gyro, valid, temps = [], [], [], []
+        seqs, gyro, valid, temps, runs = [], [], [], [], []
         ai, fmt = self._axis_i, self.fmt
         t_lo, t_hi = plausibility.TEMP_RANGE_C
         crc_err = skipped = bad_temp = 0
+        run = self._run
         i = 0
         while True:
             j = buf.find(hdr, i)
             if j < 0:
                 keep = max(i, n - (len(hdr) - 1))  # a header may straddle the chunk end
                 skipped += keep - i
+                run += keep - i
                 i = keep
                 break
             skipped += j - i
+            run += j - i
             if j + L > n:
                 i = j
                 break
@@ -141,6 +147,7 @@ class KvhCodec:
             if not _crc_ok(frame):
                 crc_err += 1
                 skipped += 1
+                run += 1
                 i = j + 1
                 continue
             f = layout.unpack_from(frame)
@@ -162,8 +169,11 @@ class KvhCodec:
             gyro.append(f[ai])
             valid.append(bool(status >> ai & 1))
             temps.append(temp)
+            runs.append(run)
+            run = 0
             i = j + L
         del buf[:i]
+        self._run = run
         c = self.counters
         c["frames_ok"] += len(seqs)
         c["crc_errors"] += crc_err
@@ -171,7 +181,7 @@ class KvhCodec:
         c[plausibility.TEMP_COUNTER] += bad_temp
         rate, bad = plausibility.gate(to_dph(gyro, self.rot, self.units, self.rate_hz), self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
-        return Frames.from_lists(seqs, rate, valid, {"temp_c": temps})
+        return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
 
 
 def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),

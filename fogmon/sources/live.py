@@ -2,12 +2,18 @@
 device continuously and reopens it with exponential backoff when it disappears, and a
 consumer that turns what was read into Blocks on the sample grid.
 
-The reader thread hands the raw input to the taps (the archive) at once, so a slow
-consumer neither overflows the device's small kernel buffer nor delays the archive. It
-queues ``("frames", Frames)``, ``("break", samples lost estimate)`` and
-``("event", kind, message)`` items; ``blocks()`` turns them into a block every
-``block_s`` s while data flows and at least every ``idle_s`` s (possibly empty, carrying
-events) while it does not."""
+The reader thread does nothing but read, so the device's small kernel buffer never
+overflows while the rest of fogmon is busy; it queues what it read in stream order:
+``("data", bytes, t_read_s)`` (a byte stream, decoded by the consumer through the
+subclass's ``_consume``), ``("frames", Frames)`` and ``("break", samples lost estimate)``
+(sources that decode in the reader thread), ``("event", kind, message, counter)`` and
+``("reopened", t_down_s)``. The consumer (``blocks()``) decodes, counts, places on the
+grid and yields a block every ``block_s`` s while data flows and at least every
+``idle_s`` s (possibly empty, carrying events) while it does not. Counters and error
+events are updated by the consumer only, together with the blocks it yields, so they
+agree with each other and with the samples delivered; ``limit(n)`` makes ``blocks()``
+end exactly at grid sample ``n`` (``--duration-s``), with nothing after it decoded,
+counted or handed to the taps."""
 from __future__ import annotations
 
 import queue
@@ -18,15 +24,15 @@ from typing import Iterator
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.sources.frames import Frames
-from fogmon.sources.grid import ErrorEvents, GridAssembler
+from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 
 
 class LiveSource:
     """Base class. Subclasses set ``name``, ``rate_hz``, ``aux_names``, ``grid``, the
     exception types meaning "device lost" (``device_errors``), ``decoder_counters`` (the
     decoder's counters dict, for CRC/bad-input events) and implement ``_open()``,
-    ``_read(handle) -> list of queue items`` (calling the taps), ``_close(handle)`` and
-    ``_what()`` (the device, for messages and errors)."""
+    ``_read(handle) -> list of queue items``, ``_close(handle)``, ``_what()`` (the
+    device, for messages and errors) and, for ``("data", ...)`` items, ``_consume``."""
 
     device_errors: tuple[type[BaseException], ...] = (OSError,)
 
@@ -40,6 +46,7 @@ class LiveSource:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._own = {"disconnects": 0, "reconnects": 0}
+        self._limit: int | None = None
 
     def add_tap(self, tap) -> None:
         """Register a tap (the archive) for the raw input (adding one twice is a no-op)."""
@@ -60,12 +67,26 @@ class LiveSource:
         raise NotImplementedError
 
     def _reconnected(self) -> None:
-        """Called in the reader thread after a successful reopen."""
+        """Called in the consumer when the reopened device's input begins."""
+
+    def limit(self, n_samples: int | None) -> None:
+        """End ``blocks()`` after grid sample ``n_samples`` (None: no limit); set before
+        ``blocks()`` starts."""
+        self._limit = n_samples
+
+    def _room(self) -> int | None:
+        """Samples the grid may still take before the limit (None: no limit)."""
+        return None if self._limit is None else self._limit - self.grid.next_index
+
+    def _consume(self, item) -> tuple[Block | None, bool]:
+        """Decode one queued item of a subclass's own kind (``("data", ...)``) into a
+        block within ``_room()``; returns (block or None, limit reached)."""
+        raise NotImplementedError
 
     # -- reader thread ---------------------------------------------------------------
     def _read_loop(self, handle) -> None:
         q, clock = self._q, self._clock
-        backoff, down_since = self.backoff_s[0], 0.0
+        backoff, down_since = self.backoff_s[0], clock()
         try:
             while not self._stop.is_set():
                 if handle is None:
@@ -75,17 +96,14 @@ class LiveSource:
                         self._stop.wait(backoff)
                         backoff = min(2 * backoff, self.backoff_s[1])
                         continue
-                    self._own["reconnects"] += 1
-                    q.put(("event", "reconnect", f"{self._what()} back after {clock() - down_since:.2f} s"))
+                    q.put(("reopened", down_since))
                     backoff = self.backoff_s[0]
-                    self._reconnected()
                 try:
                     items = self._read(handle)
                 except self.device_errors as e:
-                    self._own["disconnects"] += 1
                     down_since = clock()
                     why = str(e).splitlines()[0] if str(e) else type(e).__name__
-                    q.put(("event", "disconnect", f"{self._what()} lost ({why}); retrying"))
+                    q.put(("event", "disconnect", f"{self._what()} lost ({why}); retrying", "disconnects"))
                     self._close(handle)
                     handle = None
                     self._stop.wait(backoff)
@@ -104,21 +122,21 @@ class LiveSource:
         except self.device_errors as e:
             why = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise FogmonError(f"{self._what()}: cannot open: {why}") from None
-        errors = ErrorEvents(self.decoder_counters)      # before the reader starts counting
+        errors = ErrorEvents(self.decoder_counters)
         self._thread = threading.Thread(target=self._read_loop, args=(handle,), name="fogmon-reader", daemon=True)
         self._thread.start()
-        pending: list[Frames] = []
-        out: list[Block] = []
+        parts: list[Block] = []
         events: list[Event] = []
         last_yield = self._clock()
         ended = False
 
-        def flush():
-            nonlocal pending, events
-            events += errors.poll(self.grid.t_next_s)
-            if pending or events:
-                out.append(self.grid.push(Frames.concat(pending, self.aux_names), events))
-                pending, events = [], []
+        def take() -> Block:
+            """Everything consumed since the last block, as one block with its events."""
+            nonlocal parts, events
+            tail = self.grid.push(Frames.empty(self.aux_names), events + errors.poll(self.grid.t_next_s))
+            b = concat_blocks([*parts, tail]) if parts else tail
+            parts, events = [], []
+            return b
 
         try:
             while not ended:
@@ -128,27 +146,50 @@ class LiveSource:
                 except queue.Empty:
                     item = None
                 if item is not None:
-                    if item[0] == "frames":
-                        pending.append(item[1])
-                    elif item[0] == "break":
-                        flush()
-                        self.grid.mark_break(item[1])
-                    elif item[0] == "event":
-                        events.append(Event(self.grid.t_next_s, item[1], item[2]))
-                    else:
+                    kind = item[0]
+                    if kind == "end":
                         ended = True
+                    elif kind == "event":
+                        self._own[item[3]] += 1
+                        events.append(Event(self.grid.t_next_s, item[1], item[2]))
+                    elif kind == "reopened":
+                        self._own["reconnects"] += 1
+                        events.append(Event(self.grid.t_next_s, "reconnect",
+                                            f"{self._what()} back after {self._clock() - item[1]:.2f} s"))
+                        self._reconnected()
+                    elif kind == "break":
+                        self.grid.mark_break(item[1])
+                    else:
+                        if kind == "frames":
+                            b, full = self._place(item[1])
+                        else:
+                            b, full = self._consume(item)
+                        if b is not None and len(b):
+                            parts.append(b)
+                        if full:
+                            ended = True
+                            self._stop.set()
                     if not ended and self._clock() - last_yield < self.block_s:
                         continue
                 now = self._clock()
-                if pending or events or ended or now - last_yield >= self.idle_s:
-                    flush()
-                    if not out:
-                        out.append(self.grid.push(Frames.empty(self.aux_names)))
-                    while out:
-                        yield out.pop(0)
+                if parts or events or ended or now - last_yield >= self.idle_s:
+                    b = take()
+                    if len(b) or b.events or not ended:
+                        yield b
                     last_yield = now
         finally:
             self.close()
+
+    def _place(self, frames: Frames) -> tuple[Block, bool]:
+        """Frames decoded by the reader thread onto the grid, cut at the limit."""
+        b = self.grid.push(frames)
+        room = self._room()
+        if room is None or room > 0:
+            return b, room == 0
+        keep = len(b) + room
+        self.grid.next_index += room
+        return Block(b.t_s[:keep], b.rate_dph[:keep], b.valid[:keep], {k: v[:keep] for k, v in b.aux.items()},
+                     tuple(e for e in b.events if keep and e.t_s <= b.t_s[keep - 1])), True
 
     def close(self) -> None:
         """Stop and release the device (thread-safe); ``blocks()`` then ends."""

@@ -1,32 +1,36 @@
 """A gyro on a serial port (pyserial): bytes -> codec -> sample grid -> Blocks.
 
-If the port disappears (USB unplugged, adapter reset) it is reopened with backoff (see
-fogmon.sources.live); the samples lost meanwhile become invalid placeholders, their
-count from the clock (elapsed time x rate minus the frames that did arrive), made exact
-by the sequence counter. A silent stretch on an open port (longer than half a counter
-wrap, or 0.5 s without a counter) is treated the same way.
+The reader thread only reads (fogmon.sources.live); the consumer decodes, so the time
+base comes from the byte stream (fogmon.sources.grid): a host stall delays bytes but
+never turns into lost samples. Only when the port disappears (USB unplugged, adapter
+reset) and is reopened are the bytes of the outage gone; the samples lost meanwhile
+become invalid placeholders, their count from the clock (elapsed time x rate minus the
+frames that did arrive), made exact by the sequence counter.
 """
 from __future__ import annotations
 
+import copy
 import time
 
 import serial
 
+from fogmon.block import Block
 from fogmon.sources.grid import GridAssembler
 from fogmon.sources.live import LiveSource
 
 READ_TIMEOUT_S = 0.05
-STALL_S = 0.5
+#: bytes asked for per read at most (the OS buffer is drained in chunks this large)
+READ_MAX_BYTES = 1 << 16
 
 
 class SerialSource(LiveSource):
     """Live serial gyro. ``port`` is a device path or pyserial URL, ``codec`` one of the
     decoders of fogmon.sources.codecs; ``opener`` (tests, custom transports) returns an
     open pyserial port instead of opening ``port``. Taps get ``raw(bytes)`` for every
-    byte received and ``outage(elapsed_s, missing_est)`` for every outage, in stream
-    order, from the reader thread. Counters: the codec's (frames_ok, crc_errors,
-    bytes_skipped, ...), the grid's (seq_gaps, samples_missing, invalid_samples),
-    ``disconnects``, ``reconnects``."""
+    byte decoded and ``outage(elapsed_s, missing_est)`` for every reopen of the port, in
+    stream order. Counters: the codec's (frames_ok, crc_errors, bytes_skipped, ...), the
+    grid's (seq_gaps, samples_missing, invalid_samples), ``disconnects``,
+    ``reconnects``."""
 
     device_errors = (serial.SerialException, OSError, ValueError)
 
@@ -39,10 +43,8 @@ class SerialSource(LiveSource):
         self.aux_names = codec.aux_names
         self.name = f"{codec.describe()} on {port}"
         self._opener = opener or (lambda: serial.serial_for_url(port, baudrate=self.baud, timeout=READ_TIMEOUT_S))
-        M = codec.seq_modulus
-        self._stall_s = min(STALL_S, 0.5 * M / self.rate_hz) if M else STALL_S
-        self._last_data: float | None = None
-        self._need_break = False
+        self._last_t: float | None = None     # when the last byte before now was read (s, clock)
+        self._need_break = False              # the port was reopened: the next frame follows an outage
 
     @property
     def decoder_counters(self) -> dict[str, int]:
@@ -72,22 +74,99 @@ class SerialSource(LiveSource):
         self._need_break = True
 
     def _read(self, ser) -> list:
-        data = ser.read(max(1, min(ser.in_waiting, 1 << 16)))
-        if not data:
-            return []
-        now = self._clock()
+        data = ser.read(max(1, min(ser.in_waiting, READ_MAX_BYTES)))
+        return [("data", data, self._clock())] if data else []
+
+    # -- consumer ------------------------------------------------------------------------
+    def _consume(self, item) -> tuple[Block | None, bool]:
+        _, data, t = item
+        if self._limit is None:
+            return self._apply(data, t), False
+        saved = self._save()
+        b = self._decode(data, t)
+        if self.grid.next_index < self._limit:
+            self._tap(data, b)
+            return b[0], False
+        # the run ends in this chunk: at the end of the last frame that fits, so that nothing
+        # after it (garbage, CRC failures, a partial frame) is counted or archived
+
+        def index_after(p: int) -> int:
+            self._load(saved)
+            self._decode(data[:p], t)
+            return self.grid.next_index
+
+        lo, hi = 0, len(data)              # the longest prefix that stays within the limit
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            lo, hi = (mid, hi) if index_after(mid) <= self._limit else (lo, mid - 1)
+        target = index_after(lo)
+        lo, hi = 0, lo                     # the shortest prefix that gets there
+        while lo < hi:
+            mid = (lo + hi) // 2
+            lo, hi = (lo, mid) if index_after(mid) >= target else (mid + 1, hi)
+        self._load(saved)
+        return self._apply(data[:lo], t) if lo else None, True
+
+    def _apply(self, data: bytes, t: float) -> Block:
+        b = self._decode(data, t)
+        self._tap(data, b)
+        return b[0]
+
+    def _decode(self, data: bytes, t: float) -> tuple[Block, tuple[float, float] | None]:
+        """Feed ``data`` (read at clock time ``t``) to the codec and the grid: (block,
+        the outage (elapsed s, samples lost estimate) marked before its first frame)."""
         frames = self.codec.feed(data)
-        items = []
-        last = self._last_data
-        if last is not None and (self._need_break or now - last > self._stall_s):
-            est = (now - last) * self.rate_hz - len(frames)
-            items.append(("break", est))
-            for tap in self._taps:
-                tap.outage(now - last, est)
-        self._need_break = False
+        outage = None
+        if self._need_break and len(frames):
+            if self._last_t is not None:    # (nothing came before the outage: no gap to place)
+                elapsed = t - self._last_t
+                outage = (elapsed, max(0.0, elapsed * self.rate_hz - len(frames)))
+                self.grid.mark_break(outage[1])
+            self._need_break = False
+        if not self._need_break:
+            self._last_t = t
+        return self.grid.push(frames), outage
+
+    def _tap(self, data: bytes, decoded) -> None:
+        outage = decoded[1]
         for tap in self._taps:
+            if outage is not None:
+                tap.outage(*outage)
             tap.raw(data)
-        if len(frames):
-            items.append(("frames", frames))
-        self._last_data = now
-        return items
+
+    def _save(self) -> tuple:
+        return _snapshot(self.codec), _snapshot(self.grid), self._need_break, self._last_t
+
+    def _load(self, saved: tuple) -> None:
+        _restore(self.codec, saved[0])
+        _restore(self.grid, saved[1])
+        self._need_break, self._last_t = saved[2], saved[3]
+
+
+def _snapshot(obj) -> dict:
+    """The state of a codec or grid: its attributes, mutable ones copied (nested fogmon
+    objects such as a line framer by their own snapshot)."""
+    out = {}
+    for k, v in vars(obj).items():
+        if isinstance(v, (dict, list, bytearray, set)):
+            v = copy.copy(v)
+        elif type(v).__module__.startswith("fogmon.") and hasattr(v, "__dict__"):
+            v = (type(v), _snapshot(v))
+        out[k] = v
+    return out
+
+
+def _restore(obj, state: dict) -> None:
+    """Put ``obj`` back in ``state`` (from ``_snapshot``); dicts are refilled in place, so
+    whoever holds them (error events hold the codec's counters) sees the restored values."""
+    for k, v in state.items():
+        cur = getattr(obj, k, None)
+        if isinstance(v, tuple) and len(v) == 2 and isinstance(v[0], type) and isinstance(v[1], dict):
+            _restore(cur, v[1])
+        elif isinstance(cur, dict) and isinstance(v, dict):
+            cur.clear()
+            cur.update(v)
+        elif isinstance(cur, bytearray):
+            cur[:] = v
+        else:
+            setattr(obj, k, copy.copy(v) if isinstance(v, (dict, list, set, bytearray)) else v)
