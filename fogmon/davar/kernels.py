@@ -228,8 +228,9 @@ def stream_append(y, valid, yraw, vraw, pre, length, ref):
             d = y[i] - ref
             if abs(d) > LARGE_DPH:
                 b += _FLAG
+                d, dl = _two_sum(y[i], -ref)  # y - ref exactly: ref may be far off (a glitch)
                 sh, e = _two_sum(sh, d)
-                sl += e
+                sl += e + dl
                 n_large += 1
             else:
                 s += d
@@ -260,7 +261,11 @@ def _sq_term(pre, j, m):
         return 0.0, 0, 0
     if hc[b] != hc[j]:
         return 0.0, 1, 1
-    t += (((bh[b] - bh[a]) - (bh[a] - bh[j])) + ((bl[b] - bl[a]) - (bl[a] - bl[j]))) * inv
+    # the large samples' second difference in double-double: exact whatever the side sums hold
+    s1, e1 = _two_sum(bh[b], -bh[a])
+    s2, e2 = _two_sum(bh[a], -bh[j])
+    s, e = _two_sum(s1, -s2)
+    t += (s + (e + ((e1 - e2) + ((bl[b] - bl[a]) - (bl[a] - bl[j]))))) * inv
     return t * t, 1, 0
 
 
