@@ -85,7 +85,9 @@ def make_grid(n: int, fs_hz: float, window_s: float | None = None, hop_fraction:
 
 def log_avar(y: np.ndarray, valid: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """ln Allan variance ((deg/h)^2) of the map cells (T x M) and of the whole record (M'),
-    NaN where a cell has no valid term. Uses the DAVAR engine's compensated kernels."""
+    NaN where a cell has no valid term, +inf where it holds a sample above 1e8 deg/h
+    (kernels.CEILING_DPH; no other cell is touched by it). Uses the DAVAR engine's
+    compensated kernels and reference level."""
     y = np.ascontiguousarray(y, dtype=np.float64)
     ok = valid & np.isfinite(y)
     hi, lo, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
