@@ -73,17 +73,29 @@ def _compensated_sum(x, n):
     return s, c + r
 
 
+_REF_SAMPLES = 4096  # at most this many evenly spaced samples make the reference level
+
+
 @njit(cache=True)
-def reference_level(y, valid):
-    """Median (deg/h) of the valid samples within CEILING_DPH, NaN without any: the level
-    subtracted before the prefix sums (no single sample can move it far)."""
-    buf = np.empty(y.shape[0])
+def _median_valid(y, valid, step):
+    """Median of every step-th sample that is valid and within CEILING_DPH; NaN if none."""
+    buf = np.empty(y.shape[0] // step + 1)
     n = 0
-    for i in range(y.shape[0]):
+    for i in range(0, y.shape[0], step):
         if valid[i] and abs(y[i]) <= CEILING_DPH:
             buf[n] = y[i]
             n += 1
     return np.median(buf[:n]) if n > 0 else np.nan
+
+
+@njit(cache=True)
+def reference_level(y, valid):
+    """Median (deg/h) of the valid samples within CEILING_DPH (of at most about
+    _REF_SAMPLES evenly spaced ones), NaN without any: the level subtracted before the
+    prefix sums. No single sample can move it far; it only has to be near the signal."""
+    step = max(1, y.shape[0] // _REF_SAMPLES)
+    ref = _median_valid(y, valid, step)
+    return _median_valid(y, valid, 1) if ref != ref and step > 1 else ref
 
 
 @njit(cache=True)
@@ -144,7 +156,7 @@ def _dd_sub(s, c, bs, bc):
 def window_sums(hi, lo, bad, ms, starts, w):
     """Sums of squared valid terms (+inf for a window holding a huge sample) and
     valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
-    (increasing), by differencing a double-double cumulative sum of squared terms: O(N)
+    (increasing), by differencing a compensated cumulative sum of squared terms: O(N)
     per m for all windows. The cumulative sum is re-based on its current value every
     ``w`` terms (the open windows' records follow), so a window carries ~eps^2 of the
     squared terms of the last two windows only, whatever came before."""
@@ -195,7 +207,8 @@ def window_sums(hi, lo, bad, ms, starts, w):
             d = bad[j + 2 * m] - bad[j]
             if d == 0:
                 t = _term_dd(hi, lo, j, m)
-                s, c = _dd_add(s, c, t * t)
+                s, e = _two_sum(s, t * t)
+                c += e  # bounded: re-based every w terms
                 cnt += 1
             elif d & _LOW == 0:
                 cnt += 1
@@ -207,7 +220,9 @@ def window_sums(hi, lo, bad, ms, starts, w):
 def stream_append(y, valid, yraw, vraw, pre, length, ref):
     """Append samples to the linear buffer: raw values, validity and the prefix arrays
     ``pre`` (main sums of ``y - ref``, counts, large-sample side sums, huge counts; see
-    the module docstring). Returns the number of large samples appended."""
+    the module docstring). The side arrays are only written once the buffer holds an
+    out-of-sum sample (they are 0 before it: zeroed on re-anchoring). Returns the number
+    of large samples appended."""
     psum, bad, bh, bl, hc = pre
     s = psum[length]
     b = bad[length]
@@ -236,9 +251,10 @@ def stream_append(y, valid, yraw, vraw, pre, length, ref):
                 s += d
         psum[p + 1] = s
         bad[p + 1] = b
-        bh[p + 1] = sh
-        bl[p + 1] = sl
-        hc[p + 1] = h
+        if b >= _FLAG:  # side arrays are written from the buffer's first out-of-sum sample on (else 0)
+            bh[p + 1] = sh
+            bl[p + 1] = sl
+            hc[p + 1] = h
     return n_large
 
 
@@ -544,8 +560,12 @@ def stream_reanchor(yraw, vraw, pre, length, keep, ms, sum_s, sum_c, cnt, err, r
     if new_ref == new_ref:
         ref = new_ref
     psum, bad, bh, bl, hc = pre
-    psum[0] = bh[0] = bl[0] = 0.0
-    bad[0] = hc[0] = 0
+    if bad[length] >= _FLAG:  # side arrays were written: zero them
+        bh[:length + 1] = 0.0
+        bl[:length + 1] = 0.0
+        hc[:length + 1] = 0
+    psum[0] = 0.0
+    bad[0] = 0
     stream_append(yraw[:keep].copy(), vraw[:keep].copy(), yraw, vraw, pre, 0, ref)
     if recorded:
         for k in range(ms.shape[0]):
