@@ -50,9 +50,9 @@ def check(ends, adev, counts, ref_adev, ref_counts, pos, value):
     return holds
 
 
-@pytest.mark.parametrize("block", [1, 8192])
-@pytest.mark.parametrize("hop", [64, 250, 1, 13])  # recorded sums (>= 64), running sums
+@pytest.mark.parametrize("hop,block", [(64, 1), (1, 1), (64, 8192), (250, 8192), (1, 8192), (13, 8192)])
 def test_streaming_windows_without_the_sample_are_untouched(hop, block):
+    """Recorded sums (hop >= 64) and running sums, in blocks of 1 and 8192."""
     y0, valid = record()
     ends, ref_adev, ref_counts, ref_cur = stream(y0, valid, hop, block)
     for value in VALUES:
