@@ -39,7 +39,9 @@ class StreamingDadev:
     the first window is complete. ``alpha``: noise type per tau for the confidence
     bounds (default: dominant term of an IEEE-952 fit, refreshed at most every
     max(hop, window / 4) samples). ``reanchor``: samples between re-references (and,
-    with running sums, exact recomputes; default max(4 x window, 4096))."""
+    with running sums, exact recomputes; default max(4 x window, 4096)); plus at most
+    one early re-reference per buffer fill when most samples since the last one are
+    large (the reference level came from a glitch)."""
 
     def __init__(self, rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
                  confidence: float = 0.683, alpha=None, reanchor: int | None = None):
@@ -62,6 +64,7 @@ class StreamingDadev:
         self._ref_set = False
         self._since = 0  # samples appended since the last re-reference
         self._large = 0  # large samples among them (many: the reference level is off)
+        self._early = False  # an early re-reference was done since the buffer was last full
         nm = len(self.m)
         # recorded sums: the cumulative sum of squared terms (s + c) and valid-term count (n)
         # per tau, and their records at the window starts to come; running sums: the window's
@@ -114,9 +117,11 @@ class StreamingDadev:
         counts = np.empty((len(ends), len(self.m)), dtype=np.int64)
         i = row = 0
         while i < len(y):
-            # re-anchor when the buffer is full, or early when most samples since the last
-            # re-reference are large (a reference level taken from a glitch)
-            if self._len == cap or (2 * self._large > self._since >= max(16, w // 8)):
+            # re-anchor when the buffer is full, or once early when most samples since the
+            # last re-reference are large (a reference level taken from a glitch)
+            early = not self._early and 2 * self._large > self._since >= max(16, w // 8)
+            if self._len == cap or early:
+                self._early = early
                 keep = min(self._len, w)
                 self._ref = kernels.stream_reanchor(self._y, self._v, self._pre, self._len, keep, self.m,
                                                     self._s, self._c, self._n, self._err, self._recorded,
