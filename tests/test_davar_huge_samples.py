@@ -123,3 +123,22 @@ def test_a_large_first_sample_does_not_spoil_the_reference_level(hop):
     later = ends >= W
     assert np.array_equal(np.isnan(adev[later]), np.isnan(ref_adev[later]))  # NaN: no term (the gap)
     assert np.nanmax(np.abs(adev[later] / ref_adev[later] - 1)) <= 1e-12
+
+
+@pytest.mark.parametrize("hop", [64, 7])
+def test_a_signal_swinging_far_beyond_the_large_threshold_equals_batch(hop):
+    """Every sample large (a rate table at +-1e6 deg/h), with a gap and a huge sample:
+    the streaming engine (side prefix, vectorised large-sample path) equals the batch
+    engine at every window."""
+    n = 9000
+    rng = np.random.default_rng(4)
+    y = 1e6 * np.sin(2 * np.pi * np.arange(n) / 3000.0) + rng.normal(size=n)
+    valid = np.ones(n, bool)
+    valid[4000:4003] = False
+    y[6500] = 1e300
+    ref = dadev(y, 1.0, W, hop, valid=valid, alpha=0)
+    e, adev, counts, _ = stream(y, valid, hop, 1000)
+    assert np.array_equal(e, ref.end_index) and np.array_equal(counts, ref.n_terms)
+    assert np.array_equal(adev == np.inf, ref.adev_dph == np.inf) and (adev == np.inf).any()
+    fin = np.isfinite(ref.adev_dph)
+    assert np.max(np.abs(adev[fin] / ref.adev_dph[fin] - 1)) <= 1e-9

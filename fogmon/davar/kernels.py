@@ -269,20 +269,48 @@ def _sq_term(pre, j, m):
     a = j + m
     b = j + 2 * m
     inv = 1.0 / m
-    t = ((psum[b] - psum[a]) - (psum[a] - psum[j])) * inv
+    t = (psum[b] - psum[a]) - (psum[a] - psum[j])
     d = bad[b] - bad[j]
     if d == 0:
+        t *= inv
         return t * t, 1, 0
     if d & _LOW:
         return 0.0, 0, 0
     if hc[b] != hc[j]:
         return 0.0, 1, 1
-    # the large samples' second difference in double-double: exact whatever the side sums hold
-    s1, e1 = _two_sum(bh[b], -bh[a])
-    s2, e2 = _two_sum(bh[a], -bh[j])
-    s, e = _two_sum(s1, -s2)
-    t += (s + (e + ((e1 - e2) + ((bl[b] - bl[a]) - (bl[a] - bl[j]))))) * inv
+    t = (t + _side(bh[j], bh[a], bh[b], bl[j], bl[a], bl[b])) * inv
     return t * t, 1, 0
+
+
+@njit(cache=True, inline="always")
+def _side(h0, h1, h2, l0, l1, l2):
+    """Second difference (h2 - h1) - (h1 - h0) of the double-double side sums, formed in
+    double-double: exact whatever magnitude they hold (0 when they do not change)."""
+    s1, e1 = _two_sum(h2, -h1)
+    s2, e2 = _two_sum(h1, -h0)
+    s, e = _two_sum(s1, -s2)
+    return s + (e + ((e1 - e2) + ((l2 - l1) - (l1 - l0))))
+
+
+@njit(cache=True, inline="always")
+def _no_gap_no_huge(pre, a, b):
+    """Buffer positions a..b-1 hold no invalid and no huge sample (large ones may be)."""
+    return (pre[1][b] - pre[1][a]) & _LOW == 0 and pre[4][b] == pre[4][a]
+
+
+@njit(cache=True, inline="always")
+def _large_terms(pre, a0, n, m, x):
+    """Squared terms of factor m starting at a0 .. a0+n-1 into x[:n] when none spans a
+    gap or a huge sample: main and side second differences, branch-free (a plain term
+    comes out bit-identical to ``_sq_term``'s, its side difference being exactly 0)."""
+    psum, bh, bl = pre[0], pre[2], pre[3]
+    inv = 1.0 / m
+    p0, p1, p2 = psum[a0:a0 + n], psum[a0 + m:a0 + m + n], psum[a0 + 2 * m:a0 + 2 * m + n]
+    h0, h1, h2 = bh[a0:a0 + n], bh[a0 + m:a0 + m + n], bh[a0 + 2 * m:a0 + 2 * m + n]
+    l0, l1, l2 = bl[a0:a0 + n], bl[a0 + m:a0 + m + n], bl[a0 + 2 * m:a0 + 2 * m + n]
+    for i in range(n):
+        t = (((p2[i] - p1[i]) - (p1[i] - p0[i])) + _side(h0[i], h1[i], h2[i], l0[i], l1[i], l2[i])) * inv
+        x[i] = t * t
 
 
 _TILE = 1024  # samples per tile of the streaming update: 4 taus' term arrays stay in L1
@@ -311,6 +339,10 @@ def _tile_terms(pre, m, w, first, n, x_in, x_out, dn):
             x_in[i] = t_in * t_in
             x_out[i] = t_out * t_out
         return False  # dn not written: the caller zeroes it if another tau of the group has gaps
+    if _no_gap_no_huge(pre, a_in, first + n) and _no_gap_no_huge(pre, a_out, a_out + n - 1 + 2 * m):
+        _large_terms(pre, a_in, n, m, x_in)  # large samples only: every term counts
+        _large_terms(pre, a_out, n, m, x_out)
+        return False
     for i in range(n):
         x_in[i], v_in, h_in = _sq_term(pre, a_in + i, m)
         x_out[i], v_out, h_out = _sq_term(pre, a_out + i, m)
@@ -355,6 +387,9 @@ def window_sum(pre, start, w, m, scratch, exact):
         for j in range(nt):
             t = ((p2[j] - p1[j]) - (p1[j] - p0[j])) * inv
             scratch[j] = t * t
+        n = nt
+    elif _no_gap_no_huge(pre, start, start + w):
+        _large_terms(pre, start, nt, m, scratch)
         n = nt
     else:
         n = 0
@@ -610,6 +645,9 @@ def _entering_terms(pre, a0, n, m, x, v):
         for i in range(n):
             t = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
             x[i] = t * t
+        return False
+    if _no_gap_no_huge(pre, a0, a0 + n - 1 + 2 * m):
+        _large_terms(pre, a0, n, m, x)  # large samples only: every term counts
         return False
     for i in range(n):
         x[i], ok, h = _sq_term(pre, a0 + i, m)
