@@ -2,7 +2,8 @@
 
 Prints samples/s of: the streaming engine (46 log-spaced taus, 2^16-sample window) at hop
 1 (running sums) and hop 1024 (recorded sums), both the engine alone (``StreamingDadev.advance``: window sums and counts)
-and with full frames (``push``: ADEV, chi-square bounds, EDF per window); the batch engine
+and with full frames (``push``: ADEV, chi-square bounds, EDF per window); the engine on a
+rate swinging +-1e6 deg/h (every sample "large": the side-prefix path); the batch engine
 (``dadev``, hop 1024); recomputing ``allantools.oadev`` on every window at hop 1024; the
 ratios; and the resident memory growth over 1e7 streamed samples. Every figure is the
 best of ``--repeat`` runs, interleaved, so that load from other processes on a shared
@@ -67,6 +68,7 @@ def main(argv=None) -> int:
     m = log_taus(46, WINDOW // 4)
     rng = np.random.default_rng(0)
     y = 1000.0 + rng.normal(size=args.samples)
+    swing = 1e6 * np.sin(2 * np.pi * np.arange(args.samples) / 20000.0) + rng.normal(size=args.samples)
     StreamingDadev(1.0, 4096, taus=8, hop_s=1).push(y[:20000])  # compile all kernels once
     dadev(y[:20000], 1.0, 4096.0, 1024.0, taus=8, alpha=0)
 
@@ -80,6 +82,8 @@ def main(argv=None) -> int:
         "stream engine, hop 1": lambda: stream(y, m, 1, frames=False),
         "stream engine, hop 1024": lambda: stream(y, m, 1024, frames=False),
         "stream frames, hop 1024": lambda: stream(y, m, 1024, frames=True),
+        "stream engine, +-1e6 swing, hop 1024": lambda: stream(swing, m, 1024, frames=False),
+        "stream engine, +-1e6 swing, hop 1": lambda: stream(swing[:WINDOW + 8 * BLOCK], m, 1, frames=False),
         "stream frames, hop 1": lambda: stream(y[:WINDOW + 8 * BLOCK], m, 1, frames=True),
         "batch dadev, hop 1024": lambda: rate_per_s(
             lambda: dadev(y, 1.0, WINDOW, 1024, taus=m.astype(float), alpha=0), len(y)),
@@ -94,7 +98,7 @@ def main(argv=None) -> int:
           f"1 core per engine, best of {args.repeat}")
     ref = res["allantools per window, hop 1024"]
     for name, v in res.items():
-        print(f"{name:34s} {v / 1e6:10.3f} M samples/s   {v / ref:10.1f} x allantools recompute")
+        print(f"{name:38s} {v / 1e6:10.3f} M samples/s   {v / ref:10.1f} x allantools recompute")
     print(f"hop 1 / hop 1024 cost ratio (engine): "
           f"{res['stream engine, hop 1024'] / res['stream engine, hop 1']:.2f}")
 

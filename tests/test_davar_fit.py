@@ -114,3 +114,52 @@ def test_a_sinusoid_hump_on_white_noise_is_flagged_and_n_survives():
     # noise, so the fit may describe the tail with Q and flag the hump's rise instead
     assert fit.misfit[np.isclose(res.tau_s, 0.08)].all() and not fit.misfit[res.tau_s > 1.0].any()
     assert fit.N_dpsh.value == pytest.approx(N, rel=0.05) and fit.worst_ratio < 2.0
+
+
+def glitched_white_record():
+    """MEMS-like white rate noise at 100 Hz with a 1e6 deg/h glitch beside a short gap: the
+    five taus' robust weights end up rejecting all but one tau."""
+    y = 50.0 + np.random.default_rng(0).normal(0.0, 433.0, 400)
+    y[2] = 1e6
+    valid = np.ones(len(y), bool)
+    valid[3:7] = False
+    return y, valid, np.array([1, 3, 10, 32, 100]) / FS
+
+
+def test_fit_whose_robust_weights_reject_every_tau_is_not_identifiable():
+    """Was a brentq ValueError (NaN from 0 x inf in the excess variance)."""
+    y, valid, taus = glitched_white_record()
+    fit = fit_noise(oadev(y, FS, taus=taus, valid=valid, alpha=0))
+    for c in fit.coefficients().values():
+        assert not c.identifiable and np.isnan(c.value)
+    assert np.isnan(fit.worst_ratio)
+
+
+def test_streaming_default_alpha_survives_a_fit_that_rejects_every_tau():
+    from fogmon.davar.streaming import StreamingDadev
+    y, valid, taus = glitched_white_record()
+    out = StreamingDadev(FS, len(y) / FS, taus=taus).push(y, valid)
+    assert len(out) == 1 and np.all(np.isfinite(out.adev_dph))
+
+
+def test_nnls_is_never_given_a_column_without_information(monkeypatch):
+    """scipy 1.17's nnls can abort the process (double free) on an all-zero column: the
+    fit drops such columns (term not identifiable, value 0) and never passes one."""
+    from fogmon.davar import fit as fit_module
+    real = fit_module.nnls
+    calls = []
+
+    def checked(a, b, **kw):
+        calls.append(a.shape)
+        assert np.all(np.linalg.norm(a, axis=0) > 0) and np.all(np.isfinite(a)) and np.all(np.isfinite(b))
+        return real(a, b, **kw)
+
+    monkeypatch.setattr(fit_module, "nnls", checked)
+    x = np.array([[1.0, 0.0, 2.0], [2.0, 0.0, 1.0], [3.0, 0.0, np.nan]])
+    b = fit_module._solve_nnls(x, np.array([3.0, 3.0, 1.0]))
+    assert calls[-1] == (2, 2) and b[1] == 0.0 and np.allclose(b, [1.0, 0.0, 1.0])
+    assert np.array_equal(fit_module._solve_nnls(np.zeros((4, 5)), np.ones(4)), np.zeros(5))
+    y, valid, taus = glitched_white_record()
+    fit_noise(oadev(y, FS, taus=taus, valid=valid, alpha=0))
+    fit_noise(dadev(np.where(np.arange(20000) % 997 < 990, 1.0, np.nan) * np.random.default_rng(1).normal(
+        size=20000), 10.0, 200.0, 100.0, alpha=0))

@@ -3,8 +3,11 @@
 
 For each averaging factor m the squared overlapping terms are accumulated in one
 compensated cumulative sum and window sums are read off by differencing: O(N x M) for any
-number of windows and any hop. Prefix sums are double-double, so a large bias costs no
-precision; invalid samples (``valid`` False or NaN) exclude exactly the terms spanning them.
+number of windows and any hop. Prefix sums are double-double of (rate - median), so a large
+bias costs no precision; invalid samples (``valid`` False or NaN) exclude exactly the terms
+spanning them; a huge sample (|rate| > 1e8 deg/h or infinite) enters no sum and makes
+the terms spanning it +inf, so the windows holding it report +inf and no other window
+changes.
 """
 from __future__ import annotations
 
@@ -24,13 +27,20 @@ def _prepare(rate_dph, valid) -> tuple[np.ndarray, np.ndarray]:
     y = np.ascontiguousarray(rate_dph, dtype=np.float64)
     if y.ndim != 1:
         raise FogmonError(f"rate_dph must be one-dimensional, got shape {y.shape}")
-    ok = np.isfinite(y)
+    ok = ~np.isnan(y)  # +-inf are huge samples, not gaps
     if valid is not None:
         valid = np.asarray(valid, dtype=bool)
         if valid.shape != y.shape:
             raise FogmonError(f"valid mask shape {valid.shape} does not match rate_dph shape {y.shape}")
         ok &= valid
     return y, ok
+
+
+def reference_level(y: np.ndarray, ok: np.ndarray) -> float:
+    """Level (deg/h) subtracted before the prefix sums: the median of the valid samples
+    within the ceiling (0 without any)."""
+    ref = kernels.reference_level(y, ok)
+    return 0.0 if np.isnan(ref) else float(ref)
 
 
 def _samples(seconds: float, rate_hz: float, what: str) -> int:
@@ -113,8 +123,7 @@ def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float
     y, ok = _prepare(rate_dph, valid)
     n = len(y)
     m = tau_grid(rate_hz, n, taus)
-    ref = float(y[ok].mean()) if ok.any() else 0.0
-    hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, ref)
+    hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n)
     adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence)
     return AdevResult(m / rate_hz, m, adev, lo, hi, edf, counts[0], float(rate_hz), n, confidence)
@@ -131,8 +140,7 @@ def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None,
     hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")
     m = tau_grid(rate_hz, w, taus)
     starts = np.arange(0, len(y) - w + 1, hop, dtype=np.int64)
-    ref = float(y[ok].mean()) if ok.any() else 0.0
-    hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, ref)
+    hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, starts, w)
     end = starts + w - 1
     if alpha is None:

@@ -167,10 +167,17 @@ class _NoiseModel:
 
 
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """b >= 0 minimising |x b - y| over the finite rows; a column without information (all
+    zero: every weight of its taus is 0) is never passed to scipy's nnls (1.17 can abort
+    the process on one) and gets b = 0, i.e. its term is not identifiable."""
+    rows = np.isfinite(y) & np.all(np.isfinite(x), axis=1)
+    x, y = x[rows], y[rows]
     scale = np.linalg.norm(x, axis=0)
-    scale[scale == 0] = 1.0
-    b, _ = nnls(x / scale, y, maxiter=2000)
-    return b / scale
+    use = scale > 0
+    b = np.zeros(x.shape[1])
+    if use.any():
+        b[use] = nnls(x[:, use] / scale[use], y, maxiter=2000)[0] / scale[use]
+    return b
 
 
 def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
@@ -207,33 +214,43 @@ def _robust_scoring(x, cols, y, edf, starts):
     residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
     vector in ``starts`` in turn; keeps the solution with the least total Tukey loss (an
     earlier start wins ties) and stops early when a solution rejects no tau; the winner
-    is then scored to full precision. Returns (A, model, nu, robust weights,
-    model-inadequacy variance c2)."""
+    is then scored to full precision. A start whose weights come to keep fewer than two
+    taus has failed. Returns (A, model, nu, robust weights, model-inadequacy variance
+    c2), or None when every start failed (nothing the five terms describe)."""
     best, best_loss = None, np.inf
     for rw in starts:
         a, c2 = None, 0.0
         for _ in range(_MAX_ROBUST_ITER):
             a, model, nu = _scoring(x, cols, y, edf, rw, a, c2, rtol=_ROBUST_RTOL)
-            r = np.log(y / model)
+            with np.errstate(over="ignore"):
+                r = np.log(y / model)
             rw_new, loss = _tukey(r / np.sqrt(2.0 / nu + MISFIT_FLOOR**2))
+            if np.sum(rw_new > 0) < 2:
+                loss = np.inf
+                break
             c2_new = _excess_variance(r, 2.0 / nu, rw_new, int(np.sum(a > 0)))
             done = np.max(np.abs(rw_new - rw)) < _RW_TOL and abs(c2_new - c2) <= 1e-3 * c2
             rw, c2 = rw_new, c2_new
             if done:
                 break
-        if loss.sum() < best_loss - 1e-9:
-            best, best_loss = (a, rw, c2), loss.sum()
+        if np.sum(loss) < best_loss - 1e-9:
+            best, best_loss = (a, rw, c2), np.sum(loss)
         if np.all(rw > 0):
             break
+    if best is None:
+        return None
     a, rw, c2 = best
     return (*_scoring(x, cols, y, edf, rw, a, c2), rw, c2)
 
 
 def _excess_variance(r, v, rw, n_free: int) -> float:
     """Model-inadequacy variance c2 of ln(Allan variance) (Paule-Mandel: the c2 >= 0 with
-    sum rw r^2 / (v + c2) = degrees of freedom) when the residuals ``r`` exceed their
-    sampling variances ``v`` by more than BIRGE_GATE (reduced chi-square); else 0."""
-    dof = max(int(np.sum(rw > 0)) - n_free, 1)
+    sum rw r^2 / (v + c2) = degrees of freedom) when the residuals ``r`` of the taus
+    kept (rw > 0) exceed their sampling variances ``v`` by more than BIRGE_GATE (reduced
+    chi-square); else 0."""
+    kept = rw > 0
+    r, v, rw = r[kept], v[kept], rw[kept]
+    dof = max(len(r) - n_free, 1)
     if np.sum(rw * r**2 / v) <= BIRGE_GATE * dof:
         return 0.0
     return float(brentq(lambda c2: np.sum(rw * r**2 / (v + c2)) - dof, 0.0, float(np.sum(rw * r**2))))
@@ -276,7 +293,8 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
     dropped and the rest refitted. Returns (A_n, standard error of A_n, misfit mask over
     ``tau_s``: taus the robust weights reject, i.e. that the terms cannot describe);
     dropped terms have A_n = 0 and the standard error they would have if fitted alongside
-    the others. A_n NaN when fewer than 2 usable taus."""
+    the others. A_n NaN (not identifiable) when fewer than 2 usable taus or when the
+    robust weights reject all but one tau."""
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
@@ -290,7 +308,10 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.nd
     starts = _starts(len(y))
     edf = _NoiseModel(tau, m_int, nt, n_samples)
     while True:
-        a, model, nu, rw, c2 = _robust_scoring(x, active, y, edf, starts)
+        scored = _robust_scoring(x, active, y, edf, starts)
+        if scored is None:  # the robust weights reject all taus: nothing is identifiable
+            return np.full(5, np.nan), np.full(5, np.nan), misfit
+        a, model, nu, rw, c2 = scored
         starts = [rw]
         free = a > 0
         se = np.full(5, np.inf)

@@ -2,17 +2,39 @@
 
 Conventions: a *term* of averaging factor m starting at sample j is
 ``(sum y[j+m : j+2m] - sum y[j : j+m]) / m`` (deg/h), computed from prefix sums ``P`` of
-``y - ref`` (invalid samples contribute 0). It is valid when the prefix count ``bad`` of
-invalid samples does not change over ``[j, j+2m)``. Sums are kept as a compensated pair
-(Knuth TwoSum: ``s`` plus the accumulated rounding errors ``c``). The streaming engine
-has two modes (see fogmon/davar/streaming.py): recorded cumulative sums
-(``stream_record``) and running window sums with a rigorous rounding bound
-(``stream_update``).
+``y - ref`` (``ref``: robust reference level, ``reference_level``; invalid samples
+contribute 0). The prefix count ``bad`` holds 1 per invalid sample and _FLAG per sample
+kept out of ``P``: a term whose span changes ``bad`` by 0 is a plain term, by a
+multiple of _FLAG a term spanning out-of-sum samples, otherwise it spans a gap and is
+not counted. Out-of-sum samples are
+
+- *huge* (|rate| > CEILING_DPH or infinite): they enter no sum at all; a term spanning
+  one is +inf (it is counted), so a window holding one reports ADEV = +inf and no window
+  without it is touched;
+- *large* (streaming only, |rate - ref| > LARGE_DPH): kept in a double-double side prefix
+  (``bh``, ``bl``) read only by the terms spanning them, so the main prefix sums never
+  carry their magnitude.
+
+Sums are kept as a compensated pair (Knuth TwoSum: ``s`` plus the accumulated rounding
+errors ``c``). The streaming engine has two modes (see fogmon/davar/streaming.py):
+recorded cumulative sums (``stream_record``) and running window sums with a rigorous
+rounding bound (``stream_update``). Streaming kernels take the prefix arrays as one
+tuple ``pre = (P, bad, bh, bl, hc)`` (``hc``: prefix count of huge samples).
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+CEILING_DPH = 1e8
+"""|rate| above this (deg/h, 27,800 deg/s: beyond any gyro) or infinite makes a sample
+*huge*: it enters no sum and the Allan terms spanning it are +inf."""
+LARGE_DPH = 65536.0
+"""|rate - reference level| above this (deg/h) makes a sample *large* in the streaming
+engine: kept out of the main prefix sums (double-double side prefix)."""
+_FLAG = 1 << 32  # count unit of out-of-sum samples in ``bad`` and of huge-spanning terms in counts
+_LOW = _FLAG - 1  # mask of the plain counts
+_FAST = {"nsz", "arcp", "reassoc", "contract"}  # fastmath without "no inf" (terms may be +inf)
 
 
 @njit(cache=True, inline="always")
@@ -51,10 +73,36 @@ def _compensated_sum(x, n):
     return s, c + r
 
 
+_REF_SAMPLES = 4096  # at most this many evenly spaced samples make the reference level
+
+
+@njit(cache=True)
+def _median_valid(y, valid, step):
+    """Median of every step-th sample that is valid and within CEILING_DPH; NaN if none."""
+    buf = np.empty(y.shape[0] // step + 1)
+    n = 0
+    for i in range(0, y.shape[0], step):
+        if valid[i] and abs(y[i]) <= CEILING_DPH:
+            buf[n] = y[i]
+            n += 1
+    return np.median(buf[:n]) if n > 0 else np.nan
+
+
+@njit(cache=True)
+def reference_level(y, valid):
+    """Median (deg/h) of the valid samples within CEILING_DPH (of at most about
+    _REF_SAMPLES evenly spaced ones), NaN without any: the level subtracted before the
+    prefix sums. No single sample can move it far; it only has to be near the signal."""
+    step = max(1, y.shape[0] // _REF_SAMPLES)
+    ref = _median_valid(y, valid, step)
+    return _median_valid(y, valid, 1) if ref != ref and step > 1 else ref
+
+
 @njit(cache=True)
 def prefix_sums_dd(y, valid, ref):
-    """Double-double prefix sums of ``y - ref`` over valid samples (``hi``, ``lo``, n+1 each)
-    and the prefix count of invalid samples (n+1)."""
+    """Double-double prefix sums of ``y - ref`` over valid samples within CEILING_DPH
+    (``hi``, ``lo``, n+1 each) and the prefix count ``bad`` (n+1): 1 per invalid sample,
+    _FLAG per huge one (left out of the sums)."""
     n = y.shape[0]
     hi = np.empty(n + 1)
     lo = np.empty(n + 1)
@@ -66,11 +114,13 @@ def prefix_sums_dd(y, valid, ref):
     lo[0] = 0.0
     bad[0] = 0
     for i in range(n):
-        if valid[i]:
+        if not valid[i]:
+            b += 1
+        elif not abs(y[i]) <= CEILING_DPH:
+            b += _FLAG
+        else:
             s, e = _two_sum(s, y[i] - ref)
             c += e
-        else:
-            b += 1
         hi[i + 1] = s
         lo[i + 1] = c
         bad[i + 1] = b
@@ -84,11 +134,32 @@ def _term_dd(hi, lo, j, m):
     return (((hi[b] - hi[a]) - (hi[a] - hi[j])) + ((lo[b] - lo[a]) - (lo[a] - lo[j]))) / m
 
 
+@njit(cache=True, inline="always")
+def _dd_add(s, c, x):
+    """(s, c) + x for a double-double s + c and x >= 0, renormalised so |c| <= ulp(s) / 2."""
+    t, r = _two_sum(s, x)
+    r += c
+    u = t + r
+    return u, r - (u - t)
+
+
+@njit(cache=True, inline="always")
+def _dd_sub(s, c, bs, bc):
+    """Double-double (s, c) - (bs, bc), renormalised."""
+    t, r = _two_sum(s, -bs)
+    r += c - bc
+    u = t + r
+    return u, r - (u - t)
+
+
 @njit(cache=True)
 def window_sums(hi, lo, bad, ms, starts, w):
-    """Sums of squared valid terms and valid-term counts (T x M) for windows of ``w``
-    samples starting at ``starts`` (increasing), by differencing compensated cumulative
-    sums of squared terms: O(N) per m for all windows."""
+    """Sums of squared valid terms (+inf for a window holding a huge sample) and
+    valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
+    (increasing), by differencing a compensated cumulative sum of squared terms: O(N)
+    per m for all windows. The cumulative sum is re-based on its current value every
+    ``w`` terms (the open windows' records follow), so a window carries ~eps^2 of the
+    squared terms of the last two windows only, whatever came before."""
     nt = starts.shape[0]
     nm = ms.shape[0]
     sums = np.zeros((nt, nm))
@@ -96,6 +167,7 @@ def window_sums(hi, lo, bad, ms, starts, w):
     s_at = np.empty(nt)
     c_at = np.empty(nt)
     n_at = np.empty(nt, np.int64)
+    h_at = np.empty(nt, np.int64)
     for k in range(nm):
         m = ms[k]
         if nt == 0 or 2 * m > w:
@@ -105,54 +177,140 @@ def window_sums(hi, lo, bad, ms, starts, w):
         s = 0.0
         c = 0.0
         cnt = 0
+        nh = 0  # terms spanning a huge sample
         pa = 0
         pb = 0
+        j_base = 0
         for j in range(j_end + 1):
+            if j - j_base >= w:
+                for q in range(pb, pa):
+                    s_at[q], c_at[q] = _dd_sub(s_at[q], c_at[q], s, c)
+                s = 0.0
+                c = 0.0
+                j_base = j
             while pa < nt and starts[pa] == j:
                 s_at[pa] = s
                 c_at[pa] = c
                 n_at[pa] = cnt
+                h_at[pa] = nh
                 pa += 1
             while pb < nt and starts[pb] + span == j:
-                sums[pb, k] = (s - s_at[pb]) + (c - c_at[pb])
+                if nh > h_at[pb]:
+                    sums[pb, k] = np.inf
+                else:
+                    d, e = _two_sum(s, -s_at[pb])
+                    sums[pb, k] = d + (e + (c - c_at[pb]))
                 counts[pb, k] = cnt - n_at[pb]
                 pb += 1
             if j == j_end:
                 break
-            if bad[j + 2 * m] == bad[j]:
+            d = bad[j + 2 * m] - bad[j]
+            if d == 0:
                 t = _term_dd(hi, lo, j, m)
                 s, e = _two_sum(s, t * t)
-                c += e
+                c += e  # bounded: re-based every w terms
                 cnt += 1
+            elif d & _LOW == 0:
+                cnt += 1
+                nh += 1
     return sums, counts
 
 
 @njit(cache=True)
-def stream_append(y, valid, yraw, vraw, psum, bad, length, ref):
-    """Append samples to the linear buffer: raw values, validity, prefix sums of
-    ``y - ref`` over valid samples and prefix counts of invalid samples."""
+def stream_append(y, valid, yraw, vraw, pre, length, ref):
+    """Append samples to the linear buffer: raw values, validity and the prefix arrays
+    ``pre`` (main sums of ``y - ref``, counts, large-sample side sums, huge counts; see
+    the module docstring). The side arrays are only written once the buffer holds an
+    out-of-sum sample (they are 0 before it: zeroed on re-anchoring). Returns the number
+    of large samples appended."""
+    psum, bad, bh, bl, hc = pre
     s = psum[length]
     b = bad[length]
+    sh = bh[length]
+    sl = bl[length]
+    h = hc[length]
+    n_large = 0
     for i in range(y.shape[0]):
         p = length + i
         yraw[p] = y[i]
         vraw[p] = valid[i]
-        if valid[i]:
-            s += y[i] - ref
-        else:
+        if not valid[i]:
             b += 1
+        elif not abs(y[i]) <= CEILING_DPH:
+            b += _FLAG
+            h += 1
+        else:
+            d = y[i] - ref
+            if abs(d) > LARGE_DPH:
+                b += _FLAG
+                d, dl = _two_sum(y[i], -ref)  # y - ref exactly: ref may be far off (a glitch)
+                sh, e = _two_sum(sh, d)
+                sl += e + dl
+                n_large += 1
+            else:
+                s += d
         psum[p + 1] = s
         bad[p + 1] = b
+        if b >= _FLAG:  # side arrays are written from the buffer's first out-of-sum sample on (else 0)
+            bh[p + 1] = sh
+            bl[p + 1] = sl
+            hc[p + 1] = h
+    return n_large
 
 
 @njit(cache=True, inline="always")
-def _sq_term(psum, bad, j, m):
-    """Squared term of factor m starting at buffer position j, 0 when it spans a gap;
-    and 1 or 0 for its validity. Bit-identical to the vectorised passes (``* (1 / m)``),
-    so that a term entering one way and leaving the other cancels exactly."""
-    t = ((psum[j + 2 * m] - psum[j + m]) - (psum[j + m] - psum[j])) * (1.0 / m)
-    ok = bad[j + 2 * m] == bad[j]
-    return (t * t if ok else 0.0), (1 if ok else 0)
+def _sq_term(pre, j, m):
+    """(squared term of factor m starting at buffer position j, 1 if it is counted, 1 if
+    it spans a huge sample). A term spanning a gap is (0, 0, 0), one spanning a huge
+    sample (0, 1, 1); one spanning large samples adds their side sums. A plain term is
+    bit-identical to the vectorised passes (``* (1 / m)``), so that a term entering one
+    way and leaving the other cancels exactly."""
+    psum, bad, bh, bl, hc = pre
+    a = j + m
+    b = j + 2 * m
+    inv = 1.0 / m
+    t = (psum[b] - psum[a]) - (psum[a] - psum[j])
+    d = bad[b] - bad[j]
+    if d == 0:
+        t *= inv
+        return t * t, 1, 0
+    if d & _LOW:
+        return 0.0, 0, 0
+    if hc[b] != hc[j]:
+        return 0.0, 1, 1
+    t = (t + _side(bh[j], bh[a], bh[b], bl[j], bl[a], bl[b])) * inv
+    return t * t, 1, 0
+
+
+@njit(cache=True, inline="always")
+def _side(h0, h1, h2, l0, l1, l2):
+    """Second difference (h2 - h1) - (h1 - h0) of the double-double side sums, formed in
+    double-double: exact whatever magnitude they hold (0 when they do not change)."""
+    s1, e1 = _two_sum(h2, -h1)
+    s2, e2 = _two_sum(h1, -h0)
+    s, e = _two_sum(s1, -s2)
+    return s + (e + ((e1 - e2) + ((l2 - l1) - (l1 - l0))))
+
+
+@njit(cache=True, inline="always")
+def _no_gap_no_huge(pre, a, b):
+    """Buffer positions a..b-1 hold no invalid and no huge sample (large ones may be)."""
+    return (pre[1][b] - pre[1][a]) & _LOW == 0 and pre[4][b] == pre[4][a]
+
+
+@njit(cache=True, inline="always")
+def _large_terms(pre, a0, n, m, x):
+    """Squared terms of factor m starting at a0 .. a0+n-1 into x[:n] when none spans a
+    gap or a huge sample: main and side second differences, branch-free (a plain term
+    comes out bit-identical to ``_sq_term``'s, its side difference being exactly 0)."""
+    psum, bh, bl = pre[0], pre[2], pre[3]
+    inv = 1.0 / m
+    p0, p1, p2 = psum[a0:a0 + n], psum[a0 + m:a0 + m + n], psum[a0 + 2 * m:a0 + 2 * m + n]
+    h0, h1, h2 = bh[a0:a0 + n], bh[a0 + m:a0 + m + n], bh[a0 + 2 * m:a0 + 2 * m + n]
+    l0, l1, l2 = bl[a0:a0 + n], bl[a0 + m:a0 + m + n], bl[a0 + 2 * m:a0 + 2 * m + n]
+    for i in range(n):
+        t = (((p2[i] - p1[i]) - (p1[i] - p0[i])) + _side(h0[i], h1[i], h2[i], l0[i], l1[i], l2[i])) * inv
+        x[i] = t * t
 
 
 _TILE = 1024  # samples per tile of the streaming update: 4 taus' term arrays stay in L1
@@ -161,11 +319,13 @@ _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain pat
 
 
 @njit(cache=True, inline="always")
-def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
+def _tile_terms(pre, m, w, first, n, x_in, x_out, dn):
     """For new samples at buffer positions first..first+n-1: squared entering and
-    leaving terms (0 when invalid) and the change in valid-term count. Vectorisable fast
-    path when no invalid sample touches the tile's terms (then ``dn`` is left unwritten
-    and False returned); True when dn was written."""
+    leaving terms (0 when not plain) and the change in encoded valid-term count (valid
+    terms + _FLAG x huge-spanning terms). Vectorisable fast path when only plain terms
+    touch the tile (then ``dn`` is left unwritten and False returned); True when dn was
+    written."""
+    psum, bad = pre[0], pre[1]
     inv = 1.0 / m
     a_in = first - 2 * m + 1
     a_out = first - w
@@ -179,10 +339,14 @@ def _tile_terms(psum, bad, m, w, first, n, x_in, x_out, dn):
             x_in[i] = t_in * t_in
             x_out[i] = t_out * t_out
         return False  # dn not written: the caller zeroes it if another tau of the group has gaps
+    if _no_gap_no_huge(pre, a_in, first + n) and _no_gap_no_huge(pre, a_out, a_out + n - 1 + 2 * m):
+        _large_terms(pre, a_in, n, m, x_in)  # large samples only: every term counts
+        _large_terms(pre, a_out, n, m, x_out)
+        return False
     for i in range(n):
-        x_in[i], v_in = _sq_term(psum, bad, a_in + i, m)
-        x_out[i], v_out = _sq_term(psum, bad, a_out + i, m)
-        dn[i] = v_in - v_out
+        x_in[i], v_in, h_in = _sq_term(pre, a_in + i, m)
+        x_out[i], v_out, h_out = _sq_term(pre, a_out + i, m)
+        dn[i] = (v_in - v_out) + _FLAG * (h_in - h_out)
     return True
 
 
@@ -206,13 +370,17 @@ def _block_sum(x, i0, i1):
 
 
 @njit(cache=True)
-def window_sum(psum, bad, start, w, m, scratch, exact):
+def window_sum(pre, start, w, m, scratch, exact):
     """Recompute for the window of ``w`` samples from buffer position ``start``:
-    (s, c, count, bound) of the squared valid terms of factor m and a bound of the
-    rounding in s + c, (deg/h)^2. ``exact``: TwoSum for every term (bound ~ n eps^2 s,
-    so even a huge term that leaves later leaves no residue); else SIMD sums of 256-term
-    blocks (non-negative terms: bound 256 eps s) added by TwoSum."""
+    (s, c, encoded count, bound) of the squared valid terms of factor m (count: valid
+    terms + _FLAG x huge-spanning ones, which add 0 to s) and a bound of the rounding in
+    s + c, (deg/h)^2. ``exact``: TwoSum for every term (bound ~ n eps^2 s, so even a
+    huge term that leaves later leaves no residue); else SIMD sums of 256-term blocks
+    (non-negative terms: bound 256 eps s) added by TwoSum. No terms (2m > w): zeros."""
     nt = w - 2 * m + 1
+    if nt <= 0:
+        return 0.0, 0.0, 0, 0.0
+    psum, bad = pre[0], pre[1]
     if bad[start + w] == bad[start]:
         p0, p1, p2 = psum[start:start + nt], psum[start + m:start + m + nt], psum[start + 2 * m:start + 2 * m + nt]
         inv = 1.0 / m
@@ -220,11 +388,14 @@ def window_sum(psum, bad, start, w, m, scratch, exact):
             t = ((p2[j] - p1[j]) - (p1[j] - p0[j])) * inv
             scratch[j] = t * t
         n = nt
+    elif _no_gap_no_huge(pre, start, start + w):
+        _large_terms(pre, start, nt, m, scratch)
+        n = nt
     else:
         n = 0
         for j in range(nt):
-            scratch[j], v = _sq_term(psum, bad, start + j, m)
-            n += v
+            scratch[j], v, h = _sq_term(pre, start + j, m)
+            n += v + _FLAG * h
     if exact:
         s, c = _compensated_sum(scratch, nt)
         return s, c, n, nt * _EPS * _EPS * (s + c)
@@ -236,20 +407,29 @@ def window_sum(psum, bad, start, w, m, scratch, exact):
     return s, c, n, 256.0 * _EPS * (s + c)
 
 
+@njit(cache=True, inline="always")
+def _put(out_sums, out_counts, e, k, s, n):
+    """Write window row e, tau k from its sum s and encoded count n: +inf when a term
+    spans a huge sample; the count of valid terms."""
+    out_sums[e, k] = s if n < _FLAG else np.inf
+    out_counts[e, k] = n & _LOW
+
+
 @njit(cache=True)
-def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
+def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
     """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
     buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
     least the ``w`` samples before ``first`` or starts at the record's first sample,
     position 0 then meaning absolute index 0). For every m the
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
-    are written to the rows of ``out_sums``/``out_counts``.
+    are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums).
 
     Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
     squared terms and a SIMD sum of the tile's change, added to the compensated window
     sum (s, c). ``err`` holds per m a rigorous bound of the rounding accumulated by those
-    plain sums; a tile that would take it above _BOUND_RTOL of the window sum (a huge
+    plain sums; a tile that would take it above _BOUND_RTOL of the window sum (a large
     glitch leaving, a window drained by gaps) first recomputes its taus' window sums
     exactly (O(window)) and is then accumulated term by term with TwoSum."""
     nm = ms.shape[0]
@@ -262,14 +442,13 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
         p = first
         while p < stop and p < w:
             if p - 2 * m + 1 >= 0:
-                x, v = _sq_term(psum, bad, p - 2 * m + 1, m)
+                x, v, h = _sq_term(pre, p - 2 * m + 1, m)
                 s, r = _two_sum(sum_s[k], x)
                 sum_s[k] = s
                 sum_c[k] += r
-                cnt[k] += v
+                cnt[k] += v + _FLAG * h
             if e < emit_pos.shape[0] and emit_pos[e] == p:
-                out_sums[e, k] = sum_s[k] + sum_c[k]
-                out_counts[e, k] = cnt[k]
+                _put(out_sums, out_counts, e, k, sum_s[k] + sum_c[k], cnt[k])
                 e += 1
             p += 1
         e_head = e
@@ -295,7 +474,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
             for j in range(4):
                 k = min(g + j, nm - 1)  # slots past the last tau repeat it
                 ks[j] = k
-                wrote[j] = _tile_terms(psum, bad, ms[k], w, t0, n, xi[j], xo[j], dn[j])
+                wrote[j] = _tile_terms(pre, ms[k], w, t0, n, xi[j], xo[j], dn[j])
                 has_dn |= wrote[j]
                 tot[j], mag = _tile_totals(xi[j], xo[j], n)
                 # rounding of the squares' differences, the tile sum and the emission scan
@@ -321,8 +500,7 @@ def stream_update(first, n_new, w, ms, psum, bad, sum_s, sum_c, cnt, err, emit_p
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
                         k = ks[j]
-                        sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(psum, bad, t0 - w, w, ms[k], scratch,
-                                                                        True)
+                        sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
                 _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
                                   out_sums, out_counts)
         e_tile = e_end
@@ -355,14 +533,10 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
         w0, w1, w2, w3 = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
         if not (_within(bnd[0], w0) and _within(bnd[1], w1) and _within(bnd[2], w2) and _within(bnd[3], w3)):
             return False
-        out_sums[e, k0] = w0
-        out_sums[e, k1] = w1
-        out_sums[e, k2] = w2
-        out_sums[e, k3] = w3
-        out_counts[e, k0] = n0
-        out_counts[e, k1] = n1
-        out_counts[e, k2] = n2
-        out_counts[e, k3] = n3
+        _put(out_sums, out_counts, e, k0, w0, n0)
+        _put(out_sums, out_counts, e, k1, w1, n1)
+        _put(out_sums, out_counts, e, k2, w2, n2)
+        _put(out_sums, out_counts, e, k3, w3, n3)
         i0 = i1
     if has_dn:
         for i in range(i0, n):
@@ -398,8 +572,7 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
             c += r + de
             n_ += dn[j, i]
             if e < e1 and emit_pos[e] == t0 + i:
-                out_sums[e, k] = s + c
-                out_counts[e, k] = n_
+                _put(out_sums, out_counts, e, k, s + c, n_)
                 e += 1
         sum_s[k] = s
         sum_c[k] = c
@@ -407,59 +580,65 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
 
 
 @njit(cache=True)
-def stream_reanchor(yraw, vraw, psum, bad, length, w, ms, sum_s, sum_c, cnt, err, recompute):
-    """Keep the last ``w`` samples at the buffer front, re-reference them to their valid
-    mean and rebuild prefix sums; with ``recompute`` (running-sum mode) also recompute
-    every window sum exactly. Returns the new reference level (deg/h)."""
-    off = length - w
-    total = 0.0
-    nv = 0
-    for i in range(w):
+def stream_reanchor(yraw, vraw, pre, length, keep, ms, sum_s, sum_c, cnt, err, recorded, rec_s, rec_c, ref):
+    """Keep the last ``keep`` samples at the buffer front, re-reference them to their
+    reference level (``ref`` if they have none) and rebuild the prefix arrays. Running
+    sums (not ``recorded``): recompute every window sum exactly over the kept samples.
+    Recorded sums: re-base each cumulative sum on its current value (the records follow),
+    so that the squared terms that came before (a large glitch) cost no precision later.
+    Returns the new reference level (deg/h)."""
+    off = length - keep
+    for i in range(keep):
         yraw[i] = yraw[off + i]
         vraw[i] = vraw[off + i]
-        if vraw[i]:
-            total += yraw[i]
-            nv += 1
-    ref = total / nv if nv > 0 else 0.0
+    new_ref = reference_level(yraw[:keep], vraw[:keep])
+    if new_ref == new_ref:
+        ref = new_ref
+    psum, bad, bh, bl, hc = pre
+    if bad[length] >= _FLAG:  # side arrays were written: zero them
+        bh[:length + 1] = 0.0
+        bl[:length + 1] = 0.0
+        hc[:length + 1] = 0
     psum[0] = 0.0
     bad[0] = 0
-    stream_append(yraw[:w].copy(), vraw[:w].copy(), yraw, vraw, psum, bad, 0, ref)
-    if recompute:
-        scratch = np.empty(w)
+    stream_append(yraw[:keep].copy(), vraw[:keep].copy(), yraw, vraw, pre, 0, ref)
+    if recorded:
         for k in range(ms.shape[0]):
-            sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(psum, bad, 0, w, ms[k], scratch, False)
+            for q in range(rec_s.shape[1]):
+                rec_s[k, q], rec_c[k, q] = _dd_sub(rec_s[k, q], rec_c[k, q], sum_s[k], sum_c[k])
+            sum_s[k] = 0.0
+            sum_c[k] = 0.0
+    else:
+        scratch = np.empty(keep)
+        for k in range(ms.shape[0]):
+            sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(pre, 0, keep, ms[k], scratch, False)
     return ref
 
 
 @njit(cache=True)
-def window_sums_exact(psum, bad, start, n, ms):
-    """Sums of squared valid terms (deg/h)^2 and valid-term counts, per m, of the ``n``
-    samples from buffer position ``start``, TwoSum-exact."""
+def window_sums_exact(pre, start, n, ms):
+    """Sums of squared valid terms (deg/h)^2 (+inf when one spans a huge sample) and
+    valid-term counts, per m, of the ``n`` samples from buffer position ``start``,
+    TwoSum-exact."""
     nm = ms.shape[0]
     sums = np.zeros(nm)
     counts = np.zeros(nm, np.int64)
     scratch = np.empty(n)
     for k in range(nm):
         if 2 * ms[k] <= n:
-            s, c, counts[k], _ = window_sum(psum, bad, start, n, ms[k], scratch, True)
-            sums[k] = s + c
+            s, c, nn, _ = window_sum(pre, start, n, ms[k], scratch, True)
+            sums[k] = s + c if nn < _FLAG else np.inf
+            counts[k] = nn & _LOW
     return sums, counts
 
 
-@njit(cache=True, inline="always")
-def _dd_add(s, c, x):
-    """(s, c) + x for a double-double s + c and x >= 0, renormalised so |c| <= ulp(s) / 2."""
-    t, r = _two_sum(s, x)
-    r += c
-    u = t + r
-    return u, r - (u - t)
-
-
 @njit(cache=True)
-def _entering_terms(psum, bad, a0, n, m, x, v):
+def _entering_terms(pre, a0, n, m, x, v):
     """Squared terms of factor m starting at buffer positions a0 .. a0+n-1 into x[:n] (0
-    where a term spans a gap). When some term spans a gap their validity (1.0 / 0.0) goes
-    to v[:n] and True is returned; else v is left unwritten (vectorised path)."""
+    where a term spans a gap, +inf where it spans a huge sample). When some term is not
+    plain their validity (1.0 / 0.0) goes to v[:n] and True is returned; else v is left
+    unwritten (vectorised path)."""
+    psum, bad = pre[0], pre[1]
     inv = 1.0 / m
     if bad[a0 + n - 1 + 2 * m] == bad[a0]:
         p0, p1, p2 = psum[a0:a0 + n], psum[a0 + m:a0 + m + n], psum[a0 + 2 * m:a0 + 2 * m + n]
@@ -467,15 +646,21 @@ def _entering_terms(psum, bad, a0, n, m, x, v):
             t = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
             x[i] = t * t
         return False
+    if _no_gap_no_huge(pre, a0, a0 + n - 1 + 2 * m):
+        _large_terms(pre, a0, n, m, x)  # large samples only: every term counts
+        return False
     for i in range(n):
-        x[i], ok = _sq_term(psum, bad, a0 + i, m)
+        x[i], ok, h = _sq_term(pre, a0 + i, m)
+        if h:
+            x[i] = np.inf
         v[i] = ok
     return True
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=_FAST)
 def _segment_sums(x, bounds, n_seg, out):
-    """out[c] = sum of x[bounds[c] : bounds[c + 1]] for c < n_seg, in any order (SIMD)."""
+    """out[c] = sum of x[bounds[c] : bounds[c + 1]] for c < n_seg, in any order (SIMD;
+    +inf when the segment holds a +inf)."""
     for c in range(n_seg):
         u = x[bounds[c]:bounds[c + 1]]
         s = 0.0
@@ -485,20 +670,22 @@ def _segment_sums(x, bounds, n_seg, out):
 
 
 @njit(cache=True)
-def stream_record(first, n_new, base, w, hop, ms, psum, bad, cum_s, cum_c, cum_n, rec_s, rec_c, rec_n,
+def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_h, rec_s, rec_c, rec_n, rec_h,
                   k_row0, out_sums, out_counts):
     """Recorded-sums update over buffer positions ``first .. first + n_new - 1`` (already
     appended; buffer position 0 is absolute sample ``base``). Per m only the term ending
     at each new sample is computed: it enters the cumulative sum of squared terms
-    (double-double cum_s + cum_c; valid-term count cum_n). Window k (absolute samples
+    (double-double cum_s + cum_c; valid-term count cum_n; a term spanning a huge sample
+    is +inf and enters only cum_h, the count of segments holding one). Window k (absolute samples
     k hop .. w - 1 + k hop) starts at term k hop, so the cumulative sum of the terms
     before it is recorded (ring slot k mod R of rec_*) when that term's predecessor
     enters, and at the window's last sample its sum is the cumulative sum minus that
     record: windows never recompute and no term is computed twice. Rounding: each
     window carries only the roundings of the SIMD segment sums inside it (<= _TILE eps
-    of its sum) and ~eps^2 of the cumulative sum, whatever came before (a 1e6 deg/h
-    glitch that has left leaves no residue) and however long the run. Windows emitted
-    here are ``k_row0 + row`` (rows of out_sums/out_counts)."""
+    of its sum) and ~eps^2 of the cumulative sum since the last re-base (a large glitch
+    that has left leaves no residue), however long the run. A window whose segments
+    hold a +inf term has sum +inf. Windows emitted here are ``k_row0 + row`` (rows of
+    out_sums/out_counts)."""
     nm = ms.shape[0]
     ring = rec_s.shape[1]
     stop = first + n_new
@@ -539,7 +726,7 @@ def stream_record(first, n_new, base, w, hop, ms, psum, bad, cum_s, cum_c, cum_n
             i0 = min(n, max(0, 2 * m - 1 - a_abs))
             gaps = False
             if i0 < n:
-                gaps = _entering_terms(psum, bad, t0 + i0 - 2 * m + 1, n - i0, m, x[i0:], v[i0:])
+                gaps = _entering_terms(pre, t0 + i0 - 2 * m + 1, n - i0, m, x[i0:], v[i0:])
             if i0 > 0:
                 x[:i0] = 0.0
                 if not gaps:
@@ -549,9 +736,12 @@ def stream_record(first, n_new, base, w, hop, ms, psum, bad, cum_s, cum_c, cum_n
             _segment_sums(x, bounds, n_cut + 1, seg)
             if gaps:
                 _segment_sums(v, bounds, n_cut + 1, cnt)
-            s, c, nn = cum_s[k], cum_c[k], cum_n[k]
+            s, c, nn, nh = cum_s[k], cum_c[k], cum_n[k], cum_h[k]
             for j in range(n_cut + 1):
-                s, c = _dd_add(s, c, seg[j])
+                if seg[j] == np.inf:
+                    nh += 1
+                else:
+                    s, c = _dd_add(s, c, seg[j])
                 nn += int(cnt[j]) if gaps else bounds[j + 1] - bounds[j]
                 if j == n_cut:
                     break
@@ -560,12 +750,14 @@ def stream_record(first, n_new, base, w, hop, ms, psum, bad, cum_s, cum_c, cum_n
                     rec_s[k, slot] = s
                     rec_c[k, slot] = c
                     rec_n[k, slot] = nn
+                    rec_h[k, slot] = nh
                 if k_out[j] >= 0:
                     slot = k_out[j] % ring
                     d, e = _two_sum(s, -rec_s[k, slot])
-                    out_sums[k_out[j] - k_row0, k] = d + (e + (c - rec_c[k, slot]))
-                    out_counts[k_out[j] - k_row0, k] = nn - rec_n[k, slot]
-            cum_s[k], cum_c[k], cum_n[k] = s, c, nn
+                    row = k_out[j] - k_row0
+                    out_sums[row, k] = d + (e + (c - rec_c[k, slot])) if nh == rec_h[k, slot] else np.inf
+                    out_counts[row, k] = nn - rec_n[k, slot]
+            cum_s[k], cum_c[k], cum_n[k], cum_h[k] = s, c, nn, nh
 
 
 @njit(cache=True)

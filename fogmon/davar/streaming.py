@@ -3,13 +3,18 @@ whatever the window length, and no per-window recomputation.
 
 Terms of factor m come from prefix sums of (rate - reference level) in a linear buffer of
 ``window + reanchor`` samples; when it is full the last window moves to the front and is
-re-referenced to its mean, so an hours-long bias never costs precision. Two modes:
+re-referenced to its median, so an hours-long bias never costs precision. No single
+sample changes a window that does not hold it: a huge one (|rate| > 1e8 deg/h or
+infinite) enters no sum and makes the terms spanning it +inf, a large one (more than
+65,536 deg/h from the reference level) stays out of the main prefix sums (see
+fogmon/davar/kernels.py). Two modes:
 
 - recorded sums (hop >= RECORD_MIN_HOP, the usual case): per m only the term ending at
   each new sample is computed and added to a cumulative sum; the cumulative sum at each
   future window's first term is recorded (window / hop records per tau) and a window's
   sum is the cumulative sum at its last sample minus that record. Nothing ever leaves a
-  sum, so nothing cancels: no drift and no recompute, over any run length.
+  sum, so nothing cancels: no drift and no recompute, over any run length. Re-anchoring
+  re-bases the cumulative sums on their current value (the records follow).
 - running sums (small hops, Galleani's fast DAVAR recursion): per m the window's sum; a
   new sample adds the term ending at it and removes the term starting at the sample that
   left. Re-anchoring recomputes every sum exactly, and a rounding bound forces exact
@@ -34,7 +39,9 @@ class StreamingDadev:
     the first window is complete. ``alpha``: noise type per tau for the confidence
     bounds (default: dominant term of an IEEE-952 fit, refreshed at most every
     max(hop, window / 4) samples). ``reanchor``: samples between re-references (and,
-    with running sums, exact recomputes; default max(4 x window, 4096))."""
+    with running sums, exact recomputes; default max(4 x window, 4096)); plus at most
+    one early re-reference per buffer fill when most samples since the last one are
+    large (the reference level came from a glitch)."""
 
     def __init__(self, rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
                  confidence: float = 0.683, alpha=None, reanchor: int | None = None):
@@ -48,12 +55,16 @@ class StreamingDadev:
         cap = self.window + self.reanchor
         self._y = np.zeros(cap)
         self._v = np.zeros(cap, dtype=np.bool_)
-        self._p = np.zeros(cap + 1)
-        self._bad = np.zeros(cap + 1, dtype=np.int64)
+        # prefix arrays (kernels' ``pre``): main sums, counts, large-sample side sums, huge counts
+        self._pre = (np.zeros(cap + 1), np.zeros(cap + 1, dtype=np.int64), np.zeros(cap + 1), np.zeros(cap + 1),
+                     np.zeros(cap + 1, dtype=np.int64))
         self._len = 0  # samples in the buffer
         self._base = 0  # absolute index of buffer position 0
         self._ref = 0.0  # reference level (deg/h) subtracted before the prefix sums
         self._ref_set = False
+        self._since = 0  # samples appended since the last re-reference
+        self._large = 0  # large samples among them (many: the reference level is off)
+        self._early = False  # an early re-reference was done since the buffer was last full
         nm = len(self.m)
         # recorded sums: the cumulative sum of squared terms (s + c) and valid-term count (n)
         # per tau, and their records at the window starts to come; running sums: the window's
@@ -61,10 +72,12 @@ class StreamingDadev:
         self._s = np.zeros(nm)
         self._c = np.zeros(nm)
         self._n = np.zeros(nm, dtype=np.int64)
+        self._h = np.zeros(nm, dtype=np.int64)  # recorded sums: segments holding a term spanning a huge sample
         ring = (self.window - 1) // self.hop + 2 if self._recorded else 0
         self._rec_s = np.zeros((nm, ring))
         self._rec_c = np.zeros((nm, ring))
         self._rec_n = np.zeros((nm, ring), dtype=np.int64)
+        self._rec_h = np.zeros((nm, ring), dtype=np.int64)
         self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
         self._alpha_prev = None  # (alpha, end index) of the last fitted window, see batch.alpha_rows
 
@@ -104,25 +117,33 @@ class StreamingDadev:
         counts = np.empty((len(ends), len(self.m)), dtype=np.int64)
         i = row = 0
         while i < len(y):
-            if self._len == cap:
-                self._ref = kernels.stream_reanchor(self._y, self._v, self._p, self._bad, self._len, w,
-                                                    self.m, self._s, self._c, self._n, self._err,
-                                                    not self._recorded)
-                self._base += self._len - w
-                self._len = w
+            # re-anchor when the buffer is full, or once early when most samples since the
+            # last re-reference are large (a reference level taken from a glitch)
+            early = not self._early and 2 * self._large > self._since >= max(16, w // 8)
+            if self._len == cap or early:
+                self._early = early
+                keep = min(self._len, w)
+                self._ref = kernels.stream_reanchor(self._y, self._v, self._pre, self._len, keep, self.m,
+                                                    self._s, self._c, self._n, self._err, self._recorded,
+                                                    self._rec_s, self._rec_c, self._ref)
+                self._base += self._len - keep
+                self._len = keep
+                self._since = self._large = 0
             take = min(len(y) - i, cap - self._len)
             yc, vc = y[i:i + take], ok[i:i + take]
-            if not self._ref_set and vc.any():
-                self._ref = float(yc[vc].mean())
-                self._ref_set = True
-            kernels.stream_append(yc, vc, self._y, self._v, self._p, self._bad, self._len, self._ref)
+            if not self._ref_set:
+                ref = kernels.reference_level(yc, vc)
+                if not np.isnan(ref):
+                    self._ref, self._ref_set = ref, True
+            self._large += kernels.stream_append(yc, vc, self._y, self._v, self._pre, self._len, self._ref)
+            self._since += take
             row_end = row + int(np.searchsorted(ends[row:], self._base + self._len + take))
             if self._recorded:
-                kernels.stream_record(self._len, take, self._base, w, self.hop, self.m, self._p, self._bad,
-                                      self._s, self._c, self._n, self._rec_s, self._rec_c, self._rec_n,
-                                      k0 + row, sums[row:row_end], counts[row:row_end])
+                kernels.stream_record(self._len, take, self._base, w, self.hop, self.m, self._pre,
+                                      self._s, self._c, self._n, self._h, self._rec_s, self._rec_c, self._rec_n,
+                                      self._rec_h, k0 + row, sums[row:row_end], counts[row:row_end])
             else:
-                kernels.stream_update(self._len, take, w, self.m, self._p, self._bad, self._s, self._c,
+                kernels.stream_update(self._len, take, w, self.m, self._pre, self._s, self._c,
                                       self._n, self._err, ends[row:row_end] - self._base, sums[row:row_end],
                                       counts[row:row_end])
             self._len += take
@@ -134,7 +155,7 @@ class StreamingDadev:
         """Overlapping ADEV of the current (possibly still filling) window, whatever the
         hop: an exact recompute, O(window x taus)."""
         n = min(self.n_pushed, self.window)
-        sums, counts = kernels.window_sums_exact(self._p, self._bad, self._len - n, n, self.m)
+        sums, counts = kernels.window_sums_exact(self._pre, self._len - n, n, self.m)
         alpha = self.alpha if self.alpha is not None else row_alpha(sums, counts, self.m, n)
         adev, lo, hi, edf = statistics(sums, counts, self.m, n, alpha, self.confidence)
         return AdevResult(self.m / self.rate_hz, self.m, adev, lo, hi, edf, counts, self.rate_hz, n,

@@ -26,6 +26,7 @@ import numpy as np
 from scipy import ndimage
 
 from fogmon.davar import kernels
+from fogmon.davar.batch import reference_level
 from fogmon.davar.taus import tau_grid
 from fogmon.errors import FogmonError
 
@@ -84,10 +85,12 @@ def make_grid(n: int, fs_hz: float, window_s: float | None = None, hop_fraction:
 
 def log_avar(y: np.ndarray, valid: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """ln Allan variance ((deg/h)^2) of the map cells (T x M) and of the whole record (M'),
-    NaN where a cell has no valid term. Uses the DAVAR engine's compensated kernels."""
+    NaN where a cell has no valid term, +inf where it holds a sample above 1e8 deg/h
+    (kernels.CEILING_DPH; no other cell is touched by it). Uses the DAVAR engine's
+    compensated kernels and reference level."""
+    y = np.ascontiguousarray(y, dtype=np.float64)
     ok = valid & np.isfinite(y)
-    ref = float(y[ok].mean()) if ok.any() else 0.0
-    hi, lo, bad = kernels.prefix_sums_dd(np.ascontiguousarray(y, dtype=np.float64), ok, ref)
+    hi, lo, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     s, c = kernels.window_sums(hi, lo, bad, grid.m, grid.starts, grid.window_n)
     sw, cw = kernels.window_sums(hi, lo, bad, grid.m_whole, np.zeros(1, np.int64), grid.n)
     with np.errstate(divide="ignore", invalid="ignore"):
