@@ -497,10 +497,7 @@ class _Tail:
 
 def record_samples(source) -> int | None:
     """Length in samples of a finite source (a replay), None for a live one."""
-    n = getattr(source, "n_samples", None)
-    if n is None and getattr(source, "recording", None) is not None:
-        n = int(round(source.recording.duration_s * source.rate_hz))
-    return n
+    return getattr(source, "n_samples", None)
 
 
 def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:

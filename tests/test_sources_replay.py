@@ -52,7 +52,8 @@ def test_replay_log_grid_gaps_and_blocks(tmp_path):
     np.testing.assert_array_equal(np.flatnonzero(~valid), [5, 6, 7, 9000])
     gaps = [e for b in bl for e in b.events]
     assert [(e.t_s, e.kind) for e in gaps] == [(0.05, "gap"), (90.0, "gap")] and "3 sample(s)" in gaps[0].message
-    assert src.counters == {"samples": 19996, "samples_missing": 4, "seq_gaps": 2, "skipped_rows": 0}
+    assert src.counters == {"samples": 19996, "samples_missing": 4, "seq_gaps": 2, "skipped_rows": 0,
+                            "implausible_samples": 0}
 
 
 def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
