@@ -45,7 +45,7 @@ JUMP_Z = 5.0
 #: time from opening the source, should the device stall.
 LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
-OVERALL_MAX_SAMPLES = 2**23
+OVERALL_MAX_SAMPLES = 2**22
 #: Samples read but not yet processed that a live run or an endless simulation may hold
 #: (2**20: 17 min at 1 kHz); beyond it a simulation waits and a live device's blocks are
 #: dropped, counted and reported.
@@ -465,7 +465,8 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         summary.counters = _counters(source, reader)
         summary.event_counts = dict(event_counts)
         try:
-            rate, valid = tail.arrays()
+            del engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
+            rate, valid = tail.take()
             if len(rate) >= 8:
                 try:
                     summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
@@ -501,13 +502,17 @@ class _Tail:
             buf[:len(src) - first] = src[first:]
         self._total += len(rate) - skip
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """(rate, valid) of the latest min(pushed, n_max) samples, oldest first."""
+    def take(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rate, valid) of the latest min(pushed, n_max) samples, oldest first; the
+        buffer is released (the tail is done)."""
+        n, at = min(self._total, self.n_max), self._total % self.n_max
         if self._total <= self.n_max:
-            return self._rate[:self._total].copy(), self._valid[:self._total].copy()
-        at = self._total % self.n_max
-        return (np.concatenate([self._rate[at:], self._rate[:at]]),
-                np.concatenate([self._valid[at:], self._valid[:at]]))
+            out = self._rate[:n].copy(), self._valid[:n].copy()
+        else:
+            out = (np.concatenate([self._rate[at:], self._rate[:at]]),
+                   np.concatenate([self._valid[at:], self._valid[:at]]))
+        self._rate = self._valid = None
+        return out
 
 
 def _counters(source, reader: "_ThreadedBlocks | None") -> dict[str, int]:

@@ -82,14 +82,12 @@ def test_a_live_device_is_never_held_back_its_excess_is_dropped_and_reported():
 
 def test_tail_keeps_exactly_the_latest_samples():
     rng = np.random.default_rng(0)
-    tail, parts = _Tail(1000), []
+    parts = []
     for n in (10, 995, 1, 2500, 7, 999, 3):
-        r = rng.standard_normal(n)
-        v = r > 0
-        tail.push(r, v)
-        parts.append((r, v))
-        want_r = np.concatenate([p[0] for p in parts])[-1000:]
-        want_v = np.concatenate([p[1] for p in parts])[-1000:]
-        got_r, got_v = tail.arrays()
-        np.testing.assert_array_equal(got_r, want_r)
-        np.testing.assert_array_equal(got_v, want_v)
+        parts.append((rng.standard_normal(n), rng.standard_normal(n) > 0))
+        tail = _Tail(1000)
+        for r, v in parts:
+            tail.push(r, v)
+        got_r, got_v = tail.take()
+        np.testing.assert_array_equal(got_r, np.concatenate([p[0] for p in parts])[-1000:])
+        np.testing.assert_array_equal(got_v, np.concatenate([p[1] for p in parts])[-1000:])
