@@ -1,7 +1,11 @@
 """Replay log v1 (CONTRACT section 1): the CSV recording format every command reads,
 and `fogmon monitor`/`fogmon sim` write. Parsing is strict: a bad cell, NaN/inf, time
 going backwards or repeating is a one-line error naming file, line and column, unless
-the caller asks to tolerate bad rows, in which case they are skipped and counted."""
+the caller asks to tolerate bad rows, in which case they are skipped and counted.
+
+``ReplayLogReader`` reads a log in chunks of whole lines (bounded memory, the same rows
+however the chunks fall); ``read_replay_log`` collects them into a ``Recording`` for the
+batch commands. Lines are limited to MAX_LINE_BYTES."""
 from __future__ import annotations
 
 import functools
