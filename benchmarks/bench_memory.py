@@ -10,7 +10,7 @@
 
 Peak RSS is the child's own high-water mark from the kernel (os.wait4 ru_maxrss), so no
 sampling can miss a peak. Usage:
-  python benchmarks/bench_memory.py [--hours 24] [--sim-minutes 10] [--dir /tmp] [--keep]
+  python benchmarks/bench_memory.py [--hours 24] [--sim-minutes 120] [--dir /tmp] [--keep]
 """
 from __future__ import annotations
 
@@ -106,7 +106,7 @@ def bench_sim(tmp: Path, minutes: float) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=24.0, help="length of the big replay log in h (default 24)")
-    ap.add_argument("--sim-minutes", type=float, default=10.0, help="simulated minutes (default 10)")
+    ap.add_argument("--sim-minutes", type=float, default=120.0, help="simulated minutes (default 120)")
     ap.add_argument("--dir", default=None, help="folder for the temporary files (default: the system's)")
     ap.add_argument("--keep", action="store_true", help="keep the generated log")
     ap.add_argument("--skip-log", action="store_true")
