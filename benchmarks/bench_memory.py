@@ -10,7 +10,7 @@
 
 Peak RSS is the child's own high-water mark from the kernel (os.wait4 ru_maxrss), so no
 sampling can miss a peak. Usage:
-  python benchmarks/bench_memory.py [--hours 24] [--sim-minutes 120] [--dir /tmp] [--keep]
+  python benchmarks/bench_memory.py [--hours 24] [--sim-minutes 120] [--dir /tmp] [--rrd]
 """
 from __future__ import annotations
 
@@ -69,8 +69,8 @@ def fogmon(*args: str) -> list[str]:
     return [sys.executable, "-m", "fogmon", *args]
 
 
-def bench_log(tmp: Path, hours: float) -> None:
-    print(f"1. fogmon replay of a {FS:g} Hz replay log (console summary only, no --rrd)")
+def bench_log(tmp: Path, hours: float, rrd: bool) -> None:
+    print(f"1. fogmon replay of a {FS:g} Hz replay log (console summary{' and --rrd' if rrd else ' only, no --rrd'})")
     runs = []
     for h in (10 / 60, hours):
         path = tmp / f"log_{h:g}h.csv"
@@ -78,15 +78,16 @@ def bench_log(tmp: Path, hours: float) -> None:
         n = write_log(path, h)
         gen_s = time.monotonic() - t0
         size_mb = path.stat().st_size / 1e6
-        rss, wall, rc = peak_rss(fogmon("replay", str(path), "--no-progress"))
+        out = ["--rrd", str(tmp / "out.rrd")] if rrd else []
+        rss, wall, rc = peak_rss(fogmon("replay", str(path), "--no-progress", *out))
         runs.append(rss)
+        rrd_mb = f", .rrd {(tmp / 'out.rrd').stat().st_size / 1e6:,.0f} MB" if rrd and rc == 0 else ""
         print(f"  {h * 60 if h < 1 else h:g} {'min' if h < 1 else 'h'}: {n:,} samples, file {size_mb:,.0f} MB "
-              f"(written in {gen_s:.0f} s): peak RSS {rss:,.0f} MB, {wall:.0f} s "
+              f"(written in {gen_s:.0f} s){rrd_mb}: peak RSS {rss:,.0f} MB, {wall:.0f} s "
               f"(x{h * 3600 / wall:,.0f} real time){'' if rc == 0 else '  FAILED'}")
-        if h != hours:
-            path.unlink()
+        path.unlink()
     print(f"  peak RSS {hours:g} h / 10 min = {runs[1] / runs[0]:.2f}; target < 500 MB for 24 h: "
-          f"{'met' if runs[1] < 500 else 'NOT met'} ({runs[1]:,.0f} MB)")
+          f"{'met' if runs[1] < 500 else 'NOT met'} ({runs[1]:,.0f} MB{'' if hours >= 24 else f' for {hours:g} h'})")
 
 
 def bench_sim(tmp: Path, minutes: float) -> None:
@@ -108,7 +109,7 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=24.0, help="length of the big replay log in h (default 24)")
     ap.add_argument("--sim-minutes", type=float, default=120.0, help="simulated minutes (default 120)")
     ap.add_argument("--dir", default=None, help="folder for the temporary files (default: the system's)")
-    ap.add_argument("--keep", action="store_true", help="keep the generated log")
+    ap.add_argument("--rrd", action="store_true", help="replay the logs into an .rrd too (Rerun sink)")
     ap.add_argument("--skip-log", action="store_true")
     ap.add_argument("--skip-sim", action="store_true")
     a = ap.parse_args()
@@ -120,14 +121,11 @@ def main() -> None:
         sys.exit(f"not enough disk space for a {a.hours:g} h log: use --hours")
     try:
         if not a.skip_log:
-            bench_log(tmp, a.hours)
+            bench_log(tmp, a.hours, a.rrd)
         if not a.skip_sim:
             bench_sim(tmp, a.sim_minutes)
     finally:
-        if a.keep:
-            print(f"kept {tmp}")
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":

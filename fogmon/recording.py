@@ -79,7 +79,7 @@ class Recording:
 
 
 #: bytes of whole lines parsed at a time (reading memory is a small multiple of this)
-CHUNK_BYTES = 1 << 22
+CHUNK_BYTES = 1 << 20
 #: the longest line a replay log may have, in bytes (a file without newlines is not a log)
 MAX_LINE_BYTES = 1 << 20
 #: without ``sample_rate_hz`` metadata the rate is 1 / the median interval of this many
