@@ -380,15 +380,17 @@ def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recordin
     naming file, line and column); ``tolerate=True`` skips bad rows and counts them in
     ``Recording.skipped_rows``."""
     reader = ReplayLogReader(path, tolerate=tolerate)
-    parts = list(reader.chunks())
-    if not sum(len(p) for p in parts):
+    cols: dict[str, list[np.ndarray]] = {c: [] for c in ("time_s", "rate_dph", *reader.aux_names)}
+    skipped = 0
+    for rows in reader.chunks():  # keep the values only, not each chunk's text
+        for c, a in (("time_s", rows.t_s), ("rate_dph", rows.rate_dph), *rows.aux.items()):
+            cols[c].append(a)
+        skipped += rows.skipped
+    if not sum(len(a) for a in cols["time_s"]):
         raise FogmonError(f"{reader.name}: no data rows")
-    return Recording(
-        t_s=np.concatenate([p.t_s for p in parts]),
-        rate_dph=np.concatenate([p.rate_dph for p in parts]),
-        aux={c: np.concatenate([p.aux[c] for p in parts]) for c in reader.aux_names},
-        meta=reader.meta, path=reader.path, skipped_rows=sum(p.skipped for p in parts),
-    )
+    whole = {c: np.concatenate(v) for c, v in cols.items()}
+    return Recording(t_s=whole.pop("time_s"), rate_dph=whole.pop("rate_dph"), aux=whole, meta=reader.meta,
+                     path=reader.path, skipped_rows=skipped)
 
 
 def write_replay_log(path: str | os.PathLike, t_s, rate_dph, aux: dict | None = None,
