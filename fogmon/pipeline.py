@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import queue
 import sys
 import threading
 import time
@@ -47,7 +46,15 @@ JUMP_Z = 5.0
 #: was read is kept).
 LIVE_WALL_SLACK_S = 2.0
 #: The whole-run ADEV of the console summary keeps at most this many samples (the latest).
-OVERALL_MAX_SAMPLES = 2**23
+OVERALL_MAX_SAMPLES = 2**22
+#: Samples read but not yet processed that a live run or an endless simulation may hold
+#: (2**20: 17 min at 1 kHz); beyond it a simulation waits and a live device's blocks are
+#: dropped, counted and reported.
+QUEUE_MAX_SAMPLES = 2**20
+#: Placeholders for dropped samples come in blocks of at most this many samples.
+PLACEHOLDER_BLOCK = 2**16
+#: Events of dropped blocks kept (the rest are counted in the ``dropped`` event).
+DROPPED_EVENTS_KEPT = 1000
 
 
 # ----------------------------------------------------------------------------- options
@@ -430,7 +437,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                             s.frames(res, fit, t_end)
                         summary.n_windows += len(res)
                         _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
-                        counters = dict(getattr(source, "counters", {}) or {})
+                        counters = _counters(source, reader)
                         for s in sinks:
                             s.source_counters(float(t_end[-1]), counters)
                     tail.push(y, b.valid)
@@ -458,10 +465,11 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                         piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
         summary.wall_s = time.monotonic() - wall0
         summary.source_wall_s = time.monotonic() - wall_start
-        summary.counters = dict(getattr(source, "counters", {}) or {})
+        summary.counters = _counters(source, reader)
         summary.event_counts = dict(event_counts)
         try:
-            rate, valid = tail.arrays()
+            del engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
+            rate, valid = tail.take()
             if len(rate) >= 8:
                 try:
                     summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
@@ -477,25 +485,42 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
 
 
 class _Tail:
-    """The latest ``n_max`` (or a little more) samples and valid flags, for the whole-run ADEV."""
+    """The latest ``n_max`` samples and valid flags, for the whole-run ADEV: a ring buffer
+    of fixed size holding copies (no block is kept alive; pages not yet written cost no
+    memory)."""
 
     def __init__(self, n_max: int):
         self.n_max = n_max
-        self._parts: deque[tuple[np.ndarray, np.ndarray]] = deque()
-        self._n = 0
+        self._rate = np.empty(n_max)
+        self._valid = np.empty(n_max, bool)
+        self._total = 0  # samples pushed so far
 
     def push(self, rate: np.ndarray, valid: np.ndarray) -> None:
-        self._parts.append((rate, valid))
-        self._n += len(rate)
-        while self._n - len(self._parts[0][0]) >= self.n_max:
-            self._n -= len(self._parts.popleft()[0])
+        skip = max(len(rate) - self.n_max, 0)
+        self._total += skip
+        for src, buf in ((rate[skip:], self._rate), (valid[skip:], self._valid)):
+            at = self._total % self.n_max
+            first = min(len(src), self.n_max - at)
+            buf[at:at + first] = src[:first]
+            buf[:len(src) - first] = src[first:]
+        self._total += len(rate) - skip
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        if not self._parts:
-            return np.zeros(0), np.zeros(0, bool)
-        return (np.concatenate([r for r, _ in self._parts]), np.concatenate([v for _, v in self._parts]))
+    def take(self) -> tuple[np.ndarray, np.ndarray]:
+        """(rate, valid) of the latest min(pushed, n_max) samples, oldest first; the
+        buffer is released (the tail is done)."""
+        n, at = min(self._total, self.n_max), self._total % self.n_max
+        if self._total <= self.n_max:
+            out = self._rate[:n].copy(), self._valid[:n].copy()
+        else:
+            out = (np.concatenate([self._rate[at:], self._rate[:at]]),
+                   np.concatenate([self._valid[at:], self._valid[:at]]))
+        self._rate = self._valid = None
+        return out
 
 
+def _counters(source, reader: "_ThreadedBlocks | None") -> dict[str, int]:
+    """The source's counters and the reader's (dropped blocks)."""
+    return {**(getattr(source, "counters", {}) or {}), **(reader.counters if reader is not None else {})}
 
 
 def _deliver(b: Block, b_piece: int, piece: int, sinks, summary: Summary, event_counts: Counter) -> int:
@@ -522,10 +547,7 @@ def live_samples(duration_s: float, rate_hz: float) -> int:
 
 def record_samples(source) -> int | None:
     """Length in samples of a finite source (a replay), None for a live one."""
-    n = getattr(source, "n_samples", None)
-    if n is None and getattr(source, "recording", None) is not None:
-        n = int(round(source.recording.duration_s * source.rate_hz))
-    return n
+    return getattr(source, "n_samples", None)
 
 
 def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:
@@ -543,56 +565,148 @@ def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:
         fit_noise(res)
 
 
+@dataclass
+class _Dropped:
+    """Consecutive blocks of a live source dropped from the reader's queue: their span on
+    the sample grid (``n`` samples from ``t0_s``) and the first of their events."""
+
+    t0_s: float
+    n: int
+    blocks: int
+    events: list[Event]
+    events_left_out: int = 0
+
+
 class _ThreadedBlocks:
-    """Iterate a live source's blocks in a reader thread, so DAVAR, fits and Rerun never
-    keep the device unread (an OS serial buffer holds ~0.1 s of a 1 kHz KVH). The queue is
-    unbounded: nothing is dropped; if processing fell behind, the backlog would grow.
+    """Iterate a source's blocks in a reader thread through a queue holding at most
+    ``max_samples`` samples (a block alone may be longer), so DAVAR, fits and Rerun never
+    keep a device unread and memory stays bounded.
+
+    A source that can wait (a simulation, a file) is held back while the queue is full:
+    back-pressure. A live device (LiveSource, ``wait=False``) never is, since an OS serial
+    buffer holds ~0.1 s of a 1 kHz KVH: when the pipeline is more than ``max_samples``
+    behind, the blocks read meanwhile are dropped, counted (``blocks_dropped``,
+    ``samples_dropped`` in ``counters``) and come out as invalid placeholders on the
+    same grid with a ``dropped`` event, so the time base holds and nothing is lost
+    silently (the raw capture of an archive, written by the device thread, keeps them).
     ``backlog()`` after ``source.close()`` takes what is left once the reader is done."""
 
     _DONE = object()
 
-    def __init__(self, source):
+    def __init__(self, source, max_samples: int = QUEUE_MAX_SAMPLES, wait: bool | None = None):
+        from fogmon.sources.live import LiveSource
+
         self._source = source
-        self._q: queue.Queue = queue.Queue()
+        self.max_samples = max_samples
+        self.wait = not isinstance(source, LiveSource) if wait is None else wait
+        self.counters = {} if self.wait else {"blocks_dropped": 0, "samples_dropped": 0}
+        self.held_back = 0  # times the reader waited for room (back-pressure)
+        self._items: deque = deque()
+        self._n = 0  # samples in the queue
+        self._cond = threading.Condition()
+        self._closed = False
         self._thread = threading.Thread(target=self._read, name="fogmon-source-reader", daemon=True)
         self._thread.start()
 
     def _read(self) -> None:
         try:
             for b in self._source.blocks():
-                self._q.put(b)
+                if not self._put(b):
+                    return
         except BaseException as e:  # handed to the consumer thread
-            self._q.put(e)
+            self._append(e, 0)
         finally:
-            self._q.put(self._DONE)
+            self._append(self._DONE, 0)
+
+    def _put(self, b: Block) -> bool:
+        """Queue ``b``, waiting for room or dropping it; False once closed."""
+        with self._cond:
+            if self._n and self._n + len(b) > self.max_samples:
+                if not self.wait:
+                    self._drop(b)
+                    return True
+                self.held_back += 1
+                self._cond.notify_all()
+                while self._n and self._n + len(b) > self.max_samples and not self._closed:
+                    self._cond.wait()
+            if self._closed:
+                return False
+        self._append(b, len(b))
+        return True
+
+    def _append(self, item, n: int) -> None:
+        with self._cond:
+            self._items.append(item)
+            self._n += n
+            self._cond.notify_all()
+
+    def _drop(self, b: Block) -> None:
+        self.counters["blocks_dropped"] += 1
+        self.counters["samples_dropped"] += len(b)
+        rate = float(self._source.rate_hz)
+        last = self._items[-1] if self._items else None
+        if not (isinstance(last, _Dropped) and abs(last.t0_s + last.n / rate - float(b.t_s[0])) < 0.5 / rate):
+            last = _Dropped(float(b.t_s[0]), 0, 0, [])
+            self._items.append(last)
+        last.n += len(b)
+        last.blocks += 1
+        room = DROPPED_EVENTS_KEPT - len(last.events)
+        last.events += b.events[:room]
+        last.events_left_out += max(len(b.events) - room, 0)
+        self._cond.notify_all()
 
     def __iter__(self):
         while True:
-            try:
-                item = self._q.get(timeout=0.25)
-            except queue.Empty:
-                continue
+            with self._cond:
+                while not self._items:
+                    self._cond.wait(0.25)  # wakes for Ctrl-C in the main thread
+                item = self._items.popleft()
+                if isinstance(item, Block):
+                    self._n -= len(item)
+                    self._cond.notify_all()
             if item is self._DONE:
                 return
             if isinstance(item, BaseException):
                 raise item
-            yield item
+            if isinstance(item, _Dropped):
+                yield from self._placeholders(item)
+            else:
+                yield item
+
+    def _placeholders(self, d: _Dropped):
+        rate = float(self._source.rate_hz)
+        msg = (f"{d.n} samples ({d.blocks} blocks) from t={d.t0_s:.6f} s dropped: processing fell more than "
+               f"{self.max_samples} samples ({self.max_samples / rate:g} s) behind the device"
+               + (f"; {d.events_left_out} more events of these blocks only counted" if d.events_left_out else ""))
+        events = (Event(d.t0_s, "dropped", msg), *d.events)
+        for i in range(0, d.n, PLACEHOLDER_BLOCK):
+            m = min(PLACEHOLDER_BLOCK, d.n - i)
+            nan = np.full(m, np.nan)
+            yield Block(d.t0_s + np.arange(i, i + m) / rate, nan, np.zeros(m, bool),
+                        {k: nan for k in getattr(self._source, "aux_names", ())}, events if i == 0 else ())
 
     def backlog(self, timeout_s: float = 10.0) -> list[Block]:
         """After ``source.close()``: the blocks not yet taken, in order, up to the source's
-        end (at most ``timeout_s`` s of waiting for it); an error after the stop is dropped."""
+        end (at most ``timeout_s`` s of waiting for it; a reader held back by a full queue
+        is released and stops); an error after the stop is dropped."""
         out: list[Block] = []
         deadline = time.monotonic() + timeout_s
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
         while time.monotonic() < deadline:
-            try:
-                item = self._q.get(timeout=0.05)
-            except queue.Empty:
-                if not self._thread.is_alive() and self._q.empty():
-                    break
-                continue
+            with self._cond:
+                if not self._items:
+                    if not self._thread.is_alive():
+                        break
+                    self._cond.wait(0.05)
+                    continue
+                item = self._items.popleft()
             if item is self._DONE:
                 break
-            if isinstance(item, Block) and (len(item) or item.events):
+            if isinstance(item, _Dropped):
+                out += self._placeholders(item)
+            elif isinstance(item, Block) and (len(item) or item.events):
                 out.append(item)
         return out
 

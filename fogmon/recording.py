@@ -1,13 +1,20 @@
 """Replay log v1 (CONTRACT section 1): the CSV recording format every command reads,
 and `fogmon monitor`/`fogmon sim` write. Parsing is strict: a bad cell, NaN/inf, time
 going backwards or repeating is a one-line error naming file, line and column, unless
-the caller asks to tolerate bad rows, in which case they are skipped and counted."""
+the caller asks to tolerate bad rows, in which case they are skipped and counted.
+
+``ReplayLogReader`` reads a log in chunks of whole lines (bounded memory, the same rows
+however the chunks fall); ``read_replay_log`` collects them into a ``Recording`` for the
+batch commands. Lines are limited to MAX_LINE_BYTES."""
 from __future__ import annotations
 
+import functools
 import io
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
+from typing import Iterator
 
 import numpy as np
 
@@ -37,20 +44,8 @@ class Recording:
 
     @property
     def sample_rate_hz(self) -> float:
-        """Nominal sample rate in Hz: the ``sample_rate_hz`` metadata when present,
-        otherwise 1 / median sample interval."""
-        if "sample_rate_hz" in self.meta:
-            try:
-                fs = float(self.meta["sample_rate_hz"])
-            except ValueError:
-                raise FogmonError(f"{self.name}: metadata sample_rate_hz is not a number: "
-                                  f"{self.meta['sample_rate_hz']!r}") from None
-            if not (fs > 0 and math.isfinite(fs)):
-                raise FogmonError(f"{self.name}: metadata sample_rate_hz must be > 0, got {fs}")
-            return fs
-        if len(self.t_s) < 2:
-            raise FogmonError(f"{self.name}: too few samples to know the sample rate")
-        return 1.0 / float(np.median(np.diff(self.t_s)))
+        """Nominal sample rate in Hz (``sample_rate_from``)."""
+        return sample_rate_from(self.meta, self.t_s, self.name)
 
     @property
     def duration_s(self) -> float:
@@ -60,21 +55,8 @@ class Recording:
         return len(self.t_s)
 
     def grid_index(self) -> np.ndarray:
-        """Index of every sample on the uniform grid t0 + k / fs. Samples more than a
-        quarter period off the grid, or two samples in one period, are an error."""
-        fs = self.sample_rate_hz
-        k = (self.t_s - self.t_s[0]) * fs
-        idx = np.rint(k).astype(np.int64)
-        off = np.abs(k - idx)
-        if len(off) and off.max() > 0.25:
-            i = int(np.argmax(off))
-            raise FogmonError(f"{self.name}: sample at time_s={self.t_s[i]!r} is {off[i]:.2f} sample "
-                              f"periods off the {fs:g} Hz grid (is sample_rate_hz right?)")
-        if len(idx) > 1 and np.any(np.diff(idx) < 1):
-            i = int(np.argmax(np.diff(idx) < 1)) + 1
-            raise FogmonError(f"{self.name}: two samples within one {1 / fs:g} s period at "
-                              f"time_s={self.t_s[i]!r}")
-        return idx
+        """Index of every sample on the uniform grid t0 + k / fs (``grid_positions``)."""
+        return grid_positions(self.t_s, float(self.t_s[0]) if len(self.t_s) else 0.0, self.sample_rate_hz, self.name)
 
     def to_block(self) -> Block:
         """The recording on its uniform sample grid: missing samples (time gaps) become
@@ -96,97 +78,295 @@ class Recording:
         return Block.make(t, rate, aux=aux)
 
 
-def _parse_header(lines_iter, name: str):
-    """Read comment/metadata lines and the header. Returns (meta, columns, header_line_no)."""
-    meta: dict[str, str] = {}
-    for lineno, line in lines_iter:
-        s = line.strip()
-        if not s:
-            continue
-        if s.startswith("#"):
-            body = s[1:].strip()
-            if ":" in body and not body.lower().startswith("fogmon replay log"):
-                k, v = body.split(":", 1)
-                if k.strip() and " " not in k.strip():
-                    meta[k.strip()] = v.strip()
-            continue
+#: bytes of whole lines parsed at a time (reading memory is a small multiple of this)
+CHUNK_BYTES = 1 << 20
+#: the longest line a replay log may have, in bytes (a file without newlines is not a log)
+MAX_LINE_BYTES = 1 << 20
+#: without ``sample_rate_hz`` metadata the rate is 1 / the median interval of this many
+#: first samples (so a reader need not hold the file to know it)
+RATE_SAMPLES = 1 << 16
+_BOM = b"\xef\xbb\xbf"
+#: a cell quoted in an error message is cut to this many characters
+_CELL_SHOWN = 40
+
+
+def sample_rate_from(meta: dict, t_s: np.ndarray, name: str) -> float:
+    """Nominal sample rate (Hz): metadata ``sample_rate_hz`` when present, otherwise 1 /
+    the median interval of the first RATE_SAMPLES samples ``t_s`` (s)."""
+    if "sample_rate_hz" in meta:
+        try:
+            fs = float(meta["sample_rate_hz"])
+        except ValueError:
+            raise FogmonError(f"{name}: metadata sample_rate_hz is not a number: "
+                              f"{meta['sample_rate_hz']!r}") from None
+        if not (fs > 0 and math.isfinite(fs)):
+            raise FogmonError(f"{name}: metadata sample_rate_hz must be > 0, got {fs}")
+        return fs
+    if len(t_s) < 2:
+        raise FogmonError(f"{name}: too few samples to know the sample rate")
+    return 1.0 / float(np.median(np.diff(t_s[:RATE_SAMPLES])))
+
+
+def grid_positions(t_s: np.ndarray, t0_s: float, fs: float, name: str, after: int = -1, line_of=None) -> np.ndarray:
+    """Index k of every sample on the uniform grid ``t0_s + k / fs`` (s, Hz). A sample more
+    than a quarter period off the grid, or two samples in one period (also against grid
+    index ``after`` of the sample before these), is a FogmonError naming the line when
+    ``line_of(i)`` gives it."""
+    k = (np.asarray(t_s) - t0_s) * fs
+    idx = np.rint(k).astype(np.int64)
+    off = np.abs(k - idx)
+
+    def where(i: int) -> str:
+        return f"line {line_of(i)}, column time_s: " if line_of else ""
+
+    if len(off) and off.max() > 0.25:
+        i = int(np.argmax(off))
+        raise FogmonError(f"{name}: {where(i)}sample at time_s={float(t_s[i])!r} is {off[i]:.2f} sample "
+                          f"periods off the {fs:g} Hz grid (is sample_rate_hz right?)")
+    if len(idx) and (idx[0] <= after or np.any(np.diff(idx) < 1)):
+        i = int(np.argmax(np.diff(idx, prepend=after) < 1))
+        raise FogmonError(f"{name}: {where(i)}two samples within one {1 / fs:g} s period at "
+                          f"time_s={float(t_s[i])!r}")
+    return idx
+
+
+@dataclass
+class Rows:
+    """Rows of one chunk of a replay log, in file order: ``t_s`` (s), ``rate_dph``
+    (deg/h), aux channels by column name; ``skipped`` bad rows left out (tolerant
+    reading only). ``line_of(i)`` is the file line of row ``i`` (error messages)."""
+
+    t_s: np.ndarray
+    rate_dph: np.ndarray
+    aux: dict[str, np.ndarray]
+    skipped: int
+    first_line: int
+    _text: bytes = b""
+    _last_t: float = -math.inf
+    _reader: "ReplayLogReader | None" = None
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    def line_of(self, i: int) -> int:
+        _, lines, _ = self._reader._parse_slow(self._text, self.first_line, self._last_t)
+        return int(lines[i])
+
+
+class ReplayLogReader:
+    """A replay log read in chunks of whole lines: memory independent of the file size.
+    Opening reads the header (``meta``, ``columns``); ``chunks()`` parses the body from
+    the start each time it is called. Strict unless ``tolerate`` (bad rows skipped and
+    counted in ``Rows.skipped``). A UTF-8 byte-order mark and CRLF line ends are
+    accepted; a line longer than ``max_line_bytes`` is an error naming it."""
+
+    def __init__(self, path: str | os.PathLike, tolerate: bool = False, chunk_bytes: int = CHUNK_BYTES,
+                 max_line_bytes: int = MAX_LINE_BYTES) -> None:
+        self.path = os.fspath(path)
+        self.name = os.path.basename(self.path)
+        self.tolerate = tolerate
+        self._chunk, self._max_line = max(int(chunk_bytes), 16), int(max_line_bytes)
+        self.meta, self.columns, self._body = self._read_header()
+        self.aux_names = [c for c in self.columns if c not in REQUIRED]
+
+    @functools.cached_property
+    def sample_rate_hz(self) -> float:
+        """Nominal sample rate (Hz, ``sample_rate_from``): from the metadata, or from the
+        first RATE_SAMPLES samples (reading only those)."""
+        if "sample_rate_hz" in self.meta:
+            return sample_rate_from(self.meta, np.zeros(0), self.name)
+        first, n = [], 0
+        chunks = self.chunks()
+        for rows in chunks:
+            first.append(rows.t_s[:RATE_SAMPLES + 1 - n].copy())
+            n += len(first[-1])
+            if n > RATE_SAMPLES:
+                break
+        chunks.close()
+        return sample_rate_from({}, np.concatenate(first) if first else np.zeros(0), self.name)
+
+    def _open(self):
+        try:
+            return open(self.path, "rb")
+        except FileNotFoundError:
+            raise FogmonError(f"{self.path}: no such file") from None
+        except IsADirectoryError:
+            raise FogmonError(f"{self.path}: is a directory, not a replay log") from None
+        except OSError as e:
+            raise FogmonError(f"{self.path}: cannot read: {e.strerror}") from None
+
+    def _line_chunks(self, offset: int, lineno: int):
+        """(byte offset, number of the first line, whole lines as bytes) from ``offset``,
+        about ``chunk_bytes`` at a time; the last chunk may lack its newline."""
+        with self._open() as fh:
+            fh.seek(offset)
+            pending = b""
+            while True:
+                try:
+                    data = fh.read(self._chunk)
+                except OSError as e:
+                    raise FogmonError(f"{self.path}: cannot read: {e.strerror}") from None
+                if offset == 0 and not pending and data.startswith(_BOM):
+                    data, offset = data[len(_BOM):], len(_BOM)
+                buf = pending + data if pending else data
+                cut = len(buf) if not data else buf.rfind(b"\n") + 1
+                block, pending = buf[:cut], buf[cut:]
+                if len(pending) > self._max_line:
+                    self._too_long(lineno + block.count(b"\n"))
+                if block:
+                    self._check_line_lengths(block, lineno)
+                    yield offset, lineno, block
+                    offset += len(block)
+                    lineno += block.count(b"\n")
+                if not data:
+                    return
+
+    def _check_line_lengths(self, block: bytes, lineno: int) -> None:
+        if len(block) <= self._max_line:
+            return
+        ends = np.flatnonzero(np.frombuffer(block, np.uint8) == 10)
+        lengths = np.diff(np.concatenate([[-1], ends, [len(block) - 1]]))
+        if lengths.max() > self._max_line + 1:
+            self._too_long(lineno + int(np.argmax(lengths > self._max_line + 1)))
+
+    def _too_long(self, lineno: int):
+        raise FogmonError(f"{self.name}: line {lineno} longer than {self._max_line} bytes (not a replay log?)")
+
+    def _text(self, block: bytes, lineno: int) -> str:
+        try:
+            return block.decode("utf-8")
+        except UnicodeDecodeError as e:
+            line, col = lineno + block.count(b"\n", 0, e.start), e.start - block.rfind(b"\n", 0, e.start)
+            raise FogmonError(f"{self.name}: line {line}: not UTF-8 text (byte {col} of the line)") from None
+
+    def _read_header(self):
+        """(meta, columns, (byte offset, line number) of the first body line)."""
+        meta: dict[str, str] = {}
+        for offset, lineno, block in self._line_chunks(0, 1):
+            pos = 0
+            for i, line in enumerate(self._text(block, lineno).split("\n")):
+                raw_len = len(line.encode("utf-8")) + 1
+                s = line.strip()
+                if s.startswith("#"):
+                    body = s[1:].strip()
+                    if ":" in body and not body.lower().startswith("fogmon replay log"):
+                        k, v = body.split(":", 1)
+                        if k.strip() and " " not in k.strip():
+                            meta[k.strip()] = v.strip()
+                elif s:
+                    return meta, self._columns(s, lineno + i), (offset + pos + raw_len, lineno + i + 1)
+                pos += raw_len
+        raise FogmonError(f"{self.name}: no header line with columns {', '.join(REQUIRED)}")
+
+    def _columns(self, s: str, lineno: int) -> list[str]:
         cols = [c.strip() for c in s.split(",")]
         for req in REQUIRED:
             if req not in cols:
-                raise FogmonError(f"{name}: line {lineno}: missing required column {req!r} "
-                                  f"(header has: {', '.join(cols)})")
+                shown = ", ".join(cols) if len(s) <= 200 else s[:200] + "..."
+                raise FogmonError(f"{self.name}: line {lineno}: missing required column {req!r} "
+                                  f"(header has: {shown})")
         seen = set()
         for c in cols:
             if not c:
-                raise FogmonError(f"{name}: line {lineno}: empty column name in header")
+                raise FogmonError(f"{self.name}: line {lineno}: empty column name in header")
             if c in seen:
-                raise FogmonError(f"{name}: line {lineno}: duplicated column {c!r}")
+                raise FogmonError(f"{self.name}: line {lineno}: duplicated column {c!r}")
             seen.add(c)
-        return meta, cols, lineno
-    raise FogmonError(f"{name}: no header line with columns {', '.join(REQUIRED)}")
+        return cols
 
+    def chunks(self) -> Iterator[Rows]:
+        """The body's rows chunk by chunk, checked: numbers, finite, time strictly
+        increasing across chunks. FogmonError naming file, line and column at the first
+        bad row (unless tolerating)."""
+        last_t = -math.inf
+        cols = self.columns
+        ti, ri = cols.index("time_s"), cols.index("rate_dph")
+        for _, lineno, block in self._line_chunks(*self._body):
+            data = _parse_fast(block, len(cols))
+            skipped = 0
+            if data is None or (len(data) and (data[0, ti] <= last_t or np.any(np.diff(data[:, ti]) <= 0))):
+                data, _, skipped = self._parse_slow(block, lineno, last_t)
+            rows = Rows(data[:, ti], data[:, ri], {c: data[:, j] for j, c in enumerate(cols) if c not in REQUIRED},
+                        skipped, lineno, block, last_t, self)
+            if len(data):
+                last_t = float(data[-1, ti])
+            yield rows
 
-def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recording:
-    """Read a replay-log CSV. Strict by default (first bad row is a FogmonError naming
-    file, line and column); ``tolerate=True`` skips bad rows and counts them in
-    ``Recording.skipped_rows``."""
-    path = os.fspath(path)
-    name = os.path.basename(path)
-    try:
-        with open(path, "r", encoding="utf-8", errors="strict") as fh:
-            text = fh.read()
-    except FileNotFoundError:
-        raise FogmonError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise FogmonError(f"{path}: is a directory, not a replay log") from None
-    except UnicodeDecodeError as e:
-        raise FogmonError(f"{path}: not a text replay log (byte {e.start} is not UTF-8)") from None
-    except OSError as e:
-        raise FogmonError(f"{path}: cannot read: {e.strerror}") from None
-    lines = text.splitlines()
-    meta, cols, hline = _parse_header(((i + 1, l) for i, l in enumerate(lines)), name)
-    body = lines[hline:]
-    data = None
-    if not tolerate:
-        data = _fast_parse(body, len(cols))
-    if data is None:
-        data, skipped = _slow_parse(body, cols, hline, name, tolerate)
-    else:
+    def _parse_slow(self, block: bytes, lineno: int, last_t: float):
+        """Row by row: (rows, their line numbers, rows skipped); raises at the first bad
+        row unless tolerating."""
+        cols, name = self.columns, self.name
+        ti = cols.index("time_s")
+        rows, lines = [], []
         skipped = 0
-    ti = cols.index("time_s")
-    t = data[:, ti] if len(data) else np.zeros(0)
-    if len(t) > 1:
-        bad = np.flatnonzero(np.diff(t) <= 0)
-        if len(bad):
-            if not tolerate:
-                # locate the exact line: rerun the slow path which checks ordering.
-                _slow_parse(body, cols, hline, name, tolerate=False)
-            keep = np.ones(len(t), bool)
-            last = -np.inf
-            for i in range(len(t)):  # only reached when tolerating out-of-order rows
-                if t[i] <= last:
-                    keep[i] = False
-                else:
-                    last = t[i]
-            skipped += int((~keep).sum())
-            data = data[keep]
-    rec = Recording(
-        t_s=np.ascontiguousarray(data[:, ti]),
-        rate_dph=np.ascontiguousarray(data[:, cols.index("rate_dph")]),
-        aux={c: np.ascontiguousarray(data[:, j]) for j, c in enumerate(cols) if c not in REQUIRED},
-        meta=meta, path=path, skipped_rows=skipped,
-    )
-    if len(rec) == 0:
-        raise FogmonError(f"{name}: no data rows")
-    return rec
+        for off, line in enumerate(self._text(block, lineno).split("\n")):
+            at = lineno + off
+            s = line.strip()
+            if not s or s.startswith("#"):
+                continue
+            cells = s.split(",")
+            try:
+                if len(cells) != len(cols):
+                    raise FogmonError(f"{name}: line {at}: expected {len(cols)} cells "
+                                      f"({','.join(cols)}), found {len(cells)}")
+                vals = []
+                for c, cell in zip(cols, cells):
+                    try:
+                        v = float(cell)
+                    except ValueError:
+                        raise FogmonError(f"{name}: line {at}, column {c}: not a number: {_shown(cell)}") from None
+                    if not math.isfinite(v):
+                        raise FogmonError(f"{name}: line {at}, column {c}: {cell.strip()} is not a finite number")
+                    vals.append(v)
+                if vals[ti] <= last_t:
+                    what = "repeats" if vals[ti] == last_t else "goes backwards"
+                    raise FogmonError(f"{name}: line {at}, column time_s: time {what} "
+                                      f"({vals[ti]!r} after {last_t!r})")
+            except FogmonError:
+                if not self.tolerate:
+                    raise
+                skipped += 1
+                continue
+            last_t = vals[ti]
+            rows.append(vals)
+            lines.append(at)
+        return np.array(rows, dtype=np.float64).reshape(-1, len(cols)), np.array(lines, dtype=np.int64), skipped
 
 
-def _fast_parse(body: list[str], ncol: int) -> np.ndarray | None:
-    """numpy's C parser; None when anything looks wrong (the slow path then names it)."""
-    try:
-        a = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", comments="#", ndmin=2, dtype=np.float64)
-    except ValueError:
-        return None
+def _shown(cell: str) -> str:
+    """A cell for an error message: repr, cut to _CELL_SHOWN characters."""
+    c = cell.strip()
+    return repr(c) if len(c) <= _CELL_SHOWN else repr(c[:_CELL_SHOWN]) + f"... ({len(c)} characters)"
+
+
+def _parse_fast(block: bytes, ncol: int) -> np.ndarray | None:
+    """Rows of ``block`` by a C parser (pyarrow, numpy's loadtxt where there are comment
+    lines); None when anything looks wrong (the row-by-row parser then names it)."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    if not block.strip():
+        return np.zeros((0, ncol))
+    a = None
+    if b"#" not in block:
+        names = [f"c{j}" for j in range(ncol)]
+        try:
+            tbl = pacsv.read_csv(pa.py_buffer(block),
+                                 read_options=pacsv.ReadOptions(column_names=names, use_threads=False),
+                                 parse_options=pacsv.ParseOptions(quote_char=False),
+                                 convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(names, pa.float64()),
+                                                                      null_values=[], strings_can_be_null=False))
+            a = np.column_stack([tbl.column(j).to_numpy(zero_copy_only=False) for j in range(ncol)])
+        except (pa.ArrowInvalid, ValueError):
+            a = None
+    if a is None:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                a = np.loadtxt(io.StringIO(block.decode("utf-8")), delimiter=",", comments="#", ndmin=2,
+                               dtype=np.float64)
+        except ValueError:  # UnicodeDecodeError included
+            return None
     if a.size == 0:
         return np.zeros((0, ncol))
     if a.shape[1] != ncol or not np.isfinite(a).all():
@@ -194,42 +374,23 @@ def _fast_parse(body: list[str], ncol: int) -> np.ndarray | None:
     return a
 
 
-def _slow_parse(body, cols, hline, name, tolerate):
-    rows = []
+def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recording:
+    """Read a whole replay-log CSV into memory (the batch commands; ``fogmon replay``
+    streams it with ReplayLogReader). Strict by default (first bad row is a FogmonError
+    naming file, line and column); ``tolerate=True`` skips bad rows and counts them in
+    ``Recording.skipped_rows``."""
+    reader = ReplayLogReader(path, tolerate=tolerate)
+    cols: dict[str, list[np.ndarray]] = {c: [] for c in ("time_s", "rate_dph", *reader.aux_names)}
     skipped = 0
-    last_t = -math.inf
-    ti = cols.index("time_s")
-    for off, line in enumerate(body):
-        lineno = hline + 1 + off
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        cells = s.split(",")
-        try:
-            if len(cells) != len(cols):
-                raise FogmonError(f"{name}: line {lineno}: expected {len(cols)} cells "
-                                  f"({','.join(cols)}), found {len(cells)}")
-            vals = []
-            for c, cell in zip(cols, cells):
-                try:
-                    v = float(cell)
-                except ValueError:
-                    raise FogmonError(f"{name}: line {lineno}, column {c}: not a number: {cell.strip()!r}") from None
-                if not math.isfinite(v):
-                    raise FogmonError(f"{name}: line {lineno}, column {c}: {cell.strip()} is not a finite number")
-                vals.append(v)
-            if vals[ti] <= last_t:
-                what = "repeats" if vals[ti] == last_t else "goes backwards"
-                raise FogmonError(f"{name}: line {lineno}, column time_s: time {what} "
-                                  f"({vals[ti]!r} after {last_t!r})")
-        except FogmonError:
-            if not tolerate:
-                raise
-            skipped += 1
-            continue
-        last_t = vals[ti]
-        rows.append(vals)
-    return (np.array(rows, dtype=np.float64).reshape(-1, len(cols)), skipped)
+    for rows in reader.chunks():  # keep the values only, not each chunk's text
+        for c, a in (("time_s", rows.t_s), ("rate_dph", rows.rate_dph), *rows.aux.items()):
+            cols[c].append(a)
+        skipped += rows.skipped
+    if not sum(len(a) for a in cols["time_s"]):
+        raise FogmonError(f"{reader.name}: no data rows")
+    whole = {c: np.concatenate(v) for c, v in cols.items()}
+    return Recording(t_s=whole.pop("time_s"), rate_dph=whole.pop("rate_dph"), aux=whole, meta=reader.meta,
+                     path=reader.path, skipped_rows=skipped)
 
 
 def write_replay_log(path: str | os.PathLike, t_s, rate_dph, aux: dict | None = None,

@@ -114,3 +114,99 @@ def test_pacer_waits_for_recording_time_over_speed():
     assert slept == [0.5, pytest.approx(0.8)]
     Pacer(None, sleep=slept.append).wait(5.0)
     assert len(slept) == 2
+
+
+# -- chunked replay: identical blocks whatever the chunk size, bounded gaps --------------
+def _replay(path, **kw):
+    src = ReplayLogSource(str(path), **kw)
+    bl = list(src.blocks())
+    return src, bl
+
+
+def _flat(bl):
+    return {"t": np.concatenate([b.t_s for b in bl]), "rate": np.concatenate([b.rate_dph for b in bl]),
+            "valid": np.concatenate([b.valid for b in bl]), "temp": np.concatenate([b.aux["temp_c"] for b in bl]),
+            "lens": [len(b) for b in bl], "events": [(e.t_s, e.kind, e.message) for b in bl for e in b.events]}
+
+
+def test_chunk_seams_change_nothing(tmp_path):
+    n = 40000
+    keep = np.ones(n, bool)
+    for a, b in ((0 + 1, 4), (777, 778), (8190, 8195), (9000, 30000), (39990, 39999)):   # one spans 3 blocks
+        keep[a:b] = False
+    t = np.arange(n)[keep] / 100.0
+    p = tmp_path / "g.csv"
+    write_replay_log(p, t, np.cos(t), {"temp_c": 20 + t / 1e3}, {"sample_rate_hz": 100})
+    ref_src, ref = _replay(p)
+    want = _flat(ref)
+    assert want["lens"] == [8192] * 4 + [39999 - 4 * 8192 + 1]
+    np.testing.assert_array_equal(np.flatnonzero(~want["valid"]), np.flatnonzero(~keep[:39999 + 1]))
+    assert [m for _, _, m in want["events"]] == [
+        "3 sample(s) missing at t=0.010000 s (time gap in the log)",
+        "1 sample(s) missing at t=7.770000 s (time gap in the log)",
+        "5 sample(s) missing at t=81.900000 s (time gap in the log)",
+        "21000 sample(s) missing at t=90.000000 s (time gap in the log)",   # the whole gap, in the block it starts
+        "9 sample(s) missing at t=399.900000 s (time gap in the log)"]
+    assert ref_src.counters == {"samples": keep.sum(), "samples_missing": n - keep.sum(), "seq_gaps": 5,
+                                "skipped_rows": 0, "implausible_samples": 0}
+    assert ref_src.n_samples == n
+    for chunk_bytes in (300, 4000, 65536):
+        src, bl = _replay(p, chunk_bytes=chunk_bytes)
+        got = _flat(bl)
+        assert got["lens"] == want["lens"] and got["events"] == want["events"]
+        for k in ("t", "rate", "valid", "temp"):
+            np.testing.assert_array_equal(got[k], want[k])
+        assert src.counters == ref_src.counters
+
+
+def test_bad_row_deep_in_the_file_stops_before_any_block(tmp_path):
+    t = np.arange(5000) / 100.0
+    p = tmp_path / "late.csv"
+    write_replay_log(p, t, np.zeros(5000), {"temp_c": np.ones(5000)}, {"sample_rate_hz": 100})
+    text = p.read_text().splitlines()
+    text[4000] = "39.975,0,1"                                     # off the 100 Hz grid
+    p.write_text("\n".join(text) + "\n")
+    with pytest.raises(FogmonError, match=r"^late.csv: line 4001, column time_s: sample at time_s=39.975 is "
+                                          r"0.50 sample periods off the 100 Hz grid"):
+        ReplayLogSource(str(p), chunk_bytes=512)
+
+
+def test_implausible_rates_become_invalid_and_counted(tmp_path):
+    t = np.arange(100) / 10.0
+    r = np.ones(100)
+    r[[3, 50]] = [1e30, -4e7]
+    p = tmp_path / "x.csv"
+    write_replay_log(p, t, r, {"temp_c": np.ones(100)}, {"sample_rate_hz": 10})
+    src, bl = _replay(p, max_abs_dph=1e6)
+    v = np.concatenate([b.valid for b in bl])
+    np.testing.assert_array_equal(np.flatnonzero(~v), [3, 50])
+    assert src.counters["implausible_samples"] == 2 and src.counters["samples"] == 100
+
+
+def test_no_newline_file_via_cli_is_one_line_exit_2(tmp_path, capsys):
+    p = tmp_path / "blob.csv"
+    with open(p, "wb") as fh:                                     # 64 MiB without a newline
+        fh.write(b"time_s,rate_dph\x00")
+        for _ in range(64):
+            fh.write(b"\x00" * (1 << 20))
+    assert main(["replay", str(p), "--no-progress", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "blob.csv: line 1 longer than 1048576 bytes" in err and len(err) < 200
+
+
+def test_archive_pieces_checked_when_opened(tmp_path):
+    from fogmon.sources.replay import ReplayLogSet
+    t = np.arange(300) / 10.0
+    for k, sl in enumerate((slice(0, 100), slice(150, 300)), 1):
+        write_replay_log(tmp_path / f"samples-000{k}.csv", t[sl], np.ones(len(t[sl])), {"temp_c": t[sl]},
+                         {"sample_rate_hz": 10})
+    s = ReplayLogSet([str(tmp_path / "samples-0001.csv"), str(tmp_path / "samples-0002.csv")])
+    assert s.n_samples == 300
+    bl = list(s.blocks())
+    v = np.concatenate([b.valid for b in bl])
+    np.testing.assert_array_equal(np.flatnonzero(~v), np.arange(100, 150))
+    assert s.counters["samples_missing"] == 50 and s.counters["seq_gaps"] == 1 and s.counters["samples"] == 250
+    with open(tmp_path / "samples-0002.csv", "a") as fh:
+        fh.write("31,oops,1\n")
+    with pytest.raises(FogmonError, match="samples-0002.csv: line .*, column rate_dph: not a number"):
+        ReplayLogSet([str(tmp_path / "samples-0001.csv"), str(tmp_path / "samples-0002.csv")])

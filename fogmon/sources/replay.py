@@ -13,13 +13,14 @@ import functools
 import json
 import math
 import os
+from collections import deque
 from typing import Iterator, Sequence
 
 import numpy as np
 
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
-from fogmon.recording import read_replay_log
+from fogmon.recording import CHUNK_BYTES, ReplayLogReader, Rows, grid_positions
 from fogmon.sources import plausibility
 from fogmon.sources.codecs import OPTION_KEYS, PROTOCOLS, codec_from_options
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
@@ -38,60 +39,128 @@ def _block_len(rate_hz: float, speed: float | None) -> int:
 
 
 class ReplayLogSource:
-    """A replay-log CSV on its uniform grid: time gaps become invalid placeholders with a
-    ``gap`` event. Counters: ``samples`` (rows), ``samples_missing``, ``seq_gaps``
-    (time gaps), ``skipped_rows`` (only with ``tolerate=True``), ``implausible_samples``
-    (rates beyond +-``max_abs_dph`` deg/h: made invalid, with an ``implausible`` event)."""
+    """A replay-log CSV on its uniform grid, read in chunks (memory independent of the
+    file size): time gaps become invalid placeholders with a ``gap`` event; rates beyond
+    +-``max_abs_dph`` (deg/h, fogmon.sources.plausibility) become invalid samples. Opening
+    reads the whole file once to check it (a bad row is a one-line error naming file,
+    line and column before any work starts) and to know ``n_samples`` (grid length) and
+    ``t_first_s``/``t_last_s``. Counters, as far as the blocks yielded so far reach:
+    ``samples`` (rows), ``samples_missing``, ``seq_gaps`` (time gaps), ``skipped_rows``
+    (only with ``tolerate=True``), ``implausible_samples``."""
 
     def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
-                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH) -> None:
-        rec = read_replay_log(path, tolerate=tolerate)
-        self.recording = rec
-        self.rate_hz = rec.sample_rate_hz
-        self._block = rec.to_block()
-        present = np.zeros(len(self._block), bool)
-        present[rec.grid_index()] = True
-        self._present = present
-        self.name = f"replay log {rec.name}" + (f" ({rec.meta['sensor']})" if "sensor" in rec.meta else "")
-        starts = np.flatnonzero(~present[1:] & present[:-1]) + 1 if len(present) > 1 else np.zeros(0, int)
-        self.counters = {"samples": len(rec), "samples_missing": int((~present).sum()),
-                         "seq_gaps": len(starts), "skipped_rows": rec.skipped_rows, plausibility.COUNTER: 0}
-        self.max_abs_dph = float(max_abs_dph)
+                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES) -> None:
+        self._reader = reader = ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
+        self.meta, self.aux_names = reader.meta, reader.aux_names
+        self.rate_hz = reader.sample_rate_hz
+        self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")
+        self._max_abs_dph = max_abs_dph
+        t0 = t_last = None
+        last = -1
+        for rows in reader.chunks():  # the checking pass
+            if not len(rows):
+                continue
+            if t0 is None:
+                t0 = float(rows.t_s[0])
+            last = int(grid_positions(rows.t_s, t0, self.rate_hz, reader.name, last, rows.line_of)[-1])
+            t_last = float(rows.t_s[-1])
+        if t0 is None:
+            raise FogmonError(f"{reader.name}: no data rows")
+        self.t_first_s, self.t_last_s, self.n_samples = t0, t_last, last + 1
+        self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
+                         plausibility.COUNTER: 0}
         self._pacer = Pacer(speed)
         self._n = _block_len(self.rate_hz, speed)
         self._closed = False
 
     def blocks(self) -> Iterator[Block]:
-        b, present = self._block, self._present
-        errors = ErrorEvents(self.counters)
-        for i in range(0, len(b), self._n):
+        c = self.counters
+        errors = ErrorEvents(c)
+        for b, present, gaps in self._grid_blocks():
             if self._closed:
                 return
-            sl = slice(i, i + self._n)
-            t = b.t_s[sl]
-            self._pacer.wait(float(t[0]))
-            rate, n_bad = plausibility.gate(b.rate_dph[sl], self.max_abs_dph)
-            self.counters[plausibility.COUNTER] += n_bad
-            t_bad = float(t[np.argmax(np.isnan(rate) & b.valid[sl])])    # the first implausible sample's
-            events = _gap_events(t, ~present[sl], i > 0 and not present[i - 1]) + tuple(errors.poll(t_bad))
-            yield Block(t, rate, b.valid[sl] & ~np.isnan(rate), {k: v[sl] for k, v in b.aux.items()}, events)
+            self._pacer.wait(float(b.t_s[0]))
+            c["samples"] += present
+            c["samples_missing"] += len(b) - present
+            c["seq_gaps"] += gaps
+            rate, n_bad = plausibility.gate(b.rate_dph, self._max_abs_dph)
+            c[plausibility.COUNTER] += n_bad
+            bad = np.isnan(rate) & b.valid
+            t_event = float(b.t_s[np.argmax(bad)])      # the first implausible sample's (or the block's)
+            yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)))
+
+    def _grid_blocks(self) -> Iterator[tuple[Block, int, int]]:
+        grid = _LogGrid(self.t_first_s, self.rate_hz, self._n, self.aux_names, self._reader.name)
+        for rows in self._reader.chunks():
+            self.counters["skipped_rows"] += rows.skipped
+            yield from grid.push(rows)
+        yield grid.flush()
 
     def close(self) -> None:
         self._closed = True
 
 
-def _gap_events(t: np.ndarray, missing: np.ndarray, continues: bool) -> tuple[Event, ...]:
-    """Events for each run of missing samples starting in this block."""
-    m = missing.astype(np.int8)
-    edges = np.diff(np.concatenate([[1 if continues else 0], m, [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    if continues and len(ends) and (not len(starts) or ends[0] < starts[0]):
-        ends = ends[1:]
-    evs = [Event(float(t[s]), "gap", f"{int(e - s)} sample(s) missing at t={t[s]:.6f} s (time gap in the log)")
-           for s, e in zip(starts[:MAX_GAP_EVENTS], ends[:MAX_GAP_EVENTS])]
-    if len(starts) > MAX_GAP_EVENTS:
-        evs.append(Event(float(t[starts[MAX_GAP_EVENTS]]), "gap", f"{len(starts) - MAX_GAP_EVENTS} more gaps in this block"))
-    return tuple(evs)
+class _LogGrid:
+    """Checked rows of a replay log, in order -> blocks of ``n`` samples on the grid
+    t0 + k / fs (s, Hz), block j holding grid indices j*n .. (j+1)*n - 1: missing samples
+    are invalid placeholders (NaN) and each time gap is one ``gap`` event in the block
+    where it starts, however many blocks it spans. The result does not depend on how
+    the rows are cut into chunks."""
+
+    def __init__(self, t0_s: float, fs: float, n: int, aux_names: Sequence[str], name: str) -> None:
+        self.t0_s, self.fs, self.n, self.aux_names, self.name = t0_s, fs, n, list(aux_names), name
+        self._last = -1
+        self._gaps: deque[tuple[int, int]] = deque()  # (first missing grid index, samples missing)
+        self._start(0)
+
+    def _start(self, j: int) -> None:
+        n = self.n
+        self._j = j
+        self._t = self.t0_s + (j * n + np.arange(n)) / self.fs
+        self._rate = np.full(n, np.nan)
+        self._aux = {k: np.full(n, np.nan) for k in self.aux_names}
+        self._present = np.zeros(n, bool)
+
+    def push(self, rows: Rows) -> Iterator[tuple[Block, int, int]]:
+        """(block, samples present in it, time gaps starting in it) for every block the
+        rows complete."""
+        if not len(rows):
+            return
+        idx = grid_positions(rows.t_s, self.t0_s, self.fs, self.name, self._last, rows.line_of)
+        d = np.diff(idx, prepend=self._last)
+        g = np.flatnonzero(d > 1)
+        self._gaps.extend(zip((idx[g] - d[g] + 1).tolist(), (d[g] - 1).tolist()))
+        self._last = int(idx[-1])
+        j_of = idx // self.n
+        cuts = [0, *(np.flatnonzero(np.diff(j_of)) + 1).tolist(), len(idx)]
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            j = int(j_of[a])
+            while self._j < j:
+                yield self._emit(self.n)
+                self._start(self._j + 1)
+            at = idx[a:b] - j * self.n
+            self._t[at] = rows.t_s[a:b]
+            self._rate[at] = rows.rate_dph[a:b]
+            for k in self.aux_names:
+                self._aux[k][at] = rows.aux[k][a:b]
+            self._present[at] = True
+
+    def flush(self) -> tuple[Block, int, int]:
+        """The last block, up to the last row pushed."""
+        return self._emit(self._last - self._j * self.n + 1)
+
+    def _emit(self, m: int) -> tuple[Block, int, int]:
+        end = self._j * self.n + self.n
+        gaps = []
+        while self._gaps and self._gaps[0][0] < end:
+            gaps.append(self._gaps.popleft())
+        t = self._t[:m]
+        evs = [Event(float(t[k - end + self.n]), "gap", f"{n} sample(s) missing at t={t[k - end + self.n]:.6f} s "
+                     f"(time gap in the log)") for k, n in gaps[:MAX_GAP_EVENTS]]
+        if len(gaps) > MAX_GAP_EVENTS:
+            evs.append(Event(evs[-1].t_s, "gap", f"{len(gaps) - MAX_GAP_EVENTS} more gaps in this block"))
+        b = Block.make(t, self._rate[:m], aux={k: v[:m] for k, v in self._aux.items()}, events=evs)
+        return b, int(np.count_nonzero(self._present[:m])), len(gaps)
 
 
 #: The decoder options a serial capture's sidecar may hold (names of codec options()).
@@ -280,60 +349,68 @@ def open_raw_capture(path: str | Sequence[str], overrides: dict | None = None) -
 
 class ReplayLogSet:
     """Replay-log pieces (an archive's samples-NNNN.csv, fogmon.pieces) replayed as one
-    recording, one piece in memory at a time. The sample grid goes on across the seams:
-    samples missing between two pieces become invalid placeholders with a ``gap`` event,
-    as inside one log; pieces that overlap in time, or differ in sample rate or columns,
-    are a one-line error. Counters: the pieces' summed, seam gaps included."""
+    recording, each read in chunks. Every piece is checked when the set is opened. The
+    sample grid goes on across the seams: samples missing between two pieces become
+    invalid placeholders with a ``gap`` event, as inside one log; pieces that overlap in
+    time, or differ in sample rate or columns, are a one-line error. Counters: the
+    pieces' summed, seam gaps included."""
 
     def __init__(self, paths: Sequence[str], tolerate: bool = False,
                  max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH) -> None:
-        self.paths, self._tolerate, self._max_abs_dph = list(paths), tolerate, max_abs_dph
-        self._first = ReplayLogSource(self.paths[0], tolerate=tolerate, max_abs_dph=max_abs_dph)
-        self.rate_hz = self._first.rate_hz
-        self.name = f"replay log {os.path.basename(self.paths[0])} .. {os.path.basename(self.paths[-1])} " \
-                    f"({len(self.paths)} pieces)"
-        self.counters = {k: 0 for k in self._first.counters}
-        t0 = float(self._first.recording.t_s[0])
-        t_last = float(read_replay_log(self.paths[-1], tolerate=tolerate).t_s[-1])
-        self.n_samples = int(round((t_last - t0) * self.rate_hz)) + 1
-        self._closed = False
-
-    def blocks(self) -> Iterator[Block]:
-        t_end = aux = None
-        for i, path in enumerate(self.paths):
-            src = self._first if i == 0 else ReplayLogSource(path, tolerate=self._tolerate,
-                                                             max_abs_dph=self._max_abs_dph)
+        self.paths = list(paths)
+        self._sources = [ReplayLogSource(p, tolerate=tolerate, max_abs_dph=max_abs_dph) for p in self.paths]
+        first = self._sources[0]
+        self.rate_hz = first.rate_hz
+        aux = first.aux_names
+        for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:]):
             if src.rate_hz != self.rate_hz:
                 raise FogmonError(f"{path}: sample_rate_hz {src.rate_hz:g} differs from {self.paths[0]} "
                                   f"({self.rate_hz:g} Hz): not pieces of one recording")
+            if src.aux_names != aux:
+                raise FogmonError(f"{path}: columns {src.aux_names} differ from {self.paths[0]} ({aux})")
+            if _seam_missing(prev, src) < 0:
+                raise FogmonError(f"{path}: starts at t={src.t_first_s:.6f} s, not after the end of the "
+                                  f"previous piece (t={prev.t_last_s:.6f} s)")
+        self.name = f"replay log {os.path.basename(self.paths[0])} .. {os.path.basename(self.paths[-1])} " \
+                    f"({len(self.paths)} pieces)"
+        self.n_samples = int(round((self._sources[-1].t_last_s - first.t_first_s) * self.rate_hz)) + 1
+        self._seams = {"samples_missing": 0, "seq_gaps": 0}
+        self._closed = False
+
+    @property
+    def counters(self) -> dict[str, int]:
+        out = dict(self._seams)
+        for src in self._sources:
+            for k, v in src.counters.items():
+                out[k] = out.get(k, 0) + v
+        return out
+
+    def blocks(self) -> Iterator[Block]:
+        for i, src in enumerate(self._sources):
+            missing = _seam_missing(self._sources[i - 1], src) if i else 0
+            if missing:
+                self._seams["samples_missing"] += missing
+                self._seams["seq_gaps"] += 1
+                yield from _seam_gap(self._sources[i - 1].t_last_s, missing, self.rate_hz, src.aux_names)
             for b in src.blocks():
                 if self._closed:
                     return
-                if aux is None:
-                    aux = list(b.aux)
-                if list(b.aux) != aux:
-                    raise FogmonError(f"{path}: columns {list(b.aux)} differ from {self.paths[0]} ({aux})")
-                if t_end is not None:
-                    missing = int(round((b.t_s[0] - t_end) * self.rate_hz)) - 1
-                    if missing < 0:
-                        raise FogmonError(f"{path}: starts at t={b.t_s[0]:.6f} s, not after the end of the "
-                                          f"previous piece (t={t_end:.6f} s)")
-                    if missing:
-                        for k, v in (("samples_missing", missing), ("seq_gaps", 1)):
-                            self.counters[k] = self.counters.get(k, 0) + v
-                        yield _seam_gap(t_end, missing, self.rate_hz, aux)
-                t_end = float(b.t_s[-1])
                 yield b
-            for k, v in src.counters.items():
-                self.counters[k] = self.counters.get(k, 0) + v
 
     def close(self) -> None:
         self._closed = True
 
 
-def _seam_gap(t_end: float, missing: int, rate_hz: float, aux: list[str]) -> Block:
-    """Invalid placeholders for the samples missing between two pieces, with a gap event."""
-    t = t_end + np.arange(1, missing + 1) / rate_hz
-    nan = np.full(missing, np.nan)
-    return Block(t, nan, np.zeros(missing, bool), {k: nan for k in aux},
-                 (Event(float(t[0]), "gap", f"{missing} sample(s) missing at t={t[0]:.6f} s (between two pieces)"),))
+def _seam_missing(prev: ReplayLogSource, nxt: ReplayLogSource) -> int:
+    """Samples missing between the end of piece ``prev`` and the start of ``nxt``."""
+    return int(round((nxt.t_first_s - prev.t_last_s) * prev.rate_hz)) - 1
+
+
+def _seam_gap(t_end: float, missing: int, rate_hz: float, aux: list[str]) -> Iterator[Block]:
+    """Invalid placeholders for the samples missing between two pieces, FAST_BLOCK at a
+    time, with a gap event in the first."""
+    for i in range(0, missing, FAST_BLOCK):
+        t = t_end + np.arange(i + 1, min(i + FAST_BLOCK, missing) + 1) / rate_hz
+        nan = np.full(len(t), np.nan)
+        ev = (Event(float(t[0]), "gap", f"{missing} sample(s) missing at t={t[0]:.6f} s (between two pieces)"),)
+        yield Block(t, nan, np.zeros(len(t), bool), {k: nan for k in aux}, ev if i == 0 else ())

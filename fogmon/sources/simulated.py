@@ -1,7 +1,8 @@
 """A simulated gyro as a live source (fogmon.sources.base.Source): streams
 ``fogmon.sim.simulate.iter_simulate`` block by block in bounded memory, as fast as
 possible or paced at real time x ``speed``. Endless when neither a duration, a
-recording (``like``) nor aux channels bound it; ``close()`` stops it."""
+recording (``like``) nor aux channels bound it; ``close()`` stops it. It can wait: the
+pipeline's bounded reader queue holds it back while processing catches up."""
 from __future__ import annotations
 
 import os
