@@ -75,6 +75,10 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                    help="analyse rate_dph as recorded even when the recording has rot_dps; by default "
                         "DAVAR and the fits see the gyro's error rate_dph - 3600 x rot_dps (deg/h) "
                         "against the reference rotation")
+    g.add_argument("--keep-motion", action="store_true",
+                   help="analyse platform motion too: by default stretches where the rate moves far beyond "
+                        "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) "
+                        "are kept out of DAVAR and the fits, with platform_motion events (docs/motion.md)")
     g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
                    help="averaging times: octave (default), decade, all, an integer N = "
                         f"1..{MAX_PER_DECADE} (N log-spaced per decade), or tau values in s written with a "
@@ -253,6 +257,8 @@ class Summary:
     counters: dict[str, int] = field(default_factory=dict)
     event_counts: dict[str, int] = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
+    motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
+    motion_samples: int = 0       # valid samples the motion gate made invalid
 
     @property
     def duration_s(self) -> float:
@@ -360,6 +366,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     from fogmon.davar.fit import fit_noise
     from fogmon.davar.streaming import StreamingDadev
     from fogmon.davar.taus import tau_grid
+    from fogmon.motion import MotionGate
 
     rate_hz = float(source.rate_hz)
     total_n = record_samples(source)
@@ -389,6 +396,23 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     done = False
     use_ref = False
     reader = None
+    motion = None if getattr(args, "keep_motion", False) else MotionGate(rate_hz)
+
+    def analyse(y: np.ndarray, valid: np.ndarray) -> None:
+        """DAVAR, fits, jump events and the whole-run tail for the next samples."""
+        res = engine.push(y, valid)
+        if len(res):
+            fit = fit_noise(res)
+            t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
+            for s in sinks:
+                s.frames(res, fit, t_end)
+            summary.n_windows += len(res)
+            _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
+            counters = _counters(source, reader)
+            for s in sinks:
+                s.source_counters(float(t_end[-1]), counters)
+        tail.push(y, valid)
+
     try:
         if total_n is None:  # live: compile before the device is opened, then read it in a thread
             _warm_up(rate_hz, window_s, hop_s, taus)
@@ -429,18 +453,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                         summary.t_first_s = float(b.t_s[0])
                     piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
                     y = b.error_rate_dph if use_ref else b.rate_dph
-                    res = engine.push(y, b.valid & np.isfinite(y))
-                    if len(res):
-                        fit = fit_noise(res)
-                        t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
-                        for s in sinks:
-                            s.frames(res, fit, t_end)
-                        summary.n_windows += len(res)
-                        _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
-                        counters = _counters(source, reader)
-                        for s in sinks:
-                            s.source_counters(float(t_end[-1]), counters)
-                    tail.push(y, b.valid)
+                    analyse(*_gate_motion(motion, b.t_s, y, b.valid & np.isfinite(y), sinks, event_counts))
                     progress.update(summary.duration_s, time.monotonic() - wall0)
             if done:
                 break
@@ -463,6 +476,11 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                         continue
                     for b_piece, b in _at_seams([big], t_origin, rate_hz, piece_n):
                         piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
+        if motion is not None and started and not summary.failed:   # the samples the gate still holds
+            y, valid, ev = motion.flush()
+            _dispatch_events(sinks, ev, event_counts)
+            analyse(y, valid)
+            summary.motion_spans, summary.motion_samples = list(motion.spans), motion.samples_excluded
         summary.wall_s = time.monotonic() - wall0
         summary.source_wall_s = time.monotonic() - wall_start
         summary.counters = _counters(source, reader)
@@ -709,6 +727,17 @@ class _ThreadedBlocks:
             elif isinstance(item, Block) and (len(item) or item.events):
                 out.append(item)
         return out
+
+
+def _gate_motion(motion: "MotionGate | None", t_s: np.ndarray, y: np.ndarray, valid: np.ndarray, sinks,
+                 counts: Counter) -> tuple[np.ndarray, np.ndarray]:
+    """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
+    has judged, platform motion made invalid (its events dispatched)."""
+    if motion is None:
+        return y, valid
+    y, valid, events = motion.push(t_s, y, valid)
+    _dispatch_events(sinks, events, counts)
+    return y, valid
 
 
 def _dispatch_events(sinks, events, counts: Counter) -> None:

@@ -220,7 +220,11 @@ def test_reference_rotation_is_subtracted_unless_raw_rate():
     np.testing.assert_allclose(np.concatenate([d.adev_dph for d, _, _ in sink.frames_]), ref.adev_dph, rtol=1e-9)
     s = run_pipeline(ListSource(t, meas, [4096] * 4, fs, aux={"rot_dps": rot}), _args(window_s=40.96, raw_rate=True),
                      sinks=[Collect()])
-    assert s.analysed == "rate_dph" and s.overall.adev_dph[-1] > 1e5   # the 2.6e6 deg/h step dominates
+    assert s.analysed == "rate_dph" and [(m.t_start_s, m.t_end_s) for m in s.motion_spans] == [(79.68, 163.83)]
+    assert np.isnan(s.overall.adev_dph[-1])     # the turning string is platform motion: kept out ...
+    s = run_pipeline(ListSource(t, meas, [4096] * 4, fs, aux={"rot_dps": rot}),
+                     _args(window_s=40.96, raw_rate=True, keep_motion=True), sinks=[Collect()])
+    assert s.motion_spans == [] and s.overall.adev_dph[-1] > 1e5   # ... unless asked: the 2.6e6 deg/h step
 
 
 def test_model_check_names_the_worst_tau():

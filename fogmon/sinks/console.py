@@ -29,6 +29,8 @@ def format_summary(s: Summary) -> str:
     if s.analysed != "rate_dph":
         lines.append(f"  analysed: {s.analysed} (deg/h), the gyro's error against the reference rotation "
                      f"(--raw-rate for rate_dph itself)")
+    if s.motion_spans:
+        lines += motion_lines(s)
     a = s.overall
     if a is not None:
         conf = getattr(a, "confidence", 0.683)
@@ -62,6 +64,27 @@ def format_summary(s: Summary) -> str:
     for o in s.outputs:
         lines.append(f"Wrote {o} (open it with: rerun {o})" if o.endswith(".rrd") else f"Wrote {o}")
     return "\n".join(lines)
+
+
+#: Platform-motion spans listed in the summary before the rest is only counted.
+MAX_MOTION_SPANS = 20
+
+
+def motion_lines(s: Summary) -> list[str]:
+    """The platform-motion spans kept out of the analysis (all, or the first
+    MAX_MOTION_SPANS and where the rest are)."""
+    spans = s.motion_spans
+    pct = 100.0 * s.motion_samples / max(s.n_samples, 1)
+    out = [f"  platform motion: {len(spans)} span(s), {s.motion_samples} samples ({pct:.1f} %) kept out of "
+           f"DAVAR and the fits (--keep-motion analyses them; docs/motion.md):"]
+    shown = [f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s (peak {m.peak_dph:.3g} deg/h)" for m in spans[:MAX_MOTION_SPANS]]
+    for i in range(0, len(shown), 3):
+        out.append("    " + ", ".join(shown[i:i + 3]))
+    if len(spans) > MAX_MOTION_SPANS:
+        rrd = [o for o in s.outputs if o.endswith(".rrd")]
+        where = f"all are in the event log of {rrd[0]}" if rrd else "--rrd keeps all of them in its event log"
+        out.append(f"    ... and {len(spans) - MAX_MOTION_SPANS} more ({where})")
+    return out
 
 
 def no_windows_reason(s: Summary) -> str:
