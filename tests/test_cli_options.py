@@ -79,6 +79,7 @@ def test_api_grids_by_name_or_per_decade_drop_nothing_silently(recwarn):
     (["--hop-s", "nan"], "argument --hop-s: must be a finite number > 0"),
     (["--duration-s", "-1"], "argument --duration-s: must be a finite number > 0"),
     (["--realtime", "0"], "argument --realtime: must be a finite number > 0"),
+    (["--rate-hz", "1e12"], "argument --rate-hz: must be a finite number > 0 and <= 1e+06, got '1e12'"),
 ])
 def test_replay_bad_option_values_are_usage_errors(log, capsys, argv, message):
     with pytest.raises(SystemExit) as e:
@@ -195,3 +196,16 @@ def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):  # noq
     assert "  0 DADEV windows of 600 s every 75 s" in out, err
     assert (f"  no DADEV window: the window is 600000 samples = 600 s at 1000 Hz and the run had {n:,} samples "
             f"({n / 1000:g} s); use --window-s ") in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--can", "can0", "--dbc", "fogmon/data/gyro_example.dbc", "--can-bitrate", "-1"],
+     "argument --can-bitrate: must be an integer in 1000..8,000,000, got '-1'"),
+    (["--serial", "/dev/null", "--baud", "0"], "argument --baud: must be an integer in 1..50,000,000, got '0'"),
+    (["--serial", "/dev/null", "--protocol", "lines", "--rate-hz", "0"], "argument --rate-hz: must be a finite number > 0"),
+])
+def test_monitor_bad_port_values_are_usage_errors(capsys, argv, message):
+    with pytest.raises(SystemExit) as e:
+        main(["monitor", *argv])
+    assert e.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1].startswith(f"fogmon: error: {message}")

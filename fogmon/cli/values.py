@@ -10,11 +10,17 @@ def number(lo: float | None = None, hi: float | None = None, *, integer: bool = 
     """argparse ``type=``: a finite float (an int with ``integer``) with lo <= v <= hi
     (lo < v with ``above``); None leaves a side open."""
     kind = "an integer" if integer else "a finite number"
+
+    def fmt(v: float) -> str:
+        if not integer:
+            return f"{v:g}"
+        return f"{int(v):,}" if abs(v) >= 100_000 else str(int(v))
+
     if lo is not None and hi is not None and not above:
-        rule = f"{kind} in {lo:g}..{hi:g}"
+        rule = f"{kind} in {fmt(lo)}..{fmt(hi)}"
     else:
-        bounds = ([f"{'>' if above else '>='} {lo:g}"] if lo is not None else []) + \
-            ([f"<= {hi:g}"] if hi is not None else [])
+        bounds = ([f"{'>' if above else '>='} {fmt(lo)}"] if lo is not None else []) + \
+            ([f"<= {fmt(hi)}"] if hi is not None else [])
         rule = f"{kind} {' and '.join(bounds)}".strip()
 
     def parse(text: str):

@@ -5,12 +5,14 @@ from __future__ import annotations
 import argparse
 import os
 
-from fogmon.cli.values import positive
+from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility as pl
 from fogmon.sources.codecs import DEFAULTS, PROTOCOLS, make_codec
 
 CAN_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".log", ".mf4")
+#: The highest --rate-hz accepted (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz).
+MAX_RATE_HZ = 1e6
 
 
 def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") -> None:
@@ -23,7 +25,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     if live:
         g.add_argument("--serial", metavar="PORT", help="serial port of the gyro (/dev/ttyUSB0, COM3, or a "
                        "pyserial URL such as loop:// or socket://HOST:PORT); reopened with backoff if it disappears")
-        g.add_argument("--baud", type=int, metavar="B", help="baud rate (default per protocol: kvh-a/b/c 921600, "
+        g.add_argument("--baud", type=number(1, 50_000_000, integer=True), metavar="B", help="baud rate, "
+                       "1..50,000,000 (default per protocol: kvh-a/b/c 921600, "
                        "dsp3000 38400, lines 115200)")
     g.add_argument("--protocol", choices=PROTOCOLS, help="serial protocol: kvh-a|kvh-b|kvh-c = KVH DSP-1750/1760/1775 "
                    "binary formats A/B/C, dsp3000 = KVH DSP-3000 ASCII (deg/s), lines = ASCII/CSV lines with "
@@ -36,15 +39,15 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
                    "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
-    g.add_argument("--rate-hz", type=float, metavar="HZ", help="sample rate in Hz where the protocol does not tell "
-                   "it (default: kvh-* 1000, dsp3000 100, lines 100; CAN: the DBC message cycle time)")
+    g.add_argument("--rate-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ", help="sample rate in Hz "
+                   f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, dsp3000 100, lines 100; CAN: the DBC message cycle time)")
     c = parser.add_argument_group("CAN gyro" if live else "CAN log decoding")
     if live:
         c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
         c.add_argument("--interface", default="socketcan", metavar="I", help="python-can interface: socketcan, "
                        "pcan, kvaser, vector, slcan, virtual, ... (default: socketcan)")
-        c.add_argument("--can-bitrate", type=int, metavar="BPS", help="CAN bit rate in bit/s, for interfaces "
-                       "that set it (default: leave the interface as configured)")
+        c.add_argument("--can-bitrate", type=number(1_000, 8_000_000, integer=True), metavar="BPS",
+                       help="CAN bit rate in bit/s, 1,000..8,000,000, for interfaces that set it (default: leave the interface as configured)")
     c.add_argument("--dbc", metavar="F", help="DBC file describing the gyro's CAN frames (see "
                    "fogmon/data/gyro_example.dbc)")
     c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "
