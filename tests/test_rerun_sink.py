@@ -22,6 +22,7 @@ from fogmon.block import Event
 from fogmon.davar.batch import dadev
 from fogmon.errors import FogmonError
 from fogmon.pipeline import COEFFICIENTS, Summary, run_pipeline
+from fogmon.sinks.console import format_summary
 from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server, stop_process_group
 
 from test_pipeline import Collect, ListSource, _args, _white
@@ -271,6 +272,7 @@ def test_rotated_rrd_pieces_are_complete_recordings_that_join(tmp_path):
     pieces = [str(tmp_path / f"rot-000{k}.rrd") for k in range(1, 5)]
     assert sorted(str(p) for p in tmp_path.glob("rot-*.rrd")) == pieces
     assert s.outputs == [f"{pieces[0]} .. {pieces[-1]} (4 pieces)"]
+    assert format_summary(s).endswith(f"Wrote {s.outputs[0]} (open them with: rerun {tmp_path}/rot-*.rrd)")
     assert len({e.recording_id for p in pieces for e in RrdReader(p).recordings()}) == 1   # the viewer joins them
     for k, piece in enumerate(pieces):
         tr, rate = read_scalars(piece, "/rate/rate_dph")

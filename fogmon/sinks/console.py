@@ -62,7 +62,7 @@ def format_summary(s: Summary) -> str:
         for k, v in {**s.counters, **{f"events.{k}": v for k, v in s.event_counts.items()}}.items():
             lines.append(f"  {k:<24} {v}")
     for o in s.outputs:
-        lines.append(f"Wrote {o} (open it with: rerun {o})" if o.endswith(".rrd") else f"Wrote {o}")
+        lines.append(f"Wrote {o}{_open_hint(o)}")
     return "\n".join(lines)
 
 
@@ -85,6 +85,16 @@ def motion_lines(s: Summary) -> list[str]:
         where = f"all are in the event log of {rrd[0]}" if rrd else "--rrd keeps all of them in its event log"
         out.append(f"    ... and {len(spans) - MAX_MOTION_SPANS} more ({where})")
     return out
+
+
+def _open_hint(output: str) -> str:
+    """How to look at an output: one .rrd, or .rrd pieces NAME-0001.rrd .. (all at once)."""
+    if output.endswith(".rrd"):
+        return f" (open it with: rerun {output})"
+    first = output.split(" .. ")[0]
+    if " .. " in output and first.endswith("-0001.rrd"):
+        return f" (open them with: rerun {first[:-len('0001.rrd')]}*.rrd)"
+    return ""
 
 
 def no_windows_reason(s: Summary) -> str:
