@@ -279,11 +279,41 @@ def thermal_drift(ctx: Context) -> Candidate | None:
     return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names), ev, rate + c0, X)
 
 
-def glitches(ctx: Context) -> Candidate | None:
-    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale,
-    Bonferroni threshold over all samples (1 % family-wise)."""
+def white_profile(model: SensorModel, ctx: Context) -> np.ndarray | None:
+    """The model's own white-noise level over time relative to its RMS (1 on average),
+    or None when it is constant (no white-level effect: vibration_noise,
+    temperature_noise)."""
+    if not any(EFFECT_KINDS[e.kind].nature == "white_level" for e in model.effects):
+        return None
+    level = np.full(ctx.n, model.noise.N_dpsh)
+    for e in model.effects:
+        if EFFECT_KINDS[e.kind].nature == "white_level":
+            level = level + fx.white_level_dpsh(e, ctx.t_s, ctx.aux)
+    level = np.maximum(level, 0.0)
+    rms = float(np.sqrt(np.mean(level ** 2)))
+    return np.maximum(level / rms, 1e-3) if rms > 0 else None
+
+
+def spike_scan(ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+    """GLS amplitude (deg/h) and robust z of a one-sample spike at every sample
+    (detectors.spike_scan). When the model's white level varies in time (vibration- or
+    temperature-driven ARW), the residual is first divided by that level, so a sample
+    that is large only because the model itself is noisier there is not a spike."""
     sep = detectors.kernel_length(ctx.wh)
-    amp, z = detectors.spike_scan(ctx.wh, ctx.Yf, block=max(4096, 64 * sep))
+    block = max(4096, 64 * sep)
+    prof = white_profile(ctx.stoch, ctx)
+    if prof is None:
+        return detectors.spike_scan(ctx.wh, ctx.Yf, block=block)
+    amp, z = detectors.spike_scan(ctx.wh, ctx.wh.fft(ctx.y / prof), block=block)
+    return amp * prof, z
+
+
+def glitches(ctx: Context) -> Candidate | None:
+    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale, the
+    model's own white-level profile divided out, Bonferroni threshold over all samples
+    (1 % family-wise)."""
+    sep = detectors.kernel_length(ctx.wh)
+    amp, z = spike_scan(ctx)
     thr = detectors.bonferroni_z(int(ctx.valid.sum()))
     idx = detectors.find_spikes(z, thr, min_sep=sep)
     if not len(idx):

@@ -143,6 +143,7 @@ def build_report(res: Result, recording_path: str, model_path: str | None) -> di
         "score_before": round(res.before.score.value, 3),
         "score_after": round(res.after.score.value, 3),
         "verdict": verdict(res, mism, mism_after),
+        "warnings": res.warnings,
         "mismatches_after": mism_after,
         "score_components_before": res.before.score.as_json(),
         "score_components_after": res.after.score.as_json(),
