@@ -26,7 +26,8 @@ from fogmon.sim.model import Noise, SensorModel, validate_effect, validate_model
 
 
 def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | None = None,
-                    edf_cap: float = 50.0, ramp: bool = True) -> dict[str, float]:
+                    edf_cap: float = 50.0, ramp: bool = True, terms: tuple[str, ...] | None = None
+                    ) -> dict[str, float]:
     """IEEE-952 coefficients (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h), R deg/h^2)
     minimizing sum_i w_i (model_avar_i / avar_i - 1)^2 over the taus, all A_n >= 0, with
     w_i = min(edf_i, edf_cap) / edf_cap: equal weight wherever the point is well
@@ -37,11 +38,45 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     X = tau[:, None] ** POWERS[None, :] / av[:, None] * w[:, None]
     if not ramp:  # R left at 0 (a drift has a sign: it is the rate_ramp effect's to fit)
         X[:, -1] = 0.0
+    if terms is not None:
+        X[:, [i for i, nm in enumerate(NAMES) if nm not in terms]] = 0.0
     scale = np.max(np.abs(X), axis=0)
     scale[scale == 0] = 1.0
     a, _ = nnls(X / scale, w)
     coef = avar_terms_to_coefficients(a / scale)
     return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef)))
+
+
+NAMES = ("Q", "N", "B", "K", "R")
+#: A noise term joins the baseline only if it lowers the fit's chi-square by more than
+#: this (the 99 % point of chi-square with 1 degree of freedom): a term the data cannot
+#: tell from chance (flicker far below the white noise at every tau the record has)
+#: stays 0 instead of being inflated by an effect or by scatter.
+TERM_CHI2 = 6.63
+
+
+def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float],
+             edf_cap: float = 50.0) -> float:
+    """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit,
+    degrees of freedom capped like the fit's weights (:func:`curve_noise_fit`)."""
+    pred = adev_model(tau_s, **fit) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.array([_wh_z(a / p, min(e, edf_cap)) if p > 0 else np.inf for a, p, e in zip(av, pred, edf)])
+    return float(np.sum(z ** 2))
+
+
+def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray) -> tuple[dict[str, float], tuple]:
+    """:func:`curve_noise_fit` (R = 0) with N always and each of Q, B, K only if the data
+    need it: of the 8 term sets, the one with the least chi-square (:func:`fit_chi2`)
+    + TERM_CHI2 per term. Returns (coefficients, the terms used)."""
+    best = None
+    for k in range(8):
+        terms = ("N",) + tuple(nm for i, nm in enumerate(("Q", "B", "K")) if k >> i & 1)
+        fit = curve_noise_fit(tau_s, np.sqrt(av), edf, ramp=False, terms=terms)
+        crit = fit_chi2(tau_s, av, edf, fit) + TERM_CHI2 * len(terms)
+        if best is None or crit < best[0]:
+            best = (crit, fit, terms)
+    return best[1], best[2]
 
 
 #: A whole-record ADEV point beyond the windows' taus joins the baseline fit only while its
@@ -119,15 +154,17 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, f
     """IEEE-952 Q, N, B, K (R = 0: a drift is the rate_ramp effect's) of the recording's
     stationary noise, fitted so that an effect does not inflate them:
     :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`)
-    at the windows' taus, extended with the whole-record ADEV at longer taus, in order,
-    while each point stays within EXTEND_Z of the windows' fit (a slow noise term that
-    the windows already show is followed; a periodic term, a drift or a step that only
-    the long taus see stops the extension)."""
+    at the windows' taus, with the terms those robust points need
+    (:func:`parsimonious_fit`), refined with the whole-record ADEV at longer taus, in
+    order, while each point stays within EXTEND_Z of the windows' fit. The long taus
+    only refine: a term only they would need (what a periodic term, a drift or a step
+    does there as well) is not added - it is left for the effects and the mismatch map
+    to judge."""
     whole = oadev(y, fs_hz, taus="octave", valid=ok, alpha=0)
     tau_w, av_w = robust_avar(y, ok, fs_hz)
     nw = len(tau_w)
     tau, av, edf = list(tau_w), list(av_w), list(whole.edf[:nw])
-    fit0 = curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), ramp=False)
+    fit0, terms = parsimonious_fit(np.array(tau), np.array(av), np.array(edf))
     for j in range(nw, len(whole.tau_s)):
         a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
         pred = float(adev_model(np.array([whole.tau_s[j]]), **fit0)[0]) ** 2
@@ -136,7 +173,7 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, f
         tau.append(float(whole.tau_s[j]))
         av.append(a)
         edf.append(e)
-    return curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), ramp=False)
+    return curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), ramp=False, terms=terms)
 
 
 def baseline_model(rec: Recording) -> SensorModel:

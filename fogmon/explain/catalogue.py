@@ -68,6 +68,9 @@ class Candidate:
     rate: np.ndarray | None = None
     design: np.ndarray | None = None
     heldout: Callable | None = field(default=None, repr=False)
+    #: the white level N0 (deg/sqrt(h)) the stochastic model takes with this effect
+    #: (a white-level regression's intercept), None: unchanged
+    white_n0_dpsh: float | None = None
 
     @property
     def nature(self) -> str:
@@ -521,7 +524,8 @@ def _white_level(ctx: Context, kind: str, channel: str) -> Candidate | None:
 
     ev = (f"white level per {seg / ctx.fs_hz:.3g} s segment (ADEV at tau0) regressed on the segment mean of "
           f"{channel}: {what}, t = {tstat:.1f} over {nseg} segments")
-    return Candidate(kind, params, sep, float(tstat ** 2), 1, ev, heldout=heldout)
+    n0 = max(float(beta[0]), 0.0) if kind == "vibration_noise" else None  # N = N0 + gain vib_g
+    return Candidate(kind, params, sep, float(tstat ** 2), 1, ev, heldout=heldout, white_n0_dpsh=n0)
 
 
 def vibration_noise(ctx: Context) -> Candidate | None:

@@ -326,7 +326,8 @@ def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, lik
         y_new, stoch_new, null_new = np.where(valid, y - c.rate, 0.0), stoch, null
     else:
         y_new = y
-        stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, stoch.noise, [*stoch.effects, c.effect()])
+        noise = stoch.noise if c.white_n0_dpsh is None else replace(stoch.noise, N_dpsh=c.white_n0_dpsh)
+        stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, noise, [*stoch.effects, c.effect()])
         if progress:
             progress(f"bootstrap null with {c.kind} added: {B} simulations", 0, 0)
         null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (n_acc + 1), opt.alpha,
@@ -409,7 +410,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     rejected += [(k, bg, why) for k, (bg, why) in deferred.items()]
     rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
-    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, model.noise,
+    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, replace(model.noise, N_dpsh=stoch.noise.N_dpsh),
                          [*model.effects, *(a.cand.effect() for a in accepted)], dict(model.meta))
     fitted = validate_model(fitted)
     accepted.sort(key=lambda a: -a.cand.gain)
