@@ -1,15 +1,19 @@
 """A stationary baseline model from the recording itself, for `fogmon explain` without
-``--model``: bias = mean of (rate - 3600 rot_dps) in deg/h, IEEE-952 Q, N, B, K, R from
-the whole-record overlapping ADEV (octave taus, the DAVAR engine) by non-negative least
-squares on the *relative* Allan-variance error, equal weight per octave wherever the
-EDF exceeds 50 (less at the longest taus).
+``--model``: it describes the recording before any effect is judged, so it is fitted so
+that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
 
-Why not the statistically weighted fit (``fogmon.davar.fit_noise``)? A baseline must
-follow the recording's ADEV curve at every tau so that what is left is what is *not*
-stationary; the EDF-weighted fit lets the many-EDF short taus decide and, on real data
-whose short taus are dominated by platform motion (the PSINS ring-laser record),
-returns a flat flicker model that misses the long taus by 20x. No effects: explaining
-against this model asks "what in this recording is not stationary IEEE-952 noise?"."""
+1. the rate's least-squares fit on the recorded environment (temp_c drift terms,
+   rot_dps scale-factor terms) is projected out - for the noise estimate only;
+2. per octave tau up to the explain map's window / 4, the median over the map windows
+   of their Allan variance (an effect confined to a few windows does not move it);
+3. IEEE-952 terms by non-negative least squares on the relative Allan-variance error:
+   N always, each of Q, B, K only when it lowers the chi-square by more than chance,
+   R = 0 (a drift has a sign: the rate_ramp effect fits it);
+4. whole-record ADEV points at longer taus refine those terms while they stay
+   consistent with them, but cannot add a term.
+
+Bias: the mean rate (deg/h). No effects: explaining against this model asks "what in
+this recording is not stationary IEEE-952 noise?"."""
 from __future__ import annotations
 
 import math
@@ -34,7 +38,11 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     determined, less at the few-EDF longest taus."""
     ok = np.isfinite(adev_dph) & (adev_dph > 0)
     tau, av = np.asarray(tau_s)[ok], np.asarray(adev_dph)[ok] ** 2
-    w = np.ones(len(tau)) if edf is None else np.sqrt(np.minimum(np.asarray(edf)[ok], edf_cap) / edf_cap)
+    if edf is None:
+        w = np.ones(len(tau))
+    else:
+        e = np.minimum(np.asarray(edf, dtype=float)[ok], edf_cap)
+        w = np.sqrt(e / max(float(np.max(e)), 1e-300))
     X = tau[:, None] ** POWERS[None, :] / av[:, None] * w[:, None]
     if not ramp:  # R left at 0 (a drift has a sign: it is the rate_ramp effect's to fit)
         X[:, -1] = 0.0
@@ -55,24 +63,23 @@ NAMES = ("Q", "N", "B", "K", "R")
 TERM_CHI2 = 6.63
 
 
-def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float],
-             edf_cap: float = 50.0) -> float:
-    """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit,
-    degrees of freedom capped like the fit's weights (:func:`curve_noise_fit`)."""
+def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float]) -> float:
+    """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit."""
     pred = adev_model(tau_s, **fit) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.array([_wh_z(a / p, min(e, edf_cap)) if p > 0 else np.inf for a, p, e in zip(av, pred, edf)])
+        z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf)])
     return float(np.sum(z ** 2))
 
 
 def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray) -> tuple[dict[str, float], tuple]:
-    """:func:`curve_noise_fit` (R = 0) with N always and each of Q, B, K only if the data
-    need it: of the 8 term sets, the one with the least chi-square (:func:`fit_chi2`)
-    + TERM_CHI2 per term. Returns (coefficients, the terms used)."""
+    """:func:`curve_noise_fit` (R = 0, weights by the full degrees of freedom, so that
+    the fit and the chi-square that judges it agree) with N always and each of Q, B, K
+    only if the data need it: of the 8 term sets, the one with the least chi-square
+    (:func:`fit_chi2`) + TERM_CHI2 per term. Returns (coefficients, the terms used)."""
     best = None
     for k in range(8):
         terms = ("N",) + tuple(nm for i, nm in enumerate(("Q", "B", "K")) if k >> i & 1)
-        fit = curve_noise_fit(tau_s, np.sqrt(av), edf, ramp=False, terms=terms)
+        fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms)
         crit = fit_chi2(tau_s, av, edf, fit) + TERM_CHI2 * len(terms)
         if best is None or crit < best[0]:
             best = (crit, fit, terms)
@@ -92,17 +99,20 @@ def _wh_z(ratio: float, edf: float) -> float:
     return (ratio ** (1.0 / 3.0) - (1.0 - v)) / math.sqrt(v)
 
 
-def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """(tau s, Allan variance (deg/h)^2) at octave taus up to a window / 4: per tau the
-    median over the explain map's windows (duration / 8, hop / 4), so an effect confined
-    to a few windows (a step, a transient, a glitch) does not raise it, scaled by the
-    mean / median of a chi-square whose degrees of freedom come from the windows' own
-    robust scatter (Wilson-Hilferty: cube-root CV^2 = 2 / (9 edf))."""
+def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(tau s, Allan variance (deg/h)^2, degrees of freedom) at octave taus up to a
+    window / 4: per tau the median over the explain map's windows (duration / 8, hop /
+    4), so an effect confined to a few windows (a step, a transient, a glitch) does not
+    raise it, scaled by the mean / median of a chi-square whose degrees of freedom
+    ``edf_w`` come from the windows' own robust scatter (Wilson-Hilferty: cube-root
+    CV^2 = 2 / (9 edf_w)). The median's degrees of freedom: edf_w x (2 / pi) x the
+    number of independent windows (windows / 4: a hop is a quarter window)."""
     from fogmon.explain.mismatch import log_avar, make_grid
 
     grid = make_grid(len(y), fs_hz)
     cell, _ = log_avar(np.where(ok, y, np.nan), ok, grid)
     out = np.full(len(grid.m), np.nan)
+    edf = np.full(len(grid.m), np.nan)
     for j in range(len(grid.m)):
         c = cell[:, j][np.isfinite(cell[:, j])]
         if len(c) < 3:
@@ -111,9 +121,10 @@ def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray
         med = float(np.median(a))
         u = (a / med) ** (1.0 / 3.0)
         cv = 1.4826 * float(np.median(np.abs(u - np.median(u))))
-        v = min(cv * cv, 0.3)  # = 2 / (9 edf)
+        v = min(cv * cv, 0.3)  # = 2 / (9 edf_w)
         out[j] = med / (1.0 - v) ** 3
-    return grid.tau_s, out
+        edf[j] = 2.0 / (9.0 * max(v, 1e-9)) * (2.0 / math.pi) * max(len(c) / 4.0, 1.0)
+    return grid.tau_s, out, edf
 
 
 #: Unit-coefficient parameter sets of the aux-driven mean effects projected out before
@@ -161,9 +172,10 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, f
     does there as well) is not added - it is left for the effects and the mismatch map
     to judge."""
     whole = oadev(y, fs_hz, taus="octave", valid=ok, alpha=0)
-    tau_w, av_w = robust_avar(y, ok, fs_hz)
+    tau_w, av_w, edf_w = robust_avar(y, ok, fs_hz)
     nw = len(tau_w)
-    tau, av, edf = list(tau_w), list(av_w), list(whole.edf[:nw])
+    keep = np.isfinite(av_w)
+    tau, av, edf = list(tau_w[keep]), list(av_w[keep]), list(edf_w[keep])
     fit0, terms = parsimonious_fit(np.array(tau), np.array(av), np.array(edf))
     for j in range(nw, len(whole.tau_s)):
         a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
@@ -173,7 +185,8 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, f
         tau.append(float(whole.tau_s[j]))
         av.append(a)
         edf.append(e)
-    return curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), ramp=False, terms=terms)
+    return curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
+                           terms=terms)
 
 
 def baseline_model(rec: Recording) -> SensorModel:

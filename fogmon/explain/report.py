@@ -2,6 +2,7 @@
 a console summary, a PNG of the evidence and an optional Rerun .rrd with the same.
 
 Extra report keys beyond the contract (added, never renamed): ``mismatches_after``,
+per-region ``tau_peak_s`` and ``windows_span_s``,
 ``score_components_before/after``, per-effect ``uncertainty``, ``heldout``,
 ``bic_gain``, ``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
 family-wise threshold)."""
@@ -37,6 +38,8 @@ def _clean(x):
 
 def _region_text(r: dict) -> str:
     where = "whole record" if r["whole_record"] else f"t = {r['t_start_s']:.6g}..{r['t_end_s']:.6g} s"
+    if r.get("t_peak_s") is not None:
+        where += f" (strongest at t = {r['t_peak_s']:.6g} s)"
     kind = "noisier than the model" if r["sign"] == "excess" else "quieter than the model"
     return (f"{where}, tau {r['tau_min_s']:.4g}..{r['tau_max_s']:.4g} s: recording {kind} "
             f"(ADEV ratio {r['ratio']:.3g}, max |z| {r['max_abs_z']:.3g}, p = {r['p_value']:.2g})")
@@ -183,6 +186,8 @@ def console_summary(rep: dict) -> str:
                          f"(score {e['score_before']:.2f} -> {e['score_after']:.2f})")
     else:
         lines.append("  effects added: none")
+    for w in rep["warnings"]:
+        lines.append(f"  warning {w['kind']}: {w['text']}")
     lines.append("  verdict: " + rep["verdict"])
     return "\n".join(lines)
 
