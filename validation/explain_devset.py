@@ -1,6 +1,12 @@
 """Development set for `fogmon explain`: concealed effects with known truth, regenerated
 by seed (nothing large stored). One case per effect kind, a two-effect combination
-(the DESIGN 4.6 MWD case: thermal drift + vibration-driven ARW) and null cases.
+(the DESIGN 4.6 MWD case: thermal drift + vibration-driven ARW), null cases (against
+the exact model, and without a model: the baseline fitted from the recording), and
+noise bursts lasting 2 % of the record (not a catalogued kind: the strongest
+time-resolved region must hold the burst, peak near it, and be shorter than 10 % of
+the record). Every case also checks the report invariants: each effect lowered the
+score, regions inside the record with their peak time inside them, warnings of the
+report schema.
 
 "Concealed": a deterministic effect's peak |contribution| is under half the per-sample
 noise standard deviation; a noise-type effect changes the raw standard deviation by

@@ -239,8 +239,8 @@ THERMAL_VARIANTS = {
 
 def thermal_drift(ctx: Context) -> Candidate | None:
     """K0(T) + K1 dT/dt + K2 d2T/dt2 (the simulator's definition): four nested variants
-    at each temperature smoothing of THERMAL_SMOOTHING (one more parameter), the best
-    BIC wins."""
+    at each temperature smoothing of THERMAL_SMOOTHING (one more parameter when it is not
+    the simulator's default), the best BIC wins."""
     temp = ctx.aux.get("temp_c")
     if temp is None or not np.nanstd(temp) > 0:
         return None
@@ -296,7 +296,8 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
           f"difference step {diff_s:g} s): "
           + ", ".join(f"{nm} {_fmt(v[nm], s[nm])}" for nm in names)
           + f"; predicted drift {pp:.3g} deg/h peak-to-peak over a {np.nanmax(temp) - np.nanmin(temp):.3g} degC span")
-    return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names) + 1, ev, rate + c0, X)
+    extra = 0 if (smooth_s, diff_s) == THERMAL_SMOOTHING[0] else 1  # a smoothing moved from the default is fitted
+    return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names) + extra, ev, rate + c0, X)
 
 
 def white_profile(model: SensorModel, ctx: Context) -> np.ndarray | None:

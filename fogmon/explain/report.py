@@ -79,7 +79,7 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
     if not res.accepted and not mism:
         return (f"{ref[0].upper() + ref[1:]} explains the recording: no (time, tau) cell lies beyond the "
                 f"{100 * res.before.null.alpha:g} % family-wise threshold and no candidate effect passes "
-                f"BIC with a held-out check (score {sb:.2f}, about 1 = chance).")
+                f"BIC and a held-out check and lowers the score (score {sb:.2f}, about 1 = chance).")
     parts = []
     if mism:
         parts.append(f"Against {ref} the recording shows {len(mism)} mismatch region(s) "
@@ -99,7 +99,8 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
             parts.append(f"With these added the score is {sa:.2f} and {len(mism_after)} region(s) remain{left}: "
                          f"the catalogue does not explain everything - inspect those times and taus.")
     else:
-        parts.append("No catalogued effect passes BIC and the held-out check; the mismatch may come from "
+        parts.append("No catalogued effect passes BIC and the held-out check and lowers the score; the "
+                     "mismatch may come from "
                      "wrong noise coefficients or from physics outside the catalogue.")
     hint = _line_hint(res, mism_after if res.accepted else mism)
     if hint:
