@@ -14,6 +14,7 @@ from fogmon.explain.explainer import Options, explain
 from fogmon.recording import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import simulate
+from test_explain_invariants import assert_invariants
 
 FS = 10.0
 NOISE = Noise(N_dpsh=0.01, B_dph=0.01)
@@ -43,6 +44,7 @@ def test_concealed_periodic_is_found_fitted_and_removed(tmp_path, capsys):
     assert rep["mismatches"] and {"t_start_s", "t_end_s", "tau_min_s", "tau_max_s", "ratio", "p_value"} <= set(
         rep["mismatches"][0])
     assert [e["kind"] for e in rep["effects"]] == ["periodic"]
+    assert_invariants(rep, 0.0, 3600.0)
     p = rep["effects"][0]["params"]
     assert p["period_s"] == pytest.approx(300.0, rel=0.01)
     assert p["amplitude_dph"] == pytest.approx(0.25 * SIGMA, rel=0.15)
@@ -73,6 +75,8 @@ def test_null_recording_gives_no_effect_and_no_region(tmp_path, capsys):
     assert capsys.readouterr() == ("", "")    # --quiet: no progress, no summary
     rep = json.loads(rep_p.read_text())
     assert rep["effects"] == [] and rep["mismatches"] == []
+    assert [w["kind"] for w in rep["warnings"]] == ["record_too_short"]  # B = 0.01 is 9 % of the avar at 819 s
+    assert_invariants(rep, 0.0, 3600.0)
     assert rep["score_before"] <= 1.5 and "explains the recording" in rep["verdict"]
 
 

@@ -1,6 +1,12 @@
 """Development set for `fogmon explain`: concealed effects with known truth, regenerated
 by seed (nothing large stored). One case per effect kind, a two-effect combination
-(the DESIGN 4.6 MWD case: thermal drift + vibration-driven ARW) and null cases.
+(the DESIGN 4.6 MWD case: thermal drift + vibration-driven ARW), null cases (against
+the exact model, and without a model: the baseline fitted from the recording), and
+noise bursts lasting 2 % of the record (not a catalogued kind: the strongest
+time-resolved region must hold the burst, peak near it, and be shorter than 10 % of
+the record). Every case also checks the report invariants: each effect lowered the
+score, regions inside the record with their peak time inside them, warnings of the
+report schema.
 
 "Concealed": a deterministic effect's peak |contribution| is under half the per-sample
 noise standard deviation; a noise-type effect changes the raw standard deviation by
@@ -21,7 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fogmon.explain.baseline import baseline_model
 from fogmon.explain.explainer import Options, explain
+from fogmon.explain.report import build_report
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
 from fogmon.sim.scenarios import ChamberParams, MwdParams, mwd_run, thermal_chamber
@@ -36,6 +44,11 @@ class Case:
     noise: Noise
     effects: list = field(default_factory=list)
     scenario: str | None = None  # "mwd" | "chamber" | "table"
+    #: a noise burst added to the recording: (start s, length s, extra white std as a
+    #: multiple of the per-sample noise std) - not a catalogued kind: it must be located
+    burst: tuple[float, float, float] | None = None
+    #: explain without --model (the baseline fitted from the recording)
+    baseline: bool = False
 
 
 def _white_std(noise: Noise, fs: float) -> float:
@@ -82,6 +95,11 @@ def cases() -> list[Case]:
              [Effect("temperature_noise", {"n_gain_dpsh_per_c": 0.000012, "t_ref_c": 20.0})], "chamber"),
         Case("bandwidth_1000Hz_30min", 1000.0, 1800.0, Noise(N_dpsh=0.01, B_dph=0.02),
              [Effect("bandwidth", {"cutoff_hz": 470.0, "order": 2})]),
+        Case("null_baseline_fog_10Hz_1h", 10.0, 3600.0, Noise(N_dpsh=0.01, Q_arcsec=0.05), baseline=True),
+        Case("null_baseline_rlg_100Hz_30min", 100.0, 1800.0, Noise(Q_arcsec=0.5, N_dpsh=0.002, B_dph=0.005),
+             baseline=True),
+        Case("transient_2pct_10Hz_2h", 10.0, 2 * 3600.0, fog, burst=(4000.0, 144.0, 0.9)),
+        Case("transient_2pct_100Hz_1h_baseline", 100.0, 3600.0, fog, burst=(900.0, 72.0, 0.9), baseline=True),
         Case("thermal+vibration_100Hz_3h_mwd", 100.0, 3 * 3600.0, mwd,
              [Effect("thermal_drift", {"k0_poly_dph": [0.0, 0.002 * smwd], "k1_pos": 10.0 * smwd,
                                        "k1_neg": 10.0 * smwd, "k2_pos": 0.0, "k2_neg": 0.0}),
@@ -110,6 +128,12 @@ def build(case: Case, seed: int):
         kw = {"duration_s": case.duration_s}
     rec = simulate(truth, seed=seed, **kw)
     rec.path = f"{case.name}.csv"
+    if case.burst is not None:
+        t0, length, mult = case.burst
+        inside = (rec.t_s >= t0) & (rec.t_s < t0 + length)
+        rng = np.random.default_rng(seed + 7)
+        rec.rate_dph = rec.rate_dph + np.where(inside, mult * _white_std(case.noise, case.fs_hz)
+                                               * rng.standard_normal(len(rec.t_s)), 0.0)
     return rec, base, truth
 
 
@@ -123,6 +147,11 @@ def concealment(case: Case, rec, base: SensorModel, truth: SensorModel, seed: in
             peak = max(peak, float(np.max(np.abs(r - (np.mean(r) if e.kind != "glitches" else 0.0)))) / s)
     noise_kinds = [e for e in truth.effects if EFFECT_KINDS[e.kind].nature != "mean"]
     change = 0.0
+    if case.burst is not None:  # raw std change of the whole record
+        clean = simulate(truth, like=rec, seed=seed + 1).rate_dph
+        t0, length, mult = case.burst
+        extra = np.where((rec.t_s >= t0) & (rec.t_s < t0 + length), mult * s, 0.0)
+        return peak, float(math.sqrt(1.0 + np.mean(extra ** 2) / np.var(clean)) - 1.0)
     if noise_kinds:
         like = rec
         with_n = SensorModel(case.fs_hz, 0.0, case.noise, noise_kinds)
@@ -208,11 +237,44 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
     return out, ok
 
 
+def invariant_problems(res, rec) -> list[str]:
+    """The report invariants (issue 11): every effect lowered the score, regions inside
+    the record with a peak time inside them, warnings of the CONTRACT schema."""
+    rep = build_report(res, rec.path, None)
+    out = []
+    for e in rep["effects"]:
+        if not e["score_after"] < e["score_before"]:
+            out.append(f"{e['kind']} did not lower the score ({e['score_before']} -> {e['score_after']})")
+    t0, t1 = float(res.t_s[0]), float(res.t_s[0]) + len(res.t_s) / rec.sample_rate_hz
+    for r in rep["mismatches"] + rep["mismatches_after"]:
+        if not (t0 - 1e-6 <= r["t_start_s"] <= r["t_peak_s"] <= r["t_end_s"] <= t1 + 1e-6):
+            out.append(f"region {r['t_start_s']}..{r['t_end_s']} s (peak {r['t_peak_s']}) not inside {t0}..{t1} s")
+    for w in rep["warnings"]:
+        if set(w) != {"kind", "t_start_s", "t_end_s", "text"}:
+            out.append(f"warning keys {sorted(w)}")
+    return out
+
+
+def burst_located(case: Case, res, rec) -> tuple[bool, str]:
+    """The strongest time-resolved region holds the burst's peak time and is shorter
+    than 10 % of the record (the burst is 2 %)."""
+    t0, length, _ = case.burst
+    regs = [r for r in res.before.regions if not r.whole_record]
+    if not regs:
+        return False, "no time-resolved region"
+    r = regs[0]
+    frac = (r.t_end_s - r.t_start_s) / rec.duration_s
+    ok = r.t_start_s <= t0 + length / 2 <= r.t_end_s and t0 - length <= r.t_peak_s <= t0 + 2 * length and frac < 0.1
+    return ok, (f"region {r.t_start_s:.6g}..{r.t_end_s:.6g} s ({100 * frac:.1f} % of the record), peak "
+                f"{r.t_peak_s:.6g} s; burst {t0:g}..{t0 + length:g} s")
+
+
 def run_case(case: Case, seed: int, verbose: bool = False) -> dict:
     rec, base, truth = build(case, seed)
     peak, change = concealment(case, rec, base, truth, seed)
     t0 = time.perf_counter()
-    res = explain(rec, base, Options(seed=seed + 100))
+    model = baseline_model(rec) if case.baseline else base
+    res = explain(rec, model, Options(seed=seed + 100), baseline=case.baseline)
     dt = time.perf_counter() - t0
     truth_kinds = sorted(e.kind for e in case.effects)
     found_kinds = sorted({a.cand.kind for a in res.accepted})
@@ -221,10 +283,17 @@ def run_case(case: Case, seed: int, verbose: bool = False) -> dict:
     null = not case.effects
     regions_after = len(res.after.regions)
     sb, sa = res.before.score.value, res.after.score.value
-    if null:
+    problems = invariant_problems(res, rec)
+    if case.burst is not None:
+        located, where = burst_located(case, res, rec)
+        errs = [*errs, where]
+        named, ok = True, located
+    elif null:
         ok = not res.accepted and not res.before.regions and sb <= 1.5
     else:
         ok = named and params_ok and sa <= 1.5 and sb > 1.5 and regions_after == 0
+    errs += problems
+    ok = ok and not problems
     concealed = peak < 0.5 and abs(change) < 0.05
     row = {"case": case.name, "n": len(rec), "conceal": f"{peak:.2f}s", "raw_std": f"{100 * change:+.1f}%",
            "found": ",".join(found_kinds) or "-", "named": "yes" if named else "NO",

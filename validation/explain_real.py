@@ -229,10 +229,26 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
     passed = rp.returncode == 0
     if not passed:
         print("  [FAIL] fogmon replay runs")
-    for name, ok, numbers in checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, fs):
+    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, fs)
+    for name, ok, numbers in results:
         print(f"  [{'PASS' if ok else 'FAIL'}] {name}: {numbers}")
         passed &= ok
+    says = "; ".join([f"{len(rep['effects'])} effect(s)" + (": " + ", ".join(e["kind"] for e in rep["effects"])
+                                                            if rep["effects"] else ""),
+                      f"{len(rep['mismatches'])} region(s)" + (f", strongest {region_text(rep['mismatches'][0])}"
+                                                              if rep["mismatches"] else ""),
+                      f"{len(rep.get('warnings', []))} warning(s)",
+                      f"score {rep['score_before']:.3g} -> {rep['score_after']:.3g}"])
+    TABLE.append((entry["name"], says, [(short_name(n), ok) for n, ok, _ in results]))
     return passed
+
+
+#: (recording, what the report says, [(check, passed)]) of every recording run.
+TABLE: list = []
+
+
+def short_name(check: str) -> str:
+    return check.split(":")[0].split(" (")[0]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -249,6 +265,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"\n=== {entry['name']}: skipped, {path} not found (build it with validation/real_recordings.py)")
                 continue
             results[entry["name"]] = run_one(entry, path, Path(tmp))
+    print("\n| recording | what the report says | checks |\n|---|---|---|")
+    for name, says, res in TABLE:
+        print(f"| {name} | {says} | " + "; ".join(f"{c} {'PASS' if ok else 'FAIL'}" for c, ok in res) + " |")
     print(f"\n{sum(results.values())} of {len(results)} recordings pass every check"
           + (f"; failing: {', '.join(n for n, ok in results.items() if not ok)}" if not all(results.values()) else ""))
     return 0 if results and all(results.values()) else 1

@@ -1,37 +1,53 @@
 """A stationary baseline model from the recording itself, for `fogmon explain` without
-``--model``: bias = mean of (rate - 3600 rot_dps) in deg/h, IEEE-952 Q, N, B, K, R from
-the whole-record overlapping ADEV (octave taus, the DAVAR engine) by non-negative least
-squares on the *relative* Allan-variance error, equal weight per octave wherever the
-EDF exceeds 50 (less at the longest taus).
+``--model``: it describes the recording before any effect is judged, so it is fitted so
+that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
 
-Why not the statistically weighted fit (``fogmon.davar.fit_noise``)? A baseline must
-follow the recording's ADEV curve at every tau so that what is left is what is *not*
-stationary; the EDF-weighted fit lets the many-EDF short taus decide and, on real data
-whose short taus are dominated by platform motion (the PSINS ring-laser record),
-returns a flat flicker model that misses the long taus by 20x. No effects: explaining
-against this model asks "what in this recording is not stationary IEEE-952 noise?"."""
+1. the rate's least-squares fit on the recorded environment (temp_c drift terms,
+   rot_dps scale-factor terms) is projected out - for the noise estimate only;
+2. per octave tau up to the explain map's window / 4, the median over the map windows
+   of their Allan variance (an effect confined to a few windows does not move it);
+3. IEEE-952 terms by non-negative least squares on the relative Allan-variance error:
+   N always, each of Q, B, K only when it lowers the chi-square by more than chance,
+   R = 0 (a drift has a sign: the rate_ramp effect fits it);
+4. whole-record ADEV points at longer taus refine those terms while they stay
+   consistent with them, but cannot add a term.
+
+Bias: the mean rate (deg/h). No effects: explaining against this model asks "what in
+this recording is not stationary IEEE-952 noise?"."""
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.optimize import nnls
 
 from fogmon.davar.batch import oadev
-from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
+from fogmon.davar.theory import POWERS, adev_model, avar_terms_to_coefficients
 from fogmon.errors import FogmonError
 from fogmon.recording import Recording
-from fogmon.sim.model import Noise, SensorModel, validate_model
+from fogmon.sim import effects as fx
+from fogmon.sim.model import Noise, SensorModel, validate_effect, validate_model
 
 
 def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | None = None,
-                    edf_cap: float = 50.0) -> dict[str, float]:
+                    edf_cap: float = 50.0, ramp: bool = True, terms: tuple[str, ...] | None = None
+                    ) -> dict[str, float]:
     """IEEE-952 coefficients (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h), R deg/h^2)
     minimizing sum_i w_i (model_avar_i / avar_i - 1)^2 over the taus, all A_n >= 0, with
     w_i = min(edf_i, edf_cap) / edf_cap: equal weight wherever the point is well
     determined, less at the few-EDF longest taus."""
     ok = np.isfinite(adev_dph) & (adev_dph > 0)
     tau, av = np.asarray(tau_s)[ok], np.asarray(adev_dph)[ok] ** 2
-    w = np.ones(len(tau)) if edf is None else np.sqrt(np.minimum(np.asarray(edf)[ok], edf_cap) / edf_cap)
+    if edf is None:
+        w = np.ones(len(tau))
+    else:
+        e = np.minimum(np.asarray(edf, dtype=float)[ok], edf_cap)
+        w = np.sqrt(e / max(float(np.max(e)), 1e-300))
     X = tau[:, None] ** POWERS[None, :] / av[:, None] * w[:, None]
+    if not ramp:  # R left at 0 (a drift has a sign: it is the rate_ramp effect's to fit)
+        X[:, -1] = 0.0
+    if terms is not None:
+        X[:, [i for i, nm in enumerate(NAMES) if nm not in terms]] = 0.0
     scale = np.max(np.abs(X), axis=0)
     scale[scale == 0] = 1.0
     a, _ = nnls(X / scale, w)
@@ -39,15 +55,149 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef)))
 
 
+NAMES = ("Q", "N", "B", "K", "R")
+#: A noise term joins the baseline only if it lowers the fit's chi-square by more than
+#: this (the 99 % point of chi-square with 1 degree of freedom): a term the data cannot
+#: tell from chance (flicker far below the white noise at every tau the record has)
+#: stays 0 instead of being inflated by an effect or by scatter.
+TERM_CHI2 = 6.63
+
+
+def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float]) -> float:
+    """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit."""
+    pred = adev_model(tau_s, **fit) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf)])
+    return float(np.sum(z ** 2))
+
+
+def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray) -> tuple[dict[str, float], tuple]:
+    """:func:`curve_noise_fit` (R = 0, weights by the full degrees of freedom, so that
+    the fit and the chi-square that judges it agree) with N always and each of Q, B, K
+    only if the data need it: of the 8 term sets, the one with the least chi-square
+    (:func:`fit_chi2`) + TERM_CHI2 per term. Returns (coefficients, the terms used)."""
+    best = None
+    for k in range(8):
+        terms = ("N",) + tuple(nm for i, nm in enumerate(("Q", "B", "K")) if k >> i & 1)
+        fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms)
+        crit = fit_chi2(tau_s, av, edf, fit) + TERM_CHI2 * len(terms)
+        if best is None or crit < best[0]:
+            best = (crit, fit, terms)
+    return best[1], best[2]
+
+
+#: A whole-record ADEV point beyond the windows' taus joins the baseline fit only while its
+#: Allan variance is within this many standard deviations (Wilson-Hilferty scale) of
+#: the fit so far: beyond it a non-stationary effect, not noise, is what it measures.
+EXTEND_Z = 3.0
+
+
+def _wh_z(ratio: float, edf: float) -> float:
+    """Wilson-Hilferty z of an Allan-variance ratio (data / model) with ``edf`` degrees of
+    freedom: chi2/edf has cube root ~ N(1 - 2/(9 edf), 2/(9 edf))."""
+    v = 2.0 / (9.0 * max(edf, 0.5))
+    return (ratio ** (1.0 / 3.0) - (1.0 - v)) / math.sqrt(v)
+
+
+def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(tau s, Allan variance (deg/h)^2, degrees of freedom) at octave taus up to a
+    window / 4: per tau the median over the explain map's windows (duration / 8, hop /
+    4), so an effect confined to a few windows (a step, a transient, a glitch) does not
+    raise it, scaled by the mean / median of a chi-square whose degrees of freedom
+    ``edf_w`` come from the windows' own robust scatter (Wilson-Hilferty: cube-root
+    CV^2 = 2 / (9 edf_w)). The median's degrees of freedom: edf_w x (2 / pi) x the
+    number of independent windows (windows / 4: a hop is a quarter window)."""
+    from fogmon.explain.mismatch import log_avar, make_grid
+
+    grid = make_grid(len(y), fs_hz)
+    cell, _ = log_avar(np.where(ok, y, np.nan), ok, grid)
+    out = np.full(len(grid.m), np.nan)
+    edf = np.full(len(grid.m), np.nan)
+    for j in range(len(grid.m)):
+        c = cell[:, j][np.isfinite(cell[:, j])]
+        if len(c) < 3:
+            continue
+        a = np.exp(c)
+        med = float(np.median(a))
+        u = (a / med) ** (1.0 / 3.0)
+        cv = 1.4826 * float(np.median(np.abs(u - np.median(u))))
+        v = min(cv * cv, 0.3)  # = 2 / (9 edf_w)
+        out[j] = med / (1.0 - v) ** 3
+        edf[j] = 2.0 / (9.0 * max(v, 1e-9)) * (2.0 / math.pi) * max(len(c) / 4.0, 1.0)
+    return grid.tau_s, out, edf
+
+
+#: Unit-coefficient parameter sets of the aux-driven mean effects projected out before
+#: the baseline noise is estimated (the catalogue's thermal_drift and scale_factor).
+_AUX_UNITS = {
+    "temp_c": [("thermal_drift", {"k0_poly_dph": [0.0, 1.0]}), ("thermal_drift", {"k0_poly_dph": [0.0, 0.0, 1.0]}),
+               ("thermal_drift", {"k1_pos": 1.0}), ("thermal_drift", {"k1_neg": 1.0}),
+               ("thermal_drift", {"k2_pos": 1.0}), ("thermal_drift", {"k2_neg": 1.0})],
+    "rot_dps": [("scale_factor", {"ppm": 1.0}), ("scale_factor", {"asym_ppm": 1.0})],
+}
+_THERMAL_ZERO = {"k0_poly_dph": [], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0}
+
+
+def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, fs_hz: float) -> np.ndarray:
+    """``y`` minus its least-squares fit on the recorded environment (temperature drift
+    terms of temp_c, scale-factor terms of rot_dps, each as the simulator defines them):
+    what the stationary noise estimate must see. Unchanged without varying aux
+    channels. Only the noise estimate uses it; the effects are judged afterwards."""
+    cols = []
+    for ch, units in _AUX_UNITS.items():
+        a = aux.get(ch)
+        if a is None or not np.nanstd(a) > 0:
+            continue
+        a = np.interp(t_s, t_s[np.isfinite(a)], a[np.isfinite(a)])
+        for kind, p in units:
+            params = {**_THERMAL_ZERO, **p} if kind == "thermal_drift" else {"ppm": 0.0, "asym_ppm": 0.0, **p}
+            cols.append(fx.mean_rate_dph(validate_effect(kind, params, "baseline"), t_s, {ch: a}, fs_hz))
+    if not cols:
+        return y
+    X = np.column_stack([np.ones(len(y)), *cols])[ok]
+    beta, *_ = np.linalg.lstsq(X, y[ok], rcond=None)
+    out = y.copy()
+    out[ok] = y[ok] - X @ beta
+    return out
+
+
+def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, float]:
+    """IEEE-952 Q, N, B, K (R = 0: a drift is the rate_ramp effect's) of the recording's
+    stationary noise, fitted so that an effect does not inflate them:
+    :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`)
+    at the windows' taus, with the terms those robust points need
+    (:func:`parsimonious_fit`), refined with the whole-record ADEV at longer taus, in
+    order, while each point stays within EXTEND_Z of the windows' fit. The long taus
+    only refine: a term only they would need (what a periodic term, a drift or a step
+    does there as well) is not added - it is left for the effects and the mismatch map
+    to judge."""
+    whole = oadev(y, fs_hz, taus="octave", valid=ok, alpha=0)
+    tau_w, av_w, edf_w = robust_avar(y, ok, fs_hz)
+    nw = len(tau_w)
+    keep = np.isfinite(av_w)
+    tau, av, edf = list(tau_w[keep]), list(av_w[keep]), list(edf_w[keep])
+    fit0, terms = parsimonious_fit(np.array(tau), np.array(av), np.array(edf))
+    for j in range(nw, len(whole.tau_s)):
+        a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
+        pred = float(adev_model(np.array([whole.tau_s[j]]), **fit0)[0]) ** 2
+        if not (np.isfinite(a) and pred > 0) or _wh_z(a / pred, e) > EXTEND_Z:
+            break
+        tau.append(float(whole.tau_s[j]))
+        av.append(a)
+        edf.append(e)
+    return curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
+                           terms=terms)
+
+
 def baseline_model(rec: Recording) -> SensorModel:
-    """Stationary IEEE-952 model (no effects) fitted to ``rec``."""
+    """Stationary IEEE-952 model (no effects) fitted to ``rec`` robustly
+    (:func:`robust_noise_fit` of :func:`aux_projected`); bias the mean rate (deg/h)."""
     blk = rec.to_block()
     y = blk.error_rate_dph
     ok = blk.valid & np.isfinite(y)
     if ok.sum() < 64:
         raise FogmonError(f"{rec.name}: too few valid samples ({int(ok.sum())}) to fit a baseline model")
-    res = oadev(y, rec.sample_rate_hz, taus="octave", valid=ok, alpha=0)
-    vals = curve_noise_fit(res.tau_s, res.adev_dph, res.edf)
+    vals = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok, rec.sample_rate_hz)
     if not any(vals.values()):
         raise FogmonError(f"{rec.name}: no IEEE-952 noise term found for a baseline model")
     model = SensorModel(rec.sample_rate_hz, float(np.mean(y[ok])), Noise(**vals), [],

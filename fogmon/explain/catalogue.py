@@ -68,6 +68,9 @@ class Candidate:
     rate: np.ndarray | None = None
     design: np.ndarray | None = None
     heldout: Callable | None = field(default=None, repr=False)
+    #: the white level N0 (deg/sqrt(h)) the stochastic model takes with this effect
+    #: (a white-level regression's intercept), None: unchanged
+    white_n0_dpsh: float | None = None
 
     @property
     def nature(self) -> str:
@@ -235,12 +238,28 @@ THERMAL_VARIANTS = {
 
 
 def thermal_drift(ctx: Context) -> Candidate | None:
-    """K0(T) + K1 dT/dt + K2 d2T/dt2 (the simulator's definition, default smoothing);
-    three nested variants, the best BIC wins."""
+    """K0(T) + K1 dT/dt + K2 d2T/dt2 (the simulator's definition): four nested variants
+    at each temperature smoothing of THERMAL_SMOOTHING (one more parameter when it is not
+    the simulator's default), the best BIC wins."""
     temp = ctx.aux.get("temp_c")
     if temp is None or not np.nanstd(temp) > 0:
         return None
-    zero = {"k0_poly_dph": [], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0}
+    best = None
+    for smooth_s, diff_s in THERMAL_SMOOTHING:
+        c = _thermal_drift(ctx, temp, smooth_s, diff_s)
+        if best is None or c.bic_gain(ctx.penalty) > best.bic_gain(ctx.penalty):
+            best = c
+    return best
+
+
+#: (smooth_s, diff_step_s) tried for the temperature derivatives (the simulator's
+#: default first): a chamber's slow ramps need a longer smoothing than a drilling tool.
+THERMAL_SMOOTHING = ((10.0, 1.0), (30.0, 10.0), (100.0, 30.0))
+
+
+def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: float) -> Candidate:
+    sm = {"smooth_s": smooth_s, "diff_step_s": diff_s}
+    zero = {"k0_poly_dph": [], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0, **sm}
     unit = {
         "k0_1": {**zero, "k0_poly_dph": [0.0, 1.0]}, "k0_2": {**zero, "k0_poly_dph": [0.0, 0.0, 1.0]},
         "k1_pos": {**zero, "k1_pos": 1.0}, "k1_neg": {**zero, "k1_neg": 1.0},
@@ -267,23 +286,55 @@ def thermal_drift(ctx: Context) -> Candidate | None:
     c0 = -float(np.mean(k0_part[ctx.valid]))
     params = {"k0_poly_dph": [c0, c1, c2] if "k0_2" in v else [c0, c1],
               "k1_pos": v.get("k1_pos", v.get("k1", 0.0)), "k1_neg": v.get("k1_neg", v.get("k1", 0.0)),
-              "k2_pos": v.get("k2_pos", v.get("k2", 0.0)), "k2_neg": v.get("k2_neg", v.get("k2", 0.0))}
+              "k2_pos": v.get("k2_pos", v.get("k2", 0.0)), "k2_neg": v.get("k2_neg", v.get("k2", 0.0)), **sm}
     se = {"k0_c1": s.get("k0_1"), "k1_pos": s.get("k1_pos", s.get("k1")), "k1_neg": s.get("k1_neg", s.get("k1")),
           "k2_pos": s.get("k2_pos", s.get("k2")), "k2_neg": s.get("k2_neg", s.get("k2"))}
     if "k0_2" in s:
         se["k0_c2"] = s["k0_2"]
     pp = float(np.ptp(rate[ctx.valid]))
-    ev = (f"regression on temperature and its derivatives ({label}): "
+    ev = (f"regression on temperature and its derivatives ({label}; smoothing {smooth_s:g} s, "
+          f"difference step {diff_s:g} s): "
           + ", ".join(f"{nm} {_fmt(v[nm], s[nm])}" for nm in names)
           + f"; predicted drift {pp:.3g} deg/h peak-to-peak over a {np.nanmax(temp) - np.nanmin(temp):.3g} degC span")
-    return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names), ev, rate + c0, X)
+    extra = 0 if (smooth_s, diff_s) == THERMAL_SMOOTHING[0] else 1  # a smoothing moved from the default is fitted
+    return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names) + extra, ev, rate + c0, X)
+
+
+def white_profile(model: SensorModel, ctx: Context) -> np.ndarray | None:
+    """The model's own white-noise level over time relative to its RMS (1 on average),
+    or None when it is constant (no white-level effect: vibration_noise,
+    temperature_noise)."""
+    if not any(EFFECT_KINDS[e.kind].nature == "white_level" for e in model.effects):
+        return None
+    level = np.full(ctx.n, model.noise.N_dpsh)
+    for e in model.effects:
+        if EFFECT_KINDS[e.kind].nature == "white_level":
+            level = level + fx.white_level_dpsh(e, ctx.t_s, ctx.aux)
+    level = np.maximum(level, 0.0)
+    rms = float(np.sqrt(np.mean(level ** 2)))
+    return np.maximum(level / rms, 1e-3) if rms > 0 else None
+
+
+def spike_scan(ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+    """GLS amplitude (deg/h) and robust z of a one-sample spike at every sample
+    (detectors.spike_scan). When the model's white level varies in time (vibration- or
+    temperature-driven ARW), the residual is first divided by that level, so a sample
+    that is large only because the model itself is noisier there is not a spike."""
+    sep = detectors.kernel_length(ctx.wh)
+    block = max(4096, 64 * sep)
+    prof = white_profile(ctx.stoch, ctx)
+    if prof is None:
+        return detectors.spike_scan(ctx.wh, ctx.Yf, block=block)
+    amp, z = detectors.spike_scan(ctx.wh, ctx.wh.fft(ctx.y / prof), block=block)
+    return amp * prof, z
 
 
 def glitches(ctx: Context) -> Candidate | None:
-    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale,
-    Bonferroni threshold over all samples (1 % family-wise)."""
+    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale, the
+    model's own white-level profile divided out, Bonferroni threshold over all samples
+    (1 % family-wise)."""
     sep = detectors.kernel_length(ctx.wh)
-    amp, z = detectors.spike_scan(ctx.wh, ctx.Yf, block=max(4096, 64 * sep))
+    amp, z = spike_scan(ctx)
     thr = detectors.bonferroni_z(int(ctx.valid.sum()))
     idx = detectors.find_spikes(z, thr, min_sep=sep)
     if not len(idx):
@@ -491,7 +542,8 @@ def _white_level(ctx: Context, kind: str, channel: str) -> Candidate | None:
 
     ev = (f"white level per {seg / ctx.fs_hz:.3g} s segment (ADEV at tau0) regressed on the segment mean of "
           f"{channel}: {what}, t = {tstat:.1f} over {nseg} segments")
-    return Candidate(kind, params, sep, float(tstat ** 2), 1, ev, heldout=heldout)
+    n0 = max(float(beta[0]), 0.0) if kind == "vibration_noise" else None  # N = N0 + gain vib_g
+    return Candidate(kind, params, sep, float(tstat ** 2), 1, ev, heldout=heldout, white_n0_dpsh=n0)
 
 
 def vibration_noise(ctx: Context) -> Candidate | None:

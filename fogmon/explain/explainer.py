@@ -92,6 +92,7 @@ class Result:
     rejected: list[tuple[str, float, str]] = field(default_factory=list)
     n_boot: int = 0
     baseline: bool = False
+    warnings: list[dict] = field(default_factory=list)
 
     @property
     def deterministic_fit(self) -> np.ndarray:
@@ -223,7 +224,7 @@ def analyse(y: np.ndarray, ctx: catalogue.Context, null: mismatch.Null, grid: mi
     """Map, regions and score of residual ``y`` (candidates: the matched tests run on it)."""
     cell, whole = mismatch.log_avar(np.where(ctx.valid, y, np.nan), ctx.valid, grid)
     z, zw = mismatch.zscores(cell, whole, null)
-    _, zs = detectors.spike_scan(ctx.wh, ctx.Yf, block=max(4096, 64 * detectors.kernel_length(ctx.wh)))
+    _, zs = catalogue.spike_scan(ctx)
     nv = int(ctx.valid.sum())
     spike_ratio = float(np.max(np.abs(zs))) / detectors.expected_max_abs_z(nv) if nv else 0.0
     tests = max([math.sqrt(max(c.gain, 0.0) / (c.k * ctx.penalty)) for c in cands], default=0.0)
@@ -231,11 +232,12 @@ def analyse(y: np.ndarray, ctx: catalogue.Context, null: mismatch.Null, grid: mi
     return Analysis(cell, whole, z, zw, regions, mismatch.score(z, null, spike_ratio, tests), null)
 
 
-def candidates(ctx: catalogue.Context, counts: dict, refused: set) -> list[catalogue.Candidate]:
-    """Every applicable catalogue entry fitted to the current residual, best BIC first."""
+def candidates(ctx: catalogue.Context, counts: dict) -> list[catalogue.Candidate]:
+    """Every applicable catalogue entry fitted to the current residual, best BIC first
+    (refused kinds included: they still measure what is missing, the score's ``tests``)."""
     out = []
     for kind, fn in {**catalogue.MEAN_CANDIDATES, **catalogue.NOISE_CANDIDATES}.items():
-        if kind in refused or counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
+        if counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
             continue
         c = fn(ctx)
         if c is not None:
@@ -307,6 +309,34 @@ def _new_deficit(before: Analysis, after: Analysis) -> str | None:
     return None
 
 
+#: Smallest score drop an accepted effect must bring: the report rounds scores to 3
+#: decimals, and its invariant is score_after < score_before for every effect.
+MIN_SCORE_DROP = 0.002
+
+
+def _lowers(before: float, after: float) -> bool:
+    return after <= before - MIN_SCORE_DROP
+
+
+def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, n_acc, progress):
+    """(residual, stochastic model, null, context, analysis, candidates) with ``c`` added:
+    a mean-type effect is subtracted (same null), a noise-type one joins the stochastic
+    model (new bootstrap)."""
+    if c.nature == "mean":
+        y_new, stoch_new, null_new = np.where(valid, y - c.rate, 0.0), stoch, null
+    else:
+        y_new = y
+        noise = stoch.noise if c.white_n0_dpsh is None else replace(stoch.noise, N_dpsh=c.white_n0_dpsh)
+        stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, noise, [*stoch.effects, c.effect()])
+        if progress:
+            progress(f"bootstrap null with {c.kind} added: {B} simulations", 0, 0)
+        null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (n_acc + 1), opt.alpha,
+                             opt.workers, progress)
+    ctx_new = _whittle(stoch_new, aux, t, valid, y_new)
+    cands_new = candidates(ctx_new, {**counts, c.kind: counts.get(c.kind, 0) + 1})
+    return y_new, stoch_new, null_new, ctx_new, analyse(y_new, ctx_new, null_new, grid, cands_new), cands_new
+
+
 def explain(rec: Recording, model: SensorModel, options: Options | None = None,
             baseline: bool = False, progress: Progress | None = None) -> Result:
     """Compare ``rec`` with ``model``, locate mismatches, select and fit missing physics;
@@ -333,59 +363,103 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     ctx = _whittle(stoch, aux, t, valid, y0)
     counts: dict[str, int] = {}
     refused: set[str] = set()
-    cands = candidates(ctx, counts, refused)
+    cands = candidates(ctx, counts)
     before = current = analyse(y0, ctx, null, grid, cands)
     y = y0.copy()
     accepted: list[Accepted] = []
     rejected: list[tuple[str, float, str]] = []
+    deferred: dict[str, tuple[float, str]] = {}  # kind -> (bic gain, why): retried after an acceptance
     while len(accepted) < opt.max_effects:
         chosen = None
         for tier in tiers(cands):
             for c in tier:
-                if c.kind in refused:
+                if c.kind in refused or c.kind in deferred:
                     continue
                 bg = c.bic_gain(ctx.penalty)
                 if bg <= 0:
                     break
                 ok, note = _heldout(ctx, c)
-                if ok:
-                    chosen = (c, bg, note)
-                    break
-                rejected.append((c.kind, bg, f"failed the held-out check: {note}"))
-                refused.add(c.kind)
+                if not ok:
+                    rejected.append((c.kind, bg, f"failed the held-out check: {note}"))
+                    refused.add(c.kind)
+                    continue
+                trial = _try(c, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, len(accepted), progress)
+                overfit = _new_deficit(current, trial[4]) if c.nature != "mean" else None
+                if overfit is not None:
+                    rejected.append((c.kind, bg, f"makes the model noisier than the recording at tau {overfit} s "
+                                                 f"(the spectral fit trades long taus for short ones)"))
+                    refused.add(c.kind)
+                    continue
+                if not _lowers(current.score.value, trial[4].score.value):
+                    deferred[c.kind] = (bg, f"does not lower the score ({current.score.value:.3f} -> "
+                                            f"{trial[4].score.value:.3f}): what it fits is within chance "
+                                            f"next to what is still missing")
+                    continue
+                chosen = (c, bg, note, trial)
+                break
             if chosen is not None:
                 break
         if chosen is None:
             break
-        c, bg, note = chosen
-        score_before = current.score.value
-        if c.nature == "mean":
-            y_new, stoch_new, null_new = np.where(valid, y - c.rate, 0.0), stoch, null
-        else:
-            y_new = y
-            stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, stoch.noise, [*stoch.effects, c.effect()])
-            report(f"bootstrap null with {c.kind} added: {B} simulations", 0, 0)
-            null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (len(accepted) + 1), opt.alpha,
-                                 opt.workers, progress)
-        ctx_new = _whittle(stoch_new, aux, t, valid, y_new)
+        c, bg, note, (y, stoch, null, ctx, after, cands) = chosen
         counts[c.kind] = counts.get(c.kind, 0) + 1
-        cands_new = candidates(ctx_new, counts, refused)
-        after = analyse(y_new, ctx_new, null_new, grid, cands_new)
-        overfit = _new_deficit(current, after) if c.nature != "mean" else None
-        if overfit is not None:
-            rejected.append((c.kind, bg, f"makes the model noisier than the recording at tau {overfit} s "
-                                         f"(the spectral fit trades long taus for short ones)"))
-            refused.add(c.kind)
-            counts[c.kind] -= 1
-            cands = [x for x in cands if x.kind != c.kind]
-            continue
-        y, stoch, null, ctx, cands, current = y_new, stoch_new, null_new, ctx_new, cands_new, after
-        accepted.append(Accepted(c, bg, note, score_before, current.score.value))
-        report(f"effect {len(accepted)}: {c.kind} (score {score_before:.3g} -> {current.score.value:.3g})", 0, 0)
+        accepted.append(Accepted(c, bg, note, current.score.value, after.score.value))
+        report(f"effect {len(accepted)}: {c.kind} (score {current.score.value:.3g} -> {after.score.value:.3g})", 0, 0)
+        current = after
+        deferred.clear()
+    rejected += [(k, bg, why) for k, (bg, why) in deferred.items()]
     rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
-                 if c.bic_gain(ctx.penalty) <= 0]
-    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, model.noise,
+                 if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
+    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, replace(model.noise, N_dpsh=stoch.noise.N_dpsh),
                          [*model.effects, *(a.cand.effect() for a in accepted)], dict(model.meta))
     fitted = validate_model(fitted)
     accepted.sort(key=lambda a: -a.cand.gain)
-    return Result(rec, model, fitted, grid, t, valid, y0, y, before, current, accepted, rejected, B, baseline)
+    before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
+    current = replace(current, regions=mismatch.locate(current.regions, y, valid, grid, current.null))
+    return Result(rec, model, fitted, grid, t, valid, y0, y, before, current, accepted, rejected, B, baseline,
+                  too_short_warnings(model, grid))
+
+
+#: A slow model term the record cannot test: its share of the model's Allan variance at
+#: the longest whole-record tau (duration / 4) is below this.
+UNTESTABLE_SHARE = 0.1
+
+
+def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
+    """``record_too_short`` warnings (CONTRACT section 4): a map with fewer than 3 taus
+    (window too short to show how the mismatch depends on tau), and model terms the
+    record is too short to test - IEEE-952 B, K, R below UNTESTABLE_SHARE of the model's
+    Allan variance even at tau = duration / 4, a periodic term with fewer than two
+    periods, a Gauss-Markov correlation time beyond duration / 4."""
+    from fogmon.davar.theory import coefficients_to_avar_terms
+
+    t0, t1 = grid.t0_s, grid.t0_s + grid.n / grid.fs_hz
+    dur = grid.n / grid.fs_hz
+    tau_max = float(grid.tau_whole_s[-1])
+    out = []
+
+    def warn(text):
+        out.append({"kind": "record_too_short", "t_start_s": t0, "t_end_s": t1, "text": text})
+
+    if len(grid.m) < 3:
+        warn(f"the map window ({grid.window_s:.6g} s) holds only {len(grid.m)} octave tau(s) up to "
+             f"{grid.tau_s[-1]:.6g} s: too few to show how a mismatch depends on tau (use a longer --window-s "
+             f"or a longer recording)")
+    nz = model.noise
+    terms = coefficients_to_avar_terms(nz.Q_arcsec, nz.N_dpsh, nz.B_dph, nz.K_dphsh, nz.R_dphh)
+    parts = [float(terms[i]) * tau_max ** float(p) for i, p in enumerate((-2, -1, 0, 1, 2))]
+    total = sum(parts)
+    for i, (name, value, unit) in enumerate((("B", nz.B_dph, "deg/h"), ("K", nz.K_dphsh, "deg/h/sqrt(h)"),
+                                             ("R", nz.R_dphh, "deg/h^2")), start=2):
+        if value > 0 and total > 0 and parts[i] < UNTESTABLE_SHARE * total:
+            warn(f"the model's {name} = {value:.4g} {unit} is {100 * parts[i] / total:.2g} % of its Allan "
+                 f"variance even at the longest tau this {dur:.6g} s record supports ({tau_max:.6g} s = duration/4): "
+                 f"the record cannot test it")
+    for e in model.effects:
+        if e.kind == "periodic" and e.params["period_s"] > dur / 2:
+            warn(f"the model's periodic term ({e.params['period_s']:.6g} s) completes fewer than two periods "
+                 f"in this {dur:.6g} s record: it cannot be told from a drift")
+        if e.kind == "markov" and e.params["tau_c_s"] > tau_max:
+            warn(f"the model's Gauss-Markov correlation time ({e.params['tau_c_s']:.6g} s) is beyond the longest "
+                 f"tau this {dur:.6g} s record supports ({tau_max:.6g} s)")
+    return out

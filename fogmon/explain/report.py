@@ -2,6 +2,7 @@
 a console summary, a PNG of the evidence and an optional Rerun .rrd with the same.
 
 Extra report keys beyond the contract (added, never renamed): ``mismatches_after``,
+per-region ``tau_peak_s`` and ``windows_span_s``,
 ``score_components_before/after``, per-effect ``uncertainty``, ``heldout``,
 ``bic_gain``, ``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
 family-wise threshold)."""
@@ -37,6 +38,8 @@ def _clean(x):
 
 def _region_text(r: dict) -> str:
     where = "whole record" if r["whole_record"] else f"t = {r['t_start_s']:.6g}..{r['t_end_s']:.6g} s"
+    if r.get("t_peak_s") is not None:
+        where += f" (strongest at t = {r['t_peak_s']:.6g} s)"
     kind = "noisier than the model" if r["sign"] == "excess" else "quieter than the model"
     return (f"{where}, tau {r['tau_min_s']:.4g}..{r['tau_max_s']:.4g} s: recording {kind} "
             f"(ADEV ratio {r['ratio']:.3g}, max |z| {r['max_abs_z']:.3g}, p = {r['p_value']:.2g})")
@@ -76,7 +79,7 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
     if not res.accepted and not mism:
         return (f"{ref[0].upper() + ref[1:]} explains the recording: no (time, tau) cell lies beyond the "
                 f"{100 * res.before.null.alpha:g} % family-wise threshold and no candidate effect passes "
-                f"BIC with a held-out check (score {sb:.2f}, about 1 = chance).")
+                f"BIC and a held-out check and lowers the score (score {sb:.2f}, about 1 = chance).")
     parts = []
     if mism:
         parts.append(f"Against {ref} the recording shows {len(mism)} mismatch region(s) "
@@ -96,7 +99,8 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
             parts.append(f"With these added the score is {sa:.2f} and {len(mism_after)} region(s) remain{left}: "
                          f"the catalogue does not explain everything - inspect those times and taus.")
     else:
-        parts.append("No catalogued effect passes BIC and the held-out check; the mismatch may come from "
+        parts.append("No catalogued effect passes BIC and the held-out check and lowers the score; the "
+                     "mismatch may come from "
                      "wrong noise coefficients or from physics outside the catalogue.")
     hint = _line_hint(res, mism_after if res.accepted else mism)
     if hint:
@@ -143,6 +147,7 @@ def build_report(res: Result, recording_path: str, model_path: str | None) -> di
         "score_before": round(res.before.score.value, 3),
         "score_after": round(res.after.score.value, 3),
         "verdict": verdict(res, mism, mism_after),
+        "warnings": res.warnings,
         "mismatches_after": mism_after,
         "score_components_before": res.before.score.as_json(),
         "score_components_after": res.after.score.as_json(),
@@ -182,6 +187,8 @@ def console_summary(rep: dict) -> str:
                          f"(score {e['score_before']:.2f} -> {e['score_after']:.2f})")
     else:
         lines.append("  effects added: none")
+    for w in rep["warnings"]:
+        lines.append(f"  warning {w['kind']}: {w['text']}")
     lines.append("  verdict: " + rep["verdict"])
     return "\n".join(lines)
 
