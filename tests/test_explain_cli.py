@@ -60,10 +60,11 @@ def test_concealed_periodic_is_found_fitted_and_removed(tmp_path, capsys):
     cap = capsys.readouterr()
     assert "score before" in cap.out and "periodic" in cap.out
     stages = cap.err.splitlines()     # progress on stderr: stages as lines (the bar only on a terminal)
-    assert stages[:3] == [f"fogmon explain: reading {rec}",
+    assert stages[:4] == [f"fogmon explain: reading {rec}",
+                          "fogmon explain: looking for platform motion",
                           "fogmon explain: bootstrap null: 30 simulations of the model like the recording",
                           "fogmon explain: mismatch map and candidate effects"]
-    assert stages[3].startswith("fogmon explain: effect 1: periodic (score ")
+    assert stages[4].startswith("fogmon explain: effect 1: periodic (score ")
     assert stages[-1] == f"fogmon explain: writing {rep_p}"
 
 

@@ -89,3 +89,25 @@ def test_live_gate_keeps_a_turn_out_of_the_analysis():
     assert [e.kind for e in events] == ["platform_motion"] * 2
     (span,) = gate.spans
     assert abs(span.t_start_s - 600.0) < 2 * block / FS and abs(span.t_end_s - 630.0) < 2 * block / FS
+
+
+def test_explain_leaves_platform_motion_out_and_warns():
+    from fogmon.errors import FogmonError
+    from fogmon.explain.explainer import without_motion
+    from fogmon.recording import Recording
+
+    t, r = stationary(6, duration_s=900.0)
+    turn = (t >= 300.0) & (t < 330.0)
+    r = r + 3600.0 * 5.0 * np.clip(np.minimum(t - 300.0, 330.0 - t) / 0.5, 0.0, 1.0)
+    rec = Recording(t, r, {}, {"sample_rate_hz": "100"}, "turn.csv")
+    trimmed, warns = without_motion(rec)
+    assert [w["kind"] for w in warns] == ["platform_motion"]
+    assert warns[0]["t_start_s"] <= 300.0 and warns[0]["t_end_s"] >= 329.99 and "kept out" in warns[0]["text"]
+    assert not np.any((trimmed.t_s >= 300.0) & (trimmed.t_s < 330.0)) and len(trimmed) > len(rec) - 3200
+    rot = np.where(turn, 5.0 * np.clip(np.minimum(t - 300.0, 330.0 - t) / 0.5, 0.0, 1.0), 0.0)
+    referenced = Recording(t, r, {"rot_dps": rot}, {"sample_rate_hz": "100"}, "turn.csv")
+    assert without_motion(referenced) == (referenced, [])          # the reference says why: no motion
+    moving = Recording(t, r + 3600.0 * 50.0 * np.sin(2 * np.pi * t / 7.0) * (t > 250), {},
+                       {"sample_rate_hz": "100"}, "hand.csv")
+    with pytest.raises(FogmonError, match=r"hand.csv: platform motion over 7\d % of the record .*--keep-motion"):
+        without_motion(moving)

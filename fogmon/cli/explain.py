@@ -37,6 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="seed of the bootstrap simulations, an integer >= 0 (default 12345)")
     p.add_argument("--max-effects", type=number(0, integer=True), default=8,
                    help="most effects to add, >= 0 (default 8; 0: only locate the mismatches)")
+    p.add_argument("--keep-motion", action="store_true",
+                   help="analyse platform motion too: by default stretches where the rate moves far beyond "
+                        "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) are "
+                        "kept out of the analysis and reported as platform_motion warnings (docs/motion.md)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr and no console summary")
 
 
@@ -71,7 +75,7 @@ class StageProgress:
 
 def run(args: argparse.Namespace) -> int:
     from fogmon.explain.baseline import baseline_model
-    from fogmon.explain.explainer import Options, explain
+    from fogmon.explain.explainer import Options, explain, without_motion
     from fogmon.explain import report
     from fogmon.recording import read_replay_log
     from fogmon.sim.model import load_model
@@ -84,12 +88,17 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
     rec = read_replay_log(args.recording)
+    motion = []
+    if not args.keep_motion:
+        progress("looking for platform motion")
+        rec, motion = without_motion(rec)
     if model is None:
         progress("fitting a stationary IEEE-952 baseline model to the recording")
         model = baseline_model(rec)
     res = explain(rec, model, Options(window_s=args.window_s, n_boot=args.bootstrap, alpha=args.alpha,
                                       seed=args.seed, max_effects=args.max_effects),
                   baseline=args.model is None, progress=progress)
+    res.warnings[:0] = motion
     progress(f"writing {args.report}")
     rep = report.build_report(res, args.recording, args.model)
     report.write_report(rep, args.report)

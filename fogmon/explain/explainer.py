@@ -28,6 +28,7 @@ import numpy as np
 from fogmon.errors import FogmonError
 from fogmon.explain import catalogue, detectors, mismatch
 from fogmon.explain.fitting import Whittle, calibrate_psd, model_psd, rfft_omega
+from fogmon.motion import find_motion, motion_mask
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
@@ -349,8 +350,9 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     fs = rec.sample_rate_hz
     n = len(t)
     grid = mismatch.make_grid(n, fs, opt.window_s, t0_s=float(t[0]), name=rec.name)
-    if valid.sum() < 0.5 * n:
-        raise FogmonError(f"{rec.name}: more than half of the sample grid is missing (gaps)")
+    if valid.sum() < MIN_STATIONARY_SHARE * n:
+        raise FogmonError(f"{rec.name}: more than {100 * (1 - MIN_STATIONARY_SHARE):.0f} % of the sample grid is "
+                          f"missing (gaps)")
     y0 = raw - deterministic_dph(model, t, aux, fs)
     y0 = np.where(valid, y0 - np.nanmean(y0[valid]), 0.0)
     like = Recording(rec.t_s, np.zeros(len(rec.t_s)), {k: v for k, v in rec.aux.items() if k != "rot_dps"},
@@ -418,6 +420,37 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     current = replace(current, regions=mismatch.locate(current.regions, y, valid, grid, current.null))
     return Result(rec, model, fitted, grid, t, valid, y0, y, before, current, accepted, rejected, B, baseline,
                   too_short_warnings(model, grid))
+
+
+#: explain needs this share of the sample grid present and outside platform motion
+MIN_STATIONARY_SHARE = 0.3
+
+
+def without_motion(rec: Recording) -> tuple[Recording, list[dict]]:
+    """``rec`` without its platform-motion samples (they become time gaps) and a
+    ``platform_motion`` warning per span (CONTRACT section 4); FogmonError when too little
+    stationary data is left to explain."""
+    blk = rec.to_block()
+    y = blk.error_rate_dph
+    spans = find_motion(blk.t_s, y, blk.valid & np.isfinite(y), rec.sample_rate_hz)
+    if not spans:
+        return rec, []
+    keep = ~motion_mask(rec.t_s, spans)
+    share = 1.0 - keep.sum() / len(keep)
+    what = "the rate minus 3600 x rot_dps" if "rot_dps" in rec.aux else "the rate"
+    if keep.sum() < MIN_STATIONARY_SHARE * len(keep):
+        raise FogmonError(f"{rec.name}: platform motion over {100 * share:.0f} % of the record ("
+                          + ", ".join(f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s" for m in spans[:5])
+                          + (f" and {len(spans) - 5} more" if len(spans) > 5 else "")
+                          + f"): too little stationary data to explain; fogmon replay shows it, "
+                            f"--keep-motion analyses it as recorded")
+    warnings = [{"kind": "platform_motion", "t_start_s": m.t_start_s, "t_end_s": m.t_end_s,
+                 "text": f"{what} moves up to {m.peak_dph:.4g} deg/h from its reference, far beyond the sensor's "
+                         f"noise, with no rot_dps to say why (a turntable, a vehicle, a person, the ground): "
+                         f"kept out of the analysis (docs/motion.md)"} for m in spans]
+    trimmed = Recording(rec.t_s[keep], rec.rate_dph[keep], {k: v[keep] for k, v in rec.aux.items()},
+                        dict(rec.meta), rec.path, rec.skipped_rows)
+    return trimmed, warnings
 
 
 #: A slow model term the record cannot test: its share of the model's Allan variance at

@@ -20,6 +20,7 @@ a mismatch found there spans the whole time axis.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -153,7 +154,8 @@ class Null:
 def _pooled_sd(L: np.ndarray, mu: np.ndarray) -> np.ndarray:
     d = L - mu[None]
     axes = tuple(i for i in range(d.ndim) if i != d.ndim - 1)
-    with np.errstate(invalid="ignore"):
+    with warnings.catch_warnings():          # cells with no data at all (gaps, platform motion): NaN
+        warnings.simplefilter("ignore", RuntimeWarning)
         v = np.nanmean(d ** 2, axis=axes)
     return np.sqrt(np.maximum(v, 1e-12))
 
@@ -170,7 +172,8 @@ def build_null(cells: np.ndarray, whole: np.ndarray, alpha: float = 0.01) -> Nul
         raise ValueError("need at least 8 bootstrap replicates")
 
     def prep(L):
-        with np.errstate(invalid="ignore", over="ignore"):
+        with warnings.catch_warnings(), np.errstate(invalid="ignore", over="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)     # cells with no data: NaN
             mu = np.log(np.nanmean(np.exp(L - np.nanmax(L, axis=0)), axis=0)) + np.nanmax(L, axis=0)
             U = np.exp((L - mu) / 3.0)
             mu_u = np.nanmean(U, axis=0)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 
 import numpy as np
 
@@ -257,7 +258,9 @@ def write_png(res: Result, path: str) -> None:
     k = max(1, step)
     y = np.where(res.valid, res.residual_before, np.nan)
     nb = len(y) // k
-    ym = np.nanmean(y[: nb * k].reshape(nb, k), axis=1)
+    with warnings.catch_warnings():          # stretches with no valid sample (gaps, platform motion)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ym = np.nanmean(y[: nb * k].reshape(nb, k), axis=1)
     ax[1, 1].plot(t[: nb * k: k], ym, lw=0.5, color="0.5", label=f"residual vs model ({k}-sample means)")
     det = res.deterministic_fit
     ax[1, 1].plot(t[: nb * k: k], det[: nb * k].reshape(nb, k).mean(axis=1), color="tab:orange", lw=1.2,
