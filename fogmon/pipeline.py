@@ -420,12 +420,13 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
                 source.limit(live_samples(duration_s, rate_hz))  # nothing after the cut is read
             reader = _ThreadedBlocks(source)
         wall_start = time.monotonic()
-        wall_stop = None if duration_s is None or total_n is not None else \
-            wall_start + duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s)
+        wall_limit = None if duration_s is None or total_n is not None else \
+            duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s)
         for big in (reader if reader is not None else source.blocks()):
-            if wall_stop is not None and time.monotonic() > wall_stop:
+            opened = getattr(source, "opened_s", None) or wall_start
+            if wall_limit is not None and time.monotonic() > opened + wall_limit:
                 source.close()  # a live source that stalls still stops on time; what it read is kept
-                wall_stop = None
+                wall_limit = None
             if not len(big):
                 _dispatch_events(sinks, big.events, event_counts)
                 continue

@@ -101,10 +101,11 @@ def run_device(dev, proc, until, t0=None, k=0):
 def listened(sent, ks):
     """The frames sent from the first one the monitor archived on: pyserial's open()
     flushes the port's input, so what the device sent before that was never received
-    (a few frames at most; the test cannot know when the flush happens)."""
+    (a few frames, or seconds' worth on a loaded host; the test cannot know when the
+    flush happens). Every frame after the first one archived is checked."""
     assert ks, "nothing archived"
     i0 = sent.index(ks[0])
-    assert i0 <= FS, f"{i0} frames sent before the monitor listened"
+    assert i0 <= 10 * FS, f"{i0} frames sent before the monitor listened"    # a loaded host: seconds
     return sent[i0:]
 
 

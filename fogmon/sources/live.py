@@ -46,6 +46,7 @@ class LiveSource:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._own = {"disconnects": 0, "reconnects": 0}
+        self.opened_s: float | None = None   # time.monotonic() when the device was first opened
         self._limit: int | None = None
 
     def add_tap(self, tap) -> None:
@@ -122,6 +123,7 @@ class LiveSource:
         except self.device_errors as e:
             why = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise FogmonError(f"{self._what()}: cannot open: {why}") from None
+        self.opened_s = time.monotonic()
         errors = ErrorEvents(self.decoder_counters)
         self._thread = threading.Thread(target=self._read_loop, args=(handle,), name="fogmon-reader", daemon=True)
         self._thread.start()
