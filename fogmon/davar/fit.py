@@ -343,7 +343,7 @@ def _upper_limits(x, y, edf, rw, c2, a) -> np.ndarray:
         hi = lo + step
         for _ in range(60):
             if excess(hi) > 0:
-                upper[n] = brentq(excess, lo, hi, xtol=1e-6 * step, rtol=1e-4)
+                upper[n] = brentq(excess, lo, hi, xtol=1e-3 * step, rtol=1e-3)
                 break
             lo, hi = hi, hi + 2.0 * (hi - a_hat[n])
     return upper
