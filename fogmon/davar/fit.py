@@ -343,9 +343,14 @@ def _upper_limits(x, y, edf, rw, c2, a) -> np.ndarray:
         hi = lo + step
         for _ in range(60):
             if excess(hi) > 0:
-                upper[n] = brentq(excess, lo, hi, xtol=1e-3 * step, rtol=1e-3)
                 break
             lo, hi = hi, hi + 2.0 * (hi - a_hat[n])
+        else:
+            continue
+        while hi - lo > 1e-3 * max(hi, step):  # bisection on the signs seen (the profile is warm-started)
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if excess(mid) > 0 else (mid, hi)
+        upper[n] = hi
     return upper
 
 
