@@ -56,9 +56,10 @@ class Coefficient:
     interval ``lo``..``hi`` at the fit's confidence, ``identifiable`` False when the
     record cannot tell the term from zero (then ``value`` = ``lo`` = 0 and ``hi`` is
     ``upper``: quote only that, as an upper limit). ``upper``: one-sided
-    UPPER_CONFIDENCE (95 %) upper limit of the coefficient, for every term, never below
-    the term's estimate in the five-term fit. Scalars for an AdevResult fit, arrays over
-    windows for a DadevResult fit."""
+    UPPER_CONFIDENCE (95 %) upper limit of the coefficient, never below the term's
+    estimate in a fit that includes it (every term of an AdevResult fit; in a DadevResult
+    fit only where not identifiable, else NaN). Scalars for an AdevResult fit, arrays
+    over windows for a DadevResult fit."""
 
     value: np.ndarray | float
     lo: np.ndarray | float
@@ -318,15 +319,16 @@ def _term_variances(x, edf, rw, c2, a, n: int) -> tuple[float, float]:
     return v[0][int(np.sum(cols[:n]))], v[1][int(np.sum(cols[:n]))]
 
 
-def _upper_limits(x, y, edf, rw, c2, a) -> np.ndarray:
+def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
     """One-sided UPPER_CONFIDENCE upper limit of every A_n: the c > A_n-hat where the
     profile deviance D(c) (``_profile``; A_n-hat the estimate with term n added to the
     fitted terms ``a > 0``, which stay free >= 0), rescaled by naive / sandwich variance
     of A_n at the profiled model (the magnitude adjustment of an independence likelihood
     for the taus' correlation, Chandler & Bate 2007, evaluated under the hypothesis
-    A_n = c as in a score test), reaches norm.ppf(0.95)^2. Never below A_n-hat."""
-    upper = np.full(5, np.inf)
-    for n in range(5):
+    A_n = c as in a score test), reaches norm.ppf(0.95)^2. Never below A_n-hat. For the
+    terms in the mask ``which`` (NaN for the others)."""
+    upper = np.where(which, np.inf, np.nan)
+    for n in np.flatnonzero(which):
         terms = a > 0
         terms[n] = True
         d_min, a_hat = _profile(x, y, edf, rw, c2, a, terms, n, None)
@@ -340,22 +342,38 @@ def _upper_limits(x, y, edf, rw, c2, a) -> np.ndarray:
             naive_c, sand_c = _term_variances(x, edf, rw, c2, start[0], n)
             return naive_c / sand_c * (d - d_min) - _UPPER_DEVIANCE
         lo, step = a_hat[n], np.sqrt(sand)
-        hi = lo + step
+        f_lo, hi = -_UPPER_DEVIANCE, lo + step
         for _ in range(60):
-            if excess(hi) > 0:
+            f_hi = excess(hi)
+            if f_hi > 0:
                 break
-            lo, hi = hi, hi + 2.0 * (hi - a_hat[n])
+            lo, f_lo, hi = hi, f_hi, hi + 2.0 * (hi - a_hat[n])
         else:
             continue
-        while hi - lo > 1e-3 * max(hi, step):  # bisection on the signs seen (the profile is warm-started)
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if excess(mid) > 0 else (mid, hi)
+        side = 0
+        for _ in range(40):  # Illinois regula falsi on the values seen (the profile is warm-started)
+            if hi - lo <= 1e-3 * max(hi, step):
+                break
+            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            mid = min(max(mid, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+            f_mid = excess(mid)
+            if abs(f_mid) < 1e-3:
+                hi = mid
+                break
+            if f_mid > 0:
+                hi, f_hi = mid, f_mid
+                f_lo = f_lo / 2.0 if side == 1 else f_lo
+                side = 1
+            else:
+                lo, f_lo = mid, f_mid
+                f_hi = f_hi / 2.0 if side == -1 else f_hi
+                side = -1
         upper[n] = hi
     return upper
 
 
 def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
-             upper_limits: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+             upper_limits: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
@@ -364,8 +382,8 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     zero, the weakest one is dropped and the rest refitted. Returns (A_n, standard error
     of A_n, misfit mask over ``tau_s``: taus the terms cannot describe (robust weight 0,
     or for taus outside the subset the same Tukey rejection of their residual from the
-    model), one-sided 95 % upper limit of A_n (``_upper_limits``; NaN unless
-    ``upper_limits``)); dropped terms have
+    model), one-sided 95 % upper limit of A_n (``_upper_limits``; ``upper_limits``
+    "all" terms, the "unidentified" ones or "none", NaN where not computed)); dropped terms have
     A_n = 0 and the standard error they would have if fitted alongside the others. A_n
     NaN when fewer than 2 usable taus."""
     tau = np.asarray(tau_s, dtype=np.float64)
@@ -400,7 +418,8 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
         cols = free.copy()
         cols[n] = True
         se[n] = np.sqrt(_variances(x, model, corr, cols, rw, nu, c2)[1][int(np.sum(cols[:n]))])
-    upper = np.maximum(_upper_limits(x, y, edf, rw, c2, a), a) if upper_limits else np.full(5, np.nan)
+    which = {"all": np.ones(5, dtype=bool), "unidentified": ~free, "none": np.zeros(5, dtype=bool)}[upper_limits]
+    upper = np.maximum(_upper_limits(x, y, edf, rw, c2, a, which), a)
     misfit[use] = rw == 0
     rest = np.setdiff1d(np.flatnonzero(ok), use)
     if len(rest):
@@ -437,18 +456,20 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = 0.683) -> No
     over windows: the coefficient time series). Intervals at ``confidence``; taus the
     five terms cannot describe are down-weighted, flagged in ``misfit`` and left out of
     ``worst_ratio``. Every coefficient also carries its one-sided 95 % upper limit
-    ``upper`` (the ``hi`` of a term that is not identifiable)."""
+    ``upper`` (the ``hi`` of a term that is not identifiable); in a DadevResult fit only
+    where the term is not identifiable (NaN elsewhere: the windows need only the bound
+    they print, at a third of the cost)."""
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
-        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, upper_limits=True) for i in range(len(result))]
+        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified") for i in range(len(result))]
         a = np.array([f[0] for f in fits]).reshape(len(result), 5)
         se = np.array([f[1] for f in fits]).reshape(len(result), 5)
         misfit = np.array([f[2] for f in fits], dtype=bool).reshape(result.adev_dph.shape)
         upper = np.array([f[3] for f in fits]).reshape(len(result), 5)
     else:
         a, se, misfit, upper = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples,
-                                       upper_limits=True)
+                                       "all")
     fit = NoiseFit(*_coefficients(a, se, upper, confidence), avar_terms=a, avar_se=se, avar_upper=upper,
                    confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
