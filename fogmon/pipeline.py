@@ -26,6 +26,7 @@ import numpy as np
 from fogmon import stopping
 from fogmon.block import Block, Event
 from fogmon.cli.values import number, positive
+from fogmon.davar.jumps import JumpDetector
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
 from fogmon.errors import FogmonError, FogmonWarning
 
@@ -39,8 +40,6 @@ MAX_WINDOW_SAMPLES = 2**20
 LIVE_WINDOW_SAMPLES = 2**16
 #: What DAVAR analyses when the recording has a reference rotation.
 ERROR_EXPR = "rate_dph - 3600 x rot_dps"
-#: A coefficient-jump event needs a change of more than this many combined standard errors.
-JUMP_Z = 5.0
 #: A live run with --duration-s also stops reading the device this long (s, or 10 % more)
 #: after that much wall time from opening the source, should the device fall silent (what
 #: was read is kept).
@@ -269,54 +268,6 @@ class Summary:
     def speed_x(self) -> float:
         """Recording time / wall time."""
         return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
-
-
-# ----------------------------------------------------------------------------- jumps
-class JumpDetector:
-    """Coefficient-jump events: a coefficient whose newest estimate differs from its
-    estimate in the latest window that shares no samples with it (independent data) by
-    more than JUMP_Z combined standard errors (each taken from the fit's interval:
-    half-width / z of the fit's confidence). At 1 sigma, intervals of two independent
-    windows fail to overlap 16 % of the time by chance; at 5 sigma once in ~2 million
-    pairs. At most one event per coefficient per window length."""
-
-    def __init__(self, window_s: float):
-        self.window_s = window_s
-        self._hist: deque[tuple[float, dict]] = deque()   # (t_end_s, {name: (value, lo, hi, se)})
-        self._last_event: dict[str, float] = {}
-
-    def update(self, fit, t_end_s: np.ndarray) -> list[Event]:
-        from scipy.stats import norm
-
-        z_conf = float(norm.ppf(0.5 + getattr(fit, "confidence", 0.683) / 2))
-        cols = {}
-        for name in COEFFICIENTS:
-            c = getattr(fit, name)
-            cols[name] = [np.atleast_1d(np.asarray(getattr(c, a), dtype=np.float64))
-                          for a in ("value", "lo", "hi", "identifiable")]
-        out = []
-        for i, t in enumerate(t_end_s):
-            cur = {}
-            for name, (v, lo, hi, ok) in cols.items():
-                if ok[i] and np.isfinite(lo[i]) and np.isfinite(hi[i]):
-                    cur[name] = (v[i], lo[i], hi[i], (hi[i] - lo[i]) / (2 * z_conf))
-            h = self._hist
-            while len(h) > 1 and h[1][0] <= t - self.window_s:
-                h.popleft()
-            ref = h[0] if h and h[0][0] <= t - self.window_s else None
-            for name, (v, lo, hi, se) in (cur.items() if ref is not None else ()):
-                if name not in ref[1]:
-                    continue
-                rv, rlo, rhi, rse = ref[1][name]
-                z = abs(v - rv) / max(np.hypot(se, rse), 1e-300)
-                if z > JUMP_Z and t - self._last_event.get(name, -math.inf) >= self.window_s:
-                    self._last_event[name] = float(t)
-                    out.append(Event(float(t), "coef_jump",
-                                     f"{name} jumped from {rv:.4g} [{rlo:.4g}, {rhi:.4g}] to {v:.4g} [{lo:.4g}, "
-                                     f"{hi:.4g}] {COEFFICIENTS[name]} ({z:.1f} sigma; windows ending at "
-                                     f"{ref[0]:.1f} s and {t:.1f} s)"))
-            self._hist.append((float(t), cur))
-        return out
 
 
 # ----------------------------------------------------------------------------- helpers

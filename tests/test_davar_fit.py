@@ -163,3 +163,56 @@ def test_nnls_is_never_given_a_column_without_information(monkeypatch):
     fit_noise(oadev(y, FS, taus=taus, valid=valid, alpha=0))
     fit_noise(dadev(np.where(np.arange(20000) % 997 < 990, 1.0, np.nan) * np.random.default_rng(1).normal(
         size=20000), 10.0, 200.0, 100.0, alpha=0))
+
+
+def test_upper_limit_is_a_95_percent_bound_never_below_the_estimate():
+    # RLG record: B, K, R unidentifiable; their printed bound (hi) is the one-sided 95 %
+    # upper limit, above the estimate each term gets when it is fitted with the others
+    from fogmon.davar import fit as fit_mod
+    res = oadev(read_replay_log(RLG).rate_dph, 100.0)
+    fit = fit_noise(res)
+    a = fit.avar_terms
+    for i, name in enumerate(NAMES):
+        c = getattr(fit, name)
+        assert c.upper >= c.value and np.isfinite(c.upper), name
+        if not c.identifiable:
+            assert c.hi == c.upper and c.value == 0.0
+            assert str(c) == f"not identifiable (< {c.upper:.4g}, 95 % upper limit)"
+            # the estimate of the term fitted alongside the identified ones is below its limit
+            use = fit_mod.octave_subset(res.m, res.n_samples // 4)
+            terms = a > 0
+            terms[i] = True
+            x = res.tau_s[use][:, None] ** fit_mod.POWERS
+            edf = fit_mod._NoiseModel(res.tau_s[use], res.m[use], res.n_terms[use], res.n_samples)
+            rw = (~fit.misfit[use]).astype(float)
+            _, a_in = fit_mod._profile(x, res.adev_dph[use] ** 2, edf, rw, 0.0, a, terms, i, None)
+            assert fit_mod.avar_terms_to_coefficients(a_in)[i] <= c.upper, name
+        else:
+            assert c.hi < c.upper  # the 68.3 % interval's top is inside the 95 % one-sided limit
+
+
+def test_identification_does_not_depend_on_the_tau_grid():
+    # the same white + flicker record analysed on octave, 1/3-octave (10 per decade) and
+    # all-tau grids: the same terms identified
+    rng = np.random.default_rng(11)
+    n = 2**15
+    k = np.arange(1, n)
+    h = np.concatenate([[1.0], np.cumprod((k - 0.5) / k)])
+    y = rng.normal(size=n) * 60 * 0.002 * np.sqrt(FS) + np.convolve(rng.normal(size=n) * 0.05, h)[:n]
+    flags = {grid: tuple(bool(c.identifiable) for c in fit_noise(oadev(y, FS, taus=grid)).coefficients().values())
+             for grid in ("octave", 10, "all")}
+    assert flags["octave"] == flags[10] == flags["all"], flags
+    assert flags["octave"][1] and flags["octave"][2]  # N and B
+
+
+@pytest.mark.slow
+def test_upper_limits_cover_the_truth_near_detectability():
+    # python validation/davar_fit_accuracy.py --coverage prints the full table
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "validation"))
+    from davar_fit_accuracy import COVERAGE_LOG2_SAMPLES, coverage_case, coverage_truth
+    for name, level in (("N_dpsh", 2.0), ("K_dphsh", 30.0)):
+        res = coverage_case((name, level, 7), records=100)
+        truth = coverage_truth(name, level, 2**COVERAGE_LOG2_SAMPLES)[name]
+        assert np.mean(res[:, 1] >= truth) >= 0.95 - 2 * np.sqrt(0.95 * 0.05 / 100), name
+        assert np.all(res[:, 1] >= res[:, 2])

@@ -73,17 +73,22 @@ def test_diagonal_is_the_mixture_edf():
     np.testing.assert_allclose(2.0 / np.diag(cov), edf_mixture(frac, m, n), rtol=5e-3)
 
 
-def test_dense_grid_skeleton_keeps_the_standard_errors(monkeypatch):
-    # ~7 taus per octave: the fit correlates them through 4 per octave; compare with the
-    # exact correlation of every tau pair
+def test_dense_grids_fit_one_tau_per_octave():
+    # "all" and 20 per decade are fitted on the taus nearest each octave: the same
+    # identification and (all: exactly, 20/decade: nearly) the same fit as the octave grid
     from fogmon.davar import fit as fit_mod
     rng = np.random.default_rng(8)
     n, fs = 2**14, 100.0
     y = np.diff(rng.normal(size=n + 1) * 0.05) * fs + rng.normal(size=n) * 0.3 * np.sqrt(fs)
-    res = oadev(y, fs, taus=20)
-    assert len(fit_mod._skeleton(res.m)[0]) < len(res.m)
-    a, se, _ = fit_mod.fit_avar(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
-    monkeypatch.setattr(fit_mod, "_skeleton", lambda m: (np.asarray(m), np.arange(len(m))))
-    a_exact, se_exact, _ = fit_mod.fit_avar(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
-    assert np.array_equal(a > 0, a_exact > 0) and (a[:2] > 0).all()
-    np.testing.assert_allclose(se[:2], se_exact[:2], rtol=0.01)  # measured 0.2 %
+    fits = {}
+    for grid in ("octave", 20, "all"):
+        res = oadev(y, fs, taus=grid)
+        fits[grid] = fit_mod.fit_avar(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
+    a, se, _, _ = fits["octave"]
+    assert (a[:2] > 0).all()
+    for grid in (20, "all"):
+        assert np.array_equal(fits[grid][0] > 0, a > 0), grid
+    np.testing.assert_allclose(fits["all"][0], a, rtol=1e-9)
+    np.testing.assert_allclose(fits[20][0][:2], a[:2], rtol=0.05)
+    m_all = oadev(y, fs, taus="all").m
+    assert np.array_equal(m_all[fit_mod.octave_subset(m_all, n // 4)], 2 ** np.arange(13))

@@ -11,7 +11,7 @@ import pytest
 from fogmon.block import Block, Event
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
-from fogmon.pipeline import (COEFFICIENTS, JumpDetector, Sink, add_pipeline_arguments, default_window_s,
+from fogmon.pipeline import (COEFFICIENTS, Sink, add_pipeline_arguments, default_window_s,
                              parse_taus, run_pipeline, slice_block)
 from fogmon.sinks.console import ConsoleSink, format_summary
 
@@ -161,33 +161,6 @@ def test_events_pass_through_and_slice_keeps_them():
     assert s.event_counts["crc_error"] == 1 and s.event_counts["gap"] == 1
     b = Block.make(t[:10], r[:10], events=[Event(t[3], "gap", "x")])
     assert slice_block(b, 0, 3).events == () and len(slice_block(b, 3, 10).events) == 1
-
-
-class _C:
-    def __init__(self, v, lo, hi, ok=True):
-        self.value, self.lo, self.hi = np.array(v, float), np.array(lo, float), np.array(hi, float)
-        self.identifiable = np.full(len(self.value), ok)
-
-
-class _Fit:
-    def __init__(self, n_vals, n_lo, n_hi):
-        k = len(n_vals)
-        for name in COEFFICIENTS:
-            setattr(self, name, _C(np.ones(k), np.zeros(k), 2 * np.ones(k), ok=False))
-        self.N_dpsh = _C(n_vals, n_lo, n_hi)
-
-
-def test_jump_detector_compares_with_the_last_independent_window():
-    # N steady for 30 s then jumps to 3x; 1-sigma intervals +-10 % (z = 2 / hypot(0.1, 0.3) = 6.3)
-    t = np.arange(2.5, 60.1, 2.5)
-    v = np.where(t < 30, 1.0, 3.0)
-    j = JumpDetector(window_s=10.0)
-    ev = j.update(_Fit(v, v * 0.9, v * 1.1), t)
-    assert len(ev) == 1 and ev[0].kind == "coef_jump" and "N_dpsh" in ev[0].message and "6.3 sigma" in ev[0].message
-    assert ev[0].t_s == 30.0             # the first window after the jump; the reference ended at 20 s
-    # intervals that do not overlap at 1 sigma but only a 4-sigma change: no event
-    v = np.where(t < 30, 1.0, 1.4)
-    assert JumpDetector(window_s=10.0).update(_Fit(v, v - 0.07, v + 0.07), t) == []
 
 
 def test_console_summary_lists_adev_bounds_and_coefficients():

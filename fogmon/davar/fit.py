@@ -4,10 +4,14 @@ Model sigma^2(tau) = sum_n A_n tau^n, n = -2..2, A_n >= 0 (theory.POWERS). Each
 iteration solves a non-negative least-squares problem with weights
 nu_i / (2 sigma_model_i^4) - the inverse variance of sigma_hat_i^2 under the model, with
 nu_i the EDF of the noise mixture the model predicts at tau_i - which is Fisher scoring
-for the chi-square likelihood (made robust by Tukey reweighting). Standard errors come
-from the sandwich covariance of this estimator with the exact covariance of the Allan
+for the chi-square likelihood (made robust by Tukey reweighting). The fit uses one tau
+per octave of the grid it is given (``octave_subset``), so that identification does not
+depend on how densely the grid samples the same information. Standard errors come from
+the sandwich covariance of this estimator with the exact covariance of the Allan
 variances across taus for that mixture (confidence.avar_relative_covariance); a term is
-identifiable when its 95 % interval excludes zero.
+identifiable when its 95 % interval excludes zero. Every term also gets a one-sided 95 %
+upper limit from the profile of the fit's own (extended quasi-) likelihood, rescaled for
+the correlation across taus (``_upper_limits``).
 """
 from __future__ import annotations
 
@@ -41,25 +45,33 @@ with the pure EDF weights)."""
 TUKEY_C = 4.685
 """Tukey biweight cut-off (95 % efficiency under normal residuals), in robust scale units."""
 _RTOL = 1e-9
+UPPER_CONFIDENCE = 0.95
+"""One-sided confidence of every term's upper limit (``Coefficient.upper``)."""
+_UPPER_DEVIANCE = float(norm.ppf(UPPER_CONFIDENCE)) ** 2  # 2.706: signed root at -1.645
 
 
 @dataclass(frozen=True)
 class Coefficient:
     """One IEEE-952 coefficient (unit in the attribute name): estimate ``value``,
     interval ``lo``..``hi`` at the fit's confidence, ``identifiable`` False when the
-    record cannot tell the term from zero (then quote only ``hi`` as an upper limit).
-    Scalars for an AdevResult fit, arrays over windows for a DadevResult fit."""
+    record cannot tell the term from zero (then ``value`` = ``lo`` = 0 and ``hi`` is
+    ``upper``: quote only that, as an upper limit). ``upper``: one-sided
+    UPPER_CONFIDENCE (95 %) upper limit of the coefficient, never below the term's
+    estimate in a fit that includes it (every term of an AdevResult fit; in a DadevResult
+    fit only where not identifiable, else NaN). Scalars for an AdevResult fit, arrays
+    over windows for a DadevResult fit."""
 
     value: np.ndarray | float
     lo: np.ndarray | float
     hi: np.ndarray | float
     identifiable: np.ndarray | bool
+    upper: np.ndarray | float
 
     def __str__(self) -> str:
         if np.ndim(self.value):
             return f"Coefficient(windows={np.size(self.value)}, identifiable={int(np.sum(self.identifiable))})"
         if not self.identifiable:
-            return f"not identifiable (< {self.hi:.4g})"
+            return f"not identifiable (< {self.upper:.4g}, 95 % upper limit)"
         return f"{self.value:.4g} [{self.lo:.4g}, {self.hi:.4g}]"
 
 
@@ -79,6 +91,7 @@ class NoiseFit:
     R_dphh: Coefficient
     avar_terms: np.ndarray
     avar_se: np.ndarray
+    avar_upper: np.ndarray
     confidence: float
     misfit: np.ndarray
     worst_ratio: np.ndarray | float
@@ -107,20 +120,20 @@ _MIX_OF_TERM = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1],
 """Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
 
 
-SKELETON_PER_OCTAVE = 4
-"""Above m = 16 the cross-tau correlation is computed on at most this many taus per octave
-(``_skeleton``): denser grids ("all": n / 4 taus) share the correlations of the nearest."""
-
-
-def _skeleton(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Taus on which the fit computes the exact cross-tau correlation: every m <= 16, above
-    that m rounded to SKELETON_PER_OCTAVE per octave (a grid no denser is kept as is).
-    Returns (skeleton m, index of each m's skeleton tau)."""
-    m = np.asarray(m, dtype=np.int64)
-    step = np.log2(m) * SKELETON_PER_OCTAVE
-    dense = np.any((m[1:] > 16) & (np.diff(step) < 1.0)) if len(m) > 1 else False
-    near = np.where(m <= 16, m, np.round(2.0 ** (np.round(step) / SKELETON_PER_OCTAVE)).astype(np.int64))
-    return np.unique(near if dense else m, return_inverse=True)
+def octave_subset(m, m_max: int) -> np.ndarray:
+    """Indices (sorted) of the averaging factors ``m`` the fit uses: for each power of two
+    2^k <= ``m_max`` (n / 4, the octave grid's last), the m nearest to it in log2 within
+    half an octave. An octave grid is kept whole,
+    "all" and 1/3-octave grids give (nearly) the octave grid, sparser grids are kept. Taus
+    a fraction of an octave apart carry nearly the same information (their Allan variances
+    correlate above 0.9): fitting them all with per-tau weights would count it again for
+    every extra tau, so identification would depend on the grid's density."""
+    lg = np.log2(np.asarray(m, dtype=np.float64))
+    k = np.round(lg)
+    k = np.where(k <= np.floor(np.log2(max(m_max, 1))), k, np.inf)
+    order = np.lexsort((np.abs(lg - k), k))
+    order = order[np.isfinite(k[order])]
+    return np.sort(order[np.r_[True, np.diff(k[order]) != 0]]) if len(order) else order
 
 
 class _NoiseModel:
@@ -138,8 +151,7 @@ class _NoiseModel:
         full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
         self.full = full.astype(np.float64)
         self.gap_scale = np.asarray(n_terms) / full
-        self.skel_m, self.skel_of = _skeleton(m)
-        self.skel_x = (self.skel_m * (tau[0] / m[0]))[:, None] ** POWERS
+        self.m = np.asarray(m, dtype=np.int64)
 
     def fractions(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per
@@ -155,15 +167,11 @@ class _NoiseModel:
 
     def correlation(self, a: np.ndarray) -> np.ndarray:
         """Correlation of the Allan variance estimates across the fitted taus (T x T):
-        exact for the model's mixture (``confidence.avar_relative_covariance``), computed
-        on the skeleton taus."""
-        cov = avar_relative_covariance(self.fractions(a, self.skel_x),
-                                       covariance_matrices(self.skel_m, self.n_samples),
-                                       self.n_samples - 2.0 * self.skel_m + 1)
+        exact for the model's mixture (``confidence.avar_relative_covariance``)."""
+        cov = avar_relative_covariance(self.fractions(a), covariance_matrices(self.m, self.n_samples),
+                                       self.n_samples - 2.0 * self.m + 1)
         sd = np.sqrt(np.diag(cov))
-        corr = (cov / np.outer(sd, sd))[np.ix_(self.skel_of, self.skel_of)]
-        np.fill_diagonal(corr, 1.0)
-        return corr
+        return cov / np.outer(sd, sd)
 
 
 def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -266,9 +274,10 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def _sandwich_se(x, model, corr, cols, rw, nu, c2) -> np.ndarray:
-    """Standard errors of A over ``cols`` for the EDF-weighted estimator (weights
-    rw / ((2 / nu + c2) model^2)): sandwich covariance with the Allan variances' standard
+def _variances(x, model, corr, cols, rw, nu, c2) -> tuple[np.ndarray, np.ndarray]:
+    """Variances of A over ``cols`` for the EDF-weighted estimator (weights
+    rw / ((2 / nu + c2) model^2)): (naive, sandwich). Naive: the inverse information of
+    the independence likelihood, (X'WX)^-1. Sandwich: with the Allan variances' standard
     deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and their exact
     correlation across taus ``corr`` (applied to the inadequacy part too: a misfit is
     smooth in tau)."""
@@ -281,62 +290,176 @@ def _sandwich_se(x, model, corr, cols, rw, nu, c2) -> np.ndarray:
     wx = w[:, None] * xs
     bread = np.linalg.pinv(xs.T @ wx)
     cov = bread @ (wx.T @ cov_y @ wx) @ bread
-    return np.sqrt(np.maximum(np.diag(cov), 0.0)) / scale
+    return np.maximum(np.diag(bread), 0.0) / scale**2, np.maximum(np.diag(cov), 0.0) / scale**2
 
 
-def fit_avar(tau_s, avar, m, n_terms, n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _eql_deviance(y, model, nu, rw, c2) -> float:
+    """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
+    with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
+    (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
+    v = 2.0 / nu + c2
+    r = y / model
+    return float(np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v))))
+
+
+def _profile(x, y, edf, rw, c2, a, terms, n: int, c: float | None) -> tuple[float, np.ndarray]:
+    """Fisher scoring of the ``terms`` (mask) >= 0 with term ``n`` held at ``c`` (None:
+    free), from ``a``: returns (EQL deviance, A) at convergence."""
+    cols = terms.copy()
+    a = np.where(terms, a, 0.0)
+    if c is not None:
+        cols[n] = False
+        a[n] = c
+    offset = x @ np.where(cols, 0.0, a)
+    model = np.maximum(x @ a, 1e-300)
+    for _ in range(_MAX_ITER):
+        nu = edf(a)
+        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
+        a_new = np.where(cols, 0.0, a)
+        if cols.any():
+            a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], (y - offset) * sw)
+        model_new = np.maximum(x @ a_new, 1e-300)
+        done = np.max(np.abs(model_new / model - 1.0)) < _ROBUST_RTOL
+        a, model = a_new, model_new
+        if done:
+            break
+    return _eql_deviance(y, model, edf(a), rw, c2), a
+
+
+def _term_variances(x, edf, rw, c2, a, n: int) -> tuple[float, float]:
+    """(naive, sandwich) variance of A_n (``_variances``) in the fit of the terms a > 0
+    and n, at the model ``a``."""
+    cols = a > 0
+    cols[n] = True
+    model = np.maximum(x @ a, 1e-300)
+    v = _variances(x, model, edf.correlation(a), cols, rw, edf(a), c2)
+    return v[0][int(np.sum(cols[:n]))], v[1][int(np.sum(cols[:n]))]
+
+
+def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
+    """One-sided UPPER_CONFIDENCE upper limit of every A_n: the c > A_n-hat where the
+    profile deviance D(c) (``_profile``; A_n-hat the estimate with term n added to the
+    fitted terms ``a > 0``, which stay free >= 0), rescaled by naive / sandwich variance
+    of A_n at the profiled model (the magnitude adjustment of an independence likelihood
+    for the taus' correlation, Chandler & Bate 2007, evaluated under the hypothesis
+    A_n = c as in a score test), reaches norm.ppf(0.95)^2. Never below A_n-hat. For the
+    terms in the mask ``which`` (NaN for the others)."""
+    upper = np.where(which, np.inf, np.nan)
+    for n in np.flatnonzero(which):
+        terms = a > 0
+        terms[n] = True
+        d_min, a_hat = _profile(x, y, edf, rw, c2, a, terms, n, None)
+        naive, sand = _term_variances(x, edf, rw, c2, a_hat, n)
+        if not (sand > 0 and naive > 0):
+            continue
+        start = [a_hat]
+
+        def excess(c):
+            d, start[0] = _profile(x, y, edf, rw, c2, start[0], terms, n, c)
+            naive_c, sand_c = _term_variances(x, edf, rw, c2, start[0], n)
+            return naive_c / sand_c * (d - d_min) - _UPPER_DEVIANCE
+        lo, step = a_hat[n], np.sqrt(sand)
+        f_lo, hi = -_UPPER_DEVIANCE, lo + step
+        for _ in range(60):
+            f_hi = excess(hi)
+            if f_hi > 0:
+                break
+            lo, f_lo, hi = hi, f_hi, hi + 2.0 * (hi - a_hat[n])
+        else:
+            continue
+        side = 0
+        for _ in range(40):  # Illinois regula falsi on the values seen (the profile is warm-started)
+            if hi - lo <= 1e-3 * max(hi, step):
+                break
+            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            mid = min(max(mid, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+            f_mid = excess(mid)
+            if abs(f_mid) < 1e-3:
+                hi = mid
+                break
+            if f_mid > 0:
+                hi, f_hi = mid, f_mid
+                f_lo = f_lo / 2.0 if side == 1 else f_lo
+                side = 1
+            else:
+                lo, f_lo = mid, f_mid
+                f_hi = f_hi / 2.0 if side == -1 else f_hi
+                side = -1
+        upper[n] = hi
+    return upper
+
+
+def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
+             upper_limits: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
-    Robust Fisher scoring (``_robust_scoring``) with all five terms, then backward
-    elimination: while a fitted term's 95 % interval reaches zero, the weakest one is
-    dropped and the rest refitted. Returns (A_n, standard error of A_n, misfit mask over
-    ``tau_s``: taus the robust weights reject, i.e. that the terms cannot describe);
-    dropped terms have A_n = 0 and the standard error they would have if fitted alongside
-    the others. A_n NaN (not identifiable) when fewer than 2 usable taus or when the
-    robust weights reject all but one tau."""
+    On the taus of ``octave_subset``: robust Fisher scoring (``_robust_scoring``) with all
+    five terms, then backward elimination: while a fitted term's 95 % interval reaches
+    zero, the weakest one is dropped and the rest refitted. Returns (A_n, standard error
+    of A_n, misfit mask over ``tau_s``: taus the terms cannot describe (robust weight 0,
+    or for taus outside the subset the same Tukey rejection of their residual from the
+    model), one-sided 95 % upper limit of A_n (``_upper_limits``; ``upper_limits``
+    "all" terms, the "unidentified" ones or "none", NaN where not computed)); dropped terms have
+    A_n = 0 and the standard error they would have if fitted alongside the others. A_n
+    NaN (not identifiable) when fewer than 2 usable taus or when the robust weights
+    reject all but one tau."""
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
     misfit = np.zeros(len(tau), dtype=bool)
     if ok.sum() < 2:
-        return np.full(5, np.nan), np.full(5, np.nan), misfit
-    tau, y, nt = tau[ok], avar[ok], np.asarray(n_terms)[ok]
-    m_int = np.asarray(m, dtype=np.int64)[ok]
-    x = tau[:, None] ** POWERS
+        return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
+    use = np.flatnonzero(ok)
+    use = use[octave_subset(np.asarray(m)[use], n_samples // 4)]
+    if len(use) < 2:
+        use = np.flatnonzero(ok)
+    y, nt = avar[use], np.asarray(n_terms)[use]
+    m_int = np.asarray(m, dtype=np.int64)[use]
+    x = tau[use][:, None] ** POWERS
     active = np.ones(5, dtype=bool)
     starts = _starts(len(y))
-    edf = _NoiseModel(tau, m_int, nt, n_samples)
+    edf = _NoiseModel(tau[use], m_int, nt, n_samples)
     while True:
         scored = _robust_scoring(x, active, y, edf, starts)
         if scored is None:  # the robust weights reject all taus: nothing is identifiable
-            return np.full(5, np.nan), np.full(5, np.nan), misfit
+            return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
         a, model, nu, rw, c2 = scored
         starts = [rw]
         free = a > 0
         se = np.full(5, np.inf)
         corr = edf.correlation(a)
         if free.any():
-            se[free] = _sandwich_se(x, model, corr, free, rw, nu, c2)
+            se[free] = np.sqrt(_variances(x, model, corr, free, rw, nu, c2)[1])
         weak = free & (a - IDENTIFY_Z * se <= 0)
         if not weak.any():
             break
         active[np.flatnonzero(weak)[np.argmin(a[weak] / se[weak])]] = False
-    for n in np.flatnonzero(~free):  # upper limits: the term's error if fitted with the others
+    for n in np.flatnonzero(~free):  # the term's error if fitted with the others
         cols = free.copy()
         cols[n] = True
-        se[n] = _sandwich_se(x, model, corr, cols, rw, nu, c2)[int(np.sum(cols[:n]))]
-    misfit[ok] = rw == 0
-    return a, se, misfit
+        se[n] = np.sqrt(_variances(x, model, corr, cols, rw, nu, c2)[1][int(np.sum(cols[:n]))])
+    which = {"all": np.ones(5, dtype=bool), "unidentified": ~free, "none": np.zeros(5, dtype=bool)}[upper_limits]
+    upper = np.maximum(_upper_limits(x, y, edf, rw, c2, a, which), a)
+    misfit[use] = rw == 0
+    rest = np.setdiff1d(np.flatnonzero(ok), use)
+    if len(rest):
+        m_rest = np.asarray(m, dtype=np.int64)[rest]
+        nu_rest = _NoiseModel(tau[rest], m_rest, np.asarray(n_terms)[rest], n_samples)(a)
+        z = np.log(avar[rest] / np.maximum(tau[rest][:, None] ** POWERS @ a, 1e-300))
+        misfit[rest] = np.abs(z) / np.sqrt(2.0 / nu_rest + MISFIT_FLOOR**2) >= TUKEY_C
+    return a, se, misfit, upper
 
 
-def _coefficients(a: np.ndarray, se: np.ndarray, confidence: float) -> list[Coefficient]:
+def _coefficients(a: np.ndarray, se: np.ndarray, upper: np.ndarray, confidence: float) -> list[Coefficient]:
     z = norm.ppf(0.5 + confidence / 2.0)
     value = avar_terms_to_coefficients(a)
     lo = avar_terms_to_coefficients(np.maximum(a - z * se, 0.0))
-    hi = avar_terms_to_coefficients(np.where(np.isfinite(se), a + z * se, np.inf))
     ident = (a - IDENTIFY_Z * se > 0) & np.isfinite(a)
-    return [Coefficient(*(v[..., i] if v.ndim > 1 else v[i].item() for v in (value, lo, hi, ident)))
+    up = np.where(np.isnan(upper), np.nan, avar_terms_to_coefficients(np.where(np.isfinite(upper), upper, 0.0)))
+    up = np.where(np.isinf(upper), np.inf, up)
+    hi = np.where(ident, avar_terms_to_coefficients(np.where(np.isfinite(se), a + z * se, 0.0)), up)
+    return [Coefficient(*(v[..., i] if v.ndim > 1 else v[i].item() for v in (value, lo, hi, ident, up)))
             for i in range(5)]
 
 
@@ -353,17 +476,22 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = 0.683) -> No
     to an AdevResult (scalar coefficients) or to every window of a DadevResult (arrays
     over windows: the coefficient time series). Intervals at ``confidence``; taus the
     five terms cannot describe are down-weighted, flagged in ``misfit`` and left out of
-    ``worst_ratio``."""
+    ``worst_ratio``. Every coefficient also carries its one-sided 95 % upper limit
+    ``upper`` (the ``hi`` of a term that is not identifiable); in a DadevResult fit only
+    where the term is not identifiable (NaN elsewhere: the windows need only the bound
+    they print, at a third of the cost)."""
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
-        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n) for i in range(len(result))]
+        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified") for i in range(len(result))]
         a = np.array([f[0] for f in fits]).reshape(len(result), 5)
         se = np.array([f[1] for f in fits]).reshape(len(result), 5)
         misfit = np.array([f[2] for f in fits], dtype=bool).reshape(result.adev_dph.shape)
+        upper = np.array([f[3] for f in fits]).reshape(len(result), 5)
     else:
-        a, se, misfit = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples)
-    fit = NoiseFit(*_coefficients(a, se, confidence), avar_terms=a, avar_se=se, confidence=confidence,
-                   misfit=misfit, worst_ratio=np.nan)
+        a, se, misfit, upper = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples,
+                                       "all")
+    fit = NoiseFit(*_coefficients(a, se, upper, confidence), avar_terms=a, avar_se=se, avar_upper=upper,
+                   confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
     return replace(fit, worst_ratio=worst if worst.ndim else float(worst))

@@ -51,7 +51,7 @@ def format_summary(s: Summary) -> str:
                 lines.append(f"  {name:<9} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
             else:
                 hi = float(c.hi)
-                bound = f" (upper bound {hi:.4g} {unit})" if math.isfinite(hi) else ""
+                bound = f" (< {hi:.4g} {unit}, 95 % upper limit)" if math.isfinite(hi) else ""
                 lines.append(f"  {name:<9}   not identifiable from this record{bound}")
         check = model_check(a, f) if a is not None else None
         if check is not None:
