@@ -589,7 +589,9 @@ class _ThreadedBlocks:
             self._append(self._DONE, 0)
 
     def _put(self, b: Block) -> bool:
-        """Queue ``b``, waiting for room or dropping it; False once closed."""
+        """Queue ``b``, waiting for room or dropping it; False once a source that waits is
+        closed (nothing more of it is needed). A live device's blocks are queued even after
+        the stop: they were read and archived, so ``backlog()`` hands them on to be counted."""
         with self._cond:
             if self._n and self._n + len(b) > self.max_samples:
                 if not self.wait:
@@ -599,7 +601,7 @@ class _ThreadedBlocks:
                 self._cond.notify_all()
                 while self._n and self._n + len(b) > self.max_samples and not self._closed:
                     self._cond.wait()
-            if self._closed:
+            if self._closed and self.wait:
                 return False
         self._append(b, len(b))
         return True
