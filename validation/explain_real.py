@@ -17,8 +17,9 @@ fitted from the recording) and `fogmon replay` (console summary), then
 - checks, each PASS/FAIL with its numbers: every effect lowered the score; no list cut
   (every cluster of raw samples beyond 8 MAD is a listed glitch or inside a
   platform_motion warning, and the list holds as many as the evidence counts); regions
-  inside the record; a known transient located (a region holding its time, shorter than
-  20 % of the record); platform motion flagged where the sensor is known to move (a
+  inside the record; a known transient located (a region, or the platform_motion warning
+  of a transient that moved the platform, holding its time, shorter than 20 % of the
+  record); platform motion flagged where the sensor is known to move (a
   `platform_motion` warning overlapping each interval, CONTRACT section 4); nothing
   missing and nothing invented where the physics is known (a quiet stationary record:
   only the sensor's own filter and lines, no region left).
@@ -150,12 +151,18 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
 
     if "transient_t_s" in entry:
         T = entry["transient_t_s"]
+        # located by a time-resolved region or, when the transient moved the platform (an
+        # earthquake's ground rotation), by the platform_motion warning that keeps it out
         hold = [r for r in rep["mismatches"] if not r.get("whole_record") and r["t_start_s"] <= T <= r["t_end_s"]]
+        hold += [w for w in rep.get("warnings", []) if w.get("kind") == "platform_motion"
+                 and w["t_start_s"] <= T <= w["t_end_s"]]
         best = min(hold, key=lambda r: r["t_end_s"] - r["t_start_s"], default=None)
         frac = (best["t_end_s"] - best["t_start_s"]) / dur if best else None
+        what = ("platform_motion warning " + f"{best['t_start_s']:g}..{best['t_end_s']:g} s" if best and "kind" in best
+                else region_text(best))
         out.append((f"known transient at t = {T:g} s located", best is not None and frac < TRANSIENT_MAX_FRACTION,
-                    f"shortest region holding it: {region_text(best)} = {100 * frac:.1f} % of the record"
-                    if best else f"no time-resolved region holds t = {T:g} s"))
+                    f"shortest region or motion warning holding it: {what} = {100 * frac:.1f} % of the record"
+                    if best else f"no time-resolved region or motion warning holds t = {T:g} s"))
 
     if motion:
         warns = [w for w in rep.get("warnings", []) if w.get("kind") == "platform_motion"]
