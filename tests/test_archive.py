@@ -247,7 +247,7 @@ class PacedPort:
         pass
 
 
-def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path):
+def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeypatch):
     """--rotate-s 1 at 200 Hz over 4.5 s: five pieces of samples and raw bytes. Frame 200
     (first of piece 2) fails its CRC and frame 400 (first of piece 3) is lost, so pieces
     2 and 3 start with a missing sample; garbage sits inside piece 1."""
@@ -266,6 +266,9 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path):
                                                                    max_rate_dph=MAX_RATE_DPH),
                        opener=lambda: port, clock=port.clock)
     archive = Archive(str(arch), src)
+    # the port is paced by the pipeline, not by the clock: no wall-clock stop (a loaded host
+    # would otherwise end the run before its 4.5 s of recording)
+    monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)
     run_pipeline(src, _args(window_s=0.64, rotate_s=1.0, duration_s=4.5), sinks=[], extra_sinks=[archive])
     n = int(4.5 * FS)
     want = [k for k in range(n) if k not in (200, 400)]

@@ -236,7 +236,7 @@ def test_bytes_lost_give_the_exact_gap():
                     "300 sample(s) lost at t=3.000000 s (bytes skipped)"]
 
 
-def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(tmp_path):
+def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(tmp_path, monkeypatch):
     """A --duration-s run of 4.0 s (800 samples at 200 Hz) of a device that goes on
     sending, with CRC failures, drops and garbage before and after the cut: every counter
     equals the totals its events carry and what the archive holds, and the raw capture
@@ -260,6 +260,7 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     src = scripted_source(split(data, [997] * 40, ), [0.2] * 40)
     archive = Archive(str(tmp_path / "arch"), src)
     ev = Events()
+    monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)   # scripted device: no wall-clock stop
     summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev], extra_sinks=[archive])
     c = summary.counters
     assert summary.n_samples == 798                      # frames 798, 799 lost: the grid ends at 797
