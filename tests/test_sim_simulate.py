@@ -110,14 +110,20 @@ def test_simulated_source_streams_the_same_numbers():
 
 
 def test_simulated_source_endless_until_closed_and_paced():
-    import time
+    from fogmon.sources.pacing import Pacer
     src = SimulatedSource(SensorModel(100.0, 0.0, Noise(N_dpsh=0.05)), seed=1, speed=10.0)
-    t0 = time.monotonic()
+    now, slept = [0.0], []
+
+    def sleep(d):                         # a clock that advances only by the pacer's sleeps
+        slept.append(d)
+        now[0] += d
+
+    src._pacer = Pacer(10.0, clock=lambda: now[0], sleep=sleep)
     for i, b in enumerate(src.blocks()):
         if i == 5:
             src.close()
     assert src.counters["blocks"] == 6 and src.counters["samples"] == 6 * 100
-    assert time.monotonic() - t0 >= 0.45  # 5 blocks of 1 s recording time at 10x real time
+    assert sum(slept) == pytest.approx(0.5)  # 5 blocks of 1 s recording time after the first, at 10x
 
 
 def test_mwd_scenario_physics():
