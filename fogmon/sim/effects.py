@@ -55,23 +55,45 @@ def smoothed_temperature(t_s, temp_c, smooth_s: float) -> np.ndarray:
     return x[0] + (c[hi] - c[lo]) / (hi - lo)
 
 
+#: Temperature changes below this fraction of |T| (deg C) per difference step are rounding,
+#: not physics: dT/dt and d2T/dt2 that small are taken as 0, so the K1/K2 branch
+#: (dT/dt * d2T/dt2 > 0) does not flip on rounding noise along a steady ramp or plateau.
+#: Thermometers resolve ~1e-5 of their reading; double rounding of the smoothing is ~1e-12.
+DERIVATIVE_ROUNDING = 1e-8
+
+
 def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0, diff_step_s: float = 1.0):
     """(T, dT/dt, d2T/dt2) in deg C, deg C/s, deg C/s^2 on smoothed temperature, by
-    3-point backward differences with step h = diff_step_s (DESIGN 4.7):
-    dT = (3 T(t) - 4 T(t-h) + T(t-2h)) / 2h, d2T = (T(t) - 2 T(t-h) + T(t-2h)) / h^2,
-    T(t - h) interpolated on the sample times (held at the first sample before the start)."""
+    3-point backward differences with step h = diff_step_s (docs/methods.md), see
+    ``backward_differences``; T(t - h) interpolated on the sample times (held at the
+    first sample before the start)."""
     t = np.asarray(t_s, dtype=float)
     ts = smoothed_temperature(t, temp_c, smooth_s)
     h = float(diff_step_s)
-    t1 = np.interp(t - h, t, ts)
-    t2 = np.interp(t - 2 * h, t, ts)
-    return ts, (3 * ts - 4 * t1 + t2) / (2 * h), (ts - 2 * t1 + t2) / (h * h)
+    return (ts, *backward_differences(ts, np.interp(t - h, t, ts), np.interp(t - 2 * h, t, ts), h))
+
+
+def backward_differences(ts, back1, back2, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """dT/dt = (3 T(t) - 4 T(t-h) + T(t-2h)) / 2h and d2T/dt2 = (T(t) - 2 T(t-h) + T(t-2h)) / h^2
+    from the smoothed temperature now, h and 2h ago (deg C, s), each set to 0 where it is
+    below DERIVATIVE_ROUNDING x |T|."""
+    tol = DERIVATIVE_ROUNDING * np.maximum(np.abs(ts), 1.0)
+    d1 = 3 * ts - 4 * back1 + back2
+    d2 = ts - 2 * back1 + back2
+    d1 = np.where(np.abs(d1) <= tol, 0.0, d1) / (2 * h)
+    d2 = np.where(np.abs(d2) <= tol, 0.0, d2) / (h * h)
+    return d1, d2
 
 
 def thermal_drift(t_s, aux, p, fs_hz=None) -> np.ndarray:
-    """K0(T) + K1 dT/dt + K2 d2T/dt2 (deg/h); K1, K2 take the *_pos values where
-    dT/dt * d2T/dt2 > 0 (heating or cooling accelerates) and *_neg elsewhere."""
-    ts, d1, d2 = temperature_derivatives(t_s, aux["temp_c"], p["smooth_s"], p["diff_step_s"])
+    """K0(T) + K1 dT/dt + K2 d2T/dt2 (deg/h), see ``thermal_drift_from``."""
+    return thermal_drift_from(*temperature_derivatives(t_s, aux["temp_c"], p["smooth_s"], p["diff_step_s"]), p)
+
+
+def thermal_drift_from(ts, d1, d2, p) -> np.ndarray:
+    """K0(T) + K1 dT/dt + K2 d2T/dt2 (deg/h) from smoothed T and its derivatives; K1, K2
+    take the *_pos values where dT/dt * d2T/dt2 > 0 (heating or cooling accelerates) and
+    *_neg elsewhere."""
     pos = d1 * d2 > 0
     k1 = np.where(pos, p["k1_pos"], p["k1_neg"])
     k2 = np.where(pos, p["k2_pos"], p["k2_neg"])
