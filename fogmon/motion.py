@@ -61,7 +61,7 @@ def block_samples(rate_hz: float) -> int:
 _TRIMMED_STD_80 = 0.6616
 
 
-def _robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
+def robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
     """Per row of ``y`` (blocks x samples, NaN = none): sigma of one sample (deg/h) from
     the standard deviation of the middle 80 % of first differences (insensitive to a slow
     trend and to a few outliers; unlike a MAD it stays right for quantized rates, where
@@ -110,7 +110,7 @@ def _blocks(rate_dph: np.ndarray, valid: np.ndarray, m: int) -> tuple[np.ndarray
     enough = np.sum(np.isfinite(y), axis=1) >= m // 2
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        return y, enough, _robust_sigma_of_diffs(y)
+        return y, enough, robust_sigma_of_diffs(y)
 
 
 def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[MotionSpan]:
