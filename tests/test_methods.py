@@ -120,3 +120,17 @@ def test_updown_calibration_is_exact():
     up, down = b + (1 + sf) * v, b - (1 + sf) * v
     r = earthrate.updown_calibration(up, down, lat)
     assert r["bias_dph"] == pytest.approx(b) and r["scale_factor_ppm"] == pytest.approx(150.0)
+
+
+def test_static_kalman_stream_equals_the_batch_filter_and_holds_over_gaps():
+    rng = np.random.default_rng(4)
+    z = rng.normal(5.0, 10.0, 50_000)
+    batch = denoise.kalman_static(z, 100.0, 0.1, 0.05)
+    stream = denoise.StaticKalmanStream(100.0, 0.1, 0.05)
+    cuts = np.cumsum(rng.integers(1, 3000, 40))
+    out = np.concatenate([stream.push(p) for p in np.split(z, cuts[cuts < len(z)])])
+    assert np.max(np.abs(out - batch)) < 1e-9 * np.max(np.abs(batch))
+    gap = z[:100].copy()
+    gap[40:60] = np.nan
+    held = denoise.StaticKalmanStream(100.0, 0.1, 0.05).push(gap)
+    assert np.all(held[40:60] == held[39]) and np.isfinite(held).all()

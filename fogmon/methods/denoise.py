@@ -41,6 +41,34 @@ def kalman_static(rate_dph, rate_hz: float, N_dpsh: float, K_dphsh: float) -> np
     return out
 
 
+class StaticKalmanStream:
+    """``kalman_static`` block by block, for a live channel: the same recursion with its
+    state carried across blocks. An invalid (NaN) sample has no measurement: the estimate
+    is held (the steady-state gain is kept, a small approximation after long gaps)."""
+
+    def __init__(self, rate_hz: float, N_dpsh: float, K_dphsh: float) -> None:
+        self.gain, self.variance_dph2 = static_gain(rate_hz, N_dpsh, K_dphsh)
+        self._x = float("nan")  # the last estimate, deg/h
+
+    def push(self, rate_dph) -> np.ndarray:
+        """Estimates (deg/h) for one block of measurements (deg/h, NaN = none); NaN until
+        the first measurement."""
+        z = np.asarray(rate_dph, float)
+        out = np.empty(len(z))
+        b, a = [self.gain], [1.0, -(1.0 - self.gain)]
+        ok = np.isfinite(z)
+        edges = np.flatnonzero(np.diff(np.concatenate(([False], ok, [False])).astype(np.int8)))
+        prev = 0
+        for start, stop in zip(edges[::2], edges[1::2]):
+            out[prev:start] = self._x
+            x0 = z[start] if np.isnan(self._x) else self._x
+            out[start:stop], _ = lfilter(b, a, z[start:stop], zi=[(1.0 - self.gain) * x0])
+            self._x = float(out[stop - 1])
+            prev = stop
+        out[prev:] = self._x
+        return out
+
+
 def dynamic_gain(rate_hz: float, N_dpsh: float, accel_dphps: float) -> np.ndarray:
     """Steady-state gain (2,) of the constant-rate-change filter: state (rate deg/h,
     rate change deg/h/s), white angular acceleration of spectral density
