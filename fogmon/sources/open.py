@@ -139,12 +139,17 @@ def _sniff(path: str) -> str:
 def open_replay_source(path: str, args):
     """A source replaying ``path``: a replay-log CSV, a raw serial capture (protocol from
     ``--protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc .csv .log with
-    ``--dbc`` or a sidecar), or an archive folder (``open_archive``). Not paced: the
+    ``--dbc`` or a sidecar), another tool's recording (fogmon.sources.formats), or an
+    archive folder (``open_archive``). Not paced: the
     pipeline paces (``--realtime``)."""
     from fogmon.sources.replay import ReplayLogSource, open_raw_capture, read_sidecar
+    from fogmon.sources.formats import open_reader
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
+    other = open_reader(path, args)  # ROS bag/MCAP, PX4 ULog, MDF4, LAS (fogmon.sources.formats)
+    if other is not None:
+        return other
     if os.path.isdir(path):
         return open_archive(path, args)
     if os.path.splitext(path)[1].lower() == ".toml":  # a sensor model: stream its simulation (endless)

@@ -1,0 +1,74 @@
+"""ROS 1 bags, ROS 2 bags (a folder with metadata.yaml, sqlite3 or MCAP storage) and MCAP
+files with sensor_msgs/Imu messages, read with ``rosbags`` (``fogmon[ros]``).
+
+One topic (``--topic``, default the only Imu topic), one axis of ``angular_velocity``
+(rad/s -> deg/h; ``--axis``, default z). Time base: ``header.stamp`` of each message (s),
+on fogmon's grid as fogmon.sources.stamped describes (missing messages become counted
+invalid placeholders); time 0 is the first message's stamp, whose Unix time is kept in
+the metadata (``t0_unix_s``)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from fogmon.errors import FogmonError
+from fogmon.sources.stamped import DPH_PER_RPS, StampedSource
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+
+
+def _reader(path: str):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    return AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+
+
+def open_source(path: str, options: dict) -> StampedSource:
+    """The Imu topic ``options['topic']``, axis ``options['axis']`` (x, y, z) of the bag or
+    MCAP file ``path`` as a StampedSource; a missing topic or a topic of another type is a
+    one-line FogmonError naming the file and the Imu topics it has."""
+    axis = options.get("axis") or "z"
+    try:
+        reader = _reader(path)
+        reader.open()
+    except Exception as e:  # rosbags raises its own error types for unreadable files
+        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+    try:
+        imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+        topic = options.get("topic")
+        if topic is None:
+            if len(imu) != 1:
+                raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
+                                  f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
+            topic = imu[0]
+        conns = [c for c in reader.connections if c.topic == topic]
+        if not conns:
+            raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
+                              f"{', '.join(imu) or 'none'})")
+        other = {c.msgtype for c in conns} - {IMU_TYPE}
+        if other:
+            raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
+        n = sum(c.msgcount for c in conns)
+        ns = np.empty(n, np.int64)      # header stamps, integer ns (exact)
+        w = np.empty(n)
+        i = 0
+        for conn, _, raw in reader.messages(connections=conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            w[i] = getattr(msg.angular_velocity, axis)
+            i += 1
+    finally:
+        reader.close()
+    ns, w = ns[:i], w[:i]
+    where = f"{path} topic {topic}"
+    if i and not np.any(ns):
+        raise FogmonError(f"{where}: field header.stamp: zero in every message (the driver does not stamp them)")
+    t0 = int(ns[0]) if i else 0
+    src = StampedSource((ns - t0) * 1e-9, w * DPH_PER_RPS, None, name=f"ROS {os.path.basename(path)} {topic} "
+                         f"angular_velocity.{axis}", where=where, time_field="header.stamp",
+                         meta={"sensor": f"{topic} angular_velocity.{axis}", "t0_unix_s": repr(t0 * 1e-9)},
+                         max_abs_dph=options["max_rate_dph"])
+    src.ros_topic = topic  # the topic a Kalibr export names
+    return src
