@@ -61,12 +61,14 @@ def csv_replay(folder, rate_dph, keep, t0_s=0.0):
     return replay(path)
 
 
-def same_as_reference(got, reference, rtol=1e-12):
+def same_as_reference(got, reference, rtol=1e-12, present="samples"):
+    """Same DADEV and whole-run ADEV as the CSV's replay, and the gap counted (``present``:
+    the counter of samples read)."""
     (s, adev), (s_ref, adev_ref) = got, reference
     np.testing.assert_allclose(adev, adev_ref, rtol=rtol)
     np.testing.assert_allclose(s.overall.adev_dph, s_ref.overall.adev_dph, rtol=rtol)
     assert s.n_samples == s_ref.n_samples == N and s.rate_hz == pytest.approx(FS, rel=1e-3)
-    assert s.counters["samples"] == N - 12 and s.counters["samples_missing"] == 12 and s.counters["seq_gaps"] == 1
+    assert s.counters[present] == N - 12 and s.counters["samples_missing"] == 12 and s.counters["seq_gaps"] == 1
 
 
 def one_line_error(argv, capsys, *parts):
@@ -256,3 +258,55 @@ def test_a_missing_extra_names_it(tmp_path, capsys, monkeypatch):
     path.write_text("~V\n")
     monkeypatch.setitem(sys.modules, "lasio", None)   # as if not installed: importing it raises ImportError
     one_line_error(["replay", str(path)], capsys, str(path), "needs lasio", "pip install 'fogmon[las]'")
+
+
+def test_mdf4_can_bus_logging_with_a_dbc_replays_like_the_csv(signal, tmp_path):
+    """Raw CAN frames in an MDF4 bus log (python-can's MF4 writer, asammdf underneath),
+    decoded with the example DBC: the rate signal is 1e-6 deg/s per bit."""
+    import can
+    import cantools
+    from importlib.resources import files
+    dbc = str(files("fogmon") / "data" / "gyro_example.dbc")
+    db = cantools.database.load_file(dbc)
+    msg = db.get_message_by_name("GYRO_RATE")
+    t, rate, keep = signal
+    path = tmp_path / "bus.mf4"
+    values = np.full(N, np.nan)
+    with can.Logger(str(path)) as log:
+        for i in np.flatnonzero(keep):
+            data = msg.encode({"rate": round(float(rate[i]) / 3600.0, 6), "temperature": 25.0, "counter": int(i % 16),
+                               "valid": 1})
+            values[i] = db.decode_message(msg.frame_id, data)["rate"] * 3600.0   # what the decoder gives, deg/h
+            log.on_message_received(can.Message(timestamp=1000.0 + i / FS, arbitration_id=msg.frame_id, data=data,
+                                                is_extended_id=False))
+    s, adev = replay(path, "--dbc", dbc)
+    same_as_reference((s, adev), csv_replay(tmp_path, values, keep), present="frames_ok")
+
+
+def test_explain_reads_a_bag_like_its_csv(bag, tmp_path):
+    """The batch path (explain) gets the same Recording from a reader as from the replay log."""
+    from fogmon.recording import read_replay_log
+    from fogmon.sources.formats import read_recording
+    rec = read_recording(str(bag), build_parser(["explain", "x", "--report", "r"]).parse_args(
+        ["explain", str(bag), "--report", "r.json", "--axis", "y"]))
+    ref = read_replay_log(csv_replay_file(tmp_path, rec.rate_dph, rec.t_s, rec.sample_rate_hz))
+    np.testing.assert_array_equal(rec.rate_dph, ref.rate_dph)
+    np.testing.assert_array_equal(rec.grid_index(), ref.grid_index())
+    assert len(rec) == N - 12 and rec.sample_rate_hz == pytest.approx(FS, rel=0.2 / N)
+
+
+def csv_replay_file(folder, rate_dph, t_s, fs):
+    path = folder / "same.csv"
+    np.savetxt(path, np.column_stack([t_s, rate_dph]), fmt="%.17g", delimiter=",", comments="",
+               header=f"# fogmon replay log v1\n# sample_rate_hz: {fs!r}\ntime_s,rate_dph")
+    return path
+
+
+def test_explain_end_to_end_on_a_ulog(signal, tmp_path, capsys):
+    path = tmp_path / "flight.ulg"
+    _ulog(path, *signal)
+    report = tmp_path / "r.json"
+    assert main(["explain", str(path), "--topic", "sensor_gyro", "--axis", "z", "--report", str(report),
+                 "--bootstrap", "8", "--max-effects", "0", "--quiet"]) == 0
+    import json
+    assert json.loads(report.read_text())["recording"] == str(path)
