@@ -43,8 +43,9 @@ def open_source(path: str, options: dict) -> StampedSource:
         unit = options.get("rate_unit") or sig.unit
         factor = dph_per_unit(unit, where)
         rate = np.asarray(sig.samples, dtype=np.float64) * factor
-        if np.ma.isMaskedArray(sig.samples):
-            rate = np.where(np.ma.getmaskarray(sig.samples), np.nan, rate)
+        invalid = getattr(sig, "invalidation_bits", None)   # samples the logger marked invalid
+        if invalid is not None:
+            rate = np.where(np.asarray(invalid, dtype=bool), np.nan, rate)
         return StampedSource(np.asarray(sig.timestamps, dtype=np.float64), rate, None,
                              name=f"MDF4 {os.path.basename(path)} channel {channel} ({unit})", where=where,
                              time_field="time", meta={"sensor": f"{channel} ({unit})"},

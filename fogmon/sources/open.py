@@ -34,7 +34,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
                    "angle (units per sample) (default: delta for kvh-*, rate for dsp3000)")
     g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of KVH binary output (default: rad)")
-    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor (default: z)")
+    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor, also the axis of a ROS bag "
+                   "or PX4 ULog recording (default: z)")
     g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
