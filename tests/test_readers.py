@@ -310,3 +310,15 @@ def test_explain_end_to_end_on_a_ulog(signal, tmp_path, capsys):
                  "--bootstrap", "8", "--max-effects", "0", "--quiet"]) == 0
     import json
     assert json.loads(report.read_text())["recording"] == str(path)
+
+
+def test_las_nulls_and_implausible_rates_are_counted_invalid_samples(signal, tmp_path):
+    t, rate, keep = signal
+    r = rate.copy()
+    r[100] = -999.25          # the LAS null value: no sample
+    r[200] = 1e12             # beyond any gyro (the plausibility gate)
+    path = tmp_path / "tool.las"
+    _las(path, t, r, keep)
+    s, _ = replay(path)
+    assert s.counters["null_samples"] == 1 and s.counters["implausible_samples"] == 1
+    assert s.n_invalid == 12 + 2 and s.counters["samples"] == N - 12

@@ -36,11 +36,13 @@ OPTIONS = ("topic", "axis", "channel", "time_channel", "rate_unit", "max_rate_dp
 
 def reader_for(path: str, args=None) -> Reader | None:
     """The reader of ``path`` (None: a replay log, capture or CAN log, opened elsewhere).
-    An MDF4 file given ``--dbc`` (CAN bus logging) is a CAN log too."""
+    An MDF4 file given ``--dbc`` or with a capture sidecar, and no ``--channel``, is a CAN
+    bus log (fogmon.sources.can_source)."""
     if os.path.isdir(path):
         return _ROS if os.path.isfile(os.path.join(path, "metadata.yaml")) else None
     r = READERS.get(os.path.splitext(path)[1].lower())
-    if r is not None and r.module == "mdf" and getattr(args, "dbc", None) and not getattr(args, "channel", None):
+    can_log = getattr(args, "dbc", None) or os.path.exists(path + ".json")   # a DBC or a capture sidecar
+    if r is not None and r.module == "mdf" and can_log and not getattr(args, "channel", None):
         return None
     return r
 
