@@ -315,7 +315,7 @@ def test_explain_end_to_end_on_a_ulog(signal, tmp_path, capsys):
 def test_las_nulls_and_implausible_rates_are_counted_invalid_samples(signal, tmp_path):
     t, rate, keep = signal
     r = rate.copy()
-    r[100] = -999.25          # the LAS null value: no sample
+    r[100] = -9999.25         # the NULL value of the file's ~Well section (lasio's default): no sample
     r[200] = 1e12             # beyond any gyro (the plausibility gate)
     path = tmp_path / "tool.las"
     _las(path, t, r, keep)
