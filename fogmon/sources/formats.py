@@ -31,7 +31,7 @@ READERS = {".bag": _ROS, ".mcap": _ROS, ".db3": _ROS,
            ".mf4": Reader("mdf", "MDF4", "mdf", "asammdf"), ".mdf": Reader("mdf", "MDF4", "mdf", "asammdf"),
            ".las": Reader("las", "LAS", "las", "lasio")}
 #: the options the readers take (argparse dest -> default)
-OPTIONS = ("topic", "axis", "channel", "time_channel", "rate_unit", "max_rate_dph", "dbc")
+OPTIONS = ("topic", "axis", "channel", "time_channel", "rate_unit", "max_rate_dph")
 
 
 def reader_for(path: str, args=None) -> Reader | None:

@@ -119,7 +119,7 @@ class StampedSource:
             c["samples_missing"] += stop - start - (b - a)
             c["seq_gaps"] += len(gaps)
             c[plausibility.COUNTER] += n_bad
-            events += errors.poll(float(t[np.argmax(present & np.isnan(rate))]))  # the first implausible one's
+            events += errors.poll(float(t[np.argmax(present & ~null & np.isnan(rate))]))  # the first implausible one's
             yield Block.make(t, rate, present, aux, events)
 
     def close(self) -> None:
