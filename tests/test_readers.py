@@ -335,3 +335,19 @@ def test_ros_fast_layout_reads_what_full_deserialization_reads(bag, monkeypatch)
     slow = rosbag.open_source(str(bag), opts).to_recording()
     np.testing.assert_array_equal(fast.rate_dph, slow.rate_dph)
     np.testing.assert_array_equal(fast.t_s, slow.t_s)
+
+
+def test_thermal_and_inorbit_read_other_formats(signal, tmp_path, capsys):
+    """A LAS file's deg C curve is temp_c: `fogmon thermal` calibrates from it; `fogmon
+    inorbit` reads the same file."""
+    t, rate, keep = signal
+    import lasio
+    las = lasio.LASFile()
+    las.append_curve("TIME", t[keep], unit="S")
+    las.append_curve("GYRO", rate[keep] + 0.5 * (20 + t[keep] / 6), unit="DEG/HR")   # drifts with temperature
+    las.append_curve("TEMP", 20 + t[keep] / 6, unit="DEGC")
+    path = tmp_path / "tool.las"
+    las.write(str(path), version=2.0)
+    assert main(["thermal", str(path), "--average-s", "5"]) == 0
+    assert f"{N - 12} samples, T 20.0..30.0 deg C" in capsys.readouterr().out     # temp_c from the DEGC curve
+    assert main(["inorbit", str(path), "--period-s", "10"]) == 0

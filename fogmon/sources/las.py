@@ -5,9 +5,9 @@ A time curve (``--time-channel``, default the index curve when its unit is a tim
 ms, min, h) and a rate curve (``--channel``, default the only curve whose unit is an
 angular rate), units from the ~Curve section (``--rate-unit`` overrides a missing or
 wrong one). A depth-indexed file (index unit m or ft) is refused unless a time curve is
-named; its depth then rides along as aux ``depth_m``. LAS null values are counted
-invalid samples (``null_samples``); rows without a time are left out and counted
-(``rows_without_time``). Time stamps go on fogmon's grid as fogmon.sources.stamped
+named; its depth then rides along as aux ``depth_m``. The only curve in deg C, if any,
+becomes aux ``temp_c``. LAS null values are counted invalid samples (``null_samples``);
+rows without a time are left out and counted (``rows_without_time``). Time stamps go on fogmon's grid as fogmon.sources.stamped
 describes."""
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ from fogmon.sources.stamped import StampedSource, dph_per_unit
 #: time unit (lower case) -> s per unit
 TIME_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0,
               "hr": 3600.0}
+#: temperature units (lower case) of a curve read as aux temp_c (deg C)
+TEMP_UNITS = ("degc", "deg c", "c")
 #: depth unit (lower case) -> m per unit
 DEPTH_UNITS = {"m": 1.0, "meters": 1.0, "ft": 0.3048, "f": 0.3048, "feet": 0.3048}
 
@@ -82,9 +84,12 @@ def open_source(path: str, options: dict) -> StampedSource:
     factor = dph_per_unit(unit, where)
     t = np.asarray(tc.data, dtype=np.float64) * t_per
     has_t = np.isfinite(t)
-    aux = None
+    aux = {}
     if tc is not index and index.unit.lower() in DEPTH_UNITS:
-        aux = {"depth_m": (np.asarray(index.data, dtype=np.float64) * DEPTH_UNITS[index.unit.lower()])[has_t]}
+        aux["depth_m"] = (np.asarray(index.data, dtype=np.float64) * DEPTH_UNITS[index.unit.lower()])[has_t]
+    temps = [c for c in las.curves if c.unit.lower() in TEMP_UNITS]
+    if len(temps) == 1:
+        aux["temp_c"] = np.asarray(temps[0].data, dtype=np.float64)[has_t]
     return StampedSource(t[has_t], (np.asarray(rc.data, dtype=np.float64) * factor)[has_t], aux,
                          name=f"LAS {os.path.basename(path)} curve {rc.mnemonic} ({unit}) over {tc.mnemonic}",
                          where=where, time_field=f"curve {tc.mnemonic}", meta={"sensor": f"{rc.mnemonic} ({unit})"},
