@@ -351,3 +351,16 @@ def test_thermal_and_inorbit_read_other_formats(signal, tmp_path, capsys):
     assert main(["thermal", str(path), "--average-s", "5"]) == 0
     assert f"{N - 12} samples, T 20.0..30.0 deg C" in capsys.readouterr().out     # temp_c from the DEGC curve
     assert main(["inorbit", str(path), "--period-s", "10"]) == 0
+
+
+def test_sim_like_takes_the_time_base_of_a_ulog(signal, tmp_path, capsys):
+    path = tmp_path / "flight.ulg"
+    _ulog(path, *signal)
+    model = tmp_path / "m.toml"
+    model.write_text("[sensor]\nsample_rate_hz = 100.0\n\n[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.1\nB_dph = 0.0\n"
+                     "K_dphsh = 0.0\nR_dphh = 0.0\n")
+    out = tmp_path / "sim.csv"
+    assert main(["sim", "--model", str(model), "--like", str(path), "--out", str(out), "--seed", "1"]) == 0
+    from fogmon.recording import read_replay_log
+    sim = read_replay_log(out)
+    assert len(sim) == N - 12 and "temp_c" in sim.aux       # the ULog's samples, gap and temperature
