@@ -1,5 +1,5 @@
 """`fogmon fit CURVE.csv`: the IEEE-952 fit, with intervals and upper limits, of an
-Allan-deviation curve made by another tool (CONTRACT section 3; fogmon.davar.curve)."""
+Allan-deviation curve made by another tool (fogmon.davar.curve, docs/exports.md)."""
 from __future__ import annotations
 
 import argparse
