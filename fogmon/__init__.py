@@ -7,6 +7,8 @@ coefficients)::
     fogmon.dadev(rate_dph, rate_hz, window_s, hop_s=None)   -> DadevResult
     fogmon.StreamingDadev(rate_hz, window_s, taus="octave") -> ring-buffer updater
     fogmon.fit_noise(result)                                -> IEEE-952 Q, N, B, K, R
+    fogmon.adev_from_curve(tau_s, adev_dph, n_terms=...)    -> (AdevResult, assumptions)
+                                                               of another tool's curve
     fogmon.tau_grid(rate_hz, n_max, taus)                   -> averaging factors m
     fogmon.read_replay_log(path) / write_replay_log(...)    -> Recording I/O
 
@@ -26,6 +28,7 @@ _LAZY = {
     "StreamingDadev": "fogmon.davar.streaming",
     "fit_noise": "fogmon.davar.fit",
     "NoiseFit": "fogmon.davar.fit",
+    "adev_from_curve": "fogmon.davar.curve",
     "tau_grid": "fogmon.davar.taus",
     "Block": "fogmon.block",
     "Event": "fogmon.block",

@@ -19,6 +19,7 @@ COMMANDS = {
     "explain": "locate where a recording and a sensor model disagree, name and fit the missing physics",
     "thermal": "calibrate thermal drift K0(T) + K1 dT/dt + K2 d2T/dt2 from a recording with temp_c and correct it",
     "inorbit": "in-orbit evaluation: ARW from Pauta-cleaned differences, per-orbit bias instability, wavelet bands",
+    "fit": "IEEE-952 fit (with intervals) of an Allan-deviation curve made by another tool; --export kalibr|matlab|ros",
     "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
 }
 

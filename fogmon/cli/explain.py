@@ -10,6 +10,8 @@ from typing import TextIO
 
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.values import number, positive
+from fogmon.export import add_export_argument, export_request, write_export
+from fogmon.sources.formats import add_reader_arguments
 
 #: Most bootstrap replicates: each is one simulation of the whole recording, and beyond
 #: this the Gumbel-fitted family-wise threshold no longer sharpens.
@@ -17,7 +19,8 @@ MAX_BOOTSTRAP = 10_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns)")
+    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns), or a ROS "
+                   "bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/formats.md)")
     p.add_argument("--model", help="sensor model TOML (CONTRACT section 2); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
     p.add_argument("--report", required=True, help="JSON report to write (CONTRACT section 4); a PNG of the "
@@ -42,6 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) are "
                         "kept out of the analysis and reported as platform_motion warnings (docs/motion.md)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr and no console summary")
+    add_reader_arguments(p, axis=True)
+    add_export_argument(p)
 
 
 class StageProgress:
@@ -77,17 +82,19 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.explain.baseline import baseline_model
     from fogmon.explain.explainer import Options, explain, without_motion
     from fogmon.explain import report
-    from fogmon.recording import read_replay_log
+    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import load_model
 
     png = os.path.splitext(args.report)[0] + ".png"
     check_outputs({"--report": args.report, "--report (its PNG)": png, "--rrd": args.rrd,
                    "--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])
+    export = export_request(args, [args.recording, args.model, args.report, png, args.rrd, args.out_model,
+                                   args.out_corrected])
     progress = (lambda stage, done=0, total=0: None) if args.quiet else StageProgress()
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
-    rec = read_replay_log(args.recording)
+    rec = read_recording(args.recording, args)
     motion = []
     if not args.keep_motion:
         progress("looking for platform motion")
@@ -106,6 +113,9 @@ def run(args: argparse.Namespace) -> int:
     if args.rrd:
         report.write_rrd(res, args.rrd)
     report.write_outputs(res, args.out_model, args.out_corrected)
+    if export:
+        write_export(*export, res.fitted.noise, f"{args.recording} (explain: the fitted model's noise)",
+                     res.fitted.sample_rate_hz)
     if not args.quiet:
         print(report.console_summary(rep))
     return 0

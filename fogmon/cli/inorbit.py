@@ -9,24 +9,27 @@ import numpy as np
 
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.sources.formats import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from fogmon.methods.inorbit import ORBIT_PERIOD_S, PAUTA_K_MIN
-    p.add_argument("recording", metavar="RECORDING.csv", help="replay log (rate_dph; rot_dps is subtracted when present)")
+    p.add_argument("recording", metavar="RECORDING.csv", help="replay log (rate_dph; rot_dps is subtracted when present), or "
+                   "another format (docs/formats.md)")
     p.add_argument("--period-s", type=positive, default=ORBIT_PERIOD_S,
                    help="orbit (cycle) period for the per-cycle bias instability, s, at least 2 samples "
                         f"(default {ORBIT_PERIOD_S:g})")
     p.add_argument("--pauta-k", type=number(PAUTA_K_MIN, above=True), default=3.0,
                    help=f"Pauta criterion threshold in sigmas, > sqrt(3) = {PAUTA_K_MIN:.4g} (below it the "
                         "iterated criterion rejects every sample) (default 3)")
+    add_reader_arguments(p, axis=True)
 
 
 def run(args) -> int:
     from fogmon.methods.inorbit import arw_from_differences, cycle_bias_instability, wavelet_energy
-    from fogmon.recording import read_replay_log
+    from fogmon.sources.formats import read_recording
 
-    rec = read_replay_log(args.recording)
+    rec = read_recording(args.recording, args)
     if args.period_s * rec.sample_rate_hz < 2:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
     blk = rec.to_block()

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import argparse
 
+from fogmon.export import add_export_argument, export_request, write_export
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
+from fogmon.sources.formats import add_reader_arguments
 from fogmon.sources.open import add_source_arguments, open_replay_source
 from fogmon.stopping import interrupted_exit_code
 
@@ -28,13 +30,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.epilog = EPILOG
     parser.add_argument("recording", metavar="RECORDING",
                         help="replay-log CSV (time_s, rate_dph, ...), raw serial capture (with --protocol), "
-                             "CAN log .asc/.blf/.trc/.csv/.log (with --dbc), or an archive folder of `fogmon "
-                             "monitor` (all its pieces as one recording)")
+                             "CAN log .asc/.blf/.trc/.csv/.log/.mf4 (with --dbc), ROS bag/MCAP, PX4 ULog, MDF4, "
+                             "LAS (docs/formats.md), or an archive folder of `fogmon monitor` (all its pieces as "
+                             "one recording)")
     add_source_arguments(parser, mode="replay")
+    add_reader_arguments(parser)
     add_pipeline_arguments(parser)
+    add_export_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
+    export = export_request(args, [args.recording])
     source = open_replay_source(args.recording, args)
     summary = run_pipeline(source, args)
+    if export and not summary.interrupted:
+        write_export(*export, summary.overall_fit, summary.source_name, summary.rate_hz,
+                     getattr(source, "ros_topic", None))
+        print(f"Wrote {export[1]} ({export[0]} export of the whole-run fit)")
     return interrupted_exit_code() if summary.interrupted else 0

@@ -13,6 +13,7 @@ import numpy as np
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.sources.formats import add_reader_arguments
 
 #: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
 #: needs more than the free space of the output's folder at this rate cannot be written.
@@ -38,6 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable), e.g. --set rop_mph=10 --set stick_slip=true; "
                    "lists as --set plateaus_c=20,-40,60")
+    add_reader_arguments(p, axis=True)   # for --like in another format (docs/formats.md)
 
 
 def _overrides(items: list[str]) -> dict[str, str]:
@@ -60,7 +62,8 @@ def _first_seconds(rec, duration_s: float):
 
 
 def run(args) -> int:
-    from fogmon.recording import append_replay_rows, read_replay_log, write_replay_header
+    from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import load_model
     from fogmon.sim.scenarios import make_scenario
     from fogmon.sim.simulate import iter_simulate
@@ -76,7 +79,7 @@ def run(args) -> int:
     like = aux = aux_t = None
     duration = args.duration_s
     if args.like:
-        like = read_replay_log(args.like)
+        like = read_recording(args.like, args)
         if duration is not None:
             like = _first_seconds(like, duration)
             duration = None

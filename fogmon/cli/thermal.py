@@ -10,6 +10,7 @@ import numpy as np
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.sources.formats import add_reader_arguments
 
 
 #: Highest degree of K0(T): raw powers of deg C beyond it are ill-conditioned and over-fit
@@ -18,7 +19,8 @@ MAX_DEGREE = 6
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", metavar="RECORDING.csv", help="replay log with a temp_c column (deg C)")
+    p.add_argument("recording", metavar="RECORDING.csv", help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
+                   "temperature (docs/formats.md)")
     p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2,
                    help=f"degree of K0(T), the bias-vs-temperature polynomial, 0..{MAX_DEGREE} (default 2)")
     p.add_argument("--smooth-s", type=number(0), help="trailing smoothing of temp_c before differencing, s, >= 0 "
@@ -31,17 +33,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(default: an empty model at the recording's sample rate)")
     p.add_argument("--out-model", metavar="OUT.toml", help="write the model with the thermal_drift effect")
     p.add_argument("--out-corrected", metavar="OUT.csv", help="write the recording with the predicted drift removed")
+    add_reader_arguments(p, axis=True)
 
 
 def run(args) -> int:
     from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
-    from fogmon.recording import read_replay_log, write_replay_log
+    from fogmon.recording import write_replay_log
+    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
 
     check_outputs({"--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])
     base = load_model(args.model) if args.model else None
-    rec = read_replay_log(args.recording)
+    rec = read_recording(args.recording, args)
     if "temp_c" not in rec.aux:
         raise FogmonError(f"{rec.name}: no temp_c column; thermal calibration needs the sensor temperature")
     base = base or SensorModel(rec.sample_rate_hz, 0.0, Noise(), [])

@@ -10,21 +10,23 @@ import numpy as np
 
 from fogmon.cli.values import number
 from fogmon.errors import FogmonError
+from fogmon.sources.formats import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--up", required=True, metavar="UP.csv", help="replay log, sensing axis pointing up")
-    p.add_argument("--down", required=True, metavar="DOWN.csv", help="replay log, sensing axis pointing down")
+    p.add_argument("--up", required=True, metavar="UP.csv", help="replay log (or another format, docs/formats.md), sensing axis pointing up")
+    p.add_argument("--down", required=True, metavar="DOWN.csv", help="replay log (or another format), sensing axis pointing down")
     p.add_argument("--lat-deg", required=True, type=number(-90, 90),
                    help="latitude of the test site, deg, -90..90 (south negative); near the equator the "
                         "vertical Earth rate is too small to calibrate a scale factor and the command says so")
+    add_reader_arguments(p, axis=True)
 
 
-def _mean_and_sigma(path: str) -> tuple[float, float, str]:
+def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
     import fogmon
-    from fogmon.recording import read_replay_log
+    from fogmon.sources.formats import read_recording
 
-    rec = read_replay_log(path)
+    rec = read_recording(path, args)
     res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
     ok = np.isfinite(res.adev_dph)
     # std of the mean of the record ~ ADEV at the longest reliable tau (conservative)
@@ -37,8 +39,8 @@ def run(args) -> int:
 
     if os.path.exists(args.up) and os.path.exists(args.down) and os.path.samefile(args.up, args.down):
         raise FogmonError(f"--up {args.up} and --down {args.down} are the same file")
-    up, s_up, n_up = _mean_and_sigma(args.up)
-    down, s_down, n_down = _mean_and_sigma(args.down)
+    up, s_up, n_up = _mean_and_sigma(args.up, args)
+    down, s_down, n_down = _mean_and_sigma(args.down, args)
     r = updown_calibration(up, down, args.lat_deg, max(s_up, s_down), (f"--up {args.up}", f"--down {args.down}"))
     print(f"up/down Earth-rate calibration at latitude {args.lat_deg:g} deg "
           f"(vertical Earth rate {r['earth_vertical_dph']:.4f} deg/h)")

@@ -37,22 +37,12 @@ def format_summary(s: Summary) -> str:
         span = f"{s.overall_first_s:.2f}..{s.t_last_s:.2f} s"
         lines.append("")
         lines.append(f"Overall Allan deviation ({span}, {100 * conf:.1f} % confidence bounds):")
-        lines.append(f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}")
-        for i in range(len(a.tau_s)):
-            lines.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {a.lo_dph[i]:12.5g} {a.hi_dph[i]:12.5g} "
-                         f"{a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
+        lines += adev_lines(a)
     f = s.overall_fit
     if f is not None:
         lines.append("")
         lines.append("IEEE-952 noise coefficients (whole run, with intervals):")
-        for name, unit in COEFFICIENTS.items():
-            c = getattr(f, name)
-            if bool(c.identifiable):
-                lines.append(f"  {name:<9} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
-            else:
-                hi = float(c.hi)
-                bound = f" (< {hi:.4g} {unit}, 95 % upper limit)" if math.isfinite(hi) else ""
-                lines.append(f"  {name:<9}   not identifiable from this record{bound}")
+        lines += coefficient_lines(f)
         check = model_check(a, f) if a is not None else None
         if check is not None:
             lines.append(check)
@@ -64,6 +54,30 @@ def format_summary(s: Summary) -> str:
     for o in s.outputs:
         lines.append(f"Wrote {o}{_open_hint(o)}")
     return "\n".join(lines)
+
+
+def adev_lines(a) -> list[str]:
+    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms."""
+    out = [f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}"]
+    for i in range(len(a.tau_s)):
+        out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {a.lo_dph[i]:12.5g} {a.hi_dph[i]:12.5g} "
+                   f"{a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
+    return out
+
+
+def coefficient_lines(f) -> list[str]:
+    """The five IEEE-952 coefficients of a whole-record NoiseFit with their intervals, or
+    "not identifiable" with the 95 % upper limit."""
+    out = []
+    for name, unit in COEFFICIENTS.items():
+        c = getattr(f, name)
+        if bool(c.identifiable):
+            out.append(f"  {name:<9} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
+        else:
+            hi = float(c.hi)
+            bound = f" (< {hi:.4g} {unit}, 95 % upper limit)" if math.isfinite(hi) else ""
+            out.append(f"  {name:<9}   not identifiable from this record{bound}")
+    return out
 
 
 #: Platform-motion spans listed in the summary before the rest is only counted.

@@ -34,7 +34,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
                    "angle (units per sample) (default: delta for kvh-*, rate for dsp3000)")
     g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of KVH binary output (default: rad)")
-    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor (default: z)")
+    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor, also the axis of a ROS bag "
+                   "or PX4 ULog recording (default: z)")
     g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
@@ -139,12 +140,17 @@ def _sniff(path: str) -> str:
 def open_replay_source(path: str, args):
     """A source replaying ``path``: a replay-log CSV, a raw serial capture (protocol from
     ``--protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc .csv .log with
-    ``--dbc`` or a sidecar), or an archive folder (``open_archive``). Not paced: the
+    ``--dbc`` or a sidecar), another tool's recording (fogmon.sources.formats), or an
+    archive folder (``open_archive``). Not paced: the
     pipeline paces (``--realtime``)."""
     from fogmon.sources.replay import ReplayLogSource, open_raw_capture, read_sidecar
+    from fogmon.sources.formats import open_reader
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
+    other = open_reader(path, args)  # ROS bag/MCAP, PX4 ULog, MDF4, LAS (fogmon.sources.formats)
+    if other is not None:
+        return other
     if os.path.isdir(path):
         return open_archive(path, args)
     if os.path.splitext(path)[1].lower() == ".toml":  # a sensor model: stream its simulation (endless)

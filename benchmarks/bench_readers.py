@@ -1,0 +1,68 @@
+"""Reading speed of the other-format readers (fogmon.sources.formats), as ratios to the
+replay-log CSV reader on the same samples, measured in the same run: open the file and
+iterate every block. Files are written with the test suite's writers (tests/test_readers.py).
+
+    python benchmarks/bench_readers.py [N_SAMPLES]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "tests"))
+from fogmon.recording import write_replay_log  # noqa: E402
+from fogmon.sources.open import open_replay_source  # noqa: E402
+import test_readers as w  # noqa: E402  (the writers)
+
+
+def timed(path, **opts) -> float:
+    """Best of 3: open ``path`` and read every block, s."""
+    args = argparse.Namespace(**opts)
+    best = float("inf")
+    for _ in range(3):
+        t = time.perf_counter()
+        sum(len(b) for b in open_replay_source(str(path), args).blocks())
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def main() -> None:
+    n = int(float(sys.argv[1])) if len(sys.argv) > 1 else 100_000
+    fs = 100.0
+    rng = np.random.default_rng(1)
+    t = np.arange(n) / fs
+    rate = 60 * 0.1 * np.sqrt(fs) * rng.standard_normal(n)
+    keep = np.ones(n, bool)
+    with tempfile.TemporaryDirectory() as d:
+        d = Path(d)
+        write_replay_log(d / "ref.csv", t, rate, meta={"sample_rate_hz": fs})
+        t_csv = timed(d / "ref.csv")
+        print(f"replay-log CSV: {n / t_csv:,.0f} samples/s (reference)")
+        w.N = n
+        cases = []
+        w.write_imu_bag(d / "run.bag", t, rate, keep, "ros1")
+        cases.append(("ROS 1 bag", d / "run.bag", {}))
+        w.write_imu_bag(d / "bag2", t, rate, keep, "mcap")
+        cases.append(("ROS 2 bag (MCAP storage)", d / "bag2", {}))
+        w._ulog(d / "f.ulg", t, rate, keep)
+        cases.append(("PX4 ULog", d / "f.ulg", {}))
+        w._mdf(d / "b.mf4", t, rate, keep)
+        cases.append(("MDF4 channel", d / "b.mf4", {"channel": "GyroZ"}))
+        w._las(d / "t.las", t, rate, keep)
+        cases.append(("LAS", d / "t.las", {}))
+        for name, path, opts in cases:
+            s = timed(path, **opts)
+            print(f"{name}: {n / s:,.0f} samples/s = {t_csv / s:.2f}x the CSV reader "
+                  f"({n / fs / s:,.0f}x real time at {fs:g} Hz)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,123 @@
+"""ROS 1 bags, ROS 2 bags (a folder with metadata.yaml, sqlite3 or MCAP storage) and MCAP
+files with sensor_msgs/Imu messages, read with ``rosbags`` (``fogmon[ros]``).
+
+One topic (``--topic``, default the only Imu topic), one axis of ``angular_velocity``
+(rad/s -> deg/h; ``--axis``, default z). Time base: ``header.stamp`` of each message (s),
+on fogmon's grid as fogmon.sources.stamped describes (missing messages become counted
+invalid placeholders); time 0 is the first message's stamp, whose Unix time is kept in
+the metadata (``t0_unix_s``)."""
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from fogmon.errors import FogmonError
+from fogmon.sources.stamped import DPH_PER_RPS, StampedSource
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+
+
+def _reader(path: str):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    return AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+
+
+_STAMP_ROS1 = struct.Struct("<II")   # header.stamp sec, nsec after the uint32 seq
+_STAMP_CDR = struct.Struct("<iI")    # sec, nanosec after the 4-byte CDR encapsulation header
+_FLOAT64 = struct.Struct("<d")
+
+
+def _verified_layout(raw: bytes, ros2: bool, axis: str, msg) -> tuple | None:
+    """(stamp struct, stamp offset, byte offset of angular_velocity.<axis>) of a serialized
+    Imu message, so that messages of the same length are read with two ``unpack_from``
+    calls instead of a full deserialization (several times faster). The layout is
+    sensor_msgs/Imu's: header (ROS 1: seq, when the bag's Header has it; stamp; frame_id,
+    the only variable-length field), orientation (4 float64), its covariance (9),
+    angular_velocity (3), its covariance (9), linear_acceleration (3), its covariance (9).
+    None (every such message is deserialized) unless the offsets reproduce ``msg``, the
+    same message deserialized by rosbags, exactly (little-endian CDR only)."""
+    k = "xyz".index(axis)
+    if ros2:
+        if len(raw) < 16 or raw[1] != 1:                      # big-endian CDR: not handled here
+            return None
+        (n,) = struct.unpack_from("<I", raw, 12)
+        first = 4 + (16 + n - 4 + 7) // 8 * 8                 # float64 aligned to 8 from the CDR body
+        candidates = [(_STAMP_CDR, 4, first)]
+    else:                                                     # with a seq field (ROS 1 Header) or without
+        candidates = []
+        for at in (4, 0):
+            if len(raw) >= at + 12:
+                (n,) = struct.unpack_from("<I", raw, at + 8)
+                candidates.append((_STAMP_ROS1, at, at + 12 + n))
+    for stamp, at, first in candidates:
+        off = first + 8 * (4 + 9 + k)
+        if len(raw) != first + 8 * (4 + 9 + 3 + 9 + 3 + 9):
+            continue
+        sec, nsec = stamp.unpack_from(raw, at)
+        if (sec, nsec) == (msg.header.stamp.sec, msg.header.stamp.nanosec) and \
+                _FLOAT64.unpack_from(raw, off)[0] == getattr(msg.angular_velocity, axis):
+            return stamp, at, off
+    return None
+
+
+def open_source(path: str, options: dict) -> StampedSource:
+    """The Imu topic ``options['topic']``, axis ``options['axis']`` (x, y, z) of the bag or
+    MCAP file ``path`` as a StampedSource; a missing topic or a topic of another type is a
+    one-line FogmonError naming the file and the Imu topics it has."""
+    axis = options.get("axis") or "z"
+    try:
+        reader = _reader(path)
+        reader.open()
+    except Exception as e:  # rosbags raises its own error types for unreadable files
+        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+    try:
+        imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+        topic = options.get("topic")
+        if topic is None:
+            if len(imu) != 1:
+                raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
+                                  f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
+            topic = imu[0]
+        conns = [c for c in reader.connections if c.topic == topic]
+        if not conns:
+            raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
+                              f"{', '.join(imu) or 'none'})")
+        other = {c.msgtype for c in conns} - {IMU_TYPE}
+        if other:
+            raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
+        n = sum(c.msgcount for c in conns)
+        ns = np.empty(n, np.int64)      # header stamps, integer ns (exact)
+        w = np.empty(n)
+        i = 0
+        layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
+        for conn, _, raw in reader.messages(connections=conns):
+            lay = layouts.get(len(raw), False)
+            if lay is False:
+                msg = reader.deserialize(raw, conn.msgtype)
+                lay = layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+            if lay is None:
+                msg = reader.deserialize(raw, conn.msgtype)
+                ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+                w[i] = getattr(msg.angular_velocity, axis)
+            else:
+                sec, nsec = lay[0].unpack_from(raw, lay[1])
+                ns[i] = sec * 1_000_000_000 + nsec
+                w[i] = _FLOAT64.unpack_from(raw, lay[2])[0]
+            i += 1
+    finally:
+        reader.close()
+    ns, w = ns[:i], w[:i]
+    where = f"{path} topic {topic}"
+    if i and not np.any(ns):
+        raise FogmonError(f"{where}: field header.stamp: zero in every message (the driver does not stamp them)")
+    t0 = int(ns[0]) if i else 0
+    src = StampedSource((ns - t0) * 1e-9, w * DPH_PER_RPS, None, name=f"ROS {os.path.basename(path)} {topic} "
+                         f"angular_velocity.{axis}", where=where, time_field="header.stamp",
+                         meta={"sensor": f"{topic} angular_velocity.{axis}", "t0_unix_s": repr(t0 * 1e-9)},
+                         max_abs_dph=options["max_rate_dph"])
+    src.ros_topic = topic  # the topic a Kalibr export names
+    return src
