@@ -221,3 +221,16 @@ def test_window_without_valid_terms_is_not_judged(band_dir):
     assert s["time_inside_s"] == pytest.approx(25.6)
     ev = watch.frame(153.6, np.full(len(band.m), np.inf), {"vib_g": np.zeros(W)})  # a huge sample
     assert len(ev) == 1 and ev[0].kind == "model_band"
+
+
+@pytest.mark.parametrize("scale, shape", [
+    ({0: 3.0}, "white-level rise"), ({4: 3.0}, "hump"), ({7: 4.0, 8: 6.0}, "drift"),
+    ({0: 0.5}, "below the band"), ({0: 3.0, 8: 6.0}, "white-level rise")])
+def test_tau_shapes(band_dir, scale, shape):
+    band = make_band(base_model(), band_dir)
+    assert len(band.m) == 9
+    adev = band.median_dph.copy()
+    for k, f in scale.items():
+        adev[k] *= f
+    (ev,) = ModelWatch(band, []).frame(W / FS, adev, {})
+    assert f"; {shape}" in ev.message

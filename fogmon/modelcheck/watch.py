@@ -189,7 +189,13 @@ class ModelWatch:
         cause = self._cause(aux_window)
         self._dep = _Departure(t_end_s - new_s, t_end_s, t_end_s, float(taus[0]), float(taus[-1]),
                                float(abs(z[k])), ratio, float(band.tau_s[k]), shape, cause)
-        span = (f"tau {taus[0]:.4g} s" if len(taus) == 1 else f"taus {taus[0]:.4g}..{taus[-1]:.4g} s")
+        idx = np.flatnonzero(out)
+        if len(taus) == 1:
+            span = f"tau {taus[0]:.4g} s"
+        elif idx[-1] - idx[0] == len(idx) - 1:
+            span = f"taus {taus[0]:.4g}..{taus[-1]:.4g} s"
+        else:
+            span = "taus " + ", ".join(f"{t:.4g}" for t in taus) + " s"
         msg = (f"left the model band at t = {t_end_s:.3f} s ({span} out): ADEV {ratio:.3g}x the model median "
                f"at tau {band.tau_s[k]:.4g} s (|z| {abs(z[k]):.3g} > {band.threshold:.3g}, family-wise "
                f"{band.alpha:g} per window); {shape}; likely cause: {cause}")
