@@ -234,3 +234,10 @@ def test_tau_shapes(band_dir, scale, shape):
         adev[k] *= f
     (ev,) = ModelWatch(band, []).frame(W / FS, adev, {})
     assert f"; {shape}" in ev.message
+
+
+def test_bandwidth_above_the_live_nyquist_is_a_one_line_error(band_dir):
+    model = base_model(effects=[Effect("periodic", {"period_s": 60.0, "amplitude_dph": 1.0, "phase_rad": 0.0}),
+                                Effect("bandwidth", {"cutoff_hz": 4.0, "order": 2})])
+    with pytest.raises(FogmonError, match=r"live 5 Hz: \[\[effect\]\] #2 \(bandwidth\): cutoff_hz must be below"):
+        ModelBand.for_model(model, 5.0, W, tau_grid(5.0, W), cache_dir=band_dir)

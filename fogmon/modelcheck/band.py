@@ -50,9 +50,9 @@ def band_effects(model: SensorModel) -> tuple[list[Effect], list[str]]:
 def band_model(model: SensorModel, sample_rate_hz: float) -> SensorModel:
     """The model's stationary stochastic part at ``sample_rate_hz`` (Hz): its bias, IEEE-952
     noise and the effects of :func:`band_effects`; no meta."""
-    kept, _ = band_effects(model)
-    return validate_model(SensorModel(sample_rate_hz, model.bias_dph, model.noise, kept, {}),
-                          "model band")
+    full = validate_model(SensorModel(sample_rate_hz, model.bias_dph, model.noise, model.effects, {}),
+                          f"model at the live {sample_rate_hz:g} Hz")  # errors name the file's effect numbers
+    return SensorModel(full.sample_rate_hz, full.bias_dph, full.noise, band_effects(full)[0], {})
 
 
 def theory_adev_dph(model: SensorModel, m: np.ndarray, sample_rate_hz: float,
