@@ -3,8 +3,8 @@
 when the gyro is exactly its noise model.
 
 Built by a parametric bootstrap: ``replicates`` windows simulated from the model's
-stationary stochastic part (:func:`band_model`), each through the DAVAR engine's own
-overlapping-ADEV kernels at the live engine's averaging factors m. The statistics are
+stationary stochastic part (:func:`band_model`), each through the DAVAR engine's
+overlapping-ADEV estimator at the live engine's averaging factors m. The statistics are
 those of ``fogmon explain`` (fogmon.explain.mismatch.build_null, a one-window map): per
 tau the mean Allan variance and the spread of u = (avar / mean)^(1/3) (Wilson-Hilferty),
 a live window's z = (u - mean u) / (sd sqrt(1 + 1/B)), and a family-wise threshold over
@@ -31,11 +31,12 @@ from fogmon.sim.simulate import iter_simulate
 #: Effects that need an aux channel or follow a time schedule are left out.
 BAND_NATURES = ("noise", "filter")
 
-#: Bootstrap windows by default: at window 2^16 with white, flicker and random-walk
-#: noise, about 40 ms of simulation and ADEV per window on one core, so a few seconds
-#: (docs/modelcheck.md); the Gumbel fit of 100 maxima puts the 1 % threshold within
-#: about +-0.1 in z.
+#: Bootstrap windows by default: at window 2^16 with white, flicker and random-walk noise
+#: about 0.1 s of CPU per replicate on the loaded 2-core test machine (10.5 s in all;
+#: docs/modelcheck.md, benchmarks/bench_modelcheck.py), once per model and window thanks
+#: to the cache; the threshold from 100 maxima varies by about +-0.1 in z between seeds.
 DEFAULT_REPLICATES = 100
+
 
 def band_effects(model: SensorModel) -> tuple[list[Effect], list[str]]:
     """(effects the band holds, kinds left out): kept are those of nature ``BAND_NATURES``

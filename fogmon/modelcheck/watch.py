@@ -10,7 +10,6 @@ departure is not re-raised each hop while the band edge is crossed back and fort
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
