@@ -80,6 +80,10 @@ def test_band_level_matches_exact_theory_and_brackets_median(band_dir):
     np.testing.assert_allclose(band.tau_s, tau_grid(FS, W) / FS)
     z = band.z(band.median_dph)
     assert np.all(np.abs(z) < 0.5)
+    zmap = band.z(np.stack([band.median_dph, band.hi_dph, np.full(len(band.m), np.nan)]))  # a z-map
+    assert zmap.shape == (3, len(band.m))
+    np.testing.assert_array_equal(zmap[0], z)
+    assert np.all(np.isnan(zmap[2]))
     assert np.all(np.abs(band.z(band.hi_dph) - band.threshold) < 1e-9)
 
 

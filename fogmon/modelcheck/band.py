@@ -213,9 +213,10 @@ class ModelBand:
         return self.adev_at_z(self.threshold)
 
     def z(self, adev_dph: np.ndarray) -> np.ndarray:
-        """z per tau of a window's ADEV (deg/h); NaN where it is NaN (no valid term),
-        +inf where it is +inf (a huge sample)."""
+        """z per tau of a window's ADEV (deg/h, last axis over the band's taus: one
+        window or a T x M map of them); NaN where the ADEV is NaN (no valid term), +inf
+        where it is +inf (a huge sample)."""
         a = np.asarray(adev_dph, dtype=float)
         with np.errstate(divide="ignore"):
             cell = np.log(a * a)
-        return zscores(cell[None, :], cell, self.null)[0][0]
+        return zscores(cell, cell, self.null)[0].reshape(a.shape)
