@@ -13,7 +13,7 @@ from fogmon.davar.batch import oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import tau_grid
 from fogmon.errors import FogmonError
-from fogmon.modelcheck import ModelBand, ModelWatch
+from fogmon.modelcheck import AuxWindows, ModelBand, ModelWatch
 from fogmon.modelcheck import cache
 from fogmon.modelcheck.band import band_effects, window_log_avar
 from fogmon.modelcheck.watch import stated_rate
@@ -39,12 +39,17 @@ def stream(rate, aux: dict, band: ModelBand, aux_names=("vib_g", "temp_c", "rot_
     samples (not a multiple of the hop); returns (events, watch)."""
     sd = engine()
     watch = ModelWatch(band, aux_names)
+    held = AuxWindows(aux_names, W)
     events = []
     for k in range(0, len(rate), 3001):
         r = sd.push(rate[k:k + 3001])
+        held.push({name: a[k:k + 3001] for name, a in aux.items()}, len(rate[k:k + 3001]))
         for i in range(len(r)):
             e = int(r.end_index[i])
-            window = {name: a[e - W + 1:e + 1] for name, a in aux.items()}
+            window = held.window(e)
+            for name in aux_names:  # the whole window, exactly
+                np.testing.assert_array_equal(window[name], aux[name][e - W + 1:e + 1] if name in aux
+                                              else np.full(W, np.nan))
             events += watch.frame((e + 1) / FS, r.adev_dph[i], window)
     return events, watch
 

@@ -73,6 +73,38 @@ def tau_shape(z: np.ndarray, threshold: float) -> str:
     return "hump (excess in a middle tau band)"
 
 
+class AuxWindows:
+    """The aux samples of the windows the DADEV engine completes: push each block's aux
+    channels (the same samples, in order, as the engine gets), then :meth:`window` gives
+    the ``window_n`` samples ending at an absolute sample index the engine reported
+    (``end_index``), for :meth:`ModelWatch.frame`. Holds at most one window plus the
+    latest block per channel."""
+
+    def __init__(self, names: Sequence[str], window_n: int) -> None:
+        self.names = tuple(names)
+        self.window_n = int(window_n)
+        self._buf = {name: np.zeros(0) for name in self.names}
+        self._base = 0  # absolute index of the buffers' first sample
+        self._len = 0  # samples held
+
+    def push(self, aux: dict[str, np.ndarray], n: int) -> None:
+        """Append a block of ``n`` samples (a channel missing from ``aux``: NaN)."""
+        drop = max(self._len - self.window_n, 0)
+        for name in self.names:
+            new = np.asarray(aux[name], dtype=float) if name in aux else np.full(n, np.nan)
+            self._buf[name] = np.concatenate((self._buf[name][drop:], new))
+        self._base += drop
+        self._len += n - drop
+
+    def window(self, end_index: int) -> dict[str, np.ndarray]:
+        """name -> the aux samples of the window ending at sample ``end_index`` (absolute,
+        from the first push); only the part still held (all of it for a window the last
+        push completed)."""
+        lo = max(int(end_index) - self.window_n + 1 - self._base, 0)
+        hi = int(end_index) + 1 - self._base
+        return {name: b[lo:hi] for name, b in self._buf.items()}
+
+
 @dataclass
 class _Baseline:
     """Running mean and variance (Welford) of the aux statistics of in-band windows."""
