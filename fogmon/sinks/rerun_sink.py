@@ -60,7 +60,7 @@ FLUSH_TIMEOUT_S = 30.0
 TIMELINE = "time"
 #: Entity of the ADEV curve (x = log10 tau/s, y = log10 ADEV/(deg/h), rerun_plots.loglog_transform).
 CURVE = "adev_curve/log10"
-#: Entity of the DADEV heatmap (image pixels, rerun_plots.heatmap_transform).
+#: Entity (view origin) of the DADEV heatmap (rerun_plots.log_heatmap).
 HEATMAP = "dadev/heatmap"
 #: Model points per decade of tau drawn over the fitted range.
 MODEL_POINTS_PER_DECADE = 20
@@ -79,7 +79,7 @@ _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0
 
 def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False):
     """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
-    the five coefficient tracks (a grid, tall enough for tick labels) and the event log.
+    a grid of the five coefficient tracks (tall enough for tick labels) and the event log.
     Time-series views show the whole recording with linked time axes; the time cursor
     follows the newest data. ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the
     ADEV-curve view; ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate."""
@@ -96,7 +96,7 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool
         rrb.Tabs(
             rrb.Spatial2DView(origin=f"/{HEATMAP}",
                               name="DADEV heatmap: ADEV (deg/h, colour) by tau (s, rows) and window end time "
-                                   "(s, columns)"),
+                                   "(s, columns)", visual_bounds=rp.heatmap_bounds()),
             _series("/dadev/log10_adev_dph", "DADEV: log10 ADEV (deg/h) per tau (s) over time"),
         ),
     ]
@@ -106,9 +106,8 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool
                     _series("/counters", "Source counters"),
                     rrb.TextDocumentView(origin="/session", name="Session"))
     return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle, column_shares=[1, 1.2]),
-                                      rrb.Horizontal(rrb.Grid(*coefs, grid_columns=3), side,
-                                                     column_shares=[3, 1]),
-                                      row_shares=[1.4, 1.6, 2]),
+                                      rrb.Grid(*coefs, side, grid_columns=3),
+                                      row_shares=[1.4, 1.6, 2.4]),
                          rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
                          collapse_panels=True)
 
@@ -456,10 +455,6 @@ class RerunSink(Sink):
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
         rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
-        if len(tau):
-            rows = rp.decade_rows(tau)
-            rp.log_row_labels(rec, f"{HEATMAP}/tau_labels", [len(tau) - 1 - i for i in rows],
-                              [f"{tau[i]:.3g} s" for i in rows])
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
@@ -525,7 +520,7 @@ class RerunSink(Sink):
         rp.log_legend(self.rec, f"{CURVE}/legend", [("measured ADEV, current window", MEASURED_COLOUR),
                                                     (f"{100 * confidence:.1f} % confidence bounds", BOUNDS_COLOUR),
                                                     ("IEEE-952 model over the fitted taus", MODEL_COLOUR)],
-                      top_left=(x1 - 0.9, y1 - 0.2), step=-0.3)
+                      top_left=(x1 - 1.3, y1 + 0.1), step=-0.5)
         self._legend_sent = True
 
     def _log_heatmap(self, log_adev: np.ndarray, t_end_s: np.ndarray, tau: np.ndarray) -> None:
@@ -543,15 +538,14 @@ class RerunSink(Sink):
             self._heat_range = (lo, max(hi, lo + 1))
         lo, hi = self._heat_range
         heat = np.stack(self._heat, axis=1)[::-1]  # rows: largest tau on top
-        n_rows, n_cols = heat.shape
-        rec = self.rec
-        rec.log(HEATMAP, rp.heatmap_transform(n_cols, n_rows))
-        rec.log(f"{HEATMAP}/image", rr.Image(rp.colourise(heat, lo, hi, HEATMAP_COLORMAP)))
+        n_cols = heat.shape[1]
+        rows = rp.decade_rows(tau)
         cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
-        rp.column_labels(rec, f"{HEATMAP}/time_labels", cols + 0.5, [f"{self._heat_t[c]:.6g} s" for c in cols], n_rows)
         decades = np.arange(lo, hi + 1)
-        rp.log_colour_scale(rec, f"{HEATMAP}/colour_scale", n_rows, n_cols, lo, hi, HEATMAP_COLORMAP, decades,
-                            [f"{10.0**d:g} deg/h" for d in decades])
+        rp.log_heatmap(self.rec, HEATMAP, heat, lo, hi, HEATMAP_COLORMAP,
+                       ([len(tau) - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
+                       (cols, [f"{self._heat_t[c]:.6g} s" for c in cols]),
+                       (decades, [f"{10.0**d:g} deg/h" for d in decades]))
 
     def _log_curve(self, lx, adev, lo, hi, fit, i, tau, misfit) -> None:
         import rerun as rr
@@ -581,7 +575,7 @@ class RerunSink(Sink):
         m_ok = np.isfinite(lm)
         self.rec.log(f"{CURVE}/model_ieee952", rr.LineStrips2D(
             [np.column_stack([np.log10(t_model[m_ok]), lm[m_ok]])], colors=[MODEL_COLOUR],
-            radii=rr.Radius.ui_points(1.0)))
+            radii=rr.Radius.ui_points(1.0), draw_order=40.0))   # above the measured curve it follows
 
     def events(self, events: Sequence[Event]) -> None:
         import rerun as rr
