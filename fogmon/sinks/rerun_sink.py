@@ -123,6 +123,15 @@ def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> t
     return float(tau_s[k[0]]), float(tau_s[k[-1]])
 
 
+def model_taus(tau_s: np.ndarray) -> np.ndarray:
+    """The taus (s) the model curve is drawn at: every tau of the grid and, between
+    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade)."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
+             for a, b in zip(tau[:-1], tau[1:])]
+    return np.concatenate([*parts, tau[-1:]])
+
+
 def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
     """Decades (log10 deg/h) to frame the ADEV curve, guessed from the first samples:
     the ADEV at tau0 is about their standard deviation; longer taus fall at most 0.3
@@ -510,9 +519,11 @@ class RerunSink(Sink):
         self._log_heatmap(log_adev, t_end_s, tau)
         lx = np.log10(tau)
         misfit = np.asarray(fit.misfit, dtype=bool).reshape(np.shape(dadev.adev_dph))
+        dense = model_taus(tau)
+        model = np.asarray(fit.model_adev_dph(dense), dtype=np.float64).reshape(len(t_end_s), len(dense))
         for i in range(len(t_end_s)):
             rec.set_time(TIMELINE, duration=float(t_end_s[i]))
-            self._log_curve(lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], fit, i, tau, misfit[i])
+            self._log_curve(lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau, misfit[i], dense, model[i])
 
     def _log_legend(self, confidence: float) -> None:
         """The ADEV-curve view's legend (static; the bounds' confidence is known from the first frames)."""
@@ -547,7 +558,9 @@ class RerunSink(Sink):
                        (cols, [f"{self._heat_t[c]:.6g} s" for c in cols]),
                        (decades, [f"{10.0**d:g} deg/h" for d in decades]))
 
-    def _log_curve(self, lx, adev, lo, hi, fit, i, tau, misfit) -> None:
+    def _log_curve(self, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
+        """One window's ADEV curve and bounds, and its model (``model`` at taus ``dense``)
+        over the taus the fit used."""
         import rerun as rr
 
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -563,18 +576,14 @@ class RerunSink(Sink):
             [np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]])],
             colors=[BOUNDS_COLOUR], radii=rr.Radius.ui_points(1.0)))
         span = model_span(tau, adev, misfit)
-        if span is None:
-            self.rec.log(f"{CURVE}/model_ieee952", rr.Clear(recursive=False))
-            return
-        t_model = np.geomspace(*span, max(2, int(MODEL_POINTS_PER_DECADE * math.log10(span[1] / span[0])) + 1))
-        model = np.asarray(fit.model_adev_dph(t_model), dtype=np.float64)
-        if model.ndim == 2:
-            model = model[i]
         with np.errstate(divide="ignore", invalid="ignore"):
             lm = np.log10(model)
-        m_ok = np.isfinite(lm)
+        m_ok = (np.isfinite(lm) & (dense >= span[0]) & (dense <= span[1])) if span is not None else np.zeros(0, bool)
+        if m_ok.sum() < 2:
+            self.rec.log(f"{CURVE}/model_ieee952", rr.Clear(recursive=False))
+            return
         self.rec.log(f"{CURVE}/model_ieee952", rr.LineStrips2D(
-            [np.column_stack([np.log10(t_model[m_ok]), lm[m_ok]])], colors=[MODEL_COLOUR],
+            [np.column_stack([np.log10(dense[m_ok]), lm[m_ok]])], colors=[MODEL_COLOUR],
             radii=rr.Radius.ui_points(1.0), draw_order=40.0))   # above the measured curve it follows
 
     def events(self, events: Sequence[Event]) -> None:
