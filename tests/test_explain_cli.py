@@ -83,6 +83,8 @@ def _check_rrd(path, rep):
     assert {"/adev/log10/before/recording_residual", "/adev/log10/after/recording_residual", "/adev/log10/legend",
             "/adev/log10/grid_labels", "/zmap_before/map/image", "/zmap_after/map/image", "/zmap_before/labels",
             "/verdict"} <= static
+    if any(not m["whole_record"] for m in rep["mismatches"]):
+        assert "/zmap_before/map/regions" in static            # flagged regions outlined on the map
     n_windows, n_taus = rep["method"]["n_windows"], len(rep["method"]["taus_s"])
     for ch in reader.stream().filter(content="/zmap_before/map/image"):
         fmt = ch.to_record_batch().column("Image:format").to_pylist()[0][0]
