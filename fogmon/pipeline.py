@@ -282,30 +282,6 @@ def slice_block(b: Block, start: int, stop: int) -> Block:
                  {k: v[start:stop] for k, v in b.aux.items()}, ev)
 
 
-class _Progress:
-    """A one-line progress bar on stderr for replays (recording time / total)."""
-
-    def __init__(self, total_s: float, enabled: bool):
-        self.total_s, self.enabled = total_s, enabled and total_s > 0
-        self._last = 0.0
-
-    def update(self, done_s: float, wall_s: float, force: bool = False) -> None:
-        now = time.monotonic()
-        if not self.enabled or (not force and now - self._last < 0.2):
-            return
-        self._last = now
-        f = min(max(done_s / self.total_s, 0.0), 1.0)
-        bar = "#" * int(f * 30)
-        x = done_s / wall_s if wall_s > 0 else 0.0
-        sys.stderr.write(f"\r[{bar:<30}] {100 * f:5.1f}%  {done_s:9.1f}/{self.total_s:.1f} s  x{x:,.0f} real time ")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
-
-
 # ----------------------------------------------------------------------------- run
 def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] = (),
                  sinks: Sequence[Sink] | None = None) -> Summary:
@@ -318,6 +294,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     from fogmon.davar.streaming import StreamingDadev
     from fogmon.davar.taus import tau_grid
     from fogmon.motion import MotionGate
+    from fogmon.sinks.console import ReplayProgress
 
     rate_hz = float(source.rate_hz)
     total_n = record_samples(source)
@@ -336,9 +313,9 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
     jumps = JumpDetector(window_s)
     duration_s = getattr(args, "duration_s", None)
     realtime = getattr(args, "realtime", None)
-    progress = _Progress(min(total_n / rate_hz, duration_s or math.inf) if total_n else 0.0,
-                         enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
-                         and (realtime is None or realtime > 1))
+    progress = ReplayProgress(min(total_n / rate_hz, duration_s or math.inf) if total_n else 0.0,
+                              enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
+                              and (realtime is None or realtime > 1))
     tail = _Tail(OVERALL_MAX_SAMPLES)
     event_counts: Counter = Counter()
     started = False
@@ -416,7 +393,7 @@ def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] =
         raise
     finally:
         stopping.closing()  # a further Ctrl-C/SIGTERM must not cut the outputs short
-        progress.update(summary.duration_s, time.monotonic() - wall0, force=True)
+        progress.update(summary.duration_s, time.monotonic() - wall0)
         progress.close()
         source.close()
         if reader is not None:

@@ -50,6 +50,7 @@ def test_concealed_periodic_is_found_fitted_and_removed(tmp_path, capsys):
     assert p["amplitude_dph"] == pytest.approx(0.25 * SIGMA, rel=0.15)
     assert rep["score_before"] > 3.0 and rep["score_after"] <= 1.5 and rep["mismatches_after"] == []
     assert (tmp_path / "rep.png").stat().st_size > 10_000 and (tmp_path / "e.rrd").stat().st_size > 1000
+    _check_rrd(str(tmp_path / "e.rrd"), rep)
     fitted = load_model(fit_p)
     assert [e.kind for e in fitted.effects] == ["periodic"]
     cor = read_replay_log(cor_p)
@@ -66,6 +67,28 @@ def test_concealed_periodic_is_found_fitted_and_removed(tmp_path, capsys):
                           "fogmon explain: mismatch map and candidate effects"]
     assert stages[4].startswith("fogmon explain: effect 1: periodic (score ")
     assert stages[-1] == f"fogmon explain: writing {rep_p}"
+
+
+def _check_rrd(path, rep):
+    """The explain .rrd carries its layout (a blueprint with the five views) and static
+    evidence that shows whatever the time cursor: labelled log-log ADEV, z-map images."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    (bp,) = reader.blueprints()
+    views = {str(c.entity_path) for c in reader.stream(store=bp) if str(c.entity_path).count("/") == 2
+             and str(c.entity_path).startswith("/view/")}
+    assert len(views) == 5
+    static = {str(c.entity_path) for c in reader.stream().filter(is_static=True)}
+    assert {"/adev/log10/before/recording_residual", "/adev/log10/after/recording_residual", "/adev/log10/legend",
+            "/adev/log10/grid_labels", "/zmap_before/map/image", "/zmap_after/map/image", "/zmap_before/labels",
+            "/verdict"} <= static
+    if any(not m["whole_record"] for m in rep["mismatches"]):
+        assert "/zmap_before/map/regions" in static            # flagged regions outlined on the map
+    n_windows, n_taus = rep["method"]["n_windows"], len(rep["method"]["taus_s"])
+    for ch in reader.stream().filter(content="/zmap_before/map/image"):
+        fmt = ch.to_record_batch().column("Image:format").to_pylist()[0][0]
+        assert (fmt["width"], fmt["height"]) == (n_windows, n_taus)
 
 
 def test_null_recording_gives_no_effect_and_no_region(tmp_path, capsys):
@@ -165,8 +188,9 @@ def test_progress_bar_on_a_terminal():
     for i in range(1, 4):
         p("bootstrap", i, 3)
     p("writing r.json")
-    assert s.getvalue() == ("fogmon explain: bootstrap null: 3 simulations\n"
-                            "\r  [##########                    ] 1/3 bootstrap"
-                            "\r  [####################          ] 2/3 bootstrap"
-                            "\r  [##############################] 3/3 bootstrap\n"
-                            "fogmon explain: writing r.json\n")
+    out = s.getvalue()
+    assert out.startswith("fogmon explain: bootstrap null: 3 simulations\n")
+    assert out.endswith("fogmon explain: writing r.json\n")
+    bar = out.split("\n")[1].split("\r")[-1]         # the bar's last state (tqdm), closed before the next stage
+    assert bar.startswith("  bootstrap: 100%") and "3/3" in bar
+    assert StageProgress(io.StringIO()).bar is False   # not a terminal: stage lines only, no bar

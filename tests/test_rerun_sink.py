@@ -23,7 +23,8 @@ from fogmon.davar.batch import dadev
 from fogmon.errors import FogmonError
 from fogmon.pipeline import COEFFICIENTS, Summary, run_pipeline
 from fogmon.sinks.console import format_summary
-from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server, stop_process_group
+from fogmon.sinks.rerun_sink import (RerunSink, _Decimator, model_span, start_grpc_server,
+                                     stop_process_group)
 
 from test_pipeline import Collect, ListSource, _args, _white
 
@@ -39,6 +40,18 @@ def read_scalars(path, entity):
         vals += rb.column("Scalars:scalars").to_pylist()
     order = np.argsort(ts, kind="stable")
     return np.array(ts)[order], np.array(vals, dtype=np.float64)[order]
+
+
+def read_column(path, entity, column):
+    """(times in s, or None for static rows; values) of one component column of an entity."""
+    out = []
+    for ch in RrdReader(path).stream().filter(content=entity):
+        rb = ch.to_record_batch()
+        if column not in rb.schema.names:
+            continue
+        ts = rb.column("time").cast(pa.int64()).to_numpy() / 1e9 if "time" in rb.schema.names else [None] * rb.num_rows
+        out += list(zip(ts, rb.column(column).to_pylist()))
+    return out
 
 
 def read_texts(path, entity):
@@ -110,6 +123,64 @@ def test_rrd_raw_rate_aux_and_events(run_rrd):
     np.testing.assert_array_equal(tv[:, 0], temp)
     texts = read_texts(path, "/events")
     assert any("crc_error: frame 42: bad CRC" == x for x in texts)
+
+
+def test_rrd_coefficient_upper_limits_where_not_identifiable(run_rrd):
+    """``coef/<name>/upper_limit`` holds the 95 % upper limit (``hi``) in exactly the
+    windows where the coefficient is not identifiable, beside its interval elsewhere."""
+    path, _, _, _, summary, engine_out = run_rrd
+    fr = engine_out.frames_
+    t_end = _cat(fr, lambda d, f, te: te)
+    n_limits = 0
+    for name in COEFFICIENTS:
+        hi, ident = (_cat(fr, lambda d, f, te, a=a: np.asarray(getattr(getattr(f, name), a)))
+                     for a in ("hi", "identifiable"))
+        up = ~ident.astype(bool) & np.isfinite(hi)
+        tu, vals = read_scalars(path, f"/coef/{name}/upper_limit")
+        assert len(tu) == int(up.sum())
+        if up.any():
+            np.testing.assert_allclose(tu, t_end[up], atol=1e-9)
+            np.testing.assert_array_equal(vals[:, 0], hi[up])
+        n_limits += len(tu)
+    assert n_limits > summary.n_windows      # white noise: B, K, R are upper limits in most windows
+    names = read_column(path, "/coef/R_dphh/upper_limit", "SeriesPoints:names")
+    assert names and names[0][1] == ["upper limit (not identifiable)"]
+
+
+def test_rrd_model_line_only_over_the_fitted_taus(run_rrd):
+    """The IEEE-952 model is drawn from the first to the last tau the fit used (measured,
+    not flagged as misfit), never extrapolated to taus the fit left out."""
+    path, engine_out = run_rrd[0], run_rrd[5]
+    d, f, te = engine_out.frames_[-1]
+    rows = read_column(path, "/adev_curve/log10/model_ieee952", "LineStrips2D:strips")
+    t_last, strips = max(rows, key=lambda r: r[0])
+    assert t_last == pytest.approx(te[-1], abs=1e-9)
+    xy = np.array(strips[0])
+    span = model_span(d.tau_s, d.adev_dph[-1], np.asarray(f.misfit)[-1])
+    np.testing.assert_allclose([xy[0, 0], xy[-1, 0]], np.log10(span), atol=1e-6)
+    np.testing.assert_allclose(xy[:, 1], np.log10(f.model_adev_dph(10.0 ** xy[:, 0])[-1]), atol=1e-5)
+
+
+def test_model_span_leaves_out_misfit_and_unmeasured_taus():
+    tau = np.array([0.01, 0.02, 0.04, 0.08, 0.16, 0.32])
+    adev = np.array([40.0, 30.0, 20.0, 14.0, 10.0, np.nan])
+    assert model_span(tau, adev, np.array([1, 1, 0, 1, 0, 0], dtype=bool)) == (0.04, 0.16)
+    assert model_span(tau, adev, np.ones(6, dtype=bool)) is None
+
+
+def test_rrd_heatmap_legend_and_labels(run_rrd):
+    """The DADEV heatmap is a colour image of the latest windows (rows: taus) with tau,
+    time and colour-scale labels in units; the ADEV view has a legend."""
+    path, engine_out = run_rrd[0], run_rrd[5]
+    n_taus = len(engine_out.frames_[0][0].tau_s)
+    n_windows = sum(len(te) for _, _, te in engine_out.frames_)
+    images = read_column(path, "/dadev/heatmap/map/image", "Image:format")
+    assert images and images[-1][1][0]["width"] == n_windows and images[-1][1][0]["height"] == n_taus
+    labels = max(read_column(path, "/dadev/heatmap/labels", "Points2D:labels"), key=lambda r: r[0])[1]
+    assert any(x.endswith(" deg/h") for x in labels) and sum(x.endswith(" s") for x in labels) >= 6
+    legend = read_column(path, "/adev_curve/log10/legend", "Points2D:labels")[0][1]
+    assert legend == ["measured ADEV, current window", "68.3 % confidence bounds",
+                      "IEEE-952 model over the fitted taus"]
 
 
 def test_decimator_means_valid_samples_across_pushes():

@@ -50,32 +50,35 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 class StageProgress:
-    """``explain`` progress on ``stream``: each stage as a line, and on a terminal
-    (``bar``, default: ``stream.isatty()``) a one-line bar over counted steps."""
-
-    WIDTH = 30
+    """``explain`` progress on ``stream`` (default stderr): each stage as a line, and on a
+    terminal (``bar``, default: ``stream.isatty()``) a tqdm bar over counted steps."""
 
     def __init__(self, stream: TextIO | None = None, bar: bool | None = None):
         self.stream = stream or sys.stderr
         self.bar = self.stream.isatty() if bar is None else bar
-        self._open = False
+        self._tq = None
 
     def __call__(self, stage: str, done: int = 0, total: int = 0) -> None:
         if not total:
             self._end_bar()
             self.stream.write(f"fogmon explain: {stage}\n")
-        elif self.bar:
-            full = self.WIDTH * done // total
-            self.stream.write(f"\r  [{'#' * full:<{self.WIDTH}}] {done}/{total} {stage}")
-            self._open = True
-            if done >= total:
-                self._end_bar()
-        self.stream.flush()
+            self.stream.flush()
+            return
+        if not self.bar:
+            return
+        if self._tq is None or self._tq.total != total:
+            from tqdm import tqdm
+
+            self._end_bar()
+            self._tq = tqdm(total=total, desc=f"  {stage}", file=self.stream, mininterval=0.2, dynamic_ncols=True)
+        self._tq.update(done - self._tq.n)
+        if done >= total:
+            self._end_bar()
 
     def _end_bar(self) -> None:
-        if self._open:
-            self.stream.write("\n")
-            self._open = False
+        if self._tq is not None:
+            self._tq.close()
+            self._tq = None
 
 
 def run(args: argparse.Namespace) -> int:

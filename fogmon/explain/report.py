@@ -273,32 +273,132 @@ def write_png(res: Result, path: str) -> None:
     plt.close(fig)
 
 
+#: Colours of the explain .rrd's ADEV plot: before / after the fitted effects.
+_RRD_COLOURS = {"before": ((230, 80, 70), (120, 50, 45)), "after": ((80, 150, 255), (45, 80, 130))}
+
+
 def write_rrd(res: Result, path: str) -> None:
-    """The same evidence in a Rerun recording: z-maps as tensors, whole-record ADEV
-    (log10) of the residual and bands against log10 tau, residual and fitted effects
-    over time."""
+    """The same evidence in a Rerun recording with its layout (blueprint): the
+    whole-record ADEV of the residual with the model's family-wise band before and after
+    (log-log, labelled, ``adev``), the z-maps as labelled heatmaps with a colour scale
+    and the flagged regions outlined (``zmap_before``, ``zmap_after``), residual and
+    fitted effects over time (``rate``, timeline ``time``) and the verdict. Everything but
+    ``rate`` is static, so it shows whatever the time cursor."""
     import rerun as rr
 
+    adev = _rrd_adev_logs(res)
     rec = rr.RecordingStream("fogmon_explain")
-    rec.save(path)
+    rec.save(path, default_blueprint=rrd_blueprint(adev[2], adev[3]))
     g = res.grid
+    _rrd_adev(rec, res, *adev)
+    lim = max(3.0, float(np.nanmax(np.abs(res.before.z))) if np.isfinite(res.before.z).any() else 3.0)
     for a, label in ((res.before, "before"), (res.after, "after")):
-        rec.log(f"zmap_{label}", rr.Tensor(np.nan_to_num(a.z.T), dim_names=["tau_index", "window_index"]),
-                static=True)
-        med, lo, hi, r = _adev_band(a, a.null, g.fs_hz)
-        ent = f"adev_{label}/log10_adev_dph"
-        rec.log(ent, rr.SeriesLines(names=["recording residual", "model median", "band lo", "band hi"]), static=True)
-        rec.send_columns(ent, indexes=[rr.TimeColumn("log10_tau_s_x1000", sequence=np.round(1000 * np.log10(g.tau_whole_s)).astype(np.int64))],
-                         columns=rr.Scalars.columns(scalars=np.log10(np.column_stack([r, med, lo, hi]))))
+        _rrd_zmap(rec, f"zmap_{label}", a, g, lim)
     t = res.t_s
     k = max(1, len(t) // 20000)
     nb = len(t) // k
     y = np.where(res.valid, res.residual_before, np.nan)[: nb * k].reshape(nb, k)
     det = res.deterministic_fit[: nb * k].reshape(nb, k)
-    rec.log("rate", rr.SeriesLines(names=["residual vs model (deg/h)", "fitted deterministic effects (deg/h)"]),
-            static=True)
+    rec.log("rate", rr.SeriesLines(names=["residual vs model (deg/h)", "fitted deterministic effects (deg/h)"],
+                                   colors=[(170, 170, 170), (255, 170, 0)], widths=[0.7, 1.5]), static=True)
+    with warnings.catch_warnings():          # stretches with no valid sample (gaps, platform motion)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ym = np.nanmean(y, axis=1)
     rec.send_columns("rate", indexes=[rr.TimeColumn("time", duration=t[: nb * k: k])],
-                     columns=rr.Scalars.columns(scalars=np.column_stack([np.nanmean(y, axis=1), det.mean(axis=1)])))
+                     columns=rr.Scalars.columns(scalars=np.column_stack([ym, det.mean(axis=1)])))
     rec.log("verdict", rr.TextDocument(verdict(res, [r.as_json() for r in res.before.regions],
                                                [r.as_json() for r in res.after.regions])), static=True)
     rec.flush()
+
+
+def rrd_blueprint(x_dec: tuple[int, int], y_dec: tuple[int, int]):
+    """The explain .rrd's layout: ADEV plot (framing decades ``x_dec`` of tau in s and
+    ``y_dec`` of ADEV in deg/h) and verdict | z-maps before and after | residual over time."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+    from fogmon.sinks.rerun_plots import heatmap_bounds, loglog_bounds
+
+    whole = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(rrb.Spatial2DView(origin="/adev", name="Whole record: ADEV of the residual (deg/h) vs "
+                                             "tau (s), log-log, with the model's family-wise band",
+                                             visual_bounds=loglog_bounds(x_dec, y_dec)),
+                           rrb.TextDocumentView(origin="/verdict", name="Verdict"), column_shares=[2, 1]),
+            rrb.Horizontal(*(rrb.Spatial2DView(origin=f"/zmap_{w}", name=f"z-map {w} the fitted effects: z by tau "
+                                               f"(s, rows) and window centre time (s, columns)",
+                                               visual_bounds=heatmap_bounds())
+                             for w in ("before", "after"))),
+            rrb.TimeSeriesView(origin="/rate", name="Residual vs model and fitted effects (deg/h) over time (s)",
+                               axis_x=rrb.TimeAxis(view_range=whole)),
+            row_shares=[1.3, 1.2, 1]),
+        rrb.TimePanel(timeline="time", state="collapsed"), collapse_panels=True)
+
+
+def _rrd_adev_logs(res: Result):
+    """(log10 tau, {"before"/"after": log10 of (model median, band lo, band hi, recording
+    residual ADEV)}, decades of tau, decades of ADEV) of the whole-record ADEV plot."""
+    g = res.grid
+    lx = np.log10(g.tau_whole_s)
+    curves = {w: _adev_band(a, a.null, g.fs_hz) for w, a in (("before", res.before), ("after", res.after))}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        logs = {w: [np.log10(c) for c in cs] for w, cs in curves.items()}
+    fin = np.concatenate([v[np.isfinite(v)] for cs in logs.values() for v in cs])
+    x_dec = (math.floor(lx.min()), math.ceil(lx.max()))
+    y_dec = (math.floor(fin.min()), math.ceil(fin.max())) if fin.size else (-1, 1)
+    return lx, logs, x_dec, y_dec
+
+
+def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec) -> None:
+    """The whole-record ADEV (``_rrd_adev_logs``) of the residual, the model's median and
+    family-wise band, before and after, on a labelled log-log plot with a legend."""
+    import rerun as rr
+    from fogmon.sinks import rerun_plots as rp
+
+    ent = "adev/log10"
+    rec.log(ent, rp.loglog_transform(), static=True)
+    rp.log_decade_grid(rec, ent, x_dec, y_dec, "s", "deg/h")
+    items = []
+    for w, (med, lo, hi, r) in logs.items():
+        bright, dim = _RRD_COLOURS[w]
+        ok = np.isfinite(r)
+        pts = np.column_stack([lx[ok], r[ok]])
+        rec.log(f"{ent}/{w}/recording_residual", rr.LineStrips2D([pts], colors=[bright], radii=rr.Radius.ui_points(1.5)),
+                rr.Points2D(pts, colors=[bright], radii=rr.Radius.ui_points(3.0)), static=True)
+        m = np.isfinite(med)
+        rec.log(f"{ent}/{w}/model_median", rr.LineStrips2D([np.column_stack([lx[m], med[m]])], colors=[dim],
+                                                            radii=rr.Radius.ui_points(1.0)), static=True)
+        b = np.isfinite(lo) & np.isfinite(hi)
+        rec.log(f"{ent}/{w}/model_band", rr.LineStrips2D([np.column_stack([lx[b], lo[b]]), np.column_stack([lx[b], hi[b]])],
+                                                          colors=[dim], radii=rr.Radius.ui_points(0.7)), static=True)
+        band = f"{100 * (1 - getattr(res, w).null.alpha):g} % family-wise band"
+        items += [(f"recording residual {w} the effects", bright), (f"model {w}: median and {band}", dim)]
+    rp.log_legend(rec, f"{ent}/legend", items, top_left=(x_dec[1] - 1.3, y_dec[1] + 0.1), step=-0.4)
+
+
+def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
+    """A z-map (z of the Allan variance, windows x taus) as a labelled heatmap: rows tau
+    (largest on top), columns windows (centre time), colour scale -lim..lim, the flagged
+    regions outlined."""
+    import rerun as rr
+    from fogmon.sinks import rerun_plots as rp
+
+    z = np.asarray(a.z, dtype=np.float64).T[::-1]          # rows: largest tau on top
+    n_rows, n_cols = z.shape
+    tau, tc = g.tau_s, g.t_centre_s
+    rows = rp.decade_rows(tau)
+    cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
+    ticks = rp.nice_ticks(-lim, lim)
+    rp.log_heatmap(rec, ent, z, -lim, lim, "RdBu_r", ([n_rows - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
+                   (cols, [f"{tc[c]:.6g} s" for c in cols]), (ticks, [f"z = {v:g}" for v in ticks]), static=True)
+    boxes = []
+    for r in a.regions:
+        if r.whole_record or not r.cells:
+            continue
+        w = np.array([c[0] for c in r.cells])
+        rows_r = n_rows - 1 - np.array([c[1] for c in r.cells])
+        x0, x1, y0, y1 = w.min(), w.max() + 1, rows_r.min(), rows_r.max() + 1
+        boxes.append([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
+    if boxes:                                              # in the image's pixels (log_heatmap's map)
+        rec.log(f"{ent}/map/regions", rr.LineStrips2D(boxes, colors=[(0, 0, 0)], radii=rr.Radius.ui_points(1.5)),
+                static=True)

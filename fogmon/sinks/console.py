@@ -1,6 +1,7 @@
 """Console sink: events as they happen (stderr, rate-limited) and the end-of-run summary
 (stdout): the whole-run Allan deviation with its confidence bounds, the IEEE-952
-coefficients with their intervals, and the counters."""
+coefficients with their intervals, and the counters; and a replay's progress bar
+(stderr, tqdm, only on a terminal)."""
 from __future__ import annotations
 
 import math
@@ -153,6 +154,31 @@ def model_check(a, fit) -> str | None:
         line += (f"\n  model check: tau {taus} s not described by the five terms (vibration or periodic "
                  f"humps, quantization, steps): flagged and left out of the fit")
     return line
+
+
+class ReplayProgress:
+    """A replay's progress bar on ``stream`` (default stderr, tqdm): recording seconds
+    done of ``total_s`` and the speed in x real time. Shown only when ``enabled`` (the
+    caller checks that stderr is a terminal) and the total is known."""
+
+    FORMAT = "{percentage:5.1f}%|{bar:30}| {n:.1f}/{total:.1f} s of recording{postfix} [{elapsed}<{remaining}]"
+
+    def __init__(self, total_s: float, enabled: bool, stream: TextIO | None = None):
+        from tqdm import tqdm
+
+        self._bar = tqdm(total=total_s, file=stream or sys.stderr, disable=not (enabled and total_s > 0),
+                         mininterval=0.2, bar_format=self.FORMAT)
+
+    def update(self, done_s: float, wall_s: float) -> None:
+        """``done_s`` s of recording analysed in ``wall_s`` s of wall time."""
+        if self._bar.disable:
+            return
+        if wall_s > 0:
+            self._bar.set_postfix_str(f"x{done_s / wall_s:,.0f} real time", refresh=False)
+        self._bar.update(min(done_s, self._bar.total) - self._bar.n)
+
+    def close(self) -> None:
+        self._bar.close()
 
 
 class ConsoleSink(Sink):

@@ -9,14 +9,17 @@ Entities (units in every name; "log10" said where the value is a log):
   consecutive valid samples (decimated for display only; the engine sees every sample,
   the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels.
 - ``dadev/log10_adev_dph`` log10 of the ADEV (deg/h) at every tau, one row per window
-  (time = the window's last sample); ``dadev/heatmap_log10_adev_dph`` the latest
-  HEATMAP_WINDOWS windows as an image (rows: tau, largest at the top; columns: windows,
-  newest on the right).
+  (time = the window's last sample); ``dadev/heatmap`` the latest HEATMAP_WINDOWS windows
+  as a colour image (``image``; rows: tau, largest at the top; columns: windows, newest
+  on the right) with tau labels, window-end-time labels and a colour scale in deg/h
+  (whole decades fixed at the first windows; values beyond take the end colours).
 - ``adev_curve/log10/*`` the current window's ADEV curve with its confidence bounds and the
-  fitted IEEE-952 model, drawn as x = log10(tau / s), y = log10(ADEV / (deg/h)) with a
-  labelled decade grid (plot views have no log axes).
+  fitted IEEE-952 model (drawn only over the taus the fit used: ``model_span``), as
+  x = log10(tau / s), y = log10(ADEV / (deg/h)) with a labelled decade grid and a legend
+  (plot views have no log axes).
 - ``coef/<name>`` each IEEE-952 coefficient with its interval (series value, lo, hi;
-  only windows where it is identifiable) - the "2-D diagram" of the MWD papers.
+  only windows where it is identifiable) - the "2-D diagram" of the MWD papers;
+  ``coef/<name>/upper_limit`` its 95 % upper limit in the windows where it is not.
 - ``events`` a text log (gaps, CRC errors, reconnects, coefficient jumps);
   ``counters/<name>`` the source's counters.
 """
@@ -43,6 +46,7 @@ from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
 from fogmon.pipeline import COEFFICIENTS, Sink, StreamInfo
+from fogmon.sinks import rerun_plots as rp
 
 #: Raw rate and aux channels are shown at no more than this many points per second.
 DISPLAY_MAX_HZ = 100.0
@@ -54,11 +58,17 @@ FLUSH_SAMPLES = 1 << 16
 #: At the end, wait at most this long (s) for Rerun to deliver everything.
 FLUSH_TIMEOUT_S = 30.0
 TIMELINE = "time"
-#: Entity of the ADEV curve (x = log10 tau/s, y = log10 ADEV/(deg/h)), drawn CURVE_X/Y_SCALE
-#: view units per decade (2-D views keep a 1:1 aspect, the panel is wide).
+#: Entity of the ADEV curve (x = log10 tau/s, y = log10 ADEV/(deg/h), rerun_plots.loglog_transform).
 CURVE = "adev_curve/log10"
-CURVE_X_SCALE = 250.0
-CURVE_Y_SCALE = 100.0
+#: Entity (view origin) of the DADEV heatmap (rerun_plots.log_heatmap).
+HEATMAP = "dadev/heatmap"
+#: Model points per decade of tau drawn over the fitted range.
+MODEL_POINTS_PER_DECADE = 20
+#: Colours of the ADEV-curve view (its legend uses the same).
+MEASURED_COLOUR, BOUNDS_COLOUR, MODEL_COLOUR = (255, 255, 255), (120, 160, 255), (255, 170, 0)
+HEATMAP_COLORMAP = "viridis"
+#: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
+UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO", "implausible": "WARN", "bad_input": "WARN",
            "platform_motion": "WARN"}
@@ -69,42 +79,57 @@ _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0
 
 def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False):
     """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
-    the five coefficient tracks and the event log. Time-series views show the whole
-    recording with linked time axes; the time cursor follows the newest data.
-    ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the ADEV-curve view;
-    ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate."""
+    a grid of the five coefficient tracks (tall enough for tick labels) and the event log.
+    Time-series views show the whole recording with linked time axes; the time cursor
+    follows the newest data. ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the
+    ADEV-curve view; ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate."""
     import rerun.blueprint as rrb
 
-    top = [_series("/rate/rate_dph", "Rate (deg/h) over recording time")]
+    top = [_series("/rate/rate_dph", "Rate (deg/h) over recording time (s)")]
     if error_rate:
         top.append(_series("/rate/error_dph", "Error rate_dph - 3600 x rot_dps (deg/h), analysed"))
     if aux_names:
         top.append(_series("/aux", "Aux channels (units in names)"))
-    bounds = None
-    if curve_bounds is not None:
-        (x0, x1), (y0, y1) = curve_bounds
-        bounds = rrb.VisualBounds2D(x_range=[CURVE_X_SCALE * (x0 - 0.5), CURVE_X_SCALE * (x1 + 0.2)],
-                                    y_range=[-CURVE_Y_SCALE * (y1 + 0.3), -CURVE_Y_SCALE * (y0 - 0.6)])
     middle = [
-        rrb.Spatial2DView(origin="/adev_curve", name="Current window: log10 ADEV (deg/h) vs log10 tau (s)",
-                          visual_bounds=bounds),
+        rrb.Spatial2DView(origin="/adev_curve", name="Current window: ADEV (deg/h) vs tau (s), log-log",
+                          visual_bounds=rp.loglog_bounds(*curve_bounds) if curve_bounds is not None else None),
         rrb.Tabs(
-            rrb.TensorView(origin="/dadev/heatmap_log10_adev_dph",
-                           name="DADEV heatmap: log10 ADEV (deg/h), tau (rows) x window (columns)",
-                           scalar_mapping=rrb.TensorScalarMapping(colormap="viridis")),
-            _series("/dadev/log10_adev_dph", "DADEV: log10 ADEV (deg/h) per tau over time"),
+            rrb.Spatial2DView(origin=f"/{HEATMAP}",
+                              name="DADEV heatmap: ADEV (deg/h, colour) by tau (s, rows) and window end time "
+                                   "(s, columns)", visual_bounds=rp.heatmap_bounds()),
+            _series("/dadev/log10_adev_dph", "DADEV: log10 ADEV (deg/h) per tau (s) over time"),
         ),
     ]
-    coefs = [_series(f"/coef/{n}", f"{n} ({u}) with interval") for n, u in COEFFICIENTS.items()]
-    bottom = [rrb.Vertical(*coefs), rrb.Vertical(
-        rrb.Tabs(rrb.TextLogView(origin="/events", name="Events"),
-                 rrb.TextDocumentView(origin="/session", name="Session")),
-        _series("/counters", "Source counters"))]
-    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle),
-                                      rrb.Horizontal(*bottom, column_shares=[2, 1]),
-                                      row_shares=[1, 1.6, 2]),
+    coefs = [_series(f"/coef/{n}", f"{n} ({u}): value, interval or upper limit")
+             for n, u in COEFFICIENTS.items()]
+    side = rrb.Tabs(rrb.TextLogView(origin="/events", name="Events"),
+                    _series("/counters", "Source counters"),
+                    rrb.TextDocumentView(origin="/session", name="Session"))
+    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle, column_shares=[1, 1.2]),
+                                      rrb.Grid(*coefs, side, grid_columns=3),
+                                      row_shares=[1.4, 1.6, 2.4]),
                          rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
                          collapse_panels=True)
+
+
+def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> tuple[float, float] | None:
+    """(first, last) tau (s) the fit described: measured and not flagged as misfit; the
+    model is drawn only there (beyond, it extrapolates terms the fit never saw). None
+    when no tau was fitted."""
+    used = np.isfinite(np.asarray(adev_dph, dtype=np.float64)) & ~np.asarray(misfit, dtype=bool)
+    if not used.any():
+        return None
+    k = np.flatnonzero(used)
+    return float(tau_s[k[0]]), float(tau_s[k[-1]])
+
+
+def model_taus(tau_s: np.ndarray) -> np.ndarray:
+    """The taus (s) the model curve is drawn at: every tau of the grid and, between
+    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade)."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
+             for a, b in zip(tau[:-1], tau[1:])]
+    return np.concatenate([*parts, tau[-1:]])
 
 
 def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
@@ -331,6 +356,9 @@ class RerunSink(Sink):
         self._probe: str | None = None       # an empty file made to test --rrd, removed if no data came
         self._heat: list[np.ndarray] = []
         self._last_flush = time.monotonic()
+        self._heat_t: list[float] = []
+        self._heat_range: tuple[int, int] | None = None   # colour scale, whole decades of log10 ADEV
+        self._legend_sent = False
         self._pending_events: list[Event] = []
         if connect_url:
             _check_listening(connect_url)
@@ -424,24 +452,18 @@ class RerunSink(Sink):
         rec.log("dadev/log10_adev_dph", rr.SeriesLines(names=[f"tau={t:.4g} s" for t in tau]), static=True)
         for n, u in COEFFICIENTS.items():
             c = _COEF_COLORS[n]
-            rec.log(f"coef/{n}", rr.SeriesLines(names=[f"{n} ({u})", "lo", "hi"], colors=[c, c, c],
-                                                widths=[2.0, 0.7, 0.7]), static=True)
+            rec.log(f"coef/{n}", rr.SeriesLines(names=[f"{n} ({u})", "lo", "hi"],
+                                                colors=[c, c, c], widths=[2.0, 0.7, 0.7]), static=True)
+            rec.log(f"coef/{n}/{UPPER_LIMIT}", rr.SeriesPoints(names=["upper limit (not identifiable)"],
+                                                                colors=[c], markers=["down"], marker_sizes=[3.0]),
+                    static=True)
         rec.log("session", rr.TextDocument(
             f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\nwindow: {info.window_s:g} s, "
             f"hop: {info.hop_s:g} s\ntaus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
-        # y up in the ADEV-curve view (2-D views have y pointing down).
-        rec.log(CURVE, rr.Transform3D(scale=[CURVE_X_SCALE, -CURVE_Y_SCALE, 1.0]), static=True)
-        # decade grid lines with labels for the ADEV-curve view
-        (x0, x1), (y0, y1) = self._decades
-        xs, ys = np.arange(x0, x1 + 1), np.arange(y0, y1 + 1)
-        strips = [[[x, ys[0]], [x, ys[-1]]] for x in xs] + [[[xs[0], y], [xs[-1], y]] for y in ys]
-        rec.log(f"{CURVE}/grid", rr.LineStrips2D(strips, colors=[(90, 90, 90)], radii=rr.Radius.ui_points(0.5)),
-                static=True)
-        labels = [f"{10.0**x:g} s" for x in xs] + [f"{10.0**y:g} deg/h" for y in ys]
-        pos = [[x, ys[0] - 0.2] for x in xs] + [[xs[0] - 0.25, y] for y in ys]
-        rec.log(f"{CURVE}/grid_labels", rr.Points2D(pos, labels=labels, radii=rr.Radius.ui_points(0.5),
-                                                       colors=[(150, 150, 150)]), static=True)
+        x_dec, y_dec = self._decades
+        rec.log(CURVE, rp.loglog_transform(), static=True)
+        rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
@@ -481,26 +503,64 @@ class RerunSink(Sink):
         for name in COEFFICIENTS:
             c = getattr(fit, name)
             v, lo, hi = (np.asarray(getattr(c, a), dtype=np.float64) for a in ("value", "lo", "hi"))
-            ok = np.asarray(c.identifiable, dtype=bool) & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
+            ident = np.asarray(c.identifiable, dtype=bool)
+            ok = ident & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
             if ok.any():
                 rec.send_columns(f"coef/{name}", indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[ok])],
                                  columns=rr.Scalars.columns(scalars=np.column_stack([v[ok], lo[ok], hi[ok]])))
-        # Heatmap and the current ADEV curve: one entry per window (a few per flush).
+            up = ~ident & np.isfinite(hi)     # not identifiable: hi is the 95 % upper limit
+            if up.any():
+                rec.send_columns(f"coef/{name}/{UPPER_LIMIT}", indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[up])],
+                                 columns=rr.Scalars.columns(scalars=hi[up]))
+        if not self._legend_sent:
+            self._log_legend(dadev.confidence)
         tau = np.asarray(dadev.tau_s, dtype=np.float64)
-        lx = np.log10(tau)
-        for i in range(len(t_end_s)):
-            self._heat.append(log_adev[i].astype(np.float32))
-            del self._heat[:-HEATMAP_WINDOWS]
         rec.set_time(TIMELINE, duration=float(t_end_s[-1]))
-        heat = np.stack(self._heat, axis=1)[::-1]  # rows: largest tau on top
-        rec.log("dadev/heatmap_log10_adev_dph", rr.Tensor(
-            heat, dim_names=[f"tau {tau[-1]:.3g} s (top) .. {tau[0]:.3g} s (bottom)",
-                             f"window (newest right, hop {self.info.hop_s:g} s)"]))
+        self._log_heatmap(log_adev, t_end_s, tau)
+        lx = np.log10(tau)
+        misfit = np.asarray(fit.misfit, dtype=bool).reshape(np.shape(dadev.adev_dph))
+        dense = model_taus(tau)
+        model = np.asarray(fit.model_adev_dph(dense), dtype=np.float64).reshape(len(t_end_s), len(dense))
         for i in range(len(t_end_s)):
             rec.set_time(TIMELINE, duration=float(t_end_s[i]))
-            self._log_curve(lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], fit, i, tau)
+            self._log_curve(lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau, misfit[i], dense, model[i])
 
-    def _log_curve(self, lx, adev, lo, hi, fit, i, tau) -> None:
+    def _log_legend(self, confidence: float) -> None:
+        """The ADEV-curve view's legend (static; the bounds' confidence is known from the first frames)."""
+        (_, x1), (_, y1) = self._decades
+        rp.log_legend(self.rec, f"{CURVE}/legend", [("measured ADEV, current window", MEASURED_COLOUR),
+                                                    (f"{100 * confidence:.1f} % confidence bounds", BOUNDS_COLOUR),
+                                                    ("IEEE-952 model over the fitted taus", MODEL_COLOUR)],
+                      top_left=(x1 - 1.3, y1 + 0.1), step=-0.5)
+        self._legend_sent = True
+
+    def _log_heatmap(self, log_adev: np.ndarray, t_end_s: np.ndarray, tau: np.ndarray) -> None:
+        """The latest HEATMAP_WINDOWS windows as a colour image (rows: tau, largest on top;
+        columns: windows, newest right) with window-end-time labels and a colour scale in
+        deg/h fixed at the first frames' whole decades."""
+        import rerun as rr
+
+        self._heat += [row.astype(np.float32) for row in log_adev]
+        self._heat_t += [float(t) for t in t_end_s]
+        del self._heat[:-HEATMAP_WINDOWS], self._heat_t[:-HEATMAP_WINDOWS]
+        if self._heat_range is None:
+            fin = log_adev[np.isfinite(log_adev)]
+            lo, hi = (math.floor(fin.min()), math.ceil(fin.max())) if fin.size else (-1, 1)
+            self._heat_range = (lo, max(hi, lo + 1))
+        lo, hi = self._heat_range
+        heat = np.stack(self._heat, axis=1)[::-1]  # rows: largest tau on top
+        n_cols = heat.shape[1]
+        rows = rp.decade_rows(tau)
+        cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
+        decades = np.arange(lo, hi + 1)
+        rp.log_heatmap(self.rec, HEATMAP, heat, lo, hi, HEATMAP_COLORMAP,
+                       ([len(tau) - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
+                       (cols, [f"{self._heat_t[c]:.6g} s" for c in cols]),
+                       (decades, [f"{10.0**d:g} deg/h" for d in decades]))
+
+    def _log_curve(self, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
+        """One window's ADEV curve and bounds, and its model (``model`` at taus ``dense``)
+        over the taus the fit used."""
         import rerun as rr
 
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -509,24 +569,22 @@ class RerunSink(Sink):
         if not ok.any():
             return
         pts = np.column_stack([lx[ok], ly[ok]])
-        self.rec.log(f"{CURVE}/adev_dph", rr.LineStrips2D([pts], colors=[(255, 255, 255)], radii=rr.Radius.ui_points(1.5)),
-                     rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[(255, 255, 255)]))
+        self.rec.log(f"{CURVE}/adev_dph", rr.LineStrips2D([pts], colors=[MEASURED_COLOUR], radii=rr.Radius.ui_points(1.5)),
+                     rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[MEASURED_COLOUR]))
         b = ok & np.isfinite(llo) & np.isfinite(lhi)
         self.rec.log(f"{CURVE}/bounds", rr.LineStrips2D(
             [np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]])],
-            colors=[(120, 160, 255)], radii=rr.Radius.ui_points(1.0)))
-        try:
-            model = np.asarray(fit.model_adev_dph(tau), dtype=np.float64)
-            if model.ndim == 2:
-                model = model[i]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                lm = np.log10(model)
-            m_ok = np.isfinite(lm)
-            if m_ok.any():
-                self.rec.log(f"{CURVE}/model_ieee952", rr.LineStrips2D(
-                    [np.column_stack([lx[m_ok], lm[m_ok]])], colors=[(255, 170, 0)], radii=rr.Radius.ui_points(1.0)))
-        except (AttributeError, TypeError, ValueError, IndexError):
-            pass  # an engine without a vectorised model curve: the bounds and points still show
+            colors=[BOUNDS_COLOUR], radii=rr.Radius.ui_points(1.0)))
+        span = model_span(tau, adev, misfit)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lm = np.log10(model)
+        m_ok = (np.isfinite(lm) & (dense >= span[0]) & (dense <= span[1])) if span is not None else np.zeros(0, bool)
+        if m_ok.sum() < 2:
+            self.rec.log(f"{CURVE}/model_ieee952", rr.Clear(recursive=False))
+            return
+        self.rec.log(f"{CURVE}/model_ieee952", rr.LineStrips2D(
+            [np.column_stack([np.log10(dense[m_ok]), lm[m_ok]])], colors=[MODEL_COLOUR],
+            radii=rr.Radius.ui_points(1.0), draw_order=40.0))   # above the measured curve it follows
 
     def events(self, events: Sequence[Event]) -> None:
         import rerun as rr
@@ -558,6 +616,7 @@ class RerunSink(Sink):
         self._piece = piece
         self._open_piece()
         self._log_static(self.rec.file)
+        self._legend_sent = False
 
     def finish(self, summary) -> None:
         """Flush everything, complete the .rrd, keep serving a replay's viewers until

@@ -1,0 +1,151 @@
+"""Labelled plots drawn in Rerun 2-D (spatial) views, which have neither log axes,
+tick labels on images nor colour bars: a log-log decade grid with labels in units, a
+legend of coloured labels, and a heatmap image with labelled rows, columns and a colour
+scale. Used by the monitor's Rerun sink and the explain .rrd.
+
+Coordinates: a log-log plot entity carries ``loglog_transform`` (x = log10 tau, y = log10
+value, y up; a child of the view's origin, as a view ignores its origin's own
+transform); a heatmap fills HEAT_W x HEAT_H view units (x right, y down) whatever its
+number of rows and columns, so its view can be framed in the blueprint
+(``heatmap_bounds``). The viewer hangs a point's label just below the point, so labels
+meant to sit beside a row or grid line are anchored higher, and short tick marks show
+the exact place."""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+#: View units per decade of a log-log plot (2-D views keep a 1:1 aspect; panels are wide).
+LOGLOG_X_SCALE = 250.0
+LOGLOG_Y_SCALE = 100.0
+GRID_COLOUR = (90, 90, 90)
+LABEL_COLOUR = (170, 170, 170)
+#: A heatmap's size in view units, its colour scale's gap and width, the room for labels
+#: left and right, and how far a label is anchored above its tick (the viewer hangs a
+#: label below its point; this centres it at the panel sizes of the default layouts).
+HEAT_W, HEAT_H = 100.0, 40.0
+SCALE_GAP, SCALE_WIDTH = 3.0, 3.0
+HEAT_LEFT, HEAT_RIGHT = 14.0, 18.0
+LABEL_DROP = 1.5
+
+
+def loglog_transform():
+    """The Transform3D of a log-log plot entity: decades to view units, y up."""
+    import rerun as rr
+
+    return rr.Transform3D(scale=[LOGLOG_X_SCALE, -LOGLOG_Y_SCALE, 1.0])
+
+
+def loglog_bounds(x_dec: tuple[int, int], y_dec: tuple[int, int]):
+    """VisualBounds2D framing decades ``x_dec`` x ``y_dec`` with room for the labels."""
+    import rerun.blueprint as rrb
+
+    (x0, x1), (y0, y1) = x_dec, y_dec
+    return rrb.VisualBounds2D(x_range=[LOGLOG_X_SCALE * (x0 - 0.8), LOGLOG_X_SCALE * (x1 + 0.2)],
+                              y_range=[-LOGLOG_Y_SCALE * (y1 + 0.3), -LOGLOG_Y_SCALE * (y0 - 0.6)])
+
+
+def log_decade_grid(rec, entity: str, x_dec: tuple[int, int], y_dec: tuple[int, int],
+                    x_unit: str, y_unit: str) -> None:
+    """Static grid lines at every decade of a log-log plot and their labels ("10 s",
+    "0.1 deg/h") under ``entity`` (which carries ``loglog_transform``)."""
+    import rerun as rr
+
+    xs, ys = np.arange(x_dec[0], x_dec[1] + 1), np.arange(y_dec[0], y_dec[1] + 1)
+    strips = [[[x, ys[0]], [x, ys[-1]]] for x in xs] + [[[xs[0], y], [xs[-1], y]] for y in ys]
+    rec.log(f"{entity}/grid", rr.LineStrips2D(strips, colors=[GRID_COLOUR], radii=rr.Radius.ui_points(0.5)),
+            static=True)
+    labels = [f"{10.0**x:g} {x_unit}" for x in xs] + [f"{10.0**y:g} {y_unit}" for y in ys]
+    pos = [[x, ys[0] - 0.1] for x in xs] + [[xs[0] - 0.4, y + 0.15] for y in ys]
+    rec.log(f"{entity}/grid_labels", rr.Points2D(pos, labels=labels, radii=rr.Radius.ui_points(0.5),
+                                                 colors=[LABEL_COLOUR]), static=True)
+
+
+def log_legend(rec, entity: str, items: Sequence[tuple[str, tuple[int, int, int]]],
+               top_left: tuple[float, float], step: float) -> None:
+    """A static legend: each label in its series' colour, one under the other from
+    ``top_left`` (in the entity's coordinates) by ``step``."""
+    import rerun as rr
+
+    x, y = top_left
+    pos = [[x, y + k * step] for k in range(len(items))]
+    rec.log(entity, rr.Points2D(pos, labels=[t for t, _ in items], colors=[c for _, c in items],
+                                radii=rr.Radius.ui_points(0.0)), static=True)
+
+
+def colourise(values: np.ndarray, lo: float, hi: float, colormap: str) -> np.ndarray:
+    """RGB (uint8, shape + (3,)) of ``values`` on a matplotlib colormap over lo..hi
+    (clipped at the ends; NaN black)."""
+    import matplotlib
+
+    v = np.asarray(values, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        f = np.clip((v - lo) / (hi - lo), 0.0, 1.0)
+    rgb = matplotlib.colormaps[colormap](np.nan_to_num(f))[..., :3]
+    rgb[~np.isfinite(v)] = 0.0
+    return np.round(255 * rgb).astype(np.uint8)
+
+
+def heatmap_bounds():
+    """VisualBounds2D of a view showing ``log_heatmap`` (its labels and colour scale included)."""
+    import rerun.blueprint as rrb
+
+    return rrb.VisualBounds2D(x_range=[-HEAT_LEFT, HEAT_W + SCALE_GAP + SCALE_WIDTH + HEAT_RIGHT],
+                              y_range=[-3.0, HEAT_H + 8.0])
+
+
+def log_heatmap(rec, entity: str, values: np.ndarray, lo: float, hi: float, colormap: str,
+                row_ticks: tuple[Sequence[int], Sequence[str]], col_ticks: tuple[Sequence[int], Sequence[str]],
+                scale_ticks: tuple[Sequence[float], Sequence[str]], static: bool = False) -> None:
+    """``values`` (rows x columns, row 0 on top) as an image of HEAT_W x HEAT_H view units
+    under ``entity`` (a view's origin), coloured on ``colormap`` over lo..hi; labelled
+    rows and columns (indices, texts) with tick marks, and a colour scale on the right
+    labelled at ``scale_ticks`` (values in lo..hi, texts)."""
+    import rerun as rr
+
+    n_rows, n_cols = np.shape(values)
+    sx, sy = HEAT_W / n_cols, HEAT_H / n_rows
+    rec.log(f"{entity}/map", rr.Transform3D(scale=[sx, sy, 1.0]), static=static)
+    rec.log(f"{entity}/map/image", rr.Image(colourise(values, lo, hi, colormap)), static=static)
+    steps = 64
+    grad = np.linspace(hi, lo, steps)[:, None].repeat(2, axis=1)
+    x0 = HEAT_W + SCALE_GAP
+    rec.log(f"{entity}/scale", rr.Transform3D(translation=[x0, 0.0, 0.0], scale=[SCALE_WIDTH / 2, HEAT_H / steps, 1.0]),
+            static=static)
+    rec.log(f"{entity}/scale/image", rr.Image(colourise(grad, lo, hi, colormap)), static=static)
+    x1 = x0 + SCALE_WIDTH
+    ry = [(r + 0.5) * sy for r in row_ticks[0]]
+    cx = [(c + 0.5) * sx for c in col_ticks[0]]
+    sy_ = [(hi - v) / (hi - lo) * HEAT_H for v in scale_ticks[0]]
+    ticks = ([[[-1.5, y], [0.0, y]] for y in ry] + [[[x, HEAT_H], [x, HEAT_H + 1.5]] for x in cx]
+             + [[[x1, y], [x1 + 1.5, y]] for y in sy_])
+    rec.log(f"{entity}/ticks", rr.LineStrips2D(ticks, colors=[LABEL_COLOUR], radii=rr.Radius.ui_points(0.5)),
+            static=static)
+    pos = ([[-HEAT_LEFT / 2, y - LABEL_DROP] for y in ry] + [[x, HEAT_H + 1.5] for x in cx]
+           + [[x1 + HEAT_RIGHT / 2, y - LABEL_DROP] for y in sy_])
+    rec.log(f"{entity}/labels", rr.Points2D(pos, labels=[*row_ticks[1], *col_ticks[1], *scale_ticks[1]],
+                                            colors=[LABEL_COLOUR], radii=rr.Radius.ui_points(0.0)), static=static)
+
+
+def decade_rows(values: np.ndarray) -> list[int]:
+    """Indices of ``values`` (log-spaced, e.g. taus) to label: one per decade, the one
+    nearest a power of ten, else every row when there are few."""
+    lv = np.log10(np.asarray(values, dtype=np.float64))
+    if len(lv) <= 6:
+        return list(range(len(lv)))
+    out = []
+    for d in range(int(np.floor(lv.min())), int(np.ceil(lv.max())) + 1):
+        i = int(np.argmin(np.abs(lv - d)))
+        if abs(lv[i] - d) < 0.35 and i not in out:
+            out.append(i)
+    return out
+
+
+def nice_ticks(lo: float, hi: float, n: int = 7) -> np.ndarray:
+    """About ``n`` round values (steps of 1, 2 or 5 x 10^k) within lo..hi."""
+    raw = (hi - lo) / max(n - 1, 1)
+    mag = 10.0 ** np.floor(np.log10(raw))
+    step = mag * min(s for s in (1, 2, 5, 10) if s * mag >= raw)
+    t = np.arange(np.ceil(lo / step), np.floor(hi / step) + 1) * step
+    return t[(t >= lo) & (t <= hi)]

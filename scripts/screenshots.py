@@ -1,0 +1,91 @@
+"""Regenerate the viewer screenshots in docs/img/ from the bundled recordings.
+
+    python scripts/screenshots.py [--out docs/img] [--keep TMPDIR]
+
+Runs, as a user would, `fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd ...` (the
+README's default) and `fogmon explain replay_logs/sim_in_orbit_1hz.csv --rrd ...`, then
+the Rerun viewer of rerun-sdk on each .rrd with `--screenshot-to` in a virtual X display,
+and writes docs/img/viewer_replay.png and docs/img/viewer_explain.png (halved to
+1600 x 1000 pixels, 256-colour palette, < 300 kB each).
+
+Needs, besides fogmon's own dependencies, a virtual X server and a software Vulkan driver
+(not fogmon dependencies; on Debian/Ubuntu, as root):
+
+    apt-get install -y xvfb xauth mesa-vulkan-drivers
+
+Each screenshot takes about a minute on 2 cores (software rendering)."""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: Viewer window in logical points (the PNG has twice as many pixels before halving).
+WINDOW = "1600x1000"
+MAX_BYTES = 300_000
+
+
+def _run(cmd: list[str], what: str) -> None:
+    p = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if p.returncode != 0:
+        tail = p.stderr.strip().splitlines()[-1:] or [f"exit {p.returncode}"]
+        sys.exit(f"screenshots: {what} failed: {tail[0]}")
+
+
+def _screenshot(rrd: str, png: str) -> None:
+    """The viewer's window on ``rrd`` with its saved layout, as ``png``."""
+    from fogmon.sinks.rerun_sink import _rerun_binary
+
+    _run(["xvfb-run", "-a", "-s", "-screen 0 1920x1080x24", _rerun_binary(), "--window-size", WINDOW,
+          "--screenshot-to", png, rrd], f"rerun --screenshot-to on {rrd}")
+    if not os.path.exists(png):
+        sys.exit(f"screenshots: the viewer wrote no {png}")
+
+
+def _shrink(src: str, dst: str) -> int:
+    """Halve ``src`` and store it with an adaptive 256-colour palette as ``dst``; its size (bytes)."""
+    from PIL import Image
+
+    im = Image.open(src).convert("RGB")
+    im = im.resize((im.width // 2, im.height // 2), Image.LANCZOS)
+    im.quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(dst, optimize=True)
+    return os.path.getsize(dst)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "img"), help="folder of the PNGs (default docs/img)")
+    ap.add_argument("--keep", help="keep the .rrd files and full-size PNGs in this folder")
+    args = ap.parse_args()
+    if shutil.which("xvfb-run") is None:
+        sys.exit("screenshots: xvfb-run not found; install a virtual X server and software Vulkan: "
+                 "apt-get install -y xvfb xauth mesa-vulkan-drivers")
+    work = args.keep or tempfile.mkdtemp(prefix="fogmon-shots-")
+    os.makedirs(work, exist_ok=True)
+    os.makedirs(args.out, exist_ok=True)
+    fogmon = [sys.executable, "-m", "fogmon"]
+    replay, explain = os.path.join(work, "replay.rrd"), os.path.join(work, "explain.rrd")
+    _run([*fogmon, "replay", "replay_logs/lasergyro_z_100hz.csv", "--rrd", replay, "--no-progress", "--quiet"],
+         "fogmon replay")
+    _run([*fogmon, "explain", "replay_logs/sim_in_orbit_1hz.csv", "--report", os.path.join(work, "report.json"),
+          "--rrd", explain, "--quiet"], "fogmon explain")
+    try:
+        for rrd, name in ((replay, "viewer_replay.png"), (explain, "viewer_explain.png")):
+            full = os.path.join(work, name)
+            _screenshot(rrd, full)
+            size = _shrink(full, os.path.join(args.out, name))
+            print(f"wrote {os.path.join(args.out, name)} ({size / 1000:.0f} kB)")
+            if size > MAX_BYTES:
+                print(f"screenshots: warning: {name} is over {MAX_BYTES / 1000:.0f} kB", file=sys.stderr)
+    finally:
+        if not args.keep:
+            shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
