@@ -170,11 +170,11 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
 
 
 def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
-                   min_ratio: float = 10.0, max_lines: int = 3) -> list[tuple[float, float]]:
+                   min_ratio: float = 10.0) -> list[tuple[float, float]]:
     """Narrowband lines in ``y`` (deg/h) between f_lo_hz and f_hi_hz: local maxima of the
     Welch PSD standing ``min_ratio`` times above the median PSD of that band (a
-    broadband noise shape has no such peak). Returns up to ``max_lines`` (frequency Hz,
-    peak / band median) pairs, strongest first. Invalid samples (NaN) are set to the
+    broadband noise shape has no such peak). Returns every such line, one per 10 % of
+    frequency, as (frequency Hz, peak / band median) pairs, strongest first. Invalid samples (NaN) are set to the
     mean: this is a hint for the report, not a fit."""
     from scipy.signal import find_peaks, welch
 
@@ -196,6 +196,4 @@ def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
     for i in sorted(peaks, key=lambda i: -pb[i]):  # one line per 10 % of frequency
         if all(abs(fb[i] - fb[j]) > 0.1 * fb[j] for j in best):
             best.append(i)
-        if len(best) == max_lines:
-            break
     return [(float(fb[i]), float(pb[i] / med)) for i in best]
