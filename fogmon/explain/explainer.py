@@ -7,7 +7,8 @@ Bootstrap cost (the part that dominates): each replicate is one run of the simul
 stochastic part `--like` the recording (bias, rotation and mean-type effects are left
 out: they do not change the null of a residual) and one pass of the DAVAR engine's
 compensated kernels for the map and the whole-record ADEV (no EDF work). Mean-type
-effects never change the null, so accepting them reuses it; only noise-type effects
+effects and an outlier population (its outliers are replaced in the residual) never
+change the null, so accepting them reuses it; only noise-type effects
 (markov, bandwidth, vibration/temperature noise) trigger a new bootstrap. The
 replicate count adapts to the record length (100 up to 1e5 samples, 60 up to 4e5,
 else 40) and the family-wise threshold comes from a Gumbel law fitted to the
