@@ -240,6 +240,7 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
         elif e.kind == "bandwidth":
             checks = [("cutoff", _rel(q["cutoff_hz"], p["cutoff_hz"]), 0.25)]
         elif e.kind == "outliers":
+            p = validate_effect(e.kind, p).params  # the defaults (quantile_probs) filled in
             med = np.interp(0.5, p["quantile_probs"], p["amplitude_quantiles_dph"])
             fmed = np.interp(0.5, q["quantile_probs"], q["amplitude_quantiles_dph"])
             checks = [("rate", _rel(q["rate_per_h"], p["rate_per_h"]), 0.25), ("median_amp", _rel(fmed, med), 0.25),
