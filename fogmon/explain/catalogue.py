@@ -59,8 +59,9 @@ class Context:
 @dataclass
 class Candidate:
     """A fitted effect: full parameters, standard errors of the fitted ones, the
-    likelihood-ratio ``gain``, parameter count ``k``, its deterministic rate (deg/h, for
-    mean-type effects) and the design used (for the held-out check), plus evidence."""
+    likelihood-ratio ``gain``, parameter count ``k``, the rate it removes from the
+    residual (deg/h: a mean-type effect's deterministic rate, or an outlier population's
+    replacements) and the design used (for the held-out check), plus evidence."""
 
     kind: str
     params: dict

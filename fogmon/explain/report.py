@@ -5,7 +5,8 @@ Extra report keys beyond the contract (added, never renamed): ``mismatches_after
 per-region ``tau_peak_s`` and ``windows_span_s``,
 ``score_components_before/after``, per-effect ``uncertainty``, ``heldout``,
 ``bic_gain``, ``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
-family-wise threshold)."""
+family-wise threshold). An ``outliers`` effect's every outlier goes to the CSV its
+``times_file`` names (``outliers_path``: REPORT.outliers.csv) and to the .rrd."""
 from __future__ import annotations
 
 import json
