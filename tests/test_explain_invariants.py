@@ -4,6 +4,8 @@ recordings stay clean, a short transient is located, and without --model the bun
 simulations name their own physics."""
 import json
 import math
+import os
+import re
 
 import numpy as np
 import pytest
@@ -20,10 +22,19 @@ from fogmon.sim.simulate import simulate
 WARNING_KEYS = {"kind", "t_start_s", "t_end_s", "text"}
 
 
-def assert_invariants(rep: dict, t0: float, t1: float) -> None:
-    """The report invariants of CONTRACT section 4 / issue 11."""
+def assert_invariants(rep: dict, t0: float, t1: float, report_dir=None) -> None:
+    """The report invariants of CONTRACT section 4 / issue 11; no list cut: a glitches
+    effect lists every spike its evidence counts, an outliers effect names the file (in
+    ``report_dir``, when the report was written there) holding all it counts."""
     for e in rep["effects"]:
         assert e["score_after"] < e["score_before"], e
+        if e["kind"] == "glitches":
+            counted = re.search(r"(\d+) sample\(s\) beyond", e["evidence"])
+            assert counted and int(counted.group(1)) == len(e["params"]["times_s"]), e["evidence"]
+        if e["kind"] == "outliers" and report_dir is not None:
+            with open(os.path.join(report_dir, e["params"]["times_file"])) as fh:
+                rows = [line for line in fh if line.strip() and not line.startswith("#")]
+            assert rows[0].strip() == "time_s,amplitude_dph,abs_z" and len(rows) - 1 == e["params"]["count"] > 0
     for r in rep["mismatches"] + rep["mismatches_after"]:
         assert t0 - 1e-6 <= r["t_start_s"] <= r["t_peak_s"] <= r["t_end_s"] <= t1 + 1e-6, r
     assert isinstance(rep["warnings"], list)
@@ -40,7 +51,7 @@ def _run(path, tmp_path, model=None) -> dict:
     assert main(argv) == 0
     rep = json.loads(out.read_text())
     rec = read_replay_log(path)
-    assert_invariants(rep, float(rec.t_s[0]), float(rec.t_s[-1]) + 1.0 / rec.sample_rate_hz)
+    assert_invariants(rep, float(rec.t_s[0]), float(rec.t_s[-1]) + 1.0 / rec.sample_rate_hz, tmp_path)
     return rep
 
 

@@ -28,6 +28,8 @@ EVERY_KIND = [
     Effect("warm_up", {"amplitude_dph": 1.0, "tau_s": 300.0, "t0_s": 0.0}),
     Effect("bandwidth", {"cutoff_hz": 20.0, "order": 2, "taps": []}),
     Effect("bandwidth", {"cutoff_hz": 0.0, "order": 0, "taps": [0.25, 0.5, 0.25]}),
+    Effect("outliers", {"rate_per_h": 36.5, "amplitude_quantiles_dph": [1.0, 2.0, 7.5], "quantile_probs": [0, 0.5, 1],
+                        "positive_fraction": 0.25, "count": 73, "times_file": "run.outliers.csv"}),
 ]
 
 
@@ -39,7 +41,7 @@ def full_model() -> SensorModel:
 def test_catalogue_covers_contract_kinds_and_names_aux_and_nature():
     contract = {"thermal_drift", "periodic", "glitches", "bias_step", "vibration_noise", "rate_ramp",
                 "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth"}
-    assert set(EFFECT_KINDS) == contract
+    assert set(EFFECT_KINDS) == contract | {"outliers"}  # an addition (docs/explain.md)
     assert EFFECT_KINDS["thermal_drift"].aux == "temp_c"
     assert EFFECT_KINDS["vibration_noise"].aux == "vib_g"
     assert EFFECT_KINDS["scale_factor"].aux == "rot_dps"
@@ -237,6 +239,12 @@ def _effect_strategy():
             return st.integers(0, 4).flatmap(lambda n: st.builds(
                 lambda ts, am: Effect(kind, {"times_s": ts, "amplitudes_dph": am, "width_s": 0.0}),
                 st.lists(st.floats(0, 1e6), min_size=n, max_size=n), st.lists(st.floats(-1e3, 1e3), min_size=n, max_size=n)))
+        if kind == "outliers":
+            return st.builds(
+                lambda r, q, f, c, name: Effect(kind, {"rate_per_h": r, "amplitude_quantiles_dph": sorted(q),
+                                                       "positive_fraction": f, "count": c, "times_file": name}),
+                st.floats(0, 1e5), st.lists(st.floats(0, 1e6), min_size=8, max_size=8), st.floats(0, 1),
+                st.integers(0, 10**6), st.text(max_size=12))
         return params_for(kind).map(lambda p: Effect(kind, p))
 
     return st.sampled_from(sorted(EFFECT_KINDS)).flatmap(build)

@@ -15,8 +15,9 @@ fitted from the recording) and `fogmon replay` (console summary), then
 - the replay's whole-run IEEE-952 fit (Q N B K R, intervals or upper bounds) and its
   coefficient-jump events;
 - checks, each PASS/FAIL with its numbers: every effect lowered the score; no list cut
-  (every cluster of raw samples beyond 8 MAD is a listed glitch or inside a
-  platform_motion warning, and the list holds as many as the evidence counts); regions
+  (every cluster of raw samples beyond 8 MAD is a listed glitch, an outlier listed in
+  the file an `outliers` effect names, or inside a platform_motion warning, and each
+  list holds as many as its effect counts); regions
   inside the record; a known transient located (a region, or the platform_motion warning
   of a transient that moved the platform, holding its time, shorter than 20 % of the
   record); platform motion flagged where the sensor is known to move (a
@@ -108,13 +109,32 @@ def effect_text(e: dict) -> str:
     p = e["params"]
     if e["kind"] == "glitches":
         what = f"{len(p['times_s'])} glitch(es)"
+    elif e["kind"] == "outliers":
+        what = (f"{p['count']} outliers, {p['rate_per_h']:.4g}/h, |amplitude| quantiles "
+                + ", ".join(f"{q:.3g}" for q in p["amplitude_quantiles_dph"]) + f" deg/h, file {p['times_file']}")
     else:
         what = ", ".join(f"{k} {v:.4g}" for k, v in p.items() if isinstance(v, (int, float)))
     return f"{e['kind']} ({what}): score {e['score_before']:.3g} -> {e['score_after']:.3g}"
 
 
-def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndarray, fs: float) -> list:
-    """[(name, passed, numbers)] for one recording."""
+def outlier_listing(rep: dict, report_dir: Path) -> tuple[np.ndarray, int, int]:
+    """(times of every outlier listed in the files the report's ``outliers`` effects
+    name, rows read, outliers the effects count)."""
+    times, counted = [], 0
+    for e in rep["effects"]:
+        if e["kind"] == "outliers":
+            counted += int(e["params"]["count"])
+            f = report_dir / e["params"]["times_file"]
+            if e["params"]["times_file"] and f.is_file():
+                times.append(np.atleast_1d(np.loadtxt(f, delimiter=",", comments="#", skiprows=3, usecols=0)))
+    t = np.concatenate(times) if times else np.zeros(0)
+    return t, len(t), counted
+
+
+def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndarray, fs: float,
+           report_dir: Path) -> list:
+    """[(name, passed, numbers)] for one recording (``report_dir``: where the report and
+    the outliers file it names are)."""
     out = []
     t0, t1 = float(rec_t[0]), float(rec_t[-1]) + 1.0 / fs
     dur = t1 - t0
@@ -131,15 +151,28 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
     stated = sum(int(m.group(1)) for e in gl for m in [re.search(r"(\d+) sample\(s\) beyond", e["evidence"])] if m)
     warns = [w for w in rep.get("warnings", []) if w.get("kind") == "platform_motion"]
     tol = GLITCH_TOL_SAMPLES / fs
-    by_glitch = sum(bool(np.any((times >= a - tol) & (times <= b + tol))) for a, b in clusters)
-    by_motion = sum(any(overlaps(w["t_start_s"], w["t_end_s"], a, b + 1 / fs) for w in warns) for a, b in clusters)
-    lost = sum(not (np.any((times >= a - tol) & (times <= b + tol))
-                    or any(overlaps(w["t_start_s"], w["t_end_s"], a, b + 1 / fs) for w in warns)) for a, b in clusters)
-    out.append(("no list cut: every raw > 8 MAD outlier cluster is a listed glitch or in a platform_motion warning",
-                lost == 0 and len(times) == stated,
+    # an outlier population accounts for a cluster when its file lists an outlier there
+    o_times, o_rows, o_count = outlier_listing(rep, report_dir)
+
+    def at(ts, a, b):
+        return bool(np.any((ts >= a - tol) & (ts <= b + tol)))
+
+    def in_motion(a, b):
+        return any(overlaps(w["t_start_s"], w["t_end_s"], a, b + 1 / fs) for w in warns)
+
+    by_glitch = sum(at(times, a, b) for a, b in clusters)
+    by_outlier = sum(at(o_times, a, b) for a, b in clusters)
+    by_motion = sum(in_motion(a, b) for a, b in clusters)
+    lost = sum(not (at(times, a, b) or at(o_times, a, b) or in_motion(a, b)) for a, b in clusters)
+    pop = (f"; outliers listed in the file {o_rows}, counted by the effect {o_count}"
+           if any(e["kind"] == "outliers" for e in effects) else "")
+    out.append(("no list cut: every raw > 8 MAD outlier cluster is a listed glitch, a listed outlier or in a "
+                "platform_motion warning",
+                lost == 0 and len(times) == stated and o_rows == o_count,
                 f"{n_out} raw samples beyond {OUTLIER_MADS:g} x {scale} in {len(clusters)} cluster(s): "
-                f"{by_glitch} at a listed glitch (+-{GLITCH_TOL_SAMPLES} samples), {by_motion} in a motion warning, "
-                f"{lost} unaccounted; glitches listed {len(times)}, counted in the evidence {stated}"))
+                f"{by_glitch} at a listed glitch (+-{GLITCH_TOL_SAMPLES} samples), {by_outlier} at a listed outlier, "
+                f"{by_motion} in a motion warning, {lost} unaccounted; glitches listed {len(times)}, counted in the "
+                f"evidence {stated}{pop}"))
 
     regions = rep["mismatches"] + rep.get("mismatches_after", [])
     tau0 = 1.0 / fs
@@ -236,7 +269,7 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
     passed = rp.returncode == 0
     if not passed:
         print("  [FAIL] fogmon replay runs")
-    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, fs)
+    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, fs, report.parent)
     for name, ok, numbers in results:
         print(f"  [{'PASS' if ok else 'FAIL'}] {name}: {numbers}")
         passed &= ok

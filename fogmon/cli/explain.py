@@ -24,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", help="sensor model TOML (CONTRACT section 2); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
     p.add_argument("--report", required=True, help="JSON report to write (CONTRACT section 4); a PNG of the "
-                   "evidence is written next to it (same name, .png)")
+                   "evidence is written next to it (same name, .png), and every outlier of an outlier population "
+                   "(same name, .outliers.csv)")
     p.add_argument("--rrd", help="also write the evidence to this Rerun .rrd file")
     p.add_argument("--out-model", help="write the model with the fitted effects added (TOML)")
     p.add_argument("--out-corrected", help="write the recording with the fitted deterministic effects removed "
@@ -89,10 +90,11 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.sim.model import load_model
 
     png = os.path.splitext(args.report)[0] + ".png"
-    check_outputs({"--report": args.report, "--report (its PNG)": png, "--rrd": args.rrd,
-                   "--out-model": args.out_model, "--out-corrected": args.out_corrected},
+    outliers_csv = report.outliers_path(args.report)
+    check_outputs({"--report": args.report, "--report (its PNG)": png, "--report (its outliers list)": outliers_csv,
+                   "--rrd": args.rrd, "--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])
-    export = export_request(args, [args.recording, args.model, args.report, png, args.rrd, args.out_model,
+    export = export_request(args, [args.recording, args.model, args.report, png, outliers_csv, args.rrd, args.out_model,
                                    args.out_corrected])
     progress = (lambda stage, done=0, total=0: None) if args.quiet else StageProgress()
     model = load_model(args.model) if args.model else None
@@ -110,12 +112,13 @@ def run(args: argparse.Namespace) -> int:
                   baseline=args.model is None, progress=progress)
     res.warnings[:0] = motion
     progress(f"writing {args.report}")
-    rep = report.build_report(res, args.recording, args.model)
+    held = report.write_outliers(res, outliers_csv)
+    rep = report.build_report(res, args.recording, args.model, os.path.basename(outliers_csv) if held else "")
     report.write_report(rep, args.report)
     report.write_png(res, png)
     if args.rrd:
         report.write_rrd(res, args.rrd)
-    report.write_outputs(res, args.out_model, args.out_corrected)
+    report.write_outputs(res, args.out_model, args.out_corrected, outliers_csv if held else None)
     if export:
         write_export(*export, res.fitted.noise, f"{args.recording} (explain: the fitted model's noise)",
                      res.fitted.sample_rate_hz)

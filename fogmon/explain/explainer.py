@@ -7,7 +7,8 @@ Bootstrap cost (the part that dominates): each replicate is one run of the simul
 stochastic part `--like` the recording (bias, rotation and mean-type effects are left
 out: they do not change the null of a residual) and one pass of the DAVAR engine's
 compensated kernels for the map and the whole-record ADEV (no EDF work). Mean-type
-effects never change the null, so accepting them reuses it; only noise-type effects
+effects and an outlier population (its outliers are replaced in the residual) never
+change the null, so accepting them reuses it; only noise-type effects
 (markov, bandwidth, vibration/temperature noise) trigger a new bootstrap. The
 replicate count adapts to the record length (100 up to 1e5 samples, 60 up to 4e5,
 else 40) and the family-wise threshold comes from a Gumbel law fitted to the
@@ -252,7 +253,7 @@ def tiers(cands: list[catalogue.Candidate]) -> list[list[catalogue.Candidate]]:
     white-level) first; the broad spectral noise terms (markov, bandwidth) only when
     none of those passes - a spectral term can always soak up part of a deterministic
     signal's power, never the other way round."""
-    first = [c for c in cands if c.nature in ("mean", "white_level")]
+    first = [c for c in cands if c.nature in ("mean", "white_level") or c.rate is not None]
     return [first, [c for c in cands if c not in first]]
 
 
@@ -321,9 +322,9 @@ def _lowers(before: float, after: float) -> bool:
 
 def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, n_acc, progress):
     """(residual, stochastic model, null, context, analysis, candidates) with ``c`` added:
-    a mean-type effect is subtracted (same null), a noise-type one joins the stochastic
-    model (new bootstrap)."""
-    if c.nature == "mean":
+    a mean-type effect, or outliers replaced in the residual, is subtracted (same null),
+    a noise-type one joins the stochastic model (new bootstrap)."""
+    if c.rate is not None:
         y_new, stoch_new, null_new = np.where(valid, y - c.rate, 0.0), stoch, null
     else:
         y_new = y
@@ -386,7 +387,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                     refused.add(c.kind)
                     continue
                 trial = _try(c, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, len(accepted), progress)
-                overfit = _new_deficit(current, trial[4]) if c.nature != "mean" else None
+                overfit = _new_deficit(current, trial[4]) if c.rate is None else None
                 if overfit is not None:
                     rejected.append((c.kind, bg, f"makes the model noisier than the recording at tau {overfit} s "
                                                  f"(the spectral fit trades long taus for short ones)"))

@@ -5,20 +5,22 @@ Extra report keys beyond the contract (added, never renamed): ``mismatches_after
 per-region ``tau_peak_s`` and ``windows_span_s``,
 ``score_components_before/after``, per-effect ``uncertainty``, ``heldout``,
 ``bic_gain``, ``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
-family-wise threshold)."""
+family-wise threshold). An ``outliers`` effect's every outlier goes to the CSV its
+``times_file`` names (``outliers_path``: REPORT.outliers.csv) and to the .rrd."""
 from __future__ import annotations
 
 import json
 import math
 import os
 import warnings
+from dataclasses import replace
 
 import numpy as np
 
 from fogmon.explain.detectors import spectral_lines
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
-from fogmon.sim.model import save_model
+from fogmon.sim.model import Effect, save_model
 
 
 def _clean(x):
@@ -57,6 +59,11 @@ def _effect_summary(kind: str, p: dict) -> str:
         return f"warm-up {p['amplitude_dph']:+.3g} deg/h settling with tau = {p['tau_s']:.4g} s"
     if kind == "glitches":
         return f"{len(p['times_s'])} glitch(es)"
+    if kind == "outliers":
+        where = f", all listed in {p['times_file']}" if p.get("times_file") else ""
+        return (f"outlier population: {p['count']} outliers ({p['rate_per_h']:.4g} per hour, "
+                f"{p['rate_per_sample']:.3g} per sample), |amplitude| median {_median(p):.3g} deg/h, largest "
+                f"{p['amplitude_quantiles_dph'][-1]:.3g} deg/h{where}")
     if kind == "scale_factor":
         return f"scale-factor error {p['ppm']:.3g} ppm (asymmetry {p['asym_ppm']:.3g} ppm)"
     if kind == "thermal_drift":
@@ -71,6 +78,11 @@ def _effect_summary(kind: str, p: dict) -> str:
     if kind == "bandwidth":
         return f"sensor low-pass: Butterworth order {p['order']} at {p['cutoff_hz']:.4g} Hz"
     return kind
+
+
+def _median(p: dict) -> float:
+    """Median |amplitude| (deg/h) of an outliers effect, from its quantiles."""
+    return float(np.interp(0.5, p["quantile_probs"], p["amplitude_quantiles_dph"]))
 
 
 def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
@@ -129,13 +141,22 @@ def _line_hint(res: Result, left: list[dict]) -> str:
             f"vibration environment at those frequencies.")
 
 
-def build_report(res: Result, recording_path: str, model_path: str | None) -> dict:
+def outliers_path(report_path: str) -> str:
+    """The file next to the report that lists every outlier (REPORT.outliers.csv)."""
+    return os.path.splitext(report_path)[0] + ".outliers.csv"
+
+
+def build_report(res: Result, recording_path: str, model_path: str | None, times_file: str = "") -> dict:
+    """The report (CONTRACT section 4); ``times_file`` names the outliers file relative
+    to the report (an ``outliers`` effect's ``times_file`` parameter)."""
     mism = [r.as_json() for r in res.before.regions]
     mism_after = [r.as_json() for r in res.after.regions]
     effects = []
     for a in res.accepted:
         c = a.cand
         params = dict(c.effect().params)
+        if c.kind == "outliers":
+            params["times_file"] = times_file
         effects.append({"kind": c.kind, "params": params, "uncertainty": c.se, "evidence": c.evidence,
                         "heldout": a.heldout, "bic_gain": round(a.bic_gain, 2),
                         "score_before": round(a.score_before, 3), "score_after": round(a.score_after, 3)})
@@ -181,6 +202,8 @@ def console_summary(rep: dict) -> str:
              f"  mismatch regions: {len(rep['mismatches'])} before, {len(rep['mismatches_after'])} after"]
     for r in rep["mismatches"][:5]:
         lines.append("    - " + _region_text(r))
+    if len(rep["mismatches"]) > 5:
+        lines.append(f"    ... and {len(rep['mismatches']) - 5} more in the report")
     if rep["effects"]:
         lines.append("  effects added:")
         for e in rep["effects"]:
@@ -194,11 +217,49 @@ def console_summary(rep: dict) -> str:
     return "\n".join(lines)
 
 
-def write_outputs(res: Result, out_model: str | None, out_corrected: str | None) -> None:
-    """--out-model (fitted model TOML) and --out-corrected (recording minus the fitted
-    deterministic effects, replay log v1, same samples and aux columns)."""
+def write_outliers(res: Result, path: str) -> int:
+    """Every outlier of an accepted ``outliers`` effect as CSV (time_s in s, amplitude_dph
+    = the spike removed in deg/h, abs_z = its robust spike-test |z|) under a commented
+    header; nothing is written when there is no such effect. Returns the rows written."""
+    held = [a.cand for a in res.accepted if a.cand.kind == "outliers"]
+    if not held:
+        _remove_stale_outliers(path)
+        return 0
+    lst = held[0].listing
+    n = len(lst["times_s"])
+    with open(path, "w", encoding="utf-8", newline="\n") as fh:
+        fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} outlier samples (none left out)\n"
+                 "# amplitude_dph: the spike removed (deg/h); abs_z: its robust spike-test |z|\n"
+                 "time_s,amplitude_dph,abs_z\n")
+        for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist()):
+            fh.write(f"{t!r},{a:.9g},{z:.4g}\n")
+    return n
+
+
+def _remove_stale_outliers(path: str) -> None:
+    """Remove an outliers file an earlier run left next to the report (recognised by its
+    first line), so that it is never read as this run's."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            ours = fh.readline().startswith("# fogmon explain outliers of ")
+    except (OSError, UnicodeDecodeError):
+        return
+    if ours:
+        os.remove(path)
+
+
+def write_outputs(res: Result, out_model: str | None, out_corrected: str | None,
+                  outliers_file: str | None = None) -> None:
+    """--out-model (fitted model TOML; an ``outliers`` effect names ``outliers_file``
+    relative to the model) and --out-corrected (recording minus the fitted deterministic
+    effects, outliers replaced, replay log v1, same samples and aux columns)."""
     if out_model:
-        save_model(res.fitted, out_model)
+        fitted = res.fitted
+        if outliers_file:
+            rel = os.path.relpath(outliers_file, os.path.dirname(os.path.abspath(out_model)))
+            fitted = replace(fitted, effects=[Effect(e.kind, {**e.params, "times_file": rel})
+                                              if e.kind == "outliers" else e for e in fitted.effects])
+        save_model(fitted, out_model)
     if out_corrected:
         rec = res.recording
         idx = rec.grid_index()
@@ -207,6 +268,11 @@ def write_outputs(res: Result, out_model: str | None, out_corrected: str | None)
         meta["sample_rate_hz"] = f"{rec.sample_rate_hz:g}"
         meta["corrected_by"] = "fogmon explain: " + ", ".join(a.cand.kind for a in res.accepted
                                                               if a.cand.rate is not None) or "nothing"
+        for a in res.accepted:
+            if a.cand.kind == "outliers":
+                meta["outliers_replaced"] = (f"{a.cand.params['count']} samples (listed in the outliers file "
+                                             f"next to the report): interpolation from their neighbours plus "
+                                             f"the model's conditional noise")
         write_replay_log(out_corrected, rec.t_s, corrected, rec.aux, meta)
 
 
@@ -306,6 +372,13 @@ def write_rrd(res: Result, path: str) -> None:
         ym = np.nanmean(y, axis=1)
     rec.send_columns("rate", indexes=[rr.TimeColumn("time", duration=t[: nb * k: k])],
                      columns=rr.Scalars.columns(scalars=np.column_stack([ym, det.mean(axis=1)])))
+    for a in res.accepted:
+        if a.cand.kind == "outliers":  # every outlier, as points over time
+            lst = a.cand.listing
+            rec.log("rate/outliers_removed_dph", rr.SeriesPoints(names=["outlier amplitude removed (deg/h)"]),
+                    static=True)
+            rec.send_columns("rate/outliers_removed_dph", indexes=[rr.TimeColumn("time", duration=lst["times_s"])],
+                             columns=rr.Scalars.columns(scalars=lst["amplitudes_dph"]))
     rec.log("verdict", rr.TextDocument(verdict(res, [r.as_json() for r in res.before.regions],
                                                [r.as_json() for r in res.after.regions])), static=True)
     rec.flush()

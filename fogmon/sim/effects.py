@@ -8,7 +8,8 @@ parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
 - white-level: ``white_level_dpsh(effect, t_s, aux)`` -> added ARW level in deg/sqrt(h)
   per sample (vibration_noise, temperature_noise); the simulator scales one white
   sequence by N0 + sum of these (floored at 0).
-- noise: ``noise_generator(effect, fs_hz, rng)`` -> a stateful generator (markov).
+- noise: ``noise_generator(effect, fs_hz, rng)`` -> a stateful generator (markov,
+  outliers).
 - filter: ``BandwidthFilter(params, fs_hz)`` applied to the whole simulated rate.
 
 ``lookback_s(effect)`` is how much earlier data a mean-type effect needs to be exact
@@ -174,10 +175,38 @@ def white_level_dpsh(effect: Effect, t_s, aux: dict) -> np.ndarray:
     return WHITE_LEVEL_EFFECTS[effect.kind](t_s, aux, effect.params)
 
 
-def noise_generator(effect: Effect, fs_hz: float, rng: np.random.Generator) -> GaussMarkov:
-    """Stateful generator of a noise-type effect (``markov``)."""
+def noise_generator(effect: Effect, fs_hz: float, rng: np.random.Generator) -> GaussMarkov | OutlierSpikes:
+    """Stateful generator of a noise-type effect (``markov``, ``outliers``)."""
     p = effect.params
+    if effect.kind == "outliers":
+        return OutlierSpikes(p, fs_hz, rng)
     return GaussMarkov(p["sigma_dph"], p["tau_c_s"], fs_hz, rng)
+
+
+class OutlierSpikes:
+    """``outliers``: a Poisson process of one-sample spikes on the sample grid (rate_per_h
+    per hour), |amplitude| (deg/h) drawn by interpolating the quantile function given by
+    (quantile_probs, amplitude_quantiles_dph), positive with probability
+    positive_fraction. Three uniforms per sample, so the numbers do not depend on the
+    chunking."""
+
+    def __init__(self, params: dict, fs_hz: float, rng: np.random.Generator):
+        self.p_hit = params["rate_per_h"] / 3600.0 / fs_hz
+        if self.p_hit > 1.0:
+            raise FogmonError(f"outliers: rate_per_h {params['rate_per_h']:g} is more than one per sample at "
+                              f"{fs_hz:g} Hz")
+        self.probs = np.asarray(params["quantile_probs"], dtype=float)
+        self.quantiles = np.asarray(params["amplitude_quantiles_dph"], dtype=float)
+        self.positive = params["positive_fraction"]
+        self.rng = rng
+
+    def generate(self, n: int) -> np.ndarray:
+        u = self.rng.random((n, 3))
+        hit = u[:, 0] < self.p_hit
+        amp = np.interp(u[hit, 1], self.probs, self.quantiles)
+        out = np.zeros(n)
+        out[hit] = np.where(u[hit, 2] < self.positive, amp, -amp)
+        return out
 
 
 def lookback_s(effect: Effect) -> float:

@@ -43,7 +43,7 @@ NOISE_UNITS = {
 
 @dataclass(frozen=True)
 class Param:
-    """One effect parameter: ``unit`` (text), ``type`` ("float", "int" or "list" of
+    """One effect parameter: ``unit`` (text), ``type`` ("float", "int", "str" or "list" of
     floats), ``check`` ("any", ">=0", ">0"), ``default`` (None: required) and ``doc``."""
 
     unit: str
@@ -67,6 +67,9 @@ class EffectKind:
     def required(self) -> tuple[str, ...]:
         return tuple(k for k, p in self.params.items() if p.default is None)
 
+
+#: default probabilities of an ``outliers`` effect's amplitude quantiles
+OUTLIER_QUANTILE_PROBS = (0.0, 0.1, 0.25, 0.5, 0.75, 0.9, 0.99, 1.0)
 
 EFFECT_KINDS: dict[str, EffectKind] = {
     "thermal_drift": EffectKind(
@@ -142,6 +145,25 @@ EFFECT_KINDS: dict[str, EffectKind] = {
             "taps": Param("", "FIR coefficients instead of a Butterworth filter", "list", default=[]),
         },
         None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate"),
+    "outliers": EffectKind(
+        {
+            "rate_per_h": Param("1/h", "mean number of outliers per hour (a Poisson process on the sample grid)",
+                                check=">=0"),
+            "amplitude_quantiles_dph": Param("deg/h", "quantiles of |amplitude| at quantile_probs (simulated by "
+                                             "interpolating them)", "list", ">=0"),
+            "quantile_probs": Param("", "probabilities of amplitude_quantiles_dph, increasing from 0 to 1", "list",
+                                    ">=0", default=list(OUTLIER_QUANTILE_PROBS)),
+            "positive_fraction": Param("", "share of positive amplitudes", check=">=0", default=0.5),
+            "count": Param("", "outliers found in the recording (informational)", "int", ">=0", default=0),
+            "rate_per_sample": Param("", "count / valid samples (informational)", check=">=0", default=0.0),
+            "contamination_fraction": Param("", "fitted share of contaminated samples in the contaminated-Gaussian "
+                                            "mixture of the spike test (informational)", check=">=0", default=0.0),
+            "contamination_sd_ratio": Param("", "standard deviation of the contaminated samples over the clean "
+                                            "noise's, same mixture (informational)", check=">=0", default=0.0),
+            "times_file": Param("", "CSV listing every outlier (time_s, amplitude_dph, abs_z), relative to the "
+                                "file that names it (informational)", "str", default=""),
+        },
+        None, "noise", "heavy-tailed outlier population: spikes at a rate with an amplitude distribution"),
 }
 
 
@@ -220,7 +242,11 @@ def validate_effect(kind: str, params: dict, where: str = "effect") -> Effect:
             out[k] = list(p.default) if isinstance(p.default, list) else p.default
             continue
         v = params[k]
-        if p.type == "list":
+        if p.type == "str":
+            if not isinstance(v, str):
+                raise FogmonError(f"{where}: parameter {k!r} must be a string, got {v!r}")
+            out[k] = v
+        elif p.type == "list":
             if not isinstance(v, (list, tuple)):
                 raise FogmonError(f"{where}: parameter {k!r} must be a list of numbers, got {v!r}")
             out[k] = [_number(x, f"{where}: {k}[{i}]", p.check) for i, x in enumerate(v)]
@@ -235,6 +261,8 @@ def _check_effect(kind: str, p: dict, where: str) -> None:
     if kind == "glitches" and len(p["times_s"]) != len(p["amplitudes_dph"]):
         raise FogmonError(f"{where}: times_s and amplitudes_dph must have the same length "
                           f"({len(p['times_s'])} vs {len(p['amplitudes_dph'])})")
+    if kind == "outliers":
+        _check_outliers(p, where)
     if kind == "scale_factor":
         worst = abs(p["ppm"]) + abs(p["asym_ppm"]) / 2
         if worst >= 1e6:
@@ -247,6 +275,19 @@ def _check_effect(kind: str, p: dict, where: str) -> None:
                               f"{'both' if butter else 'neither'}")
         if butter and not (p["cutoff_hz"] > 0 and p["order"] >= 1):
             raise FogmonError(f"{where}: a Butterworth filter needs cutoff_hz > 0 and order >= 1")
+
+
+def _check_outliers(p: dict, where: str) -> None:
+    probs, q = p["quantile_probs"], p["amplitude_quantiles_dph"]
+    if len(probs) != len(q) or len(q) < 2:
+        raise FogmonError(f"{where}: quantile_probs and amplitude_quantiles_dph need the same length, at least 2 "
+                          f"({len(probs)} vs {len(q)})")
+    if probs[0] != 0.0 or probs[-1] != 1.0 or any(b <= a for a, b in zip(probs, probs[1:])):
+        raise FogmonError(f"{where}: quantile_probs must increase strictly from 0 to 1, got {probs}")
+    if any(b < a for a, b in zip(q, q[1:])):
+        raise FogmonError(f"{where}: amplitude_quantiles_dph must not decrease, got {q}")
+    if p["positive_fraction"] > 1.0:
+        raise FogmonError(f"{where}: positive_fraction must be <= 1, got {p['positive_fraction']:g}")
 
 
 def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
