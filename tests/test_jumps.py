@@ -2,7 +2,8 @@
 import numpy as np
 
 from fogmon.davar.jumps import JUMP_MIN_INDEPENDENT, JumpDetector, jump_threshold
-from fogmon.pipeline import COEFFICIENTS, JumpDetector as PipelineJumpDetector
+from fogmon.pipeline import JumpDetector as PipelineJumpDetector
+from fogmon.sinks.base import COEFFICIENTS
 
 
 class _C:

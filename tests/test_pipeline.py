@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import io
-import time
 
 import numpy as np
 import pytest
@@ -11,8 +10,10 @@ import pytest
 from fogmon.block import Block, Event
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
-from fogmon.pipeline import (COEFFICIENTS, Sink, add_pipeline_arguments, default_window_s,
-                             parse_taus, run_pipeline, slice_block)
+from fogmon.cli.pipeline_options import parse_taus
+from fogmon.pipeline import PipelineConfig, default_window_s, run_pipeline, slice_block
+from fogmon.sinks.base import COEFFICIENTS, Sink
+from fogmon.sources.pacing import Pacer
 from fogmon.sinks.console import ConsoleSink, format_summary
 
 
@@ -62,13 +63,7 @@ class Collect(Sink):
 
 
 def _args(**kw):
-    p = argparse.ArgumentParser()
-    add_pipeline_arguments(p)
-    a = p.parse_args([])
-    a.no_progress = True
-    for k, v in kw.items():
-        setattr(a, k, v)
-    return a
+    return PipelineConfig(**kw)
 
 
 def _white(n, fs, seed=1, t0=0.0):
@@ -138,17 +133,21 @@ def test_duration_stops_at_exact_sample_count_and_interrupt_is_clean():
 def test_realtime_paces_recording_time():
     fs = 100.0
     t, r = _white(100, fs)  # 1 s of recording, paced at 2x: pieces of 0.1 s wall = 20 samples
+    now = [100.0]
+
+    def sleep(d):                         # a clock that advances only by the pacer's sleeps
+        now[0] += d
 
     class Clock(Collect):
         def block(self, b):
-            self.blocks.append((time.monotonic(), float(b.t_s[-1]), len(b)))
+            self.blocks.append((now[0], float(b.t_s[-1]), len(b)))
 
     sink = Clock()
-    run_pipeline(ListSource(t, r, [100], fs), _args(window_s=0.32, realtime=2.0), sinks=[sink])
+    run_pipeline(ListSource(t, r, [100], fs), _args(window_s=0.32, realtime=2.0), sinks=[sink],
+                 pacer=Pacer(2.0, clock=lambda: now[0], sleep=sleep))
     assert [n for _, _, n in sink.blocks] == [20] * 5
-    w0 = sink.blocks[0][0] - sink.blocks[0][1] / 2.0
-    for wall, t_end, _ in sink.blocks:  # never ahead of 2x real time
-        assert wall - w0 >= t_end / 2.0 - 0.01
+    for wall, t_end, _ in sink.blocks:  # each piece when it is due at 2x real time, not before
+        assert wall - 100.0 == pytest.approx(t_end / 2.0, abs=1e-9)
 
 
 def test_events_pass_through_and_slice_keeps_them():

@@ -21,7 +21,8 @@ from rerun.chunk import RrdReader
 from fogmon.block import Event
 from fogmon.davar.batch import dadev
 from fogmon.errors import FogmonError
-from fogmon.pipeline import COEFFICIENTS, Summary, run_pipeline
+from fogmon.pipeline import run_pipeline
+from fogmon.sinks.base import COEFFICIENTS, Summary
 from fogmon.sinks.console import format_summary
 from fogmon.sinks.rerun_sink import RerunSink, _Decimator, start_grpc_server, stop_process_group
 

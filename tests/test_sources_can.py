@@ -17,7 +17,8 @@ from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive, run_archived
 from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
-from fogmon.sources.open import add_source_arguments, open_live_source, open_replay_source
+from fogmon.cli.source_options import add_source_arguments, source_options
+from fogmon.sources.open import open_live_source, open_replay_source
 
 DBC = str(resources.files("fogmon") / "data" / "gyro_example.dbc")
 FS = 100.0     # GenMsgCycleTime 10 ms in the example DBC
@@ -41,7 +42,7 @@ def gyro_msgs(ks, t0=1_000_000.0, invalid=(), extra=True):
 def args_for(*argv):
     p = argparse.ArgumentParser()
     add_source_arguments(p)
-    return p.parse_args(list(argv))
+    return source_options(p.parse_args(list(argv)))
 
 
 def gather(source):

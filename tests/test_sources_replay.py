@@ -10,7 +10,8 @@ import pytest
 from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.recording import write_replay_log
-from fogmon.sources.open import add_source_arguments, open_replay_source
+from fogmon.cli.source_options import add_source_arguments, source_options
+from fogmon.sources.open import open_replay_source
 from fogmon.sources.replay import ReplayLogSource
 from sources_fake_device import stream
 
@@ -20,7 +21,7 @@ HEAD = "# fogmon replay log v1\n# sample_rate_hz: 10\ntime_s,rate_dph,temp_c\n"
 def args_for(*argv):
     p = argparse.ArgumentParser()
     add_source_arguments(p, mode="replay")
-    return p.parse_args(list(argv))
+    return source_options(p.parse_args(list(argv)))
 
 
 @pytest.mark.parametrize("body,where", [

@@ -241,7 +241,8 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     sending, with CRC failures, drops and garbage before and after the cut: every counter
     equals the totals its events carry and what the archive holds, and the raw capture
     decodes to exactly samples.csv with the same counters."""
-    from fogmon.pipeline import Sink, run_pipeline
+    from fogmon.pipeline import run_pipeline
+    from fogmon.sinks.base import Sink
     from fogmon.sources.replay import open_raw_capture
     from test_pipeline import _args
 
@@ -261,7 +262,7 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     archive = Archive(str(tmp_path / "arch"), src)
     ev = Events()
     monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)   # scripted device: no wall-clock stop
-    summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev], extra_sinks=[archive])
+    summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev, archive])
     c = summary.counters
     assert summary.n_samples == 798                      # frames 798, 799 lost: the grid ends at 797
     inside = [k for k in intact if k < 798]

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 
-from fogmon.pipeline import add_pipeline_arguments, run_pipeline
-from fogmon.sources.open import add_source_arguments, open_replay_source
+from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
+from fogmon.cli.source_options import add_source_arguments, source_options
+from fogmon.pipeline import Pipeline
+from fogmon.sources.open import open_replay_source
 from fogmon.stopping import interrupted_exit_code
 
 EPILOG = """examples:
@@ -35,6 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    source = open_replay_source(args.recording, args)
-    summary = run_pipeline(source, args)
+    source = open_replay_source(args.recording, source_options(args))
+    pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
+    summary = pipeline.run(build_sinks(args))
     return interrupted_exit_code() if summary.interrupted else 0

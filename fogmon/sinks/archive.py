@@ -42,8 +42,9 @@ import numpy as np
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.pieces import find_pieces, piece_path
-from fogmon.pipeline import Sink
+from fogmon.sinks.base import Sink, Summary
 from fogmon.recording import append_replay_rows, write_replay_header
+from fogmon.sources.base import CaptureSource, Source
 from fogmon.sources.replay import CAPTURE_FORMAT, SIDECAR_SUFFIX
 
 REPLAY_LOG = "samples.csv"
@@ -74,7 +75,7 @@ class Archive(Sink):
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
     first temperature frame; not written), ``raw_bytes``, ``raw_frames``."""
 
-    def __init__(self, directory: str, source, flush_s: float = 0.5, clock=time.monotonic,
+    def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
                  background_flush: bool = True) -> None:
         self.directory = os.fspath(directory)
         self._created_dir = not os.path.isdir(self.directory)
@@ -102,7 +103,7 @@ class Archive(Sink):
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
-        base = dict(source.capture_spec()) if hasattr(source, "capture_spec") else None
+        base = dict(source.capture_spec()) if isinstance(source, CaptureSource) else None
         self._dbc = base.pop("dbc_path", None) if base else None
         self._spec_base = base
         self._spec = None                        # the current capture piece's sidecar
@@ -115,8 +116,7 @@ class Archive(Sink):
         if base is not None:
             self._capture_name = SERIAL_CAPTURE if base.get("kind") == "serial" else CAN_CAPTURE
             self.capture_path = os.path.join(self.directory, piece_path(self._capture_name, 1))
-            if hasattr(source, "add_tap"):
-                source.add_tap(self)
+            source.add_tap(self)
         self._closed = threading.Event()
         if background_flush:
             threading.Thread(target=self._flusher, name="fogmon-archive-flush", daemon=True).start()
@@ -172,12 +172,11 @@ class Archive(Sink):
             self.piece = piece
             self._cut_pending = self._cap_fd is not None
 
-    def finish(self, summary) -> None:
+    def finish(self, summary: Summary) -> None:
         self.close()
-        outputs = getattr(summary, "outputs", None)
-        if outputs is not None and self._pieces:
+        if self._pieces:
             n = len(self._pieces)
-            outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
+            summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
                            + (f" in {n} pieces)" if n > 1 else ")"))
 
     # -- raw capture taps (called by the source) --------------------------------------
@@ -209,7 +208,7 @@ class Archive(Sink):
     def _append_raw(self, data: bytes) -> None:
         """Serial bytes into the capture; a pending cut happens where the decoder, which
         has just been fed ``data``, holds no partial frame (else at a later call)."""
-        at = len(data) - self.source.codec.pending if self._cut_pending else -1
+        at = len(data) - self.source.pending if self._cut_pending else -1
         if at >= 0:                              # (< 0: the frame under way began in an earlier chunk)
             if at and self._open_capture():
                 self._cap_buf += data[:at]

@@ -9,7 +9,8 @@ from collections import Counter
 from typing import Sequence, TextIO
 
 from fogmon.block import Event
-from fogmon.pipeline import COEFFICIENTS, Sink, Summary, default_window_s
+from fogmon.pipeline import default_window_s
+from fogmon.sinks.base import COEFFICIENTS, Sink, Summary
 from fogmon.stopping import stop_name
 
 #: Events of one kind printed as they happen before the rest are only counted.

@@ -42,7 +42,7 @@ from fogmon import stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
-from fogmon.pipeline import COEFFICIENTS, Sink, StreamInfo
+from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 
 #: Raw rate and aux channels are shown at no more than this many points per second.
 DISPLAY_MAX_HZ = 100.0

@@ -23,6 +23,7 @@ from typing import Iterator
 
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
+from fogmon.sources.base import RawTap
 from fogmon.sources.frames import Frames
 from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 
@@ -35,13 +36,15 @@ class LiveSource:
     device, for messages and errors) and, for ``("data", ...)`` items, ``_consume``."""
 
     device_errors: tuple[type[BaseException], ...] = (OSError,)
+    #: a live device has no length (fogmon.sources.base.Source)
+    n_samples: int | None = None
 
     def __init__(self, grid: GridAssembler, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), clock=time.monotonic) -> None:
         self.grid = grid
         self.block_s, self.idle_s, self.backoff_s = block_s, idle_s, backoff_s
         self._clock = clock
-        self._taps: list = []
+        self._taps: list[RawTap] = []
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -49,7 +52,12 @@ class LiveSource:
         self.opened_s: float | None = None   # time.monotonic() when the device was first opened
         self._limit: int | None = None
 
-    def add_tap(self, tap) -> None:
+    @property
+    def pending(self) -> int:
+        """Bytes of a partial frame the decoder holds (none for frame-based input)."""
+        return 0
+
+    def add_tap(self, tap: RawTap) -> None:
         """Register a tap (the archive) for the raw input (adding one twice is a no-op)."""
         if tap not in self._taps:
             self._taps.append(tap)

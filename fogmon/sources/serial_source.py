@@ -15,6 +15,7 @@ import time
 import serial
 
 from fogmon.block import Block
+from fogmon.sources.base import Codec
 from fogmon.sources.grid import GridAssembler
 from fogmon.sources.live import LiveSource
 
@@ -34,7 +35,7 @@ class SerialSource(LiveSource):
 
     device_errors = (serial.SerialException, OSError, ValueError)
 
-    def __init__(self, port: str, baud: int, codec, block_s: float = 0.1, idle_s: float = 0.5,
+    def __init__(self, port: str, baud: int, codec: Codec, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), opener=None, clock=time.monotonic) -> None:
         super().__init__(GridAssembler(codec.rate_hz, codec.seq_modulus, codec.aux_names),
                          block_s, idle_s, backoff_s, clock)
@@ -49,6 +50,10 @@ class SerialSource(LiveSource):
     @property
     def decoder_counters(self) -> dict[str, int]:
         return self.codec.counters
+
+    @property
+    def pending(self) -> int:
+        return self.codec.pending
 
     @property
     def counters(self) -> dict[str, int]:

@@ -38,7 +38,7 @@ class SimulatedSource:
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
         self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
-        #: length in samples when bounded (None: endless), as fogmon.pipeline.record_samples reads it
+        #: length in samples when bounded (None: endless), the pipeline sizes its default window with it
         self.n_samples = (int(round(duration_s * self.rate_hz)) if duration_s is not None
                           else int(like.grid_index()[-1]) + 1 if like is not None else None)
         self.meta: dict = {}
