@@ -15,7 +15,9 @@ from hypothesis import given, settings, strategies as st
 
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
-from fogmon.sinks.archive import Archive, run_archived
+from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.sinks.archive import Archive
+from fogmon.sinks.base import Sink
 from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
 from fogmon.cli.source_options import add_source_arguments, source_options
 from fogmon.sources.open import open_live_source, open_replay_source
@@ -161,7 +163,12 @@ def test_archive_of_can_source_replays_to_the_same_samples(tmp_path):
 
     th = threading.Thread(target=device)
     th.start()
-    run_archived(src, archive, duration_s=20, on_block=lambda b: done.is_set() and src.close())
+    class StopWhenSent(Sink):
+        def block(self, b):
+            if done.is_set():
+                src.close()
+
+    run_pipeline(src, PipelineConfig(window_s=0.64, keep_motion=True), [archive, StopWhenSent()])
     th.join()
     rec = read_replay_log(archive.replay_log_path)
     assert len(rec) == len(ks) - 1

@@ -14,7 +14,9 @@ import pytest
 import serial
 
 from fogmon.recording import read_replay_log
-from fogmon.sinks.archive import Archive, run_archived
+from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.sinks.archive import Archive
+from fogmon.sinks.base import Sink
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
@@ -126,24 +128,28 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
 
     th = threading.Thread(target=device)
     th.start()
-    blocks = []
+    events = []
 
-    def on_block(b):
-        blocks.append(b)
-        if stop.is_set():
-            src.close()
+    class StopWhenSent(Sink):
+        def block(self, b):
+            if stop.is_set():
+                src.close()
 
-    counters = run_archived(src, archive, duration_s=15, on_block=on_block)
+        def events(self, ev):
+            events.extend(ev)
+
+    summary = run_pipeline(src, PipelineConfig(window_s=0.64, keep_motion=True), [archive, StopWhenSent()])
+    counters = {**summary.counters, **archive.counters}
     th.join()
     dev.close()
     rec = read_replay_log(archive.replay_log_path)
     ks = np.rint(rec.rate_dph / 3600).astype(int)
-    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for b in blocks for e in b.events])                         # every sample sent while connected
+    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for e in events])                         # every sample sent while connected
     k0 = dev.sent[0]
     assert np.array_equal(np.rint(rec.t_s * FS).astype(int), ks - k0)   # outage kept as a gap of the right length
     assert counters["disconnects"] == 1 and counters["reconnects"] == 1
     assert counters["samples_missing"] == dev.sent[-1] - k0 + 1 - len(dev.sent)
-    kinds = [e.kind for b in blocks for e in b.events]
+    kinds = [e.kind for e in events]
     assert kinds.count("disconnect") == 1 and kinds.count("reconnect") == 1 and "gap" in kinds
     # the raw capture decodes to exactly the same samples
     replay = open_raw_capture(archive.capture_path)

@@ -55,7 +55,7 @@ class JumpDetector:
 
     def update(self, fit, t_end_s: np.ndarray) -> list[Event]:
         """Events of the windows of ``fit`` (a NoiseFit over windows) ending at ``t_end_s`` (s)."""
-        z_conf = float(norm.ppf(0.5 + getattr(fit, "confidence", 0.683) / 2))
+        z_conf = float(norm.ppf(0.5 + fit.confidence / 2))
         cols = {name: [np.atleast_1d(np.asarray(getattr(getattr(fit, name), a), dtype=np.float64))
                        for a in ("value", "lo", "hi", "identifiable")] for name in NAMES}
         out = []

@@ -25,6 +25,7 @@ import difflib
 import math
 import os
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
 import tomli_w
@@ -56,12 +57,18 @@ class Param:
 @dataclass(frozen=True)
 class EffectKind:
     """Catalogue entry: parameters by name, aux channel needed (or None), nature
-    ("mean", "white_level", "noise", "filter") and a one-line description."""
+    ("mean", "white_level", "noise", "filter"), a one-line description and ``summary``:
+    fitted parameters -> one line with units (the explain report; None: the kind's name)."""
 
     params: dict
     aux: str | None
     nature: str
     description: str
+    summary: Callable[[dict], str] | None = None
+
+    def summarize(self, kind: str, p: dict) -> str:
+        """One line naming this effect (``kind``) with parameters ``p`` and their units."""
+        return self.summary(p) if self.summary is not None else kind
 
     @property
     def required(self) -> tuple[str, ...]:
@@ -80,68 +87,81 @@ EFFECT_KINDS: dict[str, EffectKind] = {
             "diff_step_s": Param("s", "step h of the 3-point backward differences", check=">0", default=1.0),
         },
         "temp_c", "mean",
-        "K0(T) + K1*dT/dt + K2*d2T/dt2 on smoothed temperature, K1/K2 by acceleration branch"),
+        "K0(T) + K1*dT/dt + K2*d2T/dt2 on smoothed temperature, K1/K2 by acceleration branch",
+        lambda p: (f"thermal drift (K1 {p['k1_pos']:.3g}/{p['k1_neg']:.3g} deg/h per degC/s, "
+                   f"K0 slope {p['k0_poly_dph'][1] if len(p['k0_poly_dph']) > 1 else 0:.3g} deg/h/degC)")),
     "periodic": EffectKind(
         {
             "period_s": Param("s", "period of the sinusoid", check=">0"),
             "amplitude_dph": Param("deg/h", "amplitude", check=">=0"),
             "phase_rad": Param("rad", "phase at t = 0: A sin(2 pi t / P + phase)"),
         },
-        None, "mean", "sinusoidal rate term (orbit, drill string, aliased vibration)"),
+        None, "mean", "sinusoidal rate term (orbit, drill string, aliased vibration)",
+        lambda p: f"periodic {p['amplitude_dph']:.3g} deg/h at period {p['period_s']:.5g} s"),
     "glitches": EffectKind(
         {
             "times_s": Param("s", "glitch times", "list"),
             "amplitudes_dph": Param("deg/h", "glitch amplitudes (same length as times_s)", "list"),
             "width_s": Param("s", "glitch duration; 0: the one sample nearest each time", check=">=0", default=0.0),
         },
-        None, "mean", "isolated spikes added to the samples at the given times"),
+        None, "mean", "isolated spikes added to the samples at the given times",
+        lambda p: f"{len(p['times_s'])} glitch(es)"),
     "bias_step": EffectKind(
         {
             "t_s": Param("s", "time of the step"),
             "step_dph": Param("deg/h", "bias change for t >= t_s"),
         },
-        None, "mean", "abrupt bias change (power interruption, shock)"),
+        None, "mean", "abrupt bias change (power interruption, shock)",
+        lambda p: f"bias step {p['step_dph']:+.3g} deg/h at t = {p['t_s']:.6g} s"),
     "vibration_noise": EffectKind(
         {"n_gain_dpsh_per_g": Param("deg/sqrt(h) per g", "N = N0 + gain * vib_g", check=">=0")},
-        "vib_g", "white_level", "white-noise level rising with vibration"),
+        "vib_g", "white_level", "white-noise level rising with vibration",
+        lambda p: f"vibration-driven ARW {p['n_gain_dpsh_per_g']:.3g} deg/sqrt(h) per g"),
     "rate_ramp": EffectKind(
         {
             "slope_dphh": Param("deg/h^2", "rate += slope * (t - t0) / 3600 for t >= t0"),
             "t0_s": Param("s", "start of the ramp"),
         },
-        None, "mean", "linear drift of the rate"),
+        None, "mean", "linear drift of the rate",
+        lambda p: f"rate ramp {p['slope_dphh']:+.3g} deg/h^2 from t = {p['t0_s']:.6g} s"),
     "scale_factor": EffectKind(
         {
             "ppm": Param("ppm", "scale-factor error (mean of positive and negative)"),
             "asym_ppm": Param("ppm", "asymmetry: scale factor for rot_dps > 0 minus that for < 0"),
         },
-        "rot_dps", "mean", "scale-factor error on the reference rotation: 3600 rot (ppm +- asym/2) 1e-6"),
+        "rot_dps", "mean", "scale-factor error on the reference rotation: 3600 rot (ppm +- asym/2) 1e-6",
+        lambda p: f"scale-factor error {p['ppm']:.3g} ppm (asymmetry {p['asym_ppm']:.3g} ppm)"),
     "markov": EffectKind(
         {
             "tau_c_s": Param("s", "correlation time", check=">0"),
             "sigma_dph": Param("deg/h", "standard deviation of the process", check=">=0"),
         },
-        None, "noise", "first-order Gauss-Markov (exponentially correlated) rate noise"),
+        None, "noise", "first-order Gauss-Markov (exponentially correlated) rate noise",
+        lambda p: f"Gauss-Markov noise {p['sigma_dph']:.3g} deg/h, correlation time {p['tau_c_s']:.4g} s"),
     "temperature_noise": EffectKind(
         {
             "n_gain_dpsh_per_c": Param("deg/sqrt(h) per degC", "N = N0 + gain * (temp_c - t_ref_c), floored at 0"),
             "t_ref_c": Param("degC", "reference temperature"),
         },
-        "temp_c", "white_level", "white-noise level changing with temperature"),
+        "temp_c", "white_level", "white-noise level changing with temperature",
+        lambda p: (f"temperature-driven ARW {p['n_gain_dpsh_per_c']:.3g} deg/sqrt(h) per degC "
+                   f"(ref {p['t_ref_c']:.3g} degC)")),
     "warm_up": EffectKind(
         {
             "amplitude_dph": Param("deg/h", "rate += A exp(-(t - t0) / tau) for t >= t0"),
             "tau_s": Param("s", "settling time constant", check=">0"),
             "t0_s": Param("s", "power-on (or power-cycle) time"),
         },
-        None, "mean", "exponential settling after power-on"),
+        None, "mean", "exponential settling after power-on",
+        lambda p: f"warm-up {p['amplitude_dph']:+.3g} deg/h settling with tau = {p['tau_s']:.4g} s"),
     "bandwidth": EffectKind(
         {
             "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (with order; 0 when taps are given)", check=">=0", default=0.0),
             "order": Param("", "Butterworth order (with cutoff_hz)", "int", ">=0", default=0),
             "taps": Param("", "FIR coefficients instead of a Butterworth filter", "list", default=[]),
         },
-        None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate"),
+        None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate",
+        lambda p: f"sensor low-pass: Butterworth order {p['order']} at {p['cutoff_hz']:.4g} Hz"),
 }
 
 

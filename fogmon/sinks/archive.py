@@ -40,12 +40,12 @@ from datetime import datetime, timezone
 import numpy as np
 
 from fogmon.block import Block
+from fogmon.capture import new_sidecar, write_sidecar
 from fogmon.errors import FogmonError
 from fogmon.pieces import find_pieces, piece_path
 from fogmon.sinks.base import Sink, Summary
 from fogmon.recording import append_replay_rows, write_replay_header
 from fogmon.sources.base import CaptureSource, Source
-from fogmon.sources.replay import CAPTURE_FORMAT, SIDECAR_SUFFIX
 
 REPLAY_LOG = "samples.csv"
 SERIAL_CAPTURE = "raw.bin"
@@ -66,7 +66,7 @@ class _KeepOpen(io.StringIO):
 
 class Archive(Sink):
     """Archive of ``source`` under ``directory`` (created if needed; must not hold an
-    archive yet). A pipeline sink (``run_pipeline(source, args, extra_sinks=[archive])``):
+    archive yet). A pipeline sink (``run_pipeline(source, config, [..., archive])``):
     ``block`` (= ``write``) takes the decoded blocks, ``rotate`` starts the next piece,
     ``finish`` closes; the source feeds the raw capture through the tap methods
     ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
@@ -233,8 +233,7 @@ class Archive(Sink):
         self._cap_fd = os.open(self.capture_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._cap_written = 0
         self._pieces.add(self.piece)
-        self._spec = {**self._spec_base, "format": CAPTURE_FORMAT, "started_utc": self.started_utc,
-                      "piece": self.piece, "breaks": []}
+        self._spec = new_sidecar(self._spec_base, self.started_utc, self.piece)
         if self._spec_base["kind"] == "can":
             import can
             self._can_text = _KeepOpen()
@@ -263,12 +262,7 @@ class Archive(Sink):
 
     # -- disk ----------------------------------------------------------------------------
     def _write_sidecar(self) -> None:
-        path = self.capture_path + SIDECAR_SUFFIX
-        tmp = path + ".tmp"
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(self._spec, fh, indent=1)
-            fh.write("\n")
-        os.replace(tmp, path)
+        write_sidecar(self.capture_path, self._spec)
 
     def _maybe_flush(self) -> None:
         if self._clock() - self._last_flush >= self.flush_s:
@@ -325,22 +319,3 @@ def _write_all(fd: int, data: bytes) -> None:
     while view:
         n = os.write(fd, view)
         view = view[n:]
-
-
-def run_archived(source, archive: Archive, duration_s: float | None = None, on_block=None,
-                 clock=time.monotonic) -> dict[str, int]:
-    """Run ``source`` into ``archive`` until it ends or ``duration_s`` (s) passed;
-    ``on_block(block)`` sees every block too. Closes both; returns the source counters
-    merged with the archive's."""
-    t_end = None if duration_s is None else clock() + duration_s
-    try:
-        for block in source.blocks():
-            archive.write(block)
-            if on_block is not None:
-                on_block(block)
-            if t_end is not None and clock() >= t_end:
-                break
-    finally:
-        source.close()
-        archive.close()
-    return {**source.counters, **archive.counters}

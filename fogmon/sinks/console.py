@@ -34,7 +34,7 @@ def format_summary(s: Summary) -> str:
         lines += motion_lines(s)
     a = s.overall
     if a is not None:
-        conf = getattr(a, "confidence", 0.683)
+        conf = a.confidence
         span = f"{s.overall_first_s:.2f}..{s.t_last_s:.2f} s"
         lines.append("")
         lines.append(f"Overall Allan deviation ({span}, {100 * conf:.1f} % confidence bounds):")
@@ -120,7 +120,7 @@ def model_check(a, fit) -> str | None:
 
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.asarray(fit.model_adev_dph(a.tau_s), dtype=float) / np.asarray(a.adev_dph, dtype=float)
-    misfit = np.asarray(getattr(fit, "misfit", np.zeros(len(ratio), dtype=bool)), dtype=bool)
+    misfit = np.asarray(fit.misfit, dtype=bool)
     ok = np.isfinite(ratio) & (ratio > 0) & ~misfit
     if not ok.any():
         return None

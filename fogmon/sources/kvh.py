@@ -23,11 +23,10 @@ import binascii
 import math
 import struct
 
-import numpy as np
-
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
+from fogmon.units import to_dph
 
 #: bit-reversal of every byte value, to run CRC-32/MPEG-2 through zlib's reflected CRC-32.
 _REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
@@ -57,14 +56,10 @@ SEQ_MODULUS = 128
 DEFAULT_RATE_HZ = 1000.0
 
 
-def to_dph(value, mode: str, units: str, rate_hz: float):
-    """Gyro output -> deg/h. ``mode`` 'rate' (units/s) or 'delta' (units per sample at
-    ``rate_hz``), ``units`` 'deg' or 'rad'."""
-    scale = 3600.0 * (180.0 / math.pi if units == "rad" else 1.0)
-    if mode == "delta":
-        scale *= rate_hz
-    with np.errstate(over="ignore"):    # a garbage 1e308 becomes inf (then gated), silently
-        return np.asarray(value, dtype=np.float64) * scale
+def output_unit(mode: str, angle: str) -> str:
+    """The fogmon.units name of a KVH output: ``mode`` 'rate' (angle/s) or 'delta' (angle
+    per sample), ``angle`` 'deg' or 'rad'."""
+    return f"{angle}/s" if mode == "rate" else angle
 
 
 class KvhCodec:
@@ -179,7 +174,8 @@ class KvhCodec:
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
         c[plausibility.TEMP_COUNTER] += bad_temp
-        rate, bad = plausibility.gate(to_dph(gyro, self.rot, self.units, self.rate_hz), self.max_rate_dph, valid)
+        rate_dph = to_dph(gyro, output_unit(self.rot, self.units), self.rate_hz)
+        rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
         return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
 

@@ -23,17 +23,16 @@ from __future__ import annotations
 import math
 import re
 
+from fogmon import units
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
-from fogmon.sources.framing import LineFramer
 from fogmon.sources.frames import Frames
+from fogmon.sources.framing import LineFramer
 
 DEFAULT_RATE_HZ = 100.0
-_D = 180 / math.pi
-#: rate column name -> (rate or per-sample delta, deg/h per unit (per s for deltas))
-RATE_COLUMNS = {"rate_dph": ("rate", 1.0), "rate_dps": ("rate", 3600.0),
-                "rate_rps": ("rate", 3600.0 * _D), "delta_deg": ("delta", 3600.0),
-                "delta_rad": ("delta", 3600.0 * _D), "delta_arcsec": ("delta", 1.0)}
+#: rate column name -> its unit (fogmon.units): a rate, or an angle per sample
+RATE_COLUMNS = {"rate_dph": "deg/h", "rate_dps": "deg/s", "rate_rps": "rad/s", "delta_deg": "deg",
+                "delta_rad": "rad", "delta_arcsec": "arcsec"}
 _SPLIT = re.compile(rb"[,;\s]+")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -89,8 +88,7 @@ class LinesCodec:
         has_seq = "seq" in self._names
         self.seq_modulus = (mod or 2 ** 62) if has_seq else None
         self._rate_name = next(n for n in self._names if n in RATE_COLUMNS)
-        mode, dph = RATE_COLUMNS[self._rate_name]
-        self._scale = dph * (self.rate_hz if mode == "delta" else 1.0)
+        self._scale = units.dph_scale(RATE_COLUMNS[self._rate_name], self.rate_hz)
         self.aux_names = tuple(n for n in self._names if n not in ("-", "seq", "valid") and n not in RATE_COLUMNS)
         self._framer = LineFramer(512)
         self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
@@ -120,7 +118,7 @@ class LinesCodec:
             try:
                 if len(cells) != ncol:
                     raise ValueError
-                for name, cell in zip(names, cells):
+                for name, cell in zip(names, cells, strict=True):
                     if name == "-":
                         continue
                     v = float(cell)

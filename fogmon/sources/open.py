@@ -58,7 +58,8 @@ def open_replay_source(path: str, opts: SourceOptions = SourceOptions()) -> Sour
     ``--protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc .csv .log with
     ``--dbc`` or a sidecar), or an archive folder (``open_archive``). Not paced: the
     pipeline paces (``--realtime``)."""
-    from fogmon.sources.replay import ReplayLogSource, open_raw_capture, read_sidecar
+    from fogmon.capture import read_sidecar
+    from fogmon.sources.replay import ReplayLogSource, open_raw_capture
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
@@ -91,7 +92,8 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     whichever is replayed and does not by itself ask for decoding again."""
     from fogmon.pieces import find_pieces, piece_path
     from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
-    from fogmon.sources.replay import ReplayLogSet, ReplayLogSource, open_raw_capture, read_sidecar
+    from fogmon.capture import read_sidecar
+    from fogmon.sources.replay import ReplayLogSet, ReplayLogSource, open_raw_capture
 
     logs = find_pieces(directory, REPLAY_LOG)
     serial, frames = find_pieces(directory, SERIAL_CAPTURE), find_pieces(directory, CAN_CAPTURE)
