@@ -17,8 +17,8 @@ import threading
 import time
 import warnings
 from collections import Counter, deque
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -169,8 +169,9 @@ class Pipeline:
     ``close`` at the end, whatever happens. Options are checked when it is built, before
     any sink or device is opened."""
 
-    def __init__(self, source: Source, config: PipelineConfig = PipelineConfig(),
+    def __init__(self, source: Source, config: PipelineConfig | None = None,
                  pacer: Pacer | None = None) -> None:
+        config = PipelineConfig() if config is None else config
         self.source, self.config = source, config
         self.rate_hz = rate_hz = float(source.rate_hz)
         self.total_n = source.n_samples
@@ -361,7 +362,7 @@ class Pipeline:
         try:
             summary.overall = oadev(rate, rate_hz, taus=self.config.taus, valid=valid)
         except FogmonError as e:  # a run shorter than the window can be too short for every tau
-            warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning)
+            warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning, stacklevel=2)
         else:
             summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
             summary.overall_fit = fit_noise(summary.overall)
@@ -630,5 +631,5 @@ def _at_seams(blocks: Iterable[Block], t_origin: float, rate_hz: float, piece_n:
             continue
         k = np.rint((b.t_s - t_origin) * rate_hz).astype(np.int64) // piece_n
         cuts = [0, *(np.flatnonzero(np.diff(k)) + 1), len(b)]
-        for i, j in zip(cuts[:-1], cuts[1:]):
+        for i, j in zip(cuts[:-1], cuts[1:], strict=True):
             yield int(k[i]) + 1, (b if j - i == len(b) else slice_block(b, i, j))

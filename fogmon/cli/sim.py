@@ -60,7 +60,7 @@ def _first_seconds(rec, duration_s: float):
 
 
 def run(args) -> int:
-    from fogmon.recording import append_replay_rows, read_replay_log, write_replay_header
+    from fogmon.recording import read_replay_log
     from fogmon.sim.model import load_model
     from fogmon.sim.scenarios import make_scenario
     from fogmon.sim.simulate import iter_simulate
@@ -102,23 +102,31 @@ def run(args) -> int:
         n_expected = duration * model.sample_rate_hz
     _check_space(args.out, n_expected)
     info: dict = {}
-    blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info)
+    n = _write(args.out, iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info), meta, info)
+    print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
+    return 0
+
+
+def _write(out: str, blocks, meta: dict, info: dict) -> int:
+    """Write the simulated ``blocks`` as a replay log ``out`` (valid samples; ``info``
+    from iter_simulate gives the sample rate); no half-written file on any error.
+    Returns the samples written."""
+    from fogmon.recording import append_replay_rows, write_replay_header
+
     first = next(blocks)
     n = 0
-    out_meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
     try:
-        with open(args.out, "w", encoding="utf-8", newline="\n") as fh:
-            write_replay_header(fh, list(first.aux), out_meta)
+        with open(out, "w", encoding="utf-8", newline="\n") as fh:
+            write_replay_header(fh, list(first.aux), {"sample_rate_hz": info["sample_rate_hz"], **meta})
             for b in itertools.chain([first], blocks):
                 v = b.valid
                 append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
                 n += int(v.sum())
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
-            os.remove(args.out)  # no half-written replay log
+            os.remove(out)  # no half-written replay log
         raise
-    print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
-    return 0
+    return n
 
 
 def _check_space(path: str, n_samples: float) -> None:

@@ -156,7 +156,8 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         lambda p: f"warm-up {p['amplitude_dph']:+.3g} deg/h settling with tau = {p['tau_s']:.4g} s"),
     "bandwidth": EffectKind(
         {
-            "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (with order; 0 when taps are given)", check=">=0", default=0.0),
+            "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (with order; 0 when taps are given)", check=">=0",
+                               default=0.0),
             "order": Param("", "Butterworth order (with cutoff_hz)", "int", ">=0", default=0),
             "taps": Param("", "FIR coefficients instead of a Butterworth filter", "list", default=[]),
         },
@@ -299,25 +300,8 @@ def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
         if k not in top:
             raise FogmonError(f"{where}: unknown table or key {k!r} (expected: [sensor], [noise], "
                               f"[[effect]], [meta]){_close(k, top)}")
-    sensor = _table(doc, "sensor", where)
-    for k in sensor:
-        if k not in ("sample_rate_hz", "bias_dph"):
-            raise FogmonError(f"{where}: [sensor] unknown key {k!r} (expected: sample_rate_hz, bias_dph)"
-                              f"{_close(k, ('sample_rate_hz', 'bias_dph'))}")
-    if "sample_rate_hz" not in sensor:
-        raise FogmonError(f"{where}: [sensor] missing key 'sample_rate_hz' (Hz)")
-    if "noise" not in doc:
-        raise FogmonError(f"{where}: no [noise] table: give {', '.join(NOISE_UNITS)} "
-                          f"(IEEE-952 terms; 0.0 for a term the gyro does not have)")
-    noise = _table(doc, "noise", where)
-    for k in noise:
-        if k not in NOISE_UNITS:
-            raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
-                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
-    missing = [k for k in NOISE_UNITS if k not in noise]
-    if missing:
-        raise FogmonError(f"{where}: [noise] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
-                          f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
+    sensor = _sensor_table(doc, where)
+    noise = _noise_table(doc, where)
     effects = doc.get("effect", [])
     if not isinstance(effects, list):
         raise FogmonError(f"{where}: 'effect' must be an array of tables: write [[effect]]")
@@ -331,6 +315,35 @@ def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
     model = SensorModel(sensor["sample_rate_hz"], sensor.get("bias_dph", 0.0),
                         Noise(**{k: noise[k] for k in noise}), elist, meta)
     return validate_model(model, where)
+
+
+def _sensor_table(doc: dict, where: str) -> dict:
+    """The [sensor] table: sample_rate_hz (required), bias_dph, nothing else."""
+    sensor = _table(doc, "sensor", where)
+    for k in sensor:
+        if k not in ("sample_rate_hz", "bias_dph"):
+            raise FogmonError(f"{where}: [sensor] unknown key {k!r} (expected: sample_rate_hz, bias_dph)"
+                              f"{_close(k, ('sample_rate_hz', 'bias_dph'))}")
+    if "sample_rate_hz" not in sensor:
+        raise FogmonError(f"{where}: [sensor] missing key 'sample_rate_hz' (Hz)")
+    return sensor
+
+
+def _noise_table(doc: dict, where: str) -> dict:
+    """The [noise] table: every IEEE-952 term (NOISE_UNITS), nothing else."""
+    if "noise" not in doc:
+        raise FogmonError(f"{where}: no [noise] table: give {', '.join(NOISE_UNITS)} "
+                          f"(IEEE-952 terms; 0.0 for a term the gyro does not have)")
+    noise = _table(doc, "noise", where)
+    for k in noise:
+        if k not in NOISE_UNITS:
+            raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
+                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
+    missing = [k for k in NOISE_UNITS if k not in noise]
+    if missing:
+        raise FogmonError(f"{where}: [noise] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
+                          f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
+    return noise
 
 
 def model_to_dict(model: SensorModel) -> dict:

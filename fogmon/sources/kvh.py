@@ -114,14 +114,34 @@ class KvhCodec:
         return (f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}), axis {self.axis}, "
                 f"{self.rate_hz:g} Hz")
 
+    def _status_seq_temp(self, f: tuple) -> tuple[int, int, float, int]:
+        """Status byte, sequence counter and temperature (deg C; format C: the latest
+        reading, sent every 4th frame) of an unpacked frame, and 1 if its temperature
+        reading was implausible (made NaN), else 0."""
+        if self.fmt == "a":
+            status, seq, temp = f[6], f[7], float(f[8])
+        elif self.fmt == "b":
+            status, seq, temp = f[7], f[8], float(f[9])
+        else:
+            status, seq = f[7], f[8]
+            temp = float(f[6]) if seq % 4 == 0 else None
+        t_lo, t_hi = plausibility.TEMP_RANGE_C
+        implausible = temp is not None and not t_lo <= temp <= t_hi   # NaN too
+        if implausible:
+            temp = math.nan
+        if self.fmt == "c":
+            if temp is not None:
+                self._last_temp_c = temp   # held until the next reading
+            temp = self._last_temp_c
+        return status, seq, temp, int(implausible)
+
     def feed(self, data: bytes) -> Frames:
         buf = self._buf
         buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
         seqs, gyro, valid, temps, runs = [], [], [], [], []
-        ai, fmt = self._axis_i, self.fmt
-        t_lo, t_hi = plausibility.TEMP_RANGE_C
+        ai = self._axis_i
         crc_err = skipped = bad_temp = 0
         run = self._run
         i = 0
@@ -146,20 +166,8 @@ class KvhCodec:
                 i = j + 1
                 continue
             f = layout.unpack_from(frame)
-            if fmt == "a":
-                status, seq, temp = f[6], f[7], float(f[8])
-            elif fmt == "b":
-                status, seq, temp = f[7], f[8], float(f[9])
-            else:
-                status, seq = f[7], f[8]
-                temp = float(f[6]) if seq % 4 == 0 else None
-            if temp is not None and not t_lo <= temp <= t_hi:   # NaN too
-                bad_temp += 1
-                temp = math.nan
-            if fmt == "c":
-                if temp is not None:
-                    self._last_temp_c = temp   # held until the next reading
-                temp = self._last_temp_c
+            status, seq, temp, implausible = self._status_seq_temp(f)
+            bad_temp += implausible
             seqs.append(seq & 0x7F)
             gyro.append(f[ai])
             valid.append(bool(status >> ai & 1))

@@ -53,11 +53,12 @@ def _sniff(path: str) -> str:
     return "other"
 
 
-def open_replay_source(path: str, opts: SourceOptions = SourceOptions()) -> Source:
+def open_replay_source(path: str, opts: SourceOptions | None = None) -> Source:
     """A source replaying ``path``: a replay-log CSV, a raw serial capture (protocol from
     ``--protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc .csv .log with
     ``--dbc`` or a sidecar), or an archive folder (``open_archive``). Not paced: the
     pipeline paces (``--realtime``)."""
+    opts = SourceOptions() if opts is None else opts
     from fogmon.capture import read_sidecar
     from fogmon.sources.replay import ReplayLogSource, open_raw_capture
     path = os.fspath(path)
@@ -90,9 +91,9 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     to decode it again, its raw capture pieces (raw-NNNN.bin or frames-NNNN.asc) as one
     stream. One piece alone is replayed by naming its file. ``--max-rate-dph`` gates
     whichever is replayed and does not by itself ask for decoding again."""
+    from fogmon.capture import read_sidecar
     from fogmon.pieces import find_pieces, piece_path
     from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
-    from fogmon.capture import read_sidecar
     from fogmon.sources.replay import ReplayLogSet, ReplayLogSource, open_raw_capture
 
     logs = find_pieces(directory, REPLAY_LOG)
@@ -105,7 +106,7 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
         sides = [read_sidecar(p) or {} for p in frames]
         fields = ("message", "rate_signal", "rate_unit", "temp_signal", "counter_signal", "valid_signal", "rate_hz",
                   "max_rate_dph", "dbc")
-        for p, side in zip(frames[1:], sides[1:]):
+        for p, side in zip(frames[1:], sides[1:], strict=True):
             if any(side.get(k) != sides[0].get(k) for k in fields):
                 raise FogmonError(f"{p}: its sidecar's decoder options or DBC differ from {frames[0]}'s: "
                                   f"not pieces of one CAN log")
