@@ -1,5 +1,5 @@
 """Issue 11 for `fogmon explain`: every reported effect lowered the score, regions lie
-inside the record and carry their peak time, warnings follow CONTRACT section 4; null
+inside the record and carry their peak time, warnings follow docs/formats.md; null
 recordings stay clean, a short transient is located, and without --model the bundled
 simulations name their own physics."""
 import json
@@ -21,7 +21,7 @@ WARNING_KEYS = {"kind", "t_start_s", "t_end_s", "text"}
 
 
 def assert_invariants(rep: dict, t0: float, t1: float) -> None:
-    """The report invariants of CONTRACT section 4 / issue 11."""
+    """The report invariants of docs/formats.md / issue 11."""
     for e in rep["effects"]:
         assert e["score_after"] < e["score_before"], e
     for r in rep["mismatches"] + rep["mismatches_after"]:

@@ -1,6 +1,6 @@
 """`fogmon explain RECORDING.csv [--model MODEL.toml] --report REPORT.json [...]`:
 locate where the recording's dynamic Allan deviation leaves what the model can
-produce, name and fit the missing physics, show the fit improve (CONTRACT 3-4)."""
+produce, name and fit the missing physics, show the fit improve (docs/formats.md)."""
 from __future__ import annotations
 
 import argparse
@@ -18,9 +18,9 @@ MAX_BOOTSTRAP = 10_000
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns)")
-    p.add_argument("--model", help="sensor model TOML (CONTRACT section 2); without it a stationary IEEE-952 "
+    p.add_argument("--model", help="sensor model TOML (docs/formats.md); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
-    p.add_argument("--report", required=True, help="JSON report to write (CONTRACT section 4); a PNG of the "
+    p.add_argument("--report", required=True, help="JSON report to write (docs/formats.md); a PNG of the "
                    "evidence is written next to it (same name, .png)")
     p.add_argument("--rrd", help="also write the evidence to this Rerun .rrd file")
     p.add_argument("--out-model", help="write the model with the fitted effects added (TOML)")

@@ -1,5 +1,5 @@
-"""``fogmon sim``: simulate a sensor model (TOML, CONTRACT section 2) into a replay log
-(CONTRACT section 1), optionally --like a recording or driven by a --scenario."""
+"""``fogmon sim``: simulate a sensor model (TOML, docs/formats.md) into a replay log
+(docs/formats.md), optionally --like a recording or driven by a --scenario."""
 from __future__ import annotations
 
 import argparse
@@ -21,9 +21,9 @@ MIN_ROW_BYTES = 4
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, metavar="MODEL.toml",
-                   help="sensor model file (CONTRACT section 2): rates deg/h, IEEE-952 noise Q_arcsec, "
+                   help="sensor model file (docs/formats.md): rates deg/h, IEEE-952 noise Q_arcsec, "
                    "N_dpsh deg/sqrt(h), B_dph deg/h, K_dphsh deg/h/sqrt(h), R_dphh deg/h^2, [[effect]] tables")
-    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (CONTRACT section 1)")
+    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (docs/formats.md)")
     p.add_argument("--like", metavar="RECORDING.csv", help="take the time base (sample times, gaps, sample rate) "
                    "and every aux column (temp_c, rot_dps, vib_g, ...) from this replay log, exactly")
     p.add_argument("--duration-s", type=positive, metavar="D", help="length in s (required without --like/--scenario; "

@@ -1,4 +1,4 @@
-"""Outputs of `fogmon explain`: the JSON report (CONTRACT section 4, plus extra keys),
+"""Outputs of `fogmon explain`: the JSON report (docs/formats.md, plus extra keys),
 a console summary, a PNG of the evidence and an optional Rerun .rrd with the same.
 
 Extra report keys beyond the contract (added, never renamed): ``mismatches_after``,

@@ -1,4 +1,4 @@
-"""Physical effects (CONTRACT section 2) as pure functions of time, aux channels and
+"""Physical effects (docs/formats.md) as pure functions of time, aux channels and
 parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
 
 - mean-type: ``mean_rate_dph(effect, t_s, aux, fs_hz)`` -> deterministic deg/h
@@ -57,7 +57,7 @@ def smoothed_temperature(t_s, temp_c, smooth_s: float) -> np.ndarray:
 
 def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0, diff_step_s: float = 1.0):
     """(T, dT/dt, d2T/dt2) in deg C, deg C/s, deg C/s^2 on smoothed temperature, by
-    3-point backward differences with step h = diff_step_s (DESIGN 4.7):
+    3-point backward differences with step h = diff_step_s (docs/methods.md):
     dT = (3 T(t) - 4 T(t-h) + T(t-2h)) / 2h, d2T = (T(t) - 2 T(t-h) + T(t-2h)) / h^2,
     T(t - h) interpolated on the sample times (held at the first sample before the start)."""
     t = np.asarray(t_s, dtype=float)

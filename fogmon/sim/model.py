@@ -1,4 +1,4 @@
-"""Sensor model file (CONTRACT section 2): a TOML description of a gyro that
+"""Sensor model file (docs/formats.md): a TOML description of a gyro that
 ``fogmon sim`` turns into a recording and ``fogmon explain`` compares recordings with.
 
 ``load_model`` validates strictly: an unknown table, key or effect kind, a missing
@@ -360,7 +360,7 @@ def model_to_dict(model: SensorModel) -> dict:
 
 
 def load_model(path: str | os.PathLike) -> SensorModel:
-    """Read and validate a sensor model TOML file (CONTRACT section 2)."""
+    """Read and validate a sensor model TOML file (docs/formats.md)."""
     path = os.fspath(path)
     name = os.path.basename(path)
     try:
@@ -381,7 +381,7 @@ def load_model(path: str | os.PathLike) -> SensorModel:
 
 def dumps_model(model: SensorModel) -> str:
     """The TOML text of a model, with a header comment naming the units."""
-    head = ("# fogmon sensor model (CONTRACT section 2). Units: rate deg/h, time s; noise: "
+    head = ("# fogmon sensor model (docs/formats.md). Units: rate deg/h, time s; noise: "
             + ", ".join(f"{k} {u.split(' (')[0]}" for k, u in NOISE_UNITS.items()) + "\n")
     return head + tomli_w.dumps(model_to_dict(model))
 

@@ -1,10 +1,10 @@
 """Aux-channel generators for simulating without a recording: an MWD run, a thermal
 chamber cycle and a spacecraft orbit. Each returns a ``Scenario`` (times in s, aux
-channels by CONTRACT name: ``temp_c`` deg C, ``rot_dps`` deg/s, ``vib_g`` g rms,
+channels by their replay-log names (docs/formats.md): ``temp_c`` deg C, ``rot_dps`` deg/s, ``vib_g`` g rms,
 ``depth_m`` m, plus scenario-specific columns) sampled at its own ``rate_hz``; the
 simulator interpolates them onto the gyro's sample times.
 
-Every default is documented on its parameter class (DESIGN 4.5 / industry ranges) and
+Every default is documented on its parameter class (industry ranges, docs/sim.md) and
 overridable: ``mwd_run(MwdParams(rop_mph=10))`` or, from the CLI, ``--set rop_mph=10``.
 """
 from __future__ import annotations
@@ -42,7 +42,7 @@ def _lags(target: np.ndarray, dt_s: float, lags_s, start: float) -> np.ndarray:
 
 @dataclass
 class MwdParams:
-    """Measurement-while-drilling run (DESIGN 4.5): stands drilled at ``rop_mph`` with
+    """Measurement-while-drilling run (docs/sim.md): stands drilled at ``rop_mph`` with
     pumps on and the string rotating, connections with pumps off (the tool warms toward
     the static formation temperature), an optional trip out at the end."""
 

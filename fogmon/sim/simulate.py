@@ -1,7 +1,7 @@
 """Turn a SensorModel into samples: batch (``simulate`` -> Recording) or streaming
 (``iter_simulate`` -> Blocks of bounded size, same numbers for the same seed).
 
-The gyro reads (CONTRACT section 2)
+The gyro reads (docs/formats.md)
     bias_dph + 3600 rot_dps + Q + N(t) white + B flicker + K random walk + R ramp
     + markov terms + mean-type effects,
 then passes through the ``bandwidth`` filters, if any. N(t) = N0 + the white-level

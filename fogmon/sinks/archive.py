@@ -4,7 +4,7 @@ nothing is lost.
 Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.pieces:
 piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
-- ``samples-NNNN.csv``: the decoded samples as a replay log (CONTRACT section 1), each
+- ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
   piece complete with magic line, metadata (``piece: N``) and header. Valid samples only
   (a replay log holds no NaN); lost and invalid samples show as time gaps, which every
   reader turns back into invalid placeholders.

@@ -1,6 +1,6 @@
 """KVH DSP-3000 ASCII output: one line per sample, ``<value> <valid flag>`` such as
 ``"       0.015733   1\\r\\n"`` (38400 baud, ~100 Hz). The value is a rate in deg/s
-(``rot='rate'``, the CONTRACT default) or an incremental angle in deg per sample
+(``rot='rate'``, the default) or an incremental angle in deg per sample
 (``rot='delta'``); flag 1 = valid. No sequence counter: only outages are detected.
 Rates beyond the DSP-3000's range x margin (fogmon.sources.plausibility) are invalid."""
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """KVH DSP-1750/1760/1775 binary output Formats A, B and C: an incremental, bounded-buffer
 decoder with resynchronisation.
 
-Wire formats (big-endian, DESIGN section 5):
+Wire formats (big-endian):
 
 - A, 36 bytes: header ``FE 81 FF 55``, gyro x/y/z float32, accel x/y/z float32
   (reserved on the 1760), status uint8 (bits 0-2: gyro x/y/z valid), sequence uint8

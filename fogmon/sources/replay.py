@@ -1,4 +1,4 @@
-"""Replay sources: a replay-log CSV (CONTRACT section 1) and a raw serial capture (the
+"""Replay sources: a replay-log CSV (docs/formats.md) and a raw serial capture (the
 bytes a device sent, decoded again with its protocol). Both yield the same blocks a live
 source would, as fast as they can (the pipeline paces ``--realtime``; a replay log can
 also pace itself for use outside it).
