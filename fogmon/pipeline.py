@@ -184,7 +184,7 @@ class Pipeline:
         self.sinks: list[Sink] = []
         self.summary = Summary(source.name, rate_hz, self.window_s, self.hop_s)
         self.started = self.done = self.use_ref = False
-        self.t_origin: float | None = None
+        self.t_origin = math.nan      # recording time of the first sample (s), once it came
         self.piece = 1
         self.reader: _ThreadedBlocks | None = None
         self.source_closed_early = False
@@ -199,7 +199,7 @@ class Pipeline:
 
         cfg, rate_hz = self.config, self.rate_hz
         self.sinks = list(sinks)
-        self.engine: StreamingDadev | None = StreamingDadev(rate_hz, self.window_s, taus=cfg.taus, hop_s=self.hop_s)
+        self.engine = StreamingDadev(rate_hz, self.window_s, taus=cfg.taus, hop_s=self.hop_s)
         self.jumps = JumpDetector(self.window_s)
         self.tail = _Tail(OVERALL_MAX_SAMPLES)
         self.motion = None if cfg.keep_motion else MotionGate(rate_hz)
@@ -238,7 +238,7 @@ class Pipeline:
         if not len(big):
             self._dispatch(big.events)
             return True
-        if self.t_origin is None:
+        if math.isnan(self.t_origin):
             self.t_origin = float(big.t_s[0])
             self.pacer.wait(self.t_origin)
         if cfg.duration_s is not None:
@@ -355,7 +355,7 @@ class Pipeline:
         from fogmon.davar.fit import fit_noise
 
         summary, rate_hz = self.summary, self.rate_hz
-        self.engine = None  # its window buffers are not needed for the whole-run ADEV: lower peak memory
+        del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
         rate, valid = self.tail.take()
         if len(rate) < 8:
             return
@@ -439,7 +439,7 @@ class _Tail:
         else:
             out = (np.concatenate([self._rate[at:], self._rate[:at]]),
                    np.concatenate([self._valid[at:], self._valid[:at]]))
-        self._rate = self._valid = None
+        self._rate, self._valid = np.empty(0), np.empty(0, bool)
         return out
 
 

@@ -320,7 +320,7 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
 def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decoding_again(tmp_path):
     from fogmon.sources.open import open_replay_source
     from fogmon.sources.replay import ReplayLogSet
-    from test_sources_replay import args_for
+    from doubles import args_for
 
     t, r, fs = noisy(n=200)
     for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):

@@ -2,7 +2,6 @@
 detection, invalid/undecodable/foreign frames; logs written by python-can's own Logger
 (.asc .blf .csv .log .trc) replayed; the archive's CAN capture replays to the same
 samples."""
-import argparse
 import threading
 import time
 import uuid
@@ -13,13 +12,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from doubles import args_for
+
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
 from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Sink
 from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
-from fogmon.cli.source_options import add_source_arguments, source_options
 from fogmon.sources.open import open_live_source, open_replay_source
 
 DBC = str(resources.files("fogmon") / "data" / "gyro_example.dbc")
@@ -39,12 +39,6 @@ def gyro_msgs(ks, t0=1_000_000.0, invalid=(), extra=True):
             out.append(can.Message(timestamp=t0 + k / FS + 1e-3, arbitration_id=0x200, is_extended_id=False, data=b"\1\2"))
             out.append(can.Message(timestamp=t0 + k / FS + 2e-3, arbitration_id=0x100, is_extended_id=False, data=b"\1\2\3"))
     return out
-
-
-def args_for(*argv):
-    p = argparse.ArgumentParser()
-    add_source_arguments(p)
-    return source_options(p.parse_args(list(argv)))
 
 
 def gather(source):

@@ -250,7 +250,7 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     from fogmon.pipeline import run_pipeline
     from fogmon.sinks.base import Sink
     from fogmon.sources.replay import open_raw_capture
-    from test_pipeline import _args
+    from fogmon.pipeline import PipelineConfig as _args
 
     faults = {k: "corrupt" for k in (10, 11, 150, 151, 152, 420, 777, 799, 800, 830, 900)}
     faults.update({k: "drop" for k in (50, 51, 500, 798, 850)})

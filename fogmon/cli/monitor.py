@@ -11,6 +11,7 @@ from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pip
 from fogmon.cli.source_options import add_source_arguments, source_options
 from fogmon.pipeline import Pipeline
 from fogmon.sinks.archive import Archive, default_archive_dir
+from fogmon.sinks.base import Summary
 from fogmon.sources.open import open_live_source
 
 EPILOG = """examples:
@@ -53,11 +54,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def nothing_received(summary, archive: Archive) -> str:
+def nothing_received(summary: Summary, archive: Archive) -> str:
     """The one line for a run that gave no sample: what did arrive, and where it is."""
     c = archive.counters
     removed = not os.path.isdir(archive.directory)
-    what = f"{c['raw_frames']:,} CAN frames" if c["raw_frames"] else f"{c['raw_bytes']:,} bytes" if c["raw_bytes"] else ""
+    what = (f"{c['raw_frames']:,} CAN frames" if c["raw_frames"] else
+            f"{c['raw_bytes']:,} bytes" if c["raw_bytes"] else "")
     src = f"{summary.source_name} in {summary.source_wall_s:.1f} s"
     if not what:
         return f"nothing was received from {src}" + ("; no archive written" if removed else "")

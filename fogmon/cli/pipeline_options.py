@@ -52,7 +52,8 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "keeps serving after a replay until Ctrl-C")
     o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
                    help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
-    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876, help="port --serve listens on, 1..65535 (default 9876)")
+    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876,
+                   help="port --serve listens on, 1..65535 (default 9876)")
     o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None if replay else 3600.0,
                    help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of S s of recording time "
                          "each (default: one file)" if replay else

@@ -39,14 +39,16 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
                    "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
     g.add_argument("--rate-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ", help="sample rate in Hz "
-                   f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, dsp3000 100, lines 100; CAN: the DBC message cycle time)")
+                   f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, "
+                   "dsp3000 100, lines 100; CAN: the DBC message cycle time)")
     c = parser.add_argument_group("CAN gyro" if live else "CAN log decoding")
     if live:
         c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
         c.add_argument("--interface", default="socketcan", metavar="I", help="python-can interface: socketcan, "
                        "pcan, kvaser, vector, slcan, virtual, ... (default: socketcan)")
         c.add_argument("--can-bitrate", type=number(1_000, 8_000_000, integer=True), metavar="BPS",
-                       help="CAN bit rate in bit/s, 1,000..8,000,000, for interfaces that set it (default: leave the interface as configured)")
+                       help="CAN bit rate in bit/s, 1,000..8,000,000, for interfaces that set it (default: "
+                            "leave the interface as configured)")
     c.add_argument("--dbc", metavar="F", help="DBC file describing the gyro's CAN frames (see "
                    "fogmon/data/gyro_example.dbc)")
     c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -166,7 +167,8 @@ def orbit(p: OrbitParams | None = None, seed: int | None = None) -> Scenario:
 
 
 #: name -> (generator, parameter class)
-SCENARIOS = {"mwd": (mwd_run, MwdParams), "chamber": (thermal_chamber, ChamberParams), "orbit": (orbit, OrbitParams)}
+SCENARIOS: dict[str, tuple[Callable[..., Scenario], type]] = {
+    "mwd": (mwd_run, MwdParams), "chamber": (thermal_chamber, ChamberParams), "orbit": (orbit, OrbitParams)}
 
 
 def _parse_value(name: str, key: str, text: str, default):
@@ -178,10 +180,10 @@ def _parse_value(name: str, key: str, text: str, default):
                 raise ValueError
             return text.lower() in ("true", "1", "yes")
         if isinstance(default, tuple):
-            v = tuple(float(x) for x in text.replace(";", ",").split(",") if x.strip())
-            if len(v) < 1 or not all(math.isfinite(x) for x in v):
+            values = tuple(float(x) for x in text.replace(";", ",").split(",") if x.strip())
+            if len(values) < 1 or not all(math.isfinite(x) for x in values):
                 raise ValueError
-            return v
+            return values
         v = float(text)
         if not math.isfinite(v):
             raise ValueError

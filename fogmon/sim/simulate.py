@@ -42,6 +42,12 @@ CHUNK_SAMPLES = 65536
 class _Plan:
     """Where the samples come from: grid size, times, aux, which grid points exist."""
 
+    src_t: np.ndarray                   # times of the recording or aux samples (s)
+    src_aux: dict[str, np.ndarray]      # their aux channels
+    idx: np.ndarray                     # --like: grid index of each recorded sample
+    n: int | None                       # samples to simulate, None = endless
+    t0: float                           # time of grid sample 0 (s)
+
     def __init__(self, model: SensorModel, duration_s, like, aux, aux_t_s):
         self.fs = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
         self.like = like
@@ -50,7 +56,7 @@ class _Plan:
         elif aux:
             self._aux(aux, aux_t_s, duration_s)
         else:
-            self.src_t, self.src_aux, self.t0, self.idx = None, {}, 0.0, None
+            self.src_t, self.src_aux, self.t0, self.idx = np.empty(0), {}, 0.0, np.empty(0, np.int64)
             if duration_s is not None and not (duration_s > 0 and math.isfinite(duration_s)):
                 raise FogmonError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
             self.n = None if duration_s is None else int(round(duration_s * self.fs))
@@ -84,7 +90,7 @@ class _Plan:
             raise FogmonError(f"duration_s {duration_s:g} s is longer than the aux channels "
                               f"({span:g} s); they would have to be invented")
         self.n = int(round((duration_s if duration_s is not None else span) * self.fs))
-        self.idx = None
+        self.idx = np.empty(0, np.int64)       # every grid sample is present
 
     @property
     def duration_s(self) -> float | None:
@@ -204,7 +210,7 @@ def simulate(model: SensorModel, duration_s: float | None = None, like: Recordin
     if like is None and not aux and duration_s is None:
         raise FogmonError("simulate needs a duration, a recording to simulate like, or aux channels")
     info: dict = {}
-    ts, rs, auxs = [], [], {}
+    ts, rs, auxs = [], [], {}  # type: ignore[var-annotated]
     for blk in iter_simulate(model, duration_s, like, aux, seed, aux_t_s, meta_out=info):
         v = blk.valid
         ts.append(blk.t_s[v])

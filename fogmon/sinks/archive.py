@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import os
 import shutil
 import threading
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
@@ -43,8 +43,8 @@ from fogmon.block import Block
 from fogmon.capture import new_sidecar, write_sidecar
 from fogmon.errors import FogmonError
 from fogmon.pieces import find_pieces, piece_path
-from fogmon.sinks.base import Sink, Summary
 from fogmon.recording import append_replay_rows, write_replay_header
+from fogmon.sinks.base import Sink, Summary
 from fogmon.sources.base import CaptureSource, Source
 
 REPLAY_LOG = "samples.csv"
@@ -54,7 +54,7 @@ CAN_CAPTURE = "frames.asc"
 
 def default_archive_dir(base: str = ".") -> str:
     """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
-    return os.path.join(base, datetime.now(timezone.utc).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
+    return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
 
 
 class _KeepOpen(io.StringIO):
@@ -94,29 +94,32 @@ class Archive(Sink):
         self._clock = clock
         self._lock = threading.RLock()
         self._last_flush = clock()
-        self.started_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        self.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
         self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
         self.piece = 1
         self._pieces: set[int] = set()          # pieces that have a file
         self._done = False
-        self._csv_fd = None
+        self._csv_fd: int | None = None
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
-        base = dict(source.capture_spec()) if isinstance(source, CaptureSource) else None
+        self._capture_source = source if isinstance(source, CaptureSource) else None
+        base = dict(self._capture_source.capture_spec()) if self._capture_source is not None else None
         self._dbc = base.pop("dbc_path", None) if base else None
         self._spec_base = base
-        self._spec = None                        # the current capture piece's sidecar
-        self._cap_fd = None
+        self._spec: dict[str, Any] = {}          # the current capture piece's sidecar
+        self._cap_fd: int | None = None
         self._cap_buf = bytearray()
         self._cap_written = 0                    # bytes of the current capture piece on disk
         self._cut_pending = False                # start a new capture piece at the next frame boundary
-        self._can_writer = None
-        self.capture_path = None
-        if base is not None:
+        self._can_writer: Any = None             # a can.ASCWriter into _can_text while a CAN piece is open
+        self._can_text = _KeepOpen()
+        self._capture_name = SERIAL_CAPTURE
+        self.capture_path: str | None = None
+        if self._capture_source is not None and base is not None:
             self._capture_name = SERIAL_CAPTURE if base.get("kind") == "serial" else CAN_CAPTURE
             self.capture_path = os.path.join(self.directory, piece_path(self._capture_name, 1))
-            source.add_tap(self)
+            self._capture_source.add_tap(self)
         self._closed = threading.Event()
         if background_flush:
             threading.Thread(target=self._flusher, name="fogmon-archive-flush", daemon=True).start()
@@ -134,26 +137,27 @@ class Archive(Sink):
     def _write(self, block: Block) -> None:
         if self._aux_names is None and len(block):
             self._aux_names = list(block.aux)
+        aux_names = self._aux_names or []
         if len(block) and not self._done:
             keep = block.valid.copy()
-            for k in self._aux_names:
+            for k in aux_names:
                 keep &= np.isfinite(block.aux[k])
             self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
             if keep.any():
                 if self._csv_fd is None:
-                    self._open_replay_log()
+                    self._open_replay_log(aux_names)
                 append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
-                                   {k: block.aux[k][keep] for k in self._aux_names})
+                                   {k: block.aux[k][keep] for k in aux_names})
                 self.counters["rows_written"] += int(keep.sum())
         self._maybe_flush()
 
-    def _open_replay_log(self) -> None:
+    def _open_replay_log(self, aux_names: list[str]) -> None:
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._pieces.add(self.piece)
         meta = {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
                 "started_utc": self.started_utc, "piece": self.piece}
-        write_replay_header(self._csv_buf, self._aux_names, meta)
+        write_replay_header(self._csv_buf, aux_names, meta)
 
     def _close_replay_log(self) -> None:
         self._flush()
@@ -208,7 +212,8 @@ class Archive(Sink):
     def _append_raw(self, data: bytes) -> None:
         """Serial bytes into the capture; a pending cut happens where the decoder, which
         has just been fed ``data``, holds no partial frame (else at a later call)."""
-        at = len(data) - self.source.pending if self._cut_pending else -1
+        pending = self._capture_source.pending if self._capture_source is not None else 0
+        at = len(data) - pending if self._cut_pending else -1
         if at >= 0:                              # (< 0: the frame under way began in an earlier chunk)
             if at and self._open_capture():
                 self._cap_buf += data[:at]
@@ -225,7 +230,7 @@ class Archive(Sink):
 
     def _open_capture(self) -> bool:
         """Make sure the current capture piece is open (False once the archive is closed)."""
-        if self._done:
+        if self._done or self._spec_base is None:   # closed, or a source without a raw capture
             return False
         if self._cap_fd is not None:
             return True
@@ -262,7 +267,8 @@ class Archive(Sink):
 
     # -- disk ----------------------------------------------------------------------------
     def _write_sidecar(self) -> None:
-        write_sidecar(self.capture_path, self._spec)
+        if self.capture_path is not None:
+            write_sidecar(self.capture_path, self._spec)
 
     def _maybe_flush(self) -> None:
         if self._clock() - self._last_flush >= self.flush_s:
@@ -307,7 +313,7 @@ class Archive(Sink):
             with contextlib.suppress(OSError):
                 os.rmdir(self.directory)
 
-    def __enter__(self) -> "Archive":
+    def __enter__(self) -> Archive:
         return self
 
     def __exit__(self, *exc) -> None:

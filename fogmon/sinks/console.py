@@ -6,7 +6,8 @@ from __future__ import annotations
 import math
 import sys
 from collections import Counter
-from typing import Sequence, TextIO
+from collections.abc import Sequence
+from typing import TextIO
 
 from fogmon.block import Event
 from fogmon.pipeline import default_window_s

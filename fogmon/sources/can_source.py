@@ -239,7 +239,7 @@ class CanSource(LiveSource):
                 m = bus.recv(timeout=0.0)
             except self.device_errors:   # keep what was read; the next call meets the error again
                 break
-        items = []
+        items: list[tuple] = []
         for brk, frames in self.decoder.feed(msgs):
             if brk is not None:
                 items.append(("break", brk))

@@ -118,22 +118,15 @@ class KvhCodec:
         """Status byte, sequence counter and temperature (deg C; format C: the latest
         reading, sent every 4th frame) of an unpacked frame, and 1 if its temperature
         reading was implausible (made NaN), else 0."""
-        if self.fmt == "a":
-            status, seq, temp = f[6], f[7], float(f[8])
-        elif self.fmt == "b":
-            status, seq, temp = f[7], f[8], float(f[9])
-        else:
-            status, seq = f[7], f[8]
-            temp = float(f[6]) if seq % 4 == 0 else None
-        t_lo, t_hi = plausibility.TEMP_RANGE_C
-        implausible = temp is not None and not t_lo <= temp <= t_hi   # NaN too
-        if implausible:
-            temp = math.nan
         if self.fmt == "c":
-            if temp is not None:
-                self._last_temp_c = temp   # held until the next reading
-            temp = self._last_temp_c
-        return status, seq, temp, int(implausible)
+            status, seq = f[7], f[8]
+            if seq % 4:
+                return status, seq, self._last_temp_c, 0
+            self._last_temp_c, bad = _plausible_temp_c(float(f[6]))   # held until the next reading
+            return status, seq, self._last_temp_c, bad
+        status, seq, reading = (f[6], f[7], f[8]) if self.fmt == "a" else (f[7], f[8], f[9])
+        temp_c, bad = _plausible_temp_c(float(reading))
+        return status, seq, temp_c, bad
 
     def feed(self, data: bytes) -> Frames:
         buf = self._buf
@@ -186,6 +179,13 @@ class KvhCodec:
         rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
         return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
+
+
+def _plausible_temp_c(temp_c: float) -> tuple[float, int]:
+    """A temperature reading (deg C), NaN when outside plausibility.TEMP_RANGE_C (NaN too),
+    and 1 if it was, else 0."""
+    t_lo, t_hi = plausibility.TEMP_RANGE_C
+    return (temp_c, 0) if t_lo <= temp_c <= t_hi else (math.nan, 1)
 
 
 def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),

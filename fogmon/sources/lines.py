@@ -109,7 +109,7 @@ class LinesCodec:
         before = fr.dropped_bytes, fr.dropped_lines
         names, ncol = self._names, len(self._names)
         seq, rate, valid = [], [], []
-        aux = {k: [] for k in self.aux_names}
+        aux: dict[str, list[float]] = {k: [] for k in self.aux_names}
         bad = bad_bytes = 0
         mod = self.seq_modulus
         for line in fr.feed(data):
@@ -141,6 +141,6 @@ class LinesCodec:
         c["frames_ok"] += len(rate)
         c["bad_lines"] += bad + fr.dropped_lines - before[1]
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
-        rate, n = plausibility.gate(rate, self.max_rate_dph, valid)
+        rate_dph, n = plausibility.gate(rate, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += n
-        return Frames.from_lists(seq, rate, valid, aux)
+        return Frames.from_lists(seq, rate_dph, valid, aux)

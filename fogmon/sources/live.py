@@ -38,6 +38,14 @@ class LiveSource:
     device_errors: tuple[type[BaseException], ...] = (OSError,)
     #: a live device has no length (fogmon.sources.base.Source)
     n_samples: int | None = None
+    name: str
+    rate_hz: float
+    aux_names: tuple[str, ...]
+
+    @property
+    def decoder_counters(self) -> dict[str, int]:
+        """The decoder's counters (CRC errors, bad frames, ...), for error events."""
+        raise NotImplementedError
 
     def __init__(self, grid: GridAssembler, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), clock=time.monotonic) -> None:

@@ -16,20 +16,20 @@ CAN_LOG_SUFFIXES = (".asc", ".blf", ".trc", ".log", ".mf4")
 
 def open_live_source(opts: SourceOptions) -> Source:
     """The live source named by ``--serial`` or ``--can`` (exactly one)."""
-    serial_port, can_channel = opts.serial, opts.can
-    if bool(serial_port) == bool(can_channel):
-        raise FogmonError("give exactly one of --serial PORT or --can CHANNEL")
-    if serial_port:
+    if opts.serial and not opts.can:
         from fogmon.sources.serial_source import SerialSource
         o = opts.codec_options()
         protocol = o.pop("protocol") or "kvh-a"
         codec = make_codec(protocol, **{k: v for k, v in o.items() if v is not None})
-        return SerialSource(serial_port, opts.baud or DEFAULTS[protocol][0], codec)
-    from fogmon.sources.can_source import CanSource, load_dbc
-    if not opts.dbc:
-        raise FogmonError("--can needs --dbc F describing the gyro's frames (example: fogmon/data/gyro_example.dbc)")
-    return CanSource(can_channel, opts.interface, load_dbc(opts.dbc), bitrate=opts.can_bitrate,
-                     dbc_path=opts.dbc, **opts.can_options())
+        return SerialSource(opts.serial, opts.baud or DEFAULTS[protocol][0], codec)
+    if opts.can and not opts.serial:
+        from fogmon.sources.can_source import CanSource, load_dbc
+        if not opts.dbc:
+            raise FogmonError("--can needs --dbc F describing the gyro's frames (example: "
+                              "fogmon/data/gyro_example.dbc)")
+        return CanSource(opts.can, opts.interface, load_dbc(opts.dbc), bitrate=opts.can_bitrate,
+                         dbc_path=opts.dbc, **opts.can_options())
+    raise FogmonError("give exactly one of --serial PORT or --can CHANNEL")
 
 
 def _sniff(path: str) -> str:

@@ -10,19 +10,18 @@ gives exactly the samples the live monitor saw."""
 from __future__ import annotations
 
 import functools
-import json
 import math
 import os
 from collections import deque
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
 from fogmon.block import Block, Event
+from fogmon.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
 from fogmon.errors import FogmonError
 from fogmon.recording import CHUNK_BYTES, ReplayLogReader, Rows, grid_positions
 from fogmon.sources import plausibility
-from fogmon.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
 from fogmon.sources.codecs import codec_from_options
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
 from fogmon.sources.pacing import Pacer
@@ -54,7 +53,8 @@ class ReplayLogSource:
         self.rate_hz = reader.sample_rate_hz
         self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")
         self._max_abs_dph = max_abs_dph
-        t0 = t_last = None
+        t0: float | None = None
+        t_last = math.nan
         last = -1
         for rows in reader.chunks():  # the checking pass
             if not len(rows):
@@ -65,7 +65,8 @@ class ReplayLogSource:
             t_last = float(rows.t_s[-1])
         if t0 is None:
             raise FogmonError(f"{reader.name}: no data rows")
-        self.t_first_s, self.t_last_s, self.n_samples = t0, t_last, last + 1
+        self.t_first_s: float = t0
+        self.t_last_s, self.n_samples = t_last, last + 1
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
                          plausibility.COUNTER: 0}
         self._pacer = Pacer(speed)
@@ -128,11 +129,11 @@ class _LogGrid:
         idx = grid_positions(rows.t_s, self.t0_s, self.fs, self.name, self._last, rows.line_of)
         d = np.diff(idx, prepend=self._last)
         g = np.flatnonzero(d > 1)
-        self._gaps.extend(zip((idx[g] - d[g] + 1).tolist(), (d[g] - 1).tolist()))
+        self._gaps.extend(zip((idx[g] - d[g] + 1).tolist(), (d[g] - 1).tolist(), strict=True))
         self._last = int(idx[-1])
         j_of = idx // self.n
         cuts = [0, *(np.flatnonzero(np.diff(j_of)) + 1).tolist(), len(idx)]
-        for a, b in zip(cuts[:-1], cuts[1:]):
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
             j = int(j_of[a])
             while self._j < j:
                 yield self._emit(self.n)
@@ -204,7 +205,7 @@ class RawCaptureSource:
         errors = ErrorEvents(self.codec.counters)
         for path in self.paths:
             try:
-                fh = open(path, "rb")
+                fh = open(path, "rb")  # noqa: SIM115 (closed by the with below; only opening errors are caught)
             except OSError as e:
                 raise FogmonError(f"{path}: cannot read: {e.strerror}") from None
             with fh:
@@ -249,6 +250,7 @@ def open_raw_capture(path: str | Sequence[str], overrides: dict | None = None) -
             offset += os.path.getsize(p)
         except OSError:
             raise FogmonError(f"{p}: no such file") from None
+    opts = opts or {}
     opts.update({k: v for k, v in (overrides or {}).items() if v is not None})
     if "protocol" not in opts:
         raise FogmonError(f"{paths[0]}: a raw serial capture needs --protocol "
@@ -271,7 +273,7 @@ class ReplayLogSet:
         first = self._sources[0]
         self.rate_hz = first.rate_hz
         aux = first.aux_names
-        for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:]):
+        for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:], strict=False):
             if src.rate_hz != self.rate_hz:
                 raise FogmonError(f"{path}: sample_rate_hz {src.rate_hz:g} differs from {self.paths[0]} "
                                   f"({self.rate_hz:g} Hz): not pieces of one recording")

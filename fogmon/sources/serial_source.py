@@ -9,6 +9,7 @@ frames that did arrive), made exact by the sequence counter.
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
 
@@ -70,10 +71,8 @@ class SerialSource(LiveSource):
         return self._opener()
 
     def _close(self, ser) -> None:
-        try:
+        with contextlib.suppress(serial.SerialException, OSError):
             ser.close()
-        except (serial.SerialException, OSError):
-            pass
 
     def _reconnected(self) -> None:
         self._need_break = True

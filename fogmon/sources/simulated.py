@@ -6,7 +6,7 @@ pipeline's bounded reader queue holds it back while processing catches up."""
 from __future__ import annotations
 
 import os
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -34,7 +34,7 @@ class SimulatedSource:
             model = load_model(model)
         if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
             raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
-        self.seed = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
+        self.seed = int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]  # fresh: an int if seed is None else int(seed)
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
         self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
