@@ -70,6 +70,7 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
         p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
                        help="pace a replay at X times real time (default X = 1 when given; "
                             "without --realtime a replay runs as fast as it can)")
+    parser.set_defaults(realtime=None)  # a live run is never paced
 
 
 def _rotate_s(text: str) -> float | None:
@@ -108,7 +109,7 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     progress bar only on a terminal and when not paced at or below real time."""
     import sys
 
-    realtime = getattr(args, "realtime", None)
+    realtime = args.realtime
     return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
                           keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
                           rotate_s=args.rotate_s,

@@ -20,7 +20,24 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     decoder options (``--protocol``, ``--dbc``...) go to both. Pacing (``--realtime``) and
     ``--duration-s`` belong to the pipeline (fogmon.pipeline)."""
     live, replay = mode in ("live", "both"), mode in ("replay", "both")
-    g = parser.add_argument_group("serial gyro" if live else "raw serial capture decoding")
+    _add_serial_arguments(parser.add_argument_group("serial gyro" if live else "raw serial capture decoding"), live)
+    _add_can_arguments(parser.add_argument_group("CAN gyro" if live else "CAN log decoding"), live)
+    parser.add_argument("--max-rate-dph", type=positive, metavar="X",
+                        help="plausibility gate in deg/h: a rate beyond +-X is a corrupt value, not data; the "
+                             "sample becomes invalid and is counted (implausible_samples) and reported. Default: "
+                             f"the device's full scale x {pl.MARGIN:g}: kvh-a/b/c "
+                             f"{pl.KVH_DSP17XX_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP17XX_FULL_SCALE_DPH / 3600:g} deg/s), "
+                             f"dsp3000 {pl.KVH_DSP3000_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP3000_FULL_SCALE_DPH / 3600:g} "
+                             f"deg/s); lines, CAN and replay logs {pl.GENERIC_MAX_ABS_DPH:,.0f} "
+                             f"({pl.GENERIC_MAX_ABS_DPH / 3600:,.0f} deg/s). Raw captures replay with the value "
+                             "their sidecar recorded unless given")
+    if replay:
+        parser.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
+                       "instead of stopping at the first one")
+
+
+def _add_serial_arguments(g, live: bool) -> None:
+    """The serial device (live) and serial decoder options."""
     if live:
         g.add_argument("--serial", metavar="PORT", help="serial port of the gyro (/dev/ttyUSB0, COM3, or a "
                        "pyserial URL such as loop:// or socket://HOST:PORT); reopened with backoff if it disappears")
@@ -41,7 +58,10 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     g.add_argument("--rate-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ", help="sample rate in Hz "
                    f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, "
                    "dsp3000 100, lines 100; CAN: the DBC message cycle time)")
-    c = parser.add_argument_group("CAN gyro" if live else "CAN log decoding")
+
+
+def _add_can_arguments(c, live: bool) -> None:
+    """The CAN bus (live) and CAN decoder (DBC) options."""
     if live:
         c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
         c.add_argument("--interface", default="socketcan", metavar="I", help="python-can interface: socketcan, "
@@ -63,18 +83,6 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
                    "detection (default: counter if the message has it)")
     c.add_argument("--can-valid", metavar="SIGNAL", help="DBC signal that is nonzero when the sample is valid "
                    "(default: valid if the message has it)")
-    parser.add_argument("--max-rate-dph", type=positive, metavar="X",
-                        help="plausibility gate in deg/h: a rate beyond +-X is a corrupt value, not data; the "
-                             "sample becomes invalid and is counted (implausible_samples) and reported. Default: "
-                             f"the device's full scale x {pl.MARGIN:g}: kvh-a/b/c "
-                             f"{pl.KVH_DSP17XX_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP17XX_FULL_SCALE_DPH / 3600:g} deg/s), "
-                             f"dsp3000 {pl.KVH_DSP3000_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP3000_FULL_SCALE_DPH / 3600:g} "
-                             f"deg/s); lines, CAN and replay logs {pl.GENERIC_MAX_ABS_DPH:,.0f} "
-                             f"({pl.GENERIC_MAX_ABS_DPH / 3600:,.0f} deg/s). Raw captures replay with the value "
-                             "their sidecar recorded unless given")
-    if replay:
-        parser.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
-                       "instead of stopping at the first one")
 
 
 def source_options(args: argparse.Namespace) -> SourceOptions:
