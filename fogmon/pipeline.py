@@ -171,6 +171,9 @@ class Pipeline:
 
     def __init__(self, source: Source, config: PipelineConfig | None = None,
                  pacer: Pacer | None = None) -> None:
+        from fogmon.davar.streaming import StreamingDadev
+        from fogmon.motion import MotionGate
+
         config = PipelineConfig() if config is None else config
         self.source, self.config = source, config
         self.rate_hz = rate_hz = float(source.rate_hz)
@@ -181,6 +184,10 @@ class Pipeline:
         if self.piece_n is not None and self.piece_n < 1:
             raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {rate_hz:g} Hz")
         self.pacer = pacer if pacer is not None else Pacer(config.realtime)
+        self.engine = StreamingDadev(rate_hz, self.window_s, taus=config.taus, hop_s=self.hop_s)  # checks --taus
+        self.jumps = JumpDetector(self.window_s)
+        self.tail = _Tail(OVERALL_MAX_SAMPLES)
+        self.motion = None if config.keep_motion else MotionGate(rate_hz)
         self.sinks: list[Sink] = []
         self.summary = Summary(source.name, rate_hz, self.window_s, self.hop_s)
         self.started = self.done = self.use_ref = False
@@ -194,15 +201,8 @@ class Pipeline:
     def run(self, sinks: Sequence[Sink]) -> Summary:
         """Stream the source through DAVAR and the noise fit into ``sinks``; returns the
         Summary. The source and all sinks are closed whatever happens."""
-        from fogmon.davar.streaming import StreamingDadev
-        from fogmon.motion import MotionGate
-
         cfg, rate_hz = self.config, self.rate_hz
         self.sinks = list(sinks)
-        self.engine = StreamingDadev(rate_hz, self.window_s, taus=cfg.taus, hop_s=self.hop_s)
-        self.jumps = JumpDetector(self.window_s)
-        self.tail = _Tail(OVERALL_MAX_SAMPLES)
-        self.motion = None if cfg.keep_motion else MotionGate(rate_hz)
         total_s = min(self.total_n / rate_hz, cfg.duration_s or math.inf) if self.total_n else 0.0
         self.progress = _Progress(total_s, enabled=cfg.progress)
         self.wall0 = self.wall_start = time.monotonic()
