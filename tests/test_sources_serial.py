@@ -98,7 +98,6 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     dev = FakeKvh(str(tmp_path), FS)
     src = SerialSource(dev.link, 921600, KvhCodec("a", "rate", "deg", "z", FS, MAX_RATE_DPH), backoff_s=(0.02, 0.2))
     archive = Archive(str(tmp_path / "archive"), src)
-    stop = threading.Event()
 
     def wait_open(reconnects):   # pyserial flushes input while opening: "connected" starts after that
         while src._thread is None or src.counters["reconnects"] < reconnects:
@@ -123,22 +122,20 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
         while time.monotonic() - t0 < 2.6:
             k = dev.send_due(t0, k)
             time.sleep(0.01)
-        time.sleep(0.3)
-        stop.set()
+        t_end = time.monotonic() + 30      # stop once every frame sent has been decoded
+        while src.counters["frames_ok"] < len(dev.sent) and time.monotonic() < t_end:
+            time.sleep(0.005)
+        src.close()                        # the pipeline still delivers what was decoded
 
     th = threading.Thread(target=device)
     th.start()
     events = []
 
-    class StopWhenSent(Sink):
-        def block(self, b):
-            if stop.is_set():
-                src.close()
-
+    class Events(Sink):
         def events(self, ev):
             events.extend(ev)
 
-    summary = run_pipeline(src, PipelineConfig(window_s=0.64, keep_motion=True), [archive, StopWhenSent()])
+    summary = run_pipeline(src, PipelineConfig(window_s=0.64, keep_motion=True), [archive, Events()])
     counters = {**summary.counters, **archive.counters}
     th.join()
     dev.close()
