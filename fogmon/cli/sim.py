@@ -71,7 +71,7 @@ def run(args) -> int:
         raise FogmonError("--set needs --scenario")
     if args.like and args.scenario:
         raise FogmonError("give --like or --scenario, not both")
-    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]  # fresh: an int
+    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
     meta = {"sensor": f"fogmon sim of {os.path.basename(args.model)}", "model": args.model, "seed": str(seed)}
     like = aux = aux_t = None
     duration = args.duration_s

@@ -34,7 +34,8 @@ class SimulatedSource:
             model = load_model(model)
         if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
             raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
-        self.seed = int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]  # fresh: an int if seed is None else int(seed)
+        fresh = np.random.SeedSequence().entropy  # an int when drawn fresh
+        self.seed = int(fresh) if seed is None else int(seed)  # type: ignore[arg-type]
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
         self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
