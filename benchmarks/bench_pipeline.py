@@ -27,7 +27,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from fogmon.block import Block  # noqa: E402
 from fogmon.davar.batch import dadev  # noqa: E402
-from fogmon.pipeline import add_pipeline_arguments, run_pipeline  # noqa: E402
+from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config  # noqa: E402
+from fogmon.pipeline import run_pipeline  # noqa: E402
 from fogmon.recording import write_replay_log  # noqa: E402
 
 FS = 1000.0
@@ -65,7 +66,8 @@ def bench_replay(tmp: str) -> None:
     t_batch = time.perf_counter() - t0
     rrd = os.path.join(tmp, "mem.rrd")
     t0 = time.perf_counter()
-    s = run_pipeline(MemorySource(rate), _args(["--rrd", rrd, "--no-progress", "--quiet"]))
+    args = _args(["--rrd", rrd, "--no-progress", "--quiet"])
+    s = run_pipeline(MemorySource(rate), pipeline_config(args), build_sinks(args))
     t_mem = time.perf_counter() - t0
     assert s.n_windows == len(ref), (s.n_windows, len(ref))
     print(f"replay 1 h of 1 kHz ({N:,} samples, window {s.window_s:g} s, hop {s.hop_s:g} s, "

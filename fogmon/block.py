@@ -52,7 +52,7 @@ class Block:
 
     @property
     def error_rate_dph(self) -> np.ndarray:
-        """The gyro's error against the reference rotation (CONTRACT 2: a gyro should read
+        """The gyro's error against the reference rotation (docs/formats.md: a gyro should read
         3600 x rot_dps), deg/h: ``rate_dph - 3600 rot_dps``; ``rate_dph`` itself when the
         block has no ``rot_dps``. NaN where either is unknown."""
         if "rot_dps" not in self.aux:

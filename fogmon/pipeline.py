@@ -11,28 +11,30 @@ of the outputs begins and the sinks are told (``Sink.rotate``) before its first 
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 import threading
 import time
 import warnings
 from collections import Counter, deque
-from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import TextIO
 
 import numpy as np
 
 from fogmon import stopping
 from fogmon.block import Block, Event
-from fogmon.cli.values import number, positive
 from fogmon.davar.jumps import JumpDetector
-from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
+from fogmon.davar.result import DadevResult
 from fogmon.errors import FogmonError, FogmonWarning
+from fogmon.sinks.base import Sink, StreamInfo, Summary
+from fogmon.sources.base import Source
+from fogmon.sources.live import LiveSource
+from fogmon.sources.pacing import Pacer
 
-#: IEEE-952 coefficients in the order they are shown, with their units.
-COEFFICIENTS = {"Q_arcsec": "arcsec", "N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h",
-                "K_dphsh": "deg/h/sqrt(h)", "R_dphh": "deg/h^2"}
+#: What ``--taus`` gives ``tau_grid``: a grid name, N per decade, or tau values in s.
+TauSpec = str | int | np.ndarray
 #: Default window bounds in samples (the window is a power of two inside these).
 MIN_WINDOW_SAMPLES = 2**10
 MAX_WINDOW_SAMPLES = 2**20
@@ -56,95 +58,7 @@ PLACEHOLDER_BLOCK = 2**16
 DROPPED_EVENTS_KEPT = 1000
 
 
-# ----------------------------------------------------------------------------- options
-def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True) -> None:
-    """Options of `fogmon replay` and `fogmon monitor` (``replay=False``: no --realtime):
-    engine, sinks, pacing."""
-    g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
-    g.add_argument("--window-s", type=positive, metavar="W",
-                   help="window length in s. Default: replay: a quarter of the recording (of its first "
-                        "--duration-s s) rounded down to a power of two of samples, within "
-                        f"{MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} samples; live: {LIVE_WINDOW_SAMPLES} samples "
-                        "(65.5 s at 1 kHz, 655.4 s at 100 Hz), or that rule applied to --duration-s when it "
-                        "gives a shorter window")
-    g.add_argument("--hop-s", type=positive, metavar="H",
-                   help="a new ADEV + noise fit every H s of recording time, at most the window "
-                        "(default: window/8)")
-    g.add_argument("--raw-rate", action="store_true",
-                   help="analyse rate_dph as recorded even when the recording has rot_dps; by default "
-                        "DAVAR and the fits see the gyro's error rate_dph - 3600 x rot_dps (deg/h) "
-                        "against the reference rotation")
-    g.add_argument("--keep-motion", action="store_true",
-                   help="analyse platform motion too: by default stretches where the rate moves far beyond "
-                        "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) "
-                        "are kept out of DAVAR and the fits, with platform_motion events (docs/motion.md)")
-    g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
-                   help="averaging times: octave (default), decade, all, an integer N = "
-                        f"1..{MAX_PER_DECADE} (N log-spaced per decade), or tau values in s written with a "
-                        "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
-                        "one sample <= tau <= window/4 can be computed: other values are left out with a "
-                        "warning")
-    o = parser.add_argument_group("output (Rerun)")
-    o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
-                   "open it with `rerun OUT.rrd`")
-    o.add_argument("--connect", metavar="URL", nargs="?", const="rerun+http://127.0.0.1:9876/proxy",
-                   help="stream to a running Rerun viewer (default URL rerun+http://127.0.0.1:9876/proxy; "
-                        "start one with `rerun`)")
-    o.add_argument("--serve", action="store_true",
-                   help="host a Rerun gRPC server that viewers connect to (`rerun URL` as printed); "
-                        "keeps serving after a replay until Ctrl-C")
-    o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
-                   help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
-    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876, help="port --serve listens on, 1..65535 (default 9876)")
-    o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None if replay else 3600.0,
-                   help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of S s of recording time "
-                         "each (default: one file)" if replay else
-                         "start new output files every S s of recording time: the archive's samples-NNNN.csv "
-                         "and raw capture pieces, and the .rrd as OUT-NNNN.rrd (default 3600 = hourly; "
-                         "0 = one piece)"))
-    o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    o.add_argument("--quiet", action="store_true", help="no console summary at the end")
-    p = parser.add_argument_group("pacing")
-    if "--duration-s" not in parser._option_string_actions:  # the source options may define it
-        p.add_argument("--duration-s", type=positive, metavar="S",
-                       help="stop after S s of recording time")
-    if replay and "--realtime" not in parser._option_string_actions:
-        p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
-                       help="pace a replay at X times real time (default X = 1 when given; "
-                            "without --realtime a replay runs as fast as it can)")
-
-
-def _rotate_s(text: str) -> float | None:
-    """``--rotate-s``: S > 0, or 0 for no rotation (None)."""
-    try:
-        if float(text) == 0:
-            return None
-    except ValueError:
-        pass
-    return positive(text)
-
-
-def parse_taus(text: str):
-    """``--taus`` value -> what ``tau_grid`` takes: a grid name, an int per decade
-    (1..MAX_PER_DECADE), or a tau_s array (values with a decimal point or comma-separated)."""
-    s = text.strip().lower()
-    if s in ("octave", "decade", "all"):
-        return s
-    if s.isdigit():
-        try:
-            return check_per_decade(int(s))
-        except FogmonError as e:
-            raise argparse.ArgumentTypeError(str(e)) from None
-    try:
-        tau_s = np.array([float(x) for x in s.split(",")], dtype=np.float64)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected octave, decade, all, an integer per decade or tau values in s, got {text!r}") from None
-    if not np.all(np.isfinite(tau_s) & (tau_s > 0)):
-        raise argparse.ArgumentTypeError(f"tau values must be finite and > 0 s, got {text!r}")
-    return tau_s
-
-
+# ----------------------------------------------------------------------------- windows
 def default_window_s(rate_hz: float, n_samples: int | None) -> float:
     """Default window in s: for a record of ``n_samples`` a quarter of it rounded down to a
     power of two of samples (within MIN..MAX_WINDOW_SAMPLES, never longer than the record);
@@ -157,11 +71,11 @@ def default_window_s(rate_hz: float, n_samples: int | None) -> float:
     return n / rate_hz
 
 
-def window_and_hop(args: argparse.Namespace, rate_hz: float, total_n: int | None) -> tuple[float, float]:
+def window_and_hop(config: PipelineConfig, rate_hz: float, total_n: int | None) -> tuple[float, float]:
     """Window and hop (s) from ``--window-s``/``--hop-s`` or their defaults, checked
     against the sample rate and the samples the run will have (the record's ``total_n``,
     None when live, cut to ``--duration-s``); FogmonError naming the option otherwise."""
-    duration_s = getattr(args, "duration_s", None)
+    duration_s = config.duration_s
     n_run = total_n
     if duration_s is not None:
         n_cut = round(duration_s * rate_hz)
@@ -171,7 +85,7 @@ def window_and_hop(args: argparse.Namespace, rate_hz: float, total_n: int | None
     if n_run is not None and n_run < 8:
         what = "the recording has" if n_run == total_n else "--duration-s leaves"
         raise FogmonError(f"{what} {n_run} samples at {rate_hz:g} Hz: an Allan deviation needs at least 8")
-    window_s = getattr(args, "window_s", None)
+    window_s = config.window_s
     if window_s is None:
         window_s = default_window_s(rate_hz, n_run)
         if total_n is None:  # live: the live window unless --duration-s asks for a shorter run
@@ -182,92 +96,13 @@ def window_and_hop(args: argparse.Namespace, rate_hz: float, total_n: int | None
                           f"({n_run / rate_hz:g} s = {n_run} samples)")
     if window_s * rate_hz < 8:
         raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {rate_hz:g} Hz")
-    hop_s = getattr(args, "hop_s", None) or window_s / 8
+    hop_s = config.hop_s or window_s / 8
     if hop_s * rate_hz < 1:
         raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {rate_hz:g} Hz")
     if hop_s > window_s:
         raise FogmonError(f"--hop-s {hop_s:g} s is longer than the window ({window_s:g} s): the samples "
                           f"between windows would never be analysed")
     return window_s, hop_s
-
-
-# ----------------------------------------------------------------------------- sinks
-@dataclass(frozen=True)
-class StreamInfo:
-    """What sinks learn before the first block: source, sample rate (Hz), window/hop (s),
-    taus (s), auxiliary channel names."""
-
-    source_name: str
-    rate_hz: float
-    window_s: float
-    hop_s: float
-    tau_s: np.ndarray
-    aux_names: tuple[str, ...]
-    #: what DAVAR analyses: "rate_dph", or "rate_dph - 3600 x rot_dps" (error vs reference rotation)
-    analysed: str = "rate_dph"
-
-
-class Sink:
-    """Receives the pipeline's outputs; every method is optional (no-op here). Sinks
-    finish in increasing ``finish_order`` (the console last, so it can name the files)."""
-
-    finish_order = 0
-
-    def start(self, info: StreamInfo) -> None: ...
-
-    def block(self, block: Block) -> None: ...
-
-    def frames(self, dadev, fit, t_end_s: np.ndarray) -> None:
-        """Completed windows: a DadevResult (T rows), its NoiseFit (arrays over T) and the
-        recording time (s) of each window's last sample."""
-
-    def events(self, events: Sequence[Event]) -> None: ...
-
-    def rotate(self, piece: int, t_s: float) -> None:
-        """Piece ``piece`` (from 1) of the outputs begins with the next block, at recording
-        time ``t_s`` (--rotate-s)."""
-
-    def source_counters(self, t_s: float, counters: dict[str, int]) -> None: ...
-
-    def finish(self, summary: "Summary") -> None: ...
-
-
-@dataclass
-class Summary:
-    """The end-of-run account: what was processed, the whole-run ADEV and fit, counters."""
-
-    source_name: str
-    rate_hz: float
-    window_s: float
-    hop_s: float
-    n_samples: int = 0
-    n_invalid: int = 0
-    t_first_s: float = math.nan
-    t_last_s: float = math.nan
-    n_windows: int = 0
-    wall_s: float = 0.0
-    source_wall_s: float = 0.0    # wall time from opening the source to the end of the run, s
-    interrupted: bool = False
-    analysed: str = "rate_dph"    # what DAVAR analysed (see StreamInfo.analysed)
-    failed: bool = False          # stopped by an error (reported by the caller, no summary)
-    overall: object = None        # AdevResult of the whole run (the latest OVERALL_MAX_SAMPLES)
-    overall_fit: object = None    # NoiseFit of ``overall``
-    overall_first_s: float = math.nan
-    counters: dict[str, int] = field(default_factory=dict)
-    event_counts: dict[str, int] = field(default_factory=dict)
-    outputs: list[str] = field(default_factory=list)
-    motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
-    motion_samples: int = 0       # valid samples the motion gate made invalid
-
-    @property
-    def duration_s(self) -> float:
-        """Recording time covered, s."""
-        return (self.t_last_s - self.t_first_s + 1.0 / self.rate_hz) if self.n_samples else 0.0
-
-    @property
-    def speed_x(self) -> float:
-        """Recording time / wall time."""
-        return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -282,153 +117,298 @@ def slice_block(b: Block, start: int, stop: int) -> Block:
                  {k: v[start:stop] for k, v in b.aux.items()}, ev)
 
 
+class ReplayProgress:
+    """A replay's progress bar on ``stream`` (default stderr, tqdm): recording seconds
+    done of ``total_s`` and the speed in x real time. Shown only when ``enabled`` (the
+    caller checks that stderr is a terminal) and the total is known."""
+
+    FORMAT = "{percentage:5.1f}%|{bar:30}| {n:.1f}/{total:.1f} s of recording{postfix} [{elapsed}<{remaining}]"
+
+    def __init__(self, total_s: float, enabled: bool, stream: TextIO | None = None):
+        from tqdm import tqdm
+
+        self._bar = tqdm(total=total_s, file=stream or sys.stderr, disable=not (enabled and total_s > 0),
+                         mininterval=0.2, bar_format=self.FORMAT)
+
+    def update(self, done_s: float, wall_s: float) -> None:
+        """``done_s`` s of recording analysed in ``wall_s`` s of wall time."""
+        if self._bar.disable:
+            return
+        if wall_s > 0:
+            self._bar.set_postfix_str(f"x{done_s / wall_s:,.0f} real time", refresh=False)
+        self._bar.update(min(done_s, self._bar.total) - self._bar.n)
+
+    def close(self) -> None:
+        self._bar.close()
+
+
 # ----------------------------------------------------------------------------- run
-def run_pipeline(source, args: argparse.Namespace, extra_sinks: Iterable[Sink] = (),
-                 sinks: Sequence[Sink] | None = None) -> Summary:
-    """Stream ``source`` through DAVAR and the noise fit into the sinks named by ``args``
-    (``--rrd``/``--connect``/``--serve`` and the console summary) plus ``extra_sinks``.
-    ``sinks`` replaces the sinks built from ``args`` (tests, notebooks). Returns the
-    Summary; the source and all sinks are closed whatever happens."""
-    from fogmon.davar.batch import oadev
-    from fogmon.davar.fit import fit_noise
-    from fogmon.davar.streaming import StreamingDadev
-    from fogmon.davar.taus import tau_grid
-    from fogmon.motion import MotionGate
-    from fogmon.sinks.console import ReplayProgress
+@dataclass(frozen=True)
+class PipelineConfig:
+    """How a run analyses and paces (built from the command line by fogmon.cli, or by hand):
+    ``window_s``/``hop_s`` (s; None = default_window_s and window/8), ``taus`` (what
+    ``tau_grid`` takes), ``raw_rate`` (analyse rate_dph even with rot_dps), ``keep_motion``
+    (no motion gate), ``duration_s`` (stop after this much recording time, s),
+    ``realtime`` (pace at this many times real time; None = as fast as possible),
+    ``rotate_s`` (new output pieces every this many s of recording time; None = one),
+    ``progress`` (a progress bar on stderr)."""
 
-    rate_hz = float(source.rate_hz)
-    total_n = record_samples(source)
-    window_s, hop_s = window_and_hop(args, rate_hz, total_n)
-    taus = getattr(args, "taus", "octave")
-    rotate_s = getattr(args, "rotate_s", None)
-    piece_n = int(round(rotate_s * rate_hz)) if rotate_s else None
-    if piece_n is not None and piece_n < 1:
-        raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {rate_hz:g} Hz")
-    piece = 1
-    engine = StreamingDadev(rate_hz, window_s, taus=taus, hop_s=hop_s)
-    if sinks is None:
-        sinks = build_sinks(args)
-    sinks = [*sinks, *extra_sinks]
-    summary = Summary(source.name, rate_hz, window_s, hop_s)
-    jumps = JumpDetector(window_s)
-    duration_s = getattr(args, "duration_s", None)
-    realtime = getattr(args, "realtime", None)
-    progress = ReplayProgress(min(total_n / rate_hz, duration_s or math.inf) if total_n else 0.0,
-                              enabled=not getattr(args, "no_progress", False) and sys.stderr.isatty()
-                              and (realtime is None or realtime > 1))
-    tail = _Tail(OVERALL_MAX_SAMPLES)
-    event_counts: Counter = Counter()
-    started = False
-    wall0 = wall_start = time.monotonic()
-    t_origin = None
-    done = False
-    use_ref = False
-    reader = None
-    motion = None if getattr(args, "keep_motion", False) else MotionGate(rate_hz)
+    window_s: float | None = None
+    hop_s: float | None = None
+    taus: TauSpec = "octave"
+    raw_rate: bool = False
+    keep_motion: bool = False
+    duration_s: float | None = None
+    realtime: float | None = None
+    rotate_s: float | None = None
+    progress: bool = False
 
-    def analyse(y: np.ndarray, valid: np.ndarray) -> None:
-        """DAVAR, fits, jump events and the whole-run tail for the next samples."""
-        res = engine.push(y, valid)
-        if len(res):
-            fit = fit_noise(res)
-            t_end = t_origin + np.asarray(res.end_index, dtype=np.float64) / rate_hz
-            for s in sinks:
-                s.frames(res, fit, t_end)
-            summary.n_windows += len(res)
-            _dispatch_events(sinks, jumps.update(fit, t_end), event_counts)
-            counters = _counters(source, reader)
-            for s in sinks:
-                s.source_counters(float(t_end[-1]), counters)
-        tail.push(y, valid)
 
-    try:
-        if total_n is None:  # live: compile before the device is opened, then read it in a thread
-            _warm_up(rate_hz, window_s, hop_s, taus)
-            if duration_s is not None and hasattr(source, "limit"):
-                source.limit(live_samples(duration_s, rate_hz))  # nothing after the cut is read
-            reader = _ThreadedBlocks(source)
-        wall_start = time.monotonic()
-        wall_limit = None if duration_s is None or total_n is not None else \
-            duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s)
-        for big in (reader if reader is not None else source.blocks()):
-            opened = getattr(source, "opened_s", None) or wall_start
-            if wall_limit is not None and time.monotonic() > opened + wall_limit:
-                source.close()  # a live source that stalls still stops on time; what it read is kept
-                wall_limit = None
-            if not len(big):
-                _dispatch_events(sinks, big.events, event_counts)
-                continue
-            if t_origin is None:
-                t_origin = float(big.t_s[0])
-            if duration_s is not None:
-                stop = int(np.searchsorted(big.t_s, t_origin + duration_s - 0.5 / rate_hz, side="right"))
-                if stop < len(big):
-                    big, done = slice_block(big, 0, stop), True
-                    if not stop:
-                        break
-            for b_piece, b in _at_seams(_paced(big, realtime, rate_hz), t_origin, rate_hz, piece_n):
-                if realtime:
-                    _sleep_until(wall0 + (float(b.t_s[-1]) - t_origin) / realtime)
-                with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
-                    if not started:
-                        m = tau_grid(rate_hz, int(round(window_s * rate_hz)), taus)
-                        use_ref = "rot_dps" in b.aux and not getattr(args, "raw_rate", False)
-                        summary.analysed = ERROR_EXPR if use_ref else "rate_dph"
-                        info = StreamInfo(source.name, rate_hz, window_s, hop_s, m / rate_hz, tuple(b.aux),
-                                          summary.analysed)
-                        for s in sinks:
-                            s.start(info)
-                        started = True
-                        summary.t_first_s = float(b.t_s[0])
-                    piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
-                    y = b.error_rate_dph if use_ref else b.rate_dph
-                    analyse(*_gate_motion(motion, b.t_s, y, b.valid & np.isfinite(y), sinks, event_counts))
-                    progress.update(summary.duration_s, time.monotonic() - wall0)
-            if done:
-                break
-    except KeyboardInterrupt:
-        summary.interrupted = True
-    except BaseException:
-        summary.failed = True
-        raise
-    finally:
-        stopping.closing()  # a further Ctrl-C/SIGTERM must not cut the outputs short
-        progress.update(summary.duration_s, time.monotonic() - wall0)
-        progress.close()
-        source.close()
-        if reader is not None:
-            backlog = reader.backlog()
-            if started and not summary.failed and not done:  # read before the stop: archived, not analysed
-                for big in backlog:
-                    if not len(big):
-                        _dispatch_events(sinks, big.events, event_counts)
-                        continue
-                    for b_piece, b in _at_seams([big], t_origin, rate_hz, piece_n):
-                        piece = _deliver(b, b_piece, piece, sinks, summary, event_counts)
-        if motion is not None and started and not summary.failed:   # the samples the gate still holds
-            y, valid, ev = motion.flush()
-            _dispatch_events(sinks, ev, event_counts)
-            analyse(y, valid)
-            summary.motion_spans, summary.motion_samples = list(motion.spans), motion.samples_excluded
-        summary.wall_s = time.monotonic() - wall0
-        summary.source_wall_s = time.monotonic() - wall_start
-        summary.counters = _counters(source, reader)
-        summary.event_counts = dict(event_counts)
+class Pipeline:
+    """One run of ``source`` into sinks, split by event the way can.Notifier is: ``run``
+    reads the source (a reader thread for a live one) and calls ``start`` before the first
+    block, ``block`` for each block (which hands completed windows to ``frames``) and
+    ``close`` at the end, whatever happens. Options are checked when it is built, before
+    any sink or device is opened."""
+
+    def __init__(self, source: Source, config: PipelineConfig | None = None,
+                 pacer: Pacer | None = None) -> None:
+        from fogmon.davar.streaming import StreamingDadev
+        from fogmon.motion import MotionGate
+
+        config = PipelineConfig() if config is None else config
+        self.source, self.config = source, config
+        self.rate_hz = rate_hz = float(source.rate_hz)
+        self.total_n = source.n_samples
+        self.window_s, self.hop_s = window_and_hop(config, rate_hz, self.total_n)
+        rotate_s = config.rotate_s
+        self.piece_n = int(round(rotate_s * rate_hz)) if rotate_s else None
+        if self.piece_n is not None and self.piece_n < 1:
+            raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+        self.pacer = pacer if pacer is not None else Pacer(config.realtime)
+        self.engine = StreamingDadev(rate_hz, self.window_s, taus=config.taus, hop_s=self.hop_s)  # checks --taus
+        self.jumps = JumpDetector(self.window_s)
+        self.tail = _Tail(OVERALL_MAX_SAMPLES)
+        self.motion = None if config.keep_motion else MotionGate(rate_hz)
+        self.sinks: list[Sink] = []
+        self.summary = Summary(source.name, rate_hz, self.window_s, self.hop_s)
+        self.started = self.done = self.use_ref = False
+        self.t_origin = math.nan      # recording time of the first sample (s), once it came
+        self.piece = 1
+        self.reader: _ThreadedBlocks | None = None
+        self.source_closed_early = False
+        self._counts: Counter = Counter()
+
+    # -- the loop ------------------------------------------------------------------
+    def run(self, sinks: Sequence[Sink]) -> Summary:
+        """Stream the source through DAVAR and the noise fit into ``sinks``; returns the
+        Summary. The source and all sinks are closed whatever happens."""
+        cfg, rate_hz = self.config, self.rate_hz
+        self.sinks = list(sinks)
+        total_s = min(self.total_n / rate_hz, cfg.duration_s or math.inf) if self.total_n else 0.0
+        self.progress = ReplayProgress(total_s, enabled=cfg.progress)
+        self.wall0 = self.wall_start = time.monotonic()
         try:
-            del engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
-            rate, valid = tail.take()
-            if len(rate) >= 8:
-                try:
-                    summary.overall = oadev(rate, rate_hz, taus=taus, valid=valid)
-                except FogmonError as e:  # a run shorter than the window can be too short for every tau
-                    warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning)
-                else:
-                    summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
-                    summary.overall_fit = fit_noise(summary.overall)
+            for big in self._blocks():
+                if not self._take(big):
+                    break
+        except KeyboardInterrupt:
+            self.summary.interrupted = True
+        except BaseException:
+            self.summary.failed = True
+            raise
         finally:
-            for s in sorted(sinks, key=lambda k: getattr(k, "finish_order", 0)):
+            self.close()
+        return self.summary
+
+    def _blocks(self) -> Iterable[Block]:
+        """The source's blocks; a live one compiles the kernels first, is cut at
+        --duration-s and read in a thread."""
+        cfg = self.config
+        if self.total_n is None:
+            _warm_up(self.rate_hz, self.window_s, self.hop_s, cfg.taus)
+            if cfg.duration_s is not None and isinstance(self.source, LiveSource):
+                self.source.limit(live_samples(cfg.duration_s, self.rate_hz))  # nothing after the cut is read
+            self.reader = _ThreadedBlocks(self.source)
+        self.wall_start = time.monotonic()
+        return self.reader if self.reader is not None else self.source.blocks()
+
+    def _take(self, big: Block) -> bool:
+        """Process one block of the source; False when the run is complete."""
+        cfg, rate_hz = self.config, self.rate_hz
+        self._check_wall_limit()
+        if not len(big):
+            self._dispatch(big.events)
+            return True
+        if math.isnan(self.t_origin):
+            self.t_origin = float(big.t_s[0])
+            self.pacer.wait(self.t_origin)
+        if cfg.duration_s is not None:
+            stop = int(np.searchsorted(big.t_s, self.t_origin + cfg.duration_s - 0.5 / rate_hz, side="right"))
+            if stop < len(big):
+                big, self.done = slice_block(big, 0, stop), True
+                if not stop:
+                    return False
+        for b_piece, b in _at_seams(_paced(big, cfg.realtime, rate_hz), self.t_origin, rate_hz, self.piece_n):
+            self.pacer.wait(float(b.t_s[-1]))
+            with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
+                if not self.started:
+                    self.start(b)
+                self.block(b, b_piece)
+        return not self.done
+
+    def _check_wall_limit(self) -> None:
+        """A live source that stalls still stops on time with --duration-s (what it read
+        is kept): closed after the run's duration plus LIVE_WALL_SLACK_S of wall time."""
+        duration_s = self.config.duration_s
+        if duration_s is None or self.total_n is not None or self.source_closed_early:
+            return
+        opened = (self.source.opened_s if isinstance(self.source, LiveSource) else None) or self.wall_start
+        if time.monotonic() > opened + duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s):
+            self.source.close()
+            self.source_closed_early = True
+
+    # -- events ----------------------------------------------------------------------
+    def start(self, first: Block) -> None:
+        """Before the first block: what is analysed, StreamInfo to the sinks."""
+        from fogmon.davar.taus import tau_grid
+
+        rate_hz = self.rate_hz
+        m = tau_grid(rate_hz, int(round(self.window_s * rate_hz)), self.config.taus)
+        self.use_ref = "rot_dps" in first.aux and not self.config.raw_rate
+        self.summary.analysed = ERROR_EXPR if self.use_ref else "rate_dph"
+        info = StreamInfo(self.source.name, rate_hz, self.window_s, self.hop_s, m / rate_hz, tuple(first.aux),
+                          self.summary.analysed)
+        for s in self.sinks:
+            s.start(info)
+        self.started = True
+        self.summary.t_first_s = float(first.t_s[0])
+
+    def block(self, b: Block, b_piece: int) -> None:
+        """One block of piece ``b_piece``: to the sinks, then (motion-gated) to DAVAR."""
+        self._deliver(b, b_piece)
+        y = b.error_rate_dph if self.use_ref else b.rate_dph
+        self._analyse(*self._gate_motion(b.t_s, y, b.valid & np.isfinite(y)))
+        self.progress.update(self.summary.duration_s, time.monotonic() - self.wall0)
+
+    def frames(self, res: DadevResult) -> None:
+        """Completed windows: fitted, handed to the sinks with their end times, jump
+        events and the source's counters."""
+        from fogmon.davar.fit import fit_noise
+
+        fit = fit_noise(res)
+        t_end = self.t_origin + np.asarray(res.end_index, dtype=np.float64) / self.rate_hz
+        for s in self.sinks:
+            s.frames(res, fit, t_end)
+        self.summary.n_windows += len(res)
+        self._dispatch(self.jumps.update(fit, t_end))
+        counters = self._counters()
+        for s in self.sinks:
+            s.source_counters(float(t_end[-1]), counters)
+
+    def close(self) -> None:
+        """End of the run: the source closed, what a live reader still held and the
+        motion gate's last samples analysed, the whole-run ADEV, the sinks finished."""
+        stopping.closing()  # a further Ctrl-C/SIGTERM must not cut the outputs short
+        summary = self.summary
+        self.progress.update(summary.duration_s, time.monotonic() - self.wall0)
+        self.progress.close()
+        self.source.close()
+        ok = self.started and not summary.failed
+        if self.reader is not None:
+            backlog = self.reader.backlog()
+            if ok and not self.done:  # read before the stop: archived, not analysed
+                self._drain(backlog)
+        if self.motion is not None and ok:   # the samples the gate still holds
+            y, valid, ev = self.motion.flush()
+            self._dispatch(ev)
+            self._analyse(y, valid)
+            summary.motion_spans, summary.motion_samples = list(self.motion.spans), self.motion.samples_excluded
+        summary.wall_s = time.monotonic() - self.wall0
+        summary.source_wall_s = time.monotonic() - self.wall_start
+        summary.counters = self._counters()
+        summary.event_counts = dict(self._counts)
+        try:
+            self._overall()
+        finally:
+            for s in sorted(self.sinks, key=lambda k: k.finish_order):
                 s.finish(summary)
-    return summary
+
+    # -- helpers ---------------------------------------------------------------------
+    def _drain(self, backlog: list[Block]) -> None:
+        """Blocks a live reader read before the stop: delivered and counted."""
+        for big in backlog:
+            if not len(big):
+                self._dispatch(big.events)
+                continue
+            for b_piece, b in _at_seams([big], self.t_origin, self.rate_hz, self.piece_n):
+                self._deliver(b, b_piece)
+
+    def _analyse(self, y: np.ndarray, valid: np.ndarray) -> None:
+        """DAVAR, fits, jump events and the whole-run tail for the next samples."""
+        res = self.engine.push(y, valid)
+        if len(res):
+            self.frames(res)
+        self.tail.push(y, valid)
+
+    def _overall(self) -> None:
+        """The whole-run ADEV and fit (of the latest OVERALL_MAX_SAMPLES samples)."""
+        from fogmon.davar.batch import oadev
+        from fogmon.davar.fit import fit_noise
+
+        summary, rate_hz = self.summary, self.rate_hz
+        del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
+        rate, valid = self.tail.take()
+        if len(rate) < 8:
+            return
+        try:
+            summary.overall = oadev(rate, rate_hz, taus=self.config.taus, valid=valid)
+        except FogmonError as e:  # a run shorter than the window can be too short for every tau
+            warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning, stacklevel=2)
+        else:
+            summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
+            summary.overall_fit = fit_noise(summary.overall)
+
+    def _counters(self) -> dict[str, int]:
+        """The source's counters and the reader's (dropped blocks)."""
+        return {**self.source.counters, **(self.reader.counters if self.reader is not None else {})}
+
+    def _deliver(self, b: Block, b_piece: int) -> None:
+        """Hand a block to the sinks (after ``rotate`` when it begins piece ``b_piece``)
+        and count it in the summary."""
+        if b_piece != self.piece:
+            for s in self.sinks:
+                s.rotate(b_piece, float(b.t_s[0]))
+            self.piece = b_piece
+        if len(b):
+            summary = self.summary
+            summary.n_samples += len(b)
+            summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+            summary.t_last_s = float(b.t_s[-1])
+            for s in self.sinks:
+                s.block(b)
+        self._dispatch(b.events)
+
+    def _gate_motion(self, t_s: np.ndarray, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
+        has judged, platform motion made invalid (its events dispatched)."""
+        if self.motion is None:
+            return y, valid
+        y, valid, events = self.motion.push(t_s, y, valid)
+        self._dispatch(events)
+        return y, valid
+
+    def _dispatch(self, events: Sequence[Event]) -> None:
+        if not events:
+            return
+        self._counts.update(e.kind for e in events)
+        for s in self.sinks:
+            s.events(events)
+
+
+def run_pipeline(source: Source, config: PipelineConfig, sinks: Sequence[Sink], pacer: Pacer | None = None) -> Summary:
+    """Stream ``source`` through DAVAR and the noise fit into ``sinks`` (Pipeline)."""
+    return Pipeline(source, config, pacer).run(sinks)
 
 
 class _Tail:
@@ -461,40 +441,14 @@ class _Tail:
         else:
             out = (np.concatenate([self._rate[at:], self._rate[:at]]),
                    np.concatenate([self._valid[at:], self._valid[:at]]))
-        self._rate = self._valid = None
+        self._rate, self._valid = np.empty(0), np.empty(0, bool)
         return out
-
-
-def _counters(source, reader: "_ThreadedBlocks | None") -> dict[str, int]:
-    """The source's counters and the reader's (dropped blocks)."""
-    return {**(getattr(source, "counters", {}) or {}), **(reader.counters if reader is not None else {})}
-
-
-def _deliver(b: Block, b_piece: int, piece: int, sinks, summary: Summary, event_counts: Counter) -> int:
-    """Hand a block to the sinks (after ``rotate`` when it begins piece ``b_piece``) and
-    count it in the summary; returns the current piece."""
-    if b_piece != piece:
-        for s in sinks:
-            s.rotate(b_piece, float(b.t_s[0]))
-    if len(b):
-        summary.n_samples += len(b)
-        summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
-        summary.t_last_s = float(b.t_s[-1])
-        for s in sinks:
-            s.block(b)
-    _dispatch_events(sinks, b.events, event_counts)
-    return b_piece
 
 
 def live_samples(duration_s: float, rate_hz: float) -> int:
     """Samples of a live run of ``duration_s`` s from its first sample: those with
     t - t_first <= duration_s - half a sample period (the replay cut, too)."""
     return max(1, math.floor(duration_s * rate_hz - 0.5 + 1e-9) + 1)
-
-
-def record_samples(source) -> int | None:
-    """Length in samples of a finite source (a replay), None for a live one."""
-    return getattr(source, "n_samples", None)
 
 
 def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:
@@ -540,13 +494,12 @@ class _ThreadedBlocks:
 
     _DONE = object()
 
-    def __init__(self, source, max_samples: int = QUEUE_MAX_SAMPLES, wait: bool | None = None):
-        from fogmon.sources.live import LiveSource
-
+    def __init__(self, source: Source, max_samples: int = QUEUE_MAX_SAMPLES, wait: bool | None = None):
         self._source = source
         self.max_samples = max_samples
         self.wait = not isinstance(source, LiveSource) if wait is None else wait
         self.counters = {} if self.wait else {"blocks_dropped": 0, "samples_dropped": 0}
+        self._aux_names: tuple[str, ...] = ()  # of the blocks read, for placeholders
         self.held_back = 0  # times the reader waited for room (back-pressure)
         self._items: deque = deque()
         self._n = 0  # samples in the queue
@@ -580,6 +533,7 @@ class _ThreadedBlocks:
                     self._cond.wait()
             if self._closed and self.wait:
                 return False
+            self._aux_names = tuple(b.aux)
         self._append(b, len(b))
         return True
 
@@ -632,7 +586,7 @@ class _ThreadedBlocks:
             m = min(PLACEHOLDER_BLOCK, d.n - i)
             nan = np.full(m, np.nan)
             yield Block(d.t0_s + np.arange(i, i + m) / rate, nan, np.zeros(m, bool),
-                        {k: nan for k in getattr(self._source, "aux_names", ())}, events if i == 0 else ())
+                        {k: nan for k in self._aux_names}, events if i == 0 else ())
 
     def backlog(self, timeout_s: float = 10.0) -> list[Block]:
         """After ``source.close()``: the blocks not yet taken, in order, up to the source's
@@ -660,25 +614,6 @@ class _ThreadedBlocks:
         return out
 
 
-def _gate_motion(motion: "MotionGate | None", t_s: np.ndarray, y: np.ndarray, valid: np.ndarray, sinks,
-                 counts: Counter) -> tuple[np.ndarray, np.ndarray]:
-    """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
-    has judged, platform motion made invalid (its events dispatched)."""
-    if motion is None:
-        return y, valid
-    y, valid, events = motion.push(t_s, y, valid)
-    _dispatch_events(sinks, events, counts)
-    return y, valid
-
-
-def _dispatch_events(sinks, events, counts: Counter) -> None:
-    if not events:
-        return
-    counts.update(e.kind for e in events)
-    for s in sinks:
-        s.events(events)
-
-
 def _paced(b: Block, realtime: float | None, rate_hz: float):
     """Split a block into pieces of <= 0.1 s of wall time when pacing, else pass it on."""
     if not realtime:
@@ -698,26 +633,5 @@ def _at_seams(blocks: Iterable[Block], t_origin: float, rate_hz: float, piece_n:
             continue
         k = np.rint((b.t_s - t_origin) * rate_hz).astype(np.int64) // piece_n
         cuts = [0, *(np.flatnonzero(np.diff(k)) + 1), len(b)]
-        for i, j in zip(cuts[:-1], cuts[1:]):
+        for i, j in zip(cuts[:-1], cuts[1:], strict=True):
             yield int(k[i]) + 1, (b if j - i == len(b) else slice_block(b, i, j))
-
-
-def _sleep_until(wall: float) -> None:
-    d = wall - time.monotonic()
-    if d > 0:
-        time.sleep(d)
-
-
-def build_sinks(args: argparse.Namespace) -> list[Sink]:
-    """The sinks the command line asks for: Rerun (file and/or live) and the console."""
-    from fogmon.sinks.console import ConsoleSink
-
-    out: list[Sink] = []
-    rrd, connect, serve = getattr(args, "rrd", None), getattr(args, "connect", None), getattr(args, "serve", False)
-    if rrd or connect or serve:
-        from fogmon.sinks.rerun_sink import RerunSink
-        out.append(RerunSink(rrd_path=rrd, connect_url=connect, serve=serve,
-                             bind=getattr(args, "bind", "127.0.0.1"), port=getattr(args, "port", 9876),
-                             rotate=bool(getattr(args, "rotate_s", None))))
-    out.append(ConsoleSink(quiet=getattr(args, "quiet", False)))
-    return out

@@ -1,4 +1,4 @@
-"""Replay log v1 (CONTRACT section 1): the CSV recording format every command reads,
+"""Replay log v1 (docs/formats.md): the CSV recording format every command reads,
 and `fogmon monitor`/`fogmon sim` write. Parsing is strict: a bad cell, NaN/inf, time
 going backwards or repeating is a one-line error naming file, line and column, unless
 the caller asks to tolerate bad rows, in which case they are skipped and counted.

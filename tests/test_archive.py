@@ -256,8 +256,9 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     from fogmon.sources.open import open_replay_source
     from fogmon.sources.replay import ReplayLogSet, RawCaptureSource
     from fogmon.sources.serial_source import SerialSource
-    from test_sources_replay import args_for
-    from test_pipeline import _args
+    from doubles import args_for
+
+    from fogmon.pipeline import PipelineConfig as _args
 
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
     arch, lead = tmp_path / "arch", 60
@@ -269,7 +270,7 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     # the port is paced by the pipeline, not by the clock: no wall-clock stop (a loaded host
     # would otherwise end the run before its 4.5 s of recording)
     monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)
-    run_pipeline(src, _args(window_s=0.64, rotate_s=1.0, duration_s=4.5), sinks=[], extra_sinks=[archive])
+    run_pipeline(src, _args(window_s=0.64, rotate_s=1.0, duration_s=4.5), sinks=[archive])
     n = int(4.5 * FS)
     want = [k for k in range(n) if k not in (200, 400)]
     names = sorted(os.listdir(arch))
@@ -366,8 +367,8 @@ def test_can_capture_pieces_replay_as_one_frame_stream(tmp_path):
     real gap, measured by the logs' absolute timestamps, and no gap at the other seam."""
     from fogmon.sources.can_source import CanSource, load_dbc
     from fogmon.sources.open import open_replay_source
+    from doubles import args_for
     from test_sources_can import DBC, gyro_msgs
-    from test_sources_replay import args_for
 
     fs = 100.0
     src = CanSource("x", "virtual", load_dbc(DBC), dbc_path=DBC)      # never opened: the test plays the bus

@@ -22,18 +22,6 @@ from test_rerun_sink import read_scalars, read_texts
 HERE = Path(__file__).resolve().parent
 
 
-@pytest.fixture
-def fake_kvh():
-    # every 500th frame with a bad CRC
-    p = subprocess.Popen([sys.executable, str(HERE / "monitor_fake_kvh.py"), "30", "500"], stdout=subprocess.PIPE,
-                         text=True)
-    try:
-        yield p.stdout.readline().strip()
-    finally:
-        p.kill()
-        p.wait(timeout=10)
-
-
 def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_path, capsys):
     arch, rrd = tmp_path / "arch", tmp_path / "live.rrd"
     rc = main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(arch),

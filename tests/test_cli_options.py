@@ -20,11 +20,10 @@ from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import MAX_PER_DECADE, tau_grid
 from fogmon.errors import FogmonError, FogmonWarning
-from fogmon.pipeline import Summary
+from fogmon.sinks.base import Summary
 from fogmon.recording import write_replay_log
 from fogmon.sinks.console import format_summary
 
-from test_cli_monitor import fake_kvh  # noqa: F401  (fixture: a 1 kHz KVH DSP-1760 on a pty)
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC = str(ROOT / "fogmon" / "data" / "gyro_example.dbc")
@@ -176,7 +175,7 @@ def test_run_shorter_than_the_window_says_why():
             ) in text
 
 
-def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):  # noqa: F811
+def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     arch = tmp_path / "arch"
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", fake_kvh, "--protocol", "kvh-a",

@@ -9,7 +9,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,7 @@ from fogmon.cli import main
 from fogmon.davar.batch import dadev
 from fogmon.recording import write_replay_log
 
-from test_rerun_sink import process_groups, read_scalars  # noqa: F401 (a fixture)
+from test_rerun_sink import read_scalars
 
 ROOT = Path(__file__).resolve().parents[1]
 

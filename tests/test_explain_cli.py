@@ -1,4 +1,4 @@
-"""`fogmon explain` end to end on small simulated recordings: the CONTRACT report, a
+"""`fogmon explain` end to end on small simulated recordings: the report of docs/formats.md, a
 concealed effect found and fitted, a null recording left alone, one-line errors, and
 the independent check that the fitted model re-simulated --like the recording stays
 inside the bootstrap bands where the original model does not."""

@@ -1,5 +1,5 @@
 """Issue 11 for `fogmon explain`: every reported effect lowered the score, regions lie
-inside the record and carry their peak time, warnings follow CONTRACT section 4; null
+inside the record and carry their peak time, warnings follow docs/formats.md; null
 recordings stay clean, a short transient is located, and without --model the bundled
 simulations name their own physics."""
 import json
@@ -23,7 +23,7 @@ WARNING_KEYS = {"kind", "t_start_s", "t_end_s", "text"}
 
 
 def assert_invariants(rep: dict, t0: float, t1: float, report_dir=None) -> None:
-    """The report invariants of CONTRACT section 4 / issue 11; no list cut: a glitches
+    """The report invariants of docs/formats.md / issue 11; no list cut: a glitches
     effect lists every spike its evidence counts, an outliers effect names the file (in
     ``report_dir``, when the report was written there) holding all it counts."""
     for e in rep["effects"]:

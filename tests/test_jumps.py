@@ -2,7 +2,9 @@
 import numpy as np
 
 from fogmon.davar.jumps import JUMP_MIN_INDEPENDENT, JumpDetector, jump_threshold
-from fogmon.pipeline import COEFFICIENTS, JumpDetector as PipelineJumpDetector
+from fogmon.davar.result import CONFIDENCE
+from fogmon.pipeline import JumpDetector as PipelineJumpDetector
+from fogmon.sinks.base import COEFFICIENTS
 
 
 class _C:
@@ -13,6 +15,8 @@ class _C:
 
 class _Fit:
     """N_dpsh as given (68.3 % intervals), the other terms not identifiable."""
+
+    confidence = CONFIDENCE
 
     def __init__(self, n_vals, rel_half_width):
         k = len(n_vals)

@@ -3,77 +3,24 @@ from __future__ import annotations
 
 import argparse
 import io
-import time
 
 import numpy as np
 import pytest
 
+from doubles import Collect, ListSource, white_noise as _white
+
 from fogmon.block import Block, Event
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
-from fogmon.pipeline import (COEFFICIENTS, Sink, add_pipeline_arguments, default_window_s,
-                             parse_taus, run_pipeline, slice_block)
+from fogmon.cli.pipeline_options import parse_taus
+from fogmon.pipeline import PipelineConfig, default_window_s, run_pipeline, slice_block
+from fogmon.sinks.base import COEFFICIENTS
+from fogmon.sources.pacing import Pacer
 from fogmon.sinks.console import ConsoleSink, format_summary
 
 
-class ListSource:
-    """A finite source serving pre-made blocks (block sizes chosen by the test)."""
-
-    def __init__(self, t, rate, sizes, rate_hz, aux=None, events=(), interrupt_after=None):
-        self.name, self.rate_hz, self.counters = "test source", rate_hz, {"frames_ok": 0}
-        self.n_samples = len(t)
-        self._t, self._r, self._sizes, self._aux = t, rate, sizes, aux or {}
-        self._events, self._interrupt_after = events, interrupt_after
-        self.closed = False
-
-    def blocks(self):
-        i = 0
-        for k, n in enumerate(self._sizes):
-            if self._interrupt_after is not None and k == self._interrupt_after:
-                raise KeyboardInterrupt
-            sl = slice(i, i + n)
-            ev = tuple(e for e in self._events if self._t[sl][0] <= e.t_s <= self._t[sl][-1])
-            self.counters["frames_ok"] += n
-            yield Block.make(self._t[sl], self._r[sl], aux={k2: v[sl] for k2, v in self._aux.items()}, events=ev)
-            i += n
-
-    def close(self):
-        self.closed = True
-
-
-class Collect(Sink):
-    def __init__(self):
-        self.info, self.frames_, self.blocks, self.events_, self.summary = None, [], [], [], None
-
-    def start(self, info):
-        self.info = info
-
-    def block(self, b):
-        self.blocks.append(b)
-
-    def frames(self, d, fit, t_end):
-        self.frames_.append((d, fit, t_end))
-
-    def events(self, ev):
-        self.events_.extend(ev)
-
-    def finish(self, summary):
-        self.summary = summary
-
-
 def _args(**kw):
-    p = argparse.ArgumentParser()
-    add_pipeline_arguments(p)
-    a = p.parse_args([])
-    a.no_progress = True
-    for k, v in kw.items():
-        setattr(a, k, v)
-    return a
-
-
-def _white(n, fs, seed=1, t0=0.0):
-    rng = np.random.default_rng(seed)
-    return t0 + np.arange(n) / fs, 3.0 + 60 * 0.05 * np.sqrt(fs) * rng.standard_normal(n)
+    return PipelineConfig(**kw)
 
 
 def test_frames_equal_batch_dadev_and_fit_with_gaps_and_odd_blocks():
@@ -138,17 +85,21 @@ def test_duration_stops_at_exact_sample_count_and_interrupt_is_clean():
 def test_realtime_paces_recording_time():
     fs = 100.0
     t, r = _white(100, fs)  # 1 s of recording, paced at 2x: pieces of 0.1 s wall = 20 samples
+    now = [100.0]
+
+    def sleep(d):                         # a clock that advances only by the pacer's sleeps
+        now[0] += d
 
     class Clock(Collect):
         def block(self, b):
-            self.blocks.append((time.monotonic(), float(b.t_s[-1]), len(b)))
+            self.blocks.append((now[0], float(b.t_s[-1]), len(b)))
 
     sink = Clock()
-    run_pipeline(ListSource(t, r, [100], fs), _args(window_s=0.32, realtime=2.0), sinks=[sink])
+    run_pipeline(ListSource(t, r, [100], fs), _args(window_s=0.32, realtime=2.0), sinks=[sink],
+                 pacer=Pacer(2.0, clock=lambda: now[0], sleep=sleep))
     assert [n for _, _, n in sink.blocks] == [20] * 5
-    w0 = sink.blocks[0][0] - sink.blocks[0][1] / 2.0
-    for wall, t_end, _ in sink.blocks:  # never ahead of 2x real time
-        assert wall - w0 >= t_end / 2.0 - 0.01
+    for wall, t_end, _ in sink.blocks:  # each piece when it is due at 2x real time, not before
+        assert wall - 100.0 == pytest.approx(t_end / 2.0, abs=1e-9)
 
 
 def test_events_pass_through_and_slice_keeps_them():
@@ -206,8 +157,8 @@ def test_model_check_names_the_worst_tau():
     from fogmon.sinks.console import model_check
 
     a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]))
-    good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]))
+    good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]), misfit=np.zeros(3, bool))
     assert model_check(a, good) == "  model check: the fitted model is within a factor 1.01 of the measured ADEV at every tau"
-    bad = SimpleNamespace(model_adev_dph=lambda tau: np.full(3, 1.0))
+    bad = SimpleNamespace(model_adev_dph=lambda tau: np.full(3, 1.0), misfit=np.zeros(3, bool))
     msg = model_check(a, bad)
     assert msg.startswith("  model check: WARNING the fitted model is 5x above the measured ADEV at tau 100 s")

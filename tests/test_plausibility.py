@@ -299,11 +299,13 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
     the gate in force, so replaying the capture gates the same samples."""
     import argparse
     from fogmon.sinks.archive import Archive
-    from fogmon.sources.open import add_source_arguments, open_live_source
+    from fogmon.cli.source_options import add_source_arguments, source_options
+    from fogmon.sources.open import open_live_source
 
     parser = argparse.ArgumentParser()
     add_source_arguments(parser, mode="live")
-    src = open_live_source(parser.parse_args(["--serial", "loop://", "--protocol", "dsp3000", "--max-rate-dph", "180"]))
+    src = open_live_source(source_options(parser.parse_args(["--serial", "loop://", "--protocol", "dsp3000",
+                                                             "--max-rate-dph", "180"])))
     data = b"0.01 1\r\n0.06 1\r\n-0.049 1\r\n" * 4    # 36, 216, -176.4 deg/h
     with Archive(str(tmp_path / "arch"), src, background_flush=False) as a:
         a.raw(data)
@@ -318,7 +320,7 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
 def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decoding_again(tmp_path):
     from fogmon.sources.open import open_replay_source
     from fogmon.sources.replay import ReplayLogSet
-    from test_sources_replay import args_for
+    from doubles import args_for
 
     t, r, fs = noisy(n=200)
     for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):

@@ -3,10 +3,8 @@ gRPC receiver gets the same data as the file; --rotate-s pieces; the --serve ser
 life (only where asked, never on a busy port, never outliving fogmon); no empty .rrd."""
 from __future__ import annotations
 
-import contextlib
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import sys
@@ -21,12 +19,15 @@ from rerun.chunk import RrdReader
 from fogmon.block import Event
 from fogmon.davar.batch import dadev
 from fogmon.errors import FogmonError
-from fogmon.pipeline import COEFFICIENTS, Summary, run_pipeline
+from fogmon.pipeline import run_pipeline
+from fogmon.sinks.base import COEFFICIENTS, Summary
 from fogmon.sinks.console import format_summary
 from fogmon.sinks.rerun_sink import (RerunSink, _Decimator, model_span, start_grpc_server,
                                      stop_process_group)
 
-from test_pipeline import Collect, ListSource, _args, _white
+from doubles import Collect, ListSource, white_noise as _white
+
+from fogmon.pipeline import PipelineConfig as _args
 
 
 def read_scalars(path, entity):
@@ -268,18 +269,6 @@ def wait_until(cond, what, timeout_s=30.0):
     while not cond():
         assert time.monotonic() < deadline, what
         time.sleep(0.05)
-
-
-@pytest.fixture
-def process_groups():
-    """Processes a test starts (in their own session): killed with their group at the end,
-    so a failing test leaves no server behind."""
-    procs = []
-    yield procs
-    for p in procs:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(p.pid, signal.SIGKILL)
-        p.wait(timeout=30)
 
 
 @pytest.mark.parametrize("bind", ["127.0.0.1", "0.0.0.0"])

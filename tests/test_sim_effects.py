@@ -1,5 +1,5 @@
 """Effects: exact values of the pure functions, and each effect simulated alone at a
-known amplitude shows the ADEV/DADEV signature of DESIGN 3 / 4.6."""
+known amplitude shows the ADEV/DADEV signature listed in docs/sim.md."""
 from __future__ import annotations
 
 import numpy as np

@@ -84,7 +84,7 @@ def test_ar1_exact_matches_continuous_markov_for_long_correlation_time():
     fs, tc = 100.0, 20.0
     tau = np.array([1.0, 10.0, 37.8, 100.0, 1000.0])
     assert np.allclose(ar1_adev_exact(tau * fs, 0.3, tc, fs), markov_adev(tau, 0.3, tc), rtol=5e-3)
-    # peak 0.618 sigma at 1.89 tau_c (DESIGN 3)
+    # peak 0.618 sigma at 1.89 tau_c (docs/sim.md)
     m = np.arange(1, 20000)
     a = ar1_adev_exact(m, 1.0, tc, fs)
     assert abs(a.max() - 0.618) < 0.005 and abs(m[np.argmax(a)] / fs / tc - 1.89) < 0.03

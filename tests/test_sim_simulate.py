@@ -204,12 +204,11 @@ def test_like_at_other_rate_uses_the_recording_rate():
 
 def test_replay_of_a_model_file_streams_its_simulation(tmp_path):
     """`fogmon replay MODEL.toml --duration-s D` runs a simulation through the pipeline."""
-    from types import SimpleNamespace
 
     from fogmon.sources.open import open_replay_source
     p = tmp_path / "m.toml"
     save_model(SensorModel(100.0, 0.0, Noise(N_dpsh=0.05)), p)
-    src = open_replay_source(str(p), SimpleNamespace())
+    src = open_replay_source(str(p))
     assert isinstance(src, SimulatedSource) and src.n_samples is None and "m.toml" in src.name
     first = next(iter(src.blocks()))
     assert len(first) == 65536 and abs(first.rate_dph.std() / (60 * 0.05 * 10) - 1) < 0.02

@@ -2,7 +2,6 @@
 detection, invalid/undecodable/foreign frames; logs written by python-can's own Logger
 (.asc .blf .csv .log .trc) replayed; the archive's CAN capture replays to the same
 samples."""
-import argparse
 import threading
 import time
 import uuid
@@ -13,11 +12,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from doubles import args_for
+
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
-from fogmon.sinks.archive import Archive, run_archived
+from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.sinks.archive import Archive
 from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
-from fogmon.sources.open import add_source_arguments, open_live_source, open_replay_source
+from fogmon.sources.open import open_live_source, open_replay_source
 
 DBC = str(resources.files("fogmon") / "data" / "gyro_example.dbc")
 FS = 100.0     # GenMsgCycleTime 10 ms in the example DBC
@@ -36,12 +38,6 @@ def gyro_msgs(ks, t0=1_000_000.0, invalid=(), extra=True):
             out.append(can.Message(timestamp=t0 + k / FS + 1e-3, arbitration_id=0x200, is_extended_id=False, data=b"\1\2"))
             out.append(can.Message(timestamp=t0 + k / FS + 2e-3, arbitration_id=0x100, is_extended_id=False, data=b"\1\2\3"))
     return out
-
-
-def args_for(*argv):
-    p = argparse.ArgumentParser()
-    add_source_arguments(p)
-    return p.parse_args(list(argv))
 
 
 def gather(source):
@@ -146,7 +142,6 @@ def test_archive_of_can_source_replays_to_the_same_samples(tmp_path):
     src = CanSource(ch, "virtual", load_dbc(DBC), dbc_path=DBC)
     archive = Archive(str(tmp_path / "arch"), src)
     ks = [k for k in range(150) if k not in (20, 21, 99)]
-    done = threading.Event()
 
     def device():
         while src._thread is None:
@@ -155,12 +150,14 @@ def test_archive_of_can_source_replays_to_the_same_samples(tmp_path):
             for m in gyro_msgs(ks, t0=time.time(), invalid=(40,)):
                 tx.send(m)
                 time.sleep(0.0005)
-        time.sleep(0.3)
-        done.set()
+        t_end = time.monotonic() + 30      # stop once every frame sent has been decoded
+        while src.counters["frames_ok"] < len(ks) and time.monotonic() < t_end:
+            time.sleep(0.005)
+        src.close()                        # the pipeline still delivers what was decoded
 
     th = threading.Thread(target=device)
     th.start()
-    run_archived(src, archive, duration_s=20, on_block=lambda b: done.is_set() and src.close())
+    run_pipeline(src, PipelineConfig(window_s=0.64, keep_motion=True), [archive])
     th.join()
     rec = read_replay_log(archive.replay_log_path)
     assert len(rec) == len(ks) - 1

@@ -1,26 +1,21 @@
 """Replay sources: replay-log CSV on its grid with gap events, raw serial captures
 (--protocol or sidecar), bad files as one-line errors with file, line and column and
 exit code 2 from `fogmon replay`."""
-import argparse
 import json
 
 import numpy as np
 import pytest
 
+from doubles import args_for
+
 from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.recording import write_replay_log
-from fogmon.sources.open import add_source_arguments, open_replay_source
+from fogmon.sources.open import open_replay_source
 from fogmon.sources.replay import ReplayLogSource
 from sources_fake_device import stream
 
 HEAD = "# fogmon replay log v1\n# sample_rate_hz: 10\ntime_s,rate_dph,temp_c\n"
-
-
-def args_for(*argv):
-    p = argparse.ArgumentParser()
-    add_source_arguments(p, mode="replay")
-    return p.parse_args(list(argv))
 
 
 @pytest.mark.parametrize("body,where", [

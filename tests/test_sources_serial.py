@@ -14,7 +14,9 @@ import pytest
 import serial
 
 from fogmon.recording import read_replay_log
-from fogmon.sinks.archive import Archive, run_archived
+from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.sinks.archive import Archive
+from fogmon.sinks.base import Sink
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
@@ -96,7 +98,6 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     dev = FakeKvh(str(tmp_path), FS)
     src = SerialSource(dev.link, 921600, KvhCodec("a", "rate", "deg", "z", FS, MAX_RATE_DPH), backoff_s=(0.02, 0.2))
     archive = Archive(str(tmp_path / "archive"), src)
-    stop = threading.Event()
 
     def wait_open(reconnects):   # pyserial flushes input while opening: "connected" starts after that
         while src._thread is None or src.counters["reconnects"] < reconnects:
@@ -121,29 +122,31 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
         while time.monotonic() - t0 < 2.6:
             k = dev.send_due(t0, k)
             time.sleep(0.01)
-        time.sleep(0.3)
-        stop.set()
+        t_end = time.monotonic() + 30      # stop once every frame sent has been decoded
+        while src.counters["frames_ok"] < len(dev.sent) and time.monotonic() < t_end:
+            time.sleep(0.005)
+        src.close()                        # the pipeline still delivers what was decoded
 
     th = threading.Thread(target=device)
     th.start()
-    blocks = []
+    events = []
 
-    def on_block(b):
-        blocks.append(b)
-        if stop.is_set():
-            src.close()
+    class Events(Sink):
+        def events(self, ev):
+            events.extend(ev)
 
-    counters = run_archived(src, archive, duration_s=15, on_block=on_block)
+    summary = run_pipeline(src, PipelineConfig(window_s=0.64, keep_motion=True), [archive, Events()])
+    counters = {**summary.counters, **archive.counters}
     th.join()
     dev.close()
     rec = read_replay_log(archive.replay_log_path)
     ks = np.rint(rec.rate_dph / 3600).astype(int)
-    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for b in blocks for e in b.events])                         # every sample sent while connected
+    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for e in events])                         # every sample sent while connected
     k0 = dev.sent[0]
     assert np.array_equal(np.rint(rec.t_s * FS).astype(int), ks - k0)   # outage kept as a gap of the right length
     assert counters["disconnects"] == 1 and counters["reconnects"] == 1
     assert counters["samples_missing"] == dev.sent[-1] - k0 + 1 - len(dev.sent)
-    kinds = [e.kind for b in blocks for e in b.events]
+    kinds = [e.kind for e in events]
     assert kinds.count("disconnect") == 1 and kinds.count("reconnect") == 1 and "gap" in kinds
     # the raw capture decodes to exactly the same samples
     replay = open_raw_capture(archive.capture_path)
@@ -241,9 +244,10 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     sending, with CRC failures, drops and garbage before and after the cut: every counter
     equals the totals its events carry and what the archive holds, and the raw capture
     decodes to exactly samples.csv with the same counters."""
-    from fogmon.pipeline import Sink, run_pipeline
+    from fogmon.pipeline import run_pipeline
+    from fogmon.sinks.base import Sink
     from fogmon.sources.replay import open_raw_capture
-    from test_pipeline import _args
+    from fogmon.pipeline import PipelineConfig as _args
 
     faults = {k: "corrupt" for k in (10, 11, 150, 151, 152, 420, 777, 799, 800, 830, 900)}
     faults.update({k: "drop" for k in (50, 51, 500, 798, 850)})
@@ -261,7 +265,7 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     archive = Archive(str(tmp_path / "arch"), src)
     ev = Events()
     monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)   # scripted device: no wall-clock stop
-    summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev], extra_sinks=[archive])
+    summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev, archive])
     c = summary.counters
     assert summary.n_samples == 798                      # frames 798, 799 lost: the grid ends at 797
     inside = [k for k in intact if k < 798]

@@ -1,6 +1,6 @@
 """Development set for `fogmon explain`: concealed effects with known truth, regenerated
 by seed (nothing large stored). One case per effect kind, a two-effect combination
-(the DESIGN 4.6 MWD case: thermal drift + vibration-driven ARW), heavy-tailed
+(the MWD case of docs/explain.md: thermal drift + vibration-driven ARW), heavy-tailed
 outliers in the thousands (an `outliers` population), null cases (against
 the exact model, and without a model: the baseline fitted from the recording), and
 noise bursts lasting 2 % of the record (not a catalogued kind: the strongest
@@ -254,7 +254,7 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
 
 def invariant_problems(res, rec) -> list[str]:
     """The report invariants (issue 11): every effect lowered the score, regions inside
-    the record with a peak time inside them, warnings of the CONTRACT schema."""
+    the record with a peak time inside them, warnings of the report schema (docs/formats.md)."""
     rep = build_report(res, rec.path, None)
     out = []
     for e in rep["effects"]:

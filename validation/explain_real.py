@@ -21,7 +21,7 @@ fitted from the recording) and `fogmon replay` (console summary), then
   inside the record; a known transient located (a region, or the platform_motion warning
   of a transient that moved the platform, holding its time, shorter than 20 % of the
   record); platform motion flagged where the sensor is known to move (a
-  `platform_motion` warning overlapping each interval, CONTRACT section 4); nothing
+  `platform_motion` warning overlapping each interval, docs/formats.md); nothing
   missing and nothing invented where the physics is known (a quiet stationary record:
   only the sensor's own filter and lines, no region left).
 

@@ -6,7 +6,7 @@ Usage:
 MIRROR: a folder holding repository snapshots as ``owner+name/repo`` bare git
 directories (default /work/.mirror), or such a git directory itself. Every original is
 read with ``git --git-dir=... show COMMIT:PATH`` at the commit the manifest names, its
-sha256 is checked, and it is converted to a replay log v1 (CONTRACT section 1: time_s in
+sha256 is checked, and it is converted to a replay log v1 (docs/formats.md: time_s in
 s, rate_dph in deg/h) under DIR (default $FOGMON_REALDATA or /work/realdata). The sha256
 of each written file is compared with the manifest; exit 1 on any mismatch or missing
 snapshot. ``--describe`` also prints the raw-data statistics the manifest's evidence

@@ -1,6 +1,6 @@
 """`fogmon explain RECORDING.csv [--model MODEL.toml] --report REPORT.json [...]`:
 locate where the recording's dynamic Allan deviation leaves what the model can
-produce, name and fit the missing physics, show the fit improve (CONTRACT 3-4)."""
+produce, name and fit the missing physics, show the fit improve (docs/formats.md)."""
 from __future__ import annotations
 
 import argparse
@@ -11,7 +11,7 @@ from typing import TextIO
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.values import number, positive
 from fogmon.export import add_export_argument, export_request, write_export
-from fogmon.sources.formats import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments
 
 #: Most bootstrap replicates: each is one simulation of the whole recording, and beyond
 #: this the Gumbel-fitted family-wise threshold no longer sharpens.
@@ -20,10 +20,10 @@ MAX_BOOTSTRAP = 10_000
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns), or a ROS "
-                   "bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/formats.md)")
-    p.add_argument("--model", help="sensor model TOML (CONTRACT section 2); without it a stationary IEEE-952 "
+                   "bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
+    p.add_argument("--model", help="sensor model TOML (docs/formats.md); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
-    p.add_argument("--report", required=True, help="JSON report to write (CONTRACT section 4); a PNG of the "
+    p.add_argument("--report", required=True, help="JSON report to write (docs/formats.md); a PNG of the "
                    "evidence is written next to it (same name, .png), and every outlier of an outlier population "
                    "(same name, .outliers.csv)")
     p.add_argument("--rrd", help="also write the evidence to this Rerun .rrd file")

@@ -7,9 +7,12 @@ import argparse
 import os
 import sys
 
-from fogmon.pipeline import add_pipeline_arguments, run_pipeline
+from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
+from fogmon.cli.source_options import add_source_arguments, source_options
+from fogmon.pipeline import Pipeline
 from fogmon.sinks.archive import Archive, default_archive_dir
-from fogmon.sources.open import add_source_arguments, open_live_source
+from fogmon.sinks.base import Summary
+from fogmon.sources.open import open_live_source
 
 EPILOG = """examples:
   fogmon monitor --serial /dev/ttyUSB0 --protocol kvh-a --connect        # into a running `rerun` viewer
@@ -38,10 +41,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    source = open_live_source(args)
+    source = open_live_source(source_options(args))
     archive = Archive(args.archive or default_archive_dir("."), source)
     try:
-        summary = run_pipeline(source, args, extra_sinks=[archive])
+        pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
+        summary = pipeline.run([*build_sinks(args), archive])
     finally:
         archive.close()   # also when the run never started; a folder it created and left empty goes
     if not summary.n_samples:
@@ -50,11 +54,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def nothing_received(summary, archive: Archive) -> str:
+def nothing_received(summary: Summary, archive: Archive) -> str:
     """The one line for a run that gave no sample: what did arrive, and where it is."""
     c = archive.counters
     removed = not os.path.isdir(archive.directory)
-    what = f"{c['raw_frames']:,} CAN frames" if c["raw_frames"] else f"{c['raw_bytes']:,} bytes" if c["raw_bytes"] else ""
+    what = (f"{c['raw_frames']:,} CAN frames" if c["raw_frames"] else
+            f"{c['raw_bytes']:,} bytes" if c["raw_bytes"] else "")
     src = f"{summary.source_name} in {summary.source_wall_s:.1f} s"
     if not what:
         return f"nothing was received from {src}" + ("; no archive written" if removed else "")

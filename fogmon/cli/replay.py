@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import argparse
 
+from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
+from fogmon.cli.source_options import add_source_arguments, source_options
 from fogmon.export import add_export_argument, export_request, write_export
-from fogmon.pipeline import add_pipeline_arguments, run_pipeline
-from fogmon.sources.formats import add_reader_arguments
-from fogmon.sources.open import add_source_arguments, open_replay_source
+from fogmon.pipeline import Pipeline
+from fogmon.cli.source_options import add_reader_arguments
+from fogmon.sources.open import open_replay_source
 from fogmon.stopping import interrupted_exit_code
 
 EPILOG = """examples:
@@ -31,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("recording", metavar="RECORDING",
                         help="replay-log CSV (time_s, rate_dph, ...), raw serial capture (with --protocol), "
                              "CAN log .asc/.blf/.trc/.csv/.log/.mf4 (with --dbc), ROS bag/MCAP, PX4 ULog, MDF4, "
-                             "LAS (docs/formats.md), or an archive folder of `fogmon monitor` (all its pieces as "
+                             "LAS (docs/readers.md), or an archive folder of `fogmon monitor` (all its pieces as "
                              "one recording)")
     add_source_arguments(parser, mode="replay")
     add_reader_arguments(parser)
@@ -41,8 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     export = export_request(args, [args.recording])
-    source = open_replay_source(args.recording, args)
-    summary = run_pipeline(source, args)
+    source = open_replay_source(args.recording, source_options(args))
+    pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
+    summary = pipeline.run(build_sinks(args))
     if export and not summary.interrupted:
         write_export(*export, summary.overall_fit, summary.source_name, summary.rate_hz,
                      getattr(source, "ros_topic", None))

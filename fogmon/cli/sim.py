@@ -1,5 +1,5 @@
-"""``fogmon sim``: simulate a sensor model (TOML, CONTRACT section 2) into a replay log
-(CONTRACT section 1), optionally --like a recording or driven by a --scenario."""
+"""``fogmon sim``: simulate a sensor model (TOML, docs/formats.md) into a replay log
+(docs/formats.md), optionally --like a recording or driven by a --scenario."""
 from __future__ import annotations
 
 import argparse
@@ -13,7 +13,7 @@ import numpy as np
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.sources.formats import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments
 
 #: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
 #: needs more than the free space of the output's folder at this rate cannot be written.
@@ -22,9 +22,9 @@ MIN_ROW_BYTES = 4
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, metavar="MODEL.toml",
-                   help="sensor model file (CONTRACT section 2): rates deg/h, IEEE-952 noise Q_arcsec, "
+                   help="sensor model file (docs/formats.md): rates deg/h, IEEE-952 noise Q_arcsec, "
                    "N_dpsh deg/sqrt(h), B_dph deg/h, K_dphsh deg/h/sqrt(h), R_dphh deg/h^2, [[effect]] tables")
-    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (CONTRACT section 1)")
+    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (docs/formats.md)")
     p.add_argument("--like", metavar="RECORDING.csv", help="take the time base (sample times, gaps, sample rate) "
                    "and every aux column (temp_c, rot_dps, vib_g, ...) from this replay log, exactly")
     p.add_argument("--duration-s", type=positive, metavar="D", help="length in s (required without --like/--scenario; "
@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable), e.g. --set rop_mph=10 --set stick_slip=true; "
                    "lists as --set plateaus_c=20,-40,60")
-    add_reader_arguments(p, axis=True)   # for --like in another format (docs/formats.md)
+    add_reader_arguments(p, axis=True)   # for --like in another format (docs/readers.md)
 
 
 def _overrides(items: list[str]) -> dict[str, str]:
@@ -62,7 +62,6 @@ def _first_seconds(rec, duration_s: float):
 
 
 def run(args) -> int:
-    from fogmon.recording import append_replay_rows, write_replay_header
     from fogmon.sources.formats import read_recording
     from fogmon.sim.model import load_model
     from fogmon.sim.scenarios import make_scenario
@@ -74,7 +73,7 @@ def run(args) -> int:
         raise FogmonError("--set needs --scenario")
     if args.like and args.scenario:
         raise FogmonError("give --like or --scenario, not both")
-    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy)
+    seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
     meta = {"sensor": f"fogmon sim of {os.path.basename(args.model)}", "model": args.model, "seed": str(seed)}
     like = aux = aux_t = None
     duration = args.duration_s
@@ -105,23 +104,31 @@ def run(args) -> int:
         n_expected = duration * model.sample_rate_hz
     _check_space(args.out, n_expected)
     info: dict = {}
-    blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info)
+    n = _write(args.out, iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info), meta, info)
+    print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
+    return 0
+
+
+def _write(out: str, blocks, meta: dict, info: dict) -> int:
+    """Write the simulated ``blocks`` as a replay log ``out`` (valid samples; ``info``
+    from iter_simulate gives the sample rate); no half-written file on any error.
+    Returns the samples written."""
+    from fogmon.recording import append_replay_rows, write_replay_header
+
     first = next(blocks)
     n = 0
-    out_meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
     try:
-        with open(args.out, "w", encoding="utf-8", newline="\n") as fh:
-            write_replay_header(fh, list(first.aux), out_meta)
+        with open(out, "w", encoding="utf-8", newline="\n") as fh:
+            write_replay_header(fh, list(first.aux), {"sample_rate_hz": info["sample_rate_hz"], **meta})
             for b in itertools.chain([first], blocks):
                 v = b.valid
                 append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
                 n += int(v.sum())
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
-            os.remove(args.out)  # no half-written replay log
+            os.remove(out)  # no half-written replay log
         raise
-    print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
-    return 0
+    return n
 
 
 def _check_space(path: str, n_samples: float) -> None:

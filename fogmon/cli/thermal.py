@@ -10,7 +10,7 @@ import numpy as np
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.sources.formats import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments
 
 
 #: Highest degree of K0(T): raw powers of deg C beyond it are ill-conditioned and over-fit

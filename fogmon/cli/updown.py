@@ -10,7 +10,7 @@ import numpy as np
 
 from fogmon.cli.values import number
 from fogmon.errors import FogmonError
-from fogmon.sources.formats import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -18,7 +18,7 @@ import numpy as np
 from fogmon.davar import kernels
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.fit import dominant_alpha, fit_avar
-from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 from fogmon.errors import FogmonError
 
@@ -89,7 +89,7 @@ def _gapless_tables(alpha: tuple, m: tuple, n_samples: int, confidence: float):
     return edf, f_lo, f_hi
 
 
-def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 0.683):
+def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE):
     """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
     (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
     (M,) or (..., M)) defaults to the dominant term of an IEEE-952 fit of each window."""
@@ -114,7 +114,7 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))
 
 
-def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float = 0.683,
+def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float = CONFIDENCE,
           alpha=None) -> AdevResult:
     """Overlapping Allan deviation (deg/h) of a rate record ``rate_dph`` (deg/h) sampled at
     ``rate_hz`` (Hz). ``taus``: see :func:`fogmon.davar.taus.tau_grid`. ``valid``: optional
@@ -130,7 +130,7 @@ def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float
 
 
 def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None, taus="octave",
-          valid=None, confidence: float = 0.683, t0_s: float = 0.0, alpha=None) -> DadevResult:
+          valid=None, confidence: float = CONFIDENCE, t0_s: float = 0.0, alpha=None) -> DadevResult:
     """Dynamic Allan deviation: overlapping ADEV (deg/h) of every window of ``window_s`` s,
     windows starting every ``hop_s`` s (default window_s / 4) from the first sample at
     time ``t0_s`` (s); only complete windows. Taus limited to window / 4. The default

@@ -15,6 +15,8 @@ import numpy as np
 from allantools.ci import edf_greenhall
 from scipy.stats import chi2
 
+from fogmon.davar.result import CONFIDENCE
+
 ALPHA_OF_TERM = np.array([2, 0, -1, -2, -2])
 """Power-law exponent alpha of each IEEE-952 term Q, N, B, K, R (R treated as random walk)."""
 
@@ -251,7 +253,7 @@ def _quantiles(confidence: float) -> tuple[float, float]:
     return lo, 1.0 - lo
 
 
-def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = 0.683) -> tuple[np.ndarray, np.ndarray]:
+def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
     """Two-sided ``confidence`` interval (lo, hi) of a deviation ``adev`` (any unit) with
     ``edf`` degrees of freedom (NIST SP1065 eq. 45). chi2 quantiles are evaluated once
     per distinct EDF value."""

@@ -23,7 +23,7 @@ from scipy.stats import norm
 
 from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
                                      edf_mixture_from, mixture_matrices)
-from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -471,7 +471,7 @@ def _worst_ratio(model_adev: np.ndarray, adev: np.ndarray, misfit: np.ndarray) -
     return np.where(np.isfinite(r), np.exp(r), np.nan)
 
 
-def fit_noise(result: AdevResult | DadevResult, confidence: float = 0.683) -> NoiseFit:
+def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) -> NoiseFit:
     """Fit IEEE-952 Q (arcsec), N (deg/sqrt(h)), B (deg/h), K (deg/h/sqrt(h)), R (deg/h^2)
     to an AdevResult (scalar coefficients) or to every window of a DadevResult (arrays
     over windows: the coefficient time series). Intervals at ``confidence``; taus the

@@ -21,6 +21,8 @@ import numpy as np
 from scipy.stats import norm, t as student_t
 
 from fogmon.block import Event
+from fogmon.davar.fit import NAMES
+from fogmon.units import coefficient_unit
 
 JUMP_Z = 5.0
 """Gaussian-equivalent size of a jump: two-sided tail 2 Phi(-5) = 5.7e-7 per independent
@@ -53,11 +55,9 @@ class JumpDetector:
 
     def update(self, fit, t_end_s: np.ndarray) -> list[Event]:
         """Events of the windows of ``fit`` (a NoiseFit over windows) ending at ``t_end_s`` (s)."""
-        from fogmon.pipeline import COEFFICIENTS
-
-        z_conf = float(norm.ppf(0.5 + getattr(fit, "confidence", 0.683) / 2))
+        z_conf = float(norm.ppf(0.5 + fit.confidence / 2))
         cols = {name: [np.atleast_1d(np.asarray(getattr(getattr(fit, name), a), dtype=np.float64))
-                       for a in ("value", "lo", "hi", "identifiable")] for name in COEFFICIENTS}
+                       for a in ("value", "lo", "hi", "identifiable")] for name in NAMES}
         out = []
         for i, t in enumerate(np.asarray(t_end_s, dtype=np.float64)):
             cur = {}
@@ -83,7 +83,7 @@ class JumpDetector:
                         self._last_event[name] = float(t)
                         out.append(Event(float(t), "coef_jump",
                                          f"{name} jumped from {rv:.4g} [{rlo:.4g}, {rhi:.4g}] to {v:.4g} [{lo:.4g}, "
-                                         f"{hi:.4g}] {COEFFICIENTS[name]} (x{v / rv:.3g}: {z:.1f} x the run's "
+                                         f"{hi:.4g}] {coefficient_unit(name)} (x{v / rv:.3g}: {z:.1f} x the run's "
                                          f"robust window-to-window scatter {scale:.3g} in ln, threshold "
                                          f"{jump_threshold(n_ind):.1f} for {n_ind:.0f} independent differences; "
                                          f"windows ending at {ref[0]:.1f} s and {t:.1f} s)"))

@@ -5,6 +5,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: Two-sided confidence of every interval fogmon reports (1 sigma of a normal).
+CONFIDENCE = 0.683
+
 
 @dataclass(frozen=True)
 class AdevResult:
@@ -14,7 +17,7 @@ class AdevResult:
     ``adev_dph`` (deg/h; NaN where no valid term), ``lo_dph``/``hi_dph`` (two-sided
     ``confidence`` interval, deg/h), ``edf`` (equivalent degrees of freedom), ``n_terms``
     (valid overlapping terms). Scalars: ``rate_hz`` (Hz), ``n_samples`` (samples in the
-    record, valid or not), ``confidence`` (0.683 = 1 sigma)."""
+    record, valid or not), ``confidence`` (CONFIDENCE = 1 sigma)."""
 
     tau_s: np.ndarray
     m: np.ndarray
@@ -25,7 +28,7 @@ class AdevResult:
     n_terms: np.ndarray
     rate_hz: float
     n_samples: int
-    confidence: float = 0.683
+    confidence: float = CONFIDENCE
 
 
 @dataclass(frozen=True)
@@ -49,7 +52,7 @@ class DadevResult:
     rate_hz: float
     window_s: float
     hop_s: float
-    confidence: float = 0.683
+    confidence: float = CONFIDENCE
 
     def __len__(self) -> int:
         return len(self.t_s)

@@ -27,7 +27,7 @@ import numpy as np
 from fogmon.block import Block
 from fogmon.davar import kernels
 from fogmon.davar.batch import _prepare, _samples, alpha_rows, row_alpha, statistics
-from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 
 RECORD_MIN_HOP = 64  # samples; below it the window / hop records per tau would outgrow the buffer
@@ -44,7 +44,7 @@ class StreamingDadev:
     large (the reference level came from a glitch)."""
 
     def __init__(self, rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
-                 confidence: float = 0.683, alpha=None, reanchor: int | None = None):
+                 confidence: float = CONFIDENCE, alpha=None, reanchor: int | None = None):
         self.rate_hz = float(rate_hz)
         self.window = _samples(window_s, rate_hz, "window_s")
         self.hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")

@@ -1,4 +1,4 @@
-"""Candidate physics (CONTRACT section 2 effect kinds), each fitted to the current
+"""Candidate physics (effect kinds of docs/formats.md), each fitted to the current
 residual and scored by a likelihood-ratio statistic ``gain`` with ``k`` free
 parameters (scanned nonlinear ones included), so that forward selection can compare
 them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.

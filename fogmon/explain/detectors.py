@@ -1,4 +1,4 @@
-"""Matched time-domain tests run beside the mismatch map (DESIGN 4.6): isolated spikes
+"""Matched time-domain tests run beside the mismatch map (docs/explain.md): isolated spikes
 and a single bias step, both as Whittle GLS scans over every sample position, so
 they are optimal for the model's noise colour (a spike far below the raw-sample
 noise is found when that noise is quantization, i.e. blue).

@@ -1,4 +1,4 @@
-"""`fogmon explain` end to end (DESIGN 4.6): residual of the recording against the
+"""`fogmon explain` end to end (docs/explain.md): residual of the recording against the
 model's deterministic part, bootstrap null of the model's stochastic part, mismatch
 map, forward selection of candidate physics with BIC and a held-out check, then the
 map again against the fitted model.
@@ -429,7 +429,7 @@ MIN_STATIONARY_SHARE = 0.3
 
 def without_motion(rec: Recording) -> tuple[Recording, list[dict]]:
     """``rec`` without its platform-motion samples (they become time gaps) and a
-    ``platform_motion`` warning per span (CONTRACT section 4); FogmonError when too little
+    ``platform_motion`` warning per span (docs/formats.md); FogmonError when too little
     stationary data is left to explain."""
     blk = rec.to_block()
     y = blk.error_rate_dph
@@ -443,8 +443,8 @@ def without_motion(rec: Recording) -> tuple[Recording, list[dict]]:
         raise FogmonError(f"{rec.name}: platform motion over {100 * share:.0f} % of the record ("
                           + ", ".join(f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s" for m in spans[:5])
                           + (f" and {len(spans) - 5} more" if len(spans) > 5 else "")
-                          + f"): too little stationary data to explain; fogmon replay shows it, "
-                            f"--keep-motion analyses it as recorded")
+                          + "): too little stationary data to explain; fogmon replay shows it, "
+                            "--keep-motion analyses it as recorded")
     warnings = [{"kind": "platform_motion", "t_start_s": m.t_start_s, "t_end_s": m.t_end_s,
                  "text": f"{what} moves up to {m.peak_dph:.4g} deg/h from its reference, far beyond the sensor's "
                          f"noise, with no rot_dps to say why (a turntable, a vehicle, a person, the ground): "
@@ -460,7 +460,7 @@ UNTESTABLE_SHARE = 0.1
 
 
 def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
-    """``record_too_short`` warnings (CONTRACT section 4): a map with fewer than 3 taus
+    """``record_too_short`` warnings (docs/formats.md): a map with fewer than 3 taus
     (window too short to show how the mismatch depends on tau), and model terms the
     record is too short to test - IEEE-952 B, K, R below UNTESTABLE_SHARE of the model's
     Allan variance even at tau = duration / 4, a periodic term with fewer than two

@@ -1,4 +1,4 @@
-"""Where a recording and a model disagree, with honest statistics (DESIGN 4.6 steps 1-3).
+"""Where a recording and a model disagree, with honest statistics (docs/explain.md, steps 1-3).
 
 The recording's dynamic Allan variance (DAVAR) on a (window, tau) grid is compared
 cell by cell with a parametric bootstrap of the model: B simulated records (same

@@ -1,4 +1,4 @@
-"""Outputs of `fogmon explain`: the JSON report (CONTRACT section 4, plus extra keys),
+"""Outputs of `fogmon explain`: the JSON report (docs/formats.md, plus extra keys),
 a console summary, a PNG of the evidence and an optional Rerun .rrd with the same.
 
 Extra report keys beyond the contract (added, never renamed): ``mismatches_after``,
@@ -20,7 +20,7 @@ import numpy as np
 from fogmon.explain.detectors import spectral_lines
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
-from fogmon.sim.model import Effect, save_model
+from fogmon.sim.model import EFFECT_KINDS, Effect, save_model
 
 
 def _clean(x):
@@ -49,40 +49,8 @@ def _region_text(r: dict) -> str:
 
 
 def _effect_summary(kind: str, p: dict) -> str:
-    if kind == "periodic":
-        return f"periodic {p['amplitude_dph']:.3g} deg/h at period {p['period_s']:.5g} s"
-    if kind == "bias_step":
-        return f"bias step {p['step_dph']:+.3g} deg/h at t = {p['t_s']:.6g} s"
-    if kind == "rate_ramp":
-        return f"rate ramp {p['slope_dphh']:+.3g} deg/h^2 from t = {p['t0_s']:.6g} s"
-    if kind == "warm_up":
-        return f"warm-up {p['amplitude_dph']:+.3g} deg/h settling with tau = {p['tau_s']:.4g} s"
-    if kind == "glitches":
-        return f"{len(p['times_s'])} glitch(es)"
-    if kind == "outliers":
-        where = f", all listed in {p['times_file']}" if p.get("times_file") else ""
-        return (f"outlier population: {p['count']} outliers ({p['rate_per_h']:.4g} per hour, "
-                f"{p['rate_per_sample']:.3g} per sample), |amplitude| median {_median(p):.3g} deg/h, largest "
-                f"{p['amplitude_quantiles_dph'][-1]:.3g} deg/h{where}")
-    if kind == "scale_factor":
-        return f"scale-factor error {p['ppm']:.3g} ppm (asymmetry {p['asym_ppm']:.3g} ppm)"
-    if kind == "thermal_drift":
-        return (f"thermal drift (K1 {p['k1_pos']:.3g}/{p['k1_neg']:.3g} deg/h per degC/s, "
-                f"K0 slope {p['k0_poly_dph'][1] if len(p['k0_poly_dph']) > 1 else 0:.3g} deg/h/degC)")
-    if kind == "markov":
-        return f"Gauss-Markov noise {p['sigma_dph']:.3g} deg/h, correlation time {p['tau_c_s']:.4g} s"
-    if kind == "vibration_noise":
-        return f"vibration-driven ARW {p['n_gain_dpsh_per_g']:.3g} deg/sqrt(h) per g"
-    if kind == "temperature_noise":
-        return f"temperature-driven ARW {p['n_gain_dpsh_per_c']:.3g} deg/sqrt(h) per degC (ref {p['t_ref_c']:.3g} degC)"
-    if kind == "bandwidth":
-        return f"sensor low-pass: Butterworth order {p['order']} at {p['cutoff_hz']:.4g} Hz"
-    return kind
-
-
-def _median(p: dict) -> float:
-    """Median |amplitude| (deg/h) of an outliers effect, from its quantiles."""
-    return float(np.interp(0.5, p["quantile_probs"], p["amplitude_quantiles_dph"]))
+    """One line for an effect: its kind's own summary (fogmon.sim.model.EFFECT_KINDS)."""
+    return EFFECT_KINDS[kind].summarize(kind, p) if kind in EFFECT_KINDS else kind
 
 
 def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:

@@ -1,4 +1,4 @@
-"""Denoising of gyro rate (DESIGN 4.7): steady-state Kalman filters for a static rate
+"""Denoising of gyro rate (docs/methods.md): steady-state Kalman filters for a static rate
 (random-walk bias seen through white noise) and a dynamic rate (constant rate change
 driven by white angular acceleration), and wavelet threshold denoising.
 

@@ -1,4 +1,4 @@
-"""Up/down calibration of a single-axis gyro against Earth rate (DESIGN 4.7).
+"""Up/down calibration of a single-axis gyro against Earth rate (docs/methods.md).
 
 With the sensing axis pointing up and then down on a level, stationary base at
 latitude phi, the true inputs are +/- w_e sin(phi). From the mean outputs (deg/h):

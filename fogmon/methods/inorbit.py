@@ -1,4 +1,4 @@
-"""In-orbit evaluation (DESIGN 4.7): a low-frequency periodic term (the orbit) and
+"""In-orbit evaluation (docs/methods.md): a low-frequency periodic term (the orbit) and
 glitches spoil the Allan variance of on-orbit gyro telemetry. First differencing
 removes slow terms, the Pauta (3-sigma) criterion removes glitches, and the angle
 random walk follows from the spread of the cleaned differences; bias instability is the

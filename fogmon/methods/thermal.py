@@ -1,11 +1,11 @@
-"""Thermal-drift prediction and correction (DESIGN 4.7, the thermal paper):
+"""Thermal-drift prediction and correction (docs/methods.md, the thermal paper):
 drift = K0(T) + K1(dT/dt) dT/dt + K2(d2T/dt2) d2T/dt2, with separate K1, K2 while the
 temperature change accelerates (dT/dt * d2T/dt2 > 0) and decelerates (<= 0),
 derivatives by 3-point backward differences on smoothed temperature.
 
 Calibration is one least-squares fit of all coefficients on a chamber run (plateaus fix
 K0(T), ramps fix K1 and K2); the result is a ``thermal_drift`` effect of the sensor
-model (CONTRACT 2), so prediction is the simulator's own effect function and the
+model (docs/formats.md), so prediction is the simulator's own effect function and the
 calibration can be written into a model file. Prediction is causal (trailing smoothing,
 backward differences): ``correct`` can run on a live stream given the temperature
 history of the last ``smooth_s + 2 diff_step_s`` seconds.

@@ -21,7 +21,7 @@ import numpy as np
 
 from fogmon.errors import FogmonError
 from fogmon.explain.mismatch import Gumbel, Null, build_null, zscores
-from fogmon.modelcheck import cache
+import fogmon.modelcheck.cache as cache
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, model_to_dict, validate_model
 from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact
 from fogmon.sim.simulate import iter_simulate

@@ -1,4 +1,4 @@
-"""Physical effects (CONTRACT section 2) as pure functions of time, aux channels and
+"""Physical effects (docs/formats.md) as pure functions of time, aux channels and
 parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
 
 - mean-type: ``mean_rate_dph(effect, t_s, aux, fs_hz)`` -> deterministic deg/h

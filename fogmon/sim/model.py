@@ -1,4 +1,4 @@
-"""Sensor model file (CONTRACT section 2): a TOML description of a gyro that
+"""Sensor model file (docs/formats.md): a TOML description of a gyro that
 ``fogmon sim`` turns into a recording and ``fogmon explain`` compares recordings with.
 
 ``load_model`` validates strictly: an unknown table, key or effect kind, a missing
@@ -25,8 +25,10 @@ import difflib
 import math
 import os
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 
+import numpy as np
 import tomli_w
 
 from fogmon.errors import FogmonError
@@ -56,12 +58,18 @@ class Param:
 @dataclass(frozen=True)
 class EffectKind:
     """Catalogue entry: parameters by name, aux channel needed (or None), nature
-    ("mean", "white_level", "noise", "filter") and a one-line description."""
+    ("mean", "white_level", "noise", "filter"), a one-line description and ``summary``:
+    fitted parameters -> one line with units (the explain report; None: the kind's name)."""
 
     params: dict
     aux: str | None
     nature: str
     description: str
+    summary: Callable[[dict], str] | None = None
+
+    def summarize(self, kind: str, p: dict) -> str:
+        """One line naming this effect (``kind``) with parameters ``p`` and their units."""
+        return self.summary(p) if self.summary is not None else kind
 
     @property
     def required(self) -> tuple[str, ...]:
@@ -83,68 +91,82 @@ EFFECT_KINDS: dict[str, EffectKind] = {
             "diff_step_s": Param("s", "step h of the 3-point backward differences", check=">0", default=1.0),
         },
         "temp_c", "mean",
-        "K0(T) + K1*dT/dt + K2*d2T/dt2 on smoothed temperature, K1/K2 by acceleration branch"),
+        "K0(T) + K1*dT/dt + K2*d2T/dt2 on smoothed temperature, K1/K2 by acceleration branch",
+        lambda p: (f"thermal drift (K1 {p['k1_pos']:.3g}/{p['k1_neg']:.3g} deg/h per degC/s, "
+                   f"K0 slope {p['k0_poly_dph'][1] if len(p['k0_poly_dph']) > 1 else 0:.3g} deg/h/degC)")),
     "periodic": EffectKind(
         {
             "period_s": Param("s", "period of the sinusoid", check=">0"),
             "amplitude_dph": Param("deg/h", "amplitude", check=">=0"),
             "phase_rad": Param("rad", "phase at t = 0: A sin(2 pi t / P + phase)"),
         },
-        None, "mean", "sinusoidal rate term (orbit, drill string, aliased vibration)"),
+        None, "mean", "sinusoidal rate term (orbit, drill string, aliased vibration)",
+        lambda p: f"periodic {p['amplitude_dph']:.3g} deg/h at period {p['period_s']:.5g} s"),
     "glitches": EffectKind(
         {
             "times_s": Param("s", "glitch times", "list"),
             "amplitudes_dph": Param("deg/h", "glitch amplitudes (same length as times_s)", "list"),
             "width_s": Param("s", "glitch duration; 0: the one sample nearest each time", check=">=0", default=0.0),
         },
-        None, "mean", "isolated spikes added to the samples at the given times"),
+        None, "mean", "isolated spikes added to the samples at the given times",
+        lambda p: f"{len(p['times_s'])} glitch(es)"),
     "bias_step": EffectKind(
         {
             "t_s": Param("s", "time of the step"),
             "step_dph": Param("deg/h", "bias change for t >= t_s"),
         },
-        None, "mean", "abrupt bias change (power interruption, shock)"),
+        None, "mean", "abrupt bias change (power interruption, shock)",
+        lambda p: f"bias step {p['step_dph']:+.3g} deg/h at t = {p['t_s']:.6g} s"),
     "vibration_noise": EffectKind(
         {"n_gain_dpsh_per_g": Param("deg/sqrt(h) per g", "N = N0 + gain * vib_g", check=">=0")},
-        "vib_g", "white_level", "white-noise level rising with vibration"),
+        "vib_g", "white_level", "white-noise level rising with vibration",
+        lambda p: f"vibration-driven ARW {p['n_gain_dpsh_per_g']:.3g} deg/sqrt(h) per g"),
     "rate_ramp": EffectKind(
         {
             "slope_dphh": Param("deg/h^2", "rate += slope * (t - t0) / 3600 for t >= t0"),
             "t0_s": Param("s", "start of the ramp"),
         },
-        None, "mean", "linear drift of the rate"),
+        None, "mean", "linear drift of the rate",
+        lambda p: f"rate ramp {p['slope_dphh']:+.3g} deg/h^2 from t = {p['t0_s']:.6g} s"),
     "scale_factor": EffectKind(
         {
             "ppm": Param("ppm", "scale-factor error (mean of positive and negative)"),
             "asym_ppm": Param("ppm", "asymmetry: scale factor for rot_dps > 0 minus that for < 0"),
         },
-        "rot_dps", "mean", "scale-factor error on the reference rotation: 3600 rot (ppm +- asym/2) 1e-6"),
+        "rot_dps", "mean", "scale-factor error on the reference rotation: 3600 rot (ppm +- asym/2) 1e-6",
+        lambda p: f"scale-factor error {p['ppm']:.3g} ppm (asymmetry {p['asym_ppm']:.3g} ppm)"),
     "markov": EffectKind(
         {
             "tau_c_s": Param("s", "correlation time", check=">0"),
             "sigma_dph": Param("deg/h", "standard deviation of the process", check=">=0"),
         },
-        None, "noise", "first-order Gauss-Markov (exponentially correlated) rate noise"),
+        None, "noise", "first-order Gauss-Markov (exponentially correlated) rate noise",
+        lambda p: f"Gauss-Markov noise {p['sigma_dph']:.3g} deg/h, correlation time {p['tau_c_s']:.4g} s"),
     "temperature_noise": EffectKind(
         {
             "n_gain_dpsh_per_c": Param("deg/sqrt(h) per degC", "N = N0 + gain * (temp_c - t_ref_c), floored at 0"),
             "t_ref_c": Param("degC", "reference temperature"),
         },
-        "temp_c", "white_level", "white-noise level changing with temperature"),
+        "temp_c", "white_level", "white-noise level changing with temperature",
+        lambda p: (f"temperature-driven ARW {p['n_gain_dpsh_per_c']:.3g} deg/sqrt(h) per degC "
+                   f"(ref {p['t_ref_c']:.3g} degC)")),
     "warm_up": EffectKind(
         {
             "amplitude_dph": Param("deg/h", "rate += A exp(-(t - t0) / tau) for t >= t0"),
             "tau_s": Param("s", "settling time constant", check=">0"),
             "t0_s": Param("s", "power-on (or power-cycle) time"),
         },
-        None, "mean", "exponential settling after power-on"),
+        None, "mean", "exponential settling after power-on",
+        lambda p: f"warm-up {p['amplitude_dph']:+.3g} deg/h settling with tau = {p['tau_s']:.4g} s"),
     "bandwidth": EffectKind(
         {
-            "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (with order; 0 when taps are given)", check=">=0", default=0.0),
+            "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (with order; 0 when taps are given)", check=">=0",
+                               default=0.0),
             "order": Param("", "Butterworth order (with cutoff_hz)", "int", ">=0", default=0),
             "taps": Param("", "FIR coefficients instead of a Butterworth filter", "list", default=[]),
         },
-        None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate"),
+        None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate",
+        lambda p: f"sensor low-pass: Butterworth order {p['order']} at {p['cutoff_hz']:.4g} Hz"),
     "outliers": EffectKind(
         {
             "rate_per_h": Param("1/h", "mean number of outliers per hour (a Poisson process on the sample grid)",
@@ -163,7 +185,12 @@ EFFECT_KINDS: dict[str, EffectKind] = {
             "times_file": Param("", "CSV listing every outlier (time_s, amplitude_dph, abs_z), relative to the "
                                 "file that names it (informational)", "str", default=""),
         },
-        None, "noise", "heavy-tailed outlier population: spikes at a rate with an amplitude distribution"),
+        None, "noise", "heavy-tailed outlier population: spikes at a rate with an amplitude distribution",
+        lambda p: (f"outlier population: {p['count']} outliers ({p['rate_per_h']:.4g} per hour, "
+                   f"{p['rate_per_sample']:.3g} per sample), |amplitude| median "
+                   f"{float(np.interp(0.5, p['quantile_probs'], p['amplitude_quantiles_dph'])):.3g} deg/h, largest "
+                   f"{p['amplitude_quantiles_dph'][-1]:.3g} deg/h"
+                   + (f", all listed in {p['times_file']}" if p.get("times_file") else ""))),
 }
 
 
@@ -320,25 +347,8 @@ def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
         if k not in top:
             raise FogmonError(f"{where}: unknown table or key {k!r} (expected: [sensor], [noise], "
                               f"[[effect]], [meta]){_close(k, top)}")
-    sensor = _table(doc, "sensor", where)
-    for k in sensor:
-        if k not in ("sample_rate_hz", "bias_dph"):
-            raise FogmonError(f"{where}: [sensor] unknown key {k!r} (expected: sample_rate_hz, bias_dph)"
-                              f"{_close(k, ('sample_rate_hz', 'bias_dph'))}")
-    if "sample_rate_hz" not in sensor:
-        raise FogmonError(f"{where}: [sensor] missing key 'sample_rate_hz' (Hz)")
-    if "noise" not in doc:
-        raise FogmonError(f"{where}: no [noise] table: give {', '.join(NOISE_UNITS)} "
-                          f"(IEEE-952 terms; 0.0 for a term the gyro does not have)")
-    noise = _table(doc, "noise", where)
-    for k in noise:
-        if k not in NOISE_UNITS:
-            raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
-                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
-    missing = [k for k in NOISE_UNITS if k not in noise]
-    if missing:
-        raise FogmonError(f"{where}: [noise] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
-                          f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
+    sensor = _sensor_table(doc, where)
+    noise = _noise_table(doc, where)
     effects = doc.get("effect", [])
     if not isinstance(effects, list):
         raise FogmonError(f"{where}: 'effect' must be an array of tables: write [[effect]]")
@@ -352,6 +362,35 @@ def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
     model = SensorModel(sensor["sample_rate_hz"], sensor.get("bias_dph", 0.0),
                         Noise(**{k: noise[k] for k in noise}), elist, meta)
     return validate_model(model, where)
+
+
+def _sensor_table(doc: dict, where: str) -> dict:
+    """The [sensor] table: sample_rate_hz (required), bias_dph, nothing else."""
+    sensor = _table(doc, "sensor", where)
+    for k in sensor:
+        if k not in ("sample_rate_hz", "bias_dph"):
+            raise FogmonError(f"{where}: [sensor] unknown key {k!r} (expected: sample_rate_hz, bias_dph)"
+                              f"{_close(k, ('sample_rate_hz', 'bias_dph'))}")
+    if "sample_rate_hz" not in sensor:
+        raise FogmonError(f"{where}: [sensor] missing key 'sample_rate_hz' (Hz)")
+    return sensor
+
+
+def _noise_table(doc: dict, where: str) -> dict:
+    """The [noise] table: every IEEE-952 term (NOISE_UNITS), nothing else."""
+    if "noise" not in doc:
+        raise FogmonError(f"{where}: no [noise] table: give {', '.join(NOISE_UNITS)} "
+                          f"(IEEE-952 terms; 0.0 for a term the gyro does not have)")
+    noise = _table(doc, "noise", where)
+    for k in noise:
+        if k not in NOISE_UNITS:
+            raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
+                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
+    missing = [k for k in NOISE_UNITS if k not in noise]
+    if missing:
+        raise FogmonError(f"{where}: [noise] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
+                          f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
+    return noise
 
 
 def model_to_dict(model: SensorModel) -> dict:
@@ -368,7 +407,7 @@ def model_to_dict(model: SensorModel) -> dict:
 
 
 def load_model(path: str | os.PathLike) -> SensorModel:
-    """Read and validate a sensor model TOML file (CONTRACT section 2)."""
+    """Read and validate a sensor model TOML file (docs/formats.md)."""
     path = os.fspath(path)
     name = os.path.basename(path)
     try:
@@ -389,7 +428,7 @@ def load_model(path: str | os.PathLike) -> SensorModel:
 
 def dumps_model(model: SensorModel) -> str:
     """The TOML text of a model, with a header comment naming the units."""
-    head = ("# fogmon sensor model (CONTRACT section 2). Units: rate deg/h, time s; noise: "
+    head = ("# fogmon sensor model (docs/formats.md). Units: rate deg/h, time s; noise: "
             + ", ".join(f"{k} {u.split(' (')[0]}" for k, u in NOISE_UNITS.items()) + "\n")
     return head + tomli_w.dumps(model_to_dict(model))
 

@@ -1,16 +1,17 @@
 """Aux-channel generators for simulating without a recording: an MWD run, a thermal
 chamber cycle and a spacecraft orbit. Each returns a ``Scenario`` (times in s, aux
-channels by CONTRACT name: ``temp_c`` deg C, ``rot_dps`` deg/s, ``vib_g`` g rms,
+channels by their replay-log names (docs/formats.md): ``temp_c`` deg C, ``rot_dps`` deg/s, ``vib_g`` g rms,
 ``depth_m`` m, plus scenario-specific columns) sampled at its own ``rate_hz``; the
 simulator interpolates them onto the gyro's sample times.
 
-Every default is documented on its parameter class (DESIGN 4.5 / industry ranges) and
+Every default is documented on its parameter class (industry ranges, docs/sim.md) and
 overridable: ``mwd_run(MwdParams(rop_mph=10))`` or, from the CLI, ``--set rop_mph=10``.
 """
 from __future__ import annotations
 
 import difflib
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
@@ -42,7 +43,7 @@ def _lags(target: np.ndarray, dt_s: float, lags_s, start: float) -> np.ndarray:
 
 @dataclass
 class MwdParams:
-    """Measurement-while-drilling run (DESIGN 4.5): stands drilled at ``rop_mph`` with
+    """Measurement-while-drilling run (docs/sim.md): stands drilled at ``rop_mph`` with
     pumps on and the string rotating, connections with pumps off (the tool warms toward
     the static formation temperature), an optional trip out at the end."""
 
@@ -97,9 +98,10 @@ class OrbitParams:
     rate_hz: float = 1.0                  #: Hz, aux sampling rate
 
 
-def mwd_run(p: MwdParams = MwdParams(), seed: int | None = None) -> Scenario:
+def mwd_run(p: MwdParams | None = None, seed: int | None = None) -> Scenario:
     """MWD aux channels: temp_c, rot_dps (string or bit speed, 1 rpm = 6 deg/s),
     vib_g, depth_m, pumps (1 on / 0 off); meta lists connection start times."""
+    p = MwdParams() if p is None else p
     dt = 1.0 / p.rate_hz
     n = int(round(p.duration_s * p.rate_hz))
     t = np.arange(n) * dt
@@ -132,8 +134,9 @@ def mwd_run(p: MwdParams = MwdParams(), seed: int | None = None) -> Scenario:
                     {"scenario": "mwd", "connections_s": " ".join(conns)})
 
 
-def thermal_chamber(p: ChamberParams = ChamberParams(), seed: int | None = None) -> Scenario:
+def thermal_chamber(p: ChamberParams | None = None, seed: int | None = None) -> Scenario:
     """Chamber cycle aux channels: temp_c (sensor), chamber_c (air), rot_dps = 0."""
+    p = ChamberParams() if p is None else p
     pts_t, pts_c = [0.0], [float(p.plateaus_c[0])]
     for c in p.plateaus_c[1:]:
         pts_t.append(pts_t[-1] + p.dwell_s)
@@ -150,9 +153,10 @@ def thermal_chamber(p: ChamberParams = ChamberParams(), seed: int | None = None)
                     {"scenario": "chamber", "plateaus_c": " ".join(f"{c:g}" for c in p.plateaus_c)})
 
 
-def orbit(p: OrbitParams = OrbitParams(), seed: int | None = None) -> Scenario:
+def orbit(p: OrbitParams | None = None, seed: int | None = None) -> Scenario:
     """Orbit aux channels: temp_c (sunlit/eclipse through a lag), rot_dps (orbital rate
     360/period deg/s times axis_factor)."""
+    p = OrbitParams() if p is None else p
     dt = 1.0 / p.rate_hz
     t = np.arange(int(round(p.duration_s * p.rate_hz))) * dt
     eclipse = np.mod(t, p.period_s) >= (1.0 - p.eclipse_fraction) * p.period_s
@@ -163,7 +167,29 @@ def orbit(p: OrbitParams = OrbitParams(), seed: int | None = None) -> Scenario:
 
 
 #: name -> (generator, parameter class)
-SCENARIOS = {"mwd": (mwd_run, MwdParams), "chamber": (thermal_chamber, ChamberParams), "orbit": (orbit, OrbitParams)}
+SCENARIOS: dict[str, tuple[Callable[..., Scenario], type]] = {
+    "mwd": (mwd_run, MwdParams), "chamber": (thermal_chamber, ChamberParams), "orbit": (orbit, OrbitParams)}
+
+
+def _parse_value(name: str, key: str, text: str, default):
+    """The text value of parameter ``key`` of scenario ``name``, of the type of its
+    ``default`` (bool, tuple of floats, float), finite; a one-line FogmonError if not."""
+    try:
+        if isinstance(default, bool):
+            if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                raise ValueError
+            return text.lower() in ("true", "1", "yes")
+        if isinstance(default, tuple):
+            values = tuple(float(x) for x in text.replace(";", ",").split(",") if x.strip())
+            if len(values) < 1 or not all(math.isfinite(x) for x in values):
+                raise ValueError
+            return values
+        v = float(text)
+        if not math.isfinite(v):
+            raise ValueError
+        return v
+    except ValueError:
+        raise FogmonError(f"scenario {name}: parameter {key}: bad value {text!r}") from None
 
 
 def scenario_params(name: str, overrides: dict[str, str], duration_s: float | None = None):
@@ -181,22 +207,7 @@ def scenario_params(name: str, overrides: dict[str, str], duration_s: float | No
             m = difflib.get_close_matches(k, known, n=1)
             raise FogmonError(f"scenario {name}: unknown parameter {k!r} (known: {', '.join(known)})"
                               + (f"; did you mean {m[0]!r}?" if m else ""))
-        default = getattr(params, k)
-        try:
-            if isinstance(default, bool):
-                if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                    raise ValueError
-                v = text.lower() in ("true", "1", "yes")
-            elif isinstance(default, tuple):
-                v = tuple(float(x) for x in text.replace(";", ",").split(",") if x.strip())
-                if len(v) < 1 or not all(math.isfinite(x) for x in v):
-                    raise ValueError
-            else:
-                v = float(text)
-                if not math.isfinite(v):
-                    raise ValueError
-        except ValueError:
-            raise FogmonError(f"scenario {name}: parameter {k}: bad value {text!r}") from None
+        v = _parse_value(name, k, text, getattr(params, k))
         if isinstance(v, float) and v < 0 and not k.endswith("_c"):
             raise FogmonError(f"scenario {name}: parameter {k} must be >= 0, got {text}")
         values[k] = v

@@ -1,7 +1,7 @@
 """Turn a SensorModel into samples: batch (``simulate`` -> Recording) or streaming
 (``iter_simulate`` -> Blocks of bounded size, same numbers for the same seed).
 
-The gyro reads (CONTRACT section 2)
+The gyro reads (docs/formats.md)
     bias_dph + 3600 rot_dps + Q + N(t) white + B flicker + K random walk + R ramp
     + markov terms + mean-type effects,
 then passes through the ``bandwidth`` filters, if any. N(t) = N0 + the white-level
@@ -24,7 +24,7 @@ realization. ``seed=None`` picks fresh entropy and reports it in ``meta['seed']`
 from __future__ import annotations
 
 import math
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -33,8 +33,7 @@ from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
-from fogmon.sim.noise import (Flicker, RandomWalk, WhiteAngle, WhiteRate,
-                              default_flicker_tau_hi_s, ramp_dph)
+from fogmon.sim.noise import Flicker, RandomWalk, WhiteAngle, WhiteRate, default_flicker_tau_hi_s, ramp_dph
 
 #: samples per streamed block by default (bounded memory; about 30 MB of work arrays)
 CHUNK_SAMPLES = 65536
@@ -43,41 +42,55 @@ CHUNK_SAMPLES = 65536
 class _Plan:
     """Where the samples come from: grid size, times, aux, which grid points exist."""
 
+    src_t: np.ndarray                   # times of the recording or aux samples (s)
+    src_aux: dict[str, np.ndarray]      # their aux channels
+    idx: np.ndarray                     # --like: grid index of each recorded sample
+    n: int | None                       # samples to simulate, None = endless
+    t0: float                           # time of grid sample 0 (s)
+
     def __init__(self, model: SensorModel, duration_s, like, aux, aux_t_s):
         self.fs = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
         self.like = like
         if like is not None:
-            self.idx = like.grid_index()
-            self.n = int(self.idx[-1]) + 1 if len(self.idx) else 0
-            self.t0 = float(like.t_s[0])
-            self.src_t = like.t_s
-            self.src_aux = like.aux
-            if duration_s is not None:
-                raise FogmonError("give either a recording to simulate like, or a duration, not both")
+            self._like(like, duration_s)
         elif aux:
-            self.src_aux = {k: np.asarray(v, dtype=float) for k, v in aux.items()}
-            lens = {len(v) for v in self.src_aux.values()}
-            if len(lens) != 1:
-                raise FogmonError("aux channels must all have the same length")
-            m = lens.pop()
-            self.src_t = (np.arange(m) / self.fs if aux_t_s is None else np.asarray(aux_t_s, dtype=float))
-            if len(self.src_t) != m or m < 1:
-                raise FogmonError("aux_t_s must have one time per aux sample (and at least one)")
-            self.t0 = float(self.src_t[0])
-            step = float(self.src_t[1] - self.src_t[0]) if m > 1 and aux_t_s is not None else 1.0 / self.fs
-            span = float(self.src_t[-1] - self.src_t[0]) + step
-            if duration_s is not None and duration_s > span + 1e-9 * span:
-                raise FogmonError(f"duration_s {duration_s:g} s is longer than the aux channels "
-                                  f"({span:g} s); they would have to be invented")
-            self.n = int(round((duration_s if duration_s is not None else span) * self.fs))
-            self.idx = None
+            self._aux(aux, aux_t_s, duration_s)
         else:
-            self.src_t, self.src_aux, self.t0, self.idx = None, {}, 0.0, None
+            self.src_t, self.src_aux, self.t0, self.idx = np.empty(0), {}, 0.0, np.empty(0, np.int64)
             if duration_s is not None and not (duration_s > 0 and math.isfinite(duration_s)):
                 raise FogmonError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
             self.n = None if duration_s is None else int(round(duration_s * self.fs))
         if self.n is not None and self.n < 1:
             raise FogmonError("nothing to simulate: the duration is shorter than one sample period")
+
+    def _like(self, like: Recording, duration_s) -> None:
+        """On the grid of a recording: its samples, times and aux channels."""
+        self.idx = like.grid_index()
+        self.n = int(self.idx[-1]) + 1 if len(self.idx) else 0
+        self.t0 = float(like.t_s[0])
+        self.src_t = like.t_s
+        self.src_aux = like.aux
+        if duration_s is not None:
+            raise FogmonError("give either a recording to simulate like, or a duration, not both")
+
+    def _aux(self, aux: dict, aux_t_s, duration_s) -> None:
+        """Along given aux channels (at ``aux_t_s`` s, or one per sample)."""
+        self.src_aux = {k: np.asarray(v, dtype=float) for k, v in aux.items()}
+        lens = {len(v) for v in self.src_aux.values()}
+        if len(lens) != 1:
+            raise FogmonError("aux channels must all have the same length")
+        m = lens.pop()
+        self.src_t = (np.arange(m) / self.fs if aux_t_s is None else np.asarray(aux_t_s, dtype=float))
+        if len(self.src_t) != m or m < 1:
+            raise FogmonError("aux_t_s must have one time per aux sample (and at least one)")
+        self.t0 = float(self.src_t[0])
+        step = float(self.src_t[1] - self.src_t[0]) if m > 1 and aux_t_s is not None else 1.0 / self.fs
+        span = float(self.src_t[-1] - self.src_t[0]) + step
+        if duration_s is not None and duration_s > span + 1e-9 * span:
+            raise FogmonError(f"duration_s {duration_s:g} s is longer than the aux channels "
+                              f"({span:g} s); they would have to be invented")
+        self.n = int(round((duration_s if duration_s is not None else span) * self.fs))
+        self.idx = np.empty(0, np.int64)       # every grid sample is present
 
     @property
     def duration_s(self) -> float | None:
@@ -116,6 +129,53 @@ def _check_aux(model: SensorModel, plan: _Plan) -> None:
                               f"recording with that column or use a --scenario")
 
 
+class _Parts:
+    """The terms of the simulated rate, built once per run from the model (random
+    generators seeded from ``rngs``: Q, N, B, K, then one per effect)."""
+
+    def __init__(self, model: SensorModel, plan: _Plan, rngs: list[np.random.Generator]) -> None:
+        fs, nz = plan.fs, model.noise
+        self.model, self.plan = model, plan
+        self.q = WhiteAngle(nz.Q_arcsec, fs, rngs[0]) if nz.Q_arcsec > 0 else None
+        self.white = WhiteRate(fs, rngs[1])
+        self.levels = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "white_level"]
+        self.b = (Flicker(nz.B_dph, fs, rngs[2], default_flicker_tau_hi_s(fs, plan.duration_s))
+                  if nz.B_dph > 0 else None)
+        self.k = RandomWalk(nz.K_dphsh, fs, rngs[3]) if nz.K_dphsh > 0 else None
+        self.noises = [fx.noise_generator(e, fs, rngs[4 + i]) for i, e in enumerate(model.effects)
+                       if EFFECT_KINDS[e.kind].nature == "noise"]
+        self.means = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "mean"]
+        self.filters = [fx.BandwidthFilter(e.params, fs) for e in model.effects
+                        if EFFECT_KINDS[e.kind].nature == "filter"]
+        #: samples before a chunk that mean-rate effects look back on
+        self.back = int(math.ceil(max([fx.lookback_s(e) for e in self.means] + [0.0]) * fs)) + 2
+
+    def rate_dph(self, k0: int, k1: int, t: np.ndarray, aux: dict[str, np.ndarray]) -> np.ndarray:
+        """The rate (deg/h) of grid samples ``k0:k1`` at times ``t`` (s) with ``aux``."""
+        model, nz, n = self.model, self.model.noise, k1 - k0
+        rate = np.full(n, model.bias_dph)
+        if "rot_dps" in aux:
+            rate += 3600.0 * aux["rot_dps"]
+        level = np.full(n, nz.N_dpsh)
+        for e in self.levels:
+            level = level + fx.white_level_dpsh(e, t, aux)
+        if nz.N_dpsh > 0 or self.levels:
+            rate += self.white.generate(n, np.maximum(level, 0.0))
+        for gen in (self.q, self.b, self.k, *self.noises):
+            if gen is not None:
+                rate += gen.generate(n)
+        if nz.R_dphh:
+            rate += ramp_dph(nz.R_dphh, t - self.plan.t0)
+        if self.means:
+            kb = max(0, k0 - self.back)
+            te, auxe, _ = self.plan.chunk(kb, k1) if kb < k0 else (t, aux, None)
+            for e in self.means:
+                rate += fx.mean_rate_dph(e, te, auxe, self.plan.fs)[k0 - kb:]
+        for f in self.filters:
+            rate = f.apply(rate)
+        return rate
+
+
 def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Recording | None = None,
                   aux: dict | None = None, seed: int | None = None, aux_t_s=None,
                   chunk_samples: int = CHUNK_SAMPLES, meta_out: dict | None = None) -> Iterator[Block]:
@@ -127,48 +187,15 @@ def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Rec
         raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
     plan = _Plan(model, duration_s, like, aux, aux_t_s)
     _check_aux(model, plan)
-    fs = plan.fs
     ss = np.random.SeedSequence(seed)
     if meta_out is not None:
-        meta_out.update(sample_rate_hz=f"{fs:g}", seed=str(ss.entropy))
-    rngs = [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))]
-    nz = model.noise
-    q = WhiteAngle(nz.Q_arcsec, fs, rngs[0]) if nz.Q_arcsec > 0 else None
-    white = WhiteRate(fs, rngs[1])
-    levels = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "white_level"]
-    b = (Flicker(nz.B_dph, fs, rngs[2], default_flicker_tau_hi_s(fs, plan.duration_s))
-         if nz.B_dph > 0 else None)
-    k = RandomWalk(nz.K_dphsh, fs, rngs[3]) if nz.K_dphsh > 0 else None
-    noises = [fx.noise_generator(e, fs, rngs[4 + i]) for i, e in enumerate(model.effects)
-              if EFFECT_KINDS[e.kind].nature == "noise"]
-    means = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "mean"]
-    filters = [fx.BandwidthFilter(e.params, fs) for e in model.effects if EFFECT_KINDS[e.kind].nature == "filter"]
-    back = int(math.ceil(max([fx.lookback_s(e) for e in means] + [0.0]) * fs)) + 2
+        meta_out.update(sample_rate_hz=f"{plan.fs:g}", seed=str(ss.entropy))
+    parts = _Parts(model, plan, [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))])
     k0 = 0
     while plan.n is None or k0 < plan.n:
         k1 = k0 + chunk_samples if plan.n is None else min(plan.n, k0 + chunk_samples)
         t, aux_c, present = plan.chunk(k0, k1)
-        n = k1 - k0
-        rate = np.full(n, model.bias_dph)
-        if "rot_dps" in aux_c:
-            rate += 3600.0 * aux_c["rot_dps"]
-        level = np.full(n, nz.N_dpsh)
-        for e in levels:
-            level = level + fx.white_level_dpsh(e, t, aux_c)
-        if nz.N_dpsh > 0 or levels:
-            rate += white.generate(n, np.maximum(level, 0.0))
-        for gen in (q, b, k, *noises):
-            if gen is not None:
-                rate += gen.generate(n)
-        if nz.R_dphh:
-            rate += ramp_dph(nz.R_dphh, t - plan.t0)
-        if means:
-            kb = max(0, k0 - back)
-            te, auxe, _ = plan.chunk(kb, k1) if kb < k0 else (t, aux_c, None)
-            for e in means:
-                rate += fx.mean_rate_dph(e, te, auxe, fs)[k0 - kb:]
-        for f in filters:
-            rate = f.apply(rate)
+        rate = parts.rate_dph(k0, k1, t, aux_c)
         rate[~present] = np.nan
         out_aux = {name: np.where(present, a, np.nan) for name, a in aux_c.items()}
         yield Block(t, rate, present.copy(), out_aux)
@@ -183,7 +210,7 @@ def simulate(model: SensorModel, duration_s: float | None = None, like: Recordin
     if like is None and not aux and duration_s is None:
         raise FogmonError("simulate needs a duration, a recording to simulate like, or aux channels")
     info: dict = {}
-    ts, rs, auxs = [], [], {}
+    ts, rs, auxs = [], [], {}  # type: ignore[var-annotated]
     for blk in iter_simulate(model, duration_s, like, aux, seed, aux_t_s, meta_out=info):
         v = blk.valid
         ts.append(blk.t_s[v])

@@ -4,7 +4,7 @@ nothing is lost.
 Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.pieces:
 piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
-- ``samples-NNNN.csv``: the decoded samples as a replay log (CONTRACT section 1), each
+- ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
   piece complete with magic line, metadata (``piece: N``) and header. Valid samples only
   (a replay log holds no NaN); lost and invalid samples show as time gaps, which every
   reader turns back into invalid placeholders.
@@ -30,21 +30,22 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import os
 import shutil
 import threading
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 
 from fogmon.block import Block
+from fogmon.capture import new_sidecar, write_sidecar
 from fogmon.errors import FogmonError
 from fogmon.pieces import find_pieces, piece_path
-from fogmon.pipeline import Sink
 from fogmon.recording import append_replay_rows, write_replay_header
-from fogmon.sources.replay import CAPTURE_FORMAT, SIDECAR_SUFFIX
+from fogmon.sinks.base import Sink, Summary
+from fogmon.sources.base import CaptureSource, Source
 
 REPLAY_LOG = "samples.csv"
 SERIAL_CAPTURE = "raw.bin"
@@ -53,7 +54,7 @@ CAN_CAPTURE = "frames.asc"
 
 def default_archive_dir(base: str = ".") -> str:
     """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
-    return os.path.join(base, datetime.now(timezone.utc).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
+    return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
 
 
 class _KeepOpen(io.StringIO):
@@ -65,7 +66,7 @@ class _KeepOpen(io.StringIO):
 
 class Archive(Sink):
     """Archive of ``source`` under ``directory`` (created if needed; must not hold an
-    archive yet). A pipeline sink (``run_pipeline(source, args, extra_sinks=[archive])``):
+    archive yet). A pipeline sink (``run_pipeline(source, config, [..., archive])``):
     ``block`` (= ``write``) takes the decoded blocks, ``rotate`` starts the next piece,
     ``finish`` closes; the source feeds the raw capture through the tap methods
     ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
@@ -74,7 +75,7 @@ class Archive(Sink):
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
     first temperature frame; not written), ``raw_bytes``, ``raw_frames``."""
 
-    def __init__(self, directory: str, source, flush_s: float = 0.5, clock=time.monotonic,
+    def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
                  background_flush: bool = True) -> None:
         self.directory = os.fspath(directory)
         self._created_dir = not os.path.isdir(self.directory)
@@ -93,30 +94,32 @@ class Archive(Sink):
         self._clock = clock
         self._lock = threading.RLock()
         self._last_flush = clock()
-        self.started_utc = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        self.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
         self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
         self.piece = 1
         self._pieces: set[int] = set()          # pieces that have a file
         self._done = False
-        self._csv_fd = None
+        self._csv_fd: int | None = None
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
-        base = dict(source.capture_spec()) if hasattr(source, "capture_spec") else None
+        self._capture_source = source if isinstance(source, CaptureSource) else None
+        base = dict(self._capture_source.capture_spec()) if self._capture_source is not None else None
         self._dbc = base.pop("dbc_path", None) if base else None
         self._spec_base = base
-        self._spec = None                        # the current capture piece's sidecar
-        self._cap_fd = None
+        self._spec: dict[str, Any] = {}          # the current capture piece's sidecar
+        self._cap_fd: int | None = None
         self._cap_buf = bytearray()
         self._cap_written = 0                    # bytes of the current capture piece on disk
         self._cut_pending = False                # start a new capture piece at the next frame boundary
-        self._can_writer = None
-        self.capture_path = None
-        if base is not None:
+        self._can_writer: Any = None             # a can.ASCWriter into _can_text while a CAN piece is open
+        self._can_text = _KeepOpen()
+        self._capture_name = SERIAL_CAPTURE
+        self.capture_path: str | None = None
+        if self._capture_source is not None and base is not None:
             self._capture_name = SERIAL_CAPTURE if base.get("kind") == "serial" else CAN_CAPTURE
             self.capture_path = os.path.join(self.directory, piece_path(self._capture_name, 1))
-            if hasattr(source, "add_tap"):
-                source.add_tap(self)
+            self._capture_source.add_tap(self)
         self._closed = threading.Event()
         if background_flush:
             threading.Thread(target=self._flusher, name="fogmon-archive-flush", daemon=True).start()
@@ -134,26 +137,27 @@ class Archive(Sink):
     def _write(self, block: Block) -> None:
         if self._aux_names is None and len(block):
             self._aux_names = list(block.aux)
+        aux_names = self._aux_names or []
         if len(block) and not self._done:
             keep = block.valid.copy()
-            for k in self._aux_names:
+            for k in aux_names:
                 keep &= np.isfinite(block.aux[k])
             self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
             if keep.any():
                 if self._csv_fd is None:
-                    self._open_replay_log()
+                    self._open_replay_log(aux_names)
                 append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
-                                   {k: block.aux[k][keep] for k in self._aux_names})
+                                   {k: block.aux[k][keep] for k in aux_names})
                 self.counters["rows_written"] += int(keep.sum())
         self._maybe_flush()
 
-    def _open_replay_log(self) -> None:
+    def _open_replay_log(self, aux_names: list[str]) -> None:
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._pieces.add(self.piece)
         meta = {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
                 "started_utc": self.started_utc, "piece": self.piece}
-        write_replay_header(self._csv_buf, self._aux_names, meta)
+        write_replay_header(self._csv_buf, aux_names, meta)
 
     def _close_replay_log(self) -> None:
         self._flush()
@@ -172,12 +176,11 @@ class Archive(Sink):
             self.piece = piece
             self._cut_pending = self._cap_fd is not None
 
-    def finish(self, summary) -> None:
+    def finish(self, summary: Summary) -> None:
         self.close()
-        outputs = getattr(summary, "outputs", None)
-        if outputs is not None and self._pieces:
+        if self._pieces:
             n = len(self._pieces)
-            outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
+            summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
                            + (f" in {n} pieces)" if n > 1 else ")"))
 
     # -- raw capture taps (called by the source) --------------------------------------
@@ -209,7 +212,8 @@ class Archive(Sink):
     def _append_raw(self, data: bytes) -> None:
         """Serial bytes into the capture; a pending cut happens where the decoder, which
         has just been fed ``data``, holds no partial frame (else at a later call)."""
-        at = len(data) - self.source.codec.pending if self._cut_pending else -1
+        pending = self._capture_source.pending if self._capture_source is not None else 0
+        at = len(data) - pending if self._cut_pending else -1
         if at >= 0:                              # (< 0: the frame under way began in an earlier chunk)
             if at and self._open_capture():
                 self._cap_buf += data[:at]
@@ -226,7 +230,7 @@ class Archive(Sink):
 
     def _open_capture(self) -> bool:
         """Make sure the current capture piece is open (False once the archive is closed)."""
-        if self._done:
+        if self._done or self._spec_base is None:   # closed, or a source without a raw capture
             return False
         if self._cap_fd is not None:
             return True
@@ -234,8 +238,7 @@ class Archive(Sink):
         self._cap_fd = os.open(self.capture_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._cap_written = 0
         self._pieces.add(self.piece)
-        self._spec = {**self._spec_base, "format": CAPTURE_FORMAT, "started_utc": self.started_utc,
-                      "piece": self.piece, "breaks": []}
+        self._spec = new_sidecar(self._spec_base, self.started_utc, self.piece)
         if self._spec_base["kind"] == "can":
             import can
             self._can_text = _KeepOpen()
@@ -264,12 +267,8 @@ class Archive(Sink):
 
     # -- disk ----------------------------------------------------------------------------
     def _write_sidecar(self) -> None:
-        path = self.capture_path + SIDECAR_SUFFIX
-        tmp = path + ".tmp"
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(self._spec, fh, indent=1)
-            fh.write("\n")
-        os.replace(tmp, path)
+        if self.capture_path is not None:
+            write_sidecar(self.capture_path, self._spec)
 
     def _maybe_flush(self) -> None:
         if self._clock() - self._last_flush >= self.flush_s:
@@ -314,7 +313,7 @@ class Archive(Sink):
             with contextlib.suppress(OSError):
                 os.rmdir(self.directory)
 
-    def __enter__(self) -> "Archive":
+    def __enter__(self) -> Archive:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -326,22 +325,3 @@ def _write_all(fd: int, data: bytes) -> None:
     while view:
         n = os.write(fd, view)
         view = view[n:]
-
-
-def run_archived(source, archive: Archive, duration_s: float | None = None, on_block=None,
-                 clock=time.monotonic) -> dict[str, int]:
-    """Run ``source`` into ``archive`` until it ends or ``duration_s`` (s) passed;
-    ``on_block(block)`` sees every block too. Closes both; returns the source counters
-    merged with the archive's."""
-    t_end = None if duration_s is None else clock() + duration_s
-    try:
-        for block in source.blocks():
-            archive.write(block)
-            if on_block is not None:
-                on_block(block)
-            if t_end is not None and clock() >= t_end:
-                break
-    finally:
-        source.close()
-        archive.close()
-    return {**source.counters, **archive.counters}

@@ -7,10 +7,12 @@ from __future__ import annotations
 import math
 import sys
 from collections import Counter
-from typing import Sequence, TextIO
+from collections.abc import Sequence
+from typing import TextIO
 
 from fogmon.block import Event
-from fogmon.pipeline import COEFFICIENTS, Sink, Summary, default_window_s
+from fogmon.pipeline import default_window_s
+from fogmon.sinks.base import COEFFICIENTS, Sink, Summary
 from fogmon.stopping import stop_name
 
 #: Events of one kind printed as they happen before the rest are only counted.
@@ -34,7 +36,7 @@ def format_summary(s: Summary) -> str:
         lines += motion_lines(s)
     a = s.overall
     if a is not None:
-        conf = getattr(a, "confidence", 0.683)
+        conf = a.confidence
         span = f"{s.overall_first_s:.2f}..{s.t_last_s:.2f} s"
         lines.append("")
         lines.append(f"Overall Allan deviation ({span}, {100 * conf:.1f} % confidence bounds):")
@@ -134,7 +136,7 @@ def model_check(a, fit) -> str | None:
 
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.asarray(fit.model_adev_dph(a.tau_s), dtype=float) / np.asarray(a.adev_dph, dtype=float)
-    misfit = np.asarray(getattr(fit, "misfit", np.zeros(len(ratio), dtype=bool)), dtype=bool)
+    misfit = np.asarray(fit.misfit, dtype=bool)
     ok = np.isfinite(ratio) & (ratio > 0) & ~misfit
     if not ok.any():
         return None
@@ -154,31 +156,6 @@ def model_check(a, fit) -> str | None:
         line += (f"\n  model check: tau {taus} s not described by the five terms (vibration or periodic "
                  f"humps, quantization, steps): flagged and left out of the fit")
     return line
-
-
-class ReplayProgress:
-    """A replay's progress bar on ``stream`` (default stderr, tqdm): recording seconds
-    done of ``total_s`` and the speed in x real time. Shown only when ``enabled`` (the
-    caller checks that stderr is a terminal) and the total is known."""
-
-    FORMAT = "{percentage:5.1f}%|{bar:30}| {n:.1f}/{total:.1f} s of recording{postfix} [{elapsed}<{remaining}]"
-
-    def __init__(self, total_s: float, enabled: bool, stream: TextIO | None = None):
-        from tqdm import tqdm
-
-        self._bar = tqdm(total=total_s, file=stream or sys.stderr, disable=not (enabled and total_s > 0),
-                         mininterval=0.2, bar_format=self.FORMAT)
-
-    def update(self, done_s: float, wall_s: float) -> None:
-        """``done_s`` s of recording analysed in ``wall_s`` s of wall time."""
-        if self._bar.disable:
-            return
-        if wall_s > 0:
-            self._bar.set_postfix_str(f"x{done_s / wall_s:,.0f} real time", refresh=False)
-        self._bar.update(min(done_s, self._bar.total) - self._bar.n)
-
-    def close(self) -> None:
-        self._bar.close()
 
 
 class ConsoleSink(Sink):

@@ -45,8 +45,8 @@ from fogmon import stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
-from fogmon.pipeline import COEFFICIENTS, Sink, StreamInfo
 from fogmon.sinks import rerun_plots as rp
+from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 
 #: Raw rate and aux channels are shown at no more than this many points per second.
 DISPLAY_MAX_HZ = 100.0
@@ -538,7 +538,6 @@ class RerunSink(Sink):
         """The latest HEATMAP_WINDOWS windows as a colour image (rows: tau, largest on top;
         columns: windows, newest right) with window-end-time labels and a colour scale in
         deg/h fixed at the first frames' whole decades."""
-        import rerun as rr
 
         self._heat += [row.astype(np.float32) for row in log_adev]
         self._heat_t += [float(t) for t in t_end_s]

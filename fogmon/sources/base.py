@@ -1,22 +1,37 @@
-"""What every source (serial gyro, CAN gyro, replay, simulator) provides.
+"""The interfaces at the sources' boundary, as typing Protocols.
 
-The rest of fogmon cannot tell a live gyro from a replay: it iterates ``blocks()``
-and reads ``counters``. Sources convert to deg/h and s at this boundary and insert
-invalid placeholder samples for anything lost (see fogmon.block)."""
+The rest of fogmon cannot tell a live gyro from a replay: it iterates ``blocks()`` and
+reads ``counters``. Sources convert to deg/h and s at this boundary and insert invalid
+placeholder samples for anything lost (see fogmon.block). A source whose raw input can
+be archived (a serial or CAN gyro) is also a ``CaptureSource``: the archive registers
+itself as its ``RawTap``. Serial decoders are ``Codec``s (fogmon.sources.codecs)."""
 from __future__ import annotations
 
-from typing import Iterator, Protocol
+from collections.abc import Iterator
+from typing import Any, Protocol, runtime_checkable
 
 from fogmon.block import Block
+from fogmon.sources.frames import Frames
 
 
 class Source(Protocol):
+    """What the pipeline reads."""
+
     #: human-readable description, e.g. "KVH DSP-1760 format A on /dev/ttyUSB0, axis z"
     name: str
     #: nominal sample rate in Hz (the uniform grid that Block samples sit on)
     rate_hz: float
-    #: running counts: frames_ok, crc_errors, bytes_skipped, seq_gaps, invalid_samples, ...
-    counters: dict[str, int]
+
+    @property
+    def n_samples(self) -> int | None:
+        """Length of a finite source in samples (sizes the default window), None for a
+        live or endless one."""
+        ...
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Running counts: frames_ok, crc_errors, bytes_skipped, seq_gaps, invalid_samples, ..."""
+        ...
 
     def blocks(self) -> Iterator[Block]:
         """Yield blocks until the source ends (end of file, --duration-s, close())."""
@@ -24,4 +39,65 @@ class Source(Protocol):
 
     def close(self) -> None:
         """Stop and release the device/file; ``blocks()`` then ends."""
+        ...
+
+
+class RawTap(Protocol):
+    """Receives a live source's raw input in stream order (the archive), possibly from
+    the source's reader thread."""
+
+    def raw(self, data: bytes) -> None:
+        """Serial bytes, right after the codec decoded them."""
+
+    def frame(self, msg: Any) -> None:
+        """One received CAN frame (a can.Message)."""
+
+    def outage(self, elapsed_s: float, missing_est: float) -> None:
+        """The device was reopened after ``elapsed_s`` s; about ``missing_est`` samples lost."""
+
+
+@runtime_checkable
+class CaptureSource(Source, Protocol):
+    """A source whose raw input can be written as a replayable capture."""
+
+    def capture_spec(self) -> dict[str, Any]:
+        """The capture's sidecar base: ``kind`` ('serial' or 'can'), the decoder options
+        (codecs.OPTION_KEYS or the CAN decoder's), the device; ``dbc_path`` for CAN."""
+        ...
+
+    def add_tap(self, tap: RawTap) -> None:
+        """Register ``tap`` for the raw input (adding one twice is a no-op)."""
+        ...
+
+    @property
+    def pending(self) -> int:
+        """Bytes of a partial frame the decoder holds (0 at a frame boundary)."""
+        ...
+
+
+class Codec(Protocol):
+    """An incremental serial decoder: bytes in, decoded frames out (deg/h)."""
+
+    protocol: str
+    rate_hz: float
+    aux_names: tuple[str, ...]
+    #: the sequence counter's modulus, None when the protocol has no counter
+    seq_modulus: int | None
+    counters: dict[str, int]
+
+    @property
+    def pending(self) -> int:
+        """Bytes of a partial frame held until more input arrives."""
+        ...
+
+    def feed(self, data: bytes) -> Frames:
+        """Decode ``data`` (any chunking); frames completed by it."""
+        ...
+
+    def options(self) -> dict[str, Any]:
+        """The options that rebuild this decoder (codecs.codec_from_options)."""
+        ...
+
+    def describe(self) -> str:
+        """A one-line description for the source's name."""
         ...

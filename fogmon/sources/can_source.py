@@ -12,14 +12,16 @@ Rates beyond ``--max-rate-dph`` (default the generic gate of fogmon.sources.plau
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import os
-from typing import Iterable, Iterator
+from collections.abc import Iterable, Iterator
 
 import can
 import numpy as np
 
+from fogmon import units
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
@@ -28,12 +30,6 @@ from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 from fogmon.sources.live import LiveSource
 
 STALL_S = 0.5
-_D = 180.0 / math.pi
-#: DBC unit (lower case, spaces removed) -> (mode, deg/h per unit; per s for deltas)
-RATE_UNITS = {"deg/h": ("rate", 1.0), "dph": ("rate", 1.0), "°/h": ("rate", 1.0),
-              "deg/s": ("rate", 3600.0), "dps": ("rate", 3600.0), "°/s": ("rate", 3600.0),
-              "rad/s": ("rate", 3600.0 * _D), "deg": ("delta", 3600.0), "°": ("delta", 3600.0),
-              "rad": ("delta", 3600.0 * _D), "arcsec": ("delta", 1.0)}
 
 
 def load_dbc(path: str):
@@ -48,6 +44,43 @@ def load_dbc(path: str):
         raise FogmonError(f"--dbc {path}: not a valid DBC file: {msg}") from None
 
 
+def _find_message(db, message: str | None, rate_signal: str):
+    """The DBC message named ``message``, or the one message carrying ``rate_signal``."""
+    if message:
+        try:
+            return db.get_message_by_name(message)
+        except KeyError:
+            raise FogmonError(f"--can-message {message!r} is not in the DBC (it has: "
+                              f"{', '.join(m.name for m in db.messages)})") from None
+    having = [m for m in db.messages if any(s.name == rate_signal for s in m.signals)]
+    if len(having) != 1:
+        raise FogmonError(f"--can-rate {rate_signal!r}: {'no' if not having else len(having)} DBC "
+                          f"messages carry it; name the signal with --can-rate and the message with "
+                          f"--can-message")
+    return having[0]
+
+
+def _pick(msg, opt: str, given: str | None, default: str) -> str | None:
+    """The signal named by option ``--opt`` (must exist), else ``default`` if the message has it."""
+    names = [s.name for s in msg.signals]
+    if given is None:
+        return default if default in names else None
+    if given not in names:
+        raise FogmonError(f"--{opt} {given!r}: message {msg.name} has no such signal (it has: {', '.join(names)})")
+    return given
+
+
+def _rate_hz(msg, rate_hz: float | None) -> float:
+    """The sample rate (Hz): given, or from the message's DBC cycle time."""
+    if rate_hz is None:
+        if not msg.cycle_time:
+            raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give --rate-hz")
+        rate_hz = 1000.0 / msg.cycle_time
+    if not (rate_hz > 0 and math.isfinite(rate_hz)):
+        raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
+    return float(rate_hz)
+
+
 class CanDecoder:
     """CAN frames -> Frames for one DBC message. Counters: ``frames_ok``,
     ``bad_frames`` (the message's id but undecodable, e.g. wrong length), ``other_frames``
@@ -60,53 +93,25 @@ class CanDecoder:
                  valid_signal: str | None = None, rate_hz: float | None = None,
                  max_rate_dph: float | None = None) -> None:
         rate_signal = rate_signal or "rate"
-        if message:
-            try:
-                msg = db.get_message_by_name(message)
-            except KeyError:
-                raise FogmonError(f"--can-message {message!r} is not in the DBC (it has: "
-                                  f"{', '.join(m.name for m in db.messages)})") from None
-        else:
-            having = [m for m in db.messages if any(s.name == rate_signal for s in m.signals)]
-            if len(having) != 1:
-                raise FogmonError(f"--can-rate {rate_signal!r}: {'no' if not having else len(having)} DBC "
-                                  f"messages carry it; name the signal with --can-rate and the message with "
-                                  f"--can-message")
-            msg = having[0]
+        msg = _find_message(db, message, rate_signal)
         names = {s.name: s for s in msg.signals}
-
-        def pick(opt: str, given: str | None, default: str) -> str | None:
-            if given is None:
-                return default if default in names else None
-            if given not in names:
-                raise FogmonError(f"--{opt} {given!r}: message {msg.name} has no such signal "
-                                  f"(it has: {', '.join(names)})")
-            return given
-
         if rate_signal not in names:
             raise FogmonError(f"--can-rate {rate_signal!r}: message {msg.name} has no such signal "
                               f"(it has: {', '.join(names)})")
         self.message = msg
         self.rate_signal = rate_signal
-        self.temp_signal = pick("can-temp", temp_signal, "temperature")
-        self.counter_signal = pick("can-counter", counter_signal, "counter")
-        self.valid_signal = pick("can-valid", valid_signal, "valid")
+        self.temp_signal = _pick(msg, "can-temp", temp_signal, "temperature")
+        self.counter_signal = _pick(msg, "can-counter", counter_signal, "counter")
+        self.valid_signal = _pick(msg, "can-valid", valid_signal, "valid")
         unit = rate_unit or names[rate_signal].unit or ""
-        key = unit.strip().lower().replace(" ", "")
-        if key not in RATE_UNITS:
+        key = units.canonical(unit)
+        if key is None:
             raise FogmonError(f"rate signal {msg.name}.{rate_signal} has unit {unit!r}: give --can-rate-unit "
-                              f"(one of {', '.join(k for k in RATE_UNITS if k.isascii())})")
+                              f"(one of {', '.join(units.DPH_PER_UNIT)})")
         self.rate_unit = unit
-        if rate_hz is None:
-            if not msg.cycle_time:
-                raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give --rate-hz")
-            rate_hz = 1000.0 / msg.cycle_time
-        if not (rate_hz > 0 and math.isfinite(rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
-        self.rate_hz = float(rate_hz)
+        self.rate_hz = _rate_hz(msg, rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
-        mode, dph = RATE_UNITS[key]
-        self._scale = dph * (self.rate_hz if mode == "delta" else 1.0)
+        self._scale = units.dph_scale(key, self.rate_hz)
         self.seq_modulus = 2 ** names[self.counter_signal].length if self.counter_signal else None
         self.aux_names = ("temp_c",) if self.temp_signal else ()
         self.counters = {"frames_ok": 0, "bad_frames": 0, "other_frames": 0, plausibility.COUNTER: 0}
@@ -218,10 +223,8 @@ class CanSource(LiveSource):
         return can.Bus(interface=self.interface, channel=self.channel, **kw)
 
     def _close(self, bus) -> None:
-        try:
+        with contextlib.suppress(Exception):  # a dead bus may fail to shut down; it is gone either way
             bus.shutdown()
-        except Exception:  # a dead bus may fail to shut down; it is gone either way
-            pass
 
     def _read(self, bus) -> list:
         m = bus.recv(timeout=0.05)
@@ -236,7 +239,7 @@ class CanSource(LiveSource):
                 m = bus.recv(timeout=0.0)
             except self.device_errors:   # keep what was read; the next call meets the error again
                 break
-        items = []
+        items: list[tuple] = []
         for brk, frames in self.decoder.feed(msgs):
             if brk is not None:
                 items.append(("break", brk))

@@ -1,4 +1,4 @@
-"""Serial protocol names (CONTRACT section 3) -> incremental byte decoders."""
+"""Serial protocol names (docs/sources.md) -> incremental byte decoders."""
 from __future__ import annotations
 
 from fogmon.errors import FogmonError

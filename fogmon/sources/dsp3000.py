@@ -1,6 +1,6 @@
 """KVH DSP-3000 ASCII output: one line per sample, ``<value> <valid flag>`` such as
 ``"       0.015733   1\\r\\n"`` (38400 baud, ~100 Hz). The value is a rate in deg/s
-(``rot='rate'``, the CONTRACT default) or an incremental angle in deg per sample
+(``rot='rate'``, the default) or an incremental angle in deg per sample
 (``rot='delta'``); flag 1 = valid. No sequence counter: only outages are detected.
 Rates beyond the DSP-3000's range x margin (fogmon.sources.plausibility) are invalid."""
 from __future__ import annotations
@@ -9,9 +9,10 @@ import math
 
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
-from fogmon.sources.framing import LineFramer
 from fogmon.sources.frames import Frames
-from fogmon.sources.kvh import to_dph
+from fogmon.sources.framing import LineFramer
+from fogmon.sources.kvh import output_unit
+from fogmon.units import to_dph
 
 DEFAULT_RATE_HZ = 100.0
 
@@ -71,6 +72,6 @@ class Dsp3000Codec:
         c["frames_ok"] += len(vals)
         c["bad_lines"] += bad + fr.dropped_lines - before[1]
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
-        rate, n = plausibility.gate(to_dph(vals, self.rot, "deg", self.rate_hz), self.max_rate_dph, valid)
+        rate, n = plausibility.gate(to_dph(vals, output_unit(self.rot, "deg"), self.rate_hz), self.max_rate_dph, valid)
         c[plausibility.COUNTER] += n
         return Frames.from_lists([-1] * len(vals), rate, valid)

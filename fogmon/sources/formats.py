@@ -7,7 +7,6 @@ options) -> StampedSource`` and needs an optional dependency group of fogmon
 (``pip install 'fogmon[ros]'``...); without it the error names the group."""
 from __future__ import annotations
 
-import argparse
 import importlib
 import os
 from dataclasses import dataclass
@@ -74,19 +73,3 @@ def read_recording(path: str, args=None):
     from fogmon.recording import read_replay_log
     src = open_reader(os.fspath(path), args)
     return read_replay_log(path) if src is None else src.to_recording()
-
-
-def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = False) -> None:
-    """The reader options (``axis`` adds ``--axis`` too, for commands without the serial
-    decoder options that already have it)."""
-    g = parser.add_argument_group("other recording formats (ROS bag/MCAP, PX4 ULog, MDF4, LAS; docs/formats.md)")
-    g.add_argument("--topic", metavar="NAME", help="ROS bag/MCAP: the sensor_msgs/Imu topic (default: the only "
-                   "one); PX4 ULog: sensor_gyro (default; NAME:INSTANCE for another instance) or sensor_combined")
-    if axis:
-        g.add_argument("--axis", choices=("x", "y", "z"), help="gyro axis of a ROS/ULog source (default: z)")
-    g.add_argument("--channel", metavar="NAME", help="MDF4: the rate channel (unit from the file); LAS: the rate "
-                   "curve (default: the only curve with a rate unit)")
-    g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve (default: the index curve when it "
-                   "is a time; a depth-indexed file needs it)")
-    g.add_argument("--rate-unit", metavar="UNIT", help="MDF4/LAS: the rate's unit when the file does not say "
-                   "it or says it wrongly: deg/h, deg/s, rad/s")

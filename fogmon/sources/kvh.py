@@ -1,7 +1,7 @@
 """KVH DSP-1750/1760/1775 binary output Formats A, B and C: an incremental, bounded-buffer
 decoder with resynchronisation.
 
-Wire formats (big-endian, DESIGN section 5):
+Wire formats (big-endian):
 
 - A, 36 bytes: header ``FE 81 FF 55``, gyro x/y/z float32, accel x/y/z float32
   (reserved on the 1760), status uint8 (bits 0-2: gyro x/y/z valid), sequence uint8
@@ -23,11 +23,10 @@ import binascii
 import math
 import struct
 
-import numpy as np
-
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
+from fogmon.units import to_dph
 
 #: bit-reversal of every byte value, to run CRC-32/MPEG-2 through zlib's reflected CRC-32.
 _REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
@@ -57,14 +56,10 @@ SEQ_MODULUS = 128
 DEFAULT_RATE_HZ = 1000.0
 
 
-def to_dph(value, mode: str, units: str, rate_hz: float):
-    """Gyro output -> deg/h. ``mode`` 'rate' (units/s) or 'delta' (units per sample at
-    ``rate_hz``), ``units`` 'deg' or 'rad'."""
-    scale = 3600.0 * (180.0 / math.pi if units == "rad" else 1.0)
-    if mode == "delta":
-        scale *= rate_hz
-    with np.errstate(over="ignore"):    # a garbage 1e308 becomes inf (then gated), silently
-        return np.asarray(value, dtype=np.float64) * scale
+def output_unit(mode: str, angle: str) -> str:
+    """The fogmon.units name of a KVH output: ``mode`` 'rate' (angle/s) or 'delta' (angle
+    per sample), ``angle`` 'deg' or 'rad'."""
+    return f"{angle}/s" if mode == "rate" else angle
 
 
 class KvhCodec:
@@ -119,14 +114,27 @@ class KvhCodec:
         return (f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}), axis {self.axis}, "
                 f"{self.rate_hz:g} Hz")
 
+    def _status_seq_temp(self, f: tuple) -> tuple[int, int, float, int]:
+        """Status byte, sequence counter and temperature (deg C; format C: the latest
+        reading, sent every 4th frame) of an unpacked frame, and 1 if its temperature
+        reading was implausible (made NaN), else 0."""
+        if self.fmt == "c":
+            status, seq = f[7], f[8]
+            if seq % 4:
+                return status, seq, self._last_temp_c, 0
+            self._last_temp_c, bad = _plausible_temp_c(float(f[6]))   # held until the next reading
+            return status, seq, self._last_temp_c, bad
+        status, seq, reading = (f[6], f[7], f[8]) if self.fmt == "a" else (f[7], f[8], f[9])
+        temp_c, bad = _plausible_temp_c(float(reading))
+        return status, seq, temp_c, bad
+
     def feed(self, data: bytes) -> Frames:
         buf = self._buf
         buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
         seqs, gyro, valid, temps, runs = [], [], [], [], []
-        ai, fmt = self._axis_i, self.fmt
-        t_lo, t_hi = plausibility.TEMP_RANGE_C
+        ai = self._axis_i
         crc_err = skipped = bad_temp = 0
         run = self._run
         i = 0
@@ -151,20 +159,8 @@ class KvhCodec:
                 i = j + 1
                 continue
             f = layout.unpack_from(frame)
-            if fmt == "a":
-                status, seq, temp = f[6], f[7], float(f[8])
-            elif fmt == "b":
-                status, seq, temp = f[7], f[8], float(f[9])
-            else:
-                status, seq = f[7], f[8]
-                temp = float(f[6]) if seq % 4 == 0 else None
-            if temp is not None and not t_lo <= temp <= t_hi:   # NaN too
-                bad_temp += 1
-                temp = math.nan
-            if fmt == "c":
-                if temp is not None:
-                    self._last_temp_c = temp   # held until the next reading
-                temp = self._last_temp_c
+            status, seq, temp, implausible = self._status_seq_temp(f)
+            bad_temp += implausible
             seqs.append(seq & 0x7F)
             gyro.append(f[ai])
             valid.append(bool(status >> ai & 1))
@@ -179,9 +175,17 @@ class KvhCodec:
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
         c[plausibility.TEMP_COUNTER] += bad_temp
-        rate, bad = plausibility.gate(to_dph(gyro, self.rot, self.units, self.rate_hz), self.max_rate_dph, valid)
+        rate_dph = to_dph(gyro, output_unit(self.rot, self.units), self.rate_hz)
+        rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
         return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
+
+
+def _plausible_temp_c(temp_c: float) -> tuple[float, int]:
+    """A temperature reading (deg C), NaN when outside plausibility.TEMP_RANGE_C (NaN too),
+    and 1 if it was, else 0."""
+    t_lo, t_hi = plausibility.TEMP_RANGE_C
+    return (temp_c, 0) if t_lo <= temp_c <= t_hi else (math.nan, 1)
 
 
 def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),

@@ -23,17 +23,16 @@ from __future__ import annotations
 import math
 import re
 
+from fogmon import units
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
-from fogmon.sources.framing import LineFramer
 from fogmon.sources.frames import Frames
+from fogmon.sources.framing import LineFramer
 
 DEFAULT_RATE_HZ = 100.0
-_D = 180 / math.pi
-#: rate column name -> (rate or per-sample delta, deg/h per unit (per s for deltas))
-RATE_COLUMNS = {"rate_dph": ("rate", 1.0), "rate_dps": ("rate", 3600.0),
-                "rate_rps": ("rate", 3600.0 * _D), "delta_deg": ("delta", 3600.0),
-                "delta_rad": ("delta", 3600.0 * _D), "delta_arcsec": ("delta", 1.0)}
+#: rate column name -> its unit (fogmon.units): a rate, or an angle per sample
+RATE_COLUMNS = {"rate_dph": "deg/h", "rate_dps": "deg/s", "rate_rps": "rad/s", "delta_deg": "deg",
+                "delta_rad": "rad", "delta_arcsec": "arcsec"}
 _SPLIT = re.compile(rb"[,;\s]+")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -89,8 +88,7 @@ class LinesCodec:
         has_seq = "seq" in self._names
         self.seq_modulus = (mod or 2 ** 62) if has_seq else None
         self._rate_name = next(n for n in self._names if n in RATE_COLUMNS)
-        mode, dph = RATE_COLUMNS[self._rate_name]
-        self._scale = dph * (self.rate_hz if mode == "delta" else 1.0)
+        self._scale = units.dph_scale(RATE_COLUMNS[self._rate_name], self.rate_hz)
         self.aux_names = tuple(n for n in self._names if n not in ("-", "seq", "valid") and n not in RATE_COLUMNS)
         self._framer = LineFramer(512)
         self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
@@ -111,7 +109,7 @@ class LinesCodec:
         before = fr.dropped_bytes, fr.dropped_lines
         names, ncol = self._names, len(self._names)
         seq, rate, valid = [], [], []
-        aux = {k: [] for k in self.aux_names}
+        aux: dict[str, list[float]] = {k: [] for k in self.aux_names}
         bad = bad_bytes = 0
         mod = self.seq_modulus
         for line in fr.feed(data):
@@ -120,7 +118,7 @@ class LinesCodec:
             try:
                 if len(cells) != ncol:
                     raise ValueError
-                for name, cell in zip(names, cells):
+                for name, cell in zip(names, cells, strict=True):
                     if name == "-":
                         continue
                     v = float(cell)
@@ -143,6 +141,6 @@ class LinesCodec:
         c["frames_ok"] += len(rate)
         c["bad_lines"] += bad + fr.dropped_lines - before[1]
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
-        rate, n = plausibility.gate(rate, self.max_rate_dph, valid)
+        rate_dph, n = plausibility.gate(rate, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += n
-        return Frames.from_lists(seq, rate, valid, aux)
+        return Frames.from_lists(seq, rate_dph, valid, aux)

@@ -19,10 +19,11 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from typing import Iterator
+from collections.abc import Iterator
 
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
+from fogmon.sources.base import RawTap
 from fogmon.sources.frames import Frames
 from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 
@@ -35,13 +36,23 @@ class LiveSource:
     device, for messages and errors) and, for ``("data", ...)`` items, ``_consume``."""
 
     device_errors: tuple[type[BaseException], ...] = (OSError,)
+    #: a live device has no length (fogmon.sources.base.Source)
+    n_samples: int | None = None
+    name: str
+    rate_hz: float
+    aux_names: tuple[str, ...]
+
+    @property
+    def decoder_counters(self) -> dict[str, int]:
+        """The decoder's counters (CRC errors, bad frames, ...), for error events."""
+        raise NotImplementedError
 
     def __init__(self, grid: GridAssembler, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), clock=time.monotonic) -> None:
         self.grid = grid
         self.block_s, self.idle_s, self.backoff_s = block_s, idle_s, backoff_s
         self._clock = clock
-        self._taps: list = []
+        self._taps: list[RawTap] = []
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -49,7 +60,12 @@ class LiveSource:
         self.opened_s: float | None = None   # time.monotonic() when the device was first opened
         self._limit: int | None = None
 
-    def add_tap(self, tap) -> None:
+    @property
+    def pending(self) -> int:
+        """Bytes of a partial frame the decoder holds (none for frame-based input)."""
+        return 0
+
+    def add_tap(self, tap: RawTap) -> None:
         """Register a tap (the archive) for the raw input (adding one twice is a no-op)."""
         if tap not in self._taps:
             self._taps.append(tap)
@@ -118,6 +134,34 @@ class LiveSource:
 
     # -- consumer --------------------------------------------------------------------
     def blocks(self) -> Iterator[Block]:
+        errors = self._start()
+        parts: list[Block] = []
+        events: list[Event] = []
+        last_yield = self._clock()
+        ended = False
+        try:
+            while not ended:
+                timeout = last_yield + self.block_s - self._clock()
+                try:
+                    item = self._q.get(timeout=timeout) if timeout > 0 else self._q.get_nowait()
+                except queue.Empty:
+                    item = None
+                if item is not None:
+                    ended = self._handle(item, parts, events)
+                    if not ended and self._clock() - last_yield < self.block_s:
+                        continue
+                now = self._clock()
+                if parts or events or ended or now - last_yield >= self.idle_s:
+                    b = self._take(parts, events, errors)
+                    if len(b) or b.events or not ended:
+                        yield b
+                    last_yield = now
+        finally:
+            self.close()
+
+    def _start(self) -> ErrorEvents:
+        """Open the device (a one-line FogmonError if it cannot be) and start the reader
+        thread; the decoder's error events from now on."""
         try:
             handle = self._open()
         except self.device_errors as e:
@@ -127,60 +171,41 @@ class LiveSource:
         errors = ErrorEvents(self.decoder_counters)
         self._thread = threading.Thread(target=self._read_loop, args=(handle,), name="fogmon-reader", daemon=True)
         self._thread.start()
-        parts: list[Block] = []
-        events: list[Event] = []
-        last_yield = self._clock()
-        ended = False
+        return errors
 
-        def take() -> Block:
-            """Everything consumed since the last block, as one block with its events."""
-            nonlocal parts, events
-            tail = self.grid.push(Frames.empty(self.aux_names), events + errors.poll(self.grid.t_next_s))
-            b = concat_blocks([*parts, tail]) if parts else tail
-            parts, events = [], []
-            return b
+    def _handle(self, item: tuple, parts: list[Block], events: list[Event]) -> bool:
+        """One item of the reader thread's queue: blocks to ``parts``, events to
+        ``events``; True when the stream ended (device end or --duration-s limit)."""
+        kind = item[0]
+        if kind == "end":
+            return True
+        if kind == "event":
+            self._own[item[3]] += 1
+            events.append(Event(self.grid.t_next_s, item[1], item[2]))
+        elif kind == "reopened":
+            self._own["reconnects"] += 1
+            events.append(Event(self.grid.t_next_s, "reconnect",
+                                f"{self._what()} back after {self._clock() - item[1]:.2f} s"))
+            self._reconnected()
+        elif kind == "break":
+            self.grid.mark_break(item[1])
+        else:
+            b, full = self._place(item[1]) if kind == "frames" else self._consume(item)
+            if b is not None and len(b):
+                parts.append(b)
+            if full:
+                self._stop.set()
+                return True
+        return False
 
-        try:
-            while not ended:
-                timeout = last_yield + self.block_s - self._clock()
-                try:
-                    item = self._q.get(timeout=timeout) if timeout > 0 else self._q.get_nowait()
-                except queue.Empty:
-                    item = None
-                if item is not None:
-                    kind = item[0]
-                    if kind == "end":
-                        ended = True
-                    elif kind == "event":
-                        self._own[item[3]] += 1
-                        events.append(Event(self.grid.t_next_s, item[1], item[2]))
-                    elif kind == "reopened":
-                        self._own["reconnects"] += 1
-                        events.append(Event(self.grid.t_next_s, "reconnect",
-                                            f"{self._what()} back after {self._clock() - item[1]:.2f} s"))
-                        self._reconnected()
-                    elif kind == "break":
-                        self.grid.mark_break(item[1])
-                    else:
-                        if kind == "frames":
-                            b, full = self._place(item[1])
-                        else:
-                            b, full = self._consume(item)
-                        if b is not None and len(b):
-                            parts.append(b)
-                        if full:
-                            ended = True
-                            self._stop.set()
-                    if not ended and self._clock() - last_yield < self.block_s:
-                        continue
-                now = self._clock()
-                if parts or events or ended or now - last_yield >= self.idle_s:
-                    b = take()
-                    if len(b) or b.events or not ended:
-                        yield b
-                    last_yield = now
-        finally:
-            self.close()
+    def _take(self, parts: list[Block], events: list[Event], errors: ErrorEvents) -> Block:
+        """Everything consumed since the last block, as one block with its events (the
+        lists are emptied)."""
+        tail = self.grid.push(Frames.empty(self.aux_names), events + errors.poll(self.grid.t_next_s))
+        b = concat_blocks([*parts, tail]) if parts else tail
+        parts.clear()
+        events.clear()
+        return b
 
     def _place(self, frames: Frames) -> tuple[Block, bool]:
         """Frames decoded by the reader thread onto the grid, cut at the limit."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fogmon.errors import FogmonError
 
@@ -37,7 +38,7 @@ TEMP_RANGE_C = (-60.0, 125.0)
 TEMP_COUNTER = "implausible_temp_c"
 
 
-def gate(rate_dph: np.ndarray, max_abs_dph: float, valid: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+def gate(rate_dph: ArrayLike, max_abs_dph: float, valid: ArrayLike | None = None) -> tuple[np.ndarray, int]:
     """``rate_dph`` (deg/h) with every value beyond +-``max_abs_dph`` replaced by NaN, and
     how many samples were implausible. Without ``valid`` only finite values beyond the
     range count (NaN is already an invalid sample); with ``valid`` (what the device

@@ -1,4 +1,4 @@
-"""Replay sources: a replay-log CSV (CONTRACT section 1) and a raw serial capture (the
+"""Replay sources: a replay-log CSV (docs/formats.md) and a raw serial capture (the
 bytes a device sent, decoded again with its protocol). Both yield the same blocks a live
 source would, as fast as they can (the pipeline paces ``--realtime``; a replay log can
 also pace itself for use outside it).
@@ -10,19 +10,19 @@ gives exactly the samples the live monitor saw."""
 from __future__ import annotations
 
 import functools
-import json
 import math
 import os
 from collections import deque
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
 from fogmon.block import Block, Event
+from fogmon.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
 from fogmon.errors import FogmonError
 from fogmon.recording import CHUNK_BYTES, ReplayLogReader, Rows, grid_positions
 from fogmon.sources import plausibility
-from fogmon.sources.codecs import OPTION_KEYS, PROTOCOLS, codec_from_options
+from fogmon.sources.codecs import codec_from_options
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
 from fogmon.sources.pacing import Pacer
 
@@ -30,8 +30,6 @@ from fogmon.sources.pacing import Pacer
 FAST_BLOCK = 8192
 #: block length (s) when paced
 PACED_BLOCK_S = 0.1
-SIDECAR_SUFFIX = ".json"
-CAPTURE_FORMAT = "fogmon capture v1"
 
 
 def _block_len(rate_hz: float, speed: float | None) -> int:
@@ -55,7 +53,8 @@ class ReplayLogSource:
         self.rate_hz = reader.sample_rate_hz
         self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")
         self._max_abs_dph = max_abs_dph
-        t0 = t_last = None
+        t0: float | None = None
+        t_last = math.nan
         last = -1
         for rows in reader.chunks():  # the checking pass
             if not len(rows):
@@ -66,7 +65,8 @@ class ReplayLogSource:
             t_last = float(rows.t_s[-1])
         if t0 is None:
             raise FogmonError(f"{reader.name}: no data rows")
-        self.t_first_s, self.t_last_s, self.n_samples = t0, t_last, last + 1
+        self.t_first_s: float = t0
+        self.t_last_s, self.n_samples = t_last, last + 1
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
                          plausibility.COUNTER: 0}
         self._pacer = Pacer(speed)
@@ -129,11 +129,11 @@ class _LogGrid:
         idx = grid_positions(rows.t_s, self.t0_s, self.fs, self.name, self._last, rows.line_of)
         d = np.diff(idx, prepend=self._last)
         g = np.flatnonzero(d > 1)
-        self._gaps.extend(zip((idx[g] - d[g] + 1).tolist(), (d[g] - 1).tolist()))
+        self._gaps.extend(zip((idx[g] - d[g] + 1).tolist(), (d[g] - 1).tolist(), strict=True))
         self._last = int(idx[-1])
         j_of = idx // self.n
         cuts = [0, *(np.flatnonzero(np.diff(j_of)) + 1).tolist(), len(idx)]
-        for a, b in zip(cuts[:-1], cuts[1:]):
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
             j = int(j_of[a])
             while self._j < j:
                 yield self._emit(self.n)
@@ -161,96 +161,6 @@ class _LogGrid:
             evs.append(Event(evs[-1].t_s, "gap", f"{len(gaps) - MAX_GAP_EVENTS} more gaps in this block"))
         b = Block.make(t, self._rate[:m], aux={k: v[:m] for k, v in self._aux.items()}, events=evs)
         return b, int(np.count_nonzero(self._present[:m])), len(gaps)
-
-
-#: The decoder options a serial capture's sidecar may hold (names of codec options()).
-DECODER_FIELDS = OPTION_KEYS
-
-
-def _text(v, folder):
-    return None if isinstance(v, str) else f"expected text, got {v!r}"
-
-
-def _text_or_null(v, folder):
-    return None if v is None or isinstance(v, str) else f"expected text or null, got {v!r}"
-
-
-def _one_of(*values):
-    def check(v, folder):
-        return None if v in values else f"expected one of {', '.join(map(str, values))}, got {v!r}"
-    return check
-
-
-def _number(minimum: float, strict: bool):
-    def check(v, folder):
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and \
-            (v > minimum if strict else v >= minimum)
-        return None if ok else f"expected a number {'>' if strict else '>='} {minimum:g}, got {v!r}"
-    return check
-
-
-def _count(v, folder):
-    return None if isinstance(v, int) and not isinstance(v, bool) and v >= 0 else \
-        f"expected a whole number >= 0, got {v!r}"
-
-
-def _file_in_folder(v, folder):
-    """A file named by the sidecar must be in the sidecar's own folder: a plain file name,
-    not a path (absolute, with .., or through a link leading elsewhere)."""
-    if not isinstance(v, str) or not v or v in (".", "..") or os.path.basename(v) != v or "\\" in v:
-        return f"must name a file in the sidecar's folder ({folder}), got {v!r}"
-    real = os.path.realpath(os.path.join(folder, v))
-    if os.path.dirname(real) != os.path.realpath(folder):
-        return f"{v!r} leads outside the sidecar's folder ({folder})"
-    return None
-
-
-def _breaks(v, folder):
-    if not isinstance(v, list):
-        return f"expected a list, got {v!r}"
-    for i, b in enumerate(v):
-        if not (isinstance(b, dict) and "offset" in b and "missing_est" in b and _count(b["offset"], folder) is None
-                and _number(0, False)(b["missing_est"], folder) is None):
-            return f"item {i}: expected {{\"offset\": bytes >= 0, \"missing_est\": samples >= 0}}, got {b!r}"
-    return None
-
-
-#: Sidecar fields -> check (None if fine, else why not). ``format`` and ``kind`` are
-#: required; unknown fields are ignored (newer writers may add some).
-SIDECAR_FIELDS = {
-    "kind": _one_of("serial", "can"), "protocol": _one_of(*PROTOCOLS), "rate_hz": _number(0, True),
-    "kvh_rot": _one_of("rate", "delta"), "kvh_units": _one_of("deg", "rad"), "axis": _one_of("x", "y", "z"),
-    "columns": _text, "max_rate_dph": _number(0, True), "breaks": _breaks, "piece": _count, "started_utc": _text,
-    "port": _text, "baud": _count, "channel": _text_or_null, "interface": _text_or_null, "dbc": _file_in_folder,
-    "message": _text_or_null, "rate_signal": _text_or_null, "rate_unit": _text_or_null,
-    "temp_signal": _text_or_null, "counter_signal": _text_or_null, "valid_signal": _text_or_null,
-}
-
-
-def read_sidecar(path: str) -> dict | None:
-    """The capture sidecar ``path + '.json'`` as a dict (checked field by field: a bad
-    one is a one-line FogmonError naming the file and the field), or None when there is
-    none."""
-    side = path + SIDECAR_SUFFIX
-    if not os.path.exists(side):
-        return None
-    try:
-        with open(side, encoding="utf-8") as fh:
-            d = json.load(fh)
-    except OSError as e:
-        raise FogmonError(f"{side}: not a readable capture sidecar ({e.strerror})") from None
-    except ValueError as e:
-        raise FogmonError(f"{side}: not a readable capture sidecar (bad JSON: {e})") from None
-    if not isinstance(d, dict) or d.get("format") != CAPTURE_FORMAT:
-        raise FogmonError(f"{side}: not a fogmon capture sidecar (missing \"format\": \"{CAPTURE_FORMAT}\")")
-    if "kind" not in d:
-        raise FogmonError(f"{side}: field kind: missing")
-    folder = os.path.dirname(os.path.abspath(side))
-    for name, check in SIDECAR_FIELDS.items():
-        why = check(d[name], folder) if name in d else None
-        if why:
-            raise FogmonError(f"{side}: field {name}: {why}")
-    return d
 
 
 class RawCaptureSource:
@@ -295,7 +205,7 @@ class RawCaptureSource:
         errors = ErrorEvents(self.codec.counters)
         for path in self.paths:
             try:
-                fh = open(path, "rb")
+                fh = open(path, "rb")  # noqa: SIM115 (closed by the with below; only opening errors are caught)
             except OSError as e:
                 raise FogmonError(f"{path}: cannot read: {e.strerror}") from None
             with fh:
@@ -340,6 +250,7 @@ def open_raw_capture(path: str | Sequence[str], overrides: dict | None = None) -
             offset += os.path.getsize(p)
         except OSError:
             raise FogmonError(f"{p}: no such file") from None
+    opts = opts or {}
     opts.update({k: v for k, v in (overrides or {}).items() if v is not None})
     if "protocol" not in opts:
         raise FogmonError(f"{paths[0]}: a raw serial capture needs --protocol "
@@ -362,7 +273,7 @@ class ReplayLogSet:
         first = self._sources[0]
         self.rate_hz = first.rate_hz
         aux = first.aux_names
-        for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:]):
+        for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:], strict=False):
             if src.rate_hz != self.rate_hz:
                 raise FogmonError(f"{path}: sample_rate_hz {src.rate_hz:g} differs from {self.paths[0]} "
                                   f"({self.rate_hz:g} Hz): not pieces of one recording")

@@ -9,12 +9,14 @@ frames that did arrive), made exact by the sequence counter.
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
 
 import serial
 
 from fogmon.block import Block
+from fogmon.sources.base import Codec
 from fogmon.sources.grid import GridAssembler
 from fogmon.sources.live import LiveSource
 
@@ -34,7 +36,7 @@ class SerialSource(LiveSource):
 
     device_errors = (serial.SerialException, OSError, ValueError)
 
-    def __init__(self, port: str, baud: int, codec, block_s: float = 0.1, idle_s: float = 0.5,
+    def __init__(self, port: str, baud: int, codec: Codec, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), opener=None, clock=time.monotonic) -> None:
         super().__init__(GridAssembler(codec.rate_hz, codec.seq_modulus, codec.aux_names),
                          block_s, idle_s, backoff_s, clock)
@@ -51,6 +53,10 @@ class SerialSource(LiveSource):
         return self.codec.counters
 
     @property
+    def pending(self) -> int:
+        return self.codec.pending
+
+    @property
     def counters(self) -> dict[str, int]:
         return {**self.codec.counters, **self.grid.counters, **self._own}
 
@@ -65,10 +71,8 @@ class SerialSource(LiveSource):
         return self._opener()
 
     def _close(self, ser) -> None:
-        try:
+        with contextlib.suppress(serial.SerialException, OSError):
             ser.close()
-        except (serial.SerialException, OSError):
-            pass
 
     def _reconnected(self) -> None:
         self._need_break = True

@@ -6,7 +6,7 @@ pipeline's bounded reader queue holds it back while processing catches up."""
 from __future__ import annotations
 
 import os
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -34,11 +34,12 @@ class SimulatedSource:
             model = load_model(model)
         if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
             raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
-        self.seed = int(np.random.SeedSequence().entropy) if seed is None else int(seed)
+        fresh = np.random.SeedSequence().entropy  # an int when drawn fresh
+        self.seed = int(fresh) if seed is None else int(seed)  # type: ignore[arg-type]
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
         self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
-        #: length in samples when bounded (None: endless), as fogmon.pipeline.record_samples reads it
+        #: length in samples when bounded (None: endless), the pipeline sizes its default window with it
         self.n_samples = (int(round(duration_s * self.rate_hz)) if duration_s is not None
                           else int(like.grid_index()[-1]) + 1 if like is not None else None)
         self.meta: dict = {}

@@ -1,0 +1,129 @@
+"""Command-line options of the streaming pipeline (`fogmon replay`, `fogmon monitor`):
+engine, outputs, pacing; and what they build: a PipelineConfig and the sinks. The only
+place that reads these options from an argparse namespace."""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from fogmon.cli.values import number, positive
+from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
+from fogmon.errors import FogmonError
+from fogmon.pipeline import LIVE_WINDOW_SAMPLES, MAX_WINDOW_SAMPLES, MIN_WINDOW_SAMPLES, PipelineConfig
+from fogmon.sinks.base import Sink
+
+
+def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True) -> None:
+    """Options of `fogmon replay` and `fogmon monitor` (``replay=False``: no --realtime):
+    engine, sinks, pacing."""
+    g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
+    g.add_argument("--window-s", type=positive, metavar="W",
+                   help="window length in s. Default: replay: a quarter of the recording (of its first "
+                        "--duration-s s) rounded down to a power of two of samples, within "
+                        f"{MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} samples; live: {LIVE_WINDOW_SAMPLES} samples "
+                        "(65.5 s at 1 kHz, 655.4 s at 100 Hz), or that rule applied to --duration-s when it "
+                        "gives a shorter window")
+    g.add_argument("--hop-s", type=positive, metavar="H",
+                   help="a new ADEV + noise fit every H s of recording time, at most the window "
+                        "(default: window/8)")
+    g.add_argument("--raw-rate", action="store_true",
+                   help="analyse rate_dph as recorded even when the recording has rot_dps; by default "
+                        "DAVAR and the fits see the gyro's error rate_dph - 3600 x rot_dps (deg/h) "
+                        "against the reference rotation")
+    g.add_argument("--keep-motion", action="store_true",
+                   help="analyse platform motion too: by default stretches where the rate moves far beyond "
+                        "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) "
+                        "are kept out of DAVAR and the fits, with platform_motion events (docs/motion.md)")
+    g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
+                   help="averaging times: octave (default), decade, all, an integer N = "
+                        f"1..{MAX_PER_DECADE} (N log-spaced per decade), or tau values in s written with a "
+                        "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
+                        "one sample <= tau <= window/4 can be computed: other values are left out with a "
+                        "warning")
+    o = parser.add_argument_group("output (Rerun)")
+    o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
+                   "open it with `rerun OUT.rrd`")
+    o.add_argument("--connect", metavar="URL", nargs="?", const="rerun+http://127.0.0.1:9876/proxy",
+                   help="stream to a running Rerun viewer (default URL rerun+http://127.0.0.1:9876/proxy; "
+                        "start one with `rerun`)")
+    o.add_argument("--serve", action="store_true",
+                   help="host a Rerun gRPC server that viewers connect to (`rerun URL` as printed); "
+                        "keeps serving after a replay until Ctrl-C")
+    o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
+                   help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
+    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876,
+                   help="port --serve listens on, 1..65535 (default 9876)")
+    o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None if replay else 3600.0,
+                   help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of S s of recording time "
+                         "each (default: one file)" if replay else
+                         "start new output files every S s of recording time: the archive's samples-NNNN.csv "
+                         "and raw capture pieces, and the .rrd as OUT-NNNN.rrd (default 3600 = hourly; "
+                         "0 = one piece)"))
+    o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    o.add_argument("--quiet", action="store_true", help="no console summary at the end")
+    p = parser.add_argument_group("pacing")
+    if "--duration-s" not in parser._option_string_actions:  # the source options may define it
+        p.add_argument("--duration-s", type=positive, metavar="S",
+                       help="stop after S s of recording time")
+    if replay and "--realtime" not in parser._option_string_actions:
+        p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
+                       help="pace a replay at X times real time (default X = 1 when given; "
+                            "without --realtime a replay runs as fast as it can)")
+    parser.set_defaults(realtime=None)  # a live run is never paced
+
+
+def _rotate_s(text: str) -> float | None:
+    """``--rotate-s``: S > 0, or 0 for no rotation (None)."""
+    try:
+        if float(text) == 0:
+            return None
+    except ValueError:
+        pass
+    return positive(text)
+
+
+def parse_taus(text: str):
+    """``--taus`` value -> what ``tau_grid`` takes: a grid name, an int per decade
+    (1..MAX_PER_DECADE), or a tau_s array (values with a decimal point or comma-separated)."""
+    s = text.strip().lower()
+    if s in ("octave", "decade", "all"):
+        return s
+    if s.isdigit():
+        try:
+            return check_per_decade(int(s))
+        except FogmonError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
+    try:
+        tau_s = np.array([float(x) for x in s.split(",")], dtype=np.float64)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected octave, decade, all, an integer per decade or tau values in s, got {text!r}") from None
+    if not np.all(np.isfinite(tau_s) & (tau_s > 0)):
+        raise argparse.ArgumentTypeError(f"tau values must be finite and > 0 s, got {text!r}")
+    return tau_s
+
+
+def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    """The PipelineConfig of parsed pipeline options (``add_pipeline_arguments``); the
+    progress bar only on a terminal and when not paced at or below real time."""
+    import sys
+
+    realtime = args.realtime
+    return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
+                          keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
+                          rotate_s=args.rotate_s,
+                          progress=not args.no_progress and sys.stderr.isatty() and (realtime is None or realtime > 1))
+
+
+def build_sinks(args: argparse.Namespace) -> list[Sink]:
+    """The sinks the command line asks for: Rerun (file and/or live) and the console."""
+    from fogmon.sinks.console import ConsoleSink
+
+    out: list[Sink] = []
+    if args.rrd or args.connect or args.serve:
+        from fogmon.sinks.rerun_sink import RerunSink
+        out.append(RerunSink(rrd_path=args.rrd, connect_url=args.connect, serve=args.serve, bind=args.bind,
+                             port=args.port, rotate=bool(args.rotate_s)))
+    out.append(ConsoleSink(quiet=args.quiet))
+    return out

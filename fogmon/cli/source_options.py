@@ -1,0 +1,110 @@
+"""Command-line options of the sources (`fogmon replay`, `fogmon monitor`) and the
+SourceOptions they build: the only place that reads them from an argparse namespace."""
+from __future__ import annotations
+
+import argparse
+from dataclasses import fields
+
+from fogmon.cli.values import number, positive
+from fogmon.sources import plausibility as pl
+from fogmon.sources.codecs import PROTOCOLS
+from fogmon.sources.options import SourceOptions
+
+#: The highest --rate-hz accepted (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz).
+MAX_RATE_HZ = 1e6
+
+
+def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") -> None:
+    """Add the source options. ``mode`` 'live' (monitor), 'replay' or 'both': live adds
+    ``--serial``/``--can`` and the port/bus options; replay adds ``--tolerate-bad-rows``;
+    decoder options (``--protocol``, ``--dbc``...) go to both. Pacing (``--realtime``) and
+    ``--duration-s`` belong to the pipeline (fogmon.pipeline)."""
+    live, replay = mode in ("live", "both"), mode in ("replay", "both")
+    _add_serial_arguments(parser.add_argument_group("serial gyro" if live else "raw serial capture decoding"), live)
+    _add_can_arguments(parser.add_argument_group("CAN gyro" if live else "CAN log decoding"), live)
+    parser.add_argument("--max-rate-dph", type=positive, metavar="X",
+                        help="plausibility gate in deg/h: a rate beyond +-X is a corrupt value, not data; the "
+                             "sample becomes invalid and is counted (implausible_samples) and reported. Default: "
+                             f"the device's full scale x {pl.MARGIN:g}: kvh-a/b/c "
+                             f"{pl.KVH_DSP17XX_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP17XX_FULL_SCALE_DPH / 3600:g} deg/s), "
+                             f"dsp3000 {pl.KVH_DSP3000_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP3000_FULL_SCALE_DPH / 3600:g} "
+                             f"deg/s); lines, CAN and replay logs {pl.GENERIC_MAX_ABS_DPH:,.0f} "
+                             f"({pl.GENERIC_MAX_ABS_DPH / 3600:,.0f} deg/s). Raw captures replay with the value "
+                             "their sidecar recorded unless given")
+    if replay:
+        parser.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
+                       "instead of stopping at the first one")
+
+
+def _add_serial_arguments(g, live: bool) -> None:
+    """The serial device (live) and serial decoder options."""
+    if live:
+        g.add_argument("--serial", metavar="PORT", help="serial port of the gyro (/dev/ttyUSB0, COM3, or a "
+                       "pyserial URL such as loop:// or socket://HOST:PORT); reopened with backoff if it disappears")
+        g.add_argument("--baud", type=number(1, 50_000_000, integer=True), metavar="B", help="baud rate, "
+                       "1..50,000,000 (default per protocol: kvh-a/b/c 921600, "
+                       "dsp3000 38400, lines 115200)")
+    g.add_argument("--protocol", choices=PROTOCOLS, help="serial protocol: kvh-a|kvh-b|kvh-c = KVH DSP-1750/1760/1775 "
+                   "binary formats A/B/C, dsp3000 = KVH DSP-3000 ASCII (deg/s), lines = ASCII/CSV lines with "
+                   "--columns (default for --serial: kvh-a; a raw capture takes it from its .json sidecar)")
+    g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
+                   "angle (units per sample) (default: delta for kvh-*, rate for dsp3000)")
+    g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of KVH binary output (default: rad)")
+    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor, also the axis of a ROS bag "
+                   "or PX4 ULog recording (default: z)")
+    g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
+                   "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
+                   "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
+                   "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
+    g.add_argument("--rate-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ", help="sample rate in Hz "
+                   f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, "
+                   "dsp3000 100, lines 100; CAN: the DBC message cycle time)")
+
+
+def _add_can_arguments(c, live: bool) -> None:
+    """The CAN bus (live) and CAN decoder (DBC) options."""
+    if live:
+        c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
+        c.add_argument("--interface", default="socketcan", metavar="I", help="python-can interface: socketcan, "
+                       "pcan, kvaser, vector, slcan, virtual, ... (default: socketcan)")
+        c.add_argument("--can-bitrate", type=number(1_000, 8_000_000, integer=True), metavar="BPS",
+                       help="CAN bit rate in bit/s, 1,000..8,000,000, for interfaces that set it (default: "
+                            "leave the interface as configured)")
+    c.add_argument("--dbc", metavar="F", help="DBC file describing the gyro's CAN frames (see "
+                   "fogmon/data/gyro_example.dbc)")
+    c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "
+                   "holding --can-rate; required if several do)")
+    c.add_argument("--can-rate", metavar="SIGNAL", help="DBC signal with the angular rate "
+                   "(default: rate); its DBC unit (deg/h, deg/s, rad/s, deg, rad, arcsec) sets the conversion")
+    c.add_argument("--can-rate-unit", metavar="UNIT", help="override the rate signal's DBC unit: deg/h, deg/s, "
+                   "rad/s (rates) or deg, rad, arcsec (angle per sample)")
+    c.add_argument("--can-temp", metavar="SIGNAL", help="DBC signal with the temperature in deg C "
+                   "(default: temperature if the message has it)")
+    c.add_argument("--can-counter", metavar="SIGNAL", help="DBC signal with the rolling counter used for gap "
+                   "detection (default: counter if the message has it)")
+    c.add_argument("--can-valid", metavar="SIGNAL", help="DBC signal that is nonzero when the sample is valid "
+                   "(default: valid if the message has it)")
+
+
+def source_options(args: argparse.Namespace) -> SourceOptions:
+    """The SourceOptions of parsed source options (``add_source_arguments``; options a
+    command does not have keep their defaults)."""
+    given = vars(args)
+    return SourceOptions(**{f.name: given[f.name] for f in fields(SourceOptions)
+                            if given.get(f.name) is not None})
+
+
+def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = False) -> None:
+    """The reader options (``axis`` adds ``--axis`` too, for commands without the serial
+    decoder options that already have it)."""
+    g = parser.add_argument_group("other recording formats (ROS bag/MCAP, PX4 ULog, MDF4, LAS; docs/readers.md)")
+    g.add_argument("--topic", metavar="NAME", help="ROS bag/MCAP: the sensor_msgs/Imu topic (default: the only "
+                   "one); PX4 ULog: sensor_gyro (default; NAME:INSTANCE for another instance) or sensor_combined")
+    if axis:
+        g.add_argument("--axis", choices=("x", "y", "z"), help="gyro axis of a ROS/ULog source (default: z)")
+    g.add_argument("--channel", metavar="NAME", help="MDF4: the rate channel (unit from the file); LAS: the rate "
+                   "curve (default: the only curve with a rate unit)")
+    g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve (default: the index curve when it "
+                   "is a time; a depth-indexed file needs it)")
+    g.add_argument("--rate-unit", metavar="UNIT", help="MDF4/LAS: the rate's unit when the file does not say "
+                   "it or says it wrongly: deg/h, deg/s, rad/s")

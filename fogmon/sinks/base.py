@@ -1,0 +1,103 @@
+"""The sink contract: what the pipeline hands its outputs (Rerun, archive, console) and
+when. A sink subclasses ``Sink`` and overrides the events it needs; the pipeline knows
+only this module, never a concrete sink (those are chosen in fogmon.cli)."""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fogmon.block import Block, Event
+from fogmon.davar.fit import NAMES, NoiseFit
+from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.units import coefficient_unit
+
+#: IEEE-952 coefficients in the order they are shown -> their units.
+COEFFICIENTS = {name: coefficient_unit(name) for name in NAMES}
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """What sinks learn before the first block: source, sample rate (Hz), window/hop (s),
+    taus (s), auxiliary channel names."""
+
+    source_name: str
+    rate_hz: float
+    window_s: float
+    hop_s: float
+    tau_s: np.ndarray
+    aux_names: tuple[str, ...]
+    #: what DAVAR analyses: "rate_dph", or "rate_dph - 3600 x rot_dps" (error vs reference rotation)
+    analysed: str = "rate_dph"
+
+
+@dataclass
+class Summary:
+    """The end-of-run account: what was processed, the whole-run ADEV and fit, counters."""
+
+    source_name: str
+    rate_hz: float
+    window_s: float
+    hop_s: float
+    n_samples: int = 0
+    n_invalid: int = 0
+    t_first_s: float = math.nan
+    t_last_s: float = math.nan
+    n_windows: int = 0
+    wall_s: float = 0.0
+    source_wall_s: float = 0.0    # wall time from opening the source to the end of the run, s
+    interrupted: bool = False
+    analysed: str = "rate_dph"    # what DAVAR analysed (see StreamInfo.analysed)
+    failed: bool = False          # stopped by an error (reported by the caller, no summary)
+    overall: AdevResult | None = None    # the whole run (its latest OVERALL_MAX_SAMPLES samples)
+    overall_fit: NoiseFit | None = None  # NoiseFit of ``overall``
+    overall_first_s: float = math.nan
+    counters: dict[str, int] = field(default_factory=dict)
+    event_counts: dict[str, int] = field(default_factory=dict)
+    outputs: list[str] = field(default_factory=list)
+    motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
+    motion_samples: int = 0       # valid samples the motion gate made invalid
+
+    @property
+    def duration_s(self) -> float:
+        """Recording time covered, s."""
+        return (self.t_last_s - self.t_first_s + 1.0 / self.rate_hz) if self.n_samples else 0.0
+
+    @property
+    def speed_x(self) -> float:
+        """Recording time / wall time."""
+        return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
+
+
+class Sink:
+    """Receives the pipeline's outputs; every method is optional (no-op here), called in
+    this order: ``start`` once, then ``block``/``frames``/``events``/``rotate``/
+    ``source_counters`` as the run goes, ``finish`` once (also after an error). Sinks
+    finish in increasing ``finish_order`` (the console last, so it can name the files)."""
+
+    finish_order = 0
+
+    def start(self, info: StreamInfo) -> None:
+        """The stream begins (before its first block)."""
+
+    def block(self, block: Block) -> None:
+        """The next samples (deg/h, s), on the source's grid."""
+
+    def frames(self, dadev: DadevResult, fit: NoiseFit, t_end_s: np.ndarray) -> None:
+        """Completed windows: their DadevResult (T rows), its NoiseFit (arrays over T) and
+        the recording time (s) of each window's last sample."""
+
+    def events(self, events: Sequence[Event]) -> None:
+        """Events of the source (gaps, CRC errors, ...) and of the pipeline (jumps, motion)."""
+
+    def rotate(self, piece: int, t_s: float) -> None:
+        """Piece ``piece`` (from 1) of the outputs begins with the next block, at recording
+        time ``t_s`` (--rotate-s)."""
+
+    def source_counters(self, t_s: float, counters: dict[str, int]) -> None:
+        """The source's counters at recording time ``t_s`` (s), after each set of frames."""
+
+    def finish(self, summary: Summary) -> None:
+        """The run ended (``summary.failed``: by an error); close files, print."""

@@ -1,0 +1,47 @@
+"""Angular units -> deg/h: the one table every decoder (KVH binary, DSP-3000, ASCII lines,
+CAN) converts with, and the unit of each IEEE-952 coefficient from its name's suffix."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+_RAD_DEG = 180.0 / math.pi
+#: unit -> (kind, deg/h per unit): kind "rate" = units/s (or /h), "delta" = angle per sample
+#: (deg/h per unit per s of sample period; multiplied by the sample rate in Hz).
+DPH_PER_UNIT: dict[str, tuple[str, float]] = {
+    "deg/h": ("rate", 1.0), "deg/s": ("rate", 3600.0), "rad/s": ("rate", 3600.0 * _RAD_DEG),
+    "deg": ("delta", 3600.0), "rad": ("delta", 3600.0 * _RAD_DEG), "arcsec": ("delta", 1.0),
+}
+#: other spellings of the same units (DBC files write dph, degree signs, ...)
+ALIASES = {"dph": "deg/h", "°/h": "deg/h", "dps": "deg/s", "°/s": "deg/s", "°": "deg"}
+
+#: coefficient-name suffix -> its unit (fogmon.davar.fit.NAMES: Q_arcsec, N_dpsh, ...)
+SUFFIX_UNITS = {"arcsec": "arcsec", "dpsh": "deg/sqrt(h)", "dph": "deg/h", "dphsh": "deg/h/sqrt(h)",
+                "dphh": "deg/h^2"}
+
+
+def canonical(unit: str) -> str | None:
+    """The table's name of ``unit`` (case, spaces and aliases ignored), None if unknown."""
+    key = unit.strip().lower().replace(" ", "")
+    key = ALIASES.get(key, key)
+    return key if key in DPH_PER_UNIT else None
+
+
+def dph_scale(unit: str, rate_hz: float) -> float:
+    """deg/h per unit of ``unit`` (a name of DPH_PER_UNIT); a per-sample angle is scaled
+    by the sample rate ``rate_hz`` (Hz)."""
+    kind, dph = DPH_PER_UNIT[unit]
+    return dph * rate_hz if kind == "delta" else dph
+
+
+def to_dph(value, unit: str, rate_hz: float) -> np.ndarray:
+    """Values in ``unit`` (a name of DPH_PER_UNIT) -> deg/h (float64); a value too large
+    for float64 becomes inf (gated as implausible afterwards), silently."""
+    with np.errstate(over="ignore"):
+        return np.asarray(value, dtype=np.float64) * dph_scale(unit, rate_hz)
+
+
+def coefficient_unit(name: str) -> str:
+    """The unit of an IEEE-952 coefficient from its name's suffix (Q_arcsec -> arcsec)."""
+    return SUFFIX_UNITS[name.rsplit("_", 1)[1]]

@@ -1,0 +1,89 @@
+"""No import cycle: every fogmon module imports alone in a fresh interpreter, and the
+pipeline and the sinks import in either order; library code never imports fogmon.cli."""
+from __future__ import annotations
+
+import ast
+import pkgutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import fogmon
+
+ROOT = Path(fogmon.__file__).resolve().parent
+#: every module but the entry point (``python -m fogmon`` runs the command when imported)
+MODULES = sorted(m.name for m in pkgutil.walk_packages([str(ROOT)], prefix="fogmon.") if m.name != "fogmon.__main__")
+
+
+def _imports(*names: str) -> subprocess.CompletedProcess:
+    code = "import importlib\n" + "".join(f"importlib.import_module({n!r})\n" for n in names)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+
+
+def _module_level_imports(name: str) -> set[str]:
+    """fogmon modules imported when ``name`` is imported (its top-level statements, not
+    the imports inside functions, which run later)."""
+    path = ROOT.joinpath(*name.split(".")[1:])
+    path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+            out.update(f"{node.module}.{a.name}" for a in node.names)
+    return {m for m in out if m in MODULES}
+
+
+def test_no_import_cycle():
+    graph = {m: _module_level_imports(m) for m in MODULES}
+    state: dict[str, int] = {}
+
+    def visit(m: str, path: list[str]) -> None:
+        if state.get(m) == 1:
+            raise AssertionError("import cycle: " + " -> ".join(path[path.index(m):] + [m]))
+        if state.get(m) == 2:
+            return
+        state[m] = 1
+        for n in sorted(graph[m]):
+            visit(n, path + [m])
+        state[m] = 2
+
+    for m in MODULES:
+        visit(m, [])
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_every_module_imports_alone():
+    """Each module in a fresh interpreter, one child process per module (one interpreter
+    would hide a module that works only after another was imported). About 70 cold
+    starts of numpy/scipy/numba: minutes on a loaded machine, so run with -m slow."""
+    code = ("import subprocess, sys\nbad = []\n"
+            f"for n in {MODULES!r}:\n"
+            "    r = subprocess.run([sys.executable, '-c', f'import {n}'],\n"
+            "                       capture_output=True, text=True)\n"
+            "    if r.returncode: bad.append((n, r.stderr.strip().splitlines()[-1]))\n"
+            "print(bad)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stdout + r.stderr
+
+
+def test_pipeline_and_sinks_import_in_either_order():
+    sinks = ("fogmon.sinks.base", "fogmon.sinks.console", "fogmon.sinks.rerun_sink", "fogmon.sinks.archive")
+    for order in (("fogmon.pipeline", *sinks), (*sinks, "fogmon.pipeline")):
+        r = _imports(*order)
+        assert r.returncode == 0, r.stderr
+
+
+def test_library_code_does_not_import_the_command_line():
+    r = _imports("fogmon.pipeline", "fogmon.sources.open", "fogmon.sinks.console", "fogmon.sinks.rerun_sink",
+                 "fogmon.sinks.archive")
+    assert r.returncode == 0, r.stderr
+    code = ("import sys, fogmon.pipeline, fogmon.sources.open, fogmon.sinks.console, fogmon.sinks.archive\n"
+            "print(sorted(m for m in sys.modules if m.startswith('fogmon.cli')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
