@@ -28,6 +28,9 @@ from fogmon.block import Block, Event
 from fogmon.davar.jumps import JumpDetector
 from fogmon.davar.result import DadevResult
 from fogmon.errors import FogmonError, FogmonWarning
+from fogmon.methods.live import Conditioner, LiveMethods
+from fogmon.modelcheck import AuxWindows, ModelBand, ModelWatch
+from fogmon.sim.model import SensorModel
 from fogmon.sinks.base import Sink, StreamInfo, Summary
 from fogmon.sources.base import Source
 from fogmon.sources.live import LiveSource
@@ -151,7 +154,10 @@ class PipelineConfig:
     (no motion gate), ``duration_s`` (stop after this much recording time, s),
     ``realtime`` (pace at this many times real time; None = as fast as possible),
     ``rotate_s`` (new output pieces every this many s of recording time; None = one),
-    ``progress`` (a progress bar on stderr)."""
+    ``progress`` (a progress bar on stderr), ``methods`` (thermal correction, outlier
+    rejection, Kalman channel: fogmon.methods.live), ``model`` (check every window
+    against the model's DADEV band at family-wise ``model_alpha`` per window:
+    fogmon.modelcheck)."""
 
     window_s: float | None = None
     hop_s: float | None = None
@@ -162,6 +168,9 @@ class PipelineConfig:
     realtime: float | None = None
     rotate_s: float | None = None
     progress: bool = False
+    methods: LiveMethods = LiveMethods()
+    model: SensorModel | None = None
+    model_alpha: float = 0.01
 
 
 class Pipeline:
@@ -190,6 +199,10 @@ class Pipeline:
         self.jumps = JumpDetector(self.window_s)
         self.tail = _Tail(OVERALL_MAX_SAMPLES)
         self.motion = None if config.keep_motion else MotionGate(rate_hz)
+        self.conditioner = Conditioner(config.methods, rate_hz) if config.methods.any else None
+        self.band = None if config.model is None else ModelBand.for_model(
+            config.model, rate_hz, self.engine.window, self.engine.m, alpha=config.model_alpha)
+        self.watch: ModelWatch | None = None
         self.sinks: list[Sink] = []
         self.summary = Summary(source.name, rate_hz, self.window_s, self.hop_s)
         self.started = self.done = self.use_ref = False
@@ -277,7 +290,16 @@ class Pipeline:
         m = tau_grid(rate_hz, int(round(self.window_s * rate_hz)), self.config.taus)
         self.use_ref = "rot_dps" in first.aux and not self.config.raw_rate
         self.summary.analysed = ERROR_EXPR if self.use_ref else "rate_dph"
-        info = StreamInfo(self.source.name, rate_hz, self.window_s, self.hop_s, m / rate_hz, tuple(first.aux),
+        aux_names = tuple(first.aux)
+        if self.conditioner is not None:
+            self.conditioner.check(aux_names, self.source.name)
+            aux_names += self.conditioner.channels
+            if self.conditioner.thermal is not None:
+                self.summary.analysed += " - thermal drift"
+        if self.band is not None:
+            self.watch = ModelWatch(self.band, tuple(first.aux))
+            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(tuple(first.aux), self.engine.window)
+        info = StreamInfo(self.source.name, rate_hz, self.window_s, self.hop_s, m / rate_hz, aux_names,
                           self.summary.analysed)
         for s in self.sinks:
             s.start(info)
@@ -285,10 +307,18 @@ class Pipeline:
         self.summary.t_first_s = float(first.t_s[0])
 
     def block(self, b: Block, b_piece: int) -> None:
-        """One block of piece ``b_piece``: to the sinks, then (motion-gated) to DAVAR."""
-        self._deliver(b, b_piece)
+        """One block of piece ``b_piece``: through the live methods, to the sinks, then
+        (motion-gated) to DAVAR."""
         y = b.error_rate_dph if self.use_ref else b.rate_dph
-        self._analyse(*self._gate_motion(b.t_s, y, b.valid & np.isfinite(y)))
+        valid = b.valid & np.isfinite(y)
+        if self.conditioner is not None:
+            c = self.conditioner.push(b.t_s, y, valid, b.aux)
+            b = Block(b.t_s, b.rate_dph, b.valid, {**b.aux, **c.channels}, (*b.events, *c.events))
+            y, valid = c.rate_dph, c.valid
+        self._deliver(b, b_piece)
+        if self.watch is not None:
+            self.aux_pending.push(b.aux, len(b))
+        self._analyse(*self._gate_motion(b.t_s, y, valid))
         self.progress.update(self.summary.duration_s, time.monotonic() - self.wall0)
 
     def frames(self, res: DadevResult) -> None:
@@ -302,6 +332,10 @@ class Pipeline:
             s.frames(res, fit, t_end)
         self.summary.n_windows += len(res)
         self._dispatch(self.jumps.update(fit, t_end))
+        if self.watch is not None:
+            for i in range(len(res)):
+                self._dispatch(self.watch.frame(float(t_end[i]), res.adev_dph[i],
+                                                self.aux_windows.window(int(res.end_index[i]))))
         counters = self._counters()
         for s in self.sinks:
             s.source_counters(float(t_end[-1]), counters)
@@ -328,6 +362,8 @@ class Pipeline:
         summary.source_wall_s = time.monotonic() - self.wall_start
         summary.counters = self._counters()
         summary.event_counts = dict(self._counts)
+        if self.watch is not None:
+            summary.model_check = self.watch.summary()
         try:
             self._overall()
         finally:
@@ -346,6 +382,8 @@ class Pipeline:
 
     def _analyse(self, y: np.ndarray, valid: np.ndarray) -> None:
         """DAVAR, fits, jump events and the whole-run tail for the next samples."""
+        if self.watch is not None:  # the aux samples of exactly these samples, for the model check
+            self.aux_windows.push(self.aux_pending.take(len(y)), len(y))
         res = self.engine.push(y, valid)
         if len(res):
             self.frames(res)
@@ -370,8 +408,14 @@ class Pipeline:
             summary.overall_fit = fit_noise(summary.overall)
 
     def _counters(self) -> dict[str, int]:
-        """The source's counters and the reader's (dropped blocks)."""
-        return {**self.source.counters, **(self.reader.counters if self.reader is not None else {})}
+        """The source's counters, the reader's (dropped blocks) and the live methods'."""
+        c = {**self.source.counters, **(self.reader.counters if self.reader is not None else {})}
+        if self.conditioner is not None:
+            if self.conditioner.rejector is not None:
+                c["outliers_rejected"] = self.conditioner.rejector.rejected
+            if self.conditioner.thermal is not None:
+                c["samples_without_temperature"] = self.conditioner.no_temperature
+        return c
 
     def _deliver(self, b: Block, b_piece: int) -> None:
         """Hand a block to the sinks (after ``rotate`` when it begins piece ``b_piece``)
@@ -409,6 +453,32 @@ class Pipeline:
 def run_pipeline(source: Source, config: PipelineConfig, sinks: Sequence[Sink], pacer: Pacer | None = None) -> Summary:
     """Stream ``source`` through DAVAR and the noise fit into ``sinks`` (Pipeline)."""
     return Pipeline(source, config, pacer).run(sinks)
+
+
+class _AuxFifo:
+    """Aux samples delivered but not yet analysed (the motion gate holds samples back):
+    ``take(n)`` gives the next ``n`` samples of every channel, in order."""
+
+    def __init__(self) -> None:
+        self._parts: deque[tuple[dict[str, np.ndarray], int]] = deque()
+
+    def push(self, aux: dict[str, np.ndarray], n: int) -> None:
+        if n:
+            self._parts.append((aux, n))
+
+    def take(self, n: int) -> dict[str, np.ndarray]:
+        got: dict[str, list[np.ndarray]] = {}
+        while n > 0 and self._parts:
+            aux, k = self._parts[0]
+            use = min(n, k)
+            for name, a in aux.items():
+                got.setdefault(name, []).append(a[:use])
+            if use == k:
+                self._parts.popleft()
+            else:
+                self._parts[0] = ({name: a[use:] for name, a in aux.items()}, k - use)
+            n -= use
+        return {name: np.concatenate(parts) for name, parts in got.items()}
 
 
 class _Tail:

@@ -10,7 +10,10 @@ import numpy as np
 from fogmon.cli.values import number, positive
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
 from fogmon.errors import FogmonError
+from fogmon.methods.live import LiveMethods
+from fogmon.methods.live_thermal import thermal_effect
 from fogmon.pipeline import LIVE_WINDOW_SAMPLES, MAX_WINDOW_SAMPLES, MIN_WINDOW_SAMPLES, PipelineConfig
+from fogmon.sim.model import SensorModel, load_model
 from fogmon.sinks.base import Sink
 
 
@@ -41,6 +44,28 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
                         "one sample <= tau <= window/4 can be computed: other values are left out with a "
                         "warning")
+    m = parser.add_argument_group("live methods and model check (docs/monitor.md)")
+    m.add_argument("--model", metavar="MODEL.toml",
+                   help="check every window against the model's DADEV band (its IEEE-952 noise and aux-free noise "
+                        "effects, docs/modelcheck.md): a model_band event, with the taus, the ratio to the model, "
+                        "the tau shape and the aux channel that co-varies, when the gyro leaves the band and when "
+                        "it is back; the band is simulated once and cached (~/.cache/fogmon)")
+    m.add_argument("--model-alpha", type=number(0, 0.5, above=True), default=0.01, metavar="A",
+                   help="family-wise false-alarm probability per window of the model check, 0 < A <= 0.5 "
+                        "(default 0.01)")
+    m.add_argument("--thermal-cal", metavar="CAL.toml",
+                   help="subtract the thermal drift K0(T) + K1 dT/dt + K2 d2T/dt2 calibrated by `fogmon thermal "
+                        "--out-model CAL.toml` sample by sample (causal filters; needs temp_c); DAVAR and the fits "
+                        "see the corrected rate, rate_corrected_dph and thermal_drift_dph (deg/h) are archived "
+                        "and drawn beside the raw rate; --raw-rate analyses the raw rate")
+    m.add_argument("--reject-outliers", nargs="?", const=7.0, type=number(2, 100, above=True), metavar="K",
+                   help="reject samples beyond K sigmas of one sample from the level the samples before them "
+                        "predict (a robust, causal Pauta criterion; default K = 7: 5.8e-10 of Gaussian samples); "
+                        "rejected samples are invalid for DAVAR, kept in the archive, counted "
+                        "(outliers_rejected) and reported as outlier events")
+    m.add_argument("--denoise", choices=("kalman",),
+                   help="kalman: a steady-state Kalman estimate of the rate (N and K from the [noise] of --model "
+                        "or --thermal-cal) as the channel rate_kalman_dph (deg/h), archived and drawn beside raw")
     o = parser.add_argument_group("output (Rerun)")
     o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
                    "open it with `rerun OUT.rrd`")
@@ -110,10 +135,30 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     import sys
 
     realtime = args.realtime
+    model = load_model(args.model) if args.model else None
+    cal = load_model(args.thermal_cal) if args.thermal_cal else None
     return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
                           keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
                           rotate_s=args.rotate_s,
-                          progress=not args.no_progress and sys.stderr.isatty() and (realtime is None or realtime > 1))
+                          progress=not args.no_progress and sys.stderr.isatty() and (realtime is None or realtime > 1),
+                          methods=_live_methods(args, model, cal), model=model, model_alpha=args.model_alpha)
+
+
+def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: SensorModel | None) -> LiveMethods:
+    """The live methods asked for; FogmonError naming the option when a file lacks what
+    it needs."""
+    thermal = None
+    if cal is not None and not args.raw_rate:
+        thermal = thermal_effect(cal, args.thermal_cal)
+    kalman = None
+    if args.denoise == "kalman":
+        src = next(((m, f) for m, f in ((model, args.model), (cal, args.thermal_cal)) if m is not None), None)
+        if src is None or not (src[0].noise.N_dpsh > 0 and src[0].noise.K_dphsh > 0):
+            raise FogmonError("--denoise kalman needs N_dpsh > 0 and K_dphsh > 0 from the [noise] of --model or "
+                              "--thermal-cal" + (f" ({src[1]} has N_dpsh {src[0].noise.N_dpsh:g}, K_dphsh "
+                                                 f"{src[0].noise.K_dphsh:g})" if src else ""))
+        kalman = (src[0].noise.N_dpsh, src[0].noise.K_dphsh)
+    return LiveMethods(thermal, args.reject_outliers, kalman)
 
 
 def build_sinks(args: argparse.Namespace) -> list[Sink]:

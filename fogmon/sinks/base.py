@@ -59,6 +59,7 @@ class Summary:
     outputs: list[str] = field(default_factory=list)
     motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
     motion_samples: int = 0       # valid samples the motion gate made invalid
+    model_check: dict | None = None   # with a model: fogmon.modelcheck.ModelWatch.summary()
 
     @property
     def duration_s(self) -> float:

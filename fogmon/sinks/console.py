@@ -30,10 +30,13 @@ def format_summary(s: Summary) -> str:
     if not s.n_windows:
         lines.append(f"  {no_windows_reason(s)}")
     if s.analysed != "rate_dph":
-        lines.append(f"  analysed: {s.analysed} (deg/h), the gyro's error against the reference rotation "
-                     f"(--raw-rate for rate_dph itself)")
+        why = (["the gyro's error against the reference rotation"] if "rot_dps" in s.analysed else []) + \
+              (["the --thermal-cal drift subtracted sample by sample"] if "thermal" in s.analysed else [])
+        lines.append(f"  analysed: {s.analysed} (deg/h): {'; '.join(why)} (--raw-rate for rate_dph itself)")
     if s.motion_spans:
         lines += motion_lines(s)
+    if s.model_check is not None:
+        lines += model_check_lines(s.model_check)
     a = s.overall
     if a is not None:
         conf = a.confidence
@@ -85,6 +88,21 @@ def coefficient_lines(f) -> list[str]:
 
 #: Platform-motion spans listed in the summary before the rest is only counted.
 MAX_MOTION_SPANS = 20
+
+
+def model_check_lines(mc: dict) -> list[str]:
+    """The live model check of the session (--model): time inside / outside the band and
+    every departure."""
+    out = [f"  model band (--model, family-wise {mc['alpha_per_window']:g} per window): inside "
+           f"{mc['time_inside_s']:.1f} s, outside {mc['time_outside_s']:.1f} s, not judged "
+           f"{mc['time_unjudged_s']:.1f} s; {mc['n_departures']} departure(s)"]
+    for d in mc["departures"]:
+        end = f"{d['end_s']:.2f} s" if d["end_s"] is not None else "the end (still out)"
+        out.append(f"    {d['start_s']:.2f} s .. {end}: peak {d['peak_ratio']:.3g}x the model at tau "
+                   f"{d['peak_tau_s']:.4g} s; {d['shape']}; likely cause: {d['cause']}")
+    if mc["left_out_effects"]:
+        out.append(f"    not in the band (need aux channels or a schedule): {', '.join(mc['left_out_effects'])}")
+    return out
 
 
 def motion_lines(s: Summary) -> list[str]:
