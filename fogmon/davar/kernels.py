@@ -807,26 +807,28 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
             cum_s[k], cum_c[k], cum_n[k], cum_h[k] = s, c, nn, nh
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms), bounds and EDF from the gap-free tables of the row's alpha run; returns
-    (adev, lo, hi, edf, gapped) where ``gapped`` marks entries with fewer than ``full``
-    terms, whose EDF and bounds the caller recomputes."""
+    (adev, lo, hi, edf, number of entries with fewer than ``full`` terms, whose EDF and
+    bounds the caller recomputes). Branch-free inner loop (SIMD)."""
     nt, nm = sums.shape
     adev = np.empty((nt, nm))
     lo = np.empty((nt, nm))
     hi = np.empty((nt, nm))
     edf = np.empty((nt, nm))
-    gapped = np.zeros((nt, nm), np.bool_)
+    n_gapped = 0
     for i in range(nt):
         r = run[i]
+        fl, fh, eg = f_lo[r], f_hi[r], edf_gapless[r]
+        s, c = sums[i], counts[i]
+        a_row, l_row, h_row, e_row = adev[i], lo[i], hi[i], edf[i]
         for k in range(nm):
-            n = counts[i, k]
-            a = np.sqrt(max(sums[i, k], 0.0) / (2.0 * n)) if n > 0 else np.nan
-            adev[i, k] = a
-            lo[i, k] = a * f_lo[r, k]
-            hi[i, k] = a * f_hi[r, k]
-            edf[i, k] = edf_gapless[r, k]
-            gapped[i, k] = n != full[k]
-    return adev, lo, hi, edf, gapped
+            a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
+            a_row[k] = a
+            l_row[k] = a * fl[k]
+            h_row[k] = a * fh[k]
+            e_row[k] = eg[k]
+            n_gapped += c[k] != full[k]
+    return adev, lo, hi, edf, n_gapped

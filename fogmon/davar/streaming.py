@@ -79,7 +79,7 @@ class StreamingDadev:
         self._rec_n = np.zeros((nm, ring), dtype=np.int64)
         self._rec_h = np.zeros((nm, ring), dtype=np.int64)
         self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
-        self._alpha_prev = None  # (alpha, end index) of the last fitted window, see batch.alpha_rows
+        self._alpha_prev = None  # noise-type state of the windows emitted so far, see batch.alpha_rows
 
     @property
     def n_pushed(self) -> int:
