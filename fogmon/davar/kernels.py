@@ -23,8 +23,40 @@ tuple ``pre = (P, bad, bh, bl, hc)`` (``hc``: prefix count of huge samples).
 """
 from __future__ import annotations
 
+import contextlib
+import warnings
+
 import numpy as np
 from numba import njit
+from numba.core import caching
+
+from fogmon.errors import FogmonWarning
+
+
+def _tolerate_unusable_numba_cache() -> None:
+    """A numba cache that cannot be read or written (corrupt files, an install directory
+    without write access) costs a compile in memory, never the run: numba's guard around
+    cache I/O (which forgives only EACCES, only on Windows) is widened to every error,
+    reported once per process as a FogmonWarning. A cache from other sources is ignored
+    by numba itself (it checks the source file's stamp)."""
+    if getattr(caching.Cache, "_fogmon_tolerant", False):
+        return
+    warned = []
+
+    @contextlib.contextmanager
+    def guard(self):
+        try:
+            yield
+        except Exception as e:  # noqa: BLE001 - any cache failure: compile in memory instead
+            if not warned:
+                warned.append(e)
+                warnings.warn(f"numba cache unusable ({type(e).__name__}: {e}); kernels are compiled in "
+                              f"memory for this run", FogmonWarning)
+    caching.Cache._guard_against_spurious_io_errors = guard
+    caching.Cache._fogmon_tolerant = True
+
+
+_tolerate_unusable_numba_cache()
 
 CEILING_DPH = 1e8
 """|rate| above this (deg/h, 27,800 deg/s: beyond any gyro) or infinite makes a sample
