@@ -20,10 +20,10 @@ from fogmon.davar.streaming import STAGE, StreamingDadev
 def _record(n, seed=0):
     rng = np.random.default_rng(seed)
     y = 1000.0 + rng.normal(size=n) + np.cumsum(rng.normal(size=n)) * 0.01
-    y[3000:3004] = np.nan
-    y[5100] = 1e6  # large glitch
+    y[n * 3 // 7:n * 3 // 7 + 4] = np.nan
+    y[n * 5 // 7] = 1e6  # large glitch
     valid = np.ones(n, dtype=bool)
-    valid[4000:4010] = False
+    valid[n * 4 // 7:n * 4 // 7 + 10] = False
     return y, valid
 
 
