@@ -52,17 +52,17 @@ def test_staged_samples_enter_current_and_larger_pushes():
     y, valid = _record(3000, seed=1)
     w = 1024
     a, b = StreamingDadev(1.0, w, hop_s=512, alpha=0), StreamingDadev(1.0, w, hop_s=512, alpha=0)
-    a.push(y[:1100])
-    b.push(y[:1000])
-    for i in range(1000, 1100):
+    a.push(y[:1200])
+    b.push(y[:1100])  # the first window (ending at sample 1023) is out
+    for i in range(1100, 1200):
         assert len(b.push(y[i:i + 1])) == 0  # staged: the next window ends at sample 1535
-    assert b._staged == 100 <= STAGE
+    assert b._staged == 100 <= STAGE and b.n_pushed == a.n_pushed
     np.testing.assert_allclose(b.current().adev_dph, a.current().adev_dph, rtol=1e-12)
-    for i in range(1100, 1150):
+    a.push(y[1200:1250])
+    for i in range(1200, 1250):
         b.push(y[i:i + 1])
-    blk = Block.make(np.arange(1150, 3000) / 1.0, y[1150:], valid=valid[1150:])
-    a.push(y[1100:1150])
-    ra, rb = a.push(Block.make(np.arange(1150, 3000) / 1.0, y[1150:], valid=valid[1150:])), b.push(blk)
+    blk = Block.make(np.arange(1250, 3000) / 1.0, y[1250:], valid=valid[1250:])
+    ra, rb = a.push(blk), b.push(blk)
     assert len(ra) == len(rb) == 3
     np.testing.assert_allclose(rb.adev_dph, ra.adev_dph, rtol=1e-12)
 
