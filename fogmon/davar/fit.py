@@ -18,12 +18,13 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import brentq, nnls
+from scipy.optimize import brentq
 from scipy.stats import norm
 
 from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
                                      edf_mixture_from, mixture_matrices)
 from fogmon.davar.result import AdevResult, DadevResult
+from fogmon.davar.scoring import fisher_scoring
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -174,41 +175,16 @@ class _NoiseModel:
         return cov / np.outer(sd, sd)
 
 
-def _solve_nnls(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """b >= 0 minimising |x b - y| over the finite rows; a column without information (all
-    zero: every weight of its taus is 0) is never passed to scipy's nnls (1.17 can abort
-    the process on one) and gets b = 0, i.e. its term is not identifiable."""
-    rows = np.isfinite(y) & np.all(np.isfinite(x), axis=1)
-    x, y = x[rows], y[rows]
-    scale = np.linalg.norm(x, axis=0)
-    use = scale > 0
-    b = np.zeros(x.shape[1])
-    if use.any():
-        b[use] = nnls(x[:, use] / scale[use], y, maxiter=2000)[0] / scale[use]
-    return b
-
-
 def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
     """Fisher scoring with the terms ``cols`` (mask over the 5 columns of x), robust
     weights ``rw`` (0..1 per tau), EDF model ``edf`` and model-inadequacy variance ``c2``,
     from the terms ``a`` (default: the data as model), until the model moves less than
-    ``rtol``: returns (A >= 0 over all 5 terms, model, nu at the final model)."""
-    if a is None or not np.any(a[cols] > 0):
-        model, a = y.copy(), np.zeros(5)
-    else:
-        a = np.where(cols, a, 0.0)
-        model = np.maximum(x @ a, 1e-300)
-    for _ in range(_MAX_ITER):
-        nu = edf(a)
-        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
-        a_new = np.zeros(5)
-        a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], y * sw)
-        model_new = np.maximum(x @ a_new, 1e-300)
-        done = np.max(np.abs(model_new / model - 1.0)) < rtol
-        a, model = a_new, model_new
-        if done:
-            break
-    return a, model, edf(a)
+    ``rtol``: returns (A >= 0 over all 5 terms, model, nu at the final model)
+    (``scoring.fisher_scoring``)."""
+    from_data = a is None or not np.any(a[cols] > 0)
+    a0 = np.zeros(5) if from_data else np.where(cols, a, 0.0)
+    return fisher_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.asarray(rw, dtype=np.float64), a0,
+                          from_data, float(c2), rtol, _MAX_ITER)
 
 
 def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -310,20 +286,9 @@ def _profile(x, y, edf, rw, c2, a, terms, n: int, c: float | None) -> tuple[floa
     if c is not None:
         cols[n] = False
         a[n] = c
-    offset = x @ np.where(cols, 0.0, a)
-    model = np.maximum(x @ a, 1e-300)
-    for _ in range(_MAX_ITER):
-        nu = edf(a)
-        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
-        a_new = np.where(cols, 0.0, a)
-        if cols.any():
-            a_new[cols] = _solve_nnls(x[:, cols] * sw[:, None], (y - offset) * sw)
-        model_new = np.maximum(x @ a_new, 1e-300)
-        done = np.max(np.abs(model_new / model - 1.0)) < _ROBUST_RTOL
-        a, model = a_new, model_new
-        if done:
-            break
-    return _eql_deviance(y, model, edf(a), rw, c2), a
+    a, model, nu = fisher_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.asarray(rw, dtype=np.float64),
+                                  a, False, float(c2), _ROBUST_RTOL, _MAX_ITER)
+    return _eql_deviance(y, model, nu, rw, c2), a
 
 
 def _term_variances(x, edf, rw, c2, a, n: int) -> tuple[float, float]:

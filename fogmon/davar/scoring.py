@@ -1,0 +1,178 @@
+"""Numba kernels of the IEEE-952 fit (fogmon/davar/fit.py): the Fisher-scoring iteration
+with the mixture-EDF weights and the small non-negative least-squares problems it solves
+(at most 5 columns, Lawson & Hanson with Householder least squares), so that an
+iteration costs microseconds instead of a hundred of Python and scipy overhead."""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from fogmon.davar import kernels  # noqa: F401 - its import makes an unusable numba cache harmless
+
+_CLASS = np.array([0, 1, 2, 3, 3])
+"""Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
+_EPS = 2.0**-52
+
+
+@njit(cache=True)
+def _least_squares(a, b):
+    """x minimising |a x - b| (n x k, n >= k) by Householder QR; 0 for a column that is
+    dependent on the ones before it."""
+    n, k = a.shape
+    r = a.copy()
+    q = b.copy()
+    for j in range(k):
+        norm = np.sqrt(np.sum(r[j:, j] ** 2))
+        if norm == 0.0:
+            continue
+        alpha = -norm if r[j, j] > 0 else norm
+        v = r[j:, j].copy()
+        v[0] -= alpha
+        vv = np.sum(v * v)
+        if vv == 0.0:
+            continue
+        for c in range(j, k):
+            r[j:, c] -= (2.0 * np.sum(v * r[j:, c]) / vv) * v
+        q[j:] -= (2.0 * np.sum(v * q[j:]) / vv) * v
+    x = np.zeros(k)
+    scale = np.max(np.abs(np.diag(r[:k, :k]))) if k else 0.0
+    for j in range(k - 1, -1, -1):
+        s = q[j]
+        for c in range(j + 1, k):
+            s -= r[j, c] * x[c]
+        x[j] = s / r[j, j] if abs(r[j, j]) > 1e-14 * scale else 0.0
+    return x
+
+
+@njit(cache=True)
+def nnls(a, b):
+    """x >= 0 minimising |a x - b| (Lawson & Hanson's active-set algorithm; columns of
+    ``a`` normalised by the caller). A column whose entry would not be positive is
+    skipped until x changes (no cycling)."""
+    n, k = a.shape
+    x = np.zeros(k)
+    passive = np.zeros(k, np.bool_)
+    skip = np.zeros(k, np.bool_)
+    tol = 10.0 * _EPS * max(n, k) * max(1.0, np.max(np.abs(a)))
+    for _ in range(4 * k + 4):
+        w = a.T @ (b - a @ x)
+        j_max = -1
+        w_max = tol
+        for j in range(k):
+            if not passive[j] and not skip[j] and w[j] > w_max:
+                w_max, j_max = w[j], j
+        if j_max < 0:
+            break
+        passive[j_max] = True
+        s = np.zeros(k)
+        first = True
+        for _inner in range(3 * k + 3):
+            idx = np.flatnonzero(passive)
+            s[:] = 0.0
+            if idx.shape[0] == 0:
+                break
+            s_p = _least_squares(a[:, idx], b)
+            if np.all(s_p > tol):
+                s[idx] = s_p
+                break
+            if first and s_p[np.searchsorted(idx, j_max)] <= tol:
+                passive[j_max] = False  # the new column does not enter: try the next one
+                skip[j_max] = True
+                s[:] = x
+                break
+            first = False
+            step = np.inf
+            for i in range(idx.shape[0]):
+                if s_p[i] <= tol:
+                    d = x[idx[i]] - s_p[i]
+                    step = min(step, x[idx[i]] / d if d > 0 else 0.0)
+            for i in range(idx.shape[0]):
+                x[idx[i]] += step * (s_p[i] - x[idx[i]])
+            for i in range(idx.shape[0]):
+                if x[idx[i]] <= tol:
+                    passive[idx[i]] = False
+                    x[idx[i]] = 0.0
+        if not skip[j_max]:
+            skip[:] = False
+        x = s
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_edf(x, a, mats, full, gap_scale):
+    """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
+    predicts (white rate noise where it is empty): full / f'Mf scaled for gaps, as
+    ``fit._NoiseModel.__call__``."""
+    t = x.shape[0]
+    nu = np.empty(t)
+    f = np.empty(4)
+    for i in range(t):
+        f[:] = 0.0
+        total = 0.0
+        for n in range(5):
+            c = x[i, n] * a[n]
+            total += c
+            f[_CLASS[n]] += c
+        if total > 0:
+            f /= total
+        else:
+            f[:] = 0.0
+            f[1] = 1.0
+        q = 0.0
+        for u in range(4):
+            for v in range(4):
+                q += f[u] * mats[i, u, v] * f[v]
+        nu[i] = full[i] / q * gap_scale[i]
+    return nu
+
+
+@njit(cache=True, error_model="numpy")
+def fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a, from_data, c2, rtol, max_iter):
+    """Fisher scoring of the terms ``cols`` (mask over the 5 columns of x) >= 0 with the
+    other terms held at their values in ``a``, robust weights ``rw``, model-inadequacy
+    variance ``c2``: weights sqrt(rw / (2 / nu + c2)) / model, nu the mixture EDF of the
+    current model (``mixture_edf``); from the data as model (``from_data``) or from
+    ``a``, until the model moves less than ``rtol`` (at most ``max_iter`` steps).
+    Returns (A, model, nu at A). Rows with non-finite weights are left out of a step;
+    a column without weight gets 0."""
+    t = x.shape[0]
+    a = a.copy()
+    if from_data:
+        a[:] = 0.0
+        model = y.copy()
+    else:
+        model = np.maximum(x @ a, 1e-300)
+    free = np.flatnonzero(cols)
+    fixed = a.copy()
+    fixed[free] = 0.0
+    offset = x @ fixed
+    for _ in range(max_iter):
+        nu = mixture_edf(x, a, mats, full, gap_scale)
+        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
+        a_new = fixed.copy()
+        if free.shape[0]:
+            rows = np.zeros(t, np.bool_)
+            for i in range(t):
+                rows[i] = np.isfinite((y[i] - offset[i]) * sw[i])
+                for j in free:
+                    rows[i] &= np.isfinite(x[i, j] * sw[i])
+            ri = np.flatnonzero(rows)
+            m_ = np.empty((ri.shape[0], free.shape[0]))
+            b_ = np.empty(ri.shape[0])
+            for r in range(ri.shape[0]):
+                i = ri[r]
+                b_[r] = (y[i] - offset[i]) * sw[i]
+                for c in range(free.shape[0]):
+                    m_[r, c] = x[i, free[c]] * sw[i]
+            scale = np.sqrt(np.sum(m_ * m_, axis=0)) if ri.shape[0] else np.zeros(free.shape[0])
+            use = np.flatnonzero(scale > 0)
+            if use.shape[0]:
+                sol = nnls(m_[:, use] / scale[use], b_)
+                for c in range(use.shape[0]):
+                    a_new[free[use[c]]] = sol[c] / scale[use[c]]
+        model_new = np.maximum(x @ a_new, 1e-300)
+        done = np.max(np.abs(model_new / model - 1.0)) < rtol
+        a, model = a_new, model_new
+        if done:
+            break
+    return a, model, mixture_edf(x, a, mats, full, gap_scale)
