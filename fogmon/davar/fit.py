@@ -18,13 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import brentq
 from scipy.stats import norm
 
 from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
                                      edf_mixture_from, mixture_matrices)
 from fogmon.davar.result import AdevResult, DadevResult
-from fogmon.davar.scoring import fisher_scoring
+from fogmon.davar.scoring import excess_variance_root, fisher_scoring
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -237,7 +236,7 @@ def _excess_variance(r, v, rw, n_free: int) -> float:
     dof = max(len(r) - n_free, 1)
     if np.sum(rw * r**2 / v) <= BIRGE_GATE * dof:
         return 0.0
-    return float(brentq(lambda c2: np.sum(rw * r**2 / (v + c2)) - dof, 0.0, float(np.sum(rw * r**2))))
+    return float(excess_variance_root(rw * r**2, v, float(dof)))
 
 
 def _starts(n: int) -> list[np.ndarray]:

@@ -176,3 +176,23 @@ def fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a, from_data, c2, rtol
         if done:
             break
     return a, model, mixture_edf(x, a, mats, full, gap_scale)
+
+
+@njit(cache=True)
+def excess_variance_root(r2w, v, dof):
+    """The c2 >= 0 where sum r2w / (v + c2) = dof (Paule-Mandel), for sum r2w / v > dof:
+    Newton's method from c2 = 0, monotone for this convex decreasing function, to full
+    precision."""
+    c2 = 0.0
+    for _ in range(200):
+        f = 0.0
+        g = 0.0
+        for i in range(r2w.shape[0]):
+            q = r2w[i] / (v[i] + c2)
+            f += q
+            g += q / (v[i] + c2)
+        step = (f - dof) / g
+        c2 += step
+        if step <= 1e-15 * c2:
+            break
+    return c2
