@@ -63,7 +63,7 @@ def main(log: str, rrd: str) -> int:
     rng = np.random.default_rng(0)
     for hop in (1.0, 64.0):
         fogmon.davar.streaming.StreamingDadev(1.0, 256.0, hop_s=hop).push(rng.normal(size=1000))
-    fogmon.davar.batch.oadev(rng.normal(size=1000), 1.0)
+    fogmon.davar.fit.fit_noise(fogmon.davar.batch.oadev(rng.normal(size=1000), 1.0))
     t_compile = time.process_time() - t
     S = fogmon.davar.streaming.StreamingDadev
     S.push = timed("engine", S.push)

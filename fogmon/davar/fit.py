@@ -23,7 +23,7 @@ from scipy.stats import norm
 from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
                                      edf_mixture_from, mixture_matrices)
 from fogmon.davar.result import AdevResult, DadevResult
-from fogmon.davar.scoring import excess_variance_root, fisher_scoring
+from fogmon.davar.scoring import fisher_scoring, robust_scoring
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -186,12 +186,6 @@ def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
                           from_data, float(c2), rtol, _MAX_ITER)
 
 
-def _tukey(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Tukey biweight weights and loss (0..1) of standardized residuals ``z``."""
-    u2 = np.minimum((z / TUKEY_C) ** 2, 1.0)
-    return (1.0 - u2) ** 2, 1.0 - (1.0 - u2) ** 3
-
-
 def _robust_scoring(x, cols, y, edf, starts):
     """Fisher scoring iteratively reweighted by Tukey's biweight of the standardized log
     residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
@@ -199,44 +193,17 @@ def _robust_scoring(x, cols, y, edf, starts):
     earlier start wins ties) and stops early when a solution rejects no tau; the winner
     is then scored to full precision. A start whose weights come to keep fewer than two
     taus has failed. Returns (A, model, nu, robust weights, model-inadequacy variance
-    c2), or None when every start failed (nothing the five terms describe)."""
-    best, best_loss = None, np.inf
-    for rw in starts:
-        a, c2 = None, 0.0
-        for _ in range(_MAX_ROBUST_ITER):
-            a, model, nu = _scoring(x, cols, y, edf, rw, a, c2, rtol=_ROBUST_RTOL)
-            with np.errstate(over="ignore"):
-                r = np.log(y / model)
-            rw_new, loss = _tukey(r / np.sqrt(2.0 / nu + MISFIT_FLOOR**2))
-            if np.sum(rw_new > 0) < 2:
-                loss = np.inf
-                break
-            c2_new = _excess_variance(r, 2.0 / nu, rw_new, int(np.sum(a > 0)))
-            done = np.max(np.abs(rw_new - rw)) < _RW_TOL and abs(c2_new - c2) <= 1e-3 * c2
-            rw, c2 = rw_new, c2_new
-            if done:
-                break
-        if np.sum(loss) < best_loss - 1e-9:
-            best, best_loss = (a, rw, c2), np.sum(loss)
-        if np.all(rw > 0):
-            break
-    if best is None:
+    c2), or None when every start failed (nothing the five terms describe). The
+    model-inadequacy variance c2 (Paule-Mandel: the c2 >= 0 with sum rw r^2 / (v + c2) =
+    degrees of freedom) is estimated when the kept taus' residuals exceed their sampling
+    variances v = 2 / nu by more than BIRGE_GATE (reduced chi-square), else 0. The
+    iteration runs in numba (``scoring.robust_scoring``)."""
+    found, a, rw, c2 = robust_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.array(starts, dtype=np.float64),
+                                      TUKEY_C, MISFIT_FLOOR**2, BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER,
+                                      _ROBUST_RTOL, _MAX_ITER)
+    if not found:
         return None
-    a, rw, c2 = best
     return (*_scoring(x, cols, y, edf, rw, a, c2), rw, c2)
-
-
-def _excess_variance(r, v, rw, n_free: int) -> float:
-    """Model-inadequacy variance c2 of ln(Allan variance) (Paule-Mandel: the c2 >= 0 with
-    sum rw r^2 / (v + c2) = degrees of freedom) when the residuals ``r`` of the taus
-    kept (rw > 0) exceed their sampling variances ``v`` by more than BIRGE_GATE (reduced
-    chi-square); else 0."""
-    kept = rw > 0
-    r, v, rw = r[kept], v[kept], rw[kept]
-    dof = max(len(r) - n_free, 1)
-    if np.sum(rw * r**2 / v) <= BIRGE_GATE * dof:
-        return 0.0
-    return float(excess_variance_root(rw * r**2, v, float(dof)))
 
 
 def _starts(n: int) -> list[np.ndarray]:

@@ -196,3 +196,88 @@ def excess_variance_root(r2w, v, dof):
         if step <= 1e-15 * c2:
             break
     return c2
+
+
+@njit(cache=True)
+def _excess_variance(r, v, rw, n_free, gate):
+    """Model-inadequacy variance c2 of ln(Allan variance) from the residuals ``r`` and
+    sampling variances ``v`` of the taus kept (rw > 0): the Paule-Mandel root
+    (``excess_variance_root``) when their reduced chi-square exceeds ``gate``, else 0."""
+    chi = 0.0
+    n = 0
+    for i in range(r.shape[0]):
+        if rw[i] > 0:
+            chi += rw[i] * r[i] ** 2 / v[i]
+            n += 1
+    dof = max(n - n_free, 1)
+    if not chi > gate * dof:
+        return 0.0
+    keep = np.flatnonzero(rw > 0)
+    return excess_variance_root(rw[keep] * r[keep] ** 2, v[keep], float(dof))
+
+
+@njit(cache=True, error_model="numpy")
+def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol, max_robust,
+                   rtol, max_iter):
+    """fit._robust_scoring without Python overhead: from each row of ``starts`` (robust
+    weights), Fisher scoring (to ``rtol``) reweighted by Tukey's biweight (cut-off
+    ``tukey_c``) of z = ln(y / model) / sqrt(2 / nu + floor2), with the Paule-Mandel
+    excess variance (``gate``), until the weights move less than ``rw_tol`` and c2 by
+    less than 1e-3 of itself (at most ``max_robust`` rounds); keeps the start with the
+    least Tukey loss (an earlier one wins ties), stops at a start that rejects no tau.
+    Returns (found, A, robust weights, c2) of the winner (found False: every start
+    kept fewer than two taus)."""
+    t = y.shape[0]
+    best_a = np.zeros(5)
+    best_rw = np.zeros(t)
+    best_c2 = 0.0
+    best_loss = np.inf
+    found = False
+    for s in range(starts.shape[0]):
+        rw = starts[s].copy()
+        a = np.zeros(5)
+        have_a = False
+        c2 = 0.0
+        total_loss = np.nan
+        for _ in range(max_robust):
+            from_data = not have_a
+            if have_a:
+                from_data = True
+                for j in range(5):
+                    if cols[j] and a[j] > 0:
+                        from_data = False
+                a0 = np.where(cols, a, 0.0)
+            else:
+                a0 = np.zeros(5)
+            a, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
+            have_a = True
+            rw_new = np.empty(t)
+            total_loss = 0.0
+            n_kept = 0
+            r = np.log(y / model)
+            v = 2.0 / nu
+            for i in range(t):
+                z = r[i] / np.sqrt(v[i] + floor2)
+                u2 = (z / tukey_c) ** 2
+                if u2 > 1.0:
+                    u2 = 1.0
+                rw_new[i] = (1.0 - u2) ** 2
+                total_loss += 1.0 - (1.0 - u2) ** 3
+                n_kept += rw_new[i] > 0
+            if n_kept < 2:
+                total_loss = np.inf
+                break
+            n_free = 0
+            for j in range(5):
+                n_free += a[j] > 0
+            c2_new = _excess_variance(r, v, rw_new, n_free, gate)
+            done = np.max(np.abs(rw_new - rw)) < rw_tol and abs(c2_new - c2) <= 1e-3 * c2
+            rw, c2 = rw_new, c2_new
+            if done:
+                break
+        if total_loss < best_loss - 1e-9:
+            best_a, best_rw, best_c2, best_loss = a, rw, c2, total_loss
+            found = True
+        if np.all(rw > 0):
+            break
+    return found, best_a, best_rw, best_c2
