@@ -12,7 +12,9 @@ Rows (issue 13's table), each beside its reference:
   (``add_frequency`` per sample, the same 46 taus);
 - push at hop 1 (a window per sample), fixed alpha, blocks of 8192 -- vs the engine alone;
 - batch ``fogmon.dadev`` (default alpha) at hop 1024 and 64, ``fogmon.oadev`` -- vs a
-  plain numpy prefix-sum DAVAR of the same windows.
+  plain numpy prefix-sum DAVAR of the same windows;
+- the engine on a rate swinging +-1e6 deg/h (every sample "large": the side-prefix path)
+  at hop 1024 and hop 1 -- vs the engine on the static rate.
 Then PASS/FAIL lines for the targets and the resident-memory growth over 1e7 pushed samples.
 
     python benchmarks/bench_davar.py [--samples 2000000] [--repeat 3]
@@ -92,6 +94,7 @@ def main(argv=None) -> int:
     m = log_taus(N_TAUS, WINDOW // 4)
     rng = np.random.default_rng(0)
     y = 1000.0 + rng.normal(size=args.samples)
+    swing = 1e6 * np.sin(2 * np.pi * np.arange(args.samples) / 20000.0) + rng.normal(size=args.samples)
     n_one = 50_000  # samples pushed one per call
     n_hop1 = WINDOW + 8 * BLOCK
     n_rt = 2000  # samples into allantools' realtime class (pure Python, slow)
@@ -141,6 +144,8 @@ def main(argv=None) -> int:
         "allantools oadev_realtime, per sample": realtime,
         "push alpha=0, hop 1": lambda: stream(y[:n_hop1], m, 1, 0),
         "engine alone (advance), hop 1": lambda: stream(y[:n_hop1], m, 1, 0, "advance"),
+        "engine, +-1e6 deg/h swing, hop 1024": lambda: stream(swing, m, 1024, 0, "advance"),
+        "engine, +-1e6 deg/h swing, hop 1": lambda: stream(swing[:n_hop1], m, 1, 0, "advance"),
         "batch dadev default, hop 1024": batch(dadev, y, 1.0, WINDOW, 1024, taus=m.astype(float)),
         "batch dadev default, hop 64": batch(dadev, y[:len(y) // 2], 1.0, WINDOW, 64, taus=m.astype(float),
                                              n=len(y) // 2),
@@ -175,6 +180,9 @@ def main(argv=None) -> int:
         ("engine alone (advance), hop 1024", at)])
     block("2. one sample per call", [("push one sample per call, hop 1024", "allantools oadev_realtime, per sample")])
     block("3. hop 1", [("push alpha=0, hop 1", "engine alone (advance), hop 1")])
+    block("engine on large samples", [
+        ("engine, +-1e6 deg/h swing, hop 1024", "engine alone (advance), hop 1024"),
+        ("engine, +-1e6 deg/h swing, hop 1", "engine alone (advance), hop 1")])
     block("4. batch", [
         ("batch dadev default, hop 1024", "numpy prefix-sum dadev, hop 1024"),
         ("batch dadev default, hop 64", "numpy prefix-sum dadev, hop 64"),
