@@ -1,8 +1,11 @@
 """Driver for bench_pipeline.py: one `fogmon replay` in this process, CPU seconds split
 into import, compile (numba kernels compiled or loaded from the cache, done up front on
-tiny inputs with the run's types), read (the source's block iterator), engine
-(StreamingDadev.push, the whole-run oadev), fits (fit_noise), sinks (the sinks' methods)
-and the rest; prints one ``key=value`` line per figure.
+tiny inputs with the run's types: the engine in both modes, oadev and a fit; a kernel
+first needed later is compiled inside its phase), read (the source's block iterator),
+engine (StreamingDadev.push, the whole-run oadev), fits (fit_noise), sinks (the sinks'
+methods) and the rest; ``first_sample``: CPU s from the first import to the first block
+(compile included, which the plain command does after it). Prints one ``key=value``
+line per figure.
 
     python benchmarks/replay_split.py REPLAY_LOG RRD
 """
