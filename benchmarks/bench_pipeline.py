@@ -7,8 +7,13 @@
    `dadev` of the same data (a reference measured in the same run).
 2. `fogmon monitor` on a fake 1 kHz KVH DSP-1760 (format A on a pty, tests/monitor_fake_kvh.py)
    writing an .rrd and the archive: CPU share of one core in steady state (target < 5 %).
+3. `fogmon replay` of the bundled demo (replay_logs/lasergyro_z_100hz.csv, 184,718 samples)
+   cold (an empty numba cache: every kernel compiled) and warm (the cache the cold run
+   wrote), in CPU seconds split into import, compile, read, engine, fits, sinks
+   (benchmarks/replay_split.py), and the plain command's CPU time warm
+   (targets: < 1 s before the first sample, < 3 s in all, fits < 10 %).
 
-Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--skip-monitor]
+Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--skip-monitor] [--skip-hour] [--skip-demo]
 """
 from __future__ import annotations
 
@@ -120,13 +125,57 @@ def bench_monitor(tmp: str, seconds: float) -> None:
           f"samples_missing {gaps}; exit {mon.returncode}")
 
 
+DEMO = ROOT / "replay_logs" / "lasergyro_z_100hz.csv"
+
+
+def _child_cpu_s(cmd, env) -> tuple[float, subprocess.CompletedProcess]:
+    """CPU seconds (user + system) of a child process run to completion, and its result."""
+    before = os.times()
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    after = os.times()
+    return (after.children_user - before.children_user) + (after.children_system - before.children_system), p
+
+
+def bench_demo(tmp: str) -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": os.path.join(tmp, "numba_cache")}
+    rrd = os.path.join(tmp, "demo.rrd")
+    print(f"`fogmon replay` of {DEMO.name} (CPU s; numba cache {env['NUMBA_CACHE_DIR']}):")
+    keys = ("import", "compile", "read", "engine", "fits", "sinks", "other", "first_sample", "total")
+    print("  " + " ".join(f"{k:>12s}" for k in ("run",) + keys))
+    split = {}
+    for run in ("cold", "warm"):
+        p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "replay_split.py"), str(DEMO), rrd],
+                           capture_output=True, text=True, env=env)
+        vals = dict(line.split("=", 1) for line in p.stdout.splitlines() if "=" in line)
+        if p.returncode or vals.get("rc") != "0":
+            print(p.stderr[-2000:])
+            return
+        split[run] = {k: float(vals[k]) for k in keys}
+        print("  " + " ".join(f"{x:>12s}" for x in [run] + [f"{split[run][k]:.2f}" for k in keys]))
+    cpu, p = _child_cpu_s([sys.executable, "-m", "fogmon", "replay", str(DEMO), "--rrd", rrd, "--no-progress",
+                           "--quiet"], env)
+    w = split["warm"]
+    print(f"  plain `fogmon replay`, warm: {cpu:.2f} CPU s (exit {p.returncode})")
+    print(f"  {'PASS' if w['first_sample'] < 1.0 else 'FAIL'}  warm: before the first sample < 1 s: "
+          f"{w['first_sample']:.2f} s (import {w['import']:.2f} + compile/cache load {w['compile']:.2f})")
+    print(f"  {'PASS' if cpu < 3.0 else 'FAIL'}  warm: whole demo < 3 s: {cpu:.2f} s")
+    print(f"  {'PASS' if w['fits'] < 0.1 * w['total'] else 'FAIL'}  warm: fits < 10 % of the replay: "
+          f"{100 * w['fits'] / w['total']:.0f} %")
+    print(f"  first-run cost (cold - warm): {split['cold']['total'] - w['total']:.1f} CPU s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--monitor-s", type=float, default=30.0, help="steady-state seconds to measure the monitor")
     ap.add_argument("--skip-monitor", action="store_true")
+    ap.add_argument("--skip-hour", action="store_true", help="skip the one-hour 1 kHz replay")
+    ap.add_argument("--skip-demo", action="store_true", help="skip the cold/warm replay of the bundled demo")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        bench_replay(tmp)
+        if not a.skip_demo:
+            bench_demo(tmp)
+        if not a.skip_hour:
+            bench_replay(tmp)
         if not a.skip_monitor:
             bench_monitor(tmp, a.monitor_s)
 

@@ -17,9 +17,10 @@ import numpy as np
 
 from fogmon.davar import kernels
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
-from fogmon.davar.fit import dominant_alpha, fit_avar
+from fogmon.davar.fit import dominant_alpha, quick_avar_terms
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
+from fogmon.davar.theory import POWERS
 from fogmon.errors import FogmonError
 
 
@@ -50,41 +51,72 @@ def _samples(seconds: float, rate_hz: float, what: str) -> int:
     return n
 
 
-def row_alpha(sums, counts, m, n_samples: int) -> np.ndarray:
-    """Noise type alpha per tau for one window: the dominant term of an IEEE-952 fit to
-    its Allan variance (sums of squared terms and valid-term counts over m)."""
+def _avar(sums, counts) -> np.ndarray:
     counts = np.asarray(counts)
     with np.errstate(invalid="ignore", divide="ignore"):
-        avar = np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan)
-    tau_m = np.asarray(m, dtype=np.float64)  # tau in units of tau0: alpha does not depend on the unit
-    return dominant_alpha(np.nan_to_num(fit_avar(tau_m, avar, m, counts, n_samples)[0]), tau_m)
+        return np.where(counts > 0, np.maximum(sums, 0.0) / (2.0 * counts), np.nan)
+
+
+def _row_terms(sums, counts, m, n_samples: int) -> np.ndarray:
+    """A_n of the quick IEEE-952 fit (``fit.quick_avar_terms``) of one window, tau in
+    units of the sample period (alpha does not depend on the unit)."""
+    return quick_avar_terms(np.asarray(m, dtype=np.float64), _avar(sums, counts), m, counts, n_samples)
+
+
+def row_alpha(sums, counts, m, n_samples: int) -> np.ndarray:
+    """Noise type alpha per tau for one window: the dominant term of a quick IEEE-952
+    fit (``fit.quick_avar_terms``) to its Allan variance (sums of squared terms and
+    valid-term counts over m)."""
+    return dominant_alpha(_row_terms(sums, counts, m, n_samples), np.asarray(m, dtype=np.float64))
+
+
+HOLD_Z = 3.0
+"""A window whose log Allan variance is within HOLD_Z standard deviations of the last
+refit's model at every tau keeps that refit's noise types (``alpha_rows``)."""
+
+
+def _model_holds(a, sums, counts, m) -> bool:
+    """The quick-fit model ``a`` still describes a window: |ln(avar / model)| <= HOLD_Z
+    sqrt(2 / nu + 0.1^2) at every tau with terms, nu = n_terms / m (about the EDF of
+    white rate noise, lower for the others: a loose test)."""
+    counts = np.asarray(counts)
+    use = counts > 0
+    tau = np.asarray(m, dtype=np.float64)[use]
+    model = (tau[:, None] ** POWERS) @ a
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = np.log(_avar(sums, counts)[use] / model) / np.sqrt(2.0 * tau / counts[use] + 0.01)
+    return bool(np.all(np.abs(z) <= HOLD_Z))
 
 
 def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
-    """Noise type per (window, tau) for windows ending at ``ends``: refitted (row_alpha)
-    on the first window at least ``every`` samples after the previous refit and held in
-    between, so batch and streaming engines pick the same windows. ``prev`` is
-    (alpha, end) of the last refit before these windows, or None. Returns
-    (alpha (T x M), (alpha, end) of the last refit)."""
-    alpha_now, end_now = (np.zeros(len(m), dtype=np.int64), None) if prev is None else prev
+    """Noise type per (window, tau) for windows ending at ``ends``: on the first window
+    at least ``every`` samples after the previous check, refitted (row_alpha) unless the
+    last refit's model still holds there (``_model_holds``), and held in between, so
+    batch and streaming engines pick the same windows. ``prev`` is the state returned for
+    the windows before these, or None. Returns (alpha (T x M), state)."""
+    alpha_now, terms_now, end_now = (np.zeros(len(m), dtype=np.int64), None, None) if prev is None else prev
     if len(ends) == 0:
-        return np.zeros((0, len(m)), dtype=np.int64), (alpha_now, end_now)
+        return np.zeros((0, len(m)), dtype=np.int64), (alpha_now, terms_now, end_now)
     seg_start, seg_alpha = [0], [alpha_now]
     r = 0 if end_now is None else int(np.searchsorted(ends, end_now + every))
+    tau_m = np.asarray(m, dtype=np.float64)
     while r < len(ends):
-        alpha_now, end_now = row_alpha(sums[r], counts[r], m, n_samples), int(ends[r])
-        seg_start.append(r)
-        seg_alpha.append(alpha_now)
+        end_now = int(ends[r])
+        if terms_now is None or not _model_holds(terms_now, sums[r], counts[r], m):
+            terms_now = _row_terms(sums[r], counts[r], m, n_samples)
+            alpha_now = dominant_alpha(terms_now, tau_m)
+            seg_start.append(r)
+            seg_alpha.append(alpha_now)
         r = int(np.searchsorted(ends, end_now + every))
     seg = np.searchsorted(np.array(seg_start), np.arange(len(ends)), side="right") - 1
-    return np.array(seg_alpha, dtype=np.int64)[seg], (alpha_now, end_now)
+    return np.array(seg_alpha, dtype=np.int64)[seg], (alpha_now, terms_now, end_now)
 
 
 @lru_cache(maxsize=256)
-def _gapless_tables(alpha: tuple, m: tuple, n_samples: int, confidence: float):
-    """Gap-free EDF per tau and the chi2 factors lo/sigma, hi/sigma (cached: streaming
-    asks for the same ones block after block)."""
-    edf = edf_full(np.array(alpha), np.array(m), n_samples)
+def _gapless_tables(alpha: bytes, m: bytes, n_samples: int, confidence: float):
+    """Gap-free EDF per tau and the chi2 factors lo/sigma, hi/sigma for int64 ``alpha``
+    and ``m`` given as bytes (cached: streaming asks for the same ones block after block)."""
+    edf = edf_full(np.frombuffer(alpha, np.int64), np.frombuffer(m, np.int64), n_samples)
     f_lo, f_hi = chi2_bounds(np.ones_like(edf), edf, confidence)
     return edf, f_lo, f_hi
 
@@ -97,18 +129,25 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     nm = len(m)
     sums = np.asarray(sums, dtype=np.float64).reshape(-1, nm)
     counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
+    m = np.ascontiguousarray(m, dtype=np.int64)
     if alpha is None:
         alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts)], dtype=np.int64).reshape(shape)
-    alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), shape).reshape(-1, nm)
-    # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
-    new_run = np.ones(len(alpha), dtype=bool)
-    new_run[1:] = np.any(alpha[1:] != alpha[:-1], axis=1)
-    run = np.cumsum(new_run) - 1
-    tables = [_gapless_tables(tuple(a), tuple(m), int(n_samples), float(confidence)) for a in alpha[new_run]]
+    alpha = np.asarray(alpha, dtype=np.int64)
+    if alpha.ndim <= 1:  # one noise type row for every window
+        runs = np.ascontiguousarray(np.broadcast_to(alpha, (1, nm)))
+        run = np.zeros(len(sums), dtype=np.int64)
+    else:  # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
+        alpha = np.broadcast_to(alpha, shape).reshape(-1, nm)
+        new_run = np.ones(len(alpha), dtype=bool)
+        new_run[1:] = np.any(alpha[1:] != alpha[:-1], axis=1)
+        run = np.cumsum(new_run) - 1
+        runs = np.ascontiguousarray(alpha[new_run])
+    tables = [_gapless_tables(a.tobytes(), m.tobytes(), int(n_samples), float(confidence)) for a in runs]
     edf_gapless, f_lo, f_hi = (np.array([t[i] for t in tables]).reshape(-1, nm) for i in range(3))
-    full = n_samples - 2 * np.asarray(m, dtype=np.int64) + 1
-    adev, lo, hi, edf, gapped = kernels.frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi)
-    if gapped.any():
+    adev, lo, hi, edf, n_gapped = kernels.frame_stats(sums, counts, run, n_samples - 2 * m + 1, edf_gapless,
+                                                      f_lo, f_hi)
+    if n_gapped:
+        gapped = counts != (n_samples - 2 * m + 1)
         edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])
         lo[gapped], hi[gapped] = chi2_bounds(adev[gapped], edf[gapped], confidence)
     return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))

@@ -23,8 +23,40 @@ tuple ``pre = (P, bad, bh, bl, hc)`` (``hc``: prefix count of huge samples).
 """
 from __future__ import annotations
 
+import contextlib
+import warnings
+
 import numpy as np
 from numba import njit
+from numba.core import caching
+
+from fogmon.errors import FogmonWarning
+
+
+def _tolerate_unusable_numba_cache() -> None:
+    """A numba cache that cannot be read or written (corrupt files, an install directory
+    without write access) costs a compile in memory, never the run: numba's guard around
+    cache I/O (which forgives only EACCES, only on Windows) is widened to every error,
+    reported once per process as a FogmonWarning. A cache from other sources is ignored
+    by numba itself (it checks the source file's stamp)."""
+    if getattr(caching.Cache, "_fogmon_tolerant", False):
+        return
+    warned = []
+
+    @contextlib.contextmanager
+    def guard(self):
+        try:
+            yield
+        except Exception as e:  # noqa: BLE001 - any cache failure: compile in memory instead
+            if not warned:
+                warned.append(e)
+                warnings.warn(f"numba cache unusable ({type(e).__name__}: {e}); kernels are compiled in "
+                              f"memory for this run", FogmonWarning)
+    caching.Cache._guard_against_spurious_io_errors = guard
+    caching.Cache._fogmon_tolerant = True
+
+
+_tolerate_unusable_numba_cache()
 
 CEILING_DPH = 1e8
 """|rate| above this (deg/h, 27,800 deg/s: beyond any gyro) or infinite makes a sample
@@ -153,70 +185,6 @@ def _dd_sub(s, c, bs, bc):
 
 
 @njit(cache=True)
-def window_sums(hi, lo, bad, ms, starts, w):
-    """Sums of squared valid terms (+inf for a window holding a huge sample) and
-    valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
-    (increasing), by differencing a compensated cumulative sum of squared terms: O(N)
-    per m for all windows. The cumulative sum is re-based on its current value every
-    ``w`` terms (the open windows' records follow), so a window carries ~eps^2 of the
-    squared terms of the last two windows only, whatever came before."""
-    nt = starts.shape[0]
-    nm = ms.shape[0]
-    sums = np.zeros((nt, nm))
-    counts = np.zeros((nt, nm), np.int64)
-    s_at = np.empty(nt)
-    c_at = np.empty(nt)
-    n_at = np.empty(nt, np.int64)
-    h_at = np.empty(nt, np.int64)
-    for k in range(nm):
-        m = ms[k]
-        if nt == 0 or 2 * m > w:
-            continue
-        span = w - 2 * m + 1  # terms per window
-        j_end = starts[nt - 1] + span  # one past the last term needed
-        s = 0.0
-        c = 0.0
-        cnt = 0
-        nh = 0  # terms spanning a huge sample
-        pa = 0
-        pb = 0
-        j_base = 0
-        for j in range(j_end + 1):
-            if j - j_base >= w:
-                for q in range(pb, pa):
-                    s_at[q], c_at[q] = _dd_sub(s_at[q], c_at[q], s, c)
-                s = 0.0
-                c = 0.0
-                j_base = j
-            while pa < nt and starts[pa] == j:
-                s_at[pa] = s
-                c_at[pa] = c
-                n_at[pa] = cnt
-                h_at[pa] = nh
-                pa += 1
-            while pb < nt and starts[pb] + span == j:
-                if nh > h_at[pb]:
-                    sums[pb, k] = np.inf
-                else:
-                    d, e = _two_sum(s, -s_at[pb])
-                    sums[pb, k] = d + (e + (c - c_at[pb]))
-                counts[pb, k] = cnt - n_at[pb]
-                pb += 1
-            if j == j_end:
-                break
-            d = bad[j + 2 * m] - bad[j]
-            if d == 0:
-                t = _term_dd(hi, lo, j, m)
-                s, e = _two_sum(s, t * t)
-                c += e  # bounded: re-based every w terms
-                cnt += 1
-            elif d & _LOW == 0:
-                cnt += 1
-                nh += 1
-    return sums, counts
-
-
-@njit(cache=True)
 def stream_append(y, valid, yraw, vraw, pre, length, ref):
     """Append samples to the linear buffer: raw values, validity and the prefix arrays
     ``pre`` (main sums of ``y - ref``, counts, large-sample side sums, huge counts; see
@@ -316,6 +284,117 @@ def _large_terms(pre, a0, n, m, x):
 _TILE = 1024  # samples per tile of the streaming update: 4 taus' term arrays stay in L1
 _EPS = 2.0**-52
 _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain path may accumulate
+
+
+@njit(cache=True)
+def _batch_terms(hi, lo, bad, j0, n, m, x, v):
+    """Squared terms of factor m starting at samples j0 .. j0+n-1 into x[:n] from the
+    double-double prefix sums (+inf where a term spans a huge sample, 0 where it spans a
+    gap). When some term is not plain their validity (1.0 / 0.0) goes to v[:n] and True
+    is returned; else v is left unwritten (vectorised path)."""
+    inv = 1.0 / m
+    if bad[j0 + n - 1 + 2 * m] == bad[j0]:
+        h0, h1, h2 = hi[j0:j0 + n], hi[j0 + m:j0 + m + n], hi[j0 + 2 * m:j0 + 2 * m + n]
+        l0, l1, l2 = lo[j0:j0 + n], lo[j0 + m:j0 + m + n], lo[j0 + 2 * m:j0 + 2 * m + n]
+        for i in range(n):
+            t = (((h2[i] - h1[i]) - (h1[i] - h0[i])) + ((l2[i] - l1[i]) - (l1[i] - l0[i]))) * inv
+            x[i] = t * t
+        return False
+    for i in range(n):
+        j = j0 + i
+        d = bad[j + 2 * m] - bad[j]
+        if d == 0:
+            t = _term_dd(hi, lo, j, m)
+            x[i] = t * t
+            v[i] = 1.0
+        elif d & _LOW == 0:
+            x[i] = np.inf
+            v[i] = 1.0
+        else:
+            x[i] = 0.0
+            v[i] = 0.0
+    return True
+
+
+@njit(cache=True, fastmath=_FAST)
+def _range_sum(x, i0, i1):
+    """Sum of x[i0:i1] in any order (SIMD; +inf when it holds a +inf)."""
+    s = 0.0
+    for i in range(i0, i1):
+        s += x[i]
+    return s
+
+
+@njit(cache=True)
+def window_sums(hi, lo, bad, ms, starts, w):
+    """Sums of squared valid terms (+inf for a window holding a huge sample) and
+    valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
+    (non-decreasing), from the double-double prefix sums ``hi``, ``lo`` and counts ``bad``
+    of ``prefix_sums_dd``: O(N) per m for all windows. Per m the squared terms are formed
+    in vectorised tiles of _TILE and summed (SIMD) between the cut points (window starts
+    and ends); the segment sums enter a double-double cumulative sum, recorded at each
+    window's start, and a window's sum is the cumulative sum at its end minus that
+    record. A segment lies inside every window it overlaps, so a window carries only the
+    roundings of its own segments (<= _TILE eps of its sum) and ~eps^2 of the cumulative
+    sum: a large glitch leaves no residue in the windows not holding it."""
+    nt = starts.shape[0]
+    nm = ms.shape[0]
+    sums = np.zeros((nt, nm))
+    counts = np.zeros((nt, nm), np.int64)
+    s_at = np.empty(nt)
+    c_at = np.empty(nt)
+    n_at = np.empty(nt, np.int64)
+    h_at = np.empty(nt, np.int64)
+    x = np.empty(_TILE)
+    v = np.empty(_TILE)
+    big = np.iinfo(np.int64).max
+    for k in range(nm):
+        m = ms[k]
+        if nt == 0 or 2 * m > w:
+            continue
+        span = w - 2 * m + 1  # terms per window
+        j_end = starts[nt - 1] + span  # one past the last term needed
+        s = 0.0
+        c = 0.0
+        cnt = 0
+        nh = 0  # segments holding a term spanning a huge sample
+        qa = 0  # next window to record
+        qb = 0  # next window to emit
+        for t0 in range(starts[0], j_end, _TILE):
+            n = min(_TILE, j_end - t0)
+            last = t0 + n == j_end
+            gaps = _batch_terms(hi, lo, bad, t0, n, m, x, v)
+            pos = 0
+            while True:
+                b = min(starts[qa] if qa < nt else big, starts[qb] + span if qb < nt else big)
+                p = min(b - t0, n)
+                if p > pos:  # the segment of terms t0 + pos .. t0 + p - 1
+                    seg = _range_sum(x, pos, p)
+                    if seg == np.inf:
+                        nh += 1
+                    else:
+                        s, c = _dd_add(s, c, seg)
+                    cnt += int(_range_sum(v, pos, p)) if gaps else p - pos
+                    pos = p
+                if b - t0 > n or (b - t0 == n and not last):
+                    break
+                while qa < nt and starts[qa] == b:
+                    s_at[qa] = s
+                    c_at[qa] = c
+                    n_at[qa] = cnt
+                    h_at[qa] = nh
+                    qa += 1
+                while qb < nt and starts[qb] + span == b:
+                    if nh > h_at[qb]:
+                        sums[qb, k] = np.inf
+                    else:
+                        d, e = _two_sum(s, -s_at[qb])
+                        sums[qb, k] = d + (e + (c - c_at[qb]))
+                    counts[qb, k] = cnt - n_at[qb]
+                    qb += 1
+                if qb == nt:
+                    break
+    return sums, counts
 
 
 @njit(cache=True, inline="always")
@@ -760,26 +839,28 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
             cum_s[k], cum_c[k], cum_n[k], cum_h[k] = s, c, nn, nh
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms), bounds and EDF from the gap-free tables of the row's alpha run; returns
-    (adev, lo, hi, edf, gapped) where ``gapped`` marks entries with fewer than ``full``
-    terms, whose EDF and bounds the caller recomputes."""
+    (adev, lo, hi, edf, number of entries with fewer than ``full`` terms, whose EDF and
+    bounds the caller recomputes). Branch-free inner loop (SIMD)."""
     nt, nm = sums.shape
     adev = np.empty((nt, nm))
     lo = np.empty((nt, nm))
     hi = np.empty((nt, nm))
     edf = np.empty((nt, nm))
-    gapped = np.zeros((nt, nm), np.bool_)
+    n_gapped = 0
     for i in range(nt):
         r = run[i]
+        fl, fh, eg = f_lo[r], f_hi[r], edf_gapless[r]
+        s, c = sums[i], counts[i]
+        a_row, l_row, h_row, e_row = adev[i], lo[i], hi[i], edf[i]
         for k in range(nm):
-            n = counts[i, k]
-            a = np.sqrt(max(sums[i, k], 0.0) / (2.0 * n)) if n > 0 else np.nan
-            adev[i, k] = a
-            lo[i, k] = a * f_lo[r, k]
-            hi[i, k] = a * f_hi[r, k]
-            edf[i, k] = edf_gapless[r, k]
-            gapped[i, k] = n != full[k]
-    return adev, lo, hi, edf, gapped
+            a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
+            a_row[k] = a
+            l_row[k] = a * fl[k]
+            h_row[k] = a * fh[k]
+            e_row[k] = eg[k]
+            n_gapped += c[k] != full[k]
+    return adev, lo, hi, edf, n_gapped

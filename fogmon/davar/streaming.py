@@ -31,6 +31,9 @@ from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 
 RECORD_MIN_HOP = 64  # samples; below it the window / hop records per tau would outgrow the buffer
+STAGE = 256
+"""Samples a push that completes no window may stage (copied, no engine call) before
+they enter the engine: a one-sample push costs a few microseconds."""
 
 
 class StreamingDadev:
@@ -79,24 +82,45 @@ class StreamingDadev:
         self._rec_n = np.zeros((nm, ring), dtype=np.int64)
         self._rec_h = np.zeros((nm, ring), dtype=np.int64)
         self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
-        self._alpha_prev = None  # (alpha, end index) of the last fitted window, see batch.alpha_rows
+        self._alpha_prev = None  # noise-type state of the windows emitted so far, see batch.alpha_rows
+        self._stage_y = np.empty(STAGE)  # samples pushed but not yet in the engine (see push)
+        self._stage_v = np.ones(STAGE, dtype=np.bool_)
+        self._staged = 0
+        self._next_end = self.window - 1  # last sample of the next window to emit (absolute index)
+        self._empty = None  # the zero-row result of a push that completes no window
 
     @property
     def n_pushed(self) -> int:
         """Samples pushed so far."""
-        return self._base + self._len
+        return self._base + self._len + self._staged
 
     def push(self, rate_dph, valid=None) -> DadevResult:
         """Feed samples: an array of rate in deg/h (``valid`` mask optional, NaN is
         invalid) or a :class:`fogmon.block.Block` (its ``valid`` flags). Returns the
         windows completed at hop boundaries inside this block (possibly zero rows);
-        ``end_index`` counts samples from the first push."""
+        ``end_index`` counts samples from the first push. A small array that completes
+        no window is only staged (up to STAGE samples): same results, a few us per call."""
+        if type(rate_dph) is np.ndarray and rate_dph.ndim == 1 and (
+                valid is None or (type(valid) is np.ndarray and valid.shape == rate_dph.shape)):
+            k, n = self._staged, rate_dph.shape[0]
+            if k + n <= STAGE and self._base + self._len + k + n <= self._next_end:
+                self._stage_y[k:k + n] = rate_dph
+                self._stage_v[k:k + n] = True if valid is None else valid
+                self._staged = k + n
+                if self._empty is None:
+                    self._empty = self._frames(np.zeros(0, np.int64), np.zeros((0, len(self.m))),
+                                               np.zeros((0, len(self.m)), np.int64), 0)
+                return self._empty
         ends, sums, counts = self.advance(rate_dph, valid)
-        w = self.window
         alpha = self.alpha
         if alpha is None:
+            w = self.window
             alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop, w // 4),
                                                  self._alpha_prev)
+        return self._frames(ends, sums, counts, alpha)
+
+    def _frames(self, ends, sums, counts, alpha) -> DadevResult:
+        w = self.window
         adev, lo, hi, edf = statistics(sums, counts, self.m, w, alpha, self.confidence)
         return DadevResult((ends - (w - 1) / 2.0) / self.rate_hz, ends, self.m / self.rate_hz, self.m,
                            adev, lo, hi, edf, counts, self.rate_hz, w / self.rate_hz,
@@ -109,8 +133,12 @@ class StreamingDadev:
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
+        if self._staged:  # staged samples first (they complete no window)
+            sy, sv = _prepare(self._stage_y[:self._staged], self._stage_v[:self._staged])
+            y, ok = np.concatenate([sy, y]), np.concatenate([sv, ok])
+            self._staged = 0
         w, cap = self.window, len(self._y)
-        a0 = self.n_pushed
+        a0 = self._base + self._len
         k0 = -(-(max(a0, w - 1) - (w - 1)) // self.hop)
         ends = np.arange(w - 1 + k0 * self.hop, a0 + len(y), self.hop, dtype=np.int64)
         sums = np.empty((len(ends), len(self.m)))
@@ -149,11 +177,15 @@ class StreamingDadev:
             self._len += take
             i += take
             row = row_end
+        n = self._base + self._len
+        self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop) * self.hop
         return ends, sums, counts
 
     def current(self) -> AdevResult:
         """Overlapping ADEV of the current (possibly still filling) window, whatever the
         hop: an exact recompute, O(window x taus)."""
+        if self._staged:
+            self.advance(np.zeros(0))  # the staged samples enter the engine (no window completes)
         n = min(self.n_pushed, self.window)
         sums, counts = kernels.window_sums_exact(self._pre, self._len - n, n, self.m)
         alpha = self.alpha if self.alpha is not None else row_alpha(sums, counts, self.m, n)

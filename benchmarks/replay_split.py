@@ -1,0 +1,100 @@
+"""Driver for bench_pipeline.py: one `fogmon replay` in this process, CPU seconds split
+into import, compile (numba kernels compiled or loaded from the cache, done up front on
+tiny inputs with the run's types: the engine in both modes, oadev and a fit; a kernel
+first needed later is compiled inside its phase), read (the source's block iterator),
+engine (StreamingDadev.push, the whole-run oadev), fits (fit_noise), sinks (the sinks'
+methods) and the rest; ``first_sample``: CPU s from the first import to the first block
+(compile included, which the plain command does after it). Prints one ``key=value``
+line per figure.
+
+    python benchmarks/replay_split.py REPLAY_LOG RRD
+"""
+from __future__ import annotations
+
+import functools
+import sys
+import time
+
+T0 = time.process_time()
+import numpy as np  # noqa: E402
+
+import fogmon.cli  # noqa: E402
+import fogmon.davar.batch  # noqa: E402
+import fogmon.davar.fit  # noqa: E402
+import fogmon.davar.streaming  # noqa: E402
+import fogmon.pipeline  # noqa: E402
+import fogmon.sinks.console  # noqa: E402
+import fogmon.sinks.rerun_sink  # noqa: E402
+import fogmon.sources.replay  # noqa: E402
+
+SPENT: dict[str, float] = {}
+FIRST: list[float] = []
+
+
+def timed(key, fn):
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        t = time.process_time()
+        try:
+            return fn(*a, **kw)
+        finally:
+            SPENT[key] = SPENT.get(key, 0.0) + time.process_time() - t
+    return wrapper
+
+
+def timed_iter(fn):
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        it = fn(*a, **kw)
+        while True:
+            t = time.process_time()
+            try:
+                item = next(it)
+            except StopIteration:
+                return
+            finally:
+                SPENT["read"] = SPENT.get("read", 0.0) + time.process_time() - t
+            if not FIRST:
+                FIRST.append(time.process_time())
+            yield item
+    return wrapper
+
+
+def main(log: str, rrd: str) -> int:
+    t_import = time.process_time() - T0
+    t = time.process_time()
+    rng = np.random.default_rng(0)
+    for hop in (1.0, 64.0):
+        fogmon.davar.streaming.StreamingDadev(1.0, 256.0, hop_s=hop).push(rng.normal(size=1000))
+    fogmon.davar.fit.fit_noise(fogmon.davar.batch.oadev(rng.normal(size=1000), 1.0))
+    t_compile = time.process_time() - t
+    S = fogmon.davar.streaming.StreamingDadev
+    S.push = timed("engine", S.push)
+    fogmon.davar.batch.oadev = timed("engine", fogmon.davar.batch.oadev)
+    fogmon.davar.fit.fit_noise = timed("fits", fogmon.davar.fit.fit_noise)
+    for mod in (fogmon.sinks.console, fogmon.sinks.rerun_sink):
+        for cls in vars(mod).values():
+            if isinstance(cls, type) and cls.__module__ == mod.__name__:
+                for name in ("start", "block", "frames", "events", "source_counters", "rotate", "finish"):
+                    if name in vars(cls):
+                        setattr(cls, name, timed("sinks", vars(cls)[name]))
+    for cls in vars(fogmon.sources.replay).values():
+        if isinstance(cls, type) and "blocks" in vars(cls):
+            cls.blocks = timed_iter(cls.blocks)
+    t = time.process_time()
+    rc = fogmon.cli.main(["replay", log, "--rrd", rrd, "--no-progress", "--quiet"])
+    run = time.process_time() - t
+    total = time.process_time() - T0
+    print(f"rc={rc}")
+    print(f"import={t_import:.3f}")
+    print(f"compile={t_compile:.3f}")
+    for k in ("read", "engine", "fits", "sinks"):
+        print(f"{k}={SPENT.get(k, 0.0):.3f}")
+    print(f"other={run - sum(SPENT.values()):.3f}")
+    print(f"first_sample={(FIRST[0] if FIRST else total) - T0:.3f}")
+    print(f"total={total:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(*sys.argv[1:3]))

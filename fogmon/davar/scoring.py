@@ -1,0 +1,283 @@
+"""Numba kernels of the IEEE-952 fit (fogmon/davar/fit.py): the Fisher-scoring iteration
+with the mixture-EDF weights and the small non-negative least-squares problems it solves
+(at most 5 columns, Lawson & Hanson with Householder least squares), so that an
+iteration costs microseconds instead of a hundred of Python and scipy overhead."""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from fogmon.davar import kernels  # noqa: F401 - its import makes an unusable numba cache harmless
+
+_CLASS = np.array([0, 1, 2, 3, 3])
+"""Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
+_EPS = 2.0**-52
+
+
+@njit(cache=True)
+def _least_squares(a, b):
+    """x minimising |a x - b| (n x k, n >= k) by Householder QR; 0 for a column that is
+    dependent on the ones before it."""
+    n, k = a.shape
+    r = a.copy()
+    q = b.copy()
+    for j in range(k):
+        norm = np.sqrt(np.sum(r[j:, j] ** 2))
+        if norm == 0.0:
+            continue
+        alpha = -norm if r[j, j] > 0 else norm
+        v = r[j:, j].copy()
+        v[0] -= alpha
+        vv = np.sum(v * v)
+        if vv == 0.0:
+            continue
+        for c in range(j, k):
+            r[j:, c] -= (2.0 * np.sum(v * r[j:, c]) / vv) * v
+        q[j:] -= (2.0 * np.sum(v * q[j:]) / vv) * v
+    x = np.zeros(k)
+    scale = np.max(np.abs(np.diag(r[:k, :k]))) if k else 0.0
+    for j in range(k - 1, -1, -1):
+        s = q[j]
+        for c in range(j + 1, k):
+            s -= r[j, c] * x[c]
+        x[j] = s / r[j, j] if abs(r[j, j]) > 1e-14 * scale else 0.0
+    return x
+
+
+@njit(cache=True)
+def nnls(a, b):
+    """x >= 0 minimising |a x - b| (Lawson & Hanson's active-set algorithm; columns of
+    ``a`` normalised by the caller). A column whose entry would not be positive is
+    skipped until x changes (no cycling)."""
+    n, k = a.shape
+    x = np.zeros(k)
+    passive = np.zeros(k, np.bool_)
+    skip = np.zeros(k, np.bool_)
+    tol = 10.0 * _EPS * max(n, k) * max(1.0, np.max(np.abs(a)))
+    for _ in range(4 * k + 4):
+        w = a.T @ (b - a @ x)
+        j_max = -1
+        w_max = tol
+        for j in range(k):
+            if not passive[j] and not skip[j] and w[j] > w_max:
+                w_max, j_max = w[j], j
+        if j_max < 0:
+            break
+        passive[j_max] = True
+        s = np.zeros(k)
+        first = True
+        for _inner in range(3 * k + 3):
+            idx = np.flatnonzero(passive)
+            s[:] = 0.0
+            if idx.shape[0] == 0:
+                break
+            s_p = _least_squares(a[:, idx], b)
+            if np.all(s_p > tol):
+                s[idx] = s_p
+                break
+            if first and s_p[np.searchsorted(idx, j_max)] <= tol:
+                passive[j_max] = False  # the new column does not enter: try the next one
+                skip[j_max] = True
+                s[:] = x
+                break
+            first = False
+            step = np.inf
+            for i in range(idx.shape[0]):
+                if s_p[i] <= tol:
+                    d = x[idx[i]] - s_p[i]
+                    step = min(step, x[idx[i]] / d if d > 0 else 0.0)
+            for i in range(idx.shape[0]):
+                x[idx[i]] += step * (s_p[i] - x[idx[i]])
+            for i in range(idx.shape[0]):
+                if x[idx[i]] <= tol:
+                    passive[idx[i]] = False
+                    x[idx[i]] = 0.0
+        if not skip[j_max]:
+            skip[:] = False
+        x = s
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_edf(x, a, mats, full, gap_scale):
+    """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
+    predicts (white rate noise where it is empty): full / f'Mf scaled for gaps, as
+    ``fit._NoiseModel.__call__``."""
+    t = x.shape[0]
+    nu = np.empty(t)
+    f = np.empty(4)
+    for i in range(t):
+        f[:] = 0.0
+        total = 0.0
+        for n in range(5):
+            c = x[i, n] * a[n]
+            total += c
+            f[_CLASS[n]] += c
+        if total > 0:
+            f /= total
+        else:
+            f[:] = 0.0
+            f[1] = 1.0
+        q = 0.0
+        for u in range(4):
+            for v in range(4):
+                q += f[u] * mats[i, u, v] * f[v]
+        nu[i] = full[i] / q * gap_scale[i]
+    return nu
+
+
+@njit(cache=True, error_model="numpy")
+def fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a, from_data, c2, rtol, max_iter):
+    """Fisher scoring of the terms ``cols`` (mask over the 5 columns of x) >= 0 with the
+    other terms held at their values in ``a``, robust weights ``rw``, model-inadequacy
+    variance ``c2``: weights sqrt(rw / (2 / nu + c2)) / model, nu the mixture EDF of the
+    current model (``mixture_edf``); from the data as model (``from_data``) or from
+    ``a``, until the model moves less than ``rtol`` (at most ``max_iter`` steps).
+    Returns (A, model, nu at A). Rows with non-finite weights are left out of a step;
+    a column without weight gets 0."""
+    t = x.shape[0]
+    a = a.copy()
+    if from_data:
+        a[:] = 0.0
+        model = y.copy()
+    else:
+        model = np.maximum(x @ a, 1e-300)
+    free = np.flatnonzero(cols)
+    fixed = a.copy()
+    fixed[free] = 0.0
+    offset = x @ fixed
+    for _ in range(max_iter):
+        nu = mixture_edf(x, a, mats, full, gap_scale)
+        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
+        a_new = fixed.copy()
+        if free.shape[0]:
+            rows = np.zeros(t, np.bool_)
+            for i in range(t):
+                rows[i] = np.isfinite((y[i] - offset[i]) * sw[i])
+                for j in free:
+                    rows[i] &= np.isfinite(x[i, j] * sw[i])
+            ri = np.flatnonzero(rows)
+            m_ = np.empty((ri.shape[0], free.shape[0]))
+            b_ = np.empty(ri.shape[0])
+            for r in range(ri.shape[0]):
+                i = ri[r]
+                b_[r] = (y[i] - offset[i]) * sw[i]
+                for c in range(free.shape[0]):
+                    m_[r, c] = x[i, free[c]] * sw[i]
+            scale = np.sqrt(np.sum(m_ * m_, axis=0)) if ri.shape[0] else np.zeros(free.shape[0])
+            use = np.flatnonzero(scale > 0)
+            if use.shape[0]:
+                sol = nnls(m_[:, use] / scale[use], b_)
+                for c in range(use.shape[0]):
+                    a_new[free[use[c]]] = sol[c] / scale[use[c]]
+        model_new = np.maximum(x @ a_new, 1e-300)
+        done = np.max(np.abs(model_new / model - 1.0)) < rtol
+        a, model = a_new, model_new
+        if done:
+            break
+    return a, model, mixture_edf(x, a, mats, full, gap_scale)
+
+
+@njit(cache=True)
+def excess_variance_root(r2w, v, dof):
+    """The c2 >= 0 where sum r2w / (v + c2) = dof (Paule-Mandel), for sum r2w / v > dof:
+    Newton's method from c2 = 0, monotone for this convex decreasing function, to full
+    precision."""
+    c2 = 0.0
+    for _ in range(200):
+        f = 0.0
+        g = 0.0
+        for i in range(r2w.shape[0]):
+            q = r2w[i] / (v[i] + c2)
+            f += q
+            g += q / (v[i] + c2)
+        step = (f - dof) / g
+        c2 += step
+        if step <= 1e-15 * c2:
+            break
+    return c2
+
+
+@njit(cache=True)
+def _excess_variance(r, v, rw, n_free, gate):
+    """Model-inadequacy variance c2 of ln(Allan variance) from the residuals ``r`` and
+    sampling variances ``v`` of the taus kept (rw > 0): the Paule-Mandel root
+    (``excess_variance_root``) when their reduced chi-square exceeds ``gate``, else 0."""
+    chi = 0.0
+    n = 0
+    for i in range(r.shape[0]):
+        if rw[i] > 0:
+            chi += rw[i] * r[i] ** 2 / v[i]
+            n += 1
+    dof = max(n - n_free, 1)
+    if not chi > gate * dof:
+        return 0.0
+    keep = np.flatnonzero(rw > 0)
+    return excess_variance_root(rw[keep] * r[keep] ** 2, v[keep], float(dof))
+
+
+@njit(cache=True, error_model="numpy")
+def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol, max_robust,
+                   rtol, max_iter):
+    """fit._robust_scoring without Python overhead: from each row of ``starts`` (robust
+    weights), Fisher scoring (to ``rtol``) reweighted by Tukey's biweight (cut-off
+    ``tukey_c``) of z = ln(y / model) / sqrt(2 / nu + floor2), with the Paule-Mandel
+    excess variance (``gate``), until the weights move less than ``rw_tol`` and c2 by
+    less than 1e-3 of itself (at most ``max_robust`` rounds); keeps the start with the
+    least Tukey loss (an earlier one wins ties), stops at a start that rejects no tau.
+    Returns (found, A, robust weights, c2) of the winner (found False: every start
+    kept fewer than two taus)."""
+    t = y.shape[0]
+    best_a = np.zeros(5)
+    best_rw = np.zeros(t)
+    best_c2 = 0.0
+    best_loss = np.inf
+    found = False
+    for s in range(starts.shape[0]):
+        rw = starts[s].copy()
+        a = np.zeros(5)
+        have_a = False
+        c2 = 0.0
+        total_loss = np.nan
+        for _ in range(max_robust):
+            from_data = not have_a
+            if have_a:
+                from_data = True
+                for j in range(5):
+                    if cols[j] and a[j] > 0:
+                        from_data = False
+                a0 = np.where(cols, a, 0.0)
+            else:
+                a0 = np.zeros(5)
+            a, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
+            have_a = True
+            rw_new = np.empty(t)
+            total_loss = 0.0
+            n_kept = 0
+            r = np.log(y / model)
+            v = 2.0 / nu
+            for i in range(t):
+                z = r[i] / np.sqrt(v[i] + floor2)
+                u2 = (z / tukey_c) ** 2
+                if u2 > 1.0:
+                    u2 = 1.0
+                rw_new[i] = (1.0 - u2) ** 2
+                total_loss += 1.0 - (1.0 - u2) ** 3
+                n_kept += rw_new[i] > 0
+            if n_kept < 2:
+                total_loss = np.inf
+                break
+            n_free = 0
+            for j in range(5):
+                n_free += a[j] > 0
+            c2_new = _excess_variance(r, v, rw_new, n_free, gate)
+            done = np.max(np.abs(rw_new - rw)) < rw_tol and abs(c2_new - c2) <= 1e-3 * c2
+            rw, c2 = rw_new, c2_new
+            if done:
+                break
+        if total_loss < best_loss - 1e-9:
+            best_a, best_rw, best_c2, best_loss = a, rw, c2, total_loss
+            found = True
+        if np.all(rw > 0):
+            break
+    return found, best_a, best_rw, best_c2
