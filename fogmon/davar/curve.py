@@ -20,7 +20,7 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
-from fogmon.davar.result import AdevResult
+from fogmon.davar.result import CONFIDENCE, AdevResult
 from fogmon.errors import FogmonError
 
 #: a tau further than this (relative) from a whole multiple of the sample period is refused
@@ -30,7 +30,7 @@ ASSUMED_RECORD_TAUS = 4
 
 
 def adev_from_curve(tau_s, adev_dph, *, rate_hz: float | None = None, n_terms=None, edf=None,
-                    n_samples: int | None = None, confidence: float = 0.683) -> tuple[AdevResult, list[str]]:
+                    n_samples: int | None = None, confidence: float = CONFIDENCE) -> tuple[AdevResult, list[str]]:
     """(AdevResult, assumptions) for an Allan-deviation curve ``adev_dph`` (deg/h) at
     ``tau_s`` (s, increasing), ready for ``fogmon.fit_noise``. Optional: ``rate_hz``
     (Hz), ``n_terms`` or ``edf`` per tau, ``n_samples`` of the record (see the module
