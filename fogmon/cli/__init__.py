@@ -20,6 +20,7 @@ COMMANDS = {
     "thermal": "calibrate thermal drift K0(T) + K1 dT/dt + K2 d2T/dt2 from a recording with temp_c and correct it",
     "inorbit": "in-orbit evaluation: ARW from Pauta-cleaned differences, per-orbit bias instability, wavelet bands",
     "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
+    "convert": "convert a recording (replay log, raw capture, CAN log, archive) to a Parquet replay log",
 }
 
 

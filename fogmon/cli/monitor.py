@@ -8,7 +8,9 @@ import os
 import sys
 
 from fogmon.pipeline import add_pipeline_arguments, run_pipeline
+from fogmon.cli.values import positive
 from fogmon.sinks.archive import Archive, default_archive_dir
+from fogmon.sinks.parquet_pieces import ROW_GROUP_S
 from fogmon.sources.open import add_source_arguments, open_live_source
 
 EPILOG = """examples:
@@ -34,12 +36,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archive", metavar="DIR",
                         help="folder for the archive (samples-NNNN.csv + raw capture pieces); default: a new "
                              "fogmon-archive-YYYYmmddTHHMMSSZ folder in the current directory")
+    parser.add_argument("--archive-format", choices=("csv", "parquet"), default="csv",
+                        help="decoded samples as replay-log CSV pieces samples-NNNN.csv (default) or Parquet "
+                             "pieces samples-NNNN.parquet written in row groups as data arrives (a SIGKILL loses at "
+                             "most the row group being filled, see --row-group-s); the raw capture is kept either way")
+    parser.add_argument("--row-group-s", type=positive, default=ROW_GROUP_S, metavar="S",
+                        help=f"--archive-format parquet: s of samples per row group (default {ROW_GROUP_S:g})")
     add_pipeline_arguments(parser, replay=False)
 
 
 def run(args: argparse.Namespace) -> int:
     source = open_live_source(args)
-    archive = Archive(args.archive or default_archive_dir("."), source)
+    archive = Archive(args.archive or default_archive_dir("."), source, samples_format=args.archive_format,
+                      row_group_s=args.row_group_s)
     try:
         summary = run_pipeline(source, args, extra_sinks=[archive])
     finally:
