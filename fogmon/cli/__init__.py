@@ -21,6 +21,7 @@ COMMANDS = {
     "inorbit": "in-orbit evaluation: ARW from Pauta-cleaned differences, per-orbit bias instability, wavelet bands",
     "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
     "convert": "convert a recording (replay log, raw capture, CAN log, archive) to a Parquet replay log",
+    "batch": "analyse many recordings on Dask into windows.parquet + recordings.parquet (fleet report optional)",
 }
 
 
