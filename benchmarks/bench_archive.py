@@ -6,7 +6,7 @@ Prints, measured in the same run: bytes per sample and per day per axis of each 
 (the day extrapolated from the H hours), the size ratio; the time to read the whole
 recording as a replay source (the checking pass + every block, as `fogmon replay`
 does) and as one in-memory Recording (`fogmon explain`), CSV over Parquet; and each
-reader's peak RSS in a child process (os.wait4), against the same child reading
+reader's peak RSS in a child process (its VmHWM), against the same child reading
 nothing (the interpreter + imports). Usage:
   python benchmarks/bench_archive.py [--hours 1] [--dir /tmp]
 """
@@ -43,7 +43,9 @@ elif what == "recording":
     n = len(read_replay_log(path))
 else:
     n = 0
-print(n, time.perf_counter() - t0)
+dt = time.perf_counter() - t0
+hwm = next(l for l in open("/proc/self/status") if l.startswith("VmHWM")).split()[1]   # kB, this process only
+print(n, dt, int(hwm) / 1024)
 """
 
 
@@ -60,14 +62,11 @@ def write_csv(path: Path, hours: float) -> int:
 
 
 def child(what: str, path: str) -> tuple[float, float]:
-    """(seconds, peak RSS MB) of a child reading ``path``."""
-    p = subprocess.Popen([sys.executable, "-c", READ, what, path], stdout=subprocess.PIPE, text=True,
-                         env={**os.environ, "PYTHONPATH": str(ROOT)})
-    _, status, ru = os.wait4(p.pid, 0)
-    out = p.stdout.read().split()
-    if status != 0:
-        raise SystemExit(f"reader failed on {path}")
-    return float(out[1]), ru.ru_maxrss / 1024.0
+    """(seconds, peak RSS MB) of a child reading ``path`` (VmHWM of its own address space:
+    ru_maxrss would carry the parent's high-water mark over the fork)."""
+    out = subprocess.run([sys.executable, "-c", READ, what, path], stdout=subprocess.PIPE, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}).stdout.split()
+    return float(out[1]), float(out[2])
 
 
 def main() -> None:

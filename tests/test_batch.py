@@ -162,7 +162,11 @@ def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_r
         assert main(["batch", str(fleet), "--out", str(out), "--scheduler", addr, "--chunk-s", "300",
                      "--no-progress"]) == 0
         for name in (tables.WINDOWS, tables.RECORDINGS):
-            assert pq.read_table(out / name).equals(pq.read_table(local_run / name)), name
+            a, b = pq.read_table(out / name), pq.read_table(local_run / name)
+            assert a.schema.equals(b.schema) and a.num_rows == b.num_rows, name
+            for c in a.column_names:                             # identical, NaN where NaN
+                x, y = a[c].to_pylist(), b[c].to_pylist()
+                assert all(u == v or (u != u and v != v) for u, v in zip(x, y)), (name, c)
     finally:
         for p in procs[::-1]:
             p.terminate()
