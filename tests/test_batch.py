@@ -175,3 +175,33 @@ def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_r
                 p.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def _row(rec, n, n_hw, ident=True, score=None):
+    row = {"recording": rec, "error": ""}
+    for c, v, hw in (("N_dpsh", n, n_hw), ("B_dph", 0.1, 0.01)):
+        row.update({c: v, f"{c}_lo": v - hw, f"{c}_hi": v + hw, f"identifiable_{c}": ident})
+    if score is not None:
+        row.update({"explain_score_before": score, "explain_score_after": 1.0, "explain_effects": "periodic"})
+    return row
+
+
+def test_fleet_report_names_the_changed_gyro_and_the_run_outside_its_model(tmp_path):
+    import pyarrow as pa
+
+    from fogmon.fleet.report import changes, write_report
+
+    rows = [_row("rig/g1/run1.csv", 0.050, 0.001, score=1.0), _row("rig/g1/run2.csv", 0.0502, 0.001, score=1.1),
+            _row("rig/g2/run1.csv", 0.050, 0.001, score=1.0), _row("rig/g2/run2.csv", 0.056, 0.001, score=2.4)]
+    ch = {(c["gyro"], c["coefficient"][0]): c for c in changes(rows)}
+    assert not ch[("g1", "N")]["changed"] and ch[("g2", "N")]["changed"]          # z = 0.14 vs 4.2
+    assert ch[("g2", "N")]["z"] == pytest.approx(0.006 / np.hypot(0.001, 0.001))
+    assert not ch[("g2", "B")]["changed"]
+    rec = tmp_path / "recordings.parquet"
+    pq.write_table(pa.Table.from_pylist(rows), rec)
+    pq.write_table(pa.table({"recording": ["x"]}), tmp_path / "windows.parquet")
+    files = write_report(str(tmp_path / "fleet.html"), str(rec), str(tmp_path / "windows.parquet"))
+    assert [os.path.basename(f) for f in files] == ["fleet.html", "fleet-trends.png", "fleet.csv"]
+    page = (tmp_path / "fleet.html").read_text()
+    assert "Gyros whose N or B changed (1)" in page and "Runs outside their model (1)" in page
+    assert "rig/g2/run2.csv" in page and (tmp_path / "fleet-trends.png").stat().st_size > 10_000
