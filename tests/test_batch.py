@@ -76,6 +76,7 @@ def local_run(fleet, tmp_path_factory):
     return out
 
 
+@pytest.mark.timeout(1200)   # a local Dask cluster on a 2-core machine shared with other jobs
 def test_batch_equals_replay_per_recording(fleet, local_run, capsys):
     w = pq.read_table(local_run / tables.WINDOWS).to_pydict()
     r = {row["recording"]: row for row in pq.read_table(local_run / tables.RECORDINGS).to_pylist()}
@@ -124,6 +125,7 @@ def test_chunks_tile_the_windows_and_samples():
         assert ch[-1].feed_first <= n - min(n, 20_000)
 
 
+@pytest.mark.timeout(600)
 def test_bad_input_is_one_line_before_any_task(fleet, tmp_path, capsys):
     bad = tmp_path / "bad"
     bad.mkdir()
@@ -132,7 +134,7 @@ def test_bad_input_is_one_line_before_any_task(fleet, tmp_path, capsys):
     rc = main(["batch", str(bad), "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"])
     err = capsys.readouterr().err
     assert rc == 2 and "z.csv: line 4, column rate_dph: not a number" in err and "Traceback" not in err
-    assert not (tmp_path / "out" / tables.WINDOWS).exists()
+    assert not (tmp_path / "out").exists()                   # nothing written
     assert main(["batch", str(tmp_path / "nothing*.csv"), "--out", str(tmp_path / "o2")]) == 2
     assert "no file matches" in capsys.readouterr().err
 
@@ -143,6 +145,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.timeout(1200)
 def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_run, tmp_path):
     from distributed import Client
 

@@ -126,6 +126,7 @@ def fake_kvh():
         p.wait(timeout=10)
 
 
+@pytest.mark.timeout(600)
 def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_path):
     """A device sends exactly 2,250 frames and falls silent; once the monitor has put them
     all in its raw capture and four 500-sample row groups are on disk, it is SIGKILLed:

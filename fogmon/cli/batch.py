@@ -105,8 +105,14 @@ def run(args: argparse.Namespace) -> int:
     if args.model:
         from fogmon.sim.model import load_model
         load_model(args.model)
-    os.makedirs(args.out, exist_ok=True)
-    check_outputs({"--out": os.path.join(args.out, tables.WINDOWS), "--report": args.report})
+    parent = os.path.dirname(os.path.abspath(args.out))
+    if not os.path.isdir(args.out) and not (os.path.isdir(parent) and os.access(parent, os.W_OK)):
+        raise FogmonError(f"--out {args.out}: cannot create it (is {parent} a writable folder?)")
+    if os.path.isdir(args.out):
+        check_outputs({"--out": os.path.join(args.out, tables.WINDOWS)})
+    report_dir = os.path.dirname(os.path.abspath(args.report)) if args.report else None
+    if report_dir and (os.path.isdir(report_dir) or report_dir != os.path.abspath(args.out)):
+        check_outputs({"--report": args.report})           # (a report inside a new --out folder is fine)
     opts = _options(args)
     show = not args.no_progress and sys.stdout.isatty()     # Dask's text progress bar writes to stdout
     client, cluster = _client(args)
@@ -124,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"fogmon batch: error: {p.error}", file=sys.stderr)
             raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
                                                " (nothing analysed)"))
-        jobs = []   # (plan, chunks, [chunk futures], explain future or None)
+        os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
+        jobs = []   # (plan, chunks, [chunk futures], explain future, motion future)
         for i, plan in enumerate(plans):
             w = int(round(plan.window_s * plan.rate_hz))
             h = int(round(plan.hop_s * plan.rate_hz))

@@ -46,7 +46,8 @@ def changes(rows: list[dict]) -> list[dict]:
             se = math.hypot((a[f"{c}_hi"] - a[f"{c}_lo"]) / 2, (b[f"{c}_hi"] - b[f"{c}_lo"]) / 2)
             z = (b[c] - a[c]) / se if ok and se > 0 else float("nan")
             out.append({"gyro": g, "coefficient": label, "first": a["recording"], "latest": b["recording"],
-                        "first_value": a[c], "latest_value": b[c], "z": z, "changed": bool(abs(z) > Z_CHANGED)})
+                        "first_value": a[c], "latest_value": b[c], "z": z, "changed": bool(abs(z) > Z_CHANGED),
+                        "tested": "yes" if ok else "no: not identifiable in both"})
     return out
 
 
@@ -54,6 +55,7 @@ def _trend_png(rows: list[dict], path: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     by_gyro: dict[str, list[dict]] = {}
     for r in rows:
@@ -74,7 +76,9 @@ def _trend_png(rows: list[dict], path: str) -> None:
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
     ax = np.atleast_1d(axes)[-1]
-    ax.set_xlabel("recording of the gyro (name order)")
+    ax.set_xlabel("recording of the gyro (name order: 1 = first)")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda x, _: f"{int(x) + 1}"))
     np.atleast_1d(axes)[0].legend(loc="best", fontsize=8, title="gyro")
     np.atleast_1d(axes)[0].set_title("whole-record IEEE-952 fit per recording (68.3 % intervals; "
                                       "\u25bd = not identifiable, 95 % upper limit)")
@@ -134,7 +138,8 @@ def write_report(path: str, recordings_parquet: str, windows_parquet: str) -> li
     parts += [f"<h2>Trends</h2><img src='{html.escape(os.path.basename(png))}' alt='N and B per recording'>",
               "<h2>All changes tested</h2>" + (_table(ch, [("gyro", "gyro"), ("coefficient", "coefficient"),
                                                             ("first_value", "first"), ("latest_value", "latest"),
-                                                            ("z", "z"), ("changed", "changed")]) if ch else
+                                                            ("z", "z"), ("changed", "changed"),
+                                                            ("tested", "tested")]) if ch else
                                                "<p>No gyro has two analysed recordings.</p>")]
     if failed:
         parts += [f"<h2>Failed recordings ({len(failed)})</h2>", _table(failed, [("recording", "recording"),
