@@ -24,16 +24,10 @@ from fogmon.recording import REQUIRED, Recording, sample_rate_from
 
 FORMAT = "fogmon replay log v1 (parquet)"
 META_KEY = b"fogmon"
-SUFFIX = ".parquet"
 #: units of the columns with a fixed meaning (CONTRACT section 1); others: "as recorded"
 UNITS = {"time_s": "s", "rate_dph": "deg/h", "temp_c": "deg C", "rot_dps": "deg/s", "vib_g": "g", "depth_m": "m"}
 #: rows per row group written by the converter (65.5 s at 1 kHz)
 ROW_GROUP_ROWS = 1 << 16
-
-
-def is_parquet(path: str | os.PathLike) -> bool:
-    """True for a path named ``*.parquet`` (what every command reads as a Parquet log)."""
-    return os.fspath(path).lower().endswith(SUFFIX)
 
 
 def schema(aux_names: Sequence[str], meta: dict, extra: dict | None = None):
@@ -143,14 +137,11 @@ class ParquetRows:
     column, or skipped and counted with ``tolerate``)."""
 
     def __init__(self, paths: str | Sequence[str], tolerate: bool = False) -> None:
-        import pyarrow.parquet as pq
-
         self.paths = [os.fspath(paths)] if isinstance(paths, (str, os.PathLike)) else [os.fspath(p) for p in paths]
         self.tolerate = tolerate
         first = os.path.basename(self.paths[0])
         self.name = first if len(self.paths) == 1 else f"{first} .. {os.path.basename(self.paths[-1])} " \
                                                        f"({len(self.paths)} files)"
-        self.infos = []
         self.n_rows = 0
         columns = None
         for p in self.paths:
@@ -159,16 +150,15 @@ class ParquetRows:
             if columns is None:
                 columns = pf.schema_arrow.names
                 self.meta = dict(info.get("meta", {}))
+                self.info = info          # the first file's metadata: units, source, sidecar facts
             elif pf.schema_arrow.names != columns:
                 raise FogmonError(f"{p}: columns {pf.schema_arrow.names} differ from {self.paths[0]} ({columns}): "
                                   f"not parts of one recording")
             elif info.get("meta", {}).get("sample_rate_hz") != self.meta.get("sample_rate_hz"):
                 raise FogmonError(f"{p}: sample_rate_hz differs from {self.paths[0]}: not parts of one recording")
-            self.infos.append(info)
             self.n_rows += pf.metadata.num_rows
         self.columns = columns
         self.aux_names = [c for c in columns if c not in REQUIRED]
-        self.info = self.infos[0]
         self.sample_rate_hz = sample_rate_from(self.meta, self._first_times(), self.name) \
             if "sample_rate_hz" not in self.meta else sample_rate_from(self.meta, np.zeros(0), self.name)
 

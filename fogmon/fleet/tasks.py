@@ -15,7 +15,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
-from fogmon.pipeline import COEFFICIENTS, OVERALL_MAX_SAMPLES, Sink, record_samples, slice_block, window_and_hop
+from fogmon.pipeline import COEFFICIENTS, Sink, record_samples, slice_block, window_and_hop
 
 #: the options of `fogmon replay` that batch passes on (source decoding and the analysis)
 ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion")
