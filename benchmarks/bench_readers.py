@@ -6,7 +6,6 @@ iterate every block. Files are written with the test suite's writers (tests/test
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import tempfile
@@ -20,12 +19,13 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 from fogmon.recording import write_replay_log  # noqa: E402
 from fogmon.sources.open import open_replay_source  # noqa: E402
+from fogmon.sources.options import SourceOptions  # noqa: E402
 import test_readers as w  # noqa: E402  (the writers)
 
 
 def timed(path, **opts) -> float:
     """Best of 3: open ``path`` and read every block, s."""
-    args = argparse.Namespace(**opts)
+    args = SourceOptions(**opts)
     best = float("inf")
     for _ in range(3):
         t = time.perf_counter()

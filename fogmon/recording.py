@@ -378,7 +378,11 @@ def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recordin
     """Read a whole replay-log CSV into memory (the batch commands; ``fogmon replay``
     streams it with ReplayLogReader). Strict by default (first bad row is a FogmonError
     naming file, line and column); ``tolerate=True`` skips bad rows and counts them in
-    ``Recording.skipped_rows``."""
+    ``Recording.skipped_rows``. A ``*.parquet`` path is read as a Parquet replay log
+    (fogmon.parquet_log)."""
+    if os.fspath(path).lower().endswith(".parquet"):
+        from fogmon.parquet_log import read_parquet_log
+        return read_parquet_log(path, tolerate=tolerate)
     reader = ReplayLogReader(path, tolerate=tolerate)
     cols: dict[str, list[np.ndarray]] = {c: [] for c in ("time_s", "rate_dph", *reader.aux_names)}
     skipped = 0

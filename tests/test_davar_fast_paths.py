@@ -11,7 +11,6 @@ import pytest
 from scipy.stats import chi2
 
 from fogmon.block import Block
-from fogmon.davar import kernels
 from fogmon.davar.batch import alpha_rows, dadev, oadev, row_alpha, statistics
 from fogmon.davar.confidence import edf_effective, edf_full
 from fogmon.davar.streaming import STAGE, StreamingDadev

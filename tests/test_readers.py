@@ -13,7 +13,10 @@ import numpy as np
 import pytest
 
 from fogmon.cli import build_parser, main
-from fogmon.pipeline import Sink, run_pipeline
+from fogmon.cli.pipeline_options import pipeline_config
+from fogmon.cli.source_options import source_options
+from fogmon.pipeline import run_pipeline
+from fogmon.sinks.base import Sink
 from fogmon.sources.open import open_replay_source
 
 FS = 100.0
@@ -36,7 +39,7 @@ def replay(path, *opts):
     argv = ["replay", str(path), "--window-s", "20.48", "--hop-s", "5.12", "--no-progress", *opts]
     args = build_parser(argv).parse_args(argv)
     sink = Frames()
-    summary = run_pipeline(open_replay_source(args.recording, args), args, sinks=[sink])
+    summary = run_pipeline(open_replay_source(args.recording, source_options(args)), pipeline_config(args), [sink])
     return summary, np.vstack(sink.adev)
 
 
@@ -134,8 +137,8 @@ def test_ros_bags_and_mcap_replay_like_the_csv(bag, signal, tmp_path):
 
 def test_ros_axis_and_unit_conversion(bag, signal):
     t, rate, keep = signal
-    src = open_replay_source(str(bag), build_parser(["replay", "x", "--axis", "x"]).parse_args(
-        ["replay", str(bag), "--axis", "x"]))          # the only Imu topic is the default
+    src = open_replay_source(str(bag), source_options(build_parser(["replay", "x", "--axis", "x"]).parse_args(
+        ["replay", str(bag), "--axis", "x"])))         # the only Imu topic is the default
     rec = src.to_recording()
     np.testing.assert_allclose(rec.rate_dph, 0.5 * rate[keep], rtol=1e-12)   # rad/s -> deg/h
     assert src.rate_hz == pytest.approx(FS, rel=0.2 / N)   # stamps jitter +-0.1 period: the span fixes the rate
@@ -175,7 +178,8 @@ def test_ulog_replays_like_the_csv_of_its_float32_values(signal, tmp_path):
     got = replay(path)
     same_as_reference(got, csv_replay(tmp_path, as_logged, keep, t0_s=10.0))
     assert "sensor_gyro:0 z" in got[0].source_name
-    rec = open_replay_source(str(path), build_parser(["replay", "x"]).parse_args(["replay", str(path)])).to_recording()
+    rec = open_replay_source(str(path), source_options(build_parser(["replay", "x"]).parse_args(
+        ["replay", str(path)]))).to_recording()
     np.testing.assert_allclose(rec.aux["temp_c"], 35.0)
     assert rec.t_s[0] == pytest.approx(10.0 + t[0], abs=1e-6)   # timestamp_sample, s since boot
 
@@ -248,8 +252,8 @@ def test_las_depth_indexed_needs_a_time_curve(signal, tmp_path, capsys):
     one_line_error(["replay", str(path)], capsys, str(path), "depth-indexed", "--time-channel")
     one_line_error(["replay", str(path), "--time-channel", "TIME", "--channel", "ROT"], capsys,
                    "field channel", "'ROT'", "GYRO (DEG/HR)")
-    src = open_replay_source(str(path), build_parser(["replay", "x"]).parse_args(
-        ["replay", str(path), "--time-channel", "TIME"]))
+    src = open_replay_source(str(path), source_options(build_parser(["replay", "x"]).parse_args(
+        ["replay", str(path), "--time-channel", "TIME"])))
     rec = src.to_recording()
     np.testing.assert_allclose(rec.aux["depth_m"][:3], [1000.0, 1000.01, 1000.02])
 

@@ -21,6 +21,8 @@ COMMANDS = {
     "inorbit": "in-orbit evaluation: ARW from Pauta-cleaned differences, per-orbit bias instability, wavelet bands",
     "fit": "IEEE-952 fit (with intervals) of an Allan-deviation curve made by another tool; --export kalibr|matlab|ros",
     "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
+    "convert": "convert a recording (replay log, raw capture, CAN log, archive) to a Parquet replay log",
+    "batch": "analyse many recordings on Dask into windows.parquet + recordings.parquet (fleet report optional)",
 }
 
 

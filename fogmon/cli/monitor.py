@@ -9,8 +9,10 @@ import sys
 
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
 from fogmon.cli.source_options import add_source_arguments, source_options
+from fogmon.cli.values import positive
 from fogmon.pipeline import Pipeline
 from fogmon.sinks.archive import Archive, default_archive_dir
+from fogmon.sinks.parquet_pieces import ROW_GROUP_S
 from fogmon.sinks.base import Summary
 from fogmon.sources.open import open_live_source
 
@@ -37,12 +39,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archive", metavar="DIR",
                         help="folder for the archive (samples-NNNN.csv + raw capture pieces); default: a new "
                              "fogmon-archive-YYYYmmddTHHMMSSZ folder in the current directory")
+    parser.add_argument("--archive-format", choices=("csv", "parquet"), default="csv",
+                        help="decoded samples as replay-log CSV pieces samples-NNNN.csv (default) or Parquet "
+                             "pieces samples-NNNN.parquet written in row groups as data arrives (a SIGKILL loses at "
+                             "most the row group being filled, see --row-group-s); the raw capture is kept either way")
+    parser.add_argument("--row-group-s", type=positive, default=ROW_GROUP_S, metavar="S",
+                        help=f"--archive-format parquet: s of samples per row group (default {ROW_GROUP_S:g})")
     add_pipeline_arguments(parser, replay=False)
 
 
 def run(args: argparse.Namespace) -> int:
     source = open_live_source(source_options(args))
-    archive = Archive(args.archive or default_archive_dir("."), source)
+    archive = Archive(args.archive or default_archive_dir("."), source, samples_format=args.archive_format,
+                      row_group_s=args.row_group_s)
     try:
         pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
         summary = pipeline.run([*build_sinks(args), archive])

@@ -7,7 +7,9 @@ piece k holds recording time [(k-1) S, k S) from the first sample; numbered from
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
   piece complete with magic line, metadata (``piece: N``) and header. Valid samples only
   (a replay log holds no NaN); lost and invalid samples show as time gaps, which every
-  reader turns back into invalid placeholders.
+  reader turns back into invalid placeholders. With ``samples_format="parquet"``
+  (``--archive-format parquet``) ``samples-NNNN.parquet`` instead, written in row groups
+  (fogmon.sinks.parquet_pieces: a SIGKILL loses at most the row group being filled).
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
   serial gyro ``raw-NNNN.bin`` (the bytes exactly as received) plus ``raw-NNNN.bin.json``
   (protocol, decoder options, outages as byte offsets in that piece); for a CAN gyro
@@ -46,6 +48,7 @@ from fogmon.pieces import find_pieces, piece_path
 from fogmon.recording import append_replay_rows, write_replay_header
 from fogmon.sinks.base import Sink, Summary
 from fogmon.sources.base import CaptureSource, Source
+from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces, piece_files
 
 REPLAY_LOG = "samples.csv"
 SERIAL_CAPTURE = "raw.bin"
@@ -76,7 +79,8 @@ class Archive(Sink):
     first temperature frame; not written), ``raw_bytes``, ``raw_frames``."""
 
     def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
-                 background_flush: bool = True) -> None:
+                 background_flush: bool = True, samples_format: str = "csv",
+                 row_group_s: float = ROW_GROUP_S) -> None:
         self.directory = os.fspath(directory)
         self._created_dir = not os.path.isdir(self.directory)
         try:
@@ -84,6 +88,7 @@ class Archive(Sink):
         except OSError as e:
             raise FogmonError(f"--archive {self.directory}: cannot create: {e.strerror}") from None
         held = [p for name in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE) for p in find_pieces(self.directory, name)]
+        held += piece_files(self.directory)
         if held:
             raise FogmonError(f"--archive {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
                               f"give a new folder")
@@ -103,6 +108,8 @@ class Archive(Sink):
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
+        self._parquet = ParquetPieces(self.directory, source.rate_hz, row_group_s) \
+            if samples_format == "parquet" else None
         self._capture_source = source if isinstance(source, CaptureSource) else None
         base = dict(self._capture_source.capture_spec()) if self._capture_source is not None else None
         self._dbc = base.pop("dbc_path", None) if base else None
@@ -143,7 +150,12 @@ class Archive(Sink):
             for k in aux_names:
                 keep &= np.isfinite(block.aux[k])
             self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
-            if keep.any():
+            if keep.any() and self._parquet is not None:
+                self._pieces.add(self.piece)
+                self._parquet.write(self.piece, self._aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
+                                    {k: block.aux[k][keep] for k in self._aux_names})
+                self.counters["rows_written"] += int(keep.sum())
+            elif keep.any():
                 if self._csv_fd is None:
                     self._open_replay_log(aux_names)
                 append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
@@ -155,12 +167,17 @@ class Archive(Sink):
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._pieces.add(self.piece)
-        meta = {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
+        write_replay_header(self._csv_buf, self._aux_names, self._meta())
+
+    def _meta(self) -> dict:
+        """The replay-log metadata of the current piece."""
+        return {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
                 "started_utc": self.started_utc, "piece": self.piece}
-        write_replay_header(self._csv_buf, aux_names, meta)
 
     def _close_replay_log(self) -> None:
         self._flush()
+        if self._parquet is not None:
+            self._parquet.end_piece()
         if self._csv_fd is not None:
             os.close(self._csv_fd)
             self._csv_fd = None

@@ -74,6 +74,10 @@ def open_replay_source(path: str, opts: SourceOptions | None = None) -> Source:
     if os.path.splitext(path)[1].lower() == ".toml":  # a sensor model: stream its simulation (endless)
         from fogmon.sources.simulated import SimulatedSource
         return SimulatedSource(path)
+    if os.path.splitext(path)[1].lower() == ".parquet":  # a Parquet replay log (fogmon.parquet_log)
+        from fogmon.sources.parquet import ParquetLogSource
+        return ParquetLogSource(path, tolerate=opts.tolerate_bad_rows,
+                                max_abs_dph=opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH)
     side = read_sidecar(path)
     ext = os.path.splitext(path)[1].lower()
     kind = _sniff(path) if not side else side.get("kind")
@@ -99,9 +103,10 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     from fogmon.capture import read_sidecar
     from fogmon.pieces import find_pieces, piece_path
     from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
+    from fogmon.sinks.parquet_pieces import piece_files
     from fogmon.sources.replay import ReplayLogSet, ReplayLogSource, open_raw_capture
 
-    logs = find_pieces(directory, REPLAY_LOG)
+    logs = find_pieces(directory, REPLAY_LOG) or piece_files(directory)
     serial, frames = find_pieces(directory, SERIAL_CAPTURE), find_pieces(directory, CAN_CAPTURE)
     decode = opts.asks_decoding()
     if serial and (decode or not logs):
@@ -118,10 +123,13 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
         return open_can_log(frames, opts.dbc, opts.can_options(), sides[0])
     tolerate = opts.tolerate_bad_rows
     max_abs_dph = opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH
+    if logs and logs[0].endswith(".parquet"):  # Parquet pieces (and parts of a piece never joined): one recording
+        from fogmon.sources.parquet import ParquetLogSource
+        return ParquetLogSource(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
     if len(logs) == 1:
         return ReplayLogSource(logs[0], tolerate=tolerate, max_abs_dph=max_abs_dph)
     if logs:
         return ReplayLogSet(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
-    raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, {SERIAL_CAPTURE} "
-                      f"or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, raw capture "
+    raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, samples.parquet, "
+                      f"{SERIAL_CAPTURE} or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, raw capture "
                       f"or CAN log")

@@ -44,11 +44,13 @@ class ReplayLogSource:
     line and column before any work starts) and to know ``n_samples`` (grid length) and
     ``t_first_s``/``t_last_s``. Counters, as far as the blocks yielded so far reach:
     ``samples`` (rows), ``samples_missing``, ``seq_gaps`` (time gaps), ``skipped_rows``
-    (only with ``tolerate=True``), ``implausible_samples``."""
+    (only with ``tolerate=True``), ``implausible_samples``. ``reader`` replaces the CSV
+    reader of ``path`` by another of the same rows (a Parquet log: fogmon.parquet_log)."""
 
     def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
-                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES) -> None:
-        self._reader = reader = ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
+                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES,
+                 reader=None) -> None:
+        self._reader = reader = reader or ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
         self.meta, self.aux_names = reader.meta, reader.aux_names
         self.rate_hz = reader.sample_rate_hz
         self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")

@@ -136,13 +136,13 @@ class StampedSource:
 
 
 def dph_per_unit(unit: str | None, where: str) -> float:
-    """deg/h per unit of a rate channel whose unit a file states as ``unit`` (the CAN
-    decoder's table, fogmon.sources.can_source.RATE_UNITS, with the spellings loggers use:
-    ``deg/hr``, ``degs/sec``, ``rad/sec``...); ``where`` names the channel in errors."""
-    from fogmon.sources.can_source import RATE_UNITS
+    """deg/h per unit of a rate channel whose unit a file states as ``unit`` (the one
+    table, fogmon.units, with the spellings loggers use: ``deg/hr``, ``degs/sec``,
+    ``rad/sec``...); ``where`` names the channel in errors."""
+    from fogmon.units import DPH_PER_UNIT, canonical
     u = (unit or "").strip().lower().replace(" ", "").replace("degs", "deg").replace("sec", "s").replace("hr", "h")
-    mode, factor = RATE_UNITS.get(u, (None, None))
-    if mode != "rate":
-        rates = ", ".join(k for k, (m, _) in RATE_UNITS.items() if m == "rate")
+    name = canonical(u) if u else None
+    if name is None or DPH_PER_UNIT[name][0] != "rate":
+        rates = ", ".join(k for k, (m, _) in DPH_PER_UNIT.items() if m == "rate")
         raise FogmonError(f"{where}: unit {unit!r} is not an angular rate fogmon knows ({rates}); give --rate-unit")
-    return factor
+    return DPH_PER_UNIT[name][1]

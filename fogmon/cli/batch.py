@@ -1,0 +1,203 @@
+"""`fogmon batch INPUTS... --out DIR`: many recordings analysed on Dask with the engine and
+fits of `fogmon replay`, into DIR/windows.parquet and DIR/recordings.parquet (CONTRACT
+section 5); `--report` adds the fleet report."""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+
+from fogmon.cli.values import number, positive
+from fogmon.errors import FogmonError
+
+#: default chunk length in samples (4.7 h at 1 kHz): long recordings are split into chunks
+DEFAULT_CHUNK_SAMPLES = 1 << 24
+
+EPILOG = """examples:
+  fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
+  fogmon batch 'rig*/gyro-*.parquet' archives/ --out fleet/ --model datasheet.toml --report fleet/fleet.html
+  fogmon batch runs/ --out fleet/ --scheduler tcp://10.0.0.5:8786   # an existing Dask cluster
+
+Inputs: replay logs (.csv), Parquet logs (.parquet), raw serial captures with their .json
+sidecar (or --protocol), CAN logs (.asc .blf .trc .csv .log with --dbc or a sidecar),
+monitor archive folders; a folder is searched for them (an archive folder is one
+recording), a glob is expanded. Every input is checked (all rows) before any analysis
+starts. One task per recording and axis; a recording longer than --chunk-s is split
+into chunks overlapping by one window, with results equal to a single pass
+(docs/batch.md). Window, hop and taus are chosen per recording as `fogmon replay` does.
+Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
+B deg/h, K deg/h/sqrt(h), R deg/h^2). Exit code 0 when every recording was analysed,
+1 when some failed (named on stderr and in recordings.parquet, column error), 2 on bad
+usage or input (nothing written)."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from fogmon.cli.pipeline_options import parse_taus
+    from fogmon.cli.source_options import add_source_arguments
+
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = EPILOG
+    parser.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files, folders or globs")
+    parser.add_argument("--out", required=True, metavar="DIR", help="folder for windows.parquet and "
+                        "recordings.parquet (created if needed; existing tables there are replaced)")
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (tcp://HOST:PORT; start "
+                        "one with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`); the "
+                        "workers must see the input paths. Default: a local cluster of --workers processes")
+    parser.add_argument("--workers", type=number(1, 1024, integer=True), metavar="N",
+                        help=f"processes of the local cluster, one thread each (default: the machine's cores, "
+                             f"{len(os.sched_getaffinity(0))} here)")
+    parser.add_argument("--model", metavar="MODEL.toml", help="also explain every recording against this sensor "
+                        "model (the explain score before/after and the effect kinds per recording)")
+    parser.add_argument("--report", metavar="FLEET.html", help="write the fleet report (HTML with its PNG figures "
+                        "and a CSV of the per-recording table beside it)")
+    parser.add_argument("--chunk-s", type=positive, metavar="S", help="split recordings longer than S s of "
+                        f"recording time into chunks (default {DEFAULT_CHUNK_SAMPLES:,} samples: "
+                        f"{DEFAULT_CHUNK_SAMPLES / 1000 / 3600:.1f} h at 1 kHz)")
+    g = parser.add_argument_group("dynamic Allan deviation (as fogmon replay)")
+    g.add_argument("--window-s", type=positive, metavar="W", help="window length in s (default: as fogmon replay, "
+                   "per recording: a quarter of it rounded down to a power of two of samples)")
+    g.add_argument("--hop-s", type=positive, metavar="H", help="hop in s (default: window/8)")
+    g.add_argument("--taus", default="octave", type=parse_taus, metavar="T", help="averaging times as fogmon "
+                   "replay --taus (default octave)")
+    g.add_argument("--raw-rate", action="store_true", help="analyse rate_dph as recorded even with rot_dps")
+    g.add_argument("--keep-motion", action="store_true", help="analyse platform motion too (docs/motion.md)")
+    parser.add_argument("--no-progress", action="store_true", help="no Dask progress bar")
+    add_source_arguments(parser, mode="replay")
+
+
+def _options(args: argparse.Namespace) -> dict:
+    """The options the tasks need (picklable): source decoding and analysis."""
+    keep = {"tolerate_bad_rows", "dbc", "protocol", "rate_hz", "kvh_rot", "kvh_units", "axis", "columns",
+            "max_rate_dph", "can_message", "can_rate", "can_rate_unit", "can_temp", "can_counter", "can_valid",
+            "window_s", "hop_s", "taus", "raw_rate", "keep_motion"}
+    return {k: v for k, v in vars(args).items() if k in keep}
+
+
+def _client(args):
+    from distributed import Client, LocalCluster
+
+    if args.scheduler:
+        try:
+            return Client(args.scheduler, timeout=30), None
+        except (OSError, TimeoutError) as e:
+            raise FogmonError(f"--scheduler {args.scheduler}: cannot connect: {e}") from None
+    n = args.workers or len(os.sched_getaffinity(0))
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                           silence_logs=logging.ERROR)
+    return Client(cluster), cluster
+
+
+def run(args: argparse.Namespace) -> int:
+    from distributed import progress
+
+    from fogmon.cli.outputs import check_outputs
+    from fogmon.fleet import tables, tasks
+    from fogmon.fleet.chunks import plan_chunks
+    from fogmon.fleet.inputs import expand_inputs
+    from fogmon.pipeline import OVERALL_MAX_SAMPLES
+
+    paths = expand_inputs(args.inputs)
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        raise FogmonError(f"--out {args.out}: is a file, give a folder")
+    if args.model and not os.path.isfile(args.model):
+        raise FogmonError(f"--model {args.model}: no such file")
+    if args.model:
+        from fogmon.sim.model import load_model
+        load_model(args.model)
+    parent = os.path.dirname(os.path.abspath(args.out))
+    if not os.path.isdir(args.out) and not (os.path.isdir(parent) and os.access(parent, os.W_OK)):
+        raise FogmonError(f"--out {args.out}: cannot create it (is {parent} a writable folder?)")
+    if os.path.isdir(args.out):
+        check_outputs({"--out": os.path.join(args.out, tables.WINDOWS)})
+    report_dir = os.path.dirname(os.path.abspath(args.report)) if args.report else None
+    if report_dir and (os.path.isdir(report_dir) or report_dir != os.path.abspath(args.out)):
+        check_outputs({"--report": args.report})           # (a report inside a new --out folder is fine)
+    opts = _options(args)
+    show = not args.no_progress and sys.stdout.isatty()     # Dask's text progress bar writes to stdout
+    client, cluster = _client(args)
+    try:
+        if show:
+            print(f"fogmon batch: {len(paths)} recordings on {len(client.scheduler_info()['workers'])} Dask workers "
+                  f"({args.scheduler or 'local cluster'})", file=sys.stderr)
+        checks = client.map(tasks.check, paths, options=opts, key=[f"check-{i}" for i in range(len(paths))])
+        if show:
+            progress(checks)
+        plans = client.gather(checks)
+        bad = [p for p in plans if p.error]
+        if bad:
+            for p in bad[:-1]:
+                print(f"fogmon batch: error: {p.error}", file=sys.stderr)
+            raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
+                                               " (nothing analysed)"))
+        os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
+        jobs = []   # (plan, chunks, [chunk futures], explain future, motion future)
+        for i, plan in enumerate(plans):
+            w = int(round(plan.window_s * plan.rate_hz))
+            h = int(round(plan.hop_s * plan.rate_hz))
+            size = int(round(args.chunk_s * plan.rate_hz)) if args.chunk_s else DEFAULT_CHUNK_SAMPLES
+            chunks = plan_chunks(plan.n_samples, w, h, max(size, w), OVERALL_MAX_SAMPLES)
+            masked = None
+            if len(chunks) > 1 and not args.keep_motion:
+                masked = client.submit(tasks.motion_pass, plan, opts, key=f"motion-{i}")
+            futs = [client.submit(tasks.run_chunk, plan, c, opts, masked, key=f"chunk-{i}-{c.index}") for c in chunks]
+            expl = client.submit(tasks.explain_recording, plan.path, args.model, opts, key=f"explain-{i}") \
+                if args.model else None
+            jobs.append((plan, chunks, futs, expl, masked))
+        every = [f for j in jobs for f in j[2]] + [j[3] for j in jobs if j[3] is not None]
+        if show:
+            progress(every)
+        windows, rows, failed = [], [], []
+        for plan, chunks, futs, expl, masked in jobs:
+            results = client.gather(futs)
+            row, win = _recording_row(plan, chunks, results, client.gather(masked) if masked is not None else None)
+            if expl is not None:
+                row.update(client.gather(expl))
+            rows.append(row)
+            if win is not None:
+                windows.append(win)
+            if row["error"]:
+                failed.append(row)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    w_path, r_path = tables.write_tables(args.out, windows, rows)
+    for row in failed:
+        print(f"fogmon batch: {row['recording']}: failed: {row['error']}", file=sys.stderr)
+    for row in rows:
+        if row.get("explain_error"):
+            print(f"fogmon batch: {row['recording']}: explain failed: {row['explain_error']}", file=sys.stderr)
+    n_win = sum(len(t) for t in windows)
+    print(f"fogmon batch: {len(rows) - len(failed)} of {len(rows)} recordings analysed "
+          f"({sum(len(j[1]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
+    if args.report:
+        from fogmon.fleet.report import write_report
+        for f in write_report(args.report, r_path, w_path):
+            print(f"fogmon batch: wrote {f}")
+    return 1 if failed or any(r.get("explain_error") for r in rows) else 0
+
+
+def _recording_row(plan, chunks, results, motion) -> tuple[dict, object]:
+    """The recordings-table row of one recording and its windows table (None if failed)."""
+    from fogmon.fleet import tables
+
+    row = {"recording": plan.path, "axis": plan.axis, "format": plan.kind, "sample_rate_hz": plan.rate_hz,
+           "window_s": plan.window_s, "hop_s": plan.hop_s, "chunks": len(chunks)}
+    errors = [r.error for r in results if r.error]
+    last = results[-1].record
+    row.update({"duration_s": float("nan"), "samples": sum(r.own_samples for r in results),
+                "samples_invalid": sum(r.own_invalid for r in results), "gaps": last.get("gaps", 0),
+                "motion_samples_excluded": (motion.samples_excluded if motion is not None
+                                            else last.get("motion_samples_excluded", 0)),
+                "windows": sum(len(r.windows.get("t_end_s", ())) for r in results),
+                "fit_first_s": last.get("fit_first_s", float("nan"))})
+    if last:
+        row["duration_s"] = last["t_last_s"] - last["t_first_s"] + 1.0 / plan.rate_hz
+    for c in tables.coefficient_columns():
+        row[c] = last.get(c, False if c.startswith("identifiable_") else float("nan"))
+    row["error"] = errors[0] if errors else ""
+    if errors:
+        return row, None
+    return row, tables.windows_table(plan.path, plan.axis, plan.window_s, results[0].tau_s,
+                                     [r.windows for r in results])

@@ -1,0 +1,100 @@
+"""`fogmon convert IN OUT.parquet`: a recording (replay-log CSV, Parquet log, raw serial
+capture, CAN log, archive folder) as a Parquet replay log (fogmon.parquet_log), or as
+a replay-log CSV when OUT ends in .csv. The samples are those `fogmon replay IN` would
+analyse: decoded, on their grid, valid ones only (gaps stay time gaps)."""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import itertools
+import os
+
+import numpy as np
+
+from fogmon.errors import FogmonError
+
+EPILOG = """examples:
+  fogmon convert run.csv run.parquet
+  fogmon convert raw-0001.bin run.parquet                  # decoder options from raw-0001.bin.json
+  fogmon convert frames.asc run.parquet --dbc gyro.dbc
+  fogmon convert runs/fogmon-archive-20261121T080000Z week.parquet
+  fogmon convert run.parquet run.csv
+
+The Parquet file keeps the replay-log columns (time_s s, rate_dph deg/h, aux channels)
+as float64 in row groups of 65,536 rows, and in its key-value metadata (key "fogmon",
+JSON) the replay-log metadata, the units, the source and, for a raw capture, its
+decoder options and counters. Exit code 0 on success, 2 on bad usage or input (no
+output file is left behind)."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from fogmon.cli.source_options import add_source_arguments
+
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    parser.epilog = EPILOG
+    parser.add_argument("input", metavar="IN", help="replay-log CSV, Parquet log, raw serial capture (sidecar or "
+                        "--protocol), CAN log (--dbc) or archive folder")
+    parser.add_argument("output", metavar="OUT", help="OUT.parquet (Parquet replay log) or OUT.csv (replay log)")
+    add_source_arguments(parser, mode="replay")
+
+
+def run(args: argparse.Namespace) -> int:
+    from fogmon.cli.outputs import check_outputs
+    from fogmon.parquet_log import ParquetLogWriter
+    from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.sources.open import open_replay_source
+    from fogmon.capture import read_sidecar
+    from fogmon.cli.source_options import source_options
+
+    ext = os.path.splitext(args.output)[1].lower()
+    if ext not in (".parquet", ".csv"):
+        raise FogmonError(f"OUT {args.output}: name it .parquet (Parquet replay log) or .csv (replay log)")
+    check_outputs({"OUT": args.output}, inputs=[args.input])
+    source = open_replay_source(args.input, source_options(args))
+    if getattr(source, "n_samples", None) is None:
+        raise FogmonError(f"{args.input}: an endless source (a sensor model) cannot be converted; "
+                          f"use `fogmon sim --out`")
+    blocks = source.blocks()
+    first = next(blocks, None)
+    aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
+    src_meta = getattr(source, "meta", {}) or {}
+    meta = {"sample_rate_hz": f"{source.rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
+            **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
+    side = read_sidecar(args.input) if os.path.isfile(args.input) else None
+    n = without_aux = 0
+    writer = fh = None
+    try:
+        if ext == ".parquet":
+            writer = ParquetLogWriter(args.output, aux_names, meta,
+                                      {"source": source.name, **({"sidecar": side} if side else {})})
+        else:
+            fh = open(args.output, "w", encoding="utf-8", newline="\n")
+            write_replay_header(fh, aux_names, meta)
+        for b in itertools.chain([first] if first is not None else [], blocks):
+            keep = b.valid.copy()
+            for a in b.aux.values():
+                keep &= np.isfinite(a)
+            without_aux += int(b.valid.sum() - keep.sum())
+            aux = {k: a[keep] for k, a in b.aux.items()}
+            if writer is not None:
+                writer.write(b.t_s[keep], b.rate_dph[keep], aux)
+            else:
+                append_replay_rows(fh, b.t_s[keep], b.rate_dph[keep], aux)
+            n += int(keep.sum())
+        if writer is not None:
+            writer.close(counters={**source.counters, "rows_without_aux": without_aux})
+        else:
+            fh.close()
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        if fh is not None:
+            fh.close()
+            with contextlib.suppress(FileNotFoundError):
+                os.remove(args.output)   # no half-written output
+        raise
+    finally:
+        source.close()
+    print(f"fogmon convert: wrote {n} samples at {source.rate_hz:g} Hz from {source.name} to {args.output}"
+          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else ""))
+    return 0

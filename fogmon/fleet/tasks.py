@@ -1,0 +1,337 @@
+"""What runs on a Dask worker for `fogmon batch`: checking a recording, the motion pass
+of a split recording, one chunk through the streaming pipeline of `fogmon replay`
+(fogmon.pipeline.run_pipeline, the same engine, fits and motion gate), and explain with
+a model. Every task takes and returns plain picklable values; a failure is returned as
+a one-line ``error`` (the recording is named by the caller), never raised."""
+from __future__ import annotations
+
+import argparse
+import os
+import traceback
+from collections import deque
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from fogmon.block import Block
+from fogmon.errors import FogmonError
+from fogmon.pipeline import PipelineConfig, slice_block, window_and_hop
+from fogmon.sinks.base import COEFFICIENTS, Sink
+from fogmon.sources.options import SourceOptions
+
+#: the options of `fogmon replay` that batch passes on (source decoding and the analysis)
+ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion")
+
+
+def _config(options: dict) -> PipelineConfig:
+    """The PipelineConfig of `fogmon replay` for the analysis options batch passes on."""
+    return PipelineConfig(window_s=options.get("window_s"), hop_s=options.get("hop_s"),
+                          taus=options.get("taus") if options.get("taus") is not None else "octave",
+                          raw_rate=bool(options.get("raw_rate")), keep_motion=bool(options.get("keep_motion")))
+
+
+def _failure(e: BaseException) -> str:
+    if isinstance(e, FogmonError):
+        return str(e)
+    last = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
+    where = f" ({os.path.basename(last.filename)}:{last.lineno})" if last else ""
+    return f"{type(e).__name__}: {e}{where}".splitlines()[0]
+
+
+def _open(path: str, options: dict):
+    from fogmon.sources.open import open_replay_source
+    names = {f.name for f in fields(SourceOptions)}
+    return open_replay_source(path, SourceOptions(**{k: v for k, v in options.items() if k in names and v is not None}))
+
+
+def input_kind(path: str) -> str:
+    """A short name of the input's format."""
+    if os.path.isdir(path):
+        return "archive"
+    ext = os.path.splitext(path)[1].lower()
+    return {".csv": "csv", ".parquet": "parquet"}.get(ext, "capture" if os.path.exists(path + ".json") else ext[1:])
+
+
+@dataclass
+class Plan:
+    """A checked recording: sample rate (Hz), samples on its grid, window and hop (s,
+    as `fogmon replay` chooses them), its axis; or ``error``."""
+
+    path: str
+    rate_hz: float = float("nan")
+    n_samples: int = 0
+    window_s: float = float("nan")
+    hop_s: float = float("nan")
+    axis: str = "-"
+    kind: str = ""
+    error: str = ""
+
+
+def check(path: str, options: dict) -> Plan:
+    """Open ``path`` as `fogmon replay` would (every row checked) and choose its window."""
+    plan = Plan(path, kind=input_kind(path))
+    try:
+        src = _open(path, options)
+        try:
+            n = src.n_samples
+            if n is None:
+                raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
+            plan.rate_hz, plan.n_samples = float(src.rate_hz), int(n)
+            plan.window_s, plan.hop_s = window_and_hop(_config(options), plan.rate_hz, plan.n_samples)
+            plan.axis = _axis(src)
+        finally:
+            src.close()
+    except Exception as e:
+        plan.error = _failure(e)
+    return plan
+
+
+def _axis(src) -> str:
+    """The gyro axis the source names (a KVH capture's decoder option, a log's ``axis``
+    metadata), else '-'."""
+    opts = getattr(src, "_options", None) or {}
+    meta = getattr(src, "meta", None) or {}
+    return str(opts.get("axis") or meta.get("axis") or "-")
+
+
+class _ChunkSource:
+    """Samples ``first`` .. ``stop`` - 1 (grid indices) of ``source``, read from its
+    start; samples in ``masked`` runs [(a, b), ...] made invalid (the motion gate's
+    decisions from the motion pass). Counts, in ``own`` = (a, b), the samples and the
+    invalid ones (before the mask), as the pipeline's summary does."""
+
+    def __init__(self, source, first: int, stop: int, own: tuple[int, int], masked=()) -> None:
+        self._src, self.first, self.stop, self.own = source, first, stop, own
+        self.rate_hz, self.name = source.rate_hz, source.name
+        self.aux_names = getattr(source, "aux_names", ())
+        self.n_samples = stop - first
+        self._masked = np.asarray(masked, dtype=np.int64).reshape(-1, 2)
+        self.t0_s = None                 # time of the recording's first sample (s)
+        self.own_samples = self.own_invalid = 0
+
+    @property
+    def counters(self) -> dict:
+        return self._src.counters
+
+    def blocks(self):
+        pos = 0
+        for b in self._src.blocks():
+            if self.t0_s is None and len(b):
+                self.t0_s = float(b.t_s[0])
+            a, z = max(self.first - pos, 0), min(self.stop - pos, len(b))
+            if a < z:
+                part = b if (a, z) == (0, len(b)) else slice_block(b, a, z)
+                lo, hi = max(self.own[0] - pos - a, 0), min(self.own[1] - pos - a, len(part))
+                if lo < hi:
+                    self.own_samples += hi - lo
+                    self.own_invalid += int(hi - lo - np.count_nonzero(part.valid[lo:hi]))
+                yield self._mask(part, pos + a)
+            pos += len(b)
+            if pos >= self.stop:
+                break
+
+    def _mask(self, b: Block, at: int) -> Block:
+        m = self._masked
+        m = m[(m[:, 1] > at) & (m[:, 0] < at + len(b))]
+        if not len(m):
+            return b
+        valid = b.valid.copy()
+        for a, z in m - at:
+            valid[max(a, 0):max(z, 0)] = False
+        return Block(b.t_s, b.rate_dph, valid, b.aux, b.events)
+
+    def close(self) -> None:
+        self._src.close()
+
+
+class _Collect(Sink):
+    """Keeps the windows the pipeline completes (end index, ADEV, fit) and its summary."""
+
+    def __init__(self) -> None:
+        self.ends, self.adev, self.fits = [], [], []
+        self.tau_s = None
+        self.summary = None
+
+    def start(self, info) -> None:
+        self.tau_s = np.asarray(info.tau_s)
+
+    def frames(self, dadev, fit, t_end_s) -> None:
+        self.ends.append(np.asarray(dadev.end_index, np.int64))
+        self.adev.append(np.asarray(dadev.adev_dph, np.float64))
+        cols = {}
+        for c in COEFFICIENTS:
+            co = getattr(fit, c)
+            cols[c], cols[f"{c}_lo"], cols[f"{c}_hi"] = (np.asarray(x, np.float64) for x in (co.value, co.lo, co.hi))
+            cols[f"identifiable_{c}"] = np.asarray(co.identifiable, bool)
+        self.fits.append(cols)
+
+    def finish(self, summary) -> None:
+        self.summary = summary
+
+
+@dataclass
+class ChunkResult:
+    """The windows a chunk owns (``windows``: column -> array; ``tau_s`` of the ADEV
+    columns) and, for the last chunk, the recording's facts (``record``); or ``error``."""
+
+    path: str
+    index: int
+    windows: dict = field(default_factory=dict)
+    tau_s: np.ndarray | None = None
+    own_samples: int = 0
+    own_invalid: int = 0
+    record: dict = field(default_factory=dict)
+    error: str = ""
+
+
+def run_chunk(plan: Plan, chunk, options: dict, masked=None) -> ChunkResult:
+    """Chunk ``chunk`` (fogmon.fleet.chunks.Chunk) of the recording through
+    ``run_pipeline`` with the window and hop of ``plan``. ``masked``: the motion pass's
+    runs when the recording is split (the pipeline's own gate is then off: it would
+    start afresh in each chunk), None to let the pipeline's gate run (one chunk)."""
+    from fogmon.pipeline import run_pipeline
+
+    out = ChunkResult(plan.path, chunk.index)
+    if isinstance(masked, MotionResult):      # the motion pass's result, handed on by Dask
+        if masked.error:
+            out.error = masked.error
+            return out
+        masked = masked.runs
+    try:
+        src = _ChunkSource(_open(plan.path, options), chunk.feed_first, chunk.feed_stop,
+                           (chunk.own_first, chunk.own_stop), masked if masked is not None else ())
+        config = _config({**options, "window_s": plan.window_s, "hop_s": plan.hop_s,
+                          "keep_motion": bool(options.get("keep_motion")) or masked is not None})
+        col = _Collect()
+        summary = run_pipeline(src, config, [col])
+        out.own_samples, out.own_invalid = src.own_samples, src.own_invalid
+        out.tau_s = col.tau_s
+        if col.ends:
+            ends = chunk.feed_first + np.concatenate(col.ends)
+            hop = int(round(plan.hop_s * plan.rate_hz))
+            w = int(round(plan.window_s * plan.rate_hz))
+            k = (ends - (w - 1)) // hop
+            keep = (k >= chunk.k_first) & (k < chunk.k_stop)
+            out.windows = {"t_end_s": src.t0_s + ends[keep] / plan.rate_hz,
+                           "adev": np.concatenate(col.adev)[keep]}
+            for name in col.fits[0]:
+                out.windows[name] = np.concatenate([f[name] for f in col.fits])[keep]
+        if chunk.last:
+            out.record = _record_facts(summary, src.t0_s)
+    except Exception as e:
+        out.error = _failure(e)
+    return out
+
+
+def _record_facts(summary, t0_s: float) -> dict:
+    """The recording's row from the last chunk's summary: its span, the source's counters
+    (read from the recording's start) and the whole-record fit."""
+    rec = {"t_first_s": t0_s, "t_last_s": summary.t_last_s,
+           "gaps": int(summary.counters.get("seq_gaps", 0)),
+           "motion_samples_excluded": int(summary.motion_samples), "fit_first_s": summary.overall_first_s}
+    fit = summary.overall_fit
+    for c in COEFFICIENTS:
+        co = getattr(fit, c, None)
+        rec[c] = float(co.value) if co is not None else float("nan")
+        rec[f"{c}_lo"] = float(co.lo) if co is not None else float("nan")
+        rec[f"{c}_hi"] = float(co.hi) if co is not None else float("nan")
+        rec[f"identifiable_{c}"] = bool(co.identifiable) if co is not None else False
+    return rec
+
+
+@dataclass
+class MotionResult:
+    """The motion gate's decisions over a whole recording: runs [(a, b)] of grid indices
+    it made invalid, the valid samples it excluded; or ``error``."""
+
+    path: str
+    runs: np.ndarray | None = None
+    samples_excluded: int = 0
+    error: str = ""
+
+
+def motion_pass(plan: Plan, options: dict) -> MotionResult:
+    """Run the pipeline's platform-motion gate (fogmon.motion.MotionGate) over the whole
+    recording, block by block as `fogmon replay` does, and record which samples it made
+    invalid, so that chunks analysed separately see exactly the same samples."""
+    from fogmon.motion import MotionGate
+
+    out = MotionResult(plan.path)
+    try:
+        src = _open(plan.path, options)
+        gate = MotionGate(plan.rate_hz)
+        use_ref = None
+        pending: deque[np.ndarray] = deque()    # valid flags handed to the gate, not yet released
+        pos = 0                                 # grid index of the next sample released
+        runs: list[tuple[int, int]] = []
+
+        def released(v_out: np.ndarray) -> None:
+            nonlocal pos
+            n = len(v_out)
+            v_in = np.concatenate([pending.popleft() for _ in range(len(pending))]) if pending else np.zeros(0, bool)
+            rest = v_in[n:]
+            if len(rest):
+                pending.append(rest)
+            masked = np.flatnonzero(v_in[:n] & ~v_out)
+            if len(masked):
+                cuts = np.flatnonzero(np.diff(masked) > 1)
+                starts = np.concatenate([[masked[0]], masked[cuts + 1]])
+                stops = np.concatenate([masked[cuts], [masked[-1]]]) + 1
+                runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist()))
+            pos += n
+
+        try:
+            for b in src.blocks():
+                if not len(b):
+                    continue
+                if use_ref is None:
+                    use_ref = "rot_dps" in b.aux and not options.get("raw_rate")
+                y = b.error_rate_dph if use_ref else b.rate_dph
+                v = b.valid & np.isfinite(y)
+                pending.append(v)
+                _, v_out, _ = gate.push(b.t_s, y, v)
+                released(v_out)
+            _, v_out, _ = gate.flush()
+            released(v_out)
+        finally:
+            src.close()
+        out.runs = np.asarray(runs, dtype=np.int64).reshape(-1, 2)
+        out.samples_excluded = int(gate.samples_excluded)
+    except Exception as e:
+        out.error = _failure(e)
+    return out
+
+
+def explain_recording(path: str, model_path: str, options: dict) -> dict:
+    """`fogmon explain RECORDING --model MODEL` with its default options: the score
+    before and after the effects it found, and their kinds (comma-separated); or
+    ``explain_error``."""
+    from fogmon.cli import explain as explain_cli
+    from fogmon.explain import report
+    from fogmon.explain.explainer import Options, explain, without_motion
+    from fogmon.recording import read_replay_log, recording_from_arrays
+    from fogmon.sim.model import load_model
+
+    try:
+        p = argparse.ArgumentParser()
+        explain_cli.add_arguments(p)
+        a = p.parse_args([path, "--report", os.devnull, "--model", model_path])
+        if input_kind(path) in ("csv", "parquet"):
+            rec = read_replay_log(path)
+        else:  # a capture, CAN log or archive: its valid samples, as `fogmon convert` writes them
+            src = _open(path, options)
+            parts = [b for b in src.blocks() if len(b)]
+            t = np.concatenate([b.t_s[b.valid] for b in parts])
+            rec = recording_from_arrays(t, np.concatenate([b.rate_dph[b.valid] for b in parts]),
+                                        {k: np.concatenate([b.aux[k][b.valid] for b in parts]) for k in parts[0].aux},
+                                        {"sample_rate_hz": f"{src.rate_hz:.12g}"})
+        if not options.get("keep_motion"):
+            rec, _ = without_motion(rec)
+        res = explain(rec, load_model(model_path), Options(window_s=a.window_s, n_boot=a.bootstrap, alpha=a.alpha,
+                                                            seed=a.seed, max_effects=a.max_effects))
+        rep = report.build_report(res, path, model_path)
+        return {"explain_score_before": float(rep["score_before"]), "explain_score_after": float(rep["score_after"]),
+                "explain_effects": ",".join(e["kind"] for e in rep["effects"]), "explain_error": ""}
+    except Exception as e:
+        return {"explain_score_before": float("nan"), "explain_score_after": float("nan"), "explain_effects": "",
+                "explain_error": _failure(e)}

@@ -1,0 +1,108 @@
+"""The archive's decoded samples as Parquet (``fogmon monitor --archive-format parquet``):
+piece k is ``samples-NNNN.parquet`` (fogmon.parquet_log), written so that a SIGKILL
+loses at most the row group being filled.
+
+While piece k is written, each completed row group (``row_group_s`` s of samples) is
+its own complete Parquet file ``samples-NNNN.parquet.parts/part-MMMMMM.parquet``
+(written as ``.tmp`` and renamed, so a part file is never half-written). When the piece
+ends (rotation, end of run) its parts are joined into ``samples-NNNN.parquet`` (one row
+group per part, written as ``.tmp`` and renamed) and the parts folder is removed. A
+reader takes, per piece, the joined file when there is one, else the parts in order
+(``piece_files``): a killed monitor's archive replays up to its last row group."""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+
+from fogmon.errors import FogmonError
+from fogmon.parquet_log import schema, table
+from fogmon.pieces import PIECE_DIGITS, piece_path
+
+PARQUET_LOG = "samples.parquet"
+PARTS_SUFFIX = ".parts"
+#: default recording time per row group (s): what a SIGKILL can cost at most
+ROW_GROUP_S = 60.0
+
+
+def piece_files(directory: str) -> list[str]:
+    """The Parquet sample files of an archive folder in recording order: per piece its
+    joined file, or (a piece whose run was killed) its row-group parts."""
+    try:
+        entries = set(os.listdir(directory))
+    except OSError:
+        return []
+    stem, ext = os.path.splitext(PARQUET_LOG)
+    pat = re.compile(rf"{re.escape(stem)}-(\d{{{PIECE_DIGITS},}}){re.escape(ext)}({re.escape(PARTS_SUFFIX)})?")
+    pieces = sorted({int(m.group(1)) for e in entries if (m := pat.fullmatch(e))})
+    out: list[str] = []
+    for k in pieces:
+        name = piece_path(PARQUET_LOG, k)
+        if name in entries:
+            out.append(os.path.join(directory, name))
+            continue
+        parts = os.path.join(directory, name + PARTS_SUFFIX)
+        out += [os.path.join(parts, p) for p in sorted(os.listdir(parts)) if p.endswith(".parquet")]
+    return out
+
+
+class ParquetPieces:
+    """Writer of the Parquet pieces under ``directory`` at ``rate_hz`` (Hz): ``write``
+    appends rows (valid samples) to the current piece, ``end_piece`` joins it."""
+
+    def __init__(self, directory: str, rate_hz: float, row_group_s: float = ROW_GROUP_S) -> None:
+        self.directory = directory
+        self.rows_per_group = max(1, int(round(row_group_s * rate_hz)))
+        self._piece = None
+        self._schema = None
+        self._buf: list = []
+        self._held = 0
+        self._parts = 0
+
+    def write(self, piece: int, aux_names, meta: dict, t_s, rate_dph, aux: dict) -> None:
+        if self._piece != piece:
+            self.end_piece()
+            self._piece, self._parts = piece, 0
+            self._schema = schema(aux_names, meta)
+            os.makedirs(self._parts_dir(), exist_ok=False)
+        tbl = table(self._schema, t_s, rate_dph, aux)
+        while len(tbl):
+            take = min(len(tbl), self.rows_per_group - self._held)
+            self._buf.append(tbl.slice(0, take))
+            self._held += take
+            tbl = tbl.slice(take)
+            if self._held == self.rows_per_group:
+                self._write_part()
+
+    def _parts_dir(self) -> str:
+        return os.path.join(self.directory, piece_path(PARQUET_LOG, self._piece) + PARTS_SUFFIX)
+
+    def _write_part(self) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        self._parts += 1
+        path = os.path.join(self._parts_dir(), f"part-{self._parts:06d}.parquet")
+        pq.write_table(pa.concat_tables(self._buf), path + ".tmp", compression="zstd")
+        os.replace(path + ".tmp", path)
+        self._buf, self._held = [], 0
+
+    def end_piece(self) -> None:
+        """Write the rows held and join the current piece's parts (no-op without one)."""
+        import pyarrow.parquet as pq
+
+        if self._piece is None:
+            return
+        if self._held:
+            self._write_part()
+        parts = self._parts_dir()
+        final = os.path.join(self.directory, piece_path(PARQUET_LOG, self._piece))
+        try:
+            with pq.ParquetWriter(final + ".tmp", self._schema, compression="zstd") as w:
+                for i in range(1, self._parts + 1):
+                    w.write_table(pq.read_table(os.path.join(parts, f"part-{i:06d}.parquet")))
+            os.replace(final + ".tmp", final)
+        except OSError as e:
+            raise FogmonError(f"{final}: cannot write: {e}") from None
+        shutil.rmtree(parts, ignore_errors=True)
+        self._piece = None
