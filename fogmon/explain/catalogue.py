@@ -71,6 +71,8 @@ class Candidate:
     #: the white level N0 (deg/sqrt(h)) the stochastic model takes with this effect
     #: (a white-level regression's intercept), None: unchanged
     white_n0_dpsh: float | None = None
+    #: corrected IEEE-952 coefficients (the ``noise`` kind): replace the model's [noise]
+    corrected_noise: object | None = None
 
     @property
     def nature(self) -> str:
@@ -488,7 +490,8 @@ def _replace_white(model: SensorModel, N: float, drop_other: bool = False) -> Se
     from fogmon.sim.model import Noise
     nz = model.noise
     noise = Noise(0.0, N, 0.0, 0.0, 0.0) if drop_other else Noise(nz.Q_arcsec, N, nz.B_dph, nz.K_dphsh, nz.R_dphh)
-    eff = [e for e in model.effects if e.kind == "bandwidth" or (not drop_other and e.kind == "markov")]
+    eff = [e for e in model.effects
+           if e.kind == "bandwidth" or (not drop_other and e.kind in ("markov", "vibration_lines"))]
     return SensorModel(model.sample_rate_hz, model.bias_dph, noise, eff)
 
 
@@ -554,5 +557,263 @@ def temperature_noise(ctx: Context) -> Candidate | None:
     return _white_level(ctx, "temperature_noise", "temp_c")
 
 
+# ---------------------------------------------------------------- vibration_lines
+#: a line is kept when it lowers the Whittle deviance by more than this many BIC
+#: penalties ln n (it has 3 parameters: centre, bandwidth, rms)
+LINE_PARAMS = 3
+#: lines proposed per fit (the strongest first)
+MAX_LINES = 6
+
+
+def _whitened(ctx: Context) -> np.ndarray:
+    """The residual divided by the calibrated model PSD in the frequency domain (white
+    where the model fits, a peak where a line is missing)."""
+    Z = ctx.Yf / np.sqrt(ctx.wh.S)
+    Z[0] = 0.0
+    return np.fft.irfft(Z, ctx.n)
+
+
+def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: int, f0: float,
+              bw0: float) -> tuple[float, tuple[float, float, float]]:
+    """One line (centre Hz, rms deg/h, -3 dB bandwidth Hz) on top of the PSD ``S`` at the
+    periodogram's bins, started at (f0, bw0): Nelder-Mead on the Whittle deviance over
+    (centre, ln bandwidth, ln variance); returns (deviance drop, line)."""
+    from scipy.optimize import minimize
+
+    from fogmon.sim.noise import line_psd
+
+    d0 = bp.deviance(S, floor)
+    near = np.abs(bp.omega * fs / (2 * np.pi) - f0) <= 5 * bw0
+    var0 = max(float(np.sum(bp.count[near] * np.maximum(bp.I[near] - S[near], 0.0)) / n), 1e-30)
+    bw_lo, nyq = 2.0 * fs / n, fs / 2
+
+    def unpack(x):
+        f = float(x[0])
+        bw = float(min(max(math.exp(x[1]), bw_lo), 2 * f, 0.5 * fs))
+        return f, math.sqrt(math.exp(x[2])), bw
+
+    def dev(x):
+        f, sig, bw = unpack(x)
+        if not (0 < f - bw / 2 and f + bw / 2 < nyq):
+            return d0 + 1e9
+        return bp.deviance(S + line_psd(bp.omega, fs, f, sig, bw), floor)
+
+    x0 = np.array([f0, math.log(bw0), math.log(var0)])
+    simplex = np.array([x0, x0 + [0.3 * bw0, 0, 0], x0 + [0, 0.7, 0], x0 + [0, 0, 0.7]])
+    r = minimize(dev, x0, method="Nelder-Mead", options={"initial_simplex": simplex, "xatol": 1e-4,
+                                                         "fatol": 0.05, "maxfev": 600})
+    return d0 - float(r.fun), unpack(r.x)
+
+
+def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: list[tuple[float, float]],
+              penalty: float) -> tuple[float, list[tuple[float, float, float]]]:
+    """Lines fitted one after the other from ``starts`` ((centre Hz, start bandwidth Hz)),
+    each on top of the ones kept before it and kept when its deviance drop exceeds
+    LINE_PARAMS ln n; returns (total deviance drop, lines (centre, rms, bandwidth))."""
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    from fogmon.sim.noise import line_psd
+
+    S = S0.copy()
+    lines = []
+    for f0, bw0 in starts:
+        if any(abs(f0 - f) < max(bw, bw0) for f, _, bw in lines):
+            continue
+        g, line = _fit_line(bp, S, floor, fs, n, f0, bw0)
+        if g > LINE_PARAMS * penalty:
+            lines.append(line)
+            S = S + line_psd(bp.omega, fs, line[0], line[1], line[2])
+    return bp.deviance(S0, floor) - bp.deviance(S, floor), sorted(lines)
+
+
+def vibration_lines(ctx: Context) -> Candidate | None:
+    """Narrowband random vibration: lines proposed by detectors.spectral_lines on the
+    residual whitened by the calibrated model PSD (between max(50 / duration, fs / 1000)
+    and 0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle
+    likelihood of the residual's binned periodogram under the model PSD plus the
+    resonator lines (fit_lines). The removable estimate is the Wiener smoother
+    S_lines / (S_model + S_lines) applied to the residual's DFT."""
+    from fogmon.explain.fitting import lines_psd
+
+    fs, n = ctx.fs_hz, ctx.n
+    T = n / fs
+    f_lo = max(50.0 / T, fs / 1000.0)
+    props = detectors.spectral_lines(np.where(ctx.valid, _whitened(ctx), np.nan), fs, f_lo, 0.49 * fs,
+                                     min_ratio=LINE_MIN_RATIO, max_lines=MAX_LINES)
+    if not props:
+        return None
+    res = 8 * fs / (2 ** math.ceil(math.log2(8 * fs / f_lo)))  # a few Welch bins: the start bandwidth
+    starts = [(f, max(res, 4 * fs / n)) for f, _ in props]
+    bp = _periodogram(ctx)
+    S0 = _stoch_psd(ctx, bp)
+    gain, lines = fit_lines(bp, S0, fs, n, starts, ctx.penalty)
+    if not lines:
+        return None
+    params = {"freq_hz": [ln[0] for ln in lines], "sigma_dph": [ln[1] for ln in lines],
+              "bandwidth_hz": [ln[2] for ln in lines]}
+    w = rfft_omega(n)
+    S_l = lines_psd(params, fs, w)
+    S_all = model_psd(ctx.stoch, w, n, white_rms_dpsh(ctx.stoch, ctx)) + S_l
+    est = np.fft.irfft(np.where(np.isfinite(S_all), S_l / S_all, 0.0) * ctx.Yf, n)
+
+    def heldout():
+        out = []
+        h = n // 2
+        halves = (slice(0, h), slice(h, 2 * h))
+        bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
+        for a, b in ((0, 1), (1, 0)):
+            S0a = model_psd(ctx.stoch, bps[a].omega, h, white_rms_dpsh(ctx.stoch, ctx))
+            ga, la = fit_lines(bps[a], S0a, fs, h, [(f, bw) for f, _, bw in lines], ctx.penalty)
+            S0b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx))
+            fl = LEAKAGE_FLOOR * float(np.median(S0b))
+            pb = {"freq_hz": [x[0] for x in la], "sigma_dph": [x[1] for x in la], "bandwidth_hz": [x[2] for x in la]}
+            gb = bps[b].deviance(S0b, fl) - bps[b].deviance(S0b + lines_psd(pb, fs, bps[b].omega), fl) if la else 0.0
+            out.append((float(gb), float(ga)))
+        return out  # (tested on the second half, on the first)
+
+    ev = ("Whittle fit of the residual spectrum: narrowband random vibration, "
+          + "; ".join(f"{f:.4g} Hz (-3 dB bandwidth {bw:.3g} Hz, rms {sig:.3g} deg/h, ADEV hump near "
+                      f"tau = {0.371 / f:.3g} s)" for f, sig, bw in lines)
+          + " - band-limited noise, not one coherent sinusoid")
+    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines), ev, rate=est,
+                     heldout=heldout)
+
+
+# ---------------------------------------------------------------- noise (coefficients)
+#: two-sided confidence of the intervals of the noise effect (and of "differs")
+NOISE_CONFIDENCE = 0.95
+#: the coefficients the noise effect may correct (index into theory.POWERS); R is the
+#: deterministic part's (a wrong R is a rate_ramp effect)
+NOISE_TERMS = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh")
+
+
+def expected_avar(S: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
+    """Allan variance ((deg/h)^2) at averaging factors ``m`` of a process with PSD ``S``
+    at the rfft bins of an n-sample record: sum over the circle of
+    S 2 sin^4(m w / 2) / (m^2 sin^2(w / 2)) / n (the DC bin left out)."""
+    w = rfft_omega(n)[1:]
+    Sf = np.where(np.isfinite(S[1:]), S[1:], 0.0)
+    mult = np.full(len(w), 2.0)
+    if n % 2 == 0:
+        mult[-1] = 1.0
+    s2 = np.sin(w / 2.0) ** 2
+    return np.array([float(np.sum(mult * Sf * 2.0 * np.sin(mm * w / 2.0) ** 4 / (mm * mm * s2)) / n)
+                     for mm in np.asarray(m, dtype=float)])
+
+
+def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: float, white_dpsh: float):
+    """Corrected IEEE-952 coefficients of ``stoch`` from the residual ``y`` (deg/h):
+    davar.fit.fit_avar (robust, octave taus, 95 % one-sided upper limits) on the
+    residual's overlapping ADEV and on the ADEV the current stochastic model predicts
+    for the same record (expected_avar of its PSD); each avar term is corrected by the
+    difference, A = A_model + (A_recording - A_expected), so that what the model's other
+    terms (flicker approximation, Gauss-Markov, lines, filters, white-level effects) do
+    to the fit cancels. Returns {name: (value, lo, hi, model value)} in coefficient
+    units for the terms whose model value lies outside the recording's NOISE_CONFIDENCE
+    interval (identified terms: A +- z se; others: 0 .. the 95 % upper limit), or None
+    when the ADEV cannot be fitted."""
+    from scipy.stats import norm
+
+    from fogmon.davar.batch import oadev
+    from fogmon.davar.fit import IDENTIFY_Z, fit_avar
+    from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
+
+    n = len(y)
+    r = oadev(np.where(valid, y, np.nan), fs, "octave", valid=valid)
+    a, se, _, up = fit_avar(r.tau_s, r.adev_dph ** 2, r.m, r.n_terms, n, "all")
+    S = model_psd(stoch, rfft_omega(n), n, white_dpsh)
+    ae, _, _, _ = fit_avar(r.tau_s, expected_avar(S, n, r.m), r.m, r.n_terms, n, "none")
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(ae))):
+        return None
+    nz = stoch.noise
+    am = coefficients_to_avar_terms(nz.Q_arcsec, nz.N_dpsh, nz.B_dph, nz.K_dphsh, 0.0)
+    z = float(norm.ppf(0.5 + NOISE_CONFIDENCE / 2.0))
+    ident = a - IDENTIFY_Z * se > 0
+    lo = np.where(ident, np.maximum(a - z * se, 0.0), 0.0)
+    hi = np.where(ident, a + z * se, np.maximum(up, a))
+    shift = am - ae
+    out = {}
+    conv = avar_terms_to_coefficients
+    for i, name in enumerate(NOISE_TERMS):
+        if lo[i] <= ae[i] <= hi[i] or not np.isfinite(hi[i]):
+            continue
+        vals = [max(x + shift[i], 0.0) for x in (a[i], lo[i], hi[i])]
+        coef = [float(conv(np.eye(5)[i] * v)[i]) for v in vals]
+        out[name] = (*coef, float(getattr(nz, name)))
+    return out
+
+
+def _corrected(stoch: SensorModel, fit: dict) -> SensorModel:
+    from dataclasses import replace
+
+    return SensorModel(stoch.sample_rate_hz, stoch.bias_dph,
+                       replace(stoch.noise, **{k: v[0] for k, v in fit.items()}), stoch.effects, stoch.meta)
+
+
+NOISE_UNIT = {"Q_arcsec": "arcsec", "N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h", "K_dphsh": "deg/h/sqrt(h)"}
+
+
+def noise_text(name: str, value: float, lo: float, hi: float, model_value: float) -> str:
+    """"your N is 0.041 deg/sqrt(h) [0.039, 0.043], not 0.030" (an unidentified term:
+    "below <hi>")."""
+    u = NOISE_UNIT[name]
+    sym = name.split("_")[0]
+    if lo <= 0 and value <= 0:
+        return f"your {sym} is below {hi:.3g} {u} (95 % upper limit), not {model_value:.3g}"
+    return f"your {sym} is {value:.3g} {u} [{lo:.3g}, {hi:.3g}], not {model_value:.3g}"
+
+
+def noise(ctx: Context) -> Candidate | None:
+    """The model's own Q, N, B, K are wrong (fit_coefficients): the terms whose model
+    value lies outside the recording's 95 % interval, corrected; scored by the Whittle
+    likelihood of the residual's binned periodogram under the model PSD with and without
+    the correction (one parameter per corrected term)."""
+    wr = white_rms_dpsh(ctx.stoch, ctx)
+    fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.fs_hz, wr)
+    if not fit:
+        return None
+    bp = _periodogram(ctx)
+    new = _corrected(ctx.stoch, fit)
+    S0 = _stoch_psd(ctx, bp)
+    S1 = model_psd(new, bp.omega, ctx.n, white_rms_dpsh(new, ctx))
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    gain = bp.deviance(S0, floor) - bp.deviance(S1, floor)
+    params = {}
+    for k, (v, lo, hi, _) in fit.items():
+        params.update({k: v, f"{k}_lo": lo, f"{k}_hi": hi})
+    se = {k: (hi - lo) / (2 * 1.959964) for k, (v, lo, hi, _) in fit.items()}
+
+    def heldout():
+        out = []
+        h = ctx.n // 2
+        halves = (slice(0, h), slice(h, 2 * h))
+        for a, b in ((0, 1), (1, 0)):
+            fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.fs_hz, wr)
+            yb = np.where(ctx.valid[halves[b]], ctx.y[halves[b]], 0.0)
+            bpb = BinnedPeriodogram(np.fft.rfft(yb), h)
+            ya = np.where(ctx.valid[halves[a]], ctx.y[halves[a]], 0.0)
+            bpa = BinnedPeriodogram(np.fft.rfft(ya), h)
+            if not fa:
+                out.append((0.0, 0.0))
+                continue
+            na = _corrected(ctx.stoch, fa)
+            gains = []
+            for bb in (bpb, bpa):
+                s0 = model_psd(ctx.stoch, bb.omega, h, wr)
+                s1 = model_psd(na, bb.omega, h, white_rms_dpsh(na, ctx))
+                fl = LEAKAGE_FLOOR * float(np.median(s0))
+                gains.append(bb.deviance(s0, fl) - bb.deviance(s1, fl))
+            out.append((float(gains[0]), float(gains[1])))
+        return out  # (tested on the second half, on the first)
+
+    ev = ("robust IEEE-952 fit of the residual's Allan deviation against the one the model predicts "
+          "(95 % intervals): " + "; ".join(noise_text(k, *v) for k, v in fit.items()))
+    return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
+                     corrected_noise=new.noise)
+
+
+#: a whitened-periodogram peak this many times the band median proposes a line
+LINE_MIN_RATIO = 8.0
+
+
 NOISE_CANDIDATES = {"markov": markov, "bandwidth": bandwidth, "vibration_noise": vibration_noise,
-                    "temperature_noise": temperature_noise}
+                    "temperature_noise": temperature_noise, "vibration_lines": vibration_lines, "noise": noise}

@@ -36,7 +36,10 @@ from fogmon.sim.noise import ramp_dph
 from fogmon.sim.simulate import iter_simulate
 
 #: how many times a kind may be added (several spectral lines are common)
-MAX_PER_KIND = {"periodic": 4, "bias_step": 2}
+MAX_PER_KIND = {"periodic": 4, "bias_step": 2, "vibration_lines": 2}
+#: kinds not tried against the baseline (no --model): its coefficients are the
+#: recording's own, so a corrected [noise] would not be a finding
+BASELINE_EXCLUDED = ("noise",)
 
 
 @dataclass
@@ -327,8 +330,11 @@ def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, lik
         y_new, stoch_new, null_new = np.where(valid, y - c.rate, 0.0), stoch, null
     else:
         y_new = y
-        noise = stoch.noise if c.white_n0_dpsh is None else replace(stoch.noise, N_dpsh=c.white_n0_dpsh)
-        stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, noise, [*stoch.effects, c.effect()])
+        if c.corrected_noise is not None:  # the noise kind: corrected coefficients, no new effect
+            stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, c.corrected_noise, stoch.effects)
+        else:
+            noise = stoch.noise if c.white_n0_dpsh is None else replace(stoch.noise, N_dpsh=c.white_n0_dpsh)
+            stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, noise, [*stoch.effects, c.effect()])
         if progress:
             progress(f"bootstrap null with {c.kind} added: {B} simulations", 0, 0)
         null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (n_acc + 1), opt.alpha,
@@ -363,7 +369,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     null = bootstrap(stoch, like, grid, B, opt.seed, opt.alpha, opt.workers, progress)
     report("mismatch map and candidate effects", 0, 0)
     ctx = _whittle(stoch, aux, t, valid, y0)
-    counts: dict[str, int] = {}
+    counts: dict[str, int] = {k: MAX_PER_KIND.get(k, 1) for k in BASELINE_EXCLUDED} if baseline else {}
     refused: set[str] = set()
     cands = candidates(ctx, counts)
     before = current = analyse(y0, ctx, null, grid, cands)
@@ -412,8 +418,11 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     rejected += [(k, bg, why) for k, (bg, why) in deferred.items()]
     rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
-    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, replace(model.noise, N_dpsh=stoch.noise.N_dpsh),
-                         [*model.effects, *(a.cand.effect() for a in accepted)], dict(model.meta))
+    # the stochastic part's coefficients: the model's, with N0 of a white-level effect and
+    # the noise kind's corrections (R is the deterministic part's, unchanged)
+    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, replace(stoch.noise, R_dphh=model.noise.R_dphh),
+                         [*model.effects, *(a.cand.effect() for a in accepted if a.cand.corrected_noise is None)],
+                         dict(model.meta))
     fitted = validate_model(fitted)
     accepted.sort(key=lambda a: -a.cand.gain)
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))

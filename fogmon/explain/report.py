@@ -4,7 +4,8 @@ a console summary, a PNG of the evidence and an optional Rerun .rrd with the sam
 Extra report keys beyond the contract (added, never renamed): ``mismatches_after``,
 per-region ``tau_peak_s`` and ``windows_span_s``,
 ``score_components_before/after``, per-effect ``uncertainty``, ``heldout``,
-``bic_gain``, ``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
+``bic_gain``, per ``noise`` effect ``model_noise`` (the model's values it corrects),
+``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
 family-wise threshold)."""
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import warnings
 
 import numpy as np
 
+from fogmon.explain.catalogue import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
@@ -46,7 +48,9 @@ def _region_text(r: dict) -> str:
             f"(ADEV ratio {r['ratio']:.3g}, max |z| {r['max_abs_z']:.3g}, p = {r['p_value']:.2g})")
 
 
-def _effect_summary(kind: str, p: dict) -> str:
+def _effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
+    """One phrase with the numbers of an effect (``model``: the model's [noise] values,
+    for the ``noise`` kind)."""
     if kind == "periodic":
         return f"periodic {p['amplitude_dph']:.3g} deg/h at period {p['period_s']:.5g} s"
     if kind == "bias_step":
@@ -70,7 +74,19 @@ def _effect_summary(kind: str, p: dict) -> str:
         return f"temperature-driven ARW {p['n_gain_dpsh_per_c']:.3g} deg/sqrt(h) per degC (ref {p['t_ref_c']:.3g} degC)"
     if kind == "bandwidth":
         return f"sensor low-pass: Butterworth order {p['order']} at {p['cutoff_hz']:.4g} Hz"
+    if kind == "vibration_lines":
+        return "narrowband vibration " + ", ".join(
+            f"{f:.4g} Hz (bandwidth {bw:.3g} Hz, rms {sg:.3g} deg/h)"
+            for f, sg, bw in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"]))
+    if kind == "noise":
+        return "wrong noise coefficients: " + "; ".join(
+            noise_text(k, p[k], p[f"{k}_lo"], p[f"{k}_hi"], model[k]) for k in NOISE_UNIT if k in p)
     return kind
+
+
+def _model_noise(res: Result) -> dict:
+    nz = res.model.noise
+    return {k: getattr(nz, k) for k in NOISE_UNIT}
 
 
 def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
@@ -90,7 +106,8 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
                      f"but matched tests do (score {sb:.2f}).")
     if res.accepted:
         parts.append("Missing physics, in order of importance: "
-                     + "; ".join(_effect_summary(a.cand.kind, a.cand.params) for a in res.accepted) + ".")
+                     + "; ".join(_effect_summary(a.cand.kind, a.cand.params, _model_noise(res))
+                                 for a in res.accepted) + ".")
         if sa <= 1.5 and not mism_after:
             parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left): "
                          f"add them to the sensor model (--out-model) or remove the deterministic ones "
@@ -135,10 +152,12 @@ def build_report(res: Result, recording_path: str, model_path: str | None) -> di
     effects = []
     for a in res.accepted:
         c = a.cand
-        params = dict(c.effect().params)
+        params = dict(c.params) if c.corrected_noise is not None else dict(c.effect().params)
         effects.append({"kind": c.kind, "params": params, "uncertainty": c.se, "evidence": c.evidence,
                         "heldout": a.heldout, "bic_gain": round(a.bic_gain, 2),
                         "score_before": round(a.score_before, 3), "score_after": round(a.score_after, 3)})
+        if c.corrected_noise is not None:
+            effects[-1]["model_noise"] = {k: v for k, v in _model_noise(res).items() if k in params}
     g = res.grid
     rep = {
         "recording": recording_path,
@@ -184,7 +203,7 @@ def console_summary(rep: dict) -> str:
     if rep["effects"]:
         lines.append("  effects added:")
         for e in rep["effects"]:
-            lines.append(f"    + {_effect_summary(e['kind'], e['params'])} "
+            lines.append(f"    + {_effect_summary(e['kind'], e['params'], e.get('model_noise'))} "
                          f"(score {e['score_before']:.2f} -> {e['score_after']:.2f})")
     else:
         lines.append("  effects added: none")
@@ -195,8 +214,9 @@ def console_summary(rep: dict) -> str:
 
 
 def write_outputs(res: Result, out_model: str | None, out_corrected: str | None) -> None:
-    """--out-model (fitted model TOML) and --out-corrected (recording minus the fitted
-    deterministic effects, replay log v1, same samples and aux columns)."""
+    """--out-model (fitted model TOML; a ``noise`` effect's corrections are in its [noise])
+    and --out-corrected (recording minus the fitted deterministic effects and the Wiener
+    estimate of any vibration_lines, replay log v1, same samples and aux columns)."""
     if out_model:
         save_model(res.fitted, out_model)
     if out_corrected:
@@ -205,8 +225,9 @@ def write_outputs(res: Result, out_model: str | None, out_corrected: str | None)
         corrected = rec.rate_dph - res.deterministic_fit[idx]
         meta = dict(rec.meta)
         meta["sample_rate_hz"] = f"{rec.sample_rate_hz:g}"
-        meta["corrected_by"] = "fogmon explain: " + ", ".join(a.cand.kind for a in res.accepted
-                                                              if a.cand.rate is not None) or "nothing"
+        meta["corrected_by"] = "fogmon explain: " + (", ".join(
+            a.cand.kind + (" (Wiener estimate of the line signal)" if a.cand.kind == "vibration_lines" else "")
+            for a in res.accepted if a.cand.rate is not None) or "nothing")
         write_replay_log(out_corrected, rec.t_s, corrected, rec.aux, meta)
 
 
