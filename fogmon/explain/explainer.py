@@ -303,6 +303,26 @@ def _heldout(ctx: catalogue.Context, c: catalogue.Candidate) -> tuple[bool, str]
     return True, "n/a (spectral or spike fit on the whole record)"
 
 
+#: a fitted line this many frequency resolutions 1/T wide is resolved: band-limited
+#: noise, not a coherent sinusoid
+LINE_RESOLVED_BINS = 4.0
+
+
+def _inside_line(c: catalogue.Candidate, cands: list[catalogue.Candidate], df_hz: float) -> float | None:
+    """Centre (Hz) of a resolved vibration_lines line holding a periodic candidate's
+    frequency (within half its -3 dB bandwidth), or None: such a line is one random
+    process, which periodic terms would only chase bin by bin."""
+    if c.kind != "periodic":
+        return None
+    f = 1.0 / c.params["period_s"]
+    for o in cands:
+        if o.kind == "vibration_lines" and o.bic_gain(0.0) > 0:
+            for fl, bw in zip(o.params["freq_hz"], o.params["bandwidth_hz"]):
+                if bw >= LINE_RESOLVED_BINS * df_hz and abs(f - fl) <= bw / 2:
+                    return float(fl)
+    return None
+
+
 def _new_deficit(before: Analysis, after: Analysis) -> str | None:
     """Tau band (text) of a whole-record deficit region present after a noise-type effect
     was added but not before, or None."""
@@ -386,6 +406,11 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                 bg = c.bic_gain(ctx.penalty)
                 if bg <= 0:
                     break
+                line = _inside_line(c, cands, ctx.fs_hz / ctx.n)
+                if line is not None:
+                    deferred[c.kind] = (bg, f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
+                                            f"vibration_lines fits (random vibration, not one coherent sinusoid)")
+                    continue
                 ok, note = _heldout(ctx, c)
                 if not ok:
                     rejected.append((c.kind, bg, f"failed the held-out check: {note}"))
