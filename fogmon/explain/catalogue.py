@@ -562,14 +562,15 @@ def temperature_noise(ctx: Context) -> Candidate | None:
 #: penalties ln n (it has 3 parameters: centre, bandwidth, rms)
 LINE_PARAMS = 3
 #: lines proposed per fit (the strongest first)
-MAX_LINES = 6
+MAX_LINES = 10
 
 
 def _whitened(ctx: Context) -> np.ndarray:
-    """The residual divided by the calibrated model PSD in the frequency domain (white
-    where the model fits, a peak where a line is missing)."""
-    Z = ctx.Yf / np.sqrt(ctx.wh.S)
-    Z[0] = 0.0
+    """The residual divided by the model PSD in the frequency domain (white where the
+    model fits, a peak where a line is missing; not the calibrated PSD, whose octave
+    bands would absorb part of a broad line)."""
+    S = model_psd(ctx.stoch, rfft_omega(ctx.n), ctx.n, white_rms_dpsh(ctx.stoch, ctx))
+    Z = np.where(np.isfinite(S) & (S > 0), ctx.Yf / np.sqrt(S), 0.0)
     return np.fft.irfft(Z, ctx.n)
 
 
@@ -589,7 +590,7 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
 
     def unpack(x):
         f = float(x[0])
-        bw = float(min(max(math.exp(x[1]), bw_lo), 2 * f, 0.5 * fs))
+        bw = float(min(max(math.exp(x[1]), bw_lo), 0.5 * f))  # narrowband: Q = f / bw >= 2
         return f, math.sqrt(math.exp(x[2])), bw
 
     def dev(x):
@@ -812,7 +813,7 @@ def noise(ctx: Context) -> Candidate | None:
 
 
 #: a whitened-periodogram peak this many times the band median proposes a line
-LINE_MIN_RATIO = 8.0
+LINE_MIN_RATIO = 4.0
 
 
 NOISE_CANDIDATES = {"markov": markov, "bandwidth": bandwidth, "vibration_noise": vibration_noise,

@@ -254,8 +254,18 @@ def tiers(cands: list[catalogue.Candidate]) -> list[list[catalogue.Candidate]]:
     """Selection order: effects tied to time structure or an aux channel (mean-type,
     white-level) first; the broad spectral noise terms (markov, bandwidth) only when
     none of those passes - a spectral term can always soak up part of a deterministic
-    signal's power, never the other way round."""
-    first = [c for c in cands if c.nature in ("mean", "white_level")]
+    signal's power, never the other way round. Corrected IEEE-952 coefficients (the
+    ``noise`` kind) compete in the first tier by BIC gain - every GLS test there assumes
+    the model's noise, so a wrong B or N can fake a step or a ramp - but never ahead of
+    a white-level effect: when an aux channel co-varies with the white level, the
+    physical effect is preferred over a corrected N."""
+    first = [c for c in cands if c.nature in ("mean", "white_level", "coefficients")]
+    levels = [c for c in first if c.nature == "white_level"]
+    coef = [c for c in first if c.nature == "coefficients"]
+    if coef and levels:  # the coefficient correction moves behind the last white-level candidate
+        first = [c for c in first if c.nature != "coefficients"]
+        at = first.index(levels[-1]) + 1
+        first[at:at] = coef
     return [first, [c for c in cands if c not in first]]
 
 
