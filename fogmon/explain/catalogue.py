@@ -570,8 +570,9 @@ def _whitened(ctx: Context) -> np.ndarray:
     model fits, a peak where a line is missing; not the calibrated PSD, whose octave
     bands would absorb part of a broad line)."""
     S = model_psd(ctx.stoch, rfft_omega(ctx.n), ctx.n, white_rms_dpsh(ctx.stoch, ctx))
-    Z = np.where(np.isfinite(S) & (S > 0), ctx.Yf / np.sqrt(S), 0.0)
-    return np.fft.irfft(Z, ctx.n)
+    S = np.maximum(S, LEAKAGE_FLOOR * float(np.median(S[1:])))  # a filter's zero: no division by 0
+    S[0] = np.inf
+    return np.fft.irfft(ctx.Yf / np.sqrt(S), ctx.n)
 
 
 def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: int, f0: float,
@@ -626,13 +627,50 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
     return bp.deviance(S0, floor) - bp.deviance(S, floor), sorted(lines)
 
 
+def _white_parts(ctx: Context, omega: np.ndarray, n: int):
+    """(PSD of the model without its white noise, PSD of unit white noise N = 1 through
+    the model's filters) at ``omega``, or None when white-level effects set N."""
+    if any(EFFECT_KINDS[e.kind].nature == "white_level" for e in ctx.stoch.effects) or ctx.stoch.noise.N_dpsh <= 0:
+        return None
+    return (model_psd(_replace_white(ctx.stoch, 0.0), omega, n),
+            model_psd(_replace_white(ctx.stoch, 1.0, drop_other=True), omega, n))
+
+
+def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tuple[float, float]]):
+    """fit_lines on the model PSD, then the white level N refitted under the lines (the
+    lines' skirts were counted as white noise before) by the same Whittle likelihood.
+    Returns (deviance drop, lines, N (deg/sqrt(h)) or None when not refitted)."""
+    from scipy.optimize import minimize_scalar
+
+    from fogmon.explain.fitting import lines_psd
+
+    fs = ctx.fs_hz
+    S0 = model_psd(ctx.stoch, bp.omega, n, white_rms_dpsh(ctx.stoch, ctx))
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    _, lines = fit_lines(bp, S0, fs, n, starts, ctx.penalty)
+    parts = _white_parts(ctx, bp.omega, n)
+    if not lines:
+        return 0.0, lines, None
+    S_l = lines_psd({"freq_hz": [x[0] for x in lines], "sigma_dph": [x[1] for x in lines],
+                     "bandwidth_hz": [x[2] for x in lines]}, fs, bp.omega)
+    d0 = bp.deviance(S0, floor)
+    if parts is None:
+        return d0 - bp.deviance(S0 + S_l, floor), lines, None
+    other, unit = parts
+    N0 = ctx.stoch.noise.N_dpsh
+    r = minimize_scalar(lambda N: bp.deviance(other + N * N * unit + S_l, floor), bounds=(0.0, 2.0 * N0),
+                        method="bounded", options={"xatol": 1e-4 * N0})
+    return d0 - float(r.fun), lines, float(r.x)
+
+
 def vibration_lines(ctx: Context) -> Candidate | None:
     """Narrowband random vibration: lines proposed by detectors.spectral_lines on the
-    residual whitened by the calibrated model PSD (between max(50 / duration, fs / 1000)
-    and 0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle
-    likelihood of the residual's binned periodogram under the model PSD plus the
-    resonator lines (fit_lines). The removable estimate is the Wiener smoother
-    S_lines / (S_model + S_lines) applied to the residual's DFT."""
+    residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
+    0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle likelihood
+    of the residual's binned periodogram under the model PSD plus the band-pass lines,
+    and the white level N refitted under them (lines_and_white). The removable
+    estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
+    residual's DFT."""
     from fogmon.explain.fitting import lines_psd
 
     fs, n = ctx.fs_hz, ctx.n
@@ -644,16 +682,14 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         return None
     res = 8 * fs / (2 ** math.ceil(math.log2(8 * fs / f_lo)))  # a few Welch bins: the start bandwidth
     starts = [(f, max(res, 4 * fs / n)) for f, _ in props]
-    bp = _periodogram(ctx)
-    S0 = _stoch_psd(ctx, bp)
-    gain, lines = fit_lines(bp, S0, fs, n, starts, ctx.penalty)
+    gain, lines, N = lines_and_white(ctx, _periodogram(ctx), n, starts)
     if not lines:
         return None
     params = {"freq_hz": [ln[0] for ln in lines], "sigma_dph": [ln[1] for ln in lines],
               "bandwidth_hz": [ln[2] for ln in lines]}
     w = rfft_omega(n)
     S_l = lines_psd(params, fs, w)
-    S_all = model_psd(ctx.stoch, w, n, white_rms_dpsh(ctx.stoch, ctx)) + S_l
+    S_all = model_psd(ctx.stoch, w, n, white_rms_dpsh(ctx.stoch, ctx) if N is None else N) + S_l
     est = np.fft.irfft(np.where(np.isfinite(S_all), S_l / S_all, 0.0) * ctx.Yf, n)
 
     def heldout():
@@ -662,21 +698,23 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         halves = (slice(0, h), slice(h, 2 * h))
         bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
         for a, b in ((0, 1), (1, 0)):
-            S0a = model_psd(ctx.stoch, bps[a].omega, h, white_rms_dpsh(ctx.stoch, ctx))
-            ga, la = fit_lines(bps[a], S0a, fs, h, [(f, bw) for f, _, bw in lines], ctx.penalty)
+            ga, la, Na = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
             S0b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx))
+            S1b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx) if Na is None else Na)
             fl = LEAKAGE_FLOOR * float(np.median(S0b))
             pb = {"freq_hz": [x[0] for x in la], "sigma_dph": [x[1] for x in la], "bandwidth_hz": [x[2] for x in la]}
-            gb = bps[b].deviance(S0b, fl) - bps[b].deviance(S0b + lines_psd(pb, fs, bps[b].omega), fl) if la else 0.0
+            gb = bps[b].deviance(S0b, fl) - bps[b].deviance(S1b + lines_psd(pb, fs, bps[b].omega), fl) if la else 0.0
             out.append((float(gb), float(ga)))
         return out  # (tested on the second half, on the first)
 
     ev = ("Whittle fit of the residual spectrum: narrowband random vibration, "
           + "; ".join(f"{f:.4g} Hz (-3 dB bandwidth {bw:.3g} Hz, rms {sig:.3g} deg/h, ADEV hump near "
                       f"tau = {0.371 / f:.3g} s)" for f, sig, bw in lines)
-          + " - band-limited noise, not one coherent sinusoid")
-    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines), ev, rate=est,
-                     heldout=heldout)
+          + " - band-limited noise, not one coherent sinusoid"
+          + ("" if N is None else f"; white level refitted under the lines: N {ctx.stoch.noise.N_dpsh:.4g} -> "
+                                  f"{N:.4g} deg/sqrt(h)"))
+    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines) + (N is not None), ev,
+                     rate=est, heldout=heldout, white_n0_dpsh=N)
 
 
 # ---------------------------------------------------------------- noise (coefficients)

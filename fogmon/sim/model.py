@@ -148,9 +148,9 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         {
             "freq_hz": Param("Hz", "centre frequency of each line (below the Nyquist frequency)", "list", ">0"),
             "sigma_dph": Param("deg/h", "rms of each line", "list", ">=0"),
-            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line's resonator", "list", ">0"),
+            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line (band-pass edges freq_hz -+ bandwidth_hz/2)", "list", ">0"),
         },
-        None, "noise", "narrowband random vibration: white noise through a second-order resonator per line"),
+        None, "noise", "narrowband random vibration: white noise through a 4-pole band-pass per line"),
     "noise": EffectKind(
         {f"{k}{suffix}": Param(u.split(" (")[0], f"corrected {k}{' ' + what if what else ''}", check=">=0")
          for k, u in NOISE_UNITS.items() for suffix, what in (("", ""), ("_lo", "interval low end"),
