@@ -563,6 +563,8 @@ def temperature_noise(ctx: Context) -> Candidate | None:
 LINE_PARAMS = 3
 #: lines proposed per fit (the strongest first)
 MAX_LINES = 10
+#: narrowband: a fitted line's quality factor centre / bandwidth is at least this
+LINE_MIN_Q = 2.0
 
 
 def _whitened(ctx: Context) -> np.ndarray:
@@ -591,7 +593,7 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
 
     def unpack(x):
         f = float(x[0])
-        bw = float(min(max(math.exp(x[1]), bw_lo), 0.5 * f))  # narrowband: Q = f / bw >= 2
+        bw = float(min(max(math.exp(x[1]), bw_lo), f / LINE_MIN_Q))  # narrowband: Q = f / bw
         return f, math.sqrt(math.exp(x[2])), bw
 
     def dev(x):

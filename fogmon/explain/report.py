@@ -140,9 +140,12 @@ def _line_hint(res: Result, left: list[dict]) -> str:
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
+    why = next((w for k, _, w in res.rejected if k == "vibration_lines"), None)
+    fit = (f"the vibration_lines fit was refused: {why}" if why else
+           "the vibration_lines fit does not account for it")
     return (f"The unexplained excess at tau {r['tau_min_s']:.3g}..{r['tau_max_s']:.3g} s goes with narrowband "
             f"power in the residual at {where}: vibration or platform motion that is not one coherent "
-            f"sinusoid over the record (no catalogued effect models it); check the mounting and the "
+            f"sinusoid over the record ({fit}); check the mounting and the "
             f"vibration environment at those frequencies.")
 
 
