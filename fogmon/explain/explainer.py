@@ -346,10 +346,15 @@ def _new_deficit(before: Analysis, after: Analysis) -> str | None:
 #: Smallest score drop an accepted effect must bring: the report rounds scores to 3
 #: decimals, and its invariant is score_after < score_before for every effect.
 MIN_SCORE_DROP = 0.002
+#: ... and at least this share of the score: the score's figures are ratios to bootstrap
+#: estimates (the null's median max |z| from 40..100 replicates is known to 1-2 %), so
+#: a smaller change is below what the score resolves, not an improvement (a real MEMS
+#: record had a bias step accepted for 5.85 -> 5.84)
+MIN_SCORE_DROP_SHARE = 0.01
 
 
 def _lowers(before: float, after: float) -> bool:
-    return after <= before - MIN_SCORE_DROP
+    return after <= before - max(MIN_SCORE_DROP, MIN_SCORE_DROP_SHARE * before)
 
 
 def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, n_acc, progress):
