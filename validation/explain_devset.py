@@ -159,6 +159,10 @@ def concealment(case: Case, rec, base: SensorModel, truth: SensorModel, seed: in
             peak = max(peak, float(np.max(np.abs(r - (np.mean(r) if e.kind != "glitches" else 0.0)))) / s)
     noise_kinds = [e for e in truth.effects if EFFECT_KINDS[e.kind].nature != "mean"]
     change = 0.0
+    if case.model_noise is not None:  # the raw std of the truth against that of the stated model
+        a = simulate(SensorModel(case.fs_hz, 0.0, case.noise, []), like=rec, seed=seed + 1).rate_dph
+        b = simulate(SensorModel(case.fs_hz, 0.0, case.model_noise, []), like=rec, seed=seed + 1).rate_dph
+        return peak, float(np.std(a) / np.std(b) - 1.0)
     if case.burst is not None:  # raw std change of the whole record
         clean = simulate(truth, like=rec, seed=seed + 1).rate_dph
         t0, length, mult = case.burst
