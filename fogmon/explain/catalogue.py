@@ -26,7 +26,7 @@ from fogmon.explain import detectors
 from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, filter_gain2, markov_psd,
                                     model_psd, rfft_omega)
 from fogmon.sim import effects as fx
-from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, validate_effect
+from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
 
 
 @dataclass
@@ -487,7 +487,6 @@ def _segment_levels(ctx: Context, seg: int):
 
 
 def _replace_white(model: SensorModel, N: float, drop_other: bool = False) -> SensorModel:
-    from fogmon.sim.model import Noise
     nz = model.noise
     noise = Noise(0.0, N, 0.0, 0.0, 0.0) if drop_other else Noise(nz.Q_arcsec, N, nz.B_dph, nz.K_dphsh, nz.R_dphh)
     eff = [e for e in model.effects
@@ -727,6 +726,11 @@ NOISE_CONFIDENCE = 0.95
 NOISE_TERMS = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh")
 
 
+#: fixed-point steps refining the corrected terms (the first correction is exact when
+#: the terms do not interact in the fit)
+NOISE_ITERATIONS = 2
+
+
 def expected_avar(S: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
     """Allan variance ((deg/h)^2) at averaging factors ``m`` of a process with PSD ``S``
     at the rfft bins of an n-sample record: sum over the circle of
@@ -750,8 +754,9 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
     terms (flicker approximation, Gauss-Markov, lines, filters, white-level effects) do
     to the fit cancels. Returns {name: (value, lo, hi, model value)} in coefficient
     units for the terms whose model value lies outside the recording's NOISE_CONFIDENCE
-    interval (identified terms: A +- z se; others: 0 .. the 95 % upper limit), or None
-    when the ADEV cannot be fitted."""
+    interval (identified terms: A +- z se; others: 0 .. the 95 % upper limit), refined by
+    NOISE_ITERATIONS fixed-point steps A += A_recording - A_predicted(A) (the terms
+    interact in the fit), or None when the ADEV cannot be fitted."""
     from scipy.stats import norm
 
     from fogmon.davar.batch import oadev
@@ -771,11 +776,27 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
     ident = a - IDENTIFY_Z * se > 0
     lo = np.where(ident, np.maximum(a - z * se, 0.0), 0.0)
     hi = np.where(ident, a + z * se, np.maximum(up, a))
-    shift = am - ae
-    out = {}
+    differ = np.array([not (lo[i] <= ae[i] <= hi[i]) and np.isfinite(hi[i]) for i in range(len(NOISE_TERMS))]
+                      + [False])
+    if not differ.any():
+        return {}
+    A = am.copy()
+    A[differ] = np.maximum(am + a - ae, 0.0)[differ]
     conv = avar_terms_to_coefficients
+    for _ in range(NOISE_ITERATIONS):  # the terms interact in such a fit (flicker's short-tau excess
+        c = conv(A)                    # reads partly as N): fit(predicted ADEV of A) -> fit(recording)
+        new = SensorModel(stoch.sample_rate_hz, 0.0, Noise(*c[:4], 0.0), stoch.effects)
+        Sk = model_psd(new, rfft_omega(n), n, white_dpsh - nz.N_dpsh + float(c[1]))
+        ak, _, _, _ = fit_avar(r.tau_s, expected_avar(Sk, n, r.m), r.m, r.n_terms, n, "none")
+        if not np.all(np.isfinite(ak)):
+            break
+        A[differ] = np.maximum(A + a - ak, 0.0)[differ]
+    shift = A - a
+    out = {}
     for i, name in enumerate(NOISE_TERMS):
-        if lo[i] <= ae[i] <= hi[i] or not np.isfinite(hi[i]):
+        # a term flagged only through another one's error (B too small reads partly as N)
+        # is left alone when its model value is inside its own corrected interval
+        if not differ[i] or max(lo[i] + shift[i], 0.0) <= am[i] <= hi[i] + shift[i]:
             continue
         vals = [max(x + shift[i], 0.0) for x in (a[i], lo[i], hi[i])]
         coef = [float(conv(np.eye(5)[i] * v)[i]) for v in vals]
