@@ -612,7 +612,8 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
               penalty: float) -> tuple[float, list[tuple[float, float, float]]]:
     """Lines fitted one after the other from ``starts`` ((centre Hz, start bandwidth Hz)),
     each on top of the ones kept before it and kept when its deviance drop exceeds
-    LINE_PARAMS ln n; returns (total deviance drop, lines (centre, rms, bandwidth))."""
+    LINE_PARAMS ln n and it is narrowband (its bandwidth not at the Q = LINE_MIN_Q limit);
+    returns (total deviance drop, lines (centre, rms, bandwidth))."""
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     from fogmon.sim.noise import line_psd
 
@@ -622,7 +623,9 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
         if any(abs(f0 - f) < max(bw, bw0) for f, _, bw in lines):
             continue
         g, line = _fit_line(bp, S, floor, fs, n, f0, bw0)
-        if g > LINE_PARAMS * penalty:
+        # a fit that runs into the widest band allowed (Q = LINE_MIN_Q) is broadband
+        # spectral shape (a filter's slope, a microseism band), not a line: not kept
+        if g > LINE_PARAMS * penalty and line[2] < 0.98 * line[0] / LINE_MIN_Q:
             lines.append(line)
             S = S + line_psd(bp.omega, fs, line[0], line[1], line[2])
     return bp.deviance(S0, floor) - bp.deviance(S, floor), sorted(lines)
