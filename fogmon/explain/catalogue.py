@@ -17,16 +17,22 @@ them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
+from scipy.optimize import minimize, minimize_scalar
+from scipy.stats import norm
 
+from fogmon.davar.batch import oadev
+from fogmon.davar.fit import IDENTIFY_Z, fit_avar
+from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.explain import detectors
-from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, filter_gain2, markov_psd,
+from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, filter_gain2, lines_psd, markov_psd,
                                     model_psd, rfft_omega)
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
+from fogmon.sim.noise import line_psd
 
 
 @dataclass
@@ -581,10 +587,6 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
     """One line (centre Hz, rms deg/h, -3 dB bandwidth Hz) on top of the PSD ``S`` at the
     periodogram's bins, started at (f0, bw0): Nelder-Mead on the Whittle deviance over
     (centre, ln bandwidth, ln variance); returns (deviance drop, line)."""
-    from scipy.optimize import minimize
-
-    from fogmon.sim.noise import line_psd
-
     d0 = bp.deviance(S, floor)
     near = np.abs(bp.omega * fs / (2 * np.pi) - f0) <= 5 * bw0
     var0 = max(float(np.sum(bp.count[near] * np.maximum(bp.I[near] - S[near], 0.0)) / n), 1e-30)
@@ -615,8 +617,6 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
     LINE_PARAMS ln n and it is narrowband (its bandwidth not at the Q = LINE_MIN_Q limit);
     returns (total deviance drop, lines (centre, rms, bandwidth))."""
     floor = LEAKAGE_FLOOR * float(np.median(S0))
-    from fogmon.sim.noise import line_psd
-
     S = S0.copy()
     lines = []
     for f0, bw0 in starts:
@@ -644,10 +644,6 @@ def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tu
     """fit_lines on the model PSD, then the white level N refitted under the lines (the
     lines' skirts were counted as white noise before) by the same Whittle likelihood.
     Returns (deviance drop, lines, N (deg/sqrt(h)) or None when not refitted)."""
-    from scipy.optimize import minimize_scalar
-
-    from fogmon.explain.fitting import lines_psd
-
     fs = ctx.fs_hz
     S0 = model_psd(ctx.stoch, bp.omega, n, white_rms_dpsh(ctx.stoch, ctx))
     floor = LEAKAGE_FLOOR * float(np.median(S0))
@@ -675,8 +671,6 @@ def vibration_lines(ctx: Context) -> Candidate | None:
     and the white level N refitted under them (lines_and_white). The removable
     estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
     residual's DFT."""
-    from fogmon.explain.fitting import lines_psd
-
     fs, n = ctx.fs_hz, ctx.n
     T = n / fs
     f_lo = max(50.0 / T, fs / 1000.0)
@@ -762,12 +756,6 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
     interval (identified terms: A +- z se; others: 0 .. the 95 % upper limit), refined by
     NOISE_ITERATIONS fixed-point steps A += A_recording - A_predicted(A) (the terms
     interact in the fit), or None when the ADEV cannot be fitted."""
-    from scipy.stats import norm
-
-    from fogmon.davar.batch import oadev
-    from fogmon.davar.fit import IDENTIFY_Z, fit_avar
-    from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
-
     n = len(y)
     r = oadev(np.where(valid, y, np.nan), fs, "octave", valid=valid)
     a, se, _, up = fit_avar(r.tau_s, r.adev_dph ** 2, r.m, r.n_terms, n, "all")
@@ -810,8 +798,6 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
 
 
 def _corrected(stoch: SensorModel, fit: dict) -> SensorModel:
-    from dataclasses import replace
-
     return SensorModel(stoch.sample_rate_hz, stoch.bias_dph,
                        replace(stoch.noise, **{k: v[0] for k, v in fit.items()}), stoch.effects, stoch.meta)
 
