@@ -689,8 +689,8 @@ def vibration_lines(ctx: Context) -> Candidate | None:
     S_l = lines_psd(params, fs, w)
     S_all = model_psd(ctx.stoch, w, n, white_rms_dpsh(ctx.stoch, ctx) if N is None else N) + S_l
     with np.errstate(divide="ignore", invalid="ignore"):  # DC (inf) and a filter's zeros (0)
-        gain = np.where(np.isfinite(S_all) & (S_all > 0), S_l / S_all, 0.0)
-    est = np.fft.irfft(gain * ctx.Yf, n)
+        wiener = np.where(np.isfinite(S_all) & (S_all > 0), S_l / S_all, 0.0)
+    est = np.fft.irfft(wiener * ctx.Yf, n)
 
     def heldout():
         out = []
