@@ -109,7 +109,8 @@ def effect_text(e: dict) -> str:
     if e["kind"] == "glitches":
         what = f"{len(p['times_s'])} glitch(es)"
     else:
-        what = ", ".join(f"{k} {v:.4g}" for k, v in p.items() if isinstance(v, (int, float)))
+        what = ", ".join(f"{k} {v:.4g}" if isinstance(v, (int, float)) else f"{k} [{', '.join(f'{x:.4g}' for x in v)}]"
+                         for k, v in p.items() if isinstance(v, (int, float)) or (isinstance(v, list) and v))
     return f"{e['kind']} ({what}): score {e['score_before']:.3g} -> {e['score_after']:.3g}"
 
 
