@@ -30,6 +30,7 @@ EVERY_KIND = [
     Effect("bandwidth", {"cutoff_hz": 0.0, "order": 0, "taps": [0.25, 0.5, 0.25]}),
     Effect("outliers", {"rate_per_h": 36.5, "amplitude_quantiles_dph": [1.0, 2.0, 7.5], "quantile_probs": [0, 0.5, 1],
                         "positive_fraction": 0.25, "count": 73, "times_file": "run.outliers.csv"}),
+    Effect("vibration_lines", {"freq_hz": [2.2, 5.5], "sigma_dph": [0.3, 0.1], "bandwidth_hz": [0.1, 0.05]}),
 ]
 
 
@@ -40,8 +41,10 @@ def full_model() -> SensorModel:
 
 def test_catalogue_covers_contract_kinds_and_names_aux_and_nature():
     contract = {"thermal_drift", "periodic", "glitches", "bias_step", "vibration_noise", "rate_ramp",
-                "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth"}
+                "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth", "vibration_lines", "noise"}
     assert set(EFFECT_KINDS) == contract | {"outliers"}  # an addition (docs/explain.md)
+    assert EFFECT_KINDS["vibration_lines"].nature == "noise"
+    assert EFFECT_KINDS["noise"].nature == "coefficients"
     assert EFFECT_KINDS["thermal_drift"].aux == "temp_c"
     assert EFFECT_KINDS["vibration_noise"].aux == "vib_g"
     assert EFFECT_KINDS["scale_factor"].aux == "rot_dps"
@@ -245,9 +248,14 @@ def _effect_strategy():
                                                        "positive_fraction": f, "count": c, "times_file": name}),
                 st.floats(0, 1e5), st.lists(st.floats(0, 1e6), min_size=8, max_size=8), st.floats(0, 1),
                 st.integers(0, 10**6), st.text(max_size=12))
+        if kind == "vibration_lines":  # lines inside (0, Nyquist) of the 100 Hz model
+            return st.lists(st.tuples(st.floats(1.0, 40.0), st.floats(0.0, 1e3), st.floats(1e-3, 1.0)),
+                            max_size=4).map(lambda ls: Effect(kind, {
+                                "freq_hz": [x[0] for x in ls], "sigma_dph": [x[1] for x in ls],
+                                "bandwidth_hz": [x[2] for x in ls]}))
         return params_for(kind).map(lambda p: Effect(kind, p))
 
-    return st.sampled_from(sorted(EFFECT_KINDS)).flatmap(build)
+    return st.sampled_from(sorted(k for k, v in EFFECT_KINDS.items() if v.nature != "coefficients")).flatmap(build)
 
 
 def test_round_trip_property(tmp_path_factory):
@@ -268,3 +276,17 @@ def test_round_trip_property(tmp_path_factory):
         assert load_model(p) == m
 
     check()
+
+
+def test_noise_kind_is_refused_in_a_model_file_and_lines_are_checked(tmp_path):
+    p = tmp_path / "m.toml"
+    head = "[sensor]\nsample_rate_hz = 20.0\n[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.01\nB_dph = 0.0\nK_dphsh = 0.0\nR_dphh = 0.0\n"
+    p.write_text(head + '[[effect]]\nkind = "noise"\nN_dpsh = 0.04\n')
+    with pytest.raises(FogmonError, match=r"m.toml.*noise.*\[noise\] table"):
+        load_model(p)
+    p.write_text(head + '[[effect]]\nkind = "vibration_lines"\nfreq_hz = [9.99]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1]\n')
+    with pytest.raises(FogmonError, match=r"line 1 at 9.99 Hz.*Nyquist frequency 10 Hz"):
+        load_model(p)
+    p.write_text(head + '[[effect]]\nkind = "vibration_lines"\nfreq_hz = [2.0, 3.0]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1, 0.1]\n')
+    with pytest.raises(FogmonError, match="one entry per line"):
+        load_model(p)

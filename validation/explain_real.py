@@ -113,7 +113,8 @@ def effect_text(e: dict) -> str:
         what = (f"{p['count']} outliers, {p['rate_per_h']:.4g}/h, |amplitude| quantiles "
                 + ", ".join(f"{q:.3g}" for q in p["amplitude_quantiles_dph"]) + f" deg/h, file {p['times_file']}")
     else:
-        what = ", ".join(f"{k} {v:.4g}" for k, v in p.items() if isinstance(v, (int, float)))
+        what = ", ".join(f"{k} {v:.4g}" if isinstance(v, (int, float)) else f"{k} [{', '.join(f'{x:.4g}' for x in v)}]"
+                         for k, v in p.items() if isinstance(v, (int, float)) or (isinstance(v, list) and v))
     return f"{e['kind']} ({what}): score {e['score_before']:.3g} -> {e['score_after']:.3g}"
 
 

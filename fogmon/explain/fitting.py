@@ -150,7 +150,7 @@ class Whittle:
 def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None) -> np.ndarray:
     """Noise PSD (see :func:`noise_psd`) of a SensorModel's stochastic part at ``omega``
     for an n-sample record: IEEE-952 terms (flicker as the simulator's exact sum of
-    Gauss-Markov terms), ``markov`` effects and ``bandwidth`` filters. ``white_dpsh``
+    Gauss-Markov terms), ``markov`` and ``vibration_lines`` effects and ``bandwidth`` filters. ``white_dpsh``
     overrides N (deg/sqrt(h)), e.g. with the RMS level of white-level effects."""
     from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus
 
@@ -163,8 +163,21 @@ def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None)
     S = noise_psd(omega, fs, nz.Q_arcsec, nz.N_dpsh if white_dpsh is None else white_dpsh, nz.K_dphsh,
                   tuple(markov))
     for e in model.effects:
+        if e.kind == "vibration_lines":
+            S = S + lines_psd(e.params, fs, omega)
+    for e in model.effects:
         if e.kind == "bandwidth":
             S = S * filter_gain2(e.params, fs, omega)
+    return S
+
+
+def lines_psd(params: dict, fs_hz: float, omega: np.ndarray) -> np.ndarray:
+    """PSD (see :func:`noise_psd`) of a ``vibration_lines`` effect: the sum of its lines."""
+    from fogmon.sim.noise import line_psd
+
+    S = np.zeros(len(omega))
+    for f, sig, bw in zip(params["freq_hz"], params["sigma_dph"], params["bandwidth_hz"]):
+        S += line_psd(omega, fs_hz, f, sig, bw)
     return S
 
 

@@ -4,7 +4,8 @@ a console summary, a PNG of the evidence and an optional Rerun .rrd with the sam
 Extra report keys beyond the contract (added, never renamed): ``mismatches_after``,
 per-region ``tau_peak_s`` and ``windows_span_s``,
 ``score_components_before/after``, per-effect ``uncertainty``, ``heldout``,
-``bic_gain``, ``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
+``bic_gain``, per ``noise`` effect ``model_noise`` (the model's values it corrects),
+``refused`` candidates and ``method`` (window, hop, taus, bootstrap size,
 family-wise threshold). An ``outliers`` effect's every outlier goes to the CSV its
 ``times_file`` names (``outliers_path``: REPORT.outliers.csv) and to the .rrd."""
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from fogmon.explain.catalogue import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
@@ -48,9 +50,19 @@ def _region_text(r: dict) -> str:
             f"(ADEV ratio {r['ratio']:.3g}, max |z| {r['max_abs_z']:.3g}, p = {r['p_value']:.2g})")
 
 
-def _effect_summary(kind: str, p: dict) -> str:
-    """One line for an effect: its kind's own summary (fogmon.sim.model.EFFECT_KINDS)."""
+def _effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
+    """One phrase with the numbers of an effect: its kind's own summary
+    (fogmon.sim.model.EFFECT_KINDS); a ``noise`` effect also names the model's values it
+    corrects (``model``: the model's [noise])."""
+    if kind == "noise" and model is not None:
+        return "wrong noise coefficients: " + "; ".join(
+            noise_text(k, p[k], p[f"{k}_lo"], p[f"{k}_hi"], model[k]) for k in NOISE_UNIT if k in p)
     return EFFECT_KINDS[kind].summarize(kind, p) if kind in EFFECT_KINDS else kind
+
+
+def _model_noise(res: Result) -> dict:
+    nz = res.model.noise
+    return {k: getattr(nz, k) for k in NOISE_UNIT}
 
 
 def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
@@ -70,7 +82,8 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
                      f"but matched tests do (score {sb:.2f}).")
     if res.accepted:
         parts.append("Missing physics, in order of importance: "
-                     + "; ".join(_effect_summary(a.cand.kind, a.cand.params) for a in res.accepted) + ".")
+                     + "; ".join(_effect_summary(a.cand.kind, a.cand.params, _model_noise(res))
+                                 for a in res.accepted) + ".")
         if sa <= 1.5 and not mism_after:
             parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left): "
                          f"add them to the sensor model (--out-model) or remove the deterministic ones "
@@ -103,9 +116,12 @@ def _line_hint(res: Result, left: list[dict]) -> str:
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
+    why = next((w for k, _, w in res.rejected if k == "vibration_lines"), None)
+    fit = (f"the vibration_lines fit was refused: {why}" if why else
+           "the vibration_lines fit does not account for it")
     return (f"The unexplained excess at tau {r['tau_min_s']:.3g}..{r['tau_max_s']:.3g} s goes with narrowband "
             f"power in the residual at {where}: vibration or platform motion that is not one coherent "
-            f"sinusoid over the record (no catalogued effect models it); check the mounting and the "
+            f"sinusoid over the record ({fit}); check the mounting and the "
             f"vibration environment at those frequencies.")
 
 
@@ -122,12 +138,14 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
     effects = []
     for a in res.accepted:
         c = a.cand
-        params = dict(c.effect().params)
+        params = dict(c.params) if c.corrected_noise is not None else dict(c.effect().params)
         if c.kind == "outliers":
             params["times_file"] = times_file
         effects.append({"kind": c.kind, "params": params, "uncertainty": c.se, "evidence": c.evidence,
                         "heldout": a.heldout, "bic_gain": round(a.bic_gain, 2),
                         "score_before": round(a.score_before, 3), "score_after": round(a.score_after, 3)})
+        if c.corrected_noise is not None:
+            effects[-1]["model_noise"] = {k: v for k, v in _model_noise(res).items() if k in params}
     g = res.grid
     rep = {
         "recording": recording_path,
@@ -175,7 +193,7 @@ def console_summary(rep: dict) -> str:
     if rep["effects"]:
         lines.append("  effects added:")
         for e in rep["effects"]:
-            lines.append(f"    + {_effect_summary(e['kind'], e['params'])} "
+            lines.append(f"    + {_effect_summary(e['kind'], e['params'], e.get('model_noise'))} "
                          f"(score {e['score_before']:.2f} -> {e['score_after']:.2f})")
     else:
         lines.append("  effects added: none")
@@ -219,8 +237,10 @@ def _remove_stale_outliers(path: str) -> None:
 def write_outputs(res: Result, out_model: str | None, out_corrected: str | None,
                   outliers_file: str | None = None) -> None:
     """--out-model (fitted model TOML; an ``outliers`` effect names ``outliers_file``
-    relative to the model) and --out-corrected (recording minus the fitted deterministic
-    effects, outliers replaced, replay log v1, same samples and aux columns)."""
+    relative to the model; a ``noise`` effect's corrections are in its [noise]) and
+    --out-corrected (recording minus the fitted deterministic effects and the Wiener
+    estimate of any vibration_lines, outliers replaced, replay log v1, same samples and
+    aux columns)."""
     if out_model:
         fitted = res.fitted
         if outliers_file:
@@ -234,8 +254,9 @@ def write_outputs(res: Result, out_model: str | None, out_corrected: str | None,
         corrected = rec.rate_dph - res.deterministic_fit[idx]
         meta = dict(rec.meta)
         meta["sample_rate_hz"] = f"{rec.sample_rate_hz:g}"
-        meta["corrected_by"] = "fogmon explain: " + ", ".join(a.cand.kind for a in res.accepted
-                                                              if a.cand.rate is not None) or "nothing"
+        meta["corrected_by"] = "fogmon explain: " + (", ".join(
+            a.cand.kind + (" (Wiener estimate of the line signal)" if a.cand.kind == "vibration_lines" else "")
+            for a in res.accepted if a.cand.rate is not None) or "nothing")
         for a in res.accepted:
             if a.cand.kind == "outliers":
                 meta["outliers_replaced"] = (f"{a.cand.params['count']} samples (listed in the outliers file "

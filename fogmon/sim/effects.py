@@ -9,7 +9,7 @@ parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
   per sample (vibration_noise, temperature_noise); the simulator scales one white
   sequence by N0 + sum of these (floored at 0).
 - noise: ``noise_generator(effect, fs_hz, rng)`` -> a stateful generator (markov,
-  outliers).
+  outliers, vibration_lines).
 - filter: ``BandwidthFilter(params, fs_hz)`` applied to the whole simulated rate.
 
 ``lookback_s(effect)`` is how much earlier data a mean-type effect needs to be exact
@@ -23,7 +23,7 @@ from scipy.signal import butter, lfilter, lfilter_zi, sosfilt, sosfilt_zi
 
 from fogmon.errors import FogmonError
 from fogmon.sim.model import EFFECT_KINDS, Effect
-from fogmon.sim.noise import GaussMarkov
+from fogmon.sim.noise import GaussMarkov, NarrowbandLine
 
 
 def _aux(effect: Effect, aux: dict) -> np.ndarray:
@@ -175,11 +175,13 @@ def white_level_dpsh(effect: Effect, t_s, aux: dict) -> np.ndarray:
     return WHITE_LEVEL_EFFECTS[effect.kind](t_s, aux, effect.params)
 
 
-def noise_generator(effect: Effect, fs_hz: float, rng: np.random.Generator) -> GaussMarkov | OutlierSpikes:
-    """Stateful generator of a noise-type effect (``markov``, ``outliers``)."""
+def noise_generator(effect: Effect, fs_hz: float, rng: np.random.Generator):
+    """Stateful generator of a noise-type effect (``markov``, ``outliers``, ``vibration_lines``)."""
     p = effect.params
     if effect.kind == "outliers":
         return OutlierSpikes(p, fs_hz, rng)
+    if effect.kind == "vibration_lines":
+        return NarrowbandLines(p, fs_hz, rng)
     return GaussMarkov(p["sigma_dph"], p["tau_c_s"], fs_hz, rng)
 
 
@@ -214,6 +216,22 @@ def lookback_s(effect: Effect) -> float:
     if effect.kind == "thermal_drift":
         return effect.params["smooth_s"] + 2.0 * effect.params["diff_step_s"]
     return 0.0
+
+
+class NarrowbandLines:
+    """A ``vibration_lines`` effect: the sum of its lines (noise.NarrowbandLine), each
+    with its own random stream spawned from the effect's."""
+
+    def __init__(self, params: dict, fs_hz: float, rng: np.random.Generator):
+        p = params
+        self.lines = [NarrowbandLine(f, s, bw, fs_hz, r) for f, s, bw, r in
+                      zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], rng.spawn(len(p["freq_hz"])))]
+
+    def generate(self, n: int) -> np.ndarray:
+        out = np.zeros(n)
+        for line in self.lines:
+            out += line.generate(n)
+        return out
 
 
 class BandwidthFilter:

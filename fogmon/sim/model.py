@@ -17,7 +17,9 @@ constraint), the aux channel it needs and its nature:
   (``fogmon.sim.effects.white_level_dpsh``); N = N0 + sum of these, the same white
   sequence scaled;
 - ``"noise"``: an extra stochastic rate term (``markov``);
-- ``"filter"``: acts on the whole simulated rate (``bandwidth``).
+- ``"filter"``: acts on the whole simulated rate (``bandwidth``);
+- ``"coefficients"``: corrected [noise] coefficients (``noise``): written by
+  ``fogmon explain`` into its report only; a model file carries them in [noise].
 """
 from __future__ import annotations
 
@@ -191,6 +193,23 @@ EFFECT_KINDS: dict[str, EffectKind] = {
                    f"{float(np.interp(0.5, p['quantile_probs'], p['amplitude_quantiles_dph'])):.3g} deg/h, largest "
                    f"{p['amplitude_quantiles_dph'][-1]:.3g} deg/h"
                    + (f", all listed in {p['times_file']}" if p.get("times_file") else ""))),
+    "vibration_lines": EffectKind(
+        {
+            "freq_hz": Param("Hz", "centre frequency of each line (below the Nyquist frequency)", "list", ">0"),
+            "sigma_dph": Param("deg/h", "rms of each line", "list", ">=0"),
+            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line (band-pass edges freq_hz -+ bandwidth_hz/2)", "list", ">0"),
+        },
+        None, "noise", "narrowband random vibration: white noise through a 4-pole band-pass per line",
+        lambda p: "vibration lines " + ", ".join(f"{f:.4g} Hz ({s:.3g} deg/h rms, {w:.3g} Hz wide)" for f, s, w in
+                                                  zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], strict=True))),
+    "noise": EffectKind(
+        {f"{k}{suffix}": Param(u.split(" (")[0], f"corrected {k}{' ' + what if what else ''}", check=">=0")
+         for k, u in NOISE_UNITS.items() for suffix, what in (("", ""), ("_lo", "interval low end"),
+                                                                ("_hi", "interval high end"))},
+        None, "coefficients", "the model's own IEEE-952 coefficients corrected (report only; --out-model "
+                              "writes them into [noise])",
+        lambda p: "corrected noise: " + ", ".join(f"{k} {p[k]:.4g} [{p[k + '_lo']:.4g}, {p[k + '_hi']:.4g}]"
+                                                  for k in NOISE_UNITS if k in p)),
 }
 
 
@@ -256,6 +275,9 @@ def validate_effect(kind: str, params: dict, where: str = "effect") -> Effect:
         raise FogmonError(f"{where}: unknown effect kind {kind!r} "
                           f"(known: {', '.join(EFFECT_KINDS)}){_close(str(kind), EFFECT_KINDS)}")
     spec = EFFECT_KINDS[kind]
+    if spec.nature == "coefficients":
+        raise FogmonError(f"{where}: kind {kind!r} is what fogmon explain reports when the model's own IEEE-952 "
+                          f"coefficients are wrong; a model file carries corrected values in its [noise] table")
     where = f"{where} ({kind})"
     for k in params:
         if k not in spec.params:
@@ -295,6 +317,9 @@ def _check_effect(kind: str, p: dict, where: str) -> None:
         if worst >= 1e6:
             raise FogmonError(f"{where}: |ppm| + |asym_ppm|/2 = {worst:g} ppm; a scale-factor error of 100 % "
                               f"(1e6 ppm) or more makes the gyro read zero or the wrong sign: a wrong unit?")
+    if kind == "vibration_lines" and not len(p["freq_hz"]) == len(p["sigma_dph"]) == len(p["bandwidth_hz"]):
+        raise FogmonError(f"{where}: freq_hz, sigma_dph and bandwidth_hz must have one entry per line "
+                          f"({len(p['freq_hz'])}, {len(p['sigma_dph'])}, {len(p['bandwidth_hz'])})")
     if kind == "bandwidth":
         butter = p["cutoff_hz"] > 0 or p["order"] > 0
         if butter == bool(p["taps"]):
@@ -330,6 +355,12 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
         if e.kind == "bandwidth" and e.params["cutoff_hz"] >= fs / 2:
             raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
                               f"Nyquist frequency {fs / 2:g} Hz, got {e.params['cutoff_hz']:g}")
+        if e.kind == "vibration_lines":
+            for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"])):
+                if not (f + bw / 2 < fs / 2 and bw < 2 * f):
+                    raise FogmonError(f"{where}: [[effect]] #{i + 1} (vibration_lines): line {j + 1} at "
+                                      f"{f:g} Hz with bandwidth {bw:g} Hz must lie between 0 and the Nyquist "
+                                      f"frequency {fs / 2:g} Hz (freq_hz +- bandwidth_hz/2)")
     return SensorModel(fs, bias, noise, effects, {str(k): str(v) for k, v in model.meta.items()})
 
 

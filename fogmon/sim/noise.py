@@ -24,13 +24,16 @@ memory while staying one reproducible realization per seed.
 - R (rate ramp): (R/3600) (t - t_start); sigma = R tau / (3600 sqrt(2)).
 - Gauss-Markov (``markov`` effect): exact sampled AR(1), x_k = a x_{k-1} + sqrt(1-a^2) sigma e_k,
   a = exp(-tau0/tau_c), started in its stationary distribution.
+- Narrowband line (``vibration_lines`` effect): white noise through a 4-pole
+  Butterworth band-pass (-3 dB edges f -+ bw/2), scaled to sigma rms; each line has its
+  own random stream.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy.signal import lfilter
+from scipy.signal import butter, lfilter, sosfilt, sosfreqz
 
 from fogmon.davar.theory import FLICKER_FACTOR
 
@@ -87,6 +90,64 @@ class GaussMarkov:
         e = self.rng.standard_normal(n)
         y, self._zi = lfilter([self.b], [1.0, -self.a], e, zi=self._zi)
         return y
+
+
+class NarrowbandLine:
+    """Narrowband random vibration (``vibration_lines``, one line): white noise through
+    the band-pass of :func:`line_filter` (-3 dB band ``freq_hz`` +- ``bandwidth_hz`` / 2),
+    scaled to ``sigma_dph`` rms (deg/h); started in steady state by a burn-in of
+    LINE_BURN_IN envelope time constants 1 / (pi bandwidth_hz)."""
+
+    def __init__(self, freq_hz: float, sigma_dph: float, bandwidth_hz: float, fs_hz: float,
+                 rng: np.random.Generator):
+        self.sos = line_filter(freq_hz, bandwidth_hz, fs_hz)
+        self.scale = float(sigma_dph) / math.sqrt(line_noise_gain(freq_hz, bandwidth_hz, fs_hz))
+        self.rng = rng
+        burn = int(math.ceil(LINE_BURN_IN * fs_hz / (math.pi * bandwidth_hz))) + 2
+        _, self._zi = sosfilt(self.sos, rng.standard_normal(burn), zi=np.zeros((len(self.sos), 2)))
+
+    def generate(self, n: int) -> np.ndarray:
+        if n == 0:
+            return np.zeros(0)
+        y, self._zi = sosfilt(self.sos, self.rng.standard_normal(n), zi=self._zi)
+        return self.scale * y
+
+
+#: burn-in of a narrowband line generator, in envelope time constants 1 / (pi bandwidth)
+LINE_BURN_IN = 20.0
+
+
+def line_filter(freq_hz: float, bandwidth_hz: float, fs_hz: float) -> np.ndarray:
+    """Second-order sections of a ``vibration_lines`` line: the 4-pole Butterworth
+    band-pass (scipy.signal.butter order 2, btype "bandpass") whose -3 dB edges are
+    freq_hz -+ bandwidth_hz / 2: gain 1 in the band, falling as 1/f^2 (power 1/f^4)
+    outside it, 0 at DC and Nyquist."""
+    return butter(2, [freq_hz - bandwidth_hz / 2.0, freq_hz + bandwidth_hz / 2.0], btype="bandpass",
+                  fs=fs_hz, output="sos")
+
+
+def line_gain2(sos: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """|H|^2 of a line's band-pass at angular normalized frequencies ``omega`` (rad/sample)."""
+    _, h = sosfreqz(sos, worN=np.asarray(omega, dtype=float))
+    return np.abs(h) ** 2
+
+
+def line_noise_gain(freq_hz: float, bandwidth_hz: float, fs_hz: float) -> float:
+    """Output variance of a line's band-pass for unit-variance white input,
+    (1/pi) * integral over 0..pi of |H|^2 (trapezoid on a grid of 2000 points across
+    the band +- 20 bandwidths and 1000 log-spaced points elsewhere: well under 0.1 %)."""
+    sos = line_filter(freq_hz, bandwidth_hz, fs_hz)
+    w0, dw = 2 * math.pi * freq_hz / fs_hz, 2 * math.pi * bandwidth_hz / fs_hz
+    near = np.linspace(max(w0 - 20 * dw, 1e-9), min(w0 + 20 * dw, math.pi), 2000)
+    w = np.unique(np.concatenate((near, np.geomspace(1e-9, math.pi, 1000), [math.pi])))
+    return float(np.trapezoid(line_gain2(sos, w), w) / math.pi)
+
+
+def line_psd(omega: np.ndarray, fs_hz: float, freq_hz: float, sigma_dph: float, bandwidth_hz: float) -> np.ndarray:
+    """Two-sided PSD ((deg/h)^2 per unit normalized frequency, sum over the n DFT bins / n
+    = variance) of one narrowband line at angular normalized frequencies ``omega``."""
+    sos = line_filter(freq_hz, bandwidth_hz, fs_hz)
+    return sigma_dph ** 2 / line_noise_gain(freq_hz, bandwidth_hz, fs_hz) * line_gain2(sos, omega)
 
 
 def flicker_taus(fs_hz: float, tau_hi_s: float, ratio: float = 2.0) -> np.ndarray:

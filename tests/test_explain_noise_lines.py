@@ -1,0 +1,107 @@
+"""Issue 11 item 5: the effect kinds `noise` (the model's own IEEE-952 coefficients are
+wrong) and `vibration_lines` (narrowband random vibration), simulated with known truth:
+named with their numbers and intervals, written into --out-model, removable, and a
+null left alone."""
+import json
+
+import numpy as np
+import pytest
+from scipy.signal import welch
+
+from fogmon.cli import main
+from fogmon.explain import catalogue
+from fogmon.explain.explainer import _whittle, stochastic_part
+from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
+from fogmon.sim.simulate import iter_simulate, simulate
+from test_explain_invariants import assert_invariants
+
+LINES = Effect("vibration_lines", {"freq_hz": [3.0, 11.0], "sigma_dph": [1.5, 1.2], "bandwidth_hz": [0.05, 0.2]})
+
+
+def _explain(tmp_path, truth: SensorModel, model: SensorModel, duration_s: float, seed: int):
+    rec = simulate(truth, duration_s=duration_s, seed=seed)
+    path, mpath = tmp_path / "rec.csv", tmp_path / "model.toml"
+    write_replay_log(path, rec.t_s, rec.rate_dph, rec.aux, {"sample_rate_hz": f"{truth.sample_rate_hz:g}"})
+    save_model(model, mpath)
+    rep_p, fit_p, cor_p = tmp_path / "rep.json", tmp_path / "fit.toml", tmp_path / "cor.csv"
+    assert main(["explain", str(path), "--model", str(mpath), "--report", str(rep_p), "--bootstrap", "30",
+                 "--out-model", str(fit_p), "--out-corrected", str(cor_p), "--quiet"]) == 0
+    rep = json.loads(rep_p.read_text())
+    assert_invariants(rep, float(rec.t_s[0]), float(rec.t_s[-1]) + 1.0 / truth.sample_rate_hz)
+    return rep, load_model(fit_p), read_replay_log(path), read_replay_log(cor_p)
+
+
+def _covers(p: dict, name: str, truth: float) -> None:
+    v, lo, hi = p[name], p[f"{name}_lo"], p[f"{name}_hi"]
+    assert lo <= truth <= hi, (name, lo, truth, hi)
+    assert lo <= v <= hi and abs(v - truth) <= (hi - lo) / 2, (name, v, truth, lo, hi)
+
+
+def test_wrong_n_in_the_model_is_named_with_its_interval_and_written_into_noise(tmp_path):
+    truth = SensorModel(10.0, 1.5, Noise(N_dpsh=0.041, B_dph=0.01))
+    model = SensorModel(10.0, 1.5, Noise(N_dpsh=0.030, B_dph=0.01))
+    rep, fitted, _, _ = _explain(tmp_path, truth, model, 3600.0, seed=7)
+    assert [e["kind"] for e in rep["effects"]] == ["noise"]
+    p = rep["effects"][0]["params"]
+    assert set(p) == {"N_dpsh", "N_dpsh_lo", "N_dpsh_hi"}          # only the term that differs
+    _covers(p, "N_dpsh", 0.041)
+    assert "your N is" in rep["verdict"] and "not 0.03" in rep["verdict"]
+    assert fitted.effects == [] and fitted.noise.N_dpsh == pytest.approx(p["N_dpsh"])
+    assert fitted.noise.B_dph == 0.01 and rep["score_after"] <= 1.5
+
+
+def test_wrong_b_in_the_model_is_named_and_written_into_noise(tmp_path):
+    truth = SensorModel(10.0, 0.0, Noise(N_dpsh=0.005, B_dph=0.04))
+    model = SensorModel(10.0, 0.0, Noise(N_dpsh=0.005, B_dph=0.015))
+    rep, fitted, _, _ = _explain(tmp_path, truth, model, 4 * 3600.0, seed=8)
+    assert [e["kind"] for e in rep["effects"]] == ["noise"]
+    p = rep["effects"][0]["params"]
+    _covers(p, "B_dph", 0.04)
+    assert "your B is" in rep["verdict"]
+    assert fitted.noise.B_dph == pytest.approx(p["B_dph"]) and fitted.effects == []
+
+
+def test_two_narrowband_lines_are_fitted_and_removed(tmp_path):
+    nz = Noise(N_dpsh=0.01, B_dph=0.01)
+    truth = SensorModel(50.0, 1.0, nz, [LINES])
+    rep, fitted, raw, cor = _explain(tmp_path, truth, SensorModel(50.0, 1.0, nz), 1200.0, seed=9)
+    assert [e["kind"] for e in rep["effects"]] == ["vibration_lines"]
+    p = rep["effects"][0]["params"]
+    assert len(p["freq_hz"]) == 2
+    for f, s, bw, tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], *LINES.params.values()):
+        assert abs(f - tf) <= tb and s == pytest.approx(ts, rel=0.2) and bw == pytest.approx(tb, rel=0.5)
+    assert [e.kind for e in fitted.effects] == ["vibration_lines"] and rep["score_after"] <= 1.5
+    f, p_raw = welch(raw.rate_dph, fs=50.0, nperseg=4096)
+    _, p_cor = welch(cor.rate_dph, fs=50.0, nperseg=4096)
+    for tf in LINES.params["freq_hz"]:
+        k = int(np.argmin(np.abs(f - tf)))
+        assert p_cor[k] < 0.2 * p_raw[k]                         # the Wiener estimate removes the line
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_null_gives_neither_kind(seed):
+    model = SensorModel(20.0, 0.0, Noise(Q_arcsec=0.2, N_dpsh=0.01, B_dph=0.01))
+    rec = simulate(model, duration_s=1800.0, seed=seed)
+    y = rec.rate_dph - rec.rate_dph.mean()
+    ctx = _whittle(stochastic_part(model), {}, rec.t_s, np.ones(len(y), bool), y)
+    for fn in (catalogue.noise, catalogue.vibration_lines):
+        c = fn(ctx)
+        assert c is None or c.bic_gain(ctx.penalty) <= 0, (c.kind, c.params, c.gain)
+
+
+def test_sim_of_a_vibration_lines_model_has_the_stated_rms_and_peak(tmp_path):
+    m = SensorModel(100.0, 0.0, Noise(), [Effect("vibration_lines", {"freq_hz": [7.0], "sigma_dph": [2.0],
+                                                                     "bandwidth_hz": [0.5]})])
+    mp, out = tmp_path / "m.toml", tmp_path / "s.csv"
+    save_model(m, mp)
+    assert main(["sim", "--model", str(mp), "--out", str(out), "--duration-s", "3600", "--seed", "4"]) == 0
+    r = read_replay_log(out).rate_dph
+    assert np.std(r) == pytest.approx(2.0, rel=0.06)             # ~1/sqrt(bandwidth * T) = 2.4 % scatter
+    f, p = welch(r, fs=100.0, nperseg=8192)
+    assert abs(f[np.argmax(p)] - 7.0) <= 0.25
+    half = p > p.max() / 2                                       # -3 dB width of the resonator
+    assert 0.3 <= (f[half].max() - f[half].min()) <= 0.8
+    a = np.concatenate([b.rate_dph for b in iter_simulate(m, duration_s=60.0, seed=4, chunk_samples=777)])
+    b = np.concatenate([b.rate_dph for b in iter_simulate(m, duration_s=60.0, seed=4)])
+    assert np.array_equal(a, b)                                  # one realization whatever the chunking
