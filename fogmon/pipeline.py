@@ -299,8 +299,9 @@ class Pipeline:
         if self.band is not None:
             self.watch = ModelWatch(self.band, tuple(first.aux))
             self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(tuple(first.aux), self.engine.window)
+        band = None if self.band is None else (self.band.lo_dph, self.band.median_dph, self.band.hi_dph)
         info = StreamInfo(self.source.name, rate_hz, self.window_s, self.hop_s, m / rate_hz, aux_names,
-                          self.summary.analysed)
+                          self.summary.analysed, band, self.config.model_alpha if band is not None else None)
         for s in self.sinks:
             s.start(info)
         self.started = True

@@ -73,3 +73,21 @@ def test_outliers_rejected_counted_and_kalman_channel():
     assert sum(int(e.message.split()[0]) for e in sink.events_ if e.kind == "outlier") == 40
     kal = np.concatenate([b.aux[KALMAN] for b in sink.blocks])
     assert np.isfinite(kal).all() and np.std(kal[5000:]) < 0.2 * np.std(y[5000:])
+
+
+def test_model_band_is_drawn_in_the_rrd_and_departures_reported(tmp_path):
+    """--model: the band (lo, median, hi) is in the .rrd around the live curve, as log10
+    deg/h at the engine's taus, with the model's median at tau 1 s from its N."""
+    from rerun.chunk import RrdReader
+
+    from fogmon.cli import main
+
+    rrd = tmp_path / "mwd.rrd"
+    assert main(["replay", str(ROOT / "replay_logs" / "sim_mwd_run_1hz.csv"), "--model",
+                 str(ROOT / "replay_logs" / "sim_mwd_run.toml"), "--rrd", str(rrd), "--quiet"]) == 0
+    strips = [ch.to_record_batch() for ch in RrdReader(str(rrd)).stream().filter(content="/adev_curve/log10/model_band")]
+    lines = [rb.column(n).to_pylist()[0] for rb in strips for n in rb.schema.names if n.endswith("strips")]
+    lo, median, hi = (np.array(s) for s in lines[0])
+    assert np.all(lo[:, 1] < median[:, 1]) and np.all(median[:, 1] < hi[:, 1])
+    assert median[0, 0] == 0.0  # tau 1 s: the MWD model's N0 = 0.02 deg/sqrt(h) -> 1.2 deg/h
+    assert abs(10 ** median[0, 1] - 60 * 0.02) < 0.05

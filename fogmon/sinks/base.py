@@ -31,6 +31,10 @@ class StreamInfo:
     aux_names: tuple[str, ...]
     #: what DAVAR analyses: "rate_dph", or "rate_dph - 3600 x rot_dps" (error vs reference rotation)
     analysed: str = "rate_dph"
+    #: with --model: the model's DADEV band at ``tau_s`` (lo, median, hi in deg/h; lo/hi at
+    #: the family-wise level of the live check) and that level (per window)
+    model_band: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    model_alpha: float | None = None
 
 
 @dataclass

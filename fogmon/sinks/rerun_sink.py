@@ -66,6 +66,8 @@ HEATMAP = "dadev/heatmap"
 MODEL_POINTS_PER_DECADE = 20
 #: Colours of the ADEV-curve view (its legend uses the same).
 MEASURED_COLOUR, BOUNDS_COLOUR, MODEL_COLOUR = (255, 255, 255), (120, 160, 255), (255, 170, 0)
+#: the --model band around the live curve
+BAND_COLOUR = (200, 90, 200)
 HEATMAP_COLORMAP = "viridis"
 #: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
 UPPER_LIMIT = "upper_limit"
@@ -359,6 +361,7 @@ class RerunSink(Sink):
         self._heat_t: list[float] = []
         self._heat_range: tuple[int, int] | None = None   # colour scale, whole decades of log10 ADEV
         self._legend_sent = False
+        self._band_alpha: float | None = None
         self._pending_events: list[Event] = []
         if connect_url:
             _check_listening(connect_url)
@@ -464,6 +467,13 @@ class RerunSink(Sink):
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
         rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
+        self._band_alpha = info.model_alpha
+        if info.model_band is not None and len(tau):
+            lx = np.log10(tau)
+            lines = [np.column_stack([lx, np.log10(np.asarray(a, dtype=np.float64))]) for a in info.model_band]
+            rec.log(f"{CURVE}/model_band", rr.LineStrips2D(lines, colors=[BAND_COLOUR],
+                                                           radii=[rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)]),
+                    static=True)
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
@@ -530,7 +540,9 @@ class RerunSink(Sink):
         (_, x1), (_, y1) = self._decades
         rp.log_legend(self.rec, f"{CURVE}/legend", [("measured ADEV, current window", MEASURED_COLOUR),
                                                     (f"{100 * confidence:.1f} % confidence bounds", BOUNDS_COLOUR),
-                                                    ("IEEE-952 model over the fitted taus", MODEL_COLOUR)],
+                                                    ("IEEE-952 model over the fitted taus", MODEL_COLOUR),
+                                                    *([(f"--model band (family-wise {self._band_alpha:g} per window)",
+                                                        BAND_COLOUR)] if self._band_alpha is not None else [])],
                       top_left=(x1 - 1.3, y1 + 0.1), step=-0.5)
         self._legend_sent = True
 
