@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from fogmon.block import Block  # noqa: E402
-from fogmon.davar.batch import dadev  # noqa: E402
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config  # noqa: E402
+from fogmon.davar.batch import dadev  # noqa: E402
 from fogmon.pipeline import run_pipeline  # noqa: E402
 from fogmon.recording import write_replay_log  # noqa: E402
 

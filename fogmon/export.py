@@ -59,7 +59,7 @@ class Term:
     upper: bool
 
     @staticmethod
-    def of(c) -> "Term":
+    def of(c) -> Term:
         """From a fogmon.davar.fit.Coefficient."""
         if bool(c.identifiable):
             return Term(float(c.value), False)

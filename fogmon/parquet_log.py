@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -168,7 +168,7 @@ class ParquetRows:
                 return rows.t_s
         return np.zeros(0)
 
-    def chunks(self) -> Iterator["_Rows"]:
+    def chunks(self) -> Iterator[_Rows]:
         last_t = -math.inf
         for p in self.paths:
             pf = _open(p)
@@ -187,7 +187,7 @@ class ParquetRows:
                 rows.skipped = skipped
                 yield rows
 
-    def _checked(self, path: str, row0: int, cols: dict, last_t: float) -> tuple["_Rows", int]:
+    def _checked(self, path: str, row0: int, cols: dict, last_t: float) -> tuple[_Rows, int]:
         t = cols["time_s"]
         bad = np.zeros(len(t), bool)
         for c, a in cols.items():

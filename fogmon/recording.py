@@ -13,8 +13,8 @@ import io
 import math
 import os
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 
@@ -143,7 +143,7 @@ class Rows:
     first_line: int
     _text: bytes = b""
     _last_t: float = -math.inf
-    _reader: "ReplayLogReader | None" = None
+    _reader: ReplayLogReader | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)

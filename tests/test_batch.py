@@ -20,8 +20,8 @@ from fogmon.fleet import tables
 from fogmon.fleet.chunks import plan_chunks
 from fogmon.fleet.tasks import _Collect, check
 from fogmon.pipeline import PipelineConfig, run_pipeline
-from fogmon.sinks.base import COEFFICIENTS
 from fogmon.recording import write_replay_log
+from fogmon.sinks.base import COEFFICIENTS
 from fogmon.sources.kvh import encode_frame
 from fogmon.sources.open import open_replay_source
 

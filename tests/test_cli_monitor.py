@@ -12,12 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_rerun_sink import read_scalars, read_texts
 
 from fogmon.cli import main
 from fogmon.recording import read_replay_log
 from fogmon.sources.replay import open_raw_capture
-
-from test_rerun_sink import read_scalars, read_texts
 
 HERE = Path(__file__).resolve().parent
 

@@ -20,10 +20,9 @@ from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import MAX_PER_DECADE, tau_grid
 from fogmon.errors import FogmonError, FogmonWarning
-from fogmon.sinks.base import Summary
 from fogmon.recording import write_replay_log
+from fogmon.sinks.base import Summary
 from fogmon.sinks.console import format_summary
-
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC = str(ROOT / "fogmon" / "data" / "gyro_example.dbc")

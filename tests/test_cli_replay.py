@@ -13,12 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_rerun_sink import read_scalars
 
 from fogmon.cli import main
 from fogmon.davar.batch import dadev
 from fogmon.recording import write_replay_log
-
-from test_rerun_sink import read_scalars
 
 ROOT = Path(__file__).resolve().parents[1]
 

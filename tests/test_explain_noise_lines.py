@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from scipy.signal import welch
+from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
 from fogmon.explain import catalogue
@@ -14,7 +15,6 @@ from fogmon.explain.explainer import _whittle, stochastic_part
 from fogmon.recording import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import iter_simulate, simulate
-from test_explain_invariants import assert_invariants
 
 LINES = Effect("vibration_lines", {"freq_hz": [3.0, 11.0], "sigma_dph": [1.5, 1.2], "bandwidth_hz": [0.05, 0.2]})
 

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
 from fogmon.errors import FogmonError
@@ -15,7 +16,6 @@ from fogmon.explain.report import build_report
 from fogmon.recording import read_replay_log, write_replay_log
 from fogmon.sim.model import OUTLIER_QUANTILE_PROBS, Effect, Noise, SensorModel, save_model, validate_effect
 from fogmon.sim.simulate import iter_simulate, simulate
-from test_explain_invariants import assert_invariants
 
 FS = 10.0
 NOISE = Noise(N_dpsh=0.01, B_dph=0.01)

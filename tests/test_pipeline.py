@@ -6,17 +6,16 @@ import io
 
 import numpy as np
 import pytest
-
 from doubles import Collect, ListSource, white_noise as _white
 
 from fogmon.block import Block, Event
+from fogmon.cli.pipeline_options import parse_taus
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
-from fogmon.cli.pipeline_options import parse_taus
 from fogmon.pipeline import PipelineConfig, default_window_s, run_pipeline, slice_block
 from fogmon.sinks.base import COEFFICIENTS
-from fogmon.sources.pacing import Pacer
 from fogmon.sinks.console import ConsoleSink, format_summary
+from fogmon.sources.pacing import Pacer
 
 
 def _args(**kw):

@@ -13,6 +13,7 @@ import re
 
 import numpy as np
 import pytest
+from test_rerun_sink import read_scalars, read_texts
 
 from fogmon.cli import main
 from fogmon.errors import ERROR_COUNTERS, FogmonError
@@ -22,8 +23,6 @@ from fogmon.sources.codecs import OPTION_KEYS, codec_from_options, make_codec
 from fogmon.sources.grid import ErrorEvents, GridAssembler
 from fogmon.sources.kvh import encode_frame
 from fogmon.sources.replay import ReplayLogSource, open_raw_capture
-
-from test_rerun_sink import read_scalars, read_texts
 
 RAD_TO_DPH = 180 / math.pi * 3600
 
@@ -298,8 +297,9 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
     """What `fogmon monitor --max-rate-dph` stores: the archive's raw-capture sidecar holds
     the gate in force, so replaying the capture gates the same samples."""
     import argparse
-    from fogmon.sinks.archive import Archive
+
     from fogmon.cli.source_options import add_source_arguments, source_options
+    from fogmon.sinks.archive import Archive
     from fogmon.sources.open import open_live_source
 
     parser = argparse.ArgumentParser()
@@ -318,9 +318,10 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
 
 
 def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decoding_again(tmp_path):
+    from doubles import args_for
+
     from fogmon.sources.open import open_replay_source
     from fogmon.sources.replay import ReplayLogSet
-    from doubles import args_for
 
     t, r, fs = noisy(n=200)
     for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):

@@ -14,20 +14,16 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from doubles import Collect, ListSource, white_noise as _white
 from rerun.chunk import RrdReader
 
 from fogmon.block import Event
 from fogmon.davar.batch import dadev
 from fogmon.errors import FogmonError
-from fogmon.pipeline import run_pipeline
+from fogmon.pipeline import PipelineConfig as _args, run_pipeline
 from fogmon.sinks.base import COEFFICIENTS, Summary
 from fogmon.sinks.console import format_summary
-from fogmon.sinks.rerun_sink import (RerunSink, _Decimator, model_span, start_grpc_server,
-                                     stop_process_group)
-
-from doubles import Collect, ListSource, white_noise as _white
-
-from fogmon.pipeline import PipelineConfig as _args
+from fogmon.sinks.rerun_sink import RerunSink, _Decimator, model_span, start_grpc_server, stop_process_group
 
 
 def read_scalars(path, entity):
@@ -123,7 +119,7 @@ def test_rrd_raw_rate_aux_and_events(run_rrd):
     ta, tv = read_scalars(path, "/aux/temp_c")
     np.testing.assert_array_equal(tv[:, 0], temp)
     texts = read_texts(path, "/events")
-    assert any("crc_error: frame 42: bad CRC" == x for x in texts)
+    assert any(x == "crc_error: frame 42: bad CRC" for x in texts)
 
 
 def test_rrd_coefficient_upper_limits_where_not_identifiable(run_rrd):

@@ -9,8 +9,17 @@ import pytest
 
 from fogmon.cli import main
 from fogmon.errors import FogmonError
-from fogmon.sim.model import (EFFECT_KINDS, Effect, Noise, SensorModel, dumps_model, load_model,
-                              save_model, validate_effect, validate_model)
+from fogmon.sim.model import (
+    EFFECT_KINDS,
+    Effect,
+    Noise,
+    SensorModel,
+    dumps_model,
+    load_model,
+    save_model,
+    validate_effect,
+    validate_model,
+)
 
 DATA = Path(__file__).resolve().parents[1] / "fogmon" / "data"
 
@@ -261,8 +270,7 @@ def _effect_strategy():
 def test_round_trip_property(tmp_path_factory):
     """Any valid model (random effects of every kind, arbitrary finite floats) saved by
     fogmon loads back identically."""
-    from hypothesis import given, settings
-    from hypothesis import strategies as st
+    from hypothesis import given, settings, strategies as st
 
     pos = st.floats(min_value=0.0, max_value=1e6, allow_nan=False)
 

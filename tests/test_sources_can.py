@@ -10,13 +10,12 @@ from importlib import resources
 import can
 import numpy as np
 import pytest
+from doubles import args_for
 from hypothesis import given, settings, strategies as st
 
-from doubles import args_for
-
 from fogmon.errors import FogmonError
-from fogmon.recording import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
 from fogmon.sources.open import open_live_source, open_replay_source

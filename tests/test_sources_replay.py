@@ -5,15 +5,14 @@ import json
 
 import numpy as np
 import pytest
-
 from doubles import args_for
+from sources_fake_device import stream
 
 from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.recording import write_replay_log
 from fogmon.sources.open import open_replay_source
 from fogmon.sources.replay import ReplayLogSource
-from sources_fake_device import stream
 
 HEAD = "# fogmon replay log v1\n# sample_rate_hz: 10\ntime_s,rate_dph,temp_c\n"
 

@@ -39,9 +39,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
 from fogmon.recording import read_replay_log
-from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
 #: A transient counts as located when a region holding its time is shorter than this
 #: fraction of the record (issue 11).

@@ -39,12 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.capture import read_sidecar
     from fogmon.cli.outputs import check_outputs
+    from fogmon.cli.source_options import source_options
     from fogmon.parquet_log import ParquetLogWriter
     from fogmon.recording import append_replay_rows, write_replay_header
     from fogmon.sources.open import open_replay_source
-    from fogmon.capture import read_sidecar
-    from fogmon.cli.source_options import source_options
 
     ext = os.path.splitext(args.output)[1].lower()
     if ext not in (".parquet", ".csv"):

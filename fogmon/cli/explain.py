@@ -9,9 +9,9 @@ import sys
 from typing import TextIO
 
 from fogmon.cli.outputs import check_outputs
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.export import add_export_argument, export_request, write_export
-from fogmon.cli.source_options import add_reader_arguments
 
 #: Most bootstrap replicates: each is one simulation of the whole recording, and beyond
 #: this the Gumbel-fitted family-wise threshold no longer sharpens.
@@ -83,11 +83,11 @@ class StageProgress:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.explain import report
     from fogmon.explain.baseline import baseline_model
     from fogmon.explain.explainer import Options, explain, without_motion
-    from fogmon.explain import report
-    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import load_model
+    from fogmon.sources.formats import read_recording
 
     png = os.path.splitext(args.report)[0] + ".png"
     outliers_csv = report.outliers_path(args.report)

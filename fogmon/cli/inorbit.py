@@ -7,9 +7,9 @@ import argparse
 
 import numpy as np
 
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -3,7 +3,7 @@ bad path is a one-line FogmonError at once, not a traceback after minutes of wor
 from __future__ import annotations
 
 import os
-from typing import Iterable
+from collections.abc import Iterable
 
 from fogmon.errors import FogmonError
 

@@ -8,10 +8,9 @@ import argparse
 import numpy as np
 
 from fogmon.cli.outputs import check_outputs
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
-
 
 #: Highest degree of K0(T): raw powers of deg C beyond it are ill-conditioned and over-fit
 #: (the thermal literature uses 1..3).
@@ -39,8 +38,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
     from fogmon.recording import write_replay_log
-    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
+    from fogmon.sources.formats import read_recording
 
     check_outputs({"--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])

@@ -8,9 +8,9 @@ import os
 
 import numpy as np
 
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

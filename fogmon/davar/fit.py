@@ -20,8 +20,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import norm
 
-from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
-                                     edf_mixture_from, mixture_matrices)
+from fogmon.davar.confidence import (
+    ALPHA_OF_TERM,
+    avar_relative_covariance,
+    covariance_matrices,
+    edf_mixture_from,
+    mixture_matrices,
+)
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.scoring import fisher_scoring, robust_scoring
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients

@@ -17,8 +17,8 @@ them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 from scipy import stats
@@ -29,8 +29,16 @@ from fogmon.davar.batch import oadev
 from fogmon.davar.fit import IDENTIFY_Z, fit_avar
 from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.explain import detectors
-from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, filter_gain2, lines_psd, markov_psd,
-                                    model_psd, rfft_omega)
+from fogmon.explain.fitting import (
+    BinnedPeriodogram,
+    Whittle,
+    avar1_of_psd,
+    filter_gain2,
+    lines_psd,
+    markov_psd,
+    model_psd,
+    rfft_omega,
+)
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, OUTLIER_QUANTILE_PROBS, Effect, Noise, SensorModel, validate_effect
 from fogmon.sim.noise import line_psd
@@ -780,7 +788,7 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
 
     def dev(x):
         f, sig, bw = unpack(x)
-        if not (0 < f - bw / 2 and f + bw / 2 < nyq):
+        if not (f - bw / 2 > 0 and f + bw / 2 < nyq):
             return d0 + 1e9
         return bp.deviance(S + line_psd(bp.omega, fs, f, sig, bw), floor)
 

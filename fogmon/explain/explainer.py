@@ -18,11 +18,11 @@ all cores.
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
-import multiprocessing as mp
-from typing import Callable
 
 import numpy as np
 

@@ -108,7 +108,7 @@ class Gumbel:
     scale: float
 
     @staticmethod
-    def fit(maxima: np.ndarray) -> "Gumbel":
+    def fit(maxima: np.ndarray) -> Gumbel:
         x = np.asarray(maxima, dtype=float)
         x = x[np.isfinite(x)]
         scale = max(float(np.std(x, ddof=1)) * math.sqrt(6.0) / math.pi, 1e-3) if len(x) > 1 else 0.5

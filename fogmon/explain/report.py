@@ -378,6 +378,7 @@ def rrd_blueprint(x_dec: tuple[int, int], y_dec: tuple[int, int]):
     ``y_dec`` of ADEV in deg/h) and verdict | z-maps before and after | residual over time."""
     import rerun as rr
     import rerun.blueprint as rrb
+
     from fogmon.sinks.rerun_plots import heatmap_bounds, loglog_bounds
 
     whole = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
@@ -415,6 +416,7 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec) -> None:
     """The whole-record ADEV (``_rrd_adev_logs``) of the residual, the model's median and
     family-wise band, before and after, on a labelled log-log plot with a legend."""
     import rerun as rr
+
     from fogmon.sinks import rerun_plots as rp
 
     ent = "adev/log10"
@@ -443,6 +445,7 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
     (largest on top), columns windows (centre time), colour scale -lim..lim, the flagged
     regions outlined."""
     import rerun as rr
+
     from fogmon.sinks import rerun_plots as rp
 
     z = np.asarray(a.z, dtype=np.float64).T[::-1]          # rows: largest tau on top

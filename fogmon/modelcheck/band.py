@@ -19,9 +19,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+import fogmon.modelcheck.cache as cache
 from fogmon.errors import FogmonError
 from fogmon.explain.mismatch import Gumbel, Null, build_null, zscores
-import fogmon.modelcheck.cache as cache
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, model_to_dict, validate_model
 from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact
 from fogmon.sim.simulate import iter_simulate
@@ -143,7 +143,7 @@ class ModelBand:
     @classmethod
     def for_model(cls, model: SensorModel, sample_rate_hz: float, window_n: int, m: np.ndarray,
                   alpha: float = 0.01, replicates: int = DEFAULT_REPLICATES, seed: int = 0,
-                  cache_dir: str | None = None) -> "ModelBand":
+                  cache_dir: str | None = None) -> ModelBand:
         """Band of ``model`` for the live engine's window (``window_n`` samples) and
         averaging factors ``m`` at ``sample_rate_hz`` (Hz), family-wise ``alpha`` per
         window, from ``replicates`` bootstrap windows (seed ``seed``). The replicates are

@@ -47,8 +47,8 @@ from fogmon.errors import FogmonError
 from fogmon.pieces import find_pieces, piece_path
 from fogmon.recording import append_replay_rows, write_replay_header
 from fogmon.sinks.base import Sink, Summary
-from fogmon.sources.base import CaptureSource, Source
 from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces, piece_files
+from fogmon.sources.base import CaptureSource, Source
 
 REPLAY_LOG = "samples.csv"
 SERIAL_CAPTURE = "raw.bin"

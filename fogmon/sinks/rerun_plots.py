@@ -12,7 +12,7 @@ meant to sit beside a row or grid line are anchored higher, and short tick marks
 the exact place."""
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -37,7 +37,7 @@ import sys
 import tempfile
 import time
 import uuid
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

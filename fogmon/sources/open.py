@@ -61,8 +61,8 @@ def open_replay_source(path: str, opts: SourceOptions | None = None) -> Source:
     pipeline paces (``--realtime``)."""
     opts = SourceOptions() if opts is None else opts
     from fogmon.capture import read_sidecar
-    from fogmon.sources.replay import ReplayLogSource, open_raw_capture
     from fogmon.sources.formats import open_reader
+    from fogmon.sources.replay import ReplayLogSource, open_raw_capture
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")

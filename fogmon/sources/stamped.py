@@ -13,7 +13,7 @@ and the time field. Sample times are the grid, ``t0 + k / fs`` (s).
 from __future__ import annotations
 
 import math
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
