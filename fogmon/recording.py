@@ -310,7 +310,7 @@ class ReplayLogReader:
                     raise FogmonError(f"{name}: line {at}: expected {len(cols)} cells "
                                       f"({','.join(cols)}), found {len(cells)}")
                 vals = []
-                for c, cell in zip(cols, cells):
+                for c, cell in zip(cols, cells, strict=True):
                     try:
                         v = float(cell)
                     except ValueError:

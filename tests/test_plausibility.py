@@ -64,7 +64,7 @@ def test_device_ranges():
 def test_kvh_crc_valid_garbage_floats_are_invalid_and_counted(fmt):
     gz = [1e-6, math.nan, 2e-6, math.inf, -math.inf, 1e30, 3e-6, 1e30]
     status = [0x77] * 7 + [0x33]                   # the last one the device itself flagged invalid (z bit 2)
-    data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30) for k, (g, s) in enumerate(zip(gz, status)))
+    data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30) for k, (g, s) in enumerate(zip(gz, status, strict=True)))
     c = make_codec(f"kvh-{fmt}", kvh_rot="delta", kvh_units="rad")
     events = ErrorEvents(c.counters)
     f = c.feed(data)
@@ -145,7 +145,7 @@ def kvh_capture(path, gz, status=None, sidecar=None):
     """A raw KVH format A capture (delta rad, 1 kHz) of frames with z = gz[k]."""
     status = status or [0x77] * len(gz)
     path.write_bytes(b"".join(encode_frame("a", k % 128, (0.0, 0.0, g), status=s, temp_c=30)
-                              for k, (g, s) in enumerate(zip(gz, status))))
+                              for k, (g, s) in enumerate(zip(gz, status, strict=True))))
     if sidecar is not None:
         path.with_name(path.name + ".json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "serial",
                                                                   "protocol": "kvh-a", **sidecar}))

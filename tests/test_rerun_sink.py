@@ -47,7 +47,7 @@ def read_column(path, entity, column):
         if column not in rb.schema.names:
             continue
         ts = rb.column("time").cast(pa.int64()).to_numpy() / 1e9 if "time" in rb.schema.names else [None] * rb.num_rows
-        out += list(zip(ts, rb.column(column).to_pylist()))
+        out += list(zip(ts, rb.column(column).to_pylist(), strict=True))
     return out
 
 
@@ -336,7 +336,7 @@ def test_rotated_rrd_pieces_are_complete_recordings_that_join(tmp_path):
         td, _ = read_scalars(piece, "/dadev/log10_adev_dph")
         assert len(td) and np.all((td >= 100 * k) & (td < 100 * (k + 1)))     # windows ending in it
         assert list(RrdReader(piece).stream().filter(content="/session", is_static=True))   # its own static data
-    joined = [np.concatenate(x) for x in zip(*(read_scalars(p, "/dadev/log10_adev_dph") for p in pieces))]
+    joined = [np.concatenate(x) for x in zip(*(read_scalars(p, "/dadev/log10_adev_dph") for p in pieces), strict=True)]
     t1, v1 = read_scalars(one, "/dadev/log10_adev_dph")
     np.testing.assert_array_equal(joined[0], t1)
     np.testing.assert_allclose(joined[1], v1, rtol=1e-12)       # blocks cut at the seams: same windows

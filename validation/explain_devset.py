@@ -256,7 +256,7 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
             ft = np.array(q["times_s"])
             fa = np.array(q["amplitudes_dph"])
             worst_t, worst_a = 0.0, 0.0
-            for ti, ai in zip(tt, p["amplitudes_dph"]):
+            for ti, ai in zip(tt, p["amplitudes_dph"], strict=True):
                 j = int(np.argmin(np.abs(ft - ti))) if len(ft) else -1
                 dt = abs(ft[j] - ti) * case.fs_hz if j >= 0 else np.inf
                 worst_t = max(worst_t, dt)
@@ -279,7 +279,7 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
                       ("unlisted", float(q["count"] - len(c.listing["times_s"])), 0.0)]
         elif e.kind == "vibration_lines":
             checks = [("lines", abs(len(q["freq_hz"]) - len(p["freq_hz"])), 0.0)]
-            for tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"]):
+            for tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], strict=True):
                 j = int(np.argmin(np.abs(np.array(q["freq_hz"]) - tf)))
                 checks += [(f"f{tf:g}/bw", abs(q["freq_hz"][j] - tf) / tb, 1.0),
                            (f"rms{tf:g}", _rel(q["sigma_dph"][j], ts), 0.2)]

@@ -75,7 +75,7 @@ def raw_outlier_clusters(t_s: np.ndarray, y: np.ndarray, ok: np.ndarray) -> tupl
         return [], 0, f"{label} {scale:.4g} deg/h"
     cut = np.flatnonzero(np.diff(idx) > 3)
     starts, ends = np.r_[idx[0], idx[cut + 1]], np.r_[idx[cut], idx[-1]]
-    return [(float(t_s[a]), float(t_s[b])) for a, b in zip(starts, ends)], len(idx), f"{label} {scale:.4g} deg/h"
+    return [(float(t_s[a]), float(t_s[b])) for a, b in zip(starts, ends, strict=True)], len(idx), f"{label} {scale:.4g} deg/h"
 
 
 def first_sentence(text: str) -> str:

@@ -153,7 +153,7 @@ def worker(args) -> dict:
                 stats["crc_errors"] += k["crc_errors"]
                 stats["implausible_temp"] += k["implausible_temp_c"]
             else:
-                ok &= k["implausible_samples"] == sum(v and r != r for r, v in zip(rate_parts, valid_parts))
+                ok &= k["implausible_samples"] == sum(v and r != r for r, v in zip(rate_parts, valid_parts, strict=True))
                 ok &= c2.pending <= 512
             stats["frames"] += len(whole)
         except Exception as e:  # noqa: BLE001 - the point is that nothing escapes

@@ -65,7 +65,7 @@ def run(args) -> int:
     after = drift_peak_to_peak(rec.t_s, corrected, args.average_s)
     p, se = cal.effect.params, cal.stderr
     print(f"thermal drift model of {rec.name} ({len(rec)} samples, T {np.min(T):.1f}..{np.max(T):.1f} deg C)")
-    for i, (c, s) in enumerate(zip(p["k0_poly_dph"], se["k0_poly_dph"])):
+    for i, (c, s) in enumerate(zip(p["k0_poly_dph"], se["k0_poly_dph"], strict=True)):
         print(f"  K0 c{i:<6} {c:+.6g} +/- {s:.2g}  deg/h per degC^{i}")
     for k, unit in (("k1_pos", "deg/h per degC/s"), ("k1_neg", "deg/h per degC/s"),
                     ("k2_pos", "deg/h per degC/s^2"), ("k2_neg", "deg/h per degC/s^2")):

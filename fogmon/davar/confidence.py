@@ -34,7 +34,7 @@ def edf_full(alpha, m, n_samples: int) -> np.ndarray:
     m = np.atleast_1d(np.asarray(m, dtype=np.int64))
     alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), m.shape)
     return np.array([_edf_greenhall(int(a), int(k), int(n_samples)) if 2 * k <= n_samples else np.nan
-                     for a, k in zip(alpha, m)])
+                     for a, k in zip(alpha, m, strict=True)])
 
 
 def edf_effective(edf_gapless: np.ndarray, m: np.ndarray, n_samples: int, n_terms: np.ndarray) -> np.ndarray:
@@ -195,7 +195,7 @@ def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
     hi = min(kinks.max() + 4 * max(ma, mb), n_b - 1) + 1
     knots = np.unique(np.clip(np.concatenate([kinks, [lo, hi, 0, n_b - n_a]]), lo, hi))
     lags, wts = [], []
-    for a, b in zip(knots[:-1], knots[1:]):
+    for a, b in zip(knots[:-1], knots[1:], strict=True):
         if b - a <= _EXACT_SEGMENT:
             lags.append(np.arange(a, b, dtype=np.float64))
             wts.append(np.ones(b - a))

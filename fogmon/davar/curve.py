@@ -142,7 +142,7 @@ def read_curve_csv(path: str) -> tuple[dict[str, np.ndarray], list[int]]:
         if len(cells) != len(cols):
             raise FogmonError(f"{path}: line {i}: {len(cells)} cells, the header has {len(cols)}")
         row = []
-        for c, v in zip(cols, cells):
+        for c, v in zip(cols, cells, strict=True):
             try:
                 x = float(v)
             except ValueError:

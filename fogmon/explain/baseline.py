@@ -52,7 +52,7 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     scale[scale == 0] = 1.0
     a, _ = nnls(X / scale, w)
     coef = avar_terms_to_coefficients(a / scale)
-    return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef)))
+    return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef), strict=True))
 
 
 NAMES = ("Q", "N", "B", "K", "R")
@@ -67,7 +67,7 @@ def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, 
     """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit."""
     pred = adev_model(tau_s, **fit) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf)])
+        z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf, strict=True)])
     return float(np.sum(z ** 2))
 
 

@@ -301,8 +301,8 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
             best = (score, fit, names, label)
     _, fit, names, label = best
     X = np.column_stack([cols[nm] for nm in names])
-    v = dict(zip(names, fit.beta.tolist()))
-    s = dict(zip(names, fit.se.tolist()))
+    v = dict(zip(names, fit.beta.tolist(), strict=True))
+    s = dict(zip(names, fit.se.tolist(), strict=True))
     c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
     rate = X @ fit.beta
     k0_part = X[:, :2] @ np.array([c1, c2]) if "k0_2" in v else X[:, 0] * c1

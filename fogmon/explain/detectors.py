@@ -54,7 +54,7 @@ def local_scale(z: np.ndarray, valid: np.ndarray | None, block: int = 4096) -> n
     nb = max(1, n // block)
     edges = np.linspace(0, n, nb + 1).astype(np.int64)
     out = np.empty(n)
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         seg = z[lo:hi] if valid is None else z[lo:hi][valid[lo:hi]]
         mad = 1.4826 * float(np.median(np.abs(seg - np.median(seg)))) if len(seg) > 16 else 0.0
         out[lo:hi] = mad

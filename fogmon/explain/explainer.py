@@ -310,7 +310,7 @@ def _heldout(ctx: catalogue.Context, c: catalogue.Candidate) -> tuple[bool, str]
         res = c.heldout()
         ok = all(g > 0 for g, exp in res if exp >= 9.0)
         return ok, "; ".join(f"{h} half: chi2 drop {g:.1f} (expected {e:.1f})"
-                             for h, (g, e) in zip(("second", "first"), res))
+                             for h, (g, e) in zip(("second", "first"), res, strict=True))
     return True, "n/a (spectral or spike fit on the whole record)"
 
 
@@ -328,7 +328,7 @@ def _inside_line(c: catalogue.Candidate, cands: list[catalogue.Candidate], df_hz
     f = 1.0 / c.params["period_s"]
     for o in cands:
         if o.kind == "vibration_lines" and o.bic_gain(0.0) > 0:
-            for fl, bw in zip(o.params["freq_hz"], o.params["bandwidth_hz"]):
+            for fl, bw in zip(o.params["freq_hz"], o.params["bandwidth_hz"], strict=True):
                 if bw >= LINE_RESOLVED_BINS * df_hz and abs(f - fl) <= bw / 2:
                     return float(fl)
     return None

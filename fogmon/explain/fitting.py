@@ -70,7 +70,7 @@ def calibrate_psd(S: np.ndarray, Yf: np.ndarray, n: int) -> np.ndarray:
         edges.append(min(nb, edges[-1] * 2))
     factors = np.ones(nb)
     first_ok = None
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         if hi - lo < MIN_BAND_BINS:
             continue
         f = float(np.median(ratio[lo:hi])) / math.log(2.0)
@@ -176,7 +176,7 @@ def lines_psd(params: dict, fs_hz: float, omega: np.ndarray) -> np.ndarray:
     from fogmon.sim.noise import line_psd
 
     S = np.zeros(len(omega))
-    for f, sig, bw in zip(params["freq_hz"], params["sigma_dph"], params["bandwidth_hz"]):
+    for f, sig, bw in zip(params["freq_hz"], params["sigma_dph"], params["bandwidth_hz"], strict=True):
         S += line_psd(omega, fs_hz, f, sig, bw)
     return S
 

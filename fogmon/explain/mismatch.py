@@ -259,7 +259,7 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
                 grid.t0_s + (grid.starts[wi.max()] + grid.window_n) / grid.fs_hz,
                 float(grid.tau_s[mi.min()]), float(grid.tau_s[mi.max()]), sign,
                 float(np.exp(np.mean(d) / 2.0)), zmax, max(null.gumbel.sf(zmax), 1e-16), False,
-                tuple(zip(wi.tolist(), mi.tolist())),
+                tuple(zip(wi.tolist(), mi.tolist(), strict=True)),
                 tau_peak_s=float(grid.tau_s[mi[int(np.argmax(np.abs(vals)))]])))
     zw = np.nan_to_num(z_whole)
     thr_w = null.threshold_whole

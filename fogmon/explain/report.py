@@ -217,7 +217,7 @@ def write_outliers(res: Result, path: str) -> int:
         fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} outlier samples (none left out)\n"
                  "# amplitude_dph: the spike removed (deg/h); abs_z: its robust spike-test |z|\n"
                  "time_s,amplitude_dph,abs_z\n")
-        for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist()):
+        for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist(), strict=True):
             fh.write(f"{t!r},{a:.9g},{z:.4g}\n")
     return n
 

@@ -277,7 +277,7 @@ def motion_pass(plan: Plan, options: dict) -> MotionResult:
                 cuts = np.flatnonzero(np.diff(masked) > 1)
                 starts = np.concatenate([[masked[0]], masked[cuts + 1]])
                 stops = np.concatenate([masked[cuts], [masked[-1]]]) + 1
-                runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist()))
+                runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist(), strict=True))
             pos += n
 
         try:

@@ -113,7 +113,7 @@ def glitches(t_s, aux, p, fs_hz=None) -> np.ndarray:
     t = np.asarray(t_s, dtype=float)
     out = np.zeros(len(t))
     half = 0.5 / _fs(t, fs_hz) if p["width_s"] <= 0 and len(t) else 0.0
-    for ti, ai in zip(p["times_s"], p["amplitudes_dph"]):
+    for ti, ai in zip(p["times_s"], p["amplitudes_dph"], strict=True):
         if p["width_s"] > 0:
             out[(t >= ti) & (t < ti + p["width_s"])] += ai
         else:
@@ -225,7 +225,7 @@ class NarrowbandLines:
     def __init__(self, params: dict, fs_hz: float, rng: np.random.Generator):
         p = params
         self.lines = [NarrowbandLine(f, s, bw, fs_hz, r) for f, s, bw, r in
-                      zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], rng.spawn(len(p["freq_hz"])))]
+                      zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], rng.spawn(len(p["freq_hz"])), strict=True)]
 
     def generate(self, n: int) -> np.ndarray:
         out = np.zeros(n)

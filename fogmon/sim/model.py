@@ -29,6 +29,7 @@ import os
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from itertools import pairwise
 
 import numpy as np
 import tomli_w
@@ -334,9 +335,9 @@ def _check_outliers(p: dict, where: str) -> None:
     if len(probs) != len(q) or len(q) < 2:
         raise FogmonError(f"{where}: quantile_probs and amplitude_quantiles_dph need the same length, at least 2 "
                           f"({len(probs)} vs {len(q)})")
-    if probs[0] != 0.0 or probs[-1] != 1.0 or any(b <= a for a, b in zip(probs, probs[1:])):
+    if probs[0] != 0.0 or probs[-1] != 1.0 or any(b <= a for a, b in pairwise(probs)):
         raise FogmonError(f"{where}: quantile_probs must increase strictly from 0 to 1, got {probs}")
-    if any(b < a for a, b in zip(q, q[1:])):
+    if any(b < a for a, b in pairwise(q)):
         raise FogmonError(f"{where}: amplitude_quantiles_dph must not decrease, got {q}")
     if p["positive_fraction"] > 1.0:
         raise FogmonError(f"{where}: positive_fraction must be <= 1, got {p['positive_fraction']:g}")
@@ -356,7 +357,7 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
             raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
                               f"Nyquist frequency {fs / 2:g} Hz, got {e.params['cutoff_hz']:g}")
         if e.kind == "vibration_lines":
-            for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"])):
+            for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"], strict=True)):
                 if not (f + bw / 2 < fs / 2 and bw < 2 * f):
                     raise FogmonError(f"{where}: [[effect]] #{i + 1} (vibration_lines): line {j + 1} at "
                                       f"{f:g} Hz with bandwidth {bw:g} Hz must lie between 0 and the Nyquist "

@@ -128,7 +128,7 @@ def model_taus(tau_s: np.ndarray) -> np.ndarray:
     neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade)."""
     tau = np.asarray(tau_s, dtype=np.float64)
     parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
-             for a, b in zip(tau[:-1], tau[1:])]
+             for a, b in zip(tau[:-1], tau[1:], strict=True)]
     return np.concatenate([*parts, tau[-1:]])
 
 
