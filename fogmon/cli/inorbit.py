@@ -14,8 +14,9 @@ from fogmon.errors import FogmonError
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from fogmon.methods.inorbit import ORBIT_PERIOD_S, PAUTA_K_MIN
-    p.add_argument("recording", metavar="RECORDING.csv", help="replay log (rate_dph; rot_dps is subtracted when present), or "
-                   "another format (docs/formats.md)")
+    p.add_argument("recording", metavar="RECORDING.csv",
+                   help="replay log (rate_dph; rot_dps is subtracted when present), or another format "
+                   "(docs/formats.md)")
     p.add_argument("--period-s", type=positive, default=ORBIT_PERIOD_S,
                    help="orbit (cycle) period for the per-cycle bias instability, s, at least 2 samples "
                         f"(default {ORBIT_PERIOD_S:g})")

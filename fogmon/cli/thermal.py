@@ -18,7 +18,8 @@ MAX_DEGREE = 6
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", metavar="RECORDING.csv", help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
+    p.add_argument("recording", metavar="RECORDING.csv",
+                   help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
                    "temperature (docs/formats.md)")
     p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2,
                    help=f"degree of K0(T), the bias-vs-temperature polynomial, 0..{MAX_DEGREE} (default 2)")

@@ -440,7 +440,8 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
-        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified") for i in range(len(result))]
+        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified")
+                for i in range(len(result))]
         a = np.array([f[0] for f in fits]).reshape(len(result), 5)
         se = np.array([f[1] for f in fits]).reshape(len(result), 5)
         misfit = np.array([f[2] for f in fits], dtype=bool).reshape(result.adev_dph.shape)

@@ -53,7 +53,8 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
         elif taus == "all":
             m = np.arange(1, m_max + 1)
         else:
-            raise FogmonError(f"taus must be 'octave', 'decade', 'all', an int per decade or tau values in s, got {taus!r}")
+            raise FogmonError(f"taus must be 'octave', 'decade', 'all', an int per decade or tau values in s, "
+                              f"got {taus!r}")
     elif isinstance(taus, (int, np.integer)) and not isinstance(taus, bool):
         k = check_per_decade(int(taus))
         m = np.round(10.0 ** (np.arange(int(np.floor(np.log10(m_max) * k)) + 1) / k))

@@ -190,7 +190,8 @@ def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
     if ok.sum() < 256:
         return []
     x = np.where(ok, x - x[ok].mean(), 0.0)
-    f, p = welch(x, fs=fs_hz, nperseg=min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * fs_hz / max(f_lo_hz, 1e-9)))))))
+    nperseg = min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * fs_hz / max(f_lo_hz, 1e-9))))))
+    f, p = welch(x, fs=fs_hz, nperseg=nperseg)
     band = (f >= f_lo_hz) & (f <= min(f_hi_hz, fs_hz / 2)) & (f > 0)
     if band.sum() < 8:
         return []

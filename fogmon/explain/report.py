@@ -112,7 +112,8 @@ def _line_hint(res: Result, left: list[dict]) -> str:
         return ""
     r = excess[0]
     fs = res.grid.fs_hz
-    lines = spectral_lines(res.residual_after, fs, 0.371 / (2.0 * r["tau_max_s"]), min(fs / 2, 0.371 / (0.5 * r["tau_min_s"])))
+    lines = spectral_lines(res.residual_after, fs, 0.371 / (2.0 * r["tau_max_s"]),
+                           min(fs / 2, 0.371 / (0.5 * r["tau_min_s"])))
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
@@ -287,7 +288,8 @@ def write_png(res: Result, path: str) -> None:
     tau = g.tau_whole_s
     for a, label, col in ((res.before, "before", "tab:red"), (res.after, "after", "tab:blue")):
         med, lo, hi, rec = _adev_band(a, a.null, g.fs_hz)
-        ax[0, 0].fill_between(tau, lo, hi, color=col, alpha=0.15, label=f"model {label}: {100 * (1 - a.null.alpha):g} % family-wise band")
+        ax[0, 0].fill_between(tau, lo, hi, color=col, alpha=0.15,
+                              label=f"model {label}: {100 * (1 - a.null.alpha):g} % family-wise band")
         ax[0, 0].loglog(tau, med, color=col, lw=1, ls="--")
         ax[0, 0].loglog(tau, rec, "o-", color=col, ms=3, label=f"recording residual ({label})")
     ax[0, 0].set_xlabel("tau (s)")
@@ -427,14 +429,16 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec) -> None:
         bright, dim = _RRD_COLOURS[w]
         ok = np.isfinite(r)
         pts = np.column_stack([lx[ok], r[ok]])
-        rec.log(f"{ent}/{w}/recording_residual", rr.LineStrips2D([pts], colors=[bright], radii=rr.Radius.ui_points(1.5)),
+        rec.log(f"{ent}/{w}/recording_residual",
+                rr.LineStrips2D([pts], colors=[bright], radii=rr.Radius.ui_points(1.5)),
                 rr.Points2D(pts, colors=[bright], radii=rr.Radius.ui_points(3.0)), static=True)
         m = np.isfinite(med)
         rec.log(f"{ent}/{w}/model_median", rr.LineStrips2D([np.column_stack([lx[m], med[m]])], colors=[dim],
                                                             radii=rr.Radius.ui_points(1.0)), static=True)
         b = np.isfinite(lo) & np.isfinite(hi)
-        rec.log(f"{ent}/{w}/model_band", rr.LineStrips2D([np.column_stack([lx[b], lo[b]]), np.column_stack([lx[b], hi[b]])],
-                                                          colors=[dim], radii=rr.Radius.ui_points(0.7)), static=True)
+        edges = [np.column_stack([lx[b], lo[b]]), np.column_stack([lx[b], hi[b]])]
+        rec.log(f"{ent}/{w}/model_band", rr.LineStrips2D(edges, colors=[dim], radii=rr.Radius.ui_points(0.7)),
+                static=True)
         band = f"{100 * (1 - getattr(res, w).null.alpha):g} % family-wise band"
         items += [(f"recording residual {w} the effects", bright), (f"model {w}: median and {band}", dim)]
     rp.log_legend(rec, f"{ent}/legend", items, top_left=(x_dec[1] - 1.3, y_dec[1] + 0.1), step=-0.4)
@@ -454,7 +458,8 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
     rows = rp.decade_rows(tau)
     cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
     ticks = rp.nice_ticks(-lim, lim)
-    rp.log_heatmap(rec, ent, z, -lim, lim, "RdBu_r", ([n_rows - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
+    rp.log_heatmap(rec, ent, z, -lim, lim, "RdBu_r",
+                   ([n_rows - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
                    (cols, [f"{tc[c]:.6g} s" for c in cols]), (ticks, [f"z = {v:g}" for v in ticks]), static=True)
     boxes = []
     for r in a.regions:

@@ -198,7 +198,8 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         {
             "freq_hz": Param("Hz", "centre frequency of each line (below the Nyquist frequency)", "list", ">0"),
             "sigma_dph": Param("deg/h", "rms of each line", "list", ">=0"),
-            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line (band-pass edges freq_hz -+ bandwidth_hz/2)", "list", ">0"),
+            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line (band-pass edges freq_hz -+ bandwidth_hz/2)",
+                                  "list", ">0"),
         },
         None, "noise", "narrowband random vibration: white noise through a 4-pole band-pass per line",
         lambda p: "vibration lines " + ", ".join(f"{f:.4g} Hz ({s:.3g} deg/h rms, {w:.3g} Hz wide)" for f, s, w in

@@ -458,8 +458,9 @@ class RerunSink(Sink):
                                                                 colors=[c], markers=["down"], marker_sizes=[3.0]),
                     static=True)
         rec.log("session", rr.TextDocument(
-            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\nwindow: {info.window_s:g} s, "
-            f"hop: {info.hop_s:g} s\ntaus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
+            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\n"
+            f"window: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
+            f"taus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
@@ -568,7 +569,8 @@ class RerunSink(Sink):
         if not ok.any():
             return
         pts = np.column_stack([lx[ok], ly[ok]])
-        self.rec.log(f"{CURVE}/adev_dph", rr.LineStrips2D([pts], colors=[MEASURED_COLOUR], radii=rr.Radius.ui_points(1.5)),
+        self.rec.log(f"{CURVE}/adev_dph",
+                     rr.LineStrips2D([pts], colors=[MEASURED_COLOUR], radii=rr.Radius.ui_points(1.5)),
                      rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[MEASURED_COLOUR]))
         b = ok & np.isfinite(llo) & np.isfinite(lhi)
         self.rec.log(f"{CURVE}/bounds", rr.LineStrips2D(

@@ -131,5 +131,5 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     if logs:
         return ReplayLogSet(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
     raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, samples.parquet, "
-                      f"{SERIAL_CAPTURE} or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, raw capture "
-                      f"or CAN log")
+                      f"{SERIAL_CAPTURE} or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, "
+                      f"raw capture or CAN log")

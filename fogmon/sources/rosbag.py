@@ -73,7 +73,8 @@ def open_source(path: str, options: dict) -> StampedSource:
         reader = _reader(path)
         reader.open()
     except Exception as e:  # rosbags raises its own error types for unreadable files
-        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({why})") from None
     try:
         imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
         topic = options.get("topic")
