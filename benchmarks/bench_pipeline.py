@@ -90,7 +90,8 @@ def bench_replay(tmp: str) -> None:
     if p.returncode:
         print(p.stderr)
     print(f"  (b) `fogmon replay` of a {os.path.getsize(csv) / 1e6:.0f} MB CSV (parse + start-up included): "
-          f"{t_cli:6.2f} s = x{3600 / t_cli:,.0f} real time (target >= 300x: {'PASS' if 3600 / t_cli >= 300 else 'FAIL'})")
+          f"{t_cli:6.2f} s = x{3600 / t_cli:,.0f} real time "
+          f"(target >= 300x: {'PASS' if 3600 / t_cli >= 300 else 'FAIL'})")
 
 
 def _cpu_s(pid: int) -> float:

@@ -106,7 +106,8 @@ def test_updown_latitude_out_of_range_is_a_usage_error(updown, capsys, lat):
 
 def test_updown_same_file_twice(updown, capsys):
     assert main(["updown", "--up", str(updown[0]), "--down", str(updown[0]), "--lat-deg", "45"]) == 2
-    assert capsys.readouterr().err == f"fogmon updown: error: --up {updown[0]} and --down {updown[0]} are the same file\n"
+    assert capsys.readouterr().err == (f"fogmon updown: error: --up {updown[0]} and --down {updown[0]} "
+                                       f"are the same file\n")
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -200,7 +200,8 @@ def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):
     (["--can", "can0", "--dbc", "fogmon/data/gyro_example.dbc", "--can-bitrate", "-1"],
      "argument --can-bitrate: must be an integer in 1000..8,000,000, got '-1'"),
     (["--serial", "/dev/null", "--baud", "0"], "argument --baud: must be an integer in 1..50,000,000, got '0'"),
-    (["--serial", "/dev/null", "--protocol", "lines", "--rate-hz", "0"], "argument --rate-hz: must be a finite number > 0"),
+    (["--serial", "/dev/null", "--protocol", "lines", "--rate-hz", "0"],
+     "argument --rate-hz: must be a finite number > 0"),
 ])
 def test_monitor_bad_port_values_are_usage_errors(capsys, argv, message):
     with pytest.raises(SystemExit) as e:

@@ -98,7 +98,8 @@ def test_replay_help(capsys):
         main(["replay", "--help"])
     assert e.value.code == 0
     out = capsys.readouterr().out
-    for opt in ("--rrd", "--connect", "--serve", "--window-s", "--hop-s", "--taus", "--realtime", "--protocol", "--dbc"):
+    for opt in ("--rrd", "--connect", "--serve", "--window-s", "--hop-s", "--taus", "--realtime", "--protocol",
+                "--dbc"):
         assert opt in out
 
 

@@ -69,7 +69,8 @@ def test_two_narrowband_lines_are_fitted_and_removed(tmp_path):
     assert [e["kind"] for e in rep["effects"]] == ["vibration_lines"]
     p = rep["effects"][0]["params"]
     assert len(p["freq_hz"]) == 2
-    for f, s, bw, tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], *LINES.params.values(), strict=True):
+    for f, s, bw, tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], *LINES.params.values(),
+                                    strict=True):
         assert abs(f - tf) <= tb and s == pytest.approx(ts, rel=0.2) and bw == pytest.approx(tb, rel=0.5)
     assert [e.kind for e in fitted.effects] == ["vibration_lines"] and rep["score_after"] <= 1.5
     f, p_raw = welch(raw.rate_dph, fs=50.0, nperseg=4096)

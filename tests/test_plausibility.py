@@ -64,7 +64,8 @@ def test_device_ranges():
 def test_kvh_crc_valid_garbage_floats_are_invalid_and_counted(fmt):
     gz = [1e-6, math.nan, 2e-6, math.inf, -math.inf, 1e30, 3e-6, 1e30]
     status = [0x77] * 7 + [0x33]                   # the last one the device itself flagged invalid (z bit 2)
-    data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30) for k, (g, s) in enumerate(zip(gz, status, strict=True)))
+    data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30)
+                    for k, (g, s) in enumerate(zip(gz, status, strict=True)))
     c = make_codec(f"kvh-{fmt}", kvh_rot="delta", kvh_units="rad")
     events = ErrorEvents(c.counters)
     f = c.feed(data)
@@ -215,7 +216,8 @@ def test_replay_log_source_gates_each_block(tmp_path):
 # ----------------------------------------------------------------------------- end to end
 def replay(capsys, path, tmp_path, name, *extra):
     out = tmp_path / f"{name}.rrd"
-    rc = main(["replay", str(path), "--rrd", str(out), "--window-s", "20.48", "--hop-s", "5.12", "--no-progress", *extra])
+    rc = main(["replay", str(path), "--rrd", str(out), "--window-s", "20.48", "--hop-s", "5.12", "--no-progress",
+               *extra])
     text = capsys.readouterr()
     return rc, text.out, text.err, out
 
@@ -289,7 +291,8 @@ def test_kvh_capture_with_garbage_floats(tmp_path, capsys):
     for k, v in ((5000, math.nan), (9000, math.inf), (15000, 1e30)):
         bad[k] = v
         status[k] = 0x33                            # in the reference the device flags the sample invalid
-    check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad), kvh_capture(tmp_path / "ref.bin", gz, status),
+    check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad),
+                   kvh_capture(tmp_path / "ref.bin", gz, status),
                    3, "--protocol", "kvh-a", "--rate-hz", str(fs))
 
 

@@ -141,7 +141,8 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     dev.close()
     rec = read_replay_log(archive.replay_log_path)
     ks = np.rint(rec.rate_dph / 3600).astype(int)
-    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for e in events])                         # every sample sent while connected
+    # every sample sent while connected
+    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for e in events])
     k0 = dev.sent[0]
     assert np.array_equal(np.rint(rec.t_s * FS).astype(int), ks - k0)   # outage kept as a gap of the right length
     assert counters["disconnects"] == 1 and counters["reconnects"] == 1

@@ -75,7 +75,8 @@ def raw_outlier_clusters(t_s: np.ndarray, y: np.ndarray, ok: np.ndarray) -> tupl
         return [], 0, f"{label} {scale:.4g} deg/h"
     cut = np.flatnonzero(np.diff(idx) > 3)
     starts, ends = np.r_[idx[0], idx[cut + 1]], np.r_[idx[cut], idx[-1]]
-    return [(float(t_s[a]), float(t_s[b])) for a, b in zip(starts, ends, strict=True)], len(idx), f"{label} {scale:.4g} deg/h"
+    clusters = [(float(t_s[a]), float(t_s[b])) for a, b in zip(starts, ends, strict=True)]
+    return clusters, len(idx), f"{label} {scale:.4g} deg/h"
 
 
 def first_sentence(text: str) -> str:
@@ -215,7 +216,8 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
                     not extra and not left,
                     f"effects {', '.join(e['kind'] for e in effects) or 'none'}"
                     + (f" (not known to be there: {', '.join(extra)})" if extra else "")
-                    + f"; {len(left)} region(s) left after; score {rep['score_before']:.3g} -> {rep['score_after']:.3g}"))
+                    + f"; {len(left)} region(s) left after; score {rep['score_before']:.3g} -> "
+                      f"{rep['score_after']:.3g}"))
     return out
 
 

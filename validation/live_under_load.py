@@ -342,7 +342,8 @@ def main(argv=None) -> int:
                     port = s.getsockname()[1]
                 server, url = start_grpc_server("127.0.0.1", port)
             print(f"{mode}: fogmon monitor {args.duration_s:g} s at {RATE_HZ} Hz, seed {args.seed}, "
-                  f"{args.hogs} CPU hogs" + (f", --connect {url}" if url else "") + (", --rrd" if mode == "rrd" else ""))
+                  f"{args.hogs} CPU hogs" + (f", --connect {url}" if url else "")
+                  + (", --rrd" if mode == "rrd" else ""))
             results[mode] = run_once(mode, args, workdir, url)
             if server is not None:
                 os.killpg(server.pid, signal.SIGKILL)
