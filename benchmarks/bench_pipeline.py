@@ -120,7 +120,7 @@ def bench_monitor(tmp: str, seconds: float) -> None:
         dev.kill()
         dev.wait()
     share = 100 * (c1 - c0) / (w1 - w0)
-    gaps = next((l.split()[-1] for l in out.splitlines() if l.strip().startswith("samples_missing")), "?")
+    gaps = next((ln.split()[-1] for ln in out.splitlines() if ln.strip().startswith("samples_missing")), "?")
     print(f"monitor, fake KVH DSP-1760 format A at 1 kHz on a pty, --rrd + archive, {w1 - w0:.0f} s steady state:")
     print(f"  CPU {share:.1f} % of one core (target < 5 %: {'PASS' if share < 5 else 'FAIL'}); "
           f"samples_missing {gaps}; exit {mon.returncode}")

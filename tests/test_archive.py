@@ -39,7 +39,8 @@ def test_archive_writes_valid_samples_and_flushes_by_time(tmp_path):
     assert a.replay_log_path.endswith("samples-0001.csv") and os.path.getsize(a.replay_log_path) == 0  # buffered
     now[0] = 0.6
     a.write(block(5, 3))
-    text = open(a.replay_log_path).read()
+    with open(a.replay_log_path) as f:
+        text = f.read()
     assert text.endswith("\n") and text.count("\n") == 6 + 7      # magic, 4 metadata, header + 7 rows
     rec = read_replay_log(a.replay_log_path)
     np.testing.assert_allclose(rec.t_s, [0, 0.1, 0.3, 0.4, 0.5, 0.6, 0.7])   # the invalid sample is a gap

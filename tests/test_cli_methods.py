@@ -148,7 +148,7 @@ def test_thermal_says_when_the_fit_does_not_reduce_the_drift(tmp_path, capsys):
     write_replay_log(p, t, np.cumsum(rng.normal(0, 0.05, n)), {"temp_c": 20 + 10 * np.sin(t / 3000)},
                      meta={"sample_rate_hz": fs})
     assert main(["thermal", str(p)]) == 0
-    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("peak-to-peak"))
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("peak-to-peak"))
     before, after = map(float, re.search(r"averages: ([\d.]+) deg/h -> ([\d.]+) deg/h", line).groups())
     assert line.endswith(f"({before / after:.1f}x smaller)" if after < before else
                          f"({after / before:.1f}x larger: the fit does not reduce this drift)")

@@ -98,7 +98,7 @@ def test_rrd_dadev_and_coefficients_equal_the_engine(run_rrd):
     np.testing.assert_allclose(adev, ref.adev_dph, rtol=1e-9)
     np.testing.assert_allclose(t_end, 3.0 + ref.end_index / 100.0, atol=1e-9)
     for name in COEFFICIENTS:
-        v, lo, hi, ok = (_cat(fr, lambda d, f, te, a=a: np.asarray(getattr(getattr(f, name), a)))
+        v, lo, hi, ok = (_cat(fr, lambda d, f, te, a=a, name=name: np.asarray(getattr(getattr(f, name), a)))
                          for a in ("value", "lo", "hi", "identifiable"))
         ok = ok.astype(bool) & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
         tc, vals = read_scalars(path, f"/coef/{name}")
@@ -130,7 +130,7 @@ def test_rrd_coefficient_upper_limits_where_not_identifiable(run_rrd):
     t_end = _cat(fr, lambda d, f, te: te)
     n_limits = 0
     for name in COEFFICIENTS:
-        hi, ident = (_cat(fr, lambda d, f, te, a=a: np.asarray(getattr(getattr(f, name), a)))
+        hi, ident = (_cat(fr, lambda d, f, te, a=a, name=name: np.asarray(getattr(getattr(f, name), a)))
                      for a in ("hi", "identifiable"))
         up = ~ident.astype(bool) & np.isfinite(hi)
         tu, vals = read_scalars(path, f"/coef/{name}/upper_limit")
@@ -300,12 +300,12 @@ def test_the_server_dies_with_fogmon_even_on_sigkill(process_groups):
     process_groups.append(parent)
     server_pid = int(parent.stdout.readline())
     assert listening(port) == {"127.0.0.1"}
-    assert open(f"/proc/{server_pid}/cmdline", "rb").read().split(b"\0")[1] == b"--serve-grpc"
+    assert Path(f"/proc/{server_pid}/cmdline").read_bytes().split(b"\0")[1] == b"--serve-grpc"
     parent.kill()
     parent.wait()
     wait_until(lambda: not listening(port), "the server outlived its parent")
     wait_until(lambda: not os.path.exists(f"/proc/{server_pid}") or
-               open(f"/proc/{server_pid}/stat").read().split()[2] == "Z", "the server process is still there")
+               Path(f"/proc/{server_pid}/stat").read_text().split()[2] == "Z", "the server process is still there")
 
 
 def test_no_rrd_is_left_when_no_sample_came(tmp_path):

@@ -120,7 +120,7 @@ def test_simulated_source_endless_until_closed_and_paced():
         now[0] += d
 
     src._pacer = Pacer(10.0, clock=lambda: now[0], sleep=sleep)
-    for i, b in enumerate(src.blocks()):
+    for i, _ in enumerate(src.blocks()):
         if i == 5:
             src.close()
     assert src.counters["blocks"] == 6 and src.counters["samples"] == 6 * 100

@@ -43,7 +43,10 @@ def gyro_msgs(ks, t0=1_000_000.0, invalid=(), extra=True):
 
 def gather(source):
     bl = list(source.blocks())
-    cat = lambda f: np.concatenate([f(b) for b in bl])
+
+    def cat(f):
+        return np.concatenate([f(b) for b in bl])
+
     return bl, cat(lambda b: b.t_s), cat(lambda b: b.rate_dph), cat(lambda b: b.valid), cat(lambda b: b.aux["temp_c"])
 
 

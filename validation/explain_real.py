@@ -88,14 +88,14 @@ def replay_sections(out: str, err: str) -> tuple[list[str], list[str]]:
     """(noise-fit lines of the replay summary, coefficient-jump event lines)."""
     lines = out.splitlines()
     fit = []
-    if any(l.startswith("IEEE-952 noise coefficients") for l in lines):
-        i = next(i for i, l in enumerate(lines) if l.startswith("IEEE-952 noise coefficients"))
-        for l in lines[i:]:
-            if not l.strip():
+    if any(ln.startswith("IEEE-952 noise coefficients") for ln in lines):
+        i = next(i for i, ln in enumerate(lines) if ln.startswith("IEEE-952 noise coefficients"))
+        for ln in lines[i:]:
+            if not ln.strip():
                 break
-            fit.append(l)
-    jumps = [l.strip() for l in err.splitlines() if "coef_jump" in l]
-    jumps += [l.strip() for l in lines if "events.coef_jump" in l]
+            fit.append(ln)
+    jumps = [ln.strip() for ln in err.splitlines() if "coef_jump" in ln]
+    jumps += [ln.strip() for ln in lines if "events.coef_jump" in ln]
     return fit, jumps
 
 
@@ -261,10 +261,10 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
 
     print(f"  replay ({wall_replay:.1f} s wall, exit {rp.returncode})")
     fit, jumps = replay_sections(rp.stdout, rp.stderr)
-    for l in fit:
-        print(f"    {l.strip()}")
-    for l in jumps or (["no coefficient jumps"] if rp.returncode == 0 else []):
-        print(f"    {l}")
+    for ln in fit:
+        print(f"    {ln.strip()}")
+    for ln in jumps or (["no coefficient jumps"] if rp.returncode == 0 else []):
+        print(f"    {ln}")
     if rp.returncode != 0:
         tail = rp.stderr.strip().splitlines()
         print(f"    replay failed, last stderr line: {tail[-1] if tail else ''}")

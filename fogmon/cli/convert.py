@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
             writer = ParquetLogWriter(args.output, aux_names, meta,
                                       {"source": source.name, **({"sidecar": side} if side else {})})
         else:
-            fh = open(args.output, "w", encoding="utf-8", newline="\n")
+            fh = open(args.output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
             write_replay_header(fh, aux_names, meta)
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep = b.valid.copy()

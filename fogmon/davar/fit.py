@@ -290,7 +290,7 @@ def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
             continue
         start = [a_hat]
 
-        def excess(c):
+        def excess(c, start=start, terms=terms, n=n, d_min=d_min):  # bound now: called in this iteration only
             d, start[0] = _profile(x, y, edf, rw, c2, start[0], terms, n, c)
             naive_c, sand_c = _term_variances(x, edf, rw, c2, start[0], n)
             return naive_c / sand_c * (d - d_min) - _UPPER_DEVIANCE

@@ -70,6 +70,7 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
             what = "cannot" if tau_s.size == 1 else "none can"
             raise FogmonError(f"requested {_list_s(tau_s)}: {what} be computed: {limits}")
         if short.size or long_.size:
-            warnings.warn(f"{_list_s(np.concatenate([short, long_]))} left out: {limits}", FogmonWarning)
+            warnings.warn(f"{_list_s(np.concatenate([short, long_]))} left out: {limits}", FogmonWarning,
+                          stacklevel=1)
     m = np.unique(np.asarray(m, dtype=np.int64))
     return m[(m >= 1) & (m <= m_max)]

@@ -218,9 +218,9 @@ class BinnedPeriodogram:
         edges = np.unique(np.concatenate((np.round(np.geomspace(1, len(Yf), n_bins)),
                                           np.round(np.linspace(1, len(Yf), n_linear)))).astype(np.int64))
         edges = np.concatenate((edges[edges < len(Yf)], [len(Yf)]))
-        I = np.abs(Yf) ** 2 / n
+        pgram = np.abs(Yf) ** 2 / n
         cw = np.concatenate(([0.0], np.cumsum(mult)))
-        ci = np.concatenate(([0.0], np.cumsum(mult * I)))
+        ci = np.concatenate(([0.0], np.cumsum(mult * pgram)))
         ck = np.concatenate(([0.0], np.cumsum(mult * k)))
         lo, hi = edges[:-1], edges[1:]
         self.count = cw[hi] - cw[lo]

@@ -70,10 +70,7 @@ def make_grid(n: int, fs_hz: float, window_s: float | None = None, hop_fraction:
     """Map grid for an n-sample record: default window = duration / 8 (at least 64 samples),
     hop = window / 4, octave taus up to window / 4; whole-record taus up to n / 4.
     A window longer than half the record is a FogmonError."""
-    if window_s is None:
-        w = max(64, n // 8)
-    else:
-        w = int(round(window_s * fs_hz))
+    w = max(64, n // 8) if window_s is None else int(round(window_s * fs_hz))
     if w < 16:
         raise FogmonError(f"--window-s {window_s:g} s is shorter than 16 samples at {fs_hz:g} Hz")
     if 2 * w > n:

@@ -158,7 +158,8 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
     process group, and on Linux dies with the thread that started it, even when fogmon
     is killed with SIGKILL (prctl PR_SET_PDEATHSIG): no server is ever left behind."""
     check_port_free(bind, port)
-    log = tempfile.TemporaryFile()   # not a pipe: a long-running server must never block on its log
+    # a file that lives as long as the server, not a pipe: a long-running server must never block on its log
+    log = tempfile.TemporaryFile()  # noqa: SIM115
     proc = subprocess.Popen([_rerun_binary(), "--serve-grpc", "--bind", bind, "--port", str(port)],
                             start_new_session=True, preexec_fn=_die_with_parent(), stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=log)
