@@ -112,8 +112,8 @@ def _mixture_matrix(m: int, n_samples: int) -> np.ndarray:
     c[0, 0] = np.sum(w_s * rho_q**2)
     for k in range(3):
         c[0, k + 1] = c[k + 1, 0] = np.sum(w_s * rho_q * rho_q_at[k])
-        for j in range(k, 3):
-            c[k + 1, j + 1] = c[j + 1, k + 1] = np.sum(w * rho[k] * rho[j])
+        for k2 in range(k, 3):
+            c[k + 1, k2 + 1] = c[k2 + 1, k + 1] = np.sum(w * rho[k] * rho[k2])
     return c
 
 
@@ -215,8 +215,8 @@ def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
     c[0, 0] = np.sum(w_q * rho_q**2)
     for k, al in enumerate(MIX_ALPHAS[1:]):
         c[0, k + 1] = c[k + 1, 0] = np.sum(w_q * rho_q * _term_xcov(k_lag, ma, mb, al))
-        for j in range(k, 3):
-            c[k + 1, j + 1] = c[j + 1, k + 1] = np.sum(w * rho[k] * rho[j])
+        for k2 in range(k, 3):
+            c[k + 1, k2 + 1] = c[k2 + 1, k + 1] = np.sum(w * rho[k] * rho[k2])
     return c
 
 
