@@ -13,7 +13,7 @@ import io
 import math
 import os
 import warnings
-from collections.abc import Iterator
+from collections.abc import Generator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -149,6 +149,7 @@ class Rows:
         return len(self.t_s)
 
     def line_of(self, i: int) -> int:
+        assert self._reader is not None, "Rows made by ReplayLogReader.chunks carry their reader"
         _, lines, _ = self._reader._parse_slow(self._text, self.first_line, self._last_t)
         return int(lines[i])
 
@@ -274,7 +275,7 @@ class ReplayLogReader:
             seen.add(c)
         return cols
 
-    def chunks(self) -> Iterator[Rows]:
+    def chunks(self) -> Generator[Rows, None, None]:
         """The body's rows chunk by chunk, checked: numbers, finite, time strictly
         increasing across chunks. FogmonError naming file, line and column at the first
         bad row (unless tolerating)."""

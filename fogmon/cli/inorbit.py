@@ -48,8 +48,8 @@ def run(args) -> int:
         print(f"  bias instability: not available ({e})")
     if ok.all():
         print("  wavelet (db4) energy by band:")
-        for lo, hi, e in wavelet_energy(rate, fs):
-            print(f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * e:6.2f} %")
+        for lo, hi, share in wavelet_energy(rate, fs):
+            print(f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %")
     else:
         print(f"  wavelet energy: skipped, the record has {int((~ok).sum())} missing samples (no interpolation)")
     return 0

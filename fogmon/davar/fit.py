@@ -281,7 +281,7 @@ def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
     A_n = c as in a score test), reaches norm.ppf(0.95)^2. Never below A_n-hat. For the
     terms in the mask ``which`` (NaN for the others)."""
     upper = np.where(which, np.inf, np.nan)
-    for n in np.flatnonzero(which):
+    for n in np.flatnonzero(which).tolist():
         terms = a > 0
         terms[n] = True
         d_min, a_hat = _profile(x, y, edf, rw, c2, a, terms, n, None)
@@ -449,7 +449,8 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     else:
         a, se, misfit, upper = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples,
                                        "all")
-    fit = NoiseFit(*_coefficients(a, se, upper, confidence), avar_terms=a, avar_se=se, avar_upper=upper,
+    q, n_, b, k, r = _coefficients(a, se, upper, confidence)
+    fit = NoiseFit(q, n_, b, k, r, avar_terms=a, avar_se=se, avar_upper=upper,
                    confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
     return replace(fit, worst_ratio=worst if worst.ndim else float(worst))

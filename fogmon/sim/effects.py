@@ -63,7 +63,8 @@ def smoothed_temperature(t_s, temp_c, smooth_s: float) -> np.ndarray:
 DERIVATIVE_ROUNDING = 1e-8
 
 
-def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0, diff_step_s: float = 1.0):
+def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0,
+                            diff_step_s: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(T, dT/dt, d2T/dt2) in deg C, deg C/s, deg C/s^2 on smoothed temperature, by
     3-point backward differences with step h = diff_step_s (docs/methods.md), see
     ``backward_differences``; T(t - h) interpolated on the sample times (held at the
@@ -248,7 +249,7 @@ class BandwidthFilter:
                 raise FogmonError(f"bandwidth: cutoff_hz {params['cutoff_hz']:g} must be below "
                                   f"the Nyquist frequency {fs_hz / 2:g} Hz")
             self.sos = butter(params["order"], params["cutoff_hz"], fs=fs_hz, output="sos")
-        self._zi = None
+        self._zi: np.ndarray | None = None
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=float)

@@ -96,10 +96,10 @@ def open_source(path: str, options: dict) -> StampedSource:
         i = 0
         layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
         for conn, _, raw in reader.messages(connections=conns):
-            lay = layouts.get(len(raw), False)
-            if lay is False:
+            if len(raw) not in layouts:
                 msg = reader.deserialize(raw, conn.msgtype)
-                lay = layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+                layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+            lay = layouts[len(raw)]
             if lay is None:
                 msg = reader.deserialize(raw, conn.msgtype)
                 ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec

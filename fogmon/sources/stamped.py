@@ -68,6 +68,9 @@ class StampedSource:
     reader gives (what it left out and why). ``to_recording()`` gives the same
     samples as a Recording for the batch commands (explain)."""
 
+    #: the ROS topic the samples came from (set by fogmon.sources.rosbag; a Kalibr export names it)
+    ros_topic: str | None = None
+
     def __init__(self, t_s, rate_dph, aux: dict | None, *, name: str, where: str, time_field: str,
                  meta: dict | None = None, max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH,
                  counters: dict[str, int] | None = None) -> None:
