@@ -241,6 +241,7 @@ def scale_factor(ctx: Context) -> Candidate | None:
         fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
         if best is None or fit.chi2_gain - len(names) * ctx.penalty > best[0].chi2_gain - len(best[2]) * ctx.penalty:
             best = (fit, X, names)
+    assert best is not None  # the loop ran at least once
     fit, X, names = best
     params = {"ppm": 0.0, "asym_ppm": 0.0}
     se = {}
@@ -299,6 +300,7 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
         score = fit.chi2_gain - len(names) * ctx.penalty
         if best is None or score > best[0]:
             best = (score, fit, names, label)
+    assert best is not None  # the loop ran at least once
     _, fit, names, label = best
     X = np.column_stack([cols[nm] for nm in names])
     v = dict(zip(names, fit.beta.tolist(), strict=True))
@@ -490,6 +492,7 @@ def outliers(ctx: Context) -> Candidate | None:
     if not ev.population:
         return None
     law = ev.law
+    assert law is not None  # a population needs a fitted law (bic_population is 0 without one)
     z_cut = min(law.z_even, ev.thr)
     se = np.where(ev.z != 0.0, np.abs(ev.amp / np.where(ev.z != 0.0, ev.z, 1.0)), 0.0)
     se = np.where(se > 0, se, float(np.median(se[se > 0])) if (se > 0).any() else 0.0)
@@ -656,6 +659,7 @@ def bandwidth(ctx: Context) -> Candidate | None:
         g, p = gain(order, math.exp((a + b) / 2))
         if best is None or g > best[0]:
             best = (g, p)
+    assert best is not None  # the loop ran at least once
     g, p = best
     ev = (f"Whittle fit of the residual spectrum: high frequencies fall below the model, as a "
           f"Butterworth low-pass of order {p['order']} at {p['cutoff_hz']:.4g} Hz")
@@ -807,7 +811,7 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
     returns (total deviance drop, lines (centre, rms, bandwidth))."""
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     S = S0.copy()
-    lines = []
+    lines: list[tuple[float, float, float]] = []
     for f0, bw0 in starts:
         if any(abs(f0 - f) < max(bw, bw0) for f, _, bw in lines):
             continue
@@ -967,7 +971,8 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
     conv = avar_terms_to_coefficients
     for _ in range(NOISE_ITERATIONS):  # the terms interact in such a fit (flicker's short-tau excess
         c = conv(A)                    # reads partly as N): fit(predicted ADEV of A) -> fit(recording)
-        new = SensorModel(stoch.sample_rate_hz, 0.0, Noise(*c[:4], 0.0), stoch.effects)
+        noise = Noise(Q_arcsec=c[0], N_dpsh=c[1], B_dph=c[2], K_dphsh=c[3], R_dphh=0.0)
+        new = SensorModel(stoch.sample_rate_hz, 0.0, noise, stoch.effects)
         Sk = model_psd(new, rfft_omega(n), n, white_dpsh - nz.N_dpsh + float(c[1]))
         ak, _, _, _ = fit_avar(r.tau_s, expected_avar(Sk, n, r.m), r.m, r.n_terms, n, "none")
         if not np.all(np.isfinite(ak)):
