@@ -83,6 +83,7 @@ def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray) -> tupl
         crit = fit_chi2(tau_s, av, edf, fit) + TERM_CHI2 * len(terms)
         if best is None or crit < best[0]:
             best = (crit, fit, terms)
+    assert best is not None  # the loop ran at least once
     return best[1], best[2]
 
 
@@ -129,7 +130,7 @@ def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray
 
 #: Unit-coefficient parameter sets of the aux-driven mean effects projected out before
 #: the baseline noise is estimated (the catalogue's thermal_drift and scale_factor).
-_AUX_UNITS = {
+_AUX_UNITS: dict[str, list[tuple[str, dict]]] = {
     "temp_c": [("thermal_drift", {"k0_poly_dph": [0.0, 1.0]}), ("thermal_drift", {"k0_poly_dph": [0.0, 0.0, 1.0]}),
                ("thermal_drift", {"k1_pos": 1.0}), ("thermal_drift", {"k1_neg": 1.0}),
                ("thermal_drift", {"k2_pos": 1.0}), ("thermal_drift", {"k2_neg": 1.0})],

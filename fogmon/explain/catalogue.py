@@ -93,7 +93,7 @@ class Candidate:
     #: abs_z (arrays; written to the outliers file, not into the report)
     listing: dict | None = field(default=None, repr=False)
     #: corrected IEEE-952 coefficients (the ``noise`` kind): replace the model's [noise]
-    corrected_noise: object | None = None
+    corrected_noise: Noise | None = None
 
     @property
     def nature(self) -> str:
@@ -564,10 +564,15 @@ def _periodogram(ctx: Context) -> BinnedPeriodogram:
 
 def white_rms_dpsh(model: SensorModel, ctx: Context) -> float:
     """RMS over the record of the white level N(t) = N0 + white-level effects (deg/sqrt(h))."""
-    level = np.full(ctx.n, model.noise.N_dpsh)
+    return white_level_rms_dpsh(model, ctx.t_s, ctx.aux)
+
+
+def white_level_rms_dpsh(model: SensorModel, t_s: np.ndarray, aux: dict) -> float:
+    """``white_rms_dpsh`` from the sample times ``t_s`` (s) and aux channels alone."""
+    level = np.full(len(t_s), model.noise.N_dpsh)
     for e in model.effects:
         if EFFECT_KINDS[e.kind].nature == "white_level":
-            level = level + fx.white_level_dpsh(e, ctx.t_s, ctx.aux)
+            level = level + fx.white_level_dpsh(e, t_s, aux)
     return float(np.sqrt(np.mean(np.maximum(level, 0.0) ** 2)))
 
 

@@ -176,7 +176,8 @@ def _init_worker(shared: tuple) -> None:
 
 
 def _replicate_in_worker(seed) -> tuple[np.ndarray, np.ndarray]:
-    return _replicate(*_SHARED, seed)
+    model, like, grid = _SHARED
+    return _replicate(model, like, grid, seed)
 
 
 def bootstrap(stoch: SensorModel, like: Recording, grid: mismatch.Grid, n_boot: int, seed: int,
@@ -207,8 +208,7 @@ def default_n_boot(n: int) -> int:
 # ---------------------------------------------------------------- analysis
 def _whittle(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray, y: np.ndarray):
     n = len(y)
-    probe = catalogue.Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), y, stoch, None, None)
-    S = model_psd(stoch, rfft_omega(n), n, catalogue.white_rms_dpsh(stoch, probe))
+    S = model_psd(stoch, rfft_omega(n), n, catalogue.white_level_rms_dpsh(stoch, t, ctx_aux))
     S = np.maximum(S, 1e-4 * np.median(S[1:]))  # a filter's zero must not give one bin all the weight
     yy = np.where(valid, y, 0.0)
     Yf = np.fft.rfft(yy)

@@ -219,7 +219,7 @@ class Region:
     tau_peak_s: float | None = None
 
     def as_json(self) -> dict:
-        out = {"t_start_s": round(self.t_start_s, 6), "t_end_s": round(self.t_end_s, 6),
+        out: dict[str, object] = {"t_start_s": round(self.t_start_s, 6), "t_end_s": round(self.t_end_s, 6),
                "tau_min_s": self.tau_min_s, "tau_max_s": self.tau_max_s, "ratio": round(self.ratio, 4),
                "p_value": float(f"{self.p_value:.3g}"),
                "t_peak_s": None if self.t_peak_s is None else round(self.t_peak_s, 6),

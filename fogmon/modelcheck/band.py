@@ -41,7 +41,8 @@ DEFAULT_REPLICATES = 100
 def band_effects(model: SensorModel) -> tuple[list[Effect], list[str]]:
     """(effects the band holds, kinds left out): kept are those of nature ``BAND_NATURES``
     that need no aux channel."""
-    kept, left = [], []
+    kept: list[Effect] = []
+    left: list[Effect] = []
     for e in model.effects:
         spec = EFFECT_KINDS[e.kind]
         (kept if spec.aux is None and spec.nature in BAND_NATURES else left).append(e)
