@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
             n += int(keep.sum())
         if writer is not None:
             writer.close(counters={**source.counters, "rows_without_aux": without_aux})
-        else:
+        elif fh is not None:
             fh.close()
     except BaseException:
         if writer is not None:

@@ -213,6 +213,7 @@ def write_outliers(res: Result, path: str) -> int:
         _remove_stale_outliers(path)
         return 0
     lst = held[0].listing
+    assert lst is not None, "an outliers candidate carries its listing"
     n = len(lst["times_s"])
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} outlier samples (none left out)\n"
@@ -363,9 +364,10 @@ def write_rrd(res: Result, path: str) -> None:
         ym = np.nanmean(y, axis=1)
     rec.send_columns("rate", indexes=[rr.TimeColumn("time", duration=t[: nb * k: k])],
                      columns=rr.Scalars.columns(scalars=np.column_stack([ym, det.mean(axis=1)])))
-    for a in res.accepted:
-        if a.cand.kind == "outliers":  # every outlier, as points over time
-            lst = a.cand.listing
+    for acc in res.accepted:
+        if acc.cand.kind == "outliers":  # every outlier, as points over time
+            lst = acc.cand.listing
+            assert lst is not None, "an outliers candidate carries its listing"
             rec.log("rate/outliers_removed_dph", rr.SeriesPoints(names=["outlier amplitude removed (deg/h)"]),
                     static=True)
             rec.send_columns("rate/outliers_removed_dph", indexes=[rr.TimeColumn("time", duration=lst["times_s"])],
