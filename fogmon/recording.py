@@ -240,7 +240,7 @@ class ReplayLogReader:
             line, col = lineno + block.count(b"\n", 0, e.start), e.start - block.rfind(b"\n", 0, e.start)
             raise FogmonError(f"{self.name}: line {line}: not UTF-8 text (byte {col} of the line)") from None
 
-    def _read_header(self):
+    def _read_header(self) -> tuple[dict[str, str], list[str], tuple[int, int]]:
         """(meta, columns, (byte offset, line number) of the first body line)."""
         meta: dict[str, str] = {}
         for offset, lineno, block in self._line_chunks(0, 1):
