@@ -61,7 +61,7 @@ def write_recording(path: Path, hours: float, seed: int) -> int:
 
 
 def _hwm() -> float:
-    return int(next(l for l in open("/proc/self/status") if l.startswith("VmHWM")).split()[1]) / 1024
+    return int(next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM")).split()[1]) / 1024
 
 
 def run_batch(folder: str, out: str, workers: int) -> tuple[float, list[float]]:

@@ -129,8 +129,8 @@ def main(argv=None) -> int:
                 allantools.oadev(y[k * 1024:k * 1024 + WINDOW], rate=1.0, data_type="freq", taus=m.astype(float))
         return per_cpu_s(run, 1024 * windows)
 
-    def batch(fn, *a, n=len(y), **kw):
-        return lambda: per_cpu_s(lambda: fn(*a, **kw), n)
+    def batch(fn, *a, n=None, **kw):
+        return lambda: per_cpu_s(lambda: fn(*a, **kw), len(y) if n is None else n)
 
     runs = {
         "push default alpha, hop 1024": lambda: stream(y, m, 1024, None),

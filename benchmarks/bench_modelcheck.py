@@ -47,7 +47,8 @@ def main() -> None:
         t0 = time.perf_counter()
         ModelBand.for_model(model, FS, W, sd.m, cache_dir=d)
         cached = time.perf_counter() - t0
-    print(f"band build, {DEFAULT_REPLICATES} replicates: {build:.2f} s ({cpu:.2f} s CPU) = {build / unit:.0f} x the reference "
+    print(f"band build, {DEFAULT_REPLICATES} replicates: {build:.2f} s ({cpu:.2f} s CPU) = "
+          f"{build / unit:.0f} x the reference "
           f"({build / DEFAULT_REPLICATES / unit:.2f} x per replicate); from the cache: {cached * 1e3:.1f} ms")
 
     long = simulate(model, duration_s=(W + HOP * 8) / FS, seed=2).rate_dph

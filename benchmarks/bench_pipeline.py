@@ -31,8 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 
 from fogmon.block import Block  # noqa: E402
-from fogmon.davar.batch import dadev  # noqa: E402
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config  # noqa: E402
+from fogmon.davar.batch import dadev  # noqa: E402
 from fogmon.pipeline import run_pipeline  # noqa: E402
 from fogmon.recording import write_replay_log  # noqa: E402
 
@@ -90,7 +90,8 @@ def bench_replay(tmp: str) -> None:
     if p.returncode:
         print(p.stderr)
     print(f"  (b) `fogmon replay` of a {os.path.getsize(csv) / 1e6:.0f} MB CSV (parse + start-up included): "
-          f"{t_cli:6.2f} s = x{3600 / t_cli:,.0f} real time (target >= 300x: {'PASS' if 3600 / t_cli >= 300 else 'FAIL'})")
+          f"{t_cli:6.2f} s = x{3600 / t_cli:,.0f} real time "
+          f"(target >= 300x: {'PASS' if 3600 / t_cli >= 300 else 'FAIL'})")
 
 
 def _cpu_s(pid: int) -> float:
@@ -119,7 +120,7 @@ def bench_monitor(tmp: str, seconds: float) -> None:
         dev.kill()
         dev.wait()
     share = 100 * (c1 - c0) / (w1 - w0)
-    gaps = next((l.split()[-1] for l in out.splitlines() if l.strip().startswith("samples_missing")), "?")
+    gaps = next((ln.split()[-1] for ln in out.splitlines() if ln.strip().startswith("samples_missing")), "?")
     print(f"monitor, fake KVH DSP-1760 format A at 1 kHz on a pty, --rrd + archive, {w1 - w0:.0f} s steady state:")
     print(f"  CPU {share:.1f} % of one core (target < 5 %: {'PASS' if share < 5 else 'FAIL'}); "
           f"samples_missing {gaps}; exit {mon.returncode}")

@@ -17,10 +17,11 @@ import numpy as np
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
+import test_readers as w  # noqa: E402  (the writers)
+
 from fogmon.recording import write_replay_log  # noqa: E402
 from fogmon.sources.open import open_replay_source  # noqa: E402
 from fogmon.sources.options import SourceOptions  # noqa: E402
-import test_readers as w  # noqa: E402  (the writers)
 
 
 def timed(path, **opts) -> float:

@@ -53,8 +53,10 @@ def main() -> None:
             fh.write(data)
         t_rep = timed(lambda: sum(len(b) for b in RawCaptureSource(p, {"protocol": "kvh-a"}).blocks()))
     print(f"raw-capture replay: {n / t_rep:,.0f} samples/s = {n / t_rep / 1000:,.0f}x real time of a 1 kHz gyro")
-    import can
     from importlib import resources
+
+    import can
+
     from fogmon.sources.can_source import CanDecoder, load_dbc
     db = load_dbc(str(resources.files("fogmon") / "data" / "gyro_example.dbc"))
     m = db.get_message_by_name("GYRO_RATE")

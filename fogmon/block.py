@@ -60,7 +60,7 @@ class Block:
         return self.rate_dph - 3600.0 * self.aux["rot_dps"]
 
     @staticmethod
-    def make(t_s, rate_dph, valid=None, aux=None, events=()) -> "Block":
+    def make(t_s, rate_dph, valid=None, aux=None, events=()) -> Block:
         """Build a block from array-likes; ``valid`` defaults to ``isfinite(rate)``;
         a non-finite rate is always invalid."""
         t = np.asarray(t_s, dtype=np.float64)

@@ -59,7 +59,7 @@ class Term:
     upper: bool
 
     @staticmethod
-    def of(c) -> "Term":
+    def of(c) -> Term:
         """From a fogmon.davar.fit.Coefficient."""
         if bool(c.identifiable):
             return Term(float(c.value), False)
@@ -107,7 +107,8 @@ def kalibr_yaml(fit, source: str, rate_hz: float | None, topic: str | None = Non
         "",
         "#Gyroscopes",
         f"gyroscope_noise_density: {_g(nd)}   # rad/s/sqrt(Hz) = N {t['N_dpsh'].note('deg/sqrt(h)')} x pi/180 / 60",
-        f"gyroscope_random_walk: {_g(rw)}   # rad/s^2/sqrt(Hz) = K {t['K_dphsh'].note('deg/h/sqrt(h)')} x pi/180 / 216000",
+        f"gyroscope_random_walk: {_g(rw)}   # rad/s^2/sqrt(Hz) = K {t['K_dphsh'].note('deg/h/sqrt(h)')} "
+        "x pi/180 / 216000",
         "# no Kalibr field for: bias instability B " + t["B_dph"].note("deg/h") +
         (f" = {bias_instability_rad(t['B_dph'].value):.6g} rad/s" if t["B_dph"].value is not None else "") +
         " (Kalibr models the bias as a pure random walk: B is not in its model)",
@@ -148,7 +149,8 @@ def ros_yaml(fit, source: str, rate_hz: float | None, topic: str | None = None) 
     if b.value is not None:
         floor = FLICKER_FLOOR * b.value
         lines.append(f"# Bias Instability: {b.value / 3600.0:.6g} deg/s {b.value:.6g} deg/hr (B; the ADEV floor "
-                     f"allan_variance_ros reads is 0.664 B = {floor:.6g} deg/hr)" + (" (95 % upper limit)" if b.upper else ""))
+                     f"allan_variance_ros reads is 0.664 B = {floor:.6g} deg/hr)"
+                     + (" (95 % upper limit)" if b.upper else ""))
     if k.value is not None:
         lines.append(f"# Rate Random Walk: {k.value / 3600.0 / 60.0:.6g} deg/s/sqrt(s) {k.value:.6g} deg/hr/sqrt(hr)"
                      + (" (95 % upper limit)" if k.upper else ""))
@@ -162,11 +164,13 @@ def matlab_snippet(fit, source: str, rate_hz: float | None, topic: str | None = 
     n, b, k = t["N_dpsh"], t["B_dph"], t["K_dphsh"]
     rows = []
     if n.value is not None:
-        rows.append(("NoiseDensity", noise_density_rad(n.value), f"(rad/s)/sqrt(Hz) = N {n.note('deg/sqrt(h)')} x pi/180/60"))
+        rows.append(("NoiseDensity", noise_density_rad(n.value),
+                     f"(rad/s)/sqrt(Hz) = N {n.note('deg/sqrt(h)')} x pi/180/60"))
     if b.value is not None:
         rows.append(("BiasInstability", bias_instability_rad(b.value), f"rad/s = B {b.note('deg/h')} x pi/180/3600"))
     if k.value is not None:
-        rows.append(("RandomWalk", random_walk_rad(k.value), f"(rad/s)*sqrt(Hz) = K {k.note('deg/h/sqrt(h)')} x pi/180/216000"))
+        rows.append(("RandomWalk", random_walk_rad(k.value),
+                     f"(rad/s)*sqrt(Hz) = K {k.note('deg/h/sqrt(h)')} x pi/180/216000"))
     lines = ["% " + s[2:] for s in _header(source, rate_hz)]
     lines.append("params = gyroparams( ...")
     for i, (key, v, why) in enumerate(rows):

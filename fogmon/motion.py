@@ -260,6 +260,7 @@ class MotionGate:
         else:
             self._ref.append(mean)
             if self._mask_next:
+                assert self._span is not None, "_mask_next is set only while a span is open"
                 self._mask(a, a + m)
                 self._span[1] = t1
                 self._mask_next = False
@@ -274,6 +275,7 @@ class MotionGate:
         self._v[a:b] = False
 
     def _close(self, t_s: float) -> Event:
+        assert self._span is not None, "called with a span open"
         a, b, peak = self._span
         self.spans.append(MotionSpan(a, b, peak))
         self._span = None

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -136,14 +136,14 @@ class ParquetRows:
     values, time strictly increasing; a bad row is a one-line error naming file, row and
     column, or skipped and counted with ``tolerate``)."""
 
-    def __init__(self, paths: str | Sequence[str], tolerate: bool = False) -> None:
+    def __init__(self, paths: str | os.PathLike | Sequence[str], tolerate: bool = False) -> None:
         self.paths = [os.fspath(paths)] if isinstance(paths, (str, os.PathLike)) else [os.fspath(p) for p in paths]
         self.tolerate = tolerate
         first = os.path.basename(self.paths[0])
         self.name = first if len(self.paths) == 1 else f"{first} .. {os.path.basename(self.paths[-1])} " \
                                                        f"({len(self.paths)} files)"
         self.n_rows = 0
-        columns = None
+        columns: list[str] | None = None
         for p in self.paths:
             pf = _open(p)
             info = file_info(pf, p)
@@ -157,7 +157,8 @@ class ParquetRows:
             elif info.get("meta", {}).get("sample_rate_hz") != self.meta.get("sample_rate_hz"):
                 raise FogmonError(f"{p}: sample_rate_hz differs from {self.paths[0]}: not parts of one recording")
             self.n_rows += pf.metadata.num_rows
-        self.columns = columns
+        assert columns is not None  # self.paths is never empty
+        self.columns: list[str] = columns
         self.aux_names = [c for c in columns if c not in REQUIRED]
         self.sample_rate_hz = sample_rate_from(self.meta, self._first_times(), self.name) \
             if "sample_rate_hz" not in self.meta else sample_rate_from(self.meta, np.zeros(0), self.name)
@@ -168,7 +169,7 @@ class ParquetRows:
                 return rows.t_s
         return np.zeros(0)
 
-    def chunks(self) -> Iterator["_Rows"]:
+    def chunks(self) -> Iterator[_Rows]:
         last_t = -math.inf
         for p in self.paths:
             pf = _open(p)
@@ -187,7 +188,7 @@ class ParquetRows:
                 rows.skipped = skipped
                 yield rows
 
-    def _checked(self, path: str, row0: int, cols: dict, last_t: float) -> tuple["_Rows", int]:
+    def _checked(self, path: str, row0: int, cols: dict, last_t: float) -> tuple[_Rows, int]:
         t = cols["time_s"]
         bad = np.zeros(len(t), bool)
         for c, a in cols.items():
@@ -235,10 +236,10 @@ def _open(path: str):
         raise FogmonError(f"{path}: not a readable Parquet file ({e})") from None
 
 
-def read_parquet_log(paths: str | Sequence[str], tolerate: bool = False) -> Recording:
+def read_parquet_log(paths: str | os.PathLike | Sequence[str], tolerate: bool = False) -> Recording:
     """A whole Parquet replay log in memory (the batch commands: explain, sim --like, ...)."""
     reader = ParquetRows(paths, tolerate=tolerate)
-    parts = {c: [] for c in reader.columns}
+    parts: dict[str, list[np.ndarray]] = {c: [] for c in reader.columns}
     skipped = 0
     for rows in reader.chunks():
         parts["time_s"].append(rows.t_s)

@@ -13,8 +13,8 @@ import io
 import math
 import os
 import warnings
+from collections.abc import Generator
 from dataclasses import dataclass, field
-from typing import Iterator
 
 import numpy as np
 
@@ -143,12 +143,13 @@ class Rows:
     first_line: int
     _text: bytes = b""
     _last_t: float = -math.inf
-    _reader: "ReplayLogReader | None" = None
+    _reader: ReplayLogReader | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
 
     def line_of(self, i: int) -> int:
+        assert self._reader is not None, "Rows made by ReplayLogReader.chunks carry their reader"
         _, lines, _ = self._reader._parse_slow(self._text, self.first_line, self._last_t)
         return int(lines[i])
 
@@ -239,7 +240,7 @@ class ReplayLogReader:
             line, col = lineno + block.count(b"\n", 0, e.start), e.start - block.rfind(b"\n", 0, e.start)
             raise FogmonError(f"{self.name}: line {line}: not UTF-8 text (byte {col} of the line)") from None
 
-    def _read_header(self):
+    def _read_header(self) -> tuple[dict[str, str], list[str], tuple[int, int]]:
         """(meta, columns, (byte offset, line number) of the first body line)."""
         meta: dict[str, str] = {}
         for offset, lineno, block in self._line_chunks(0, 1):
@@ -274,7 +275,7 @@ class ReplayLogReader:
             seen.add(c)
         return cols
 
-    def chunks(self) -> Iterator[Rows]:
+    def chunks(self) -> Generator[Rows, None, None]:
         """The body's rows chunk by chunk, checked: numbers, finite, time strictly
         increasing across chunks. FogmonError naming file, line and column at the first
         bad row (unless tolerating)."""
@@ -310,7 +311,7 @@ class ReplayLogReader:
                     raise FogmonError(f"{name}: line {at}: expected {len(cols)} cells "
                                       f"({','.join(cols)}), found {len(cells)}")
                 vals = []
-                for c, cell in zip(cols, cells):
+                for c, cell in zip(cols, cells, strict=True):
                     try:
                         v = float(cell)
                     except ValueError:

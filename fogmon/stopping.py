@@ -17,12 +17,13 @@ import contextlib
 import signal
 import sys
 import threading
-from typing import Iterator
+from collections.abc import Iterator
+from typing import Any
 
 #: The signals that stop a command, and how the summary names them.
-STOP_SIGNALS = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
+STOP_SIGNALS: dict[int, str] = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM", signal.SIGHUP: "SIGHUP"}
 
-_state = {"received": None, "shield": 0, "pending": False, "closing": False}
+_state: dict[str, Any] = {"received": None, "shield": 0, "pending": False, "closing": False}
 
 
 def _handler(signum: int, frame) -> None:

@@ -20,7 +20,8 @@ TS_S = 0.01
 
 def convert(src: str, dst: str) -> None:
     """Write the z-axis rate (deg/h) of a PSINS .imu file as a replay log v1."""
-    rows = [l for l in open(src, encoding="ascii").read().splitlines() if l.strip() and not l.startswith("%")]
+    with open(src, encoding="ascii") as f:
+        rows = [ln for ln in f.read().splitlines() if ln.strip() and not ln.startswith("%")]
     counts = np.array([[int(float(x)) for x in r.split()] for r in rows[3:]], dtype=np.int64)
     rate_dph = counts[:, 2] * (ARCSEC_PER_COUNT / TS_S)  # 1 arcsec/s == 1 deg/h
     t_s = np.round(np.arange(len(counts)) * TS_S, 2)

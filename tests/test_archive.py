@@ -11,13 +11,13 @@ import time
 
 import numpy as np
 import pytest
+from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, has_open, stream
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sources.replay import open_raw_capture
-from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, has_open, stream
 
 FS = 200.0
 
@@ -39,7 +39,8 @@ def test_archive_writes_valid_samples_and_flushes_by_time(tmp_path):
     assert a.replay_log_path.endswith("samples-0001.csv") and os.path.getsize(a.replay_log_path) == 0  # buffered
     now[0] = 0.6
     a.write(block(5, 3))
-    text = open(a.replay_log_path).read()
+    with open(a.replay_log_path) as f:
+        text = f.read()
     assert text.endswith("\n") and text.count("\n") == 6 + 7      # magic, 4 metadata, header + 7 rows
     rec = read_replay_log(a.replay_log_path)
     np.testing.assert_allclose(rec.t_s, [0, 0.1, 0.3, 0.4, 0.5, 0.6, 0.7])   # the invalid sample is a gap
@@ -251,14 +252,13 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     """--rotate-s 1 at 200 Hz over 4.5 s: five pieces of samples and raw bytes. Frame 200
     (first of piece 2) fails its CRC and frame 400 (first of piece 3) is lost, so pieces
     2 and 3 start with a missing sample; garbage sits inside piece 1."""
-    from fogmon.pipeline import run_pipeline
-    from fogmon.sources.codecs import make_codec
-    from fogmon.sources.open import open_replay_source
-    from fogmon.sources.replay import ReplayLogSet, RawCaptureSource
-    from fogmon.sources.serial_source import SerialSource
     from doubles import args_for
 
-    from fogmon.pipeline import PipelineConfig as _args
+    from fogmon.pipeline import PipelineConfig as _args, run_pipeline
+    from fogmon.sources.codecs import make_codec
+    from fogmon.sources.open import open_replay_source
+    from fogmon.sources.replay import RawCaptureSource, ReplayLogSet
+    from fogmon.sources.serial_source import SerialSource
 
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
     arch, lead = tmp_path / "arch", 60
@@ -365,10 +365,11 @@ def test_can_capture_pieces_replay_as_one_frame_stream(tmp_path):
     """CAN frames 0..299 at 100 Hz cut into pieces after frames 99 and 194; frames 195..219
     (0.25 s, more than a 4-bit counter wrap) never arrived: the joined pieces give the
     real gap, measured by the logs' absolute timestamps, and no gap at the other seam."""
-    from fogmon.sources.can_source import CanSource, load_dbc
-    from fogmon.sources.open import open_replay_source
     from doubles import args_for
     from test_sources_can import DBC, gyro_msgs
+
+    from fogmon.sources.can_source import CanSource, load_dbc
+    from fogmon.sources.open import open_replay_source
 
     fs = 100.0
     src = CanSource("x", "virtual", load_dbc(DBC), dbc_path=DBC)      # never opened: the test plays the bus

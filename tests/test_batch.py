@@ -20,8 +20,8 @@ from fogmon.fleet import tables
 from fogmon.fleet.chunks import plan_chunks
 from fogmon.fleet.tasks import _Collect, check
 from fogmon.pipeline import PipelineConfig, run_pipeline
-from fogmon.sinks.base import COEFFICIENTS
 from fogmon.recording import write_replay_log
+from fogmon.sinks.base import COEFFICIENTS
 from fogmon.sources.kvh import encode_frame
 from fogmon.sources.open import open_replay_source
 
@@ -168,7 +168,7 @@ def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_r
             assert a.schema.equals(b.schema) and a.num_rows == b.num_rows, name
             for c in a.column_names:                             # identical, NaN where NaN
                 x, y = a[c].to_pylist(), b[c].to_pylist()
-                assert all(u == v or (u != u and v != v) for u, v in zip(x, y)), (name, c)
+                assert all(u == v or (u != u and v != v) for u, v in zip(x, y, strict=True)), (name, c)
     finally:
         for p in procs[::-1]:
             p.terminate()

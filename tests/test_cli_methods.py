@@ -106,7 +106,8 @@ def test_updown_latitude_out_of_range_is_a_usage_error(updown, capsys, lat):
 
 def test_updown_same_file_twice(updown, capsys):
     assert main(["updown", "--up", str(updown[0]), "--down", str(updown[0]), "--lat-deg", "45"]) == 2
-    assert capsys.readouterr().err == f"fogmon updown: error: --up {updown[0]} and --down {updown[0]} are the same file\n"
+    assert capsys.readouterr().err == (f"fogmon updown: error: --up {updown[0]} and --down {updown[0]} "
+                                       f"are the same file\n")
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -147,7 +148,7 @@ def test_thermal_says_when_the_fit_does_not_reduce_the_drift(tmp_path, capsys):
     write_replay_log(p, t, np.cumsum(rng.normal(0, 0.05, n)), {"temp_c": 20 + 10 * np.sin(t / 3000)},
                      meta={"sample_rate_hz": fs})
     assert main(["thermal", str(p)]) == 0
-    line = next(l for l in capsys.readouterr().out.splitlines() if l.startswith("peak-to-peak"))
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("peak-to-peak"))
     before, after = map(float, re.search(r"averages: ([\d.]+) deg/h -> ([\d.]+) deg/h", line).groups())
     assert line.endswith(f"({before / after:.1f}x smaller)" if after < before else
                          f"({after / before:.1f}x larger: the fit does not reduce this drift)")

@@ -12,12 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_rerun_sink import read_scalars, read_texts
 
 from fogmon.cli import main
 from fogmon.recording import read_replay_log
 from fogmon.sources.replay import open_raw_capture
-
-from test_rerun_sink import read_scalars, read_texts
 
 HERE = Path(__file__).resolve().parent
 
@@ -36,14 +35,14 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     assert rec.sample_rate_hz == 1000.0 and list(rec.aux) == ["temp_c"] and np.all(rec.aux["temp_c"] == 31)
     assert len(rec) <= n and rec.t_s[-1] == pytest.approx((n - 1) / 1000)
     # N of the fake device is 0.05 deg/sqrt(h): the whole-run fit finds it
-    line = next(l for l in out.splitlines() if l.strip().startswith("N_dpsh"))
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith("N_dpsh"))
     assert abs(float(line.split("=")[1].split()[0]) - 0.05) < 0.005
     rrd = tmp_path / "live-0001.rrd"   # the first hourly piece (--rotate-s 3600)
     t_live, live = read_scalars(str(rrd), "/dadev/log10_adev_dph")
     assert live.shape == (12, 8)      # (n - 512) // 128 + 1 windows; m = 1 .. 128
     t_rate, _ = read_scalars(str(rrd), "/rate/rate_dph")
     assert len(t_rate) <= 200         # 1 kHz shown as means of 10 samples
-    crc = int(next(l for l in out.splitlines() if l.strip().startswith("crc_errors")).split()[1])
+    crc = int(next(ln for ln in out.splitlines() if ln.strip().startswith("crc_errors")).split()[1])
     assert crc >= 2                    # 2 s at 1 kHz, every 500th frame bad
     texts = read_texts(str(rrd), "/events")
     assert sum(int(x.split()[1]) for x in texts if x.startswith("crc_error:")) == crc
@@ -52,8 +51,8 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     rb = list(raw.blocks())
     assert sum(len(b) for b in rb) == n
     np.testing.assert_allclose(np.concatenate([b.t_s[b.valid] for b in rb]), rec.t_s, rtol=0, atol=1e-9)
-    summary = {l.split()[0]: int(l.split()[1]) for l in out.split("Counters:")[1].splitlines()[1:]
-               if len(l.split()) == 2 and l.split()[1].isdigit()}
+    summary = {ln.split()[0]: int(ln.split()[1]) for ln in out.split("Counters:")[1].splitlines()[1:]
+               if len(ln.split()) == 2 and ln.split()[1].isdigit()}
     assert all(summary[k] == v for k, v in raw.counters.items()), (summary, raw.counters)
     replay = tmp_path / "replay.rrd"
     assert main(["replay", str(arch), "--rrd", str(replay), "--window-s", "0.512",
@@ -104,7 +103,7 @@ def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
             p.kill()
     assert p.returncode == 0, err
     assert "fogmon: interrupted (Ctrl-C)" in out and "Traceback" not in err
-    n = int(next(l for l in out.splitlines() if "samples at 1000 Hz" in l).split()[0])
+    n = int(next(ln for ln in out.splitlines() if "samples at 1000 Hz" in ln).split()[0])
     rec = read_replay_log(arch / "samples-0001.csv")  # complete rows only, readable
     raw = list(open_raw_capture(str(arch / "raw-0001.bin")).blocks())
     assert sum(len(b) for b in raw) == n            # what was read before the stop is archived and counted

@@ -20,10 +20,9 @@ from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import MAX_PER_DECADE, tau_grid
 from fogmon.errors import FogmonError, FogmonWarning
-from fogmon.sinks.base import Summary
 from fogmon.recording import write_replay_log
+from fogmon.sinks.base import Summary
 from fogmon.sinks.console import format_summary
-
 
 ROOT = Path(__file__).resolve().parents[1]
 DBC = str(ROOT / "fogmon" / "data" / "gyro_example.dbc")
@@ -111,7 +110,8 @@ def test_replay_names_the_taus_it_leaves_out_once(log, capsys):
     # the window (2048 samples) cannot hold 50 s, the whole run (12000 samples, n/4 = 60 s) can
     assert cap.err == ("fogmon replay: warning: tau 50 s left out: an Allan deviation needs tau from one sample to "
                        "n/4 samples, 0.02 .. 10.24 s (n = 2048 samples at 50 Hz, tau rounded to whole samples)\n")
-    rows = [l.split() for l in cap.out.splitlines() if l.strip() and l.strip()[0].isdigit() and len(l.split()) == 6]
+    rows = [ln.split() for ln in cap.out.splitlines()
+            if ln.strip() and ln.strip()[0].isdigit() and len(ln.split()) == 6]
     assert [float(r[0]) for r in rows] == [0.1, 1.0, 50.0]
 
 
@@ -191,7 +191,7 @@ def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):
     finally:
         if p.poll() is None:
             p.kill()
-    n = int(next(l for l in out.splitlines() if "samples at 1000 Hz" in l).split()[0])
+    n = int(next(ln for ln in out.splitlines() if "samples at 1000 Hz" in ln).split()[0])
     assert "  0 DADEV windows of 600 s every 75 s" in out, err
     assert (f"  no DADEV window: the window is 600000 samples = 600 s at 1000 Hz and the run had {n:,} samples "
             f"({n / 1000:g} s); use --window-s ") in out
@@ -201,7 +201,8 @@ def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):
     (["--can", "can0", "--dbc", "fogmon/data/gyro_example.dbc", "--can-bitrate", "-1"],
      "argument --can-bitrate: must be an integer in 1000..8,000,000, got '-1'"),
     (["--serial", "/dev/null", "--baud", "0"], "argument --baud: must be an integer in 1..50,000,000, got '0'"),
-    (["--serial", "/dev/null", "--protocol", "lines", "--rate-hz", "0"], "argument --rate-hz: must be a finite number > 0"),
+    (["--serial", "/dev/null", "--protocol", "lines", "--rate-hz", "0"],
+     "argument --rate-hz: must be a finite number > 0"),
 ])
 def test_monitor_bad_port_values_are_usage_errors(capsys, argv, message):
     with pytest.raises(SystemExit) as e:

@@ -13,12 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_rerun_sink import read_scalars
 
 from fogmon.cli import main
 from fogmon.davar.batch import dadev
 from fogmon.recording import write_replay_log
-
-from test_rerun_sink import read_scalars
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -64,7 +63,7 @@ def test_replay_taus_and_default_window(small_log, capsys):
     out = capsys.readouterr().out
     # default window: 12000 // 4 = 3000 -> 2048 samples = 40.96 s, hop window / 8
     assert "DADEV windows of 40.96 s every 5.12 s" in out
-    rows = [l.split() for l in out.splitlines() if l.strip() and l.strip()[0].isdigit() and len(l.split()) == 6]
+    rows = [ln.split() for ln in out.splitlines() if ln.strip() and ln.strip()[0].isdigit() and len(ln.split()) == 6]
     assert [float(r[0]) for r in rows] == [0.1, 1.0, 10.0]
 
 
@@ -99,7 +98,8 @@ def test_replay_help(capsys):
         main(["replay", "--help"])
     assert e.value.code == 0
     out = capsys.readouterr().out
-    for opt in ("--rrd", "--connect", "--serve", "--window-s", "--hop-s", "--taus", "--realtime", "--protocol", "--dbc"):
+    for opt in ("--rrd", "--connect", "--serve", "--window-s", "--hop-s", "--taus", "--realtime", "--protocol",
+                "--dbc"):
         assert opt in out
 
 
@@ -116,7 +116,7 @@ def test_readme_default_command_end_to_end(tmp_path):
     assert logadev.shape == (38, 14)   # windows of 32768 samples every 4096; m = 1 .. 8192 (0.01 .. 81.92 s)
     # the real gyro's published character (PROVENANCE.txt): OADEV(z) 34 deg/h at 0.01 s, 34.17
     # over the whole record, 33.63 with the vehicle's sway (platform motion, 3.9 %) kept out
-    line = next(l for l in p.stdout.splitlines() if l.split()[:1] == ["0.01"])
+    line = next(ln for ln in p.stdout.splitlines() if ln.split()[:1] == ["0.01"])
     assert abs(float(line.split()[1]) - 33.63) < 0.01
     assert "platform motion: 25 span(s), 7136 samples (3.9 %) kept out" in p.stdout
 

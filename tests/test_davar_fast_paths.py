@@ -79,7 +79,7 @@ def test_frame_statistics_equal_their_definitions():
     adev, lo, hi, edf = statistics(sums, counts, m, n, alpha, 0.9)
     with np.errstate(invalid="ignore", divide="ignore"):
         want = np.sqrt(sums / (2.0 * counts))
-    e = np.array([edf_effective(edf_full(a, m, n), m, n, c) for a, c in zip(alpha, counts)])
+    e = np.array([edf_effective(edf_full(a, m, n), m, n, c) for a, c in zip(alpha, counts, strict=True)])
     np.testing.assert_allclose(adev, want, rtol=1e-15)
     np.testing.assert_allclose(edf, e, rtol=1e-12)
     ok = counts > 0
@@ -89,7 +89,7 @@ def test_frame_statistics_equal_their_definitions():
     # a fixed alpha row is the same as that row repeated per window
     one = statistics(sums, counts, m, n, alpha[0], 0.9)
     rep = statistics(sums, counts, m, n, np.tile(alpha[0], (7, 1)), 0.9)
-    for u, v in zip(one, rep):
+    for u, v in zip(one, rep, strict=True):
         np.testing.assert_array_equal(u, v)
 
 

@@ -25,7 +25,7 @@ def record():
 def stream(y, valid, hop, block):
     eng = StreamingDadev(1.0, W, taus="octave", hop_s=hop, alpha=0, reanchor=1500)
     out = [eng.advance(y[i:i + block], valid[i:i + block]) for i in range(0, len(y), block)]
-    ends, sums, counts = (np.concatenate(x) for x in zip(*out))
+    ends, sums, counts = (np.concatenate(x) for x in zip(*out, strict=True))
     with np.errstate(invalid="ignore", divide="ignore"):
         return ends, np.sqrt(sums / (2.0 * counts)), counts, eng.current()
 
@@ -97,7 +97,7 @@ def test_a_1e30_sample_no_longer_zeroes_every_later_window():
     got = [eng.push(y[:20 * W]), eng.push(y[20 * W:])]
     want = [ref.push(clean[:20 * W]), ref.push(clean[20 * W:])]
     holds = [(r.end_index >= p) & (r.end_index - W + 1 <= p) for r in got for p in (100, 25 * W)]
-    for g, r, h in zip(got, want, (holds[0] | holds[1], holds[2] | holds[3])):
+    for g, r, h in zip(got, want, (holds[0] | holds[1], holds[2] | holds[3]), strict=True):
         assert np.all(g.adev_dph[h] == np.inf) and h.sum() == (1 if g is got[0] else 4)
         assert np.max(np.abs(g.adev_dph[~h] / r.adev_dph[~h] - 1)) <= 1e-12
         assert not np.isnan(g.adev_dph).any() and not np.isnan(g.lo_dph).any()

@@ -55,9 +55,9 @@ def test_chi2_bounds_match_allantools():
     dev = np.array([1.0, 2.0, 0.5, 3.0])
     edf = np.array([3.0, 17.5, 1000.0, 17.5])
     lo, hi = chi2_bounds(dev, edf, 0.683)
-    for d, e, l, h in zip(dev, edf, lo, hi):
+    for d, e, low, h in zip(dev, edf, lo, hi, strict=True):
         rl, rh = confidence_interval(d, e, ci=0.683)
-        assert l == pytest.approx(rl, rel=1e-12) and h == pytest.approx(rh, rel=1e-12)
+        assert low == pytest.approx(rl, rel=1e-12) and h == pytest.approx(rh, rel=1e-12)
     lo95, hi95 = chi2_bounds(dev, edf, 0.95)
     assert np.all(lo95 < lo) and np.all(hi95 > hi)
 

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
 from fogmon.explain import mismatch
@@ -14,7 +15,6 @@ from fogmon.explain.explainer import Options, explain
 from fogmon.recording import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import simulate
-from test_explain_invariants import assert_invariants
 
 FS = 10.0
 NOISE = Noise(N_dpsh=0.01, B_dph=0.01)
@@ -180,6 +180,7 @@ def test_unwritable_outputs_fail_before_any_work_and_create_nothing(tmp_path, ca
 
 def test_progress_bar_on_a_terminal():
     import io
+
     from fogmon.cli.explain import StageProgress
 
     s = io.StringIO()

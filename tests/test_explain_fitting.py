@@ -6,8 +6,16 @@ import pytest
 
 from fogmon.davar.theory import adev_model
 from fogmon.explain import detectors
-from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, calibrate_psd, markov_psd,
-                                    model_psd, noise_psd, rfft_omega)
+from fogmon.explain.fitting import (
+    BinnedPeriodogram,
+    Whittle,
+    avar1_of_psd,
+    calibrate_psd,
+    markov_psd,
+    model_psd,
+    noise_psd,
+    rfft_omega,
+)
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.noise import ar1_adev_exact
 

@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 from scipy.signal import welch
+from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
 from fogmon.explain import catalogue
@@ -14,7 +15,6 @@ from fogmon.explain.explainer import _whittle, stochastic_part
 from fogmon.recording import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import iter_simulate, simulate
-from test_explain_invariants import assert_invariants
 
 LINES = Effect("vibration_lines", {"freq_hz": [3.0, 11.0], "sigma_dph": [1.5, 1.2], "bandwidth_hz": [0.05, 0.2]})
 
@@ -69,7 +69,8 @@ def test_two_narrowband_lines_are_fitted_and_removed(tmp_path):
     assert [e["kind"] for e in rep["effects"]] == ["vibration_lines"]
     p = rep["effects"][0]["params"]
     assert len(p["freq_hz"]) == 2
-    for f, s, bw, tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], *LINES.params.values()):
+    for f, s, bw, tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], *LINES.params.values(),
+                                    strict=True):
         assert abs(f - tf) <= tb and s == pytest.approx(ts, rel=0.2) and bw == pytest.approx(tb, rel=0.5)
     assert [e.kind for e in fitted.effects] == ["vibration_lines"] and rep["score_after"] <= 1.5
     f, p_raw = welch(raw.rate_dph, fs=50.0, nperseg=4096)

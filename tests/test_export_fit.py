@@ -108,7 +108,7 @@ def test_fit_of_a_curve_with_its_term_counts_equals_the_fit_of_the_record(record
     _, a = record
     curve = tmp_path / "curve.csv"
     curve.write_text("# from another tool\r\ntau_s,adev_dph,n_terms\r\n" + "".join(
-        f"{float(t)!r},{float(d)!r},{int(k)}\r\n" for t, d, k in zip(a.tau_s, a.adev_dph, a.n_terms)))
+        f"{float(t)!r},{float(d)!r},{int(k)}\r\n" for t, d, k in zip(a.tau_s, a.adev_dph, a.n_terms, strict=True)))
     res, said = fogmon.adev_from_curve(a.tau_s, a.adev_dph, rate_hz=100.0, n_terms=a.n_terms)
     assert said == [] and res.n_samples == a.n_samples
     direct, from_curve = fogmon.fit_noise(a), fogmon.fit_noise(res)
@@ -129,7 +129,8 @@ def test_fit_with_stated_edf_and_without_either_says_what_it_assumed(record, tmp
     np.testing.assert_allclose(res.n_terms, a.n_samples - 2 * a.m + 1, rtol=1e-12)  # white EDF = a gap-free record
     assert res.edf is not None and np.all(res.edf == white)
     curve = tmp_path / "bare.csv"
-    curve.write_text("tau_s,adev_dph\n" + "".join(f"{float(t)!r},{float(d)!r}\n" for t, d in zip(a.tau_s, a.adev_dph)))
+    curve.write_text("tau_s,adev_dph\n" + "".join(f"{float(t)!r},{float(d)!r}\n"
+                                                  for t, d in zip(a.tau_s, a.adev_dph, strict=True)))
     assert main(["fit", str(curve)]) == 0
     text = capsys.readouterr().out
     assert "assumed: sample rate 100 Hz (1 / the first tau" in text
@@ -167,7 +168,8 @@ def test_explain_exports_the_fitted_models_noise(tmp_path, capsys):
     write_replay_log(rec, np.arange(n) / fs, 60 * 0.1 * math.sqrt(fs) * rng.standard_normal(n),
                      meta={"sample_rate_hz": fs})
     model = tmp_path / "m.toml"
-    model.write_text("[sensor]\nsample_rate_hz = 10.0\n\n[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.1\nB_dph = 0.0\nK_dphsh = 0.02\nR_dphh = 0.0\n")
+    model.write_text("[sensor]\nsample_rate_hz = 10.0\n\n"
+                     "[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.1\nB_dph = 0.0\nK_dphsh = 0.02\nR_dphh = 0.0\n")
     out = tmp_path / "imu.yaml"
     assert main(["explain", str(rec), "--model", str(model), "--report", str(tmp_path / "r.json"), "--bootstrap", "8",
                  "--max-effects", "0", "--quiet", "--export", "kalibr", str(out)]) == 0

@@ -1,4 +1,6 @@
 """Coefficient-jump events: judged against the run's own scatter, not the fit's intervals."""
+from itertools import pairwise
+
 import numpy as np
 
 from fogmon.davar.jumps import JUMP_MIN_INDEPENDENT, JumpDetector, jump_threshold
@@ -74,4 +76,4 @@ def test_no_event_before_the_run_knows_its_own_scatter():
 def test_threshold_falls_to_the_gaussian_one_with_many_pairs():
     assert jump_threshold(JUMP_MIN_INDEPENDENT - 1) == np.inf
     th = [jump_threshold(n) for n in (JUMP_MIN_INDEPENDENT, 20, 100, 10_000)]
-    assert all(a > b for a, b in zip(th, th[1:])) and 5.0 < th[-1] < 5.05
+    assert all(a > b for a, b in pairwise(th)) and 5.0 < th[-1] < 5.05

@@ -13,8 +13,7 @@ from fogmon.davar.batch import oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import tau_grid
 from fogmon.errors import FogmonError
-from fogmon.modelcheck import AuxWindows, ModelBand, ModelWatch
-from fogmon.modelcheck import cache
+from fogmon.modelcheck import AuxWindows, ModelBand, ModelWatch, cache
 from fogmon.modelcheck.band import band_effects, window_log_avar
 from fogmon.modelcheck.watch import stated_rate
 from fogmon.sim.model import Effect, Noise, SensorModel

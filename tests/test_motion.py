@@ -10,7 +10,10 @@ from fogmon.sim.simulate import simulate
 FS = 100.0
 
 
-def stationary(seed, duration_s=1800.0, noise=Noise(Q_arcsec=0.5, N_dpsh=0.05, B_dph=0.2, K_dphsh=0.5, R_dphh=2.0)):
+STATIONARY_NOISE = Noise(Q_arcsec=0.5, N_dpsh=0.05, B_dph=0.2, K_dphsh=0.5, R_dphh=2.0)
+
+
+def stationary(seed, duration_s=1800.0, noise=STATIONARY_NOISE):
     rec = simulate(SensorModel(FS, 12.0, noise), duration_s=duration_s, seed=seed)
     return rec.t_s, rec.rate_dph
 

@@ -47,7 +47,7 @@ def test_convert_csv_gives_the_same_blocks_and_counters(tmp_path, capsys):
     assert (a.n_samples, a.t_first_s, a.t_last_s, a.aux_names) == (b.n_samples, b.t_first_s, b.t_last_s, b.aux_names)
     ba, bb = _blocks(a), _blocks(b)
     assert [len(x) for x in ba] == [len(x) for x in bb]
-    for x, y in zip(ba, bb):
+    for x, y in zip(ba, bb, strict=True):
         np.testing.assert_array_equal(x.t_s, y.t_s)
         np.testing.assert_array_equal(x.rate_dph, y.rate_dph)
         np.testing.assert_array_equal(x.valid, y.valid)

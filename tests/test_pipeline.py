@@ -6,17 +6,16 @@ import io
 
 import numpy as np
 import pytest
-
 from doubles import Collect, ListSource, white_noise as _white
 
 from fogmon.block import Block, Event
+from fogmon.cli.pipeline_options import parse_taus
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
-from fogmon.cli.pipeline_options import parse_taus
 from fogmon.pipeline import PipelineConfig, default_window_s, run_pipeline, slice_block
 from fogmon.sinks.base import COEFFICIENTS
-from fogmon.sources.pacing import Pacer
 from fogmon.sinks.console import ConsoleSink, format_summary
+from fogmon.sources.pacing import Pacer
 
 
 def _args(**kw):
@@ -158,7 +157,8 @@ def test_model_check_names_the_worst_tau():
 
     a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]))
     good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]), misfit=np.zeros(3, bool))
-    assert model_check(a, good) == "  model check: the fitted model is within a factor 1.01 of the measured ADEV at every tau"
+    assert model_check(a, good) == ("  model check: the fitted model is within a factor 1.01 of the measured ADEV "
+                                    "at every tau")
     bad = SimpleNamespace(model_adev_dph=lambda tau: np.full(3, 1.0), misfit=np.zeros(3, bool))
     msg = model_check(a, bad)
     assert msg.startswith("  model check: WARNING the fitted model is 5x above the measured ADEV at tau 100 s")

@@ -13,6 +13,7 @@ import re
 
 import numpy as np
 import pytest
+from test_rerun_sink import read_scalars, read_texts
 
 from fogmon.cli import main
 from fogmon.errors import ERROR_COUNTERS, FogmonError
@@ -22,8 +23,6 @@ from fogmon.sources.codecs import OPTION_KEYS, codec_from_options, make_codec
 from fogmon.sources.grid import ErrorEvents, GridAssembler
 from fogmon.sources.kvh import encode_frame
 from fogmon.sources.replay import ReplayLogSource, open_raw_capture
-
-from test_rerun_sink import read_scalars, read_texts
 
 RAD_TO_DPH = 180 / math.pi * 3600
 
@@ -65,7 +64,8 @@ def test_device_ranges():
 def test_kvh_crc_valid_garbage_floats_are_invalid_and_counted(fmt):
     gz = [1e-6, math.nan, 2e-6, math.inf, -math.inf, 1e30, 3e-6, 1e30]
     status = [0x77] * 7 + [0x33]                   # the last one the device itself flagged invalid (z bit 2)
-    data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30) for k, (g, s) in enumerate(zip(gz, status)))
+    data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30)
+                    for k, (g, s) in enumerate(zip(gz, status, strict=True)))
     c = make_codec(f"kvh-{fmt}", kvh_rot="delta", kvh_units="rad")
     events = ErrorEvents(c.counters)
     f = c.feed(data)
@@ -146,7 +146,7 @@ def kvh_capture(path, gz, status=None, sidecar=None):
     """A raw KVH format A capture (delta rad, 1 kHz) of frames with z = gz[k]."""
     status = status or [0x77] * len(gz)
     path.write_bytes(b"".join(encode_frame("a", k % 128, (0.0, 0.0, g), status=s, temp_c=30)
-                              for k, (g, s) in enumerate(zip(gz, status))))
+                              for k, (g, s) in enumerate(zip(gz, status, strict=True))))
     if sidecar is not None:
         path.with_name(path.name + ".json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "serial",
                                                                   "protocol": "kvh-a", **sidecar}))
@@ -216,7 +216,8 @@ def test_replay_log_source_gates_each_block(tmp_path):
 # ----------------------------------------------------------------------------- end to end
 def replay(capsys, path, tmp_path, name, *extra):
     out = tmp_path / f"{name}.rrd"
-    rc = main(["replay", str(path), "--rrd", str(out), "--window-s", "20.48", "--hop-s", "5.12", "--no-progress", *extra])
+    rc = main(["replay", str(path), "--rrd", str(out), "--window-s", "20.48", "--hop-s", "5.12", "--no-progress",
+               *extra])
     text = capsys.readouterr()
     return rc, text.out, text.err, out
 
@@ -290,7 +291,8 @@ def test_kvh_capture_with_garbage_floats(tmp_path, capsys):
     for k, v in ((5000, math.nan), (9000, math.inf), (15000, 1e30)):
         bad[k] = v
         status[k] = 0x33                            # in the reference the device flags the sample invalid
-    check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad), kvh_capture(tmp_path / "ref.bin", gz, status),
+    check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad),
+                   kvh_capture(tmp_path / "ref.bin", gz, status),
                    3, "--protocol", "kvh-a", "--rate-hz", str(fs))
 
 
@@ -298,8 +300,9 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
     """What `fogmon monitor --max-rate-dph` stores: the archive's raw-capture sidecar holds
     the gate in force, so replaying the capture gates the same samples."""
     import argparse
-    from fogmon.sinks.archive import Archive
+
     from fogmon.cli.source_options import add_source_arguments, source_options
+    from fogmon.sinks.archive import Archive
     from fogmon.sources.open import open_live_source
 
     parser = argparse.ArgumentParser()
@@ -318,9 +321,10 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
 
 
 def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decoding_again(tmp_path):
+    from doubles import args_for
+
     from fogmon.sources.open import open_replay_source
     from fogmon.sources.replay import ReplayLogSet
-    from doubles import args_for
 
     t, r, fs = noisy(n=200)
     for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):

@@ -268,9 +268,10 @@ def test_a_missing_extra_names_it(tmp_path, capsys, monkeypatch):
 def test_mdf4_can_bus_logging_with_a_dbc_replays_like_the_csv(signal, tmp_path):
     """Raw CAN frames in an MDF4 bus log (python-can's MF4 writer, asammdf underneath),
     decoded with the example DBC: the rate signal is 1e-6 deg/s per bit."""
+    from importlib.resources import files
+
     import can
     import cantools
-    from importlib.resources import files
     dbc = str(files("fogmon") / "data" / "gyro_example.dbc")
     db = cantools.database.load_file(dbc)
     msg = db.get_message_by_name("GYRO_RATE")

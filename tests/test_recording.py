@@ -165,7 +165,8 @@ def test_header_only_file_is_a_one_line_error_without_warnings(tmp_path, recwarn
 
 def test_rate_without_metadata_from_the_first_samples(tmp_path):
     from fogmon.recording import RATE_SAMPLES
-    t = np.concatenate([np.arange(RATE_SAMPLES + 1) / 100.0, RATE_SAMPLES / 100.0 + 1 + np.arange(RATE_SAMPLES * 2) / 50.0])
+    t = np.concatenate([np.arange(RATE_SAMPLES + 1) / 100.0,
+                        RATE_SAMPLES / 100.0 + 1 + np.arange(RATE_SAMPLES * 2) / 50.0])
     p = tmp_path / "x.csv"
     write_replay_log(p, t, np.zeros(len(t)))
     assert read_replay_log(p).sample_rate_hz == pytest.approx(100.0)   # not the median of the whole file (50 Hz)

@@ -14,20 +14,16 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
+from doubles import Collect, ListSource, white_noise as _white
 from rerun.chunk import RrdReader
 
 from fogmon.block import Event
 from fogmon.davar.batch import dadev
 from fogmon.errors import FogmonError
-from fogmon.pipeline import run_pipeline
+from fogmon.pipeline import PipelineConfig as _args, run_pipeline
 from fogmon.sinks.base import COEFFICIENTS, Summary
 from fogmon.sinks.console import format_summary
-from fogmon.sinks.rerun_sink import (RerunSink, _Decimator, model_span, start_grpc_server,
-                                     stop_process_group)
-
-from doubles import Collect, ListSource, white_noise as _white
-
-from fogmon.pipeline import PipelineConfig as _args
+from fogmon.sinks.rerun_sink import RerunSink, _Decimator, model_span, start_grpc_server, stop_process_group
 
 
 def read_scalars(path, entity):
@@ -51,7 +47,7 @@ def read_column(path, entity, column):
         if column not in rb.schema.names:
             continue
         ts = rb.column("time").cast(pa.int64()).to_numpy() / 1e9 if "time" in rb.schema.names else [None] * rb.num_rows
-        out += list(zip(ts, rb.column(column).to_pylist()))
+        out += list(zip(ts, rb.column(column).to_pylist(), strict=True))
     return out
 
 
@@ -102,7 +98,7 @@ def test_rrd_dadev_and_coefficients_equal_the_engine(run_rrd):
     np.testing.assert_allclose(adev, ref.adev_dph, rtol=1e-9)
     np.testing.assert_allclose(t_end, 3.0 + ref.end_index / 100.0, atol=1e-9)
     for name in COEFFICIENTS:
-        v, lo, hi, ok = (_cat(fr, lambda d, f, te, a=a: np.asarray(getattr(getattr(f, name), a)))
+        v, lo, hi, ok = (_cat(fr, lambda d, f, te, a=a, name=name: np.asarray(getattr(getattr(f, name), a)))
                          for a in ("value", "lo", "hi", "identifiable"))
         ok = ok.astype(bool) & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
         tc, vals = read_scalars(path, f"/coef/{name}")
@@ -123,7 +119,7 @@ def test_rrd_raw_rate_aux_and_events(run_rrd):
     ta, tv = read_scalars(path, "/aux/temp_c")
     np.testing.assert_array_equal(tv[:, 0], temp)
     texts = read_texts(path, "/events")
-    assert any("crc_error: frame 42: bad CRC" == x for x in texts)
+    assert any(x == "crc_error: frame 42: bad CRC" for x in texts)
 
 
 def test_rrd_coefficient_upper_limits_where_not_identifiable(run_rrd):
@@ -134,7 +130,7 @@ def test_rrd_coefficient_upper_limits_where_not_identifiable(run_rrd):
     t_end = _cat(fr, lambda d, f, te: te)
     n_limits = 0
     for name in COEFFICIENTS:
-        hi, ident = (_cat(fr, lambda d, f, te, a=a: np.asarray(getattr(getattr(f, name), a)))
+        hi, ident = (_cat(fr, lambda d, f, te, a=a, name=name: np.asarray(getattr(getattr(f, name), a)))
                      for a in ("hi", "identifiable"))
         up = ~ident.astype(bool) & np.isfinite(hi)
         tu, vals = read_scalars(path, f"/coef/{name}/upper_limit")
@@ -304,12 +300,12 @@ def test_the_server_dies_with_fogmon_even_on_sigkill(process_groups):
     process_groups.append(parent)
     server_pid = int(parent.stdout.readline())
     assert listening(port) == {"127.0.0.1"}
-    assert open(f"/proc/{server_pid}/cmdline", "rb").read().split(b"\0")[1] == b"--serve-grpc"
+    assert Path(f"/proc/{server_pid}/cmdline").read_bytes().split(b"\0")[1] == b"--serve-grpc"
     parent.kill()
     parent.wait()
     wait_until(lambda: not listening(port), "the server outlived its parent")
     wait_until(lambda: not os.path.exists(f"/proc/{server_pid}") or
-               open(f"/proc/{server_pid}/stat").read().split()[2] == "Z", "the server process is still there")
+               Path(f"/proc/{server_pid}/stat").read_text().split()[2] == "Z", "the server process is still there")
 
 
 def test_no_rrd_is_left_when_no_sample_came(tmp_path):
@@ -340,7 +336,7 @@ def test_rotated_rrd_pieces_are_complete_recordings_that_join(tmp_path):
         td, _ = read_scalars(piece, "/dadev/log10_adev_dph")
         assert len(td) and np.all((td >= 100 * k) & (td < 100 * (k + 1)))     # windows ending in it
         assert list(RrdReader(piece).stream().filter(content="/session", is_static=True))   # its own static data
-    joined = [np.concatenate(x) for x in zip(*(read_scalars(p, "/dadev/log10_adev_dph") for p in pieces))]
+    joined = [np.concatenate(x) for x in zip(*(read_scalars(p, "/dadev/log10_adev_dph") for p in pieces), strict=True)]
     t1, v1 = read_scalars(one, "/dadev/log10_adev_dph")
     np.testing.assert_array_equal(joined[0], t1)
     np.testing.assert_allclose(joined[1], v1, rtol=1e-12)       # blocks cut at the seams: same windows

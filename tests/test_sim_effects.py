@@ -159,7 +159,8 @@ def test_warm_up_signature_is_a_transient_hump_seen_only_early():
     assert d.adev_dph[0, j] > 10 * white and np.all(d.adev_dph[2:, j] < 1.3 * white)
 
 
-@pytest.mark.parametrize("kind,aux_name,gain", [("vibration_noise", "vib_g", 0.02), ("temperature_noise", "temp_c", 0.002)])
+@pytest.mark.parametrize("kind,aux_name,gain",
+                         [("vibration_noise", "vib_g", 0.02), ("temperature_noise", "temp_c", 0.002)])
 def test_level_noise_raises_white_line_where_the_aux_channel_is_high(kind, aux_name, gain):
     """N0 = 0.01 deg/sqrt(h); aux 0 in the first half, 5 (g or degC above t_ref) in the
     second: the DADEV white line moves from 0.6/sqrt(tau) to 60 (N0 + 5 gain)/sqrt(tau)."""

@@ -9,8 +9,17 @@ import pytest
 
 from fogmon.cli import main
 from fogmon.errors import FogmonError
-from fogmon.sim.model import (EFFECT_KINDS, Effect, Noise, SensorModel, dumps_model, load_model,
-                              save_model, validate_effect, validate_model)
+from fogmon.sim.model import (
+    EFFECT_KINDS,
+    Effect,
+    Noise,
+    SensorModel,
+    dumps_model,
+    load_model,
+    save_model,
+    validate_effect,
+    validate_model,
+)
 
 DATA = Path(__file__).resolve().parents[1] / "fogmon" / "data"
 
@@ -107,7 +116,8 @@ BAD = {
     "missing rate": ("[sensor]\nbias_dph = 1\n" + NOISE, ["bad.toml", "[sensor]", "sample_rate_hz"]),
     "unknown table": (S100 + NOISE + "[noize]\nN_dpsh = 1\n", ["bad.toml", "'noize'", "[noise]"]),
     "not toml": ('[sensor\nsample_rate_hz = 100\n', ["bad.toml", "not valid TOML", "line 1"]),
-    "string number": ('[sensor]\nsample_rate_hz = "100"\n' + NOISE, ["bad.toml", "sample_rate_hz", "expected a number"]),
+    "string number": ('[sensor]\nsample_rate_hz = "100"\n' + NOISE,
+                      ["bad.toml", "sample_rate_hz", "expected a number"]),
     "glitch lengths": (S100 + NOISE + '[[effect]]\nkind = "glitches"\ntimes_s = [1.0, 2.0]\namplitudes_dph = [1.0]\n',
                        ["bad.toml", "glitches", "same length"]),
     "bandwidth both": (S100 + NOISE + '[[effect]]\nkind = "bandwidth"\ncutoff_hz = 10.0\norder = 2\n'
@@ -241,7 +251,8 @@ def _effect_strategy():
         if kind == "glitches":
             return st.integers(0, 4).flatmap(lambda n: st.builds(
                 lambda ts, am: Effect(kind, {"times_s": ts, "amplitudes_dph": am, "width_s": 0.0}),
-                st.lists(st.floats(0, 1e6), min_size=n, max_size=n), st.lists(st.floats(-1e3, 1e3), min_size=n, max_size=n)))
+                st.lists(st.floats(0, 1e6), min_size=n, max_size=n),
+                st.lists(st.floats(-1e3, 1e3), min_size=n, max_size=n)))
         if kind == "outliers":
             return st.builds(
                 lambda r, q, f, c, name: Effect(kind, {"rate_per_h": r, "amplitude_quantiles_dph": sorted(q),
@@ -261,8 +272,7 @@ def _effect_strategy():
 def test_round_trip_property(tmp_path_factory):
     """Any valid model (random effects of every kind, arbitrary finite floats) saved by
     fogmon loads back identically."""
-    from hypothesis import given, settings
-    from hypothesis import strategies as st
+    from hypothesis import given, settings, strategies as st
 
     pos = st.floats(min_value=0.0, max_value=1e6, allow_nan=False)
 
@@ -280,13 +290,15 @@ def test_round_trip_property(tmp_path_factory):
 
 def test_noise_kind_is_refused_in_a_model_file_and_lines_are_checked(tmp_path):
     p = tmp_path / "m.toml"
-    head = "[sensor]\nsample_rate_hz = 20.0\n[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.01\nB_dph = 0.0\nK_dphsh = 0.0\nR_dphh = 0.0\n"
+    head = ("[sensor]\nsample_rate_hz = 20.0\n"
+            "[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.01\nB_dph = 0.0\nK_dphsh = 0.0\nR_dphh = 0.0\n")
     p.write_text(head + '[[effect]]\nkind = "noise"\nN_dpsh = 0.04\n')
     with pytest.raises(FogmonError, match=r"m.toml.*noise.*\[noise\] table"):
         load_model(p)
-    p.write_text(head + '[[effect]]\nkind = "vibration_lines"\nfreq_hz = [9.99]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1]\n')
+    lines = '[[effect]]\nkind = "vibration_lines"\n'
+    p.write_text(head + lines + 'freq_hz = [9.99]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1]\n')
     with pytest.raises(FogmonError, match=r"line 1 at 9.99 Hz.*Nyquist frequency 10 Hz"):
         load_model(p)
-    p.write_text(head + '[[effect]]\nkind = "vibration_lines"\nfreq_hz = [2.0, 3.0]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1, 0.1]\n')
+    p.write_text(head + lines + 'freq_hz = [2.0, 3.0]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1, 0.1]\n')
     with pytest.raises(FogmonError, match="one entry per line"):
         load_model(p)

@@ -13,8 +13,16 @@ import pytest
 
 from fogmon.davar.theory import markov_adev
 from fogmon.sim.model import Effect, Noise, SensorModel
-from fogmon.sim.noise import (FLICKER_FLOOR, Flicker, GaussMarkov, RandomWalk, WhiteAngle, WhiteRate,
-                              ar1_adev_exact, flicker_adev_exact)
+from fogmon.sim.noise import (
+    FLICKER_FLOOR,
+    Flicker,
+    GaussMarkov,
+    RandomWalk,
+    WhiteAngle,
+    WhiteRate,
+    ar1_adev_exact,
+    flicker_adev_exact,
+)
 from fogmon.sim.simulate import iter_simulate, simulate
 
 ROOT = Path(__file__).resolve().parents[1]

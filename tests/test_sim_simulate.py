@@ -13,7 +13,8 @@ from fogmon.sim.simulate import iter_simulate, simulate
 from fogmon.sources.simulated import SimulatedSource
 
 MWD = SensorModel(100.0, 0.5, Noise(N_dpsh=0.02, B_dph=0.05), [
-    Effect("thermal_drift", {"k0_poly_dph": [0.0, 0.002], "k1_pos": 40.0, "k1_neg": 25.0, "k2_pos": 0.0, "k2_neg": 0.0}),
+    Effect("thermal_drift",
+           {"k0_poly_dph": [0.0, 0.002], "k1_pos": 40.0, "k1_neg": 25.0, "k2_pos": 0.0, "k2_neg": 0.0}),
     Effect("vibration_noise", {"n_gain_dpsh_per_g": 0.005}),
     Effect("scale_factor", {"ppm": 30.0, "asym_ppm": 5.0}),
 ])
@@ -119,7 +120,7 @@ def test_simulated_source_endless_until_closed_and_paced():
         now[0] += d
 
     src._pacer = Pacer(10.0, clock=lambda: now[0], sleep=sleep)
-    for i, b in enumerate(src.blocks()):
+    for i, _ in enumerate(src.blocks()):
         if i == 5:
             src.close()
     assert src.counters["blocks"] == 6 and src.counters["samples"] == 6 * 100

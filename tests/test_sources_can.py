@@ -10,13 +10,12 @@ from importlib import resources
 import can
 import numpy as np
 import pytest
+from doubles import args_for
 from hypothesis import given, settings, strategies as st
 
-from doubles import args_for
-
 from fogmon.errors import FogmonError
-from fogmon.recording import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
 from fogmon.sources.open import open_live_source, open_replay_source
@@ -35,20 +34,26 @@ def gyro_msgs(ks, t0=1_000_000.0, invalid=(), extra=True):
                          "valid": int(k not in invalid)})
         out.append(can.Message(timestamp=t0 + k / FS, arbitration_id=0x100, is_extended_id=False, data=data))
         if extra and k == 3:
-            out.append(can.Message(timestamp=t0 + k / FS + 1e-3, arbitration_id=0x200, is_extended_id=False, data=b"\1\2"))
-            out.append(can.Message(timestamp=t0 + k / FS + 2e-3, arbitration_id=0x100, is_extended_id=False, data=b"\1\2\3"))
+            out.append(can.Message(timestamp=t0 + k / FS + 1e-3, arbitration_id=0x200, is_extended_id=False,
+                                   data=b"\1\2"))
+            out.append(can.Message(timestamp=t0 + k / FS + 2e-3, arbitration_id=0x100, is_extended_id=False,
+                                   data=b"\1\2\3"))
     return out
 
 
 def gather(source):
     bl = list(source.blocks())
-    cat = lambda f: np.concatenate([f(b) for b in bl])
+
+    def cat(f):
+        return np.concatenate([f(b) for b in bl])
+
     return bl, cat(lambda b: b.t_s), cat(lambda b: b.rate_dph), cat(lambda b: b.valid), cat(lambda b: b.aux["temp_c"])
 
 
 def test_decoder_defaults_from_dbc():
     d = CanDecoder(load_dbc(DBC))
-    assert (d.rate_signal, d.temp_signal, d.counter_signal, d.valid_signal) == ("rate", "temperature", "counter", "valid")
+    signals = (d.rate_signal, d.temp_signal, d.counter_signal, d.valid_signal)
+    assert signals == ("rate", "temperature", "counter", "valid")
     assert d.rate_hz == FS and d.seq_modulus == 16 and d.rate_unit == "deg/s"
 
 
@@ -217,7 +222,8 @@ class FlakyBus:
 def test_can_adapter_lost_and_back_outage_measured_by_timestamps():
     src = CanSource("x", "virtual", load_dbc(DBC), backoff_s=(0.01, 0.05))
     # frames 0..99, adapter lost for 1.5 s (frames 100..249 never seen), frames 250..299
-    buses = [FlakyBus(gyro_msgs(range(100), extra=False), True), FlakyBus(gyro_msgs(range(250, 300), extra=False), False)]
+    buses = [FlakyBus(gyro_msgs(range(100), extra=False), True),
+             FlakyBus(gyro_msgs(range(250, 300), extra=False), False)]
     attempts = []
 
     def opener():

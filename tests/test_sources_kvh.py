@@ -7,11 +7,12 @@ import struct
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
-
-from fogmon.sources.kvh import FORMATS, KvhCodec, crc32_mpeg2, encode_frame
 from sources_fake_device import frame_k, stream
 
-VECTOR = bytes.fromhex("fe81ff55 37a96a6e 38586c1f b75bf862 bf803e78 bb650d28 3b0a37ac 77 3d 0028 4bfa34d8".replace(" ", ""))
+from fogmon.sources.kvh import FORMATS, KvhCodec, crc32_mpeg2, encode_frame
+
+VECTOR = bytes.fromhex("fe81ff55 37a96a6e 38586c1f b75bf862 bf803e78 bb650d28 3b0a37ac 77 3d 0028 4bfa34d8"
+                       .replace(" ", ""))
 
 
 def crc_bitwise(data: bytes) -> int:

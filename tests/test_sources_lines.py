@@ -80,6 +80,6 @@ def test_property_dsp3000_roundtrip_any_chunking(samples, chunk):
     rate = np.concatenate([o.rate_dph for o in out]) if out else np.zeros(0)
     dph = [float(f"{v:.6f}") * 3600 for v, _ in samples]
     plausible = [abs(r) <= KVH_DSP3000_MAX_ABS_DPH for r in dph]     # beyond the gate: NaN, counted if flagged valid
-    np.testing.assert_allclose(rate, [r if p else np.nan for r, p in zip(dph, plausible)])
+    np.testing.assert_allclose(rate, [r if p else np.nan for r, p in zip(dph, plausible, strict=True)])
     assert c.counters["bad_lines"] == 0
-    assert c.counters["implausible_samples"] == sum(ok and not p for (_, ok), p in zip(samples, plausible))
+    assert c.counters["implausible_samples"] == sum(ok and not p for (_, ok), p in zip(samples, plausible, strict=True))

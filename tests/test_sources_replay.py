@@ -5,15 +5,14 @@ import json
 
 import numpy as np
 import pytest
-
 from doubles import args_for
+from sources_fake_device import stream
 
 from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.recording import write_replay_log
 from fogmon.sources.open import open_replay_source
 from fogmon.sources.replay import ReplayLogSource
-from sources_fake_device import stream
 
 HEAD = "# fogmon replay log v1\n# sample_rate_hz: 10\ntime_s,rate_dph,temp_c\n"
 
@@ -38,7 +37,8 @@ def test_replay_log_grid_gaps_and_blocks(tmp_path):
     keep = np.ones(len(t), bool)
     keep[[5, 6, 7, 9000]] = False
     p = tmp_path / "r.csv"
-    write_replay_log(p, t[keep], np.arange(len(t))[keep] * 1.0, {"temp_c": np.ones(keep.sum())}, {"sample_rate_hz": 100})
+    write_replay_log(p, t[keep], np.arange(len(t))[keep] * 1.0, {"temp_c": np.ones(keep.sum())},
+                     {"sample_rate_hz": 100})
     src = open_replay_source(str(p), args_for())
     assert isinstance(src, ReplayLogSource)
     bl = list(src.blocks())
@@ -69,7 +69,8 @@ def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
     # a sidecar names the protocol; the command line still overrides it
     (tmp_path / "cap.bin.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "serial",
                                                        "protocol": "kvh-a", "kvh_rot": "rate", "kvh_units": "deg",
-                                                       "rate_hz": 200, "breaks": [{"offset": 36 * 50, "missing_est": 130.0}]}))
+                                                       "rate_hz": 200,
+                                                       "breaks": [{"offset": 36 * 50, "missing_est": 130.0}]}))
     src = open_replay_source(str(p), args_for())
     assert sum(len(b) for b in src.blocks()) == 300 + 128     # the outage is put back where it was
     src = open_replay_source(str(p), args_for("--rate-hz", "400"))

@@ -12,15 +12,15 @@ import time
 import numpy as np
 import pytest
 import serial
+from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
-from fogmon.recording import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
+from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Sink
 from fogmon.sources.kvh import KvhCodec
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
-from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -141,7 +141,8 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
     dev.close()
     rec = read_replay_log(archive.replay_log_path)
     ks = np.rint(rec.rate_dph / 3600).astype(int)
-    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for e in events])                         # every sample sent while connected
+    # every sample sent while connected
+    assert list(ks) == dev.sent, (counters, [(e.t_s, e.kind, e.message) for e in events])
     k0 = dev.sent[0]
     assert np.array_equal(np.rint(rec.t_s * FS).astype(int), ks - k0)   # outage kept as a gap of the right length
     assert counters["disconnects"] == 1 and counters["reconnects"] == 1
@@ -244,10 +245,9 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     sending, with CRC failures, drops and garbage before and after the cut: every counter
     equals the totals its events carry and what the archive holds, and the raw capture
     decodes to exactly samples.csv with the same counters."""
-    from fogmon.pipeline import run_pipeline
+    from fogmon.pipeline import PipelineConfig as _args, run_pipeline
     from fogmon.sinks.base import Sink
     from fogmon.sources.replay import open_raw_capture
-    from fogmon.pipeline import PipelineConfig as _args
 
     faults = {k: "corrupt" for k in (10, 11, 150, 151, 152, 420, 777, 799, 800, 830, 900)}
     faults.update({k: "drop" for k in (50, 51, 500, 798, 850)})

@@ -20,10 +20,9 @@ def test_a_stop_signal_interrupts_like_ctrl_c(sig, name, code):
 def test_a_shielded_section_finishes_first_and_closing_only_notes():
     done = []
     with stopping.installed():
-        with pytest.raises(KeyboardInterrupt):
-            with stopping.shielded():
-                signal.raise_signal(signal.SIGTERM)
-                done.append("rest of the block")
+        with pytest.raises(KeyboardInterrupt), stopping.shielded():
+            signal.raise_signal(signal.SIGTERM)
+            done.append("rest of the block")
         assert done == ["rest of the block"]
     with stopping.installed():
         stopping.closing()

@@ -37,7 +37,7 @@ HUGE_VALUES = (1e30, 1e160, 1e300, np.inf, np.finfo(float).max, -1e300, 3e7)
 def _stream(y, w, hop, block):
     eng = StreamingDadev(1.0, w, taus="octave", hop_s=hop, alpha=0, reanchor=w)
     out = [eng.advance(y[i:i + block]) for i in range(0, len(y), block)]
-    ends, sums, counts = (np.concatenate(x) for x in zip(*out))
+    ends, sums, counts = (np.concatenate(x) for x in zip(*out, strict=True))
     with np.errstate(invalid="ignore", divide="ignore"):
         return ends, np.sqrt(sums / (2.0 * counts)), counts
 

@@ -120,7 +120,7 @@ def coverage(records: int, jobs: int) -> int:
     print(f"{'term':9s} {'level':>6s} {'truth':>10s} {'ident%':>7s} {'cover%':>7s} {'+-':>4s} "
           f"{'false%':>7s} {'up/truth':>9s} {'up<est':>6s}")
     ok = True
-    for (name, level, _), res in zip(cases, parts):
+    for (name, level, _), res in zip(cases, parts, strict=True):
         truth = coverage_truth(name, level, n)[name]
         ident, upper, value = res.T
         cover = 100 * np.mean(upper >= truth)

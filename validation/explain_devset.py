@@ -237,11 +237,13 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
             checks = [("period", _rel(q["period_s"], p["period_s"]), 0.02),
                       ("amp", _rel(q["amplitude_dph"], p["amplitude_dph"]), 0.15)]
         elif e.kind == "bias_step":
-            checks = [("t/dur", abs(q["t_s"] - p["t_s"]) / dur, 0.02), ("step", _rel(q["step_dph"], p["step_dph"]), 0.2)]
+            checks = [("t/dur", abs(q["t_s"] - p["t_s"]) / dur, 0.02),
+                      ("step", _rel(q["step_dph"], p["step_dph"]), 0.2)]
         elif e.kind == "rate_ramp":
             checks = [("slope", _rel(q["slope_dphh"], p["slope_dphh"]), 0.2)]
         elif e.kind == "warm_up":
-            checks = [("amp", _rel(q["amplitude_dph"], p["amplitude_dph"]), 0.2), ("tau", _rel(q["tau_s"], p["tau_s"]), 0.3)]
+            checks = [("amp", _rel(q["amplitude_dph"], p["amplitude_dph"]), 0.2),
+                      ("tau", _rel(q["tau_s"], p["tau_s"]), 0.3)]
         elif e.kind == "thermal_drift":
             t = rec.t_s
             true = fx.mean_rate_dph(validate_effect(e.kind, p), t, rec.aux, case.fs_hz)
@@ -250,13 +252,14 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
             checks = [("1/ptp_reduction", 1.0 / red, 0.2)]
         elif e.kind == "scale_factor":
             den = abs(p["ppm"]) + abs(p["asym_ppm"])
-            checks = [("ppm", abs(q["ppm"] - p["ppm"]) / den, 0.15), ("asym", abs(q["asym_ppm"] - p["asym_ppm"]) / den, 0.15)]
+            checks = [("ppm", abs(q["ppm"] - p["ppm"]) / den, 0.15),
+                      ("asym", abs(q["asym_ppm"] - p["asym_ppm"]) / den, 0.15)]
         elif e.kind == "glitches":
             tt = np.array(p["times_s"])
             ft = np.array(q["times_s"])
             fa = np.array(q["amplitudes_dph"])
             worst_t, worst_a = 0.0, 0.0
-            for ti, ai in zip(tt, p["amplitudes_dph"]):
+            for ti, ai in zip(tt, p["amplitudes_dph"], strict=True):
                 j = int(np.argmin(np.abs(ft - ti))) if len(ft) else -1
                 dt = abs(ft[j] - ti) * case.fs_hz if j >= 0 else np.inf
                 worst_t = max(worst_t, dt)
@@ -264,7 +267,8 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
             checks = [("dt/samples", worst_t, 30.0), ("amp", worst_a, 0.3),
                       ("extra", float(len(ft) - len(tt)), 0.0)]
         elif e.kind == "markov":
-            checks = [("sigma", _rel(q["sigma_dph"], p["sigma_dph"]), 0.2), ("tau_c", _rel(q["tau_c_s"], p["tau_c_s"]), 0.4)]
+            checks = [("sigma", _rel(q["sigma_dph"], p["sigma_dph"]), 0.2),
+                      ("tau_c", _rel(q["tau_c_s"], p["tau_c_s"]), 0.4)]
         elif e.kind == "vibration_noise":
             checks = [("gain", _rel(q["n_gain_dpsh_per_g"], p["n_gain_dpsh_per_g"]), 0.25)]
         elif e.kind == "temperature_noise":
@@ -279,7 +283,7 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
                       ("unlisted", float(q["count"] - len(c.listing["times_s"])), 0.0)]
         elif e.kind == "vibration_lines":
             checks = [("lines", abs(len(q["freq_hz"]) - len(p["freq_hz"])), 0.0)]
-            for tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"]):
+            for tf, ts, tb in zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], strict=True):
                 j = int(np.argmin(np.abs(np.array(q["freq_hz"]) - tf)))
                 checks += [(f"f{tf:g}/bw", abs(q["freq_hz"][j] - tf) / tb, 1.0),
                            (f"rms{tf:g}", _rel(q["sigma_dph"][j], ts), 0.2)]

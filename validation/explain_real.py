@@ -39,9 +39,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
 from fogmon.recording import read_replay_log
-from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
 #: A transient counts as located when a region holding its time is shorter than this
 #: fraction of the record (issue 11).
@@ -75,7 +75,8 @@ def raw_outlier_clusters(t_s: np.ndarray, y: np.ndarray, ok: np.ndarray) -> tupl
         return [], 0, f"{label} {scale:.4g} deg/h"
     cut = np.flatnonzero(np.diff(idx) > 3)
     starts, ends = np.r_[idx[0], idx[cut + 1]], np.r_[idx[cut], idx[-1]]
-    return [(float(t_s[a]), float(t_s[b])) for a, b in zip(starts, ends)], len(idx), f"{label} {scale:.4g} deg/h"
+    clusters = [(float(t_s[a]), float(t_s[b])) for a, b in zip(starts, ends, strict=True)]
+    return clusters, len(idx), f"{label} {scale:.4g} deg/h"
 
 
 def first_sentence(text: str) -> str:
@@ -87,14 +88,14 @@ def replay_sections(out: str, err: str) -> tuple[list[str], list[str]]:
     """(noise-fit lines of the replay summary, coefficient-jump event lines)."""
     lines = out.splitlines()
     fit = []
-    if any(l.startswith("IEEE-952 noise coefficients") for l in lines):
-        i = next(i for i, l in enumerate(lines) if l.startswith("IEEE-952 noise coefficients"))
-        for l in lines[i:]:
-            if not l.strip():
+    if any(ln.startswith("IEEE-952 noise coefficients") for ln in lines):
+        i = next(i for i, ln in enumerate(lines) if ln.startswith("IEEE-952 noise coefficients"))
+        for ln in lines[i:]:
+            if not ln.strip():
                 break
-            fit.append(l)
-    jumps = [l.strip() for l in err.splitlines() if "coef_jump" in l]
-    jumps += [l.strip() for l in lines if "events.coef_jump" in l]
+            fit.append(ln)
+    jumps = [ln.strip() for ln in err.splitlines() if "coef_jump" in ln]
+    jumps += [ln.strip() for ln in lines if "events.coef_jump" in ln]
     return fit, jumps
 
 
@@ -215,7 +216,8 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
                     not extra and not left,
                     f"effects {', '.join(e['kind'] for e in effects) or 'none'}"
                     + (f" (not known to be there: {', '.join(extra)})" if extra else "")
-                    + f"; {len(left)} region(s) left after; score {rep['score_before']:.3g} -> {rep['score_after']:.3g}"))
+                    + f"; {len(left)} region(s) left after; score {rep['score_before']:.3g} -> "
+                      f"{rep['score_after']:.3g}"))
     return out
 
 
@@ -259,10 +261,10 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
 
     print(f"  replay ({wall_replay:.1f} s wall, exit {rp.returncode})")
     fit, jumps = replay_sections(rp.stdout, rp.stderr)
-    for l in fit:
-        print(f"    {l.strip()}")
-    for l in jumps or (["no coefficient jumps"] if rp.returncode == 0 else []):
-        print(f"    {l}")
+    for ln in fit:
+        print(f"    {ln.strip()}")
+    for ln in jumps or (["no coefficient jumps"] if rp.returncode == 0 else []):
+        print(f"    {ln}")
     if rp.returncode != 0:
         tail = rp.stderr.strip().splitlines()
         print(f"    replay failed, last stderr line: {tail[-1] if tail else ''}")

@@ -83,7 +83,8 @@ def make_input(rng: random.Random, protocol: str) -> bytes:
                                      status=rng.randrange(256), temp_c=rng.choice(temps) if rng.random() < 0.2 else
                                      rng.randrange(-40, 80)) for _ in range(rng.randrange(0, 5)))
     elif protocol == "dsp3000":
-        base = b"".join(f"  {value(rng, 100):.6g}   {rng.randrange(2)}\r\n".encode() for _ in range(rng.randrange(0, 6)))
+        base = b"".join(f"  {value(rng, 100):.6g}   {rng.randrange(2)}\r\n".encode()
+                        for _ in range(rng.randrange(0, 6)))
     else:
         base = b"".join(f"{rng.randrange(300)},{value(rng, 1):.5g};{rng.uniform(0, 50):.2f}\n".encode()
                         for _ in range(rng.randrange(0, 6)))
@@ -153,7 +154,8 @@ def worker(args) -> dict:
                 stats["crc_errors"] += k["crc_errors"]
                 stats["implausible_temp"] += k["implausible_temp_c"]
             else:
-                ok &= k["implausible_samples"] == sum(v and r != r for r, v in zip(rate_parts, valid_parts))
+                ok &= k["implausible_samples"] == sum(v and r != r
+                                                      for r, v in zip(rate_parts, valid_parts, strict=True))
                 ok &= c2.pending <= 512
             stats["frames"] += len(whole)
         except Exception as e:  # noqa: BLE001 - the point is that nothing escapes

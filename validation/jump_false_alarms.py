@@ -121,7 +121,7 @@ def main(argv=None) -> int:
         other = [e for e in events if e not in hit]
         good = bool(hit)
         ok &= good
-        print(f"  seed {100 + seed}: {'detected at %.1f s' % hit[0].t_s if hit else 'NOT detected'}, "
+        print(f"  seed {100 + seed}: {f'detected at {hit[0].t_s:.1f} s' if hit else 'NOT detected'}, "
               f"{len(other)} other event(s) {'PASS' if good else 'FAIL'}")
         for e in hit[:1] + other:
             print(f"      {e.t_s:9.1f} s {e.message}")

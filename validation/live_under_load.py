@@ -45,12 +45,13 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 
+from sources_fake_device import has_open, open_pty  # noqa: E402
+
 from fogmon.errors import FogmonError  # noqa: E402
 from fogmon.pieces import find_pieces  # noqa: E402
 from fogmon.recording import read_replay_log  # noqa: E402
 from fogmon.sources.kvh import encode_frame  # noqa: E402
 from fogmon.sources.replay import open_raw_capture  # noqa: E402
-from sources_fake_device import has_open, open_pty  # noqa: E402
 
 RATE_HZ = 1000
 DPS_PER_K = 1e-3            # frame k sends k x 0.001 deg/s = 3.6 k deg/h
@@ -333,14 +334,16 @@ def main(argv=None) -> int:
         for mode in modes:
             url = None
             if mode == "connect":
-                from fogmon.sinks.rerun_sink import start_grpc_server
                 import socket
+
+                from fogmon.sinks.rerun_sink import start_grpc_server
                 with socket.socket() as s:
                     s.bind(("127.0.0.1", 0))
                     port = s.getsockname()[1]
                 server, url = start_grpc_server("127.0.0.1", port)
             print(f"{mode}: fogmon monitor {args.duration_s:g} s at {RATE_HZ} Hz, seed {args.seed}, "
-                  f"{args.hogs} CPU hogs" + (f", --connect {url}" if url else "") + (", --rrd" if mode == "rrd" else ""))
+                  f"{args.hogs} CPU hogs" + (f", --connect {url}" if url else "")
+                  + (", --rrd" if mode == "rrd" else ""))
             results[mode] = run_once(mode, args, workdir, url)
             if server is not None:
                 os.killpg(server.pid, signal.SIGKILL)

@@ -181,8 +181,8 @@ def describe(entry: dict, path: Path) -> None:
     f, psd = welch(np.where(ok, y - med, 0.0), fs=fs, nperseg=min(4096, len(y) // 4))
     rel = psd / np.median(psd[1:])
     edges = fs / 2 / 2.0 ** np.arange(9)[::-1]
-    bands = [f"{a:.3g}-{b:.3g} Hz {np.mean(rel[(f >= a) & (f < b)]):.2g}" for a, b in zip(edges[:-1], edges[1:])
-             if np.any((f >= a) & (f < b))]
+    bands = [f"{a:.3g}-{b:.3g} Hz {np.mean(rel[(f >= a) & (f < b)]):.2g}"
+             for a, b in zip(edges[:-1], edges[1:], strict=True) if np.any((f >= a) & (f < b))]
     i = int(np.argmax(np.where(f > 0.05, rel, 0)))
     print(f"  Welch PSD / its median, octave bands: {'; '.join(bands)}; strongest peak above 0.05 Hz "
           f"{rel[i]:.3g}x at {f[i]:.4g} Hz; 0.9-1 x Nyquist {np.mean(rel[f >= 0.45 * fs]):.2g}")

@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
                                                " (nothing analysed)"))
         os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
-        jobs = []   # (plan, chunks, [chunk futures], explain future, motion future)
+        jobs: list[tuple] = []   # (plan, chunks, [chunk futures], explain future, motion future)
         for i, plan in enumerate(plans):
             w = int(round(plan.window_s * plan.rate_hz))
             h = int(round(plan.hop_s * plan.rate_hz))
@@ -147,7 +147,9 @@ def run(args: argparse.Namespace) -> int:
         every = [f for j in jobs for f in j[2]] + [j[3] for j in jobs if j[3] is not None]
         if show:
             progress(every)
-        windows, rows, failed = [], [], []
+        windows: list = []  # pyarrow Tables, one per recording analysed
+        rows: list[dict] = []
+        failed: list[dict] = []
         for plan, chunks, futs, expl, masked in jobs:
             results = client.gather(futs)
             row, win = _recording_row(plan, chunks, results, client.gather(masked) if masked is not None else None)

@@ -39,12 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.capture import read_sidecar
     from fogmon.cli.outputs import check_outputs
+    from fogmon.cli.source_options import source_options
     from fogmon.parquet_log import ParquetLogWriter
     from fogmon.recording import append_replay_rows, write_replay_header
     from fogmon.sources.open import open_replay_source
-    from fogmon.capture import read_sidecar
-    from fogmon.cli.source_options import source_options
 
     ext = os.path.splitext(args.output)[1].lower()
     if ext not in (".parquet", ".csv"):
@@ -68,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
             writer = ParquetLogWriter(args.output, aux_names, meta,
                                       {"source": source.name, **({"sidecar": side} if side else {})})
         else:
-            fh = open(args.output, "w", encoding="utf-8", newline="\n")
+            fh = open(args.output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
             write_replay_header(fh, aux_names, meta)
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep = b.valid.copy()
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
             n += int(keep.sum())
         if writer is not None:
             writer.close(counters={**source.counters, "rows_without_aux": without_aux})
-        else:
+        elif fh is not None:
             fh.close()
     except BaseException:
         if writer is not None:

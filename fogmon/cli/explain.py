@@ -6,12 +6,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import TextIO
+from typing import Any, TextIO
 
 from fogmon.cli.outputs import check_outputs
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.export import add_export_argument, export_request, write_export
-from fogmon.cli.source_options import add_reader_arguments
 
 #: Most bootstrap replicates: each is one simulation of the whole recording, and beyond
 #: this the Gumbel-fitted family-wise threshold no longer sharpens.
@@ -57,7 +57,7 @@ class StageProgress:
     def __init__(self, stream: TextIO | None = None, bar: bool | None = None):
         self.stream = stream or sys.stderr
         self.bar = self.stream.isatty() if bar is None else bar
-        self._tq = None
+        self._tq: Any = None  # a tqdm bar (tqdm is untyped) while one is shown
 
     def __call__(self, stage: str, done: int = 0, total: int = 0) -> None:
         if not total:
@@ -83,11 +83,11 @@ class StageProgress:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.explain import report
     from fogmon.explain.baseline import baseline_model
     from fogmon.explain.explainer import Options, explain, without_motion
-    from fogmon.explain import report
-    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import load_model
+    from fogmon.sources.formats import read_recording
 
     png = os.path.splitext(args.report)[0] + ".png"
     outliers_csv = report.outliers_path(args.report)
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
     rec = read_recording(args.recording, args)
-    motion = []
+    motion: list[dict] = []
     if not args.keep_motion:
         progress("looking for platform motion")
         rec, motion = without_motion(rec)

@@ -7,15 +7,16 @@ import argparse
 
 import numpy as np
 
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from fogmon.methods.inorbit import ORBIT_PERIOD_S, PAUTA_K_MIN
-    p.add_argument("recording", metavar="RECORDING.csv", help="replay log (rate_dph; rot_dps is subtracted when present), or "
-                   "another format (docs/formats.md)")
+    p.add_argument("recording", metavar="RECORDING.csv",
+                   help="replay log (rate_dph; rot_dps is subtracted when present), or another format "
+                   "(docs/formats.md)")
     p.add_argument("--period-s", type=positive, default=ORBIT_PERIOD_S,
                    help="orbit (cycle) period for the per-cycle bias instability, s, at least 2 samples "
                         f"(default {ORBIT_PERIOD_S:g})")
@@ -47,8 +48,8 @@ def run(args) -> int:
         print(f"  bias instability: not available ({e})")
     if ok.all():
         print("  wavelet (db4) energy by band:")
-        for lo, hi, e in wavelet_energy(rate, fs):
-            print(f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * e:6.2f} %")
+        for lo, hi, share in wavelet_energy(rate, fs):
+            print(f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %")
     else:
         print(f"  wavelet energy: skipped, the record has {int((~ok).sum())} missing samples (no interpolation)")
     return 0

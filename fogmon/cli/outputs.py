@@ -3,7 +3,7 @@ bad path is a one-line FogmonError at once, not a traceback after minutes of wor
 from __future__ import annotations
 
 import os
-from typing import Iterable
+from collections.abc import Iterable
 
 from fogmon.errors import FogmonError
 
@@ -18,14 +18,14 @@ def check_outputs(outputs: dict[str, str | None], inputs: Iterable[str | None] =
     not a folder, and it is neither one of the ``inputs`` nor another output. The check
     leaves nothing behind (an existing file is opened for appending, unchanged)."""
     given = [(opt, path) for opt, path in outputs.items() if path]
-    inputs = [p for p in inputs if p]
+    in_paths = [p for p in inputs if p]
     for i, (opt, path) in enumerate(given):
         folder = os.path.dirname(os.path.abspath(path))
         if os.path.isdir(path):
             raise FogmonError(f"{opt} {path}: is a folder, give a file name")
         if not os.path.isdir(folder):
             raise FogmonError(f"{opt} {path}: folder {folder} does not exist")
-        for other in inputs:
+        for other in in_paths:
             if _same(path, other):
                 raise FogmonError(f"{opt} {path}: is the input {other}; write to another file")
         for opt2, path2 in given[:i]:

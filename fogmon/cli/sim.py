@@ -11,9 +11,9 @@ import sys
 import numpy as np
 
 from fogmon.cli.outputs import check_outputs
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
 
 #: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
 #: needs more than the free space of the output's folder at this rate cannot be written.
@@ -62,10 +62,10 @@ def _first_seconds(rec, duration_s: float):
 
 
 def run(args) -> int:
-    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import load_model
     from fogmon.sim.scenarios import make_scenario
     from fogmon.sim.simulate import iter_simulate
+    from fogmon.sources.formats import read_recording
 
     check_outputs({"--out": args.out}, inputs=[args.model, args.like])
     model = load_model(args.model)

@@ -8,10 +8,9 @@ import argparse
 import numpy as np
 
 from fogmon.cli.outputs import check_outputs
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
-
 
 #: Highest degree of K0(T): raw powers of deg C beyond it are ill-conditioned and over-fit
 #: (the thermal literature uses 1..3).
@@ -19,7 +18,8 @@ MAX_DEGREE = 6
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", metavar="RECORDING.csv", help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
+    p.add_argument("recording", metavar="RECORDING.csv",
+                   help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
                    "temperature (docs/formats.md)")
     p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2,
                    help=f"degree of K0(T), the bias-vs-temperature polynomial, 0..{MAX_DEGREE} (default 2)")
@@ -39,8 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
     from fogmon.recording import write_replay_log
-    from fogmon.sources.formats import read_recording
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
+    from fogmon.sources.formats import read_recording
 
     check_outputs({"--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])
@@ -66,7 +66,7 @@ def run(args) -> int:
     after = drift_peak_to_peak(rec.t_s, corrected, args.average_s)
     p, se = cal.effect.params, cal.stderr
     print(f"thermal drift model of {rec.name} ({len(rec)} samples, T {np.min(T):.1f}..{np.max(T):.1f} deg C)")
-    for i, (c, s) in enumerate(zip(p["k0_poly_dph"], se["k0_poly_dph"])):
+    for i, (c, s) in enumerate(zip(p["k0_poly_dph"], se["k0_poly_dph"], strict=True)):
         print(f"  K0 c{i:<6} {c:+.6g} +/- {s:.2g}  deg/h per degC^{i}")
     for k, unit in (("k1_pos", "deg/h per degC/s"), ("k1_neg", "deg/h per degC/s"),
                     ("k2_pos", "deg/h per degC/s^2"), ("k2_neg", "deg/h per degC/s^2")):

@@ -8,14 +8,16 @@ import os
 
 import numpy as np
 
+from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number
 from fogmon.errors import FogmonError
-from fogmon.cli.source_options import add_reader_arguments
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--up", required=True, metavar="UP.csv", help="replay log (or another format, docs/formats.md), sensing axis pointing up")
-    p.add_argument("--down", required=True, metavar="DOWN.csv", help="replay log (or another format), sensing axis pointing down")
+    p.add_argument("--up", required=True, metavar="UP.csv",
+                   help="replay log (or another format, docs/formats.md), sensing axis pointing up")
+    p.add_argument("--down", required=True, metavar="DOWN.csv",
+                   help="replay log (or another format), sensing axis pointing down")
     p.add_argument("--lat-deg", required=True, type=number(-90, 90),
                    help="latitude of the test site, deg, -90..90 (south negative); near the equator the "
                         "vertical Earth rate is too small to calibrate a scale factor and the command says so")

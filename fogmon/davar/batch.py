@@ -131,7 +131,8 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
     m = np.ascontiguousarray(m, dtype=np.int64)
     if alpha is None:
-        alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts)], dtype=np.int64).reshape(shape)
+        alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts, strict=True)],
+                         dtype=np.int64).reshape(shape)
     alpha = np.asarray(alpha, dtype=np.int64)
     if alpha.ndim <= 1:  # one noise type row for every window
         runs = np.ascontiguousarray(np.broadcast_to(alpha, (1, nm)))

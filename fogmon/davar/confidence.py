@@ -34,7 +34,7 @@ def edf_full(alpha, m, n_samples: int) -> np.ndarray:
     m = np.atleast_1d(np.asarray(m, dtype=np.int64))
     alpha = np.broadcast_to(np.asarray(alpha, dtype=np.int64), m.shape)
     return np.array([_edf_greenhall(int(a), int(k), int(n_samples)) if 2 * k <= n_samples else np.nan
-                     for a, k in zip(alpha, m)])
+                     for a, k in zip(alpha, m, strict=True)])
 
 
 def edf_effective(edf_gapless: np.ndarray, m: np.ndarray, n_samples: int, n_terms: np.ndarray) -> np.ndarray:
@@ -112,8 +112,8 @@ def _mixture_matrix(m: int, n_samples: int) -> np.ndarray:
     c[0, 0] = np.sum(w_s * rho_q**2)
     for k in range(3):
         c[0, k + 1] = c[k + 1, 0] = np.sum(w_s * rho_q * rho_q_at[k])
-        for l in range(k, 3):
-            c[k + 1, l + 1] = c[l + 1, k + 1] = np.sum(w * rho[k] * rho[l])
+        for k2 in range(k, 3):
+            c[k + 1, k2 + 1] = c[k2 + 1, k + 1] = np.sum(w * rho[k] * rho[k2])
     return c
 
 
@@ -195,7 +195,7 @@ def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
     hi = min(kinks.max() + 4 * max(ma, mb), n_b - 1) + 1
     knots = np.unique(np.clip(np.concatenate([kinks, [lo, hi, 0, n_b - n_a]]), lo, hi))
     lags, wts = [], []
-    for a, b in zip(knots[:-1], knots[1:]):
+    for a, b in zip(knots[:-1], knots[1:], strict=True):
         if b - a <= _EXACT_SEGMENT:
             lags.append(np.arange(a, b, dtype=np.float64))
             wts.append(np.ones(b - a))
@@ -215,8 +215,8 @@ def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
     c[0, 0] = np.sum(w_q * rho_q**2)
     for k, al in enumerate(MIX_ALPHAS[1:]):
         c[0, k + 1] = c[k + 1, 0] = np.sum(w_q * rho_q * _term_xcov(k_lag, ma, mb, al))
-        for l in range(k, 3):
-            c[k + 1, l + 1] = c[l + 1, k + 1] = np.sum(w * rho[k] * rho[l])
+        for k2 in range(k, 3):
+            c[k + 1, k2 + 1] = c[k2 + 1, k + 1] = np.sum(w * rho[k] * rho[k2])
     return c
 
 

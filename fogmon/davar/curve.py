@@ -122,7 +122,9 @@ def read_curve_csv(path: str) -> tuple[dict[str, np.ndarray], list[int]]:
         raise FogmonError(f"{path}: is a folder, not a curve CSV") from None
     except (OSError, UnicodeDecodeError) as e:
         raise FogmonError(f"{path}: cannot read: {getattr(e, 'strerror', None) or e}") from None
-    cols, rows, line_no = None, [], []
+    cols: list[str] | None = None
+    rows: list[list[float]] = []
+    line_no: list[int] = []
     for i, raw in enumerate(lines, 1):
         s = raw.strip()
         if not s or s.startswith("#"):
@@ -142,7 +144,7 @@ def read_curve_csv(path: str) -> tuple[dict[str, np.ndarray], list[int]]:
         if len(cells) != len(cols):
             raise FogmonError(f"{path}: line {i}: {len(cells)} cells, the header has {len(cols)}")
         row = []
-        for c, v in zip(cols, cells):
+        for c, v in zip(cols, cells, strict=True):
             try:
                 x = float(v)
             except ValueError:

@@ -20,8 +20,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.stats import norm
 
-from fogmon.davar.confidence import (ALPHA_OF_TERM, avar_relative_covariance, covariance_matrices,
-                                     edf_mixture_from, mixture_matrices)
+from fogmon.davar.confidence import (
+    ALPHA_OF_TERM,
+    avar_relative_covariance,
+    covariance_matrices,
+    edf_mixture_from,
+    mixture_matrices,
+)
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.scoring import fisher_scoring, robust_scoring
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
@@ -276,7 +281,7 @@ def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
     A_n = c as in a score test), reaches norm.ppf(0.95)^2. Never below A_n-hat. For the
     terms in the mask ``which`` (NaN for the others)."""
     upper = np.where(which, np.inf, np.nan)
-    for n in np.flatnonzero(which):
+    for n in np.flatnonzero(which).tolist():
         terms = a > 0
         terms[n] = True
         d_min, a_hat = _profile(x, y, edf, rw, c2, a, terms, n, None)
@@ -285,7 +290,7 @@ def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
             continue
         start = [a_hat]
 
-        def excess(c):
+        def excess(c, start=start, terms=terms, n=n, d_min=d_min):  # bound now: called in this iteration only
             d, start[0] = _profile(x, y, edf, rw, c2, start[0], terms, n, c)
             naive_c, sand_c = _term_variances(x, edf, rw, c2, start[0], n)
             return naive_c / sand_c * (d - d_min) - _UPPER_DEVIANCE
@@ -435,7 +440,8 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
-        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified") for i in range(len(result))]
+        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified")
+                for i in range(len(result))]
         a = np.array([f[0] for f in fits]).reshape(len(result), 5)
         se = np.array([f[1] for f in fits]).reshape(len(result), 5)
         misfit = np.array([f[2] for f in fits], dtype=bool).reshape(result.adev_dph.shape)
@@ -443,7 +449,8 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     else:
         a, se, misfit, upper = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples,
                                        "all")
-    fit = NoiseFit(*_coefficients(a, se, upper, confidence), avar_terms=a, avar_se=se, avar_upper=upper,
+    q, n_, b, k, r = _coefficients(a, se, upper, confidence)
+    fit = NoiseFit(q, n_, b, k, r, avar_terms=a, avar_se=se, avar_upper=upper,
                    confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
     return replace(fit, worst_ratio=worst if worst.ndim else float(worst))

@@ -67,8 +67,8 @@ class JumpDetector:
             h = self._hist
             while len(h) > 1 and h[1][0] <= t - self.window_s:
                 h.popleft()
-            ref = h[0] if h and h[0][0] <= t - self.window_s else None
-            for name, (v, lo, hi, rse) in (cur.items() if ref is not None else ()):
+            ref = h[0] if h and h[0][0] <= t - self.window_s else (math.nan, {})  # none yet: nothing compared
+            for name, (v, lo, hi, rse) in cur.items():
                 if name not in ref[1]:
                     continue
                 rv, rlo, rhi, rrse = ref[1][name]

@@ -51,7 +51,7 @@ def _tolerate_unusable_numba_cache() -> None:
             if not warned:
                 warned.append(e)
                 warnings.warn(f"numba cache unusable ({type(e).__name__}: {e}); kernels are compiled in "
-                              f"memory for this run", FogmonWarning)
+                              f"memory for this run", FogmonWarning, stacklevel=1)
     caching.Cache._guard_against_spurious_io_errors = guard
     caching.Cache._fogmon_tolerant = True
 

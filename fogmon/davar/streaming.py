@@ -87,7 +87,7 @@ class StreamingDadev:
         self._stage_v = np.ones(STAGE, dtype=np.bool_)
         self._staged = 0
         self._next_end = self.window - 1  # last sample of the next window to emit (absolute index)
-        self._empty = None  # the zero-row result of a push that completes no window
+        self._empty: DadevResult | None = None  # the zero-row result of a push that completes no window
 
     @property
     def n_pushed(self) -> int:

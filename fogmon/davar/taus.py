@@ -53,7 +53,8 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
         elif taus == "all":
             m = np.arange(1, m_max + 1)
         else:
-            raise FogmonError(f"taus must be 'octave', 'decade', 'all', an int per decade or tau values in s, got {taus!r}")
+            raise FogmonError(f"taus must be 'octave', 'decade', 'all', an int per decade or tau values in s, "
+                              f"got {taus!r}")
     elif isinstance(taus, (int, np.integer)) and not isinstance(taus, bool):
         k = check_per_decade(int(taus))
         m = np.round(10.0 ** (np.arange(int(np.floor(np.log10(m_max) * k)) + 1) / k))
@@ -69,6 +70,7 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
             what = "cannot" if tau_s.size == 1 else "none can"
             raise FogmonError(f"requested {_list_s(tau_s)}: {what} be computed: {limits}")
         if short.size or long_.size:
-            warnings.warn(f"{_list_s(np.concatenate([short, long_]))} left out: {limits}", FogmonWarning)
+            warnings.warn(f"{_list_s(np.concatenate([short, long_]))} left out: {limits}", FogmonWarning,
+                          stacklevel=1)
     m = np.unique(np.asarray(m, dtype=np.int64))
     return m[(m >= 1) & (m <= m_max)]

@@ -52,7 +52,7 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     scale[scale == 0] = 1.0
     a, _ = nnls(X / scale, w)
     coef = avar_terms_to_coefficients(a / scale)
-    return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef)))
+    return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef), strict=True))
 
 
 NAMES = ("Q", "N", "B", "K", "R")
@@ -67,7 +67,7 @@ def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, 
     """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit."""
     pred = adev_model(tau_s, **fit) ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf)])
+        z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf, strict=True)])
     return float(np.sum(z ** 2))
 
 
@@ -83,6 +83,7 @@ def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray) -> tupl
         crit = fit_chi2(tau_s, av, edf, fit) + TERM_CHI2 * len(terms)
         if best is None or crit < best[0]:
             best = (crit, fit, terms)
+    assert best is not None  # the loop ran at least once
     return best[1], best[2]
 
 
@@ -129,7 +130,7 @@ def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray
 
 #: Unit-coefficient parameter sets of the aux-driven mean effects projected out before
 #: the baseline noise is estimated (the catalogue's thermal_drift and scale_factor).
-_AUX_UNITS = {
+_AUX_UNITS: dict[str, list[tuple[str, dict]]] = {
     "temp_c": [("thermal_drift", {"k0_poly_dph": [0.0, 1.0]}), ("thermal_drift", {"k0_poly_dph": [0.0, 0.0, 1.0]}),
                ("thermal_drift", {"k1_pos": 1.0}), ("thermal_drift", {"k1_neg": 1.0}),
                ("thermal_drift", {"k2_pos": 1.0}), ("thermal_drift", {"k2_neg": 1.0})],

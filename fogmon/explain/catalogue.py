@@ -17,8 +17,8 @@ them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable
 
 import numpy as np
 from scipy import stats
@@ -29,8 +29,16 @@ from fogmon.davar.batch import oadev
 from fogmon.davar.fit import IDENTIFY_Z, fit_avar
 from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.explain import detectors
-from fogmon.explain.fitting import (BinnedPeriodogram, Whittle, avar1_of_psd, filter_gain2, lines_psd, markov_psd,
-                                    model_psd, rfft_omega)
+from fogmon.explain.fitting import (
+    BinnedPeriodogram,
+    Whittle,
+    avar1_of_psd,
+    filter_gain2,
+    lines_psd,
+    markov_psd,
+    model_psd,
+    rfft_omega,
+)
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, OUTLIER_QUANTILE_PROBS, Effect, Noise, SensorModel, validate_effect
 from fogmon.sim.noise import line_psd
@@ -85,7 +93,7 @@ class Candidate:
     #: abs_z (arrays; written to the outliers file, not into the report)
     listing: dict | None = field(default=None, repr=False)
     #: corrected IEEE-952 coefficients (the ``noise`` kind): replace the model's [noise]
-    corrected_noise: object | None = None
+    corrected_noise: Noise | None = None
 
     @property
     def nature(self) -> str:
@@ -233,6 +241,7 @@ def scale_factor(ctx: Context) -> Candidate | None:
         fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
         if best is None or fit.chi2_gain - len(names) * ctx.penalty > best[0].chi2_gain - len(best[2]) * ctx.penalty:
             best = (fit, X, names)
+    assert best is not None  # the loop ran at least once
     fit, X, names = best
     params = {"ppm": 0.0, "asym_ppm": 0.0}
     se = {}
@@ -291,10 +300,11 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
         score = fit.chi2_gain - len(names) * ctx.penalty
         if best is None or score > best[0]:
             best = (score, fit, names, label)
+    assert best is not None  # the loop ran at least once
     _, fit, names, label = best
     X = np.column_stack([cols[nm] for nm in names])
-    v = dict(zip(names, fit.beta.tolist()))
-    s = dict(zip(names, fit.se.tolist()))
+    v = dict(zip(names, fit.beta.tolist(), strict=True))
+    s = dict(zip(names, fit.se.tolist(), strict=True))
     c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
     rate = X @ fit.beta
     k0_part = X[:, :2] @ np.array([c1, c2]) if "k0_2" in v else X[:, 0] * c1
@@ -482,6 +492,7 @@ def outliers(ctx: Context) -> Candidate | None:
     if not ev.population:
         return None
     law = ev.law
+    assert law is not None  # a population needs a fitted law (bic_population is 0 without one)
     z_cut = min(law.z_even, ev.thr)
     se = np.where(ev.z != 0.0, np.abs(ev.amp / np.where(ev.z != 0.0, ev.z, 1.0)), 0.0)
     se = np.where(se > 0, se, float(np.median(se[se > 0])) if (se > 0).any() else 0.0)
@@ -553,10 +564,15 @@ def _periodogram(ctx: Context) -> BinnedPeriodogram:
 
 def white_rms_dpsh(model: SensorModel, ctx: Context) -> float:
     """RMS over the record of the white level N(t) = N0 + white-level effects (deg/sqrt(h))."""
-    level = np.full(ctx.n, model.noise.N_dpsh)
+    return white_level_rms_dpsh(model, ctx.t_s, ctx.aux)
+
+
+def white_level_rms_dpsh(model: SensorModel, t_s: np.ndarray, aux: dict) -> float:
+    """``white_rms_dpsh`` from the sample times ``t_s`` (s) and aux channels alone."""
+    level = np.full(len(t_s), model.noise.N_dpsh)
     for e in model.effects:
         if EFFECT_KINDS[e.kind].nature == "white_level":
-            level = level + fx.white_level_dpsh(e, ctx.t_s, ctx.aux)
+            level = level + fx.white_level_dpsh(e, t_s, aux)
     return float(np.sqrt(np.mean(np.maximum(level, 0.0) ** 2)))
 
 
@@ -648,6 +664,7 @@ def bandwidth(ctx: Context) -> Candidate | None:
         g, p = gain(order, math.exp((a + b) / 2))
         if best is None or g > best[0]:
             best = (g, p)
+    assert best is not None  # the loop ran at least once
     g, p = best
     ev = (f"Whittle fit of the residual spectrum: high frequencies fall below the model, as a "
           f"Butterworth low-pass of order {p['order']} at {p['cutoff_hz']:.4g} Hz")
@@ -780,7 +797,7 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
 
     def dev(x):
         f, sig, bw = unpack(x)
-        if not (0 < f - bw / 2 and f + bw / 2 < nyq):
+        if not (f - bw / 2 > 0 and f + bw / 2 < nyq):
             return d0 + 1e9
         return bp.deviance(S + line_psd(bp.omega, fs, f, sig, bw), floor)
 
@@ -799,7 +816,7 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
     returns (total deviance drop, lines (centre, rms, bandwidth))."""
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     S = S0.copy()
-    lines = []
+    lines: list[tuple[float, float, float]] = []
     for f0, bw0 in starts:
         if any(abs(f0 - f) < max(bw, bw0) for f, _, bw in lines):
             continue
@@ -959,7 +976,8 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
     conv = avar_terms_to_coefficients
     for _ in range(NOISE_ITERATIONS):  # the terms interact in such a fit (flicker's short-tau excess
         c = conv(A)                    # reads partly as N): fit(predicted ADEV of A) -> fit(recording)
-        new = SensorModel(stoch.sample_rate_hz, 0.0, Noise(*c[:4], 0.0), stoch.effects)
+        noise = Noise(Q_arcsec=c[0], N_dpsh=c[1], B_dph=c[2], K_dphsh=c[3], R_dphh=0.0)
+        new = SensorModel(stoch.sample_rate_hz, 0.0, noise, stoch.effects)
         Sk = model_psd(new, rfft_omega(n), n, white_dpsh - nz.N_dpsh + float(c[1]))
         ak, _, _, _ = fit_avar(r.tau_s, expected_avar(Sk, n, r.m), r.m, r.n_terms, n, "none")
         if not np.all(np.isfinite(ak)):

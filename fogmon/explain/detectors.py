@@ -54,7 +54,7 @@ def local_scale(z: np.ndarray, valid: np.ndarray | None, block: int = 4096) -> n
     nb = max(1, n // block)
     edges = np.linspace(0, n, nb + 1).astype(np.int64)
     out = np.empty(n)
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         seg = z[lo:hi] if valid is None else z[lo:hi][valid[lo:hi]]
         mad = 1.4826 * float(np.median(np.abs(seg - np.median(seg)))) if len(seg) > 16 else 0.0
         out[lo:hi] = mad
@@ -190,7 +190,8 @@ def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
     if ok.sum() < 256:
         return []
     x = np.where(ok, x - x[ok].mean(), 0.0)
-    f, p = welch(x, fs=fs_hz, nperseg=min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * fs_hz / max(f_lo_hz, 1e-9)))))))
+    nperseg = min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * fs_hz / max(f_lo_hz, 1e-9))))))
+    f, p = welch(x, fs=fs_hz, nperseg=nperseg)
     band = (f >= f_lo_hz) & (f <= min(f_hi_hz, fs_hz / 2)) & (f > 0)
     if band.sum() < 8:
         return []

@@ -18,11 +18,11 @@ all cores.
 from __future__ import annotations
 
 import math
+import multiprocessing as mp
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
-import multiprocessing as mp
-from typing import Callable
 
 import numpy as np
 
@@ -176,7 +176,8 @@ def _init_worker(shared: tuple) -> None:
 
 
 def _replicate_in_worker(seed) -> tuple[np.ndarray, np.ndarray]:
-    return _replicate(*_SHARED, seed)
+    model, like, grid = _SHARED
+    return _replicate(model, like, grid, seed)
 
 
 def bootstrap(stoch: SensorModel, like: Recording, grid: mismatch.Grid, n_boot: int, seed: int,
@@ -207,8 +208,7 @@ def default_n_boot(n: int) -> int:
 # ---------------------------------------------------------------- analysis
 def _whittle(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray, y: np.ndarray):
     n = len(y)
-    probe = catalogue.Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), y, stoch, None, None)
-    S = model_psd(stoch, rfft_omega(n), n, catalogue.white_rms_dpsh(stoch, probe))
+    S = model_psd(stoch, rfft_omega(n), n, catalogue.white_level_rms_dpsh(stoch, t, ctx_aux))
     S = np.maximum(S, 1e-4 * np.median(S[1:]))  # a filter's zero must not give one bin all the weight
     yy = np.where(valid, y, 0.0)
     Yf = np.fft.rfft(yy)
@@ -310,7 +310,7 @@ def _heldout(ctx: catalogue.Context, c: catalogue.Candidate) -> tuple[bool, str]
         res = c.heldout()
         ok = all(g > 0 for g, exp in res if exp >= 9.0)
         return ok, "; ".join(f"{h} half: chi2 drop {g:.1f} (expected {e:.1f})"
-                             for h, (g, e) in zip(("second", "first"), res))
+                             for h, (g, e) in zip(("second", "first"), res, strict=True))
     return True, "n/a (spectral or spike fit on the whole record)"
 
 
@@ -328,7 +328,7 @@ def _inside_line(c: catalogue.Candidate, cands: list[catalogue.Candidate], df_hz
     f = 1.0 / c.params["period_s"]
     for o in cands:
         if o.kind == "vibration_lines" and o.bic_gain(0.0) > 0:
-            for fl, bw in zip(o.params["freq_hz"], o.params["bandwidth_hz"]):
+            for fl, bw in zip(o.params["freq_hz"], o.params["bandwidth_hz"], strict=True):
                 if bw >= LINE_RESOLVED_BINS * df_hz and abs(f - fl) <= bw / 2:
                     return float(fl)
     return None

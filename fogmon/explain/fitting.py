@@ -70,7 +70,7 @@ def calibrate_psd(S: np.ndarray, Yf: np.ndarray, n: int) -> np.ndarray:
         edges.append(min(nb, edges[-1] * 2))
     factors = np.ones(nb)
     first_ok = None
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         if hi - lo < MIN_BAND_BINS:
             continue
         f = float(np.median(ratio[lo:hi])) / math.log(2.0)
@@ -176,7 +176,7 @@ def lines_psd(params: dict, fs_hz: float, omega: np.ndarray) -> np.ndarray:
     from fogmon.sim.noise import line_psd
 
     S = np.zeros(len(omega))
-    for f, sig, bw in zip(params["freq_hz"], params["sigma_dph"], params["bandwidth_hz"]):
+    for f, sig, bw in zip(params["freq_hz"], params["sigma_dph"], params["bandwidth_hz"], strict=True):
         S += line_psd(omega, fs_hz, f, sig, bw)
     return S
 
@@ -218,9 +218,9 @@ class BinnedPeriodogram:
         edges = np.unique(np.concatenate((np.round(np.geomspace(1, len(Yf), n_bins)),
                                           np.round(np.linspace(1, len(Yf), n_linear)))).astype(np.int64))
         edges = np.concatenate((edges[edges < len(Yf)], [len(Yf)]))
-        I = np.abs(Yf) ** 2 / n
+        pgram = np.abs(Yf) ** 2 / n
         cw = np.concatenate(([0.0], np.cumsum(mult)))
-        ci = np.concatenate(([0.0], np.cumsum(mult * I)))
+        ci = np.concatenate(([0.0], np.cumsum(mult * pgram)))
         ck = np.concatenate(([0.0], np.cumsum(mult * k)))
         lo, hi = edges[:-1], edges[1:]
         self.count = cw[hi] - cw[lo]

@@ -70,10 +70,7 @@ def make_grid(n: int, fs_hz: float, window_s: float | None = None, hop_fraction:
     """Map grid for an n-sample record: default window = duration / 8 (at least 64 samples),
     hop = window / 4, octave taus up to window / 4; whole-record taus up to n / 4.
     A window longer than half the record is a FogmonError."""
-    if window_s is None:
-        w = max(64, n // 8)
-    else:
-        w = int(round(window_s * fs_hz))
+    w = max(64, n // 8) if window_s is None else int(round(window_s * fs_hz))
     if w < 16:
         raise FogmonError(f"--window-s {window_s:g} s is shorter than 16 samples at {fs_hz:g} Hz")
     if 2 * w > n:
@@ -108,7 +105,7 @@ class Gumbel:
     scale: float
 
     @staticmethod
-    def fit(maxima: np.ndarray) -> "Gumbel":
+    def fit(maxima: np.ndarray) -> Gumbel:
         x = np.asarray(maxima, dtype=float)
         x = x[np.isfinite(x)]
         scale = max(float(np.std(x, ddof=1)) * math.sqrt(6.0) / math.pi, 1e-3) if len(x) > 1 else 0.5
@@ -222,7 +219,7 @@ class Region:
     tau_peak_s: float | None = None
 
     def as_json(self) -> dict:
-        out = {"t_start_s": round(self.t_start_s, 6), "t_end_s": round(self.t_end_s, 6),
+        out: dict[str, object] = {"t_start_s": round(self.t_start_s, 6), "t_end_s": round(self.t_end_s, 6),
                "tau_min_s": self.tau_min_s, "tau_max_s": self.tau_max_s, "ratio": round(self.ratio, 4),
                "p_value": float(f"{self.p_value:.3g}"),
                "t_peak_s": None if self.t_peak_s is None else round(self.t_peak_s, 6),
@@ -259,7 +256,7 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
                 grid.t0_s + (grid.starts[wi.max()] + grid.window_n) / grid.fs_hz,
                 float(grid.tau_s[mi.min()]), float(grid.tau_s[mi.max()]), sign,
                 float(np.exp(np.mean(d) / 2.0)), zmax, max(null.gumbel.sf(zmax), 1e-16), False,
-                tuple(zip(wi.tolist(), mi.tolist())),
+                tuple(zip(wi.tolist(), mi.tolist(), strict=True)),
                 tau_peak_s=float(grid.tau_s[mi[int(np.argmax(np.abs(vals)))]])))
     zw = np.nan_to_num(z_whole)
     thr_w = null.threshold_whole

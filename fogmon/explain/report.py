@@ -112,7 +112,8 @@ def _line_hint(res: Result, left: list[dict]) -> str:
         return ""
     r = excess[0]
     fs = res.grid.fs_hz
-    lines = spectral_lines(res.residual_after, fs, 0.371 / (2.0 * r["tau_max_s"]), min(fs / 2, 0.371 / (0.5 * r["tau_min_s"])))
+    lines = spectral_lines(res.residual_after, fs, 0.371 / (2.0 * r["tau_max_s"]),
+                           min(fs / 2, 0.371 / (0.5 * r["tau_min_s"])))
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
@@ -212,12 +213,13 @@ def write_outliers(res: Result, path: str) -> int:
         _remove_stale_outliers(path)
         return 0
     lst = held[0].listing
+    assert lst is not None, "an outliers candidate carries its listing"
     n = len(lst["times_s"])
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
         fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} outlier samples (none left out)\n"
                  "# amplitude_dph: the spike removed (deg/h); abs_z: its robust spike-test |z|\n"
                  "time_s,amplitude_dph,abs_z\n")
-        for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist()):
+        for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist(), strict=True):
             fh.write(f"{t!r},{a:.9g},{z:.4g}\n")
     return n
 
@@ -287,7 +289,8 @@ def write_png(res: Result, path: str) -> None:
     tau = g.tau_whole_s
     for a, label, col in ((res.before, "before", "tab:red"), (res.after, "after", "tab:blue")):
         med, lo, hi, rec = _adev_band(a, a.null, g.fs_hz)
-        ax[0, 0].fill_between(tau, lo, hi, color=col, alpha=0.15, label=f"model {label}: {100 * (1 - a.null.alpha):g} % family-wise band")
+        ax[0, 0].fill_between(tau, lo, hi, color=col, alpha=0.15,
+                              label=f"model {label}: {100 * (1 - a.null.alpha):g} % family-wise band")
         ax[0, 0].loglog(tau, med, color=col, lw=1, ls="--")
         ax[0, 0].loglog(tau, rec, "o-", color=col, ms=3, label=f"recording residual ({label})")
     ax[0, 0].set_xlabel("tau (s)")
@@ -361,9 +364,10 @@ def write_rrd(res: Result, path: str) -> None:
         ym = np.nanmean(y, axis=1)
     rec.send_columns("rate", indexes=[rr.TimeColumn("time", duration=t[: nb * k: k])],
                      columns=rr.Scalars.columns(scalars=np.column_stack([ym, det.mean(axis=1)])))
-    for a in res.accepted:
-        if a.cand.kind == "outliers":  # every outlier, as points over time
-            lst = a.cand.listing
+    for acc in res.accepted:
+        if acc.cand.kind == "outliers":  # every outlier, as points over time
+            lst = acc.cand.listing
+            assert lst is not None, "an outliers candidate carries its listing"
             rec.log("rate/outliers_removed_dph", rr.SeriesPoints(names=["outlier amplitude removed (deg/h)"]),
                     static=True)
             rec.send_columns("rate/outliers_removed_dph", indexes=[rr.TimeColumn("time", duration=lst["times_s"])],
@@ -378,6 +382,7 @@ def rrd_blueprint(x_dec: tuple[int, int], y_dec: tuple[int, int]):
     ``y_dec`` of ADEV in deg/h) and verdict | z-maps before and after | residual over time."""
     import rerun as rr
     import rerun.blueprint as rrb
+
     from fogmon.sinks.rerun_plots import heatmap_bounds, loglog_bounds
 
     whole = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
@@ -415,6 +420,7 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec) -> None:
     """The whole-record ADEV (``_rrd_adev_logs``) of the residual, the model's median and
     family-wise band, before and after, on a labelled log-log plot with a legend."""
     import rerun as rr
+
     from fogmon.sinks import rerun_plots as rp
 
     ent = "adev/log10"
@@ -425,14 +431,16 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec) -> None:
         bright, dim = _RRD_COLOURS[w]
         ok = np.isfinite(r)
         pts = np.column_stack([lx[ok], r[ok]])
-        rec.log(f"{ent}/{w}/recording_residual", rr.LineStrips2D([pts], colors=[bright], radii=rr.Radius.ui_points(1.5)),
+        rec.log(f"{ent}/{w}/recording_residual",
+                rr.LineStrips2D([pts], colors=[bright], radii=rr.Radius.ui_points(1.5)),
                 rr.Points2D(pts, colors=[bright], radii=rr.Radius.ui_points(3.0)), static=True)
         m = np.isfinite(med)
         rec.log(f"{ent}/{w}/model_median", rr.LineStrips2D([np.column_stack([lx[m], med[m]])], colors=[dim],
                                                             radii=rr.Radius.ui_points(1.0)), static=True)
         b = np.isfinite(lo) & np.isfinite(hi)
-        rec.log(f"{ent}/{w}/model_band", rr.LineStrips2D([np.column_stack([lx[b], lo[b]]), np.column_stack([lx[b], hi[b]])],
-                                                          colors=[dim], radii=rr.Radius.ui_points(0.7)), static=True)
+        edges = [np.column_stack([lx[b], lo[b]]), np.column_stack([lx[b], hi[b]])]
+        rec.log(f"{ent}/{w}/model_band", rr.LineStrips2D(edges, colors=[dim], radii=rr.Radius.ui_points(0.7)),
+                static=True)
         band = f"{100 * (1 - getattr(res, w).null.alpha):g} % family-wise band"
         items += [(f"recording residual {w} the effects", bright), (f"model {w}: median and {band}", dim)]
     rp.log_legend(rec, f"{ent}/legend", items, top_left=(x_dec[1] - 1.3, y_dec[1] + 0.1), step=-0.4)
@@ -443,6 +451,7 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
     (largest on top), columns windows (centre time), colour scale -lim..lim, the flagged
     regions outlined."""
     import rerun as rr
+
     from fogmon.sinks import rerun_plots as rp
 
     z = np.asarray(a.z, dtype=np.float64).T[::-1]          # rows: largest tau on top
@@ -451,7 +460,8 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
     rows = rp.decade_rows(tau)
     cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
     ticks = rp.nice_ticks(-lim, lim)
-    rp.log_heatmap(rec, ent, z, -lim, lim, "RdBu_r", ([n_rows - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
+    rp.log_heatmap(rec, ent, z, -lim, lim, "RdBu_r",
+                   ([n_rows - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
                    (cols, [f"{tc[c]:.6g} s" for c in cols]), (ticks, [f"z = {v:g}" for v in ticks]), static=True)
     boxes = []
     for r in a.regions:

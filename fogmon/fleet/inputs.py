@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import glob
 import os
-from typing import Sequence
+from collections.abc import Sequence
 
 from fogmon.errors import FogmonError
 

@@ -62,7 +62,7 @@ def _trend_png(rows: list[dict], path: str) -> None:
         if not r["error"]:
             by_gyro.setdefault(gyro_of(r["recording"]), []).append(r)
     fig, axes = plt.subplots(len(TREND_COEFS), 1, figsize=(10, 3.2 * len(TREND_COEFS)), sharex=True)
-    for ax, (c, label) in zip(np.atleast_1d(axes), TREND_COEFS):
+    for ax, (c, label) in zip(np.atleast_1d(axes), TREND_COEFS, strict=True):
         for g, rs in sorted(by_gyro.items()):
             rs = sorted(rs, key=lambda r: r["recording"])
             x = np.arange(len(rs))

@@ -46,7 +46,8 @@ def write_tables(out_dir: str, windows: list, recordings: list[dict]) -> tuple[s
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    w = pa.concat_tables(windows, promote_options="default") if windows else pa.table({"recording": pa.array([], pa.string())})
+    w = (pa.concat_tables(windows, promote_options="default") if windows
+         else pa.table({"recording": pa.array([], pa.string())}))
     adev = sorted((c for c in w.column_names if c.startswith("adev_")), key=lambda c: float(c[5:-1]))
     w = w.select([c for c in w.column_names if not c.startswith("adev_")] + adev)
     r = pa.Table.from_pylist(recordings)

@@ -25,8 +25,9 @@ ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion")
 
 def _config(options: dict) -> PipelineConfig:
     """The PipelineConfig of `fogmon replay` for the analysis options batch passes on."""
+    taus = options.get("taus")
     return PipelineConfig(window_s=options.get("window_s"), hop_s=options.get("hop_s"),
-                          taus=options.get("taus") if options.get("taus") is not None else "octave",
+                          taus="octave" if taus is None else taus,
                           raw_rate=bool(options.get("raw_rate")), keep_motion=bool(options.get("keep_motion")))
 
 
@@ -106,7 +107,7 @@ class _ChunkSource:
         self.aux_names = getattr(source, "aux_names", ())
         self.n_samples = stop - first
         self._masked = np.asarray(masked, dtype=np.int64).reshape(-1, 2)
-        self.t0_s = None                 # time of the recording's first sample (s)
+        self.t0_s: float | None = None   # time of the recording's first sample (s)
         self.own_samples = self.own_invalid = 0
 
     @property
@@ -148,8 +149,10 @@ class _Collect(Sink):
     """Keeps the windows the pipeline completes (end index, ADEV, fit) and its summary."""
 
     def __init__(self) -> None:
-        self.ends, self.adev, self.fits = [], [], []
-        self.tau_s = None
+        self.ends: list[np.ndarray] = []
+        self.adev: list[np.ndarray] = []
+        self.fits: list[dict[str, np.ndarray]] = []
+        self.tau_s: np.ndarray | None = None
         self.summary = None
 
     def start(self, info) -> None:
@@ -223,7 +226,7 @@ def run_chunk(plan: Plan, chunk, options: dict, masked=None) -> ChunkResult:
     return out
 
 
-def _record_facts(summary, t0_s: float) -> dict:
+def _record_facts(summary, t0_s: float | None) -> dict:
     """The recording's row from the last chunk's summary: its span, the source's counters
     (read from the recording's start) and the whole-record fit."""
     rec = {"t_first_s": t0_s, "t_last_s": summary.t_last_s,
@@ -277,7 +280,7 @@ def motion_pass(plan: Plan, options: dict) -> MotionResult:
                 cuts = np.flatnonzero(np.diff(masked) > 1)
                 starts = np.concatenate([[masked[0]], masked[cuts + 1]])
                 stops = np.concatenate([masked[cuts], [masked[-1]]]) + 1
-                runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist()))
+                runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist(), strict=True))
             pos += n
 
         try:

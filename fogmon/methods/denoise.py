@@ -59,7 +59,7 @@ class StaticKalmanStream:
         ok = np.isfinite(z)
         edges = np.flatnonzero(np.diff(np.concatenate(([False], ok, [False])).astype(np.int8)))
         prev = 0
-        for start, stop in zip(edges[::2], edges[1::2]):
+        for start, stop in zip(edges[::2], edges[1::2], strict=True):
             out[prev:start] = self._x
             x0 = z[start] if np.isnan(self._x) else self._x
             out[start:stop], _ = lfilter(b, a, z[start:stop], zi=[(1.0 - self.gain) * x0])

@@ -56,7 +56,8 @@ def updown_calibration(mean_up_dph: float, mean_down_dph: float, lat_deg: float,
                if abs(diff) < abs(expected) else
                f"{names[0]} and {names[1]} differ by far more than Earth rate (a wrong latitude? rates not in deg/h?)")
         raise FogmonError(f"{why}: up - down = {diff:+.4g} deg/h where a gyro within {100 * MAX_SF:g} % of its scale "
-                          f"factor reads {expected:+.4g} deg/h (2 x the vertical Earth rate at latitude {lat_deg:g} deg)")
+                          f"factor reads {expected:+.4g} deg/h (2 x the vertical Earth rate at latitude "
+                          f"{lat_deg:g} deg)")
     return {"bias_dph": (mean_up_dph + mean_down_dph) / 2.0, "bias_sigma_dph": s / math.sqrt(2.0),
             "scale_factor_ppm": sf * 1e6, "scale_factor_sigma_ppm": sf_sigma * 1e6,
             "earth_vertical_dph": vertical}

@@ -72,10 +72,10 @@ def calibrate_thermal(t_s, rate_dph, temp_c, degree: int = 2, smooth_s: float = 
     se[live] = np.sqrt(np.diag(cov)) / scale[live]
     k0 = [float(v) for v in beta[:degree + 1]]
     names = ("k1_pos", "k1_neg", "k2_pos", "k2_neg")
-    params = {"k0_poly_dph": k0, **{n: float(v) for n, v in zip(names, beta[degree + 1:])},
+    params = {"k0_poly_dph": k0, **{n: float(v) for n, v in zip(names, beta[degree + 1:], strict=True)},
               "smooth_s": float(smooth_s), "diff_step_s": float(diff_step_s)}
     stderr = {"k0_poly_dph": [float(v) for v in se[:degree + 1]],
-              **{n: float(v) for n, v in zip(names, se[degree + 1:])}}
+              **{n: float(v) for n, v in zip(names, se[degree + 1:], strict=True)}}
     return ThermalCalibration(validate_effect("thermal_drift", params), stderr, float(np.sqrt(s2)))
 
 

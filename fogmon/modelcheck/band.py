@@ -19,9 +19,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+import fogmon.modelcheck.cache as cache
 from fogmon.errors import FogmonError
 from fogmon.explain.mismatch import Gumbel, Null, build_null, zscores
-import fogmon.modelcheck.cache as cache
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, model_to_dict, validate_model
 from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact
 from fogmon.sim.simulate import iter_simulate
@@ -41,7 +41,8 @@ DEFAULT_REPLICATES = 100
 def band_effects(model: SensorModel) -> tuple[list[Effect], list[str]]:
     """(effects the band holds, kinds left out): kept are those of nature ``BAND_NATURES``
     that need no aux channel."""
-    kept, left = [], []
+    kept: list[Effect] = []
+    left: list[Effect] = []
     for e in model.effects:
         spec = EFFECT_KINDS[e.kind]
         (kept if spec.aux is None and spec.nature in BAND_NATURES else left).append(e)
@@ -143,7 +144,7 @@ class ModelBand:
     @classmethod
     def for_model(cls, model: SensorModel, sample_rate_hz: float, window_n: int, m: np.ndarray,
                   alpha: float = 0.01, replicates: int = DEFAULT_REPLICATES, seed: int = 0,
-                  cache_dir: str | None = None) -> "ModelBand":
+                  cache_dir: str | None = None) -> ModelBand:
         """Band of ``model`` for the live engine's window (``window_n`` samples) and
         averaging factors ``m`` at ``sample_rate_hz`` (Hz), family-wise ``alpha`` per
         window, from ``replicates`` bootstrap windows (seed ``seed``). The replicates are

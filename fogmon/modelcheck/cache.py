@@ -4,6 +4,7 @@ corrupt or mismatched file is rebuilt, never fatal; a folder that cannot be writ
 just skips caching (the caller is told why)."""
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -58,7 +59,5 @@ def save(folder: str, k: str, a: np.ndarray) -> str:
         return f"built, not cached ({folder}: {e.strerror or e})"
     finally:
         if tmp is not None:
-            try:
+            with contextlib.suppress(OSError):
                 os.unlink(tmp)
-            except OSError:
-                pass

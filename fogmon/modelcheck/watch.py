@@ -246,7 +246,7 @@ class ModelWatch:
             j = int(np.argmax(sc))
             if best is None or sc[j] > best[0]:
                 best = (float(sc[j]), name, j, s[j], self._base.mean[name][j])
-        if not judged:
+        if not judged or best is None:  # judged implies best is set
             return "no aux channel co-varies (no in-band window yet to compare the aux channels with)"
         if best[0] < COVARY_Z:
             return "no aux channel co-varies"
@@ -258,6 +258,7 @@ class ModelWatch:
 
     def _close(self, t_s: float) -> Event:
         d = self._dep
+        assert d is not None, "called with a departure open"
         d.end_s = t_s
         self._done.append(d)
         self._dep = None

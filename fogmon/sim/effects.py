@@ -63,7 +63,8 @@ def smoothed_temperature(t_s, temp_c, smooth_s: float) -> np.ndarray:
 DERIVATIVE_ROUNDING = 1e-8
 
 
-def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0, diff_step_s: float = 1.0):
+def temperature_derivatives(t_s, temp_c, smooth_s: float = 10.0,
+                            diff_step_s: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(T, dT/dt, d2T/dt2) in deg C, deg C/s, deg C/s^2 on smoothed temperature, by
     3-point backward differences with step h = diff_step_s (docs/methods.md), see
     ``backward_differences``; T(t - h) interpolated on the sample times (held at the
@@ -113,7 +114,7 @@ def glitches(t_s, aux, p, fs_hz=None) -> np.ndarray:
     t = np.asarray(t_s, dtype=float)
     out = np.zeros(len(t))
     half = 0.5 / _fs(t, fs_hz) if p["width_s"] <= 0 and len(t) else 0.0
-    for ti, ai in zip(p["times_s"], p["amplitudes_dph"]):
+    for ti, ai in zip(p["times_s"], p["amplitudes_dph"], strict=True):
         if p["width_s"] > 0:
             out[(t >= ti) & (t < ti + p["width_s"])] += ai
         else:
@@ -225,7 +226,7 @@ class NarrowbandLines:
     def __init__(self, params: dict, fs_hz: float, rng: np.random.Generator):
         p = params
         self.lines = [NarrowbandLine(f, s, bw, fs_hz, r) for f, s, bw, r in
-                      zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], rng.spawn(len(p["freq_hz"])))]
+                      zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], rng.spawn(len(p["freq_hz"])), strict=True)]
 
     def generate(self, n: int) -> np.ndarray:
         out = np.zeros(n)
@@ -248,7 +249,7 @@ class BandwidthFilter:
                 raise FogmonError(f"bandwidth: cutoff_hz {params['cutoff_hz']:g} must be below "
                                   f"the Nyquist frequency {fs_hz / 2:g} Hz")
             self.sos = butter(params["order"], params["cutoff_hz"], fs=fs_hz, output="sos")
-        self._zi = None
+        self._zi: np.ndarray | None = None
 
     def apply(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=float)

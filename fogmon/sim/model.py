@@ -29,6 +29,7 @@ import os
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from itertools import pairwise
 
 import numpy as np
 import tomli_w
@@ -197,7 +198,8 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         {
             "freq_hz": Param("Hz", "centre frequency of each line (below the Nyquist frequency)", "list", ">0"),
             "sigma_dph": Param("deg/h", "rms of each line", "list", ">=0"),
-            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line (band-pass edges freq_hz -+ bandwidth_hz/2)", "list", ">0"),
+            "bandwidth_hz": Param("Hz", "-3 dB bandwidth of each line (band-pass edges freq_hz -+ bandwidth_hz/2)",
+                                  "list", ">0"),
         },
         None, "noise", "narrowband random vibration: white noise through a 4-pole band-pass per line",
         lambda p: "vibration lines " + ", ".join(f"{f:.4g} Hz ({s:.3g} deg/h rms, {w:.3g} Hz wide)" for f, s, w in
@@ -334,9 +336,9 @@ def _check_outliers(p: dict, where: str) -> None:
     if len(probs) != len(q) or len(q) < 2:
         raise FogmonError(f"{where}: quantile_probs and amplitude_quantiles_dph need the same length, at least 2 "
                           f"({len(probs)} vs {len(q)})")
-    if probs[0] != 0.0 or probs[-1] != 1.0 or any(b <= a for a, b in zip(probs, probs[1:])):
+    if probs[0] != 0.0 or probs[-1] != 1.0 or any(b <= a for a, b in pairwise(probs)):
         raise FogmonError(f"{where}: quantile_probs must increase strictly from 0 to 1, got {probs}")
-    if any(b < a for a, b in zip(q, q[1:])):
+    if any(b < a for a, b in pairwise(q)):
         raise FogmonError(f"{where}: amplitude_quantiles_dph must not decrease, got {q}")
     if p["positive_fraction"] > 1.0:
         raise FogmonError(f"{where}: positive_fraction must be <= 1, got {p['positive_fraction']:g}")
@@ -356,7 +358,7 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
             raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
                               f"Nyquist frequency {fs / 2:g} Hz, got {e.params['cutoff_hz']:g}")
         if e.kind == "vibration_lines":
-            for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"])):
+            for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"], strict=True)):
                 if not (f + bw / 2 < fs / 2 and bw < 2 * f):
                     raise FogmonError(f"{where}: [[effect]] #{i + 1} (vibration_lines): line {j + 1} at "
                                       f"{f:g} Hz with bandwidth {bw:g} Hz must lie between 0 and the Nyquist "

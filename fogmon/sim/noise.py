@@ -172,7 +172,8 @@ class Flicker:
         tau_hi_s = tau_hi_s or default_flicker_tau_hi_s(fs_hz, None)
         self.taus_s = flicker_taus(fs_hz, tau_hi_s, ratio)
         sigma = float(B_dph) * math.sqrt(math.log(ratio) / math.pi)
-        self.terms = [GaussMarkov(sigma, tc, fs_hz, r) for tc, r in zip(self.taus_s, rng.spawn(len(self.taus_s)))]
+        self.terms = [GaussMarkov(sigma, tc, fs_hz, r)
+                      for tc, r in zip(self.taus_s, rng.spawn(len(self.taus_s)), strict=True)]
 
     def generate(self, n: int) -> np.ndarray:
         out = np.zeros(n)

@@ -47,8 +47,8 @@ from fogmon.errors import FogmonError
 from fogmon.pieces import find_pieces, piece_path
 from fogmon.recording import append_replay_rows, write_replay_header
 from fogmon.sinks.base import Sink, Summary
-from fogmon.sources.base import CaptureSource, Source
 from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces, piece_files
+from fogmon.sources.base import CaptureSource, Source
 
 REPLAY_LOG = "samples.csv"
 SERIAL_CAPTURE = "raw.bin"
@@ -152,8 +152,8 @@ class Archive(Sink):
             self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
             if keep.any() and self._parquet is not None:
                 self._pieces.add(self.piece)
-                self._parquet.write(self.piece, self._aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
-                                    {k: block.aux[k][keep] for k in self._aux_names})
+                self._parquet.write(self.piece, aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
+                                    {k: block.aux[k][keep] for k in aux_names})
                 self.counters["rows_written"] += int(keep.sum())
             elif keep.any():
                 if self._csv_fd is None:
@@ -167,7 +167,7 @@ class Archive(Sink):
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._pieces.add(self.piece)
-        write_replay_header(self._csv_buf, self._aux_names, self._meta())
+        write_replay_header(self._csv_buf, aux_names, self._meta())
 
     def _meta(self) -> dict:
         """The replay-log metadata of the current piece."""

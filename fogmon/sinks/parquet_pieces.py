@@ -53,7 +53,7 @@ class ParquetPieces:
     def __init__(self, directory: str, rate_hz: float, row_group_s: float = ROW_GROUP_S) -> None:
         self.directory = directory
         self.rows_per_group = max(1, int(round(row_group_s * rate_hz)))
-        self._piece = None
+        self._piece: int | None = None
         self._schema = None
         self._buf: list = []
         self._held = 0
@@ -75,6 +75,7 @@ class ParquetPieces:
                 self._write_part()
 
     def _parts_dir(self) -> str:
+        assert self._piece is not None, "called inside a piece"
         return os.path.join(self.directory, piece_path(PARQUET_LOG, self._piece) + PARTS_SUFFIX)
 
     def _write_part(self) -> None:

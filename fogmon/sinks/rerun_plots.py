@@ -12,7 +12,7 @@ meant to sit beside a row or grid line are anchored higher, and short tick marks
 the exact place."""
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -96,8 +96,9 @@ def heatmap_bounds():
 
 
 def log_heatmap(rec, entity: str, values: np.ndarray, lo: float, hi: float, colormap: str,
-                row_ticks: tuple[Sequence[int], Sequence[str]], col_ticks: tuple[Sequence[int], Sequence[str]],
-                scale_ticks: tuple[Sequence[float], Sequence[str]], static: bool = False) -> None:
+                row_ticks: tuple[Sequence[int] | np.ndarray, Sequence[str]],
+                col_ticks: tuple[Sequence[int] | np.ndarray, Sequence[str]],
+                scale_ticks: tuple[Sequence[float] | np.ndarray, Sequence[str]], static: bool = False) -> None:
     """``values`` (rows x columns, row 0 on top) as an image of HEAT_W x HEAT_H view units
     under ``entity`` (a view's origin), coloured on ``colormap`` over lo..hi; labelled
     rows and columns (indices, texts) with tick marks, and a colour scale on the right

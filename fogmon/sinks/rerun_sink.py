@@ -37,7 +37,8 @@ import sys
 import tempfile
 import time
 import uuid
-from typing import Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -47,6 +48,9 @@ from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
 from fogmon.sinks import rerun_plots as rp
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
+
+if TYPE_CHECKING:
+    from rerun import RecordingStream
 
 #: Raw rate and aux channels are shown at no more than this many points per second.
 DISPLAY_MAX_HZ = 100.0
@@ -87,12 +91,12 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool
     ADEV-curve view; ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate."""
     import rerun.blueprint as rrb
 
-    top = [_series("/rate/rate_dph", "Rate (deg/h) over recording time (s)")]
+    top: list[rrb.Container | rrb.View] = [_series("/rate/rate_dph", "Rate (deg/h) over recording time (s)")]
     if error_rate:
         top.append(_series("/rate/error_dph", "Error rate_dph - 3600 x rot_dps (deg/h), analysed"))
     if aux_names:
         top.append(_series("/aux", "Aux channels (units in names)"))
-    middle = [
+    middle: list[rrb.Container | rrb.View] = [
         rrb.Spatial2DView(origin="/adev_curve", name="Current window: ADEV (deg/h) vs tau (s), log-log",
                           visual_bounds=rp.loglog_bounds(*curve_bounds) if curve_bounds is not None else None),
         rrb.Tabs(
@@ -130,7 +134,7 @@ def model_taus(tau_s: np.ndarray) -> np.ndarray:
     neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade)."""
     tau = np.asarray(tau_s, dtype=np.float64)
     parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
-             for a, b in zip(tau[:-1], tau[1:])]
+             for a, b in zip(tau[:-1], tau[1:], strict=True)]
     return np.concatenate([*parts, tau[-1:]])
 
 
@@ -160,7 +164,8 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
     process group, and on Linux dies with the thread that started it, even when fogmon
     is killed with SIGKILL (prctl PR_SET_PDEATHSIG): no server is ever left behind."""
     check_port_free(bind, port)
-    log = tempfile.TemporaryFile()   # not a pipe: a long-running server must never block on its log
+    # a file that lives as long as the server, not a pipe: a long-running server must never block on its log
+    log = tempfile.TemporaryFile()  # noqa: SIM115
     proc = subprocess.Popen([_rerun_binary(), "--serve-grpc", "--bind", bind, "--port", str(port)],
                             start_new_session=True, preexec_fn=_die_with_parent(), stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=log)
@@ -315,7 +320,8 @@ class _Streams:
     and ``file`` (the current .rrd piece, replaced at each --rotate-s seam)."""
 
     def __init__(self) -> None:
-        self.live = self.file = None
+        self.live: RecordingStream | None = None
+        self.file: RecordingStream | None = None
 
     def all(self) -> list:
         return [r for r in (self.live, self.file) if r is not None]
@@ -377,6 +383,7 @@ class RerunSink(Sink):
                   file=sys.stderr)
 
     def _piece_path(self) -> str:
+        assert self.rrd_path is not None, "called with --rrd only"
         return piece_path(self.rrd_path, self._piece) if self.rotate_files else self.rrd_path
 
     def _check_rrd(self) -> None:
@@ -434,6 +441,7 @@ class RerunSink(Sink):
         import rerun as rr
 
         path = self._piece_path()
+        assert self.rec is not None, "the streams open with the first block"
         self.rec.file = rr.RecordingStream("fogmon", recording_id=self._recording_id)
         self.rec.file.save(path, default_blueprint=self._blueprint)
         self.pieces.append(path)
@@ -461,8 +469,9 @@ class RerunSink(Sink):
                                                                 colors=[c], markers=["down"], marker_sizes=[3.0]),
                     static=True)
         rec.log("session", rr.TextDocument(
-            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\nwindow: {info.window_s:g} s, "
-            f"hop: {info.hop_s:g} s\ntaus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
+            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\n"
+            f"window: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
+            f"taus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
@@ -498,12 +507,14 @@ class RerunSink(Sink):
             ok = np.isfinite(v)
             if not ok.any():
                 continue
+            assert self.rec is not None, "the streams open with the first block"
             self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
                                   columns=rr.Scalars.columns(scalars=v[ok]))
 
     def frames(self, dadev, fit, t_end_s: np.ndarray) -> None:
         import rerun as rr
 
+        assert self.rec is not None, "the streams open with the first block"
         rec = self.rec
         self._flush_raw()
         idx = [rr.TimeColumn(TIMELINE, duration=t_end_s)]
@@ -580,7 +591,9 @@ class RerunSink(Sink):
         if not ok.any():
             return
         pts = np.column_stack([lx[ok], ly[ok]])
-        self.rec.log(f"{CURVE}/adev_dph", rr.LineStrips2D([pts], colors=[MEASURED_COLOUR], radii=rr.Radius.ui_points(1.5)),
+        assert self.rec is not None, "the streams open with the first block"
+        self.rec.log(f"{CURVE}/adev_dph",
+                     rr.LineStrips2D([pts], colors=[MEASURED_COLOUR], radii=rr.Radius.ui_points(1.5)),
                      rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[MEASURED_COLOUR]))
         b = ok & np.isfinite(llo) & np.isfinite(lhi)
         self.rec.log(f"{CURVE}/bounds", rr.LineStrips2D(
@@ -614,6 +627,7 @@ class RerunSink(Sink):
         import rerun as rr
 
         for k, v in counters.items():
+            assert self.rec is not None, "the streams open with the first block"
             self.rec.send_columns(f"counters/{k}", indexes=[rr.TimeColumn(TIMELINE, duration=[t_s])],
                                   columns=rr.Scalars.columns(scalars=[float(v)]))
 
@@ -651,6 +665,7 @@ class RerunSink(Sink):
 
     def _serve_until_stopped(self) -> None:
         print(f"fogmon: done; still serving {self.server_url} for viewers - press Ctrl-C to stop", file=sys.stderr)
+        assert self.server is not None, "called with --serve only"
         try:
             while self.server.poll() is None and not stopping.stop_requested():
                 time.sleep(0.5)

@@ -17,6 +17,7 @@ import functools
 import math
 import os
 from collections.abc import Iterable, Iterator
+from typing import Any
 
 import can
 import numpy as np
@@ -219,7 +220,7 @@ class CanSource(LiveSource):
         return f"--can {self.channel} --interface {self.interface}"
 
     def _open(self):
-        kw = {"bitrate": self.bitrate} if self.bitrate else {}
+        kw: dict[str, Any] = {"bitrate": self.bitrate} if self.bitrate else {}
         return can.Bus(interface=self.interface, channel=self.channel, **kw)
 
     def _close(self, bus) -> None:

@@ -38,7 +38,7 @@ class Frames:
         return len(self.seq)
 
     @staticmethod
-    def from_lists(seq, rate_dph, valid, aux: dict | None = None, skipped=None, frame_bytes: int = 0) -> "Frames":
+    def from_lists(seq, rate_dph, valid, aux: dict | None = None, skipped=None, frame_bytes: int = 0) -> Frames:
         return Frames(np.asarray(seq, dtype=np.int64).reshape(-1),
                       np.asarray(rate_dph, dtype=np.float64).reshape(-1),
                       np.asarray(valid, dtype=bool).reshape(-1),
@@ -47,5 +47,5 @@ class Frames:
                       int(frame_bytes))
 
     @staticmethod
-    def empty(aux_names=()) -> "Frames":
+    def empty(aux_names=()) -> Frames:
         return Frames.from_lists([], [], [], {k: [] for k in aux_names})

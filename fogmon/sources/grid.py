@@ -83,9 +83,10 @@ class GridAssembler:
             base = (seq0 - self._last_seq - 1) % M  # missing = base + j*M for the j closest to est
             j = max(0, int(round((est - base) / M)))
             return base + j * M, 2
-        counted = M is not None and seq0 >= 0 and self._last_seq is not None
-        base = np.array([(seq0 - self._last_seq - 1) % M]) if counted else None
-        return int(lost_frames(base, [skipped0], frame_bytes, M if counted else None)[0]), int(skipped0 > 0)
+        last = self._last_seq
+        base0 = np.array([(seq0 - last - 1) % M]) if M is not None and seq0 >= 0 and last is not None else None
+        M_counted = M if base0 is not None else None
+        return int(lost_frames(base0, np.array([skipped0]), frame_bytes, M_counted)[0]), int(skipped0 > 0)
 
     def push(self, frames: Frames, events: list[Event] | tuple = ()) -> Block:
         """Place ``frames`` on the grid; returns the block (possibly empty) with gap

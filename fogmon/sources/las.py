@@ -7,8 +7,8 @@ angular rate), units from the ~Curve section (``--rate-unit`` overrides a missin
 wrong one). A depth-indexed file (index unit m or ft) is refused unless a time curve is
 named; its depth then rides along as aux ``depth_m``. The only curve in deg C, if any,
 becomes aux ``temp_c``. LAS null values are counted invalid samples (``null_samples``);
-rows without a time are left out and counted (``rows_without_time``). Time stamps go on fogmon's grid as fogmon.sources.stamped
-describes."""
+rows without a time are left out and counted (``rows_without_time``). Time stamps go on
+fogmon's grid as fogmon.sources.stamped describes."""
 from __future__ import annotations
 
 import os
@@ -43,7 +43,8 @@ def open_source(path: str, options: dict) -> StampedSource:
     try:
         las = lasio.read(path, ignore_header_errors=False)
     except Exception as e:  # lasio raises many error types for broken files
-        raise FogmonError(f"{path}: not a readable LAS file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable LAS file ({why})") from None
     curves = {c.mnemonic: c for c in las.curves}
     if not curves:
         raise FogmonError(f"{path}: no curves in the ~Curve section")

@@ -24,7 +24,8 @@ def open_source(path: str, options: dict) -> StampedSource:
     try:
         mdf = asammdf.MDF(path)
     except Exception as e:  # asammdf raises MdfException and plain errors for broken files
-        raise FogmonError(f"{path}: not a readable MDF file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable MDF file ({why})") from None
     with mdf:
         names = sorted(n for n in mdf.channels_db if n not in ("t", "time"))  # not the master time
         channel = options.get("channel")

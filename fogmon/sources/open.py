@@ -61,8 +61,8 @@ def open_replay_source(path: str, opts: SourceOptions | None = None) -> Source:
     pipeline paces (``--realtime``)."""
     opts = SourceOptions() if opts is None else opts
     from fogmon.capture import read_sidecar
-    from fogmon.sources.replay import ReplayLogSource, open_raw_capture
     from fogmon.sources.formats import open_reader
+    from fogmon.sources.replay import ReplayLogSource, open_raw_capture
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
@@ -131,5 +131,5 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     if logs:
         return ReplayLogSet(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
     raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, samples.parquet, "
-                      f"{SERIAL_CAPTURE} or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, raw capture "
-                      f"or CAN log")
+                      f"{SERIAL_CAPTURE} or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, "
+                      f"raw capture or CAN log")

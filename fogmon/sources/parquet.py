@@ -3,7 +3,7 @@ checks as a CSV replay log (fogmon.sources.replay.ReplayLogSource), read one row
 a time (memory of one row group and one block, whatever the file size)."""
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 from fogmon.parquet_log import ParquetRows
 from fogmon.sources import plausibility

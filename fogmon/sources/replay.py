@@ -275,6 +275,7 @@ class ReplayLogSet:
         first = self._sources[0]
         self.rate_hz = first.rate_hz
         aux = first.aux_names
+        # neighbour pairs: prev is one longer than paths[1:] and sources[1:], the last is unused
         for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:], strict=False):
             if src.rate_hz != self.rate_hz:
                 raise FogmonError(f"{path}: sample_rate_hz {src.rate_hz:g} differs from {self.paths[0]} "

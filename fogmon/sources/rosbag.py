@@ -73,7 +73,8 @@ def open_source(path: str, options: dict) -> StampedSource:
         reader = _reader(path)
         reader.open()
     except Exception as e:  # rosbags raises its own error types for unreadable files
-        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({why})") from None
     try:
         imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
         topic = options.get("topic")
@@ -95,10 +96,10 @@ def open_source(path: str, options: dict) -> StampedSource:
         i = 0
         layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
         for conn, _, raw in reader.messages(connections=conns):
-            lay = layouts.get(len(raw), False)
-            if lay is False:
+            if len(raw) not in layouts:
                 msg = reader.deserialize(raw, conn.msgtype)
-                lay = layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+                layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+            lay = layouts[len(raw)]
             if lay is None:
                 msg = reader.deserialize(raw, conn.msgtype)
                 ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec

@@ -2,18 +2,19 @@
 file) on fogmon's uniform sample grid.
 
 Such files carry one time stamp per sample (header stamps, logger clocks) with jitter and
-no sequence counter. Each stamp step is rounded to a whole number of median steps, so a step of k periods (k >= 2) means k - 1 samples are
-missing: they become invalid placeholders with a ``gap`` event and are counted, as in a
-replay log (fogmon.sources.replay). Rounding step by step (not against the first stamp)
-keeps a clock that runs slightly off its nominal rate from turning into false gaps.
-The nominal rate is then the grid periods over the span of the stamps. A step under half
-a period (a repeated or backward stamp) is a one-line error naming the file, the sample
-and the time field. Sample times are the grid, ``t0 + k / fs`` (s).
+no sequence counter. Each stamp step is rounded to a whole number of median steps, so a
+step of k periods (k >= 2) means k - 1 samples are missing: they become invalid
+placeholders with a ``gap`` event and are counted, as in a replay log
+(fogmon.sources.replay). Rounding step by step (not against the first stamp) keeps a clock
+that runs slightly off its nominal rate from turning into false gaps. The nominal rate is
+then the grid periods over the span of the stamps. A step under half a period (a repeated
+or backward stamp) is a one-line error naming the file, the sample and the time field.
+Sample times are the grid, ``t0 + k / fs`` (s).
 """
 from __future__ import annotations
 
 import math
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -66,6 +67,9 @@ class StampedSource:
     ``null_samples`` (samples present with no value: invalid) plus the ``counters`` the
     reader gives (what it left out and why). ``to_recording()`` gives the same
     samples as a Recording for the batch commands (explain)."""
+
+    #: the ROS topic the samples came from (set by fogmon.sources.rosbag; a Kalibr export names it)
+    ros_topic: str | None = None
 
     def __init__(self, t_s, rate_dph, aux: dict | None, *, name: str, where: str, time_field: str,
                  meta: dict | None = None, max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH,

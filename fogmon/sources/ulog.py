@@ -33,7 +33,8 @@ def open_source(path: str, options: dict) -> StampedSource:
     try:
         log = pyulog.ULog(path, [name])
     except Exception as e:  # pyulog raises plain exceptions for broken files
-        raise FogmonError(f"{path}: not a readable ULog file ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable ULog file ({why})") from None
     found = [d for d in log.data_list if d.name == name]
     data = next((d for d in found if d.multi_id == int(inst or 0)), None)
     if data is None:
