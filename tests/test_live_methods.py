@@ -85,7 +85,8 @@ def test_model_band_is_drawn_in_the_rrd_and_departures_reported(tmp_path):
     rrd = tmp_path / "mwd.rrd"
     assert main(["replay", str(ROOT / "replay_logs" / "sim_mwd_run_1hz.csv"), "--model",
                  str(ROOT / "replay_logs" / "sim_mwd_run.toml"), "--rrd", str(rrd), "--quiet"]) == 0
-    strips = [ch.to_record_batch() for ch in RrdReader(str(rrd)).stream().filter(content="/adev_curve/log10/model_band")]
+    band = "/adev_curve/log10/model_band"
+    strips = [ch.to_record_batch() for ch in RrdReader(str(rrd)).stream().filter(content=band)]
     lines = [rb.column(n).to_pylist()[0] for rb in strips for n in rb.schema.names if n.endswith("strips")]
     lo, median, hi = (np.array(s) for s in lines[0])
     assert np.all(lo[:, 1] < median[:, 1]) and np.all(median[:, 1] < hi[:, 1])

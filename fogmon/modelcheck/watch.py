@@ -218,7 +218,8 @@ class ModelWatch:
             return []
         shape = tau_shape(z, band.threshold)
         cause = self._cause(aux_window)
-        self._dep = _Departure(t_end_s - new_s + 1.0 / band.sample_rate_hz, t_end_s, t_end_s, float(taus[0]), float(taus[-1]),
+        first_new_s = t_end_s - new_s + 1.0 / band.sample_rate_hz  # the first sample of the new data
+        self._dep = _Departure(first_new_s, t_end_s, t_end_s, float(taus[0]), float(taus[-1]),
                                float(abs(z[k])), ratio, float(band.tau_s[k]), shape, cause)
         idx = np.flatnonzero(out)
         if len(taus) == 1:

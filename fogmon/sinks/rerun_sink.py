@@ -480,9 +480,8 @@ class RerunSink(Sink):
         if info.model_band is not None and len(tau):
             lx = np.log10(tau)
             lines = [np.column_stack([lx, np.log10(np.asarray(a, dtype=np.float64))]) for a in info.model_band]
-            rec.log(f"{CURVE}/model_band", rr.LineStrips2D(lines, colors=[BAND_COLOUR],
-                                                           radii=[rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)]),
-                    static=True)
+            radii = np.array([rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)], dtype=np.float32)
+            rec.log(f"{CURVE}/model_band", rr.LineStrips2D(lines, colors=[BAND_COLOUR], radii=radii), static=True)
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
