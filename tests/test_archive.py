@@ -20,6 +20,12 @@ from fogmon.sinks.archive import Archive
 from fogmon.sources.replay import open_raw_capture
 
 FS = 200.0
+#: A safety bound (s) on waiting for the monitor: it synchronises on data (the port open,
+#: rows on disk), and a cold start (imports, numba compiling in a fresh venv) on a loaded
+#: 2-core machine has taken over 60 s; a monitor that has done nothing after this is broken.
+WAIT_S = 600.0
+#: the tests that start a monitor wait up to WAIT_S, beyond the suite's 300 s per test
+pytestmark = pytest.mark.timeout(2 * WAIT_S)
 
 
 class FakeSource:
@@ -84,13 +90,13 @@ def run_device(dev, proc, until, t0=None, k=0):
     """Send at FS (once the monitor has the port open and flushed) until ``until()``;
     returns (t0, next k) to carry on."""
     if t0 is None:
-        t_end = time.monotonic() + 60
+        t_end = time.monotonic() + WAIT_S
         while not has_open(proc.pid, dev.tty) and time.monotonic() < t_end:
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.01)
         t0 = time.monotonic()       # frames sent before pyserial's open() flushed its input are lost:
                                     # the checks start at the first frame archived (``listened``)
-    while not until() and time.monotonic() - t0 < 60:
+    while not until() and time.monotonic() - t0 < WAIT_S:
         try:
             k = dev.send_due(t0, k)
         except TimeoutError:        # the monitor stopped reading (it is finishing or gone)
