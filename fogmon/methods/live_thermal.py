@@ -15,6 +15,7 @@ prediction and its corrected rate is NaN (the caller marks it invalid and counts
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,58 +47,83 @@ def thermal_effect(model: SensorModel, name: str) -> Effect:
 
 class LiveThermalCorrection:
     """Causal thermal-drift correction of a stream of blocks (time s, rate deg/h,
-    temperature deg C), carrying the filters' history from one block to the next."""
+    temperature deg C), carrying the filters' history from one block to the next. The
+    trailing mean uses running prefix sums, and the history sits in a buffer trimmed only
+    when full, so a block costs O(its length x log(history)), not O(history): a live
+    1 kHz gyro delivers blocks of a few samples."""
 
     def __init__(self, effect: Effect) -> None:
         self._params = effect.params
         self.smooth_s = float(self._params["smooth_s"])
         self.h_s = float(self._params["diff_step_s"])
         self.history_s = self.smooth_s + 2 * self.h_s
-        self._t = np.empty(0)        # times of the kept history, s
-        self._temp = np.empty(0)     # raw temperature, deg C (NaN = unknown)
-        self._smooth = np.empty(0)   # smoothed temperature, deg C
+        self._buf = np.empty((4, 0))   # rows: time s, prefix sum before, prefix count before, smoothed deg C
+        self._n = 0                    # samples held in the buffer
+        self._ref = math.nan           # temperature the prefix sums are taken from (the first known), deg C
+        self._sum_next = 0.0           # prefix sum and count before the next sample
+        self._count_next = 0
 
-    def _smoothed(self, t: np.ndarray, temp: np.ndarray, n_new: int) -> np.ndarray:
-        """Trailing mean of the known temperatures in (t - smooth_s, t] for the last
-        ``n_new`` of ``t`` (the history before them is included in ``t``/``temp``)."""
-        new = slice(len(t) - n_new, len(t))
-        if self.smooth_s <= 0:
-            return temp[new].copy()
+    def _append(self, cols: np.ndarray) -> None:
+        """Add columns to the history; when the buffer is full, drop what is older than
+        history_s (one sample before it kept, for interpolation) and grow if needed."""
+        m = cols.shape[1]
+        if self._n + m > self._buf.shape[1]:
+            t = self._buf[0, :self._n]
+            keep = max(int(np.searchsorted(t, t[-1] - self.history_s, side="left")) - 1, 0) if self._n else 0
+            held = self._buf[:, keep:self._n]
+            cap = max(2 * (held.shape[1] + m), 1024)
+            self._buf = np.empty((4, cap))
+            self._buf[:, :held.shape[1]] = held
+            self._n = held.shape[1]
+        self._buf[:, self._n:self._n + m] = cols
+        self._n += m
+
+    def _smoothed(self, t_new: np.ndarray, temp: np.ndarray) -> np.ndarray:
+        """Trailing mean (deg C) of the known temperatures in (t - smooth_s, t] for each
+        new sample, the new samples' columns appended to the history."""
         known = np.isfinite(temp)
-        ref = temp[known][0] if known.any() else 0.0
-        c = np.concatenate(([0.0], np.cumsum(np.where(known, temp - ref, 0.0))))
-        k = np.concatenate(([0], np.cumsum(known)))
-        hi = np.arange(len(t) - n_new + 1, len(t) + 1)
-        lo = np.searchsorted(t, t[new] - self.smooth_s, side="right")
-        count = k[hi] - k[lo]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(count > 0, ref + (c[hi] - c[lo]) / count, np.nan)
+        if math.isnan(self._ref) and known.any():
+            self._ref = float(temp[known][0])
+        ref = 0.0 if math.isnan(self._ref) else self._ref
+        v = np.where(known, temp - ref, 0.0)
+        before = self._sum_next + np.concatenate(([0.0], np.cumsum(v)[:-1]))
+        count_before = self._count_next + np.concatenate(([0], np.cumsum(known)[:-1]))
+        self._sum_next, self._count_next = float(before[-1] + v[-1]), int(count_before[-1] + known[-1])
+        self._append(np.vstack((t_new, before, count_before, np.full(len(t_new), np.nan))))
+        n, m = self._n, len(t_new)
+        if self.smooth_s <= 0:
+            smooth = temp.copy()
+        else:
+            t, pre, cnt = self._buf[0, :n], self._buf[1, :n], self._buf[2, :n]
+            lo = np.searchsorted(t, t_new - self.smooth_s, side="right")
+            total = pre[n - m:] + v - pre[lo]
+            count = cnt[n - m:] + known - cnt[lo]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                smooth = np.where(count > 0, ref + total / count, np.nan)
+        # an unknown smoothed value holds the last known one for the differences
+        last = self._buf[3, n - m - 1] if n > m else math.nan
+        filled = smooth.copy()
+        idx = np.where(np.isfinite(filled), np.arange(m), -1)
+        np.maximum.accumulate(idx, out=idx)
+        filled = np.where(idx >= 0, filled[np.maximum(idx, 0)], last)
+        self._buf[3, n - m:n] = filled
+        return smooth
 
     def push(self, t_s: np.ndarray, rate_dph: np.ndarray, temp_c: np.ndarray) -> Corrected:
         """Correct one block (equal-length arrays, time increasing across calls)."""
         t_new = np.asarray(t_s, float)
-        n = len(t_new)
-        if n == 0:
+        if len(t_new) == 0:
             return Corrected(np.empty(0), np.empty(0), np.zeros(0, bool))
-        t = np.concatenate((self._t, t_new))
-        temp = np.concatenate((self._temp, np.asarray(temp_c, float)))
-        smooth = np.concatenate((self._smooth, self._smoothed(t, temp, n)))
-        ok = np.isfinite(smooth)
-        ts = smooth[-n:]
-        back1 = self._at(t, smooth, ok, t_new - self.h_s)
-        back2 = self._at(t, smooth, ok, t_new - 2 * self.h_s)
-        d1, d2 = backward_differences(ts, back1, back2, self.h_s)
-        drift = thermal_drift_from(ts, d1, d2, self._params)
-        keep = np.searchsorted(t, t[-1] - self.history_s, side="left")
-        keep = max(keep - 1, 0)  # one sample before the span, for interpolation at its edge
-        self._t, self._temp, self._smooth = t[keep:], temp[keep:], smooth[keep:]
+        ts = self._smoothed(t_new, np.asarray(temp_c, float))
+        t, filled = self._buf[0, :self._n], self._buf[3, :self._n]
+        a = max(int(np.searchsorted(t, t_new[0] - 2 * self.h_s, side="left")) - 1, 0)
+        first = a + int(np.argmax(np.isfinite(filled[a:])))  # interpolation starts at a known value
+        if not np.isfinite(filled[first]):
+            drift = np.full(len(t_new), np.nan)
+        else:
+            # held at the first known value before it, as the offline filter holds the record's first sample
+            back1 = np.interp(t_new - self.h_s, t[first:], filled[first:])
+            back2 = np.interp(t_new - 2 * self.h_s, t[first:], filled[first:])
+            d1, d2 = backward_differences(ts, back1, back2, self.h_s)
+            drift = thermal_drift_from(ts, d1, d2, self._params)
         return Corrected(np.asarray(rate_dph, float) - drift, drift, ~np.isfinite(drift))
-
-    @staticmethod
-    def _at(t: np.ndarray, smooth: np.ndarray, ok: np.ndarray, when: np.ndarray) -> np.ndarray:
-        """Smoothed temperature interpolated at times ``when`` over the known values
-        (held at the first known value before it, as the offline filter holds the
-        record's first sample)."""
-        if not ok.any():
-            return np.full(len(when), np.nan)
-        return np.interp(when, t[ok], smooth[ok])
