@@ -1,4 +1,4 @@
-"""The replay log as Parquet: the same columns as the CSV (CONTRACT section 1: ``time_s``
+"""The replay log as Parquet: the same columns as the CSV (docs/formats.md, replay log: ``time_s``
 s, ``rate_dph`` deg/h, aux channels), float64, valid samples only (gaps are time gaps),
 and the CSV's ``# key: value`` metadata plus units and facts about the source in the
 file's key-value metadata (key ``fogmon``, a JSON object: ``format``, ``meta`` (the CSV
@@ -24,7 +24,7 @@ from fogmon.recording import REQUIRED, Recording, sample_rate_from
 
 FORMAT = "fogmon replay log v1 (parquet)"
 META_KEY = b"fogmon"
-#: units of the columns with a fixed meaning (CONTRACT section 1); others: "as recorded"
+#: units of the columns with a fixed meaning (docs/formats.md, replay log); others: "as recorded"
 UNITS = {"time_s": "s", "rate_dph": "deg/h", "temp_c": "deg C", "rot_dps": "deg/s", "vib_g": "g", "depth_m": "m"}
 #: rows per row group written by the converter (65.5 s at 1 kHz)
 ROW_GROUP_ROWS = 1 << 16

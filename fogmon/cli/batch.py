@@ -1,6 +1,6 @@
 """`fogmon batch INPUTS... --out DIR`: many recordings analysed on Dask with the engine and
-fits of `fogmon replay`, into DIR/windows.parquet and DIR/recordings.parquet (CONTRACT
-section 5); `--report` adds the fleet report."""
+fits of `fogmon replay`, into DIR/windows.parquet and DIR/recordings.parquet (docs/batch.md,
+the output tables); `--report` adds the fleet report."""
 from __future__ import annotations
 
 import argparse

@@ -132,7 +132,7 @@ def outliers_path(report_path: str) -> str:
 
 
 def build_report(res: Result, recording_path: str, model_path: str | None, times_file: str = "") -> dict:
-    """The report (CONTRACT section 4); ``times_file`` names the outliers file relative
+    """The report (docs/formats.md, explain report); ``times_file`` names the outliers file relative
     to the report (an ``outliers`` effect's ``times_file`` parameter)."""
     mism = [r.as_json() for r in res.before.regions]
     mism_after = [r.as_json() for r in res.after.regions]

@@ -1,4 +1,4 @@
-"""The two tables `fogmon batch` writes (CONTRACT section 5): ``windows.parquet``, one row
+"""The two tables `fogmon batch` writes (docs/batch.md): ``windows.parquet``, one row
 per (recording, axis, window), and ``recordings.parquet``, one row per (recording, axis)."""
 from __future__ import annotations
 
