@@ -215,7 +215,7 @@ def test_live_grpc_receiver_gets_the_same_data_as_the_file(tmp_path):
     recv = subprocess.Popen([rerun_exe, "--bind", "127.0.0.1", "--port", str(port), "--save", live],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 120  # a guard against a hang, not a timing
         while True:
             try:
                 socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
@@ -259,7 +259,7 @@ def listening(port):
     return out
 
 
-def wait_until(cond, what, timeout_s=30.0):
+def wait_until(cond, what, timeout_s=120.0):
     """Poll ``cond`` (the deadline only guards against a hang; it is not what is tested)."""
     deadline = time.monotonic() + timeout_s
     while not cond():

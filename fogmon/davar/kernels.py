@@ -440,14 +440,6 @@ def _tile_totals(x_in, x_out, n):
     return d, a
 
 
-@njit(cache=True, fastmath=True)
-def _block_sum(x, i0, i1):
-    s = 0.0
-    for i in range(i0, i1):
-        s += x[i]
-    return s
-
-
 @njit(cache=True)
 def window_sum(pre, start, w, m, scratch, exact):
     """Recompute for the window of ``w`` samples from buffer position ``start``:
@@ -481,7 +473,7 @@ def window_sum(pre, start, w, m, scratch, exact):
     s = 0.0
     c = 0.0
     for i0 in range(0, nt, 256):
-        s, r = _two_sum(s, _block_sum(scratch, i0, min(i0 + 256, nt)))
+        s, r = _two_sum(s, _range_sum(scratch, i0, min(i0 + 256, nt)))
         c += r
     return s, c, n, 256.0 * _EPS * (s + c)
 
