@@ -23,19 +23,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1_000_000, help="samples (at 100 Hz)")
     a = ap.parse_args()
-    fs = 100.0
+    sample_rate_hz = 100.0
     noise = Noise(Q_arcsec=0.05, N_dpsh=0.01, B_dph=0.01)
-    base = SensorModel(fs, 0.5, noise, [])
-    sigma = math.sqrt((60 * 0.01) ** 2 * fs + 2 * (0.05 * fs) ** 2)
+    base = SensorModel(sample_rate_hz, 0.5, noise, [])
+    sigma = math.sqrt((60 * 0.01) ** 2 * sample_rate_hz + 2 * (0.05 * sample_rate_hz) ** 2)
     t0 = time.perf_counter()
-    rec0 = simulate(base, duration_s=a.n / fs, seed=1)
-    dadev(rec0.rate_dph, fs, window_s=a.n / fs / 8, alpha=0)
+    rec0 = simulate(base, duration_s=a.n / sample_rate_hz, seed=1)
+    dadev(rec0.rate_dph, sample_rate_hz, window_s=a.n / sample_rate_hz / 8, alpha=0)
     unit = time.perf_counter() - t0
     print(f"reference: one simulation + one DADEV of {a.n} samples: {unit:.2f} s")
     for label, eff in (("null", []),
                        ("periodic 0.3 sigma", [Effect("periodic", {"period_s": 777.0, "amplitude_dph": 0.3 * sigma,
                                                                     "phase_rad": 0.0})])):
-        rec = simulate(SensorModel(fs, 0.5, noise, eff), duration_s=a.n / fs, seed=2)
+        rec = simulate(SensorModel(sample_rate_hz, 0.5, noise, eff), duration_s=a.n / sample_rate_hz, seed=2)
         t0 = time.perf_counter()
         res = explain(rec, base, Options())
         dt = time.perf_counter() - t0

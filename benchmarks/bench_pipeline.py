@@ -46,7 +46,7 @@ class MemorySource:
     """One hour of 1 kHz white noise (N = 0.05 deg/sqrt(h)) plus 10 deg/h bias, in blocks."""
 
     def __init__(self, rate):
-        self.name, self.rate_hz, self.counters, self.n_samples = "memory (1 h at 1 kHz)", FS, {}, len(rate)
+        self.name, self.sample_rate_hz, self.counters, self.n_samples = "memory (1 h at 1 kHz)", FS, {}, len(rate)
         self._rate = rate
 
     def blocks(self):

@@ -37,14 +37,14 @@ def timed(path, **opts) -> float:
 
 def main() -> None:
     n = int(float(sys.argv[1])) if len(sys.argv) > 1 else 100_000
-    fs = 100.0
+    sample_rate_hz = 100.0
     rng = np.random.default_rng(1)
-    t = np.arange(n) / fs
-    rate = 60 * 0.1 * np.sqrt(fs) * rng.standard_normal(n)
+    t = np.arange(n) / sample_rate_hz
+    rate = 60 * 0.1 * np.sqrt(sample_rate_hz) * rng.standard_normal(n)
     keep = np.ones(n, bool)
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)
-        write_replay_log(d / "ref.csv", t, rate, meta={"sample_rate_hz": fs})
+        write_replay_log(d / "ref.csv", t, rate, meta={"sample_rate_hz": sample_rate_hz})
         t_csv = timed(d / "ref.csv")
         print(f"replay-log CSV: {n / t_csv:,.0f} samples/s (reference)")
         w.N = n
@@ -62,7 +62,7 @@ def main() -> None:
         for name, path, opts in cases:
             s = timed(path, **opts)
             print(f"{name}: {n / s:,.0f} samples/s = {t_csv / s:.2f}x the CSV reader "
-                  f"({n / fs / s:,.0f}x real time at {fs:g} Hz)")
+                  f"({n / sample_rate_hz / s:,.0f}x real time at {sample_rate_hz:g} Hz)")
 
 
 if __name__ == "__main__":

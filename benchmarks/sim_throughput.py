@@ -28,10 +28,10 @@ def rss_mb() -> float:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--hours", type=float, default=1.0)
-    ap.add_argument("--rate-hz", type=float, default=1000.0)
+    ap.add_argument("--rate-hz", dest="sample_rate_hz", type=float, default=1000.0)
     a = ap.parse_args()
     dur = a.hours * 3600.0
-    model = SensorModel(a.rate_hz, 0.1, Noise(0.01, 0.02, 0.05, 0.01, 0.0), [
+    model = SensorModel(a.sample_rate_hz, 0.1, Noise(0.01, 0.02, 0.05, 0.01, 0.0), [
         Effect("thermal_drift", {"k0_poly_dph": [0.0, 0.002], "k1_pos": 40.0, "k1_neg": 25.0,
                                  "k2_pos": 0.0, "k2_neg": 0.0}),
         Effect("vibration_noise", {"n_gain_dpsh_per_g": 0.005}),
@@ -50,7 +50,7 @@ def main() -> None:
     for _ in range(20):
         rng.standard_normal(1 << 20)
     ref = 20 * (1 << 20) / (time.perf_counter() - t1)
-    print(f"{n} samples ({dur:g} s at {a.rate_hz:g} Hz) in {dt:.1f} s: {n / dt / 1e6:.2f} M samples/s "
+    print(f"{n} samples ({dur:g} s at {a.sample_rate_hz:g} Hz) in {dt:.1f} s: {n / dt / 1e6:.2f} M samples/s "
           f"= 1/{ref / (n / dt):.0f} of numpy normal generation ({ref / 1e6:.0f} M/s)")
     print(f"peak RSS {rss_mb():.0f} MB (after building the scenario: {base:.0f} MB; "
           f"a whole-record float64 array would be {n * 8 / 1e6:.0f} MB)")

@@ -3,13 +3,13 @@
 Public API (units in every name: deg/h for rate, s for time, IEEE-952 units for
 coefficients)::
 
-    fogmon.oadev(rate_dph, rate_hz, taus="octave")          -> AdevResult
-    fogmon.dadev(rate_dph, rate_hz, window_s, hop_s=None)   -> DadevResult
-    fogmon.StreamingDadev(rate_hz, window_s, taus="octave") -> ring-buffer updater
+    fogmon.oadev(rate_dph, sample_rate_hz, taus="octave")          -> AdevResult
+    fogmon.dadev(rate_dph, sample_rate_hz, window_s, hop_s=None)   -> DadevResult
+    fogmon.StreamingDadev(sample_rate_hz, window_s, taus="octave") -> ring-buffer updater
     fogmon.fit_noise(result)                                -> IEEE-952 Q, N, B, K, R
     fogmon.adev_from_curve(tau_s, adev_dph, n_terms=...)    -> (AdevResult, assumptions)
                                                                of another tool's curve
-    fogmon.tau_grid(rate_hz, n_max, taus)                   -> averaging factors m
+    fogmon.tau_grid(sample_rate_hz, n_max, taus)                   -> averaging factors m
     fogmon.read_replay_log(path) / write_replay_log(...)    -> Recording I/O
 
 Names are imported lazily so that ``fogmon --help`` starts fast.

@@ -71,7 +71,7 @@ def _breaks(v, folder):
 #: Sidecar fields -> check (None if fine, else why not). ``format`` and ``kind`` are
 #: required; unknown fields are ignored (newer writers may add some).
 SIDECAR_FIELDS = {
-    "kind": _one_of("serial", "can"), "protocol": _one_of(*PROTOCOLS), "rate_hz": _number(0, True),
+    "kind": _one_of("serial", "can"), "protocol": _one_of(*PROTOCOLS), "sample_rate_hz": _number(0, True),
     "kvh_rot": _one_of("rate", "delta"), "kvh_units": _one_of("deg", "rad"), "axis": _one_of("x", "y", "z"),
     "columns": _text, "max_rate_dph": _number(0, True), "breaks": _breaks, "piece": _count, "started_utc": _text,
     "port": _text, "baud": _count, "channel": _text_or_null, "interface": _text_or_null, "dbc": _file_in_folder,
@@ -98,6 +98,8 @@ def read_sidecar(path: str) -> dict | None:
         raise FogmonError(f"{side}: not a fogmon capture sidecar (missing \"format\": \"{CAPTURE_FORMAT}\")")
     if "kind" not in d:
         raise FogmonError(f"{side}: field kind: missing")
+    if "sample_rate_hz" in d and "sample_rate_hz" not in d:  # the name earlier versions wrote
+        d["sample_rate_hz"] = d.pop("sample_rate_hz")
     folder = os.path.dirname(os.path.abspath(side))
     for name, check in SIDECAR_FIELDS.items():
         why = check(d[name], folder) if name in d else None

@@ -39,14 +39,14 @@ def bias_instability_rad(b_dph: float) -> float:
     return b_dph * RAD_PER_DEG / 3600.0
 
 
-def discrete_white(density: float, rate_hz: float) -> float:
-    """Per-sample sigma of white noise of ``density`` (per sqrt(Hz)) sampled at ``rate_hz``."""
-    return density * math.sqrt(rate_hz)
+def discrete_white(density: float, sample_rate_hz: float) -> float:
+    """Per-sample sigma of white noise of ``density`` (per sqrt(Hz)) sampled at ``sample_rate_hz``."""
+    return density * math.sqrt(sample_rate_hz)
 
 
-def discrete_random_walk(density: float, rate_hz: float) -> float:
-    """Per-sample step sigma of a random walk of ``density`` (per sqrt(Hz)) at ``rate_hz``."""
-    return density / math.sqrt(rate_hz)
+def discrete_random_walk(density: float, sample_rate_hz: float) -> float:
+    """Per-sample step sigma of a random walk of ``density`` (per sqrt(Hz)) at ``sample_rate_hz``."""
+    return density / math.sqrt(sample_rate_hz)
 
 
 @dataclass(frozen=True)
@@ -85,19 +85,19 @@ def _g(x: float | None) -> str:
     return "null" if x is None else repr(float(x))
 
 
-def _header(source: str, rate_hz: float | None) -> list[str]:
+def _header(source: str, sample_rate_hz: float | None) -> list[str]:
     return [f"# fogmon IEEE-952 fit of {source}",
-            f"# sample rate {rate_hz:g} Hz" if rate_hz else "# sample rate unknown (a fitted curve)"]
+            f"# sample rate {sample_rate_hz:g} Hz" if sample_rate_hz else "# sample rate unknown (a fitted curve)"]
 
 
-def kalibr_yaml(fit, source: str, rate_hz: float | None, topic: str | None = None) -> str:
+def kalibr_yaml(fit, source: str, sample_rate_hz: float | None, topic: str | None = None) -> str:
     """Kalibr imu.yaml text: continuous-time gyroscope densities (what Kalibr, VINS and
     OpenVINS expect); Q, B and R have no Kalibr field and are stated in comments; the
     accelerometer fields are left for the user (a gyro recording cannot give them)."""
     t = terms(fit)
     nd = None if t["N_dpsh"].value is None else noise_density_rad(t["N_dpsh"].value)
     rw = None if t["K_dphsh"].value is None else random_walk_rad(t["K_dphsh"].value)
-    lines = _header(source, rate_hz) + [
+    lines = _header(source, sample_rate_hz) + [
         "# Kalibr imu.yaml: continuous-time noise densities (Kalibr discretizes them with update_rate:",
         "# sigma_d = noise_density * sqrt(update_rate), random-walk step = random_walk / sqrt(update_rate))",
         "",
@@ -114,15 +114,18 @@ def kalibr_yaml(fit, source: str, rate_hz: float | None, topic: str | None = Non
         " (Kalibr models the bias as a pure random walk: B is not in its model)",
         "#   quantization Q " + t["Q_arcsec"].note("arcsec") + ", rate ramp R " + t["R_dphh"].note("deg/h^2"),
     ]
-    if rate_hz and nd is not None and rw is not None:
-        lines.append(f"# per-sample (discrete) at {rate_hz:g} Hz: white sigma {discrete_white(nd, rate_hz):.6g} rad/s, "
-                     f"bias step sigma {discrete_random_walk(rw, rate_hz):.6g} rad/s (not what Kalibr reads)")
+    if sample_rate_hz and nd is not None and rw is not None:
+        lines.append(
+            f"# per-sample (discrete) at {sample_rate_hz:g} Hz: "
+            f"white sigma {discrete_white(nd, sample_rate_hz):.6g} rad/s, "
+            f"bias step sigma {discrete_random_walk(rw, sample_rate_hz):.6g} rad/s (not what Kalibr reads)"
+        )
     lines += ["", f"rostopic: {topic or '/imu0'}" + ("" if topic else "   # the IMU topic: make sure this is correct"),
-              f"update_rate: {_g(rate_hz)}   # Hz" + ("" if rate_hz else ": the IMU rate, fill in")]
+              f"update_rate: {_g(sample_rate_hz)}   # Hz" + ("" if sample_rate_hz else ": the IMU rate, fill in")]
     return "\n".join(lines) + "\n"
 
 
-def ros_yaml(fit, source: str, rate_hz: float | None, topic: str | None = None) -> str:
+def ros_yaml(fit, source: str, sample_rate_hz: float | None, topic: str | None = None) -> str:
     """allan_variance_ros-style output: its imu.yaml key layout (Kalibr's gyroscope keys,
     rostopic, update_rate) and, as comments, the values its analysis prints (angle random
     walk deg/sqrt(s) and deg/sqrt(hr), bias instability deg/s and deg/hr, rate random walk
@@ -132,14 +135,14 @@ def ros_yaml(fit, source: str, rate_hz: float | None, topic: str | None = None) 
     n, b, k = t["N_dpsh"], t["B_dph"], t["K_dphsh"]
     nd = None if n.value is None else noise_density_rad(n.value)
     rw = None if k.value is None else random_walk_rad(k.value)
-    lines = _header(source, rate_hz) + [
+    lines = _header(source, sample_rate_hz) + [
         "# allan_variance_ros-style imu.yaml (gyroscope only: fogmon reads one gyro axis)",
         "#Gyroscope",
         f"gyroscope_noise_density: {_g(nd)} ",
         f"gyroscope_random_walk: {_g(rw)} ",
         "",
         f"rostopic: {topic or '/sensors/imu'!r}" + ("" if topic else " #Make sure this is correct"),
-        f"update_rate: {_g(rate_hz)}" + ("" if rate_hz else " #Make sure this is correct"),
+        f"update_rate: {_g(sample_rate_hz)}" + ("" if sample_rate_hz else " #Make sure this is correct"),
         "",
         "# GYROSCOPE (allan_variance_ros's printed units):",
     ]
@@ -157,7 +160,7 @@ def ros_yaml(fit, source: str, rate_hz: float | None, topic: str | None = None) 
     return "\n".join(lines) + "\n"
 
 
-def matlab_snippet(fit, source: str, rate_hz: float | None, topic: str | None = None) -> str:
+def matlab_snippet(fit, source: str, sample_rate_hz: float | None, topic: str | None = None) -> str:
     """A MATLAB ``gyroparams`` call (Navigation / Sensor Fusion Toolbox units: NoiseDensity
     (rad/s)/sqrt(Hz), BiasInstability rad/s, RandomWalk (rad/s)*sqrt(Hz))."""
     t = terms(fit)
@@ -171,7 +174,7 @@ def matlab_snippet(fit, source: str, rate_hz: float | None, topic: str | None = 
     if k.value is not None:
         rows.append(("RandomWalk", random_walk_rad(k.value),
                      f"(rad/s)*sqrt(Hz) = K {k.note('deg/h/sqrt(h)')} x pi/180/216000"))
-    lines = ["% " + s[2:] for s in _header(source, rate_hz)]
+    lines = ["% " + s[2:] for s in _header(source, sample_rate_hz)]
     lines.append("params = gyroparams( ...")
     for i, (key, v, why) in enumerate(rows):
         lines.append(f"    '{key}', {v!r}{', ...' if i < len(rows) - 1 else ');'}   % {why}")
@@ -179,19 +182,21 @@ def matlab_snippet(fit, source: str, rate_hz: float | None, topic: str | None = 
         lines[-1] = "params = gyroparams();   % no noise term could be fitted"
     lines.append(f"% not in gyroparams: quantization Q {t['Q_arcsec'].note('arcsec')}, rate ramp R "
                  f"{t['R_dphh'].note('deg/h^2')}")
-    if rate_hz:
-        lines.append(f"% imuSensor('SampleRate', {rate_hz!r}) discretizes these densities at the sample rate")
+    if sample_rate_hz:
+        lines.append(f"% imuSensor('SampleRate', {sample_rate_hz!r}) discretizes these densities at the sample rate")
     return "\n".join(lines) + "\n"
 
 
 WRITERS = {"kalibr": kalibr_yaml, "ros": ros_yaml, "matlab": matlab_snippet}
 
 
-def write_export(kind: str, path: str, fit, source: str, rate_hz: float | None, topic: str | None = None) -> None:
+def write_export(
+    kind: str, path: str, fit, source: str, sample_rate_hz: float | None, topic: str | None = None
+) -> None:
     """Write ``fit`` (a whole-record NoiseFit) to ``path`` in format ``kind`` (FORMATS)."""
     if fit is None:
         raise FogmonError(f"--export {kind} {path}: no noise fit to export (the record gave no Allan deviation)")
-    text = WRITERS[kind](fit, source, rate_hz, topic)
+    text = WRITERS[kind](fit, source, sample_rate_hz, topic)
     try:
         with open(path, "w", encoding="utf-8") as fh:
             fh.write(text)

@@ -4,7 +4,7 @@ handling the unit, the ground shaking. Noise coefficients fitted over such a str
 describe the motion, not the gyro (a hand-turned FOG "identifies" R = 7e9 deg/h^2), so
 explain and the live pipeline keep them out of their fits and say so.
 
-The test, on blocks of ``block_samples(rate_hz)`` samples: a block moves when its mean
+The test, on blocks of ``block_samples(sample_rate_hz)`` samples: a block moves when its mean
 rate departs from the local reference (a running median of block means over
 ``REFERENCE_S``) by more than both
 
@@ -52,9 +52,9 @@ class MotionSpan:
     peak_dph: float
 
 
-def block_samples(rate_hz: float) -> int:
+def block_samples(sample_rate_hz: float) -> int:
     """Samples per test block: 0.25 s, at least 32 samples."""
-    return max(32, int(round(0.25 * rate_hz)))
+    return max(32, int(round(0.25 * sample_rate_hz)))
 
 
 #: the standard deviation of a normal variable's middle 80 % is this fraction of sigma
@@ -113,12 +113,12 @@ def _blocks(rate_dph: np.ndarray, valid: np.ndarray, m: int) -> tuple[np.ndarray
         return y, enough, robust_sigma_of_diffs(y)
 
 
-def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, rate_hz: float) -> list[MotionSpan]:
+def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample_rate_hz: float) -> list[MotionSpan]:
     """The platform-motion spans of a recording on a uniform grid (``t_s`` in s,
     ``rate_dph`` in deg/h with the reference rotation already removed, ``valid`` False
     where there is no sample), in time order; empty for a stationary recording. The
     reference of each block is centred on it (see ``MotionTracker`` for the causal one)."""
-    m = block_samples(rate_hz)
+    m = block_samples(sample_rate_hz)
     nb = len(rate_dph) // m
     y, enough, sig = _blocks(rate_dph[:nb * m], np.asarray(valid)[:nb * m], m)
     idx = np.flatnonzero(enough)
@@ -129,12 +129,12 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, rate_h
     limit = _limit(*_quiet_scales(sig[idx], mu))
     if not np.isfinite(limit):
         return []
-    dev = np.abs(mu - median_filter(mu, size=_reference_blocks(rate_hz), mode="nearest"))
+    dev = np.abs(mu - median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="nearest"))
     moving = idx[dev > limit]
     peak = np.zeros(nb)
     peak[idx] = dev
-    gap = _merge_blocks(rate_hz)
-    dt, t0 = 1.0 / rate_hz, float(t_s[0])
+    gap = _merge_blocks(sample_rate_hz)
+    dt, t0 = 1.0 / sample_rate_hz, float(t_s[0])
     out = []
     for a, b in _runs(moving, gap):     # one block of margin each side: onsets begin inside the neighbours
         a, b = max(0, a - 1), min(nb - 1, b + 1)
@@ -143,14 +143,14 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, rate_h
     return out
 
 
-def _reference_blocks(rate_hz: float) -> int:
+def _reference_blocks(sample_rate_hz: float) -> int:
     """Blocks in the running-median reference (odd, at least 5)."""
-    return max(5, int(REFERENCE_S * rate_hz / block_samples(rate_hz))) | 1
+    return max(5, int(REFERENCE_S * sample_rate_hz / block_samples(sample_rate_hz))) | 1
 
 
-def _merge_blocks(rate_hz: float) -> int:
+def _merge_blocks(sample_rate_hz: float) -> int:
     """Flagged blocks at most this many blocks apart belong to one span."""
-    return max(2, int(np.ceil(MERGE_S * rate_hz / block_samples(rate_hz))))
+    return max(2, int(np.ceil(MERGE_S * sample_rate_hz / block_samples(sample_rate_hz))))
 
 
 def _runs(blocks: np.ndarray, gap: int) -> list[tuple[int, int]]:
@@ -178,13 +178,13 @@ class MotionGate:
     WARMUP_BLOCKS = 16
     RESCALE_BLOCKS = 64
 
-    def __init__(self, rate_hz: float) -> None:
-        self.m = block_samples(rate_hz)
-        n_hist = max(self.WARMUP_BLOCKS, int(self.HISTORY_S * rate_hz / self.m))
+    def __init__(self, sample_rate_hz: float) -> None:
+        self.m = block_samples(sample_rate_hz)
+        n_hist = max(self.WARMUP_BLOCKS, int(self.HISTORY_S * sample_rate_hz / self.m))
         self._sig: deque[float] = deque(maxlen=n_hist)
         self._means: deque[float] = deque(maxlen=n_hist)
-        self._ref: deque[float] = deque(maxlen=_reference_blocks(rate_hz) // 2 + 1)
-        self._gap = _merge_blocks(rate_hz)
+        self._ref: deque[float] = deque(maxlen=_reference_blocks(sample_rate_hz) // 2 + 1)
+        self._gap = _merge_blocks(sample_rate_hz)
         self._limit = float("nan")
         self._sigma_1 = float("nan")
         self._n_judged = 0

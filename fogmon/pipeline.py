@@ -62,46 +62,46 @@ DROPPED_EVENTS_KEPT = 1000
 
 
 # ----------------------------------------------------------------------------- windows
-def default_window_s(rate_hz: float, n_samples: int | None) -> float:
+def default_window_s(sample_rate_hz: float, n_samples: int | None) -> float:
     """Default window in s: for a record of ``n_samples`` a quarter of it rounded down to a
     power of two of samples (within MIN..MAX_WINDOW_SAMPLES, never longer than the record);
     live (``n_samples`` None) LIVE_WINDOW_SAMPLES."""
     if n_samples is None:
-        return LIVE_WINDOW_SAMPLES / rate_hz
+        return LIVE_WINDOW_SAMPLES / sample_rate_hz
     quarter = max(n_samples // 4, 1)
     n = 2 ** int(math.floor(math.log2(quarter)))
     n = min(max(n, MIN_WINDOW_SAMPLES), MAX_WINDOW_SAMPLES, n_samples)
-    return n / rate_hz
+    return n / sample_rate_hz
 
 
-def window_and_hop(config: PipelineConfig, rate_hz: float, total_n: int | None) -> tuple[float, float]:
+def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None) -> tuple[float, float]:
     """Window and hop (s) from ``--window-s``/``--hop-s`` or their defaults, checked
     against the sample rate and the samples the run will have (the record's ``total_n``,
     None when live, cut to ``--duration-s``); FogmonError naming the option otherwise."""
     duration_s = config.duration_s
     n_run = total_n
     if duration_s is not None:
-        n_cut = round(duration_s * rate_hz)
+        n_cut = round(duration_s * sample_rate_hz)
         if n_cut < 1:
-            raise FogmonError(f"--duration-s {duration_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+            raise FogmonError(f"--duration-s {duration_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         n_run = n_cut if total_n is None else min(total_n, n_cut)
     if n_run is not None and n_run < 8:
         what = "the recording has" if n_run == total_n else "--duration-s leaves"
-        raise FogmonError(f"{what} {n_run} samples at {rate_hz:g} Hz: an Allan deviation needs at least 8")
+        raise FogmonError(f"{what} {n_run} samples at {sample_rate_hz:g} Hz: an Allan deviation needs at least 8")
     window_s = config.window_s
     if window_s is None:
-        window_s = default_window_s(rate_hz, n_run)
+        window_s = default_window_s(sample_rate_hz, n_run)
         if total_n is None:  # live: the live window unless --duration-s asks for a shorter run
-            window_s = min(window_s, default_window_s(rate_hz, None))
-    if n_run is not None and window_s * rate_hz > n_run:
+            window_s = min(window_s, default_window_s(sample_rate_hz, None))
+    if n_run is not None and window_s * sample_rate_hz > n_run:
         what = "the recording" if n_run == total_n else "the --duration-s run"
         raise FogmonError(f"--window-s {window_s:g} s is longer than {what} "
-                          f"({n_run / rate_hz:g} s = {n_run} samples)")
-    if window_s * rate_hz < 8:
-        raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {rate_hz:g} Hz")
+                          f"({n_run / sample_rate_hz:g} s = {n_run} samples)")
+    if window_s * sample_rate_hz < 8:
+        raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {sample_rate_hz:g} Hz")
     hop_s = config.hop_s or window_s / 8
-    if hop_s * rate_hz < 1:
-        raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+    if hop_s * sample_rate_hz < 1:
+        raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
     if hop_s > window_s:
         raise FogmonError(f"--hop-s {hop_s:g} s is longer than the window ({window_s:g} s): the samples "
                           f"between windows would never be analysed")
@@ -187,24 +187,24 @@ class Pipeline:
 
         config = PipelineConfig() if config is None else config
         self.source, self.config = source, config
-        self.rate_hz = rate_hz = float(source.rate_hz)
+        self.sample_rate_hz = sample_rate_hz = float(source.sample_rate_hz)
         self.total_n = source.n_samples
-        self.window_s, self.hop_s = window_and_hop(config, rate_hz, self.total_n)
+        self.window_s, self.hop_s = window_and_hop(config, sample_rate_hz, self.total_n)
         rotate_s = config.rotate_s
-        self.piece_n = int(round(rotate_s * rate_hz)) if rotate_s else None
+        self.piece_n = int(round(rotate_s * sample_rate_hz)) if rotate_s else None
         if self.piece_n is not None and self.piece_n < 1:
-            raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {rate_hz:g} Hz")
+            raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         self.pacer = pacer if pacer is not None else Pacer(config.realtime)
-        self.engine = StreamingDadev(rate_hz, self.window_s, taus=config.taus, hop_s=self.hop_s)  # checks --taus
+        self.engine = StreamingDadev(sample_rate_hz, self.window_s, taus=config.taus, hop_s=self.hop_s)  # checks --taus
         self.jumps = JumpDetector(self.window_s)
         self.tail = _Tail(OVERALL_MAX_SAMPLES)
-        self.motion = None if config.keep_motion else MotionGate(rate_hz)
-        self.conditioner = Conditioner(config.methods, rate_hz) if config.methods.any else None
+        self.motion = None if config.keep_motion else MotionGate(sample_rate_hz)
+        self.conditioner = Conditioner(config.methods, sample_rate_hz) if config.methods.any else None
         self.band = None if config.model is None else ModelBand.for_model(
-            config.model, rate_hz, self.engine.window, self.engine.m, alpha=config.model_alpha)
+            config.model, sample_rate_hz, self.engine.window_n, self.engine.m, alpha=config.model_alpha)
         self.watch: ModelWatch | None = None
         self.sinks: list[Sink] = []
-        self.summary = Summary(source.name, rate_hz, self.window_s, self.hop_s)
+        self.summary = Summary(source.name, sample_rate_hz, self.window_s, self.hop_s)
         self.started = self.done = self.use_ref = False
         self.t_origin = math.nan      # recording time of the first sample (s), once it came
         self.piece = 1
@@ -216,9 +216,9 @@ class Pipeline:
     def run(self, sinks: Sequence[Sink]) -> Summary:
         """Stream the source through DAVAR and the noise fit into ``sinks``; returns the
         Summary. The source and all sinks are closed whatever happens."""
-        cfg, rate_hz = self.config, self.rate_hz
+        cfg, sample_rate_hz = self.config, self.sample_rate_hz
         self.sinks = list(sinks)
-        total_s = min(self.total_n / rate_hz, cfg.duration_s or math.inf) if self.total_n else 0.0
+        total_s = min(self.total_n / sample_rate_hz, cfg.duration_s or math.inf) if self.total_n else 0.0
         self.progress = ReplayProgress(total_s, enabled=cfg.progress)
         self.wall0 = self.wall_start = time.monotonic()
         try:
@@ -239,16 +239,16 @@ class Pipeline:
         --duration-s and read in a thread."""
         cfg = self.config
         if self.total_n is None:
-            _warm_up(self.rate_hz, self.window_s, self.hop_s, cfg.taus)
+            _warm_up(self.sample_rate_hz, self.window_s, self.hop_s, cfg.taus)
             if cfg.duration_s is not None and isinstance(self.source, LiveSource):
-                self.source.limit(live_samples(cfg.duration_s, self.rate_hz))  # nothing after the cut is read
+                self.source.limit(live_samples(cfg.duration_s, self.sample_rate_hz))  # nothing after the cut is read
             self.reader = _ThreadedBlocks(self.source)
         self.wall_start = time.monotonic()
         return self.reader if self.reader is not None else self.source.blocks()
 
     def _take(self, big: Block) -> bool:
         """Process one block of the source; False when the run is complete."""
-        cfg, rate_hz = self.config, self.rate_hz
+        cfg, sample_rate_hz = self.config, self.sample_rate_hz
         self._check_wall_limit()
         if not len(big):
             self._dispatch(big.events)
@@ -257,12 +257,14 @@ class Pipeline:
             self.t_origin = float(big.t_s[0])
             self.pacer.wait(self.t_origin)
         if cfg.duration_s is not None:
-            stop = int(np.searchsorted(big.t_s, self.t_origin + cfg.duration_s - 0.5 / rate_hz, side="right"))
+            stop = int(np.searchsorted(big.t_s, self.t_origin + cfg.duration_s - 0.5 / sample_rate_hz, side="right"))
             if stop < len(big):
                 big, self.done = slice_block(big, 0, stop), True
                 if not stop:
                     return False
-        for b_piece, b in _at_seams(_paced(big, cfg.realtime, rate_hz), self.t_origin, rate_hz, self.piece_n):
+        for b_piece, b in _at_seams(
+            _paced(big, cfg.realtime, sample_rate_hz), self.t_origin, sample_rate_hz, self.piece_n
+        ):
             self.pacer.wait(float(b.t_s[-1]))
             with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
                 if not self.started:
@@ -286,8 +288,8 @@ class Pipeline:
         """Before the first block: what is analysed, StreamInfo to the sinks."""
         from fogmon.davar.taus import tau_grid
 
-        rate_hz = self.rate_hz
-        m = tau_grid(rate_hz, int(round(self.window_s * rate_hz)), self.config.taus)
+        sample_rate_hz = self.sample_rate_hz
+        m = tau_grid(sample_rate_hz, int(round(self.window_s * sample_rate_hz)), self.config.taus)
         self.use_ref = "rot_dps" in first.aux and not self.config.raw_rate
         self.summary.analysed = ERROR_EXPR if self.use_ref else "rate_dph"
         aux_names = tuple(first.aux)
@@ -298,9 +300,9 @@ class Pipeline:
                 self.summary.analysed += " - thermal drift"
         if self.band is not None:
             self.watch = ModelWatch(self.band, tuple(first.aux))
-            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(tuple(first.aux), self.engine.window)
+            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(tuple(first.aux), self.engine.window_n)
         band = None if self.band is None else (self.band.lo_dph, self.band.median_dph, self.band.hi_dph)
-        info = StreamInfo(self.source.name, rate_hz, self.window_s, self.hop_s, m / rate_hz, aux_names,
+        info = StreamInfo(self.source.name, sample_rate_hz, self.window_s, self.hop_s, m / sample_rate_hz, aux_names,
                           self.summary.analysed, band, self.config.model_alpha if band is not None else None)
         for s in self.sinks:
             s.start(info)
@@ -328,7 +330,7 @@ class Pipeline:
         from fogmon.davar.fit import fit_noise
 
         fit = fit_noise(res)
-        t_end = self.t_origin + np.asarray(res.end_index, dtype=np.float64) / self.rate_hz
+        t_end = self.t_origin + np.asarray(res.end_index, dtype=np.float64) / self.sample_rate_hz
         for s in self.sinks:
             s.frames(res, fit, t_end)
         self.summary.n_windows += len(res)
@@ -378,7 +380,7 @@ class Pipeline:
             if not len(big):
                 self._dispatch(big.events)
                 continue
-            for b_piece, b in _at_seams([big], self.t_origin, self.rate_hz, self.piece_n):
+            for b_piece, b in _at_seams([big], self.t_origin, self.sample_rate_hz, self.piece_n):
                 self._deliver(b, b_piece)
 
     def _analyse(self, y: np.ndarray, valid: np.ndarray) -> None:
@@ -395,17 +397,17 @@ class Pipeline:
         from fogmon.davar.batch import oadev
         from fogmon.davar.fit import fit_noise
 
-        summary, rate_hz = self.summary, self.rate_hz
+        summary, sample_rate_hz = self.summary, self.sample_rate_hz
         del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
         rate, valid = self.tail.take()
         if len(rate) < 8:
             return
         try:
-            summary.overall = oadev(rate, rate_hz, taus=self.config.taus, valid=valid)
+            summary.overall = oadev(rate, sample_rate_hz, taus=self.config.taus, valid=valid)
         except FogmonError as e:  # a run shorter than the window can be too short for every tau
             warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning, stacklevel=2)
         else:
-            summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / rate_hz
+            summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / sample_rate_hz
             summary.overall_fit = fit_noise(summary.overall)
 
     def _counters(self) -> dict[str, int]:
@@ -516,22 +518,22 @@ class _Tail:
         return out
 
 
-def live_samples(duration_s: float, rate_hz: float) -> int:
+def live_samples(duration_s: float, sample_rate_hz: float) -> int:
     """Samples of a live run of ``duration_s`` s from its first sample: those with
     t - t_first <= duration_s - half a sample period (the replay cut, too)."""
-    return max(1, math.floor(duration_s * rate_hz - 0.5 + 1e-9) + 1)
+    return max(1, math.floor(duration_s * sample_rate_hz - 0.5 + 1e-9) + 1)
 
 
-def _warm_up(rate_hz: float, window_s: float, hop_s: float, taus) -> None:
+def _warm_up(sample_rate_hz: float, window_s: float, hop_s: float, taus) -> None:
     """Compile/load the engine's kernels on a throw-away instance before the source is
     opened, so a live device is not left unread while they compile."""
     from fogmon.davar.fit import fit_noise
     from fogmon.davar.streaming import StreamingDadev
 
-    n = int(round(window_s * rate_hz)) + int(round(hop_s * rate_hz))
+    n = int(round(window_s * sample_rate_hz)) + int(round(hop_s * sample_rate_hz))
     if n > 1 << 22:
         return
-    res = StreamingDadev(rate_hz, window_s, taus=taus, hop_s=hop_s).push(
+    res = StreamingDadev(sample_rate_hz, window_s, taus=taus, hop_s=hop_s).push(
         np.random.default_rng(0).standard_normal(n))
     if len(res):
         fit_noise(res)
@@ -617,7 +619,7 @@ class _ThreadedBlocks:
     def _drop(self, b: Block) -> None:
         self.counters["blocks_dropped"] += 1
         self.counters["samples_dropped"] += len(b)
-        rate = float(self._source.rate_hz)
+        rate = float(self._source.sample_rate_hz)
         last = self._items[-1] if self._items else None
         if not (isinstance(last, _Dropped) and abs(last.t0_s + last.n / rate - float(b.t_s[0])) < 0.5 / rate):
             last = _Dropped(float(b.t_s[0]), 0, 0, [])
@@ -648,7 +650,7 @@ class _ThreadedBlocks:
                 yield item
 
     def _placeholders(self, d: _Dropped):
-        rate = float(self._source.rate_hz)
+        rate = float(self._source.sample_rate_hz)
         msg = (f"{d.n} samples ({d.blocks} blocks) from t={d.t0_s:.6f} s dropped: processing fell more than "
                f"{self.max_samples} samples ({self.max_samples / rate:g} s) behind the device"
                + (f"; {d.events_left_out} more events of these blocks only counted" if d.events_left_out else ""))
@@ -685,24 +687,24 @@ class _ThreadedBlocks:
         return out
 
 
-def _paced(b: Block, realtime: float | None, rate_hz: float):
+def _paced(b: Block, realtime: float | None, sample_rate_hz: float):
     """Split a block into pieces of <= 0.1 s of wall time when pacing, else pass it on."""
     if not realtime:
         yield b
         return
-    step = max(1, int(0.1 * realtime * rate_hz))
+    step = max(1, int(0.1 * realtime * sample_rate_hz))
     for i in range(0, len(b), step):
         yield slice_block(b, i, min(i + step, len(b)))
 
 
-def _at_seams(blocks: Iterable[Block], t_origin: float, rate_hz: float, piece_n: int | None):
+def _at_seams(blocks: Iterable[Block], t_origin: float, sample_rate_hz: float, piece_n: int | None):
     """(piece, block) pairs, blocks cut where a new piece of ``piece_n`` samples begins
     (piece 1 starts at ``t_origin``; ``piece_n`` None: one piece)."""
     for b in blocks:
         if not piece_n:
             yield 1, b
             continue
-        k = np.rint((b.t_s - t_origin) * rate_hz).astype(np.int64) // piece_n
+        k = np.rint((b.t_s - t_origin) * sample_rate_hz).astype(np.int64) // piece_n
         cuts = [0, *(np.flatnonzero(np.diff(k)) + 1), len(b)]
         for i, j in zip(cuts[:-1], cuts[1:], strict=True):
             yield int(k[i]) + 1, (b if j - i == len(b) else slice_block(b, i, j))

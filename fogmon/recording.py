@@ -63,8 +63,8 @@ class Recording:
         invalid placeholders (rate and aux NaN), so gaps are never joined."""
         idx = self.grid_index()
         n = int(idx[-1]) + 1 if len(idx) else 0
-        fs = self.sample_rate_hz
-        t = self.t_s[0] + np.arange(n) / fs if n else np.zeros(0)
+        sample_rate_hz = self.sample_rate_hz
+        t = self.t_s[0] + np.arange(n) / sample_rate_hz if n else np.zeros(0)
         if n == len(idx):
             return Block.make(self.t_s.copy(), self.rate_dph.copy(), aux={k: v.copy() for k, v in self.aux.items()})
         t[idx] = self.t_s
@@ -95,24 +95,26 @@ def sample_rate_from(meta: dict, t_s: np.ndarray, name: str) -> float:
     the median interval of the first RATE_SAMPLES samples ``t_s`` (s)."""
     if "sample_rate_hz" in meta:
         try:
-            fs = float(meta["sample_rate_hz"])
+            sample_rate_hz = float(meta["sample_rate_hz"])
         except ValueError:
             raise FogmonError(f"{name}: metadata sample_rate_hz is not a number: "
                               f"{meta['sample_rate_hz']!r}") from None
-        if not (fs > 0 and math.isfinite(fs)):
-            raise FogmonError(f"{name}: metadata sample_rate_hz must be > 0, got {fs}")
-        return fs
+        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+            raise FogmonError(f"{name}: metadata sample_rate_hz must be > 0, got {sample_rate_hz}")
+        return sample_rate_hz
     if len(t_s) < 2:
         raise FogmonError(f"{name}: too few samples to know the sample rate")
     return 1.0 / float(np.median(np.diff(t_s[:RATE_SAMPLES])))
 
 
-def grid_positions(t_s: np.ndarray, t0_s: float, fs: float, name: str, after: int = -1, line_of=None) -> np.ndarray:
+def grid_positions(
+    t_s: np.ndarray, t0_s: float, sample_rate_hz: float, name: str, after: int = -1, line_of=None
+) -> np.ndarray:
     """Index k of every sample on the uniform grid ``t0_s + k / fs`` (s, Hz). A sample more
     than a quarter period off the grid, or two samples in one period (also against grid
     index ``after`` of the sample before these), is a FogmonError naming the line when
     ``line_of(i)`` gives it."""
-    k = (np.asarray(t_s) - t0_s) * fs
+    k = (np.asarray(t_s) - t0_s) * sample_rate_hz
     idx = np.rint(k).astype(np.int64)
     off = np.abs(k - idx)
 
@@ -122,10 +124,10 @@ def grid_positions(t_s: np.ndarray, t0_s: float, fs: float, name: str, after: in
     if len(off) and off.max() > 0.25:
         i = int(np.argmax(off))
         raise FogmonError(f"{name}: {where(i)}sample at time_s={float(t_s[i])!r} is {off[i]:.2f} sample "
-                          f"periods off the {fs:g} Hz grid (is sample_rate_hz right?)")
+                          f"periods off the {sample_rate_hz:g} Hz grid (is sample_rate_hz right?)")
     if len(idx) and (idx[0] <= after or np.any(np.diff(idx) < 1)):
         i = int(np.argmax(np.diff(idx, prepend=after) < 1))
-        raise FogmonError(f"{name}: {where(i)}two samples within one {1 / fs:g} s period at "
+        raise FogmonError(f"{name}: {where(i)}two samples within one {1 / sample_rate_hz:g} s period at "
                           f"time_s={float(t_s[i])!r}")
     return idx
 

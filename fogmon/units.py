@@ -28,18 +28,18 @@ def canonical(unit: str) -> str | None:
     return key if key in DPH_PER_UNIT else None
 
 
-def dph_scale(unit: str, rate_hz: float) -> float:
+def dph_scale(unit: str, sample_rate_hz: float) -> float:
     """deg/h per unit of ``unit`` (a name of DPH_PER_UNIT); a per-sample angle is scaled
-    by the sample rate ``rate_hz`` (Hz)."""
+    by the sample rate ``sample_rate_hz`` (Hz)."""
     kind, dph = DPH_PER_UNIT[unit]
-    return dph * rate_hz if kind == "delta" else dph
+    return dph * sample_rate_hz if kind == "delta" else dph
 
 
-def to_dph(value, unit: str, rate_hz: float) -> np.ndarray:
+def to_dph(value, unit: str, sample_rate_hz: float) -> np.ndarray:
     """Values in ``unit`` (a name of DPH_PER_UNIT) -> deg/h (float64); a value too large
     for float64 becomes inf (gated as implausible afterwards), silently."""
     with np.errstate(over="ignore"):
-        return np.asarray(value, dtype=np.float64) * dph_scale(unit, rate_hz)
+        return np.asarray(value, dtype=np.float64) * dph_scale(unit, sample_rate_hz)
 
 
 def coefficient_unit(name: str) -> str:

@@ -16,8 +16,8 @@ from fogmon.sources.options import SourceOptions
 class ListSource:
     """A finite source serving pre-made blocks (block sizes chosen by the test)."""
 
-    def __init__(self, t, rate, sizes, rate_hz, aux=None, events=(), interrupt_after=None):
-        self.name, self.rate_hz, self.counters = "test source", rate_hz, {"frames_ok": 0}
+    def __init__(self, t, rate, sizes, sample_rate_hz, aux=None, events=(), interrupt_after=None):
+        self.name, self.sample_rate_hz, self.counters = "test source", sample_rate_hz, {"frames_ok": 0}
         self.n_samples = len(t)
         self._t, self._r, self._sizes, self._aux = t, rate, sizes, aux or {}
         self._events, self._interrupt_after = events, interrupt_after
@@ -58,10 +58,10 @@ class Collect(Sink):
         self.summary = summary
 
 
-def white_noise(n, fs, seed=1, t0=0.0):
+def white_noise(n, sample_rate_hz, seed=1, t0=0.0):
     """(t_s, rate_dph): n samples at fs Hz of 3 deg/h bias plus white noise N = 0.05 deg/sqrt(h)."""
     rng = np.random.default_rng(seed)
-    return t0 + np.arange(n) / fs, 3.0 + 60 * 0.05 * np.sqrt(fs) * rng.standard_normal(n)
+    return t0 + np.arange(n) / sample_rate_hz, 3.0 + 60 * 0.05 * np.sqrt(sample_rate_hz) * rng.standard_normal(n)
 
 
 def args_for(*argv: str) -> SourceOptions:

@@ -86,13 +86,13 @@ def has_open(pid: int, tty_path: str) -> bool:
 
 class FakeKvh:
     """A KVH on a pty reachable as ``self.link`` (a symlink, like /dev/serial/by-id/...).
-    ``run_for(seconds)`` in a thread sends frames at ``rate_hz`` paced by the clock
+    ``run_for(seconds)`` in a thread sends frames at ``sample_rate_hz`` paced by the clock
     (k = frames due since start); ``unplug()``/``plug()`` remove and recreate the pty.
     ``sent`` lists every k written while plugged in."""
 
-    def __init__(self, directory: str, rate_hz: float = 200.0) -> None:
+    def __init__(self, directory: str, sample_rate_hz: float = 200.0) -> None:
         self.link = os.path.join(directory, "ttyFAKEKVH")
-        self.rate_hz = rate_hz
+        self.sample_rate_hz = sample_rate_hz
         self.sent: list[int] = []
         self.lock = threading.Lock()
         self.master = self.slave = None
@@ -114,7 +114,7 @@ class FakeKvh:
     def send_due(self, t0: float, k_next: int) -> int:
         """Send every frame due by now (k < (now - t0) * rate); returns the next k.
         TimeoutError (nothing recorded as sent) when the reader is gone."""
-        due = int((time.monotonic() - t0) * self.rate_hz)
+        due = int((time.monotonic() - t0) * self.sample_rate_hz)
         with self.lock:
             if self.master is not None and due > k_next:
                 write_all(self.master, b"".join(frame_k(k) for k in range(k_next, due)))

@@ -29,7 +29,7 @@ pytestmark = pytest.mark.timeout(2 * WAIT_S)
 
 
 class FakeSource:
-    name, rate_hz, counters = "fake gyro", 10.0, {}
+    name, sample_rate_hz, counters = "fake gyro", 10.0, {}
 
 
 def block(k0, n, valid=None):
@@ -227,10 +227,10 @@ class PacedPort:
     device's pace (bytes / frame length / rate), so the source's timing follows the
     data, not the load of the machine."""
 
-    def __init__(self, data: bytes, chunk: int, rate_hz: float, lead: int, consumed, frame_len: int = 36):
+    def __init__(self, data: bytes, chunk: int, sample_rate_hz: float, lead: int, consumed, frame_len: int = 36):
         self.data, self.chunk, self.lead, self.consumed = data, chunk, lead, consumed
         self.frame_len, self.pos, self.now_s = frame_len, 0, 0.0
-        self._s_per_byte = 1.0 / (frame_len * rate_hz)
+        self._s_per_byte = 1.0 / (frame_len * sample_rate_hz)
 
     def _allowed(self):
         return min(len(self.data), (self.consumed() + self.lead) * self.frame_len) - self.pos
@@ -269,7 +269,7 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
     arch, lead = tmp_path / "arch", 60
     port = PacedPort(data, 50, FS, lead, consumed=lambda: archive.counters["rows_written"])
-    src = SerialSource("fake", 921600, make_codec("kvh-a", kvh_rot="rate", kvh_units="deg", rate_hz=FS,
+    src = SerialSource("fake", 921600, make_codec("kvh-a", kvh_rot="rate", kvh_units="deg", sample_rate_hz=FS,
                                                                    max_rate_dph=MAX_RATE_DPH),
                        opener=lambda: port, clock=port.clock)
     archive = Archive(str(arch), src)
@@ -377,14 +377,14 @@ def test_can_capture_pieces_replay_as_one_frame_stream(tmp_path):
     from fogmon.sources.can_source import CanSource, load_dbc
     from fogmon.sources.open import open_replay_source
 
-    fs = 100.0
+    sample_rate_hz = 100.0
     src = CanSource("x", "virtual", load_dbc(DBC), dbc_path=DBC)      # never opened: the test plays the bus
     arch = tmp_path / "arch"
     with Archive(str(arch), src) as archive:
         for m in gyro_msgs(range(300), extra=False):
-            k = round((m.timestamp - 1_000_000.0) * fs)
+            k = round((m.timestamp - 1_000_000.0) * sample_rate_hz)
             if k in (100, 220):
-                archive.rotate(2 if k == 100 else 3, k / fs)
+                archive.rotate(2 if k == 100 else 3, k / sample_rate_hz)
             if not 195 <= k < 220:
                 archive.frame(m)
     assert sorted(os.listdir(arch)) == ["frames-0001.asc", "frames-0001.asc.json", "frames-0002.asc",

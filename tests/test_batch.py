@@ -28,16 +28,16 @@ from fogmon.sources.open import open_replay_source
 OPTS = {"window_s": None, "hop_s": None, "taus": "octave", "raw_rate": False, "keep_motion": False}
 
 
-def _log(path, n, fs, seed, motion=False, gap=False):
+def _log(path, n, sample_rate_hz, seed, motion=False, gap=False):
     rng = np.random.default_rng(seed)
-    t = np.arange(n) / fs
+    t = np.arange(n) / sample_rate_hz
     rate = 10.0 + 3.0 * rng.standard_normal(n) + np.cumsum(rng.standard_normal(n)) * 0.01
     if motion:                                   # a 30 s turn of 3000 deg/h, no rot_dps to explain it
-        rate[n // 2:n // 2 + int(30 * fs)] += 3000.0
+        rate[n // 2:n // 2 + int(30 * sample_rate_hz)] += 3000.0
     keep = np.ones(n, bool)
     if gap:
         keep[n // 3:n // 3 + 25] = False
-    write_replay_log(path, t[keep], rate[keep], {"temp_c": 25 + t[keep] / 1e4}, {"sample_rate_hz": fs})
+    write_replay_log(path, t[keep], rate[keep], {"temp_c": 25 + t[keep] / 1e4}, {"sample_rate_hz": sample_rate_hz})
 
 
 @pytest.fixture(scope="module")
@@ -99,7 +99,9 @@ def test_batch_equals_replay_per_recording(fleet, local_run, capsys):
         sel = rec_col == name
         ends = np.concatenate(col.ends)
         assert sel.sum() == len(ends) == row["windows"]
-        np.testing.assert_allclose(np.array(w["t_end_s"])[sel], s.t_first_s + ends / s.rate_hz, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(
+            np.array(w["t_end_s"])[sel], s.t_first_s + ends / s.sample_rate_hz, rtol=0, atol=1e-9
+        )
         adev = np.concatenate(col.adev)
         for j, tau in enumerate(col.tau_s):
             np.testing.assert_allclose(np.array(w[tables.adev_column(tau)], float)[sel], adev[:, j], rtol=1e-9, atol=0)

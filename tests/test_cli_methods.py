@@ -42,19 +42,23 @@ def test_thermal_without_temperature_is_one_line_error(tmp_path, capsys):
 
 
 def test_inorbit_and_updown(tmp_path, capsys):
-    fs, n = 10.0, 200_000
+    sample_rate_hz, n = 10.0, 200_000
     rng = np.random.default_rng(1)
-    t = np.arange(n) / fs
-    rate = rng.normal(0, 60 * 0.01 * np.sqrt(fs), n) + 2 * np.sin(2 * np.pi * t / 5580)
+    t = np.arange(n) / sample_rate_hz
+    rate = rng.normal(0, 60 * 0.01 * np.sqrt(sample_rate_hz), n) + 2 * np.sin(2 * np.pi * t / 5580)
     p = tmp_path / "orbit.csv"
-    write_replay_log(p, t, rate, meta={"sample_rate_hz": fs})
+    write_replay_log(p, t, rate, meta={"sample_rate_hz": sample_rate_hz})
     assert main(["inorbit", str(p)]) == 0
     out = capsys.readouterr().out
     assert "N = 0.01" in out and "3 per-cycle means" in out
     lat, v = 45.0, 15.041067 * np.sin(np.radians(45.0))
     up, down = tmp_path / "up.csv", tmp_path / "down.csv"
-    write_replay_log(up, t[:36000], 1.0 + 1.0002 * v + rng.normal(0, 0.01, 36000), meta={"sample_rate_hz": fs})
-    write_replay_log(down, t[:36000], 1.0 - 1.0002 * v + rng.normal(0, 0.01, 36000), meta={"sample_rate_hz": fs})
+    write_replay_log(
+        up, t[:36000], 1.0 + 1.0002 * v + rng.normal(0, 0.01, 36000), meta={"sample_rate_hz": sample_rate_hz}
+    )
+    write_replay_log(
+        down, t[:36000], 1.0 - 1.0002 * v + rng.normal(0, 0.01, 36000), meta={"sample_rate_hz": sample_rate_hz}
+    )
     assert main(["updown", "--up", str(up), "--down", str(down), "--lat-deg", str(lat)]) == 0
     out = capsys.readouterr().out
     bias, bias_sd = map(float, re.search(r"bias +([-+\d.]+) \+/- ([\d.e-]+) deg/h", out).groups())
@@ -66,13 +70,13 @@ def test_inorbit_and_updown(tmp_path, capsys):
 def updown(tmp_path_factory):
     """1 h up and down at 10 Hz, latitude 45 deg: bias 1 deg/h, scale-factor error +200 ppm."""
     d = tmp_path_factory.mktemp("updown")
-    fs, n = 10.0, 36000
-    t = np.arange(n) / fs
+    sample_rate_hz, n = 10.0, 36000
+    t = np.arange(n) / sample_rate_hz
     v = 15.041067 * np.sin(np.radians(45.0))
     rng = np.random.default_rng(2)
     for name, sign in (("up", 1), ("down", -1)):
         write_replay_log(d / f"{name}.csv", t, 1.0 + sign * 1.0002 * v + rng.normal(0, 0.01, n),
-                         meta={"sample_rate_hz": fs})
+                         meta={"sample_rate_hz": sample_rate_hz})
     return d / "up.csv", d / "down.csv"
 
 
@@ -141,12 +145,12 @@ def test_thermal_values_and_outputs_that_cannot_work(chamber, tmp_path, capsys, 
 
 
 def test_thermal_says_when_the_fit_does_not_reduce_the_drift(tmp_path, capsys):
-    fs, n = 1.0, 20_000
-    t = np.arange(n) / fs
+    sample_rate_hz, n = 1.0, 20_000
+    t = np.arange(n) / sample_rate_hz
     rng = np.random.default_rng(7)
     p = tmp_path / "flat.csv"          # a temperature ramp the rate does not follow, plus slow rate wander
     write_replay_log(p, t, np.cumsum(rng.normal(0, 0.05, n)), {"temp_c": 20 + 10 * np.sin(t / 3000)},
-                     meta={"sample_rate_hz": fs})
+                     meta={"sample_rate_hz": sample_rate_hz})
     assert main(["thermal", str(p)]) == 0
     line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("peak-to-peak"))
     before, after = map(float, re.search(r"averages: ([\d.]+) deg/h -> ([\d.]+) deg/h", line).groups())

@@ -31,10 +31,10 @@ DBC = str(ROOT / "fogmon" / "data" / "gyro_example.dbc")
 @pytest.fixture
 def log(tmp_path):
     """12,000 samples at 50 Hz (240 s) of white rate noise."""
-    fs, n = 50.0, 12_000
-    t = np.arange(n) / fs
+    sample_rate_hz, n = 50.0, 12_000
+    t = np.arange(n) / sample_rate_hz
     path = tmp_path / "run.csv"
-    write_replay_log(path, t, 2.0 + np.random.default_rng(5).standard_normal(n), {}, {"sample_rate_hz": fs})
+    write_replay_log(path, t, 2.0 + np.random.default_rng(5).standard_normal(n), {}, {"sample_rate_hz": sample_rate_hz})
     return path
 
 

@@ -31,28 +31,28 @@ def fogmon_process(*argv, **kw):
 
 @pytest.fixture
 def small_log(tmp_path):
-    fs, n = 50.0, 12_000
+    sample_rate_hz, n = 50.0, 12_000
     rng = np.random.default_rng(5)
-    t = np.arange(n) / fs
-    rate = 2.0 + 60 * 0.1 * np.sqrt(fs) * rng.standard_normal(n)
+    t = np.arange(n) / sample_rate_hz
+    rate = 2.0 + 60 * 0.1 * np.sqrt(sample_rate_hz) * rng.standard_normal(n)
     keep = np.ones(n, bool)
     keep[6000:6010] = False     # a 0.2 s time gap
     path = tmp_path / "run.csv"
-    write_replay_log(path, t[keep], rate[keep], {"temp_c": 20 + t[keep] / 100}, {"sample_rate_hz": fs})
+    write_replay_log(path, t[keep], rate[keep], {"temp_c": 20 + t[keep] / 100}, {"sample_rate_hz": sample_rate_hz})
     r = rate.copy()
     r[~keep] = np.nan
-    return path, r, fs
+    return path, r, sample_rate_hz
 
 
 def test_replay_writes_rrd_equal_to_engine_and_summary(small_log, tmp_path, capsys):
-    path, r, fs = small_log
+    path, r, sample_rate_hz = small_log
     out = tmp_path / "o" / "run.rrd"
     rc = main(["replay", str(path), "--rrd", str(out), "--window-s", "40.96", "--hop-s", "10.24", "--no-progress"])
     assert rc == 0
     text = capsys.readouterr()
     assert "12000 samples at 50 Hz" in text.out and "(10 invalid/lost)" in text.out
     assert f"Wrote {out}" in text.out and "gap" in text.err
-    ref = dadev(r, fs, 40.96, 10.24, valid=np.isfinite(r))
+    ref = dadev(r, sample_rate_hz, 40.96, 10.24, valid=np.isfinite(r))
     _, logadev = read_scalars(str(out), "/dadev/log10_adev_dph")
     np.testing.assert_allclose(10 ** logadev, ref.adev_dph, rtol=1e-9)  # streaming engine == batch
 
@@ -159,12 +159,12 @@ def test_replay_serve_feeds_a_late_viewer_and_stops_on_ctrl_c(small_log, tmp_pat
 @pytest.fixture
 def gap_log(tmp_path):
     """60 s at 50 Hz of white noise with a 0.2 s time gap at t = 1 s (its event says the replay is under way)."""
-    fs, n = 50.0, 3000
-    t = np.arange(n) / fs
+    sample_rate_hz, n = 50.0, 3000
+    t = np.arange(n) / sample_rate_hz
     keep = (t < 1.0) | (t >= 1.2)
-    rate = 60 * 0.1 * np.sqrt(fs) * np.random.default_rng(3).standard_normal(n)
+    rate = 60 * 0.1 * np.sqrt(sample_rate_hz) * np.random.default_rng(3).standard_normal(n)
     path = tmp_path / "gap.csv"
-    write_replay_log(path, t[keep], rate[keep], {}, {"sample_rate_hz": fs})
+    write_replay_log(path, t[keep], rate[keep], {}, {"sample_rate_hz": sample_rate_hz})
     return path
 
 
@@ -221,12 +221,12 @@ def test_serve_on_a_busy_port_exits_2_with_one_line_and_leaves_nothing(small_log
     assert len(err.strip().splitlines()) == 1 and not out.exists()
 
 
-SIDECAR_OK = {"format": "fogmon capture v1", "kind": "serial", "protocol": "kvh-a", "rate_hz": 200.0,
+SIDECAR_OK = {"format": "fogmon capture v1", "kind": "serial", "protocol": "kvh-a", "sample_rate_hz": 200.0,
               "kvh_rot": "rate", "kvh_units": "deg", "axis": "z", "breaks": []}
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"rate_hz": "fast"}, "field rate_hz: expected a number > 0, got 'fast'"),
+    ({"sample_rate_hz": "fast"}, "field sample_rate_hz: expected a number > 0, got 'fast'"),
     ({"protocol": "kvh-x"}, "field protocol: expected one of kvh-a, kvh-b, kvh-c, dsp3000, lines, got 'kvh-x'"),
     ({"breaks": [{"offset": -3, "missing_est": 1}]}, "field breaks: item 0: expected"),
     ({"breaks": {"offset": 3}}, "field breaks: expected a list"),
@@ -256,7 +256,7 @@ def test_a_sidecar_cannot_name_a_file_outside_its_folder(tmp_path, capsys, dbc):
     (arch / "link.dbc").symlink_to(tmp_path / "outside.dbc")
     (arch / "frames-0001.asc").write_text("date Mon Nov 23 10:00:00.000 am 2026\nbase hex  timestamps absolute\n")
     (arch / "frames-0001.asc.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "can",
-                                                            "rate_hz": 100.0, "dbc": dbc}))
+                                                            "sample_rate_hz": 100.0, "dbc": dbc}))
     assert main(["replay", str(arch / "frames-0001.asc"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"fogmon replay: error: {arch}/frames-0001.asc.json: field dbc: ")

@@ -78,11 +78,11 @@ def test_dense_grids_fit_one_tau_per_octave():
     # identification and (all: exactly, 20/decade: nearly) the same fit as the octave grid
     from fogmon.davar import fit as fit_mod
     rng = np.random.default_rng(8)
-    n, fs = 2**14, 100.0
-    y = np.diff(rng.normal(size=n + 1) * 0.05) * fs + rng.normal(size=n) * 0.3 * np.sqrt(fs)
+    n, sample_rate_hz = 2**14, 100.0
+    y = np.diff(rng.normal(size=n + 1) * 0.05) * sample_rate_hz + rng.normal(size=n) * 0.3 * np.sqrt(sample_rate_hz)
     fits = {}
     for grid in ("octave", 20, "all"):
-        res = oadev(y, fs, taus=grid)
+        res = oadev(y, sample_rate_hz, taus=grid)
         fits[grid] = fit_mod.fit_avar(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
     a, se, _, _ = fits["octave"]
     assert (a[:2] > 0).all()
@@ -90,5 +90,5 @@ def test_dense_grids_fit_one_tau_per_octave():
         assert np.array_equal(fits[grid][0] > 0, a > 0), grid
     np.testing.assert_allclose(fits["all"][0], a, rtol=1e-9)
     np.testing.assert_allclose(fits[20][0][:2], a[:2], rtol=0.05)
-    m_all = oadev(y, fs, taus="all").m
+    m_all = oadev(y, sample_rate_hz, taus="all").m
     assert np.array_equal(m_all[fit_mod.octave_subset(m_all, n // 4)], 2 ** np.arange(13))

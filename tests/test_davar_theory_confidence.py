@@ -31,11 +31,11 @@ def test_markov_and_sinusoid_peaks():
 
 def test_markov_formula_matches_simulated_ar1():
     rng = np.random.default_rng(0)
-    n, fs, tc, sig = 400000, 10.0, 2.0, 1.5
-    a = np.exp(-1 / (fs * tc))
+    n, sample_rate_hz, tc, sig = 400000, 10.0, 2.0, 1.5
+    a = np.exp(-1 / (sample_rate_hz * tc))
     from scipy.signal import lfilter
     y = lfilter([np.sqrt(1 - a * a) * sig], [1, -a], rng.normal(size=n))
-    res = oadev(y, fs, taus=[1.0, 4.0, 16.0])
+    res = oadev(y, sample_rate_hz, taus=[1.0, 4.0, 16.0])
     # sampled AR(1) differs from the continuous formula by O(tau0 / tau); 3 % with 1-sigma noise
     assert np.allclose(res.adev_dph, markov_adev(res.tau_s, sig, tc), rtol=0.03)
 

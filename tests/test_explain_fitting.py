@@ -38,33 +38,35 @@ def test_whittle_gls_with_white_psd_equals_ols_with_intercept():
     assert np.allclose(fit.cov, cov, rtol=1e-8)
 
 
-@pytest.mark.parametrize("fs", [1.0, 100.0, 1000.0])
-def test_psd_integrates_to_ieee952_allan_variance_at_tau0(fs):
+@pytest.mark.parametrize("sample_rate_hz", [1.0, 100.0, 1000.0])
+def test_psd_integrates_to_ieee952_allan_variance_at_tau0(sample_rate_hz):
     n = 1 << 14
     w = rfft_omega(n)
     for kw in ({"N_dpsh": 0.03}, {"Q_arcsec": 0.7}):
-        S = noise_psd(w, fs, **kw)
-        assert avar1_of_psd(S, n) == pytest.approx(adev_model(1 / fs, **kw) ** 2, rel=1e-9)
+        S = noise_psd(w, sample_rate_hz, **kw)
+        assert avar1_of_psd(S, n) == pytest.approx(adev_model(1 / sample_rate_hz, **kw) ** 2, rel=1e-9)
     # per-sample variance of white rate noise: (60 N)^2 fs
-    S = noise_psd(w, fs, N_dpsh=0.03)
-    assert (2 * np.sum(S[1:-1]) + S[-1]) / n == pytest.approx((60 * 0.03) ** 2 * fs, rel=1e-3)
+    S = noise_psd(w, sample_rate_hz, N_dpsh=0.03)
+    assert (2 * np.sum(S[1:-1]) + S[-1]) / n == pytest.approx((60 * 0.03) ** 2 * sample_rate_hz, rel=1e-3)
 
 
 def test_markov_psd_matches_exact_ar1_allan_variance():
-    fs, sigma, tc = 10.0, 0.4, 3.0
+    sample_rate_hz, sigma, tc = 10.0, 0.4, 3.0
     n = 1 << 16
-    S = markov_psd(rfft_omega(n), fs, sigma, tc)
+    S = markov_psd(rfft_omega(n), sample_rate_hz, sigma, tc)
     S[0] = 0.0
-    assert avar1_of_psd(S, n) == pytest.approx(float(ar1_adev_exact(np.array([1.0]), sigma, tc, fs)[0]) ** 2, rel=1e-3)
+    assert avar1_of_psd(S, n) == pytest.approx(
+        float(ar1_adev_exact(np.array([1.0]), sigma, tc, sample_rate_hz)[0]) ** 2, rel=1e-3
+    )
 
 
 def test_model_psd_includes_filter_and_flicker():
-    fs = 100.0
-    m = SensorModel(fs, 0.0, Noise(N_dpsh=0.01, B_dph=1.0),
+    sample_rate_hz = 100.0
+    m = SensorModel(sample_rate_hz, 0.0, Noise(N_dpsh=0.01, B_dph=1.0),
                     [Effect("bandwidth", {"cutoff_hz": 20.0, "order": 2, "taps": []})])
     w = rfft_omega(4096)
     S = model_psd(m, w, 4096)
-    white = (60 * 0.01) ** 2 * fs
+    white = (60 * 0.01) ** 2 * sample_rate_hz
     assert S[-1] < 1e-3 * white          # Butterworth zero at Nyquist
     nu = 5 / 4096                        # flicker: two-sided B^2 / (2 pi nu) (h_-1 = B^2 / pi)
     assert S[5] - white == pytest.approx(1.0 / (2 * np.pi * nu), rel=0.05)
@@ -132,13 +134,13 @@ def test_spectral_lines_finds_an_incoherent_resonance_and_nothing_in_white_noise
     from scipy.signal import lfilter
 
     from fogmon.explain.detectors import spectral_lines
-    fs, n = 100.0, 2 ** 17
+    sample_rate_hz, n = 100.0, 2 ** 17
     rng = np.random.default_rng(21)
     white = rng.normal(0.0, 1.0, n)
-    assert spectral_lines(white, fs, 0.05, 50.0) == []
+    assert spectral_lines(white, sample_rate_hz, 0.05, 50.0) == []
     # second-order resonance at 2.5 Hz (Q ~ 50): narrowband but random in phase, like vehicle sway
-    r, w0 = 1 - np.pi * 2.5 / fs / 50, 2 * np.pi * 2.5 / fs
+    r, w0 = 1 - np.pi * 2.5 / sample_rate_hz / 50, 2 * np.pi * 2.5 / sample_rate_hz
     sway = lfilter([1.0], [1.0, -2 * r * np.cos(w0), r * r], rng.normal(0.0, 0.05, n))
-    lines = spectral_lines(white + sway, fs, 0.05, 50.0)
+    lines = spectral_lines(white + sway, sample_rate_hz, 0.05, 50.0)
     assert lines and abs(lines[0][0] - 2.5) < 0.05 and lines[0][1] > 10
     assert all(abs(f - lines[0][0]) > 0.1 * lines[0][0] for f, _ in lines[1:])

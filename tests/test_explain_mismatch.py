@@ -12,16 +12,16 @@ from fogmon.explain import mismatch
 
 def test_log_avar_matches_allantools_per_window_and_whole_record():
     rng = np.random.default_rng(0)
-    fs = 10.0
+    sample_rate_hz = 10.0
     y = rng.standard_normal(4000) + 0.01 * np.cumsum(rng.standard_normal(4000))
-    g = mismatch.make_grid(len(y), fs, window_s=100.0)
+    g = mismatch.make_grid(len(y), sample_rate_hz, window_s=100.0)
     cell, whole = mismatch.log_avar(y, np.ones(len(y), bool), g)
     assert cell.shape == (len(g.starts), len(g.m))
     for i in (0, len(g.starts) - 1):
         seg = y[g.starts[i]: g.starts[i] + g.window_n]
-        _, ad, _, _ = allantools.oadev(seg, rate=fs, data_type="freq", taus=g.tau_s)
+        _, ad, _, _ = allantools.oadev(seg, rate=sample_rate_hz, data_type="freq", taus=g.tau_s)
         assert np.allclose(np.exp(cell[i] / 2), ad, rtol=1e-9)
-    _, ad, _, _ = allantools.oadev(y, rate=fs, data_type="freq", taus=g.tau_whole_s)
+    _, ad, _, _ = allantools.oadev(y, rate=sample_rate_hz, data_type="freq", taus=g.tau_whole_s)
     assert np.allclose(np.exp(whole / 2), ad, rtol=1e-9)
 
 

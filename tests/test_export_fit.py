@@ -85,12 +85,12 @@ def test_ros_output_has_allan_variance_ros_keys_and_printed_units():
 
 @pytest.fixture(scope="module")
 def record(tmp_path_factory):
-    fs, n = 100.0, 200_000
+    sample_rate_hz, n = 100.0, 200_000
     rng = np.random.default_rng(3)
-    rate = 3.0 + 60 * 0.1 * math.sqrt(fs) * rng.standard_normal(n)
+    rate = 3.0 + 60 * 0.1 * math.sqrt(sample_rate_hz) * rng.standard_normal(n)
     path = tmp_path_factory.mktemp("rec") / "run.csv"
-    write_replay_log(path, np.arange(n) / fs, rate, meta={"sample_rate_hz": fs})
-    return path, fogmon.oadev(rate, fs)
+    write_replay_log(path, np.arange(n) / sample_rate_hz, rate, meta={"sample_rate_hz": sample_rate_hz})
+    return path, fogmon.oadev(rate, sample_rate_hz)
 
 
 def test_replay_export_equals_its_whole_run_fit(record, tmp_path, capsys):
@@ -109,7 +109,7 @@ def test_fit_of_a_curve_with_its_term_counts_equals_the_fit_of_the_record(record
     curve = tmp_path / "curve.csv"
     curve.write_text("# from another tool\r\ntau_s,adev_dph,n_terms\r\n" + "".join(
         f"{float(t)!r},{float(d)!r},{int(k)}\r\n" for t, d, k in zip(a.tau_s, a.adev_dph, a.n_terms, strict=True)))
-    res, said = fogmon.adev_from_curve(a.tau_s, a.adev_dph, rate_hz=100.0, n_terms=a.n_terms)
+    res, said = fogmon.adev_from_curve(a.tau_s, a.adev_dph, sample_rate_hz=100.0, n_terms=a.n_terms)
     assert said == [] and res.n_samples == a.n_samples
     direct, from_curve = fogmon.fit_noise(a), fogmon.fit_noise(res)
     np.testing.assert_allclose(from_curve.avar_terms, direct.avar_terms, rtol=1e-12)
@@ -125,7 +125,7 @@ def test_fit_with_stated_edf_and_without_either_says_what_it_assumed(record, tmp
     _, a = record
     from fogmon.davar.confidence import edf_full
     white = edf_full(0, a.m, a.n_samples)
-    res, said = fogmon.adev_from_curve(a.tau_s, a.adev_dph, rate_hz=100.0, edf=white, n_samples=a.n_samples)
+    res, said = fogmon.adev_from_curve(a.tau_s, a.adev_dph, sample_rate_hz=100.0, edf=white, n_samples=a.n_samples)
     np.testing.assert_allclose(res.n_terms, a.n_samples - 2 * a.m + 1, rtol=1e-12)  # white EDF = a gap-free record
     assert res.edf is not None and np.all(res.edf == white)
     curve = tmp_path / "bare.csv"
@@ -162,11 +162,11 @@ def test_unknown_export_format_is_one_line_before_any_work(record, tmp_path, cap
 
 
 def test_explain_exports_the_fitted_models_noise(tmp_path, capsys):
-    fs, n = 10.0, 20_000
+    sample_rate_hz, n = 10.0, 20_000
     rng = np.random.default_rng(4)
     rec = tmp_path / "run.csv"
-    write_replay_log(rec, np.arange(n) / fs, 60 * 0.1 * math.sqrt(fs) * rng.standard_normal(n),
-                     meta={"sample_rate_hz": fs})
+    write_replay_log(rec, np.arange(n) / sample_rate_hz, 60 * 0.1 * math.sqrt(sample_rate_hz) * rng.standard_normal(n),
+                     meta={"sample_rate_hz": sample_rate_hz})
     model = tmp_path / "m.toml"
     model.write_text("[sensor]\nsample_rate_hz = 10.0\n\n"
                      "[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.1\nB_dph = 0.0\nK_dphsh = 0.02\nR_dphh = 0.0\n")

@@ -60,12 +60,12 @@ def test_thermal_cal_needs_a_temperature(chamber):
 
 def test_outliers_rejected_counted_and_kalman_channel():
     rng = np.random.default_rng(5)
-    n, fs = 60_000, 100.0
-    t = np.arange(n) / fs
-    y = 60 * 0.05 * np.sqrt(fs) * rng.standard_normal(n)
+    n, sample_rate_hz = 60_000, 100.0
+    t = np.arange(n) / sample_rate_hz
+    y = 60 * 0.05 * np.sqrt(sample_rate_hz) * rng.standard_normal(n)
     spikes = np.sort(rng.choice(np.arange(10_000, n), 40, replace=False))
     y[spikes] += 1e4
-    src = ListSource(t, y, [1000] * 60, fs)
+    src = ListSource(t, y, [1000] * 60, sample_rate_hz)
     sink = Collect()
     Pipeline(src, PipelineConfig(window_s=163.84, keep_motion=True,
                                  methods=LiveMethods(outlier_k=7.0, kalman_n_k=(0.05, 0.01)))).run([sink])

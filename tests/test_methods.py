@@ -39,56 +39,56 @@ def test_pauta_consistency_factor_matches_monte_carlo(k):
 
 
 def test_arw_from_differences_ignores_orbit_term_and_glitches():
-    fs, n_dpsh = 10.0, 0.02
+    sample_rate_hz, n_dpsh = 10.0, 0.02
     n = 6 * 55800  # six 5580 s orbits at 10 Hz
-    t = np.arange(n) / fs
+    t = np.arange(n) / sample_rate_hz
     rng = np.random.default_rng(7)
-    sigma = 60 * n_dpsh * math.sqrt(fs)
+    sigma = 60 * n_dpsh * math.sqrt(sample_rate_hz)
     rate = rng.normal(0.0, sigma, n) + 5.0 * np.sin(2 * np.pi * t / inorbit.ORBIT_PERIOD_S)
     spikes = rng.choice(n, 400, replace=False)
     rate[spikes] += rng.choice([-1, 1], 400) * 30 * sigma
-    est = inorbit.arw_from_differences(rate, fs)
+    est = inorbit.arw_from_differences(rate, sample_rate_hz)
     assert est.N_dpsh == pytest.approx(n_dpsh, rel=0.01)
     assert est.outliers >= 400
-    naive = np.diff(rate).std() / math.sqrt(2) / (60 * math.sqrt(fs))
+    naive = np.diff(rate).std() / math.sqrt(2) / (60 * math.sqrt(sample_rate_hz))
     assert naive > 1.3 * n_dpsh  # the glitches would have ruined the plain estimate
 
 
 def test_cycle_bias_instability_is_std_of_cycle_means():
-    period, fs = 100.0, 2.0
+    period, sample_rate_hz = 100.0, 2.0
     means = np.array([1.0, 3.0, 2.0, 5.0])
-    t = np.arange(int(4.5 * period * fs)) / fs
-    rate = np.repeat(np.append(means, 9.0), int(period * fs))[: len(t)]
+    t = np.arange(int(4.5 * period * sample_rate_hz)) / sample_rate_hz
+    rate = np.repeat(np.append(means, 9.0), int(period * sample_rate_hz))[: len(t)]
     bi, ncyc = inorbit.cycle_bias_instability(t, rate, period)
     assert ncyc == 4 and bi == pytest.approx(means.std(ddof=1))
 
 
 def test_wavelet_energy_locates_a_sinusoid():
-    fs = 100.0
-    t = np.arange(2 ** 14) / fs
-    bands = inorbit.wavelet_energy(np.sin(2 * np.pi * 4.5 * t), fs)
+    sample_rate_hz = 100.0
+    t = np.arange(2 ** 14) / sample_rate_hz
+    bands = inorbit.wavelet_energy(np.sin(2 * np.pi * 4.5 * t), sample_rate_hz)
     lo, hi, e = max(bands, key=lambda b: b[2])
     assert lo <= 4.5 <= hi and e > 0.6
     assert sum(b[2] for b in bands) == pytest.approx(1.0)
 
 
 def test_static_kalman_error_variance_matches_riccati():
-    fs, N, K = 100.0, 0.01, 2.0
+    sample_rate_hz, N, K = 100.0, 0.01, 2.0
     n = 400_000
     rng = np.random.default_rng(11)
-    truth = np.cumsum(rng.normal(0, (K / 60) / math.sqrt(fs), n)) + 3.0
-    z = truth + rng.normal(0, 60 * N * math.sqrt(fs), n)
-    est = denoise.kalman_static(z, fs, N, K)
-    _, p_post = denoise.static_gain(fs, N, K)
+    truth = np.cumsum(rng.normal(0, (K / 60) / math.sqrt(sample_rate_hz), n)) + 3.0
+    z = truth + rng.normal(0, 60 * N * math.sqrt(sample_rate_hz), n)
+    est = denoise.kalman_static(z, sample_rate_hz, N, K)
+    _, p_post = denoise.static_gain(sample_rate_hz, N, K)
     mse = np.mean((est[20_000:] - truth[20_000:]) ** 2)
     assert mse == pytest.approx(p_post, rel=0.06)
     assert mse < 0.05 * np.var(z - truth)
 
 
 def test_dynamic_kalman_error_variance_matches_riccati():
-    fs, N, qa = 100.0, 0.01, 5.0
+    sample_rate_hz, N, qa = 100.0, 0.01, 5.0
     n = 400_000
-    dt = 1 / fs
+    dt = 1 / sample_rate_hz
     rng = np.random.default_rng(13)
     F = np.array([[1, dt], [0, 1]])
     Q = qa ** 2 * np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]])
@@ -96,11 +96,11 @@ def test_dynamic_kalman_error_variance_matches_riccati():
     x = np.zeros((n, 2))
     for k in range(1, n):  # reference simulation of the state model
         x[k] = F @ x[k - 1] + w[k]
-    z = x[:, 0] + rng.normal(0, 60 * N * math.sqrt(fs), n)
-    est = denoise.kalman_dynamic(z, fs, N, qa)
-    L = denoise.dynamic_gain(fs, N, qa)
+    z = x[:, 0] + rng.normal(0, 60 * N * math.sqrt(sample_rate_hz), n)
+    est = denoise.kalman_dynamic(z, sample_rate_hz, N, qa)
+    L = denoise.dynamic_gain(sample_rate_hz, N, qa)
     from scipy.linalg import solve_discrete_are
-    P = solve_discrete_are(F.T, np.array([[1.0], [0.0]]), Q, np.array([[(60 * N) ** 2 * fs]]))
+    P = solve_discrete_are(F.T, np.array([[1.0], [0.0]]), Q, np.array([[(60 * N) ** 2 * sample_rate_hz]]))
     p_post = ((np.eye(2) - np.outer(L, [1, 0])) @ P)[0, 0]
     mse = np.mean((est[20_000:] - x[20_000:, 0]) ** 2)
     assert mse == pytest.approx(p_post, rel=0.06)

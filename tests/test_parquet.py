@@ -29,13 +29,13 @@ def _blocks(src):
     return list(src.blocks())
 
 
-def _gappy_log(path, n=50_000, fs=100.0):
+def _gappy_log(path, n=50_000, sample_rate_hz=100.0):
     rng = np.random.default_rng(3)
-    t = np.arange(n) / fs
+    t = np.arange(n) / sample_rate_hz
     keep = np.ones(n, bool)
     keep[1000:1040] = keep[20_000:20_001] = False
     write_replay_log(path, t[keep], rng.standard_normal(n)[keep] * 5 + 1, {"temp_c": 25 + t[keep] / 1e3},
-                     {"sample_rate_hz": fs, "sensor": "test gyro"})
+                     {"sample_rate_hz": sample_rate_hz, "sensor": "test gyro"})
 
 
 def test_convert_csv_gives_the_same_blocks_and_counters(tmp_path, capsys):

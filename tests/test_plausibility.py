@@ -74,7 +74,7 @@ def test_kvh_crc_valid_garbage_floats_are_invalid_and_counted(fmt):
     good = np.isfinite(f.rate_dph)
     assert list(np.flatnonzero(good)) == [0, 2, 6]
     np.testing.assert_allclose(f.rate_dph[good], np.float32([1e-6, 2e-6, 3e-6]) * RAD_TO_DPH * 1000, rtol=1e-6)
-    g = GridAssembler(c.rate_hz, c.seq_modulus, c.aux_names)
+    g = GridAssembler(c.sample_rate_hz, c.seq_modulus, c.aux_names)
     b = g.push(f)
     assert list(np.flatnonzero(b.valid)) == [0, 2, 6] and g.counters["invalid_samples"] == 5
     (e,) = events.poll(1.0)
@@ -190,16 +190,16 @@ def test_monitor_and_replay_offer_the_option(capsys):
 
 
 # ----------------------------------------------------------------------------- replay logs
-def noisy(n=6000, fs=50.0, seed=11):
+def noisy(n=6000, sample_rate_hz=50.0, seed=11):
     rng = np.random.default_rng(seed)
-    return np.arange(n) / fs, 2.0 + 40.0 * rng.standard_normal(n), fs
+    return np.arange(n) / sample_rate_hz, 2.0 + 40.0 * rng.standard_normal(n), sample_rate_hz
 
 
 def test_replay_log_source_gates_each_block(tmp_path):
-    t, r, fs = noisy()
+    t, r, sample_rate_hz = noisy()
     r = r.copy()
     r[[10, 5000]] = [1e30, -4e7]
-    write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": fs})
+    write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": sample_rate_hz})
     src = ReplayLogSource(str(tmp_path / "x.csv"))
     bl = list(src.blocks())
     valid = np.concatenate([b.valid for b in bl])
@@ -251,20 +251,22 @@ def check_same_run(capsys, tmp_path, bad, ref, n_bad, *extra):
 
 
 def test_replay_log_holding_1e30(tmp_path, capsys):
-    t, r, fs = noisy()
-    write_replay_log(tmp_path / "ref.csv", np.delete(t, 3000), np.delete(r, 3000), {}, {"sample_rate_hz": fs})
+    t, r, sample_rate_hz = noisy()
+    write_replay_log(
+        tmp_path / "ref.csv", np.delete(t, 3000), np.delete(r, 3000), {}, {"sample_rate_hz": sample_rate_hz}
+    )
     r = r.copy()
     r[3000] = 1e30
-    write_replay_log(tmp_path / "bad.csv", t, r, {}, {"sample_rate_hz": fs})
+    write_replay_log(tmp_path / "bad.csv", t, r, {}, {"sample_rate_hz": sample_rate_hz})
     out = check_same_run(capsys, tmp_path, tmp_path / "bad.csv", tmp_path / "ref.csv", 1)
     assert "(1 invalid/lost)" in out
 
 
 def test_replay_log_and_max_rate_dph(tmp_path, capsys):
-    t, r, fs = noisy()
+    t, r, sample_rate_hz = noisy()
     r = r.copy()
     r[100] = 5000.0                                # plausible for the generic gate, not for a 1000 deg/h one
-    write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": fs})
+    write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": sample_rate_hz})
     rc, out, _, _ = replay(capsys, tmp_path / "x.csv", tmp_path, "a")
     assert rc == 0 and counter(out, "implausible_samples") == 0
     rc, out, _, _ = replay(capsys, tmp_path / "x.csv", tmp_path, "b", "--max-rate-dph", "1000")
@@ -272,7 +274,7 @@ def test_replay_log_and_max_rate_dph(tmp_path, capsys):
 
 
 def test_dsp3000_capture_with_a_1e25_line(tmp_path, capsys):
-    _, r, fs = noisy()
+    _, r, sample_rate_hz = noisy()
     lines = [f"  {v / 3600:.6f}   1\r\n" for v in r]
     ref = lines.copy()
     lines[2500] = "1e25 1\r\n"
@@ -280,12 +282,12 @@ def test_dsp3000_capture_with_a_1e25_line(tmp_path, capsys):
     (tmp_path / "bad.txt").write_text("".join(lines))
     (tmp_path / "ref.txt").write_text("".join(ref))
     check_same_run(capsys, tmp_path, tmp_path / "bad.txt", tmp_path / "ref.txt", 1,
-                   "--protocol", "dsp3000", "--rate-hz", str(fs))
+                   "--protocol", "dsp3000", "--rate-hz", str(sample_rate_hz))
 
 
 def test_kvh_capture_with_garbage_floats(tmp_path, capsys):
-    _, r, fs = noisy(n=24000, fs=200.0)
-    gz = list(r / RAD_TO_DPH / fs)
+    _, r, sample_rate_hz = noisy(n=24000, sample_rate_hz=200.0)
+    gz = list(r / RAD_TO_DPH / sample_rate_hz)
     status = [0x77] * len(gz)
     bad = gz.copy()
     for k, v in ((5000, math.nan), (9000, math.inf), (15000, 1e30)):
@@ -293,7 +295,7 @@ def test_kvh_capture_with_garbage_floats(tmp_path, capsys):
         status[k] = 0x33                            # in the reference the device flags the sample invalid
     check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad),
                    kvh_capture(tmp_path / "ref.bin", gz, status),
-                   3, "--protocol", "kvh-a", "--rate-hz", str(fs))
+                   3, "--protocol", "kvh-a", "--rate-hz", str(sample_rate_hz))
 
 
 def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_path, capsys):
@@ -326,9 +328,11 @@ def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decodin
     from fogmon.sources.open import open_replay_source
     from fogmon.sources.replay import ReplayLogSet
 
-    t, r, fs = noisy(n=200)
+    t, r, sample_rate_hz = noisy(n=200)
     for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):
-        write_replay_log(tmp_path / f"samples-000{k}.csv", t[sl], r[sl], {}, {"sample_rate_hz": fs, "piece": k})
+        write_replay_log(
+            tmp_path / f"samples-000{k}.csv", t[sl], r[sl], {}, {"sample_rate_hz": sample_rate_hz, "piece": k}
+        )
     kvh_capture(tmp_path / "raw-0001.bin", [1e-6] * 10, sidecar={})
     src = open_replay_source(str(tmp_path), args_for("--max-rate-dph", "50"))
     assert isinstance(src, ReplayLogSet)

@@ -70,7 +70,7 @@ def same_as_reference(got, reference, rtol=1e-12, present="samples"):
     (s, adev), (s_ref, adev_ref) = got, reference
     np.testing.assert_allclose(adev, adev_ref, rtol=rtol)
     np.testing.assert_allclose(s.overall.adev_dph, s_ref.overall.adev_dph, rtol=rtol)
-    assert s.n_samples == s_ref.n_samples == N and s.rate_hz == pytest.approx(FS, rel=1e-3)
+    assert s.n_samples == s_ref.n_samples == N and s.sample_rate_hz == pytest.approx(FS, rel=1e-3)
     assert s.counters[present] == N - 12 and s.counters["samples_missing"] == 12 and s.counters["seq_gaps"] == 1
 
 
@@ -141,7 +141,7 @@ def test_ros_axis_and_unit_conversion(bag, signal):
         ["replay", str(bag), "--axis", "x"])))         # the only Imu topic is the default
     rec = src.to_recording()
     np.testing.assert_allclose(rec.rate_dph, 0.5 * rate[keep], rtol=1e-12)   # rad/s -> deg/h
-    assert src.rate_hz == pytest.approx(FS, rel=0.2 / N)   # stamps jitter +-0.1 period: the span fixes the rate
+    assert src.sample_rate_hz == pytest.approx(FS, rel=0.2 / N)   # stamps jitter +-0.1 period: the span fixes the rate
     np.testing.assert_allclose(rec.t_s, (np.arange(N) / FS)[keep], atol=0.1 / FS)
 
 
@@ -301,10 +301,10 @@ def test_explain_reads_a_bag_like_its_csv(bag, tmp_path):
     assert len(rec) == N - 12 and rec.sample_rate_hz == pytest.approx(FS, rel=0.2 / N)
 
 
-def csv_replay_file(folder, rate_dph, t_s, fs):
+def csv_replay_file(folder, rate_dph, t_s, sample_rate_hz):
     path = folder / "same.csv"
     np.savetxt(path, np.column_stack([t_s, rate_dph]), fmt="%.17g", delimiter=",", comments="",
-               header=f"# fogmon replay log v1\n# sample_rate_hz: {fs!r}\ntime_s,rate_dph")
+               header=f"# fogmon replay log v1\n# sample_rate_hz: {sample_rate_hz!r}\ntime_s,rate_dph")
     return path
 
 

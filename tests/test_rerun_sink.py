@@ -68,13 +68,13 @@ def _free_port():
 
 @pytest.fixture(scope="module")
 def run_rrd(tmp_path_factory):
-    fs, n = 100.0, 40_000
-    t, r = _white(n, fs, seed=7, t0=3.0)
+    sample_rate_hz, n = 100.0, 40_000
+    t, r = _white(n, sample_rate_hz, seed=7, t0=3.0)
     r[20_000:20_050] = np.nan
     temp = 25 + 0.001 * np.arange(n)
     ev = [Event(100.0, "crc_error", "frame 42: bad CRC")]
     path = str(tmp_path_factory.mktemp("rrd") / "sub" / "run.rrd")
-    src = ListSource(t, r, [7000] * 5 + [5000], fs, aux={"temp_c": temp}, events=ev)
+    src = ListSource(t, r, [7000] * 5 + [5000], sample_rate_hz, aux={"temp_c": temp}, events=ev)
     engine_out = Collect()
     summary = run_pipeline(src, _args(window_s=81.92, hop_s=10.24), sinks=[RerunSink(rrd_path=path), engine_out])
     return path, t, r, temp, summary, engine_out
@@ -195,10 +195,10 @@ def test_decimator_means_valid_samples_across_pushes():
 
 
 def test_1khz_rate_is_decimated_for_display_only(tmp_path):
-    fs = 1000.0
-    t, r = _white(20_000, fs)
+    sample_rate_hz = 1000.0
+    t, r = _white(20_000, sample_rate_hz)
     path = str(tmp_path / "k.rrd")
-    s = run_pipeline(ListSource(t, r, [4096] * 4 + [20_000 - 4 * 4096], fs), _args(window_s=4.096),
+    s = run_pipeline(ListSource(t, r, [4096] * 4 + [20_000 - 4 * 4096], sample_rate_hz), _args(window_s=4.096),
                      sinks=[RerunSink(rrd_path=path)])
     tr, rate = read_scalars(path, "/rate/rate_dph")
     assert len(tr) == 2000
@@ -223,10 +223,10 @@ def test_live_grpc_receiver_gets_the_same_data_as_the_file(tmp_path):
             except OSError:
                 assert time.monotonic() < deadline, "rerun receiver did not start"
                 time.sleep(0.1)
-        fs = 100.0
-        t, r = _white(12_000, fs, seed=3)
+        sample_rate_hz = 100.0
+        t, r = _white(12_000, sample_rate_hz, seed=3)
         file_ = str(tmp_path / "file.rrd")
-        run_pipeline(ListSource(t, r, [3000] * 4, fs), _args(window_s=20.48),
+        run_pipeline(ListSource(t, r, [3000] * 4, sample_rate_hz), _args(window_s=20.48),
                      sinks=[RerunSink(rrd_path=file_, connect_url=f"rerun+http://127.0.0.1:{port}/proxy")])
         ents = ("/dadev/log10_adev_dph", "/coef/N_dpsh", "/rate/rate_dph")
 
@@ -319,11 +319,13 @@ def test_no_rrd_is_left_when_no_sample_came(tmp_path):
 
 @pytest.mark.filterwarnings("error:RRD file has no footer")
 def test_rotated_rrd_pieces_are_complete_recordings_that_join(tmp_path):
-    fs, n = 100.0, 40_000
-    t, r = _white(n, fs, seed=9)
+    sample_rate_hz, n = 100.0, 40_000
+    t, r = _white(n, sample_rate_hz, seed=9)
     one, rot = str(tmp_path / "one.rrd"), str(tmp_path / "rot.rrd")
-    run_pipeline(ListSource(t, r, [7000] * 5 + [5000], fs), _args(window_s=40.96), sinks=[RerunSink(rrd_path=one)])
-    s = run_pipeline(ListSource(t, r, [7000] * 5 + [5000], fs), _args(window_s=40.96, rotate_s=100.0),
+    run_pipeline(
+        ListSource(t, r, [7000] * 5 + [5000], sample_rate_hz), _args(window_s=40.96), sinks=[RerunSink(rrd_path=one)]
+    )
+    s = run_pipeline(ListSource(t, r, [7000] * 5 + [5000], sample_rate_hz), _args(window_s=40.96, rotate_s=100.0),
                      sinks=[RerunSink(rrd_path=rot, rotate=True)])
     pieces = [str(tmp_path / f"rot-000{k}.rrd") for k in range(1, 5)]
     assert sorted(str(p) for p in tmp_path.glob("rot-*.rrd")) == pieces
@@ -343,11 +345,11 @@ def test_rotated_rrd_pieces_are_complete_recordings_that_join(tmp_path):
 
 
 def test_error_rate_is_logged_beside_the_raw_rate(tmp_path):
-    fs = 10.0
-    t, r = _white(4000, fs, seed=4)
+    sample_rate_hz = 10.0
+    t, r = _white(4000, sample_rate_hz, seed=4)
     rot = np.where(t < 200, 0.0, 720.0)
     path = str(tmp_path / "e.rrd")
-    run_pipeline(ListSource(t, r + 3600 * rot, [4000], fs, aux={"rot_dps": rot}), _args(window_s=51.2),
+    run_pipeline(ListSource(t, r + 3600 * rot, [4000], sample_rate_hz, aux={"rot_dps": rot}), _args(window_s=51.2),
                  sinks=[RerunSink(rrd_path=path)])
     _, raw = read_scalars(path, "/rate/rate_dph")
     _, err = read_scalars(path, "/rate/error_dph")

@@ -19,8 +19,8 @@ def eff(kind, **p) -> Effect:
     return validate_effect(kind, p)
 
 
-def t_grid(seconds: float, fs: float = FS) -> np.ndarray:
-    return np.arange(int(seconds * fs)) / fs
+def t_grid(seconds: float, sample_rate_hz: float = FS) -> np.ndarray:
+    return np.arange(int(seconds * sample_rate_hz)) / sample_rate_hz
 
 
 def slope(res, lo_s, hi_s) -> float:

@@ -198,7 +198,7 @@ def test_cli_sim_bad_values_are_usage_errors(tmp_path, capsys, argv, message):
     ("{tmp}/o.csv", ["--duration-s", "1e15"], "--out {tmp}/o.csv: 1e+17 samples take at least 4e+17 bytes, the "
                                               "folder has "),
     ("{tmp}/o.csv", ["--scenario", "orbit", "--duration-s", "0.5"], "scenario orbit: duration_s 0.5 s holds fewer "
-                                                                    "than 2 samples at rate_hz 1 Hz"),
+                                                                    "than 2 samples at sample_rate_hz 1 Hz"),
     ("{tmp}/o.csv", ["--scenario", "chamber", "--set", "plateaus_c=20,nan"], "scenario chamber: parameter plateaus_c: "
                                                                              "bad value '20,nan'"),
 ])
@@ -279,8 +279,8 @@ def test_round_trip_property(tmp_path_factory):
     @settings(max_examples=60, deadline=None)
     @given(st.floats(min_value=100.0, max_value=1e5), st.floats(-1e6, 1e6), st.tuples(pos, pos, pos, pos, pos),
            st.lists(_effect_strategy(), max_size=4))
-    def check(fs, bias, nz, effects):
-        m = validate_model(SensorModel(fs, bias, Noise(*nz), effects))
+    def check(sample_rate_hz, bias, nz, effects):
+        m = validate_model(SensorModel(sample_rate_hz, bias, Noise(*nz), effects))
         p = tmp_path_factory.mktemp("rt") / "m.toml"
         save_model(m, p)
         assert load_model(p) == m

@@ -80,29 +80,33 @@ def test_seed_none_reports_its_entropy():
 
 
 def test_flicker_generator_exact_floor_within_1pct_over_band():
-    fs, dur = 100.0, 3600.0 * 24
-    m = np.unique(np.round(np.logspace(np.log10(20), np.log10(dur * fs / 10), 80)).astype(int))
-    r = flicker_adev_exact(m, 0.05, fs, 10 * dur) / (FLICKER_FLOOR * 0.05)
+    sample_rate_hz, dur = 100.0, 3600.0 * 24
+    m = np.unique(np.round(np.logspace(np.log10(20), np.log10(dur * sample_rate_hz / 10), 80)).astype(int))
+    r = flicker_adev_exact(m, 0.05, sample_rate_hz, 10 * dur) / (FLICKER_FLOOR * 0.05)
     assert np.all(np.abs(r - 1) < 0.011), (r.min(), r.max())
     # the first few tau0 sit above the floor, as discrete flicker does (Kasdin: 0.798 B at m = 1)
-    assert 1.15 < flicker_adev_exact(np.array([1]), 1.0, fs, 10 * dur)[0] / FLICKER_FLOOR < 1.35
+    assert 1.15 < flicker_adev_exact(np.array([1]), 1.0, sample_rate_hz, 10 * dur)[0] / FLICKER_FLOOR < 1.35
 
 
 def test_ar1_exact_matches_continuous_markov_for_long_correlation_time():
-    fs, tc = 100.0, 20.0
+    sample_rate_hz, tc = 100.0, 20.0
     tau = np.array([1.0, 10.0, 37.8, 100.0, 1000.0])
-    assert np.allclose(ar1_adev_exact(tau * fs, 0.3, tc, fs), markov_adev(tau, 0.3, tc), rtol=5e-3)
+    assert np.allclose(
+        ar1_adev_exact(tau * sample_rate_hz, 0.3, tc, sample_rate_hz), markov_adev(tau, 0.3, tc), rtol=5e-3
+    )
     # peak 0.618 sigma at 1.89 tau_c (docs/sim.md)
     m = np.arange(1, 20000)
-    a = ar1_adev_exact(m, 1.0, tc, fs)
-    assert abs(a.max() - 0.618) < 0.005 and abs(m[np.argmax(a)] / fs / tc - 1.89) < 0.03
+    a = ar1_adev_exact(m, 1.0, tc, sample_rate_hz)
+    assert abs(a.max() - 0.618) < 0.005 and abs(m[np.argmax(a)] / sample_rate_hz / tc - 1.89) < 0.03
 
 
 def test_white_angle_adev_exact_against_allantools():
     """Q: sqrt(3) Q / tau at every tau, measured with an independent ADEV (allantools)."""
-    q, fs = 0.5, 200.0
-    x = WhiteAngle(q, fs, np.random.default_rng(3)).generate(400000)
-    taus, ad, _, _ = allantools.oadev(x, rate=fs, data_type="freq", taus=np.array([1, 4, 16, 64]) / fs)
+    q, sample_rate_hz = 0.5, 200.0
+    x = WhiteAngle(q, sample_rate_hz, np.random.default_rng(3)).generate(400000)
+    taus, ad, _, _ = allantools.oadev(
+        x, rate=sample_rate_hz, data_type="freq", taus=np.array([1, 4, 16, 64]) / sample_rate_hz
+    )
     assert np.allclose(ad, math.sqrt(3) * q / taus, rtol=0.02)
 
 
@@ -110,7 +114,7 @@ def test_quick_validation_all_terms_within_tolerance():
     """validation/sim_noise.py on 40 seeds x 4096 samples: within the validation's
     tolerance or 3.5 standard errors of the 40-seed mean, whichever is larger."""
     val = _validation()
-    fs, n = 100.0, 4096
-    for name, build, theory, tau_min, tol, alpha in val.cases(fs, n):
-        ok, tau, ratio = val.run_case(name, build, theory, tau_min, tol, alpha, fs, n, 40, sigmas=3.5)
+    sample_rate_hz, n = 100.0, 4096
+    for name, build, theory, tau_min, tol, alpha in val.cases(sample_rate_hz, n):
+        ok, tau, ratio = val.run_case(name, build, theory, tau_min, tol, alpha, sample_rate_hz, n, 40, sigmas=3.5)
         assert ok, (name, tau, ratio)

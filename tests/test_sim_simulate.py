@@ -107,7 +107,7 @@ def test_simulated_source_streams_the_same_numbers():
     src = SimulatedSource(m, duration_s=50.0, seed=9)
     got = np.concatenate([b.rate_dph for b in src.blocks()])
     assert np.array_equal(got, simulate(m, duration_s=50.0, seed=9).rate_dph)
-    assert src.counters["samples"] == 5000 and src.rate_hz == 100.0 and src.meta["seed"] == "9"
+    assert src.counters["samples"] == 5000 and src.sample_rate_hz == 100.0 and src.meta["seed"] == "9"
 
 
 def test_simulated_source_endless_until_closed_and_paced():
@@ -144,7 +144,7 @@ def test_mwd_scenario_physics():
     assert abs(a["temp_c"][0] - (static[0] - p.circulation_cooling_c)) < 1e-9
     i_conn_end = np.flatnonzero(conn)[-1]
     assert a["temp_c"][i_conn_end] > a["temp_c"][np.flatnonzero(conn)[0]] + 5
-    d1 = np.diff(a["temp_c"]) * p.rate_hz
+    d1 = np.diff(a["temp_c"]) * p.sample_rate_hz
     assert np.max(np.abs(np.diff(d1))) < 1e-3  # no kinks: two lags
     assert np.allclose(a["rot_dps"][drilling], 6 * p.rpm) and np.all(a["rot_dps"][~drilling] == 0)
     assert 2.0 < np.median(a["vib_g"][drilling]) < 4.0 and np.median(a["vib_g"][conn]) < 0.05
@@ -161,7 +161,7 @@ def test_chamber_scenario_plateaus_and_ramps():
     p = ChamberParams()
     sc = thermal_chamber(p)
     air = sc.aux["chamber_c"]
-    ramp = np.abs(np.diff(air)) * p.rate_hz * 60
+    ramp = np.abs(np.diff(air)) * p.sample_rate_hz * 60
     assert np.isclose(ramp.max(), 1.0) and set(np.round(np.unique(air[1:][ramp == 0]))) >= {20.0, -40.0, 60.0}
     assert sc.t_s[-1] + 1 == pytest.approx(4 * 1800 + (60 + 100 + 40) * 60)
     assert abs(sc.aux["temp_c"][np.argmin(np.abs(sc.t_s - (1800 + 3600 + 1800 - 1)))] + 40) < 0.1
@@ -171,13 +171,13 @@ def test_orbit_scenario_period():
     p = OrbitParams()
     sc = orbit(p)
     x = sc.aux["temp_c"] - sc.aux["temp_c"].mean()
-    f = np.fft.rfftfreq(len(x), 1 / p.rate_hz)
+    f = np.fft.rfftfreq(len(x), 1 / p.sample_rate_hz)
     assert abs(1 / f[np.argmax(np.abs(np.fft.rfft(x))[1:]) + 1] - 5580.0) < 1.0
     assert np.allclose(sc.aux["rot_dps"], 360 / 5580)
 
 
 def test_scenario_drives_simulation_with_interpolated_aux():
-    sc = make_scenario("orbit", {"duration_s": "11160", "rate_hz": "0.5"})
+    sc = make_scenario("orbit", {"duration_s": "11160", "sample_rate_hz": "0.5"})
     m = SensorModel(10.0, 0.0, Noise(), [Effect("thermal_drift", {"k0_poly_dph": [0.0, 1.0], "k1_pos": 0.0,
                                                                    "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0,
                                                                    "smooth_s": 0.0})])

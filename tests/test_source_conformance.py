@@ -41,7 +41,7 @@ def _raw_capture(tmp_path):
     path = tmp_path / "raw.bin"
     path.write_bytes(data)
     write_sidecar(str(path), {"format": CAPTURE_FORMAT, "kind": "serial", "protocol": "kvh-a", "kvh_rot": "rate",
-                              "kvh_units": "deg", "rate_hz": 1000.0, "max_rate_dph": MAX_RATE_DPH})
+                              "kvh_units": "deg", "sample_rate_hz": 1000.0, "max_rate_dph": MAX_RATE_DPH})
     return open_replay_source(str(path)), 250
 
 
@@ -71,13 +71,13 @@ def finite_source(request, tmp_path):
     return SOURCES[request.param](tmp_path)
 
 
-def _check_block(b: Block, rate_hz: float) -> None:
+def _check_block(b: Block, sample_rate_hz: float) -> None:
     assert isinstance(b, Block)
     assert b.t_s.dtype == np.float64 and b.rate_dph.dtype == np.float64 and b.valid.dtype == bool
     assert len(b.t_s) == len(b.rate_dph) == len(b.valid)
     assert all(len(v) == len(b) for v in b.aux.values())
     if len(b) > 1:
-        np.testing.assert_allclose(np.diff(b.t_s) * rate_hz, 1.0, atol=1e-6)     # on the uniform grid
+        np.testing.assert_allclose(np.diff(b.t_s) * sample_rate_hz, 1.0, atol=1e-6)     # on the uniform grid
     assert np.all(np.isfinite(b.rate_dph[b.valid]))                               # invalid = placeholders
 
 
@@ -87,7 +87,7 @@ class TestFiniteSources:
     def test_declares_what_the_pipeline_reads(self, finite_source):
         src, n = finite_source
         assert isinstance(src.name, str) and src.name
-        assert isinstance(src.rate_hz, float) and src.rate_hz > 0
+        assert isinstance(src.sample_rate_hz, float) and src.sample_rate_hz > 0
         assert src.n_samples == n
         assert all(isinstance(v, int) for v in src.counters.values())
         assert not isinstance(src, CaptureSource)
@@ -97,10 +97,10 @@ class TestFiniteSources:
         src, n = finite_source
         blocks = list(src.blocks())
         for b in blocks:
-            _check_block(b, src.rate_hz)
+            _check_block(b, src.sample_rate_hz)
         t = np.concatenate([b.t_s for b in blocks])
         assert len(t) == n
-        np.testing.assert_allclose(np.diff(t) * src.rate_hz, 1.0, atol=1e-6)    # across blocks too
+        np.testing.assert_allclose(np.diff(t) * src.sample_rate_hz, 1.0, atol=1e-6)    # across blocks too
 
     def test_close_ends_blocks(self, finite_source):
         src, n = finite_source
@@ -117,7 +117,7 @@ def test_live_sources_are_capture_sources_with_no_length():
     serial_src = SerialSource("loop://", 921600, make_codec("kvh-a"))
     can_src = CanSource("conformance", "virtual", load_dbc(DBC), dbc_path=DBC)
     for src in (serial_src, can_src):
-        assert isinstance(src, CaptureSource) and src.n_samples is None and src.rate_hz > 0
+        assert isinstance(src, CaptureSource) and src.n_samples is None and src.sample_rate_hz > 0
         spec = src.capture_spec()
         assert spec["kind"] in ("serial", "can") and src.pending == 0
         assert all(isinstance(v, int) for v in src.counters.values())
@@ -147,7 +147,7 @@ def _codec(protocol: str) -> Codec:
 class TestCodecs:
     def test_declares_the_codec_interface(self, protocol):
         c = _codec(protocol)
-        assert c.protocol == protocol and c.rate_hz > 0 and isinstance(c.aux_names, tuple)
+        assert c.protocol == protocol and c.sample_rate_hz > 0 and isinstance(c.aux_names, tuple)
         assert c.seq_modulus is None or c.seq_modulus >= 2
         assert isinstance(c.describe(), str) and c.pending == 0
 

@@ -54,7 +54,7 @@ def test_decoder_defaults_from_dbc():
     d = CanDecoder(load_dbc(DBC))
     signals = (d.rate_signal, d.temp_signal, d.counter_signal, d.valid_signal)
     assert signals == ("rate", "temperature", "counter", "valid")
-    assert d.rate_hz == FS and d.seq_modulus == 16 and d.rate_unit == "deg/s"
+    assert d.sample_rate_hz == FS and d.seq_modulus == 16 and d.rate_unit == "deg/s"
 
 
 @pytest.mark.parametrize("kw,msg", [({"message": "NOPE"}, "--can-message 'NOPE'"),

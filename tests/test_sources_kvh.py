@@ -45,7 +45,7 @@ def test_crc_check_values():
 
 
 def test_public_vector_decodes():
-    c = KvhCodec("a", rot="delta", units="rad", axis="z", rate_hz=1000)
+    c = KvhCodec("a", rot="delta", units="rad", axis="z", sample_rate_hz=1000)
     f = c.feed(VECTOR)
     assert list(f.seq) == [61] and f.aux["temp_c"][0] == 40.0 and bool(f.valid[0])   # status 0x77
     gz = struct.unpack(">f", VECTOR[12:16])[0]
@@ -54,12 +54,12 @@ def test_public_vector_decodes():
                           "implausible_temp_c": 0}
 
 
-@pytest.mark.parametrize("rot,units,fs,expect_dph", [
+@pytest.mark.parametrize("rot,units,sample_rate_hz,expect_dph", [
     ("rate", "deg", 1000, 0.5 * 3600), ("rate", "rad", 1000, 0.5 * 180 / math.pi * 3600),
     ("delta", "deg", 1000, 0.5 * 3600 * 1000), ("delta", "rad", 250, 0.5 * 180 / math.pi * 3600 * 250)])
-def test_unit_conversion_to_dph(rot, units, fs, expect_dph):
+def test_unit_conversion_to_dph(rot, units, sample_rate_hz, expect_dph):
     # 0.5 rad per sample at 250 Hz is beyond the DSP-17xx gate: this tests the conversion alone
-    f = KvhCodec("a", rot, units, "y", fs, max_rate_dph=1e9).feed(encode_frame("a", 3, (9.0, 0.5, -9.0)))
+    f = KvhCodec("a", rot, units, "y", sample_rate_hz, max_rate_dph=1e9).feed(encode_frame("a", 3, (9.0, 0.5, -9.0)))
     assert f.rate_dph[0] == pytest.approx(expect_dph, rel=1e-12)
 
 

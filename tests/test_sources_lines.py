@@ -27,14 +27,14 @@ def test_dsp3000_lines():
 
 
 def test_dsp3000_delta_mode_and_long_garbage():
-    c = Dsp3000Codec(rot="delta", rate_hz=100)
+    c = Dsp3000Codec(rot="delta", sample_rate_hz=100)
     f = c.feed(b"x" * 5000 + b"\n  0.001 1\n")
     assert f.rate_dph[0] == pytest.approx(0.001 * 3600 * 100)
     assert c.counters["bad_lines"] == 1 and c.counters["bytes_skipped"] == 5001 and c.pending == 0
 
 
 def test_lines_column_map_units_and_counter():
-    c = LinesCodec("seq:16,rate_rps,temp_c,-,valid", rate_hz=50)
+    c = LinesCodec("seq:16,rate_rps,temp_c,-,valid", sample_rate_hz=50)
     f = c.feed(b"# header\n15,0.001,25.5,abc,1\n0;0.002;25.6;x;0\n3\t-0.001\t25.7\t0\t1\nbad,1,2\n")
     np.testing.assert_allclose(f.rate_dph, np.array([0.001, 0.002, -0.001]) * 180 / math.pi * 3600)
     assert list(f.seq) == [15, 0, 3] and list(f.valid) == [True, False, True]
@@ -46,7 +46,7 @@ def test_lines_column_map_units_and_counter():
 @pytest.mark.parametrize("spec,scale", [("rate_dph", 1.0), ("rate_dps", 3600.0), ("delta_deg", 3600.0 * 20),
                                         ("delta_arcsec", 20.0), ("delta_rad", 180 / math.pi * 3600 * 20)])
 def test_lines_rate_units(spec, scale):
-    f = LinesCodec(spec, rate_hz=20).feed(b"2.5\n")
+    f = LinesCodec(spec, sample_rate_hz=20).feed(b"2.5\n")
     assert f.rate_dph[0] == pytest.approx(2.5 * scale, rel=1e-12)
 
 

@@ -63,18 +63,18 @@ def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
     v = np.concatenate([b.valid for b in bl])
     r = np.concatenate([b.rate_dph for b in bl])
     assert list(np.rint(r[v] / 3600).astype(int)) == intact and len(v) == 300
-    assert src.rate_hz == 200 and src.counters["crc_errors"] == 1 and src.counters["samples_missing"] == 2
+    assert src.sample_rate_hz == 200 and src.counters["crc_errors"] == 1 and src.counters["samples_missing"] == 2
     assert [e.kind for b in bl for e in b.events].count("crc_error") == 1
     assert src.n_samples == 300
     # a sidecar names the protocol; the command line still overrides it
     (tmp_path / "cap.bin.json").write_text(json.dumps({"format": "fogmon capture v1", "kind": "serial",
                                                        "protocol": "kvh-a", "kvh_rot": "rate", "kvh_units": "deg",
-                                                       "rate_hz": 200,
+                                                       "sample_rate_hz": 200,
                                                        "breaks": [{"offset": 36 * 50, "missing_est": 130.0}]}))
     src = open_replay_source(str(p), args_for())
     assert sum(len(b) for b in src.blocks()) == 300 + 128     # the outage is put back where it was
     src = open_replay_source(str(p), args_for("--rate-hz", "400"))
-    assert src.rate_hz == 400
+    assert src.sample_rate_hz == 400
 
 
 def test_bad_sidecar_is_one_line_error(tmp_path):

@@ -188,10 +188,15 @@ class ScriptedPort:
         pass
 
 
-def scripted_source(chunks, stalls_s=(), fs=FS):
+def scripted_source(chunks, stalls_s=(), sample_rate_hz=FS):
     port = ScriptedPort(chunks, stalls_s)
-    return SerialSource("scripted", 921600, KvhCodec("a", "rate", "deg", "z", fs, MAX_RATE_DPH), opener=lambda: port,
-                        clock=port.clock)
+    return SerialSource(
+        "scripted",
+        921600,
+        KvhCodec("a", "rate", "deg", "z", sample_rate_hz, MAX_RATE_DPH),
+        opener=lambda: port,
+        clock=port.clock,
+    )
 
 
 def split(data: bytes, sizes) -> list[bytes]:
@@ -210,7 +215,7 @@ def test_host_stall_with_a_continuous_stream_makes_no_gap(stall_s, tmp_path):
     data, intact = stream(1000, {300: "drop"})
     chunks = split(data, [3000, 7777, 50, 4001, 9000, 36 * 200 + 5])
     stalls = [0.0, stall_s, stall_s, 0.0, stall_s, 2 * stall_s]
-    src = scripted_source(chunks, stalls, fs=1000.0)           # a counter wrap: 128 ms
+    src = scripted_source(chunks, stalls, sample_rate_hz=1000.0)           # a counter wrap: 128 ms
     archive = Archive(str(tmp_path / "arch"), src)
     blocks, t, rate, valid = collect(src, 1000)
     archive.close()

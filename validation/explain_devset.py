@@ -42,7 +42,7 @@ from fogmon.sim.simulate import simulate
 @dataclass
 class Case:
     name: str
-    fs_hz: float
+    sample_rate_hz: float
     duration_s: float
     noise: Noise
     effects: list = field(default_factory=list)
@@ -57,9 +57,9 @@ class Case:
     model_noise: Noise | None = None
 
 
-def _white_std(noise: Noise, fs: float) -> float:
+def _white_std(noise: Noise, sample_rate_hz: float) -> float:
     """Per-sample std (deg/h) of the model's Q + N noise (what hides an effect)."""
-    return math.sqrt((60.0 * noise.N_dpsh) ** 2 * fs + 2.0 * (noise.Q_arcsec * fs) ** 2)
+    return math.sqrt((60.0 * noise.N_dpsh) ** 2 * sample_rate_hz + 2.0 * (noise.Q_arcsec * sample_rate_hz) ** 2)
 
 
 def cases() -> list[Case]:
@@ -129,8 +129,8 @@ def cases() -> list[Case]:
 def build(case: Case, seed: int):
     """(recording, base model, truth model) for a case."""
     eff = [validate_effect(e.kind, e.params) for e in case.effects]
-    base = SensorModel(case.fs_hz, 1.5, case.model_noise or case.noise, [])
-    truth = SensorModel(case.fs_hz, 1.5, case.noise, eff)
+    base = SensorModel(case.sample_rate_hz, 1.5, case.model_noise or case.noise, [])
+    truth = SensorModel(case.sample_rate_hz, 1.5, case.noise, eff)
     kw = {}
     if case.scenario == "mwd":
         sc = mwd_run(MwdParams(duration_s=case.duration_s), seed=seed)
@@ -151,24 +151,24 @@ def build(case: Case, seed: int):
         t0, length, mult = case.burst
         inside = (rec.t_s >= t0) & (rec.t_s < t0 + length)
         rng = np.random.default_rng(seed + 7)
-        rec.rate_dph = rec.rate_dph + np.where(inside, mult * _white_std(case.noise, case.fs_hz)
+        rec.rate_dph = rec.rate_dph + np.where(inside, mult * _white_std(case.noise, case.sample_rate_hz)
                                                * rng.standard_normal(len(rec.t_s)), 0.0)
     return rec, base, truth
 
 
 def concealment(case: Case, rec, base: SensorModel, truth: SensorModel, seed: int) -> tuple[float, float]:
     """(largest deterministic |peak| / per-sample noise std, relative raw-std change)."""
-    s = _white_std(case.noise, case.fs_hz)
+    s = _white_std(case.noise, case.sample_rate_hz)
     peak = 0.0
     for e in truth.effects:
         if EFFECT_KINDS[e.kind].nature == "mean":
-            r = fx.mean_rate_dph(e, rec.t_s, rec.aux, case.fs_hz)
+            r = fx.mean_rate_dph(e, rec.t_s, rec.aux, case.sample_rate_hz)
             peak = max(peak, float(np.max(np.abs(r - (np.mean(r) if e.kind != "glitches" else 0.0)))) / s)
     noise_kinds = [e for e in truth.effects if EFFECT_KINDS[e.kind].nature != "mean"]
     change = 0.0
     if case.model_noise is not None:  # the raw std of the truth against that of the stated model
-        a = simulate(SensorModel(case.fs_hz, 0.0, case.noise, []), like=rec, seed=seed + 1).rate_dph
-        b = simulate(SensorModel(case.fs_hz, 0.0, case.model_noise, []), like=rec, seed=seed + 1).rate_dph
+        a = simulate(SensorModel(case.sample_rate_hz, 0.0, case.noise, []), like=rec, seed=seed + 1).rate_dph
+        b = simulate(SensorModel(case.sample_rate_hz, 0.0, case.model_noise, []), like=rec, seed=seed + 1).rate_dph
         return peak, float(np.std(a) / np.std(b) - 1.0)
     if case.burst is not None:  # raw std change of the whole record
         clean = simulate(truth, like=rec, seed=seed + 1).rate_dph
@@ -177,8 +177,8 @@ def concealment(case: Case, rec, base: SensorModel, truth: SensorModel, seed: in
         return peak, float(math.sqrt(1.0 + np.mean(extra ** 2) / np.var(clean)) - 1.0)
     if noise_kinds:
         like = rec
-        with_n = SensorModel(case.fs_hz, 0.0, case.noise, noise_kinds)
-        without = SensorModel(case.fs_hz, 0.0, case.noise, [])
+        with_n = SensorModel(case.sample_rate_hz, 0.0, case.noise, noise_kinds)
+        without = SensorModel(case.sample_rate_hz, 0.0, case.noise, [])
         a = simulate(with_n, like=like, seed=seed + 1).rate_dph
         b = simulate(without, like=like, seed=seed + 1).rate_dph
         if "rot_dps" in like.aux:
@@ -246,8 +246,8 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
                       ("tau", _rel(q["tau_s"], p["tau_s"]), 0.3)]
         elif e.kind == "thermal_drift":
             t = rec.t_s
-            true = fx.mean_rate_dph(validate_effect(e.kind, p), t, rec.aux, case.fs_hz)
-            fit = fx.mean_rate_dph(c.effect(), t, rec.aux, case.fs_hz)
+            true = fx.mean_rate_dph(validate_effect(e.kind, p), t, rec.aux, case.sample_rate_hz)
+            fit = fx.mean_rate_dph(c.effect(), t, rec.aux, case.sample_rate_hz)
             red = np.ptp(true) / max(np.ptp(true - fit), 1e-300)
             checks = [("1/ptp_reduction", 1.0 / red, 0.2)]
         elif e.kind == "scale_factor":
@@ -261,7 +261,7 @@ def param_errors(case: Case, res, rec) -> tuple[list[str], bool]:
             worst_t, worst_a = 0.0, 0.0
             for ti, ai in zip(tt, p["amplitudes_dph"], strict=True):
                 j = int(np.argmin(np.abs(ft - ti))) if len(ft) else -1
-                dt = abs(ft[j] - ti) * case.fs_hz if j >= 0 else np.inf
+                dt = abs(ft[j] - ti) * case.sample_rate_hz if j >= 0 else np.inf
                 worst_t = max(worst_t, dt)
                 worst_a = max(worst_a, _rel(fa[j], ai) if j >= 0 else np.inf)
             checks = [("dt/samples", worst_t, 30.0), ("amp", worst_a, 0.3),

@@ -133,12 +133,12 @@ def outlier_listing(rep: dict, report_dir: Path) -> tuple[np.ndarray, int, int]:
     return t, len(t), counted
 
 
-def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndarray, fs: float,
+def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndarray, sample_rate_hz: float,
            report_dir: Path) -> list:
     """[(name, passed, numbers)] for one recording (``report_dir``: where the report and
     the outliers file it names are)."""
     out = []
-    t0, t1 = float(rec_t[0]), float(rec_t[-1]) + 1.0 / fs
+    t0, t1 = float(rec_t[0]), float(rec_t[-1]) + 1.0 / sample_rate_hz
     dur = t1 - t0
     effects = rep["effects"]
 
@@ -152,7 +152,7 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
     times = np.array(sorted(t for e in gl for t in e["params"]["times_s"]))
     stated = sum(int(m.group(1)) for e in gl for m in [re.search(r"(\d+) sample\(s\) beyond", e["evidence"])] if m)
     warns = [w for w in rep.get("warnings", []) if w.get("kind") == "platform_motion"]
-    tol = GLITCH_TOL_SAMPLES / fs
+    tol = GLITCH_TOL_SAMPLES / sample_rate_hz
     # an outlier population accounts for a cluster when its file lists an outlier there
     o_times, o_rows, o_count = outlier_listing(rep, report_dir)
 
@@ -160,7 +160,7 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
         return bool(np.any((ts >= a - tol) & (ts <= b + tol)))
 
     def in_motion(a, b):
-        return any(overlaps(w["t_start_s"], w["t_end_s"], a, b + 1 / fs) for w in warns)
+        return any(overlaps(w["t_start_s"], w["t_end_s"], a, b + 1 / sample_rate_hz) for w in warns)
 
     by_glitch = sum(at(times, a, b) for a, b in clusters)
     by_outlier = sum(at(o_times, a, b) for a, b in clusters)
@@ -177,7 +177,7 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
                 f"evidence {stated}{pop}"))
 
     regions = rep["mismatches"] + rep.get("mismatches_after", [])
-    tau0 = 1.0 / fs
+    tau0 = 1.0 / sample_rate_hz
     outside = [r for r in regions if r["t_start_s"] < t0 - tau0 or r["t_end_s"] > t1 + tau0
                or r["tau_min_s"] < 0.999 * tau0 or r["tau_max_s"] > dur]
     out.append(("regions inside the record", not outside,
@@ -227,8 +227,8 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
     print(f"    known: {entry['contains']}")
     rec = read_replay_log(path)
     blk = rec.to_block()
-    fs = rec.sample_rate_hz
-    print(f"    {len(rec)} samples at {fs:g} Hz, {rec.duration_s:.6g} s, {len(blk.t_s) - len(rec)} missing")
+    sample_rate_hz = rec.sample_rate_hz
+    print(f"    {len(rec)} samples at {sample_rate_hz:g} Hz, {rec.duration_s:.6g} s, {len(blk.t_s) - len(rec)} missing")
 
     report = tmp / f"{entry['name']}.json"
     w0 = time.monotonic()
@@ -272,7 +272,7 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
     passed = rp.returncode == 0
     if not passed:
         print("  [FAIL] fogmon replay runs")
-    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, fs, report.parent)
+    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, sample_rate_hz, report.parent)
     for name, ok, numbers in results:
         print(f"  [{'PASS' if ok else 'FAIL'}] {name}: {numbers}")
         passed &= ok

@@ -49,12 +49,12 @@ STATED_PER_WINDOW = 5 * HOPS_PER_WINDOW * 2.0 * float(norm.sf(JUMP_Z))
 SIM_HZ, SIM_S, SIM_WINDOW_S, SIM_DF = 20.0, 8 * 3600.0, 204.8, 5
 
 
-def run(rate, fs: float, window_s: float, valid=None) -> tuple[list, float, int]:
+def run(rate, sample_rate_hz: float, window_s: float, valid=None) -> tuple[list, float, int]:
     """(events, window lengths of run compared, windows) of the jump detector over ``rate``."""
-    d = dadev(rate, fs, window_s, window_s / HOPS_PER_WINDOW, valid=valid)
+    d = dadev(rate, sample_rate_hz, window_s, window_s / HOPS_PER_WINDOW, valid=valid)
     if not len(d):
         return [], 0.0, 0
-    t_end = (np.asarray(d.end_index, dtype=np.float64) + 1) / fs
+    t_end = (np.asarray(d.end_index, dtype=np.float64) + 1) / sample_rate_hz
     events = JumpDetector(window_s).update(fit_noise(d), t_end)
     compared = max(t_end[-1] - t_end[0] - window_s, 0.0) / window_s
     return events, compared, len(d)
@@ -99,11 +99,11 @@ def main(argv=None) -> int:
             continue
         rec = read_replay_log(path)
         b = rec.to_block()
-        fs = rec.sample_rate_hz
+        sample_rate_hz = rec.sample_rate_hz
         valid = b.valid & np.isfinite(b.rate_dph)
-        for label, w in (("default", default_window_s(fs, len(b.rate_dph))),
-                         ("short", 2 ** int(np.log2(len(b.rate_dph) / 32)) / fs)):
-            events, compared, windows = run(b.rate_dph, fs, w, valid)
+        for label, w in (("default", default_window_s(sample_rate_hz, len(b.rate_dph))),
+                         ("short", 2 ** int(np.log2(len(b.rate_dph) / 32)) / sample_rate_hz)):
+            events, compared, windows = run(b.rate_dph, sample_rate_hz, w, valid)
             print(_line(f"{path.name} ({label})", w, events, compared, windows))
             for e in events:
                 print(f"      {e.t_s:9.1f} s {e.message}")

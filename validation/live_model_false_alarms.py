@@ -32,12 +32,21 @@ from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.simulate import iter_simulate
 
 MODELS = {
-    "white+flicker+rrw": lambda fs: SensorModel(fs, 3.0, Noise(N_dpsh=0.05, B_dph=0.05, K_dphsh=0.02)),
-    "quantization+white+ramp": lambda fs: SensorModel(fs, -2.0, Noise(Q_arcsec=0.5, N_dpsh=0.02, R_dphh=0.5)),
-    "white+markov+bandwidth": lambda fs: SensorModel(
-        fs, 0.0, Noise(N_dpsh=0.05, B_dph=0.02),
-        [Effect("markov", {"tau_c_s": 20.0, "sigma_dph": 0.3}),
-         Effect("bandwidth", {"cutoff_hz": 0.3 * fs, "order": 2})]),
+    "white+flicker+rrw": lambda sample_rate_hz: SensorModel(
+        sample_rate_hz, 3.0, Noise(N_dpsh=0.05, B_dph=0.05, K_dphsh=0.02)
+    ),
+    "quantization+white+ramp": lambda sample_rate_hz: SensorModel(
+        sample_rate_hz, -2.0, Noise(Q_arcsec=0.5, N_dpsh=0.02, R_dphh=0.5)
+    ),
+    "white+markov+bandwidth": lambda sample_rate_hz: SensorModel(
+        sample_rate_hz,
+        0.0,
+        Noise(N_dpsh=0.05, B_dph=0.02),
+        [
+            Effect("markov", {"tau_c_s": 20.0, "sigma_dph": 0.3}),
+            Effect("bandwidth", {"cutoff_hz": 0.3 * sample_rate_hz, "order": 2}),
+        ],
+    ),
 }
 P_FAIL = 1e-3
 
@@ -46,23 +55,23 @@ def null_run(model: SensorModel, hours: float, window_n: int, seed: int, alpha: 
              replicates: int, cache_dir: str) -> tuple[dict, dict]:
     """Stream ``hours`` h of the model through StreamingDadev + ModelWatch; returns
     (watch summary, stated rates)."""
-    fs = model.sample_rate_hz
+    sample_rate_hz = model.sample_rate_hz
     # alpha=0: fixed noise type for the (unused) confidence bounds; the ADEV is the same
-    sd = StreamingDadev(fs, window_n / fs, hop_s=window_n / 4 / fs, alpha=0)
-    band = ModelBand.for_model(model, fs, window_n, sd.m, alpha=alpha, replicates=replicates,
+    sd = StreamingDadev(sample_rate_hz, window_n / sample_rate_hz, hop_s=window_n / 4 / sample_rate_hz, alpha=0)
+    band = ModelBand.for_model(model, sample_rate_hz, window_n, sd.m, alpha=alpha, replicates=replicates,
                                seed=10_000 + seed, cache_dir=cache_dir)
     watch = ModelWatch(band, ())
     for blk in iter_simulate(model, duration_s=hours * 3600.0, seed=seed):
         r = sd.push(blk)
         for i in range(len(r)):
-            watch.frame((r.end_index[i] + 1) / fs, r.adev_dph[i], {})
-    return watch.summary(), stated_rate(band, sd.hop / fs)
+            watch.frame((r.end_index[i] + 1) / sample_rate_hz, r.adev_dph[i], {})
+    return watch.summary(), stated_rate(band, sd.hop_n / sample_rate_hz)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=24.0, help="simulated time per null run (h)")
-    ap.add_argument("--rate-hz", type=float, default=10.0, help="sample rate (Hz)")
+    ap.add_argument("--rate-hz", dest="sample_rate_hz", type=float, default=10.0, help="sample rate (Hz)")
     ap.add_argument("--window", type=int, default=1024, help="DADEV window (samples); hop = window / 4")
     ap.add_argument("--alpha", type=float, default=0.01, help="family-wise false-alarm rate per window")
     ap.add_argument("--replicates", type=int, default=None, help="bootstrap windows (default: the library's)")
@@ -73,7 +82,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as cache_dir:
         for name, make in MODELS.items():
             for seed in range(a.seeds):
-                s, st = null_run(make(a.rate_hz), a.hours, a.window, seed, a.alpha,
+                s, st = null_run(make(a.sample_rate_hz), a.hours, a.window, seed, a.alpha,
                                  kw.get("replicates", 100), cache_dir)
                 hours = (s["time_inside_s"] + s["time_outside_s"]) / 3600.0
                 hop_per_window = 4

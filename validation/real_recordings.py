@@ -94,11 +94,11 @@ def read_mseed(data: bytes, channel: str) -> tuple[np.ndarray, np.ndarray, float
     traces = pymseed.MS3TraceList.from_buffer(data, unpack_data=True)
     (tid,) = [t for t in traces if t.sourceid.endswith(channel)]
     segs = list(tid)
-    fs = float(segs[0].samprate)
+    sample_rate_hz = float(segs[0].samprate)
     t0 = segs[0].starttime
-    t = np.concatenate([(s.starttime - t0) * 1e-9 + np.arange(s.numsamples) / fs for s in segs])
+    t = np.concatenate([(s.starttime - t0) * 1e-9 + np.arange(s.numsamples) / sample_rate_hz for s in segs])
     x = np.concatenate([np.asarray(s.datasamples, dtype=float) for s in segs])
-    return t, x, fs
+    return t, x, sample_rate_hz
 
 
 def read_csv_column(data: bytes, column: str) -> tuple[np.ndarray, np.ndarray]:
@@ -118,13 +118,13 @@ def read_ulog(data: bytes, topic: str, column: str) -> tuple[np.ndarray, np.ndar
     return (ts - ts[0]) * 1e-6, d.data[column].astype(float)
 
 
-def snap(t_s: np.ndarray, fs: float, name: str) -> tuple[np.ndarray, float]:
+def snap(t_s: np.ndarray, sample_rate_hz: float, name: str) -> tuple[np.ndarray, float]:
     """Timestamps moved to the nearest slot of the fs grid; (snapped times, largest shift s).
     Two samples in one slot would be a conversion error."""
-    k = np.rint(t_s * fs)
+    k = np.rint(t_s * sample_rate_hz)
     if np.any(np.diff(k) < 1):
-        raise SystemExit(f"{name}: two samples fall into one {1 / fs:g} s slot; cannot snap")
-    return k / fs, float(np.max(np.abs(k / fs - t_s)))
+        raise SystemExit(f"{name}: two samples fall into one {1 / sample_rate_hz:g} s slot; cannot snap")
+    return k / sample_rate_hz, float(np.max(np.abs(k / sample_rate_hz - t_s)))
 
 
 def convert(entry: dict, original: bytes) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -132,21 +132,21 @@ def convert(entry: dict, original: bytes) -> tuple[np.ndarray, np.ndarray, float
     recording, its excerpt window applied."""
     shift = 0.0
     if entry["reader"] == "mseed":
-        t, x, fs = read_mseed(original, entry["channel"])
+        t, x, sample_rate_hz = read_mseed(original, entry["channel"])
     else:
         if entry["reader"] == "csv":
             t, x = read_csv_column(original, entry["column"])
         else:
             t, x = read_ulog(original, entry["topic"], entry["column"])
-        fs = entry["snap_hz"]
-        t, shift = snap(t, fs, entry["name"])
+        sample_rate_hz = entry["snap_hz"]
+        t, shift = snap(t, sample_rate_hz, entry["name"])
     keep = (t >= entry.get("t_start_s", -np.inf)) & (t < entry.get("t_end_s", np.inf))
-    return np.round(t[keep], 9), x[keep] * entry["scale_to_dph"], fs, shift
+    return np.round(t[keep], 9), x[keep] * entry["scale_to_dph"], sample_rate_hz, shift
 
 
-def metadata(entry: dict, fs: float) -> dict:
+def metadata(entry: dict, sample_rate_hz: float) -> dict:
     return {
-        "sample_rate_hz": f"{fs:g}",
+        "sample_rate_hz": f"{sample_rate_hz:g}",
         "sensor": f"{entry['sensor']}, axis {entry['axis']}",
         "source": (f"github.com/{entry['repo']} commit {entry['commit']} {entry['path']} "
                    f"({entry['licence_spdx']}; see fogmon validation/real_recordings.toml)"),
@@ -162,37 +162,37 @@ def describe(entry: dict, path: Path) -> None:
     blk = read_replay_log(path).to_block()
     ok = blk.valid
     y = blk.rate_dph
-    fs = 1.0 / float(np.median(np.diff(blk.t_s)))
+    sample_rate_hz = 1.0 / float(np.median(np.diff(blk.t_s)))
     med = float(np.median(y[ok]))
     mad = float(np.median(np.abs(y[ok] - med)))
     n_out = int(np.sum(np.abs(y[ok] - med) > 8 * mad))
     scale = entry.get("scale_to_dph", 1.0)
     print(f"  {int(ok.sum())} samples, {len(y) - int(ok.sum())} missing (gaps), {blk.t_s[0]:g}..{blk.t_s[-1]:g} s, "
           f"median {med:.6g} deg/h, MAD {mad:.4g} deg/h, {n_out} samples beyond 8 MAD")
-    b = int(round(entry.get("describe_block_s", 5.0) * fs))
+    b = int(round(entry.get("describe_block_s", 5.0) * sample_rate_hz))
     if b < 2 or len(y) < 2 * b:
         return
     blocks = y[: len(y) // b * b].reshape(-1, b)
     sd = np.array([np.std(r[np.isfinite(r)]) if np.isfinite(r).sum() > 1 else np.nan for r in blocks])
-    print(f"  {b / fs:g}-s block standard deviations (original units): "
+    print(f"  {b / sample_rate_hz:g}-s block standard deviations (original units): "
           + " ".join(f"{v / scale:.3g}" for v in sd))
     from scipy.signal import welch
 
-    f, psd = welch(np.where(ok, y - med, 0.0), fs=fs, nperseg=min(4096, len(y) // 4))
+    f, psd = welch(np.where(ok, y - med, 0.0), fs=sample_rate_hz, nperseg=min(4096, len(y) // 4))
     rel = psd / np.median(psd[1:])
-    edges = fs / 2 / 2.0 ** np.arange(9)[::-1]
+    edges = sample_rate_hz / 2 / 2.0 ** np.arange(9)[::-1]
     bands = [f"{a:.3g}-{b:.3g} Hz {np.mean(rel[(f >= a) & (f < b)]):.2g}"
              for a, b in zip(edges[:-1], edges[1:], strict=True) if np.any((f >= a) & (f < b))]
     i = int(np.argmax(np.where(f > 0.05, rel, 0)))
     print(f"  Welch PSD / its median, octave bands: {'; '.join(bands)}; strongest peak above 0.05 Hz "
-          f"{rel[i]:.3g}x at {f[i]:.4g} Hz; 0.9-1 x Nyquist {np.mean(rel[f >= 0.45 * fs]):.2g}")
+          f"{rel[i]:.3g}x at {f[i]:.4g} Hz; 0.9-1 x Nyquist {np.mean(rel[f >= 0.45 * sample_rate_hz]):.2g}")
     dev2 = np.where(ok, (y - med) ** 2, 0.0)
     ker = np.ones(b)
     rms = np.sqrt(np.convolve(dev2, ker, "same") / np.maximum(np.convolve(ok.astype(float), ker, "same"), 1))
     i = int(np.argmax(rms))
     hi = np.flatnonzero(rms > 3 * np.median(rms))
     span = f"{blk.t_s[hi[0]]:.1f}..{blk.t_s[hi[-1]]:.1f} s" if len(hi) else "nowhere"
-    print(f"  {b / fs:g}-s moving RMS (original units): median {np.median(rms) / scale:.4g}, peak "
+    print(f"  {b / sample_rate_hz:g}-s moving RMS (original units): median {np.median(rms) / scale:.4g}, peak "
           f"{rms[i] / scale:.4g} at t = {blk.t_s[i]:.1f} s, above 3x the median {span}")
 
 
@@ -207,10 +207,10 @@ def main(argv: list[str] | None = None) -> int:
     for entry in load_manifest():
         out = data_path(entry, args.out)
         if "reader" in entry:
-            t, rate, fs, shift = convert(entry, read_original(entry, args.mirror))
-            write_replay_log(out, t, rate, meta=metadata(entry, fs))
+            t, rate, sample_rate_hz, shift = convert(entry, read_original(entry, args.mirror))
+            write_replay_log(out, t, rate, meta=metadata(entry, sample_rate_hz))
             note = f", timestamps snapped (largest shift {1e3 * shift:.3g} ms)" if shift else ""
-            print(f"{entry['name']}: wrote {out} ({len(t)} samples at {fs:g} Hz{note})")
+            print(f"{entry['name']}: wrote {out} ({len(t)} samples at {sample_rate_hz:g} Hz{note})")
         digest = sha256(out.read_bytes())
         want = entry.get("sha256_converted")
         ok = digest == want

@@ -68,7 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _options(args: argparse.Namespace) -> dict:
     """The options the tasks need (picklable): source decoding and analysis."""
-    keep = {"tolerate_bad_rows", "dbc", "protocol", "rate_hz", "kvh_rot", "kvh_units", "axis", "columns",
+    keep = {"tolerate_bad_rows", "dbc", "protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "axis", "columns",
             "max_rate_dph", "can_message", "can_rate", "can_rate_unit", "can_temp", "can_counter", "can_valid",
             "window_s", "hop_s", "taus", "raw_rate", "keep_motion"}
     return {k: v for k, v in vars(args).items() if k in keep}
@@ -133,9 +133,9 @@ def run(args: argparse.Namespace) -> int:
         os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
         jobs: list[tuple] = []   # (plan, chunks, [chunk futures], explain future, motion future)
         for i, plan in enumerate(plans):
-            w = int(round(plan.window_s * plan.rate_hz))
-            h = int(round(plan.hop_s * plan.rate_hz))
-            size = int(round(args.chunk_s * plan.rate_hz)) if args.chunk_s else DEFAULT_CHUNK_SAMPLES
+            w = int(round(plan.window_s * plan.sample_rate_hz))
+            h = int(round(plan.hop_s * plan.sample_rate_hz))
+            size = int(round(args.chunk_s * plan.sample_rate_hz)) if args.chunk_s else DEFAULT_CHUNK_SAMPLES
             chunks = plan_chunks(plan.n_samples, w, h, max(size, w), OVERALL_MAX_SAMPLES)
             masked = None
             if len(chunks) > 1 and not args.keep_motion:
@@ -184,7 +184,7 @@ def _recording_row(plan, chunks, results, motion) -> tuple[dict, object]:
     """The recordings-table row of one recording and its windows table (None if failed)."""
     from fogmon.fleet import tables
 
-    row = {"recording": plan.path, "axis": plan.axis, "format": plan.kind, "sample_rate_hz": plan.rate_hz,
+    row = {"recording": plan.path, "axis": plan.axis, "format": plan.kind, "sample_rate_hz": plan.sample_rate_hz,
            "window_s": plan.window_s, "hop_s": plan.hop_s, "chunks": len(chunks)}
     errors = [r.error for r in results if r.error]
     last = results[-1].record
@@ -195,7 +195,7 @@ def _recording_row(plan, chunks, results, motion) -> tuple[dict, object]:
                 "windows": sum(len(r.windows.get("t_end_s", ())) for r in results),
                 "fit_first_s": last.get("fit_first_s", float("nan"))})
     if last:
-        row["duration_s"] = last["t_last_s"] - last["t_first_s"] + 1.0 / plan.rate_hz
+        row["duration_s"] = last["t_last_s"] - last["t_first_s"] + 1.0 / plan.sample_rate_hz
     for c in tables.coefficient_columns():
         row[c] = last.get(c, False if c.startswith("identifiable_") else float("nan"))
     row["error"] = errors[0] if errors else ""

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     first = next(blocks, None)
     aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
     src_meta = getattr(source, "meta", {}) or {}
-    meta = {"sample_rate_hz": f"{source.rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
+    meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
             **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
     side = read_sidecar(args.input) if os.path.isfile(args.input) else None
     n = without_aux = 0
@@ -95,6 +95,6 @@ def run(args: argparse.Namespace) -> int:
         raise
     finally:
         source.close()
-    print(f"fogmon convert: wrote {n} samples at {source.rate_hz:g} Hz from {source.name} to {args.output}"
+    print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
           + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else ""))
     return 0

@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.epilog = EPILOG
     p.add_argument("curve", metavar="CURVE.csv", help="Allan-deviation curve: columns tau_s (s), adev_dph (deg/h), "
                    "optional edf or n_terms")
-    p.add_argument("--rate-hz", type=number(0, 1e6, above=True), metavar="HZ",
+    p.add_argument("--rate-hz", dest="sample_rate_hz", type=number(0, 1e6, above=True), metavar="HZ",
                    help="sample rate of the record behind the curve, Hz (default: 1 / the first tau)")
     p.add_argument("--record-s", type=positive, metavar="S", help="length of that record, s (default: from "
                    "n_terms, else assumed 4 x the largest tau)")
@@ -45,18 +45,21 @@ def run(args: argparse.Namespace) -> int:
     cols, _ = read_curve_csv(args.curve)
     n = None
     if args.record_s is not None:
-        rate = args.rate_hz or 1.0 / float(cols["tau_s"][0])
+        rate = args.sample_rate_hz or 1.0 / float(cols["tau_s"][0])
         n = int(round(args.record_s * rate))
     try:
-        result, said = adev_from_curve(cols["tau_s"], cols["adev_dph"], rate_hz=args.rate_hz,
+        result, said = adev_from_curve(cols["tau_s"], cols["adev_dph"], sample_rate_hz=args.sample_rate_hz,
                                        n_terms=cols.get("n_terms"), edf=cols.get("edf"), n_samples=n,
                                        confidence=args.confidence)
     except FogmonError as e:
         raise FogmonError(f"{args.curve}: {e}") from None
     fit = fit_noise(result, confidence=args.confidence)
     result = with_fit_intervals(result, fit, "edf" in cols)
-    lines = [f"fogmon fit: {args.curve}: {len(result.tau_s)} taus, {result.tau_s[0]:g}..{result.tau_s[-1]:g} s; "
-             f"record {result.n_samples} samples at {result.rate_hz:g} Hz = {result.n_samples / result.rate_hz:g} s"]
+    lines = [
+        f"fogmon fit: {args.curve}: {len(result.tau_s)} taus, {result.tau_s[0]:g}..{result.tau_s[-1]:g} s; "
+        f"record {result.n_samples} samples at {result.sample_rate_hz:g} Hz = "
+        f"{result.n_samples / result.sample_rate_hz:g} s"
+    ]
     lines += [f"  assumed: {s}" for s in said]
     lines += ["", f"Allan deviation ({100 * args.confidence:.1f} % confidence bounds; EDF "
               f"{'as stated' if 'edf' in cols else 'for the noise type the fit finds at each tau'}):"]
@@ -66,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if check:
         lines.append(check)
     if export:
-        write_export(*export, fit, f"the curve {args.curve}", args.rate_hz)
+        write_export(*export, fit, f"the curve {args.curve}", args.sample_rate_hz)
         lines.append(f"Wrote {export[1]} ({export[0]} export of the fit)")
     print("\n".join(lines))
     return 0

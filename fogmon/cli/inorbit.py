@@ -35,9 +35,9 @@ def run(args) -> int:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
     blk = rec.to_block()
     rate = blk.error_rate_dph
-    fs = rec.sample_rate_hz
-    arw = arw_from_differences(rate, fs, args.pauta_k)  # differences across gaps are NaN, dropped
-    print(f"in-orbit evaluation of {rec.name} ({len(rec)} samples at {fs:g} Hz, {rec.duration_s:.0f} s)")
+    sample_rate_hz = rec.sample_rate_hz
+    arw = arw_from_differences(rate, sample_rate_hz, args.pauta_k)  # differences across gaps are NaN, dropped
+    print(f"in-orbit evaluation of {rec.name} ({len(rec)} samples at {sample_rate_hz:g} Hz, {rec.duration_s:.0f} s)")
     print(f"  angle random walk N = {arw.N_dpsh:.4g} deg/sqrt(h) (white rate {arw.sigma_dph:.4g} deg/h per sample; "
           f"{arw.outliers} differences rejected by the {args.pauta_k:g}-sigma Pauta criterion)")
     ok = np.isfinite(rate)
@@ -48,7 +48,7 @@ def run(args) -> int:
         print(f"  bias instability: not available ({e})")
     if ok.all():
         print("  wavelet (db4) energy by band:")
-        for lo, hi, share in wavelet_energy(rate, fs):
+        for lo, hi, share in wavelet_energy(rate, sample_rate_hz):
             print(f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %")
     else:
         print(f"  wavelet energy: skipped, the record has {int((~ok).sum())} missing samples (no interpolation)")

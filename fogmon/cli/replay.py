@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
     summary = pipeline.run(build_sinks(args))
     if export and not summary.interrupted:
-        write_export(*export, summary.overall_fit, summary.source_name, summary.rate_hz,
+        write_export(*export, summary.overall_fit, summary.source_name, summary.sample_rate_hz,
                      getattr(source, "ros_topic", None))
         print(f"Wrote {export[1]} ({export[0]} export of the whole-run fit)")
     return interrupted_exit_code() if summary.interrupted else 0

@@ -92,7 +92,7 @@ def run(args) -> int:
             sc = make_scenario(args.scenario, _overrides(args.set), duration, seed)
         except MemoryError:
             raise FogmonError(f"--scenario {args.scenario}: not enough memory for its aux channels: lower "
-                              f"rate_hz or the duration") from None
+                              f"sample_rate_hz or the duration") from None
         aux, aux_t = sc.aux, sc.t_s
         meta.update(sc.meta)
         if args.set:

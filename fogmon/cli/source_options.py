@@ -56,9 +56,15 @@ def _add_serial_arguments(g, live: bool) -> None:
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
                    "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
-    g.add_argument("--rate-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ", help="sample rate in Hz "
-                   f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, "
-                   "dsp3000 100, lines 100; CAN: the DBC message cycle time)")
+    g.add_argument(
+        "--rate-hz",
+        dest="sample_rate_hz",
+        type=number(0, MAX_RATE_HZ, above=True),
+        metavar="HZ",
+        help="sample rate in Hz "
+        f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, "
+        "dsp3000 100, lines 100; CAN: the DBC message cycle time)",
+    )
 
 
 def _add_can_arguments(c, live: bool) -> None:

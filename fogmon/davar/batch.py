@@ -44,8 +44,8 @@ def reference_level(y: np.ndarray, ok: np.ndarray) -> float:
     return 0.0 if np.isnan(ref) else float(ref)
 
 
-def _samples(seconds: float, rate_hz: float, what: str) -> int:
-    n = int(round(seconds * rate_hz))
+def _samples(seconds: float, sample_rate_hz: float, what: str) -> int:
+    n = int(round(seconds * sample_rate_hz))
     if not np.isfinite(seconds) or n < 1:
         raise FogmonError(f"{what} must be at least one sample period, got {seconds} s")
     return n
@@ -154,31 +154,31 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))
 
 
-def oadev(rate_dph, rate_hz: float, taus="octave", valid=None, confidence: float = CONFIDENCE,
+def oadev(rate_dph, sample_rate_hz: float, taus="octave", valid=None, confidence: float = CONFIDENCE,
           alpha=None) -> AdevResult:
     """Overlapping Allan deviation (deg/h) of a rate record ``rate_dph`` (deg/h) sampled at
-    ``rate_hz`` (Hz). ``taus``: see :func:`fogmon.davar.taus.tau_grid`. ``valid``: optional
+    ``sample_rate_hz`` (Hz). ``taus``: see :func:`fogmon.davar.taus.tau_grid`. ``valid``: optional
     mask; NaN samples are invalid too. Bounds: chi-square at ``confidence`` with Greenhall
     EDF for noise type ``alpha`` (default: the dominant term of an IEEE-952 fit)."""
     y, ok = _prepare(rate_dph, valid)
     n = len(y)
-    m = tau_grid(rate_hz, n, taus)
+    m = tau_grid(sample_rate_hz, n, taus)
     hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n)
     adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence)
-    return AdevResult(m / rate_hz, m, adev, lo, hi, edf, counts[0], float(rate_hz), n, confidence)
+    return AdevResult(m / sample_rate_hz, m, adev, lo, hi, edf, counts[0], float(sample_rate_hz), n, confidence)
 
 
-def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None, taus="octave",
+def dadev(rate_dph, sample_rate_hz: float, window_s: float, hop_s: float | None = None, taus="octave",
           valid=None, confidence: float = CONFIDENCE, t0_s: float = 0.0, alpha=None) -> DadevResult:
     """Dynamic Allan deviation: overlapping ADEV (deg/h) of every window of ``window_s`` s,
     windows starting every ``hop_s`` s (default window_s / 4) from the first sample at
     time ``t0_s`` (s); only complete windows. Taus limited to window / 4. The default
     ``alpha`` is refitted every max(hop, window / 4) samples (see :func:`alpha_rows`)."""
     y, ok = _prepare(rate_dph, valid)
-    w = _samples(window_s, rate_hz, "window_s")
-    hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")
-    m = tau_grid(rate_hz, w, taus)
+    w = _samples(window_s, sample_rate_hz, "window_s")
+    hop = _samples(window_s / 4.0 if hop_s is None else hop_s, sample_rate_hz, "hop_s")
+    m = tau_grid(sample_rate_hz, w, taus)
     starts = np.arange(0, len(y) - w + 1, hop, dtype=np.int64)
     hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, starts, w)
@@ -186,5 +186,5 @@ def dadev(rate_dph, rate_hz: float, window_s: float, hop_s: float | None = None,
     if alpha is None:
         alpha, _ = alpha_rows(sums, counts, end, m, w, max(hop, w // 4))
     adev, lo, hi, edf = statistics(sums, counts, m, w, alpha, confidence)
-    return DadevResult(t0_s + (starts + (w - 1) / 2.0) / rate_hz, end, m / rate_hz, m, adev, lo, hi, edf,
-                       counts, float(rate_hz), w / rate_hz, hop / rate_hz, confidence)
+    return DadevResult(t0_s + (starts + (w - 1) / 2.0) / sample_rate_hz, end, m / sample_rate_hz, m, adev, lo, hi, edf,
+                       counts, float(sample_rate_hz), w / sample_rate_hz, hop / sample_rate_hz, confidence)

@@ -2,9 +2,9 @@
 fogmon AdevResults, so that ``fit_noise`` gives their IEEE-952 fit with intervals.
 
 The fit weighs each tau by the sampling statistics of an overlapping Allan variance over
-a record of ``n_samples`` samples at ``rate_hz`` with ``n_terms`` valid terms per tau
+a record of ``n_samples`` samples at ``sample_rate_hz`` with ``n_terms`` valid terms per tau
 (fogmon.davar.fit). A curve carries at most part of that, so:
-- ``rate_hz``: given, else 1 / the first tau (the curve starts at the sample period);
+- ``sample_rate_hz``: given, else 1 / the first tau (the curve starts at the sample period);
 - ``n_terms`` (valid overlapping terms per tau): given, else every term of a gap-free
   record (n_samples - 2 m + 1);
 - ``n_samples``: given, else from ``n_terms`` (max of n_terms + 2 m - 1), else assumed
@@ -29,10 +29,10 @@ M_TOLERANCE = 1e-6
 ASSUMED_RECORD_TAUS = 4
 
 
-def adev_from_curve(tau_s, adev_dph, *, rate_hz: float | None = None, n_terms=None, edf=None,
+def adev_from_curve(tau_s, adev_dph, *, sample_rate_hz: float | None = None, n_terms=None, edf=None,
                     n_samples: int | None = None, confidence: float = CONFIDENCE) -> tuple[AdevResult, list[str]]:
     """(AdevResult, assumptions) for an Allan-deviation curve ``adev_dph`` (deg/h) at
-    ``tau_s`` (s, increasing), ready for ``fogmon.fit_noise``. Optional: ``rate_hz``
+    ``tau_s`` (s, increasing), ready for ``fogmon.fit_noise``. Optional: ``sample_rate_hz``
     (Hz), ``n_terms`` or ``edf`` per tau, ``n_samples`` of the record (see the module
     docstring for what is assumed without them). The result's ``edf``, ``lo_dph`` and
     ``hi_dph`` assume white rate noise until ``with_fit_intervals`` replaces them with
@@ -46,15 +46,15 @@ def adev_from_curve(tau_s, adev_dph, *, rate_hz: float | None = None, n_terms=No
     if not (np.all(np.isfinite(adev)) and np.all(adev > 0)):
         raise FogmonError("adev_dph must be finite and > 0")
     said = []
-    if rate_hz is None:
-        rate_hz = 1.0 / float(tau[0])
-        said.append(f"sample rate {rate_hz:g} Hz (1 / the first tau; --rate-hz sets it)")
-    k = tau * rate_hz
+    if sample_rate_hz is None:
+        sample_rate_hz = 1.0 / float(tau[0])
+        said.append(f"sample rate {sample_rate_hz:g} Hz (1 / the first tau; --rate-hz sets it)")
+    k = tau * sample_rate_hz
     m = np.rint(k).astype(np.int64)
     off = np.abs(k - m) / np.maximum(k, 1.0)
     if m[0] < 1 or off.max() > M_TOLERANCE:
         i = int(np.argmax(off)) if m[0] >= 1 else 0
-        raise FogmonError(f"tau_s {tau[i]:g} s is not a whole multiple of the sample period {1 / rate_hz:g} s "
+        raise FogmonError(f"tau_s {tau[i]:g} s is not a whole multiple of the sample period {1 / sample_rate_hz:g} s "
                           f"(give the record's sample rate with --rate-hz)")
     if n_terms is not None:
         n_terms = np.asarray(n_terms, dtype=np.float64)
@@ -69,12 +69,12 @@ def adev_from_curve(tau_s, adev_dph, *, rate_hz: float | None = None, n_terms=No
             n_samples = int(np.max(n_terms + 2 * m - 1))
         else:
             n_samples = int(ASSUMED_RECORD_TAUS * m[-1])
-            said.append(f"record of {n_samples} samples = {n_samples / rate_hz:g} s ({ASSUMED_RECORD_TAUS} x "
+            said.append(f"record of {n_samples} samples = {n_samples / sample_rate_hz:g} s ({ASSUMED_RECORD_TAUS} x "
                         f"the largest tau; an n_terms column or --record-s sets it)")
     n_samples = int(n_samples)
     if 2 * m[-1] > n_samples:
-        raise FogmonError(f"the largest tau {tau[-1]:g} s needs a record of at least {2 * m[-1] / rate_hz:g} s "
-                          f"({2 * m[-1]} samples), not {n_samples / rate_hz:g} s")
+        raise FogmonError(f"the largest tau {tau[-1]:g} s needs a record of at least {2 * m[-1] / sample_rate_hz:g} s "
+                          f"({2 * m[-1]} samples), not {n_samples / sample_rate_hz:g} s")
     full = (n_samples - 2 * m + 1).astype(np.float64)
     white = edf_full(0, m, n_samples)
     if edf is not None:
@@ -92,7 +92,7 @@ def adev_from_curve(tau_s, adev_dph, *, rate_hz: float | None = None, n_terms=No
         said.append("fully overlapping estimator, no gaps (an n_terms or edf column states them)")
     nu = edf if edf is not None else edf_effective(white, m, n_samples, terms)
     lo, hi = chi2_bounds(adev, nu, confidence)
-    return AdevResult(tau, m, adev, lo, hi, nu, terms, float(rate_hz), n_samples,
+    return AdevResult(tau, m, adev, lo, hi, nu, terms, float(sample_rate_hz), n_samples,
                       confidence), said
 
 

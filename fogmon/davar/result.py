@@ -13,10 +13,10 @@ CONFIDENCE = 0.683
 class AdevResult:
     """Overlapping Allan deviation of one record or window.
 
-    Arrays over taus: ``tau_s`` (s), ``m`` (averaging factor, tau = m / rate_hz),
+    Arrays over taus: ``tau_s`` (s), ``m`` (averaging factor, tau = m / sample_rate_hz),
     ``adev_dph`` (deg/h; NaN where no valid term), ``lo_dph``/``hi_dph`` (two-sided
     ``confidence`` interval, deg/h), ``edf`` (equivalent degrees of freedom), ``n_terms``
-    (valid overlapping terms). Scalars: ``rate_hz`` (Hz), ``n_samples`` (samples in the
+    (valid overlapping terms). Scalars: ``sample_rate_hz`` (Hz), ``n_samples`` (samples in the
     record, valid or not), ``confidence`` (CONFIDENCE = 1 sigma)."""
 
     tau_s: np.ndarray
@@ -26,7 +26,7 @@ class AdevResult:
     hi_dph: np.ndarray
     edf: np.ndarray
     n_terms: np.ndarray
-    rate_hz: float
+    sample_rate_hz: float
     n_samples: int
     confidence: float = CONFIDENCE
 
@@ -37,7 +37,7 @@ class DadevResult:
 
     ``t_s`` (s, window-centre times, shape T), ``end_index`` (index of each window's last
     sample, T), ``tau_s``/``m`` (M), ``adev_dph``, ``lo_dph``, ``hi_dph`` (deg/h),
-    ``edf``, ``n_terms`` (T x M); ``rate_hz`` (Hz), ``window_s``, ``hop_s`` (s),
+    ``edf``, ``n_terms`` (T x M); ``sample_rate_hz`` (Hz), ``window_s``, ``hop_s`` (s),
     ``confidence``."""
 
     t_s: np.ndarray
@@ -49,7 +49,7 @@ class DadevResult:
     hi_dph: np.ndarray
     edf: np.ndarray
     n_terms: np.ndarray
-    rate_hz: float
+    sample_rate_hz: float
     window_s: float
     hop_s: float
     confidence: float = CONFIDENCE
@@ -60,10 +60,10 @@ class DadevResult:
     @property
     def window_samples(self) -> int:
         """Window length in samples."""
-        return int(round(self.window_s * self.rate_hz))
+        return int(round(self.window_s * self.sample_rate_hz))
 
     def window(self, i: int) -> AdevResult:
         """The ADEV of window ``i`` as an AdevResult."""
         return AdevResult(self.tau_s, self.m, self.adev_dph[i], self.lo_dph[i], self.hi_dph[i],
-                          self.edf[i], self.n_terms[i], self.rate_hz, self.window_samples,
+                          self.edf[i], self.n_terms[i], self.sample_rate_hz, self.window_samples,
                           self.confidence)

@@ -37,7 +37,7 @@ they enter the engine: a one-sample push costs a few microseconds."""
 
 
 class StreamingDadev:
-    """Sliding-window overlapping ADEV of a rate stream sampled at ``rate_hz`` (Hz) over
+    """Sliding-window overlapping ADEV of a rate stream sampled at ``sample_rate_hz`` (Hz) over
     windows of ``window_s`` (s), emitted every ``hop_s`` (s, default window_s / 4) once
     the first window is complete. ``alpha``: noise type per tau for the confidence
     bounds (default: dominant term of an IEEE-952 fit, refreshed at most every
@@ -46,16 +46,16 @@ class StreamingDadev:
     one early re-reference per buffer fill when most samples since the last one are
     large (the reference level came from a glitch)."""
 
-    def __init__(self, rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
+    def __init__(self, sample_rate_hz: float, window_s: float, taus="octave", hop_s: float | None = None,
                  confidence: float = CONFIDENCE, alpha=None, reanchor: int | None = None):
-        self.rate_hz = float(rate_hz)
-        self.window = _samples(window_s, rate_hz, "window_s")
-        self.hop = _samples(window_s / 4.0 if hop_s is None else hop_s, rate_hz, "hop_s")
-        self.m = tau_grid(rate_hz, self.window, taus)
+        self.sample_rate_hz = float(sample_rate_hz)
+        self.window_n = _samples(window_s, sample_rate_hz, "window_s")
+        self.hop_n = _samples(window_s / 4.0 if hop_s is None else hop_s, sample_rate_hz, "hop_s")
+        self.m = tau_grid(sample_rate_hz, self.window_n, taus)
         self.confidence = confidence
         self.alpha = None if alpha is None else np.broadcast_to(np.asarray(alpha, np.int64), self.m.shape)
-        self.reanchor = int(reanchor) if reanchor is not None else max(4 * self.window, 4096)
-        cap = self.window + self.reanchor
+        self.reanchor = int(reanchor) if reanchor is not None else max(4 * self.window_n, 4096)
+        cap = self.window_n + self.reanchor
         self._y = np.zeros(cap)
         self._v = np.zeros(cap, dtype=np.bool_)
         # prefix arrays (kernels' ``pre``): main sums, counts, large-sample side sums, huge counts
@@ -71,12 +71,12 @@ class StreamingDadev:
         nm = len(self.m)
         # recorded sums: the cumulative sum of squared terms (s + c) and valid-term count (n)
         # per tau, and their records at the window starts to come; running sums: the window's
-        self._recorded = self.hop >= RECORD_MIN_HOP
+        self._recorded = self.hop_n >= RECORD_MIN_HOP
         self._s = np.zeros(nm)
         self._c = np.zeros(nm)
         self._n = np.zeros(nm, dtype=np.int64)
         self._h = np.zeros(nm, dtype=np.int64)  # recorded sums: segments holding a term spanning a huge sample
-        ring = (self.window - 1) // self.hop + 2 if self._recorded else 0
+        ring = (self.window_n - 1) // self.hop_n + 2 if self._recorded else 0
         self._rec_s = np.zeros((nm, ring))
         self._rec_c = np.zeros((nm, ring))
         self._rec_n = np.zeros((nm, ring), dtype=np.int64)
@@ -86,7 +86,7 @@ class StreamingDadev:
         self._stage_y = np.empty(STAGE)  # samples pushed but not yet in the engine (see push)
         self._stage_v = np.ones(STAGE, dtype=np.bool_)
         self._staged = 0
-        self._next_end = self.window - 1  # last sample of the next window to emit (absolute index)
+        self._next_end = self.window_n - 1  # last sample of the next window to emit (absolute index)
         self._empty: DadevResult | None = None  # the zero-row result of a push that completes no window
 
     @property
@@ -114,17 +114,17 @@ class StreamingDadev:
         ends, sums, counts = self.advance(rate_dph, valid)
         alpha = self.alpha
         if alpha is None:
-            w = self.window
-            alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop, w // 4),
+            w = self.window_n
+            alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop_n, w // 4),
                                                  self._alpha_prev)
         return self._frames(ends, sums, counts, alpha)
 
     def _frames(self, ends, sums, counts, alpha) -> DadevResult:
-        w = self.window
+        w = self.window_n
         adev, lo, hi, edf = statistics(sums, counts, self.m, w, alpha, self.confidence)
-        return DadevResult((ends - (w - 1) / 2.0) / self.rate_hz, ends, self.m / self.rate_hz, self.m,
-                           adev, lo, hi, edf, counts, self.rate_hz, w / self.rate_hz,
-                           self.hop / self.rate_hz, self.confidence)
+        return DadevResult((ends - (w - 1) / 2.0) / self.sample_rate_hz, ends, self.m / self.sample_rate_hz, self.m,
+                           adev, lo, hi, edf, counts, self.sample_rate_hz, w / self.sample_rate_hz,
+                           self.hop_n / self.sample_rate_hz, self.confidence)
 
     def advance(self, rate_dph, valid=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The engine alone: feed samples like :meth:`push` and return, for the windows
@@ -137,10 +137,10 @@ class StreamingDadev:
             sy, sv = _prepare(self._stage_y[:self._staged], self._stage_v[:self._staged])
             y, ok = np.concatenate([sy, y]), np.concatenate([sv, ok])
             self._staged = 0
-        w, cap = self.window, len(self._y)
+        w, cap = self.window_n, len(self._y)
         a0 = self._base + self._len
-        k0 = -(-(max(a0, w - 1) - (w - 1)) // self.hop)
-        ends = np.arange(w - 1 + k0 * self.hop, a0 + len(y), self.hop, dtype=np.int64)
+        k0 = -(-(max(a0, w - 1) - (w - 1)) // self.hop_n)
+        ends = np.arange(w - 1 + k0 * self.hop_n, a0 + len(y), self.hop_n, dtype=np.int64)
         sums = np.empty((len(ends), len(self.m)))
         counts = np.empty((len(ends), len(self.m)), dtype=np.int64)
         i = row = 0
@@ -167,7 +167,7 @@ class StreamingDadev:
             self._since += take
             row_end = row + int(np.searchsorted(ends[row:], self._base + self._len + take))
             if self._recorded:
-                kernels.stream_record(self._len, take, self._base, w, self.hop, self.m, self._pre,
+                kernels.stream_record(self._len, take, self._base, w, self.hop_n, self.m, self._pre,
                                       self._s, self._c, self._n, self._h, self._rec_s, self._rec_c, self._rec_n,
                                       self._rec_h, k0 + row, sums[row:row_end], counts[row:row_end])
             else:
@@ -178,7 +178,7 @@ class StreamingDadev:
             i += take
             row = row_end
         n = self._base + self._len
-        self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop) * self.hop
+        self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop_n) * self.hop_n
         return ends, sums, counts
 
     def current(self) -> AdevResult:
@@ -186,9 +186,9 @@ class StreamingDadev:
         hop: an exact recompute, O(window x taus)."""
         if self._staged:
             self.advance(np.zeros(0))  # the staged samples enter the engine (no window completes)
-        n = min(self.n_pushed, self.window)
+        n = min(self.n_pushed, self.window_n)
         sums, counts = kernels.window_sums_exact(self._pre, self._len - n, n, self.m)
         alpha = self.alpha if self.alpha is not None else row_alpha(sums, counts, self.m, n)
         adev, lo, hi, edf = statistics(sums, counts, self.m, n, alpha, self.confidence)
-        return AdevResult(self.m / self.rate_hz, self.m, adev, lo, hi, edf, counts, self.rate_hz, n,
+        return AdevResult(self.m / self.sample_rate_hz, self.m, adev, lo, hi, edf, counts, self.sample_rate_hz, n,
                           self.confidence)

@@ -1,4 +1,4 @@
-"""Averaging-time grids: averaging factors m (tau = m / rate_hz, tau in s)."""
+"""Averaging-time grids: averaging factors m (tau = m / sample_rate_hz, tau in s)."""
 from __future__ import annotations
 
 import warnings
@@ -29,8 +29,8 @@ def _list_s(tau_s) -> str:
     return ("tau " if len(tau_s) == 1 else "taus ") + ", ".join(f"{t:g}" for t in tau_s) + " s"
 
 
-def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
-    """Averaging factors m (int64, sorted, unique) for ``n_max`` samples at ``rate_hz`` Hz.
+def tau_grid(sample_rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
+    """Averaging factors m (int64, sorted, unique) for ``n_max`` samples at ``sample_rate_hz`` Hz.
 
     ``taus`` is ``"octave"`` (m = 1, 2, 4, ...), ``"decade"`` (1, 2, 4, 10, 20, 40, ...),
     ``"all"`` (every m), an int k (k log-spaced m per decade, 1 <= k <= MAX_PER_DECADE),
@@ -40,8 +40,8 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
     than n_max / 4 samples) are left out with a FogmonWarning naming them, and a
     FogmonError if none is left.
     """
-    if not rate_hz > 0:
-        raise FogmonError(f"sample rate must be > 0 Hz, got {rate_hz}")
+    if not sample_rate_hz > 0:
+        raise FogmonError(f"sample rate must be > 0 Hz, got {sample_rate_hz}")
     m_max = int(n_max) // 4
     if m_max < 1:
         raise FogmonError(f"need at least 4 samples for an Allan deviation, got {n_max}")
@@ -62,10 +62,13 @@ def tau_grid(rate_hz: float, n_max: int, taus="octave") -> np.ndarray:
         tau_s = np.atleast_1d(np.asarray(taus, dtype=np.float64))
         if tau_s.size == 0 or not np.all(np.isfinite(tau_s)) or np.any(tau_s <= 0):
             raise FogmonError("tau values must be finite and > 0 s")
-        m = np.round(tau_s * rate_hz)
+        m = np.round(tau_s * sample_rate_hz)
         short, long_ = tau_s[m < 1], tau_s[m > m_max]
-        limits = (f"an Allan deviation needs tau from one sample to n/4 samples, {1 / rate_hz:g} .. "
-                  f"{m_max / rate_hz:g} s (n = {int(n_max)} samples at {rate_hz:g} Hz, tau rounded to whole samples)")
+        limits = (
+            f"an Allan deviation needs tau from one sample to n/4 samples, {1 / sample_rate_hz:g} .. "
+            f"{m_max / sample_rate_hz:g} s (n = {int(n_max)} samples at {sample_rate_hz:g} Hz, "
+            "tau rounded to whole samples)"
+        )
         if short.size + long_.size == tau_s.size:
             what = "cannot" if tau_s.size == 1 else "none can"
             raise FogmonError(f"requested {_list_s(tau_s)}: {what} be computed: {limits}")

@@ -100,7 +100,7 @@ def _wh_z(ratio: float, edf: float) -> float:
     return (ratio ** (1.0 / 3.0) - (1.0 - v)) / math.sqrt(v)
 
 
-def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def robust_avar(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(tau s, Allan variance (deg/h)^2, degrees of freedom) at octave taus up to a
     window / 4: per tau the median over the explain map's windows (duration / 8, hop /
     4), so an effect confined to a few windows (a step, a transient, a glitch) does not
@@ -110,7 +110,7 @@ def robust_avar(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> tuple[np.ndarray
     number of independent windows (windows / 4: a hop is a quarter window)."""
     from fogmon.explain.mismatch import log_avar, make_grid
 
-    grid = make_grid(len(y), fs_hz)
+    grid = make_grid(len(y), sample_rate_hz)
     cell, _ = log_avar(np.where(ok, y, np.nan), ok, grid)
     out = np.full(len(grid.m), np.nan)
     edf = np.full(len(grid.m), np.nan)
@@ -139,7 +139,7 @@ _AUX_UNITS: dict[str, list[tuple[str, dict]]] = {
 _THERMAL_ZERO = {"k0_poly_dph": [], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0}
 
 
-def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, fs_hz: float) -> np.ndarray:
+def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, sample_rate_hz: float) -> np.ndarray:
     """``y`` minus its least-squares fit on the recorded environment (temperature drift
     terms of temp_c, scale-factor terms of rot_dps, each as the simulator defines them):
     what the stationary noise estimate must see. Unchanged without varying aux
@@ -152,7 +152,7 @@ def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, fs_
         a = np.interp(t_s, t_s[np.isfinite(a)], a[np.isfinite(a)])
         for kind, p in units:
             params = {**_THERMAL_ZERO, **p} if kind == "thermal_drift" else {"ppm": 0.0, "asym_ppm": 0.0, **p}
-            cols.append(fx.mean_rate_dph(validate_effect(kind, params, "baseline"), t_s, {ch: a}, fs_hz))
+            cols.append(fx.mean_rate_dph(validate_effect(kind, params, "baseline"), t_s, {ch: a}, sample_rate_hz))
     if not cols:
         return y
     X = np.column_stack([np.ones(len(y)), *cols])[ok]
@@ -162,7 +162,7 @@ def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, fs_
     return out
 
 
-def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, float]:
+def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> dict[str, float]:
     """IEEE-952 Q, N, B, K (R = 0: a drift is the rate_ramp effect's) of the recording's
     stationary noise, fitted so that an effect does not inflate them:
     :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`)
@@ -172,8 +172,8 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, fs_hz: float) -> dict[str, f
     only refine: a term only they would need (what a periodic term, a drift or a step
     does there as well) is not added - it is left for the effects and the mismatch map
     to judge."""
-    whole = oadev(y, fs_hz, taus="octave", valid=ok, alpha=0)
-    tau_w, av_w, edf_w = robust_avar(y, ok, fs_hz)
+    whole = oadev(y, sample_rate_hz, taus="octave", valid=ok, alpha=0)
+    tau_w, av_w, edf_w = robust_avar(y, ok, sample_rate_hz)
     nw = len(tau_w)
     keep = np.isfinite(av_w)
     tau, av, edf = list(tau_w[keep]), list(av_w[keep]), list(edf_w[keep])

@@ -53,7 +53,7 @@ class Context:
     t_s: np.ndarray
     aux: dict
     valid: np.ndarray
-    fs_hz: float
+    sample_rate_hz: float
     y: np.ndarray
     stoch: SensorModel
     wh: Whittle
@@ -108,7 +108,7 @@ class Candidate:
 
 def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
     """Rate (deg/h) of a mean-type effect with the given parameters on the context grid."""
-    return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.fs_hz)
+    return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.sample_rate_hz)
 
 
 def _fmt(x: float, se: float) -> str:
@@ -133,7 +133,7 @@ def periodic(ctx: Context) -> Candidate | None:
     def g(f):
         return ctx.wh.gls(ctx.wh.fft(cols(f)), ctx.Yf).chi2_gain
 
-    lo, hi = (k - 1) * ctx.fs_hz / n, (k + 1) * ctx.fs_hz / n
+    lo, hi = (k - 1) * ctx.sample_rate_hz / n, (k + 1) * ctx.sample_rate_hz / n
     r = (math.sqrt(5) - 1) / 2
     a, b = lo, hi
     c, d = b - r * (b - a), a + r * (b - a)
@@ -150,7 +150,7 @@ def periodic(ctx: Context) -> Candidate | None:
     f = c if gc > gd else d
     X = cols(f)
     fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
-    h = 0.02 * ctx.fs_hz / n
+    h = 0.02 * ctx.sample_rate_hz / n
     curv = (2 * fit.chi2_gain - g(f + h) - g(f - h)) / h ** 2
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
@@ -173,7 +173,7 @@ def bias_step(ctx: Context) -> Candidate | None:
     n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, int(0.01 * n), int(0.99 * n))
     X = (np.arange(n) >= n0).astype(float)[:, None]
     fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
-    t_step = float(ctx.t_s[n0] - 0.5 / ctx.fs_hz)
+    t_step = float(ctx.t_s[n0] - 0.5 / ctx.sample_rate_hz)
     params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
     ev = f"change-point scan: bias step of {_fmt(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
     return Candidate("bias_step", params, {"step_dph": float(fit.se[0])}, fit.chi2_gain, 2, ev,
@@ -219,7 +219,7 @@ def warm_up(ctx: Context) -> Candidate | None:
 
     # faster than a few matched-filter lengths it cannot be told from the record's ends
     # (the circular GLS joins them) or from a glitch
-    tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.fs_hz
+    tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.sample_rate_hz
     ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14))
     X = make(ltau)
     fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
@@ -516,7 +516,7 @@ def outliers(ctx: Context) -> Candidate | None:
     fill = np.random.default_rng([OUTLIER_FILL_SEED, len(idx)]).standard_normal(len(idx)) * se[idx]
     rate = np.zeros(ctx.n)
     rate[idx] = a - fill
-    hours = int(ctx.valid.sum()) / ctx.fs_hz / 3600.0
+    hours = int(ctx.valid.sum()) / ctx.sample_rate_hz / 3600.0
     nv = int(ctx.valid.sum())
     q = np.quantile(np.abs(a), OUTLIER_QUANTILE_PROBS)
     params = {"rate_per_h": len(idx) / hours, "amplitude_quantiles_dph": q.tolist(),
@@ -589,11 +589,11 @@ def markov(ctx: Context) -> Candidate | None:
     S0 = _stoch_psd(ctx, bp)
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     d0 = bp.deviance(S0, floor)
-    T = ctx.n / ctx.fs_hz
+    T = ctx.n / ctx.sample_rate_hz
     best = None
-    grid = np.geomspace(5.0 / ctx.fs_hz, T / 20.0, 36)
+    grid = np.geomspace(5.0 / ctx.sample_rate_hz, T / 20.0, 36)
     for tc in grid:
-        P = markov_psd(bp.omega, ctx.fs_hz, 1.0, tc)
+        P = markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
         v = _newton_variance(bp, S0, P)
         if v <= 0:
             continue
@@ -605,7 +605,7 @@ def markov(ctx: Context) -> Candidate | None:
     g, tc, v = best
     sigma = math.sqrt(v)
     # se of sigma from the curvature in v
-    P = markov_psd(bp.omega, ctx.fs_hz, 1.0, tc)
+    P = markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
     S = S0 + v * P
     info = float(np.sum(bp.count * P ** 2 / S ** 2))
     se_sigma = math.sqrt(1.0 / info) / (2 * sigma) if info > 0 else float("nan")
@@ -646,10 +646,10 @@ def bandwidth(ctx: Context) -> Candidate | None:
 
     def gain(order, fc):
         p = {"cutoff_hz": float(fc), "order": int(order), "taps": []}
-        return d0 - bp.deviance(S0 * filter_gain2(p, ctx.fs_hz, bp.omega), floor), p
+        return d0 - bp.deviance(S0 * filter_gain2(p, ctx.sample_rate_hz, bp.omega), floor), p
 
     best = None
-    grid = np.geomspace(ctx.fs_hz / 500.0, 0.49 * ctx.fs_hz, 48)
+    grid = np.geomspace(ctx.sample_rate_hz / 500.0, 0.49 * ctx.sample_rate_hz, 48)
     for order in (1, 2, 3, 4):
         gains = [gain(order, fc)[0] for fc in grid]
         i = int(np.argmax(gains))
@@ -744,7 +744,7 @@ def _white_level(ctx: Context, kind: str, channel: str) -> Candidate | None:
             res.append((float(base @ base - pred @ pred) / s2, float(np.var(xt[ok]) * ok.sum() * bf[1] ** 2 / s2)))
         return res
 
-    ev = (f"white level per {seg / ctx.fs_hz:.3g} s segment (ADEV at tau0) regressed on the segment mean of "
+    ev = (f"white level per {seg / ctx.sample_rate_hz:.3g} s segment (ADEV at tau0) regressed on the segment mean of "
           f"{channel}: {what}, t = {tstat:.1f} over {nseg} segments")
     n0 = max(float(beta[0]), 0.0) if kind == "vibration_noise" else None  # N = N0 + gain vib_g
     return Candidate(kind, params, sep, float(tstat ** 2), 1, ev, heldout=heldout, white_n0_dpsh=n0)
@@ -780,15 +780,15 @@ def _whitened(ctx: Context) -> np.ndarray:
     return np.fft.irfft(ctx.Yf / np.sqrt(S), ctx.n)
 
 
-def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: int, f0: float,
+def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, sample_rate_hz: float, n: int, f0: float,
               bw0: float) -> tuple[float, tuple[float, float, float]]:
     """One line (centre Hz, rms deg/h, -3 dB bandwidth Hz) on top of the PSD ``S`` at the
     periodogram's bins, started at (f0, bw0): Nelder-Mead on the Whittle deviance over
     (centre, ln bandwidth, ln variance); returns (deviance drop, line)."""
     d0 = bp.deviance(S, floor)
-    near = np.abs(bp.omega * fs / (2 * np.pi) - f0) <= 5 * bw0
+    near = np.abs(bp.omega * sample_rate_hz / (2 * np.pi) - f0) <= 5 * bw0
     var0 = max(float(np.sum(bp.count[near] * np.maximum(bp.I[near] - S[near], 0.0)) / n), 1e-30)
-    bw_lo, nyq = 2.0 * fs / n, fs / 2
+    bw_lo, nyq = 2.0 * sample_rate_hz / n, sample_rate_hz / 2
 
     def unpack(x):
         f = float(x[0])
@@ -799,7 +799,7 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
         f, sig, bw = unpack(x)
         if not (f - bw / 2 > 0 and f + bw / 2 < nyq):
             return d0 + 1e9
-        return bp.deviance(S + line_psd(bp.omega, fs, f, sig, bw), floor)
+        return bp.deviance(S + line_psd(bp.omega, sample_rate_hz, f, sig, bw), floor)
 
     x0 = np.array([f0, math.log(bw0), math.log(var0)])
     simplex = np.array([x0, x0 + [0.3 * bw0, 0, 0], x0 + [0, 0.7, 0], x0 + [0, 0, 0.7]])
@@ -808,7 +808,7 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, fs: float, n: 
     return d0 - float(r.fun), unpack(r.x)
 
 
-def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: list[tuple[float, float]],
+def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, sample_rate_hz: float, n: int, starts: list[tuple[float, float]],
               penalty: float) -> tuple[float, list[tuple[float, float, float]]]:
     """Lines fitted one after the other from ``starts`` ((centre Hz, start bandwidth Hz)),
     each on top of the ones kept before it and kept when its deviance drop exceeds
@@ -820,12 +820,12 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, fs: float, n: int, starts: 
     for f0, bw0 in starts:
         if any(abs(f0 - f) < max(bw, bw0) for f, _, bw in lines):
             continue
-        g, line = _fit_line(bp, S, floor, fs, n, f0, bw0)
+        g, line = _fit_line(bp, S, floor, sample_rate_hz, n, f0, bw0)
         # a fit that runs into the widest band allowed (Q = LINE_MIN_Q) is broadband
         # spectral shape (a filter's slope, a microseism band), not a line: not kept
         if g > LINE_PARAMS * penalty and line[2] < 0.98 * line[0] / LINE_MIN_Q:
             lines.append(line)
-            S = S + line_psd(bp.omega, fs, line[0], line[1], line[2])
+            S = S + line_psd(bp.omega, sample_rate_hz, line[0], line[1], line[2])
     return bp.deviance(S0, floor) - bp.deviance(S, floor), sorted(lines)
 
 
@@ -842,15 +842,15 @@ def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tu
     """fit_lines on the model PSD, then the white level N refitted under the lines (the
     lines' skirts were counted as white noise before) by the same Whittle likelihood.
     Returns (deviance drop, lines, N (deg/sqrt(h)) or None when not refitted)."""
-    fs = ctx.fs_hz
+    sample_rate_hz = ctx.sample_rate_hz
     S0 = model_psd(ctx.stoch, bp.omega, n, white_rms_dpsh(ctx.stoch, ctx))
     floor = LEAKAGE_FLOOR * float(np.median(S0))
-    _, lines = fit_lines(bp, S0, fs, n, starts, ctx.penalty)
+    _, lines = fit_lines(bp, S0, sample_rate_hz, n, starts, ctx.penalty)
     parts = _white_parts(ctx, bp.omega, n)
     if not lines:
         return 0.0, lines, None
     S_l = lines_psd({"freq_hz": [x[0] for x in lines], "sigma_dph": [x[1] for x in lines],
-                     "bandwidth_hz": [x[2] for x in lines]}, fs, bp.omega)
+                     "bandwidth_hz": [x[2] for x in lines]}, sample_rate_hz, bp.omega)
     d0 = bp.deviance(S0, floor)
     if parts is None:
         return d0 - bp.deviance(S0 + S_l, floor), lines, None
@@ -869,22 +869,29 @@ def vibration_lines(ctx: Context) -> Candidate | None:
     and the white level N refitted under them (lines_and_white). The removable
     estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
     residual's DFT."""
-    fs, n = ctx.fs_hz, ctx.n
-    T = n / fs
-    f_lo = max(50.0 / T, fs / 1000.0)
-    props = detectors.spectral_lines(np.where(ctx.valid, _whitened(ctx), np.nan), fs, f_lo, 0.49 * fs,
-                                     min_ratio=LINE_MIN_RATIO)[:MAX_LINES]
+    sample_rate_hz, n = ctx.sample_rate_hz, ctx.n
+    T = n / sample_rate_hz
+    f_lo = max(50.0 / T, sample_rate_hz / 1000.0)
+    props = detectors.spectral_lines(
+        np.where(ctx.valid, _whitened(ctx), np.nan),
+        sample_rate_hz,
+        f_lo,
+        0.49 * sample_rate_hz,
+        min_ratio=LINE_MIN_RATIO,
+    )[:MAX_LINES]
     if not props:
         return None
-    res = 8 * fs / (2 ** math.ceil(math.log2(8 * fs / f_lo)))  # a few Welch bins: the start bandwidth
-    starts = [(f, max(res, 4 * fs / n)) for f, _ in props]
+    res = (
+        8 * sample_rate_hz / (2 ** math.ceil(math.log2(8 * sample_rate_hz / f_lo)))
+    )  # a few Welch bins: the start bandwidth
+    starts = [(f, max(res, 4 * sample_rate_hz / n)) for f, _ in props]
     gain, lines, N = lines_and_white(ctx, _periodogram(ctx), n, starts)
     if not lines:
         return None
     params = {"freq_hz": [ln[0] for ln in lines], "sigma_dph": [ln[1] for ln in lines],
               "bandwidth_hz": [ln[2] for ln in lines]}
     w = rfft_omega(n)
-    S_l = lines_psd(params, fs, w)
+    S_l = lines_psd(params, sample_rate_hz, w)
     S_all = model_psd(ctx.stoch, w, n, white_rms_dpsh(ctx.stoch, ctx) if N is None else N) + S_l
     with np.errstate(divide="ignore", invalid="ignore"):  # DC (inf) and a filter's zeros (0)
         wiener = np.where(np.isfinite(S_all) & (S_all > 0), S_l / S_all, 0.0)
@@ -901,7 +908,11 @@ def vibration_lines(ctx: Context) -> Candidate | None:
             S1b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx) if Na is None else Na)
             fl = LEAKAGE_FLOOR * float(np.median(S0b))
             pb = {"freq_hz": [x[0] for x in la], "sigma_dph": [x[1] for x in la], "bandwidth_hz": [x[2] for x in la]}
-            gb = bps[b].deviance(S0b, fl) - bps[b].deviance(S1b + lines_psd(pb, fs, bps[b].omega), fl) if la else 0.0
+            gb = (
+                bps[b].deviance(S0b, fl) - bps[b].deviance(S1b + lines_psd(pb, sample_rate_hz, bps[b].omega), fl)
+                if la
+                else 0.0
+            )
             out.append((float(gb), float(ga)))
         return out  # (tested on the second half, on the first)
 
@@ -942,7 +953,7 @@ def expected_avar(S: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
                      for mm in np.asarray(m, dtype=float)])
 
 
-def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: float, white_dpsh: float):
+def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, sample_rate_hz: float, white_dpsh: float):
     """Corrected IEEE-952 coefficients of ``stoch`` from the residual ``y`` (deg/h):
     davar.fit.fit_avar (robust, octave taus, 95 % one-sided upper limits) on the
     residual's overlapping ADEV and on the ADEV the current stochastic model predicts
@@ -955,7 +966,7 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, fs: f
     NOISE_ITERATIONS fixed-point steps A += A_recording - A_predicted(A) (the terms
     interact in the fit), or None when the ADEV cannot be fitted."""
     n = len(y)
-    r = oadev(np.where(valid, y, np.nan), fs, "octave", valid=valid)
+    r = oadev(np.where(valid, y, np.nan), sample_rate_hz, "octave", valid=valid)
     a, se, _, up = fit_avar(r.tau_s, r.adev_dph ** 2, r.m, r.n_terms, n, "all")
     S = model_psd(stoch, rfft_omega(n), n, white_dpsh)
     ae, _, _, _ = fit_avar(r.tau_s, expected_avar(S, n, r.m), r.m, r.n_terms, n, "none")
@@ -1020,7 +1031,7 @@ def noise(ctx: Context) -> Candidate | None:
     likelihood of the residual's binned periodogram under the model PSD with and without
     the correction (one parameter per corrected term)."""
     wr = white_rms_dpsh(ctx.stoch, ctx)
-    fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.fs_hz, wr)
+    fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.sample_rate_hz, wr)
     if not fit:
         return None
     bp = _periodogram(ctx)
@@ -1039,7 +1050,7 @@ def noise(ctx: Context) -> Candidate | None:
         h = ctx.n // 2
         halves = (slice(0, h), slice(h, 2 * h))
         for a, b in ((0, 1), (1, 0)):
-            fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.fs_hz, wr)
+            fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
             yb = np.where(ctx.valid[halves[b]], ctx.y[halves[b]], 0.0)
             bpb = BinnedPeriodogram(np.fft.rfft(yb), h)
             ya = np.where(ctx.valid[halves[a]], ctx.y[halves[a]], 0.0)

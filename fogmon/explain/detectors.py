@@ -176,7 +176,7 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
     return n0, float(b[n0] / A[n0]), float(gain[k])
 
 
-def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
+def spectral_lines(y: np.ndarray, sample_rate_hz: float, f_lo_hz: float, f_hi_hz: float,
                    min_ratio: float = 10.0) -> list[tuple[float, float]]:
     """Narrowband lines in ``y`` (deg/h) between f_lo_hz and f_hi_hz: local maxima of the
     Welch PSD standing ``min_ratio`` times above the median PSD of that band (a
@@ -190,9 +190,9 @@ def spectral_lines(y: np.ndarray, fs_hz: float, f_lo_hz: float, f_hi_hz: float,
     if ok.sum() < 256:
         return []
     x = np.where(ok, x - x[ok].mean(), 0.0)
-    nperseg = min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * fs_hz / max(f_lo_hz, 1e-9))))))
-    f, p = welch(x, fs=fs_hz, nperseg=nperseg)
-    band = (f >= f_lo_hz) & (f <= min(f_hi_hz, fs_hz / 2)) & (f > 0)
+    nperseg = min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * sample_rate_hz / max(f_lo_hz, 1e-9))))))
+    f, p = welch(x, fs=sample_rate_hz, nperseg=nperseg)
+    band = (f >= f_lo_hz) & (f <= min(f_hi_hz, sample_rate_hz / 2)) & (f > 0)
     if band.sum() < 8:
         return []
     fb, pb = f[band], p[band]

@@ -135,7 +135,7 @@ def _grid_arrays(rec: Recording):
     return t, blk.rate_dph, valid, aux
 
 
-def deterministic_dph(model: SensorModel, t: np.ndarray, aux: dict, fs: float) -> np.ndarray:
+def deterministic_dph(model: SensorModel, t: np.ndarray, aux: dict, sample_rate_hz: float) -> np.ndarray:
     """The model's deterministic rate (deg/h): bias + 3600 rot_dps + R ramp + mean-type effects."""
     det = np.full(len(t), float(model.bias_dph))
     if "rot_dps" in aux:
@@ -144,7 +144,7 @@ def deterministic_dph(model: SensorModel, t: np.ndarray, aux: dict, fs: float) -
         det += ramp_dph(model.noise.R_dphh, t - t[0])
     for e in model.effects:
         if EFFECT_KINDS[e.kind].nature == "mean":
-            det += fx.mean_rate_dph(e, t, aux, fs)
+            det += fx.mean_rate_dph(e, t, aux, sample_rate_hz)
     return det
 
 
@@ -396,16 +396,16 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     model = validate_model(model)
     check_inputs(rec, model, opt.window_s)
     t, raw, valid, aux = _grid_arrays(rec)
-    fs = rec.sample_rate_hz
+    sample_rate_hz = rec.sample_rate_hz
     n = len(t)
-    grid = mismatch.make_grid(n, fs, opt.window_s, t0_s=float(t[0]), name=rec.name)
+    grid = mismatch.make_grid(n, sample_rate_hz, opt.window_s, t0_s=float(t[0]), name=rec.name)
     if valid.sum() < MIN_STATIONARY_SHARE * n:
         raise FogmonError(f"{rec.name}: more than {100 * (1 - MIN_STATIONARY_SHARE):.0f} % of the sample grid is "
                           f"missing (gaps)")
-    y0 = raw - deterministic_dph(model, t, aux, fs)
+    y0 = raw - deterministic_dph(model, t, aux, sample_rate_hz)
     y0 = np.where(valid, y0 - np.nanmean(y0[valid]), 0.0)
     like = Recording(rec.t_s, np.zeros(len(rec.t_s)), {k: v for k, v in rec.aux.items() if k != "rot_dps"},
-                     {"sample_rate_hz": repr(fs)}, rec.path)
+                     {"sample_rate_hz": repr(sample_rate_hz)}, rec.path)
     B = opt.n_boot or default_n_boot(n)
     stoch = stochastic_part(model)
     report(f"bootstrap null: {B} simulations of the model like the recording", 0, 0)
@@ -429,7 +429,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                 bg = c.bic_gain(ctx.penalty)
                 if bg <= 0:
                     break
-                line = _inside_line(c, cands, ctx.fs_hz / ctx.n)
+                line = _inside_line(c, cands, ctx.sample_rate_hz / ctx.n)
                 if line is not None:
                     deferred[c.kind] = (bg, f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
                                             f"vibration_lines fits (random vibration, not one coherent sinusoid)")
@@ -523,8 +523,8 @@ def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
     periods, a Gauss-Markov correlation time beyond duration / 4."""
     from fogmon.davar.theory import coefficients_to_avar_terms
 
-    t0, t1 = grid.t0_s, grid.t0_s + grid.n / grid.fs_hz
-    dur = grid.n / grid.fs_hz
+    t0, t1 = grid.t0_s, grid.t0_s + grid.n / grid.sample_rate_hz
+    dur = grid.n / grid.sample_rate_hz
     tau_max = float(grid.tau_whole_s[-1])
     out = []
 

@@ -35,7 +35,7 @@ def rfft_omega(n: int) -> np.ndarray:
     return 2.0 * np.pi * np.arange(n // 2 + 1) / n
 
 
-def noise_psd(omega: np.ndarray, fs_hz: float, Q_arcsec: float = 0.0, N_dpsh: float = 0.0,
+def noise_psd(omega: np.ndarray, sample_rate_hz: float, Q_arcsec: float = 0.0, N_dpsh: float = 0.0,
               K_dphsh: float = 0.0, markov: tuple[tuple[float, float], ...] = ()) -> np.ndarray:
     """Two-sided PSD in (deg/h)^2 per unit normalized frequency at angular normalized
     frequencies ``omega`` (rad/sample) for IEEE-952 Q (arcsec), N (deg/sqrt(h)),
@@ -44,19 +44,19 @@ def noise_psd(omega: np.ndarray, fs_hz: float, Q_arcsec: float = 0.0, N_dpsh: fl
     w = np.asarray(omega, dtype=np.float64)
     s2 = np.sin(w / 2.0) ** 2
     with np.errstate(divide="ignore"):
-        S = np.full(len(w), (60.0 * N_dpsh) ** 2 * fs_hz)
-        S += 4.0 * s2 * (Q_arcsec * fs_hz) ** 2
+        S = np.full(len(w), (60.0 * N_dpsh) ** 2 * sample_rate_hz)
+        S += 4.0 * s2 * (Q_arcsec * sample_rate_hz) ** 2
         if K_dphsh > 0:
-            S += (K_dphsh / 60.0) ** 2 / fs_hz / (4.0 * s2)
+            S += (K_dphsh / 60.0) ** 2 / sample_rate_hz / (4.0 * s2)
         for sigma, tau_c in markov:
-            S += markov_psd(w, fs_hz, sigma, tau_c)
+            S += markov_psd(w, sample_rate_hz, sigma, tau_c)
     S[w == 0] = np.inf
     return np.maximum(S, 1e-300)
 
 
-def markov_psd(omega: np.ndarray, fs_hz: float, sigma_dph: float, tau_c_s: float) -> np.ndarray:
+def markov_psd(omega: np.ndarray, sample_rate_hz: float, sigma_dph: float, tau_c_s: float) -> np.ndarray:
     """PSD of the sampled first-order Gauss-Markov process (AR(1), a = exp(-tau0/tau_c))."""
-    a = math.exp(-1.0 / (fs_hz * tau_c_s))
+    a = math.exp(-1.0 / (sample_rate_hz * tau_c_s))
     return sigma_dph ** 2 * (1.0 - a * a) / np.abs(1.0 - a * np.exp(-1j * omega)) ** 2
 
 
@@ -154,39 +154,42 @@ def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None)
     overrides N (deg/sqrt(h)), e.g. with the RMS level of white-level effects."""
     from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus
 
-    fs = float(model.sample_rate_hz)
+    sample_rate_hz = float(model.sample_rate_hz)
     nz = model.noise
     markov = [(e.params["sigma_dph"], e.params["tau_c_s"]) for e in model.effects if e.kind == "markov"]
     if nz.B_dph > 0:
         sig = nz.B_dph * math.sqrt(math.log(2.0) / math.pi)
-        markov += [(sig, tc) for tc in flicker_taus(fs, default_flicker_tau_hi_s(fs, n / fs))]
-    S = noise_psd(omega, fs, nz.Q_arcsec, nz.N_dpsh if white_dpsh is None else white_dpsh, nz.K_dphsh,
+        markov += [
+            (sig, tc)
+            for tc in flicker_taus(sample_rate_hz, default_flicker_tau_hi_s(sample_rate_hz, n / sample_rate_hz))
+        ]
+    S = noise_psd(omega, sample_rate_hz, nz.Q_arcsec, nz.N_dpsh if white_dpsh is None else white_dpsh, nz.K_dphsh,
                   tuple(markov))
     for e in model.effects:
         if e.kind == "vibration_lines":
-            S = S + lines_psd(e.params, fs, omega)
+            S = S + lines_psd(e.params, sample_rate_hz, omega)
     for e in model.effects:
         if e.kind == "bandwidth":
-            S = S * filter_gain2(e.params, fs, omega)
+            S = S * filter_gain2(e.params, sample_rate_hz, omega)
     return S
 
 
-def lines_psd(params: dict, fs_hz: float, omega: np.ndarray) -> np.ndarray:
+def lines_psd(params: dict, sample_rate_hz: float, omega: np.ndarray) -> np.ndarray:
     """PSD (see :func:`noise_psd`) of a ``vibration_lines`` effect: the sum of its lines."""
     from fogmon.sim.noise import line_psd
 
     S = np.zeros(len(omega))
     for f, sig, bw in zip(params["freq_hz"], params["sigma_dph"], params["bandwidth_hz"], strict=True):
-        S += line_psd(omega, fs_hz, f, sig, bw)
+        S += line_psd(omega, sample_rate_hz, f, sig, bw)
     return S
 
 
-def filter_gain2(params: dict, fs_hz: float, omega: np.ndarray) -> np.ndarray:
+def filter_gain2(params: dict, sample_rate_hz: float, omega: np.ndarray) -> np.ndarray:
     """|H|^2 of a ``bandwidth`` effect (Butterworth or FIR) at ``omega`` (rad/sample)."""
     if params.get("taps"):
         _, h = signal.freqz(params["taps"], [1.0], worN=omega)
     else:
-        sos = signal.butter(int(params["order"]), params["cutoff_hz"], fs=fs_hz, output="sos")
+        sos = signal.butter(int(params["order"]), params["cutoff_hz"], fs=sample_rate_hz, output="sos")
         _, h = signal.sosfreqz(sos, worN=omega)
     return np.abs(h) ** 2
 

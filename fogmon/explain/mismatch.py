@@ -39,7 +39,7 @@ class Grid:
     """The (window, tau) grid: window and hop in samples, window start indices,
     averaging factors m of the map (``m``) and of the whole-record ADEV (``m_whole``)."""
 
-    fs_hz: float
+    sample_rate_hz: float
     n: int
     window_n: int
     hop_n: int
@@ -50,35 +50,46 @@ class Grid:
 
     @property
     def tau_s(self) -> np.ndarray:
-        return self.m / self.fs_hz
+        return self.m / self.sample_rate_hz
 
     @property
     def tau_whole_s(self) -> np.ndarray:
-        return self.m_whole / self.fs_hz
+        return self.m_whole / self.sample_rate_hz
 
     @property
     def window_s(self) -> float:
-        return self.window_n / self.fs_hz
+        return self.window_n / self.sample_rate_hz
 
     @property
     def t_centre_s(self) -> np.ndarray:
-        return self.t0_s + (self.starts + (self.window_n - 1) / 2.0) / self.fs_hz
+        return self.t0_s + (self.starts + (self.window_n - 1) / 2.0) / self.sample_rate_hz
 
 
-def make_grid(n: int, fs_hz: float, window_s: float | None = None, hop_fraction: float = 0.25,
+def make_grid(n: int, sample_rate_hz: float, window_s: float | None = None, hop_fraction: float = 0.25,
               t0_s: float = 0.0, name: str = "recording") -> Grid:
     """Map grid for an n-sample record: default window = duration / 8 (at least 64 samples),
     hop = window / 4, octave taus up to window / 4; whole-record taus up to n / 4.
     A window longer than half the record is a FogmonError."""
-    w = max(64, n // 8) if window_s is None else int(round(window_s * fs_hz))
+    w = max(64, n // 8) if window_s is None else int(round(window_s * sample_rate_hz))
     if w < 16:
-        raise FogmonError(f"--window-s {window_s:g} s is shorter than 16 samples at {fs_hz:g} Hz")
+        raise FogmonError(f"--window-s {window_s:g} s is shorter than 16 samples at {sample_rate_hz:g} Hz")
     if 2 * w > n:
-        raise FogmonError(f"{name}: {n / fs_hz:g} s ({n} samples) is too short for the {w / fs_hz:g} s map "
-                          f"window: need at least two windows ({2 * w / fs_hz:g} s)")
+        raise FogmonError(
+            f"{name}: {n / sample_rate_hz:g} s ({n} samples) is too short for the {w / sample_rate_hz:g} s map "
+            f"window: need at least two windows ({2 * w / sample_rate_hz:g} s)"
+        )
     hop = max(1, int(round(w * hop_fraction)))
     starts = np.arange(0, n - w + 1, hop, dtype=np.int64)
-    return Grid(fs_hz, n, w, hop, starts, tau_grid(fs_hz, w, "octave"), tau_grid(fs_hz, n, "octave"), t0_s)
+    return Grid(
+        sample_rate_hz,
+        n,
+        w,
+        hop,
+        starts,
+        tau_grid(sample_rate_hz, w, "octave"),
+        tau_grid(sample_rate_hz, n, "octave"),
+        t0_s,
+    )
 
 
 def log_avar(y: np.ndarray, valid: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
@@ -252,8 +263,8 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
             d = lnratio[wi, mi]
             zmax = float(np.max(np.abs(vals)))
             out.append(Region(
-                grid.t0_s + grid.starts[wi.min()] / grid.fs_hz,
-                grid.t0_s + (grid.starts[wi.max()] + grid.window_n) / grid.fs_hz,
+                grid.t0_s + grid.starts[wi.min()] / grid.sample_rate_hz,
+                grid.t0_s + (grid.starts[wi.max()] + grid.window_n) / grid.sample_rate_hz,
                 float(grid.tau_s[mi.min()]), float(grid.tau_s[mi.max()]), sign,
                 float(np.exp(np.mean(d) / 2.0)), zmax, max(null.gumbel.sf(zmax), 1e-16), False,
                 tuple(zip(wi.tolist(), mi.tolist(), strict=True)),
@@ -266,7 +277,7 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
             mi = np.flatnonzero(lab == r)
             d = lnratio_w[mi]
             zmax = float(np.max(np.abs(z_whole[mi])))
-            out.append(Region(grid.t0_s, grid.t0_s + grid.n / grid.fs_hz, float(grid.tau_whole_s[mi.min()]),
+            out.append(Region(grid.t0_s, grid.t0_s + grid.n / grid.sample_rate_hz, float(grid.tau_whole_s[mi.min()]),
                               float(grid.tau_whole_s[mi.max()]), sign, float(np.exp(np.mean(d) / 2.0)), zmax,
                               max(null.gumbel_whole.sf(zmax), 1e-16), True,
                               tau_peak_s=float(grid.tau_whole_s[mi[int(np.argmax(np.abs(z_whole[mi])))]])))
@@ -313,7 +324,7 @@ def locate(regions: list[Region], y: np.ndarray, valid: np.ndarray, grid: Grid, 
 
 
 def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: Null) -> Region:
-    fs = grid.fs_hz
+    sample_rate_hz = grid.sample_rate_hz
     n = grid.n
     if r.whole_record:
         j = int(np.argmin(np.abs(grid.tau_whole_s - r.tau_peak_s)))
@@ -335,26 +346,26 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
     ratio, _ = local_avar_ratio(y, valid, m, level, smooth)
     t_lo, t_hi = r.t_start_s, r.t_end_s
     i = np.arange(len(ratio))
-    start_s = grid.t0_s + i / fs
-    inside = (start_s >= t_lo - 1e-9) & (start_s + 2 * m / fs <= t_hi + 1e-9) & np.isfinite(ratio)
+    start_s = grid.t0_s + i / sample_rate_hz
+    inside = (start_s >= t_lo - 1e-9) & (start_s + 2 * m / sample_rate_hz <= t_hi + 1e-9) & np.isfinite(ratio)
     if not inside.any():
         return r
     sel = np.flatnonzero(inside)
     dev = r.sign * (ratio[sel] - 1.0)
     k = int(np.argmax(dev))
     peak = sel[k]
-    t_peak = grid.t0_s + (peak + m) / fs
+    t_peak = grid.t0_s + (peak + m) / sample_rate_hz
     if r.whole_record or dev[k] <= 0:
-        return replace(r, t_peak_s=t_peak, tau_peak_s=m / fs)
+        return replace(r, t_peak_s=t_peak, tau_peak_s=m / sample_rate_hz)
     # the run of consecutive starts around the peak with at least half the peak's excess
     stop = ~(dev >= 0.5 * dev[k]) | np.r_[False, np.diff(sel) != 1]  # a start that ends the run
     brk = np.flatnonzero(stop[: k + 1])
     a = int(brk[-1]) + (0 if dev[brk[-1]] >= 0.5 * dev[k] else 1) if len(brk) else 0
     after = np.flatnonzero(stop[k + 1:])
     b = k + int(after[0]) if len(after) else len(sel) - 1
-    t0 = max(t_lo, grid.t0_s + (sel[a] - smooth // 2) / fs)
-    t1 = min(t_hi, grid.t0_s + (sel[b] - smooth // 2 + smooth + 2 * m) / fs)
-    return replace(r, t_start_s=t0, t_end_s=t1, t_peak_s=t_peak, tau_peak_s=m / fs, span_s=(t_lo, t_hi))
+    t0 = max(t_lo, grid.t0_s + (sel[a] - smooth // 2) / sample_rate_hz)
+    t1 = min(t_hi, grid.t0_s + (sel[b] - smooth // 2 + smooth + 2 * m) / sample_rate_hz)
+    return replace(r, t_start_s=t0, t_end_s=t1, t_peak_s=t_peak, tau_peak_s=m / sample_rate_hz, span_s=(t_lo, t_hi))
 
 
 #: Power of the score's smooth maximum of its four figures.

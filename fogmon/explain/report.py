@@ -111,9 +111,9 @@ def _line_hint(res: Result, left: list[dict]) -> str:
     if not excess:
         return ""
     r = excess[0]
-    fs = res.grid.fs_hz
-    lines = spectral_lines(res.residual_after, fs, 0.371 / (2.0 * r["tau_max_s"]),
-                           min(fs / 2, 0.371 / (0.5 * r["tau_min_s"])))
+    sample_rate_hz = res.grid.sample_rate_hz
+    lines = spectral_lines(res.residual_after, sample_rate_hz, 0.371 / (2.0 * r["tau_max_s"]),
+                           min(sample_rate_hz / 2, 0.371 / (0.5 * r["tau_min_s"])))
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
@@ -162,8 +162,13 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
         "score_components_after": res.after.score.as_json(),
         "refused": [{"kind": k, "bic_gain": round(b, 2), "why": why} for k, b, why in res.rejected],
         "method": {
-            "sample_rate_hz": g.fs_hz, "n_samples": g.n, "window_s": g.window_s, "hop_s": g.hop_n / g.fs_hz,
-            "n_windows": len(g.starts), "taus_s": g.tau_s.tolist(), "n_bootstrap": res.n_boot,
+            "sample_rate_hz": g.sample_rate_hz,
+            "n_samples": g.n,
+            "window_s": g.window_s,
+            "hop_s": g.hop_n / g.sample_rate_hz,
+            "n_windows": len(g.starts),
+            "taus_s": g.tau_s.tolist(),
+            "n_bootstrap": res.n_boot,
             "family_wise_alpha": res.before.null.alpha,
             "threshold_abs_z": round(res.before.null.threshold, 3),
             "threshold_abs_z_whole_record": round(res.before.null.threshold_whole, 3),
@@ -267,7 +272,7 @@ def write_outputs(res: Result, out_model: str | None, out_corrected: str | None,
         write_replay_log(out_corrected, rec.t_s, corrected, rec.aux, meta)
 
 
-def _adev_band(a, null, fs):
+def _adev_band(a, null, sample_rate_hz):
     """Whole-record ADEV (deg/h): null mean, family-wise band, recording."""
     infl = math.sqrt(1 + 1 / null.n_replicates)
     thr = null.threshold_whole
@@ -288,7 +293,7 @@ def write_png(res: Result, path: str) -> None:
     fig, ax = plt.subplots(2, 2, figsize=(13, 9), constrained_layout=True)
     tau = g.tau_whole_s
     for a, label, col in ((res.before, "before", "tab:red"), (res.after, "after", "tab:blue")):
-        med, lo, hi, rec = _adev_band(a, a.null, g.fs_hz)
+        med, lo, hi, rec = _adev_band(a, a.null, g.sample_rate_hz)
         ax[0, 0].fill_between(tau, lo, hi, color=col, alpha=0.15,
                               label=f"model {label}: {100 * (1 - a.null.alpha):g} % family-wise band")
         ax[0, 0].loglog(tau, med, color=col, lw=1, ls="--")
@@ -407,7 +412,7 @@ def _rrd_adev_logs(res: Result):
     residual ADEV)}, decades of tau, decades of ADEV) of the whole-record ADEV plot."""
     g = res.grid
     lx = np.log10(g.tau_whole_s)
-    curves = {w: _adev_band(a, a.null, g.fs_hz) for w, a in (("before", res.before), ("after", res.after))}
+    curves = {w: _adev_band(a, a.null, g.sample_rate_hz) for w, a in (("before", res.before), ("after", res.after))}
     with np.errstate(divide="ignore", invalid="ignore"):
         logs = {w: [np.log10(c) for c in cs] for w, cs in curves.items()}
     fin = np.concatenate([v[np.isfinite(v)] for cs in logs.values() for v in cs])

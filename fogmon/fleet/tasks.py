@@ -59,7 +59,7 @@ class Plan:
     as `fogmon replay` chooses them), its axis; or ``error``."""
 
     path: str
-    rate_hz: float = float("nan")
+    sample_rate_hz: float = float("nan")
     n_samples: int = 0
     window_s: float = float("nan")
     hop_s: float = float("nan")
@@ -77,8 +77,8 @@ def check(path: str, options: dict) -> Plan:
             n = src.n_samples
             if n is None:
                 raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
-            plan.rate_hz, plan.n_samples = float(src.rate_hz), int(n)
-            plan.window_s, plan.hop_s = window_and_hop(_config(options), plan.rate_hz, plan.n_samples)
+            plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
+            plan.window_s, plan.hop_s = window_and_hop(_config(options), plan.sample_rate_hz, plan.n_samples)
             plan.axis = _axis(src)
         finally:
             src.close()
@@ -103,7 +103,7 @@ class _ChunkSource:
 
     def __init__(self, source, first: int, stop: int, own: tuple[int, int], masked=()) -> None:
         self._src, self.first, self.stop, self.own = source, first, stop, own
-        self.rate_hz, self.name = source.rate_hz, source.name
+        self.sample_rate_hz, self.name = source.sample_rate_hz, source.name
         self.aux_names = getattr(source, "aux_names", ())
         self.n_samples = stop - first
         self._masked = np.asarray(masked, dtype=np.int64).reshape(-1, 2)
@@ -211,11 +211,11 @@ def run_chunk(plan: Plan, chunk, options: dict, masked=None) -> ChunkResult:
         out.tau_s = col.tau_s
         if col.ends:
             ends = chunk.feed_first + np.concatenate(col.ends)
-            hop = int(round(plan.hop_s * plan.rate_hz))
-            w = int(round(plan.window_s * plan.rate_hz))
+            hop = int(round(plan.hop_s * plan.sample_rate_hz))
+            w = int(round(plan.window_s * plan.sample_rate_hz))
             k = (ends - (w - 1)) // hop
             keep = (k >= chunk.k_first) & (k < chunk.k_stop)
-            out.windows = {"t_end_s": src.t0_s + ends[keep] / plan.rate_hz,
+            out.windows = {"t_end_s": src.t0_s + ends[keep] / plan.sample_rate_hz,
                            "adev": np.concatenate(col.adev)[keep]}
             for name in col.fits[0]:
                 out.windows[name] = np.concatenate([f[name] for f in col.fits])[keep]
@@ -262,7 +262,7 @@ def motion_pass(plan: Plan, options: dict) -> MotionResult:
     out = MotionResult(plan.path)
     try:
         src = _open(plan.path, options)
-        gate = MotionGate(plan.rate_hz)
+        gate = MotionGate(plan.sample_rate_hz)
         use_ref = None
         pending: deque[np.ndarray] = deque()    # valid flags handed to the gate, not yet released
         pos = 0                                 # grid index of the next sample released
@@ -327,7 +327,7 @@ def explain_recording(path: str, model_path: str, options: dict) -> dict:
             t = np.concatenate([b.t_s[b.valid] for b in parts])
             rec = recording_from_arrays(t, np.concatenate([b.rate_dph[b.valid] for b in parts]),
                                         {k: np.concatenate([b.aux[k][b.valid] for b in parts]) for k in parts[0].aux},
-                                        {"sample_rate_hz": f"{src.rate_hz:.12g}"})
+                                        {"sample_rate_hz": f"{src.sample_rate_hz:.12g}"})
         if not options.get("keep_motion"):
             rec, _ = without_motion(rec)
         res = explain(rec, load_model(model_path), Options(window_s=a.window_s, n_boot=a.bootstrap, alpha=a.alpha,

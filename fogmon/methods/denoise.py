@@ -19,11 +19,11 @@ from scipy.signal import lfilter, lfilter_zi
 from fogmon.errors import FogmonError
 
 
-def static_gain(rate_hz: float, N_dpsh: float, K_dphsh: float) -> tuple[float, float]:
+def static_gain(sample_rate_hz: float, N_dpsh: float, K_dphsh: float) -> tuple[float, float]:
     """Steady-state Kalman gain L and a-posteriori error variance P ((deg/h)^2) for
     x_k = x_{k-1} + w (var q), z_k = x_k + v (var r)."""
-    r = (60.0 * N_dpsh) ** 2 * rate_hz
-    q = (K_dphsh / 60.0) ** 2 / rate_hz
+    r = (60.0 * N_dpsh) ** 2 * sample_rate_hz
+    q = (K_dphsh / 60.0) ** 2 / sample_rate_hz
     if r <= 0 or q <= 0:
         raise FogmonError("kalman: N_dpsh and K_dphsh must both be > 0")
     p_pred = (q + math.sqrt(q * q + 4.0 * q * r)) / 2.0
@@ -31,11 +31,11 @@ def static_gain(rate_hz: float, N_dpsh: float, K_dphsh: float) -> tuple[float, f
     return gain, (1.0 - gain) * p_pred
 
 
-def kalman_static(rate_dph, rate_hz: float, N_dpsh: float, K_dphsh: float) -> np.ndarray:
+def kalman_static(rate_dph, sample_rate_hz: float, N_dpsh: float, K_dphsh: float) -> np.ndarray:
     """Kalman estimate (deg/h) of a slowly wandering rate: x_k = x_{k-1} + L (z_k - x_{k-1}),
     started at the first sample."""
     z = np.asarray(rate_dph, float)
-    gain, _ = static_gain(rate_hz, N_dpsh, K_dphsh)
+    gain, _ = static_gain(sample_rate_hz, N_dpsh, K_dphsh)
     b, a = [gain], [1.0, -(1.0 - gain)]
     out, _ = lfilter(b, a, z, zi=lfilter_zi(b, a) * z[0])
     return out
@@ -46,8 +46,8 @@ class StaticKalmanStream:
     state carried across blocks. An invalid (NaN) sample has no measurement: the estimate
     is held (the steady-state gain is kept, a small approximation after long gaps)."""
 
-    def __init__(self, rate_hz: float, N_dpsh: float, K_dphsh: float) -> None:
-        self.gain, self.variance_dph2 = static_gain(rate_hz, N_dpsh, K_dphsh)
+    def __init__(self, sample_rate_hz: float, N_dpsh: float, K_dphsh: float) -> None:
+        self.gain, self.variance_dph2 = static_gain(sample_rate_hz, N_dpsh, K_dphsh)
         self._x = float("nan")  # the last estimate, deg/h
 
     def push(self, rate_dph) -> np.ndarray:
@@ -69,28 +69,28 @@ class StaticKalmanStream:
         return out
 
 
-def dynamic_gain(rate_hz: float, N_dpsh: float, accel_dphps: float) -> np.ndarray:
+def dynamic_gain(sample_rate_hz: float, N_dpsh: float, accel_dphps: float) -> np.ndarray:
     """Steady-state gain (2,) of the constant-rate-change filter: state (rate deg/h,
     rate change deg/h/s), white angular acceleration of spectral density
     ``accel_dphps`` (deg/h/s per sqrt(Hz)), rate measured with ARW N."""
-    dt = 1.0 / rate_hz
+    dt = 1.0 / sample_rate_hz
     F = np.array([[1.0, dt], [0.0, 1.0]])
     H = np.array([[1.0, 0.0]])
     qa = accel_dphps ** 2
     Q = qa * np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]])
-    R = np.array([[(60.0 * N_dpsh) ** 2 * rate_hz]])
+    R = np.array([[(60.0 * N_dpsh) ** 2 * sample_rate_hz]])
     if R[0, 0] <= 0 or qa <= 0:
         raise FogmonError("kalman: N_dpsh and accel_dphps must both be > 0")
     P = solve_discrete_are(F.T, H.T, Q, R)  # a-priori covariance
     return (P @ H.T / (H @ P @ H.T + R)).ravel()
 
 
-def kalman_dynamic(rate_dph, rate_hz: float, N_dpsh: float, accel_dphps: float) -> np.ndarray:
+def kalman_dynamic(rate_dph, sample_rate_hz: float, N_dpsh: float, accel_dphps: float) -> np.ndarray:
     """Kalman estimate (deg/h) of a manoeuvring rate (steady-state constant-rate-change
     filter), as the equivalent second-order IIR filter from measurement to rate."""
     z = np.asarray(rate_dph, float)
-    dt = 1.0 / rate_hz
-    L = dynamic_gain(rate_hz, N_dpsh, accel_dphps)
+    dt = 1.0 / sample_rate_hz
+    L = dynamic_gain(sample_rate_hz, N_dpsh, accel_dphps)
     F = np.array([[1.0, dt], [0.0, 1.0]])
     A = (np.eye(2) - np.outer(L, [1.0, 0.0])) @ F  # x_k = A x_{k-1} + L z_k
     # transfer function z -> x_k[0]: b(q) / det(I - A q^-1)

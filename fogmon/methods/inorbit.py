@@ -61,7 +61,7 @@ class DifferenceArw:
     outliers: int
 
 
-def arw_from_differences(rate_dph, rate_hz: float, k: float = 3.0) -> DifferenceArw:
+def arw_from_differences(rate_dph, sample_rate_hz: float, k: float = 3.0) -> DifferenceArw:
     """First-difference the rate (removing slow terms such as the orbital one), reject
     glitches with the Pauta criterion, and read the white-rate level: var(diff) = 2
     sigma^2 for white rate noise, corrected for the Pauta truncation; N = sigma /
@@ -72,7 +72,7 @@ def arw_from_differences(rate_dph, rate_hz: float, k: float = 3.0) -> Difference
     d = np.diff(y)
     keep = pauta_mask(d, k)
     sigma = d[keep].std(ddof=1) / pauta_consistency(k) / math.sqrt(2.0)
-    return DifferenceArw(sigma / (60.0 * math.sqrt(rate_hz)), float(sigma), int((~keep).sum()))
+    return DifferenceArw(sigma / (60.0 * math.sqrt(sample_rate_hz)), float(sigma), int((~keep).sum()))
 
 
 def cycle_bias_instability(t_s, rate_dph, period_s: float = ORBIT_PERIOD_S) -> tuple[float, int]:
@@ -90,7 +90,7 @@ def cycle_bias_instability(t_s, rate_dph, period_s: float = ORBIT_PERIOD_S) -> t
     return float(means.std(ddof=1)), ncyc
 
 
-def wavelet_energy(rate_dph, rate_hz: float, wavelet: str = "db4", level: int | None = None):
+def wavelet_energy(rate_dph, sample_rate_hz: float, wavelet: str = "db4", level: int | None = None):
     """Energy of each Daubechies-4 (default) wavelet level of the mean-removed rate: list
     of (band_lo_hz, band_hi_hz, energy_fraction) from the finest detail band to the
     approximation. The periodized transform is orthogonal, so the fractions are a true
@@ -104,6 +104,6 @@ def wavelet_energy(rate_dph, rate_hz: float, wavelet: str = "db4", level: int | 
     e /= e.sum()
     out = []
     for j in range(1, level + 1):  # detail level j covers fs/2^(j+1) .. fs/2^j
-        out.append((rate_hz / 2 ** (j + 1), rate_hz / 2 ** j, float(e[level - j + 1])))
-    out.append((0.0, rate_hz / 2 ** (level + 1), float(e[0])))
+        out.append((sample_rate_hz / 2 ** (j + 1), sample_rate_hz / 2 ** j, float(e[level - j + 1])))
+    out.append((0.0, sample_rate_hz / 2 ** (level + 1), float(e[0])))
     return out

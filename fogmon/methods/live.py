@@ -56,10 +56,12 @@ class Conditioned:
 class Conditioner:
     """Runs the chosen methods on a stream of blocks (recording time s, rate deg/h)."""
 
-    def __init__(self, methods: LiveMethods, rate_hz: float) -> None:
+    def __init__(self, methods: LiveMethods, sample_rate_hz: float) -> None:
         self.thermal = LiveThermalCorrection(methods.thermal) if methods.thermal is not None else None
         self.rejector = OutlierRejector(methods.outlier_k) if methods.outlier_k is not None else None
-        self.kalman = StaticKalmanStream(rate_hz, *methods.kalman_n_k) if methods.kalman_n_k is not None else None
+        self.kalman = (
+            StaticKalmanStream(sample_rate_hz, *methods.kalman_n_k) if methods.kalman_n_k is not None else None
+        )
         #: samples without a temperature, so without a thermal correction (invalid for the analysis)
         self.no_temperature = 0
 

@@ -64,19 +64,22 @@ def theory_adev_dph(model: SensorModel, m: np.ndarray, sample_rate_hz: float,
     flicker generator's longest correlation time); None when the model holds an effect
     without a closed form (bandwidth filter, vibration lines)."""
     bm = band_model(model, sample_rate_hz)
-    fs = float(sample_rate_hz)
+    sample_rate_hz = float(sample_rate_hz)
     m = np.asarray(m, dtype=float)
-    tau = m / fs
+    tau = m / sample_rate_hz
     nz = bm.noise
-    step = nz.K_dphsh / 60.0 * math.sqrt(1.0 / fs)  # random-walk step, deg/h
+    step = nz.K_dphsh / 60.0 * math.sqrt(1.0 / sample_rate_hz)  # random-walk step, deg/h
     avar = (3.0 * nz.Q_arcsec ** 2 / tau ** 2 + (60.0 * nz.N_dpsh) ** 2 / tau
             + step ** 2 * (2.0 * m * m + 1.0) / (6.0 * m) + (nz.R_dphh / 3600.0) ** 2 * tau ** 2 / 2.0)
     if nz.B_dph > 0:
-        avar = avar + flicker_adev_exact(m, nz.B_dph, fs, default_flicker_tau_hi_s(fs, duration_s)) ** 2
+        avar = (
+            avar
+            + flicker_adev_exact(m, nz.B_dph, sample_rate_hz, default_flicker_tau_hi_s(sample_rate_hz, duration_s)) ** 2
+        )
     for e in bm.effects:
         if e.kind != "markov":
             return None
-        avar = avar + ar1_adev_exact(m, e.params["sigma_dph"], e.params["tau_c_s"], fs) ** 2
+        avar = avar + ar1_adev_exact(m, e.params["sigma_dph"], e.params["tau_c_s"], sample_rate_hz) ** 2
     return np.sqrt(avar)
 
 
@@ -98,11 +101,11 @@ def replicate_log_avar(model: SensorModel, window_n: int, m: np.ndarray, replica
     """ln Allan variance ((deg/h)^2), replicates x taus: ``replicates`` independent
     simulations of ``model`` (its own sample rate) of ``window_n`` samples each, seeds
     spawned from ``seed``."""
-    fs = model.sample_rate_hz
+    sample_rate_hz = model.sample_rate_hz
     seeds = np.random.SeedSequence(seed).generate_state(replicates, np.uint64)
     out = np.empty((replicates, len(m)))
     for b, sb in enumerate(seeds):
-        (blk,) = iter_simulate(model, duration_s=window_n / fs, seed=int(sb), chunk_samples=window_n)
+        (blk,) = iter_simulate(model, duration_s=window_n / sample_rate_hz, seed=int(sb), chunk_samples=window_n)
         out[b] = window_log_avar(blk.rate_dph, m)
     return out
 

@@ -37,9 +37,9 @@ KIND = "model_band"
 AUX_POINTS = 1024
 
 
-def aux_stats(x: np.ndarray, fs_hz: float) -> np.ndarray:
+def aux_stats(x: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     """(mean, standard deviation, least-squares slope per s) of one aux channel over a
-    window of samples at ``fs_hz`` (Hz), from at most AUX_POINTS evenly spaced samples
+    window of samples at ``sample_rate_hz`` (Hz), from at most AUX_POINTS evenly spaced samples
     (NaN samples ignored; NaN where fewer than two are finite)."""
     x = np.asarray(x, dtype=float)
     step = max(1, len(x) // AUX_POINTS)
@@ -47,7 +47,7 @@ def aux_stats(x: np.ndarray, fs_hz: float) -> np.ndarray:
     ok = np.isfinite(v)
     if ok.sum() < 2:
         return np.full(3, np.nan)
-    t = np.flatnonzero(ok) * (step / fs_hz)
+    t = np.flatnonzero(ok) * (step / sample_rate_hz)
     v = v[ok]
     tc = t - t.mean()
     mean = float(v.mean())

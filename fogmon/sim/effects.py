@@ -1,16 +1,16 @@
 """Physical effects (docs/formats.md) as pure functions of time, aux channels and
 parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
 
-- mean-type: ``mean_rate_dph(effect, t_s, aux, fs_hz)`` -> deterministic deg/h
+- mean-type: ``mean_rate_dph(effect, t_s, aux, sample_rate_hz)`` -> deterministic deg/h
   contribution (thermal_drift, periodic, glitches, bias_step, rate_ramp, scale_factor,
   warm_up). Each is linear in its amplitude-type parameters, so a fitter can evaluate
   it with one coefficient set to 1 to get a regressor.
 - white-level: ``white_level_dpsh(effect, t_s, aux)`` -> added ARW level in deg/sqrt(h)
   per sample (vibration_noise, temperature_noise); the simulator scales one white
   sequence by N0 + sum of these (floored at 0).
-- noise: ``noise_generator(effect, fs_hz, rng)`` -> a stateful generator (markov,
+- noise: ``noise_generator(effect, sample_rate_hz, rng)`` -> a stateful generator (markov,
   outliers, vibration_lines).
-- filter: ``BandwidthFilter(params, fs_hz)`` applied to the whole simulated rate.
+- filter: ``BandwidthFilter(params, sample_rate_hz)`` applied to the whole simulated rate.
 
 ``lookback_s(effect)`` is how much earlier data a mean-type effect needs to be exact
 at the first sample of a chunk (the streaming simulator prepends that much).
@@ -35,11 +35,11 @@ def _aux(effect: Effect, aux: dict) -> np.ndarray:
     return np.asarray(aux[name], dtype=float)
 
 
-def _fs(t_s: np.ndarray, fs_hz: float | None) -> float:
-    if fs_hz:
-        return float(fs_hz)
+def _fs(t_s: np.ndarray, sample_rate_hz: float | None) -> float:
+    if sample_rate_hz:
+        return float(sample_rate_hz)
     if len(t_s) < 2:
-        raise ValueError("fs_hz is needed for fewer than two samples")
+        raise ValueError("sample_rate_hz is needed for fewer than two samples")
     return 1.0 / float(np.median(np.diff(t_s)))
 
 
@@ -87,7 +87,7 @@ def backward_differences(ts, back1, back2, h: float) -> tuple[np.ndarray, np.nda
     return d1, d2
 
 
-def thermal_drift(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def thermal_drift(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """K0(T) + K1 dT/dt + K2 d2T/dt2 (deg/h), see ``thermal_drift_from``."""
     return thermal_drift_from(*temperature_derivatives(t_s, aux["temp_c"], p["smooth_s"], p["diff_step_s"]), p)
 
@@ -103,17 +103,17 @@ def thermal_drift_from(ts, d1, d2, p) -> np.ndarray:
     return k0 + k1 * d1 + k2 * d2
 
 
-def periodic(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def periodic(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """A sin(2 pi t / P + phase) deg/h."""
     return p["amplitude_dph"] * np.sin(2 * np.pi * np.asarray(t_s, float) / p["period_s"] + p["phase_rad"])
 
 
-def glitches(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def glitches(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """Spikes: each amplitude on the one sample nearest its time (width_s = 0), or on
     every sample in [t_i, t_i + width_s)."""
     t = np.asarray(t_s, dtype=float)
     out = np.zeros(len(t))
-    half = 0.5 / _fs(t, fs_hz) if p["width_s"] <= 0 and len(t) else 0.0
+    half = 0.5 / _fs(t, sample_rate_hz) if p["width_s"] <= 0 and len(t) else 0.0
     for ti, ai in zip(p["times_s"], p["amplitudes_dph"], strict=True):
         if p["width_s"] > 0:
             out[(t >= ti) & (t < ti + p["width_s"])] += ai
@@ -122,24 +122,24 @@ def glitches(t_s, aux, p, fs_hz=None) -> np.ndarray:
     return out
 
 
-def bias_step(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def bias_step(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """step_dph for t >= t_s (deg/h)."""
     return np.where(np.asarray(t_s, float) >= p["t_s"], p["step_dph"], 0.0)
 
 
-def rate_ramp(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def rate_ramp(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """slope (deg/h^2) * (t - t0) / 3600 for t >= t0 (deg/h)."""
     dt = np.asarray(t_s, float) - p["t0_s"]
     return np.where(dt >= 0, p["slope_dphh"] * dt / 3600.0, 0.0)
 
 
-def scale_factor(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def scale_factor(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """3600 rot_dps (ppm + sign(rot) asym_ppm / 2) 1e-6 (deg/h)."""
     rot = np.asarray(aux["rot_dps"], dtype=float)
     return 3600.0 * rot * (p["ppm"] + np.sign(rot) * p["asym_ppm"] / 2.0) * 1e-6
 
 
-def warm_up(t_s, aux, p, fs_hz=None) -> np.ndarray:
+def warm_up(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     """A exp(-(t - t0) / tau) for t >= t0 (deg/h)."""
     dt = np.asarray(t_s, float) - p["t0_s"]
     return np.where(dt >= 0, p["amplitude_dph"] * np.exp(-np.maximum(dt, 0.0) / p["tau_s"]), 0.0)
@@ -162,12 +162,12 @@ MEAN_EFFECTS = {
 WHITE_LEVEL_EFFECTS = {"vibration_noise": vibration_noise, "temperature_noise": temperature_noise}
 
 
-def mean_rate_dph(effect: Effect, t_s, aux: dict, fs_hz: float | None = None) -> np.ndarray:
+def mean_rate_dph(effect: Effect, t_s, aux: dict, sample_rate_hz: float | None = None) -> np.ndarray:
     """Deterministic rate contribution (deg/h) of a mean-type effect at times t_s (s)."""
     fn = MEAN_EFFECTS[effect.kind]
     if EFFECT_KINDS[effect.kind].aux:
         _aux(effect, aux)
-    return np.broadcast_to(fn(np.asarray(t_s, float), aux, effect.params, fs_hz), np.shape(t_s)).astype(float)
+    return np.broadcast_to(fn(np.asarray(t_s, float), aux, effect.params, sample_rate_hz), np.shape(t_s)).astype(float)
 
 
 def white_level_dpsh(effect: Effect, t_s, aux: dict) -> np.ndarray:
@@ -176,14 +176,14 @@ def white_level_dpsh(effect: Effect, t_s, aux: dict) -> np.ndarray:
     return WHITE_LEVEL_EFFECTS[effect.kind](t_s, aux, effect.params)
 
 
-def noise_generator(effect: Effect, fs_hz: float, rng: np.random.Generator):
+def noise_generator(effect: Effect, sample_rate_hz: float, rng: np.random.Generator):
     """Stateful generator of a noise-type effect (``markov``, ``outliers``, ``vibration_lines``)."""
     p = effect.params
     if effect.kind == "outliers":
-        return OutlierSpikes(p, fs_hz, rng)
+        return OutlierSpikes(p, sample_rate_hz, rng)
     if effect.kind == "vibration_lines":
-        return NarrowbandLines(p, fs_hz, rng)
-    return GaussMarkov(p["sigma_dph"], p["tau_c_s"], fs_hz, rng)
+        return NarrowbandLines(p, sample_rate_hz, rng)
+    return GaussMarkov(p["sigma_dph"], p["tau_c_s"], sample_rate_hz, rng)
 
 
 class OutlierSpikes:
@@ -193,11 +193,11 @@ class OutlierSpikes:
     positive_fraction. Three uniforms per sample, so the numbers do not depend on the
     chunking."""
 
-    def __init__(self, params: dict, fs_hz: float, rng: np.random.Generator):
-        self.p_hit = params["rate_per_h"] / 3600.0 / fs_hz
+    def __init__(self, params: dict, sample_rate_hz: float, rng: np.random.Generator):
+        self.p_hit = params["rate_per_h"] / 3600.0 / sample_rate_hz
         if self.p_hit > 1.0:
             raise FogmonError(f"outliers: rate_per_h {params['rate_per_h']:g} is more than one per sample at "
-                              f"{fs_hz:g} Hz")
+                              f"{sample_rate_hz:g} Hz")
         self.probs = np.asarray(params["quantile_probs"], dtype=float)
         self.quantiles = np.asarray(params["amplitude_quantiles_dph"], dtype=float)
         self.positive = params["positive_fraction"]
@@ -223,9 +223,9 @@ class NarrowbandLines:
     """A ``vibration_lines`` effect: the sum of its lines (noise.NarrowbandLine), each
     with its own random stream spawned from the effect's."""
 
-    def __init__(self, params: dict, fs_hz: float, rng: np.random.Generator):
+    def __init__(self, params: dict, sample_rate_hz: float, rng: np.random.Generator):
         p = params
-        self.lines = [NarrowbandLine(f, s, bw, fs_hz, r) for f, s, bw, r in
+        self.lines = [NarrowbandLine(f, s, bw, sample_rate_hz, r) for f, s, bw, r in
                       zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], rng.spawn(len(p["freq_hz"])), strict=True)]
 
     def generate(self, n: int) -> np.ndarray:
@@ -240,15 +240,15 @@ class BandwidthFilter:
     sections, or FIR ``taps``; stateful across chunks, started in steady state for the
     first input value (no start-up transient on a constant bias)."""
 
-    def __init__(self, params: dict, fs_hz: float):
+    def __init__(self, params: dict, sample_rate_hz: float):
         if params["taps"]:
             self.taps = np.asarray(params["taps"], dtype=float)
             self.sos = None
         else:
-            if params["cutoff_hz"] >= fs_hz / 2:
+            if params["cutoff_hz"] >= sample_rate_hz / 2:
                 raise FogmonError(f"bandwidth: cutoff_hz {params['cutoff_hz']:g} must be below "
-                                  f"the Nyquist frequency {fs_hz / 2:g} Hz")
-            self.sos = butter(params["order"], params["cutoff_hz"], fs=fs_hz, output="sos")
+                                  f"the Nyquist frequency {sample_rate_hz / 2:g} Hz")
+            self.sos = butter(params["order"], params["cutoff_hz"], fs=sample_rate_hz, output="sos")
         self._zi: np.ndarray | None = None
 
     def apply(self, x: np.ndarray) -> np.ndarray:

@@ -347,23 +347,23 @@ def _check_outliers(p: dict, where: str) -> None:
 def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
     """Validate a SensorModel built in code (same rules as load_model); returns a
     normalized copy."""
-    fs = _number(model.sample_rate_hz, f"{where}: [sensor] sample_rate_hz", ">0")
+    sample_rate_hz = _number(model.sample_rate_hz, f"{where}: [sensor] sample_rate_hz", ">0")
     bias = _number(model.bias_dph, f"{where}: [sensor] bias_dph")
     noise = Noise(**{f.name: _number(getattr(model.noise, f.name), f"{where}: [noise] {f.name}", ">=0")
                      for f in fields(Noise)})
     effects = [validate_effect(e.kind, e.params, f"{where}: [[effect]] #{i + 1}")
                for i, e in enumerate(model.effects)]
     for i, e in enumerate(effects):
-        if e.kind == "bandwidth" and e.params["cutoff_hz"] >= fs / 2:
+        if e.kind == "bandwidth" and e.params["cutoff_hz"] >= sample_rate_hz / 2:
             raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
-                              f"Nyquist frequency {fs / 2:g} Hz, got {e.params['cutoff_hz']:g}")
+                              f"Nyquist frequency {sample_rate_hz / 2:g} Hz, got {e.params['cutoff_hz']:g}")
         if e.kind == "vibration_lines":
             for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"], strict=True)):
-                if not (f + bw / 2 < fs / 2 and bw < 2 * f):
+                if not (f + bw / 2 < sample_rate_hz / 2 and bw < 2 * f):
                     raise FogmonError(f"{where}: [[effect]] #{i + 1} (vibration_lines): line {j + 1} at "
                                       f"{f:g} Hz with bandwidth {bw:g} Hz must lie between 0 and the Nyquist "
-                                      f"frequency {fs / 2:g} Hz (freq_hz +- bandwidth_hz/2)")
-    return SensorModel(fs, bias, noise, effects, {str(k): str(v) for k, v in model.meta.items()})
+                                      f"frequency {sample_rate_hz / 2:g} Hz (freq_hz +- bandwidth_hz/2)")
+    return SensorModel(sample_rate_hz, bias, noise, effects, {str(k): str(v) for k, v in model.meta.items()})
 
 
 def _table(doc: dict, name: str, where: str) -> dict:

@@ -41,16 +41,16 @@ from fogmon.davar.theory import FLICKER_FACTOR
 FLICKER_FLOOR = math.sqrt(FLICKER_FACTOR)
 
 
-def white_std_dph(N_dpsh, fs_hz: float):
+def white_std_dph(N_dpsh, sample_rate_hz: float):
     """Per-sample standard deviation (deg/h) of white rate noise of ARW N (deg/sqrt(h))."""
-    return 60.0 * np.asarray(N_dpsh, dtype=float) * math.sqrt(fs_hz)
+    return 60.0 * np.asarray(N_dpsh, dtype=float) * math.sqrt(sample_rate_hz)
 
 
 class WhiteAngle:
     """Quantization noise Q (arcsec) as differenced white angle noise, deg/h."""
 
-    def __init__(self, Q_arcsec: float, fs_hz: float, rng: np.random.Generator):
-        self.Q, self.fs, self.rng = float(Q_arcsec), float(fs_hz), rng
+    def __init__(self, Q_arcsec: float, sample_rate_hz: float, rng: np.random.Generator):
+        self.Q, self.sample_rate_hz, self.rng = float(Q_arcsec), float(sample_rate_hz), rng
         self._last = self.Q * rng.standard_normal()
 
     def generate(self, n: int) -> np.ndarray:
@@ -58,28 +58,28 @@ class WhiteAngle:
         prev = np.concatenate(([self._last], theta[:-1])) if n else theta
         if n:
             self._last = theta[-1]
-        return (theta - prev) * self.fs
+        return (theta - prev) * self.sample_rate_hz
 
 
 class WhiteRate:
     """White rate noise with a per-sample ARW level N (deg/sqrt(h), scalar or array):
     the same unit-normal sequence scaled by 60 N sqrt(fs), so N may vary over time."""
 
-    def __init__(self, fs_hz: float, rng: np.random.Generator):
-        self.fs, self.rng = float(fs_hz), rng
+    def __init__(self, sample_rate_hz: float, rng: np.random.Generator):
+        self.sample_rate_hz, self.rng = float(sample_rate_hz), rng
 
     def generate(self, n: int, N_dpsh=1.0) -> np.ndarray:
-        return white_std_dph(N_dpsh, self.fs) * self.rng.standard_normal(n)
+        return white_std_dph(N_dpsh, self.sample_rate_hz) * self.rng.standard_normal(n)
 
 
 class GaussMarkov:
     """First-order Gauss-Markov rate noise (std sigma_dph deg/h, correlation time
     tau_c_s s), exact sampled AR(1) started stationary."""
 
-    def __init__(self, sigma_dph: float, tau_c_s: float, fs_hz: float, rng: np.random.Generator):
+    def __init__(self, sigma_dph: float, tau_c_s: float, sample_rate_hz: float, rng: np.random.Generator):
         self.sigma = float(sigma_dph)
-        self.a = math.exp(-1.0 / (fs_hz * tau_c_s))
-        self.b = self.sigma * math.sqrt(-math.expm1(-2.0 / (fs_hz * tau_c_s)))
+        self.a = math.exp(-1.0 / (sample_rate_hz * tau_c_s))
+        self.b = self.sigma * math.sqrt(-math.expm1(-2.0 / (sample_rate_hz * tau_c_s)))
         self.rng = rng
         x_prev = self.sigma * rng.standard_normal()
         self._zi = np.array([self.a * x_prev])
@@ -98,12 +98,12 @@ class NarrowbandLine:
     scaled to ``sigma_dph`` rms (deg/h); started in steady state by a burn-in of
     LINE_BURN_IN envelope time constants 1 / (pi bandwidth_hz)."""
 
-    def __init__(self, freq_hz: float, sigma_dph: float, bandwidth_hz: float, fs_hz: float,
+    def __init__(self, freq_hz: float, sigma_dph: float, bandwidth_hz: float, sample_rate_hz: float,
                  rng: np.random.Generator):
-        self.sos = line_filter(freq_hz, bandwidth_hz, fs_hz)
-        self.scale = float(sigma_dph) / math.sqrt(line_noise_gain(freq_hz, bandwidth_hz, fs_hz))
+        self.sos = line_filter(freq_hz, bandwidth_hz, sample_rate_hz)
+        self.scale = float(sigma_dph) / math.sqrt(line_noise_gain(freq_hz, bandwidth_hz, sample_rate_hz))
         self.rng = rng
-        burn = int(math.ceil(LINE_BURN_IN * fs_hz / (math.pi * bandwidth_hz))) + 2
+        burn = int(math.ceil(LINE_BURN_IN * sample_rate_hz / (math.pi * bandwidth_hz))) + 2
         _, self._zi = sosfilt(self.sos, rng.standard_normal(burn), zi=np.zeros((len(self.sos), 2)))
 
     def generate(self, n: int) -> np.ndarray:
@@ -117,13 +117,13 @@ class NarrowbandLine:
 LINE_BURN_IN = 20.0
 
 
-def line_filter(freq_hz: float, bandwidth_hz: float, fs_hz: float) -> np.ndarray:
+def line_filter(freq_hz: float, bandwidth_hz: float, sample_rate_hz: float) -> np.ndarray:
     """Second-order sections of a ``vibration_lines`` line: the 4-pole Butterworth
     band-pass (scipy.signal.butter order 2, btype "bandpass") whose -3 dB edges are
     freq_hz -+ bandwidth_hz / 2: gain 1 in the band, falling as 1/f^2 (power 1/f^4)
     outside it, 0 at DC and Nyquist."""
     return butter(2, [freq_hz - bandwidth_hz / 2.0, freq_hz + bandwidth_hz / 2.0], btype="bandpass",
-                  fs=fs_hz, output="sos")
+                  fs=sample_rate_hz, output="sos")
 
 
 def line_gain2(sos: np.ndarray, omega: np.ndarray) -> np.ndarray:
@@ -132,47 +132,49 @@ def line_gain2(sos: np.ndarray, omega: np.ndarray) -> np.ndarray:
     return np.abs(h) ** 2
 
 
-def line_noise_gain(freq_hz: float, bandwidth_hz: float, fs_hz: float) -> float:
+def line_noise_gain(freq_hz: float, bandwidth_hz: float, sample_rate_hz: float) -> float:
     """Output variance of a line's band-pass for unit-variance white input,
     (1/pi) * integral over 0..pi of |H|^2 (trapezoid on a grid of 2000 points across
     the band +- 20 bandwidths and 1000 log-spaced points elsewhere: well under 0.1 %)."""
-    sos = line_filter(freq_hz, bandwidth_hz, fs_hz)
-    w0, dw = 2 * math.pi * freq_hz / fs_hz, 2 * math.pi * bandwidth_hz / fs_hz
+    sos = line_filter(freq_hz, bandwidth_hz, sample_rate_hz)
+    w0, dw = 2 * math.pi * freq_hz / sample_rate_hz, 2 * math.pi * bandwidth_hz / sample_rate_hz
     near = np.linspace(max(w0 - 20 * dw, 1e-9), min(w0 + 20 * dw, math.pi), 2000)
     w = np.unique(np.concatenate((near, np.geomspace(1e-9, math.pi, 1000), [math.pi])))
     return float(np.trapezoid(line_gain2(sos, w), w) / math.pi)
 
 
-def line_psd(omega: np.ndarray, fs_hz: float, freq_hz: float, sigma_dph: float, bandwidth_hz: float) -> np.ndarray:
+def line_psd(
+    omega: np.ndarray, sample_rate_hz: float, freq_hz: float, sigma_dph: float, bandwidth_hz: float
+) -> np.ndarray:
     """Two-sided PSD ((deg/h)^2 per unit normalized frequency, sum over the n DFT bins / n
     = variance) of one narrowband line at angular normalized frequencies ``omega``."""
-    sos = line_filter(freq_hz, bandwidth_hz, fs_hz)
-    return sigma_dph ** 2 / line_noise_gain(freq_hz, bandwidth_hz, fs_hz) * line_gain2(sos, omega)
+    sos = line_filter(freq_hz, bandwidth_hz, sample_rate_hz)
+    return sigma_dph ** 2 / line_noise_gain(freq_hz, bandwidth_hz, sample_rate_hz) * line_gain2(sos, omega)
 
 
-def flicker_taus(fs_hz: float, tau_hi_s: float, ratio: float = 2.0) -> np.ndarray:
+def flicker_taus(sample_rate_hz: float, tau_hi_s: float, ratio: float = 2.0) -> np.ndarray:
     """Correlation times (s) of the Gauss-Markov terms of the flicker generator."""
-    tau_lo = 0.25 / fs_hz
+    tau_lo = 0.25 / sample_rate_hz
     k = int(math.ceil(math.log(max(tau_hi_s / tau_lo, ratio)) / math.log(ratio))) + 1
     return tau_lo * ratio ** np.arange(k)
 
 
-def default_flicker_tau_hi_s(fs_hz: float, duration_s: float | None) -> float:
+def default_flicker_tau_hi_s(sample_rate_hz: float, duration_s: float | None) -> float:
     """Longest flicker correlation time: 10x the duration when known (keeps the floor
     within 0.1 % up to duration/10), else 1e9 tau0."""
-    return 10.0 * duration_s if duration_s else 1e9 / fs_hz
+    return 10.0 * duration_s if duration_s else 1e9 / sample_rate_hz
 
 
 class Flicker:
     """Bias-instability (flicker) rate noise of coefficient B (deg/h): sum of
     Gauss-Markov terms, see the module docstring."""
 
-    def __init__(self, B_dph: float, fs_hz: float, rng: np.random.Generator,
+    def __init__(self, B_dph: float, sample_rate_hz: float, rng: np.random.Generator,
                  tau_hi_s: float | None = None, ratio: float = 2.0):
-        tau_hi_s = tau_hi_s or default_flicker_tau_hi_s(fs_hz, None)
-        self.taus_s = flicker_taus(fs_hz, tau_hi_s, ratio)
+        tau_hi_s = tau_hi_s or default_flicker_tau_hi_s(sample_rate_hz, None)
+        self.taus_s = flicker_taus(sample_rate_hz, tau_hi_s, ratio)
         sigma = float(B_dph) * math.sqrt(math.log(ratio) / math.pi)
-        self.terms = [GaussMarkov(sigma, tc, fs_hz, r)
+        self.terms = [GaussMarkov(sigma, tc, sample_rate_hz, r)
                       for tc, r in zip(self.taus_s, rng.spawn(len(self.taus_s)), strict=True)]
 
     def generate(self, n: int) -> np.ndarray:
@@ -185,8 +187,8 @@ class Flicker:
 class RandomWalk:
     """Rate random walk K (deg/h/sqrt(h)): steps of std (K/60) sqrt(tau0), from 0."""
 
-    def __init__(self, K_dphsh: float, fs_hz: float, rng: np.random.Generator):
-        self.step = float(K_dphsh) / 60.0 * math.sqrt(1.0 / fs_hz)
+    def __init__(self, K_dphsh: float, sample_rate_hz: float, rng: np.random.Generator):
+        self.step = float(K_dphsh) / 60.0 * math.sqrt(1.0 / sample_rate_hz)
         self.rng = rng
         self._zi = np.zeros(1)
 
@@ -203,14 +205,14 @@ def ramp_dph(R_dphh: float, t_rel_s) -> np.ndarray:
     return float(R_dphh) / 3600.0 * np.asarray(t_rel_s, dtype=float)
 
 
-def ar1_adev_exact(m, sigma_dph: float, tau_c_s: float, fs_hz: float) -> np.ndarray:
+def ar1_adev_exact(m, sigma_dph: float, tau_c_s: float, sample_rate_hz: float) -> np.ndarray:
     """Exact overlapping-ADEV expectation (deg/h) of the sampled AR(1) process of
     GaussMarkov at averaging factors m:
     AVAR = s^2 [m (1 - a^2) - a (1 - a^m)(3 - a^m)] / (m^2 (1 - a)^2), a = exp(-tau0/tau_c).
     Where m tau0/tau_c < 1e-4 that difference cancels, and the random-walk limit
     q (2 m^2 + 1) / (6 m), q = s^2 (1 - a^2), is used (relative error < 1e-4)."""
     m = np.asarray(m, dtype=float)
-    x = 1.0 / (fs_hz * tau_c_s)
+    x = 1.0 / (sample_rate_hz * tau_c_s)
     a = math.exp(-x)
     u = -math.expm1(-x)
     am = np.exp(-m * x)
@@ -221,7 +223,9 @@ def ar1_adev_exact(m, sigma_dph: float, tau_c_s: float, fs_hz: float) -> np.ndar
     return np.sqrt(np.maximum(np.where(m * x < 1e-4, walk, exact), 0.0))
 
 
-def flicker_adev_exact(m, B_dph: float, fs_hz: float, tau_hi_s: float, ratio: float = 2.0) -> np.ndarray:
+def flicker_adev_exact(m, B_dph: float, sample_rate_hz: float, tau_hi_s: float, ratio: float = 2.0) -> np.ndarray:
     """Exact ADEV expectation (deg/h) of the Flicker generator at averaging factors m."""
     sigma = B_dph * math.sqrt(math.log(ratio) / math.pi)
-    return np.sqrt(sum(ar1_adev_exact(m, sigma, tc, fs_hz) ** 2 for tc in flicker_taus(fs_hz, tau_hi_s, ratio)))
+    return np.sqrt(
+        sum(ar1_adev_exact(m, sigma, tc, sample_rate_hz) ** 2 for tc in flicker_taus(sample_rate_hz, tau_hi_s, ratio))
+    )

@@ -1,7 +1,7 @@
 """Aux-channel generators for simulating without a recording: an MWD run, a thermal
 chamber cycle and a spacecraft orbit. Each returns a ``Scenario`` (times in s, aux
 channels by their replay-log names (docs/formats.md): ``temp_c`` deg C, ``rot_dps`` deg/s, ``vib_g`` g rms,
-``depth_m`` m, plus scenario-specific columns) sampled at its own ``rate_hz``; the
+``depth_m`` m, plus scenario-specific columns) sampled at its own ``sample_rate_hz``; the
 simulator interpolates them onto the gyro's sample times.
 
 Every default is documented on its parameter class (industry ranges, docs/sim.md) and
@@ -48,7 +48,7 @@ class MwdParams:
     the static formation temperature), an optional trip out at the end."""
 
     duration_s: float = 4 * 3600.0        #: s, run length (including the trip)
-    rate_hz: float = 10.0                 #: Hz, aux sampling rate
+    sample_rate_hz: float = 10.0                 #: Hz, aux sampling rate
     start_depth_m: float = 3000.0         #: m, bit depth at the start
     stand_length_m: float = 28.5          #: m per stand (27-30 m)
     rop_mph: float = 30.0                 #: m/h, rate of penetration (5-60 m/h)
@@ -80,7 +80,7 @@ class ChamberParams:
     ramp_c_per_min: float = 1.0           #: deg C/min between plateaus
     lag1_s: float = 60.0                  #: s, air-to-case lag
     lag2_s: float = 300.0                 #: s, case-to-coil lag
-    rate_hz: float = 1.0                  #: Hz, aux sampling rate
+    sample_rate_hz: float = 1.0                  #: Hz, aux sampling rate
 
 
 @dataclass
@@ -95,15 +95,15 @@ class OrbitParams:
     temp_swing_c: float = 4.0             #: deg C, sunlit minus eclipse equilibrium
     lag_s: float = 900.0                  #: s, sensor thermal lag
     axis_factor: float = 1.0              #: cosine of sensing axis to orbit normal
-    rate_hz: float = 1.0                  #: Hz, aux sampling rate
+    sample_rate_hz: float = 1.0                  #: Hz, aux sampling rate
 
 
 def mwd_run(p: MwdParams | None = None, seed: int | None = None) -> Scenario:
     """MWD aux channels: temp_c, rot_dps (string or bit speed, 1 rpm = 6 deg/s),
     vib_g, depth_m, pumps (1 on / 0 off); meta lists connection start times."""
     p = MwdParams() if p is None else p
-    dt = 1.0 / p.rate_hz
-    n = int(round(p.duration_s * p.rate_hz))
+    dt = 1.0 / p.sample_rate_hz
+    n = int(round(p.duration_s * p.sample_rate_hz))
     t = np.arange(n) * dt
     stand_s = p.stand_length_m / p.rop_mph * 3600.0
     cycle = stand_s + p.connection_s
@@ -145,8 +145,8 @@ def thermal_chamber(p: ChamberParams | None = None, seed: int | None = None) -> 
         pts_c.append(float(c))
     pts_t.append(pts_t[-1] + p.dwell_s)
     pts_c.append(pts_c[-1])
-    dt = 1.0 / p.rate_hz
-    t = np.arange(int(round(pts_t[-1] * p.rate_hz))) * dt
+    dt = 1.0 / p.sample_rate_hz
+    t = np.arange(int(round(pts_t[-1] * p.sample_rate_hz))) * dt
     air = np.interp(t, pts_t, pts_c)
     temp = _lags(air, dt, (p.lag1_s, p.lag2_s), pts_c[0])
     return Scenario(t, {"temp_c": temp, "chamber_c": air, "rot_dps": np.zeros(len(t))},
@@ -157,8 +157,8 @@ def orbit(p: OrbitParams | None = None, seed: int | None = None) -> Scenario:
     """Orbit aux channels: temp_c (sunlit/eclipse through a lag), rot_dps (orbital rate
     360/period deg/s times axis_factor)."""
     p = OrbitParams() if p is None else p
-    dt = 1.0 / p.rate_hz
-    t = np.arange(int(round(p.duration_s * p.rate_hz))) * dt
+    dt = 1.0 / p.sample_rate_hz
+    t = np.arange(int(round(p.duration_s * p.sample_rate_hz))) * dt
     eclipse = np.mod(t, p.period_s) >= (1.0 - p.eclipse_fraction) * p.period_s
     sun = p.temp_mean_c + p.temp_swing_c * (np.where(eclipse, 0.0, 1.0) - (1.0 - p.eclipse_fraction))
     temp = _lags(sun, dt, (p.lag_s,), p.temp_mean_c)
@@ -217,12 +217,12 @@ def scenario_params(name: str, overrides: dict[str, str], duration_s: float | No
                               "change dwell_s/plateaus_c instead of --duration-s")
         values["duration_s"] = float(duration_s)
     params = replace(params, **values)
-    for k in ("rate_hz", "lag1_s", "lag2_s", "lag_s", "period_s", "rop_mph", "stand_length_m", "ramp_c_per_min"):
+    for k in ("sample_rate_hz", "lag1_s", "lag2_s", "lag_s", "period_s", "rop_mph", "stand_length_m", "ramp_c_per_min"):
         if k in known and getattr(params, k) <= 0:
             raise FogmonError(f"scenario {name}: parameter {k} must be > 0")
-    if "duration_s" in known and params.duration_s * params.rate_hz < 2:
+    if "duration_s" in known and params.duration_s * params.sample_rate_hz < 2:
         raise FogmonError(f"scenario {name}: duration_s {params.duration_s:g} s holds fewer than 2 samples at "
-                          f"rate_hz {params.rate_hz:g} Hz")
+                          f"sample_rate_hz {params.sample_rate_hz:g} Hz")
     return params
 
 

@@ -49,7 +49,7 @@ class _Plan:
     t0: float                           # time of grid sample 0 (s)
 
     def __init__(self, model: SensorModel, duration_s, like, aux, aux_t_s):
-        self.fs = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
+        self.sample_rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
         self.like = like
         if like is not None:
             self._like(like, duration_s)
@@ -59,7 +59,7 @@ class _Plan:
             self.src_t, self.src_aux, self.t0, self.idx = np.empty(0), {}, 0.0, np.empty(0, np.int64)
             if duration_s is not None and not (duration_s > 0 and math.isfinite(duration_s)):
                 raise FogmonError(f"duration_s must be a positive number of seconds, got {duration_s!r}")
-            self.n = None if duration_s is None else int(round(duration_s * self.fs))
+            self.n = None if duration_s is None else int(round(duration_s * self.sample_rate_hz))
         if self.n is not None and self.n < 1:
             raise FogmonError("nothing to simulate: the duration is shorter than one sample period")
 
@@ -80,27 +80,27 @@ class _Plan:
         if len(lens) != 1:
             raise FogmonError("aux channels must all have the same length")
         m = lens.pop()
-        self.src_t = (np.arange(m) / self.fs if aux_t_s is None else np.asarray(aux_t_s, dtype=float))
+        self.src_t = (np.arange(m) / self.sample_rate_hz if aux_t_s is None else np.asarray(aux_t_s, dtype=float))
         if len(self.src_t) != m or m < 1:
             raise FogmonError("aux_t_s must have one time per aux sample (and at least one)")
         self.t0 = float(self.src_t[0])
-        step = float(self.src_t[1] - self.src_t[0]) if m > 1 and aux_t_s is not None else 1.0 / self.fs
+        step = float(self.src_t[1] - self.src_t[0]) if m > 1 and aux_t_s is not None else 1.0 / self.sample_rate_hz
         span = float(self.src_t[-1] - self.src_t[0]) + step
         if duration_s is not None and duration_s > span + 1e-9 * span:
             raise FogmonError(f"duration_s {duration_s:g} s is longer than the aux channels "
                               f"({span:g} s); they would have to be invented")
-        self.n = int(round((duration_s if duration_s is not None else span) * self.fs))
+        self.n = int(round((duration_s if duration_s is not None else span) * self.sample_rate_hz))
         self.idx = np.empty(0, np.int64)       # every grid sample is present
 
     @property
     def duration_s(self) -> float | None:
-        return None if self.n is None else self.n / self.fs
+        return None if self.n is None else self.n / self.sample_rate_hz
 
     def chunk(self, k0: int, k1: int):
         """(t_s, aux, present) on grid samples [k0, k1): times, aux channels and the
         mask of samples that exist in the output."""
         k = np.arange(k0, k1)
-        t = self.t0 + k / self.fs
+        t = self.t0 + k / self.sample_rate_hz
         present = np.ones(len(k), dtype=bool)
         aux = {}
         if self.like is not None:
@@ -134,21 +134,21 @@ class _Parts:
     generators seeded from ``rngs``: Q, N, B, K, then one per effect)."""
 
     def __init__(self, model: SensorModel, plan: _Plan, rngs: list[np.random.Generator]) -> None:
-        fs, nz = plan.fs, model.noise
+        sample_rate_hz, nz = plan.sample_rate_hz, model.noise
         self.model, self.plan = model, plan
-        self.q = WhiteAngle(nz.Q_arcsec, fs, rngs[0]) if nz.Q_arcsec > 0 else None
-        self.white = WhiteRate(fs, rngs[1])
+        self.q = WhiteAngle(nz.Q_arcsec, sample_rate_hz, rngs[0]) if nz.Q_arcsec > 0 else None
+        self.white = WhiteRate(sample_rate_hz, rngs[1])
         self.levels = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "white_level"]
-        self.b = (Flicker(nz.B_dph, fs, rngs[2], default_flicker_tau_hi_s(fs, plan.duration_s))
+        self.b = (Flicker(nz.B_dph, sample_rate_hz, rngs[2], default_flicker_tau_hi_s(sample_rate_hz, plan.duration_s))
                   if nz.B_dph > 0 else None)
-        self.k = RandomWalk(nz.K_dphsh, fs, rngs[3]) if nz.K_dphsh > 0 else None
-        self.noises = [fx.noise_generator(e, fs, rngs[4 + i]) for i, e in enumerate(model.effects)
+        self.k = RandomWalk(nz.K_dphsh, sample_rate_hz, rngs[3]) if nz.K_dphsh > 0 else None
+        self.noises = [fx.noise_generator(e, sample_rate_hz, rngs[4 + i]) for i, e in enumerate(model.effects)
                        if EFFECT_KINDS[e.kind].nature == "noise"]
         self.means = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "mean"]
-        self.filters = [fx.BandwidthFilter(e.params, fs) for e in model.effects
+        self.filters = [fx.BandwidthFilter(e.params, sample_rate_hz) for e in model.effects
                         if EFFECT_KINDS[e.kind].nature == "filter"]
         #: samples before a chunk that mean-rate effects look back on
-        self.back = int(math.ceil(max([fx.lookback_s(e) for e in self.means] + [0.0]) * fs)) + 2
+        self.back = int(math.ceil(max([fx.lookback_s(e) for e in self.means] + [0.0]) * sample_rate_hz)) + 2
 
     def rate_dph(self, k0: int, k1: int, t: np.ndarray, aux: dict[str, np.ndarray]) -> np.ndarray:
         """The rate (deg/h) of grid samples ``k0:k1`` at times ``t`` (s) with ``aux``."""
@@ -170,7 +170,7 @@ class _Parts:
             kb = max(0, k0 - self.back)
             te, auxe, _ = self.plan.chunk(kb, k1) if kb < k0 else (t, aux, None)
             for e in self.means:
-                rate += fx.mean_rate_dph(e, te, auxe, self.plan.fs)[k0 - kb:]
+                rate += fx.mean_rate_dph(e, te, auxe, self.plan.sample_rate_hz)[k0 - kb:]
         for f in self.filters:
             rate = f.apply(rate)
         return rate
@@ -189,7 +189,7 @@ def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Rec
     _check_aux(model, plan)
     ss = np.random.SeedSequence(seed)
     if meta_out is not None:
-        meta_out.update(sample_rate_hz=f"{plan.fs:g}", seed=str(ss.entropy))
+        meta_out.update(sample_rate_hz=f"{plan.sample_rate_hz:g}", seed=str(ss.entropy))
     parts = _Parts(model, plan, [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))])
     k0 = 0
     while plan.n is None or k0 < plan.n:

@@ -108,7 +108,7 @@ class Archive(Sink):
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
-        self._parquet = ParquetPieces(self.directory, source.rate_hz, row_group_s) \
+        self._parquet = ParquetPieces(self.directory, source.sample_rate_hz, row_group_s) \
             if samples_format == "parquet" else None
         self._capture_source = source if isinstance(source, CaptureSource) else None
         base = dict(self._capture_source.capture_spec()) if self._capture_source is not None else None
@@ -171,7 +171,7 @@ class Archive(Sink):
 
     def _meta(self) -> dict:
         """The replay-log metadata of the current piece."""
-        return {"sample_rate_hz": f"{self.source.rate_hz:.12g}", "sensor": self.source.name,
+        return {"sample_rate_hz": f"{self.source.sample_rate_hz:.12g}", "sensor": self.source.name,
                 "started_utc": self.started_utc, "piece": self.piece}
 
     def _close_replay_log(self) -> None:

@@ -24,7 +24,7 @@ class StreamInfo:
     taus (s), auxiliary channel names."""
 
     source_name: str
-    rate_hz: float
+    sample_rate_hz: float
     window_s: float
     hop_s: float
     tau_s: np.ndarray
@@ -42,7 +42,7 @@ class Summary:
     """The end-of-run account: what was processed, the whole-run ADEV and fit, counters."""
 
     source_name: str
-    rate_hz: float
+    sample_rate_hz: float
     window_s: float
     hop_s: float
     n_samples: int = 0
@@ -68,7 +68,7 @@ class Summary:
     @property
     def duration_s(self) -> float:
         """Recording time covered, s."""
-        return (self.t_last_s - self.t_first_s + 1.0 / self.rate_hz) if self.n_samples else 0.0
+        return (self.t_last_s - self.t_first_s + 1.0 / self.sample_rate_hz) if self.n_samples else 0.0
 
     @property
     def speed_x(self) -> float:

@@ -24,7 +24,7 @@ def format_summary(s: Summary) -> str:
     lines = []
     state = f"interrupted ({stop_name()})" if s.interrupted else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
-    lines.append(f"  {s.n_samples} samples at {s.rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
+    lines.append(f"  {s.n_samples} samples at {s.sample_rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
                  f"({s.n_invalid} invalid/lost), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
     lines.append(f"  {s.n_windows} DADEV windows of {s.window_s:g} s every {s.hop_s:g} s")
     if not s.n_windows:
@@ -135,11 +135,13 @@ def _open_hint(output: str) -> str:
 def no_windows_reason(s: Summary) -> str:
     """Why a run of at least one sample gave no DADEV window (it was shorter than one
     window) and the --window-s that would give some."""
-    w = round(s.window_s * s.rate_hz)
-    run_s = s.n_samples / s.rate_hz
-    return (f"no DADEV window: the window is {w} samples = {s.window_s:g} s at {s.rate_hz:g} Hz and the run had "
-            f"{s.n_samples:,} samples ({run_s:g} s); use --window-s {default_window_s(s.rate_hz, s.n_samples):g} "
-            f"(or any window up to {run_s:g} s)")
+    w = round(s.window_s * s.sample_rate_hz)
+    run_s = s.n_samples / s.sample_rate_hz
+    return (
+        f"no DADEV window: the window is {w} samples = {s.window_s:g} s at {s.sample_rate_hz:g} Hz and the run had "
+        f"{s.n_samples:,} samples ({run_s:g} s); use --window-s {default_window_s(s.sample_rate_hz, s.n_samples):g} "
+        f"(or any window up to {run_s:g} s)"
+    )
 
 
 #: The fitted model is reported as not describing the record beyond this ADEV ratio.

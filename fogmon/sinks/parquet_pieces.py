@@ -47,12 +47,12 @@ def piece_files(directory: str) -> list[str]:
 
 
 class ParquetPieces:
-    """Writer of the Parquet pieces under ``directory`` at ``rate_hz`` (Hz): ``write``
+    """Writer of the Parquet pieces under ``directory`` at ``sample_rate_hz`` (Hz): ``write``
     appends rows (valid samples) to the current piece, ``end_piece`` joins it."""
 
-    def __init__(self, directory: str, rate_hz: float, row_group_s: float = ROW_GROUP_S) -> None:
+    def __init__(self, directory: str, sample_rate_hz: float, row_group_s: float = ROW_GROUP_S) -> None:
         self.directory = directory
-        self.rows_per_group = max(1, int(round(row_group_s * rate_hz)))
+        self.rows_per_group = max(1, int(round(row_group_s * sample_rate_hz)))
         self._piece: int | None = None
         self._schema = None
         self._buf: list = []

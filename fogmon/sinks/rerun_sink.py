@@ -412,7 +412,7 @@ class RerunSink(Sink):
     # -- set-up ---------------------------------------------------------------
     def start(self, info: StreamInfo) -> None:
         self.info = info
-        self.step = max(1, int(math.ceil(info.rate_hz / DISPLAY_MAX_HZ)))
+        self.step = max(1, int(math.ceil(info.sample_rate_hz / DISPLAY_MAX_HZ)))
         self.dec = _Decimator(self.step)
 
     def _setup(self, first: Block) -> None:
@@ -469,7 +469,7 @@ class RerunSink(Sink):
                                                                 colors=[c], markers=["down"], marker_sizes=[3.0]),
                     static=True)
         rec.log("session", rr.TextDocument(
-            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.rate_hz:g} Hz\n"
+            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.sample_rate_hz:g} Hz\n"
             f"window: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
             f"taus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)

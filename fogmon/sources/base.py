@@ -20,7 +20,7 @@ class Source(Protocol):
     #: human-readable description, e.g. "KVH DSP-1760 format A on /dev/ttyUSB0, axis z"
     name: str
     #: nominal sample rate in Hz (the uniform grid that Block samples sit on)
-    rate_hz: float
+    sample_rate_hz: float
 
     @property
     def n_samples(self) -> int | None:
@@ -79,7 +79,7 @@ class Codec(Protocol):
     """An incremental serial decoder: bytes in, decoded frames out (deg/h)."""
 
     protocol: str
-    rate_hz: float
+    sample_rate_hz: float
     aux_names: tuple[str, ...]
     #: the sequence counter's modulus, None when the protocol has no counter
     seq_modulus: int | None

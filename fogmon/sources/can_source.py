@@ -71,15 +71,15 @@ def _pick(msg, opt: str, given: str | None, default: str) -> str | None:
     return given
 
 
-def _rate_hz(msg, rate_hz: float | None) -> float:
+def _rate_hz(msg, sample_rate_hz: float | None) -> float:
     """The sample rate (Hz): given, or from the message's DBC cycle time."""
-    if rate_hz is None:
+    if sample_rate_hz is None:
         if not msg.cycle_time:
             raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give --rate-hz")
-        rate_hz = 1000.0 / msg.cycle_time
-    if not (rate_hz > 0 and math.isfinite(rate_hz)):
-        raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
-    return float(rate_hz)
+        sample_rate_hz = 1000.0 / msg.cycle_time
+    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+        raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+    return float(sample_rate_hz)
 
 
 class CanDecoder:
@@ -91,7 +91,7 @@ class CanDecoder:
 
     def __init__(self, db, message: str | None = None, rate_signal: str | None = None, rate_unit: str | None = None,
                  temp_signal: str | None = None, counter_signal: str | None = None,
-                 valid_signal: str | None = None, rate_hz: float | None = None,
+                 valid_signal: str | None = None, sample_rate_hz: float | None = None,
                  max_rate_dph: float | None = None) -> None:
         rate_signal = rate_signal or "rate"
         msg = _find_message(db, message, rate_signal)
@@ -110,22 +110,29 @@ class CanDecoder:
             raise FogmonError(f"rate signal {msg.name}.{rate_signal} has unit {unit!r}: give --can-rate-unit "
                               f"(one of {', '.join(units.DPH_PER_UNIT)})")
         self.rate_unit = unit
-        self.rate_hz = _rate_hz(msg, rate_hz)
+        self.sample_rate_hz = _rate_hz(msg, sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
-        self._scale = units.dph_scale(key, self.rate_hz)
+        self._scale = units.dph_scale(key, self.sample_rate_hz)
         self.seq_modulus = 2 ** names[self.counter_signal].length if self.counter_signal else None
         self.aux_names = ("temp_c",) if self.temp_signal else ()
         self.counters = {"frames_ok": 0, "bad_frames": 0, "other_frames": 0, plausibility.COUNTER: 0}
-        self._stall_s = min(STALL_S, 0.5 * self.seq_modulus / self.rate_hz) if self.seq_modulus else STALL_S
+        self._stall_s = min(STALL_S, 0.5 * self.seq_modulus / self.sample_rate_hz) if self.seq_modulus else STALL_S
         self._last_ts: float | None = None
 
     def options(self) -> dict:
-        return {"message": self.message.name, "rate_signal": self.rate_signal, "rate_unit": self.rate_unit,
-                "temp_signal": self.temp_signal, "counter_signal": self.counter_signal,
-                "valid_signal": self.valid_signal, "rate_hz": self.rate_hz, "max_rate_dph": self.max_rate_dph}
+        return {
+            "message": self.message.name,
+            "rate_signal": self.rate_signal,
+            "rate_unit": self.rate_unit,
+            "temp_signal": self.temp_signal,
+            "counter_signal": self.counter_signal,
+            "valid_signal": self.valid_signal,
+            "sample_rate_hz": self.sample_rate_hz,
+            "max_rate_dph": self.max_rate_dph,
+        }
 
     def describe(self) -> str:
-        return f"CAN {self.message.name}.{self.rate_signal} ({self.rate_unit}), {self.rate_hz:g} Hz"
+        return f"CAN {self.message.name}.{self.rate_signal} ({self.rate_unit}), {self.sample_rate_hz:g} Hz"
 
     def feed(self, msgs: Iterable) -> list[tuple[float | None, Frames]]:
         """Decode ``msgs`` (can.Message, in order): segments of frames, each with the
@@ -163,7 +170,7 @@ class CanDecoder:
             ts = float(m.timestamp)
             if self._last_ts is not None and ts - self._last_ts > self._stall_s:
                 close_seg()
-                brk = (ts - self._last_ts) * self.rate_hz - 1.0
+                brk = (ts - self._last_ts) * self.sample_rate_hz - 1.0
             self._last_ts = ts
             c["frames_ok"] += 1
             cur["seq"].append(seq % self.seq_modulus if self.seq_modulus else -1)
@@ -197,10 +204,10 @@ class CanSource(LiveSource):
     def __init__(self, channel: str, interface: str, db, bitrate: int | None = None, dbc_path: str | None = None,
                  block_s: float = 0.1, idle_s: float = 0.5, backoff_s=(0.05, 2.0), **decoder_options) -> None:
         self.decoder = CanDecoder(db, **decoder_options)
-        super().__init__(GridAssembler(self.decoder.rate_hz, self.decoder.seq_modulus, self.decoder.aux_names),
+        super().__init__(GridAssembler(self.decoder.sample_rate_hz, self.decoder.seq_modulus, self.decoder.aux_names),
                          block_s, idle_s, backoff_s)
         self.channel, self.interface, self.bitrate, self.dbc_path = channel, interface, bitrate, dbc_path
-        self.rate_hz = self.decoder.rate_hz
+        self.sample_rate_hz = self.decoder.sample_rate_hz
         self.aux_names = self.decoder.aux_names
         self.name = f"{self.decoder.describe()} on {interface}:{channel}"
 
@@ -260,9 +267,9 @@ class CanLogSource:
         self.path = self.paths[0]
         self._db, self._options = db, decoder_options
         self.decoder = CanDecoder(db, **decoder_options)
-        self.rate_hz = self.decoder.rate_hz
+        self.sample_rate_hz = self.decoder.sample_rate_hz
         self.aux_names = self.decoder.aux_names
-        self.grid = GridAssembler(self.rate_hz, self.decoder.seq_modulus, self.aux_names)
+        self.grid = GridAssembler(self.sample_rate_hz, self.decoder.seq_modulus, self.aux_names)
         what = os.path.basename(self.path) + (
             f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
         self.name = f"CAN log {what}: {self.decoder.describe()}"
@@ -320,7 +327,7 @@ def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar:
     opts = {}
     if sidecar:
         opts.update({k: sidecar[k] for k in ("message", "rate_signal", "rate_unit", "temp_signal",
-                                              "counter_signal", "valid_signal", "rate_hz", "max_rate_dph")
+                                              "counter_signal", "valid_signal", "sample_rate_hz", "max_rate_dph")
                      if sidecar.get(k) is not None})
         if not dbc and sidecar.get("dbc"):
             dbc = os.path.join(os.path.dirname(os.path.abspath(first)), sidecar["dbc"])

@@ -27,12 +27,14 @@ class Dsp3000Codec:
     protocol = "dsp3000"
     aux_names: tuple[str, ...] = ()
 
-    def __init__(self, rot: str = "rate", rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None) -> None:
+    def __init__(
+        self, rot: str = "rate", sample_rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None
+    ) -> None:
         if rot not in ("rate", "delta"):
             raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
-        if not (rate_hz > 0 and math.isfinite(rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
-        self.rot, self.rate_hz = rot, float(rate_hz)
+        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+            raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+        self.rot, self.sample_rate_hz = rot, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP3000_MAX_ABS_DPH)
         self._framer = LineFramer(64)
         self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
@@ -42,11 +44,11 @@ class Dsp3000Codec:
         return self._framer.pending
 
     def options(self) -> dict:
-        return {"protocol": self.protocol, "kvh_rot": self.rot, "rate_hz": self.rate_hz,
+        return {"protocol": self.protocol, "kvh_rot": self.rot, "sample_rate_hz": self.sample_rate_hz,
                 "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
-        return f"KVH DSP-3000 ASCII ({'deg/s' if self.rot == 'rate' else 'deg per sample'}), {self.rate_hz:g} Hz"
+        return f"KVH DSP-3000 ASCII ({'deg/s' if self.rot == 'rate' else 'deg per sample'}), {self.sample_rate_hz:g} Hz"
 
     def feed(self, data: bytes) -> Frames:
         fr = self._framer
@@ -72,6 +74,8 @@ class Dsp3000Codec:
         c["frames_ok"] += len(vals)
         c["bad_lines"] += bad + fr.dropped_lines - before[1]
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
-        rate, n = plausibility.gate(to_dph(vals, output_unit(self.rot, "deg"), self.rate_hz), self.max_rate_dph, valid)
+        rate, n = plausibility.gate(
+            to_dph(vals, output_unit(self.rot, "deg"), self.sample_rate_hz), self.max_rate_dph, valid
+        )
         c[plausibility.COUNTER] += n
         return Frames.from_lists([-1] * len(vals), rate, valid)

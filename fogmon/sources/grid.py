@@ -48,12 +48,12 @@ def lost_frames(base: np.ndarray | None, skipped: np.ndarray, frame_bytes: int, 
 
 
 class GridAssembler:
-    """Frames -> Blocks on the grid ``t_s = t0_s + k / rate_hz`` (s). Counters:
+    """Frames -> Blocks on the grid ``t_s = t0_s + k / sample_rate_hz`` (s). Counters:
     ``seq_gaps`` (places where samples were lost), ``samples_missing`` (placeholders
     inserted), ``invalid_samples`` (frames the device flagged invalid)."""
 
-    def __init__(self, rate_hz: float, seq_modulus: int | None, aux_names=(), t0_s: float = 0.0) -> None:
-        self.rate_hz = float(rate_hz)
+    def __init__(self, sample_rate_hz: float, seq_modulus: int | None, aux_names=(), t0_s: float = 0.0) -> None:
+        self.sample_rate_hz = float(sample_rate_hz)
         self.seq_modulus = seq_modulus
         self.aux_names = tuple(aux_names)
         self.t0_s = float(t0_s)
@@ -110,7 +110,7 @@ class GridAssembler:
         offs = np.arange(n) + np.cumsum(missing)          # output position of each frame
         total = int(offs[-1]) + 1
         k0 = self.next_index
-        t = self.t0_s + (k0 + np.arange(total)) / self.rate_hz
+        t = self.t0_s + (k0 + np.arange(total)) / self.sample_rate_hz
         rate = np.full(total, np.nan)
         valid = np.zeros(total, bool)
         rate[offs] = frames.rate_dph
@@ -139,7 +139,7 @@ class GridAssembler:
     @property
     def t_next_s(self) -> float:
         """Grid time (s) of the next sample."""
-        return self.t0_s + self.next_index / self.rate_hz
+        return self.t0_s + self.next_index / self.sample_rate_hz
 
 
 def concat_blocks(blocks: list[Block]) -> Block:

@@ -76,7 +76,7 @@ class KvhCodec:
     seq_modulus = SEQ_MODULUS
 
     def __init__(self, fmt: str = "a", rot: str = "delta", units: str = "rad",
-                 axis: str = "z", rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None) -> None:
+                 axis: str = "z", sample_rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None) -> None:
         fmt = fmt.lower()
         if fmt not in FORMATS:
             raise FogmonError(f"unknown KVH format {fmt!r} (use a, b or c)")
@@ -86,9 +86,9 @@ class KvhCodec:
             raise FogmonError(f"--kvh-units must be deg or rad, got {units!r}")
         if axis not in AXES:
             raise FogmonError(f"--axis must be x, y or z, got {axis!r}")
-        if not (rate_hz > 0 and math.isfinite(rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
-        self.fmt, self.rot, self.units, self.axis, self.rate_hz = fmt, rot, units, axis, float(rate_hz)
+        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+            raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+        self.fmt, self.rot, self.units, self.axis, self.sample_rate_hz = fmt, rot, units, axis, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP17XX_MAX_ABS_DPH)
         self.protocol = f"kvh-{fmt}"
         self.header, self.frame_len, self._layout = FORMATS[fmt]
@@ -108,11 +108,11 @@ class KvhCodec:
     def options(self) -> dict:
         """What is needed to rebuild this decoder (raw-capture sidecar)."""
         return {"protocol": self.protocol, "kvh_rot": self.rot, "kvh_units": self.units,
-                "axis": self.axis, "rate_hz": self.rate_hz, "max_rate_dph": self.max_rate_dph}
+                "axis": self.axis, "sample_rate_hz": self.sample_rate_hz, "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
         return (f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}), axis {self.axis}, "
-                f"{self.rate_hz:g} Hz")
+                f"{self.sample_rate_hz:g} Hz")
 
     def _status_seq_temp(self, f: tuple) -> tuple[int, int, float, int]:
         """Status byte, sequence counter and temperature (deg C; format C: the latest
@@ -175,7 +175,7 @@ class KvhCodec:
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
         c[plausibility.TEMP_COUNTER] += bad_temp
-        rate_dph = to_dph(gyro, output_unit(self.rot, self.units), self.rate_hz)
+        rate_dph = to_dph(gyro, output_unit(self.rot, self.units), self.sample_rate_hz)
         rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
         return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)

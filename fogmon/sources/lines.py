@@ -78,17 +78,17 @@ class LinesCodec:
 
     protocol = "lines"
 
-    def __init__(self, columns: str = "rate_dph", rate_hz: float = DEFAULT_RATE_HZ,
+    def __init__(self, columns: str = "rate_dph", sample_rate_hz: float = DEFAULT_RATE_HZ,
                  max_rate_dph: float | None = None) -> None:
-        if not (rate_hz > 0 and math.isfinite(rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {rate_hz}")
-        self.columns, self.rate_hz = columns, float(rate_hz)
+        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
+            raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+        self.columns, self.sample_rate_hz = columns, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
         self._names, mod = parse_columns(columns)
         has_seq = "seq" in self._names
         self.seq_modulus = (mod or 2 ** 62) if has_seq else None
         self._rate_name = next(n for n in self._names if n in RATE_COLUMNS)
-        self._scale = units.dph_scale(RATE_COLUMNS[self._rate_name], self.rate_hz)
+        self._scale = units.dph_scale(RATE_COLUMNS[self._rate_name], self.sample_rate_hz)
         self.aux_names = tuple(n for n in self._names if n not in ("-", "seq", "valid") and n not in RATE_COLUMNS)
         self._framer = LineFramer(512)
         self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
@@ -98,11 +98,11 @@ class LinesCodec:
         return self._framer.pending
 
     def options(self) -> dict:
-        return {"protocol": self.protocol, "columns": self.columns, "rate_hz": self.rate_hz,
+        return {"protocol": self.protocol, "columns": self.columns, "sample_rate_hz": self.sample_rate_hz,
                 "max_rate_dph": self.max_rate_dph}
 
     def describe(self) -> str:
-        return f"ASCII lines [{self.columns}], {self.rate_hz:g} Hz"
+        return f"ASCII lines [{self.columns}], {self.sample_rate_hz:g} Hz"
 
     def feed(self, data: bytes) -> Frames:
         fr = self._framer

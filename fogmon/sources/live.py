@@ -29,7 +29,7 @@ from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
 
 
 class LiveSource:
-    """Base class. Subclasses set ``name``, ``rate_hz``, ``aux_names``, ``grid``, the
+    """Base class. Subclasses set ``name``, ``sample_rate_hz``, ``aux_names``, ``grid``, the
     exception types meaning "device lost" (``device_errors``), ``decoder_counters`` (the
     decoder's counters dict, for CRC/bad-input events) and implement ``_open()``,
     ``_read(handle) -> list of queue items``, ``_close(handle)``, ``_what()`` (the
@@ -39,7 +39,7 @@ class LiveSource:
     #: a live device has no length (fogmon.sources.base.Source)
     n_samples: int | None = None
     name: str
-    rate_hz: float
+    sample_rate_hz: float
     aux_names: tuple[str, ...]
 
     @property

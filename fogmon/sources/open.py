@@ -114,8 +114,17 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     if frames and (decode or not logs):
         from fogmon.sources.can_source import open_can_log
         sides = [read_sidecar(p) or {} for p in frames]
-        fields = ("message", "rate_signal", "rate_unit", "temp_signal", "counter_signal", "valid_signal", "rate_hz",
-                  "max_rate_dph", "dbc")
+        fields = (
+            "message",
+            "rate_signal",
+            "rate_unit",
+            "temp_signal",
+            "counter_signal",
+            "valid_signal",
+            "sample_rate_hz",
+            "max_rate_dph",
+            "dbc",
+        )
         for p, side in zip(frames[1:], sides[1:], strict=True):
             if any(side.get(k) != sides[0].get(k) for k in fields):
                 raise FogmonError(f"{p}: its sidecar's decoder options or DBC differ from {frames[0]}'s: "

@@ -10,7 +10,7 @@ from typing import Any
 @dataclass(frozen=True)
 class SourceOptions:
     """Options of fogmon.sources.open: ``serial``/``baud`` or ``can``/``interface``/
-    ``can_bitrate`` (a live device), the serial decoder (``protocol``, ``rate_hz`` Hz,
+    ``can_bitrate`` (a live device), the serial decoder (``protocol``, ``sample_rate_hz`` Hz,
     ``kvh_rot``, ``kvh_units``, ``axis``, ``columns``), the CAN decoder (``dbc``,
     ``can_message``, ``can_rate``, ``can_rate_unit``, ``can_temp``, ``can_counter``,
     ``can_valid``), the plausibility gate ``max_rate_dph`` (deg/h), for a replay log
@@ -23,7 +23,7 @@ class SourceOptions:
     interface: str = "socketcan"
     can_bitrate: int | None = None
     protocol: str | None = None
-    rate_hz: float | None = None
+    sample_rate_hz: float | None = None
     kvh_rot: str | None = None
     kvh_units: str | None = None
     axis: str | None = None
@@ -44,7 +44,7 @@ class SourceOptions:
 
     def codec_options(self) -> dict[str, Any]:
         """Serial decoder options given (None = not given), as make_codec names them."""
-        return {"protocol": self.protocol, "rate_hz": self.rate_hz, "kvh_rot": self.kvh_rot,
+        return {"protocol": self.protocol, "sample_rate_hz": self.sample_rate_hz, "kvh_rot": self.kvh_rot,
                 "kvh_units": self.kvh_units, "axis": self.axis, "columns": self.columns,
                 "max_rate_dph": self.max_rate_dph}
 
@@ -52,7 +52,7 @@ class SourceOptions:
         """CAN decoder options given (None = not given), as CanDecoder names them."""
         return {"message": self.can_message, "rate_signal": self.can_rate, "rate_unit": self.can_rate_unit,
                 "temp_signal": self.can_temp, "counter_signal": self.can_counter, "valid_signal": self.can_valid,
-                "rate_hz": self.rate_hz, "max_rate_dph": self.max_rate_dph}
+                "sample_rate_hz": self.sample_rate_hz, "max_rate_dph": self.max_rate_dph}
 
     def asks_decoding(self) -> bool:
         """Whether a decoder option other than the gate is given (an archive is then

@@ -32,8 +32,8 @@ FAST_BLOCK = 8192
 PACED_BLOCK_S = 0.1
 
 
-def _block_len(rate_hz: float, speed: float | None) -> int:
-    return FAST_BLOCK if not speed else max(1, int(round(PACED_BLOCK_S * rate_hz * speed)))
+def _block_len(sample_rate_hz: float, speed: float | None) -> int:
+    return FAST_BLOCK if not speed else max(1, int(round(PACED_BLOCK_S * sample_rate_hz * speed)))
 
 
 class ReplayLogSource:
@@ -52,7 +52,7 @@ class ReplayLogSource:
                  reader=None) -> None:
         self._reader = reader = reader or ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
         self.meta, self.aux_names = reader.meta, reader.aux_names
-        self.rate_hz = reader.sample_rate_hz
+        self.sample_rate_hz = reader.sample_rate_hz
         self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")
         self._max_abs_dph = max_abs_dph
         t0: float | None = None
@@ -63,7 +63,7 @@ class ReplayLogSource:
                 continue
             if t0 is None:
                 t0 = float(rows.t_s[0])
-            last = int(grid_positions(rows.t_s, t0, self.rate_hz, reader.name, last, rows.line_of)[-1])
+            last = int(grid_positions(rows.t_s, t0, self.sample_rate_hz, reader.name, last, rows.line_of)[-1])
             t_last = float(rows.t_s[-1])
         if t0 is None:
             raise FogmonError(f"{reader.name}: no data rows")
@@ -72,7 +72,7 @@ class ReplayLogSource:
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
                          plausibility.COUNTER: 0}
         self._pacer = Pacer(speed)
-        self._n = _block_len(self.rate_hz, speed)
+        self._n = _block_len(self.sample_rate_hz, speed)
         self._closed = False
 
     def blocks(self) -> Iterator[Block]:
@@ -92,7 +92,7 @@ class ReplayLogSource:
             yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)))
 
     def _grid_blocks(self) -> Iterator[tuple[Block, int, int]]:
-        grid = _LogGrid(self.t_first_s, self.rate_hz, self._n, self.aux_names, self._reader.name)
+        grid = _LogGrid(self.t_first_s, self.sample_rate_hz, self._n, self.aux_names, self._reader.name)
         for rows in self._reader.chunks():
             self.counters["skipped_rows"] += rows.skipped
             yield from grid.push(rows)
@@ -109,8 +109,14 @@ class _LogGrid:
     where it starts, however many blocks it spans. The result does not depend on how
     the rows are cut into chunks."""
 
-    def __init__(self, t0_s: float, fs: float, n: int, aux_names: Sequence[str], name: str) -> None:
-        self.t0_s, self.fs, self.n, self.aux_names, self.name = t0_s, fs, n, list(aux_names), name
+    def __init__(self, t0_s: float, sample_rate_hz: float, n: int, aux_names: Sequence[str], name: str) -> None:
+        self.t0_s, self.sample_rate_hz, self.n, self.aux_names, self.name = (
+            t0_s,
+            sample_rate_hz,
+            n,
+            list(aux_names),
+            name,
+        )
         self._last = -1
         self._gaps: deque[tuple[int, int]] = deque()  # (first missing grid index, samples missing)
         self._start(0)
@@ -118,7 +124,7 @@ class _LogGrid:
     def _start(self, j: int) -> None:
         n = self.n
         self._j = j
-        self._t = self.t0_s + (j * n + np.arange(n)) / self.fs
+        self._t = self.t0_s + (j * n + np.arange(n)) / self.sample_rate_hz
         self._rate = np.full(n, np.nan)
         self._aux = {k: np.full(n, np.nan) for k in self.aux_names}
         self._present = np.zeros(n, bool)
@@ -128,7 +134,7 @@ class _LogGrid:
         rows complete."""
         if not len(rows):
             return
-        idx = grid_positions(rows.t_s, self.t0_s, self.fs, self.name, self._last, rows.line_of)
+        idx = grid_positions(rows.t_s, self.t0_s, self.sample_rate_hz, self.name, self._last, rows.line_of)
         d = np.diff(idx, prepend=self._last)
         g = np.flatnonzero(d > 1)
         self._gaps.extend(zip((idx[g] - d[g] + 1).tolist(), (d[g] - 1).tolist(), strict=True))
@@ -169,7 +175,7 @@ class RawCaptureSource:
     """Bytes a serial device sent, decoded again. ``path`` is one capture file or the
     pieces of one (an archive's raw-NNNN.bin), read in order as one byte stream, so the
     decoder's state (a frame split across two pieces, the sequence counter) carries
-    across. ``options`` are the decoder options (``protocol``, ``rate_hz``, ``kvh_rot``,
+    across. ``options`` are the decoder options (``protocol``, ``sample_rate_hz``, ``kvh_rot``,
     ``kvh_units``, ``axis``, ``columns``); ``breaks`` the outages [(byte offset in the
     stream, estimated samples lost)]. Counters: the decoder's and the grid's (see
     GridAssembler)."""
@@ -183,8 +189,8 @@ class RawCaptureSource:
                 raise FogmonError(f"{p}: no such file")
         self._options = dict(options)
         self.codec = codec_from_options(options)
-        self.rate_hz = self.codec.rate_hz
-        self.grid = GridAssembler(self.rate_hz, self.codec.seq_modulus, self.codec.aux_names)
+        self.sample_rate_hz = self.codec.sample_rate_hz
+        self.grid = GridAssembler(self.sample_rate_hz, self.codec.seq_modulus, self.codec.aux_names)
         what = os.path.basename(self.paths[0]) + (
             f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
         self.name = f"raw capture {what}: {self.codec.describe()}"
@@ -273,13 +279,13 @@ class ReplayLogSet:
         self.paths = list(paths)
         self._sources = [ReplayLogSource(p, tolerate=tolerate, max_abs_dph=max_abs_dph) for p in self.paths]
         first = self._sources[0]
-        self.rate_hz = first.rate_hz
+        self.sample_rate_hz = first.sample_rate_hz
         aux = first.aux_names
         # neighbour pairs: prev is one longer than paths[1:] and sources[1:], the last is unused
         for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:], strict=False):
-            if src.rate_hz != self.rate_hz:
-                raise FogmonError(f"{path}: sample_rate_hz {src.rate_hz:g} differs from {self.paths[0]} "
-                                  f"({self.rate_hz:g} Hz): not pieces of one recording")
+            if src.sample_rate_hz != self.sample_rate_hz:
+                raise FogmonError(f"{path}: sample_rate_hz {src.sample_rate_hz:g} differs from {self.paths[0]} "
+                                  f"({self.sample_rate_hz:g} Hz): not pieces of one recording")
             if src.aux_names != aux:
                 raise FogmonError(f"{path}: columns {src.aux_names} differ from {self.paths[0]} ({aux})")
             if _seam_missing(prev, src) < 0:
@@ -287,7 +293,7 @@ class ReplayLogSet:
                                   f"previous piece (t={prev.t_last_s:.6f} s)")
         self.name = f"replay log {os.path.basename(self.paths[0])} .. {os.path.basename(self.paths[-1])} " \
                     f"({len(self.paths)} pieces)"
-        self.n_samples = int(round((self._sources[-1].t_last_s - first.t_first_s) * self.rate_hz)) + 1
+        self.n_samples = int(round((self._sources[-1].t_last_s - first.t_first_s) * self.sample_rate_hz)) + 1
         self._seams = {"samples_missing": 0, "seq_gaps": 0}
         self._closed = False
 
@@ -305,7 +311,7 @@ class ReplayLogSet:
             if missing:
                 self._seams["samples_missing"] += missing
                 self._seams["seq_gaps"] += 1
-                yield from _seam_gap(self._sources[i - 1].t_last_s, missing, self.rate_hz, src.aux_names)
+                yield from _seam_gap(self._sources[i - 1].t_last_s, missing, self.sample_rate_hz, src.aux_names)
             for b in src.blocks():
                 if self._closed:
                     return
@@ -317,14 +323,14 @@ class ReplayLogSet:
 
 def _seam_missing(prev: ReplayLogSource, nxt: ReplayLogSource) -> int:
     """Samples missing between the end of piece ``prev`` and the start of ``nxt``."""
-    return int(round((nxt.t_first_s - prev.t_last_s) * prev.rate_hz)) - 1
+    return int(round((nxt.t_first_s - prev.t_last_s) * prev.sample_rate_hz)) - 1
 
 
-def _seam_gap(t_end: float, missing: int, rate_hz: float, aux: list[str]) -> Iterator[Block]:
+def _seam_gap(t_end: float, missing: int, sample_rate_hz: float, aux: list[str]) -> Iterator[Block]:
     """Invalid placeholders for the samples missing between two pieces, FAST_BLOCK at a
     time, with a gap event in the first."""
     for i in range(0, missing, FAST_BLOCK):
-        t = t_end + np.arange(i + 1, min(i + FAST_BLOCK, missing) + 1) / rate_hz
+        t = t_end + np.arange(i + 1, min(i + FAST_BLOCK, missing) + 1) / sample_rate_hz
         nan = np.full(len(t), np.nan)
         ev = (Event(float(t[0]), "gap", f"{missing} sample(s) missing at t={t[0]:.6f} s (between two pieces)"),)
         yield Block(t, nan, np.zeros(len(t), bool), {k: nan for k in aux}, ev if i == 0 else ())

@@ -38,10 +38,10 @@ class SerialSource(LiveSource):
 
     def __init__(self, port: str, baud: int, codec: Codec, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), opener=None, clock=time.monotonic) -> None:
-        super().__init__(GridAssembler(codec.rate_hz, codec.seq_modulus, codec.aux_names),
+        super().__init__(GridAssembler(codec.sample_rate_hz, codec.seq_modulus, codec.aux_names),
                          block_s, idle_s, backoff_s, clock)
         self.port, self.baud, self.codec = port, int(baud), codec
-        self.rate_hz = codec.rate_hz
+        self.sample_rate_hz = codec.sample_rate_hz
         self.aux_names = codec.aux_names
         self.name = f"{codec.describe()} on {port}"
         self._opener = opener or (lambda: serial.serial_for_url(port, baudrate=self.baud, timeout=READ_TIMEOUT_S))
@@ -124,7 +124,7 @@ class SerialSource(LiveSource):
         if self._need_break and len(frames):
             if self._last_t is not None:    # (nothing came before the outage: no gap to place)
                 elapsed = t - self._last_t
-                outage = (elapsed, max(0.0, elapsed * self.rate_hz - len(frames)))
+                outage = (elapsed, max(0.0, elapsed * self.sample_rate_hz - len(frames)))
                 self.grid.mark_break(outage[1])
             self._need_break = False
         if not self._need_break:

@@ -38,13 +38,13 @@ class SimulatedSource:
         self.seed = int(fresh) if seed is None else int(seed)  # type: ignore[arg-type]
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
-        self.rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
+        self.sample_rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
         #: length in samples when bounded (None: endless), the pipeline sizes its default window with it
-        self.n_samples = (int(round(duration_s * self.rate_hz)) if duration_s is not None
+        self.n_samples = (int(round(duration_s * self.sample_rate_hz)) if duration_s is not None
                           else int(like.grid_index()[-1]) + 1 if like is not None else None)
         self.meta: dict = {}
         seed = self.seed
-        chunk = max(1, int(round(PACED_BLOCK_S * self.rate_hz * speed))) if speed else CHUNK_SAMPLES
+        chunk = max(1, int(round(PACED_BLOCK_S * self.sample_rate_hz * speed))) if speed else CHUNK_SAMPLES
         self._it = iter_simulate(model, duration_s, like, aux, seed, aux_t_s, chunk_samples=chunk, meta_out=self.meta)
         self._pacer = Pacer(speed)
         self.counters = {"samples": 0, "blocks": 0, "samples_missing": 0}

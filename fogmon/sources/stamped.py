@@ -75,15 +75,15 @@ class StampedSource:
                  meta: dict | None = None, max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH,
                  counters: dict[str, int] | None = None) -> None:
         t = np.asarray(t_s, dtype=np.float64)
-        self._idx, self.rate_hz = grid_index(t, where, time_field)
+        self._idx, self.sample_rate_hz = grid_index(t, where, time_field)
         self.t_first_s = float(t[0])
         self._rate = np.asarray(rate_dph, dtype=np.float64)
         self._aux = {k: np.asarray(v, dtype=np.float64) for k, v in (aux or {}).items()}
         self.aux_names = list(self._aux)
         self.name, self.where = name, where
-        self.meta = {"sample_rate_hz": repr(self.rate_hz), **(meta or {})}
+        self.meta = {"sample_rate_hz": repr(self.sample_rate_hz), **(meta or {})}
         self.n_samples = int(self._idx[-1]) + 1
-        self.t_last_s = self.t_first_s + (self.n_samples - 1) / self.rate_hz
+        self.t_last_s = self.t_first_s + (self.n_samples - 1) / self.sample_rate_hz
         self._max_abs_dph = max_abs_dph
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, plausibility.COUNTER: 0,
                          **({"null_samples": 0} if np.isnan(self._rate).any() else {}), **(counters or {})}
@@ -100,7 +100,7 @@ class StampedSource:
             stop = min(start + n, self.n_samples)
             a, b = np.searchsorted(idx, [start, stop])
             at = idx[a:b] - start
-            t = self.t_first_s + np.arange(start, stop) / self.rate_hz
+            t = self.t_first_s + np.arange(start, stop) / self.sample_rate_hz
             rate = np.full(stop - start, np.nan)
             rate[at] = self._rate[a:b]
             aux = {}
@@ -132,7 +132,7 @@ class StampedSource:
     def to_recording(self) -> Recording:
         """The present, plausible samples on their grid times (gaps stay time gaps), with
         ``sample_rate_hz`` metadata: what ``read_replay_log`` gives for the same data."""
-        t = self.t_first_s + self._idx / self.rate_hz
+        t = self.t_first_s + self._idx / self.sample_rate_hz
         rate, _ = plausibility.gate(self._rate, self._max_abs_dph)
         keep = np.isfinite(rate)
         return Recording(t[keep], rate[keep], {k: v[keep] for k, v in self._aux.items()}, dict(self.meta),
