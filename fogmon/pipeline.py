@@ -109,17 +109,6 @@ def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int |
 
 
 # ----------------------------------------------------------------------------- helpers
-def slice_block(b: Block, start: int, stop: int) -> Block:
-    """Samples ``start:stop`` of a block, with the events that fall in their time span
-    (the first slice also takes events before it, the last those after it)."""
-    n = len(b)
-    t0 = b.t_s[start] if start > 0 else -math.inf
-    t1 = b.t_s[stop] if stop < n else math.inf
-    ev = tuple(e for e in b.events if t0 <= e.t_s < t1)
-    return Block(b.t_s[start:stop], b.rate_dph[start:stop], b.valid[start:stop],
-                 {k: v[start:stop] for k, v in b.aux.items()}, ev)
-
-
 class ReplayProgress:
     """A replay's progress bar on ``stream`` (default stderr, tqdm): recording seconds
     done of ``total_s`` and the speed in x real time. Shown only when ``enabled`` (the
@@ -259,7 +248,7 @@ class Pipeline:
         if cfg.duration_s is not None:
             stop = int(np.searchsorted(big.t_s, self.t_origin + cfg.duration_s - 0.5 / sample_rate_hz, side="right"))
             if stop < len(big):
-                big, self.done = slice_block(big, 0, stop), True
+                big, self.done = big.slice(0, stop), True
                 if not stop:
                     return False
         for b_piece, b in _at_seams(
@@ -694,7 +683,7 @@ def _paced(b: Block, realtime: float | None, sample_rate_hz: float):
         return
     step = max(1, int(0.1 * realtime * sample_rate_hz))
     for i in range(0, len(b), step):
-        yield slice_block(b, i, min(i + step, len(b)))
+        yield b.slice(i, min(i + step, len(b)))
 
 
 def _at_seams(blocks: Iterable[Block], t_origin: float, sample_rate_hz: float, piece_n: int | None):
@@ -707,4 +696,4 @@ def _at_seams(blocks: Iterable[Block], t_origin: float, sample_rate_hz: float, p
         k = np.rint((b.t_s - t_origin) * sample_rate_hz).astype(np.int64) // piece_n
         cuts = [0, *(np.flatnonzero(np.diff(k)) + 1), len(b)]
         for i, j in zip(cuts[:-1], cuts[1:], strict=True):
-            yield int(k[i]) + 1, (b if j - i == len(b) else slice_block(b, i, j))
+            yield int(k[i]) + 1, (b if j - i == len(b) else b.slice(i, j))

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fogmon.block import Block
+from fogmon.block import Block, axis_aux
 from fogmon.errors import FogmonError
 
 MAGIC = "# fogmon replay log v1"
@@ -29,7 +29,9 @@ REQUIRED = ("time_s", "rate_dph")
 class Recording:
     """A whole recording in memory: ``t_s`` (s), ``rate_dph`` (deg/h), auxiliary
     channels by column name, ``meta`` from ``# key: value`` lines, and how many bad
-    rows were skipped when reading tolerantly."""
+    rows were skipped when reading tolerantly. Several axes: ``axes`` names them and
+    ``rate_dph`` has one column per axis (aux as in fogmon.block); ``for_axis(name)``
+    is the one-axis recording every one-axis analysis takes."""
 
     t_s: np.ndarray
     rate_dph: np.ndarray
@@ -37,6 +39,7 @@ class Recording:
     meta: dict[str, str] = field(default_factory=dict)
     path: str | None = None
     skipped_rows: int = 0
+    axes: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -58,6 +61,22 @@ class Recording:
         """Index of every sample on the uniform grid t0 + k / fs (``grid_positions``)."""
         return grid_positions(self.t_s, float(self.t_s[0]) if len(self.t_s) else 0.0, self.sample_rate_hz, self.name)
 
+    def axis_names(self) -> tuple[str, ...]:
+        """The axes to analyse: ``axes``, or ("",) for a one-axis recording."""
+        return self.axes or ("",)
+
+    def for_axis(self, name: str) -> Recording:
+        """The one-axis recording of axis ``name`` (its rate column, its aux as
+        fogmon.block.axis_aux gives them, ``meta['axis']`` set); a one-axis recording
+        is returned as it is."""
+        if not self.axes:
+            return self
+        if name not in self.axes:
+            raise FogmonError(f"{self.name}: no axis {name!r} (axes: {', '.join(self.axes)})")
+        j = self.axes.index(name)
+        return Recording(self.t_s, self.rate_dph[:, j], axis_aux(self.aux, self.axes, name),
+                         {**self.meta, "axis": name}, self.path, self.skipped_rows)
+
     def to_block(self) -> Block:
         """The recording on its uniform sample grid: missing samples (time gaps) become
         invalid placeholders (rate and aux NaN), so gaps are never joined."""
@@ -66,16 +85,17 @@ class Recording:
         sample_rate_hz = self.sample_rate_hz
         t = self.t_s[0] + np.arange(n) / sample_rate_hz if n else np.zeros(0)
         if n == len(idx):
-            return Block.make(self.t_s.copy(), self.rate_dph.copy(), aux={k: v.copy() for k, v in self.aux.items()})
+            return Block.make(self.t_s.copy(), self.rate_dph.copy(), aux={k: v.copy() for k, v in self.aux.items()},
+                              axes=self.axes)
         t[idx] = self.t_s
-        rate = np.full(n, np.nan)
+        rate = np.full((n, *self.rate_dph.shape[1:]), np.nan)
         rate[idx] = self.rate_dph
         aux = {}
         for k, v in self.aux.items():
             a = np.full(n, np.nan)
             a[idx] = v
             aux[k] = a
-        return Block.make(t, rate, aux=aux)
+        return Block.make(t, rate, aux=aux, axes=self.axes)
 
 
 #: bytes of whole lines parsed at a time (reading memory is a small multiple of this)
@@ -431,7 +451,8 @@ def append_replay_rows(fh, t_s, rate_dph, aux: dict | None = None) -> None:
     fh.write(buf.getvalue())
 
 
-def recording_from_arrays(t_s, rate_dph, aux=None, meta=None) -> Recording:
-    """A Recording from arrays (for notebooks and tests)."""
+def recording_from_arrays(t_s, rate_dph, aux=None, meta=None, axes: tuple[str, ...] = ()) -> Recording:
+    """A Recording from arrays (for notebooks and tests); with ``axes``, ``rate_dph``
+    is (n, len(axes))."""
     return Recording(np.asarray(t_s, float), np.asarray(rate_dph, float),
-                     {k: np.asarray(v, float) for k, v in (aux or {}).items()}, dict(meta or {}))
+                     {k: np.asarray(v, float) for k, v in (aux or {}).items()}, dict(meta or {}), axes=tuple(axes))

@@ -12,7 +12,7 @@ from fogmon.block import Block, Event
 from fogmon.cli.pipeline_options import parse_taus
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
-from fogmon.pipeline import PipelineConfig, default_window_s, run_pipeline, slice_block
+from fogmon.pipeline import PipelineConfig, default_window_s, run_pipeline
 from fogmon.sinks.base import COEFFICIENTS
 from fogmon.sinks.console import ConsoleSink, format_summary
 from fogmon.sources.pacing import Pacer
@@ -116,7 +116,7 @@ def test_events_pass_through_and_slice_keeps_them():
     assert [e.kind for e in sink.events_ if e.kind != "coef_jump"] == ["crc_error", "gap"]
     assert s.event_counts["crc_error"] == 1 and s.event_counts["gap"] == 1
     b = Block.make(t[:10], r[:10], events=[Event(t[3], "gap", "x")])
-    assert slice_block(b, 0, 3).events == () and len(slice_block(b, 3, 10).events) == 1
+    assert b.slice(0, 3).events == () and len(b.slice(3, 10).events) == 1
 
 
 def test_console_summary_lists_adev_bounds_and_coefficients():

@@ -15,7 +15,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
-from fogmon.pipeline import PipelineConfig, slice_block, window_and_hop
+from fogmon.pipeline import PipelineConfig, window_and_hop
 from fogmon.sinks.base import COEFFICIENTS, Sink
 from fogmon.sources.options import SourceOptions
 
@@ -121,7 +121,7 @@ class _ChunkSource:
                 self.t0_s = float(b.t_s[0])
             a, z = max(self.first - pos, 0), min(self.stop - pos, len(b))
             if a < z:
-                part = b if (a, z) == (0, len(b)) else slice_block(b, a, z)
+                part = b if (a, z) == (0, len(b)) else b.slice(a, z)
                 lo, hi = max(self.own[0] - pos - a, 0), min(self.own[1] - pos - a, len(part))
                 if lo < hi:
                     self.own_samples += hi - lo

@@ -27,7 +27,7 @@ from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
-from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
+from fogmon.sources.grid import ErrorEvents, GridAssembler
 from fogmon.sources.live import LiveSource
 
 STALL_S = 0.5
@@ -189,7 +189,7 @@ def _push_segments(grid: GridAssembler, segs, events) -> Block:
         blocks.append(grid.push(frames, events if i == 0 else ()))
     if not blocks:
         return grid.push(Frames.empty(grid.aux_names), events)
-    return concat_blocks(blocks)
+    return Block.concat(blocks)
 
 
 class CanSource(LiveSource):

@@ -8,7 +8,8 @@ stream was continuous up to each frame: the bytes between the end of the previou
 frame and the start of this one that belong to no good frame (0 = continuous: garbage,
 CRC failures and truncated frames show here; the time base relies on it, see
 fogmon.sources.grid). ``frame_bytes`` is the protocol's frame length in bytes (0 =
-variable or unknown)."""
+variable or unknown). A multi-axis codec names its ``axes`` and gives ``rate_dph`` and
+``valid`` one column per axis, as fogmon.block.Block does."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -29,6 +30,7 @@ class Frames:
     aux: dict[str, np.ndarray] = field(default_factory=dict)
     skipped: np.ndarray | None = None
     frame_bytes: int = 0
+    axes: tuple[str, ...] = ()
 
     def skipped_bytes(self) -> np.ndarray:
         """``skipped`` as an int64 array (zeros when the codec does not report it)."""
@@ -38,14 +40,16 @@ class Frames:
         return len(self.seq)
 
     @staticmethod
-    def from_lists(seq, rate_dph, valid, aux: dict | None = None, skipped=None, frame_bytes: int = 0) -> Frames:
+    def from_lists(seq, rate_dph, valid, aux: dict | None = None, skipped=None, frame_bytes: int = 0,
+                   axes: tuple[str, ...] = ()) -> Frames:
+        shape = (-1, len(axes)) if axes else (-1,)
         return Frames(np.asarray(seq, dtype=np.int64).reshape(-1),
-                      np.asarray(rate_dph, dtype=np.float64).reshape(-1),
-                      np.asarray(valid, dtype=bool).reshape(-1),
+                      np.asarray(rate_dph, dtype=np.float64).reshape(shape),
+                      np.asarray(valid, dtype=bool).reshape(shape),
                       {k: np.asarray(v, dtype=np.float64).reshape(-1) for k, v in (aux or {}).items()},
                       None if skipped is None else np.asarray(skipped, dtype=np.int64).reshape(-1),
-                      int(frame_bytes))
+                      int(frame_bytes), tuple(axes))
 
     @staticmethod
-    def empty(aux_names=()) -> Frames:
-        return Frames.from_lists([], [], [], {k: [] for k in aux_names})
+    def empty(aux_names=(), axes: tuple[str, ...] = ()) -> Frames:
+        return Frames.from_lists([], [], [], {k: [] for k in aux_names}, axes=axes)

@@ -142,15 +142,6 @@ class GridAssembler:
         return self.t0_s + self.next_index / self.sample_rate_hz
 
 
-def concat_blocks(blocks: list[Block]) -> Block:
-    """Consecutive blocks of one grid as one block."""
-    if len(blocks) == 1:
-        return blocks[0]
-    return Block(np.concatenate([b.t_s for b in blocks]), np.concatenate([b.rate_dph for b in blocks]),
-                 np.concatenate([b.valid for b in blocks]),
-                 {k: np.concatenate([b.aux[k] for b in blocks]) for k in blocks[0].aux},
-                 tuple(e for b in blocks for e in b.events))
-
 
 class ErrorEvents:
     """Decoder error counters -> events: ``poll(t_s)`` returns one event per counter that

@@ -20,12 +20,13 @@ import queue
 import threading
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.sources.base import RawTap
 from fogmon.sources.frames import Frames
-from fogmon.sources.grid import ErrorEvents, GridAssembler, concat_blocks
+from fogmon.sources.grid import ErrorEvents, GridAssembler
 
 
 class LiveSource:
@@ -202,7 +203,7 @@ class LiveSource:
         """Everything consumed since the last block, as one block with its events (the
         lists are emptied)."""
         tail = self.grid.push(Frames.empty(self.aux_names), events + errors.poll(self.grid.t_next_s))
-        b = concat_blocks([*parts, tail]) if parts else tail
+        b = Block.concat([*parts, tail]) if parts else tail
         parts.clear()
         events.clear()
         return b
@@ -215,8 +216,8 @@ class LiveSource:
             return b, room == 0
         keep = len(b) + room
         self.grid.next_index += room
-        return Block(b.t_s[:keep], b.rate_dph[:keep], b.valid[:keep], {k: v[:keep] for k, v in b.aux.items()},
-                     tuple(e for e in b.events if keep and e.t_s <= b.t_s[keep - 1])), True
+        cut = b.slice(0, keep)
+        return replace(cut, events=tuple(e for e in b.events if keep and e.t_s <= b.t_s[keep - 1])), True
 
     def close(self) -> None:
         """Stop and release the device (thread-safe); ``blocks()`` then ends."""
