@@ -421,25 +421,32 @@ def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recordin
 
 
 def write_replay_log(path: str | os.PathLike, t_s, rate_dph, aux: dict | None = None,
-                     meta: dict | None = None) -> None:
+                     meta: dict | None = None, axes: tuple[str, ...] = ()) -> None:
     """Write a replay log v1. ``meta`` goes into ``# key: value`` lines (put
-    ``sample_rate_hz`` there). Values are written with 12 significant digits."""
+    ``sample_rate_hz`` there). Values are written with 12 significant digits. With
+    ``axes``, ``rate_dph`` is (n, len(axes)), written as ``rate_<axis>_dph`` columns."""
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
-        write_replay_header(fh, list((aux or {}).keys()), meta)
+        write_replay_header(fh, list((aux or {}).keys()), meta, axes)
         append_replay_rows(fh, t_s, rate_dph, aux)
 
 
-def write_replay_header(fh, aux_names: list[str], meta: dict | None = None) -> None:
+def rate_columns(axes: tuple[str, ...]) -> list[str]:
+    """The rate column names: ``rate_dph`` for one axis, ``rate_<axis>_dph`` for several."""
+    return [f"rate_{a}_dph" for a in axes] if axes else ["rate_dph"]
+
+
+def write_replay_header(fh, aux_names: list[str], meta: dict | None = None, axes: tuple[str, ...] = ()) -> None:
     """Header of a replay log: magic line, metadata, column names."""
     fh.write(MAGIC + "\n")
     for k, v in (meta or {}).items():
         fh.write(f"# {k}: {v}\n")
-    fh.write(",".join(["time_s", "rate_dph", *aux_names]) + "\n")
+    fh.write(",".join(["time_s", *rate_columns(axes), *aux_names]) + "\n")
 
 
 def append_replay_rows(fh, t_s, rate_dph, aux: dict | None = None) -> None:
-    """Append rows (same column order as the header). Non-finite values are not
-    allowed in a replay log: drop invalid samples before calling."""
+    """Append rows (same column order as the header; a 2-D ``rate_dph`` gives one
+    column per axis). Non-finite values are not allowed in a replay log: drop invalid
+    samples before calling."""
     cols = [np.asarray(t_s, float), np.asarray(rate_dph, float)]
     cols += [np.asarray(a, float) for a in (aux or {}).values()]
     if not len(cols[0]):
