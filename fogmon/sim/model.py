@@ -28,7 +28,7 @@ import math
 import os
 import tomllib
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from itertools import pairwise
 
 import numpy as np
@@ -229,22 +229,42 @@ class Noise:
 
 @dataclass
 class Effect:
-    """A physical effect: ``kind`` from EFFECT_KINDS and its parameters by name."""
+    """A physical effect: ``kind`` from EFFECT_KINDS and its parameters by name; ``axes``
+    the axes it acts on (empty: every axis)."""
 
     kind: str
     params: dict = field(default_factory=dict)
+    axes: tuple[str, ...] = ()
 
 
 @dataclass
 class SensorModel:
     """A simulated gyro: sample rate (Hz), constant bias (deg/h), IEEE-952 noise,
-    effects, and free-form ``meta`` strings (the optional [meta] table)."""
+    effects, and free-form ``meta`` strings (the optional [meta] table). Several axes:
+    ``axis_noise`` holds each axis's [noise.<axis>] coefficients (``noise`` is then the
+    [noise] defaults they override); ``for_axis(name)`` is one axis's model."""
 
     sample_rate_hz: float
     bias_dph: float = 0.0
     noise: Noise = field(default_factory=Noise)
     effects: list[Effect] = field(default_factory=list)
     meta: dict[str, str] = field(default_factory=dict)
+    axis_noise: dict[str, Noise] = field(default_factory=dict)
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        """The axes the model names ([noise.<axis>] tables); () for a one-axis model or
+        one whose noise is the same on every axis."""
+        return tuple(self.axis_noise)
+
+    def for_axis(self, name: str) -> SensorModel:
+        """The one-axis model of axis ``name``: its noise, the effects that act on it.
+        A model without axis tables gives the same noise on every axis."""
+        if self.axis_noise and name not in self.axis_noise:
+            raise FogmonError(f"the model has no [noise.{name}] table (its axes: {', '.join(self.axes)})")
+        effects = [Effect(e.kind, e.params) for e in self.effects if not e.axes or name in e.axes]
+        return SensorModel(self.sample_rate_hz, self.bias_dph, self.axis_noise.get(name, self.noise), effects,
+                           dict(self.meta))
 
 
 def _close(key: str, options) -> str:
@@ -351,8 +371,20 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
     bias = _number(model.bias_dph, f"{where}: [sensor] bias_dph")
     noise = Noise(**{f.name: _number(getattr(model.noise, f.name), f"{where}: [noise] {f.name}", ">=0")
                      for f in fields(Noise)})
-    effects = [validate_effect(e.kind, e.params, f"{where}: [[effect]] #{i + 1}")
-               for i, e in enumerate(model.effects)]
+    axis_noise = {}
+    for a, nz in model.axis_noise.items():
+        _check_axis_name(a, f"{where}: [noise.{a}]")
+        axis_noise[a] = Noise(**{f.name: _number(getattr(nz, f.name), f"{where}: [noise.{a}] {f.name}", ">=0")
+                                 for f in fields(Noise)})
+    effects = []
+    for i, e in enumerate(model.effects):
+        at = f"{where}: [[effect]] #{i + 1}"
+        for a in e.axes:
+            _check_axis_name(a, f"{at}: axes")
+            if axis_noise and a not in axis_noise:
+                raise FogmonError(f"{at}: axes names {a!r}, which has no [noise.{a}] table "
+                                  f"(axes: {', '.join(axis_noise)})")
+        effects.append(replace(validate_effect(e.kind, e.params, at), axes=tuple(e.axes)))
     for i, e in enumerate(effects):
         if e.kind == "bandwidth" and e.params["cutoff_hz"] >= sample_rate_hz / 2:
             raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
@@ -363,7 +395,14 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
                     raise FogmonError(f"{where}: [[effect]] #{i + 1} (vibration_lines): line {j + 1} at "
                                       f"{f:g} Hz with bandwidth {bw:g} Hz must lie between 0 and the Nyquist "
                                       f"frequency {sample_rate_hz / 2:g} Hz (freq_hz +- bandwidth_hz/2)")
-    return SensorModel(sample_rate_hz, bias, noise, effects, {str(k): str(v) for k, v in model.meta.items()})
+    return SensorModel(sample_rate_hz, bias, noise, effects, {str(k): str(v) for k, v in model.meta.items()},
+                       axis_noise)
+
+
+def _check_axis_name(name: object, where: str) -> None:
+    """An axis name is letters and digits (it becomes part of column names)."""
+    if not (isinstance(name, str) and name.isascii() and name.isalnum()):
+        raise FogmonError(f"{where}: an axis name is letters and digits, got {name!r}")
 
 
 def _table(doc: dict, name: str, where: str) -> dict:
@@ -389,11 +428,16 @@ def model_from_dict(doc: dict, where: str = "model") -> SensorModel:
     for i, e in enumerate(effects):
         if not isinstance(e, dict) or "kind" not in e:
             raise FogmonError(f"{where}: [[effect]] #{i + 1}: missing key 'kind'")
-        params = {k: v for k, v in e.items() if k != "kind"}
-        elist.append(Effect(e["kind"], params))
+        params = {k: v for k, v in e.items() if k not in ("kind", "axes")}
+        axes = e.get("axes", [])
+        if not isinstance(axes, list) or not axes and "axes" in e:
+            raise FogmonError(f"{where}: [[effect]] #{i + 1}: axes must be a non-empty list of axis names, "
+                              f"got {axes!r}")
+        elist.append(Effect(e["kind"], params, tuple(axes)))
     meta = _table(doc, "meta", where)
-    model = SensorModel(sensor["sample_rate_hz"], sensor.get("bias_dph", 0.0),
-                        Noise(**{k: noise[k] for k in noise}), elist, meta)
+    shared, per_axis = noise
+    model = SensorModel(sensor["sample_rate_hz"], sensor.get("bias_dph", 0.0), Noise(**shared), elist, meta,
+                        {a: Noise(**t) for a, t in per_axis.items()})
     return validate_model(model, where)
 
 
@@ -409,21 +453,35 @@ def _sensor_table(doc: dict, where: str) -> dict:
     return sensor
 
 
-def _noise_table(doc: dict, where: str) -> dict:
-    """The [noise] table: every IEEE-952 term (NOISE_UNITS), nothing else."""
+def _noise_table(doc: dict, where: str) -> tuple[dict, dict[str, dict]]:
+    """The [noise] table: every IEEE-952 term (NOISE_UNITS), nothing else; or
+    [noise.<axis>] tables, each term of which overrides a [noise] one (every term must
+    then be given one way or the other). Returns (the shared terms, each axis's terms)."""
     if "noise" not in doc:
         raise FogmonError(f"{where}: no [noise] table: give {', '.join(NOISE_UNITS)} "
                           f"(IEEE-952 terms; 0.0 for a term the gyro does not have)")
     noise = _table(doc, "noise", where)
-    for k in noise:
+    shared = {k: v for k, v in noise.items() if not isinstance(v, dict)}
+    tables = {k: v for k, v in noise.items() if isinstance(v, dict)}
+    for k in shared:
         if k not in NOISE_UNITS:
             raise FogmonError(f"{where}: [noise] unknown key {k!r} (expected: "
-                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}){_close(k, NOISE_UNITS)}")
-    missing = [k for k in NOISE_UNITS if k not in noise]
-    if missing:
-        raise FogmonError(f"{where}: [noise] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
-                          f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
-    return noise
+                              f"{', '.join(f'{n} [{u}]' for n, u in NOISE_UNITS.items())}, or [noise.<axis>] "
+                              f"tables){_close(k, NOISE_UNITS)}")
+    per_axis = {}
+    for a, t in tables.items():
+        _check_axis_name(a, f"{where}: [noise.{a}]")
+        for k in t:
+            if k not in NOISE_UNITS:
+                raise FogmonError(f"{where}: [noise.{a}] unknown key {k!r} (expected: "
+                                  f"{', '.join(NOISE_UNITS)}){_close(k, NOISE_UNITS)}")
+        per_axis[a] = {**shared, **t}
+    for name, terms in ([("noise", shared)] if not tables else [(f"noise.{a}", t) for a, t in per_axis.items()]):
+        missing = [k for k in NOISE_UNITS if k not in terms]
+        if missing:
+            raise FogmonError(f"{where}: [{name}] missing {', '.join(f'{k} [{NOISE_UNITS[k]}]' for k in missing)}: "
+                              f"every IEEE-952 term is required (0.0 for a term the gyro does not have)")
+    return {k: shared.get(k, 0.0) for k in NOISE_UNITS}, per_axis
 
 
 def model_to_dict(model: SensorModel) -> dict:
@@ -434,8 +492,11 @@ def model_to_dict(model: SensorModel) -> dict:
         doc["meta"] = dict(model.meta)
     doc["sensor"] = {"sample_rate_hz": model.sample_rate_hz, "bias_dph": model.bias_dph}
     doc["noise"] = {f.name: getattr(model.noise, f.name) for f in fields(Noise)}
+    for a, nz in model.axis_noise.items():
+        doc["noise"][a] = {f.name: getattr(nz, f.name) for f in fields(Noise)}
     if model.effects:
-        doc["effect"] = [{"kind": e.kind, **e.params} for e in model.effects]
+        doc["effect"] = [{"kind": e.kind, **({"axes": list(e.axes)} if e.axes else {}), **e.params}
+                         for e in model.effects]
     return doc
 
 
