@@ -34,11 +34,13 @@ class Event:
 
     ``t_s`` is recording time in s; ``kind`` a short machine name (``gap``,
     ``crc_error``, ``disconnect``, ``reconnect``, ``coef_jump``...); ``message`` one
-    human-readable line."""
+    human-readable line; ``axis`` the axis it concerns ("" for the whole stream or a
+    one-axis one)."""
 
     t_s: float
     kind: str
     message: str
+    axis: str = ""
 
 
 @dataclass(frozen=True, slots=True)

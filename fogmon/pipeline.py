@@ -290,9 +290,9 @@ class Pipeline:
         if self.band is not None:
             self.watch = ModelWatch(self.band, tuple(first.aux))
             self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(tuple(first.aux), self.engine.window_n)
-        band = None if self.band is None else (self.band.lo_dph, self.band.median_dph, self.band.hi_dph)
+        bands = {} if self.band is None else {"": (self.band.lo_dph, self.band.median_dph, self.band.hi_dph)}
         info = StreamInfo(self.source.name, sample_rate_hz, self.window_s, self.hop_s, m / sample_rate_hz, aux_names,
-                          self.summary.analysed, band, self.config.model_alpha if band is not None else None)
+                          self.summary.analysed, bands, self.config.model_alpha if bands else None)
         for s in self.sinks:
             s.start(info)
         self.started = True

@@ -158,7 +158,7 @@ class _Collect(Sink):
     def start(self, info) -> None:
         self.tau_s = np.asarray(info.tau_s)
 
-    def frames(self, dadev, fit, t_end_s) -> None:
+    def frames(self, dadev, fit, t_end_s, axis: str = "") -> None:
         self.ends.append(np.asarray(dadev.end_index, np.int64))
         self.adev.append(np.asarray(dadev.adev_dph, np.float64))
         cols = {}

@@ -21,7 +21,8 @@ COEFFICIENTS = {name: coefficient_unit(name) for name in NAMES}
 @dataclass(frozen=True)
 class StreamInfo:
     """What sinks learn before the first block: source, sample rate (Hz), window/hop (s),
-    taus (s), auxiliary channel names."""
+    taus (s), auxiliary channel names, and the axes analysed (() for a one-axis stream;
+    each then has its own engine, fits and ``frames`` calls)."""
 
     source_name: str
     sample_rate_hz: float
@@ -31,10 +32,12 @@ class StreamInfo:
     aux_names: tuple[str, ...]
     #: what DAVAR analyses: "rate_dph", or "rate_dph - 3600 x rot_dps" (error vs reference rotation)
     analysed: str = "rate_dph"
-    #: with --model: the model's DADEV band at ``tau_s`` (lo, median, hi in deg/h; lo/hi at
-    #: the family-wise level of the live check) and that level (per window)
-    model_band: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: with --model: per axis ("" for a one-axis stream) the model's DADEV band at ``tau_s``
+    #: (lo, median, hi in deg/h; lo/hi at the family-wise level of the live check), and
+    #: that level (per window)
+    model_bands: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
     model_alpha: float | None = None
+    axes: tuple[str, ...] = ()
 
 
 @dataclass
@@ -90,9 +93,10 @@ class Sink:
     def block(self, block: Block) -> None:
         """The next samples (deg/h, s), on the source's grid."""
 
-    def frames(self, dadev: DadevResult, fit: NoiseFit, t_end_s: np.ndarray) -> None:
-        """Completed windows: their DadevResult (T rows), its NoiseFit (arrays over T) and
-        the recording time (s) of each window's last sample."""
+    def frames(self, dadev: DadevResult, fit: NoiseFit, t_end_s: np.ndarray, axis: str = "") -> None:
+        """Completed windows of axis ``axis`` ("" for a one-axis stream): their DadevResult
+        (T rows), its NoiseFit (arrays over T) and the recording time (s) of each window's
+        last sample."""
 
     def events(self, events: Sequence[Event]) -> None:
         """Events of the source (gaps, CRC errors, ...) and of the pipeline (jumps, motion)."""

@@ -477,9 +477,10 @@ class RerunSink(Sink):
         rec.log(CURVE, rp.loglog_transform(), static=True)
         rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
         self._band_alpha = info.model_alpha
-        if info.model_band is not None and len(tau):
+        band = info.model_bands.get("")
+        if band is not None and len(tau):
             lx = np.log10(tau)
-            lines = [np.column_stack([lx, np.log10(np.asarray(a, dtype=np.float64))]) for a in info.model_band]
+            lines = [np.column_stack([lx, np.log10(np.asarray(a, dtype=np.float64))]) for a in band]
             radii = np.array([rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)], dtype=np.float32)
             rec.log(f"{CURVE}/model_band", rr.LineStrips2D(lines, colors=[BAND_COLOUR], radii=radii), static=True)
 
@@ -510,7 +511,7 @@ class RerunSink(Sink):
             self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
                                   columns=rr.Scalars.columns(scalars=v[ok]))
 
-    def frames(self, dadev, fit, t_end_s: np.ndarray) -> None:
+    def frames(self, dadev, fit, t_end_s: np.ndarray, axis: str = "") -> None:
         import rerun as rr
 
         assert self.rec is not None, "the streams open with the first block"
