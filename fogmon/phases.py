@@ -1,0 +1,124 @@
+"""Operating phases of a run from its aux channels, and the noise coefficients per phase:
+the drilling engineer's session summary (docs/monitor.md).
+
+A window's state comes from the aux channels that say what the tool is doing: ``pumps``
+(mud pumps, 1 on / 0 off) and ``rot_dps`` (drill-string or turntable rotation, deg/s).
+A window is in a state when at least STATE_FRACTION of its valid aux samples are;
+otherwise it straddles a change (``transition``) and belongs to no phase. Consecutive
+windows in one state make a phase; each phase keeps the range (min..max over its windows)
+of every IEEE-952 coefficient the window fits identified. Runs without those channels
+have one state, ``steady``.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fogmon.davar.fit import NAMES
+
+#: A window is in a state when this fraction of its aux samples are.
+STATE_FRACTION = 0.9
+#: |rot_dps| above this (deg/s) is rotating (1 rpm = 6 deg/s; a stationary gyro reads Earth
+#: rate, 0.004 deg/s, and a rate table's settling stays well below it).
+ROTATING_DPS = 1.0
+#: ``pumps`` above this is on (the channel is 1 on / 0 off).
+PUMPS_ON = 0.5
+TRANSITION = "transition"
+STEADY = "steady"
+
+
+def sample_states(aux: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """The state name of every sample from ``pumps`` and ``rot_dps`` (None when the aux has
+    neither channel; "" where a channel is NaN)."""
+    parts = []
+    if "pumps" in aux:
+        p = np.asarray(aux["pumps"], dtype=float)
+        parts.append((np.where(p > PUMPS_ON, "pumps on", "pumps off"), np.isnan(p)))
+    if "rot_dps" in aux:
+        r = np.asarray(aux["rot_dps"], dtype=float)
+        parts.append((np.where(np.abs(r) > ROTATING_DPS, "rotating", "not rotating"), np.isnan(r)))
+    if not parts:
+        return None
+    names = parts[0][0].astype(object)
+    unknown = parts[0][1].copy()
+    for words, nan in parts[1:]:
+        names = names + ", " + words.astype(object)
+        unknown |= nan
+    names[unknown] = ""
+    return names
+
+
+def window_state(aux: Mapping[str, np.ndarray]) -> str:
+    """The state of a window from its aux samples: STEADY without state channels, the
+    state of at least STATE_FRACTION of its known samples, else TRANSITION."""
+    states = sample_states(aux)
+    if states is None:
+        return STEADY
+    known = states[states != ""]
+    if not len(known):
+        return TRANSITION
+    values, counts = np.unique(known.astype(str), return_counts=True)
+    k = int(np.argmax(counts))
+    return str(values[k]) if counts[k] >= STATE_FRACTION * len(known) else TRANSITION
+
+
+@dataclass
+class Phase:
+    """Consecutive windows in one state: the recording time (s) of the first and last
+    window's end, the number of windows, and per coefficient (fit.NAMES, IEEE-952 units)
+    the (min, max) of its identified values (absent when never identified)."""
+
+    state: str
+    t_first_end_s: float
+    t_last_end_s: float
+    windows: int = 0
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    def add(self, t_end_s: float, values: Mapping[str, float]) -> None:
+        self.t_last_end_s = t_end_s
+        self.windows += 1
+        for name, v in values.items():
+            lo, hi = self.ranges.get(name, (v, v))
+            self.ranges[name] = (min(lo, v), max(hi, v))
+
+
+class PhaseLog:
+    """The phases of a run, window by window (:meth:`frame`), and their summary."""
+
+    def __init__(self) -> None:
+        self.phases: list[Phase] = []
+        self.transitions = 0
+        self._broken = False  # a transition since the last phase's window: the next window starts a phase
+
+    def frame(self, t_end_s: float, aux: Mapping[str, np.ndarray], values: Mapping[str, float],
+              identifiable: Mapping[str, bool]) -> str:
+        """One window ending at ``t_end_s`` (s) with its aux samples and fitted coefficients
+        (name -> value in IEEE-952 units, and whether identified); returns its state."""
+        state = window_state(aux)
+        if state == TRANSITION:
+            self.transitions += 1
+            self._broken = True
+            return state
+        if not self.phases or self.phases[-1].state != state or self._broken:
+            self.phases.append(Phase(state, t_end_s, t_end_s))
+        kept = {n: float(values[n]) for n in NAMES if identifiable.get(n) and np.isfinite(values.get(n, np.nan))}
+        self.phases[-1].add(t_end_s, kept)
+        self._broken = False
+        return state
+
+    def summary(self) -> dict:
+        """Per state: the phases (time span of their window ends, windows), their number,
+        the windows, and the coefficient ranges over all its phases; windows straddling a
+        change of state (``transition_windows``) are in none."""
+        by_state: dict[str, dict] = {}
+        for p in self.phases:
+            s = by_state.setdefault(p.state, {"phases": [], "windows": 0, "ranges": {}})
+            s["phases"].append({"t_first_end_s": p.t_first_end_s, "t_last_end_s": p.t_last_end_s,
+                                "windows": p.windows, "ranges": dict(p.ranges)})
+            s["windows"] += p.windows
+            for name, (lo, hi) in p.ranges.items():
+                a, b = s["ranges"].get(name, (lo, hi))
+                s["ranges"][name] = (min(a, lo), max(b, hi))
+        return {"states": by_state, "transition_windows": self.transitions}

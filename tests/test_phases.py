@@ -1,0 +1,37 @@
+"""Operating phases from pumps/rotation and the coefficient ranges per phase."""
+import numpy as np
+
+from fogmon.phases import STEADY, TRANSITION, PhaseLog, window_state
+
+
+def aux(pumps, rot_dps, n=100):
+    return {"pumps": np.full(n, float(pumps)), "rot_dps": np.full(n, float(rot_dps))}
+
+
+def test_window_state_names_pumps_and_rotation_and_needs_a_clear_majority():
+    assert window_state(aux(1, 720)) == "pumps on, rotating"
+    assert window_state(aux(0, 0.004)) == "pumps off, not rotating"      # Earth rate is not rotating
+    assert window_state({"temp_c": np.zeros(5)}) == STEADY
+    mixed = {"pumps": np.r_[np.ones(85), np.zeros(15)]}
+    assert window_state(mixed) == TRANSITION
+    mostly = {"pumps": np.r_[np.ones(95), np.zeros(5)], "vib_g": np.zeros(100)}
+    assert window_state(mostly) == "pumps on"
+    assert window_state({"pumps": np.full(10, np.nan)}) == TRANSITION
+
+
+def test_phases_split_at_every_change_and_transition_and_keep_identified_ranges():
+    log = PhaseLog()
+    ident = {"N_dpsh": True, "B_dph": True, "K_dphsh": False}
+    seq = [(aux(1, 720), 0.03), (aux(1, 720), 0.05), ({"pumps": np.r_[np.ones(50), np.zeros(50)],
+                                                      "rot_dps": np.zeros(100)}, 9.9),
+           (aux(0, 0), 0.02), (aux(0, 0), 0.021), (aux(1, 720), 0.04)]
+    states = [log.frame(60.0 * (i + 1), a, {"N_dpsh": n, "B_dph": 0.01, "K_dphsh": 5.0}, ident)
+              for i, (a, n) in enumerate(seq)]
+    assert states[2] == TRANSITION
+    s = log.summary()
+    assert s["transition_windows"] == 1
+    drilling = s["states"]["pumps on, rotating"]
+    assert len(drilling["phases"]) == 2 and drilling["windows"] == 3
+    assert drilling["ranges"]["N_dpsh"] == (0.03, 0.05) and "K_dphsh" not in drilling["ranges"]
+    static = s["states"]["pumps off, not rotating"]
+    assert static["phases"][0]["t_first_end_s"] == 240.0 and static["ranges"]["N_dpsh"] == (0.02, 0.021)
