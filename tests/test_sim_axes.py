@@ -123,6 +123,15 @@ def test_like_gives_the_time_base_and_each_axis_its_own_aux():
     assert np.allclose(sim.rate_dph[:, 2], like.aux["temp_c_z"])
     blocks = list(iter_simulate(SensorModel(100.0, 0.0, Noise(N_dpsh=0.1)), like=like, seed=1, chunk_samples=512))
     assert sum(int((~b.valid).sum()) for b in blocks) == 20 * 3 and blocks[0].axes == AXES
+    # streamed in chunks, the thermal drift looks back on each axis's own temperature
+    smooth = SensorModel(100.0, 0.0, Noise(), [Effect("thermal_drift", {**THERMAL.params, "smooth_s": 3.0,
+                                                                        "k1_pos": 50.0, "k1_neg": 50.0})],
+                         axis_noise={a: Noise() for a in AXES})
+    whole = simulate(smooth, like=like, seed=1)
+    streamed = np.concatenate([b.rate_dph[b.valid.all(axis=1)]
+                               for b in iter_simulate(smooth, like=like, seed=1, chunk_samples=333)])
+    assert np.allclose(streamed, whole.rate_dph, rtol=0, atol=1e-9)
+    assert np.ptp(whole.rate_dph[:, 2] - whole.rate_dph[:, 0]) > 10.0
 
 
 def test_one_axis_model_like_a_three_axis_recording_gives_every_axis_the_same_noise():
