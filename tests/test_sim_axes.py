@@ -80,9 +80,10 @@ def test_an_effect_on_z_changes_z_only():
 
 def test_noise_is_independent_across_axes_while_a_shared_vibration_sets_every_level():
     """One vib_g switching between 0.1 and 3 g every 10 s drives a vibration_noise
-    effect on every axis: the rates do not correlate (|r| < 4/sqrt(n)), the per-second
-    noise power of the axes follows the one vibration level together (r > 0.9;
-    0.96 or more over 20 seeds)."""
+    effect on every axis: the rates do not correlate (|r| < 4 standard deviations of r
+    for independent series with this variance profile, sqrt(sum w^2) / sum w with
+    w = N(t)^2), the per-second noise power of the axes follows the one vibration level
+    together (r > 0.9; 0.958 or more over 20 seeds)."""
     n, sample_rate_hz = 200000, 100.0
     t = np.arange(n) / sample_rate_hz
     vib = np.where(np.floor(t / 10.0) % 2 == 0, 0.1, 3.0)
@@ -91,8 +92,10 @@ def test_noise_is_independent_across_axes_while_a_shared_vibration_sets_every_le
     rec = simulate(m, aux={"vib_g": vib}, seed=2)
     r = rec.rate_dph
     power = (r.reshape(-1, 100, 3) ** 2).mean(axis=1)           # per-second mean square, per axis
+    w = (0.01 + 0.05 * vib) ** 2
+    sd_r = np.sqrt(np.sum(w ** 2)) / np.sum(w)                  # ~1.4 / sqrt(n) here
     for i, j in ((0, 1), (0, 2), (1, 2)):
-        assert abs(np.corrcoef(r[:, i], r[:, j])[0, 1]) < 4 / np.sqrt(n)
+        assert abs(np.corrcoef(r[:, i], r[:, j])[0, 1]) < 4 * sd_r
         assert np.corrcoef(power[:, i], power[:, j])[0, 1] > 0.9
     # and the level law N = N0 + gain vib_g holds on each axis
     hi = vib == 3.0
