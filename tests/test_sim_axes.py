@@ -219,3 +219,15 @@ def test_cli_axis_must_name_an_axis_of_the_run(tmp_path, capsys):
     assert cli_main(["sim", "--model", str(model), "--out", str(out), "--duration-s", "5", "--axis", "x"]) == 2
     assert "--axis x: the simulation has no such axis (its axes: p, q)" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_simulated_source_of_a_three_axis_model_counts_samples_not_axis_cells():
+    from fogmon.sources.simulated import SimulatedSource
+
+    like = three_axis_like()
+    src = SimulatedSource(SensorModel(100.0, 0.0, Noise(N_dpsh=0.05)), like=like, seed=2)
+    blocks = list(src.blocks())
+    assert src.axes == AXES and all(b.axes == AXES for b in blocks)
+    assert src.counters["samples"] == len(like) == 3980 and src.counters["samples_missing"] == 20
+    got = np.concatenate([b.rate_dph[b.valid.all(axis=1)] for b in blocks])
+    assert np.array_equal(got, simulate(SensorModel(100.0, 0.0, Noise(N_dpsh=0.05)), like=like, seed=2).rate_dph)
