@@ -209,6 +209,23 @@ def test_cli_like_three_axis_and_axis_selects_one(tmp_path, monkeypatch):
     assert meta_z["axis"] == "z" and head_z == "time_s,rate_dph,temp_c,vib_g"
     assert len(full) == len(z) == 3980 and np.array_equal(z[:, 0], full[:, 0])
     assert np.array_equal(z[:, 1], full[:, 3]) and np.array_equal(z[:, 2], full[:, 5])   # z's rate, temp_c_z
+    out5 = tmp_path / "s5.csv"
+    assert cli_main([*base, "--out", str(out5), "--duration-s", "5"]) == 0           # the first 5 s, all axes
+    _, head5, first = read_csv(out5)
+    assert head5 == head and np.array_equal(first, full[:500])
+
+
+def test_cli_orbit_scenario_three_axes(tmp_path):
+    """The in-orbit paper's three-axis FOG: one model, orbital rate on y, one temperature."""
+    model = tmp_path / "m.toml"
+    save_model(SensorModel(10.0, 0.0, Noise(N_dpsh=0.01)), model)
+    out = tmp_path / "orbit.csv"
+    assert cli_main(["sim", "--model", str(model), "--out", str(out), "--scenario", "orbit", "--duration-s", "600",
+                     "--set", "axes=xyz", "--seed", "1"]) == 0
+    meta, head, data = read_csv(out)
+    assert head == "time_s,rate_x_dph,rate_y_dph,rate_z_dph,temp_c,rot_dps_x,rot_dps_y,rot_dps_z"
+    assert meta["scenario"] == "orbit" and meta["scenario_set"] == "axes=xyz" and data.shape == (6000, 8)
+    assert np.allclose(data[:, 1:4].mean(axis=0), [0.0, 3600 * 360 / 5580, 0.0], atol=0.1)
 
 
 
