@@ -1,5 +1,7 @@
 """``fogmon sim``: simulate a sensor model (TOML, docs/formats.md) into a replay log
-(docs/formats.md), optionally --like a recording or driven by a --scenario."""
+(docs/formats.md), optionally --like a recording or driven by a --scenario. A
+multi-axis run (docs/sim.md) writes one rate_<axis>_dph column per axis; --axis NAME
+writes that axis alone as a one-axis log."""
 from __future__ import annotations
 
 import argparse
@@ -35,7 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", choices=("mwd", "chamber", "orbit"), help="generate the aux channels when there "
                    "is no recording: mwd = drilling run (stands, connections with pumps off, geothermal heating, "
                    "vibration, string rotation), chamber = thermal-chamber plateaus joined by 1 C/min ramps, "
-                   "orbit = 5580 s orbit heating and orbital rate; see docs/sim.md for every parameter")
+                   "orbit = 5580 s orbit heating and orbital rate; --set axes=xyz for a three-axis gyro; "
+                   "see docs/sim.md for every parameter")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario parameter (repeatable), e.g. --set rop_mph=10 --set stick_slip=true; "
                    "lists as --set plateaus_c=20,-40,60")
@@ -58,13 +61,13 @@ def _first_seconds(rec, duration_s: float):
     if not keep.any():
         raise FogmonError(f"--duration-s {duration_s:g} is shorter than one sample of {rec.name}")
     return Recording(rec.t_s[keep], rec.rate_dph[keep], {k: v[keep] for k, v in rec.aux.items()},
-                     dict(rec.meta), rec.path)
+                     dict(rec.meta), rec.path, axes=rec.axes)
 
 
 def run(args) -> int:
     from fogmon.sim.model import load_model
     from fogmon.sim.scenarios import make_scenario
-    from fogmon.sim.simulate import iter_simulate
+    from fogmon.sim.simulate import iter_simulate, simulated_axes
     from fogmon.sources.formats import read_recording
 
     check_outputs({"--out": args.out}, inputs=[args.model, args.like])
@@ -76,6 +79,7 @@ def run(args) -> int:
     seed = args.seed if args.seed is not None else int(np.random.SeedSequence().entropy)  # type: ignore[arg-type]
     meta = {"sensor": f"fogmon sim of {os.path.basename(args.model)}", "model": args.model, "seed": str(seed)}
     like = aux = aux_t = None
+    axes: tuple[str, ...] = ()
     duration = args.duration_s
     if args.like:
         like = read_recording(args.like, args)
@@ -93,7 +97,7 @@ def run(args) -> int:
         except MemoryError:
             raise FogmonError(f"--scenario {args.scenario}: not enough memory for its aux channels: lower "
                               f"sample_rate_hz or the duration") from None
-        aux, aux_t = sc.aux, sc.t_s
+        aux, aux_t, axes = sc.aux, sc.t_s, sc.axes
         meta.update(sc.meta)
         if args.set:
             meta["scenario_set"] = " ".join(args.set)
@@ -102,11 +106,27 @@ def run(args) -> int:
         raise FogmonError("give --duration-s, --like RECORDING or --scenario")
     else:
         n_expected = duration * model.sample_rate_hz
+    sim_axes = simulated_axes(model, like, axes)
+    if args.axis and sim_axes:
+        _check_axis(args.axis, sim_axes)
+        meta["axis"] = args.axis
     _check_space(args.out, n_expected)
     info: dict = {}
-    n = _write(args.out, iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info), meta, info)
-    print(f"fogmon sim: wrote {n} samples at {info['sample_rate_hz']} Hz to {args.out} (seed {seed})")
+    blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info, axes=axes)
+    if args.axis:
+        blocks = (b.axis(args.axis) for b in blocks)
+    n = _write(args.out, blocks, meta, info)
+    written = f"axis {args.axis}" if args.axis and sim_axes else "axes " + ", ".join(sim_axes) if sim_axes else ""
+    print(f"fogmon sim: wrote {n} samples{' of ' + written if written else ''} at {info['sample_rate_hz']} Hz to "
+          f"{args.out} (seed {seed})")
     return 0
+
+
+def _check_axis(axis: str, axes: tuple[str, ...]) -> None:
+    """``--axis`` must name an axis of a multi-axis run (every axis is simulated, the
+    one named is written as a one-axis log: its numbers are its column of the whole run)."""
+    if axis not in axes:
+        raise FogmonError(f"--axis {axis}: the simulation has no such axis (its axes: {', '.join(axes)})")
 
 
 def _write(out: str, blocks, meta: dict, info: dict) -> int:
@@ -114,14 +134,15 @@ def _write(out: str, blocks, meta: dict, info: dict) -> int:
     from iter_simulate gives the sample rate); no half-written file on any error.
     Returns the samples written."""
     from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.sim.simulate import present_samples
 
     first = next(blocks)
     n = 0
     try:
         with open(out, "w", encoding="utf-8", newline="\n") as fh:
-            write_replay_header(fh, list(first.aux), {"sample_rate_hz": info["sample_rate_hz"], **meta})
+            write_replay_header(fh, list(first.aux), {"sample_rate_hz": info["sample_rate_hz"], **meta}, first.axes)
             for b in itertools.chain([first], blocks):
-                v = b.valid
+                v = present_samples(b)
                 append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
                 n += int(v.sum())
     except BaseException:

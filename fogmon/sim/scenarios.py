@@ -6,6 +6,11 @@ simulator interpolates them onto the gyro's sample times.
 
 Every default is documented on its parameter class (industry ranges, docs/sim.md) and
 overridable: ``mwd_run(MwdParams(rop_mph=10))`` or, from the CLI, ``--set rop_mph=10``.
+
+Several axes: the parameter ``axes`` ("xyz": one axis per character) makes a scenario
+for a multi-axis gyro: ``Scenario.axes`` names them, channels every axis shares stay
+plain (temp_c, vib_g: one cause for every axis) and those that differ by axis become
+``<ch>_<axis>`` (the rotation each sensing axis sees: ``rot_dps_z``).
 """
 from __future__ import annotations
 
@@ -21,12 +26,19 @@ from fogmon.errors import FogmonError
 
 @dataclass
 class Scenario:
-    """Aux channels ``aux`` at times ``t_s`` (s), and facts for the metadata (``meta``,
-    e.g. connection times an analyst may want to mark)."""
+    """Aux channels ``aux`` at times ``t_s`` (s), facts for the metadata (``meta``,
+    e.g. connection times an analyst may want to mark), and the ``axes`` of a
+    multi-axis scenario (() for one axis)."""
 
     t_s: np.ndarray
     aux: dict[str, np.ndarray]
     meta: dict[str, str] = field(default_factory=dict)
+    axes: tuple[str, ...] = ()
+
+
+def _per_axis(name: str, values: list[np.ndarray], axes: str) -> dict[str, np.ndarray]:
+    """Channel ``name`` of each axis as ``<name>_<axis>`` (``values`` in the order of ``axes``)."""
+    return {f"{name}_{a}": v for a, v in zip(axes, values, strict=True)}
 
 
 def _lags(target: np.ndarray, dt_s: float, lags_s, start: float) -> np.ndarray:
@@ -68,6 +80,8 @@ class MwdParams:
     vib_spread: float = 0.3               #: relative (log-normal) fluctuation of vibration, 10 s correlation
     trip_s: float = 0.0                   #: s, trip out at the end of the run (0: none)
     trip_speed_mph: float = 300.0         #: m/h, tripping speed
+    axes: str = ""                        #: several gyros, one axis per character ("xyz"); "": one
+    spin_axis: str = "z"                  #: with axes: the one along the tool (the others see no rotation)
 
 
 @dataclass
@@ -81,6 +95,7 @@ class ChamberParams:
     lag1_s: float = 60.0                  #: s, air-to-case lag
     lag2_s: float = 300.0                 #: s, case-to-coil lag
     sample_rate_hz: float = 1.0                  #: Hz, aux sampling rate
+    axes: str = ""                        #: several gyros, one axis per character ("xyz"); "": one
 
 
 @dataclass
@@ -94,13 +109,17 @@ class OrbitParams:
     temp_mean_c: float = 20.0             #: deg C, mean sensor temperature
     temp_swing_c: float = 4.0             #: deg C, sunlit minus eclipse equilibrium
     lag_s: float = 900.0                  #: s, sensor thermal lag
-    axis_factor: float = 1.0              #: cosine of sensing axis to orbit normal
+    axis_factor: float = 1.0              #: one axis: cosine of its sensing axis to the orbit normal
     sample_rate_hz: float = 1.0                  #: Hz, aux sampling rate
+    axes: str = ""                        #: several gyros, one axis per character ("xyz"); "": one
+    axis_factors: tuple = (0.0, 1.0, 0.0)  #: with axes: each axis's cosine to the orbit normal, in axes order
 
 
 def mwd_run(p: MwdParams | None = None, seed: int | None = None) -> Scenario:
     """MWD aux channels: temp_c, rot_dps (string or bit speed, 1 rpm = 6 deg/s),
-    vib_g, depth_m, pumps (1 on / 0 off); meta lists connection start times."""
+    vib_g, depth_m, pumps (1 on / 0 off); meta lists connection start times. With
+    ``axes``: rot_dps_<axis>, the string speed on ``spin_axis`` and 0 on the others;
+    temperature and vibration shared."""
     p = MwdParams() if p is None else p
     dt = 1.0 / p.sample_rate_hz
     n = int(round(p.duration_s * p.sample_rate_hz))
@@ -129,13 +148,15 @@ def mwd_run(p: MwdParams | None = None, seed: int | None = None) -> Scenario:
     level = np.where(drilling, p.vib_drilling_g, np.where(tripping, p.vib_trip_g, p.vib_static_g))
     vib = level * np.exp(p.vib_spread * wobble - 0.5 * p.vib_spread ** 2)
     conns = [f"{c:g}" for c in np.arange(stand_s, drill_end, cycle)]
-    return Scenario(t, {"temp_c": temp, "rot_dps": 6.0 * rpm, "vib_g": vib, "depth_m": depth,
-                        "pumps": drilling.astype(float)},
-                    {"scenario": "mwd", "connections_s": " ".join(conns)})
+    rot = {"rot_dps": 6.0 * rpm} if not p.axes else _per_axis(
+        "rot_dps", [6.0 * rpm if a == p.spin_axis else np.zeros(n) for a in p.axes], p.axes)
+    return Scenario(t, {"temp_c": temp, **rot, "vib_g": vib, "depth_m": depth, "pumps": drilling.astype(float)},
+                    {"scenario": "mwd", "connections_s": " ".join(conns)}, tuple(p.axes))
 
 
 def thermal_chamber(p: ChamberParams | None = None, seed: int | None = None) -> Scenario:
-    """Chamber cycle aux channels: temp_c (sensor), chamber_c (air), rot_dps = 0."""
+    """Chamber cycle aux channels: temp_c (sensor), chamber_c (air), rot_dps = 0; the
+    same for every axis of ``axes``."""
     p = ChamberParams() if p is None else p
     pts_t, pts_c = [0.0], [float(p.plateaus_c[0])]
     for c in p.plateaus_c[1:]:
@@ -150,20 +171,24 @@ def thermal_chamber(p: ChamberParams | None = None, seed: int | None = None) -> 
     air = np.interp(t, pts_t, pts_c)
     temp = _lags(air, dt, (p.lag1_s, p.lag2_s), pts_c[0])
     return Scenario(t, {"temp_c": temp, "chamber_c": air, "rot_dps": np.zeros(len(t))},
-                    {"scenario": "chamber", "plateaus_c": " ".join(f"{c:g}" for c in p.plateaus_c)})
+                    {"scenario": "chamber", "plateaus_c": " ".join(f"{c:g}" for c in p.plateaus_c)}, tuple(p.axes))
 
 
 def orbit(p: OrbitParams | None = None, seed: int | None = None) -> Scenario:
     """Orbit aux channels: temp_c (sunlit/eclipse through a lag), rot_dps (orbital rate
-    360/period deg/s times axis_factor)."""
+    360/period deg/s times axis_factor). With ``axes`` (a three-axis unit, as in the
+    in-orbit evaluation): rot_dps_<axis>, the orbital rate times that axis's entry of
+    ``axis_factors``; one temperature for every axis."""
     p = OrbitParams() if p is None else p
     dt = 1.0 / p.sample_rate_hz
     t = np.arange(int(round(p.duration_s * p.sample_rate_hz))) * dt
     eclipse = np.mod(t, p.period_s) >= (1.0 - p.eclipse_fraction) * p.period_s
     sun = p.temp_mean_c + p.temp_swing_c * (np.where(eclipse, 0.0, 1.0) - (1.0 - p.eclipse_fraction))
     temp = _lags(sun, dt, (p.lag_s,), p.temp_mean_c)
-    rot = np.full(len(t), 360.0 / p.period_s * p.axis_factor)
-    return Scenario(t, {"temp_c": temp, "rot_dps": rot}, {"scenario": "orbit", "period_s": f"{p.period_s:g}"})
+    orbital_dps = 360.0 / p.period_s
+    rot = {"rot_dps": np.full(len(t), orbital_dps * p.axis_factor)} if not p.axes else _per_axis(
+        "rot_dps", [np.full(len(t), orbital_dps * c) for c in p.axis_factors], p.axes)
+    return Scenario(t, {"temp_c": temp, **rot}, {"scenario": "orbit", "period_s": f"{p.period_s:g}"}, tuple(p.axes))
 
 
 #: name -> (generator, parameter class)
@@ -173,8 +198,13 @@ SCENARIOS: dict[str, tuple[Callable[..., Scenario], type]] = {
 
 def _parse_value(name: str, key: str, text: str, default):
     """The text value of parameter ``key`` of scenario ``name``, of the type of its
-    ``default`` (bool, tuple of floats, float), finite; a one-line FogmonError if not."""
+    ``default`` (bool, tuple of floats, float: finite; str: axis names, one per
+    character, letters and digits, none twice); a one-line FogmonError if not."""
     try:
+        if isinstance(default, str):
+            if not (text.isascii() and text.isalnum() and len(set(text)) == len(text)):
+                raise ValueError
+            return text
         if isinstance(default, bool):
             if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
                 raise ValueError
@@ -220,10 +250,22 @@ def scenario_params(name: str, overrides: dict[str, str], duration_s: float | No
     for k in ("sample_rate_hz", "lag1_s", "lag2_s", "lag_s", "period_s", "rop_mph", "stand_length_m", "ramp_c_per_min"):
         if k in known and getattr(params, k) <= 0:
             raise FogmonError(f"scenario {name}: parameter {k} must be > 0")
+    _check_axes(name, params)
     if "duration_s" in known and params.duration_s * params.sample_rate_hz < 2:
         raise FogmonError(f"scenario {name}: duration_s {params.duration_s:g} s holds fewer than 2 samples at "
                           f"sample_rate_hz {params.sample_rate_hz:g} Hz")
     return params
+
+
+def _check_axes(name: str, p) -> None:
+    """The per-axis parameters must fit ``axes``."""
+    if not p.axes:
+        return
+    if getattr(p, "spin_axis", p.axes[0]) not in p.axes:
+        raise FogmonError(f"scenario {name}: spin_axis {p.spin_axis!r} is not one of axes {p.axes!r}")
+    if len(getattr(p, "axis_factors", p.axes)) != len(p.axes):
+        raise FogmonError(f"scenario {name}: axis_factors needs one cosine per axis of {p.axes!r}, "
+                          f"got {len(p.axis_factors)}")
 
 
 def make_scenario(name: str, overrides: dict[str, str] | None = None, duration_s: float | None = None,

@@ -20,15 +20,26 @@ Time base and aux channels come from, in order of precedence:
 Random streams: one SeedSequence(seed) spawns an independent stream per term (Q, N,
 B, K, then one per effect), so adding an effect does not change the other terms'
 realization. ``seed=None`` picks fresh entropy and reports it in ``meta['seed']``.
+
+Several axes (the model's [noise.<axis>] tables, else the axes of ``like``, else the
+``axes`` asked for, e.g. a scenario's): every axis is simulated as the one-axis gyro
+``model.for_axis(axis)`` (its noise, the effects that act on it) on the shared time
+base, seeing the aux channels ``fogmon.block.axis_aux`` gives it (shared ones and its
+own ``<ch>_<axis>``). SeedSequence(seed) first spawns one child per axis, which then
+spawns that axis's term streams as above: the noise of different axes is independent,
+while a shared aux channel is a common cause (one ``vib_g`` sets the white-noise level
+of every axis, one ``temp_c`` drives every axis's thermal drift). A one-axis run keeps
+the streams above, so its output for a given seed is what it always was.
 """
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from fogmon.block import Block
+from fogmon.block import Block, axis_aux
 from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
@@ -119,23 +130,27 @@ class _Plan:
         return t, aux, present
 
 
-def _check_aux(model: SensorModel, plan: _Plan) -> None:
-    have = set(plan.src_aux)
+def _check_aux(model: SensorModel, have: set[str], axis: str = "") -> None:
+    """FogmonError when an effect of ``model`` needs an aux channel not in ``have``
+    (the channels axis ``axis`` sees; "" for a one-axis run)."""
+    on = f" on axis {axis}" if axis else ""
     for i, e in enumerate(model.effects):
         need = EFFECT_KINDS[e.kind].aux
         if need and need not in have:
-            raise FogmonError(f"model effect #{i + 1} ({e.kind}) needs the aux channel {need!r}, which the "
+            raise FogmonError(f"model effect #{i + 1} ({e.kind}){on} needs the aux channel {need!r}, which the "
                               f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate --like a "
                               f"recording with that column or use a --scenario")
 
 
 class _Parts:
-    """The terms of the simulated rate, built once per run from the model (random
-    generators seeded from ``rngs``: Q, N, B, K, then one per effect)."""
+    """The terms of one axis's simulated rate, built once per run from its one-axis
+    model (random generators seeded from ``rngs``: Q, N, B, K, then one per effect);
+    ``view`` gives the aux channels the axis sees from all of them."""
 
-    def __init__(self, model: SensorModel, plan: _Plan, rngs: list[np.random.Generator]) -> None:
+    def __init__(self, model: SensorModel, plan: _Plan, rngs: list[np.random.Generator],
+                 view: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] = dict) -> None:
         sample_rate_hz, nz = plan.sample_rate_hz, model.noise
-        self.model, self.plan = model, plan
+        self.model, self.plan, self.view = model, plan, view
         self.q = WhiteAngle(nz.Q_arcsec, sample_rate_hz, rngs[0]) if nz.Q_arcsec > 0 else None
         self.white = WhiteRate(sample_rate_hz, rngs[1])
         self.levels = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "white_level"]
@@ -150,9 +165,11 @@ class _Parts:
         #: samples before a chunk that mean-rate effects look back on
         self.back = int(math.ceil(max([fx.lookback_s(e) for e in self.means] + [0.0]) * sample_rate_hz)) + 2
 
-    def rate_dph(self, k0: int, k1: int, t: np.ndarray, aux: dict[str, np.ndarray]) -> np.ndarray:
-        """The rate (deg/h) of grid samples ``k0:k1`` at times ``t`` (s) with ``aux``."""
+    def rate_dph(self, k0: int, k1: int, t: np.ndarray, all_aux: dict[str, np.ndarray]) -> np.ndarray:
+        """The rate (deg/h) of grid samples ``k0:k1`` at times ``t`` (s) with the aux
+        channels ``all_aux`` (this axis sees ``view(all_aux)``)."""
         model, nz, n = self.model, self.model.noise, k1 - k0
+        aux = self.view(all_aux)
         rate = np.full(n, model.bias_dph)
         if "rot_dps" in aux:
             rate += 3600.0 * aux["rot_dps"]
@@ -168,7 +185,10 @@ class _Parts:
             rate += ramp_dph(nz.R_dphh, t - self.plan.t0)
         if self.means:
             kb = max(0, k0 - self.back)
-            te, auxe, _ = self.plan.chunk(kb, k1) if kb < k0 else (t, aux, None)
+            te, auxe = t, aux
+            if kb < k0:
+                te, back_aux, _ = self.plan.chunk(kb, k1)
+                auxe = self.view(back_aux)
             for e in self.means:
                 rate += fx.mean_rate_dph(e, te, auxe, self.plan.sample_rate_hz)[k0 - kb:]
         for f in self.filters:
@@ -176,43 +196,79 @@ class _Parts:
         return rate
 
 
+def simulated_axes(model: SensorModel, like: Recording | None = None, axes: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """The axes a simulation has: the model's [noise.<axis>] tables, else the axes of
+    ``like``, else ``axes`` (a scenario's); () for a one-axis run."""
+    return model.axes or (like.axes if like is not None else ()) or tuple(axes)
+
+
+def _axis_parts(model: SensorModel, plan: _Plan, ss: np.random.SeedSequence, axes: tuple[str, ...],
+                named: tuple[str, ...]) -> list[_Parts]:
+    """One _Parts per axis of ``axes``: its one-axis model, its own child of ``ss``, the
+    aux channels it sees (``axis_aux`` among every axis ``named`` by model, input or caller)."""
+    parts = []
+    for a, child in zip(axes, ss.spawn(len(axes)), strict=True):
+        one = model.for_axis(a)
+        view = functools.partial(axis_aux, axes=named, name=a)
+        _check_aux(one, set(view(plan.src_aux)), a)
+        parts.append(_Parts(one, plan, [np.random.default_rng(c) for c in child.spawn(4 + len(one.effects))], view))
+    return parts
+
+
 def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Recording | None = None,
                   aux: dict | None = None, seed: int | None = None, aux_t_s=None,
-                  chunk_samples: int = CHUNK_SAMPLES, meta_out: dict | None = None) -> Iterator[Block]:
+                  chunk_samples: int = CHUNK_SAMPLES, meta_out: dict | None = None,
+                  axes: tuple[str, ...] = ()) -> Iterator[Block]:
     """Yield the simulation as Blocks of at most ``chunk_samples`` samples (t_s in s,
     rate_dph in deg/h, aux channels). Infinite when neither a duration, a recording nor
-    aux channels bound it. ``meta_out`` (a dict) receives sample_rate_hz and seed."""
+    aux channels bound it. ``meta_out`` (a dict) receives sample_rate_hz and seed.
+    Several axes (``simulated_axes``; ``axes`` names them when neither the model nor
+    ``like`` does): Blocks with ``axes`` and one rate column per axis."""
     model = validate_model(model)
     if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
     plan = _Plan(model, duration_s, like, aux, aux_t_s)
-    _check_aux(model, plan)
+    sim_axes = simulated_axes(model, like, axes)
     ss = np.random.SeedSequence(seed)
     if meta_out is not None:
         meta_out.update(sample_rate_hz=f"{plan.sample_rate_hz:g}", seed=str(ss.entropy))
-    parts = _Parts(model, plan, [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))])
+    if sim_axes:
+        named = tuple(dict.fromkeys((*sim_axes, *(like.axes if like is not None else ()), *axes)))
+        parts = _axis_parts(model, plan, ss, sim_axes, named)
+    else:
+        _check_aux(model, set(plan.src_aux))
+        parts = [_Parts(model, plan, [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))])]
     k0 = 0
     while plan.n is None or k0 < plan.n:
         k1 = k0 + chunk_samples if plan.n is None else min(plan.n, k0 + chunk_samples)
         t, aux_c, present = plan.chunk(k0, k1)
-        rate = parts.rate_dph(k0, k1, t, aux_c)
+        rate = np.column_stack([p.rate_dph(k0, k1, t, aux_c) for p in parts]) if sim_axes else \
+            parts[0].rate_dph(k0, k1, t, aux_c)
         rate[~present] = np.nan
         out_aux = {name: np.where(present, a, np.nan) for name, a in aux_c.items()}
-        yield Block(t, rate, present.copy(), out_aux)
+        valid = np.repeat(present[:, None], len(sim_axes), axis=1) if sim_axes else present.copy()
+        yield Block(t, rate, valid, out_aux, axes=sim_axes)
         k0 = k1
+
+
+def present_samples(block: Block) -> np.ndarray:
+    """The samples of a simulated block that exist (every axis of a sample shares its
+    presence: a gap of the input is a gap of every axis)."""
+    return block.valid if not block.axes else np.all(block.valid, axis=1)
 
 
 def simulate(model: SensorModel, duration_s: float | None = None, like: Recording | None = None,
              aux: dict | None = None, seed: int | None = None, aux_t_s=None,
-             meta: dict | None = None) -> Recording:
+             meta: dict | None = None, axes: tuple[str, ...] = ()) -> Recording:
     """The whole simulation as a Recording (valid samples only; ``meta`` gets
-    sample_rate_hz and seed added). Same numbers as concatenating ``iter_simulate``."""
+    sample_rate_hz and seed added). Same numbers as concatenating ``iter_simulate``;
+    several axes as there (a Recording with ``axes``)."""
     if like is None and not aux and duration_s is None:
         raise FogmonError("simulate needs a duration, a recording to simulate like, or aux channels")
     info: dict = {}
     ts, rs, auxs = [], [], {}  # type: ignore[var-annotated]
-    for blk in iter_simulate(model, duration_s, like, aux, seed, aux_t_s, meta_out=info):
-        v = blk.valid
+    for blk in iter_simulate(model, duration_s, like, aux, seed, aux_t_s, meta_out=info, axes=axes):
+        v = present_samples(blk)
         ts.append(blk.t_s[v])
         rs.append(blk.rate_dph[v])
         for name, a in blk.aux.items():
@@ -221,4 +277,5 @@ def simulate(model: SensorModel, duration_s: float | None = None, like: Recordin
     full_meta["sample_rate_hz"] = info["sample_rate_hz"]
     full_meta["seed"] = info["seed"]
     return Recording(np.concatenate(ts), np.concatenate(rs),
-                     {k: np.concatenate(v) for k, v in auxs.items()}, full_meta)
+                     {k: np.concatenate(v) for k, v in auxs.items()}, full_meta,
+                     axes=simulated_axes(model, like, axes))

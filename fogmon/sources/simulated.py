@@ -14,7 +14,7 @@ from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim.model import SensorModel, load_model
-from fogmon.sim.simulate import CHUNK_SAMPLES, iter_simulate
+from fogmon.sim.simulate import CHUNK_SAMPLES, iter_simulate, present_samples, simulated_axes
 from fogmon.sources.pacing import Pacer
 
 #: block length (s) when paced, as for the replay sources
@@ -24,7 +24,9 @@ PACED_BLOCK_S = 0.1
 class SimulatedSource:
     """Source yielding a simulation of ``model`` (a SensorModel or a model file path).
     Counters: ``samples`` (valid samples yielded), ``blocks``, ``samples_missing``
-    (gap placeholders copied from a ``like`` recording)."""
+    (gap placeholders copied from a ``like`` recording). ``axes``: the axes of a
+    multi-axis simulation (its blocks have them; () for one axis), a sample counted
+    once for all its axes."""
 
     def __init__(self, model: SensorModel | str, duration_s: float | None = None, like: Recording | None = None,
                  aux: dict | None = None, aux_t_s=None, seed: int | None = None, speed: float | None = None) -> None:
@@ -38,6 +40,7 @@ class SimulatedSource:
         self.seed = int(fresh) if seed is None else int(seed)  # type: ignore[arg-type]
         self.name = f"simulated gyro ({what}, seed {self.seed})"
         self.model = model
+        self.axes = simulated_axes(model, like)
         self.sample_rate_hz = float(like.sample_rate_hz if like is not None else model.sample_rate_hz)
         #: length in samples when bounded (None: endless), the pipeline sizes its default window with it
         self.n_samples = (int(round(duration_s * self.sample_rate_hz)) if duration_s is not None
@@ -55,7 +58,7 @@ class SimulatedSource:
             if self._closed:
                 return
             self._pacer.wait(float(b.t_s[0]))
-            nv = int(b.valid.sum())
+            nv = int(present_samples(b).sum())
             self.counters["samples"] += nv
             self.counters["samples_missing"] += len(b) - nv
             self.counters["blocks"] += 1
