@@ -47,6 +47,13 @@ def axis_aux(aux: dict[str, np.ndarray], axes: tuple[str, ...], name: str) -> di
     return {**shared, **own}
 
 
+def select_aux(aux: dict[str, np.ndarray], axes: tuple[str, ...], names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The aux channels of axes ``names`` of ``axes``: all but the own ``<ch>_<axis>``
+    channels of the axes left out."""
+    dropped = tuple("_" + a for a in axes if a not in names)
+    return {k: v for k, v in aux.items() if not dropped or not k.endswith(dropped)}
+
+
 @dataclass(frozen=True, slots=True)
 class Event:
     """Something that happened in a source or engine: gap, CRC error, reconnect, jump.
@@ -116,9 +123,8 @@ class Block:
         if len(names) == 1:
             return self.axis(names[0])
         cols = [self.axes.index(a) for a in names]
-        dropped = tuple("_" + a for a in self.axes if a not in names)
-        aux = {k: v for k, v in self.aux.items() if not dropped or not k.endswith(dropped)}
-        return Block(self.t_s, self.rate_dph[:, cols], self.valid[:, cols], aux, self.events, tuple(names))
+        return Block(self.t_s, self.rate_dph[:, cols], self.valid[:, cols], select_aux(self.aux, self.axes, names),
+                     self.events, tuple(names))
 
     def slice(self, start: int, stop: int) -> Block:
         """Samples ``start:stop``, with the events that fall in their time span (the
