@@ -161,3 +161,12 @@ def test_archive_of_multi_axis_pieces_picks_axes_without_decoding_again(tmp_path
     src, blocks = blocks_of(arch, "--axis", "y")
     assert all(b.axes == () and sorted(b.aux) == ["temp_c"] for b in blocks)
     assert sum(int(b.valid.sum()) for b in blocks) == 195
+
+
+@pytest.mark.parametrize("axis", ["x,y", "w"])
+def test_imu_readers_take_one_axis_of_x_y_z(axis):
+    from fogmon.sources.stamped import imu_axis
+
+    assert imu_axis({"axis": None}, "run.bag") == "z"
+    with pytest.raises(FogmonError, match=rf"run.bag: --axis {axis}: this reader gives one gyro axis, x, y or z"):
+        imu_axis({"axis": axis}, "run.bag")
