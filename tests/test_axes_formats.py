@@ -170,3 +170,18 @@ def test_imu_readers_take_one_axis_of_x_y_z(axis):
     assert imu_axis({"axis": None}, "run.bag") == "z"
     with pytest.raises(FogmonError, match=rf"run.bag: --axis {axis}: this reader gives one gyro axis, x, y or z"):
         imu_axis({"axis": axis}, "run.bag")
+
+
+def test_convert_keeps_rows_valid_on_every_axis_and_says_how_many_it_left_out(tmp_path, capsys):
+    p = tmp_path / "imu.csv"
+    p.write_text("# sample_rate_hz: 10\ntime_s,rate_x_dph,rate_y_dph,temp_c_y\n0,1,2,20\n0.1,3,1e30,21\n"
+                 "0.2,5,6,22\n")                                    # 1e30 deg/h: implausible, invalid on y only
+    out = tmp_path / "imu.parquet"
+    assert main(["convert", str(p), str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "wrote 2 samples" in said and "; 1 samples valid on some axes only left out" in said
+    rec = read_parquet_log(out)
+    np.testing.assert_array_equal(rec.rate_dph, [[1, 2], [5, 6]])
+    assert main(["convert", str(p), str(tmp_path / "x.csv"), "--axis", "x"]) == 0
+    x = read_replay_log(tmp_path / "x.csv")
+    assert x.axes == () and list(x.aux) == [] and len(x) == 3

@@ -37,7 +37,7 @@ def run(args) -> int:
     if args.period_s * rec.sample_rate_hz < 2:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
     for axis in pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names():
-        for line in evaluate(rec.for_axis(axis) if axis else rec, args.period_s, args.pauta_k):
+        for line in evaluate(rec.for_axis(axis), args.period_s, args.pauta_k):
             print(f"{axis}: {line}" if axis else line)
     return 0
 

@@ -56,7 +56,7 @@ def run(args) -> int:
     base = load_model(args.model) if args.model else None
     rec = read_recording(args.recording, args)
     axes = pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names()
-    recs = {a: rec.for_axis(a) if a else rec for a in axes}
+    recs = {a: rec.for_axis(a) for a in axes}
     for a, one in recs.items():
         if "temp_c" not in one.aux:
             raise FogmonError(f"{rec.name}: no temp_c column{f' for axis {a} (temp_c or temp_c_{a})' if a else ''}; "
@@ -84,8 +84,8 @@ def run(args) -> int:
 def _filters(args, base, axis: str, rec) -> tuple[float, float]:
     """(smooth_s, diff_step_s) of ``axis``: the options, else the base model's
     thermal_drift acting on the axis, else 10 s and 1 s; checked against the record."""
-    prior: dict = next((e.params for e in base.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)),
-                 {})
+    drifts = [e.params for e in base.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)]
+    prior: dict = drifts[0] if drifts else {}
     smooth_s = args.smooth_s if args.smooth_s is not None else prior.get("smooth_s", 10.0)
     diff_step_s = args.diff_step_s if args.diff_step_s is not None else prior.get("diff_step_s", 1.0)
     settle_s = smooth_s + 2 * diff_step_s
