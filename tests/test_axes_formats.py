@@ -63,6 +63,9 @@ def test_tolerant_reading_skips_bad_multi_axis_rows(tmp_path):
     rec = read_replay_log(p, tolerate=True)
     assert rec.skipped_rows == 2
     np.testing.assert_array_equal(rec.rate_dph, [[1, 2], [5, 6], [9, 10]])
+    parts = list(ReplayLogReader(p, tolerate=True, chunk_bytes=16).chunks())    # a few lines per chunk
+    assert len(parts) == 3 and sum(r.skipped for r in parts) == 2
+    np.testing.assert_array_equal(np.concatenate([r.rate_dph for r in parts]), rec.rate_dph)
     np.testing.assert_array_equal(rec.to_block().valid, [[True, True], [False, False], [True, True],
                                                          [False, False], [True, True]])
 
