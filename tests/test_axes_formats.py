@@ -121,7 +121,7 @@ def test_axis_option_picks_axes_of_csv_and_parquet(tmp_path, capsys, suffix):
     assert src.axes == AXES and all(b.axes == AXES for b in blocks)
     assert sum(len(b) for b in blocks) == 400 and src.counters["samples_missing"] == 3
     src, blocks = blocks_of(p, "--axis", "z")
-    assert src.axes == () and all(b.axes == () for b in blocks)
+    assert src.axes == () and all(b.axes == () for b in blocks) and src.aux_names == ["temp_c"]
     b = blocks[0]
     np.testing.assert_allclose(b.rate_dph[b.valid], rate[:, 2], rtol=1e-11)
     np.testing.assert_allclose(b.aux["temp_c"][b.valid], aux["temp_c_z"], rtol=1e-11)   # z's own temperature
@@ -130,7 +130,7 @@ def test_axis_option_picks_axes_of_csv_and_parquet(tmp_path, capsys, suffix):
     np.testing.assert_allclose(blocks[0].rate_dph[blocks[0].valid[:, 0]], rate[:, [2, 0]], rtol=1e-11)
     assert sorted(blocks[0].aux) == ["temp_c", "temp_c_z"]
     src, blocks = blocks_of(p, "--axis", "y,x")
-    assert sorted(blocks[0].aux) == ["temp_c"]                        # z's own channel left out
+    assert sorted(blocks[0].aux) == src.aux_names == ["temp_c"]      # z's own channel left out
     assert main(["replay", str(p), "--axis", "w", "--no-progress", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"imu.{suffix}: no axis 'w' (axes: x, y, z)" in err

@@ -54,9 +54,11 @@ class ReplayLogSource:
                  max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES,
                  reader=None, axis: str | None = None) -> None:
         self._reader = reader = reader or ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
-        self.meta, self.aux_names = reader.meta, reader.aux_names
+        self.meta = reader.meta
         self._pick = pick_axes(reader.axes, axis, reader.name)
         self.axes = reader.axes if self._pick is None else self._pick if len(self._pick) > 1 else ()
+        # the aux channels of the blocks: those of a placeholder block of the log, axes picked
+        self.aux_names = list(self._picked(next(_seam_gap(0.0, 1, 1.0, reader.aux_names, reader.axes))).aux)
         self.sample_rate_hz = reader.sample_rate_hz
         self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")
         self._max_abs_dph = max_abs_dph
@@ -90,8 +92,7 @@ class ReplayLogSource:
             c["samples"] += present
             c["samples_missing"] += len(b) - present
             c["seq_gaps"] += gaps
-            if self._pick is not None:
-                b = b.select(self._pick)
+            b = self._picked(b)
             rate, n_bad = plausibility.gate(b.rate_dph, self._max_abs_dph)
             c[plausibility.COUNTER] += n_bad
             bad = np.isnan(rate) & b.valid
@@ -99,8 +100,12 @@ class ReplayLogSource:
             t_event = float(b.t_s[np.argmax(first)])      # the first implausible sample's (or the block's)
             yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)), b.axes)
 
+    def _picked(self, b: Block) -> Block:
+        """A block of the log's columns with the axes ``--axis`` keeps."""
+        return b if self._pick is None else b.select(self._pick)
+
     def _grid_blocks(self) -> Iterator[tuple[Block, int, int]]:
-        grid = _LogGrid(self.t_first_s, self.sample_rate_hz, self._n, self.aux_names, self._reader.name,
+        grid = _LogGrid(self.t_first_s, self.sample_rate_hz, self._n, self._reader.aux_names, self._reader.name,
                         self._reader.axes)
         for rows in self._reader.chunks():
             self.counters["skipped_rows"] += rows.skipped
@@ -327,9 +332,8 @@ class ReplayLogSet:
             if missing:
                 self._seams["samples_missing"] += missing
                 self._seams["seq_gaps"] += 1
-                for b in _seam_gap(self._sources[i - 1].t_last_s, missing, self.sample_rate_hz, src.aux_names,
-                                   src._reader.axes):
-                    yield b if src._pick is None else b.select(src._pick)
+                yield from map(src._picked, _seam_gap(self._sources[i - 1].t_last_s, missing, self.sample_rate_hz,
+                                                      src._reader.aux_names, src._reader.axes))
             for b in src.blocks():
                 if self._closed:
                     return
