@@ -18,6 +18,25 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fogmon.errors import FogmonError
+
+
+def is_axis_name(name: object) -> bool:
+    """An axis name is ASCII letters and digits (it becomes part of column names)."""
+    return isinstance(name, str) and name.isascii() and name.isalnum()
+
+
+def parse_axes(text: str) -> tuple[str, ...]:
+    """Axis names from ``--axis`` text: one name or a comma list (``x,y``); FogmonError
+    for an empty, repeated or non-letters/digits name."""
+    names = tuple(a.strip() for a in text.split(","))
+    for a in names:
+        if not is_axis_name(a):
+            raise FogmonError(f"--axis {text}: an axis name is letters and digits, got {a!r}")
+    if len(set(names)) < len(names):
+        raise FogmonError(f"--axis {text}: an axis is named twice")
+    return names
+
 
 def axis_aux(aux: dict[str, np.ndarray], axes: tuple[str, ...], name: str) -> dict[str, np.ndarray]:
     """The aux channels axis ``name`` sees: the shared ones, and its own ``<ch>_<name>``
@@ -26,6 +45,13 @@ def axis_aux(aux: dict[str, np.ndarray], axes: tuple[str, ...], name: str) -> di
     others = tuple("_" + a for a in axes if a != name)
     shared = {k: v for k, v in aux.items() if not k.endswith("_" + name) and not k.endswith(others)}
     return {**shared, **own}
+
+
+def select_aux(aux: dict[str, np.ndarray], axes: tuple[str, ...], names: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """The aux channels of axes ``names`` of ``axes``: all but the own ``<ch>_<axis>``
+    channels of the axes left out."""
+    dropped = tuple("_" + a for a in axes if a not in names)
+    return {k: v for k, v in aux.items() if not dropped or not k.endswith(dropped)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,6 +115,16 @@ class Block:
         j = self.axes.index(name)
         return Block(self.t_s, self.rate_dph[:, j], self.valid[:, j], axis_aux(self.aux, self.axes, name),
                      self.events)
+
+    def select(self, names: tuple[str, ...]) -> Block:
+        """Axes ``names`` only, in that order: one name gives the one-axis view
+        ``axis(name)``; several a block of those columns, without the aux channels of
+        the axes left out (``<ch>_<axis>``)."""
+        if len(names) == 1:
+            return self.axis(names[0])
+        cols = [self.axes.index(a) for a in names]
+        return Block(self.t_s, self.rate_dph[:, cols], self.valid[:, cols], select_aux(self.aux, self.axes, names),
+                     self.events, tuple(names))
 
     def slice(self, start: int, stop: int) -> Block:
         """Samples ``start:stop``, with the events that fall in their time span (the

@@ -1,10 +1,11 @@
-"""The replay log as Parquet: the same columns as the CSV (docs/formats.md, replay log: ``time_s``
-s, ``rate_dph`` deg/h, aux channels), float64, valid samples only (gaps are time gaps),
-and the CSV's ``# key: value`` metadata plus units and facts about the source in the
-file's key-value metadata (key ``fogmon``, a JSON object: ``format``, ``meta`` (the CSV
-metadata, strings: ``sample_rate_hz``, ``sensor``, ...), ``units`` (column -> unit),
-and optional ``source`` (what the samples were decoded from), ``sidecar`` (a raw
-capture's decoder options) and ``counters`` (the decoder's counts)).
+"""The replay log as Parquet: the same columns as the CSV (docs/formats.md, replay log:
+``time_s`` s, ``rate_dph`` deg/h or one ``rate_<axis>_dph`` per axis, aux channels),
+float64, valid samples only (gaps are time gaps), and the CSV's ``# key: value``
+metadata plus units and facts about the source in the file's key-value metadata (key
+``fogmon``, a JSON object: ``format``, ``meta`` (the CSV metadata, strings:
+``sample_rate_hz``, ``sensor``, ...), ``units`` (column -> unit), and optional
+``source`` (what the samples were decoded from), ``sidecar`` (a raw capture's decoder
+options) and ``counters`` (the decoder's counts)).
 
 Written in row groups as data arrives (``ParquetLogWriter``); read row group by row group
 (``ParquetRows``: memory of one row group, whatever the file size), as one recording
@@ -20,7 +21,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.recording import REQUIRED, Recording, sample_rate_from
+from fogmon.recording import Recording, rate_axes, rate_columns, sample_rate_from
 
 FORMAT = "fogmon replay log v1 (parquet)"
 META_KEY = b"fogmon"
@@ -30,39 +31,42 @@ UNITS = {"time_s": "s", "rate_dph": "deg/h", "temp_c": "deg C", "rot_dps": "deg/
 ROW_GROUP_ROWS = 1 << 16
 
 
-def schema(aux_names: Sequence[str], meta: dict, extra: dict | None = None):
+def schema(aux_names: Sequence[str], meta: dict, extra: dict | None = None, axes: tuple[str, ...] = ()):
     """The pyarrow schema of a Parquet replay log with ``aux_names`` and metadata
     ``meta`` (CSV-style, values made strings) plus ``extra`` facts (source, sidecar,
-    counters)."""
+    counters); with ``axes``, one ``rate_<axis>_dph`` column per axis."""
     import pyarrow as pa
 
-    cols = ["time_s", "rate_dph", *aux_names]
+    rates = rate_columns(axes)
+    cols = ["time_s", *rates, *aux_names]
     info = {"format": FORMAT, "meta": {k: str(v) for k, v in meta.items()},
-            "units": {c: UNITS.get(c, "as recorded") for c in cols}, **(extra or {})}
+            "units": {c: "deg/h" if c in rates else UNITS.get(c, "as recorded") for c in cols}, **(extra or {})}
     return pa.schema([(c, pa.float64()) for c in cols], metadata={META_KEY: json.dumps(info).encode()})
 
 
 def table(sch, t_s, rate_dph, aux: dict):
-    """A pyarrow table of rows in schema ``sch``."""
+    """A pyarrow table of rows in schema ``sch`` (a 2-D ``rate_dph``: one column per axis)."""
     import pyarrow as pa
 
-    arrays = [np.asarray(t_s, np.float64), np.asarray(rate_dph, np.float64)]
-    arrays += [np.asarray(aux[n], np.float64) for n in sch.names[2:]]
+    rate = np.asarray(rate_dph, np.float64)
+    rates = [rate] if rate.ndim == 1 else list(rate.T)
+    arrays = [np.asarray(t_s, np.float64), *rates]
+    arrays += [np.asarray(aux[n], np.float64) for n in sch.names[1 + len(rates):]]
     return pa.Table.from_arrays(arrays, schema=sch)
 
 
 class ParquetLogWriter:
     """One Parquet replay log written row group by row group: ``write`` buffers rows
-    and writes a row group each ``row_group_rows`` rows; ``close`` writes the rest and
-    the footer. The file is written as ``path + '.tmp'`` and renamed on close, so a
-    file named ``path`` is always complete."""
+    and writes a row group each ``row_group_rows`` rows (``rate_dph`` (n, len(axes)) with
+    ``axes``); ``close`` writes the rest and the footer. The file is written as
+    ``path + '.tmp'`` and renamed on close, so a file named ``path`` is always complete."""
 
     def __init__(self, path: str, aux_names: Sequence[str], meta: dict, extra: dict | None = None,
-                 row_group_rows: int = ROW_GROUP_ROWS) -> None:
+                 row_group_rows: int = ROW_GROUP_ROWS, axes: tuple[str, ...] = ()) -> None:
         import pyarrow.parquet as pq
 
         self.path = os.fspath(path)
-        self.schema = schema(aux_names, meta, extra)
+        self.schema = schema(aux_names, meta, extra, axes)
         self.rows = 0
         self._n = int(row_group_rows)
         self._buf: list = []
@@ -111,9 +115,10 @@ class ParquetLogWriter:
             os.remove(self.path + ".tmp")
 
 
-def file_info(pf, path: str) -> dict:
-    """The ``fogmon`` metadata of an open ``pq.ParquetFile`` (checked: one-line error
-    naming the file otherwise)."""
+def file_info(pf, path: str) -> tuple[dict, tuple[str, ...]]:
+    """The ``fogmon`` metadata of an open ``pq.ParquetFile`` and its axes (() for one
+    axis; its columns checked as a CSV header is: one-line error naming the file and
+    column otherwise)."""
     md = pf.metadata.metadata or {}      # the file's key-value metadata (the footer's, the latest)
     try:
         info = json.loads(md[META_KEY])
@@ -123,15 +128,12 @@ def file_info(pf, path: str) -> dict:
     if not ok:
         info = {"meta": {}}
     names = pf.schema_arrow.names
-    for req in REQUIRED:
-        if req not in names:
-            raise FogmonError(f"{path}: missing required column {req!r} (columns: {', '.join(names)})")
-    return info
+    return info, rate_axes(names, path, ", ".join(names))
 
 
 class ParquetRows:
     """A Parquet replay log (one file, or several in order: pieces of one recording) as
-    the rows a ``ReplayLogSource`` takes: ``meta``, ``aux_names``, ``sample_rate_hz``,
+    the rows a ``ReplayLogSource`` takes: ``meta``, ``axes``, ``aux_names``, ``sample_rate_hz``,
     ``name`` and ``chunks()`` yielding one row group at a time (checked: finite
     values, time strictly increasing; a bad row is a one-line error naming file, row and
     column, or skipped and counted with ``tolerate``)."""
@@ -146,9 +148,10 @@ class ParquetRows:
         columns: list[str] | None = None
         for p in self.paths:
             pf = _open(p)
-            info = file_info(pf, p)
+            info, axes = file_info(pf, p)
             if columns is None:
                 columns = pf.schema_arrow.names
+                self.axes = axes
                 self.meta = dict(info.get("meta", {}))
                 self.info = info          # the first file's metadata: units, source, sidecar facts
             elif pf.schema_arrow.names != columns:
@@ -159,7 +162,8 @@ class ParquetRows:
             self.n_rows += pf.metadata.num_rows
         assert columns is not None  # self.paths is never empty
         self.columns: list[str] = columns
-        self.aux_names = [c for c in columns if c not in REQUIRED]
+        self.rate_names = rate_columns(self.axes)
+        self.aux_names = [c for c in columns if c != "time_s" and c not in self.rate_names]
         self.sample_rate_hz = sample_rate_from(self.meta, self._first_times(), self.name) \
             if "sample_rate_hz" not in self.meta else sample_rate_from(self.meta, np.zeros(0), self.name)
 
@@ -206,7 +210,8 @@ class ParquetRows:
             prev = last_t if j == 0 else tk[j - 1]
             what = "repeats" if tk[j] == prev else "goes backwards"
             raise FogmonError(f"{path}: row {row0 + i + 1}, column time_s: time {what} ({tk[j]!r} after {prev!r})")
-        rows = _Rows(tk, cols["rate_dph"][keep], {c: cols[c][keep] for c in self.aux_names})
+        rate = np.column_stack([cols[c] for c in self.rate_names]) if self.axes else cols["rate_dph"]
+        rows = _Rows(tk, rate[keep], {c: cols[c][keep] for c in self.aux_names})
         return rows, int(bad.sum())
 
 
@@ -239,7 +244,7 @@ def _open(path: str):
 def read_parquet_log(paths: str | os.PathLike | Sequence[str], tolerate: bool = False) -> Recording:
     """A whole Parquet replay log in memory (the batch commands: explain, sim --like, ...)."""
     reader = ParquetRows(paths, tolerate=tolerate)
-    parts: dict[str, list[np.ndarray]] = {c: [] for c in reader.columns}
+    parts: dict[str, list[np.ndarray]] = {c: [] for c in ("time_s", "rate_dph", *reader.aux_names)}
     skipped = 0
     for rows in reader.chunks():
         parts["time_s"].append(rows.t_s)
@@ -250,4 +255,5 @@ def read_parquet_log(paths: str | os.PathLike | Sequence[str], tolerate: bool = 
     if not sum(len(a) for a in parts["time_s"]):
         raise FogmonError(f"{reader.name}: no data rows")
     whole = {c: np.concatenate(v) for c, v in parts.items()}
-    return Recording(whole.pop("time_s"), whole.pop("rate_dph"), whole, reader.meta, reader.paths[0], skipped)
+    return Recording(whole.pop("time_s"), whole.pop("rate_dph"), whole, reader.meta, reader.paths[0], skipped,
+                     reader.axes)

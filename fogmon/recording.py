@@ -12,17 +12,20 @@ import functools
 import io
 import math
 import os
+import re
 import warnings
 from collections.abc import Generator
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from fogmon.block import Block, axis_aux
+from fogmon.block import Block, axis_aux, is_axis_name, parse_axes
 from fogmon.errors import FogmonError
 
 MAGIC = "# fogmon replay log v1"
 REQUIRED = ("time_s", "rate_dph")
+#: the rate column of one axis of a multi-axis log
+_AXIS_RATE = re.compile(r"rate_(.*)_dph")
 
 
 @dataclass
@@ -155,8 +158,9 @@ def grid_positions(
 @dataclass
 class Rows:
     """Rows of one chunk of a replay log, in file order: ``t_s`` (s), ``rate_dph``
-    (deg/h), aux channels by column name; ``skipped`` bad rows left out (tolerant
-    reading only). ``line_of(i)`` is the file line of row ``i`` (error messages)."""
+    (deg/h; one column per axis of a multi-axis log), aux channels by column name;
+    ``skipped`` bad rows left out (tolerant reading only). ``line_of(i)`` is the file
+    line of row ``i`` (error messages)."""
 
     t_s: np.ndarray
     rate_dph: np.ndarray
@@ -178,7 +182,8 @@ class Rows:
 
 class ReplayLogReader:
     """A replay log read in chunks of whole lines: memory independent of the file size.
-    Opening reads the header (``meta``, ``columns``); ``chunks()`` parses the body from
+    Opening reads the header (``meta``, ``columns``, ``axes``: the axis names of
+    ``rate_<axis>_dph`` columns, () for a one-axis log); ``chunks()`` parses the body from
     the start each time it is called. Strict unless ``tolerate`` (bad rows skipped and
     counted in ``Rows.skipped``). A UTF-8 byte-order mark and CRLF line ends are
     accepted; a line longer than ``max_line_bytes`` is an error naming it."""
@@ -190,7 +195,8 @@ class ReplayLogReader:
         self.tolerate = tolerate
         self._chunk, self._max_line = max(int(chunk_bytes), 16), int(max_line_bytes)
         self.meta, self.columns, self._body = self._read_header()
-        self.aux_names = [c for c in self.columns if c not in REQUIRED]
+        self.rate_names = rate_columns(self.axes)
+        self.aux_names = [c for c in self.columns if c != "time_s" and c not in self.rate_names]
 
     @functools.cached_property
     def sample_rate_hz(self) -> float:
@@ -283,11 +289,8 @@ class ReplayLogReader:
 
     def _columns(self, s: str, lineno: int) -> list[str]:
         cols = [c.strip() for c in s.split(",")]
-        for req in REQUIRED:
-            if req not in cols:
-                shown = ", ".join(cols) if len(s) <= 200 else s[:200] + "..."
-                raise FogmonError(f"{self.name}: line {lineno}: missing required column {req!r} "
-                                  f"(header has: {shown})")
+        shown = ", ".join(cols) if len(s) <= 200 else s[:200] + "..."
+        self.axes = rate_axes(cols, f"{self.name}: line {lineno}", shown)
         seen = set()
         for c in cols:
             if not c:
@@ -303,13 +306,14 @@ class ReplayLogReader:
         bad row (unless tolerating)."""
         last_t = -math.inf
         cols = self.columns
-        ti, ri = cols.index("time_s"), cols.index("rate_dph")
+        ti = cols.index("time_s")
+        ri = [cols.index(c) for c in self.rate_names] if self.axes else cols.index("rate_dph")
         for _, lineno, block in self._line_chunks(*self._body):
             data = _parse_fast(block, len(cols))
             skipped = 0
             if data is None or (len(data) and (data[0, ti] <= last_t or np.any(np.diff(data[:, ti]) <= 0))):
                 data, _, skipped = self._parse_slow(block, lineno, last_t)
-            rows = Rows(data[:, ti], data[:, ri], {c: data[:, j] for j, c in enumerate(cols) if c not in REQUIRED},
+            rows = Rows(data[:, ti], data[:, ri], {c: data[:, j] for j, c in enumerate(cols) if c in self.aux_names},
                         skipped, lineno, block, last_t, self)
             if len(data):
                 last_t = float(data[-1, ti])
@@ -354,6 +358,41 @@ class ReplayLogReader:
             rows.append(vals)
             lines.append(at)
         return np.array(rows, dtype=np.float64).reshape(-1, len(cols)), np.array(lines, dtype=np.int64), skipped
+
+
+def rate_axes(cols: list[str], where: str, shown: str) -> tuple[str, ...]:
+    """The axes a header's columns ``cols`` name: () for one axis (``rate_dph``), else
+    the ``<axis>`` of each ``rate_<axis>_dph`` column in header order. ``time_s`` and
+    exactly one of the two forms are required and an axis name is letters and digits:
+    FogmonError otherwise, starting with ``where`` (file and line) and naming the
+    column; ``shown`` is the header as error messages show it."""
+    if "time_s" not in cols:
+        raise FogmonError(f"{where}: missing required column 'time_s' (header has: {shown})")
+    per_axis = [(c, m.group(1)) for c in cols if (m := _AXIS_RATE.fullmatch(c))]
+    if not per_axis and "rate_dph" not in cols:
+        raise FogmonError(f"{where}: missing required column 'rate_dph' (one axis) or rate_<axis>_dph columns "
+                          f"(several axes) (header has: {shown})")
+    if per_axis and "rate_dph" in cols:
+        raise FogmonError(f"{where}, column {per_axis[0][0]}: a header has rate_dph (one axis) or "
+                          f"rate_<axis>_dph columns (several axes), not both")
+    for c, a in per_axis:
+        if not is_axis_name(a):
+            raise FogmonError(f"{where}, column {c}: axis name {a!r} is not letters and digits")
+    return tuple(a for _, a in per_axis)
+
+
+def pick_axes(axes: tuple[str, ...], asked: str | None, name: str) -> tuple[str, ...] | None:
+    """The axes ``--axis`` ``asked`` (a name or a comma list) keeps of a recording
+    ``name`` with ``axes``: None when nothing is to be picked (not asked, or a one-axis
+    recording, where --axis is left to the decoders and readers that take it, as it
+    always was). An axis the recording does not have is a FogmonError listing its axes."""
+    if asked is None or not axes:
+        return None
+    want = parse_axes(asked)
+    for a in want:
+        if a not in axes:
+            raise FogmonError(f"{name}: no axis {a!r} (axes: {', '.join(axes)})")
+    return want
 
 
 def _shown(cell: str) -> str:
@@ -417,7 +456,7 @@ def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recordin
         raise FogmonError(f"{reader.name}: no data rows")
     whole = {c: np.concatenate(v) for c, v in cols.items()}
     return Recording(t_s=whole.pop("time_s"), rate_dph=whole.pop("rate_dph"), aux=whole, meta=reader.meta,
-                     path=reader.path, skipped_rows=skipped)
+                     path=reader.path, skipped_rows=skipped, axes=reader.axes)
 
 
 def write_replay_log(path: str | os.PathLike, t_s, rate_dph, aux: dict | None = None,

@@ -20,11 +20,13 @@ EPILOG = """examples:
   fogmon convert runs/fogmon-archive-20261121T080000Z week.parquet
   fogmon convert run.parquet run.csv
 
-The Parquet file keeps the replay-log columns (time_s s, rate_dph deg/h, aux channels)
-as float64 in row groups of 65,536 rows, and in its key-value metadata (key "fogmon",
-JSON) the replay-log metadata, the units, the source and, for a raw capture, its
-decoder options and counters. Exit code 0 on success, 2 on bad usage or input (no
-output file is left behind)."""
+The Parquet file keeps the replay-log columns (time_s s, rate_dph deg/h or one
+rate_<axis>_dph per axis, aux channels) as float64 in row groups of 65,536 rows, and
+in its key-value metadata (key "fogmon", JSON) the replay-log metadata, the units, the
+source and, for a raw capture, its decoder options and counters. A multi-axis recording
+keeps its axes (--axis picks some); a sample time where some axis is invalid is left
+out (a row holds every axis) and counted. Exit code 0 on success, 2 on bad usage or
+input (no output file is left behind)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -57,24 +59,27 @@ def run(args: argparse.Namespace) -> int:
     blocks = source.blocks()
     first = next(blocks, None)
     aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
+    axes = first.axes if first is not None else getattr(source, "axes", ())
     src_meta = getattr(source, "meta", {}) or {}
     meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
             **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
     side = read_sidecar(args.input) if os.path.isfile(args.input) else None
-    n = without_aux = 0
+    n = without_aux = part_invalid = 0
     writer = fh = None
     try:
         if ext == ".parquet":
             writer = ParquetLogWriter(args.output, aux_names, meta,
-                                      {"source": source.name, **({"sidecar": side} if side else {})})
+                                      {"source": source.name, **({"sidecar": side} if side else {})}, axes=axes)
         else:
             fh = open(args.output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
-            write_replay_header(fh, aux_names, meta)
+            write_replay_header(fh, aux_names, meta, axes)
         for b in itertools.chain([first] if first is not None else [], blocks):
-            keep = b.valid.copy()
+            valid = b.valid.all(axis=1) if b.axes else b.valid.copy()   # a row holds every axis
+            part_invalid += int(b.valid.any(axis=1).sum() - valid.sum()) if b.axes else 0
+            keep = valid.copy()
             for a in b.aux.values():
                 keep &= np.isfinite(a)
-            without_aux += int(b.valid.sum() - keep.sum())
+            without_aux += int(valid.sum() - keep.sum())
             aux = {k: a[keep] for k, a in b.aux.items()}
             if writer is not None:
                 writer.write(b.t_s[keep], b.rate_dph[keep], aux)
@@ -82,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
                 append_replay_rows(fh, b.t_s[keep], b.rate_dph[keep], aux)
             n += int(keep.sum())
         if writer is not None:
-            writer.close(counters={**source.counters, "rows_without_aux": without_aux})
+            writer.close(counters={**source.counters, "rows_without_aux": without_aux,
+                                   **({"rows_with_an_invalid_axis": part_invalid} if axes else {})})
         elif fh is not None:
             fh.close()
     except BaseException:
@@ -96,5 +102,6 @@ def run(args: argparse.Namespace) -> int:
     finally:
         source.close()
     print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
-          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else ""))
+          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else "")
+          + (f"; {part_invalid} samples valid on some axes only left out" if part_invalid else ""))
     return 0

@@ -1,6 +1,8 @@
 """``fogmon inorbit``: the in-orbit evaluation of the in-orbit paper on a recording:
 angle random walk from Pauta-cleaned first differences, bias instability as the std of
-per-orbit means, and where the energy sits (Daubechies-4 wavelet bands)."""
+per-orbit means, and where the energy sits (Daubechies-4 wavelet bands). A multi-axis
+recording is evaluated axis by axis (``--axis`` picks some), each line prefixed by its
+axis."""
 from __future__ import annotations
 
 import argparse
@@ -10,13 +12,14 @@ import numpy as np
 from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.recording import Recording
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from fogmon.methods.inorbit import ORBIT_PERIOD_S, PAUTA_K_MIN
     p.add_argument("recording", metavar="RECORDING.csv",
-                   help="replay log (rate_dph; rot_dps is subtracted when present), or another format "
-                   "(docs/formats.md)")
+                   help="replay log (rate_dph, or rate_<axis>_dph per axis: each axis evaluated; rot_dps is "
+                   "subtracted when present), or another format (docs/formats.md)")
     p.add_argument("--period-s", type=positive, default=ORBIT_PERIOD_S,
                    help="orbit (cycle) period for the per-cycle bias instability, s, at least 2 samples "
                         f"(default {ORBIT_PERIOD_S:g})")
@@ -27,29 +30,39 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from fogmon.methods.inorbit import arw_from_differences, cycle_bias_instability, wavelet_energy
+    from fogmon.recording import pick_axes
     from fogmon.sources.formats import read_recording
 
     rec = read_recording(args.recording, args)
     if args.period_s * rec.sample_rate_hz < 2:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
+    for axis in pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names():
+        for line in evaluate(rec.for_axis(axis), args.period_s, args.pauta_k):
+            print(f"{axis}: {line}" if axis else line)
+    return 0
+
+
+def evaluate(rec: Recording, period_s: float, pauta_k: float) -> list[str]:
+    """The in-orbit evaluation of a one-axis recording, as the lines printed."""
+    from fogmon.methods.inorbit import arw_from_differences, cycle_bias_instability, wavelet_energy
+
     blk = rec.to_block()
     rate = blk.error_rate_dph
     sample_rate_hz = rec.sample_rate_hz
-    arw = arw_from_differences(rate, sample_rate_hz, args.pauta_k)  # differences across gaps are NaN, dropped
-    print(f"in-orbit evaluation of {rec.name} ({len(rec)} samples at {sample_rate_hz:g} Hz, {rec.duration_s:.0f} s)")
-    print(f"  angle random walk N = {arw.N_dpsh:.4g} deg/sqrt(h) (white rate {arw.sigma_dph:.4g} deg/h per sample; "
-          f"{arw.outliers} differences rejected by the {args.pauta_k:g}-sigma Pauta criterion)")
+    arw = arw_from_differences(rate, sample_rate_hz, pauta_k)  # differences across gaps are NaN, dropped
+    out = [f"in-orbit evaluation of {rec.name} ({len(rec)} samples at {sample_rate_hz:g} Hz, {rec.duration_s:.0f} s)",
+           f"  angle random walk N = {arw.N_dpsh:.4g} deg/sqrt(h) (white rate {arw.sigma_dph:.4g} deg/h per sample; "
+           f"{arw.outliers} differences rejected by the {pauta_k:g}-sigma Pauta criterion)"]
     ok = np.isfinite(rate)
     try:
-        bi, ncyc = cycle_bias_instability(blk.t_s[ok], rate[ok], args.period_s)
-        print(f"  bias instability (std of {ncyc} per-cycle means, {args.period_s:g} s) = {bi:.4g} deg/h")
+        bi, ncyc = cycle_bias_instability(blk.t_s[ok], rate[ok], period_s)
+        out.append(f"  bias instability (std of {ncyc} per-cycle means, {period_s:g} s) = {bi:.4g} deg/h")
     except FogmonError as e:
-        print(f"  bias instability: not available ({e})")
+        out.append(f"  bias instability: not available ({e})")
     if ok.all():
-        print("  wavelet (db4) energy by band:")
-        for lo, hi, share in wavelet_energy(rate, sample_rate_hz):
-            print(f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %")
+        out.append("  wavelet (db4) energy by band:")
+        out += [f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %"
+                for lo, hi, share in wavelet_energy(rate, sample_rate_hz)]
     else:
-        print(f"  wavelet energy: skipped, the record has {int((~ok).sum())} missing samples (no interpolation)")
-    return 0
+        out.append(f"  wavelet energy: skipped, the record has {int((~ok).sum())} missing samples (no interpolation)")
+    return out

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from dataclasses import fields
 
+from fogmon.block import parse_axes
 from fogmon.cli.values import number, positive
+from fogmon.errors import FogmonError
 from fogmon.sources import plausibility as pl
 from fogmon.sources.codecs import PROTOCOLS
 from fogmon.sources.options import SourceOptions
@@ -50,8 +52,9 @@ def _add_serial_arguments(g, live: bool) -> None:
     g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
                    "angle (units per sample) (default: delta for kvh-*, rate for dsp3000)")
     g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of KVH binary output (default: rad)")
-    g.add_argument("--axis", choices=("x", "y", "z"), help="KVH gyro axis to monitor, also the axis of a ROS bag "
-                   "or PX4 ULog recording (default: z)")
+    g.add_argument("--axis", type=axis_list, metavar="NAME", help="KVH gyro axis to monitor (x, y or z), also the "
+                   "axis of a ROS bag or PX4 ULog recording (default: z); for a multi-axis replay log (rate_<axis>_dph "
+                   "columns) the axis to analyse, or a comma list (x,y) (default: every axis)")
     g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
@@ -92,6 +95,16 @@ def _add_can_arguments(c, live: bool) -> None:
                    "(default: valid if the message has it)")
 
 
+def axis_list(text: str) -> str:
+    """argparse ``type=`` of ``--axis``: an axis name (letters and digits) or a comma list
+    of them, kept as given (fogmon.block.parse_axes)."""
+    try:
+        parse_axes(text)
+    except FogmonError as e:
+        raise argparse.ArgumentTypeError(str(e).split(": ", 1)[1]) from None
+    return text
+
+
 def source_options(args: argparse.Namespace) -> SourceOptions:
     """The SourceOptions of parsed source options (``add_source_arguments``; options a
     command does not have keep their defaults)."""
@@ -107,7 +120,9 @@ def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = False) ->
     g.add_argument("--topic", metavar="NAME", help="ROS bag/MCAP: the sensor_msgs/Imu topic (default: the only "
                    "one); PX4 ULog: sensor_gyro (default; NAME:INSTANCE for another instance) or sensor_combined")
     if axis:
-        g.add_argument("--axis", choices=("x", "y", "z"), help="gyro axis of a ROS/ULog source (default: z)")
+        g.add_argument("--axis", type=axis_list, metavar="NAME", help="gyro axis of a ROS/ULog source (x, y or z; "
+                       "default: z); for a multi-axis replay log (rate_<axis>_dph columns) the axis to analyse, or "
+                       "a comma list (x,y) (default: every axis)")
     g.add_argument("--channel", metavar="NAME", help="MDF4: the rate channel (unit from the file); LAS: the rate "
                    "curve (default: the only curve with a rate unit)")
     g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve (default: the index curve when it "

@@ -1,16 +1,26 @@
 """``fogmon thermal``: calibrate the thermal-drift model of a gyro from a recording with
 temperature (a chamber run), print the coefficients and the drift before/after, and
-write the calibrated model and/or the corrected recording."""
+write the calibrated model and/or the corrected recording. A multi-axis recording is
+calibrated axis by axis (``--axis`` picks some; each axis's temperature is ``temp_c_<axis>``
+or the shared ``temp_c``), its lines prefixed by the axis; the model gets one
+thermal_drift effect per axis (``axes = [<axis>]``) and the corrected recording keeps the
+calibrated axes."""
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fogmon.block import select_aux
 from fogmon.cli.outputs import check_outputs
 from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+
+if TYPE_CHECKING:
+    from fogmon.sim.model import Effect, SensorModel
 
 #: Highest degree of K0(T): raw powers of deg C beyond it are ill-conditioned and over-fit
 #: (the thermal literature uses 1..3).
@@ -37,8 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
-    from fogmon.recording import write_replay_log
+    from fogmon.recording import pick_axes, write_replay_log
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
     from fogmon.sources.formats import read_recording
 
@@ -46,10 +55,37 @@ def run(args) -> int:
                   inputs=[args.recording, args.model])
     base = load_model(args.model) if args.model else None
     rec = read_recording(args.recording, args)
-    if "temp_c" not in rec.aux:
-        raise FogmonError(f"{rec.name}: no temp_c column; thermal calibration needs the sensor temperature")
+    axes = pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names()
+    recs = {a: rec.for_axis(a) for a in axes}
+    for a, one in recs.items():
+        if "temp_c" not in one.aux:
+            raise FogmonError(f"{rec.name}: no temp_c column{f' for axis {a} (temp_c or temp_c_{a})' if a else ''}; "
+                              f"thermal calibration needs the sensor temperature")
     base = base or SensorModel(rec.sample_rate_hz, 0.0, Noise(), [])
-    prior = next((e.params for e in base.effects if e.kind == "thermal_drift"), {})
+    filters = {a: _filters(args, base, a, rec) for a in axes}     # every value checked before any fit
+    cals, corrected = {}, {}
+    for a, one in recs.items():
+        cals[a], corrected[a] = _calibrate(one, args, *filters[a], prefix=f"{a}: " if a else "")
+    if args.out_model:
+        save_model(with_calibration(base, {a: c.effect for a, c in cals.items()}, rec.axes), args.out_model)
+        print(f"wrote {args.out_model}")
+    if args.out_corrected:
+        note = {"corrected": f"thermal_drift removed by fogmon thermal from {rec.name}"}
+        if len(axes) == 1:      # a one-axis recording, or one axis picked: a one-axis log
+            one = recs[axes[0]]
+            write_replay_log(args.out_corrected, one.t_s, corrected[axes[0]], one.aux, {**one.meta, **note})
+        else:
+            write_replay_log(args.out_corrected, rec.t_s, np.column_stack([corrected[a] for a in axes]),
+                             select_aux(rec.aux, rec.axes, axes), {**rec.meta, **note}, axes=axes)
+        print(f"wrote {args.out_corrected}")
+    return 0
+
+
+def _filters(args, base, axis: str, rec) -> tuple[float, float]:
+    """(smooth_s, diff_step_s) of ``axis``: the options, else the base model's
+    thermal_drift acting on the axis, else 10 s and 1 s; checked against the record."""
+    drifts = [e.params for e in base.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)]
+    prior: dict = drifts[0] if drifts else {}
     smooth_s = args.smooth_s if args.smooth_s is not None else prior.get("smooth_s", 10.0)
     diff_step_s = args.diff_step_s if args.diff_step_s is not None else prior.get("diff_step_s", 1.0)
     settle_s = smooth_s + 2 * diff_step_s
@@ -59,28 +95,47 @@ def run(args) -> int:
     if args.average_s > rec.duration_s / 2:
         raise FogmonError(f"--average-s {args.average_s:g} s: the peak-to-peak drift needs at least two blocks in "
                           f"the {rec.duration_s:g} s of {rec.name}")
+    return smooth_s, diff_step_s
+
+
+def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
+    """Calibrate one axis, print its coefficients and drift (lines starting with
+    ``prefix``); (ThermalCalibration, corrected rate deg/h)."""
+    from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
+
     T = rec.aux["temp_c"]
     cal = calibrate_thermal(rec.t_s, rec.rate_dph, T, args.degree, smooth_s, diff_step_s)
     corrected = correct_thermal(rec.t_s, rec.rate_dph, T, cal.effect)
     before = drift_peak_to_peak(rec.t_s, rec.rate_dph, args.average_s)
     after = drift_peak_to_peak(rec.t_s, corrected, args.average_s)
     p, se = cal.effect.params, cal.stderr
-    print(f"thermal drift model of {rec.name} ({len(rec)} samples, T {np.min(T):.1f}..{np.max(T):.1f} deg C)")
+    lines = [f"thermal drift model of {rec.name} ({len(rec)} samples, T {np.min(T):.1f}..{np.max(T):.1f} deg C)"]
     for i, (c, s) in enumerate(zip(p["k0_poly_dph"], se["k0_poly_dph"], strict=True)):
-        print(f"  K0 c{i:<6} {c:+.6g} +/- {s:.2g}  deg/h per degC^{i}")
+        lines.append(f"  K0 c{i:<6} {c:+.6g} +/- {s:.2g}  deg/h per degC^{i}")
     for k, unit in (("k1_pos", "deg/h per degC/s"), ("k1_neg", "deg/h per degC/s"),
                     ("k2_pos", "deg/h per degC/s^2"), ("k2_neg", "deg/h per degC/s^2")):
-        print(f"  {k:<9} {p[k]:+.6g} +/- {se[k]:.2g}  {unit}")
-    print(f"  residual std {cal.residual_std_dph:.4g} deg/h per sample")
+        lines.append(f"  {k:<9} {p[k]:+.6g} +/- {se[k]:.2g}  {unit}")
+    lines.append(f"  residual std {cal.residual_std_dph:.4g} deg/h per sample")
     change = (f"{before / after:.1f}x smaller" if after < before else
               f"{after / before:.1f}x larger: the fit does not reduce this drift" if before > 0 else "no drift")
-    print(f"peak-to-peak drift of {args.average_s:g} s averages: {before:.4g} deg/h -> {after:.4g} deg/h ({change})")
-    if args.out_model:
-        base.effects = [e for e in base.effects if e.kind != "thermal_drift"] + [cal.effect]
-        save_model(base, args.out_model)
-        print(f"wrote {args.out_model}")
-    if args.out_corrected:
-        meta = dict(rec.meta, corrected=f"thermal_drift removed by fogmon thermal from {rec.name}")
-        write_replay_log(args.out_corrected, rec.t_s, corrected, rec.aux, meta)
-        print(f"wrote {args.out_corrected}")
-    return 0
+    lines.append(f"peak-to-peak drift of {args.average_s:g} s averages: {before:.4g} deg/h -> {after:.4g} deg/h "
+                 f"({change})")
+    for line in lines:
+        print(prefix + line)
+    return cal, corrected
+
+
+def with_calibration(base: SensorModel, effects: dict[str, Effect], axes: tuple[str, ...]) -> SensorModel:
+    """``base`` with the calibrated thermal_drift ``effects`` by axis ("" = a one-axis
+    recording: the model's thermal_drift effects replaced by the one). Several axes: one
+    effect per axis with ``axes = [<axis>]`` (docs/methods.md); a thermal_drift of
+    ``base`` keeps acting only on the recording's axes not calibrated."""
+    if "" in effects:
+        kept = [e for e in base.effects if e.kind != "thermal_drift"]
+        return replace(base, effects=kept + [effects[""]])
+    kept = []
+    for e in base.effects:
+        rest = tuple(a for a in (e.axes or axes) if a not in effects) if e.kind == "thermal_drift" else e.axes
+        if e.kind != "thermal_drift" or rest:
+            kept.append(replace(e, axes=rest))
+    return replace(base, effects=kept + [replace(eff, axes=(a,)) for a, eff in effects.items()])

@@ -45,6 +45,19 @@ def thermal_effect(model: SensorModel, name: str) -> Effect:
     return found[0]
 
 
+def axis_thermal_effect(model: SensorModel, name: str, axis: str) -> Effect:
+    """The ``thermal_drift`` effect acting on ``axis`` (its ``axes`` name it, or it has
+    none: every axis) of a calibration file ``name``: what ``fogmon thermal --out-model``
+    writes for a multi-axis recording, one effect per axis (docs/methods.md); a one-axis
+    calibration serves every axis. FogmonError naming the file and axis otherwise."""
+    found = [e for e in model.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)]
+    if len(found) != 1:
+        raise FogmonError(f"{name}: axis {axis}: a thermal calibration needs exactly one [[effect]] with kind = "
+                          f"\"thermal_drift\" acting on the axis (axes = [\"{axis}\"], or no axes: every axis); "
+                          f"found {len(found)}")
+    return found[0]
+
+
 class LiveThermalCorrection:
     """Causal thermal-drift correction of a stream of blocks (time s, rate deg/h,
     temperature deg C), carrying the filters' history from one block to the next. The

@@ -48,7 +48,8 @@ def piece_files(directory: str) -> list[str]:
 
 class ParquetPieces:
     """Writer of the Parquet pieces under ``directory`` at ``sample_rate_hz`` (Hz): ``write``
-    appends rows (valid samples) to the current piece, ``end_piece`` joins it."""
+    appends rows (valid samples; with ``axes``, ``rate_dph`` is (n, len(axes)), written as
+    ``rate_<axis>_dph`` columns) to the current piece, ``end_piece`` joins it."""
 
     def __init__(self, directory: str, sample_rate_hz: float, row_group_s: float = ROW_GROUP_S) -> None:
         self.directory = directory
@@ -59,11 +60,11 @@ class ParquetPieces:
         self._held = 0
         self._parts = 0
 
-    def write(self, piece: int, aux_names, meta: dict, t_s, rate_dph, aux: dict) -> None:
+    def write(self, piece: int, aux_names, meta: dict, t_s, rate_dph, aux: dict, axes: tuple[str, ...] = ()) -> None:
         if self._piece != piece:
             self.end_piece()
             self._piece, self._parts = piece, 0
-            self._schema = schema(aux_names, meta)
+            self._schema = schema(aux_names, meta, axes=axes)
             os.makedirs(self._parts_dir(), exist_ok=False)
         tbl = table(self._schema, t_s, rate_dph, aux)
         while len(tbl):

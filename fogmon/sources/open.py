@@ -4,6 +4,7 @@ and ``fogmon replay``."""
 from __future__ import annotations
 
 import os
+import re
 
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility as pl
@@ -43,7 +44,7 @@ def _sniff(path: str) -> str:
         s = raw.strip()
         if not s:
             continue
-        if s.startswith(b"# fogmon replay log") or (b"time_s" in s and b"rate_dph" in s):
+        if s.startswith(b"# fogmon replay log") or (b"time_s" in s and re.search(rb"rate_(\w+_)?dph", s)):
             return "replay-log"
         if s.startswith(b"timestamp,arbitration_id"):
             return "can-csv"
@@ -77,7 +78,7 @@ def open_replay_source(path: str, opts: SourceOptions | None = None) -> Source:
     if os.path.splitext(path)[1].lower() == ".parquet":  # a Parquet replay log (fogmon.parquet_log)
         from fogmon.sources.parquet import ParquetLogSource
         return ParquetLogSource(path, tolerate=opts.tolerate_bad_rows,
-                                max_abs_dph=opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH)
+                                max_abs_dph=opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH, axis=opts.axis)
     side = read_sidecar(path)
     ext = os.path.splitext(path)[1].lower()
     kind = _sniff(path) if not side else side.get("kind")
@@ -88,9 +89,18 @@ def open_replay_source(path: str, opts: SourceOptions | None = None) -> Source:
         return open_raw_capture(path, opts.codec_options())
     if kind == "replay-log" or ext == ".csv":
         return ReplayLogSource(path, tolerate=opts.tolerate_bad_rows,
-                               max_abs_dph=opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH)
+                               max_abs_dph=opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH, axis=opts.axis)
     raise FogmonError(f"{path}: not a replay log; for a raw serial capture give --protocol "
                       f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with --dbc")
+
+
+def _log_axes(path: str) -> tuple[str, ...]:
+    """The axes of a replay-log piece (CSV or Parquet), from its header."""
+    if path.endswith(".parquet"):
+        from fogmon.parquet_log import ParquetRows
+        return ParquetRows(path).axes
+    from fogmon.recording import ReplayLogReader
+    return ReplayLogReader(path).axes
 
 
 def open_archive(directory: str, opts: SourceOptions) -> Source:
@@ -99,7 +109,8 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     decoder options (--protocol, --kvh-*, --axis, --columns, --rate-hz, --dbc, --can-*)
     to decode it again, its raw capture pieces (raw-NNNN.bin or frames-NNNN.asc) as one
     stream. One piece alone is replayed by naming its file. ``--max-rate-dph`` gates
-    whichever is replayed and does not by itself ask for decoding again."""
+    whichever is replayed and does not by itself ask for decoding again, nor does
+    ``--axis`` when the pieces are multi-axis logs (it then picks their axes)."""
     from fogmon.capture import read_sidecar
     from fogmon.pieces import find_pieces, piece_path
     from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
@@ -108,7 +119,7 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
 
     logs = find_pieces(directory, REPLAY_LOG) or piece_files(directory)
     serial, frames = find_pieces(directory, SERIAL_CAPTURE), find_pieces(directory, CAN_CAPTURE)
-    decode = opts.asks_decoding()
+    decode = opts.asks_decoding(axis=not (opts.axis and logs and _log_axes(logs[0])))
     if serial and (decode or not logs):
         return open_raw_capture(serial, opts.codec_options())
     if frames and (decode or not logs):
@@ -134,11 +145,11 @@ def open_archive(directory: str, opts: SourceOptions) -> Source:
     max_abs_dph = opts.max_rate_dph or pl.GENERIC_MAX_ABS_DPH
     if logs and logs[0].endswith(".parquet"):  # Parquet pieces (and parts of a piece never joined): one recording
         from fogmon.sources.parquet import ParquetLogSource
-        return ParquetLogSource(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
+        return ParquetLogSource(logs, tolerate=tolerate, max_abs_dph=max_abs_dph, axis=opts.axis)
     if len(logs) == 1:
-        return ReplayLogSource(logs[0], tolerate=tolerate, max_abs_dph=max_abs_dph)
+        return ReplayLogSource(logs[0], tolerate=tolerate, max_abs_dph=max_abs_dph, axis=opts.axis)
     if logs:
-        return ReplayLogSet(logs, tolerate=tolerate, max_abs_dph=max_abs_dph)
+        return ReplayLogSet(logs, tolerate=tolerate, max_abs_dph=max_abs_dph, axis=opts.axis)
     raise FogmonError(f"{directory}: is a folder without an archive (no pieces of {REPLAY_LOG}, samples.parquet, "
                       f"{SERIAL_CAPTURE} or {CAN_CAPTURE} such as {piece_path(REPLAY_LOG, 1)}); give a replay log, "
                       f"raw capture or CAN log")

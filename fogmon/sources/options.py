@@ -11,7 +11,8 @@ from typing import Any
 class SourceOptions:
     """Options of fogmon.sources.open: ``serial``/``baud`` or ``can``/``interface``/
     ``can_bitrate`` (a live device), the serial decoder (``protocol``, ``sample_rate_hz`` Hz,
-    ``kvh_rot``, ``kvh_units``, ``axis``, ``columns``), the CAN decoder (``dbc``,
+    ``kvh_rot``, ``kvh_units``, ``axis``, ``columns``; ``axis`` also picks the axes of a
+    multi-axis replay log: a name or a comma list), the CAN decoder (``dbc``,
     ``can_message``, ``can_rate``, ``can_rate_unit``, ``can_temp``, ``can_counter``,
     ``can_valid``), the plausibility gate ``max_rate_dph`` (deg/h), for a replay log
     ``tolerate_bad_rows``, and for other recording formats (fogmon.sources.formats)
@@ -54,8 +55,9 @@ class SourceOptions:
                 "temp_signal": self.can_temp, "counter_signal": self.can_counter, "valid_signal": self.can_valid,
                 "sample_rate_hz": self.sample_rate_hz, "max_rate_dph": self.max_rate_dph}
 
-    def asks_decoding(self) -> bool:
-        """Whether a decoder option other than the gate is given (an archive is then
-        decoded again from its raw capture)."""
+    def asks_decoding(self, axis: bool = True) -> bool:
+        """Whether a decoder option other than the gate (and, with ``axis=False``, other
+        than ``axis``) is given (an archive is then decoded again from its raw capture)."""
         given = {**self.codec_options(), **self.can_options(), "dbc": self.dbc}
-        return any(v is not None for k, v in given.items() if k != "max_rate_dph")
+        ignored = ("max_rate_dph",) if axis else ("max_rate_dph", "axis")
+        return any(v is not None for k, v in given.items() if k not in ignored)

@@ -20,7 +20,7 @@ import numpy as np
 from fogmon.block import Block, Event
 from fogmon.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
 from fogmon.errors import FogmonError
-from fogmon.recording import CHUNK_BYTES, ReplayLogReader, Rows, grid_positions
+from fogmon.recording import CHUNK_BYTES, ReplayLogReader, Rows, grid_positions, pick_axes
 from fogmon.sources import plausibility
 from fogmon.sources.codecs import codec_from_options
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
@@ -42,16 +42,23 @@ class ReplayLogSource:
     +-``max_abs_dph`` (deg/h, fogmon.sources.plausibility) become invalid samples. Opening
     reads the whole file once to check it (a bad row is a one-line error naming file,
     line and column before any work starts) and to know ``n_samples`` (grid length) and
-    ``t_first_s``/``t_last_s``. Counters, as far as the blocks yielded so far reach:
+    ``t_first_s``/``t_last_s``. A multi-axis log (``rate_<axis>_dph`` columns) gives
+    multi-axis blocks; ``axis`` (``--axis``: a name or a comma list, ``pick_axes``) keeps
+    those axes only, one of them as a one-axis block. ``axes``: the axes of the blocks
+    (() for one axis). Counters, as far as the blocks yielded so far reach:
     ``samples`` (rows), ``samples_missing``, ``seq_gaps`` (time gaps), ``skipped_rows``
     (only with ``tolerate=True``), ``implausible_samples``. ``reader`` replaces the CSV
     reader of ``path`` by another of the same rows (a Parquet log: fogmon.parquet_log)."""
 
     def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
                  max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES,
-                 reader=None) -> None:
+                 reader=None, axis: str | None = None) -> None:
         self._reader = reader = reader or ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
-        self.meta, self.aux_names = reader.meta, reader.aux_names
+        self.meta = reader.meta
+        self._pick = pick_axes(reader.axes, axis, reader.name)
+        self.axes = reader.axes if self._pick is None else self._pick if len(self._pick) > 1 else ()
+        # the aux channels of the blocks: those of a placeholder block of the log, axes picked
+        self.aux_names = list(self._picked(next(_seam_gap(0.0, 1, 1.0, reader.aux_names, reader.axes))).aux)
         self.sample_rate_hz = reader.sample_rate_hz
         self.name = f"replay log {reader.name}" + (f" ({reader.meta['sensor']})" if "sensor" in reader.meta else "")
         self._max_abs_dph = max_abs_dph
@@ -85,14 +92,21 @@ class ReplayLogSource:
             c["samples"] += present
             c["samples_missing"] += len(b) - present
             c["seq_gaps"] += gaps
+            b = self._picked(b)
             rate, n_bad = plausibility.gate(b.rate_dph, self._max_abs_dph)
             c[plausibility.COUNTER] += n_bad
             bad = np.isnan(rate) & b.valid
-            t_event = float(b.t_s[np.argmax(bad)])      # the first implausible sample's (or the block's)
-            yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)))
+            first = bad.any(axis=1) if bad.ndim == 2 else bad
+            t_event = float(b.t_s[np.argmax(first)])      # the first implausible sample's (or the block's)
+            yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)), b.axes)
+
+    def _picked(self, b: Block) -> Block:
+        """A block of the log's columns with the axes ``--axis`` keeps."""
+        return b if self._pick is None else b.select(self._pick)
 
     def _grid_blocks(self) -> Iterator[tuple[Block, int, int]]:
-        grid = _LogGrid(self.t_first_s, self.sample_rate_hz, self._n, self.aux_names, self._reader.name)
+        grid = _LogGrid(self.t_first_s, self.sample_rate_hz, self._n, self._reader.aux_names, self._reader.name,
+                        self._reader.axes)
         for rows in self._reader.chunks():
             self.counters["skipped_rows"] += rows.skipped
             yield from grid.push(rows)
@@ -107,9 +121,10 @@ class _LogGrid:
     t0 + k / fs (s, Hz), block j holding grid indices j*n .. (j+1)*n - 1: missing samples
     are invalid placeholders (NaN) and each time gap is one ``gap`` event in the block
     where it starts, however many blocks it spans. The result does not depend on how
-    the rows are cut into chunks."""
+    the rows are cut into chunks. With ``axes``, the rate has one column per axis."""
 
-    def __init__(self, t0_s: float, sample_rate_hz: float, n: int, aux_names: Sequence[str], name: str) -> None:
+    def __init__(self, t0_s: float, sample_rate_hz: float, n: int, aux_names: Sequence[str], name: str,
+                 axes: tuple[str, ...] = ()) -> None:
         self.t0_s, self.sample_rate_hz, self.n, self.aux_names, self.name = (
             t0_s,
             sample_rate_hz,
@@ -117,6 +132,7 @@ class _LogGrid:
             list(aux_names),
             name,
         )
+        self.axes = axes
         self._last = -1
         self._gaps: deque[tuple[int, int]] = deque()  # (first missing grid index, samples missing)
         self._start(0)
@@ -125,7 +141,7 @@ class _LogGrid:
         n = self.n
         self._j = j
         self._t = self.t0_s + (j * n + np.arange(n)) / self.sample_rate_hz
-        self._rate = np.full(n, np.nan)
+        self._rate = np.full((n, len(self.axes)) if self.axes else n, np.nan)
         self._aux = {k: np.full(n, np.nan) for k in self.aux_names}
         self._present = np.zeros(n, bool)
 
@@ -167,7 +183,7 @@ class _LogGrid:
                      f"(time gap in the log)") for k, n in gaps[:MAX_GAP_EVENTS]]
         if len(gaps) > MAX_GAP_EVENTS:
             evs.append(Event(evs[-1].t_s, "gap", f"{len(gaps) - MAX_GAP_EVENTS} more gaps in this block"))
-        b = Block.make(t, self._rate[:m], aux={k: v[:m] for k, v in self._aux.items()}, events=evs)
+        b = Block.make(t, self._rate[:m], aux={k: v[:m] for k, v in self._aux.items()}, events=evs, axes=self.axes)
         return b, int(np.count_nonzero(self._present[:m])), len(gaps)
 
 
@@ -272,14 +288,16 @@ class ReplayLogSet:
     sample grid goes on across the seams: samples missing between two pieces become
     invalid placeholders with a ``gap`` event, as inside one log; pieces that overlap in
     time, or differ in sample rate or columns, are a one-line error. Counters: the
-    pieces' summed, seam gaps included."""
+    pieces' summed, seam gaps included. ``axis``, ``axes``: as ReplayLogSource."""
 
     def __init__(self, paths: Sequence[str], tolerate: bool = False,
-                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH) -> None:
+                 max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, axis: str | None = None) -> None:
         self.paths = list(paths)
-        self._sources = [ReplayLogSource(p, tolerate=tolerate, max_abs_dph=max_abs_dph) for p in self.paths]
+        self._sources = [ReplayLogSource(p, tolerate=tolerate, max_abs_dph=max_abs_dph, axis=axis)
+                         for p in self.paths]
         first = self._sources[0]
         self.sample_rate_hz = first.sample_rate_hz
+        self.axes = first.axes
         aux = first.aux_names
         # neighbour pairs: prev is one longer than paths[1:] and sources[1:], the last is unused
         for path, prev, src in zip(self.paths[1:], self._sources, self._sources[1:], strict=False):
@@ -288,6 +306,9 @@ class ReplayLogSet:
                                   f"({self.sample_rate_hz:g} Hz): not pieces of one recording")
             if src.aux_names != aux:
                 raise FogmonError(f"{path}: columns {src.aux_names} differ from {self.paths[0]} ({aux})")
+            if src._reader.rate_names != first._reader.rate_names:
+                raise FogmonError(f"{path}: rate columns {src._reader.rate_names} differ from {self.paths[0]} "
+                                  f"({first._reader.rate_names})")
             if _seam_missing(prev, src) < 0:
                 raise FogmonError(f"{path}: starts at t={src.t_first_s:.6f} s, not after the end of the "
                                   f"previous piece (t={prev.t_last_s:.6f} s)")
@@ -311,7 +332,8 @@ class ReplayLogSet:
             if missing:
                 self._seams["samples_missing"] += missing
                 self._seams["seq_gaps"] += 1
-                yield from _seam_gap(self._sources[i - 1].t_last_s, missing, self.sample_rate_hz, src.aux_names)
+                yield from map(src._picked, _seam_gap(self._sources[i - 1].t_last_s, missing, self.sample_rate_hz,
+                                                      src._reader.aux_names, src._reader.axes))
             for b in src.blocks():
                 if self._closed:
                     return
@@ -326,11 +348,13 @@ def _seam_missing(prev: ReplayLogSource, nxt: ReplayLogSource) -> int:
     return int(round((nxt.t_first_s - prev.t_last_s) * prev.sample_rate_hz)) - 1
 
 
-def _seam_gap(t_end: float, missing: int, sample_rate_hz: float, aux: list[str]) -> Iterator[Block]:
+def _seam_gap(t_end: float, missing: int, sample_rate_hz: float, aux: list[str],
+              axes: tuple[str, ...] = ()) -> Iterator[Block]:
     """Invalid placeholders for the samples missing between two pieces, FAST_BLOCK at a
     time, with a gap event in the first."""
     for i in range(0, missing, FAST_BLOCK):
         t = t_end + np.arange(i + 1, min(i + FAST_BLOCK, missing) + 1) / sample_rate_hz
         nan = np.full(len(t), np.nan)
+        rate = np.full((len(t), len(axes)), np.nan) if axes else nan
         ev = (Event(float(t[0]), "gap", f"{missing} sample(s) missing at t={t[0]:.6f} s (between two pieces)"),)
-        yield Block(t, nan, np.zeros(len(t), bool), {k: nan for k in aux}, ev if i == 0 else ())
+        yield Block(t, rate, np.zeros(rate.shape, bool), {k: nan for k in aux}, ev if i == 0 else (), axes)

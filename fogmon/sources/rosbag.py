@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import DPH_PER_RPS, StampedSource
+from fogmon.sources.stamped import DPH_PER_RPS, StampedSource, imu_axis
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 
@@ -68,7 +68,7 @@ def open_source(path: str, options: dict) -> StampedSource:
     """The Imu topic ``options['topic']``, axis ``options['axis']`` (x, y, z) of the bag or
     MCAP file ``path`` as a StampedSource; a missing topic or a topic of another type is a
     one-line FogmonError naming the file and the Imu topics it has."""
-    axis = options.get("axis") or "z"
+    axis = imu_axis(options, path)
     try:
         reader = _reader(path)
         reader.open()

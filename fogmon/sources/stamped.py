@@ -139,6 +139,15 @@ class StampedSource:
                          path=self.where)
 
 
+def imu_axis(options: dict, path: str) -> str:
+    """The gyro axis ``options['axis']`` of an IMU recording (x, y or z; default z): one
+    axis per run (a comma list or another name is a FogmonError naming the file)."""
+    axis = options.get("axis") or "z"
+    if axis not in ("x", "y", "z"):
+        raise FogmonError(f"{path}: --axis {axis}: this reader gives one gyro axis, x, y or z")
+    return axis
+
+
 def dph_per_unit(unit: str | None, where: str) -> float:
     """deg/h per unit of a rate channel whose unit a file states as ``unit`` (the one
     table, fogmon.units, with the spellings loggers use: ``deg/hr``, ``degs/sec``,

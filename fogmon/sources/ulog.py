@@ -12,7 +12,7 @@ import os
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import DPH_PER_RPS, StampedSource
+from fogmon.sources.stamped import DPH_PER_RPS, StampedSource, imu_axis
 
 #: topic -> field of each axis (rad/s)
 AXIS_FIELDS = {"sensor_gyro": {"x": "x", "y": "y", "z": "z"},
@@ -25,7 +25,7 @@ def open_source(path: str, options: dict) -> StampedSource:
     import pyulog
     topic = options.get("topic") or "sensor_gyro"
     name, _, inst = topic.partition(":")
-    axis = options.get("axis") or "z"
+    axis = imu_axis(options, path)
     if name not in AXIS_FIELDS:
         raise FogmonError(f"{path}: field topic: {name!r} is not a gyro topic fogmon reads ({', '.join(AXIS_FIELDS)})")
     if inst and not inst.isdigit():
