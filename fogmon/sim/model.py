@@ -34,6 +34,7 @@ from itertools import pairwise
 import numpy as np
 import tomli_w
 
+from fogmon.block import is_axis_name
 from fogmon.errors import FogmonError
 
 #: IEEE-952 noise coefficient keys of the [noise] table and their units.
@@ -401,7 +402,7 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
 
 def _check_axis_name(name: object, where: str) -> None:
     """An axis name is letters and digits (it becomes part of column names)."""
-    if not (isinstance(name, str) and name.isascii() and name.isalnum()):
+    if not is_axis_name(name):
         raise FogmonError(f"{where}: an axis name is letters and digits, got {name!r}")
 
 
