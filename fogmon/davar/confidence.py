@@ -209,13 +209,22 @@ def _phase_acv(t: np.ndarray, alpha: int) -> np.ndarray:
         return np.where(a > 0, t * t * np.log(np.where(a > 0, a, 1.0)), 0.0)
 
 
+def _term_xcov_raw(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
+    """Covariance (up to a constant) of the Allan term of factor ``ma`` at j with that of
+    ``mb`` at j + lag."""
+    off = (np.arange(3)[None, :] * mb - np.arange(3)[:, None] * ma).ravel()
+    return (np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel() * _phase_acv(lag[..., None] + off, alpha)).sum(-1)
+
+
+@lru_cache(maxsize=1 << 12)
+def _term_sd(m: int, alpha: int) -> float:
+    """Standard deviation (same constant) of an Allan term of factor m."""
+    return float(np.sqrt(_term_xcov_raw(np.zeros(1), m, m, alpha)[0]))
+
+
 def _term_xcov(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
     """Correlation of the Allan term of factor ``ma`` at j with that of ``mb`` at j + lag."""
-    def raw(lg, m1, m2):
-        off = (np.arange(3)[None, :] * m2 - np.arange(3)[:, None] * m1).ravel()
-        return (np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel() * _phase_acv(lg[..., None] + off, alpha)).sum(-1)
-    zero = np.zeros(1)
-    return raw(lag, ma, mb) / np.sqrt(raw(zero, ma, ma)[0] * raw(zero, mb, mb)[0])
+    return _term_xcov_raw(lag, ma, mb, alpha) / (_term_sd(ma, alpha) * _term_sd(mb, alpha))
 
 
 def _pair_count(lag: np.ndarray, ma_terms: int, mb_terms: int) -> np.ndarray:
@@ -223,6 +232,7 @@ def _pair_count(lag: np.ndarray, ma_terms: int, mb_terms: int) -> np.ndarray:
     return np.maximum(np.minimum(ma_terms, mb_terms - lag) - np.maximum(0, -lag), 0).astype(np.float64)
 
 
+@lru_cache(maxsize=1 << 14)
 def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
     """C[k, l] = sum over lags of N(lag) rho_k(lag) rho_l(lag) for the overlapping Allan
     variances of factors ma and mb (noise types MIX_ALPHAS; rho the cross-correlation of
