@@ -157,6 +157,7 @@ class _NoiseModel:
         self.full = full.astype(np.float64)
         self.gap_scale = np.asarray(n_terms) / full
         self.m = np.asarray(m, dtype=np.int64)
+        self._cov: np.ndarray | None = None  # covariance_matrices of m, fetched on first use
 
     def fractions(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per
@@ -173,8 +174,9 @@ class _NoiseModel:
     def correlation(self, a: np.ndarray) -> np.ndarray:
         """Correlation of the Allan variance estimates across the fitted taus (T x T):
         exact for the model's mixture (``confidence.avar_relative_covariance``)."""
-        cov = avar_relative_covariance(self.fractions(a), covariance_matrices(self.m, self.n_samples),
-                                       self.n_samples - 2.0 * self.m + 1)
+        if self._cov is None:
+            self._cov = covariance_matrices(self.m, self.n_samples)
+        cov = avar_relative_covariance(self.fractions(a), self._cov, self.full)
         sd = np.sqrt(np.diag(cov))
         return cov / np.outer(sd, sd)
 
