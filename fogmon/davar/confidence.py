@@ -2,7 +2,7 @@
 
 sigma_hat^2 ~ sigma^2 chi2_nu / nu with nu from Greenhall & Riley's EDF algorithm
 (Greenhall 2004, overlapping ADEV: d = 2, F = S = m; the cases of
-``allantools.ci.edf_greenhall``, which tests/test_davar_confidence.py checks it against,
+``allantools.ci.edf_greenhall``, which tests/test_davar_theory_confidence.py checks it against,
 evaluated here so that a run needs neither allantools nor scipy.stats). The noise type alpha
 (S_y ~ f^alpha) per tau comes from the dominant IEEE-952 term (``ALPHA_OF_TERM``) or from
 the caller. When gaps remove terms, nu is scaled by the fraction of terms still valid.
