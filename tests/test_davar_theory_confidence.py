@@ -51,6 +51,27 @@ def test_edf_is_greenhall_and_scales_with_gaps():
     assert e[2] == pytest.approx(full[2] * 484 / 969) and e[3] == pytest.approx(full[3] / 501)
 
 
+def test_edf_is_allantools_greenhall_in_every_case():
+    """fogmon evaluates Greenhall's algorithm itself (no allantools or scipy.stats at run
+    time): every case of allantools' edf_greenhall for the overlapping ADEV (BasicSum
+    with F = m or inf, the long-record tables, the short-record BasicSum, alpha 2 .. -2)."""
+    checked = 0
+    for n in (8, 20, 64, 257, 1000, 4096, 65536, 10**6):
+        for k in sorted({1, 2, 3, 5, 16, 33, 34, 100, 1000, n // 8, n // 3, n // 2}):
+            if not 1 <= k <= n // 2:
+                continue
+            for alpha in (2, 1, 0, -1, -2):
+                try:
+                    want = edf_greenhall(alpha, 2, k, n + 1, overlapping=True, modified=False)
+                except NotImplementedError:  # alpha 2 with under 2 m terms: no EDF either way
+                    with pytest.raises(ValueError):
+                        edf_full(alpha, k, n)
+                    continue
+                assert edf_full(alpha, k, n)[0] == pytest.approx(want, rel=1e-12), (alpha, k, n)
+                checked += 1
+    assert checked > 350
+
+
 def test_chi2_bounds_match_allantools():
     dev = np.array([1.0, 2.0, 0.5, 3.0])
     edf = np.array([3.0, 17.5, 1000.0, 17.5])

@@ -93,7 +93,8 @@ def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
     at least ``every`` samples after the previous check, refitted (row_alpha) unless the
     last refit's model still holds there (``_model_holds``), and held in between, so
     batch and streaming engines pick the same windows. ``prev`` is the state returned for
-    the windows before these, or None. Returns (alpha (T x M), state)."""
+    the windows before these, or None. Returns (alpha (T x M; a read-only broadcast of one
+    row when one row holds for all these windows), state)."""
     alpha_now, terms_now, end_now = (np.zeros(len(m), dtype=np.int64), None, None) if prev is None else prev
     if len(ends) == 0:
         return np.zeros((0, len(m)), dtype=np.int64), (alpha_now, terms_now, end_now)
@@ -108,8 +109,11 @@ def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
             seg_start.append(r)
             seg_alpha.append(alpha_now)
         r = int(np.searchsorted(ends, end_now + every))
+    state = (alpha_now, terms_now, end_now)
+    if len(seg_alpha) == 1:  # one noise-type row for every window: a read-only view (see statistics)
+        return np.broadcast_to(np.asarray(seg_alpha[0], dtype=np.int64), (len(ends), len(m))), state
     seg = np.searchsorted(np.array(seg_start), np.arange(len(ends)), side="right") - 1
-    return np.array(seg_alpha, dtype=np.int64)[seg], (alpha_now, terms_now, end_now)
+    return np.array(seg_alpha, dtype=np.int64)[seg], state
 
 
 @lru_cache(maxsize=256)
@@ -134,6 +138,8 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
         alpha = np.array([row_alpha(s, c, m, n_samples) for s, c in zip(sums, counts, strict=True)],
                          dtype=np.int64).reshape(shape)
     alpha = np.asarray(alpha, dtype=np.int64)
+    if alpha.ndim == 2 and len(alpha) and alpha.strides[0] == 0:  # a row broadcast over windows (alpha_rows)
+        alpha = alpha[0]
     if alpha.ndim <= 1:  # one noise type row for every window
         runs = np.ascontiguousarray(np.broadcast_to(alpha, (1, nm)))
         run = np.zeros(len(sums), dtype=np.int64)

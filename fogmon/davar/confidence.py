@@ -1,7 +1,9 @@
 """Chi-square confidence intervals of the overlapping Allan deviation.
 
 sigma_hat^2 ~ sigma^2 chi2_nu / nu with nu from Greenhall & Riley's EDF algorithm
-(``allantools.ci.edf_greenhall``, overlapping ADEV, d = 2). The noise type alpha
+(Greenhall 2004, overlapping ADEV: d = 2, F = S = m; the cases of
+``allantools.ci.edf_greenhall``, which tests/test_davar_theory_confidence.py checks it against,
+evaluated here so that a run needs neither allantools nor scipy.stats). The noise type alpha
 (S_y ~ f^alpha) per tau comes from the dominant IEEE-952 term (``ALPHA_OF_TERM``) or from
 the caller. When gaps remove terms, nu is scaled by the fraction of terms still valid.
 For the noise fit: the EDF of a noise mixture (``edf_mixture``) and the exact covariance
@@ -12,19 +14,11 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from allantools.ci import edf_greenhall
-from scipy.stats import chi2
 
 from fogmon.davar.result import CONFIDENCE
 
 ALPHA_OF_TERM = np.array([2, 0, -1, -2, -2])
 """Power-law exponent alpha of each IEEE-952 term Q, N, B, K, R (R treated as random walk)."""
-
-
-@lru_cache(maxsize=1 << 16)
-def _edf_greenhall(alpha: int, m: int, n_samples: int) -> float:
-    # Greenhall counts phase points: n rate samples are n + 1 phase points.
-    return float(edf_greenhall(alpha, 2, m, n_samples + 1, overlapping=True, modified=False))
 
 
 def edf_full(alpha, m, n_samples: int) -> np.ndarray:
@@ -67,6 +61,54 @@ def _sz(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
             return _sw(u, alpha + 2)
         return f**2 * (2.0 * _sw(u, alpha) - _sw(u - 1.0 / f, alpha) - _sw(u + 1.0 / f, alpha))
     return 6.0 * sx(t) - 4.0 * (sx(t - 1.0) + sx(t + 1.0)) + sx(t - 2.0) + sx(t + 2.0)
+
+
+_J_MAX = 100  # Greenhall's limit of the BasicSum's lags
+_TABLE2_D2 = {2: (35.0 / 18.0, 1.0), 1: (790.0, 410.0), 0: (2.0 / 3.0, 1.0 / 3.0), -1: (0.852, 0.375),
+              -2: (1.079, 0.368)}
+"""Greenhall's table 2 (a0, a1) for d = 2 per alpha: 1 / EDF ~ (a0 - a1 / r) / r for long records."""
+_TABLE3_D2 = (15.23, 12.0)  # Greenhall's table 3 (b0, b1) for d = 2, alpha = 1
+
+
+def _basic_sum(j: int, big_m: float, s: float, f: float, alpha: int) -> float:
+    """Greenhall's BasicSum: sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_{0<j<J} (1 - j/M) sz(j/S)^2."""
+    lag = np.arange(1, j, dtype=np.float64)
+    inner = 2.0 * (1.0 - lag / big_m) * _sz(lag / s, f, alpha) ** 2
+    ends = _sz(np.array([0.0, j / s]), f, alpha) ** 2
+    return float(ends[0] + (1.0 - j / big_m) * ends[1] + inner.sum())
+
+
+@lru_cache(maxsize=1 << 16)
+def _edf_greenhall(alpha: int, m: int, n_samples: int) -> float:
+    """Greenhall's EDF of the overlapping Allan variance (d = 2, F = S = m) of
+    ``n_samples`` rate samples (n + 1 phase points, so M = n - 2m + 1 terms)."""
+    if not -2 <= alpha <= 2:
+        raise ValueError(f"noise type alpha {alpha} outside 2 .. -2")
+    big_m = float(n_samples - 2 * m + 1)
+    j = min(big_m, 3.0 * m)
+    r = big_m / m
+    if alpha == 2:  # case 4
+        if np.ceil(r) <= 2:
+            raise ValueError(f"no Greenhall EDF for alpha 2 with {big_m:g} terms of m = {m}")
+        return 1.0 / ((70.0 / 36.0 - 1.0 / r) / big_m)  # a0 = C(8, 4) / C(4, 2)^2, a1 = d / 2
+    f = float(m)
+    if alpha == 1:  # case 3
+        if j <= _J_MAX:
+            return 1.0 / (_basic_sum(int(j), big_m, m, f, 1) / (_sz(np.zeros(1), f, 1)[0] ** 2 * big_m))
+        b = (_TABLE3_D2[0] + _TABLE3_D2[1] * np.log(m)) ** 2
+        if r > 3:
+            a0, a1 = _TABLE2_D2[1]
+            return 1.0 / ((a0 - a1 / r) / (b * r))
+        mp = _J_MAX / r
+        return 1.0 / (_basic_sum(_J_MAX, _J_MAX, mp, mp, 1) / (b * _J_MAX))
+    if j <= _J_MAX:  # case 2: alpha <= 0
+        f = f if 3 * m <= _J_MAX else np.inf
+        return 1.0 / (_basic_sum(int(j), big_m, m, f, alpha) / (_sz(np.zeros(1), f, alpha)[0] ** 2 * big_m))
+    if r > 3:
+        a0, a1 = _TABLE2_D2[alpha]
+        return 1.0 / ((a0 - a1 / r) / r)
+    return 1.0 / (_basic_sum(_J_MAX, _J_MAX, _J_MAX / r, np.inf, alpha)
+                  / (_sz(np.zeros(1), np.inf, alpha)[0] ** 2 * _J_MAX))
 
 
 def _discrete_rho(m: int, alpha: int, j: np.ndarray) -> np.ndarray:
@@ -167,13 +209,22 @@ def _phase_acv(t: np.ndarray, alpha: int) -> np.ndarray:
         return np.where(a > 0, t * t * np.log(np.where(a > 0, a, 1.0)), 0.0)
 
 
+def _term_xcov_raw(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
+    """Covariance (up to a constant) of the Allan term of factor ``ma`` at j with that of
+    ``mb`` at j + lag."""
+    off = (np.arange(3)[None, :] * mb - np.arange(3)[:, None] * ma).ravel()
+    return (np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel() * _phase_acv(lag[..., None] + off, alpha)).sum(-1)
+
+
+@lru_cache(maxsize=1 << 12)
+def _term_sd(m: int, alpha: int) -> float:
+    """Standard deviation (same constant) of an Allan term of factor m."""
+    return float(np.sqrt(_term_xcov_raw(np.zeros(1), m, m, alpha)[0]))
+
+
 def _term_xcov(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
     """Correlation of the Allan term of factor ``ma`` at j with that of ``mb`` at j + lag."""
-    def raw(lg, m1, m2):
-        off = (np.arange(3)[None, :] * m2 - np.arange(3)[:, None] * m1).ravel()
-        return (np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel() * _phase_acv(lg[..., None] + off, alpha)).sum(-1)
-    zero = np.zeros(1)
-    return raw(lag, ma, mb) / np.sqrt(raw(zero, ma, ma)[0] * raw(zero, mb, mb)[0])
+    return _term_xcov_raw(lag, ma, mb, alpha) / (_term_sd(ma, alpha) * _term_sd(mb, alpha))
 
 
 def _pair_count(lag: np.ndarray, ma_terms: int, mb_terms: int) -> np.ndarray:
@@ -181,6 +232,7 @@ def _pair_count(lag: np.ndarray, ma_terms: int, mb_terms: int) -> np.ndarray:
     return np.maximum(np.minimum(ma_terms, mb_terms - lag) - np.maximum(0, -lag), 0).astype(np.float64)
 
 
+@lru_cache(maxsize=1 << 14)
 def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
     """C[k, l] = sum over lags of N(lag) rho_k(lag) rho_l(lag) for the overlapping Allan
     variances of factors ma and mb (noise types MIX_ALPHAS; rho the cross-correlation of
@@ -259,6 +311,8 @@ def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENC
     per distinct EDF value."""
     adev = np.asarray(adev, dtype=np.float64)
     edf = np.broadcast_to(np.asarray(edf, dtype=np.float64), adev.shape)
+    from scipy.special import gammaincinv  # imported here: scipy costs start-up time
+
     q_lo, q_hi = _quantiles(float(confidence))
     ok = np.isfinite(edf) & (edf > 0)
     f_lo = np.full(adev.shape, np.nan)
@@ -266,6 +320,7 @@ def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENC
     if ok.any():
         u, inv = np.unique(edf[ok], return_inverse=True)
         with np.errstate(divide="ignore", over="ignore"):  # tiny EDF: hi is +inf
-            f_lo[ok] = np.sqrt(u / chi2.ppf(q_hi, u))[inv]
-            f_hi[ok] = np.sqrt(u / chi2.ppf(q_lo, u))[inv]
+            # the chi2 quantile with u degrees of freedom at q is 2 gammaincinv(u / 2, q)
+            f_lo[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_hi)))[inv]
+            f_hi[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_lo)))[inv]
     return adev * f_lo, adev * f_hi

@@ -16,9 +16,9 @@ the correlation across taus (``_upper_limits``).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from statistics import NormalDist
 
 import numpy as np
-from scipy.stats import norm
 
 from fogmon.davar.confidence import (
     ALPHA_OF_TERM,
@@ -52,7 +52,7 @@ TUKEY_C = 4.685
 _RTOL = 1e-9
 UPPER_CONFIDENCE = 0.95
 """One-sided confidence of every term's upper limit (``Coefficient.upper``)."""
-_UPPER_DEVIANCE = float(norm.ppf(UPPER_CONFIDENCE)) ** 2  # 2.706: signed root at -1.645
+_UPPER_DEVIANCE = NormalDist().inv_cdf(UPPER_CONFIDENCE) ** 2  # 2.706: signed root at -1.645
 
 
 @dataclass(frozen=True)
@@ -157,6 +157,7 @@ class _NoiseModel:
         self.full = full.astype(np.float64)
         self.gap_scale = np.asarray(n_terms) / full
         self.m = np.asarray(m, dtype=np.int64)
+        self._cov: np.ndarray | None = None  # covariance_matrices of m, fetched on first use
 
     def fractions(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
         """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per
@@ -173,8 +174,9 @@ class _NoiseModel:
     def correlation(self, a: np.ndarray) -> np.ndarray:
         """Correlation of the Allan variance estimates across the fitted taus (T x T):
         exact for the model's mixture (``confidence.avar_relative_covariance``)."""
-        cov = avar_relative_covariance(self.fractions(a), covariance_matrices(self.m, self.n_samples),
-                                       self.n_samples - 2.0 * self.m + 1)
+        if self._cov is None:
+            self._cov = covariance_matrices(self.m, self.n_samples)
+        cov = avar_relative_covariance(self.fractions(a), self._cov, self.full)
         sd = np.sqrt(np.diag(cov))
         return cov / np.outer(sd, sd)
 
@@ -278,7 +280,7 @@ def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
     fitted terms ``a > 0``, which stay free >= 0), rescaled by naive / sandwich variance
     of A_n at the profiled model (the magnitude adjustment of an independence likelihood
     for the taus' correlation, Chandler & Bate 2007, evaluated under the hypothesis
-    A_n = c as in a score test), reaches norm.ppf(0.95)^2. Never below A_n-hat. For the
+    A_n = c as in a score test), reaches the squared 95 % normal quantile. Never below A_n-hat. For the
     terms in the mask ``which`` (NaN for the others)."""
     upper = np.where(which, np.inf, np.nan)
     for n in np.flatnonzero(which).tolist():
@@ -409,7 +411,7 @@ def quick_avar_terms(tau_s, avar, m, n_terms, n_samples: int) -> np.ndarray:
 
 
 def _coefficients(a: np.ndarray, se: np.ndarray, upper: np.ndarray, confidence: float) -> list[Coefficient]:
-    z = norm.ppf(0.5 + confidence / 2.0)
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
     value = avar_terms_to_coefficients(a)
     lo = avar_terms_to_coefficients(np.maximum(a - z * se, 0.0))
     ident = (a - IDENTIFY_Z * se > 0) & np.isfinite(a)

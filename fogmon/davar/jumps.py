@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from statistics import NormalDist
 
 import numpy as np
-from scipy.stats import norm, t as student_t
 
 from fogmon.block import Event
 from fogmon.davar.fit import NAMES
@@ -31,7 +31,7 @@ JUMP_MIN_INDEPENDENT = 8
 """Independent window-pair differences a coefficient needs before it can jump."""
 _MAD_EFFICIENCY = 0.37  # a MAD of n Gaussian values is worth a standard deviation of 0.37 n
 _MAD_SD = 1.4826        # standard deviation / MAD for Gaussian data
-_P_JUMP = 2.0 * float(norm.sf(JUMP_Z))
+_P_JUMP = math.erfc(JUMP_Z / math.sqrt(2.0))  # 2 Phi(-JUMP_Z)
 
 
 def jump_threshold(n_independent: float) -> float:
@@ -40,7 +40,9 @@ def jump_threshold(n_independent: float) -> float:
     0.37 n - 1 degrees of freedom (inf when fewer than JUMP_MIN_INDEPENDENT)."""
     if n_independent < JUMP_MIN_INDEPENDENT:
         return math.inf
-    return float(student_t.isf(_P_JUMP / 2.0, _MAD_EFFICIENCY * n_independent - 1.0))
+    from scipy.special import stdtrit  # imported here: scipy costs start-up time
+
+    return -float(stdtrit(_MAD_EFFICIENCY * n_independent - 1.0, _P_JUMP / 2.0))
 
 
 class JumpDetector:
@@ -55,7 +57,7 @@ class JumpDetector:
 
     def update(self, fit, t_end_s: np.ndarray) -> list[Event]:
         """Events of the windows of ``fit`` (a NoiseFit over windows) ending at ``t_end_s`` (s)."""
-        z_conf = float(norm.ppf(0.5 + fit.confidence / 2))
+        z_conf = NormalDist().inv_cdf(0.5 + fit.confidence / 2)
         cols = {name: [np.atleast_1d(np.asarray(getattr(getattr(fit, name), a), dtype=np.float64))
                        for a in ("value", "lo", "hi", "identifiable")] for name in NAMES}
         out = []

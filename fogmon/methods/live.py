@@ -11,15 +11,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fogmon.block import Event
 from fogmon.errors import FogmonError
-from fogmon.methods.denoise import StaticKalmanStream
-from fogmon.methods.live_outliers import OutlierRejector
-from fogmon.methods.live_thermal import LiveThermalCorrection
 from fogmon.sim.model import Effect
+
+if TYPE_CHECKING:
+    from fogmon.methods.denoise import StaticKalmanStream
+    from fogmon.methods.live_outliers import OutlierRejector
+    from fogmon.methods.live_thermal import LiveThermalCorrection
 
 CORRECTED = "rate_corrected_dph"
 DRIFT = "thermal_drift_dph"
@@ -57,11 +60,20 @@ class Conditioner:
     """Runs the chosen methods on a stream of blocks (recording time s, rate deg/h)."""
 
     def __init__(self, methods: LiveMethods, sample_rate_hz: float) -> None:
-        self.thermal = LiveThermalCorrection(methods.thermal) if methods.thermal is not None else None
-        self.rejector = OutlierRejector(methods.outlier_k) if methods.outlier_k is not None else None
-        self.kalman = (
-            StaticKalmanStream(sample_rate_hz, *methods.kalman_n_k) if methods.kalman_n_k is not None else None
-        )
+        # a method's module is imported only when it runs: they pull in scipy.signal,
+        # scipy.linalg and scipy.ndimage, a second of start-up for a run without them
+        self.thermal: LiveThermalCorrection | None = None
+        self.rejector: OutlierRejector | None = None
+        self.kalman: StaticKalmanStream | None = None
+        if methods.thermal is not None:
+            from fogmon.methods.live_thermal import LiveThermalCorrection
+            self.thermal = LiveThermalCorrection(methods.thermal)
+        if methods.outlier_k is not None:
+            from fogmon.methods.live_outliers import OutlierRejector
+            self.rejector = OutlierRejector(methods.outlier_k)
+        if methods.kalman_n_k is not None:
+            from fogmon.methods.denoise import StaticKalmanStream
+            self.kalman = StaticKalmanStream(sample_rate_hz, *methods.kalman_n_k)
         #: samples without a temperature, so without a thermal correction (invalid for the analysis)
         self.no_temperature = 0
 

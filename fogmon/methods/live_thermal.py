@@ -21,7 +21,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sim.effects import backward_differences, thermal_drift_from
 from fogmon.sim.model import Effect, SensorModel
 
 
@@ -124,6 +123,9 @@ class LiveThermalCorrection:
 
     def push(self, t_s: np.ndarray, rate_dph: np.ndarray, temp_c: np.ndarray) -> Corrected:
         """Correct one block (equal-length arrays, time increasing across calls)."""
+        # imported here: fogmon.sim.effects pulls in scipy.signal (a second of every run's start-up)
+        from fogmon.sim.effects import backward_differences, thermal_drift_from
+
         t_new = np.asarray(t_s, float)
         if len(t_new) == 0:
             return Corrected(np.empty(0), np.empty(0), np.zeros(0, bool))

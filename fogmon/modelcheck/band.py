@@ -16,15 +16,19 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 import fogmon.modelcheck.cache as cache
 from fogmon.errors import FogmonError
-from fogmon.explain.mismatch import Gumbel, Null, build_null, zscores
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, model_to_dict, validate_model
-from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact
-from fogmon.sim.simulate import iter_simulate
+
+if TYPE_CHECKING:
+    from fogmon.explain.mismatch import Null
+
+# fogmon.explain.mismatch and fogmon.sim (scipy.ndimage, scipy.signal: a second of start-up)
+# are imported inside the functions that use them: a run without --model never needs them
 
 #: Effect natures the band holds: stationary random processes the simulator makes from
 #: the model alone (``markov``, ``vibration_lines``: "noise"; ``bandwidth``: "filter").
@@ -63,6 +67,8 @@ def theory_adev_dph(model: SensorModel, m: np.ndarray, sample_rate_hz: float,
     band model at averaging factors m, for a simulation of ``duration_s`` s (it sets the
     flicker generator's longest correlation time); None when the model holds an effect
     without a closed form (bandwidth filter, vibration lines)."""
+    from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact
+
     bm = band_model(model, sample_rate_hz)
     sample_rate_hz = float(sample_rate_hz)
     m = np.asarray(m, dtype=float)
@@ -101,6 +107,8 @@ def replicate_log_avar(model: SensorModel, window_n: int, m: np.ndarray, replica
     """ln Allan variance ((deg/h)^2), replicates x taus: ``replicates`` independent
     simulations of ``model`` (its own sample rate) of ``window_n`` samples each, seeds
     spawned from ``seed``."""
+    from fogmon.sim.simulate import iter_simulate
+
     sample_rate_hz = model.sample_rate_hz
     seeds = np.random.SeedSequence(seed).generate_state(replicates, np.uint64)
     out = np.empty((replicates, len(m)))
@@ -173,6 +181,8 @@ class ModelBand:
         else:
             L = replicate_log_avar(bm, window_n, m, int(replicates), int(seed))
             status = cache.save(folder, key, L)
+        from fogmon.explain.mismatch import Gumbel, build_null
+
         null = build_null(L[:, None, :], L, alpha)
         null = replace(null, gumbel=Gumbel.fit(loo_max_abs_z(L, null.mu[0])))
         median = np.median(np.sqrt(np.exp(L)), axis=0)
@@ -220,6 +230,8 @@ class ModelBand:
         """z per tau of a window's ADEV (deg/h, last axis over the band's taus: one
         window or a T x M map of them); NaN where the ADEV is NaN (no valid term), +inf
         where it is +inf (a huge sample)."""
+        from fogmon.explain.mismatch import zscores
+
         a = np.asarray(adev_dph, dtype=float)
         with np.errstate(divide="ignore"):
             cell = np.log(a * a)
