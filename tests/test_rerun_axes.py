@@ -139,7 +139,7 @@ def test_blueprint_overlays_the_axes_and_sets_heatmaps_side_by_side(three_axis_r
     assert views["Rate (deg/h) of axes x, y, z over recording time (s)"]["contents"] == [
         f"/axis/{a}/rate/rate_dph/**" for a in AXES]
     for name, unit in COEFFICIENTS.items():
-        v = views[f"{name} ({unit}) of axes x, y, z: value, interval or upper limit"]
+        v = views[f"{name} ({unit}): value, interval or upper limit (x red, y green, z blue)"]
         assert v["class"] == "TimeSeries" and v["contents"] == [f"/axis/{a}/coef/{name}/**" for a in AXES]
     heatmaps = sorted(v["origin"] for n, v in views.items() if "DADEV heatmap" in n)
     assert heatmaps == [f"/axis/{a}/dadev/heatmap" for a in AXES]

@@ -94,6 +94,7 @@ _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 #: Colours of the axes of a multi-axis stream, in the order of StreamInfo.axes (x red, y green,
 #: z blue, as 3-D viewers draw them), repeated beyond six axes.
 AXIS_COLOURS = ((235, 90, 80), (90, 200, 100), (90, 150, 255), (230, 180, 40), (200, 110, 220), (70, 200, 200))
+AXIS_COLOUR_NAMES = ("red", "green", "blue", "yellow", "purple", "cyan")
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
 
@@ -134,15 +135,16 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool
         _series(f"/{axis_path(a, 'dadev/log10_adev_dph')}", "$origin/**",
                 f"{_axis_title(a)}DADEV: log10 ADEV (deg/h) per tau (s) over time"),
     ) for a in (axes or ("",))]
-    coefs = [_series(*_over_axes(f"coef/{n}", axes), f"{n} ({u}){of}: value, interval or upper limit")
+    key = ", ".join(f"{a} {AXIS_COLOUR_NAMES[k % len(AXIS_COLOUR_NAMES)]}" for k, a in enumerate(axes))
+    coefs = [_series(*_over_axes(f"coef/{n}", axes), f"{n} ({u}): value, interval or upper limit"
+                     + (f" ({key})" if axes else ""), legend=not axes)    # 3 series per axis: a key, no legend
              for n, u in COEFFICIENTS.items()]
     side = rrb.Tabs(rrb.TextLogView(origin=(ev := _over_axes("events", axes))[0], contents=ev[1],
                                     name=f"Events{' (all axes)' if axes else ''}"),
                     _series("/counters", "$origin/**", "Source counters"),
                     rrb.TextDocumentView(origin="/session", name="Session"))
-    heat_share = 0.8 if axes else 1.2
-    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top),
-                                      rrb.Horizontal(curve, *heat, column_shares=[1, *[heat_share] * len(heat)]),
+    shares = [1, 1.2] if not axes else [1.6, *[0.8] * len(heat)]
+    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(curve, *heat, column_shares=shares),
                                       rrb.Grid(*coefs, side, grid_columns=3),
                                       row_shares=[1.4, 1.6, 2.4]),
                          rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
@@ -191,13 +193,14 @@ def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
     return top - max(3, math.ceil(0.3 * n_taus)), top + 1
 
 
-def _series(origin: str, contents: list[str] | str, name: str):
+def _series(origin: str, contents: list[str] | str, name: str, legend: bool = True):
     """A time-series view of the whole recording (``contents``: entity queries, as Rerun's)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
     shown = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
-    return rrb.TimeSeriesView(origin=origin, contents=contents, name=name, axis_x=rrb.TimeAxis(view_range=shown))
+    return rrb.TimeSeriesView(origin=origin, contents=contents, name=name, axis_x=rrb.TimeAxis(view_range=shown),
+                              plot_legend=None if legend else rrb.PlotLegend(visible=False))
 
 
 def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[subprocess.Popen, str]:
@@ -411,7 +414,7 @@ def _styles(axes: tuple[str, ...]) -> dict[str, _Style]:
 
 def _shades(colour: tuple[int, int, int]) -> tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]:
     """An axis colour's shades for its confidence bounds (darker), model (lighter) and model band (greyed)."""
-    return _mix(colour, (0, 0, 0), 0.45), _mix(colour, (255, 255, 255), 0.55), _mix(colour, (128, 128, 128), 0.6)
+    return _mix(colour, (0, 0, 0), 0.45), _mix(colour, (255, 255, 255), 0.35), _mix(colour, (128, 128, 128), 0.6)
 
 
 def _mix(colour: tuple[int, int, int], to: tuple[int, int, int], f: float) -> tuple[int, int, int]:
@@ -680,7 +683,8 @@ class RerunSink(Sink):
                      (f"darker: {100 * confidence:.1f} % confidence bounds", first.bounds),
                      ("lighter: IEEE-952 model over the fitted taus", first.model),
                      *((f"greyed: {b}", first.band) for b in band)]
-        rp.log_legend(self.rec, f"{CURVE}/legend", items, top_left=(x1 - 1.3, y1 + 0.1), step=-0.5)
+        rp.log_legend(self.rec, f"{CURVE}/legend", items, top_left=(x1 - 1.3, y1 + 0.1),
+                      step=-0.4 if self.info.axes else -0.5)
         self._legend_sent = True
 
     def _log_heatmap(self, axis: str, log_adev: np.ndarray, t_end_s: np.ndarray, tau: np.ndarray) -> None:
