@@ -53,7 +53,7 @@ period_s = 5580.0
 amplitude_dph = 0.05
 phase_rad = 0.0
 """
-THREE_AXIS_DURATION_S, THREE_AXIS_WINDOW_S = 6 * 3600.0, 819.2
+THREE_AXIS_DURATION_S, THREE_AXIS_WINDOW_S = 3600.0, 409.6
 
 
 def _run(cmd: list[str], what: str) -> None:
