@@ -29,7 +29,7 @@ its model band) and coefficients go under ``axis/<name>/`` (``axis/x/rate/rate_d
 ``axis/<name>/events``; the decade grid and legend of the overlaid ADEV curves stay at
 ``adev_curve/log10``, aux channels at ``aux/<name>``, whole-stream events at ``events``.
 Each axis has one colour (AXIS_COLOURS) in every view: rates, ADEV curves and coefficient
-tracks of all axes overlaid, one heatmap per axis side by side (``axes_blueprint``).
+tracks of all axes overlaid, one heatmap per axis side by side (``blueprint`` with ``axes``).
 A one-axis stream keeps the paths and layout above.
 """
 from __future__ import annotations
@@ -94,6 +94,7 @@ _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 #: Colours of the axes of a multi-axis stream, in the order of StreamInfo.axes (x red, y green,
 #: z blue, as 3-D viewers draw them), repeated beyond six axes.
 AXIS_COLOURS = ((235, 90, 80), (90, 200, 100), (90, 150, 255), (230, 180, 40), (200, 110, 220), (70, 200, 200))
+#: What the views' titles call those colours.
 AXIS_COLOUR_NAMES = ("red", "green", "blue", "yellow", "purple", "cyan")
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
@@ -161,6 +162,7 @@ def _over_axes(path: str, axes: tuple[str, ...]) -> tuple[str, list[str] | str]:
 
 
 def _axis_title(axis: str) -> str:
+    """The prefix of a one-axis view's title ("Axis x: "; none for a one-axis stream)."""
     return f"Axis {axis}: " if axis else ""
 
 
