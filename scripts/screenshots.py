@@ -3,10 +3,11 @@
     python scripts/screenshots.py [--out docs/img] [--keep TMPDIR]
 
 Runs, as a user would, `fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd ...` (the
-README's default) and `fogmon explain replay_logs/sim_in_orbit_1hz.csv --rrd ...`, then
-the Rerun viewer of rerun-sdk on each .rrd with `--screenshot-to` in a virtual X display,
-and writes docs/img/viewer_replay.png and docs/img/viewer_explain.png (halved to
-1600 x 1000 pixels, 256-colour palette, < 300 kB each).
+README's default) and `fogmon explain replay_logs/sim_in_orbit_1hz.csv --rrd ...`, and
+writes a simulated three-axis gyro's .rrd (``three_axis_rrd``), then the Rerun viewer of
+rerun-sdk on each .rrd with `--screenshot-to` in a virtual X display, and writes
+docs/img/viewer_replay.png, docs/img/viewer_explain.png and docs/img/viewer_axes.png
+(halved to 1600 x 1000 pixels, 256-colour palette, < 300 kB each).
 
 Needs, besides fogmon's own dependencies, a virtual X server and a software Vulkan driver
 (not fogmon dependencies; on Debian/Ubuntu, as root):
@@ -22,11 +23,37 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import tomllib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: Viewer window in logical points (the PNG has twice as many pixels before halving).
 WINDOW = "1600x1000"
 MAX_BYTES = 300_000
+#: The three-axis gyro of viewer_axes.png: white noise and bias instability differing by
+#: axis, an orbital-period term on z only (deg/sqrt(h), deg/h, s).
+THREE_AXIS_MODEL = """
+[sensor]
+sample_rate_hz = 10.0
+[noise]
+Q_arcsec = 0.0
+N_dpsh = 0.02
+B_dph = 0.004
+K_dphsh = 0.0
+R_dphh = 0.0
+[noise.x]
+[noise.y]
+N_dpsh = 0.035
+[noise.z]
+N_dpsh = 0.015
+B_dph = 0.01
+[[effect]]
+kind = "periodic"
+axes = ["z"]
+period_s = 5580.0
+amplitude_dph = 0.05
+phase_rad = 0.0
+"""
+THREE_AXIS_DURATION_S, THREE_AXIS_WINDOW_S = 3600.0, 409.6
 
 
 def _run(cmd: list[str], what: str) -> None:
@@ -44,6 +71,39 @@ def _screenshot(rrd: str, png: str) -> None:
           "--screenshot-to", png, rrd], f"rerun --screenshot-to on {rrd}")
     if not os.path.exists(png):
         sys.exit(f"screenshots: the viewer wrote no {png}")
+
+
+def three_axis_rrd(path: str) -> None:
+    """``path``: THREE_AXIS_MODEL simulated (fogmon.sim, one model per axis, seeds 1-3) and
+    sent to the Rerun sink as the pipeline does for several axes (3-axis blocks, one
+    StreamingDadev and fit per axis). Until `fogmon replay` takes several axes."""
+    import numpy as np
+
+    from fogmon.block import Block
+    from fogmon.davar.fit import fit_noise
+    from fogmon.davar.streaming import StreamingDadev
+    from fogmon.sim.model import model_from_dict
+    from fogmon.sim.simulate import simulate
+    from fogmon.sinks.base import StreamInfo, Summary
+    from fogmon.sinks.rerun_sink import RerunSink
+
+    model = model_from_dict(tomllib.loads(THREE_AXIS_MODEL))
+    axes, fs = model.axes, model.sample_rate_hz
+    recs = [simulate(model.for_axis(a), THREE_AXIS_DURATION_S, seed=k + 1) for k, a in enumerate(axes)]
+    t, rate = recs[0].t_s, np.column_stack([r.rate_dph for r in recs])
+    engines = {a: StreamingDadev(fs, THREE_AXIS_WINDOW_S, hop_s=THREE_AXIS_WINDOW_S / 8) for a in axes}
+    e0 = engines[axes[0]]
+    sink = RerunSink(rrd_path=path)
+    sink.start(StreamInfo("simulated three-axis gyro", fs, THREE_AXIS_WINDOW_S, e0.hop_n / fs, e0.m / fs, (),
+                          axes=axes))
+    for k in range(0, len(t), 36_000):
+        block = Block.make(t[k:k + 36_000], rate[k:k + 36_000], axes=axes)
+        sink.block(block)
+        for a in axes:
+            res = engines[a].push(block.axis(a).rate_dph)
+            if len(res):
+                sink.frames(res, fit_noise(res), t[0] + res.end_index / fs, axis=a)
+    sink.finish(Summary("simulated three-axis gyro", fs, THREE_AXIS_WINDOW_S, e0.hop_n / fs))
 
 
 def _shrink(src: str, dst: str) -> int:
@@ -68,13 +128,15 @@ def main() -> int:
     os.makedirs(work, exist_ok=True)
     os.makedirs(args.out, exist_ok=True)
     fogmon = [sys.executable, "-m", "fogmon"]
-    replay, explain = os.path.join(work, "replay.rrd"), os.path.join(work, "explain.rrd")
+    replay, explain, axes = (os.path.join(work, f"{n}.rrd") for n in ("replay", "explain", "axes"))
     _run([*fogmon, "replay", "replay_logs/lasergyro_z_100hz.csv", "--rrd", replay, "--no-progress", "--quiet"],
          "fogmon replay")
     _run([*fogmon, "explain", "replay_logs/sim_in_orbit_1hz.csv", "--report", os.path.join(work, "report.json"),
           "--rrd", explain, "--quiet"], "fogmon explain")
+    three_axis_rrd(axes)
     try:
-        for rrd, name in ((replay, "viewer_replay.png"), (explain, "viewer_explain.png")):
+        for rrd, name in ((replay, "viewer_replay.png"), (explain, "viewer_explain.png"),
+                          (axes, "viewer_axes.png")):
             full = os.path.join(work, name)
             _screenshot(rrd, full)
             size = _shrink(full, os.path.join(args.out, name))

@@ -60,6 +60,24 @@ def read_texts(path, entity):
     return out
 
 
+def read_views(path):
+    """The views of an .rrd's blueprint: display name -> {class, origin, contents}."""
+    reader = RrdReader(path)
+    (store,) = reader.blueprints()
+    parts: dict[str, dict] = {}
+    for ch in reader.stream(store=store):
+        ent = str(ch.entity_path)
+        if not ent.startswith("/view/"):
+            continue
+        view = parts.setdefault(ent.split("/")[2], {})
+        for row in ch.to_record_batch().to_pylist():
+            for k, col in (("class", "ViewBlueprint:class_identifier"), ("name", "ViewBlueprint:display_name"),
+                           ("origin", "ViewBlueprint:space_origin"), ("contents", "ViewContents:query")):
+                if row.get(col) is not None:
+                    view[k] = row[col] if k == "contents" else row[col][0]
+    return {v["name"]: v for v in parts.values()}
+
+
 def _free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -178,6 +196,16 @@ def test_rrd_heatmap_legend_and_labels(run_rrd):
     legend = read_column(path, "/adev_curve/log10/legend", "Points2D:labels")[0][1]
     assert legend == ["measured ADEV, current window", "68.3 % confidence bounds",
                       "IEEE-952 model over the fitted taus"]
+
+
+def test_one_axis_layout_is_unchanged(run_rrd):
+    """A one-axis stream's views show today's entities, each with its children."""
+    views = read_views(run_rrd[0]).values()
+    assert sorted((v["class"], v["origin"]) for v in views) == sorted(
+        [("TimeSeries", "/rate/rate_dph"), ("TimeSeries", "/aux"), ("2D", "/adev_curve"), ("2D", "/dadev/heatmap"),
+         ("TimeSeries", "/dadev/log10_adev_dph"), *(("TimeSeries", f"/coef/{n}") for n in COEFFICIENTS),
+         ("TextLog", "/events"), ("TimeSeries", "/counters"), ("TextDocument", "/session")])
+    assert all(v["contents"] == ["$origin/**"] for v in views)
 
 
 def test_decimator_means_valid_samples_across_pushes():

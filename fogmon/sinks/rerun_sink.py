@@ -22,6 +22,15 @@ Entities (units in every name; "log10" said where the value is a log):
   ``coef/<name>/upper_limit`` its 95 % upper limit in the windows where it is not.
 - ``events`` a text log (gaps, CRC errors, reconnects, coefficient jumps);
   ``counters/<name>`` the source's counters.
+
+Several axes (``StreamInfo.axes``): each axis's rate, DADEV, heatmap, ADEV curve (with
+its model band) and coefficients go under ``axis/<name>/`` (``axis/x/rate/rate_dph``,
+``axis/x/adev_curve/log10/adev_dph``, ``axis/x/coef/N_dpsh``, ...), its events to
+``axis/<name>/events``; the decade grid and legend of the overlaid ADEV curves stay at
+``adev_curve/log10``, aux channels at ``aux/<name>``, whole-stream events at ``events``.
+Each axis has one colour (AXIS_COLOURS) in every view: rates, ADEV curves and coefficient
+tracks of all axes overlaid, one heatmap per axis side by side (``blueprint`` with ``axes``).
+A one-axis stream keeps the paths and layout above.
 """
 from __future__ import annotations
 
@@ -38,6 +47,7 @@ import tempfile
 import time
 import uuid
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -73,49 +83,87 @@ MEASURED_COLOUR, BOUNDS_COLOUR, MODEL_COLOUR = (255, 255, 255), (120, 160, 255),
 #: the --model band around the live curve
 BAND_COLOUR = (200, 90, 200)
 HEATMAP_COLORMAP = "viridis"
+#: Height (view units, above the image) of the axis-name label of a multi-axis heatmap.
+HEATMAP_TITLE_Y = -2.5
 #: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
 UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO", "implausible": "WARN", "bad_input": "WARN",
            "platform_motion": "WARN"}
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
+#: Colours of the axes of a multi-axis stream, in the order of StreamInfo.axes (x red, y green,
+#: z blue, as 3-D viewers draw them), repeated beyond six axes.
+AXIS_COLOURS = ((235, 90, 80), (90, 200, 100), (90, 150, 255), (230, 180, 40), (200, 110, 220), (70, 200, 200))
+#: What the views' titles call those colours.
+AXIS_COLOUR_NAMES = ("red", "green", "blue", "yellow", "purple", "cyan")
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
 
 
-def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False):
+def axis_path(axis: str, path: str) -> str:
+    """The entity of ``path`` for axis ``axis`` of a multi-axis stream (``axis/<axis>/<path>``);
+    ``path`` itself for a one-axis stream (``axis`` "")."""
+    return f"axis/{axis}/{path}" if axis else path
+
+
+def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False,
+              axes: tuple[str, ...] = ()):
     """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
     a grid of the five coefficient tracks (tall enough for tick labels) and the event log.
     Time-series views show the whole recording with linked time axes; the time cursor
     follows the newest data. ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the
-    ADEV-curve view; ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate."""
+    ADEV-curve view; ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate.
+    With ``axes`` (several): the rates, ADEV curves and each coefficient's tracks of all
+    axes overlaid in one view each, one heatmap per axis side by side, the events of all."""
     import rerun.blueprint as rrb
 
-    top: list[rrb.Container | rrb.View] = [_series("/rate/rate_dph", "Rate (deg/h) over recording time (s)")]
+    of = f" of axes {', '.join(axes)}" if axes else ""
+    top: list[rrb.Container | rrb.View] = [
+        _series(*_over_axes("rate/rate_dph", axes), f"Rate (deg/h){of} over recording time (s)")]
     if error_rate:
-        top.append(_series("/rate/error_dph", "Error rate_dph - 3600 x rot_dps (deg/h), analysed"))
+        top.append(_series(*_over_axes("rate/error_dph", axes),
+                           f"Error rate_dph - 3600 x rot_dps (deg/h){of}, analysed"))
     if aux_names:
-        top.append(_series("/aux", "Aux channels (units in names)"))
-    middle: list[rrb.Container | rrb.View] = [
-        rrb.Spatial2DView(origin="/adev_curve", name="Current window: ADEV (deg/h) vs tau (s), log-log",
-                          visual_bounds=rp.loglog_bounds(*curve_bounds) if curve_bounds is not None else None),
-        rrb.Tabs(
-            rrb.Spatial2DView(origin=f"/{HEATMAP}",
-                              name="DADEV heatmap: ADEV (deg/h, colour) by tau (s, rows) and window end time "
-                                   "(s, columns)", visual_bounds=rp.heatmap_bounds()),
-            _series("/dadev/log10_adev_dph", "DADEV: log10 ADEV (deg/h) per tau (s) over time"),
-        ),
-    ]
-    coefs = [_series(f"/coef/{n}", f"{n} ({u}): value, interval or upper limit")
+        top.append(_series("/aux", "$origin/**", "Aux channels (units in names)"))
+    origin, contents = _over_axes("adev_curve", axes)
+    curve = rrb.Spatial2DView(origin=origin, contents=contents,
+                              name=f"Current window: ADEV (deg/h) vs tau (s){of}, log-log",
+                              visual_bounds=rp.loglog_bounds(*curve_bounds) if curve_bounds is not None else None)
+    heat = [rrb.Tabs(
+        rrb.Spatial2DView(origin=f"/{axis_path(a, HEATMAP)}",
+                          name=f"{_axis_title(a)}DADEV heatmap: ADEV (deg/h, colour) by tau (s, rows) and window "
+                               "end time (s, columns)", visual_bounds=rp.heatmap_bounds()),
+        _series(f"/{axis_path(a, 'dadev/log10_adev_dph')}", "$origin/**",
+                f"{_axis_title(a)}DADEV: log10 ADEV (deg/h) per tau (s) over time"),
+    ) for a in (axes or ("",))]
+    key = ", ".join(f"{a} {AXIS_COLOUR_NAMES[k % len(AXIS_COLOUR_NAMES)]}" for k, a in enumerate(axes))
+    coefs = [_series(*_over_axes(f"coef/{n}", axes), f"{n} ({u}): value, interval or upper limit"
+                     + (f" ({key})" if axes else ""), legend=not axes)    # 3 series per axis: a key, no legend
              for n, u in COEFFICIENTS.items()]
-    side = rrb.Tabs(rrb.TextLogView(origin="/events", name="Events"),
-                    _series("/counters", "Source counters"),
+    side = rrb.Tabs(rrb.TextLogView(origin=(ev := _over_axes("events", axes))[0], contents=ev[1],
+                                    name=f"Events{' (all axes)' if axes else ''}"),
+                    _series("/counters", "$origin/**", "Source counters"),
                     rrb.TextDocumentView(origin="/session", name="Session"))
-    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(*middle, column_shares=[1, 1.2]),
+    shares = [1, 1.2] if not axes else [1.6, *[0.8] * len(heat)]
+    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(curve, *heat, column_shares=shares),
                                       rrb.Grid(*coefs, side, grid_columns=3),
                                       row_shares=[1.4, 1.6, 2.4]),
                          rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
                          collapse_panels=True)
+
+
+def _over_axes(path: str, axes: tuple[str, ...]) -> tuple[str, list[str] | str]:
+    """(origin, contents) of a view of ``path``: of one axis, its entity and children; of
+    several, ``/`` with every axis's ``axis/<name>/path`` and its children."""
+    if not axes:
+        return f"/{path}", "$origin/**"
+    shared = {"adev_curve": ["/adev_curve/**"], "events": ["/events"]}.get(path, [])  # grid, legend; stream events
+    return "/", [*shared, *(f"/{axis_path(a, path)}/**" for a in axes)]
+
+
+def _axis_title(axis: str) -> str:
+    """The prefix of a one-axis view's title ("Axis x: "; none for a one-axis stream)."""
+    return f"Axis {axis}: " if axis else ""
 
 
 def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> tuple[float, float] | None:
@@ -147,13 +195,14 @@ def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
     return top - max(3, math.ceil(0.3 * n_taus)), top + 1
 
 
-def _series(origin: str, name: str):
-    """A time-series view of the whole recording."""
+def _series(origin: str, contents: list[str] | str, name: str, legend: bool = True):
+    """A time-series view of the whole recording (``contents``: entity queries, as Rerun's)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
     shown = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
-    return rrb.TimeSeriesView(origin=origin, name=name, axis_x=rrb.TimeAxis(view_range=shown))
+    return rrb.TimeSeriesView(origin=origin, contents=contents, name=name, axis_x=rrb.TimeAxis(view_range=shown),
+                              plot_legend=None if legend else rrb.PlotLegend(visible=False))
 
 
 def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[subprocess.Popen, str]:
@@ -339,6 +388,53 @@ class _Streams:
             r.set_time(*args, **kwargs)
 
 
+@dataclass(frozen=True)
+class _Style:
+    """How one axis is drawn: the prefix of its series names ("x: "; "" for a one-axis
+    stream) and its colours (RGB; ``rate`` None: Rerun's default)."""
+
+    label: str
+    rate: tuple[int, int, int] | None
+    measured: tuple[int, int, int]
+    bounds: tuple[int, int, int]
+    model: tuple[int, int, int]
+    band: tuple[int, int, int]
+    coef: dict[str, tuple[int, int, int]]
+
+
+def _styles(axes: tuple[str, ...]) -> dict[str, _Style]:
+    """Axis name ("" for a one-axis stream) -> its style. Several axes: each its
+    AXIS_COLOURS colour, in shades (``_shades``) for its bounds, model and model band."""
+    if not axes:
+        return {"": _Style("", None, MEASURED_COLOUR, BOUNDS_COLOUR, MODEL_COLOUR, BAND_COLOUR, _COEF_COLORS)}
+    out = {}
+    for k, a in enumerate(axes):
+        c = AXIS_COLOURS[k % len(AXIS_COLOURS)]
+        out[a] = _Style(f"{a}: ", c, c, *_shades(c), dict.fromkeys(COEFFICIENTS, c))
+    return out
+
+
+def _shades(colour: tuple[int, int, int]) -> tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]:
+    """An axis colour's shades for its confidence bounds (darker), model (lighter) and model band (greyed)."""
+    return _mix(colour, (0, 0, 0), 0.45), _mix(colour, (255, 255, 255), 0.35), _mix(colour, (128, 128, 128), 0.6)
+
+
+def _mix(colour: tuple[int, int, int], to: tuple[int, int, int], f: float) -> tuple[int, int, int]:
+    """``colour`` moved a fraction ``f`` towards ``to``."""
+    r, g, b = (round(c + f * (t - c)) for c, t in zip(colour, to, strict=True))
+    return r, g, b
+
+
+@dataclass
+class _Heat:
+    """One axis's heatmap: log10 ADEV rows of the latest windows, their end times (s), and
+    the colour scale (whole decades of log10 ADEV, fixed at the first frames)."""
+
+    rows: list[np.ndarray] = field(default_factory=list)
+    t_s: list[float] = field(default_factory=list)
+    decades: tuple[int, int] | None = None
+
+
 class RerunSink(Sink):
     """Streams the pipeline into Rerun: ``rrd_path`` (file; with ``rotate`` one file per
     piece, named by fogmon.pieces: OUT-0001.rrd, ..., each a complete recording with the
@@ -362,10 +458,7 @@ class RerunSink(Sink):
         self._recording_id = str(uuid.uuid4())
         self._piece = 1
         self._probe: str | None = None       # an empty file made to test --rrd, removed if no data came
-        self._heat: list[np.ndarray] = []
         self._last_flush = time.monotonic()
-        self._heat_t: list[float] = []
-        self._heat_range: tuple[int, int] | None = None   # colour scale, whole decades of log10 ADEV
         self._legend_sent = False
         self._band_alpha: float | None = None
         self._pending_events: list[Event] = []
@@ -414,6 +507,8 @@ class RerunSink(Sink):
         self.info = info
         self.step = max(1, int(math.ceil(info.sample_rate_hz / DISPLAY_MAX_HZ)))
         self.dec = _Decimator(self.step)
+        self._styles = _styles(info.axes)      # keys: the axis names, "" for a one-axis stream
+        self._heat = {a: _Heat() for a in self._styles}
 
     def _setup(self, first: Block) -> None:
         """Open the streams and send the blueprint; the first block frames the ADEV view."""
@@ -423,9 +518,13 @@ class RerunSink(Sink):
         tau = info.tau_s
         x_dec = (math.floor(np.log10(tau[0])), math.ceil(np.log10(tau[-1]))) if len(tau) else (-2, 2)
         error_rate = info.analysed != "rate_dph"
-        y = first.error_rate_dph if error_rate else first.rate_dph
-        self._decades = (x_dec, _adev_decades(y[first.valid & np.isfinite(y)], len(tau)))
-        self._blueprint = blueprint(info.aux_names, self._decades, error_rate)
+        y_decs = []
+        for a in self._styles:
+            b = first.axis(a) if a else first
+            y = b.error_rate_dph if error_rate else b.rate_dph
+            y_decs.append(_adev_decades(y[b.valid & np.isfinite(y)], len(tau)))
+        self._decades = (x_dec, (min(d[0] for d in y_decs), max(d[1] for d in y_decs)))
+        self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes)
         self.rec = _Streams()
         live = [rr.GrpcSink(url) for url in (self.server_url, self.connect_url) if url]
         if live:
@@ -452,46 +551,62 @@ class RerunSink(Sink):
         import rerun as rr
 
         info = self.info
-        what = "rate_dph" if self.step == 1 else f"rate_dph (mean of {self.step} samples, display only)"
-        rec.log("rate/rate_dph", rr.SeriesLines(names=[what], widths=[1.0]), static=True)
-        if info.analysed != "rate_dph":
-            rec.log("rate/error_dph", rr.SeriesLines(names=[f"{info.analysed} (analysed)"]), static=True)
+        tau = info.tau_s
+        for a, st in self._styles.items():
+            what = "rate_dph" if self.step == 1 else f"rate_dph (mean of {self.step} samples, display only)"
+            rec.log(axis_path(a, "rate/rate_dph"), rr.SeriesLines(names=[st.label + what], widths=[1.0],
+                                                                  colors=st.rate and [st.rate]), static=True)
+            if info.analysed != "rate_dph":
+                rec.log(axis_path(a, "rate/error_dph"),
+                        rr.SeriesLines(names=[f"{st.label}{info.analysed} (analysed)"], colors=st.rate and [st.rate]),
+                        static=True)
+            rec.log(axis_path(a, "dadev/log10_adev_dph"), rr.SeriesLines(names=[f"tau={t:.4g} s" for t in tau]),
+                    static=True)
+            for n, u in COEFFICIENTS.items():
+                c = st.coef[n]
+                rec.log(axis_path(a, f"coef/{n}"), rr.SeriesLines(
+                    names=[f"{st.label}{n} ({u})", f"{st.label}lo", f"{st.label}hi"], colors=[c, c, c],
+                    widths=[2.0, 0.7, 0.7]), static=True)
+                rec.log(axis_path(a, f"coef/{n}/{UPPER_LIMIT}"), rr.SeriesPoints(
+                    names=[f"{st.label}upper limit (not identifiable)"], colors=[c], markers=["down"],
+                    marker_sizes=[3.0]), static=True)
         for name in info.aux_names:
             label = name if self.step == 1 else f"{name} (mean of {self.step} samples)"
             rec.log(f"aux/{name}", rr.SeriesLines(names=[label]), static=True)
-        tau = info.tau_s
-        rec.log("dadev/log10_adev_dph", rr.SeriesLines(names=[f"tau={t:.4g} s" for t in tau]), static=True)
-        for n, u in COEFFICIENTS.items():
-            c = _COEF_COLORS[n]
-            rec.log(f"coef/{n}", rr.SeriesLines(names=[f"{n} ({u})", "lo", "hi"],
-                                                colors=[c, c, c], widths=[2.0, 0.7, 0.7]), static=True)
-            rec.log(f"coef/{n}/{UPPER_LIMIT}", rr.SeriesPoints(names=["upper limit (not identifiable)"],
-                                                                colors=[c], markers=["down"], marker_sizes=[3.0]),
-                    static=True)
+        axes = f"axes: {', '.join(info.axes)}\n" if info.axes else ""
         rec.log("session", rr.TextDocument(
-            f"source: {info.source_name}\nanalysed: {info.analysed} (deg/h)\nsample rate: {info.sample_rate_hz:g} Hz\n"
-            f"window: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
+            f"source: {info.source_name}\n{axes}analysed: {info.analysed} (deg/h)\n"
+            f"sample rate: {info.sample_rate_hz:g} Hz\nwindow: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
             f"taus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
         rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
         self._band_alpha = info.model_alpha
-        band = info.model_bands.get("")
-        if band is not None and len(tau):
-            lx = np.log10(tau)
-            lines = [np.column_stack([lx, np.log10(np.asarray(a, dtype=np.float64))]) for a in band]
-            radii = np.array([rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)], dtype=np.float32)
-            rec.log(f"{CURVE}/model_band", rr.LineStrips2D(lines, colors=[BAND_COLOUR], radii=radii), static=True)
+        for a, st in self._styles.items():
+            if a:
+                rec.log(axis_path(a, CURVE), rp.loglog_transform(), static=True)
+                rp.log_legend(rec, f"{axis_path(a, HEATMAP)}/title", [(f"axis {a}", st.measured)],
+                              top_left=(rp.HEAT_W / 2, HEATMAP_TITLE_Y), step=0.0)
+            band = info.model_bands.get(a)
+            if band is not None and len(tau):
+                lx = np.log10(tau)
+                lines = [np.column_stack([lx, np.log10(np.asarray(b, dtype=np.float64))]) for b in band]
+                radii = np.array([rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)], dtype=np.float32)
+                rec.log(f"{axis_path(a, CURVE)}/model_band", rr.LineStrips2D(lines, colors=[st.band], radii=radii),
+                        static=True)
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
         if self.rec is None:
             self._setup(block)
-        rate = np.where(block.valid, block.rate_dph, np.nan)
-        chans = {"rate/rate_dph": rate, **{f"aux/{k}": v for k, v in block.aux.items()}}
-        if self.info.analysed != "rate_dph":
-            chans["rate/error_dph"] = np.where(block.valid, block.error_rate_dph, np.nan)
+        chans = {}
+        for a in self._styles:
+            b = block.axis(a) if a else block
+            chans[axis_path(a, "rate/rate_dph")] = np.where(b.valid, b.rate_dph, np.nan)
+            if self.info.analysed != "rate_dph":
+                chans[axis_path(a, "rate/error_dph")] = np.where(b.valid, b.error_rate_dph, np.nan)
+        chans.update({f"aux/{k}": v for k, v in block.aux.items()})
         self.dec.push(block.t_s, chans)
         if time.monotonic() - self._last_flush > FLUSH_WALL_S or self.dec.pending() >= FLUSH_SAMPLES:
             self._flush_raw()
@@ -515,74 +630,91 @@ class RerunSink(Sink):
         import rerun as rr
 
         assert self.rec is not None, "the streams open with the first block"
+        if axis not in self._styles:
+            raise ValueError(f"RerunSink.frames: axis {axis!r} is not one of the stream's axes {self.info.axes}")
         rec = self.rec
         self._flush_raw()
         idx = [rr.TimeColumn(TIMELINE, duration=t_end_s)]
         with np.errstate(divide="ignore", invalid="ignore"):
             log_adev = np.log10(np.asarray(dadev.adev_dph, dtype=np.float64))
-        rec.send_columns("dadev/log10_adev_dph", indexes=idx, columns=rr.Scalars.columns(scalars=log_adev))
+        rec.send_columns(axis_path(axis, "dadev/log10_adev_dph"), indexes=idx,
+                         columns=rr.Scalars.columns(scalars=log_adev))
         for name in COEFFICIENTS:
             c = getattr(fit, name)
             v, lo, hi = (np.asarray(getattr(c, a), dtype=np.float64) for a in ("value", "lo", "hi"))
             ident = np.asarray(c.identifiable, dtype=bool)
             ok = ident & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
             if ok.any():
-                rec.send_columns(f"coef/{name}", indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[ok])],
+                rec.send_columns(axis_path(axis, f"coef/{name}"),
+                                 indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[ok])],
                                  columns=rr.Scalars.columns(scalars=np.column_stack([v[ok], lo[ok], hi[ok]])))
             up = ~ident & np.isfinite(hi)     # not identifiable: hi is the 95 % upper limit
             if up.any():
-                rec.send_columns(f"coef/{name}/{UPPER_LIMIT}", indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[up])],
+                rec.send_columns(axis_path(axis, f"coef/{name}/{UPPER_LIMIT}"),
+                                 indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[up])],
                                  columns=rr.Scalars.columns(scalars=hi[up]))
         if not self._legend_sent:
             self._log_legend(dadev.confidence)
         tau = np.asarray(dadev.tau_s, dtype=np.float64)
         rec.set_time(TIMELINE, duration=float(t_end_s[-1]))
-        self._log_heatmap(log_adev, t_end_s, tau)
+        self._log_heatmap(axis, log_adev, t_end_s, tau)
         lx = np.log10(tau)
         misfit = np.asarray(fit.misfit, dtype=bool).reshape(np.shape(dadev.adev_dph))
         dense = model_taus(tau)
         model = np.asarray(fit.model_adev_dph(dense), dtype=np.float64).reshape(len(t_end_s), len(dense))
         for i in range(len(t_end_s)):
             rec.set_time(TIMELINE, duration=float(t_end_s[i]))
-            self._log_curve(lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau, misfit[i], dense, model[i])
+            self._log_curve(axis, lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau, misfit[i], dense,
+                            model[i])
 
     def _log_legend(self, confidence: float) -> None:
-        """The ADEV-curve view's legend (static; the bounds' confidence is known from the first frames)."""
+        """The ADEV-curve view's legend (static; the bounds' confidence is known from the
+        first frames): what each line is; with several axes, each axis's colour and the
+        shades of its bounds, model and band."""
         (_, x1), (_, y1) = self._decades
-        rp.log_legend(self.rec, f"{CURVE}/legend", [("measured ADEV, current window", MEASURED_COLOUR),
-                                                    (f"{100 * confidence:.1f} % confidence bounds", BOUNDS_COLOUR),
-                                                    ("IEEE-952 model over the fitted taus", MODEL_COLOUR),
-                                                    *([(f"--model band (family-wise {self._band_alpha:g} per window)",
-                                                        BAND_COLOUR)] if self._band_alpha is not None else [])],
-                      top_left=(x1 - 1.3, y1 + 0.1), step=-0.5)
+        alpha = self._band_alpha
+        band = [] if alpha is None else [f"--model band (family-wise {alpha:g} per window)"]
+        if not self.info.axes:
+            items = [("measured ADEV, current window", MEASURED_COLOUR),
+                     (f"{100 * confidence:.1f} % confidence bounds", BOUNDS_COLOUR),
+                     ("IEEE-952 model over the fitted taus", MODEL_COLOUR),
+                     *((b, BAND_COLOUR) for b in band)]
+        else:
+            first = next(iter(self._styles.values()))     # the shades shown in the first axis's colour
+            items = [*((f"axis {a}: measured ADEV, current window", st.measured) for a, st in self._styles.items()),
+                     (f"darker: {100 * confidence:.1f} % confidence bounds", first.bounds),
+                     ("lighter: IEEE-952 model over the fitted taus", first.model),
+                     *((f"greyed: {b}", first.band) for b in band)]
+        rp.log_legend(self.rec, f"{CURVE}/legend", items, top_left=(x1 - 1.3, y1 + 0.1),
+                      step=-0.4 if self.info.axes else -0.5)
         self._legend_sent = True
 
-    def _log_heatmap(self, log_adev: np.ndarray, t_end_s: np.ndarray, tau: np.ndarray) -> None:
-        """The latest HEATMAP_WINDOWS windows as a colour image (rows: tau, largest on top;
+    def _log_heatmap(self, axis: str, log_adev: np.ndarray, t_end_s: np.ndarray, tau: np.ndarray) -> None:
+        """Axis ``axis``'s latest HEATMAP_WINDOWS windows as a colour image (rows: tau, largest on top;
         columns: windows, newest right) with window-end-time labels and a colour scale in
         deg/h fixed at the first frames' whole decades."""
-
-        self._heat += [row.astype(np.float32) for row in log_adev]
-        self._heat_t += [float(t) for t in t_end_s]
-        del self._heat[:-HEATMAP_WINDOWS], self._heat_t[:-HEATMAP_WINDOWS]
-        if self._heat_range is None:
+        h = self._heat[axis]
+        h.rows += [row.astype(np.float32) for row in log_adev]
+        h.t_s += [float(t) for t in t_end_s]
+        del h.rows[:-HEATMAP_WINDOWS], h.t_s[:-HEATMAP_WINDOWS]
+        if h.decades is None:
             fin = log_adev[np.isfinite(log_adev)]
             lo, hi = (math.floor(fin.min()), math.ceil(fin.max())) if fin.size else (-1, 1)
-            self._heat_range = (lo, max(hi, lo + 1))
-        lo, hi = self._heat_range
-        heat = np.stack(self._heat, axis=1)[::-1]  # rows: largest tau on top
+            h.decades = (lo, max(hi, lo + 1))
+        lo, hi = h.decades
+        heat = np.stack(h.rows, axis=1)[::-1]  # rows: largest tau on top
         n_cols = heat.shape[1]
         rows = rp.decade_rows(tau)
         cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
         decades = np.arange(lo, hi + 1)
-        rp.log_heatmap(self.rec, HEATMAP, heat, lo, hi, HEATMAP_COLORMAP,
+        rp.log_heatmap(self.rec, axis_path(axis, HEATMAP), heat, lo, hi, HEATMAP_COLORMAP,
                        ([len(tau) - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
-                       (cols, [f"{self._heat_t[c]:.6g} s" for c in cols]),
+                       (cols, [f"{h.t_s[c]:.6g} s" for c in cols]),
                        (decades, [f"{10.0**d:g} deg/h" for d in decades]))
 
-    def _log_curve(self, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
-        """One window's ADEV curve and bounds, and its model (``model`` at taus ``dense``)
-        over the taus the fit used."""
+    def _log_curve(self, axis, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
+        """One window's ADEV curve and bounds of axis ``axis``, and its model (``model`` at
+        taus ``dense``) over the taus the fit used."""
         import rerun as rr
 
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -590,24 +722,25 @@ class RerunSink(Sink):
         ok = np.isfinite(ly)
         if not ok.any():
             return
+        curve, st = axis_path(axis, CURVE), self._styles[axis]
         pts = np.column_stack([lx[ok], ly[ok]])
         assert self.rec is not None, "the streams open with the first block"
-        self.rec.log(f"{CURVE}/adev_dph",
-                     rr.LineStrips2D([pts], colors=[MEASURED_COLOUR], radii=rr.Radius.ui_points(1.5)),
-                     rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[MEASURED_COLOUR]))
+        self.rec.log(f"{curve}/adev_dph",
+                     rr.LineStrips2D([pts], colors=[st.measured], radii=rr.Radius.ui_points(1.5)),
+                     rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[st.measured]))
         b = ok & np.isfinite(llo) & np.isfinite(lhi)
-        self.rec.log(f"{CURVE}/bounds", rr.LineStrips2D(
+        self.rec.log(f"{curve}/bounds", rr.LineStrips2D(
             [np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]])],
-            colors=[BOUNDS_COLOUR], radii=rr.Radius.ui_points(1.0)))
+            colors=[st.bounds], radii=rr.Radius.ui_points(1.0)))
         span = model_span(tau, adev, misfit)
         with np.errstate(divide="ignore", invalid="ignore"):
             lm = np.log10(model)
         m_ok = (np.isfinite(lm) & (dense >= span[0]) & (dense <= span[1])) if span is not None else np.zeros(0, bool)
         if m_ok.sum() < 2:
-            self.rec.log(f"{CURVE}/model_ieee952", rr.Clear(recursive=False))
+            self.rec.log(f"{curve}/model_ieee952", rr.Clear(recursive=False))
             return
-        self.rec.log(f"{CURVE}/model_ieee952", rr.LineStrips2D(
-            [np.column_stack([np.log10(dense[m_ok]), lm[m_ok]])], colors=[MODEL_COLOUR],
+        self.rec.log(f"{curve}/model_ieee952", rr.LineStrips2D(
+            [np.column_stack([np.log10(dense[m_ok]), lm[m_ok]])], colors=[st.model],
             radii=rr.Radius.ui_points(1.0), draw_order=40.0))   # above the measured curve it follows
 
     def events(self, events: Sequence[Event]) -> None:
@@ -618,10 +751,14 @@ class RerunSink(Sink):
         if self.rec is None:   # before the first sample (e.g. a source reconnecting)
             self._pending_events.extend(events)
             return
-        t = np.array([e.t_s for e in events], dtype=np.float64)
-        self.rec.send_columns("events", indexes=[rr.TimeColumn(TIMELINE, duration=t)],
-                              columns=rr.TextLog.columns(text=[f"{e.kind}: {e.message}" for e in events],
-                                                         level=[_LEVELS.get(e.kind, "INFO") for e in events]))
+        by_entity: dict[str, list[Event]] = {}
+        for e in events:    # an axis's events under it (several axes); the whole stream's at ``events``
+            by_entity.setdefault(axis_path(e.axis, "events") if e.axis in self.info.axes else "events", []).append(e)
+        for entity, evs in by_entity.items():
+            t = np.array([e.t_s for e in evs], dtype=np.float64)
+            self.rec.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=t)],
+                                  columns=rr.TextLog.columns(text=[f"{e.kind}: {e.message}" for e in evs],
+                                                             level=[_LEVELS.get(e.kind, "INFO") for e in evs]))
 
     def source_counters(self, t_s: float, counters: dict[str, int]) -> None:
         import rerun as rr
