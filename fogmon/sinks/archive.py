@@ -7,7 +7,11 @@ piece k holds recording time [(k-1) S, k S) from the first sample; numbered from
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
   piece complete with magic line, metadata (``piece: N``) and header. Valid samples only
   (a replay log holds no NaN); lost and invalid samples show as time gaps, which every
-  reader turns back into invalid placeholders. With ``samples_format="parquet"``
+  reader turns back into invalid placeholders. A multi-axis stream (``block.axes``)
+  writes one ``rate_<axis>_dph`` column per axis, and a row only where every axis is
+  valid: a sample with only some axes valid is left out and counted
+  (``partial_samples_dropped``); the raw capture keeps it, and ``fogmon replay`` of the
+  capture decodes it with every axis as the device sent it. With ``samples_format="parquet"``
   (``--archive-format parquet``) ``samples-NNNN.parquet`` instead, written in row groups
   (fogmon.sinks.parquet_pieces: a SIGKILL loses at most the row group being filled).
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
@@ -76,7 +80,9 @@ class Archive(Sink):
     (registered here with ``source.add_tap``). ``replay_log_path`` and ``capture_path``
     name the current piece's files. Counters: ``rows_written``, ``rows_without_aux``
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
-    first temperature frame; not written), ``raw_bytes``, ``raw_frames``."""
+    first temperature frame; not written), ``partial_samples_dropped`` (samples of a
+    multi-axis stream with some but not all axes valid; not written), ``raw_bytes``,
+    ``raw_frames``. A multi-axis source (its ``axes``) needs ``samples_format="csv"``."""
 
     def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
                  background_flush: bool = True, samples_format: str = "csv",
@@ -94,19 +100,24 @@ class Archive(Sink):
                               f"give a new folder")
         if not os.access(self.directory, os.W_OK):
             raise FogmonError(f"--archive {self.directory}: cannot write there")
+        if samples_format == "parquet" and getattr(source, "axes", None):
+            raise FogmonError("--archive-format parquet holds one axis: use csv for a multi-axis source, or "
+                              "pick one axis with --axis")
         self.source = source
         self.flush_s = float(flush_s)
         self._clock = clock
         self._lock = threading.RLock()
         self._last_flush = clock()
         self.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
-        self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
+        self.counters = {"rows_written": 0, "rows_without_aux": 0, "partial_samples_dropped": 0, "raw_bytes": 0,
+                         "raw_frames": 0}
         self.piece = 1
         self._pieces: set[int] = set()          # pieces that have a file
         self._done = False
         self._csv_fd: int | None = None
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
+        self._axes: tuple[str, ...] = ()
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
         self._parquet = ParquetPieces(self.directory, source.sample_rate_hz, row_group_s) \
             if samples_format == "parquet" else None
@@ -143,13 +154,17 @@ class Archive(Sink):
 
     def _write(self, block: Block) -> None:
         if self._aux_names is None and len(block):
-            self._aux_names = list(block.aux)
+            self._aux_names, self._axes = list(block.aux), block.axes
         aux_names = self._aux_names or []
         if len(block) and not self._done:
-            keep = block.valid.copy()
+            valid: np.ndarray = block.valid
+            if block.axes:                  # a row only where every axis is valid
+                valid = np.all(block.valid, axis=1)
+                self.counters["partial_samples_dropped"] += int(np.count_nonzero(block.valid.any(axis=1) & ~valid))
+            keep = valid.copy()
             for k in aux_names:
                 keep &= np.isfinite(block.aux[k])
-            self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
+            self.counters["rows_without_aux"] += int(valid.sum() - keep.sum())
             if keep.any() and self._parquet is not None:
                 self._pieces.add(self.piece)
                 self._parquet.write(self.piece, aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
@@ -167,7 +182,7 @@ class Archive(Sink):
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._pieces.add(self.piece)
-        write_replay_header(self._csv_buf, aux_names, self._meta())
+        write_replay_header(self._csv_buf, aux_names, self._meta(), self._axes)
 
     def _meta(self) -> dict:
         """The replay-log metadata of the current piece."""
@@ -197,8 +212,11 @@ class Archive(Sink):
         self.close()
         if self._pieces:
             n = len(self._pieces)
+            partial = self.counters["partial_samples_dropped"]
             summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
-                           + (f" in {n} pieces)" if n > 1 else ")"))
+                                   + (f" in {n} pieces" if n > 1 else "")
+                                   + (f"; {partial} with only some axes valid left out of the replay log, kept in "
+                                      f"the raw capture" if partial else "") + ")")
 
     # -- raw capture taps (called by the source) --------------------------------------
     def raw(self, data: bytes) -> None:
