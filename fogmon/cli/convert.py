@@ -9,8 +9,6 @@ import contextlib
 import itertools
 import os
 
-import numpy as np
-
 from fogmon.errors import FogmonError
 
 EPILOG = """examples:
@@ -44,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.cli.source_options import source_options
     from fogmon.parquet_log import ParquetLogWriter
     from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.sinks.archive import replay_rows
     from fogmon.sources.open import open_replay_source
 
     ext = os.path.splitext(args.output)[1].lower()
@@ -61,7 +60,11 @@ def run(args: argparse.Namespace) -> int:
     meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
             **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
     side = read_sidecar(args.input) if os.path.isfile(args.input) else None
-    n = without_aux = 0
+    axes = first.axes if first is not None else ()
+    if axes and ext == ".parquet":
+        raise FogmonError(f"OUT {args.output}: a Parquet replay log holds one axis; {args.input} has axes "
+                          f"{','.join(axes)}: write .csv, or pick one axis with --axis")
+    n = without_aux = partial = 0
     writer = fh = None
     try:
         if ext == ".parquet":
@@ -69,12 +72,11 @@ def run(args: argparse.Namespace) -> int:
                                       {"source": source.name, **({"sidecar": side} if side else {})})
         else:
             fh = open(args.output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
-            write_replay_header(fh, aux_names, meta)
+            write_replay_header(fh, aux_names, meta, axes)
         for b in itertools.chain([first] if first is not None else [], blocks):
-            keep = b.valid.copy()
-            for a in b.aux.values():
-                keep &= np.isfinite(a)
-            without_aux += int(b.valid.sum() - keep.sum())
+            keep, b_partial, b_without_aux = replay_rows(b)
+            without_aux += b_without_aux
+            partial += b_partial
             aux = {k: a[keep] for k, a in b.aux.items()}
             if writer is not None:
                 writer.write(b.t_s[keep], b.rate_dph[keep], aux)
@@ -96,5 +98,6 @@ def run(args: argparse.Namespace) -> int:
     finally:
         source.close()
     print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
-          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else ""))
+          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else "")
+          + (f"; {partial} samples with only some axes valid left out" if partial else ""))
     return 0

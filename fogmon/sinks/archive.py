@@ -59,6 +59,18 @@ SERIAL_CAPTURE = "raw.bin"
 CAN_CAPTURE = "frames.asc"
 
 
+def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
+    """Which samples of ``block`` a replay log holds (it has no NaN): those valid on every
+    axis with every aux channel finite. Returns that mask, the samples left out for having
+    only some axes valid, and those left out (valid on every axis) for a non-finite aux."""
+    valid: np.ndarray = np.all(block.valid, axis=1) if block.axes else block.valid
+    partial = int(np.count_nonzero(np.any(block.valid, axis=1) & ~valid)) if block.axes else 0
+    keep = valid.copy()
+    for a in block.aux.values():
+        keep &= np.isfinite(a)
+    return keep, partial, int(valid.sum() - keep.sum())
+
+
 def default_archive_dir(base: str = ".") -> str:
     """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
     return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
@@ -80,8 +92,8 @@ class Archive(Sink):
     (registered here with ``source.add_tap``). ``replay_log_path`` and ``capture_path``
     name the current piece's files. Counters: ``rows_written``, ``rows_without_aux``
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
-    first temperature frame; not written), ``partial_samples_dropped`` (samples of a
-    multi-axis stream with some but not all axes valid; not written), ``raw_bytes``,
+    first temperature frame; not written), ``partial_samples_dropped`` (a multi-axis
+    stream only: samples with some but not all axes valid; not written), ``raw_bytes``,
     ``raw_frames``. A multi-axis source (its ``axes``) needs ``samples_format="csv"``."""
 
     def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
@@ -109,8 +121,9 @@ class Archive(Sink):
         self._lock = threading.RLock()
         self._last_flush = clock()
         self.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
-        self.counters = {"rows_written": 0, "rows_without_aux": 0, "partial_samples_dropped": 0, "raw_bytes": 0,
-                         "raw_frames": 0}
+        self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
+        if getattr(source, "axes", None):
+            self.counters["partial_samples_dropped"] = 0
         self.piece = 1
         self._pieces: set[int] = set()          # pieces that have a file
         self._done = False
@@ -157,14 +170,10 @@ class Archive(Sink):
             self._aux_names, self._axes = list(block.aux), block.axes
         aux_names = self._aux_names or []
         if len(block) and not self._done:
-            valid: np.ndarray = block.valid
-            if block.axes:                  # a row only where every axis is valid
-                valid = np.all(block.valid, axis=1)
-                self.counters["partial_samples_dropped"] += int(np.count_nonzero(block.valid.any(axis=1) & ~valid))
-            keep = valid.copy()
-            for k in aux_names:
-                keep &= np.isfinite(block.aux[k])
-            self.counters["rows_without_aux"] += int(valid.sum() - keep.sum())
+            keep, partial, without_aux = replay_rows(block)
+            self.counters["rows_without_aux"] += without_aux
+            if block.axes:
+                self.counters["partial_samples_dropped"] = self.counters.get("partial_samples_dropped", 0) + partial
             if keep.any() and self._parquet is not None:
                 self._pieces.add(self.piece)
                 self._parquet.write(self.piece, aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
@@ -212,7 +221,7 @@ class Archive(Sink):
         self.close()
         if self._pieces:
             n = len(self._pieces)
-            partial = self.counters["partial_samples_dropped"]
+            partial = self.counters.get("partial_samples_dropped", 0)
             summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
                                    + (f" in {n} pieces" if n > 1 else "")
                                    + (f"; {partial} with only some axes valid left out of the replay log, kept in "
