@@ -13,6 +13,7 @@ import uuid
 import can
 import numpy as np
 import pytest
+import serial
 from doubles import args_for
 from sources_fake_device import MAX_RATE_DPH, open_pty, write_all
 
@@ -357,3 +358,45 @@ def test_can_source_on_a_virtual_bus_with_axes_in_two_messages_archive_and_repla
     assert archive.counters["partial_samples_dropped"] == 1
     # the ASC capture with its sidecar (the DBC copy beside it) decodes to the same blocks
     assert_same_samples(concat(list(open_replay_source(archive.capture_path, args_for()).blocks())), live)
+
+
+def test_lines_with_three_rate_columns_on_a_serial_port():
+    port = serial.serial_for_url("loop://", timeout=0.05)
+    lines = [f"{k % 16},{k},{-k},{2 * k},{int(k != 20)}\n".encode() for k in range(40) if k not in (10, 11)]
+    port.write(b"".join(lines[:15]) + b"BOOT\n" + b"".join(lines[15:]))
+    src = SerialSource("loop://", 115200, LinesCodec("seq:16,rate_x_dph,rate_y_dph,rate_z_dph,valid_z", 100.0),
+                       opener=lambda: port)
+    assert src.axes == ("x", "y", "z")
+    blocks = []
+    for b in src.blocks():
+        blocks.append(b)
+        if sum(len(x) for x in blocks) >= 40:
+            break
+    src.close()
+    b = concat(blocks)
+    k = np.arange(40)
+    lost = np.isin(k, (10, 11))
+    np.testing.assert_array_equal(b.valid, np.column_stack([~lost, ~lost, ~lost & (k != 20)]))
+    want = np.column_stack([k, -k, 2 * k]).astype(float)
+    want[~b.valid] = np.nan                                           # lost samples and z at k = 20
+    np.testing.assert_array_equal(b.rate_dph, want)
+    assert src.counters["samples_missing"] == 2 and src.counters["bad_lines"] == 1
+    assert src.counters["invalid_samples_z"] == 1 and src.counters["invalid_samples_x"] == 0
+
+
+def test_convert_writes_a_multi_axis_replay_log_by_the_archive_rule(tmp_path, capsys):
+    from fogmon.cli import main
+    data, intact = kvh_stream()
+    raw = tmp_path / "raw.bin"
+    raw.write_bytes(data)
+    opts = ["--protocol", "kvh-a", "--kvh-rot", "rate", "--kvh-units", "deg", "--rate-hz", str(FS),
+            "--max-rate-dph", str(MAX_RATE_DPH)]
+    assert main(["convert", str(raw), str(tmp_path / "out.csv"), *opts]) == 0
+    assert "3 samples with only some axes valid left out" in capsys.readouterr().out
+    header, rows = read_archive_csv(str(tmp_path / "out.csv"))
+    rate, valid, accel = expected(intact)
+    full = valid.all(axis=1) & np.isfinite(accel).all(axis=1)
+    assert header[:4] == ["time_s", "rate_x_dph", "rate_y_dph", "rate_z_dph"]
+    np.testing.assert_array_equal(rows[:, 1:4], rate[full])
+    assert main(["convert", str(raw), str(tmp_path / "out.parquet"), *opts]) == 2
+    assert "holds one axis" in capsys.readouterr().err and not (tmp_path / "out.parquet").exists()

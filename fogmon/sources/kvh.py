@@ -174,7 +174,7 @@ class KvhCodec:
         buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
-        seqs, gyro, accel, status_bytes, temps, runs = [], [], [], [], [], []
+        seqs, sensors, status_bytes, temps, runs = [], [], [], [], []
         crc_err = skipped = bad_temp = 0
         run = self._run
         i = 0
@@ -202,8 +202,7 @@ class KvhCodec:
             status, seq, temp, implausible = self._status_seq_temp(f)
             bad_temp += implausible
             seqs.append(seq & 0x7F)
-            gyro.append(f[0:3])
-            accel.append(f[3:6])
+            sensors.append(f[:6])                  # gyro x/y/z, accel x/y/z
             status_bytes.append(status)
             temps.append(temp)
             runs.append(run)
@@ -219,15 +218,15 @@ class KvhCodec:
         ai = self._axis_i
         bits = np.asarray(status_bytes, dtype=np.uint8).reshape(-1, 1)
         valid = (bits >> np.asarray(ai, dtype=np.uint8) & 1).astype(bool)
-        gyro_xyz = np.asarray(gyro, dtype=np.float64).reshape(-1, 3)
-        rate_dph = to_dph(gyro_xyz[:, ai], output_unit(self.rot, self.units), self.sample_rate_hz)
+        gyro_accel = np.asarray(sensors, dtype=np.float64).reshape(-1, 6)
+        rate_dph = to_dph(gyro_accel[:, ai], output_unit(self.rot, self.units), self.sample_rate_hz)
         if not self.axes:
             rate_dph, valid = rate_dph[:, 0], valid[:, 0]
         rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
         aux = {"temp_c": temps}
         if self._accel_names:
-            accel_g = np.asarray(accel, dtype=np.float64).reshape(-1, 3)[:, ai] * self._accel_g
+            accel_g = gyro_accel[:, [3 + i for i in ai]] * self._accel_g
             accel_g[(bits >> (np.asarray(ai, dtype=np.uint8) + 4) & 1) == 0] = np.nan
             aux = {**dict(zip(self._accel_names, accel_g.T, strict=True)), **aux}
         return Frames.from_lists(seqs, rate, valid, aux, runs, L, self.axes)
