@@ -22,11 +22,11 @@ from fogmon.capture import read_sidecar
 from fogmon.errors import FogmonError
 from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Summary
-from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
+from fogmon.sources.can_source import CanDecoder, CanSource
 from fogmon.sources.codecs import make_codec
 from fogmon.sources.kvh import G0_MPS2, KvhCodec, encode_frame
 from fogmon.sources.lines import LinesCodec
-from fogmon.sources.open import open_replay_source
+from fogmon.sources.open import open_live_source, open_replay_source
 from fogmon.sources.replay import open_raw_capture
 from fogmon.sources.serial_source import SerialSource
 
@@ -321,8 +321,10 @@ def test_can_source_on_a_virtual_bus_with_axes_in_two_messages_archive_and_repla
     dbc = tmp_path / "imu.dbc"
     dbc.write_text(DBC_TWO_MESSAGES)
     ch = f"fogmon-{uuid.uuid4().hex}"
-    src = CanSource(ch, "virtual", load_dbc(str(dbc)), dbc_path=str(dbc), rate_signal="x=GyroX,y=GyroY,z=GyroZ")
-    assert src.axes == ("x", "y", "z")
+    src = open_live_source(args_for("--can", ch, "--interface", "virtual", "--dbc", str(dbc),
+                                    "--can-rate", "x=GyroX,y=GyroY,z=GyroZ"))
+    assert isinstance(src, CanSource) and src.axes == ("x", "y", "z")
+    assert src.name.startswith("CAN axes x=GYRO_XY.GyroX, y=GYRO_XY.GyroY, z=GYRO_Z.GyroZ (clock GYRO_XY), 100 Hz")
     archive = Archive(str(tmp_path / "arch"), src, background_flush=False)
     ks = [k for k in range(120) if k not in (30, 31)]        # two clock frames lost: a gap on every axis
     msgs = imu_msgs(ks, lost_z=(50,), t0=time.time())
