@@ -103,7 +103,7 @@ def test_codec_decodes_every_gyro_and_accelerometer_and_one_axis_as_before():
     np.testing.assert_array_equal(fz.valid, valid[intact, 2])
     assert z.options() == {"protocol": "kvh-a", "kvh_rot": "rate", "kvh_units": "deg", "axis": "z",
                            "sample_rate_hz": FS, "max_rate_dph": MAX_RATE_DPH}
-    assert z.counters == {k: v for k, v in c.counters.items()}
+    assert c.counters.pop("implausible_accel_g") == 0 and z.counters == c.counters
     # --axis y,x: those gyros in that order, with their accelerometers
     yx = three_axis_codec(axis="y,x").feed(data)
     assert yx.axes == ("y", "x") and set(yx.aux) == {"accel_y_g", "accel_x_g", "temp_c"}
@@ -118,6 +118,12 @@ def test_accelerometer_units_and_bad_options():
     dv_fps = tuple(a * G0_MPS2 / 0.3048 / FS for a in accel_g)
     f = KvhCodec("c", sample_rate_hz=FS, accel="dv-ft").feed(encode_frame("c", 0, gyro, dv_fps))
     np.testing.assert_allclose([f.aux[f"accel_{a}_g"][0] for a in "xyz"], accel_g, rtol=1e-6)
+    # a CRC-valid garbage float (or NaN) in an accelerometer field flagged valid: NaN, counted
+    c = KvhCodec("a")
+    f = c.feed(encode_frame("a", 0, gyro, (1e30, np.nan, -49.0))
+               + encode_frame("a", 1, gyro, (1e30, 0, 0), status=0x07))          # accelerometers flagged invalid
+    np.testing.assert_array_equal([f.aux[f"accel_{a}_g"][0] for a in "xyz"], [np.nan, np.nan, -49.0])
+    assert np.isnan([f.aux[f"accel_{a}_g"][1] for a in "xyz"]).all() and c.counters["implausible_accel_g"] == 2
     c = KvhCodec("a", accel="none")
     assert c.aux_names == ("temp_c",) and c.axes == ("x", "y", "z") and c.options()["kvh_accel"] == "none"
     for kw, msg in [({"axis": "q"}, "--axis"), ({"axis": "x,x"}, "--axis"), ({"accel": "mps"}, "--kvh-accel")]:

@@ -20,7 +20,8 @@ in rad or deg, as the device is configured; they are converted to deg/h here and
 
 Axes: by default all three gyros are decoded (a three-axis stream, ``axes`` x, y, z,
 each gyro valid as its status bit says) with the accelerometers as aux channels
-``accel_<axis>_g`` in g, NaN where their status bit is clear. The accelerometers send
+``accel_<axis>_g`` in g, NaN where their status bit is clear or the reading is beyond
+plausibility.KVH_ACCEL_MAX_ABS_G (counted as ``implausible_accel_g``). The accelerometers send
 acceleration in g (the device's default linear format) or, after ``=LINFMT``, velocity
 increments per sample in m/s or ft/s (``=LINUNITS``): ``accel`` says which (``ACCEL_UNITS``)
 and ``none`` leaves them out (a gyro-only DSP-1760, whose accel fields are reserved).
@@ -135,6 +136,8 @@ class KvhCodec:
         self.aux_names = (*self._accel_names, "temp_c")
         self.counters = {"frames_ok": 0, "crc_errors": 0, "bytes_skipped": 0,
                          plausibility.COUNTER: 0, plausibility.TEMP_COUNTER: 0}
+        if self._accel_names:
+            self.counters[plausibility.ACCEL_COUNTER] = 0
         self._buf = bytearray()
         self._last_temp_c = math.nan  # format C: temperature arrives every 4th frame
         self._run = 0                 # bytes skipped since the last good frame
@@ -227,7 +230,11 @@ class KvhCodec:
         aux = {"temp_c": temps}
         if self._accel_names:
             accel_g = gyro_accel[:, [3 + i for i in ai]] * self._accel_g
-            accel_g[(bits >> (np.asarray(ai, dtype=np.uint8) + 4) & 1) == 0] = np.nan
+            flagged = (bits >> (np.asarray(ai, dtype=np.uint8) + 4) & 1) == 1
+            with np.errstate(invalid="ignore"):
+                implausible = flagged & ~(np.abs(accel_g) <= plausibility.KVH_ACCEL_MAX_ABS_G)
+            c[plausibility.ACCEL_COUNTER] += int(implausible.sum())
+            accel_g[~flagged | implausible] = np.nan
             aux = {**dict(zip(self._accel_names, accel_g.T, strict=True)), **aux}
         return Frames.from_lists(seqs, rate, valid, aux, runs, L, self.axes)
 
