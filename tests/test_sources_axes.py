@@ -408,3 +408,24 @@ def test_convert_writes_a_multi_axis_replay_log_by_the_archive_rule(tmp_path, ca
     np.testing.assert_array_equal(rows[:, 1:4], rate[full])
     assert main(["convert", str(raw), str(tmp_path / "out.parquet"), *opts]) == 2
     assert "holds one axis" in capsys.readouterr().err and not (tmp_path / "out.parquet").exists()
+
+
+def test_duration_limit_cuts_a_three_axis_stream_at_its_last_sample_and_the_capture_with_it(tmp_path):
+    data, intact = kvh_stream()
+    port = serial.serial_for_url("loop://", timeout=0.05)
+    src = SerialSource("loop://", 921600, three_axis_codec(), opener=lambda: port)
+    src.limit(100)
+    archive = Archive(str(tmp_path / "arch"), src, background_flush=False)
+    port.write(data[:4000])                     # loop:// holds 4096 bytes: frames 0..110, faults included
+    blocks = []
+    for b in src.blocks():
+        blocks.append(b)
+        archive.block(b)
+    archive.close()
+    live = concat(blocks)
+    rate, valid, _ = expected(intact)
+    assert len(live) == 100
+    np.testing.assert_array_equal(live.rate_dph, rate[:100])
+    np.testing.assert_array_equal(live.valid, valid[:100])
+    assert src.counters["frames_ok"] == sum(k < 100 for k in intact)
+    assert_same_samples(concat(list(open_raw_capture(archive.capture_path).blocks())), live)
