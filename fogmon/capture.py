@@ -12,6 +12,7 @@ from typing import Any
 
 from fogmon.errors import FogmonError
 from fogmon.sources.codecs import OPTION_KEYS, PROTOCOLS
+from fogmon.sources.kvh import ACCEL_UNITS
 
 SIDECAR_SUFFIX = ".json"
 CAPTURE_FORMAT = "fogmon capture v1"
@@ -58,6 +59,14 @@ def _file_in_folder(v, folder):
     return None
 
 
+def _axes(v, folder):
+    """The axes decoded: one ("z", as every earlier version wrote for KVH) or several
+    ("x,y,z"), letters/digits (the decoder checks it has them)."""
+    names = v.split(",") if isinstance(v, str) else []
+    ok = names and all(a.isascii() and a.isalnum() for a in names) and len(set(names)) == len(names)
+    return None if ok else f"expected an axis name or several separated by commas (x,y,z), got {v!r}"
+
+
 def _breaks(v, folder):
     if not isinstance(v, list):
         return f"expected a list, got {v!r}"
@@ -72,7 +81,8 @@ def _breaks(v, folder):
 #: required; unknown fields are ignored (newer writers may add some).
 SIDECAR_FIELDS = {
     "kind": _one_of("serial", "can"), "protocol": _one_of(*PROTOCOLS), "sample_rate_hz": _number(0, True),
-    "kvh_rot": _one_of("rate", "delta"), "kvh_units": _one_of("deg", "rad"), "axis": _one_of("x", "y", "z"),
+    "kvh_rot": _one_of("rate", "delta"), "kvh_units": _one_of("deg", "rad"), "axis": _axes,
+    "kvh_accel": _one_of(*ACCEL_UNITS),
     "columns": _text, "max_rate_dph": _number(0, True), "breaks": _breaks, "piece": _count, "started_utc": _text,
     "port": _text, "baud": _count, "channel": _text_or_null, "interface": _text_or_null, "dbc": _file_in_folder,
     "message": _text_or_null, "rate_signal": _text_or_null, "rate_unit": _text_or_null,

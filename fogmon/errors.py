@@ -21,4 +21,6 @@ ERROR_COUNTERS = {
     "implausible_samples": ("implausible", "sample(s) with an implausible rate (beyond the device's range or "
                                            "--max-rate-dph, or not a number) made invalid"),
     "implausible_temp_c": ("implausible", "temperature reading(s) outside the plausible range set to NaN"),
+    "implausible_accel_g": ("implausible", "acceleration reading(s) beyond any KVH accelerometer's range set to "
+                                           "NaN"),
 }

@@ -80,8 +80,8 @@ def test_archive_that_received_nothing_leaves_no_folder(tmp_path):
 
 def monitor(link, archive, *extra, quiet=True):
     return subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", link, "--protocol", "kvh-a",
-                             "--kvh-rot", "rate", "--kvh-units", "deg", "--rate-hz", str(FS), "--archive", archive,
-                             "--max-rate-dph", str(MAX_RATE_DPH),
+                             "--axis", "z", "--kvh-rot", "rate", "--kvh-units", "deg", "--rate-hz", str(FS),
+                             "--archive", archive, "--max-rate-dph", str(MAX_RATE_DPH),
                              "--no-progress", *(["--quiet"] if quiet else []), *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
@@ -269,7 +269,7 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
     arch, lead = tmp_path / "arch", 60
     port = PacedPort(data, 50, FS, lead, consumed=lambda: archive.counters["rows_written"])
-    src = SerialSource("fake", 921600, make_codec("kvh-a", kvh_rot="rate", kvh_units="deg", sample_rate_hz=FS,
+    src = SerialSource("fake", 921600, make_codec("kvh-a", axis="z", kvh_rot="rate", kvh_units="deg", sample_rate_hz=FS,
                                                                    max_rate_dph=MAX_RATE_DPH),
                        opener=lambda: port, clock=port.clock)
     archive = Archive(str(arch), src)

@@ -182,7 +182,7 @@ def test_convert_keeps_rows_valid_on_every_axis_and_says_how_many_it_left_out(tm
     out = tmp_path / "imu.parquet"
     assert main(["convert", str(p), str(out)]) == 0
     said = capsys.readouterr().out
-    assert "wrote 2 samples" in said and "; 1 samples valid on some axes only left out" in said
+    assert "wrote 2 samples" in said and "; 1 samples with only some axes valid left out" in said
     rec = read_parquet_log(out)
     np.testing.assert_array_equal(rec.rate_dph, [[1, 2], [5, 6]])
     assert main(["convert", str(p), str(tmp_path / "x.csv"), "--axis", "x"]) == 0

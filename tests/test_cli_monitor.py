@@ -24,7 +24,7 @@ HERE = Path(__file__).resolve().parent
 def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_path, capsys):
     arch, rrd = tmp_path / "arch", tmp_path / "live.rrd"
     rc = main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(arch),
-               "--rrd", str(rrd), "--window-s", "0.512", "--hop-s", "0.128", "--no-progress"])
+               "--axis", "z", "--rrd", str(rrd), "--window-s", "0.512", "--hop-s", "0.128", "--no-progress"])
     assert rc == 0
     out = capsys.readouterr().out
     # 2 s = 2000 samples; 1999 when the run's last frame is one of the bad ones (its slot is only
@@ -90,7 +90,8 @@ def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(HERE.parent)}
     arch, rrd = tmp_path / "arch", tmp_path / "c.rrd"
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", fake_kvh, "--protocol", "kvh-a",
-                          "--archive", str(arch), "--rrd", str(rrd), "--window-s", "0.512", "--no-progress"],
+                          "--axis", "z", "--archive", str(arch), "--rrd", str(rrd), "--window-s", "0.512",
+                          "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         deadline = time.monotonic() + 600  # failure guard only (a cold numba compile under load): we wait for data

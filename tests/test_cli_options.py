@@ -180,7 +180,7 @@ def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     arch = tmp_path / "arch"
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", fake_kvh, "--protocol", "kvh-a",
-                          "--archive", str(arch), "--window-s", "600", "--no-progress"],
+                          "--axis", "z", "--archive", str(arch), "--window-s", "600", "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         deadline = time.monotonic() + 600  # failure guard only (a cold numba compile under load): we wait for data

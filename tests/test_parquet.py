@@ -107,10 +107,10 @@ def test_convert_raw_capture_keeps_its_sidecar_facts(tmp_path, capsys):
     del frames[1500:1503]                                         # 3 frames lost
     raw.write_bytes(b"".join(frames))
     out = tmp_path / "raw.parquet"
-    assert main(["convert", str(raw), str(out), "--protocol", "kvh-a"]) == 0
+    assert main(["convert", str(raw), str(out), "--protocol", "kvh-a", "--axis", "z"]) == 0
     capsys.readouterr()
     rec = read_parquet_log(str(out))
-    ref = [b for b in open_raw_capture(str(raw), {"protocol": "kvh-a"}).blocks()]
+    ref = [b for b in open_raw_capture(str(raw), {"protocol": "kvh-a", "axis": "z"}).blocks()]
     np.testing.assert_array_equal(rec.t_s, np.concatenate([b.t_s[b.valid] for b in ref]))
     info = __import__("json").loads(pq.ParquetFile(out).metadata.metadata[META_KEY])
     assert "raw capture raw.bin" in info["source"] and info["counters"]["seq_gaps"] == 1
@@ -157,8 +157,8 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
     arch = tmp_path / "arch"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", port, "--protocol", "kvh-a",
-                          "--archive", str(arch), "--archive-format", "parquet", "--row-group-s", str(rows / 1000),
-                          "--window-s", "0.512", "--no-progress", "--quiet"],
+                          "--axis", "z", "--archive", str(arch), "--archive-format", "parquet",
+                          "--row-group-s", str(rows / 1000), "--window-s", "0.512", "--no-progress", "--quiet"],
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     sender = threading.Thread(target=send, daemon=True)
     sender.start()
@@ -193,7 +193,7 @@ def test_monitor_parquet_archive_joined_at_the_end(fake_kvh, tmp_path, capsys):
     arch = tmp_path / "arch"
     assert main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "1.5", "--archive", str(arch),
                  "--archive-format", "parquet", "--row-group-s", "0.4", "--window-s", "0.256", "--no-progress",
-                 "--quiet"]) == 0
+                 "--axis", "z", "--quiet"]) == 0
     assert sorted(os.listdir(arch)) == ["raw-0001.bin", "raw-0001.bin.json", "samples-0001.parquet"]
     pf = pq.ParquetFile(arch / "samples-0001.parquet")
     assert pf.metadata.num_row_groups == 4                            # 400 + 400 + 400 + the rest

@@ -66,7 +66,7 @@ def test_kvh_crc_valid_garbage_floats_are_invalid_and_counted(fmt):
     status = [0x77] * 7 + [0x33]                   # the last one the device itself flagged invalid (z bit 2)
     data = b"".join(encode_frame(fmt, k, (0.0, 0.0, g), status=s, temp_c=30)
                     for k, (g, s) in enumerate(zip(gz, status, strict=True)))
-    c = make_codec(f"kvh-{fmt}", kvh_rot="delta", kvh_units="rad")
+    c = make_codec(f"kvh-{fmt}", kvh_rot="delta", kvh_units="rad", axis="z")
     events = ErrorEvents(c.counters)
     f = c.feed(data)
     assert c.counters["frames_ok"] == 8 and c.counters["crc_errors"] == 0
@@ -86,11 +86,11 @@ def test_kvh_gate_edge_and_override():
     """At 1 kHz delta-rad, the gate +-2,646,000 deg/h is 0.012828 rad per sample."""
     edge = pl.KVH_DSP17XX_MAX_ABS_DPH / RAD_TO_DPH / 1000
     data = b"".join(encode_frame("a", k, (0, 0, v)) for k, v in enumerate([0.99 * edge, 1.01 * edge]))
-    c = make_codec("kvh-a")
+    c = make_codec("kvh-a", axis="z")
     assert list(np.isfinite(c.feed(data).rate_dph)) == [True, False] and c.counters["implausible_samples"] == 1
-    c = make_codec("kvh-a", max_rate_dph=1e7)
+    c = make_codec("kvh-a", axis="z", max_rate_dph=1e7)
     assert list(np.isfinite(c.feed(data).rate_dph)) == [True, True] and c.counters["implausible_samples"] == 0
-    c = make_codec("kvh-a", max_rate_dph=1e5)
+    c = make_codec("kvh-a", axis="z", max_rate_dph=1e5)
     assert list(np.isfinite(c.feed(data).rate_dph)) == [False, False] and c.counters["implausible_samples"] == 2
 
 
@@ -295,7 +295,7 @@ def test_kvh_capture_with_garbage_floats(tmp_path, capsys):
         status[k] = 0x33                            # in the reference the device flags the sample invalid
     check_same_run(capsys, tmp_path, kvh_capture(tmp_path / "bad.bin", bad),
                    kvh_capture(tmp_path / "ref.bin", gz, status),
-                   3, "--protocol", "kvh-a", "--rate-hz", str(sample_rate_hz))
+                   3, "--protocol", "kvh-a", "--axis", "z", "--rate-hz", str(sample_rate_hz))
 
 
 def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_path, capsys):

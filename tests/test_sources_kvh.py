@@ -88,7 +88,7 @@ def test_resync_and_exact_accounting_with_faults():
     faults = {10: "corrupt", 11: "drop", 30: "truncate", 50: "garbage", 51: "corrupt", 70: "drop"}
     data, intact = stream(100, faults)
     for chunk in (1, 7, 36, 1000):
-        c = KvhCodec("a", "rate", "deg")
+        c = KvhCodec("a", "rate", "deg", "z")
         parts = [c.feed(data[i:i + chunk]) for i in range(0, len(data), chunk)]
         ks = [int(v / 3600) for p in parts for v in p.rate_dph]
         assert ks == intact                             # every intact frame, resync within one frame

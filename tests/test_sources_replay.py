@@ -58,7 +58,7 @@ def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
     with pytest.raises(FogmonError, match="not a replay log; for a raw serial capture give --protocol"):
         open_replay_source(str(p), args_for())
     src = open_replay_source(str(p), args_for("--protocol", "kvh-a", "--kvh-rot", "rate", "--kvh-units", "deg",
-                                              "--rate-hz", "200"))
+                                              "--axis", "z", "--rate-hz", "200"))
     bl = list(src.blocks())
     v = np.concatenate([b.valid for b in bl])
     r = np.concatenate([b.rate_dph for b in bl])

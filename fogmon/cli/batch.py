@@ -68,9 +68,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _options(args: argparse.Namespace) -> dict:
     """The options the tasks need (picklable): source decoding and analysis."""
-    keep = {"tolerate_bad_rows", "dbc", "protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "axis", "columns",
-            "max_rate_dph", "can_message", "can_rate", "can_rate_unit", "can_temp", "can_counter", "can_valid",
-            "window_s", "hop_s", "taus", "raw_rate", "keep_motion"}
+    keep = {"tolerate_bad_rows", "dbc", "protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "kvh_accel", "axis",
+            "columns", "max_rate_dph", "can_message", "can_rate", "can_rate_unit", "can_temp", "can_counter",
+            "can_valid", "window_s", "hop_s", "taus", "raw_rate", "keep_motion"}
     return {k: v for k, v in vars(args).items() if k in keep}
 
 

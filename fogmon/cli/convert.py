@@ -9,8 +9,6 @@ import contextlib
 import itertools
 import os
 
-import numpy as np
-
 from fogmon.errors import FogmonError
 
 EPILOG = """examples:
@@ -46,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.cli.source_options import source_options
     from fogmon.parquet_log import ParquetLogWriter
     from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.sinks.archive import replay_rows
     from fogmon.sources.open import open_replay_source
 
     ext = os.path.splitext(args.output)[1].lower()
@@ -64,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
             **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
     side = read_sidecar(args.input) if os.path.isfile(args.input) else None
-    n = without_aux = part_invalid = 0
+    n = without_aux = partial = 0
     writer = fh = None
     try:
         if ext == ".parquet":
@@ -74,12 +73,9 @@ def run(args: argparse.Namespace) -> int:
             fh = open(args.output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
             write_replay_header(fh, aux_names, meta, axes)
         for b in itertools.chain([first] if first is not None else [], blocks):
-            valid = b.valid.all(axis=1) if b.axes else b.valid.copy()   # a row holds every axis
-            part_invalid += int(b.valid.any(axis=1).sum() - valid.sum()) if b.axes else 0
-            keep = valid.copy()
-            for a in b.aux.values():
-                keep &= np.isfinite(a)
-            without_aux += int(valid.sum() - keep.sum())
+            keep, b_partial, b_without_aux = replay_rows(b)
+            without_aux += b_without_aux
+            partial += b_partial
             aux = {k: a[keep] for k, a in b.aux.items()}
             if writer is not None:
                 writer.write(b.t_s[keep], b.rate_dph[keep], aux)
@@ -88,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
             n += int(keep.sum())
         if writer is not None:
             writer.close(counters={**source.counters, "rows_without_aux": without_aux,
-                                   **({"rows_with_an_invalid_axis": part_invalid} if axes else {})})
+                                   **({"partial_samples_dropped": partial} if axes else {})})
         elif fh is not None:
             fh.close()
     except BaseException:
@@ -103,5 +99,5 @@ def run(args: argparse.Namespace) -> int:
         source.close()
     print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
           + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else "")
-          + (f"; {part_invalid} samples valid on some axes only left out" if part_invalid else ""))
+          + (f"; {partial} samples with only some axes valid left out" if partial else ""))
     return 0

@@ -10,6 +10,7 @@ from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility as pl
 from fogmon.sources.codecs import PROTOCOLS
+from fogmon.sources.kvh import ACCEL_UNITS
 from fogmon.sources.options import SourceOptions
 
 #: The highest --rate-hz accepted (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz).
@@ -51,10 +52,16 @@ def _add_serial_arguments(g, live: bool) -> None:
                    "--columns (default for --serial: kvh-a; a raw capture takes it from its .json sidecar)")
     g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
                    "angle (units per sample) (default: delta for kvh-*, rate for dsp3000)")
-    g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of KVH binary output (default: rad)")
-    g.add_argument("--axis", type=axis_list, metavar="NAME", help="KVH gyro axis to monitor (x, y or z), also the "
-                   "axis of a ROS bag or PX4 ULog recording (default: z); for a multi-axis replay log (rate_<axis>_dph "
-                   "columns) the axis to analyse, or a comma list (x,y) (default: every axis)")
+    g.add_argument("--kvh-units", choices=("deg", "rad"), help="angle unit of the KVH gyros' output (default: rad)")
+    g.add_argument("--kvh-accel", choices=tuple(ACCEL_UNITS), help="what the KVH accelerometers output (aux "
+                   "channels accel_<axis>_g, converted to g): g = acceleration in g (the device's default), "
+                   "dv-m / dv-ft = velocity increment per sample in m/s / ft/s (=LINFMT delta), none = leave "
+                   "them out (a gyro-only DSP-1760) (default: g)")
+    g.add_argument("--axis", type=axis_list, metavar="AXES", help="KVH gyros to decode: one of x, y, z (a "
+                   "one-axis stream, as before) or several separated by commas (x,y) (default: all three, a "
+                   "three-axis stream x,y,z with the accelerometers); the axes of a multi-axis replay log "
+                   "(rate_<axis>_dph columns) to analyse (default: every axis); the axis of a ROS bag or PX4 ULog "
+                   "recording (default: z)")
     g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
@@ -82,9 +89,13 @@ def _add_can_arguments(c, live: bool) -> None:
     c.add_argument("--dbc", metavar="F", help="DBC file describing the gyro's CAN frames (see "
                    "fogmon/data/gyro_example.dbc)")
     c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "
-                   "holding --can-rate; required if several do)")
+                   "holding --can-rate, or its first axis's signal; required if several do)")
     c.add_argument("--can-rate", metavar="SIGNAL", help="DBC signal with the angular rate "
-                   "(default: rate); its DBC unit (deg/h, deg/s, rad/s, deg, rad, arcsec) sets the conversion")
+                   "(default: rate); its DBC unit (deg/h, deg/s, rad/s, deg, rad, arcsec) sets the conversion. "
+                   "Several axes: AXIS=SIGNAL,... (x=GyroX,y=GyroY,z=GyroZ), possibly in different messages: the "
+                   "first axis's message is the sample clock, each other axis takes its message's latest frame "
+                   "since the previous clock frame, and is invalid (counted) for a sample without one "
+                   "(docs/sources.md)")
     c.add_argument("--can-rate-unit", metavar="UNIT", help="override the rate signal's DBC unit: deg/h, deg/s, "
                    "rad/s (rates) or deg, rad, arcsec (angle per sample)")
     c.add_argument("--can-temp", metavar="SIGNAL", help="DBC signal with the temperature in deg C "

@@ -7,7 +7,11 @@ piece k holds recording time [(k-1) S, k S) from the first sample; numbered from
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
   piece complete with magic line, metadata (``piece: N``) and header. Valid samples only
   (a replay log holds no NaN); lost and invalid samples show as time gaps, which every
-  reader turns back into invalid placeholders. With ``samples_format="parquet"``
+  reader turns back into invalid placeholders. A multi-axis stream (``block.axes``)
+  writes one ``rate_<axis>_dph`` column per axis, and a row only where every axis is
+  valid: a sample with only some axes valid is left out and counted
+  (``partial_samples_dropped``); the raw capture keeps it, and ``fogmon replay`` of the
+  capture decodes it with every axis as the device sent it. With ``samples_format="parquet"``
   (``--archive-format parquet``) ``samples-NNNN.parquet`` instead, written in row groups
   (fogmon.sinks.parquet_pieces: a SIGKILL loses at most the row group being filled).
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
@@ -55,6 +59,18 @@ SERIAL_CAPTURE = "raw.bin"
 CAN_CAPTURE = "frames.asc"
 
 
+def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
+    """Which samples of ``block`` a replay log holds (it has no NaN): those valid on every
+    axis with every aux channel finite. Returns that mask, the samples left out for having
+    only some axes valid, and those left out (valid on every axis) for a non-finite aux."""
+    valid: np.ndarray = np.all(block.valid, axis=1) if block.axes else block.valid
+    partial = int(np.count_nonzero(np.any(block.valid, axis=1) & ~valid)) if block.axes else 0
+    keep = valid.copy()
+    for a in block.aux.values():
+        keep &= np.isfinite(a)
+    return keep, partial, int(valid.sum() - keep.sum())
+
+
 def default_archive_dir(base: str = ".") -> str:
     """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
     return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
@@ -76,7 +92,9 @@ class Archive(Sink):
     (registered here with ``source.add_tap``). ``replay_log_path`` and ``capture_path``
     name the current piece's files. Counters: ``rows_written``, ``rows_without_aux``
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
-    first temperature frame; not written), ``raw_bytes``, ``raw_frames``."""
+    first temperature frame; not written), ``partial_samples_dropped`` (a multi-axis
+    stream only: samples with some but not all axes valid; not written), ``raw_bytes``,
+    ``raw_frames``. A multi-axis source (its ``axes``) needs ``samples_format="csv"``."""
 
     def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
                  background_flush: bool = True, samples_format: str = "csv",
@@ -101,12 +119,15 @@ class Archive(Sink):
         self._last_flush = clock()
         self.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
         self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
+        if getattr(source, "axes", None):
+            self.counters["partial_samples_dropped"] = 0
         self.piece = 1
         self._pieces: set[int] = set()          # pieces that have a file
         self._done = False
         self._csv_fd: int | None = None
         self._csv_buf = io.StringIO()
         self._aux_names: list[str] | None = None
+        self._axes: tuple[str, ...] = ()
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
         self._parquet = ParquetPieces(self.directory, source.sample_rate_hz, row_group_s) \
             if samples_format == "parquet" else None
@@ -143,17 +164,17 @@ class Archive(Sink):
 
     def _write(self, block: Block) -> None:
         if self._aux_names is None and len(block):
-            self._aux_names = list(block.aux)
+            self._aux_names, self._axes = list(block.aux), block.axes
         aux_names = self._aux_names or []
         if len(block) and not self._done:
-            keep = block.valid.copy()
-            for k in aux_names:
-                keep &= np.isfinite(block.aux[k])
-            self.counters["rows_without_aux"] += int(block.valid.sum() - keep.sum())
+            keep, partial, without_aux = replay_rows(block)
+            self.counters["rows_without_aux"] += without_aux
+            if block.axes:
+                self.counters["partial_samples_dropped"] = self.counters.get("partial_samples_dropped", 0) + partial
             if keep.any() and self._parquet is not None:
                 self._pieces.add(self.piece)
                 self._parquet.write(self.piece, aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
-                                    {k: block.aux[k][keep] for k in aux_names})
+                                    {k: block.aux[k][keep] for k in aux_names}, block.axes)
                 self.counters["rows_written"] += int(keep.sum())
             elif keep.any():
                 if self._csv_fd is None:
@@ -167,7 +188,7 @@ class Archive(Sink):
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         self._pieces.add(self.piece)
-        write_replay_header(self._csv_buf, aux_names, self._meta())
+        write_replay_header(self._csv_buf, aux_names, self._meta(), self._axes)
 
     def _meta(self) -> dict:
         """The replay-log metadata of the current piece."""
@@ -197,8 +218,11 @@ class Archive(Sink):
         self.close()
         if self._pieces:
             n = len(self._pieces)
+            partial = self.counters.get("partial_samples_dropped", 0)
             summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
-                           + (f" in {n} pieces)" if n > 1 else ")"))
+                                   + (f" in {n} pieces" if n > 1 else "")
+                                   + (f"; {partial} with only some axes valid left out of the replay log, kept in "
+                                      f"the raw capture" if partial else "") + ")")
 
     # -- raw capture taps (called by the source) --------------------------------------
     def raw(self, data: bytes) -> None:

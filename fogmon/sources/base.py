@@ -34,7 +34,10 @@ class Source(Protocol):
         ...
 
     def blocks(self) -> Iterator[Block]:
-        """Yield blocks until the source ends (end of file, --duration-s, close())."""
+        """Yield blocks until the source ends (end of file, --duration-s, close()).
+        A multi-axis source (a three-axis KVH, several CAN or ``lines`` rate columns)
+        also has ``axes``, the axes of its blocks known before the first one (read it
+        with ``getattr(source, "axes", ())``)."""
         ...
 
     def close(self) -> None:
@@ -84,6 +87,8 @@ class Codec(Protocol):
     #: the sequence counter's modulus, None when the protocol has no counter
     seq_modulus: int | None
     counters: dict[str, int]
+    #: the axes of its frames (fogmon.sources.frames), () for one axis
+    axes: tuple[str, ...]
 
     @property
     def pending(self) -> int:

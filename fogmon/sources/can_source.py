@@ -9,6 +9,18 @@ the conversion to deg/h. Lost frames are found from the rolling counter (its wra
 wrap, or 0.5 s without a counter, is an outage whose length the timestamps give).
 Rates beyond ``--max-rate-dph`` (default the generic gate of fogmon.sources.plausibility,
 10,000 deg/s) make the sample invalid, counted as ``implausible_samples``.
+
+Several axes (``--can-rate x=GyroX,y=GyroY,z=GyroZ``, one signal per axis, possibly in
+different messages): the message carrying the first axis's signal is the sample clock.
+Each of its frames is one sample, placed on the grid by its counter and timestamps as
+for one axis; its temperature, counter and valid signals serve every axis. An axis whose
+signal is in another message takes the latest frame of that message received since the
+previous clock frame. Failure modes: no such frame in that period (lost, or late) makes
+that axis invalid for that sample, counted per axis (``axis_frames_missing_<axis>``);
+more than one (a clock frame lost, or the message sent faster than the clock) keeps the
+latest and counts the others (``axis_frames_superseded``); a message sent just after the
+clock message of its period joins the next sample, a fixed lag of one sample period
+(pick as clock, by naming its axis first, the message sent last in each period).
 """
 from __future__ import annotations
 
@@ -71,6 +83,21 @@ def _pick(msg, opt: str, given: str | None, default: str) -> str | None:
     return given
 
 
+def parse_rate_signals(spec: str) -> list[tuple[str, str]]:
+    """``--can-rate``: ``SIGNAL`` -> [("", SIGNAL)] (one axis), ``x=GyroX,y=GyroY`` ->
+    [("x", "GyroX"), ("y", "GyroY")]. A FogmonError names a bad item."""
+    if "=" not in spec:
+        return [("", spec)]
+    out: list[tuple[str, str]] = []
+    for item in spec.split(","):
+        axis, _, signal = (p.strip() for p in item.partition("="))
+        if not (axis.isascii() and axis.isalnum()) or not signal or any(a == axis for a, _ in out):
+            raise FogmonError(f"--can-rate {spec!r}: write AXIS=SIGNAL,... with distinct axis names "
+                              f"(letters/digits), got {item!r}")
+        out.append((axis, signal))
+    return out
+
+
 def _rate_hz(msg, sample_rate_hz: float | None) -> float:
     """The sample rate (Hz): given, or from the message's DBC cycle time."""
     if sample_rate_hz is None:
@@ -83,39 +110,60 @@ def _rate_hz(msg, sample_rate_hz: float | None) -> float:
 
 
 class CanDecoder:
-    """CAN frames -> Frames for one DBC message. Counters: ``frames_ok``,
+    """CAN frames -> Frames for one DBC message (the sample clock; with several axes also
+    the messages of the other axes' signals, see the module doc). Counters: ``frames_ok``,
     ``bad_frames`` (the message's id but undecodable, e.g. wrong length), ``other_frames``
     (other ids, ignored), ``implausible_samples`` (frames flagged valid whose rate is NaN,
     inf or beyond ``max_rate_dph`` deg/h, None = plausibility.GENERIC_MAX_ABS_DPH: made
-    invalid)."""
+    invalid); with axes in other messages ``axis_frames_missing_<axis>`` and
+    ``axis_frames_superseded``. ``axes``: () for one rate signal."""
 
     def __init__(self, db, message: str | None = None, rate_signal: str | None = None, rate_unit: str | None = None,
                  temp_signal: str | None = None, counter_signal: str | None = None,
                  valid_signal: str | None = None, sample_rate_hz: float | None = None,
                  max_rate_dph: float | None = None) -> None:
         rate_signal = rate_signal or "rate"
-        msg = _find_message(db, message, rate_signal)
+        signals = parse_rate_signals(rate_signal)
+        msg = _find_message(db, message, signals[0][1])
         names = {s.name: s for s in msg.signals}
-        if rate_signal not in names:
-            raise FogmonError(f"--can-rate {rate_signal!r}: message {msg.name} has no such signal "
+        if signals[0][1] not in names:
+            raise FogmonError(f"--can-rate {signals[0][1]!r}: message {msg.name} has no such signal "
                               f"(it has: {', '.join(names)})")
         self.message = msg
         self.rate_signal = rate_signal
+        self.axes = tuple(a for a, _ in signals) if len(signals) > 1 else ()
+        #: per axis: (signal, its message: the clock message or another)
+        self._signals = [(sig, msg if sig in names else _find_message(db, None, sig)) for _, sig in signals]
         self.temp_signal = _pick(msg, "can-temp", temp_signal, "temperature")
         self.counter_signal = _pick(msg, "can-counter", counter_signal, "counter")
         self.valid_signal = _pick(msg, "can-valid", valid_signal, "valid")
-        unit = rate_unit or names[rate_signal].unit or ""
-        key = units.canonical(unit)
-        if key is None:
-            raise FogmonError(f"rate signal {msg.name}.{rate_signal} has unit {unit!r}: give --can-rate-unit "
-                              f"(one of {', '.join(units.DPH_PER_UNIT)})")
-        self.rate_unit = unit
         self.sample_rate_hz = _rate_hz(msg, sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
-        self._scale = units.dph_scale(key, self.sample_rate_hz)
+        keys = []
+        for sig, m in self._signals:
+            unit = rate_unit or m.get_signal_by_name(sig).unit or ""
+            key = units.canonical(unit)
+            if key is None:
+                raise FogmonError(f"rate signal {m.name}.{sig} has unit {unit!r}: give --can-rate-unit "
+                                  f"(one of {', '.join(units.DPH_PER_UNIT)})")
+            keys.append(key)
+        #: the rate unit: given (--can-rate-unit, every axis) or the first signal's DBC unit
+        self.rate_unit = rate_unit or self._signals[0][1].get_signal_by_name(self._signals[0][0]).unit
+        self._rate_unit_given = rate_unit
+        self._scale = np.array([units.dph_scale(k, self.sample_rate_hz) for k in keys])
+        #: other messages' frame ids -> (message, the axes (indices) it carries)
+        self._side: dict[int, tuple[Any, list[int]]] = {}
+        for j, (_, m) in enumerate(self._signals):
+            if m is not msg:
+                self._side.setdefault(m.frame_id, (m, []))[1].append(j)
+        self._latest: dict[int, float] = {}    # axis index -> the other message's value awaiting a clock frame
         self.seq_modulus = 2 ** names[self.counter_signal].length if self.counter_signal else None
         self.aux_names = ("temp_c",) if self.temp_signal else ()
         self.counters = {"frames_ok": 0, "bad_frames": 0, "other_frames": 0, plausibility.COUNTER: 0}
+        if self._side:
+            self.counters.update({f"axis_frames_missing_{self.axes[j]}": 0
+                                  for _, js in self._side.values() for j in js})
+            self.counters["axis_frames_superseded"] = 0
         self._stall_s = min(STALL_S, 0.5 * self.seq_modulus / self.sample_rate_hz) if self.seq_modulus else STALL_S
         self._last_ts: float | None = None
 
@@ -123,7 +171,7 @@ class CanDecoder:
         return {
             "message": self.message.name,
             "rate_signal": self.rate_signal,
-            "rate_unit": self.rate_unit,
+            "rate_unit": self._rate_unit_given if self.axes else self.rate_unit,  # several axes: each its DBC unit
             "temp_signal": self.temp_signal,
             "counter_signal": self.counter_signal,
             "valid_signal": self.valid_signal,
@@ -132,7 +180,10 @@ class CanDecoder:
         }
 
     def describe(self) -> str:
-        return f"CAN {self.message.name}.{self.rate_signal} ({self.rate_unit}), {self.sample_rate_hz:g} Hz"
+        if not self.axes:
+            return f"CAN {self.message.name}.{self.rate_signal} ({self.rate_unit}), {self.sample_rate_hz:g} Hz"
+        sigs = ", ".join(f"{a}={m.name}.{s}" for a, (s, m) in zip(self.axes, self._signals, strict=True))
+        return f"CAN axes {sigs} (clock {self.message.name}), {self.sample_rate_hz:g} Hz"
 
     def feed(self, msgs: Iterable) -> list[tuple[float | None, Frames]]:
         """Decode ``msgs`` (can.Message, in order): segments of frames, each with the
@@ -146,21 +197,26 @@ class CanDecoder:
             if cur["seq"]:
                 aux = {"temp_c": cur["temp"]} if self.temp_signal else {}
                 with np.errstate(over="ignore"):       # a garbage 1e308 becomes inf, then gated
-                    rate = np.asarray(cur["rate"], dtype=np.float64) * self._scale
-                rate, bad = plausibility.gate(rate, self.max_rate_dph, cur["valid"])
+                    rate = np.asarray(cur["rate"], dtype=np.float64).reshape(-1, len(self._scale)) * self._scale
+                valid = np.asarray(cur["valid"], dtype=bool).reshape(rate.shape)
+                rate, bad = plausibility.gate(rate, self.max_rate_dph, valid)
                 c[plausibility.COUNTER] += bad
-                segs.append((brk, Frames.from_lists(cur["seq"], rate, cur["valid"], aux)))
+                segs.append((brk, Frames.from_lists(cur["seq"], rate, valid, aux, axes=self.axes)))
                 for v in cur.values():
                     v.clear()
 
         c = self.counters
         for m in msgs:
+            if m.arbitration_id in self._side and not (m.is_error_frame or m.is_remote_frame):
+                self._take_side(m)
+                continue
             if m.arbitration_id != fid or m.is_error_frame or m.is_remote_frame:
                 c["other_frames"] += 1
                 continue
             try:
                 d = self.message.decode(bytes(m.data), decode_choices=False)
-                rate = float(d[self.rate_signal])
+                rate = [self._value(j, d) for j in range(len(self._signals))]
+                ok_axes = [v is not None for v in rate]
                 temp = float(d[self.temp_signal]) if self.temp_signal else 0.0
                 seq = int(d[self.counter_signal]) if self.counter_signal else -1
                 ok = bool(d[self.valid_signal]) if self.valid_signal else True
@@ -174,11 +230,36 @@ class CanDecoder:
             self._last_ts = ts
             c["frames_ok"] += 1
             cur["seq"].append(seq % self.seq_modulus if self.seq_modulus else -1)
-            cur["rate"].append(rate)
-            cur["valid"].append(ok)
+            cur["rate"].append([math.nan if v is None else v for v in rate])
+            cur["valid"].append([ok and a for a in ok_axes])
             cur["temp"].append(temp)
         close_seg()
         return segs
+
+    def _take_side(self, m) -> None:
+        """A frame of another axis's message: its values wait for the next clock frame."""
+        msg, js = self._side[m.arbitration_id]
+        try:
+            d = msg.decode(bytes(m.data), decode_choices=False)
+            values = {j: float(d[self._signals[j][0]]) for j in js}
+        except Exception:  # cantools: wrong length, ...
+            self.counters["bad_frames"] += 1
+            return
+        if js[0] in self._latest:
+            self.counters["axis_frames_superseded"] += 1
+        self._latest.update(values)
+
+    def _value(self, j: int, d: dict) -> float | None:
+        """Axis ``j``'s rate (signal units) for the clock frame decoded as ``d``: from ``d``,
+        or the latest frame of its own message since the previous clock frame (None and
+        counted when none came)."""
+        sig, msg = self._signals[j]
+        if msg is self.message:
+            return float(d[sig])
+        if j in self._latest:
+            return self._latest.pop(j)
+        self.counters[f"axis_frames_missing_{self.axes[j]}"] += 1
+        return None
 
 
 def _push_segments(grid: GridAssembler, segs, events) -> Block:
@@ -188,7 +269,7 @@ def _push_segments(grid: GridAssembler, segs, events) -> Block:
             grid.mark_break(brk)
         blocks.append(grid.push(frames, events if i == 0 else ()))
     if not blocks:
-        return grid.push(Frames.empty(grid.aux_names), events)
+        return grid.push(Frames.empty(grid.aux_names, grid.axes), events)
     return Block.concat(blocks)
 
 
@@ -204,8 +285,8 @@ class CanSource(LiveSource):
     def __init__(self, channel: str, interface: str, db, bitrate: int | None = None, dbc_path: str | None = None,
                  block_s: float = 0.1, idle_s: float = 0.5, backoff_s=(0.05, 2.0), **decoder_options) -> None:
         self.decoder = CanDecoder(db, **decoder_options)
-        super().__init__(GridAssembler(self.decoder.sample_rate_hz, self.decoder.seq_modulus, self.decoder.aux_names),
-                         block_s, idle_s, backoff_s)
+        super().__init__(GridAssembler(self.decoder.sample_rate_hz, self.decoder.seq_modulus, self.decoder.aux_names,
+                                       axes=self.decoder.axes), block_s, idle_s, backoff_s)
         self.channel, self.interface, self.bitrate, self.dbc_path = channel, interface, bitrate, dbc_path
         self.sample_rate_hz = self.decoder.sample_rate_hz
         self.aux_names = self.decoder.aux_names
@@ -269,7 +350,8 @@ class CanLogSource:
         self.decoder = CanDecoder(db, **decoder_options)
         self.sample_rate_hz = self.decoder.sample_rate_hz
         self.aux_names = self.decoder.aux_names
-        self.grid = GridAssembler(self.sample_rate_hz, self.decoder.seq_modulus, self.aux_names)
+        self.axes = self.decoder.axes
+        self.grid = GridAssembler(self.sample_rate_hz, self.decoder.seq_modulus, self.aux_names, axes=self.axes)
         what = os.path.basename(self.path) + (
             f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
         self.name = f"CAN log {what}: {self.decoder.describe()}"

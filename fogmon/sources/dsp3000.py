@@ -26,6 +26,7 @@ class Dsp3000Codec:
     seq_modulus = None
     protocol = "dsp3000"
     aux_names: tuple[str, ...] = ()
+    axes: tuple[str, ...] = ()          # one axis
 
     def __init__(
         self, rot: str = "rate", sample_rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None

@@ -50,18 +50,24 @@ def lost_frames(base: np.ndarray | None, skipped: np.ndarray, frame_bytes: int, 
 class GridAssembler:
     """Frames -> Blocks on the grid ``t_s = t0_s + k / sample_rate_hz`` (s). Counters:
     ``seq_gaps`` (places where samples were lost), ``samples_missing`` (placeholders
-    inserted), ``invalid_samples`` (frames the device flagged invalid)."""
+    inserted), ``invalid_samples`` (frames the device flagged invalid). With ``axes``
+    (frames and blocks with one rate/valid column per axis) ``invalid_samples`` counts
+    frames with at least one axis invalid and ``invalid_samples_<axis>`` those of each
+    axis; a lost frame is a placeholder on every axis."""
 
-    def __init__(self, sample_rate_hz: float, seq_modulus: int | None, aux_names=(), t0_s: float = 0.0) -> None:
+    def __init__(self, sample_rate_hz: float, seq_modulus: int | None, aux_names=(), t0_s: float = 0.0,
+                 axes: tuple[str, ...] = ()) -> None:
         self.sample_rate_hz = float(sample_rate_hz)
         self.seq_modulus = seq_modulus
         self.aux_names = tuple(aux_names)
+        self.axes = tuple(axes)
         self.t0_s = float(t0_s)
         self.next_index = 0          # grid index of the next sample
         self._started = False        # a frame has been placed
         self._last_seq: int | None = None
         self._break_est: float | None = None
-        self.counters = {"seq_gaps": 0, "samples_missing": 0, "invalid_samples": 0}
+        self.counters = {"seq_gaps": 0, "samples_missing": 0, "invalid_samples": 0,
+                         **{f"invalid_samples_{a}": 0 for a in self.axes}}
 
     def mark_break(self, missing_est: float) -> None:
         """An outage before the next frame (the port was closed and reopened), in which
@@ -93,9 +99,11 @@ class GridAssembler:
         events plus the given ``events``."""
         n = len(frames)
         evs = list(events)
+        shape = (len(self.axes),) if self.axes else ()
         if n == 0:
             t = np.zeros(0)
-            return Block(t, t.copy(), np.zeros(0, bool), {k: np.zeros(0) for k in self.aux_names}, tuple(evs))
+            return Block(t, np.zeros((0, *shape)), np.zeros((0, *shape), bool),
+                         {k: np.zeros(0) for k in self.aux_names}, tuple(evs), self.axes)
         seq, skipped = frames.seq, frames.skipped_bytes()
         missing = np.zeros(n, dtype=np.int64)
         why = (skipped > 0).astype(np.int64)
@@ -111,11 +119,11 @@ class GridAssembler:
         total = int(offs[-1]) + 1
         k0 = self.next_index
         t = self.t0_s + (k0 + np.arange(total)) / self.sample_rate_hz
-        rate = np.full(total, np.nan)
-        valid = np.zeros(total, bool)
-        rate[offs] = frames.rate_dph
-        valid[offs] = frames.valid & np.isfinite(frames.rate_dph)
-        rate[offs[~valid[offs]]] = np.nan
+        rate = np.full((total, *shape), np.nan)
+        valid = np.zeros((total, *shape), bool)
+        ok = frames.valid & np.isfinite(frames.rate_dph)
+        rate[offs] = np.where(ok, frames.rate_dph, np.nan)
+        valid[offs] = ok
         aux = {}
         for name in self.aux_names:
             a = np.full(total, np.nan)
@@ -125,7 +133,10 @@ class GridAssembler:
         c = self.counters
         c["seq_gaps"] += len(gaps)
         c["samples_missing"] += int(missing.sum())
-        c["invalid_samples"] += int(n - valid[offs].sum())
+        bad = ~ok
+        c["invalid_samples"] += int(bad.any(axis=1).sum() if self.axes else bad.sum())
+        for j, axis in enumerate(self.axes):
+            c[f"invalid_samples_{axis}"] += int(bad[:, j].sum())
         for g in gaps[:MAX_GAP_EVENTS]:
             tg = float(t[offs[g] - missing[g]])
             evs.append(Event(tg, "gap", f"{int(missing[g])} sample(s) lost at t={tg:.6f} s ({_WHY[why[g]]})"))
@@ -134,7 +145,7 @@ class GridAssembler:
             evs.append(Event(float(t[offs[rest[0]]]), "gap",
                              f"{len(rest)} more gaps, {int(missing[rest].sum())} samples lost in this block"))
         self.next_index = k0 + total
-        return Block(t, rate, valid, aux, tuple(evs))
+        return Block(t, rate, valid, aux, tuple(evs), self.axes)
 
     @property
     def t_next_s(self) -> float:

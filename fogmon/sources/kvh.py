@@ -4,8 +4,9 @@ decoder with resynchronisation.
 Wire formats (big-endian):
 
 - A, 36 bytes: header ``FE 81 FF 55``, gyro x/y/z float32, accel x/y/z float32
-  (reserved on the 1760), status uint8 (bits 0-2: gyro x/y/z valid), sequence uint8
-  (0-127, wrapping), temperature int16 (deg C), CRC-32/MPEG-2 uint32.
+  (reserved on the 1760), status uint8 (bits 0-2: gyro x/y/z valid, bits 4-6: accel
+  x/y/z valid), sequence uint8 (0-127, wrapping), temperature int16 (deg C),
+  CRC-32/MPEG-2 uint32.
 - B, 40 bytes: header ``... 56``, as A with a uint32 microsecond timestamp after the
   accelerometers (before status).
 - C, 38 bytes: header ``... 57``, gyro, accel, one float32 multiplexed by sequence % 4
@@ -16,6 +17,17 @@ before it, so the CRC of a whole good frame is 0. Resync: find the header, check
 on failure drop one byte and rescan. Gyro values are delta angles (per sample) or rates,
 in rad or deg, as the device is configured; they are converted to deg/h here and gated
 (fogmon.sources.plausibility): a CRC-valid frame can still carry a garbage float.
+
+Axes: by default all three gyros are decoded (a three-axis stream, ``axes`` x, y, z,
+each gyro valid as its status bit says) with the accelerometers as aux channels
+``accel_<axis>_g`` in g, NaN where their status bit is clear or the reading is beyond
+plausibility.KVH_ACCEL_MAX_ABS_G (counted as ``implausible_accel_g``). The accelerometers send
+acceleration in g (the device's default linear format) or, after ``=LINFMT``, velocity
+increments per sample in m/s or ft/s (``=LINUNITS``): ``accel`` says which (``ACCEL_UNITS``)
+and ``none`` leaves them out (a gyro-only DSP-1760, whose accel fields are reserved).
+``--kvh-units`` is the gyros' angle unit only. One axis (``axis="z"``) is today's
+one-axis stream: that gyro alone, ``temp_c`` the only aux channel; several
+(``axis="x,y"``) a multi-axis stream of those gyros and their accelerometers.
 """
 from __future__ import annotations
 
@@ -23,6 +35,9 @@ import binascii
 import math
 import struct
 
+import numpy as np
+
+from fogmon.block import parse_axes
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
@@ -54,6 +69,23 @@ FORMATS = {
 AXES = ("x", "y", "z")
 SEQ_MODULUS = 128
 DEFAULT_RATE_HZ = 1000.0
+#: standard gravity, m/s^2 per g
+G0_MPS2 = 9.80665
+#: accelerometer output (``--kvh-accel``) -> (g per unit, per sample: a velocity increment
+#: per sample, multiplied by the sample rate in Hz); "none": not decoded
+ACCEL_UNITS = {"g": (1.0, False), "dv-m": (1.0 / G0_MPS2, True), "dv-ft": (0.3048 / G0_MPS2, True),
+               "none": (0.0, False)}
+
+
+def kvh_axes(axis: str | None) -> tuple[str, ...]:
+    """``--axis`` of a KVH decoder -> the gyros to decode: None = all three, ``"z"`` one,
+    ``"x,y"`` several (in the order given). A FogmonError names a bad or repeated axis."""
+    if axis is None:
+        return AXES
+    names = parse_axes(str(axis))
+    if any(a not in AXES for a in names):
+        raise FogmonError(f"--axis must be x, y, z or several of them separated by commas (x,y), got {axis!r}")
+    return names
 
 
 def output_unit(mode: str, angle: str) -> str:
@@ -76,7 +108,8 @@ class KvhCodec:
     seq_modulus = SEQ_MODULUS
 
     def __init__(self, fmt: str = "a", rot: str = "delta", units: str = "rad",
-                 axis: str = "z", sample_rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None) -> None:
+                 axis: str | None = None, sample_rate_hz: float = DEFAULT_RATE_HZ,
+                 max_rate_dph: float | None = None, accel: str = "g") -> None:
         fmt = fmt.lower()
         if fmt not in FORMATS:
             raise FogmonError(f"unknown KVH format {fmt!r} (use a, b or c)")
@@ -84,18 +117,27 @@ class KvhCodec:
             raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
         if units not in ("deg", "rad"):
             raise FogmonError(f"--kvh-units must be deg or rad, got {units!r}")
-        if axis not in AXES:
-            raise FogmonError(f"--axis must be x, y or z, got {axis!r}")
+        if accel not in ACCEL_UNITS:
+            raise FogmonError(f"--kvh-accel must be one of {', '.join(ACCEL_UNITS)}, got {accel!r}")
+        names = kvh_axes(axis)
         if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
             raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
-        self.fmt, self.rot, self.units, self.axis, self.sample_rate_hz = fmt, rot, units, axis, float(sample_rate_hz)
+        self.fmt, self.rot, self.units, self.sample_rate_hz = fmt, rot, units, float(sample_rate_hz)
+        self.axis, self.accel = ",".join(names), accel
+        #: () for one gyro (today's one-axis stream), else the gyros decoded
+        self.axes = names if len(names) > 1 else ()
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP17XX_MAX_ABS_DPH)
         self.protocol = f"kvh-{fmt}"
         self.header, self.frame_len, self._layout = FORMATS[fmt]
-        self._axis_i = AXES.index(axis)
-        self.aux_names = ("temp_c",)
+        self._axis_i = [AXES.index(a) for a in names]
+        scale, per_sample = ACCEL_UNITS[accel]
+        self._accel_g = scale * (self.sample_rate_hz if per_sample else 1.0)
+        self._accel_names = tuple(f"accel_{a}_g" for a in names) if self.axes and accel != "none" else ()
+        self.aux_names = (*self._accel_names, "temp_c")
         self.counters = {"frames_ok": 0, "crc_errors": 0, "bytes_skipped": 0,
                          plausibility.COUNTER: 0, plausibility.TEMP_COUNTER: 0}
+        if self._accel_names:
+            self.counters[plausibility.ACCEL_COUNTER] = 0
         self._buf = bytearray()
         self._last_temp_c = math.nan  # format C: temperature arrives every 4th frame
         self._run = 0                 # bytes skipped since the last good frame
@@ -107,12 +149,14 @@ class KvhCodec:
 
     def options(self) -> dict:
         """What is needed to rebuild this decoder (raw-capture sidecar)."""
-        return {"protocol": self.protocol, "kvh_rot": self.rot, "kvh_units": self.units,
+        opts = {"protocol": self.protocol, "kvh_rot": self.rot, "kvh_units": self.units,
                 "axis": self.axis, "sample_rate_hz": self.sample_rate_hz, "max_rate_dph": self.max_rate_dph}
+        return {**opts, "kvh_accel": self.accel} if self.axes else opts
 
     def describe(self) -> str:
-        return (f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}), axis {self.axis}, "
-                f"{self.sample_rate_hz:g} Hz")
+        what = f"axis {self.axis}" if not self.axes else f"axes {self.axis}"
+        accel = f", accel {self.accel}" if self._accel_names else ""
+        return f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}{accel}), {what}, {self.sample_rate_hz:g} Hz"
 
     def _status_seq_temp(self, f: tuple) -> tuple[int, int, float, int]:
         """Status byte, sequence counter and temperature (deg C; format C: the latest
@@ -133,8 +177,7 @@ class KvhCodec:
         buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
-        seqs, gyro, valid, temps, runs = [], [], [], [], []
-        ai = self._axis_i
+        seqs, sensors, status_bytes, temps, runs = [], [], [], [], []
         crc_err = skipped = bad_temp = 0
         run = self._run
         i = 0
@@ -162,8 +205,8 @@ class KvhCodec:
             status, seq, temp, implausible = self._status_seq_temp(f)
             bad_temp += implausible
             seqs.append(seq & 0x7F)
-            gyro.append(f[ai])
-            valid.append(bool(status >> ai & 1))
+            sensors.append(f[:6])                  # gyro x/y/z, accel x/y/z
+            status_bytes.append(status)
             temps.append(temp)
             runs.append(run)
             run = 0
@@ -175,10 +218,25 @@ class KvhCodec:
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
         c[plausibility.TEMP_COUNTER] += bad_temp
-        rate_dph = to_dph(gyro, output_unit(self.rot, self.units), self.sample_rate_hz)
+        ai = self._axis_i
+        bits = np.asarray(status_bytes, dtype=np.uint8).reshape(-1, 1)
+        valid = (bits >> np.asarray(ai, dtype=np.uint8) & 1).astype(bool)
+        gyro_accel = np.asarray(sensors, dtype=np.float64).reshape(-1, 6)
+        rate_dph = to_dph(gyro_accel[:, ai], output_unit(self.rot, self.units), self.sample_rate_hz)
+        if not self.axes:
+            rate_dph, valid = rate_dph[:, 0], valid[:, 0]
         rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
-        return Frames.from_lists(seqs, rate, valid, {"temp_c": temps}, runs, L)
+        aux = {"temp_c": temps}
+        if self._accel_names:
+            accel_g = gyro_accel[:, [3 + i for i in ai]] * self._accel_g
+            flagged = (bits >> (np.asarray(ai, dtype=np.uint8) + 4) & 1) == 1
+            with np.errstate(invalid="ignore"):
+                implausible = flagged & ~(np.abs(accel_g) <= plausibility.KVH_ACCEL_MAX_ABS_G)
+            c[plausibility.ACCEL_COUNTER] += int(implausible.sum())
+            accel_g[~flagged | implausible] = np.nan
+            aux = {**dict(zip(self._accel_names, accel_g.T, strict=True)), **aux}
+        return Frames.from_lists(seqs, rate, valid, aux, runs, L, self.axes)
 
 
 def _plausible_temp_c(temp_c: float) -> tuple[float, int]:

@@ -5,7 +5,12 @@ tabs or spaces.
 The column map (``--columns``) names each field in order:
 
 - the rate, exactly one of ``rate_dph`` (deg/h), ``rate_dps`` (deg/s), ``rate_rps``
-  (rad/s), ``delta_deg``, ``delta_rad``, ``delta_arcsec`` (angle per sample);
+  (rad/s), ``delta_deg``, ``delta_rad``, ``delta_arcsec`` (angle per sample); or one
+  per axis, the axis name (letters/digits) inside the name: ``rate_x_dph``,
+  ``rate_y_dps``, ``delta_z_rad``, ... (each in its own unit). Two or more give a
+  multi-axis stream (axes in column order; ``axis`` picks some of them, one picked = a
+  one-axis stream), a single one a one-axis stream;
+- ``valid_<axis>`` (nonzero = that axis's sample is good), beside ``valid`` (all axes);
 - ``seq`` (unbounded sample counter) or ``seq:N`` (counter wrapping at N), used for gap
   detection;
 - ``valid`` (nonzero = good sample);
@@ -35,6 +40,18 @@ RATE_COLUMNS = {"rate_dph": "deg/h", "rate_dps": "deg/s", "rate_rps": "rad/s", "
                 "delta_rad": "rad", "delta_arcsec": "arcsec"}
 _SPLIT = re.compile(rb"[,;\s]+")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+#: a per-axis rate column: rate_<axis>_dph, delta_<axis>_rad, ...
+_AXIS_RATE = re.compile(r"^(rate|delta)_([A-Za-z0-9]+)_([a-z]+)$")
+
+
+def rate_column(name: str) -> tuple[str, str] | None:
+    """(axis, fogmon.units unit) of a rate column name (axis "" for the plain names of
+    RATE_COLUMNS), None for any other name."""
+    if name in RATE_COLUMNS:
+        return "", RATE_COLUMNS[name]
+    m = _AXIS_RATE.match(name)
+    base = f"{m.group(1)}_{m.group(3)}" if m else ""
+    return (m.group(2), RATE_COLUMNS[base]) if m and base in RATE_COLUMNS else None
 
 
 def parse_columns(spec: str) -> tuple[list[str], int | None]:
@@ -64,10 +81,11 @@ def parse_columns(spec: str) -> tuple[list[str], int | None]:
     dup = {n for n in real if real.count(n) > 1}
     if dup:
         raise FogmonError(f"--columns names {', '.join(sorted(dup))} more than once")
-    rates = [n for n in names if n in RATE_COLUMNS]
-    if len(rates) != 1:
-        raise FogmonError(f"--columns needs exactly one rate column (one of {', '.join(RATE_COLUMNS)}), "
-                          f"got {spec!r}")
+    rates = [r for r in map(rate_column, names) if r is not None]
+    axes = [a for a, _ in rates]
+    if not rates or ("" in axes and len(rates) > 1) or len(set(axes)) != len(axes):
+        raise FogmonError(f"--columns needs exactly one rate column (one of {', '.join(RATE_COLUMNS)}) or one per "
+                          f"axis (rate_x_dph, rate_y_dps, ...), got {spec!r}")
     return names, modulus
 
 
@@ -79,7 +97,7 @@ class LinesCodec:
     protocol = "lines"
 
     def __init__(self, columns: str = "rate_dph", sample_rate_hz: float = DEFAULT_RATE_HZ,
-                 max_rate_dph: float | None = None) -> None:
+                 max_rate_dph: float | None = None, axis: str | None = None) -> None:
         if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
             raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
         self.columns, self.sample_rate_hz = columns, float(sample_rate_hz)
@@ -87,9 +105,19 @@ class LinesCodec:
         self._names, mod = parse_columns(columns)
         has_seq = "seq" in self._names
         self.seq_modulus = (mod or 2 ** 62) if has_seq else None
-        self._rate_name = next(n for n in self._names if n in RATE_COLUMNS)
-        self._scale = units.dph_scale(RATE_COLUMNS[self._rate_name], self.sample_rate_hz)
-        self.aux_names = tuple(n for n in self._names if n not in ("-", "seq", "valid") and n not in RATE_COLUMNS)
+        rates = {n: r for n in self._names if (r := rate_column(n)) is not None}
+        by_axis = {a: (n, u) for n, (a, u) in rates.items()}
+        picked = list(by_axis) if axis is None or "" in by_axis else axis.split(",")
+        missing = [a for a in picked if a not in by_axis]
+        if missing:
+            raise FogmonError(f"--axis {axis}: --columns {columns!r} has no rate column of axis "
+                              f"{', '.join(missing)} (it has: {', '.join(by_axis)})")
+        self.axes: tuple[str, ...] = tuple(picked) if len(picked) > 1 else ()
+        self._rates = [(by_axis[a][0], units.dph_scale(by_axis[a][1], self.sample_rate_hz),
+                        f"valid_{a}" if f"valid_{a}" in self._names else None) for a in picked]
+        self.axis = None if axis is None or "" in by_axis else ",".join(picked)
+        own = set(rates) | {f"valid_{a}" for a in by_axis if a}
+        self.aux_names = tuple(n for n in self._names if n not in ("-", "seq", "valid") and n not in own)
         self._framer = LineFramer(512)
         self.counters = {"frames_ok": 0, "bad_lines": 0, "bytes_skipped": 0, plausibility.COUNTER: 0}
 
@@ -98,11 +126,13 @@ class LinesCodec:
         return self._framer.pending
 
     def options(self) -> dict:
-        return {"protocol": self.protocol, "columns": self.columns, "sample_rate_hz": self.sample_rate_hz,
+        opts = {"protocol": self.protocol, "columns": self.columns, "sample_rate_hz": self.sample_rate_hz,
                 "max_rate_dph": self.max_rate_dph}
+        return opts if self.axis is None else {**opts, "axis": self.axis}
 
     def describe(self) -> str:
-        return f"ASCII lines [{self.columns}], {self.sample_rate_hz:g} Hz"
+        what = f", axes {','.join(self.axes)}" if self.axes else (f", axis {self.axis}" if self.axis else "")
+        return f"ASCII lines [{self.columns}]{what}, {self.sample_rate_hz:g} Hz"
 
     def feed(self, data: bytes) -> Frames:
         fr = self._framer
@@ -133,8 +163,9 @@ class LinesCodec:
                 bad_bytes += len(line)
                 continue
             seq.append(int(row["seq"]) % mod if mod else -1)
-            rate.append(row[self._rate_name] * self._scale)
-            valid.append(row.get("valid", 1.0) != 0)
+            ok = row.get("valid", 1.0) != 0
+            rate.append([row[n] * scale for n, scale, _ in self._rates])
+            valid.append([ok and (v is None or row[v] != 0) for _, _, v in self._rates])
             for k in self.aux_names:
                 aux[k].append(row[k])
         c = self.counters
@@ -143,4 +174,4 @@ class LinesCodec:
         c["bytes_skipped"] += bad_bytes + fr.dropped_bytes - before[0]
         rate_dph, n = plausibility.gate(rate, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += n
-        return Frames.from_lists(seq, rate_dph, valid, aux)
+        return Frames.from_lists(seq, rate_dph, valid, aux, axes=self.axes)

@@ -62,6 +62,11 @@ class LiveSource:
         self._limit: int | None = None
 
     @property
+    def axes(self) -> tuple[str, ...]:
+        """The axes of the blocks (() for a one-axis stream)."""
+        return self.grid.axes
+
+    @property
     def pending(self) -> int:
         """Bytes of a partial frame the decoder holds (none for frame-based input)."""
         return 0
@@ -202,7 +207,7 @@ class LiveSource:
     def _take(self, parts: list[Block], events: list[Event], errors: ErrorEvents) -> Block:
         """Everything consumed since the last block, as one block with its events (the
         lists are emptied)."""
-        tail = self.grid.push(Frames.empty(self.aux_names), events + errors.poll(self.grid.t_next_s))
+        tail = self.grid.push(Frames.empty(self.aux_names, self.grid.axes), events + errors.poll(self.grid.t_next_s))
         b = Block.concat([*parts, tail]) if parts else tail
         parts.clear()
         events.clear()

@@ -11,8 +11,8 @@ from typing import Any
 class SourceOptions:
     """Options of fogmon.sources.open: ``serial``/``baud`` or ``can``/``interface``/
     ``can_bitrate`` (a live device), the serial decoder (``protocol``, ``sample_rate_hz`` Hz,
-    ``kvh_rot``, ``kvh_units``, ``axis``, ``columns``; ``axis`` also picks the axes of a
-    multi-axis replay log: a name or a comma list), the CAN decoder (``dbc``,
+    ``kvh_rot``, ``kvh_units``, ``kvh_accel``, ``axis``, ``columns``; ``axis`` also picks the
+    axes of a multi-axis replay log: a name or a comma list), the CAN decoder (``dbc``,
     ``can_message``, ``can_rate``, ``can_rate_unit``, ``can_temp``, ``can_counter``,
     ``can_valid``), the plausibility gate ``max_rate_dph`` (deg/h), for a replay log
     ``tolerate_bad_rows``, and for other recording formats (fogmon.sources.formats)
@@ -27,6 +27,7 @@ class SourceOptions:
     sample_rate_hz: float | None = None
     kvh_rot: str | None = None
     kvh_units: str | None = None
+    kvh_accel: str | None = None
     axis: str | None = None
     columns: str | None = None
     dbc: str | None = None
@@ -46,7 +47,7 @@ class SourceOptions:
     def codec_options(self) -> dict[str, Any]:
         """Serial decoder options given (None = not given), as make_codec names them."""
         return {"protocol": self.protocol, "sample_rate_hz": self.sample_rate_hz, "kvh_rot": self.kvh_rot,
-                "kvh_units": self.kvh_units, "axis": self.axis, "columns": self.columns,
+                "kvh_units": self.kvh_units, "kvh_accel": self.kvh_accel, "axis": self.axis, "columns": self.columns,
                 "max_rate_dph": self.max_rate_dph}
 
     def can_options(self) -> dict[str, Any]:

@@ -36,6 +36,11 @@ COUNTER = "implausible_samples"
 TEMP_RANGE_C = (-60.0, 125.0)
 #: the counter of the KVH decoders for temperatures outside TEMP_RANGE_C
 TEMP_COUNTER = "implausible_temp_c"
+#: accelerations (g) a KVH DSP-17xx accelerometer can report: well beyond the range of any
+#: of them (+-10 g on the DSP-1750); beyond it the field is corrupt (a garbage float)
+KVH_ACCEL_MAX_ABS_G = 50.0
+#: the counter of the KVH decoders for accelerations beyond KVH_ACCEL_MAX_ABS_G (or not a number)
+ACCEL_COUNTER = "implausible_accel_g"
 
 
 def gate(rate_dph: ArrayLike, max_abs_dph: float, valid: ArrayLike | None = None) -> tuple[np.ndarray, int]:

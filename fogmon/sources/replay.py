@@ -192,8 +192,8 @@ class RawCaptureSource:
     pieces of one (an archive's raw-NNNN.bin), read in order as one byte stream, so the
     decoder's state (a frame split across two pieces, the sequence counter) carries
     across. ``options`` are the decoder options (``protocol``, ``sample_rate_hz``, ``kvh_rot``,
-    ``kvh_units``, ``axis``, ``columns``); ``breaks`` the outages [(byte offset in the
-    stream, estimated samples lost)]. Counters: the decoder's and the grid's (see
+    ``kvh_units``, ``kvh_accel``, ``axis``, ``columns``; ``axes`` the codec's); ``breaks``
+    the outages [(byte offset in the stream, estimated samples lost)]. Counters: the decoder's and the grid's (see
     GridAssembler)."""
 
     CHUNK = 1 << 16
@@ -206,7 +206,8 @@ class RawCaptureSource:
         self._options = dict(options)
         self.codec = codec_from_options(options)
         self.sample_rate_hz = self.codec.sample_rate_hz
-        self.grid = GridAssembler(self.sample_rate_hz, self.codec.seq_modulus, self.codec.aux_names)
+        self.axes: tuple[str, ...] = self.codec.axes
+        self.grid = GridAssembler(self.sample_rate_hz, self.codec.seq_modulus, self.codec.aux_names, axes=self.axes)
         what = os.path.basename(self.paths[0]) + (
             f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
         self.name = f"raw capture {what}: {self.codec.describe()}"

@@ -38,7 +38,7 @@ class SerialSource(LiveSource):
 
     def __init__(self, port: str, baud: int, codec: Codec, block_s: float = 0.1, idle_s: float = 0.5,
                  backoff_s: tuple[float, float] = (0.05, 2.0), opener=None, clock=time.monotonic) -> None:
-        super().__init__(GridAssembler(codec.sample_rate_hz, codec.seq_modulus, codec.aux_names),
+        super().__init__(GridAssembler(codec.sample_rate_hz, codec.seq_modulus, codec.aux_names, axes=codec.axes),
                          block_s, idle_s, backoff_s, clock)
         self.port, self.baud, self.codec = port, int(baud), codec
         self.sample_rate_hz = codec.sample_rate_hz
