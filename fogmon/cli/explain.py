@@ -19,13 +19,15 @@ MAX_BOOTSTRAP = 10_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns), or a ROS "
-                   "bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
+    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns; several axes: "
+                   "rate_<axis>_dph columns, each axis explained unless --axis picks one, docs/explain.md), or a "
+                   "ROS bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
     p.add_argument("--model", help="sensor model TOML (docs/formats.md); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
     p.add_argument("--report", required=True, help="JSON report to write (docs/formats.md); a PNG of the "
                    "evidence is written next to it (same name, .png), and every outlier of an outlier population "
-                   "(same name, .outliers.csv)")
+                   "(same name, .outliers.csv); with several axes one of each per axis (.<axis>.png, "
+                   ".<axis>.outliers.csv)")
     p.add_argument("--rrd", help="also write the evidence to this Rerun .rrd file")
     p.add_argument("--out-model", help="write the model with the fitted effects added (TOML)")
     p.add_argument("--out-corrected", help="write the recording with the fitted deterministic effects removed "

@@ -368,7 +368,7 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
     return replace(r, t_start_s=t0, t_end_s=t1, t_peak_s=t_peak, tau_peak_s=m / sample_rate_hz, span_s=(t_lo, t_hi))
 
 
-#: Power of the score's smooth maximum of its four figures.
+#: Power of the score's smooth maximum of its four figures (and of the axes' scores).
 SCORE_POWER = 8.0
 
 
