@@ -61,7 +61,8 @@ def axes_verdict(ares: AxesResult, axes: dict[str, dict]) -> str:
             parts.append(f"Axis {a}: {len(rep['mismatches'])} mismatch region(s) no catalogued effect explains "
                          f"(score {rep['score_before']:.2f}).")
         else:
-            parts.append(f"Axis {a}: explained by the model (score {rep['score_before']:.2f}).")
+            parts.append(f"Axis {a}: explained by {'its baseline' if ares.baseline else 'the model'} "
+                         f"(score {rep['score_before']:.2f}).")
     for c in ares.common:
         how = ("the axes' data cohere beyond chance on every pair" if c.significant else
                "but the axes' data do not cohere beyond chance on every pair (see its evidence)")
