@@ -170,6 +170,13 @@ def test_null_three_axes_nothing_missing_and_nothing_common(tmp_path, monkeypatc
     assert rep["common"] == [] and "No effect is shared" in rep["verdict"]
 
 
+def test_axis_option_picks_one_axis_and_gives_the_one_axis_report(tmp_path, monkeypatch):
+    rep = _explain_cli(tmp_path, monkeypatch, three_axis_recording([], seed=50), "--quiet", "--max-effects", "0",
+                       "--axis", "y")
+    assert "axes" not in rep and "common" not in rep and rep["mismatches"] == []
+    assert (tmp_path / "rep.png").exists() and not (tmp_path / "rep.y.png").exists()
+
+
 def test_coherence_p_values_hold_their_level_for_independent_autocorrelated_series():
     """Independent AR(1) series (phi 0.9): the naive Pearson test rejects about half the
     time at 5 %; with Bartlett's effective n the rate stays near 5 %."""
