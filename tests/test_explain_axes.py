@@ -177,6 +177,45 @@ def test_axis_option_picks_one_axis_and_gives_the_one_axis_report(tmp_path, monk
     assert (tmp_path / "rep.png").exists() and not (tmp_path / "rep.y.png").exists()
 
 
+def _fake_result(t, residual, kind="thermal_drift"):
+    """What common_causes reads of an explain Result: grid, residual before the fit,
+    mismatch regions (none: every octave tau is tested) and the accepted effect."""
+    from types import SimpleNamespace
+
+    from fogmon.explain import mismatch
+
+    cand = SimpleNamespace(kind=kind, params={"k1_pos": 1.0})
+    return SimpleNamespace(t_s=t, valid=np.ones(len(t), bool), residual_before=residual,
+                           grid=mismatch.make_grid(len(t), FS), before=SimpleNamespace(regions=[]),
+                           accepted=[SimpleNamespace(cand=cand)])
+
+
+def test_a_shared_drift_coheres_across_axes_and_independent_drifts_are_reported_not_significant():
+    from fogmon.explain.axes import common_causes
+
+    rng = np.random.default_rng(7)
+    n = 20_000
+    t = np.arange(n) / FS
+    box = np.ones(300) / 300
+
+    def slow():
+        return np.convolve(np.cumsum(rng.standard_normal(n)), box, "same") * 0.05
+
+    shared = slow()
+    aux = {"temp_c": 20 + shared}
+    rec = recording_from_arrays(t, np.zeros((n, 2)), aux, {"sample_rate_hz": "10"}, axes=("x", "y"))
+    noise = [SIGMA * rng.standard_normal(n) for _ in range(2)]
+    together = {"x": _fake_result(t, noise[0] + shared), "y": _fake_result(t, noise[1] - 0.7 * shared)}
+    (c,) = common_causes(rec, together, 0.01)
+    assert (c.kind, c.channel, c.axes) == ("thermal_drift", "temp_c", ("x", "y")) and c.significant
+    assert c.pairs[0].r < -0.5 and c.pairs[0].taus_n > 3          # opposite signs: still one cause
+    apart = {"x": _fake_result(t, noise[0] + slow()), "y": _fake_result(t, noise[1] + slow())}
+    (c,) = common_causes(rec, apart, 0.01)
+    assert not c.significant and "Not significant at the 1 % level on x-y" in c.evidence()
+    rec.aux["temp_c_y"] = rec.aux["temp_c"] + 1.0                # y has its own sensor: two causes
+    assert common_causes(rec, together, 0.01) == []
+
+
 def test_coherence_p_values_hold_their_level_for_independent_autocorrelated_series():
     """Independent AR(1) series (phi 0.9): the naive Pearson test rejects about half the
     time at 5 %; with Bartlett's effective n the rate stays near 5 %."""
