@@ -19,13 +19,15 @@ MAX_BOOTSTRAP = 10_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns), or a ROS "
-                   "bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
+    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns; several axes: "
+                   "rate_<axis>_dph columns, each axis explained unless --axis picks one, docs/explain.md), or a "
+                   "ROS bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
     p.add_argument("--model", help="sensor model TOML (docs/formats.md); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
     p.add_argument("--report", required=True, help="JSON report to write (docs/formats.md); a PNG of the "
                    "evidence is written next to it (same name, .png), and every outlier of an outlier population "
-                   "(same name, .outliers.csv)")
+                   "(same name, .outliers.csv); with several axes one of each per axis (.<axis>.png, "
+                   ".<axis>.outliers.csv)")
     p.add_argument("--rrd", help="also write the evidence to this Rerun .rrd file")
     p.add_argument("--out-model", help="write the model with the fitted effects added (TOML)")
     p.add_argument("--out-corrected", help="write the recording with the fitted deterministic effects removed "
@@ -84,6 +86,7 @@ class StageProgress:
 
 def run(args: argparse.Namespace) -> int:
     from fogmon.explain import report
+    from fogmon.explain.axes import one_axis_model
     from fogmon.explain.baseline import baseline_model
     from fogmon.explain.explainer import Options, explain, without_motion
     from fogmon.sim.model import load_model
@@ -100,6 +103,12 @@ def run(args: argparse.Namespace) -> int:
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
     rec = read_recording(args.recording, args)
+    if rec.axes and args.axis:
+        rec = rec.for_axis(args.axis)
+    if rec.axes:
+        return _run_axes(args, rec, model, progress, export is not None)
+    if model is not None:
+        model = one_axis_model(model, rec, args.axis)
     motion: list[dict] = []
     if not args.keep_motion:
         progress("looking for platform motion")
@@ -124,4 +133,45 @@ def run(args: argparse.Namespace) -> int:
                      res.fitted.sample_rate_hz)
     if not args.quiet:
         print(report.console_summary(rep))
+    return 0
+
+
+def _run_axes(args: argparse.Namespace, rec, model, progress, export: bool) -> int:
+    """``run`` for a recording with several axes (docs/explain.md, "Several axes"): every
+    axis explained, the multi-axis report, per-axis PNG and outliers files next to it."""
+    from fogmon.errors import FogmonError
+    from fogmon.explain import report
+    from fogmon.explain.axes import explain_axes
+    from fogmon.explain.axes_report import (
+        axes_console_summary,
+        axis_file,
+        build_axes_report,
+        write_axes_outputs,
+        write_axes_rrd,
+    )
+    from fogmon.explain.explainer import Options
+
+    if export:
+        raise FogmonError(f"--export writes one axis's noise coefficients and {rec.name} has axes "
+                          f"{', '.join(rec.axes)}: pick one with --axis NAME")
+    pngs = {a: axis_file(args.report, a, ".png") for a in rec.axes}
+    held = {a: axis_file(args.report, a, ".outliers.csv") for a in rec.axes}
+    check_outputs({"--report": args.report, **{f"--report (its axis {a} PNG)": p for a, p in pngs.items()},
+                   **{f"--report (its axis {a} outliers list)": p for a, p in held.items()},
+                   "--rrd": args.rrd, "--out-model": args.out_model, "--out-corrected": args.out_corrected},
+                  inputs=[args.recording, args.model])
+    ares = explain_axes(rec, model, Options(window_s=args.window_s, n_boot=args.bootstrap, alpha=args.alpha,
+                                            seed=args.seed, max_effects=args.max_effects),
+                        keep_motion=args.keep_motion, progress=progress)
+    progress(f"writing {args.report}")
+    times = {a: os.path.basename(held[a]) for a, res in ares.results.items() if report.write_outliers(res, held[a])}
+    rep = build_axes_report(ares, args.recording, args.model, times)
+    report.write_report(rep, args.report)
+    for a, res in ares.results.items():
+        report.write_png(res, pngs[a])
+    if args.rrd:
+        write_axes_rrd(ares, args.rrd)
+    write_axes_outputs(ares, args.out_model, args.out_corrected, {a: held[a] for a in times})
+    if not args.quiet:
+        print(axes_console_summary(rep))
     return 0

@@ -368,8 +368,16 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
     return replace(r, t_start_s=t0, t_end_s=t1, t_peak_s=t_peak, tau_peak_s=m / sample_rate_hz, span_s=(t_lo, t_hi))
 
 
-#: Power of the score's smooth maximum of its four figures.
+#: Power of the score's smooth maximum of its four figures (and of the axes' scores).
 SCORE_POWER = 8.0
+
+
+def smooth_max(values) -> float:
+    """The power mean (mean of c^SCORE_POWER)^(1/SCORE_POWER) of non-negative figures:
+    between n^(-1/SCORE_POWER) x and 1 x the largest (0.84 x for four)."""
+    c = np.asarray(values, dtype=float)
+    top = float(np.max(c)) if c.size else 0.0
+    return top * float(np.mean((c / top) ** SCORE_POWER)) ** (1.0 / SCORE_POWER) if top > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -394,11 +402,9 @@ class Score:
 
     @property
     def value(self) -> float:
-        c = np.array([self.rms_map, self.max_map, self.spikes, self.tests], dtype=float)
-        top = float(np.max(c))
         # smooth so that an effect that lowers any one figure (and raises none more) lowers
         # the score: a plain maximum ignores an effect that fixes a figure below the top
-        return top * float(np.mean((c / top) ** SCORE_POWER)) ** (1.0 / SCORE_POWER) if top > 0 else 0.0
+        return smooth_max([self.rms_map, self.max_map, self.spikes, self.tests])
 
     def as_json(self) -> dict:
         return {k: round(getattr(self, k), 3) for k in ("rms_map", "max_map", "spikes", "tests")}

@@ -25,12 +25,12 @@ from fogmon.recording import write_replay_log
 from fogmon.sim.model import EFFECT_KINDS, Effect, save_model
 
 
-def _clean(x):
+def json_safe(x):
     """JSON-safe plain Python numbers (NaN/inf -> None)."""
     if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
+        return {str(k): json_safe(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [json_safe(v) for v in x]
     if isinstance(x, (np.floating, float)):
         v = float(x)
         return v if math.isfinite(v) else None
@@ -50,7 +50,7 @@ def _region_text(r: dict) -> str:
             f"(ADEV ratio {r['ratio']:.3g}, max |z| {r['max_abs_z']:.3g}, p = {r['p_value']:.2g})")
 
 
-def _effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
+def effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
     """One phrase with the numbers of an effect: its kind's own summary
     (fogmon.sim.model.EFFECT_KINDS); a ``noise`` effect also names the model's values it
     corrects (``model``: the model's [noise])."""
@@ -82,7 +82,7 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
                      f"but matched tests do (score {sb:.2f}).")
     if res.accepted:
         parts.append("Missing physics, in order of importance: "
-                     + "; ".join(_effect_summary(a.cand.kind, a.cand.params, _model_noise(res))
+                     + "; ".join(effect_summary(a.cand.kind, a.cand.params, _model_noise(res))
                                  for a in res.accepted) + ".")
         if sa <= 1.5 and not mism_after:
             parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left): "
@@ -178,7 +178,7 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
         nz = res.model.noise
         rep["baseline_model"] = {"bias_dph": res.model.bias_dph, "Q_arcsec": nz.Q_arcsec, "N_dpsh": nz.N_dpsh,
                                  "B_dph": nz.B_dph, "K_dphsh": nz.K_dphsh, "R_dphh": nz.R_dphh}
-    return _clean(rep)
+    return json_safe(rep)
 
 
 def write_report(rep: dict, path: str) -> None:
@@ -199,7 +199,7 @@ def console_summary(rep: dict) -> str:
     if rep["effects"]:
         lines.append("  effects added:")
         for e in rep["effects"]:
-            lines.append(f"    + {_effect_summary(e['kind'], e['params'], e.get('model_noise'))} "
+            lines.append(f"    + {effect_summary(e['kind'], e['params'], e.get('model_noise'))} "
                          f"(score {e['score_before']:.2f} -> {e['score_after']:.2f})")
     else:
         lines.append("  effects added: none")
@@ -257,19 +257,29 @@ def write_outputs(res: Result, out_model: str | None, out_corrected: str | None,
         save_model(fitted, out_model)
     if out_corrected:
         rec = res.recording
-        idx = rec.grid_index()
-        corrected = rec.rate_dph - res.deterministic_fit[idx]
-        meta = dict(rec.meta)
-        meta["sample_rate_hz"] = f"{rec.sample_rate_hz:g}"
-        meta["corrected_by"] = "fogmon explain: " + (", ".join(
-            a.cand.kind + (" (Wiener estimate of the line signal)" if a.cand.kind == "vibration_lines" else "")
-            for a in res.accepted if a.cand.rate is not None) or "nothing")
-        for a in res.accepted:
-            if a.cand.kind == "outliers":
-                meta["outliers_replaced"] = (f"{a.cand.params['count']} samples (listed in the outliers file "
-                                             f"next to the report): interpolation from their neighbours plus "
-                                             f"the model's conditional noise")
-        write_replay_log(out_corrected, rec.t_s, corrected, rec.aux, meta)
+        meta = {**rec.meta, "sample_rate_hz": f"{rec.sample_rate_hz:g}", **corrected_meta(res)}
+        write_replay_log(out_corrected, rec.t_s, corrected_rate_dph(res), rec.aux, meta)
+
+
+def corrected_rate_dph(res: Result) -> np.ndarray:
+    """The rate (deg/h) of each sample of ``res.recording`` minus the fitted deterministic
+    effects (``Result.deterministic_fit``: vibration_lines' Wiener estimate, outliers'
+    replacements included)."""
+    return res.recording.rate_dph - res.deterministic_fit[res.recording.grid_index()]
+
+
+def corrected_meta(res: Result, suffix: str = "") -> dict[str, str]:
+    """The metadata lines of --out-corrected that say what was removed:
+    ``corrected_by<suffix>`` and, with an outliers population, ``outliers_replaced<suffix>``."""
+    meta = {f"corrected_by{suffix}": "fogmon explain: " + (", ".join(
+        a.cand.kind + (" (Wiener estimate of the line signal)" if a.cand.kind == "vibration_lines" else "")
+        for a in res.accepted if a.cand.rate is not None) or "nothing")}
+    for a in res.accepted:
+        if a.cand.kind == "outliers":
+            meta[f"outliers_replaced{suffix}"] = (f"{a.cand.params['count']} samples (listed in the outliers file "
+                                                  f"next to the report): interpolation from their neighbours plus "
+                                                  f"the model's conditional noise")
+    return meta
 
 
 def _adev_band(a, null, sample_rate_hz):
@@ -349,65 +359,84 @@ def write_rrd(res: Result, path: str) -> None:
     ``rate`` is static, so it shows whatever the time cursor."""
     import rerun as rr
 
-    adev = _rrd_adev_logs(res)
+    adev = rrd_adev_logs(res)
     rec = rr.RecordingStream("fogmon_explain")
     rec.save(path, default_blueprint=rrd_blueprint(adev[2], adev[3]))
+    log_rrd(rec, res, adev)
+    rec.flush()
+
+
+def log_rrd(rec, res: Result, adev, prefix: str = "") -> None:
+    """Log the evidence of ``write_rrd`` into the Rerun stream ``rec``, every entity under
+    ``prefix`` (``""``, or ``axis/<name>/`` for one axis of several); ``adev`` is
+    ``rrd_adev_logs(res)``."""
+    import rerun as rr
+
     g = res.grid
-    _rrd_adev(rec, res, *adev)
+    lx, logs, x_dec, y_dec = adev
+    _rrd_adev(rec, res, lx, logs, x_dec, y_dec, prefix)
     lim = max(3.0, float(np.nanmax(np.abs(res.before.z))) if np.isfinite(res.before.z).any() else 3.0)
     for a, label in ((res.before, "before"), (res.after, "after")):
-        _rrd_zmap(rec, f"zmap_{label}", a, g, lim)
+        _rrd_zmap(rec, f"{prefix}zmap_{label}", a, g, lim)
     t = res.t_s
     k = max(1, len(t) // 20000)
     nb = len(t) // k
     y = np.where(res.valid, res.residual_before, np.nan)[: nb * k].reshape(nb, k)
     det = res.deterministic_fit[: nb * k].reshape(nb, k)
-    rec.log("rate", rr.SeriesLines(names=["residual vs model (deg/h)", "fitted deterministic effects (deg/h)"],
-                                   colors=[(170, 170, 170), (255, 170, 0)], widths=[0.7, 1.5]), static=True)
+    rec.log(f"{prefix}rate", rr.SeriesLines(names=["residual vs model (deg/h)",
+                                                   "fitted deterministic effects (deg/h)"],
+                                            colors=[(170, 170, 170), (255, 170, 0)], widths=[0.7, 1.5]), static=True)
     with warnings.catch_warnings():          # stretches with no valid sample (gaps, platform motion)
         warnings.simplefilter("ignore", RuntimeWarning)
         ym = np.nanmean(y, axis=1)
-    rec.send_columns("rate", indexes=[rr.TimeColumn("time", duration=t[: nb * k: k])],
+    rec.send_columns(f"{prefix}rate", indexes=[rr.TimeColumn("time", duration=t[: nb * k: k])],
                      columns=rr.Scalars.columns(scalars=np.column_stack([ym, det.mean(axis=1)])))
     for acc in res.accepted:
         if acc.cand.kind == "outliers":  # every outlier, as points over time
             lst = acc.cand.listing
             assert lst is not None, "an outliers candidate carries its listing"
-            rec.log("rate/outliers_removed_dph", rr.SeriesPoints(names=["outlier amplitude removed (deg/h)"]),
+            rec.log(f"{prefix}rate/outliers_removed_dph", rr.SeriesPoints(names=["outlier amplitude removed (deg/h)"]),
                     static=True)
-            rec.send_columns("rate/outliers_removed_dph", indexes=[rr.TimeColumn("time", duration=lst["times_s"])],
+            rec.send_columns(f"{prefix}rate/outliers_removed_dph",
+                             indexes=[rr.TimeColumn("time", duration=lst["times_s"])],
                              columns=rr.Scalars.columns(scalars=lst["amplitudes_dph"]))
-    rec.log("verdict", rr.TextDocument(verdict(res, [r.as_json() for r in res.before.regions],
-                                               [r.as_json() for r in res.after.regions])), static=True)
-    rec.flush()
+    rec.log(f"{prefix}verdict", rr.TextDocument(verdict(res, [r.as_json() for r in res.before.regions],
+                                                        [r.as_json() for r in res.after.regions])), static=True)
 
 
 def rrd_blueprint(x_dec: tuple[int, int], y_dec: tuple[int, int]):
-    """The explain .rrd's layout: ADEV plot (framing decades ``x_dec`` of tau in s and
-    ``y_dec`` of ADEV in deg/h) and verdict | z-maps before and after | residual over time."""
+    """The explain .rrd's layout (``rrd_layout``) with the time panel collapsed."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(rrd_layout(x_dec, y_dec), rrb.TimePanel(timeline="time", state="collapsed"),
+                         collapse_panels=True)
+
+
+def rrd_layout(x_dec: tuple[int, int], y_dec: tuple[int, int], prefix: str = "", name: str | None = None):
+    """The views of one explain: ADEV plot (framing decades ``x_dec`` of tau in s and
+    ``y_dec`` of ADEV in deg/h) and verdict | z-maps before and after | residual over
+    time, of the entities under ``prefix`` (``log_rrd``), the container called ``name``."""
     import rerun as rr
     import rerun.blueprint as rrb
 
     from fogmon.sinks.rerun_plots import heatmap_bounds, loglog_bounds
 
     whole = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
-    return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.Horizontal(rrb.Spatial2DView(origin="/adev", name="Whole record: ADEV of the residual (deg/h) vs "
-                                             "tau (s), log-log, with the model's family-wise band",
-                                             visual_bounds=loglog_bounds(x_dec, y_dec)),
-                           rrb.TextDocumentView(origin="/verdict", name="Verdict"), column_shares=[2, 1]),
-            rrb.Horizontal(*(rrb.Spatial2DView(origin=f"/zmap_{w}", name=f"z-map {w} the fitted effects: z by tau "
-                                               f"(s, rows) and window centre time (s, columns)",
-                                               visual_bounds=heatmap_bounds())
-                             for w in ("before", "after"))),
-            rrb.TimeSeriesView(origin="/rate", name="Residual vs model and fitted effects (deg/h) over time (s)",
-                               axis_x=rrb.TimeAxis(view_range=whole)),
-            row_shares=[1.3, 1.2, 1]),
-        rrb.TimePanel(timeline="time", state="collapsed"), collapse_panels=True)
+    return rrb.Vertical(
+        rrb.Horizontal(rrb.Spatial2DView(origin=f"/{prefix}adev", name="Whole record: ADEV of the residual (deg/h) "
+                                         "vs tau (s), log-log, with the model's family-wise band",
+                                         visual_bounds=loglog_bounds(x_dec, y_dec)),
+                       rrb.TextDocumentView(origin=f"/{prefix}verdict", name="Verdict"), column_shares=[2, 1]),
+        rrb.Horizontal(*(rrb.Spatial2DView(origin=f"/{prefix}zmap_{w}", name=f"z-map {w} the fitted effects: z by "
+                                           f"tau (s, rows) and window centre time (s, columns)",
+                                           visual_bounds=heatmap_bounds())
+                         for w in ("before", "after"))),
+        rrb.TimeSeriesView(origin=f"/{prefix}rate", name="Residual vs model and fitted effects (deg/h) over time (s)",
+                           axis_x=rrb.TimeAxis(view_range=whole)),
+        row_shares=[1.3, 1.2, 1], name=name)
 
 
-def _rrd_adev_logs(res: Result):
+def rrd_adev_logs(res: Result):
     """(log10 tau, {"before"/"after": log10 of (model median, band lo, band hi, recording
     residual ADEV)}, decades of tau, decades of ADEV) of the whole-record ADEV plot."""
     g = res.grid
@@ -421,14 +450,14 @@ def _rrd_adev_logs(res: Result):
     return lx, logs, x_dec, y_dec
 
 
-def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec) -> None:
-    """The whole-record ADEV (``_rrd_adev_logs``) of the residual, the model's median and
+def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec, prefix: str = "") -> None:
+    """The whole-record ADEV (``rrd_adev_logs``) of the residual, the model's median and
     family-wise band, before and after, on a labelled log-log plot with a legend."""
     import rerun as rr
 
     from fogmon.sinks import rerun_plots as rp
 
-    ent = "adev/log10"
+    ent = f"{prefix}adev/log10"
     rec.log(ent, rp.loglog_transform(), static=True)
     rp.log_decade_grid(rec, ent, x_dec, y_dec, "s", "deg/h")
     items = []
