@@ -119,7 +119,7 @@ def adev_axes_lines(results: dict) -> list[str]:
 def coefficient_axes_lines(fits: dict) -> list[str]:
     """The five IEEE-952 coefficients of whole-record NoiseFits of several axes side by
     side: name, unit, then per axis value [lo, hi] or n/i (< 95 % upper limit)."""
-    out = [f"  {'coefficient':<9} {'unit':<14}" + " ".join(f"{a:>{AXIS_COLUMN}}" for a in fits)]
+    out = [f"  {'coefficient':<11} {'unit':<14}" + " ".join(f"{a:>{AXIS_COLUMN}}" for a in fits)]
     for name, unit in COEFFICIENTS.items():
         cells = []
         for f in fits.values():
