@@ -234,3 +234,18 @@ def test_a_one_axis_run_prints_what_it_printed_before_axes():
         ("model_band", 20.47, ""), ("outlier", 60.02, ""), ("platform_motion", 60.16, ""),
         ("platform_motion", 74.55, "")]
     assert set(col.by_axis) == {""} and col.info.axes == () and s.axes == {}
+
+
+def test_replay_export_of_several_axes_asks_for_one_before_any_work(monkeypatch, tmp_path, capsys):
+    import fogmon.cli.replay as replay_cli
+    from fogmon.cli import main
+
+    t, rate, aux = three_axis_data()
+    monkeypatch.setattr(replay_cli, "open_replay_source", lambda path, options: ListSource(t, rate, SIZES, FS,
+                                                                                            aux=aux, axes=AXES))
+    out = tmp_path / "imu.yaml"
+    assert main(["replay", "three.csv", "--export", "kalibr", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].endswith("--export kalibr: three.csv has axes x, y, z and an export holds one gyro's fit: "
+                            "select one with --axis NAME") and len(err) == 1
+    assert not out.exists()
