@@ -304,6 +304,11 @@ class Pipeline:
         sample_rate_hz = self.sample_rate_hz
         if first.axes != self.axes:
             self._set_axes(first.axes)
+        model = self.config.model
+        if not self.axes and model is not None and model.axes:
+            warnings.warn(f"--model has [noise.<axis>] tables ({', '.join(model.axes)}) and {self.source.name} is "
+                          f"one axis: it is checked against the model's [noise] table and every effect (--axis NAME "
+                          f"picks an axis's model)", FogmonWarning, stacklevel=2)
         m = tau_grid(sample_rate_hz, int(round(self.window_s * sample_rate_hz)), self.config.taus)
         views = [first.axis(a.name) if a.name else first for a in self.analyses]
         self.use_ref = any("rot_dps" in v.aux for v in views) and not self.config.raw_rate

@@ -249,3 +249,72 @@ def test_replay_export_of_several_axes_asks_for_one_before_any_work(monkeypatch,
     assert err[-1].endswith("--export kalibr: three.csv has axes x, y, z and an export holds one gyro's fit: "
                             "select one with --axis NAME") and len(err) == 1
     assert not out.exists()
+
+
+MODEL3 = """
+[sensor]
+sample_rate_hz = 100.0
+[noise]
+Q_arcsec = 0.0
+N_dpsh = 0.05
+B_dph = 0.0
+K_dphsh = 0.0
+R_dphh = 0.0
+[noise.x]
+[noise.y]
+N_dpsh = 0.08
+[noise.z]
+N_dpsh = 0.03
+"""
+
+
+def _parsed(*argv):
+    import argparse
+
+    from fogmon.cli.pipeline_options import add_pipeline_arguments
+    from fogmon.cli.source_options import add_source_arguments
+
+    p = argparse.ArgumentParser()
+    add_source_arguments(p)
+    add_pipeline_arguments(p)
+    return p.parse_args(list(argv))
+
+
+def test_axis_picks_the_model_of_that_axis(tmp_path):
+    from fogmon.cli.pipeline_options import pipeline_config
+
+    m = tmp_path / "m.toml"
+    m.write_text(MODEL3)
+    assert pipeline_config(_parsed("--model", str(m), "--axis", "y")).model.noise.N_dpsh == 0.08
+    assert pipeline_config(_parsed("--model", str(m))).model.axes == AXES
+    m.write_text(MODEL3.replace("[noise.z]", "[noise.w]"))
+    with pytest.raises(FogmonError, match=r"--model .*m.toml: the model has no \[noise.z\] table"):
+        pipeline_config(_parsed("--model", str(m), "--axis", "z"))
+
+
+def test_a_model_of_several_axes_on_one_axis_says_which_noise_it_checks(tmp_path):
+    from fogmon.errors import FogmonWarning
+    from fogmon.sim.model import load_model
+
+    m = tmp_path / "m.toml"
+    m.write_text(MODEL3)
+    t, rate, aux = three_axis_data()
+    src = ListSource(t[:4096], rate[:4096, 0].copy(), [4096], FS)
+    with pytest.warns(FogmonWarning, match=r"--model has \[noise.<axis>\] tables \(x, y, z\) and test source is one "
+                                           r"axis: it is checked against the model's \[noise\] table"):
+        Pipeline(src, PipelineConfig(window_s=10.24, model=load_model(m), keep_motion=True)).run([Collect()])
+
+
+def test_each_axis_is_checked_against_its_own_model(tmp_path):
+    from fogmon.sim.model import load_model
+
+    m = tmp_path / "m.toml"
+    m.write_text(MODEL3)
+    col, s = run_axes(PipelineConfig(window_s=20.48, hop_s=20.48, model=load_model(m)))
+    med = {a: col.info.model_bands[a][1] for a in AXES}
+    assert med["y"][0] / med["x"][0] == pytest.approx(0.08 / 0.05, rel=1e-6)
+    assert med["z"][0] / med["x"][0] == pytest.approx(0.03 / 0.05, rel=1e-6)
+    assert s.axes["x"].model_check["n_departures"] == 0          # inside its own band all along
+    assert s.axes["y"].model_check["n_departures"] == 0          # its turn is kept out by its motion gate
+    deps = s.axes["z"].model_check["departures"]
+    assert [d["start_s"] <= 90.0 <= d["alarm_s"] for d in deps] == [True]    # z leaves it only for its glitch

@@ -131,11 +131,18 @@ def parse_taus(text: str):
 
 def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The PipelineConfig of parsed pipeline options (``add_pipeline_arguments``); the
-    progress bar only on a terminal and when not paced at or below real time."""
+    progress bar only on a terminal and when not paced at or below real time; with
+    ``--axis NAME`` a model of several axes is that axis's model."""
     import sys
 
     realtime = args.realtime
     model = load_model(args.model) if args.model else None
+    axis = getattr(args, "axis", None)
+    if model is not None and model.axes and axis:   # --axis picked one axis: check it against that axis's model
+        try:
+            model = model.for_axis(axis)
+        except FogmonError as e:
+            raise FogmonError(f"--model {args.model}: {e}") from None
     cal = load_model(args.thermal_cal) if args.thermal_cal else None
     return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
                           keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
