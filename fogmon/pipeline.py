@@ -8,6 +8,9 @@ ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl
 (SIGTERM, SIGHUP: fogmon.stopping), and always closes the source and the sinks so the
 .rrd and the archive are complete. With ``--rotate-s`` blocks are cut where a new piece
 of the outputs begins and the sinks are told (``Sink.rotate``) before its first block.
+A stream of several axes (``Block.axes``) runs one engine, fit, motion gate, live
+methods and model check per axis (``AxisAnalysis``), each equal to a one-axis run of
+that axis.
 """
 from __future__ import annotations
 
@@ -167,7 +170,8 @@ class Pipeline:
     reads the source (a reader thread for a live one) and calls ``start`` before the first
     block, ``block`` for each block (which hands completed windows to ``frames``) and
     ``close`` at the end, whatever happens. Options are checked when it is built, before
-    any sink or device is opened."""
+    any sink or device is opened. Each axis of the stream (``axes``: the source's, or
+    its first block's) is analysed by its own AxisAnalysis (``analyses``)."""
 
     def __init__(self, source: Source, config: PipelineConfig | None = None,
                  pacer: Pacer | None = None) -> None:
@@ -206,7 +210,7 @@ class Pipeline:
             if missing:
                 raise FogmonError(f"--model: the model has no [noise.{missing[0]}] table (its axes: "
                                   f"{', '.join(cfg.model.axes)}; the stream's: {', '.join(axes)}); "
-                                  f"select the axes it has with --axis NAME")
+                                  f"select one of its axes with --axis NAME")
         self.axes = axes
         self.summary.axes = {a: AxisSummary() for a in axes}
         bands: list[tuple[SensorModel, ModelBand]] = []   # one band per distinct axis model
