@@ -318,3 +318,22 @@ def test_each_axis_is_checked_against_its_own_model(tmp_path):
     assert s.axes["y"].model_check["n_departures"] == 0          # its turn is kept out by its motion gate
     deps = s.axes["z"].model_check["departures"]
     assert [d["start_s"] <= 90.0 <= d["alarm_s"] for d in deps] == [True]    # z leaves it only for its glitch
+
+
+def test_a_live_source_of_several_axes_read_in_its_thread_equals_one_axis_runs():
+    t, rate, aux = three_axis_data()
+    cfg = PipelineConfig(window_s=20.48, hop_s=20.48, keep_motion=True)
+
+    def live(r, axes=()):
+        src = ListSource(t, r, SIZES, FS, aux=aux, axes=axes)
+        src.n_samples = None                         # live: warm-up, reader thread, backlog at the end
+        col = Collect()
+        return col, run_pipeline(src, cfg, [col])
+
+    col, s = live(rate, AXES)
+    assert s.n_samples == N and set(col.by_axis) == set(AXES)
+    for j, a in enumerate(AXES):
+        one, s1 = live(rate[:, j].copy())
+        np.testing.assert_array_equal(np.concatenate([d.adev_dph for d, _, _ in col.by_axis[a]]),
+                                      np.concatenate([d.adev_dph for d, _, _ in one.by_axis[""]]))
+        np.testing.assert_array_equal(s.axes[a].overall.adev_dph, s1.overall.adev_dph)
