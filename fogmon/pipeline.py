@@ -21,7 +21,7 @@ import time
 import warnings
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TextIO
 
 import numpy as np
@@ -147,7 +147,8 @@ class PipelineConfig:
     ``realtime`` (pace at this many times real time; None = as fast as possible),
     ``rotate_s`` (new output pieces every this many s of recording time; None = one),
     ``progress`` (a progress bar on stderr), ``methods`` (thermal correction, outlier
-    rejection, Kalman channel: fogmon.methods.live), ``model`` (check every window
+    rejection, Kalman channel: fogmon.methods.live; ``axis_methods``: an axis's own, for
+    the axes of a stream of several axes it names), ``model`` (check every window
     against the model's DADEV band at family-wise ``model_alpha`` per window:
     fogmon.modelcheck)."""
 
@@ -161,6 +162,7 @@ class PipelineConfig:
     rotate_s: float | None = None
     progress: bool = False
     methods: LiveMethods = LiveMethods()
+    axis_methods: dict[str, LiveMethods] = field(default_factory=dict)
     model: SensorModel | None = None
     model_alpha: float = 0.01
 
@@ -202,7 +204,7 @@ class Pipeline:
         """One AxisAnalysis per axis of the stream (one named "" for a one-axis stream);
         FogmonError when an option cannot apply to these axes."""
         cfg = self.config
-        if axes and cfg.methods.thermal is not None:
+        if any(cfg.axis_methods.get(a, cfg.methods).thermal is not None for a in axes):
             raise FogmonError(f"--thermal-cal: the calibration is for one axis and {self.source.name} has axes "
                               f"{', '.join(axes)}: select one with --axis NAME")
         if axes and cfg.model is not None:
@@ -320,7 +322,7 @@ class Pipeline:
         aux_names = tuple(first.aux)
         for a, view in zip(self.analyses, views, strict=True):
             aux_names += a.start(tuple(view.aux), self.source.name)
-        if self.config.methods.thermal is not None:
+        if any(a.conditioner is not None and a.conditioner.thermal is not None for a in self.analyses):
             self.summary.analysed += " - thermal drift"
         bands = {a.name: (a.band.lo_dph, a.band.median_dph, a.band.hi_dph) for a in self.analyses
                  if a.band is not None}
@@ -493,7 +495,8 @@ class AxisAnalysis:
         self.jumps = JumpDetector(window_s)
         self.tail = _Tail(OVERALL_MAX_SAMPLES)
         self.motion = None if config.keep_motion else MotionGate(sample_rate_hz)
-        self.conditioner = Conditioner(config.methods, sample_rate_hz) if config.methods.any else None
+        methods = config.axis_methods.get(name, config.methods) if name else config.methods
+        self.conditioner = Conditioner(methods, sample_rate_hz) if methods.any else None
         self.band: ModelBand | None = None
         self.watch: ModelWatch | None = None
 

@@ -337,3 +337,19 @@ def test_a_live_source_of_several_axes_read_in_its_thread_equals_one_axis_runs()
         np.testing.assert_array_equal(np.concatenate([d.adev_dph for d, _, _ in col.by_axis[a]]),
                                       np.concatenate([d.adev_dph for d, _, _ in one.by_axis[""]]))
         np.testing.assert_array_equal(s.axes[a].overall.adev_dph, s1.overall.adev_dph)
+
+
+def test_the_kalman_channel_of_each_axis_uses_that_axis_s_noise(tmp_path):
+    from fogmon.cli.pipeline_options import pipeline_config
+
+    m = tmp_path / "m.toml"
+    m.write_text(MODEL3.replace("K_dphsh = 0.0", "K_dphsh = 0.5"))
+    cfg = pipeline_config(_parsed("--model", str(m), "--denoise", "kalman"))
+    assert {a: x.kalman_n_k for a, x in cfg.axis_methods.items()} == {"x": (0.05, 0.5), "y": (0.08, 0.5),
+                                                                      "z": (0.03, 0.5)}
+    cfg = replace(cfg, model=None, keep_motion=True, window_s=20.48, hop_s=20.48)
+    col, s = run_axes(cfg)
+    assert {"rate_kalman_dph_x", "rate_kalman_dph_y", "rate_kalman_dph_z"} <= set(col.info.aux_names)
+    kalman_y = np.concatenate([b.aux["rate_kalman_dph_y"] for b in col.blocks])
+    one, _ = run_one(replace(cfg, methods=cfg.axis_methods["y"], axis_methods={}), "y")
+    np.testing.assert_array_equal(kalman_y, np.concatenate([b.aux["rate_kalman_dph"] for b in one.blocks]))
