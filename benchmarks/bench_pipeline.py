@@ -5,8 +5,15 @@
    seconds and x real time (target >= 300x), measured (a) from memory and (b) as the
    `fogmon replay` command on a replay-log CSV (CSV parsing included), beside the batch
    `dadev` of the same data (a reference measured in the same run).
+   Three axes: the same hour as three axes of one stream (a StreamingDadev, fits and
+   motion gate per axis) from memory, against the same hour as one axis (target: < 3x);
+   without an .rrd unless --axes-rrd.
 2. `fogmon monitor` on a fake 1 kHz KVH DSP-1760 (format A on a pty, tests/monitor_fake_kvh.py)
    writing an .rrd and the archive: CPU share of one core in steady state (target < 5 %).
+   Three axes live: the pipeline fed a paced 1 kHz stream of three axes in real time
+   (blocks of 10 ms as a serial reader delivers them, read in its reader thread; an
+   .rrd with --axes-rrd): CPU share of one core of the whole process in steady state
+   (target < 10 %), beside the same for one axis.
 3. `fogmon replay` of the bundled demo (replay_logs/lasergyro_z_100hz.csv, 184,718 samples)
    cold (an empty numba cache: every kernel compiled) and warm (the cache the cold run
    wrote), in CPU seconds split into import, compile, read, engine, fits, sinks
@@ -14,7 +21,7 @@
    (targets: < 1 s before the first sample, < 3 s in all, fits < 10 %).
 
 Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--skip-monitor] [--skip-hour] [--skip-demo]
-       [--monitor-args "--model M.toml --thermal-cal C.toml"]
+       [--skip-axes] [--axes-rrd] [--monitor-args "--model M.toml --thermal-cal C.toml"]
 """
 from __future__ import annotations
 
@@ -42,17 +49,21 @@ N = 3_600_000
 BLOCK = 8192
 
 
-class MemorySource:
-    """One hour of 1 kHz white noise (N = 0.05 deg/sqrt(h)) plus 10 deg/h bias, in blocks."""
+AXES = ("x", "y", "z")
 
-    def __init__(self, rate):
+
+class MemorySource:
+    """One hour of 1 kHz white noise (N = 0.05 deg/sqrt(h)) plus 10 deg/h bias, in blocks
+    (``axes``: ``rate`` has one column per axis)."""
+
+    def __init__(self, rate, axes=()):
         self.name, self.sample_rate_hz, self.counters, self.n_samples = "memory (1 h at 1 kHz)", FS, {}, len(rate)
-        self._rate = rate
+        self._rate, self.axes = rate, axes
 
     def blocks(self):
         for i in range(0, len(self._rate), BLOCK):
             r = self._rate[i:i + BLOCK]
-            yield Block.make(np.arange(i, i + len(r)) / FS, r, aux={"temp_c": np.full(len(r), 25.0)})
+            yield Block.make(np.arange(i, i + len(r)) / FS, r, aux={"temp_c": np.full(len(r), 25.0)}, axes=self.axes)
 
     def close(self):
         pass
@@ -93,6 +104,76 @@ def bench_replay(tmp: str) -> None:
     print(f"  (b) `fogmon replay` of a {os.path.getsize(csv) / 1e6:.0f} MB CSV (parse + start-up included): "
           f"{t_cli:6.2f} s = x{3600 / t_cli:,.0f} real time "
           f"(target >= 300x: {'PASS' if 3600 / t_cli >= 300 else 'FAIL'})")
+
+
+def _axes_args(tmp: str, name: str, rrd: bool):
+    """The options of the axes measurements: quiet, and an .rrd when ``rrd``."""
+    return _args(["--no-progress", "--quiet", *(["--rrd", os.path.join(tmp, name)] if rrd else [])])
+
+
+def bench_replay_axes(tmp: str, rrd: bool) -> None:
+    """The hour of bench_replay as one axis and as three axes, from memory (into an .rrd
+    when ``rrd``)."""
+    rng = np.random.default_rng(1)
+    rate = 10.0 + 60 * 0.05 * np.sqrt(FS) * rng.standard_normal((N, 3))
+    wall = {}
+    for axes, r in (((), np.ascontiguousarray(rate[:, 0])), (AXES, rate)):
+        args = _axes_args(tmp, f"axes{len(axes)}.rrd", rrd)
+        t0 = time.perf_counter()
+        s = run_pipeline(MemorySource(r, axes), pipeline_config(args), build_sinks(args))
+        wall[len(axes)] = time.perf_counter() - t0
+        assert s.n_windows > 0 and (not axes or all(x.overall_fit is not None for x in s.axes.values()))
+    ratio = wall[3] / wall[0]
+    print(f"replay 1 h of 1 kHz from memory ({'into an .rrd' if rrd else 'no .rrd'}), one axis vs three axes of "
+          f"one stream:")
+    print(f"  one axis {wall[0]:6.2f} s = x{3600 / wall[0]:,.0f} real time; three axes {wall[3]:6.2f} s = "
+          f"x{3600 / wall[3]:,.0f} real time")
+    print(f"  three axes / one axis = {ratio:.2f} (target < 3: {'PASS' if ratio < 3 else 'FAIL'})")
+
+
+class PacedSource:
+    """A live-like source (``n_samples`` None): ``seconds`` s of 1 kHz samples of ``axes``
+    (one axis when empty) in 10 ms blocks, each yielded when its last sample's time has
+    come on the wall clock; records the process's CPU and wall time once ``skip_s`` s
+    have passed and at the end."""
+
+    def __init__(self, seconds: float, axes=(), skip_s: float = 5.0):
+        self.name, self.sample_rate_hz, self.counters, self.n_samples = "paced 1 kHz", FS, {}, None
+        self.axes, self.seconds, self.skip_s = axes, seconds, skip_s
+        shape = (int(seconds * FS), len(axes)) if axes else int(seconds * FS)
+        self._rate = 10.0 + 60 * 0.05 * np.sqrt(FS) * np.random.default_rng(2).standard_normal(shape)
+        self.marks: list[tuple[float, float]] = []
+
+    def blocks(self):
+        step = int(0.01 * FS)
+        w0 = time.monotonic()
+        for i in range(0, len(self._rate), step):
+            due = w0 + (i + step) / FS
+            time.sleep(max(0.0, due - time.monotonic()))
+            if not self.marks and time.monotonic() - w0 >= self.skip_s:
+                self.marks.append((time.process_time(), time.monotonic()))
+            r = self._rate[i:i + step]
+            yield Block.make(np.arange(i, i + len(r)) / FS, r, aux={"temp_c": np.full(len(r), 25.0)}, axes=self.axes)
+        self.marks.append((time.process_time(), time.monotonic()))
+
+    def close(self):
+        pass
+
+
+def bench_live_axes(tmp: str, seconds: float, rrd: bool) -> None:
+    """CPU share of one core of the pipeline on a paced 1 kHz stream, one and three axes
+    (into an .rrd when ``rrd``)."""
+    share = {}
+    for axes in ((), AXES):
+        src = PacedSource(seconds + 5.0, axes)
+        args = _axes_args(tmp, f"live{len(axes)}.rrd", rrd)
+        run_pipeline(src, pipeline_config(args), build_sinks(args))
+        (c0, w0), (c1, w1) = src.marks[0], src.marks[-1]
+        share[len(axes)] = 100 * (c1 - c0) / (w1 - w0)
+    print(f"pipeline on a paced live 1 kHz stream (10 ms blocks, reader thread, {'.rrd' if rrd else 'no .rrd'}), "
+          f"{seconds:.0f} s steady state:")
+    print(f"  one axis: CPU {share[0]:.1f} % of one core; three axes: CPU {share[3]:.1f} % of one core "
+          f"(target < 10 %: {'PASS' if share[3] < 10 else 'FAIL'}); three / one = {share[3] / share[0]:.2f}")
 
 
 def _cpu_s(pid: int) -> float:
@@ -173,6 +254,8 @@ def main() -> None:
     ap.add_argument("--skip-monitor", action="store_true")
     ap.add_argument("--skip-hour", action="store_true", help="skip the one-hour 1 kHz replay")
     ap.add_argument("--skip-demo", action="store_true", help="skip the cold/warm replay of the bundled demo")
+    ap.add_argument("--skip-axes", action="store_true", help="skip the three-axis replay and live measurements")
+    ap.add_argument("--axes-rrd", action="store_true", help="the three-axis measurements also write an .rrd")
     ap.add_argument("--monitor-args", default="", metavar="ARGS",
                     help="more options for the measured monitor, e.g. \"--model M.toml --thermal-cal C.toml\" "
                          "(a --model band is built once and cached: run twice to measure the steady state)")
@@ -182,8 +265,12 @@ def main() -> None:
             bench_demo(tmp)
         if not a.skip_hour:
             bench_replay(tmp)
+        if not a.skip_axes and not a.skip_hour:
+            bench_replay_axes(tmp, a.axes_rrd)
         if not a.skip_monitor:
             bench_monitor(tmp, a.monitor_s, a.monitor_args.split())
+        if not a.skip_axes and not a.skip_monitor:
+            bench_live_axes(tmp, a.monitor_s, a.axes_rrd)
 
 
 if __name__ == "__main__":

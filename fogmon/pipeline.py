@@ -8,6 +8,9 @@ ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl
 (SIGTERM, SIGHUP: fogmon.stopping), and always closes the source and the sinks so the
 .rrd and the archive are complete. With ``--rotate-s`` blocks are cut where a new piece
 of the outputs begins and the sinks are told (``Sink.rotate``) before its first block.
+A stream of several axes (``Block.axes``) runs one engine, fit, motion gate, live
+methods and model check per axis (``AxisAnalysis``), each equal to a one-axis run of
+that axis.
 """
 from __future__ import annotations
 
@@ -17,8 +20,8 @@ import threading
 import time
 import warnings
 from collections import Counter, deque
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field, replace
 from typing import TextIO
 
 import numpy as np
@@ -31,7 +34,7 @@ from fogmon.errors import FogmonError, FogmonWarning
 from fogmon.methods.live import Conditioner, LiveMethods
 from fogmon.modelcheck import AuxWindows, ModelBand, ModelWatch
 from fogmon.sim.model import SensorModel
-from fogmon.sinks.base import Sink, StreamInfo, Summary
+from fogmon.sinks.base import AxisSummary, Sink, StreamInfo, Summary
 from fogmon.sources.base import Source
 from fogmon.sources.live import LiveSource
 from fogmon.sources.pacing import Pacer
@@ -144,7 +147,8 @@ class PipelineConfig:
     ``realtime`` (pace at this many times real time; None = as fast as possible),
     ``rotate_s`` (new output pieces every this many s of recording time; None = one),
     ``progress`` (a progress bar on stderr), ``methods`` (thermal correction, outlier
-    rejection, Kalman channel: fogmon.methods.live), ``model`` (check every window
+    rejection, Kalman channel: fogmon.methods.live; ``axis_methods``: an axis's own, for
+    the axes of a stream of several axes it names), ``model`` (check every window
     against the model's DADEV band at family-wise ``model_alpha`` per window:
     fogmon.modelcheck)."""
 
@@ -158,6 +162,7 @@ class PipelineConfig:
     rotate_s: float | None = None
     progress: bool = False
     methods: LiveMethods = LiveMethods()
+    axis_methods: dict[str, LiveMethods] = field(default_factory=dict)
     model: SensorModel | None = None
     model_alpha: float = 0.01
 
@@ -167,13 +172,11 @@ class Pipeline:
     reads the source (a reader thread for a live one) and calls ``start`` before the first
     block, ``block`` for each block (which hands completed windows to ``frames``) and
     ``close`` at the end, whatever happens. Options are checked when it is built, before
-    any sink or device is opened."""
+    any sink or device is opened. Each axis of the stream (``axes``: the source's, or
+    its first block's) is analysed by its own AxisAnalysis (``analyses``)."""
 
     def __init__(self, source: Source, config: PipelineConfig | None = None,
                  pacer: Pacer | None = None) -> None:
-        from fogmon.davar.streaming import StreamingDadev
-        from fogmon.motion import MotionGate
-
         config = PipelineConfig() if config is None else config
         self.source, self.config = source, config
         self.sample_rate_hz = sample_rate_hz = float(source.sample_rate_hz)
@@ -184,22 +187,48 @@ class Pipeline:
         if self.piece_n is not None and self.piece_n < 1:
             raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         self.pacer = pacer if pacer is not None else Pacer(config.realtime)
-        self.engine = StreamingDadev(sample_rate_hz, self.window_s, taus=config.taus, hop_s=self.hop_s)  # checks --taus
-        self.jumps = JumpDetector(self.window_s)
-        self.tail = _Tail(OVERALL_MAX_SAMPLES)
-        self.motion = None if config.keep_motion else MotionGate(sample_rate_hz)
-        self.conditioner = Conditioner(config.methods, sample_rate_hz) if config.methods.any else None
-        self.band = None if config.model is None else ModelBand.for_model(
-            config.model, sample_rate_hz, self.engine.window_n, self.engine.m, alpha=config.model_alpha)
-        self.watch: ModelWatch | None = None
         self.sinks: list[Sink] = []
         self.summary = Summary(source.name, sample_rate_hz, self.window_s, self.hop_s)
+        self.axes: tuple[str, ...] = ()
+        self.analyses: list[AxisAnalysis] = []
+        self._set_axes(tuple(getattr(source, "axes", None) or ()))  # checks --taus, builds the model bands
         self.started = self.done = self.use_ref = False
         self.t_origin = math.nan      # recording time of the first sample (s), once it came
         self.piece = 1
         self.reader: _ThreadedBlocks | None = None
         self.source_closed_early = False
         self._counts: Counter = Counter()
+        self._t_frames: float | None = None   # end (s) of the latest window not yet followed by counters
+
+    def _set_axes(self, axes: tuple[str, ...]) -> None:
+        """One AxisAnalysis per axis of the stream (one named "" for a one-axis stream);
+        FogmonError when an option cannot apply to these axes."""
+        cfg = self.config
+        if any(cfg.axis_methods.get(a, cfg.methods).thermal is not None for a in axes):
+            raise FogmonError(f"--thermal-cal: the calibration is for one axis and {self.source.name} has axes "
+                              f"{', '.join(axes)}: select one with --axis NAME")
+        if axes and cfg.model is not None:
+            missing = [a for a in axes if cfg.model.axes and a not in cfg.model.axes]
+            if missing:
+                raise FogmonError(f"--model: the model has no [noise.{missing[0]}] table (its axes: "
+                                  f"{', '.join(cfg.model.axes)}; the stream's: {', '.join(axes)}); "
+                                  f"select one of its axes with --axis NAME")
+        self.axes = axes
+        self.summary.axes = {a: AxisSummary() for a in axes}
+        bands: list[tuple[SensorModel, ModelBand]] = []   # one band per distinct axis model
+        self.analyses = []
+        for name in axes or ("",):
+            analysis = AxisAnalysis(name, self.sample_rate_hz, self.window_s, self.hop_s, cfg,
+                                    self.summary.axes[name] if name else self.summary)
+            if cfg.model is not None:
+                model = cfg.model.for_axis(name) if name else cfg.model
+                band = next((b for m, b in bands if m == model), None)
+                if band is None:
+                    band = ModelBand.for_model(model, self.sample_rate_hz, analysis.engine.window_n,
+                                               analysis.engine.m, alpha=cfg.model_alpha)
+                    bands.append((model, band))
+                analysis.band = band
+            self.analyses.append(analysis)
 
     # -- the loop ------------------------------------------------------------------
     def run(self, sinks: Sequence[Sink]) -> Summary:
@@ -274,63 +303,70 @@ class Pipeline:
 
     # -- events ----------------------------------------------------------------------
     def start(self, first: Block) -> None:
-        """Before the first block: what is analysed, StreamInfo to the sinks."""
+        """Before the first block: what is analysed (per axis when the block has axes),
+        StreamInfo to the sinks."""
         from fogmon.davar.taus import tau_grid
 
         sample_rate_hz = self.sample_rate_hz
+        if first.axes != self.axes:
+            self._set_axes(first.axes)
+        model = self.config.model
+        if not self.axes and model is not None and model.axes:
+            warnings.warn(f"--model has [noise.<axis>] tables ({', '.join(model.axes)}) and {self.source.name} is "
+                          f"one axis: it is checked against the model's [noise] table and every effect (--axis NAME "
+                          f"picks an axis's model)", FogmonWarning, stacklevel=2)
         m = tau_grid(sample_rate_hz, int(round(self.window_s * sample_rate_hz)), self.config.taus)
-        self.use_ref = "rot_dps" in first.aux and not self.config.raw_rate
+        views = [first.axis(a.name) if a.name else first for a in self.analyses]
+        self.use_ref = any("rot_dps" in v.aux for v in views) and not self.config.raw_rate
         self.summary.analysed = ERROR_EXPR if self.use_ref else "rate_dph"
         aux_names = tuple(first.aux)
-        if self.conditioner is not None:
-            self.conditioner.check(aux_names, self.source.name)
-            aux_names += self.conditioner.channels
-            if self.conditioner.thermal is not None:
-                self.summary.analysed += " - thermal drift"
-        if self.band is not None:
-            self.watch = ModelWatch(self.band, tuple(first.aux))
-            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(tuple(first.aux), self.engine.window_n)
-        bands = {} if self.band is None else {"": (self.band.lo_dph, self.band.median_dph, self.band.hi_dph)}
+        for a, view in zip(self.analyses, views, strict=True):
+            aux_names += a.start(tuple(view.aux), self.source.name)
+        if any(a.conditioner is not None and a.conditioner.thermal is not None for a in self.analyses):
+            self.summary.analysed += " - thermal drift"
+        bands = {a.name: (a.band.lo_dph, a.band.median_dph, a.band.hi_dph) for a in self.analyses
+                 if a.band is not None}
         info = StreamInfo(self.source.name, sample_rate_hz, self.window_s, self.hop_s, m / sample_rate_hz, aux_names,
-                          self.summary.analysed, bands, self.config.model_alpha if bands else None)
+                          self.summary.analysed, bands, self.config.model_alpha if bands else None, self.axes)
         for s in self.sinks:
             s.start(info)
         self.started = True
         self.summary.t_first_s = float(first.t_s[0])
 
     def block(self, b: Block, b_piece: int) -> None:
-        """One block of piece ``b_piece``: through the live methods, to the sinks, then
-        (motion-gated) to DAVAR."""
-        y = b.error_rate_dph if self.use_ref else b.rate_dph
-        valid = b.valid & np.isfinite(y)
-        if self.conditioner is not None:
-            c = self.conditioner.push(b.t_s, y, valid, b.aux)
-            b = Block(b.t_s, b.rate_dph, b.valid, {**b.aux, **c.channels}, (*b.events, *c.events))
-            y, valid = c.rate_dph, c.valid
+        """One block of piece ``b_piece``: each axis through the live methods, to the
+        sinks, then each axis (motion-gated) to DAVAR."""
+        prepared = [a.prepare(b, self.use_ref) for a in self.analyses]
+        channels = {k: v for p in prepared for k, v in p.channels.items()}
+        events = tuple(e for p in prepared for e in p.events)
+        if channels or events:
+            b = Block(b.t_s, b.rate_dph, b.valid, {**b.aux, **channels}, (*b.events, *events), b.axes)
         self._deliver(b, b_piece)
-        if self.watch is not None:
-            self.aux_pending.push(b.aux, len(b))
-        self._analyse(*self._gate_motion(b.t_s, y, valid))
+        for a, p in zip(self.analyses, prepared, strict=True):
+            self._analyse(a, *a.gate(b.t_s, p.rate_dph, p.valid, self._dispatch))
+        self._send_counters()
         self.progress.update(self.summary.duration_s, time.monotonic() - self.wall0)
 
-    def frames(self, res: DadevResult) -> None:
-        """Completed windows: fitted, handed to the sinks with their end times, jump
-        events and the source's counters."""
+    def frames(self, analysis: AxisAnalysis, res: DadevResult) -> None:
+        """Completed windows of one axis: fitted, handed to the sinks with their end times
+        (and the axis name when the stream has axes), jump and model-band events."""
         from fogmon.davar.fit import fit_noise
 
         fit = fit_noise(res)
         t_end = self.t_origin + np.asarray(res.end_index, dtype=np.float64) / self.sample_rate_hz
+        name = analysis.name
         for s in self.sinks:
-            s.frames(res, fit, t_end)
-        self.summary.n_windows += len(res)
-        self._dispatch(self.jumps.update(fit, t_end))
-        if self.watch is not None:
+            if name:
+                s.frames(res, fit, t_end, axis=name)
+            else:  # a one-axis stream: as before axes existed
+                s.frames(res, fit, t_end)
+        analysis.summary.n_windows += len(res)
+        self._dispatch(analysis.named(analysis.jumps.update(fit, t_end)))
+        if analysis.watch is not None:
             for i in range(len(res)):
-                self._dispatch(self.watch.frame(float(t_end[i]), res.adev_dph[i],
-                                                self.aux_windows.window(int(res.end_index[i]))))
-        counters = self._counters()
-        for s in self.sinks:
-            s.source_counters(float(t_end[-1]), counters)
+                self._dispatch(analysis.named(analysis.watch.frame(
+                    float(t_end[i]), res.adev_dph[i], analysis.aux_windows.window(int(res.end_index[i])))))
+        self._t_frames = float(t_end[-1])
 
     def close(self) -> None:
         """End of the run: the source closed, what a live reader still held and the
@@ -345,19 +381,25 @@ class Pipeline:
             backlog = self.reader.backlog()
             if ok and not self.done:  # read before the stop: archived, not analysed
                 self._drain(backlog)
-        if self.motion is not None and ok:   # the samples the gate still holds
-            y, valid, ev = self.motion.flush()
-            self._dispatch(ev)
-            self._analyse(y, valid)
-            summary.motion_spans, summary.motion_samples = list(self.motion.spans), self.motion.samples_excluded
+        for a in self.analyses:
+            if a.motion is not None and ok:   # the samples the gate still holds
+                y, valid, ev = a.motion.flush()
+                self._dispatch(a.named(ev))
+                self._analyse(a, y, valid)
+                a.summary.motion_spans, a.summary.motion_samples = list(a.motion.spans), a.motion.samples_excluded
+        if ok:
+            self._send_counters()
         summary.wall_s = time.monotonic() - self.wall0
         summary.source_wall_s = time.monotonic() - self.wall_start
         summary.counters = self._counters()
         summary.event_counts = dict(self._counts)
-        if self.watch is not None:
-            summary.model_check = self.watch.summary()
+        if self.axes:
+            summary.n_windows = max(a.summary.n_windows for a in self.analyses)
         try:
-            self._overall()
+            for a in self.analyses:
+                if a.watch is not None:
+                    a.summary.model_check = a.watch.summary()
+                a.overall(self.summary.t_last_s, self.config.taus)
         finally:
             for s in sorted(self.sinks, key=lambda k: k.finish_order):
                 s.finish(summary)
@@ -372,41 +414,27 @@ class Pipeline:
             for b_piece, b in _at_seams([big], self.t_origin, self.sample_rate_hz, self.piece_n):
                 self._deliver(b, b_piece)
 
-    def _analyse(self, y: np.ndarray, valid: np.ndarray) -> None:
-        """DAVAR, fits, jump events and the whole-run tail for the next samples."""
-        if self.watch is not None:  # the aux samples of exactly these samples, for the model check
-            self.aux_windows.push(self.aux_pending.take(len(y)), len(y))
-        res = self.engine.push(y, valid)
+    def _analyse(self, a: AxisAnalysis, y: np.ndarray, valid: np.ndarray) -> None:
+        """DAVAR, fits, jump and model-band events of axis ``a`` for its next samples."""
+        res = a.analyse(y, valid)
         if len(res):
-            self.frames(res)
-        self.tail.push(y, valid)
+            self.frames(a, res)
 
-    def _overall(self) -> None:
-        """The whole-run ADEV and fit (of the latest OVERALL_MAX_SAMPLES samples)."""
-        from fogmon.davar.batch import oadev
-        from fogmon.davar.fit import fit_noise
-
-        summary, sample_rate_hz = self.summary, self.sample_rate_hz
-        del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
-        rate, valid = self.tail.take()
-        if len(rate) < 8:
+    def _send_counters(self) -> None:
+        """The counters to the sinks, once after the windows a block completed (if any)."""
+        if self._t_frames is None:
             return
-        try:
-            summary.overall = oadev(rate, sample_rate_hz, taus=self.config.taus, valid=valid)
-        except FogmonError as e:  # a run shorter than the window can be too short for every tau
-            warnings.warn(f"no whole-run Allan deviation: {e}", FogmonWarning, stacklevel=2)
-        else:
-            summary.overall_first_s = summary.t_last_s - (len(rate) - 1) / sample_rate_hz
-            summary.overall_fit = fit_noise(summary.overall)
+        counters = self._counters()
+        for s in self.sinks:
+            s.source_counters(self._t_frames, counters)
+        self._t_frames = None
 
     def _counters(self) -> dict[str, int]:
-        """The source's counters, the reader's (dropped blocks) and the live methods'."""
+        """The source's counters, the reader's (dropped blocks) and the live methods' (per
+        axis as ``<counter>_<axis>`` when the stream has axes)."""
         c = {**self.source.counters, **(self.reader.counters if self.reader is not None else {})}
-        if self.conditioner is not None:
-            if self.conditioner.rejector is not None:
-                c["outliers_rejected"] = self.conditioner.rejector.rejected
-            if self.conditioner.thermal is not None:
-                c["samples_without_temperature"] = self.conditioner.no_temperature
+        for a in self.analyses:
+            c.update({a.suffixed(k): v for k, v in a.counters().items()})
         return c
 
     def _deliver(self, b: Block, b_piece: int) -> None:
@@ -419,20 +447,16 @@ class Pipeline:
         if len(b):
             summary = self.summary
             summary.n_samples += len(b)
-            summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
+            if b.axes:
+                summary.n_invalid += int(len(b) - np.count_nonzero(b.valid.all(axis=1)))
+                for j, a in enumerate(b.axes):
+                    summary.axes[a].n_invalid += int(len(b) - np.count_nonzero(b.valid[:, j]))
+            else:
+                summary.n_invalid += int(len(b) - np.count_nonzero(b.valid))
             summary.t_last_s = float(b.t_s[-1])
             for s in self.sinks:
                 s.block(b)
         self._dispatch(b.events)
-
-    def _gate_motion(self, t_s: np.ndarray, y: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
-        has judged, platform motion made invalid (its events dispatched)."""
-        if self.motion is None:
-            return y, valid
-        y, valid, events = self.motion.push(t_s, y, valid)
-        self._dispatch(events)
-        return y, valid
 
     def _dispatch(self, events: Sequence[Event]) -> None:
         if not events:
@@ -440,6 +464,122 @@ class Pipeline:
         self._counts.update(e.kind for e in events)
         for s in self.sinks:
             s.events(events)
+
+
+@dataclass(frozen=True)
+class _Prepared:
+    """One axis of a block after the live methods: the rate to analyse (deg/h), its
+    valid flags, the channels and events the methods add."""
+
+    rate_dph: np.ndarray
+    valid: np.ndarray
+    channels: dict[str, np.ndarray]
+    events: tuple[Event, ...]
+
+
+class AxisAnalysis:
+    """The analysis of one axis in a run (``name`` "" for a one-axis stream): live
+    methods, motion gate, streaming DAVAR, coefficient-jump events, model check (``band``,
+    set by the pipeline) and the whole-run tail, writing its account into ``summary``.
+    Each axis of a multi-axis stream has its own, so each axis's results equal those of
+    a one-axis run of that axis (``Block.axis``). Channels the methods add and counters
+    are named ``<name>_<axis>``, events carry the axis."""
+
+    def __init__(self, name: str, sample_rate_hz: float, window_s: float, hop_s: float, config: PipelineConfig,
+                 summary: AxisSummary) -> None:
+        from fogmon.davar.streaming import StreamingDadev
+        from fogmon.motion import MotionGate
+
+        self.name, self.summary, self.sample_rate_hz = name, summary, sample_rate_hz
+        self.engine = StreamingDadev(sample_rate_hz, window_s, taus=config.taus, hop_s=hop_s)  # checks --taus
+        self.jumps = JumpDetector(window_s)
+        self.tail = _Tail(OVERALL_MAX_SAMPLES)
+        self.motion = None if config.keep_motion else MotionGate(sample_rate_hz)
+        methods = config.axis_methods.get(name, config.methods) if name else config.methods
+        self.conditioner = Conditioner(methods, sample_rate_hz) if methods.any else None
+        self.band: ModelBand | None = None
+        self.watch: ModelWatch | None = None
+
+    def suffixed(self, key: str) -> str:
+        """``key`` as this axis names it: ``<key>_<axis>``, or ``key`` for a one-axis stream."""
+        return f"{key}_{self.name}" if self.name else key
+
+    def named(self, events: Sequence[Event]) -> Sequence[Event]:
+        """``events`` of this axis, with their axis set."""
+        return [replace(e, axis=self.name) for e in events] if self.name else events
+
+    def start(self, aux_names: tuple[str, ...], source_name: str) -> tuple[str, ...]:
+        """Before the first block (``aux_names``: this axis's aux channels): the live
+        methods checked, the model check set up; returns the channel names it adds."""
+        if self.band is not None:
+            self.watch = ModelWatch(self.band, aux_names)
+            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(aux_names, self.engine.window_n)
+        if self.conditioner is None:
+            return ()
+        self.conditioner.check(aux_names, source_name)
+        return tuple(self.suffixed(c) for c in self.conditioner.channels)
+
+    def prepare(self, b: Block, use_ref: bool) -> _Prepared:
+        """This axis of block ``b`` (its error against rot_dps when ``use_ref``) through
+        the live methods; its aux channels kept for the model check."""
+        view = b.axis(self.name) if self.name else b
+        if self.watch is not None:
+            self.aux_pending.push(view.aux, len(b))
+        y = np.ascontiguousarray(view.error_rate_dph if use_ref else view.rate_dph)
+        valid = np.ascontiguousarray(view.valid) & np.isfinite(y)
+        if self.conditioner is None:
+            return _Prepared(y, valid, {}, ())
+        c = self.conditioner.push(b.t_s, y, valid, view.aux)
+        return _Prepared(c.rate_dph, c.valid, {self.suffixed(k): v for k, v in c.channels.items()},
+                         tuple(self.named(c.events)))
+
+    def gate(self, t_s: np.ndarray, y: np.ndarray, valid: np.ndarray,
+             dispatch: Callable[[Sequence[Event]], None]) -> tuple[np.ndarray, np.ndarray]:
+        """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
+        has judged, platform motion made invalid (its events to ``dispatch``)."""
+        if self.motion is None:
+            return y, valid
+        y, valid, events = self.motion.push(t_s, y, valid)
+        dispatch(self.named(events))
+        return y, valid
+
+    def analyse(self, y: np.ndarray, valid: np.ndarray) -> DadevResult:
+        """The next samples into DAVAR and the whole-run tail; the windows they complete."""
+        if self.watch is not None:  # the aux samples of exactly these samples, for the model check
+            self.aux_windows.push(self.aux_pending.take(len(y)), len(y))
+        res = self.engine.push(y, valid)
+        self.tail.push(y, valid)
+        return res
+
+    def counters(self) -> dict[str, int]:
+        """The live methods' counters."""
+        c = {}
+        if self.conditioner is not None:
+            if self.conditioner.rejector is not None:
+                c["outliers_rejected"] = self.conditioner.rejector.rejected
+            if self.conditioner.thermal is not None:
+                c["samples_without_temperature"] = self.conditioner.no_temperature
+        return c
+
+    def overall(self, t_last_s: float, taus: TauSpec) -> None:
+        """The whole-run ADEV and fit (of the latest OVERALL_MAX_SAMPLES samples, the last
+        at ``t_last_s``) into the summary."""
+        from fogmon.davar.batch import oadev
+        from fogmon.davar.fit import fit_noise
+
+        summary, sample_rate_hz = self.summary, self.sample_rate_hz
+        del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
+        rate, valid = self.tail.take()
+        if len(rate) < 8:
+            return
+        try:
+            summary.overall = oadev(rate, sample_rate_hz, taus=taus, valid=valid)
+        except FogmonError as e:  # a run shorter than the window can be too short for every tau
+            axis = f"axis {self.name}: " if self.name else ""
+            warnings.warn(f"{axis}no whole-run Allan deviation: {e}", FogmonWarning, stacklevel=2)
+        else:
+            summary.overall_first_s = t_last_s - (len(rate) - 1) / sample_rate_hz
+            summary.overall_fit = fit_noise(summary.overall)
 
 
 def run_pipeline(source: Source, config: PipelineConfig, sinks: Sequence[Sink], pacer: Pacer | None = None) -> Summary:
@@ -562,6 +702,7 @@ class _ThreadedBlocks:
         self.wait = not isinstance(source, LiveSource) if wait is None else wait
         self.counters = {} if self.wait else {"blocks_dropped": 0, "samples_dropped": 0}
         self._aux_names: tuple[str, ...] = ()  # of the blocks read, for placeholders
+        self._axes: tuple[str, ...] = ()
         self.held_back = 0  # times the reader waited for room (back-pressure)
         self._items: deque = deque()
         self._n = 0  # samples in the queue
@@ -595,7 +736,7 @@ class _ThreadedBlocks:
                     self._cond.wait()
             if self._closed and self.wait:
                 return False
-            self._aux_names = tuple(b.aux)
+            self._aux_names, self._axes = tuple(b.aux), b.axes
         self._append(b, len(b))
         return True
 
@@ -647,8 +788,9 @@ class _ThreadedBlocks:
         for i in range(0, d.n, PLACEHOLDER_BLOCK):
             m = min(PLACEHOLDER_BLOCK, d.n - i)
             nan = np.full(m, np.nan)
-            yield Block(d.t0_s + np.arange(i, i + m) / rate, nan, np.zeros(m, bool),
-                        {k: nan for k in self._aux_names}, events if i == 0 else ())
+            shape = (m, len(self._axes)) if self._axes else m
+            yield Block(d.t0_s + np.arange(i, i + m) / rate, np.full(shape, np.nan), np.zeros(shape, bool),
+                        {k: nan for k in self._aux_names}, events if i == 0 else (), self._axes)
 
     def backlog(self, timeout_s: float = 10.0) -> list[Block]:
         """After ``source.close()``: the blocks not yet taken, in order, up to the source's

@@ -14,13 +14,14 @@ from fogmon.sources.options import SourceOptions
 
 
 class ListSource:
-    """A finite source serving pre-made blocks (block sizes chosen by the test)."""
+    """A finite source serving pre-made blocks (block sizes chosen by the test); with
+    ``axes``, ``rate`` has one column per axis (NaN: an invalid sample of that axis)."""
 
-    def __init__(self, t, rate, sizes, sample_rate_hz, aux=None, events=(), interrupt_after=None):
+    def __init__(self, t, rate, sizes, sample_rate_hz, aux=None, events=(), interrupt_after=None, axes=()):
         self.name, self.sample_rate_hz, self.counters = "test source", sample_rate_hz, {"frames_ok": 0}
         self.n_samples = len(t)
         self._t, self._r, self._sizes, self._aux = t, rate, sizes, aux or {}
-        self._events, self._interrupt_after = events, interrupt_after
+        self._events, self._interrupt_after, self.axes = events, interrupt_after, tuple(axes)
         self.closed = False
 
     def blocks(self):
@@ -31,7 +32,8 @@ class ListSource:
             sl = slice(i, i + n)
             ev = tuple(e for e in self._events if self._t[sl][0] <= e.t_s <= self._t[sl][-1])
             self.counters["frames_ok"] += n
-            yield Block.make(self._t[sl], self._r[sl], aux={k2: v[sl] for k2, v in self._aux.items()}, events=ev)
+            yield Block.make(self._t[sl], self._r[sl], aux={k2: v[sl] for k2, v in self._aux.items()}, events=ev,
+                             axes=self.axes)
             i += n
 
     def close(self):
@@ -39,8 +41,13 @@ class ListSource:
 
 
 class Collect(Sink):
+    """Keeps everything the pipeline hands it; ``frames_`` of every axis, ``by_axis``
+    the frames per axis name ("" for a one-axis stream)."""
+
     def __init__(self):
         self.info, self.frames_, self.blocks, self.events_, self.summary = None, [], [], [], None
+        self.by_axis = {}
+        self.counters = []
 
     def start(self, info):
         self.info = info
@@ -48,8 +55,12 @@ class Collect(Sink):
     def block(self, b):
         self.blocks.append(b)
 
-    def frames(self, d, fit, t_end):
+    def frames(self, d, fit, t_end, axis=""):
         self.frames_.append((d, fit, t_end))
+        self.by_axis.setdefault(axis, []).append((d, fit, t_end))
+
+    def source_counters(self, t_s, counters):
+        self.counters.append((t_s, counters))
 
     def events(self, ev):
         self.events_.extend(ev)

@@ -131,28 +131,32 @@ def run(args: argparse.Namespace) -> int:
             raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
                                                " (nothing analysed)"))
         os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
-        jobs: list[tuple] = []   # (plan, chunks, [chunk futures], explain future, motion future)
+        jobs: list[tuple] = []   # (plan, axis, chunks, [chunk futures], explain future, motion future)
         for i, plan in enumerate(plans):
             w = int(round(plan.window_s * plan.sample_rate_hz))
             h = int(round(plan.hop_s * plan.sample_rate_hz))
             size = int(round(args.chunk_s * plan.sample_rate_hz)) if args.chunk_s else DEFAULT_CHUNK_SAMPLES
             chunks = plan_chunks(plan.n_samples, w, h, max(size, w), OVERALL_MAX_SAMPLES)
-            masked = None
-            if len(chunks) > 1 and not args.keep_motion:
-                masked = client.submit(tasks.motion_pass, plan, opts, key=f"motion-{i}")
-            futs = [client.submit(tasks.run_chunk, plan, c, opts, masked, key=f"chunk-{i}-{c.index}") for c in chunks]
-            expl = client.submit(tasks.explain_recording, plan.path, args.model, opts, key=f"explain-{i}") \
-                if args.model else None
-            jobs.append((plan, chunks, futs, expl, masked))
-        every = [f for j in jobs for f in j[2]] + [j[3] for j in jobs if j[3] is not None]
+            for axis in plan.axes or ("",):   # a recording of several axes: each axis on its own
+                key = f"{i}-{axis}" if axis else f"{i}"
+                masked = None
+                if len(chunks) > 1 and not args.keep_motion:
+                    masked = client.submit(tasks.motion_pass, plan, opts, axis, key=f"motion-{key}")
+                futs = [client.submit(tasks.run_chunk, plan, c, opts, masked, axis, key=f"chunk-{key}-{c.index}")
+                        for c in chunks]
+                expl = client.submit(tasks.explain_recording, plan.path, args.model, opts, axis,
+                                     key=f"explain-{key}") if args.model else None
+                jobs.append((plan, axis, chunks, futs, expl, masked))
+        every = [f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None]
         if show:
             progress(every)
         windows: list = []  # pyarrow Tables, one per recording analysed
         rows: list[dict] = []
         failed: list[dict] = []
-        for plan, chunks, futs, expl, masked in jobs:
+        for plan, axis, chunks, futs, expl, masked in jobs:
             results = client.gather(futs)
-            row, win = _recording_row(plan, chunks, results, client.gather(masked) if masked is not None else None)
+            row, win = _recording_row(plan, axis, chunks, results,
+                                      client.gather(masked) if masked is not None else None)
             if expl is not None:
                 row.update(client.gather(expl))
             rows.append(row)
@@ -171,8 +175,9 @@ def run(args: argparse.Namespace) -> int:
         if row.get("explain_error"):
             print(f"fogmon batch: {row['recording']}: explain failed: {row['explain_error']}", file=sys.stderr)
     n_win = sum(len(t) for t in windows)
-    print(f"fogmon batch: {len(rows) - len(failed)} of {len(rows)} recordings analysed "
-          f"({sum(len(j[1]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
+    what = "(recording, axis) pairs" if any(p.axes for p in plans) else "recordings"
+    print(f"fogmon batch: {len(rows) - len(failed)} of {len(rows)} {what} analysed "
+          f"({sum(len(j[2]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
     if args.report:
         from fogmon.fleet.report import write_report
         for f in write_report(args.report, r_path, w_path):
@@ -180,12 +185,13 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed or any(r.get("explain_error") for r in rows) else 0
 
 
-def _recording_row(plan, chunks, results, motion) -> tuple[dict, object]:
-    """The recordings-table row of one recording and its windows table (None if failed)."""
+def _recording_row(plan, axis: str, chunks, results, motion) -> tuple[dict, object]:
+    """The recordings-table row of one recording's axis ``axis`` ("": a one-axis
+    recording, named by ``plan.axis``) and its windows table (None if failed)."""
     from fogmon.fleet import tables
 
-    row = {"recording": plan.path, "axis": plan.axis, "format": plan.kind, "sample_rate_hz": plan.sample_rate_hz,
-           "window_s": plan.window_s, "hop_s": plan.hop_s, "chunks": len(chunks)}
+    row = {"recording": plan.path, "axis": axis or plan.axis, "format": plan.kind,
+           "sample_rate_hz": plan.sample_rate_hz, "window_s": plan.window_s, "hop_s": plan.hop_s, "chunks": len(chunks)}
     errors = [r.error for r in results if r.error]
     last = results[-1].record
     row.update({"duration_s": float("nan"), "samples": sum(r.own_samples for r in results),
@@ -201,5 +207,5 @@ def _recording_row(plan, chunks, results, motion) -> tuple[dict, object]:
     row["error"] = errors[0] if errors else ""
     if errors:
         return row, None
-    return row, tables.windows_table(plan.path, plan.axis, plan.window_s, results[0].tau_s,
+    return row, tables.windows_table(plan.path, axis or plan.axis, plan.window_s, results[0].tau_s,
                                      [r.windows for r in results])

@@ -4,6 +4,7 @@ place that reads these options from an argparse namespace."""
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 import numpy as np
 
@@ -65,7 +66,9 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "(outliers_rejected) and reported as outlier events")
     m.add_argument("--denoise", choices=("kalman",),
                    help="kalman: a steady-state Kalman estimate of the rate (N and K from the [noise] of --model "
-                        "or --thermal-cal) as the channel rate_kalman_dph (deg/h), archived and drawn beside raw")
+                        "or --thermal-cal; per axis from the [noise.<axis>] tables of a --model of several axes) as "
+                        "the channel rate_kalman_dph (deg/h; rate_kalman_dph_<axis> per axis), archived and drawn "
+                        "beside raw")
     o = parser.add_argument_group("output (Rerun)")
     o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
                    "open it with `rerun OUT.rrd`")
@@ -131,17 +134,26 @@ def parse_taus(text: str):
 
 def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The PipelineConfig of parsed pipeline options (``add_pipeline_arguments``); the
-    progress bar only on a terminal and when not paced at or below real time."""
+    progress bar only on a terminal and when not paced at or below real time; with
+    ``--axis NAME`` a model of several axes is that axis's model."""
     import sys
 
     realtime = args.realtime
     model = load_model(args.model) if args.model else None
+    axis = getattr(args, "axis", None)
+    if model is not None and model.axes and axis:   # --axis picked one axis: check it against that axis's model
+        try:
+            model = model.for_axis(axis)
+        except FogmonError as e:
+            raise FogmonError(f"--model {args.model}: {e}") from None
     cal = load_model(args.thermal_cal) if args.thermal_cal else None
+    methods = _live_methods(args, model, cal)
     return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
                           keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
                           rotate_s=args.rotate_s,
                           progress=not args.no_progress and sys.stderr.isatty() and (realtime is None or realtime > 1),
-                          methods=_live_methods(args, model, cal), model=model, model_alpha=args.model_alpha)
+                          methods=methods, axis_methods=_axis_methods(args, model, methods),
+                          model=model, model_alpha=args.model_alpha)
 
 
 def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: SensorModel | None) -> LiveMethods:
@@ -153,12 +165,29 @@ def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: Sens
     kalman = None
     if args.denoise == "kalman":
         src = next(((m, f) for m, f in ((model, args.model), (cal, args.thermal_cal)) if m is not None), None)
-        if src is None or not (src[0].noise.N_dpsh > 0 and src[0].noise.K_dphsh > 0):
+        if src is None:
             raise FogmonError("--denoise kalman needs N_dpsh > 0 and K_dphsh > 0 from the [noise] of --model or "
-                              "--thermal-cal" + (f" ({src[1]} has N_dpsh {src[0].noise.N_dpsh:g}, K_dphsh "
-                                                 f"{src[0].noise.K_dphsh:g})" if src else ""))
-        kalman = (src[0].noise.N_dpsh, src[0].noise.K_dphsh)
+                              "--thermal-cal")
+        kalman = _kalman_n_k(src[0].noise, src[1])
     return LiveMethods(thermal, args.reject_outliers, kalman)
+
+
+def _kalman_n_k(noise, where: str) -> tuple[float, float]:
+    """(N deg/sqrt(h), K deg/h/sqrt(h)) of ``noise`` for --denoise kalman; FogmonError
+    naming ``where`` unless both are > 0."""
+    if not (noise.N_dpsh > 0 and noise.K_dphsh > 0):
+        raise FogmonError(f"--denoise kalman needs N_dpsh > 0 and K_dphsh > 0 from the [noise] of --model or "
+                          f"--thermal-cal ({where} has N_dpsh {noise.N_dpsh:g}, K_dphsh {noise.K_dphsh:g})")
+    return noise.N_dpsh, noise.K_dphsh
+
+
+def _axis_methods(args: argparse.Namespace, model: SensorModel | None, methods: LiveMethods) -> dict[str, LiveMethods]:
+    """Each axis's live methods where a --model of several axes gives the Kalman channel
+    its own N and K (its [noise.<axis>]); empty otherwise (every axis uses ``methods``)."""
+    if methods.kalman_n_k is None or model is None or not model.axes:
+        return {}
+    return {a: replace(methods, kalman_n_k=_kalman_n_k(model.for_axis(a).noise, f"{args.model} [noise.{a}]"))
+            for a in model.axes}
 
 
 def build_sinks(args: argparse.Namespace) -> list[Sink]:

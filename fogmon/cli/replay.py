@@ -7,6 +7,7 @@ import argparse
 
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
 from fogmon.cli.source_options import add_reader_arguments, add_source_arguments, source_options
+from fogmon.errors import FogmonError
 from fogmon.export import add_export_argument, export_request, write_export
 from fogmon.pipeline import Pipeline
 from fogmon.sources.open import open_replay_source
@@ -44,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
     export = export_request(args, [args.recording])
     source = open_replay_source(args.recording, source_options(args))
     pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
+    if export and pipeline.axes:
+        raise FogmonError(f"--export {export[0]}: {args.recording} has axes {', '.join(pipeline.axes)} and an "
+                          f"export holds one gyro's fit: select one with --axis NAME")
     summary = pipeline.run(build_sinks(args))
     if export and not summary.interrupted:
         write_export(*export, summary.overall_fit, summary.source_name, summary.sample_rate_hz,

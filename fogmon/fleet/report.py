@@ -28,15 +28,28 @@ def gyro_of(recording: str) -> str:
     return os.path.basename(os.path.dirname(os.path.normpath(recording))) or "."
 
 
-def changes(rows: list[dict]) -> list[dict]:
-    """Per gyro with at least two analysed recordings and per coefficient of
-    TREND_COEFS: first and latest estimate, z and whether |z| > Z_CHANGED."""
-    out = []
-    by_gyro: dict[str, list[dict]] = {}
+def by_gyro(rows: list[dict]) -> dict[str, list[dict]]:
+    """The analysed rows per gyro (``gyro_of``); a gyro whose rows name several axes is
+    one gyro per axis, labelled "<gyro> axis <name>"."""
+    groups: dict[str, list[dict]] = {}
     for r in rows:
         if not r["error"]:
-            by_gyro.setdefault(gyro_of(r["recording"]), []).append(r)
-    for g, rs in sorted(by_gyro.items()):
+            groups.setdefault(gyro_of(r["recording"]), []).append(r)
+    out: dict[str, list[dict]] = {}
+    for g, rs in groups.items():
+        if len({r.get("axis") for r in rs}) == 1:
+            out[g] = rs
+            continue
+        for r in rs:
+            out.setdefault(f"{g} axis {r['axis']}", []).append(r)
+    return out
+
+
+def changes(rows: list[dict]) -> list[dict]:
+    """Per gyro (``by_gyro``) with at least two analysed recordings and per coefficient
+    of TREND_COEFS: first and latest estimate, z and whether |z| > Z_CHANGED."""
+    out = []
+    for g, rs in sorted(by_gyro(rows).items()):
         rs = sorted(rs, key=lambda r: r["recording"])
         if len(rs) < 2:
             continue
@@ -57,13 +70,10 @@ def _trend_png(rows: list[dict], path: str) -> None:
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
-    by_gyro: dict[str, list[dict]] = {}
-    for r in rows:
-        if not r["error"]:
-            by_gyro.setdefault(gyro_of(r["recording"]), []).append(r)
+    groups = by_gyro(rows)
     fig, axes = plt.subplots(len(TREND_COEFS), 1, figsize=(10, 3.2 * len(TREND_COEFS)), sharex=True)
     for ax, (c, label) in zip(np.atleast_1d(axes), TREND_COEFS, strict=True):
-        for g, rs in sorted(by_gyro.items()):
+        for g, rs in sorted(groups.items()):
             rs = sorted(rs, key=lambda r: r["recording"])
             x = np.arange(len(rs))
             v = np.array([r[c] for r in rs], float)

@@ -56,7 +56,8 @@ def input_kind(path: str) -> str:
 @dataclass
 class Plan:
     """A checked recording: sample rate (Hz), samples on its grid, window and hop (s,
-    as `fogmon replay` chooses them), its axis; or ``error``."""
+    as `fogmon replay` chooses them), its axis (of a one-axis source) or ``axes`` (of a
+    source of several axes, each analysed as a recording of its own); or ``error``."""
 
     path: str
     sample_rate_hz: float = float("nan")
@@ -64,6 +65,7 @@ class Plan:
     window_s: float = float("nan")
     hop_s: float = float("nan")
     axis: str = "-"
+    axes: tuple[str, ...] = ()
     kind: str = ""
     error: str = ""
 
@@ -79,7 +81,7 @@ def check(path: str, options: dict) -> Plan:
                 raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
             plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
             plan.window_s, plan.hop_s = window_and_hop(_config(options), plan.sample_rate_hz, plan.n_samples)
-            plan.axis = _axis(src)
+            plan.axis, plan.axes = _axis(src), _axes(src)
         finally:
             src.close()
     except Exception as e:
@@ -95,14 +97,29 @@ def _axis(src) -> str:
     return str(opts.get("axis") or meta.get("axis") or "-")
 
 
-class _ChunkSource:
-    """Samples ``first`` .. ``stop`` - 1 (grid indices) of ``source``, read from its
-    start; samples in ``masked`` runs [(a, b), ...] made invalid (the motion gate's
-    decisions from the motion pass). Counts, in ``own`` = (a, b), the samples and the
-    invalid ones (before the mask), as the pipeline's summary does."""
+def _axes(src) -> tuple[str, ...]:
+    """The axes of a source of several axes (its ``axes``, else its first block's); ()
+    for a one-axis source."""
+    axes = getattr(src, "axes", None)
+    if axes is None:
+        axes = next((b.axes for b in src.blocks() if len(b)), ())
+    return tuple(axes)
 
-    def __init__(self, source, first: int, stop: int, own: tuple[int, int], masked=()) -> None:
-        self._src, self.first, self.stop, self.own = source, first, stop, own
+
+def _blocks(source, axis: str):
+    """The source's blocks, or their one-axis view of ``axis`` ("": as they are)."""
+    return (b.axis(axis) for b in source.blocks()) if axis else source.blocks()
+
+
+class _ChunkSource:
+    """Samples ``first`` .. ``stop`` - 1 (grid indices) of axis ``axis`` ("": a one-axis
+    source) of ``source``, read from its start; samples in ``masked`` runs [(a, b), ...]
+    made invalid (the motion gate's decisions from the motion pass). Counts, in ``own`` =
+    (a, b), the samples and the invalid ones (before the mask), as the pipeline's summary
+    does."""
+
+    def __init__(self, source, first: int, stop: int, own: tuple[int, int], masked=(), axis: str = "") -> None:
+        self._src, self.first, self.stop, self.own, self.axis = source, first, stop, own, axis
         self.sample_rate_hz, self.name = source.sample_rate_hz, source.name
         self.aux_names = getattr(source, "aux_names", ())
         self.n_samples = stop - first
@@ -116,7 +133,7 @@ class _ChunkSource:
 
     def blocks(self):
         pos = 0
-        for b in self._src.blocks():
+        for b in _blocks(self._src, self.axis):
             if self.t0_s is None and len(b):
                 self.t0_s = float(b.t_s[0])
             a, z = max(self.first - pos, 0), min(self.stop - pos, len(b))
@@ -187,11 +204,12 @@ class ChunkResult:
     error: str = ""
 
 
-def run_chunk(plan: Plan, chunk, options: dict, masked=None) -> ChunkResult:
-    """Chunk ``chunk`` (fogmon.fleet.chunks.Chunk) of the recording through
-    ``run_pipeline`` with the window and hop of ``plan``. ``masked``: the motion pass's
-    runs when the recording is split (the pipeline's own gate is then off: it would
-    start afresh in each chunk), None to let the pipeline's gate run (one chunk)."""
+def run_chunk(plan: Plan, chunk, options: dict, masked=None, axis: str = "") -> ChunkResult:
+    """Chunk ``chunk`` (fogmon.fleet.chunks.Chunk) of axis ``axis`` ("": a one-axis
+    recording) of the recording through ``run_pipeline`` with the window and hop of
+    ``plan``. ``masked``: the motion pass's runs when the recording is split (the
+    pipeline's own gate is then off: it would start afresh in each chunk), None to let
+    the pipeline's gate run (one chunk)."""
     from fogmon.pipeline import run_pipeline
 
     out = ChunkResult(plan.path, chunk.index)
@@ -202,7 +220,7 @@ def run_chunk(plan: Plan, chunk, options: dict, masked=None) -> ChunkResult:
         masked = masked.runs
     try:
         src = _ChunkSource(_open(plan.path, options), chunk.feed_first, chunk.feed_stop,
-                           (chunk.own_first, chunk.own_stop), masked if masked is not None else ())
+                           (chunk.own_first, chunk.own_stop), masked if masked is not None else (), axis)
         config = _config({**options, "window_s": plan.window_s, "hop_s": plan.hop_s,
                           "keep_motion": bool(options.get("keep_motion")) or masked is not None})
         col = _Collect()
@@ -253,10 +271,11 @@ class MotionResult:
     error: str = ""
 
 
-def motion_pass(plan: Plan, options: dict) -> MotionResult:
+def motion_pass(plan: Plan, options: dict, axis: str = "") -> MotionResult:
     """Run the pipeline's platform-motion gate (fogmon.motion.MotionGate) over the whole
-    recording, block by block as `fogmon replay` does, and record which samples it made
-    invalid, so that chunks analysed separately see exactly the same samples."""
+    recording (its axis ``axis``; "": a one-axis recording), block by block as `fogmon
+    replay` does, and record which samples it made invalid, so that chunks analysed
+    separately see exactly the same samples."""
     from fogmon.motion import MotionGate
 
     out = MotionResult(plan.path)
@@ -284,7 +303,7 @@ def motion_pass(plan: Plan, options: dict) -> MotionResult:
             pos += n
 
         try:
-            for b in src.blocks():
+            for b in _blocks(src, axis):
                 if not len(b):
                     continue
                 if use_ref is None:
@@ -305,9 +324,10 @@ def motion_pass(plan: Plan, options: dict) -> MotionResult:
     return out
 
 
-def explain_recording(path: str, model_path: str, options: dict) -> dict:
-    """`fogmon explain RECORDING --model MODEL` with its default options: the score
-    before and after the effects it found, and their kinds (comma-separated); or
+def explain_recording(path: str, model_path: str, options: dict, axis: str = "") -> dict:
+    """`fogmon explain RECORDING --model MODEL` with its default options (of axis
+    ``axis`` with the model's axis ``axis``; "": a one-axis recording): the score before
+    and after the effects it found, and their kinds (comma-separated); or
     ``explain_error``."""
     from fogmon.cli import explain as explain_cli
     from fogmon.explain import report
@@ -321,17 +341,20 @@ def explain_recording(path: str, model_path: str, options: dict) -> dict:
         a = p.parse_args([path, "--report", os.devnull, "--model", model_path])
         if input_kind(path) in ("csv", "parquet"):
             rec = read_replay_log(path)
+            rec = rec.for_axis(axis) if axis else rec
         else:  # a capture, CAN log or archive: its valid samples, as `fogmon convert` writes them
             src = _open(path, options)
-            parts = [b for b in src.blocks() if len(b)]
+            parts = [b for b in _blocks(src, axis) if len(b)]
             t = np.concatenate([b.t_s[b.valid] for b in parts])
             rec = recording_from_arrays(t, np.concatenate([b.rate_dph[b.valid] for b in parts]),
                                         {k: np.concatenate([b.aux[k][b.valid] for b in parts]) for k in parts[0].aux},
                                         {"sample_rate_hz": f"{src.sample_rate_hz:.12g}"})
         if not options.get("keep_motion"):
             rec, _ = without_motion(rec)
-        res = explain(rec, load_model(model_path), Options(window_s=a.window_s, n_boot=a.bootstrap, alpha=a.alpha,
-                                                            seed=a.seed, max_effects=a.max_effects))
+        model = load_model(model_path)
+        res = explain(rec, model.for_axis(axis) if axis else model,
+                      Options(window_s=a.window_s, n_boot=a.bootstrap, alpha=a.alpha, seed=a.seed,
+                              max_effects=a.max_effects))
         rep = report.build_report(res, path, model_path)
         return {"explain_score_before": float(rep["score_before"]), "explain_score_after": float(rep["score_after"]),
                 "explain_effects": ",".join(e["kind"] for e in rep["effects"]), "explain_error": ""}

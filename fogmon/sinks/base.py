@@ -40,33 +40,45 @@ class StreamInfo:
     axes: tuple[str, ...] = ()
 
 
+@dataclass(kw_only=True)
+class AxisSummary:
+    """One axis's part of the end-of-run account: its invalid or lost samples, DADEV
+    windows, the whole-run ADEV and fit, platform motion and model check."""
+
+    n_invalid: int = 0
+    n_windows: int = 0
+    overall: AdevResult | None = None    # the whole run (its latest OVERALL_MAX_SAMPLES samples)
+    overall_fit: NoiseFit | None = None  # NoiseFit of ``overall``
+    overall_first_s: float = math.nan
+    motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
+    motion_samples: int = 0       # valid samples the motion gate made invalid
+    model_check: dict | None = None   # with a model: fogmon.modelcheck.ModelWatch.summary()
+
+
 @dataclass
-class Summary:
-    """The end-of-run account: what was processed, the whole-run ADEV and fit, counters."""
+class Summary(AxisSummary):
+    """The end-of-run account: what was processed, the whole-run ADEV and fit, counters.
+    A one-axis run's analysis is in the fields of AxisSummary and ``axes`` is empty; a
+    run of several axes has one AxisSummary per axis in ``axes`` (in stream order), and
+    of those fields only ``n_invalid`` (samples invalid on any axis) and ``n_windows``
+    (windows per axis) are set."""
 
     source_name: str
     sample_rate_hz: float
     window_s: float
     hop_s: float
     n_samples: int = 0
-    n_invalid: int = 0
     t_first_s: float = math.nan
     t_last_s: float = math.nan
-    n_windows: int = 0
     wall_s: float = 0.0
     source_wall_s: float = 0.0    # wall time from opening the source to the end of the run, s
     interrupted: bool = False
     analysed: str = "rate_dph"    # what DAVAR analysed (see StreamInfo.analysed)
     failed: bool = False          # stopped by an error (reported by the caller, no summary)
-    overall: AdevResult | None = None    # the whole run (its latest OVERALL_MAX_SAMPLES samples)
-    overall_fit: NoiseFit | None = None  # NoiseFit of ``overall``
-    overall_first_s: float = math.nan
     counters: dict[str, int] = field(default_factory=dict)
     event_counts: dict[str, int] = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
-    motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
-    motion_samples: int = 0       # valid samples the motion gate made invalid
-    model_check: dict | None = None   # with a model: fogmon.modelcheck.ModelWatch.summary()
+    axes: dict[str, AxisSummary] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:

@@ -12,7 +12,7 @@ from typing import TextIO
 
 from fogmon.block import Event
 from fogmon.pipeline import default_window_s
-from fogmon.sinks.base import COEFFICIENTS, Sink, Summary
+from fogmon.sinks.base import COEFFICIENTS, AxisSummary, Sink, Summary
 from fogmon.stopping import stop_name
 
 #: Events of one kind printed as they happen before the rest are only counted.
@@ -20,38 +20,23 @@ MAX_EVENTS_PER_KIND = 10
 
 
 def format_summary(s: Summary) -> str:
-    """The summary as text (units in every heading)."""
+    """The summary as text (units in every heading); a run of several axes shows the
+    axes side by side (``axes_lines``)."""
     lines = []
     state = f"interrupted ({stop_name()})" if s.interrupted else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
+    lost = "invalid/lost on some axis" if s.axes else "invalid/lost"
     lines.append(f"  {s.n_samples} samples at {s.sample_rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
-                 f"({s.n_invalid} invalid/lost), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
-    lines.append(f"  {s.n_windows} DADEV windows of {s.window_s:g} s every {s.hop_s:g} s")
+                 f"({s.n_invalid} {lost}), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
+    per_axis = " per axis" if s.axes else ""
+    lines.append(f"  {s.n_windows} DADEV windows{per_axis} of {s.window_s:g} s every {s.hop_s:g} s")
     if not s.n_windows:
         lines.append(f"  {no_windows_reason(s)}")
     if s.analysed != "rate_dph":
         why = (["the gyro's error against the reference rotation"] if "rot_dps" in s.analysed else []) + \
               (["the --thermal-cal drift subtracted sample by sample"] if "thermal" in s.analysed else [])
         lines.append(f"  analysed: {s.analysed} (deg/h): {'; '.join(why)} (--raw-rate for rate_dph itself)")
-    if s.motion_spans:
-        lines += motion_lines(s)
-    if s.model_check is not None:
-        lines += model_check_lines(s.model_check)
-    a = s.overall
-    if a is not None:
-        conf = a.confidence
-        span = f"{s.overall_first_s:.2f}..{s.t_last_s:.2f} s"
-        lines.append("")
-        lines.append(f"Overall Allan deviation ({span}, {100 * conf:.1f} % confidence bounds):")
-        lines += adev_lines(a)
-    f = s.overall_fit
-    if f is not None:
-        lines.append("")
-        lines.append("IEEE-952 noise coefficients (whole run, with intervals):")
-        lines += coefficient_lines(f)
-        check = model_check(a, f) if a is not None else None
-        if check is not None:
-            lines.append(check)
+    lines += axes_lines(s) if s.axes else condition_lines(s, s) + result_lines(s, s)
     if s.counters or s.event_counts:
         lines.append("")
         lines.append("Counters:")
@@ -60,6 +45,92 @@ def format_summary(s: Summary) -> str:
     for o in s.outputs:
         lines.append(f"Wrote {o}{_open_hint(o)}")
     return "\n".join(lines)
+
+
+def condition_lines(x: AxisSummary, run: Summary) -> list[str]:
+    """One axis's platform motion and live model check (``run``: the whole run's summary)."""
+    return (motion_lines(x, run) if x.motion_spans else []) + \
+        (model_check_lines(x.model_check) if x.model_check is not None else [])
+
+
+def result_lines(x: AxisSummary, run: Summary) -> list[str]:
+    """One axis's whole-run ADEV table and IEEE-952 coefficients."""
+    lines = []
+    a = x.overall
+    if a is not None:
+        lines += ["", f"Overall Allan deviation ({_span(x, run)}, {100 * a.confidence:.1f} % confidence bounds):"]
+        lines += adev_lines(a)
+    f = x.overall_fit
+    if f is not None:
+        lines += ["", "IEEE-952 noise coefficients (whole run, with intervals):"]
+        lines += coefficient_lines(f)
+        check = model_check(a, f) if a is not None else None
+        if check is not None:
+            lines.append(check)
+    return lines
+
+
+def _span(x: AxisSummary, run: Summary) -> str:
+    """The time span of the whole-run ADEV, s."""
+    return f"{x.overall_first_s:.2f}..{run.t_last_s:.2f} s"
+
+
+def axes_lines(s: Summary) -> list[str]:
+    """The axes of a multi-axis run: invalid samples, motion and model check per axis,
+    then the whole-run ADEV and the coefficients of every axis side by side."""
+    axes = s.axes
+    lines = ["  invalid/lost samples per axis: " + ", ".join(f"{a} {x.n_invalid}" for a, x in axes.items())]
+    for a, x in axes.items():
+        lines += [f"  axis {a}: {ln[2:]}" if ln[2] != " " else ln for ln in condition_lines(x, s)]
+    done = {a: x.overall for a, x in axes.items() if x.overall is not None}
+    if done:
+        first = next(x for x in axes.values() if x.overall is not None)
+        conf = next(iter(done.values())).confidence
+        lines += ["", f"Overall Allan deviation per axis ({_span(first, s)}, {100 * conf:.1f} % confidence "
+                      f"bounds), adev_dph [lo_dph, hi_dph]:"]
+        lines += adev_axes_lines(done)
+    fits = {a: x.overall_fit for a, x in axes.items() if x.overall_fit is not None}
+    if fits:
+        lines += ["", "IEEE-952 noise coefficients per axis (whole run, with intervals; n/i: not identifiable "
+                      "from this record, < its 95 % upper limit):"]
+        lines += coefficient_axes_lines(fits)
+        for a, x in axes.items():
+            check = model_check(x.overall, x.overall_fit) if x.overall is not None and x.overall_fit else None
+            if check is not None:
+                lines.append(check.replace("model check:", f"model check (axis {a}):"))
+    return lines
+
+
+#: Width of one axis's column in the side-by-side tables.
+AXIS_COLUMN = 28
+
+
+def adev_axes_lines(results: dict) -> list[str]:
+    """AdevResults of several axes (same taus) side by side: tau_s, then per axis
+    adev_dph [lo_dph, hi_dph]."""
+    out = [f"  {'tau_s':>10} " + " ".join(f"{a:>{AXIS_COLUMN}}" for a in results)]
+    tau_s = next(iter(results.values())).tau_s
+    for i in range(len(tau_s)):
+        cells = [f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" for r in results.values()]
+        out.append(f"  {tau_s[i]:10.4g} " + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
+    return out
+
+
+def coefficient_axes_lines(fits: dict) -> list[str]:
+    """The five IEEE-952 coefficients of whole-record NoiseFits of several axes side by
+    side: name, unit, then per axis value [lo, hi] or n/i (< 95 % upper limit)."""
+    out = [f"  {'coefficient':<11} {'unit':<14}" + " ".join(f"{a:>{AXIS_COLUMN}}" for a in fits)]
+    for name, unit in COEFFICIENTS.items():
+        cells = []
+        for f in fits.values():
+            c = getattr(f, name)
+            if bool(c.identifiable):
+                cells.append(f"{float(c.value):.4g} [{float(c.lo):.4g}, {float(c.hi):.4g}]")
+            else:
+                hi = float(c.hi)
+                cells.append(f"n/i (< {hi:.4g})" if math.isfinite(hi) else "n/i")
+        out.append(f"  {name:<11} {unit:<14}" + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
+    return out
 
 
 def adev_lines(a) -> list[str]:
@@ -105,18 +176,18 @@ def model_check_lines(mc: dict) -> list[str]:
     return out
 
 
-def motion_lines(s: Summary) -> list[str]:
+def motion_lines(s: AxisSummary, run: Summary) -> list[str]:
     """The platform-motion spans kept out of the analysis (all, or the first
-    MAX_MOTION_SPANS and where the rest are)."""
+    MAX_MOTION_SPANS and where the rest are); ``run`` the whole run's summary."""
     spans = s.motion_spans
-    pct = 100.0 * s.motion_samples / max(s.n_samples, 1)
+    pct = 100.0 * s.motion_samples / max(run.n_samples, 1)
     out = [f"  platform motion: {len(spans)} span(s), {s.motion_samples} samples ({pct:.1f} %) kept out of "
            f"DAVAR and the fits (--keep-motion analyses them; docs/motion.md):"]
     shown = [f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s (peak {m.peak_dph:.3g} deg/h)" for m in spans[:MAX_MOTION_SPANS]]
     for i in range(0, len(shown), 3):
         out.append("    " + ", ".join(shown[i:i + 3]))
     if len(spans) > MAX_MOTION_SPANS:
-        rrd = [o for o in s.outputs if o.endswith(".rrd")]
+        rrd = [o for o in run.outputs if o.endswith(".rrd")]
         where = f"all are in the event log of {rrd[0]}" if rrd else "--rrd keeps all of them in its event log"
         out.append(f"    ... and {len(spans) - MAX_MOTION_SPANS} more ({where})")
     return out
@@ -194,7 +265,8 @@ class ConsoleSink(Sink):
             self._seen[e.kind] += 1
             n = self._seen[e.kind]
             if n <= MAX_EVENTS_PER_KIND:
-                err.write(f"[{e.t_s:10.2f} s] {e.kind}: {e.message}\n")
+                axis = f" (axis {e.axis})" if e.axis else ""
+                err.write(f"[{e.t_s:10.2f} s] {e.kind}{axis}: {e.message}\n")
             elif n == MAX_EVENTS_PER_KIND + 1:
                 err.write(f"[{e.t_s:10.2f} s] {e.kind}: more of these are only counted (see the summary)\n")
 
