@@ -191,7 +191,7 @@ class Pipeline:
         self.summary = Summary(source.name, sample_rate_hz, self.window_s, self.hop_s)
         self.axes: tuple[str, ...] = ()
         self.analyses: list[AxisAnalysis] = []
-        self._set_axes(tuple(getattr(source, "axes", None) or ()))  # checks --taus, builds the model bands
+        self._set_axes(tuple(source.axes))  # checks --taus, builds the model bands
         self.started = self.done = self.use_ref = False
         self.t_origin = math.nan      # recording time of the first sample (s), once it came
         self.piece = 1

@@ -29,7 +29,7 @@ pytestmark = pytest.mark.timeout(2 * WAIT_S)
 
 
 class FakeSource:
-    name, sample_rate_hz, counters = "fake gyro", 10.0, {}
+    name, sample_rate_hz, counters, axes = "fake gyro", 10.0, {}, ()
 
 
 def block(k0, n, valid=None):

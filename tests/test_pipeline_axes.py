@@ -151,6 +151,7 @@ def test_a_model_without_the_stream_s_axis_is_a_one_line_error():
 def test_dropped_blocks_of_several_axes_become_placeholders_of_several_axes():
     class Empty:
         name, sample_rate_hz, n_samples, counters = "empty", FS, None, {}
+        axes = ()        # a source that learns its axes only with its first block
 
         def blocks(self):
             yield Block.make(np.arange(2) / FS, np.ones((2, 3)), aux={"temp_c": np.ones(2)}, axes=AXES)

@@ -16,7 +16,7 @@ class CountingSource:
     after ``pause_after`` blocks it sets ``paused`` and waits for ``resume``."""
 
     def __init__(self, n_blocks: int, pause_after: int | None = None):
-        self.sample_rate_hz, self.aux_names = RATE_HZ, ("temp_c",)
+        self.sample_rate_hz, self.aux_names, self.axes = RATE_HZ, ("temp_c",), ()
         self.n_blocks, self.pause_after = n_blocks, pause_after
         self.resume, self.paused = threading.Event(), threading.Event()
         self.produced = 0

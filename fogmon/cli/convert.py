@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     blocks = source.blocks()
     first = next(blocks, None)
     aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
-    axes = first.axes if first is not None else getattr(source, "axes", ())
+    axes = first.axes if first is not None else source.axes
     src_meta = getattr(source, "meta", {}) or {}
     meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
             **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}

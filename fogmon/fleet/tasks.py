@@ -81,7 +81,7 @@ def check(path: str, options: dict) -> Plan:
                 raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
             plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
             plan.window_s, plan.hop_s = window_and_hop(_config(options), plan.sample_rate_hz, plan.n_samples)
-            plan.axis, plan.axes = _axis(src), _axes(src)
+            plan.axis, plan.axes = _axis(src), tuple(src.axes)
         finally:
             src.close()
     except Exception as e:
@@ -95,15 +95,6 @@ def _axis(src) -> str:
     opts = getattr(src, "_options", None) or {}
     meta = getattr(src, "meta", None) or {}
     return str(opts.get("axis") or meta.get("axis") or "-")
-
-
-def _axes(src) -> tuple[str, ...]:
-    """The axes of a source of several axes (its ``axes``, else its first block's); ()
-    for a one-axis source."""
-    axes = getattr(src, "axes", None)
-    if axes is None:
-        axes = next((b.axes for b in src.blocks() if len(b)), ())
-    return tuple(axes)
 
 
 def _blocks(source, axis: str):
@@ -122,6 +113,7 @@ class _ChunkSource:
         self._src, self.first, self.stop, self.own, self.axis = source, first, stop, own, axis
         self.sample_rate_hz, self.name = source.sample_rate_hz, source.name
         self.aux_names = getattr(source, "aux_names", ())
+        self.axes = source.axes if not axis else ()
         self.n_samples = stop - first
         self._masked = np.asarray(masked, dtype=np.int64).reshape(-1, 2)
         self.t0_s: float | None = None   # time of the recording's first sample (s)
@@ -156,7 +148,7 @@ class _ChunkSource:
         valid = b.valid.copy()
         for a, z in m - at:
             valid[max(a, 0):max(z, 0)] = False
-        return Block(b.t_s, b.rate_dph, valid, b.aux, b.events)
+        return Block(b.t_s, b.rate_dph, valid, b.aux, b.events, b.axes)
 
     def close(self) -> None:
         self._src.close()

@@ -119,7 +119,7 @@ class Archive(Sink):
         self._last_flush = clock()
         self.started_utc = datetime.now(UTC).isoformat(timespec="seconds")
         self.counters = {"rows_written": 0, "rows_without_aux": 0, "raw_bytes": 0, "raw_frames": 0}
-        if getattr(source, "axes", None):
+        if source.axes:
             self.counters["partial_samples_dropped"] = 0
         self.piece = 1
         self._pieces: set[int] = set()          # pieces that have a file

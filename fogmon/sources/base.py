@@ -23,6 +23,12 @@ class Source(Protocol):
     sample_rate_hz: float
 
     @property
+    def axes(self) -> tuple[str, ...]:
+        """The axes of its blocks, known before the first one (() for a one-axis source;
+        a three-axis KVH, several CAN or ``lines`` rate columns, a multi-axis log)."""
+        ...
+
+    @property
     def n_samples(self) -> int | None:
         """Length of a finite source in samples (sizes the default window), None for a
         live or endless one."""
@@ -34,10 +40,7 @@ class Source(Protocol):
         ...
 
     def blocks(self) -> Iterator[Block]:
-        """Yield blocks until the source ends (end of file, --duration-s, close()).
-        A multi-axis source (a three-axis KVH, several CAN or ``lines`` rate columns)
-        also has ``axes``, the axes of its blocks known before the first one (read it
-        with ``getattr(source, "axes", ())``)."""
+        """Yield blocks until the source ends (end of file, --duration-s, close())."""
         ...
 
     def close(self) -> None:

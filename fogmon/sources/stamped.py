@@ -70,6 +70,8 @@ class StampedSource:
 
     #: the ROS topic the samples came from (set by fogmon.sources.rosbag; a Kalibr export names it)
     ros_topic: str | None = None
+    #: one axis (--axis picks it from a three-axis IMU message)
+    axes: tuple[str, ...] = ()
 
     def __init__(self, t_s, rate_dph, aux: dict | None, *, name: str, where: str, time_field: str,
                  meta: dict | None = None, max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH,
