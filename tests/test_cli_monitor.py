@@ -112,3 +112,32 @@ def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
     np.testing.assert_allclose(np.concatenate([b.t_s[b.valid] for b in raw]), rec.t_s, rtol=0, atol=1e-9)
     t, _ = read_scalars(str(tmp_path / "c-0001.rrd"), "/rate/rate_dph")
     assert len(t) > 0
+
+
+def test_monitor_three_axis_kvh_archives_every_axis_and_replays_the_same(fake_kvh, tmp_path, capsys):
+    """Issue 14: one port, one process, one archive: a three-axis KVH 1760 (a bad CRC every
+    500th frame) monitored without --axis; the archive holds every axis exactly as the raw
+    capture decodes it, and replaying the archive gives each axis's live DADEV."""
+    arch, rrd = tmp_path / "arch", tmp_path / "live.rrd"
+    args = ["--window-s", "0.512", "--hop-s", "0.128", "--no-progress"]
+    assert main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(arch),
+                 "--rrd", str(rrd), *args]) == 0
+    out = capsys.readouterr().out
+    assert "IEEE-952 noise coefficients per axis" in out
+    rec = read_replay_log(arch / "samples-0001.csv")
+    assert rec.axes == ("x", "y", "z") and {"accel_x_g", "accel_z_g", "temp_c"} <= set(rec.aux)
+    raw = open_raw_capture(sorted(str(p) for p in arch.glob("raw-*.bin")))
+    rb = list(raw.blocks())
+    assert raw.axes == rec.axes
+    rate = np.concatenate([b.rate_dph for b in rb])
+    ok = np.concatenate([b.valid for b in rb]).all(axis=1)
+    assert (~ok).sum() >= 2                                   # the bad-CRC frames: lost on every axis
+    np.testing.assert_allclose(rec.rate_dph, rate[ok], rtol=1e-11)  # 12 significant digits in the CSV
+    live = {a: read_scalars(str(tmp_path / "live-0001.rrd"), f"/axis/{a}/dadev/log10_adev_dph") for a in rec.axes}
+    assert all(v[1].shape == (12, 8) for v in live.values())
+    assert main(["replay", str(arch), "--rrd", str(tmp_path / "replay.rrd"), *args, "--quiet"]) == 0
+    for a, (t_live, adev_live) in live.items():
+        t_rep, adev_rep = read_scalars(str(tmp_path / "replay.rrd"), f"/axis/{a}/dadev/log10_adev_dph")
+        np.testing.assert_allclose(t_rep, t_live, atol=1e-9)
+        np.testing.assert_allclose(adev_rep, adev_live, rtol=1e-9)
+    assert not np.allclose(live["x"][1], live["z"][1])        # the axes carry their own noise

@@ -26,8 +26,9 @@ def format_summary(s: Summary) -> str:
     state = f"interrupted ({stop_name()})" if s.interrupted else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
     lost = "invalid/lost on some axis" if s.axes else "invalid/lost"
+    speed = f"{s.speed_x:,.0f}" if s.speed_x >= 10 else f"{s.speed_x:.2g}"   # a live run: about x1
     lines.append(f"  {s.n_samples} samples at {s.sample_rate_hz:g} Hz = {s.duration_s:.2f} s of recording "
-                 f"({s.n_invalid} {lost}), in {s.wall_s:.2f} s wall = x{s.speed_x:,.0f} real time")
+                 f"({s.n_invalid} {lost}), in {s.wall_s:.2f} s wall = x{speed} real time")
     per_axis = " per axis" if s.axes else ""
     lines.append(f"  {s.n_windows} DADEV windows{per_axis} of {s.window_s:g} s every {s.hop_s:g} s")
     if not s.n_windows:
