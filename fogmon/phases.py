@@ -25,6 +25,8 @@ STATE_FRACTION = 0.9
 ROTATING_DPS = 1.0
 #: ``pumps`` above this is on (the channel is 1 on / 0 off).
 PUMPS_ON = 0.5
+#: The aux channels a state is read from.
+STATE_CHANNELS = ("pumps", "rot_dps")
 TRANSITION = "transition"
 STEADY = "steady"
 
@@ -93,20 +95,23 @@ class PhaseLog:
         self._broken = False  # a transition since the last phase's window: the next window starts a phase
 
     def frame(self, t_end_s: float, aux: Mapping[str, np.ndarray], values: Mapping[str, float],
-              identifiable: Mapping[str, bool]) -> str:
+              identifiable: Mapping[str, bool]) -> Phase | None:
         """One window ending at ``t_end_s`` (s) with its aux samples and fitted coefficients
-        (name -> value in IEEE-952 units, and whether identified); returns its state."""
+        (name -> value in IEEE-952 units, and whether identified); returns the phase it
+        starts, if it starts one."""
         state = window_state(aux)
         if state == TRANSITION:
             self.transitions += 1
             self._broken = True
-            return state
+            return None
+        new = None
         if not self.phases or self.phases[-1].state != state or self._broken:
-            self.phases.append(Phase(state, t_end_s, t_end_s))
+            new = Phase(state, t_end_s, t_end_s)
+            self.phases.append(new)
         kept = {n: float(values[n]) for n in NAMES if identifiable.get(n) and np.isfinite(values.get(n, np.nan))}
         self.phases[-1].add(t_end_s, kept)
         self._broken = False
-        return state
+        return new
 
     def summary(self) -> dict:
         """Per state: the phases (time span of their window ends, windows), their number,

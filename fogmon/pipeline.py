@@ -28,11 +28,13 @@ import numpy as np
 
 from fogmon import stopping
 from fogmon.block import Block, Event
+from fogmon.davar.fit import NoiseFit
 from fogmon.davar.jumps import JumpDetector
 from fogmon.davar.result import DadevResult
 from fogmon.errors import FogmonError, FogmonWarning
 from fogmon.methods.live import Conditioner, LiveMethods
 from fogmon.modelcheck import AuxWindows, ModelBand, ModelWatch
+from fogmon.phases import STATE_CHANNELS, PhaseLog
 from fogmon.sim.model import SensorModel
 from fogmon.sinks.base import AxisSummary, Sink, StreamInfo, Summary
 from fogmon.sources.base import Source
@@ -362,10 +364,8 @@ class Pipeline:
                 s.frames(res, fit, t_end)
         analysis.summary.n_windows += len(res)
         self._dispatch(analysis.named(analysis.jumps.update(fit, t_end)))
-        if analysis.watch is not None:
-            for i in range(len(res)):
-                self._dispatch(analysis.named(analysis.watch.frame(
-                    float(t_end[i]), res.adev_dph[i], analysis.aux_windows.window(int(res.end_index[i])))))
+        if analysis.aux_windows is not None:
+            self._dispatch(analysis.named(analysis.window_checks(res, fit, t_end)))
         self._t_frames = float(t_end[-1])
 
     def close(self) -> None:
@@ -399,6 +399,8 @@ class Pipeline:
             for a in self.analyses:
                 if a.watch is not None:
                     a.summary.model_check = a.watch.summary()
+                if a.phases is not None:
+                    a.summary.phases = a.phases.summary()
                 a.overall(self.summary.t_last_s, self.config.taus)
         finally:
             for s in sorted(self.sinks, key=lambda k: k.finish_order):
@@ -499,6 +501,8 @@ class AxisAnalysis:
         self.conditioner = Conditioner(methods, sample_rate_hz) if methods.any else None
         self.band: ModelBand | None = None
         self.watch: ModelWatch | None = None
+        self.phases: PhaseLog | None = None
+        self.aux_windows: AuxWindows | None = None   # the aux samples of each window (model check, phases)
 
     def suffixed(self, key: str) -> str:
         """``key`` as this axis names it: ``<key>_<axis>``, or ``key`` for a one-axis stream."""
@@ -513,7 +517,12 @@ class AxisAnalysis:
         methods checked, the model check set up; returns the channel names it adds."""
         if self.band is not None:
             self.watch = ModelWatch(self.band, aux_names)
-            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(aux_names, self.engine.window_n)
+        states = tuple(n for n in STATE_CHANNELS if n in aux_names)
+        if states:
+            self.phases = PhaseLog()
+        if self.watch is not None or self.phases is not None:
+            held = aux_names if self.watch is not None else states
+            self.aux_pending, self.aux_windows = _AuxFifo(), AuxWindows(held, self.engine.window_n)
         if self.conditioner is None:
             return ()
         self.conditioner.check(aux_names, source_name)
@@ -523,7 +532,7 @@ class AxisAnalysis:
         """This axis of block ``b`` (its error against rot_dps when ``use_ref``) through
         the live methods; its aux channels kept for the model check."""
         view = b.axis(self.name) if self.name else b
-        if self.watch is not None:
+        if self.aux_windows is not None:
             self.aux_pending.push(view.aux, len(b))
         y = np.ascontiguousarray(view.error_rate_dph if use_ref else view.rate_dph)
         valid = np.ascontiguousarray(view.valid) & np.isfinite(y)
@@ -545,11 +554,31 @@ class AxisAnalysis:
 
     def analyse(self, y: np.ndarray, valid: np.ndarray) -> DadevResult:
         """The next samples into DAVAR and the whole-run tail; the windows they complete."""
-        if self.watch is not None:  # the aux samples of exactly these samples, for the model check
+        if self.aux_windows is not None:  # the aux samples of exactly these samples (model check, phases)
             self.aux_windows.push(self.aux_pending.take(len(y)), len(y))
         res = self.engine.push(y, valid)
         self.tail.push(y, valid)
         return res
+
+    def window_checks(self, res: DadevResult, fit: NoiseFit, t_end: np.ndarray) -> list[Event]:
+        """Completed windows against the model's band and into the phase log: the
+        ``model_band`` events, and a ``phase`` event where a window starts a phase."""
+        assert self.aux_windows is not None
+        events: list[Event] = []
+        coefs = fit.coefficients()   # a DADEV fit: arrays over the windows
+        values = {n: np.atleast_1d(c.value) for n, c in coefs.items()}
+        known = {n: np.atleast_1d(c.identifiable) for n, c in coefs.items()}
+        for i in range(len(res)):
+            aux = self.aux_windows.window(int(res.end_index[i]))
+            if self.watch is not None:
+                events += self.watch.frame(float(t_end[i]), res.adev_dph[i], aux)
+            if self.phases is not None:
+                started = self.phases.frame(float(t_end[i]), aux, {n: float(v[i]) for n, v in values.items()},
+                                            {n: bool(k[i]) for n, k in known.items()})
+                if started is not None:
+                    events.append(Event(float(t_end[i]), "phase", f"{started.state} (the window ending at "
+                                        f"{t_end[i]:.1f} s is the first wholly in it)"))
+        return events
 
     def counters(self) -> dict[str, int]:
         """The live methods' counters."""

@@ -25,9 +25,10 @@ def test_phases_split_at_every_change_and_transition_and_keep_identified_ranges(
     seq = [(aux(1, 720), 0.03), (aux(1, 720), 0.05), ({"pumps": np.r_[np.ones(50), np.zeros(50)],
                                                       "rot_dps": np.zeros(100)}, 9.9),
            (aux(0, 0), 0.02), (aux(0, 0), 0.021), (aux(1, 720), 0.04)]
-    states = [log.frame(60.0 * (i + 1), a, {"N_dpsh": n, "B_dph": 0.01, "K_dphsh": 5.0}, ident)
-              for i, (a, n) in enumerate(seq)]
-    assert states[2] == TRANSITION
+    started = [log.frame(60.0 * (i + 1), a, {"N_dpsh": n, "B_dph": 0.01, "K_dphsh": 5.0}, ident)
+               for i, (a, n) in enumerate(seq)]
+    assert [p.state if p else None for p in started] == [
+        "pumps on, rotating", None, None, "pumps off, not rotating", None, "pumps on, rotating"]
     s = log.summary()
     assert s["transition_windows"] == 1
     drilling = s["states"]["pumps on, rotating"]
@@ -35,3 +36,32 @@ def test_phases_split_at_every_change_and_transition_and_keep_identified_ranges(
     assert drilling["ranges"]["N_dpsh"] == (0.03, 0.05) and "K_dphsh" not in drilling["ranges"]
     static = s["states"]["pumps off, not rotating"]
     assert static["phases"][0]["t_first_end_s"] == 240.0 and static["ranges"]["N_dpsh"] == (0.02, 0.021)
+
+
+def test_the_pipeline_reports_the_phases_of_a_drilling_run():
+    """Drilling (pumps on, string rotating) with connections (pumps off, still) between
+    stands; the monitor's session summary splits the run at the connections and gives each
+    state its coefficient ranges; a phase event marks each phase's first window."""
+    from doubles import Collect, ListSource
+
+    from fogmon.pipeline import Pipeline, PipelineConfig
+
+    fs, n = 10.0, 36_000                                     # 1 h at 10 Hz
+    t = np.arange(n) / fs
+    connection = (t % 1200.0) >= 900.0                     # 15 min drilling, 5 min connection
+    pumps = np.where(connection, 0.0, 1.0)
+    rot = np.where(connection, 0.0, 720.0)                 # 120 rpm while drilling
+    rng = np.random.default_rng(5)
+    white = 60 * 0.05 * np.sqrt(fs) * rng.standard_normal(n)      # N = 0.05 deg/sqrt(h)
+    rate = 3600.0 * rot + white                            # the gyro reads the string's rotation
+    sink = Collect()
+    src = ListSource(t, rate, [3600] * 10, fs, aux={"pumps": pumps, "rot_dps": rot})
+    summary = Pipeline(src, PipelineConfig(window_s=120.0, hop_s=30.0, keep_motion=True)).run([sink])
+    states = summary.phases["states"]
+    assert set(states) == {"pumps on, rotating", "pumps off, not rotating"}
+    assert len(states["pumps on, rotating"]["phases"]) == 3 and len(states["pumps off, not rotating"]["phases"]) == 3
+    lo, hi = states["pumps on, rotating"]["ranges"]["N_dpsh"]
+    assert 0.04 < lo <= hi < 0.06
+    starts = [e for e in sink.events_ if e.kind == "phase"]
+    assert len(starts) == 6 and starts[0].message.startswith("pumps on, rotating")
+    assert summary.phases["transition_windows"] > 0

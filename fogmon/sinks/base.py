@@ -53,6 +53,7 @@ class AxisSummary:
     motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
     motion_samples: int = 0       # valid samples the motion gate made invalid
     model_check: dict | None = None   # with a model: fogmon.modelcheck.ModelWatch.summary()
+    phases: dict | None = None    # with pumps/rot_dps aux channels: fogmon.phases.PhaseLog.summary()
 
 
 @dataclass

@@ -51,7 +51,8 @@ def format_summary(s: Summary) -> str:
 def condition_lines(x: AxisSummary, run: Summary) -> list[str]:
     """One axis's platform motion and live model check (``run``: the whole run's summary)."""
     return (motion_lines(x, run) if x.motion_spans else []) + \
-        (model_check_lines(x.model_check) if x.model_check is not None else [])
+        (model_check_lines(x.model_check) if x.model_check is not None else []) + \
+        (phase_lines(x.phases) if x.phases is not None else [])
 
 
 def result_lines(x: AxisSummary, run: Summary) -> list[str]:
@@ -174,6 +175,19 @@ def model_check_lines(mc: dict) -> list[str]:
                    f"{d['peak_tau_s']:.4g} s; {d['shape']}; likely cause: {d['cause']}")
     if mc["left_out_effects"]:
         out.append(f"    not in the band (need aux channels or a schedule): {', '.join(mc['left_out_effects'])}")
+    return out
+
+
+def phase_lines(ph: dict) -> list[str]:
+    """The operating phases of the session (from pumps/rot_dps) and, per state, the range
+    of every coefficient the window fits identified (docs/monitor.md)."""
+    out = [f"  phases (from pumps / rot_dps; {ph['transition_windows']} window(s) straddling a change are in none):"]
+    for state, s in ph["states"].items():
+        spans = ", ".join(f"{p['t_first_end_s']:.0f}..{p['t_last_end_s']:.0f} s" for p in s["phases"][:4])
+        more = f", ... ({len(s['phases']) - 4} more)" if len(s["phases"]) > 4 else ""
+        ranges = "; ".join(f"{n} {lo:.4g}..{hi:.4g} {COEFFICIENTS[n]}" for n, (lo, hi) in s["ranges"].items())
+        out.append(f"    {state}: {len(s['phases'])} phase(s), {s['windows']} window(s) ending {spans}{more}")
+        out.append(f"      {ranges or 'no coefficient identified in its windows'}")
     return out
 
 
