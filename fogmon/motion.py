@@ -17,6 +17,12 @@ motion over most of the record still leaves them right). Single-sample outliers 
 are not motion: samples beyond ``K_OUTLIER`` sample-sigmas of their block's median are left
 out of the block mean. A constant-rate plateau longer than half of ``REFERENCE_S`` cannot
 be told from a bias change and is not flagged (the reference follows it).
+
+Offline (``find_motion``) a second, sample-scale test finds bursts shorter than a block,
+whose block mean averages out (a vehicle's 3 Hz sway, an earthquake's coda): most of
+``BURST_N`` consecutive samples on one side of every nearby reference, beyond both
+``K_OUTLIER`` sample sigmas and ``K_BLOCK`` x the quiet spread of a sample about its
+block mean. One or two extreme samples stay outliers.
 """
 from __future__ import annotations
 
@@ -41,12 +47,15 @@ REFERENCE_S = 300.0
 MERGE_S = 10.0
 #: the quiet scales are low quantiles over blocks (motion may cover most of a record)
 QUIET_QUANTILE = 0.25
+#: a burst: the median of this many consecutive samples beyond the burst limit, one side
+BURST_N = 5
 
 
 @dataclass(frozen=True)
 class MotionSpan:
     """A stretch of platform motion: recording time ``t_start_s`` .. ``t_end_s`` (s) and
-    the largest departure of a block-mean rate from its reference, ``peak_dph`` (deg/h)."""
+    the largest departure of a block-mean rate, or of a burst's samples, from its
+    reference, ``peak_dph`` (deg/h)."""
     t_start_s: float
     t_end_s: float
     peak_dph: float
@@ -61,17 +70,23 @@ def block_samples(sample_rate_hz: float) -> int:
 _TRIMMED_STD_80 = 0.6616
 
 
-def robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
-    """Per row of ``y`` (blocks x samples, NaN = none): sigma of one sample (deg/h) from
-    the standard deviation of the middle 80 % of first differences (insensitive to a slow
-    trend and to a few outliers; unlike a MAD it stays right for quantized rates, where
-    most differences tie)."""
-    d = np.sort(np.diff(y, axis=1), axis=1)             # NaNs sort last
+def _trimmed_sigma(x: np.ndarray) -> np.ndarray:
+    """Per row of ``x`` (NaN = none): the standard deviation of its middle 80 % over that
+    of a normal variable's, i.e. a robust sigma that, unlike a MAD, stays right for
+    quantized values, where most of them tie."""
+    d = np.sort(x, axis=1)                               # NaNs sort last
     n = np.sum(np.isfinite(d), axis=1, keepdims=True)
     k = n // 10
     rank = np.arange(d.shape[1])
     mid = np.where((rank >= k) & (rank < n - k), d, np.nan)
-    return np.nanstd(mid, axis=1) / _TRIMMED_STD_80 / np.sqrt(2.0)
+    return np.nanstd(mid, axis=1) / _TRIMMED_STD_80
+
+
+def robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
+    """Per row of ``y`` (blocks x samples, NaN = none): sigma of one sample (deg/h) from
+    the robust sigma of first differences (insensitive to a slow trend and to a few
+    outliers; right for quantized rates too)."""
+    return _trimmed_sigma(np.diff(y, axis=1)) / np.sqrt(2.0)
 
 
 def _block_means(y: np.ndarray, sigma_1: float) -> np.ndarray:
@@ -129,17 +144,44 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
     limit = _limit(*_quiet_scales(sig[idx], mu))
     if not np.isfinite(limit):
         return []
-    dev = np.abs(mu - median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="nearest"))
-    moving = idx[dev > limit]
-    peak = np.zeros(nb)
-    peak[idx] = dev
-    gap = _merge_blocks(sample_rate_hz)
+    ref = median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="nearest")
+    dev = np.abs(mu - ref)
+    moved = np.zeros(nb)
+    moved[idx] = np.where(dev > limit, dev, 0.0)
+    peak = np.repeat(moved, m)              # per sample: the departure that flagged it
+    ref_all = np.full(nb, np.nan)
+    ref_all[idx] = ref
+    spread = float(np.quantile(_trimmed_sigma(y[idx] - mu[:, None]), QUIET_QUANTILE))
+    burst = _burst_departure(y, ref_all, max(K_OUTLIER * sigma_1, K_BLOCK * spread))
+    peak = np.where(peak > 0, peak, burst)       # a burst's samples, where no block mean moved
     dt, t0 = 1.0 / sample_rate_hz, float(t_s[0])
     out = []
-    for a, b in _runs(moving, gap):     # one block of margin each side: onsets begin inside the neighbours
-        a, b = max(0, a - 1), min(nb - 1, b + 1)
-        out.append(MotionSpan(t0 + a * m * dt, min(t0 + ((b + 1) * m - 1) * dt, float(t_s[-1])),
-                              float(peak[a:b + 1].max())))
+    # one block of margin each side (onsets begin inside the neighbours); flagged samples
+    # closer than the merge gap form one span
+    for a, b in _runs(np.flatnonzero(peak > 0), _merge_blocks(sample_rate_hz) * m):
+        a, b = max(0, a - m), min(nb * m - 1, b + m)
+        out.append(MotionSpan(t0 + a * dt, min(t0 + b * dt, float(t_s[-1])), float(peak[a:b + 1].max())))
+    return out
+
+
+def _burst_departure(y: np.ndarray, ref: np.ndarray, limit: float) -> np.ndarray:
+    """Per sample of ``y`` (blocks x samples, deg/h; ``ref`` each block's reference, NaN
+    = none): the median departure (deg/h) of the BURST_N samples centred on it from the
+    nearest of the references of its block and the two beside it, where that median is
+    beyond ``limit`` on one side of all three (more than half of them depart: a burst),
+    else 0. One or two extreme samples never make a burst; taking the nearest reference
+    keeps a level change inside a block (a bias step) from looking like one."""
+    if not np.isfinite(limit) or limit <= 0:
+        return np.zeros(y.size)
+    near = np.stack([ref, np.r_[ref[:1], ref[:-1]], np.r_[ref[1:], ref[-1:]]])
+    with warnings.catch_warnings():          # blocks with no reference (gaps): never a burst
+        warnings.simplefilter("ignore", RuntimeWarning)
+        hi, lo = np.nanmax(near, axis=0), np.nanmin(near, axis=0)
+    x = y.ravel()
+    out = np.zeros(x.size)
+    for d in (x - np.repeat(hi, y.shape[1]), np.repeat(lo, y.shape[1]) - x):
+        med = median_filter(np.nan_to_num(d, nan=0.0), size=BURST_N, mode="nearest")
+        out = np.where(med > limit, med, out)
     return out
 
 
@@ -153,15 +195,13 @@ def _merge_blocks(sample_rate_hz: float) -> int:
     return max(2, int(np.ceil(MERGE_S * sample_rate_hz / block_samples(sample_rate_hz))))
 
 
-def _runs(blocks: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """(first, last) of each run of sorted block indices with steps of at most ``gap``."""
-    out: list[tuple[int, int]] = []
-    for b in blocks:
-        if out and b - out[-1][1] <= gap:
-            out[-1] = (out[-1][0], int(b))
-        else:
-            out.append((int(b), int(b)))
-    return out
+def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
+    """(first, last) of each run of sorted (block or sample) indices with steps of at most
+    ``gap``."""
+    if not len(idx):
+        return []
+    cut = np.flatnonzero(np.diff(idx) > gap)
+    return list(zip(np.r_[idx[0], idx[cut + 1]].tolist(), np.r_[idx[cut], idx[-1]].tolist(), strict=True))
 
 
 class MotionGate:

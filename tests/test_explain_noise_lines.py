@@ -91,6 +91,20 @@ def test_a_null_gives_neither_kind(seed):
         assert c is None or c.bic_gain(ctx.penalty) <= 0, (c.kind, c.params, c.gain)
 
 
+def test_a_broad_band_like_a_microseism_is_a_line():
+    """A band of Q = 1.5 (the G ring's secondary microseism: 0.214 Hz, 0.142 Hz wide) is
+    fitted as a line, not dropped as broadband shape."""
+    nz = Noise(N_dpsh=0.01)
+    band = Effect("vibration_lines", {"freq_hz": [0.3], "sigma_dph": [1.0], "bandwidth_hz": [0.2]})
+    rec = simulate(SensorModel(20.0, 0.0, nz, [band]), duration_s=1800.0, seed=4)
+    y = rec.rate_dph - rec.rate_dph.mean()
+    ctx = _whittle(stochastic_part(SensorModel(20.0, 0.0, nz)), {}, rec.t_s, np.ones(len(y), bool), y)
+    c = catalogue.vibration_lines(ctx)
+    assert c is not None and c.bic_gain(ctx.penalty) > 0
+    (f,), (s,), (bw,) = c.params["freq_hz"], c.params["sigma_dph"], c.params["bandwidth_hz"]
+    assert abs(f - 0.3) < 0.05 and s == pytest.approx(1.0, rel=0.2) and bw == pytest.approx(0.2, rel=0.3)
+
+
 def test_sim_of_a_vibration_lines_model_has_the_stated_rms_and_peak(tmp_path):
     m = SensorModel(100.0, 0.0, Noise(), [Effect("vibration_lines", {"freq_hz": [7.0], "sigma_dph": [2.0],
                                                                      "bandwidth_hz": [0.5]})])

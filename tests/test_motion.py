@@ -3,7 +3,7 @@ stationary IEEE-952 noise with drift, bias instability, rate ramps or glitches."
 import numpy as np
 import pytest
 
-from fogmon.motion import MotionGate, block_samples, find_motion, motion_mask
+from fogmon.motion import MotionGate, block_samples, find_motion, motion_mask, robust_sigma_of_diffs
 from fogmon.sim.model import Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
@@ -114,3 +114,24 @@ def test_explain_leaves_platform_motion_out_and_warns():
                        {"sample_rate_hz": "100"}, "hand.csv")
     with pytest.raises(FogmonError, match=r"hand.csv: platform motion over 7\d % of the record .*--keep-motion"):
         without_motion(moving)
+
+
+def test_short_sway_bursts_are_motion_and_outlier_pairs_are_not():
+    """Bursts shorter than a test block (a half cycle of 3 Hz sway, 0.15 s) average out
+    of the block means; the burst test finds them. Pairs of adjacent outliers stay
+    outliers."""
+    t, r = stationary(7)
+    sigma = float(robust_sigma_of_diffs(r[None, :])[0])    # noise of one sample (deg/h)
+    r = r.copy()
+    starts = (300.0, 900.0, 1500.0)
+    for t0 in starts:                                      # +-, one full 3 Hz cycle
+        cycle = (t >= t0) & (t < t0 + 1.0 / 3.0)
+        r[cycle] += 20.0 * sigma * np.sin(2 * np.pi * 3.0 * (t[cycle] - t0))
+    rng = np.random.default_rng(3)
+    pairs = rng.choice(np.flatnonzero((t > 1600.0) & (t < 1790.0)), 20, replace=False)
+    r[pairs] += 1e5
+    r[pairs + 1] += 1e5
+    spans = find_motion(t, r, np.ones(len(t), bool), FS)
+    assert len(spans) == len(starts)
+    for s, t0 in zip(spans, starts, strict=True):
+        assert s.t_start_s <= t0 + 0.05 and s.t_end_s >= t0 + 0.3 and s.t_end_s - s.t_start_s < 1.5

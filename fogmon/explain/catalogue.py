@@ -766,8 +766,9 @@ LINE_PARAMS = 3
 #: with the lines; weaker lines are proposed again to a second vibration_lines round, and
 #: the verdict's line hint lists every line the residual still holds)
 MAX_LINES = 10
-#: narrowband: a fitted line's quality factor centre / bandwidth is at least this
-LINE_MIN_Q = 2.0
+#: a fitted line's quality factor centre / bandwidth is at least this (the G ring's secondary
+#: microseism is a real band of Q = 1.5)
+LINE_MIN_Q = 1.0
 
 
 def _whitened(ctx: Context) -> np.ndarray:
@@ -822,7 +823,7 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, sample_rate_hz: float, n: i
             continue
         g, line = _fit_line(bp, S, floor, sample_rate_hz, n, f0, bw0)
         # a fit that runs into the widest band allowed (Q = LINE_MIN_Q) is broadband
-        # spectral shape (a filter's slope, a microseism band), not a line: not kept
+        # spectral shape (a filter's slope), not a line: not kept
         if g > LINE_PARAMS * penalty and line[2] < 0.98 * line[0] / LINE_MIN_Q:
             lines.append(line)
             S = S + line_psd(bp.omega, sample_rate_hz, line[0], line[1], line[2])
