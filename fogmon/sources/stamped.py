@@ -132,8 +132,9 @@ class StampedSource:
             c["samples_missing"] += stop - start - int(b - a)
             c["seq_gaps"] += len(gaps)
             c[plausibility.COUNTER] += n_bad
-            bad = present & ~null & np.isnan(rate)
-            events += errors.poll(float(t[np.argmax(bad.any(axis=1) if self.axes else bad)]))  # the first one's
+            bad = present & ~null & np.isnan(rate)                  # made invalid by the gate
+            first = bad.any(axis=1) if self.axes else bad
+            events += errors.poll(float(t[np.argmax(first)]))       # the first implausible sample's time
             yield Block.make(t, rate, present, aux, events, self.axes)
 
     def close(self) -> None:
