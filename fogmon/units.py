@@ -1,5 +1,6 @@
 """Angular units -> deg/h: the one table every decoder (KVH binary, DSP-3000, ASCII lines,
-CAN) converts with, and the unit of each IEEE-952 coefficient from its name's suffix."""
+CAN) converts with, the unit of each IEEE-952 coefficient from its name's suffix, and
+standard gravity (accelerometers in m/s^2 -> g)."""
 from __future__ import annotations
 
 import math
@@ -15,6 +16,9 @@ DPH_PER_UNIT: dict[str, tuple[str, float]] = {
 }
 #: other spellings of the same units (DBC files write dph, degree signs, ...)
 ALIASES = {"dph": "deg/h", "°/h": "deg/h", "dps": "deg/s", "°/s": "deg/s", "°": "deg"}
+
+#: standard gravity, m/s^2 per g (accelerometers fogmon passes on are in g)
+G0_MPS2 = 9.80665
 
 #: coefficient-name suffix -> its unit (fogmon.davar.fit.NAMES: Q_arcsec, N_dpsh, ...)
 SUFFIX_UNITS = {"arcsec": "arcsec", "dpsh": "deg/sqrt(h)", "dph": "deg/h", "dphsh": "deg/h/sqrt(h)",

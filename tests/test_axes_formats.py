@@ -166,13 +166,17 @@ def test_archive_of_multi_axis_pieces_picks_axes_without_decoding_again(tmp_path
     assert sum(int(b.valid.sum()) for b in blocks) == 195
 
 
-@pytest.mark.parametrize("axis", ["x,y", "w"])
-def test_imu_readers_take_one_axis_of_x_y_z(axis):
-    from fogmon.sources.stamped import imu_axis
+@pytest.mark.parametrize("axis", ["x,w", "w"])
+def test_imu_readers_take_x_y_z_all_one_or_several(axis):
+    from fogmon.sources.stamped import imu_axes
 
-    assert imu_axis({"axis": None}, "run.bag") == "z"
-    with pytest.raises(FogmonError, match=rf"run.bag: --axis {axis}: this reader gives one gyro axis, x, y or z"):
-        imu_axis({"axis": axis}, "run.bag")
+    assert imu_axes({"axis": None}, "run.bag") == ("x", "y", "z")
+    assert imu_axes({"axis": "z"}, "run.bag") == ("z",)
+    assert imu_axes({"axis": "y,x"}, "run.bag") == ("y", "x")
+    with pytest.raises(FogmonError, match=rf"run.bag: --axis {axis}: the gyro axes of an IMU are x, y and z"):
+        imu_axes({"axis": axis}, "run.bag")
+    with pytest.raises(FogmonError, match="run.bag: --axis x,x: an axis is named twice"):
+        imu_axes({"axis": "x,x"}, "run.bag")
 
 
 def test_convert_keeps_rows_valid_on_every_axis_and_says_how_many_it_left_out(tmp_path, capsys):

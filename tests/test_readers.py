@@ -6,18 +6,21 @@ naming the file and the field."""
 from __future__ import annotations
 
 import math
+import re
 import struct
 import sys
 
 import numpy as np
 import pytest
 
+from fogmon.block import Block
 from fogmon.cli import build_parser, main
 from fogmon.cli.pipeline_options import pipeline_config
 from fogmon.cli.source_options import source_options
 from fogmon.pipeline import run_pipeline
 from fogmon.sinks.base import Sink
 from fogmon.sources.open import open_replay_source
+from fogmon.sources.options import SourceOptions
 
 FS = 100.0
 N = 6000
@@ -25,22 +28,29 @@ DPH_PER_RPS = 3600 * 180 / math.pi
 
 
 class Frames(Sink):
-    """Keeps every DADEV row the pipeline emits."""
+    """Keeps every DADEV row the pipeline emits, by axis ("" for a one-axis run)."""
 
     def __init__(self):
-        self.adev = []
+        self.adev = {}
 
-    def frames(self, dadev, fit, t_end_s):
-        self.adev.append(dadev.adev_dph)
+    def frames(self, dadev, fit, t_end_s, axis=""):
+        self.adev.setdefault(axis, []).append(dadev.adev_dph)
 
 
-def replay(path, *opts):
-    """(Summary, DADEV rows) of `fogmon replay PATH OPTS` through the real source and pipeline."""
+def replay_axes(path, *opts):
+    """(Summary, {axis: DADEV rows}) of `fogmon replay PATH OPTS` through the real source
+    and pipeline (axis "" for a one-axis run)."""
     argv = ["replay", str(path), "--window-s", "20.48", "--hop-s", "5.12", "--no-progress", *opts]
     args = build_parser(argv).parse_args(argv)
     sink = Frames()
     summary = run_pipeline(open_replay_source(args.recording, source_options(args)), pipeline_config(args), [sink])
-    return summary, np.vstack(sink.adev)
+    return summary, {a: np.vstack(rows) for a, rows in sink.adev.items()}
+
+
+def replay(path, *opts):
+    """(Summary, DADEV rows) of a one-axis `fogmon replay PATH OPTS`."""
+    summary, adev = replay_axes(path, *opts)
+    return summary, adev[""]
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +140,7 @@ def bag(request, signal, tmp_path_factory):
 
 def test_ros_bags_and_mcap_replay_like_the_csv(bag, signal, tmp_path):
     t, rate, keep = signal
-    got = replay(bag, "--topic", "/imu/data")
+    got = replay(bag, "--topic", "/imu/data", "--axis", "z")
     same_as_reference(got, csv_replay(tmp_path, rate / DPH_PER_RPS * DPH_PER_RPS, keep))  # float64 rad/s in the bag
     assert "/imu/data angular_velocity.z" in got[0].source_name
 
@@ -154,7 +164,8 @@ def test_ros_wrong_topic_is_one_line_naming_file_and_field(bag, capsys):
 # ------------------------------------------------------------------------------ ULog
 def _ulog(path, t, rate_dph, keep, temp_c=35.0):
     """A minimal ULog (spec: docs.px4.io ULog file format): header, flag bits, format and
-    subscription of sensor_gyro, one data message per sample (timestamps in us, x/y/z rad/s)."""
+    subscription of sensor_gyro, one data message per sample (timestamps in us, x/y/z rad/s:
+    0.5, -1 and 1 times the rate)."""
     def msg(kind, payload):
         return struct.pack("<HB", len(payload), ord(kind)) + payload
 
@@ -166,7 +177,7 @@ def _ulog(path, t, rate_dph, keep, temp_c=35.0):
     for i in np.flatnonzero(keep):
         us = int(round(1e6 * (10.0 + t[i])))
         w = rate_dph[i] / DPH_PER_RPS
-        out += msg("D", struct.pack("<HQQffff", 1, us + 250, us, 0.0, 0.0, w, temp_c))
+        out += msg("D", struct.pack("<HQQffff", 1, us + 250, us, 0.5 * w, -w, w, temp_c))
     path.write_bytes(bytes(out))
 
 
@@ -175,7 +186,7 @@ def test_ulog_replays_like_the_csv_of_its_float32_values(signal, tmp_path):
     path = tmp_path / "flight.ulg"
     _ulog(path, t, rate, keep)
     as_logged = np.float32(rate / DPH_PER_RPS).astype(np.float64) * DPH_PER_RPS   # ULog keeps float32 rad/s
-    got = replay(path)
+    got = replay(path, "--axis", "z")
     same_as_reference(got, csv_replay(tmp_path, as_logged, keep, t0_s=10.0))
     assert "sensor_gyro:0 z" in got[0].source_name
     rec = open_replay_source(str(path), source_options(build_parser(["replay", "x"]).parse_args(
@@ -190,6 +201,96 @@ def test_ulog_wrong_topic_is_one_line(signal, tmp_path, capsys):
     one_line_error(["replay", str(path), "--topic", "sensor_gyro:2"], capsys, str(path), "field topic",
                    "sensor_gyro:0")
     one_line_error(["replay", str(path), "--topic", "vehicle_status"], capsys, "not a gyro topic")
+
+
+# ------------------------------------------------------------------------------ three axes
+def whole_read(path, axis=None):
+    """(source, all its blocks as one) of ``path`` read with ``--axis axis``."""
+    src = open_replay_source(str(path), SourceOptions(axis=axis))
+    return src, Block.concat(list(src.blocks()))
+
+
+def equal_per_axis_to_one_axis_reads(path):
+    """Without --axis a three-axis source x, y, z whose every axis is, block and recording,
+    exactly the one-axis read of that axis (--axis a); --axis z,x a two-axis subset in that
+    order. (source, whole read) of the three-axis read."""
+    src, whole = whole_read(path)
+    assert src.axes == whole.axes == ("x", "y", "z")
+    rec = src.to_recording()
+    assert rec.axes == ("x", "y", "z")
+    for a in ("x", "y", "z"):
+        one_src, one = whole_read(path, a)
+        view = whole.axis(a)
+        assert one_src.axes == one.axes == () and one_src.sample_rate_hz == src.sample_rate_hz
+        for got, want in ((view.t_s, one.t_s), (view.rate_dph, one.rate_dph), (view.valid, one.valid)):
+            np.testing.assert_array_equal(got, want)
+        assert view.events == one.events and one_src.counters == src.counters
+        one_rec = one_src.to_recording()
+        np.testing.assert_array_equal(rec.for_axis(a).t_s, one_rec.t_s)
+        np.testing.assert_array_equal(rec.for_axis(a).rate_dph, one_rec.rate_dph)
+        for k, v in one_rec.aux.items():
+            np.testing.assert_array_equal(rec.aux[k], v)
+    pair_src, pair = whole_read(path, "z,x")
+    assert pair_src.axes == pair.axes == ("z", "x")
+    np.testing.assert_array_equal(pair.rate_dph, whole.rate_dph[:, [2, 0]])
+    return src, whole
+
+
+def test_ros_gives_three_axes_equal_to_the_one_axis_reads_and_the_accelerometer_in_g(bag, signal):
+    t, rate, keep = signal
+    src, whole = equal_per_axis_to_one_axis_reads(bag)
+    np.testing.assert_allclose(src.to_recording().rate_dph, np.column_stack([0.5 * rate, -rate, rate])[keep],
+                               rtol=1e-12)
+    assert "/imu/data angular_velocity.x,y,z" in src.name
+    assert sorted(whole.aux) == ["accel_x_g", "accel_y_g", "accel_z_g"]
+    read = whole.valid.all(axis=1)
+    assert np.count_nonzero(~read) == 12 and np.isnan(whole.aux["accel_z_g"][~read]).all()
+    np.testing.assert_array_equal(whole.aux["accel_x_g"][read], 0.0)
+    np.testing.assert_allclose(whole.aux["accel_z_g"][read], 9.81 / 9.80665, rtol=1e-15)   # m/s^2 / g0
+    assert sorted(whole_read(bag, "z,x")[1].aux) == ["accel_x_g", "accel_z_g"]   # the axes picked
+    assert whole_read(bag, "z")[1].aux == {}                                     # one axis: as always
+
+
+def test_ulog_gives_three_axes_equal_to_the_one_axis_reads(signal, tmp_path):
+    t, rate, keep = signal
+    path = tmp_path / "flight.ulg"
+    _ulog(path, t, rate, keep)
+    src, whole = equal_per_axis_to_one_axis_reads(path)
+    as_logged = np.float32(np.column_stack([0.5 * rate, -rate, rate]) / DPH_PER_RPS).astype(np.float64)
+    np.testing.assert_array_equal(src.to_recording().rate_dph, as_logged[keep] * DPH_PER_RPS)
+    assert "sensor_gyro:0 x,y,z" in src.name and list(whole.aux) == ["temp_c"]
+
+
+def test_replay_of_a_bag_without_axis_analyses_every_axis(bag, capsys):
+    """`fogmon replay run.bag`: each axis's DADEV is the one-axis replay's of that axis; the
+    console shows one column per axis."""
+    summary, adev = replay_axes(bag)
+    assert list(summary.axes) == list(adev) == ["x", "y", "z"]
+    np.testing.assert_array_equal(adev["y"], replay(bag, "--axis", "y")[1])
+    np.testing.assert_allclose(adev["y"], 2 * adev["x"], rtol=1e-12)              # y = -2 x, sample by sample
+    assert main(["replay", str(bag), "--window-s", "20.48", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "invalid/lost samples per axis: x 12, y 12, z 12" in out
+    assert re.search(r"^ +tau_s +x +y +z$", out, re.M) and re.search(r"^  coefficient unit +x +y +z$", out, re.M)
+
+
+def test_imu_axis_that_is_not_x_y_z_is_one_line(bag, capsys):
+    one_line_error(["replay", str(bag), "--axis", "x,w"], capsys, str(bag), "--axis x,w", "x, y and z")
+
+
+def test_updown_of_three_axis_ulogs_needs_the_axis(signal, tmp_path, capsys):
+    """z reads Earth's vertical rate at 45 deg (15.041 deg/h x sin 45 deg) x (1 + 1000 ppm)
+    + 0.5 deg/h, up and then down: `fogmon updown --axis z` finds both."""
+    t, _, keep = signal
+    earth_dph = 15.041067 * math.sin(math.radians(45.0)) * 1.001
+    up, down = tmp_path / "up.ulg", tmp_path / "down.ulg"
+    _ulog(up, t, np.full(N, 0.5 + earth_dph), keep)
+    _ulog(down, t, np.full(N, 0.5 - earth_dph), keep)
+    argv = ["updown", "--up", str(up), "--down", str(down), "--lat-deg", "45"]
+    one_line_error(argv, capsys, str(up), "has axes x, y, z", "give --axis NAME")
+    assert main([*argv, "--axis", "z"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"bias +\+0\.500", out) and re.search(r"scale-factor error \+1000\.\d ", out), out
 
 
 # ------------------------------------------------------------------------------ MDF4

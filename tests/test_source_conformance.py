@@ -62,8 +62,32 @@ def _model(tmp_path):
     return SimulatedSource(str(p), duration_s=5.0, seed=3), 500
 
 
+def _imu_samples():
+    """(stamps s, rate deg/h, kept) of 300 samples at FS, two missing: a three-axis IMU file
+    of tests/test_readers.py's writers."""
+    t = np.arange(300) / FS
+    keep = np.ones(300, bool)
+    keep[50:52] = False
+    return t, 3.0 + np.sin(t), keep
+
+
+def _ros_bag(tmp_path):
+    from test_readers import write_imu_bag
+
+    write_imu_bag(tmp_path / "run.bag", *_imu_samples(), "ros1")
+    return open_replay_source(str(tmp_path / "run.bag")), 300
+
+
+def _px4_ulog(tmp_path):
+    from test_readers import _ulog
+
+    _ulog(tmp_path / "flight.ulg", *_imu_samples())
+    return open_replay_source(str(tmp_path / "flight.ulg")), 300
+
+
 SOURCES = {"replay-log": _replay_log, "archive-pieces": _archive_pieces, "raw-capture": _raw_capture,
-           "can-log": _can_log, "simulation": _model}
+           "can-log": _can_log, "simulation": _model, "ros-bag": _ros_bag,
+           "px4-ulog": _px4_ulog}
 
 
 @pytest.fixture(params=sorted(SOURCES))
@@ -98,6 +122,7 @@ class TestFiniteSources:
         blocks = list(src.blocks())
         for b in blocks:
             _check_block(b, src.sample_rate_hz)
+            assert b.axes == src.axes                                                    # as declared
         t = np.concatenate([b.t_s for b in blocks])
         assert len(t) == n
         np.testing.assert_allclose(np.diff(t) * src.sample_rate_hz, 1.0, atol=1e-6)    # across blocks too

@@ -60,8 +60,8 @@ def _add_serial_arguments(g, live: bool) -> None:
     g.add_argument("--axis", type=axis_list, metavar="AXES", help="KVH gyros to decode: one of x, y, z (a "
                    "one-axis stream, as before) or several separated by commas (x,y) (default: all three, a "
                    "three-axis stream x,y,z with the accelerometers); the axes of a multi-axis replay log "
-                   "(rate_<axis>_dph columns) to analyse (default: every axis); the axis of a ROS bag or PX4 ULog "
-                   "recording (default: z)")
+                   "(rate_<axis>_dph columns) to analyse (default: every axis); the gyros of a ROS bag or PX4 ULog "
+                   "IMU, x, y, z, one or several (default: all three)")
     g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
@@ -131,9 +131,9 @@ def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = False) ->
     g.add_argument("--topic", metavar="NAME", help="ROS bag/MCAP: the sensor_msgs/Imu topic (default: the only "
                    "one); PX4 ULog: sensor_gyro (default; NAME:INSTANCE for another instance) or sensor_combined")
     if axis:
-        g.add_argument("--axis", type=axis_list, metavar="NAME", help="gyro axis of a ROS/ULog source (x, y or z; "
-                       "default: z); for a multi-axis replay log (rate_<axis>_dph columns) the axis to analyse, or "
-                       "a comma list (x,y) (default: every axis)")
+        g.add_argument("--axis", type=axis_list, metavar="NAME", help="the axis to analyse, or a comma list (x,y): "
+                       "gyros x, y, z of a ROS bag or PX4 ULog IMU, axes of a multi-axis replay log "
+                       "(rate_<axis>_dph columns) (default: every axis)")
     g.add_argument("--channel", metavar="NAME", help="MDF4: the rate channel (unit from the file); LAS: the rate "
                    "curve (default: the only curve with a rate unit)")
     g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve (default: the index curve when it "

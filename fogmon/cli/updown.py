@@ -29,6 +29,11 @@ def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
     from fogmon.sources.formats import read_recording
 
     rec = read_recording(path, args)
+    if rec.axes:                                   # a three-axis IMU or multi-axis log: one gyro is calibrated
+        if args.axis is None:
+            raise FogmonError(f"{path}: has axes {', '.join(rec.axes)}; up/down calibrates one gyro: give --axis "
+                              f"NAME (the axis pointing up and down)")
+        rec = rec.for_axis(args.axis)
     res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
     ok = np.isfinite(res.adev_dph)
     # std of the mean of the record ~ ADEV at the longest reliable tau (conservative)

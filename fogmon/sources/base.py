@@ -25,7 +25,8 @@ class Source(Protocol):
     @property
     def axes(self) -> tuple[str, ...]:
         """The axes of its blocks, known before the first one (() for a one-axis source;
-        a three-axis KVH, several CAN or ``lines`` rate columns, a multi-axis log)."""
+        a three-axis KVH, several CAN or ``lines`` rate columns, a multi-axis log, a ROS bag or
+        PX4 ULog IMU read without ``--axis``)."""
         ...
 
     @property

@@ -62,8 +62,6 @@ def open_reader(path: str, args):
         raise FogmonError(f"{path}: reading {r.what} files needs {r.library}, which is not installed: "
                           f"pip install 'fogmon[{r.extra}]'") from None
     o = options(args)
-    if r.module in ("rosbag", "ulog") and o["axis"] not in (None, "x", "y", "z"):
-        raise FogmonError(f"{path}: --axis {o['axis']}: a {r.what} recording is read one axis at a time (x, y or z)")
     if o["max_rate_dph"] is None:
         o["max_rate_dph"] = plausibility.GENERIC_MAX_ABS_DPH
     return importlib.import_module(f"fogmon.sources.{r.module}").open_source(path, o)

@@ -41,7 +41,7 @@ from fogmon.block import parse_axes
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
-from fogmon.units import to_dph
+from fogmon.units import G0_MPS2, to_dph
 
 #: bit-reversal of every byte value, to run CRC-32/MPEG-2 through zlib's reflected CRC-32.
 _REV8 = bytes(int(f"{i:08b}"[::-1], 2) for i in range(256))
@@ -69,8 +69,6 @@ FORMATS = {
 AXES = ("x", "y", "z")
 SEQ_MODULUS = 128
 DEFAULT_RATE_HZ = 1000.0
-#: standard gravity, m/s^2 per g
-G0_MPS2 = 9.80665
 #: accelerometer output (``--kvh-accel``) -> (g per unit, per sample: a velocity increment
 #: per sample, multiplied by the sample rate in Hz); "none": not decoded
 ACCEL_UNITS = {"g": (1.0, False), "dv-m": (1.0 / G0_MPS2, True), "dv-ft": (0.3048 / G0_MPS2, True),

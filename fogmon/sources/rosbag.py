@@ -1,11 +1,13 @@
 """ROS 1 bags, ROS 2 bags (a folder with metadata.yaml, sqlite3 or MCAP storage) and MCAP
 files with sensor_msgs/Imu messages, read with ``rosbags`` (``fogmon[ros]``).
 
-One topic (``--topic``, default the only Imu topic), one axis of ``angular_velocity``
-(rad/s -> deg/h; ``--axis``, default z). Time base: ``header.stamp`` of each message (s),
-on fogmon's grid as fogmon.sources.stamped describes (missing messages become counted
-invalid placeholders); time 0 is the first message's stamp, whose Unix time is kept in
-the metadata (``t0_unix_s``)."""
+One topic (``--topic``, default the only Imu topic); ``angular_velocity`` (rad/s ->
+deg/h) of the axes ``--axis`` asks (fogmon.sources.stamped.imu_axes): without it all
+three, a multi-axis source with ``linear_acceleration`` as aux channels ``accel_<axis>_g``
+(m/s^2 -> g); with one axis a one-axis source of that gyro alone. Time base:
+``header.stamp`` of each message (s), on fogmon's grid as fogmon.sources.stamped
+describes (missing messages become counted invalid placeholders); time 0 is the first
+message's stamp, whose Unix time is kept in the metadata (``t0_unix_s``)."""
 from __future__ import annotations
 
 import os
@@ -15,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import DPH_PER_RPS, StampedSource, imu_axis
+from fogmon.sources.stamped import DPH_PER_RPS, IMU_AXES, StampedSource, imu_axes
+from fogmon.units import G0_MPS2
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 
@@ -28,19 +31,26 @@ def _reader(path: str):
 
 _STAMP_ROS1 = struct.Struct("<II")   # header.stamp sec, nsec after the uint32 seq
 _STAMP_CDR = struct.Struct("<iI")    # sec, nanosec after the 4-byte CDR encapsulation header
-_FLOAT64 = struct.Struct("<d")
+#: angular_velocity x, y, z (rad/s), its covariance (9 float64, skipped), linear_acceleration x, y, z (m/s^2)
+_VECTORS = struct.Struct("<3d72x3d")
 
 
-def _verified_layout(raw: bytes, ros2: bool, axis: str, msg) -> tuple | None:
-    """(stamp struct, stamp offset, byte offset of angular_velocity.<axis>) of a serialized
-    Imu message, so that messages of the same length are read with two ``unpack_from``
-    calls instead of a full deserialization (several times faster). The layout is
+def _vectors(msg) -> tuple[float, ...]:
+    """angular_velocity x, y, z (rad/s) and linear_acceleration x, y, z (m/s^2) of a
+    deserialized Imu message."""
+    w, a = msg.angular_velocity, msg.linear_acceleration
+    return w.x, w.y, w.z, a.x, a.y, a.z
+
+
+def _verified_layout(raw: bytes, ros2: bool, msg) -> tuple | None:
+    """(stamp struct, stamp offset, byte offset of angular_velocity) of a serialized Imu
+    message, so that messages of the same length are read with two ``unpack_from`` calls
+    instead of a full deserialization (several times faster). The layout is
     sensor_msgs/Imu's: header (ROS 1: seq, when the bag's Header has it; stamp; frame_id,
     the only variable-length field), orientation (4 float64), its covariance (9),
     angular_velocity (3), its covariance (9), linear_acceleration (3), its covariance (9).
     None (every such message is deserialized) unless the offsets reproduce ``msg``, the
     same message deserialized by rosbags, exactly (little-endian CDR only)."""
-    k = "xyz".index(axis)
     if ros2:
         if len(raw) < 16 or raw[1] != 1:                      # big-endian CDR: not handled here
             return None
@@ -54,21 +64,20 @@ def _verified_layout(raw: bytes, ros2: bool, axis: str, msg) -> tuple | None:
                 (n,) = struct.unpack_from("<I", raw, at + 8)
                 candidates.append((_STAMP_ROS1, at, at + 12 + n))
     for stamp, at, first in candidates:
-        off = first + 8 * (4 + 9 + k)
+        off = first + 8 * (4 + 9)
         if len(raw) != first + 8 * (4 + 9 + 3 + 9 + 3 + 9):
             continue
-        sec, nsec = stamp.unpack_from(raw, at)
-        if (sec, nsec) == (msg.header.stamp.sec, msg.header.stamp.nanosec) and \
-                _FLOAT64.unpack_from(raw, off)[0] == getattr(msg.angular_velocity, axis):
+        if stamp.unpack_from(raw, at) == (msg.header.stamp.sec, msg.header.stamp.nanosec) and \
+                _VECTORS.unpack_from(raw, off) == _vectors(msg):
             return stamp, at, off
     return None
 
 
 def open_source(path: str, options: dict) -> StampedSource:
-    """The Imu topic ``options['topic']``, axis ``options['axis']`` (x, y, z) of the bag or
-    MCAP file ``path`` as a StampedSource; a missing topic or a topic of another type is a
-    one-line FogmonError naming the file and the Imu topics it has."""
-    axis = imu_axis(options, path)
+    """The Imu topic ``options['topic']``, axes ``options['axis']`` (``imu_axes``) of the
+    bag or MCAP file ``path`` as a StampedSource; a missing topic or a topic of another
+    type is a one-line FogmonError naming the file and the Imu topics it has."""
+    axes = imu_axes(options, path)
     try:
         reader = _reader(path)
         reader.open()
@@ -92,33 +101,37 @@ def open_source(path: str, options: dict) -> StampedSource:
             raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
         n = sum(c.msgcount for c in conns)
         ns = np.empty(n, np.int64)      # header stamps, integer ns (exact)
-        w = np.empty(n)
+        v = np.empty((n, 6))            # angular_velocity x, y, z (rad/s), linear_acceleration x, y, z (m/s^2)
         i = 0
         layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
         for conn, _, raw in reader.messages(connections=conns):
             if len(raw) not in layouts:
                 msg = reader.deserialize(raw, conn.msgtype)
-                layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+                layouts[len(raw)] = _verified_layout(raw, reader.is2, msg)
             lay = layouts[len(raw)]
             if lay is None:
                 msg = reader.deserialize(raw, conn.msgtype)
                 ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-                w[i] = getattr(msg.angular_velocity, axis)
+                v[i] = _vectors(msg)
             else:
                 sec, nsec = lay[0].unpack_from(raw, lay[1])
                 ns[i] = sec * 1_000_000_000 + nsec
-                w[i] = _FLOAT64.unpack_from(raw, lay[2])[0]
+                v[i] = _VECTORS.unpack_from(raw, lay[2])
             i += 1
     finally:
         reader.close()
-    ns, w = ns[:i], w[:i]
+    ns, v = ns[:i], v[:i]
     where = f"{path} topic {topic}"
     if i and not np.any(ns):
         raise FogmonError(f"{where}: field header.stamp: zero in every message (the driver does not stamp them)")
     t0 = int(ns[0]) if i else 0
-    src = StampedSource((ns - t0) * 1e-9, w * DPH_PER_RPS, None, name=f"ROS {os.path.basename(path)} {topic} "
-                         f"angular_velocity.{axis}", where=where, time_field="header.stamp",
-                         meta={"sensor": f"{topic} angular_velocity.{axis}", "t0_unix_s": repr(t0 * 1e-9)},
-                         max_abs_dph=options["max_rate_dph"])
+    cols = [IMU_AXES.index(a) for a in axes]
+    field = f"angular_velocity.{','.join(axes)}"
+    several = len(axes) > 1
+    accel = {f"accel_{a}_g": v[:, 3 + c] / G0_MPS2 for a, c in zip(axes, cols, strict=True)} if several else None
+    src = StampedSource((ns - t0) * 1e-9, v[:, cols if several else cols[0]] * DPH_PER_RPS, accel,
+                        name=f"ROS {os.path.basename(path)} {topic} {field}", where=where, time_field="header.stamp",
+                        meta={"sensor": f"{topic} {field}", "t0_unix_s": repr(t0 * 1e-9)},
+                        max_abs_dph=options["max_rate_dph"], axes=axes if several else ())
     src.ros_topic = topic  # the topic a Kalibr export names
     return src

@@ -9,7 +9,9 @@ placeholders with a ``gap`` event and are counted, as in a replay log
 that runs slightly off its nominal rate from turning into false gaps. The nominal rate is
 then the grid periods over the span of the stamps. A step under half a period (a repeated
 or backward stamp) is a one-line error naming the file, the sample and the time field.
-Sample times are the grid, ``t0 + k / fs`` (s).
+Sample times are the grid, ``t0 + k / fs`` (s). An IMU file (a ROS Imu message, a PX4
+gyro topic) gives its gyro axes as one multi-axis source (fogmon.block: one rate column
+per axis), or one axis as a one-axis source (``imu_axes``).
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from fogmon.block import Block, Event
+from fogmon.block import Block, Event, parse_axes
 from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sources import plausibility
@@ -29,6 +31,8 @@ from fogmon.sources.replay import FAST_BLOCK
 DPH_PER_RPS = 3600.0 * 180.0 / math.pi
 #: a stamp step below this many nominal periods is two samples in one period: an error
 MIN_STEP_PERIODS = 0.5
+#: the gyro axes of an IMU message or topic
+IMU_AXES = ("x", "y", "z")
 
 
 def grid_index(t_s: np.ndarray, where: str, time_field: str) -> tuple[np.ndarray, float]:
@@ -59,27 +63,30 @@ def grid_index(t_s: np.ndarray, where: str, time_field: str) -> tuple[np.ndarray
 
 class StampedSource:
     """Samples with their own time stamps -> Blocks on the uniform grid (see the module
-    docstring). ``t_s`` (s), ``rate_dph`` (deg/h), ``aux`` channels by name (arrays of the
-    same length); ``where`` names the data in errors and events, ``name`` describes the
-    source. Rates beyond +-``max_abs_dph`` become invalid and are counted. Counters, as
-    far as the blocks yielded reach: ``samples`` (present), ``samples_missing``,
-    ``seq_gaps`` (time gaps), ``implausible_samples``, and where the file has any,
-    ``null_samples`` (samples present with no value: invalid) plus the ``counters`` the
-    reader gives (what it left out and why). ``to_recording()`` gives the same
-    samples as a Recording for the batch commands (explain)."""
+    docstring). ``t_s`` (s), ``rate_dph`` (deg/h; with ``axes``, one column per axis),
+    ``aux`` channels by name (arrays of the same length); ``where`` names the data in
+    errors and events, ``name`` describes the source. Rates beyond +-``max_abs_dph``
+    become invalid and are counted. Counters, as far as the blocks yielded reach:
+    ``samples`` (present), ``samples_missing``, ``seq_gaps`` (time gaps),
+    ``implausible_samples``, and where the file has any, ``null_samples`` (values
+    present but not a number: invalid; these two count one per axis) plus the
+    ``counters`` the reader gives (what it left out and why). ``to_recording()`` gives
+    the same samples as a Recording for the batch commands (explain)."""
 
     #: the ROS topic the samples came from (set by fogmon.sources.rosbag; a Kalibr export names it)
     ros_topic: str | None = None
-    #: one axis (--axis picks it from a three-axis IMU message)
-    axes: tuple[str, ...] = ()
 
     def __init__(self, t_s, rate_dph, aux: dict | None, *, name: str, where: str, time_field: str,
                  meta: dict | None = None, max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH,
-                 counters: dict[str, int] | None = None) -> None:
+                 counters: dict[str, int] | None = None, axes: tuple[str, ...] = ()) -> None:
         t = np.asarray(t_s, dtype=np.float64)
         self._idx, self.sample_rate_hz = grid_index(t, where, time_field)
         self.t_first_s = float(t[0])
         self._rate = np.asarray(rate_dph, dtype=np.float64)
+        #: the axes of the blocks (() for one axis)
+        self.axes = tuple(axes)
+        if self._rate.shape != ((len(t), len(self.axes)) if self.axes else (len(t),)):
+            raise ValueError(f"rate_dph has shape {self._rate.shape} for {len(t)} stamps and axes {self.axes}")
         self._aux = {k: np.asarray(v, dtype=np.float64) for k, v in (aux or {}).items()}
         self.aux_names = list(self._aux)
         self.name, self.where = name, where
@@ -103,13 +110,13 @@ class StampedSource:
             a, b = np.searchsorted(idx, [start, stop])
             at = idx[a:b] - start
             t = self.t_first_s + np.arange(start, stop) / self.sample_rate_hz
-            rate = np.full(stop - start, np.nan)
+            rate = np.full((stop - start, *self._rate.shape[1:]), np.nan)
             rate[at] = self._rate[a:b]
             aux = {}
             for k, v in self._aux.items():
                 aux[k] = np.full(stop - start, np.nan)
                 aux[k][at] = v[a:b]
-            present = np.zeros(stop - start, bool)
+            present = np.zeros((stop - start, *self._rate.shape[1:]), bool)   # every axis of a sample read
             present[at] = True
             null = present & np.isnan(rate)
             rate, n_bad = plausibility.gate(rate, self._max_abs_dph, present & ~null)
@@ -121,33 +128,45 @@ class StampedSource:
                             f"in {self.where})") for g in gaps[:MAX_GAP_EVENTS]]
             if len(gaps) > MAX_GAP_EVENTS:
                 events.append(Event(events[-1].t_s, "gap", f"{len(gaps) - MAX_GAP_EVENTS} more gaps in this block"))
-            c["samples"] += b - a
-            c["samples_missing"] += stop - start - (b - a)
+            c["samples"] += int(b - a)
+            c["samples_missing"] += stop - start - int(b - a)
             c["seq_gaps"] += len(gaps)
             c[plausibility.COUNTER] += n_bad
-            events += errors.poll(float(t[np.argmax(present & ~null & np.isnan(rate))]))  # the first implausible one's
-            yield Block.make(t, rate, present, aux, events)
+            bad = present & ~null & np.isnan(rate)                  # made invalid by the gate
+            first = bad.any(axis=1) if self.axes else bad
+            events += errors.poll(float(t[np.argmax(first)]))       # the first implausible sample's time
+            yield Block.make(t, rate, present, aux, events, self.axes)
 
     def close(self) -> None:
         self._closed = True
 
     def to_recording(self) -> Recording:
         """The present, plausible samples on their grid times (gaps stay time gaps), with
-        ``sample_rate_hz`` metadata: what ``read_replay_log`` gives for the same data."""
+        ``sample_rate_hz`` metadata: what ``read_replay_log`` gives for the same data
+        (several axes: the samples plausible on every axis, as a replay log holds them)."""
         t = self.t_first_s + self._idx / self.sample_rate_hz
         rate, _ = plausibility.gate(self._rate, self._max_abs_dph)
-        keep = np.isfinite(rate)
+        keep = np.isfinite(rate).all(axis=1) if self.axes else np.isfinite(rate)
         return Recording(t[keep], rate[keep], {k: v[keep] for k, v in self._aux.items()}, dict(self.meta),
-                         path=self.where)
+                         path=self.where, axes=self.axes)
 
 
-def imu_axis(options: dict, path: str) -> str:
-    """The gyro axis ``options['axis']`` of an IMU recording (x, y or z; default z): one
-    axis per run (a comma list or another name is a FogmonError naming the file)."""
-    axis = options.get("axis") or "z"
-    if axis not in ("x", "y", "z"):
-        raise FogmonError(f"{path}: --axis {axis}: this reader gives one gyro axis, x, y or z")
-    return axis
+def imu_axes(options: dict, path: str) -> tuple[str, ...]:
+    """The gyro axes ``options['axis']`` (``--axis``) asks of an IMU recording ``path``:
+    all three, IMU_AXES, when not given; one (``z``: a one-axis source, as this reader
+    always gave) or several in the order given (``x,y``). A name other than x, y, z is
+    a FogmonError naming the file."""
+    asked = options.get("axis")
+    if asked is None:
+        return IMU_AXES
+    try:
+        names = parse_axes(asked)
+    except FogmonError as e:
+        raise FogmonError(f"{path}: {e}") from None
+    if any(a not in IMU_AXES for a in names):
+        raise FogmonError(f"{path}: --axis {asked}: the gyro axes of an IMU are x, y and z (one, or several "
+                          f"separated by commas)")
+    return names
 
 
 def dph_per_unit(unit: str | None, where: str) -> float:

@@ -2,9 +2,10 @@
 
 Topic (``--topic``): ``sensor_gyro`` (default; fields x, y, z in rad/s and temperature in
 deg C; ``sensor_gyro:1`` for the second instance) or ``sensor_combined`` (gyro_rad[0..2]
-in rad/s). Axis ``--axis`` (default z). Time base: the topic's ``timestamp_sample`` (us
-since boot) where it has one, else ``timestamp``, on fogmon's grid as
-fogmon.sources.stamped describes; times stay in s since boot."""
+in rad/s). Axes ``--axis`` (fogmon.sources.stamped.imu_axes: without it all three, a
+multi-axis source; one axis, a one-axis source). Time base: the topic's
+``timestamp_sample`` (us since boot) where it has one, else ``timestamp``, on fogmon's
+grid as fogmon.sources.stamped describes; times stay in s since boot."""
 from __future__ import annotations
 
 import os
@@ -12,7 +13,7 @@ import os
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import DPH_PER_RPS, StampedSource, imu_axis
+from fogmon.sources.stamped import DPH_PER_RPS, StampedSource, imu_axes
 
 #: topic -> field of each axis (rad/s)
 AXIS_FIELDS = {"sensor_gyro": {"x": "x", "y": "y", "z": "z"},
@@ -20,12 +21,13 @@ AXIS_FIELDS = {"sensor_gyro": {"x": "x", "y": "y", "z": "z"},
 
 
 def open_source(path: str, options: dict) -> StampedSource:
-    """Topic ``options['topic']`` (NAME or NAME:INSTANCE), axis ``options['axis']`` of the
-    ULog ``path`` as a StampedSource (temperature as aux ``temp_c`` where logged)."""
+    """Topic ``options['topic']`` (NAME or NAME:INSTANCE), axes ``options['axis']``
+    (``imu_axes``) of the ULog ``path`` as a StampedSource (temperature as aux ``temp_c``
+    where logged)."""
     import pyulog
     topic = options.get("topic") or "sensor_gyro"
     name, _, inst = topic.partition(":")
-    axis = imu_axis(options, path)
+    axes = imu_axes(options, path)
     if name not in AXIS_FIELDS:
         raise FogmonError(f"{path}: field topic: {name!r} is not a gyro topic fogmon reads ({', '.join(AXIS_FIELDS)})")
     if inst and not inst.isdigit():
@@ -41,14 +43,17 @@ def open_source(path: str, options: dict) -> StampedSource:
         have = ", ".join(f"{d.name}:{d.multi_id}" for d in found) or "none"
         raise FogmonError(f"{path}: field topic: no {topic!r} in the log (instances of {name}: {have})")
     d = data.data
-    field = AXIS_FIELDS[name][axis]
-    if field not in d:
-        raise FogmonError(f"{path}: topic {topic}: no field {field} in the log")
+    fields = [AXIS_FIELDS[name][a] for a in axes]
+    for field in fields:
+        if field not in d:
+            raise FogmonError(f"{path}: topic {topic}: no field {field} in the log")
     time_field = "timestamp_sample" if "timestamp_sample" in d else "timestamp"
     aux = {"temp_c": d["temperature"]} if "temperature" in d else None
     where = f"{path} topic {name}:{data.multi_id}"
+    several = len(axes) > 1
+    rate = np.column_stack([d[f] for f in fields]) if several else d[fields[0]]
+    what = f"{name}:{data.multi_id} {','.join(fields)}"
     return StampedSource(np.asarray(d[time_field], dtype=np.float64) * 1e-6,
-                         np.asarray(d[field], dtype=np.float64) * DPH_PER_RPS, aux,
-                         name=f"PX4 ULog {os.path.basename(path)} {name}:{data.multi_id} {field}", where=where,
-                         time_field=time_field, meta={"sensor": f"{name}:{data.multi_id} {field}"},
-                         max_abs_dph=options["max_rate_dph"])
+                         np.asarray(rate, dtype=np.float64) * DPH_PER_RPS, aux,
+                         name=f"PX4 ULog {os.path.basename(path)} {what}", where=where, time_field=time_field,
+                         meta={"sensor": what}, max_abs_dph=options["max_rate_dph"], axes=axes if several else ())
