@@ -76,49 +76,60 @@ def open_source(path: str, options: dict) -> StampedSource:
         why = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({why})") from None
     try:
-        imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
-        topic = options.get("topic")
-        if topic is None:
-            if len(imu) != 1:
-                raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
-                                  f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
-            topic = imu[0]
-        conns = [c for c in reader.connections if c.topic == topic]
-        if not conns:
-            raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
-                              f"{', '.join(imu) or 'none'})")
-        other = {c.msgtype for c in conns} - {IMU_TYPE}
-        if other:
-            raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
-        n = sum(c.msgcount for c in conns)
-        ns = np.empty(n, np.int64)      # header stamps, integer ns (exact)
-        w = np.empty(n)
-        i = 0
-        layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
-        for conn, _, raw in reader.messages(connections=conns):
-            if len(raw) not in layouts:
-                msg = reader.deserialize(raw, conn.msgtype)
-                layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
-            lay = layouts[len(raw)]
-            if lay is None:
-                msg = reader.deserialize(raw, conn.msgtype)
-                ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-                w[i] = getattr(msg.angular_velocity, axis)
-            else:
-                sec, nsec = lay[0].unpack_from(raw, lay[1])
-                ns[i] = sec * 1_000_000_000 + nsec
-                w[i] = _FLOAT64.unpack_from(raw, lay[2])[0]
-            i += 1
+        topic, conns = _topic(path, reader, options.get("topic"))
+        ns, w = _read_axis(reader, conns, axis)
     finally:
         reader.close()
-    ns, w = ns[:i], w[:i]
     where = f"{path} topic {topic}"
-    if i and not np.any(ns):
+    if len(ns) and not np.any(ns):
         raise FogmonError(f"{where}: field header.stamp: zero in every message (the driver does not stamp them)")
-    t0 = int(ns[0]) if i else 0
+    t0 = int(ns[0]) if len(ns) else 0
     src = StampedSource((ns - t0) * 1e-9, w * DPH_PER_RPS, None, name=f"ROS {os.path.basename(path)} {topic} "
                          f"angular_velocity.{axis}", where=where, time_field="header.stamp",
                          meta={"sensor": f"{topic} angular_velocity.{axis}", "t0_unix_s": repr(t0 * 1e-9)},
                          max_abs_dph=options["max_rate_dph"])
     src.ros_topic = topic  # the topic a Kalibr export names
     return src
+
+
+def _topic(path: str, reader, topic: str | None) -> tuple[str, list]:
+    """The Imu topic to read (``topic``, else the only Imu topic) and its connections."""
+    imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+    if topic is None:
+        if len(imu) != 1:
+            raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
+                              f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
+        topic = imu[0]
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
+                          f"{', '.join(imu) or 'none'})")
+    other = {c.msgtype for c in conns} - {IMU_TYPE}
+    if other:
+        raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
+    return topic, conns
+
+
+def _read_axis(reader, conns: list, axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """Header stamps (integer ns, exact) and angular_velocity.<axis> (rad/s) of every
+    message of ``conns``, in the bag's order."""
+    n = sum(c.msgcount for c in conns)
+    ns = np.empty(n, np.int64)
+    w = np.empty(n)
+    i = 0
+    layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
+    for conn, _, raw in reader.messages(connections=conns):
+        if len(raw) not in layouts:
+            msg = reader.deserialize(raw, conn.msgtype)
+            layouts[len(raw)] = _verified_layout(raw, reader.is2, axis, msg)
+        lay = layouts[len(raw)]
+        if lay is None:
+            msg = reader.deserialize(raw, conn.msgtype)
+            ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            w[i] = getattr(msg.angular_velocity, axis)
+        else:
+            sec, nsec = lay[0].unpack_from(raw, lay[1])
+            ns[i] = sec * 1_000_000_000 + nsec
+            w[i] = _FLOAT64.unpack_from(raw, lay[2])[0]
+        i += 1
+    return ns[:i], w[:i]
