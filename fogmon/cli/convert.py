@@ -75,9 +75,7 @@ def _convert(source, input_path: str, output: str, ext: str) -> tuple[int, int, 
     first = next(blocks, None)
     aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
     axes = first.axes if first is not None else source.axes
-    src_meta = getattr(source, "meta", {}) or {}
-    meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
-            **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
+    meta = _replay_meta(source)
     side = read_sidecar(input_path) if os.path.isfile(input_path) else None
     n = without_aux = partial = 0
     writer = fh = None
@@ -112,3 +110,10 @@ def _convert(source, input_path: str, output: str, ext: str) -> tuple[int, int, 
                 os.remove(output)   # no half-written output
         raise
     return n, without_aux, partial
+
+
+def _replay_meta(source) -> dict[str, str]:
+    """The output's replay-log metadata: the source's, with its sample rate (Hz) and sensor."""
+    src_meta = getattr(source, "meta", {}) or {}
+    return {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
+            **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
