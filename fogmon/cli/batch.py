@@ -89,15 +89,36 @@ def _client(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    from distributed import progress
-
-    from fogmon.cli.outputs import check_outputs
-    from fogmon.fleet import tables, tasks
-    from fogmon.fleet.chunks import plan_chunks
     from fogmon.fleet.inputs import expand_inputs
-    from fogmon.pipeline import OVERALL_MAX_SAMPLES
 
     paths = expand_inputs(args.inputs)
+    _check_outputs(args)
+    opts = _options(args)
+    show = not args.no_progress and sys.stdout.isatty()     # Dask's text progress bar writes to stdout
+    client, cluster = _client(args)
+    try:
+        if show:
+            print(f"fogmon batch: {len(paths)} recordings on {len(client.scheduler_info()['workers'])} Dask workers "
+                  f"({args.scheduler or 'local cluster'})", file=sys.stderr)
+        plans = _check_inputs(client, paths, opts, show)
+        os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
+        jobs = _submit(client, plans, args, opts)
+        if show:
+            from distributed import progress
+            progress([f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None])
+        windows, rows = _gather(client, jobs)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return _finish(args, plans, jobs, windows, rows)
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """FogmonError unless --out, --model and --report can be used (before any work)."""
+    from fogmon.cli.outputs import check_outputs
+    from fogmon.fleet import tables
+
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise FogmonError(f"--out {args.out}: is a file, give a folder")
     if args.model and not os.path.isfile(args.model):
@@ -113,61 +134,76 @@ def run(args: argparse.Namespace) -> int:
     report_dir = os.path.dirname(os.path.abspath(args.report)) if args.report else None
     if report_dir and (os.path.isdir(report_dir) or report_dir != os.path.abspath(args.out)):
         check_outputs({"--report": args.report})           # (a report inside a new --out folder is fine)
-    opts = _options(args)
-    show = not args.no_progress and sys.stdout.isatty()     # Dask's text progress bar writes to stdout
-    client, cluster = _client(args)
-    try:
-        if show:
-            print(f"fogmon batch: {len(paths)} recordings on {len(client.scheduler_info()['workers'])} Dask workers "
-                  f"({args.scheduler or 'local cluster'})", file=sys.stderr)
-        checks = client.map(tasks.check, paths, options=opts, key=[f"check-{i}" for i in range(len(paths))])
-        if show:
-            progress(checks)
-        plans = client.gather(checks)
-        bad = [p for p in plans if p.error]
-        if bad:
-            for p in bad[:-1]:
-                print(f"fogmon batch: error: {p.error}", file=sys.stderr)
-            raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
-                                               " (nothing analysed)"))
-        os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
-        jobs: list[tuple] = []   # (plan, axis, chunks, [chunk futures], explain future, motion future)
-        for i, plan in enumerate(plans):
-            w = int(round(plan.window_s * plan.sample_rate_hz))
-            h = int(round(plan.hop_s * plan.sample_rate_hz))
-            size = int(round(args.chunk_s * plan.sample_rate_hz)) if args.chunk_s else DEFAULT_CHUNK_SAMPLES
-            chunks = plan_chunks(plan.n_samples, w, h, max(size, w), OVERALL_MAX_SAMPLES)
-            for axis in plan.axes or ("",):   # a recording of several axes: each axis on its own
-                key = f"{i}-{axis}" if axis else f"{i}"
-                masked = None
-                if len(chunks) > 1 and not args.keep_motion:
-                    masked = client.submit(tasks.motion_pass, plan, opts, axis, key=f"motion-{key}")
-                futs = [client.submit(tasks.run_chunk, plan, c, opts, masked, axis, key=f"chunk-{key}-{c.index}")
-                        for c in chunks]
-                expl = client.submit(tasks.explain_recording, plan.path, args.model, opts, axis,
-                                     key=f"explain-{key}") if args.model else None
-                jobs.append((plan, axis, chunks, futs, expl, masked))
-        every = [f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None]
-        if show:
-            progress(every)
-        windows: list = []  # pyarrow Tables, one per recording analysed
-        rows: list[dict] = []
-        failed: list[dict] = []
-        for plan, axis, chunks, futs, expl, masked in jobs:
-            results = client.gather(futs)
-            row, win = _recording_row(plan, axis, chunks, results,
-                                      client.gather(masked) if masked is not None else None)
-            if expl is not None:
-                row.update(client.gather(expl))
-            rows.append(row)
-            if win is not None:
-                windows.append(win)
-            if row["error"]:
-                failed.append(row)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+
+
+def _check_inputs(client, paths: list[str], opts: dict, show: bool) -> list:
+    """Every input checked on the cluster (all rows): its plans, or FogmonError naming
+    the bad inputs (the last one in the error, the others on stderr)."""
+    from distributed import progress
+
+    from fogmon.fleet import tasks
+
+    checks = client.map(tasks.check, paths, options=opts, key=[f"check-{i}" for i in range(len(paths))])
+    if show:
+        progress(checks)
+    plans = client.gather(checks)
+    bad = [p for p in plans if p.error]
+    if bad:
+        for p in bad[:-1]:
+            print(f"fogmon batch: error: {p.error}", file=sys.stderr)
+        raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
+                                           " (nothing analysed)"))
+    return plans
+
+
+def _submit(client, plans: list, args: argparse.Namespace, opts: dict) -> list[tuple]:
+    """The tasks of every recording and axis, submitted: one tuple per (recording, axis) of
+    (plan, axis, chunks, [chunk futures], explain future or None, motion future or None)."""
+    from fogmon.fleet import tasks
+    from fogmon.fleet.chunks import plan_chunks
+    from fogmon.pipeline import OVERALL_MAX_SAMPLES
+
+    jobs: list[tuple] = []
+    for i, plan in enumerate(plans):
+        w = int(round(plan.window_s * plan.sample_rate_hz))
+        h = int(round(plan.hop_s * plan.sample_rate_hz))
+        size = int(round(args.chunk_s * plan.sample_rate_hz)) if args.chunk_s else DEFAULT_CHUNK_SAMPLES
+        chunks = plan_chunks(plan.n_samples, w, h, max(size, w), OVERALL_MAX_SAMPLES)
+        for axis in plan.axes or ("",):   # a recording of several axes: each axis on its own
+            key = f"{i}-{axis}" if axis else f"{i}"
+            masked = None
+            if len(chunks) > 1 and not args.keep_motion:
+                masked = client.submit(tasks.motion_pass, plan, opts, axis, key=f"motion-{key}")
+            futs = [client.submit(tasks.run_chunk, plan, c, opts, masked, axis, key=f"chunk-{key}-{c.index}")
+                    for c in chunks]
+            expl = client.submit(tasks.explain_recording, plan.path, args.model, opts, axis,
+                                 key=f"explain-{key}") if args.model else None
+            jobs.append((plan, axis, chunks, futs, expl, masked))
+    return jobs
+
+
+def _gather(client, jobs: list[tuple]) -> tuple[list, list[dict]]:
+    """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed)
+    and the recordings-table rows."""
+    windows: list = []
+    rows: list[dict] = []
+    for plan, axis, chunks, futs, expl, masked in jobs:
+        results = client.gather(futs)
+        row, win = _recording_row(plan, axis, chunks, results,
+                                  client.gather(masked) if masked is not None else None)
+        if expl is not None:
+            row.update(client.gather(expl))
+        rows.append(row)
+        if win is not None:
+            windows.append(win)
+    return windows, rows
+
+
+def _finish(args: argparse.Namespace, plans: list, jobs: list[tuple], windows: list, rows: list[dict]) -> int:
+    """Write the tables (and --report), say what was done and what failed; the exit code."""
+    from fogmon.fleet import tables
+
+    failed = [row for row in rows if row["error"]]
     w_path, r_path = tables.write_tables(args.out, windows, rows)
     for row in failed:
         print(f"fogmon batch: {row['recording']}: failed: {row['error']}", file=sys.stderr)

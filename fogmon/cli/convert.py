@@ -39,12 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fogmon.capture import read_sidecar
     from fogmon.cli.outputs import check_outputs
     from fogmon.cli.source_options import source_options
-    from fogmon.parquet_log import ParquetLogWriter
-    from fogmon.recording import append_replay_rows, write_replay_header
-    from fogmon.sinks.archive import replay_rows
     from fogmon.sources.open import open_replay_source
 
     ext = os.path.splitext(args.output)[1].lower()
@@ -55,22 +51,40 @@ def run(args: argparse.Namespace) -> int:
     if getattr(source, "n_samples", None) is None:
         raise FogmonError(f"{args.input}: an endless source (a sensor model) cannot be converted; "
                           f"use `fogmon sim --out`")
+    try:
+        n, without_aux, partial = _convert(source, args.input, args.output, ext)
+    finally:
+        source.close()
+    print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
+          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else "")
+          + (f"; {partial} samples with only some axes valid left out" if partial else ""))
+    return 0
+
+
+def _convert(source, input_path: str, output: str, ext: str) -> tuple[int, int, int]:
+    """Write ``source``'s valid samples to ``output`` (a Parquet log for ext ".parquet",
+    else a replay-log CSV); no half-written output on any error. Returns the samples
+    written, the valid samples left out without aux values and those left out with only
+    some axes valid."""
+    from fogmon.capture import read_sidecar
+    from fogmon.parquet_log import ParquetLogWriter
+    from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.sinks.archive import replay_rows
+
     blocks = source.blocks()
     first = next(blocks, None)
     aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
     axes = first.axes if first is not None else source.axes
-    src_meta = getattr(source, "meta", {}) or {}
-    meta = {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
-            **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}
-    side = read_sidecar(args.input) if os.path.isfile(args.input) else None
+    meta = _replay_meta(source)
+    side = read_sidecar(input_path) if os.path.isfile(input_path) else None
     n = without_aux = partial = 0
     writer = fh = None
     try:
         if ext == ".parquet":
-            writer = ParquetLogWriter(args.output, aux_names, meta,
+            writer = ParquetLogWriter(output, aux_names, meta,
                                       {"source": source.name, **({"sidecar": side} if side else {})}, axes=axes)
         else:
-            fh = open(args.output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
+            fh = open(output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
             write_replay_header(fh, aux_names, meta, axes)
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep, b_partial, b_without_aux = replay_rows(b)
@@ -93,11 +107,13 @@ def run(args: argparse.Namespace) -> int:
         if fh is not None:
             fh.close()
             with contextlib.suppress(FileNotFoundError):
-                os.remove(args.output)   # no half-written output
+                os.remove(output)   # no half-written output
         raise
-    finally:
-        source.close()
-    print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
-          + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else "")
-          + (f"; {partial} samples with only some axes valid left out" if partial else ""))
-    return 0
+    return n, without_aux, partial
+
+
+def _replay_meta(source) -> dict[str, str]:
+    """The output's replay-log metadata: the source's, with its sample rate (Hz) and sensor."""
+    src_meta = getattr(source, "meta", {}) or {}
+    return {"sample_rate_hz": f"{source.sample_rate_hz:.12g}", "sensor": src_meta.get("sensor", source.name),
+            **{k: v for k, v in src_meta.items() if k not in ("sample_rate_hz", "sensor")}}

@@ -21,6 +21,14 @@ from fogmon.sinks.base import Sink
 def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True) -> None:
     """Options of `fogmon replay` and `fogmon monitor` (``replay=False``: no --realtime):
     engine, sinks, pacing."""
+    _add_davar_arguments(parser)
+    _add_method_arguments(parser)
+    _add_output_arguments(parser, replay)
+    _add_pacing_arguments(parser, replay)
+
+
+def _add_davar_arguments(parser: argparse.ArgumentParser) -> None:
+    """Window, hop, taus and what the engine analyses."""
     g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
     g.add_argument("--window-s", type=positive, metavar="W",
                    help="window length in s. Default: replay: a quarter of the recording (of its first "
@@ -45,6 +53,10 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
                         "one sample <= tau <= window/4 can be computed: other values are left out with a "
                         "warning")
+
+
+def _add_method_arguments(parser: argparse.ArgumentParser) -> None:
+    """The live methods: model check, thermal calibration, outlier rejection, denoising."""
     m = parser.add_argument_group("live methods and model check (docs/monitor.md)")
     m.add_argument("--model", metavar="MODEL.toml",
                    help="check every window against the model's DADEV band (its IEEE-952 noise and aux-free noise "
@@ -69,6 +81,10 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                         "or --thermal-cal; per axis from the [noise.<axis>] tables of a --model of several axes) as "
                         "the channel rate_kalman_dph (deg/h; rate_kalman_dph_<axis> per axis), archived and drawn "
                         "beside raw")
+
+
+def _add_output_arguments(parser: argparse.ArgumentParser, replay: bool) -> None:
+    """Rerun outputs, file rotation and the console."""
     o = parser.add_argument_group("output (Rerun)")
     o.add_argument("--rrd", metavar="OUT.rrd", help="write a Rerun recording file (headless); "
                    "open it with `rerun OUT.rrd`")
@@ -90,6 +106,10 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
                          "0 = one piece)"))
     o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     o.add_argument("--quiet", action="store_true", help="no console summary at the end")
+
+
+def _add_pacing_arguments(parser: argparse.ArgumentParser, replay: bool) -> None:
+    """--duration-s and, for a replay, --realtime."""
     p = parser.add_argument_group("pacing")
     if "--duration-s" not in parser._option_string_actions:  # the source options may define it
         p.add_argument("--duration-s", type=positive, metavar="S",

@@ -9,6 +9,7 @@ import contextlib
 import itertools
 import os
 import sys
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -16,6 +17,10 @@ from fogmon.cli.outputs import check_outputs
 from fogmon.cli.source_options import add_reader_arguments
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+
+if TYPE_CHECKING:
+    from fogmon.recording import Recording
+    from fogmon.sim.model import SensorModel
 
 #: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
 #: needs more than the free space of the output's folder at this rate cannot be written.
@@ -66,9 +71,7 @@ def _first_seconds(rec, duration_s: float):
 
 def run(args) -> int:
     from fogmon.sim.model import load_model
-    from fogmon.sim.scenarios import make_scenario
     from fogmon.sim.simulate import iter_simulate, simulated_axes
-    from fogmon.sources.formats import read_recording
 
     check_outputs({"--out": args.out}, inputs=[args.model, args.like])
     model = load_model(args.model)
@@ -82,26 +85,9 @@ def run(args) -> int:
     axes: tuple[str, ...] = ()
     duration = args.duration_s
     if args.like:
-        like = read_recording(args.like, args)
-        if duration is not None:
-            like = _first_seconds(like, duration)
-            duration = None
-        meta["like"] = args.like
-        if abs(like.sample_rate_hz - model.sample_rate_hz) > 1e-9 * model.sample_rate_hz:
-            print(f"fogmon sim: note: simulating at the recording's {like.sample_rate_hz:g} Hz, not the model's "
-                  f"{model.sample_rate_hz:g} Hz (the noise coefficients hold at any rate)", file=sys.stderr)
-        n_expected = len(like)
+        like, duration, n_expected = _like(args, model, meta)
     elif args.scenario:
-        try:
-            sc = make_scenario(args.scenario, _overrides(args.set), duration, seed)
-        except MemoryError:
-            raise FogmonError(f"--scenario {args.scenario}: not enough memory for its aux channels: lower "
-                              f"sample_rate_hz or the duration") from None
-        aux, aux_t, axes = sc.aux, sc.t_s, sc.axes
-        meta.update(sc.meta)
-        if args.set:
-            meta["scenario_set"] = " ".join(args.set)
-        n_expected = (sc.t_s[-1] - sc.t_s[0]) * model.sample_rate_hz
+        aux, aux_t, axes, n_expected = _scenario(args, model, seed, meta)
     elif duration is None:
         raise FogmonError("give --duration-s, --like RECORDING or --scenario")
     else:
@@ -120,6 +106,40 @@ def run(args) -> int:
     print(f"fogmon sim: wrote {n} samples{' of ' + written if written else ''} at {info['sample_rate_hz']} Hz to "
           f"{args.out} (seed {seed})")
     return 0
+
+
+def _like(args: argparse.Namespace, model: SensorModel, meta: dict) -> tuple[Recording, float | None, float]:
+    """The --like recording (its first --duration-s s if given), the duration left to
+    iter_simulate (None: the recording's) and the samples expected; notes ``meta``."""
+    from fogmon.sources.formats import read_recording
+
+    like = read_recording(args.like, args)
+    duration = args.duration_s
+    if duration is not None:
+        like = _first_seconds(like, duration)
+        duration = None
+    meta["like"] = args.like
+    if abs(like.sample_rate_hz - model.sample_rate_hz) > 1e-9 * model.sample_rate_hz:
+        print(f"fogmon sim: note: simulating at the recording's {like.sample_rate_hz:g} Hz, not the model's "
+              f"{model.sample_rate_hz:g} Hz (the noise coefficients hold at any rate)", file=sys.stderr)
+    return like, duration, len(like)
+
+
+def _scenario(args: argparse.Namespace, model: SensorModel, seed: int,
+              meta: dict) -> tuple[dict, np.ndarray, tuple[str, ...], float]:
+    """The --scenario's aux channels, their times (s), its axes and the samples expected;
+    notes ``meta``."""
+    from fogmon.sim.scenarios import make_scenario
+
+    try:
+        sc = make_scenario(args.scenario, _overrides(args.set), args.duration_s, seed)
+    except MemoryError:
+        raise FogmonError(f"--scenario {args.scenario}: not enough memory for its aux channels: lower "
+                          f"sample_rate_hz or the duration") from None
+    meta.update(sc.meta)
+    if args.set:
+        meta["scenario_set"] = " ".join(args.set)
+    return sc.aux, sc.t_s, sc.axes, (sc.t_s[-1] - sc.t_s[0]) * model.sample_rate_hz
 
 
 def _check_axis(axis: str, axes: tuple[str, ...]) -> None:

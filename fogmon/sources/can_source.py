@@ -109,6 +109,20 @@ def _rate_hz(msg, sample_rate_hz: float | None) -> float:
     return float(sample_rate_hz)
 
 
+def _rate_units(signals: list[tuple[str, Any]], rate_unit: str | None) -> list[str]:
+    """The fogmon.units unit of each (signal, message) of ``signals``: ``rate_unit`` or
+    the signal's DBC unit."""
+    keys = []
+    for sig, m in signals:
+        unit = rate_unit or m.get_signal_by_name(sig).unit or ""
+        key = units.canonical(unit)
+        if key is None:
+            raise FogmonError(f"rate signal {m.name}.{sig} has unit {unit!r}: give --can-rate-unit "
+                              f"(one of {', '.join(units.DPH_PER_UNIT)})")
+        keys.append(key)
+    return keys
+
+
 class CanDecoder:
     """CAN frames -> Frames for one DBC message (the sample clock; with several axes also
     the messages of the other axes' signals, see the module doc). Counters: ``frames_ok``,
@@ -139,14 +153,7 @@ class CanDecoder:
         self.valid_signal = _pick(msg, "can-valid", valid_signal, "valid")
         self.sample_rate_hz = _rate_hz(msg, sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
-        keys = []
-        for sig, m in self._signals:
-            unit = rate_unit or m.get_signal_by_name(sig).unit or ""
-            key = units.canonical(unit)
-            if key is None:
-                raise FogmonError(f"rate signal {m.name}.{sig} has unit {unit!r}: give --can-rate-unit "
-                                  f"(one of {', '.join(units.DPH_PER_UNIT)})")
-            keys.append(key)
+        keys = _rate_units(self._signals, rate_unit)
         #: the rate unit: given (--can-rate-unit, every axis) or the first signal's DBC unit
         self.rate_unit = rate_unit or self._signals[0][1].get_signal_by_name(self._signals[0][0]).unit
         self._rate_unit_given = rate_unit
@@ -192,19 +199,6 @@ class CanDecoder:
         segs: list[tuple[float | None, Frames]] = []
         cur: dict[str, list] = {"seq": [], "rate": [], "valid": [], "temp": []}
         brk = None
-
-        def close_seg():
-            if cur["seq"]:
-                aux = {"temp_c": cur["temp"]} if self.temp_signal else {}
-                with np.errstate(over="ignore"):       # a garbage 1e308 becomes inf, then gated
-                    rate = np.asarray(cur["rate"], dtype=np.float64).reshape(-1, len(self._scale)) * self._scale
-                valid = np.asarray(cur["valid"], dtype=bool).reshape(rate.shape)
-                rate, bad = plausibility.gate(rate, self.max_rate_dph, valid)
-                c[plausibility.COUNTER] += bad
-                segs.append((brk, Frames.from_lists(cur["seq"], rate, valid, aux, axes=self.axes)))
-                for v in cur.values():
-                    v.clear()
-
         c = self.counters
         for m in msgs:
             if m.arbitration_id in self._side and not (m.is_error_frame or m.is_remote_frame):
@@ -213,28 +207,52 @@ class CanDecoder:
             if m.arbitration_id != fid or m.is_error_frame or m.is_remote_frame:
                 c["other_frames"] += 1
                 continue
-            try:
-                d = self.message.decode(bytes(m.data), decode_choices=False)
-                rate = [self._value(j, d) for j in range(len(self._signals))]
-                ok_axes = [v is not None for v in rate]
-                temp = float(d[self.temp_signal]) if self.temp_signal else 0.0
-                seq = int(d[self.counter_signal]) if self.counter_signal else -1
-                ok = bool(d[self.valid_signal]) if self.valid_signal else True
-            except Exception:  # cantools: wrong length, bad multiplexer id, ...
-                c["bad_frames"] += 1
+            row = self._decode(m)
+            if row is None:
                 continue
             ts = float(m.timestamp)
             if self._last_ts is not None and ts - self._last_ts > self._stall_s:
-                close_seg()
+                self._close_segment(cur, brk, segs)
                 brk = (ts - self._last_ts) * self.sample_rate_hz - 1.0
             self._last_ts = ts
             c["frames_ok"] += 1
+            seq, rate, ok_axes, ok, temp = row
             cur["seq"].append(seq % self.seq_modulus if self.seq_modulus else -1)
             cur["rate"].append([math.nan if v is None else v for v in rate])
             cur["valid"].append([ok and a for a in ok_axes])
             cur["temp"].append(temp)
-        close_seg()
+        self._close_segment(cur, brk, segs)
         return segs
+
+    def _decode(self, m) -> tuple[int, list[float | None], list[bool], bool, float] | None:
+        """A clock frame's (counter or -1, rate per axis in signal units or None, axis has
+        a value, valid flag, temperature deg C or 0); None and counted when undecodable."""
+        try:
+            d = self.message.decode(bytes(m.data), decode_choices=False)
+            rate = [self._value(j, d) for j in range(len(self._signals))]
+            ok_axes = [v is not None for v in rate]
+            temp = float(d[self.temp_signal]) if self.temp_signal else 0.0
+            seq = int(d[self.counter_signal]) if self.counter_signal else -1
+            ok = bool(d[self.valid_signal]) if self.valid_signal else True
+        except Exception:  # cantools: wrong length, bad multiplexer id, ...
+            self.counters["bad_frames"] += 1
+            return None
+        return seq, rate, ok_axes, ok, temp
+
+    def _close_segment(self, cur: dict[str, list], brk: float | None, segs: list) -> None:
+        """The frames collected in ``cur`` (then emptied), scaled to deg/h and gated, appended
+        to ``segs`` with ``brk``, the samples lost before them."""
+        if not cur["seq"]:
+            return
+        aux = {"temp_c": cur["temp"]} if self.temp_signal else {}
+        with np.errstate(over="ignore"):       # a garbage 1e308 becomes inf, then gated
+            rate = np.asarray(cur["rate"], dtype=np.float64).reshape(-1, len(self._scale)) * self._scale
+        valid = np.asarray(cur["valid"], dtype=bool).reshape(rate.shape)
+        rate, bad = plausibility.gate(rate, self.max_rate_dph, valid)
+        self.counters[plausibility.COUNTER] += bad
+        segs.append((brk, Frames.from_lists(cur["seq"], rate, valid, aux, axes=self.axes)))
+        for v in cur.values():
+            v.clear()
 
     def _take_side(self, m) -> None:
         """A frame of another axis's message: its values wait for the next clock frame."""

@@ -171,8 +171,15 @@ class KvhCodec:
         return status, seq, temp_c, bad
 
     def feed(self, data: bytes) -> Frames:
+        self._buf += data
+        seqs, sensors, status_bytes, temps, runs = self._scan()
+        return self._frames(seqs, sensors, status_bytes, temps, runs)
+
+    def _scan(self) -> tuple[list[int], list[tuple], list[int], list[float], list[int]]:
+        """The whole frames in the buffer (then dropped from it; a partial frame stays),
+        found by header and CRC, with counters: per frame its counter, the six gyro/accel
+        fields, status byte, temperature (deg C) and the bytes skipped before it."""
         buf = self._buf
-        buf += data
         n = len(buf)
         L, hdr, layout = self.frame_len, self.header, self._layout
         seqs, sensors, status_bytes, temps, runs = [], [], [], [], []
@@ -216,6 +223,13 @@ class KvhCodec:
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
         c[plausibility.TEMP_COUNTER] += bad_temp
+        return seqs, sensors, status_bytes, temps, runs
+
+    def _frames(self, seqs: list[int], sensors: list[tuple], status_bytes: list[int], temps: list[float],
+                runs: list[int]) -> Frames:
+        """The scanned frames as Frames: rate in deg/h of the decoded axes, gated; aux
+        temp_c and, with --kvh-accel, the accelerations in g."""
+        c = self.counters
         ai = self._axis_i
         bits = np.asarray(status_bytes, dtype=np.uint8).reshape(-1, 1)
         valid = (bits >> np.asarray(ai, dtype=np.uint8) & 1).astype(bool)
@@ -225,16 +239,22 @@ class KvhCodec:
             rate_dph, valid = rate_dph[:, 0], valid[:, 0]
         rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
-        aux = {"temp_c": temps}
+        aux: dict = {"temp_c": temps}
         if self._accel_names:
-            accel_g = gyro_accel[:, [3 + i for i in ai]] * self._accel_g
-            flagged = (bits >> (np.asarray(ai, dtype=np.uint8) + 4) & 1) == 1
-            with np.errstate(invalid="ignore"):
-                implausible = flagged & ~(np.abs(accel_g) <= plausibility.KVH_ACCEL_MAX_ABS_G)
-            c[plausibility.ACCEL_COUNTER] += int(implausible.sum())
-            accel_g[~flagged | implausible] = np.nan
-            aux = {**dict(zip(self._accel_names, accel_g.T, strict=True)), **aux}
-        return Frames.from_lists(seqs, rate, valid, aux, runs, L, self.axes)
+            aux = {**self._accel_aux(gyro_accel, bits), **aux}
+        return Frames.from_lists(seqs, rate, valid, aux, runs, self.frame_len, self.axes)
+
+    def _accel_aux(self, gyro_accel: np.ndarray, bits: np.ndarray) -> dict[str, np.ndarray]:
+        """The decoded axes' accelerations (g) as aux channels: NaN where the status byte
+        flags them invalid or they are implausible (counted)."""
+        ai = self._axis_i
+        accel_g = gyro_accel[:, [3 + i for i in ai]] * self._accel_g
+        flagged = (bits >> (np.asarray(ai, dtype=np.uint8) + 4) & 1) == 1
+        with np.errstate(invalid="ignore"):
+            implausible = flagged & ~(np.abs(accel_g) <= plausibility.KVH_ACCEL_MAX_ABS_G)
+        self.counters[plausibility.ACCEL_COUNTER] += int(implausible.sum())
+        accel_g[~flagged | implausible] = np.nan
+        return dict(zip(self._accel_names, accel_g.T, strict=True))
 
 
 def _plausible_temp_c(temp_c: float) -> tuple[float, int]:

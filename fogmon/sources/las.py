@@ -39,47 +39,10 @@ def open_source(path: str, options: dict) -> StampedSource:
     """The time and rate curves of the LAS file ``path`` as a StampedSource; a missing
     curve or a depth index without a time curve is a one-line FogmonError naming the
     file and the field."""
-    import lasio
-    try:
-        las = lasio.read(path, ignore_header_errors=False)
-    except Exception as e:  # lasio raises many error types for broken files
-        why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FogmonError(f"{path}: not a readable LAS file ({why})") from None
-    curves = {c.mnemonic: c for c in las.curves}
-    if not curves:
-        raise FogmonError(f"{path}: no curves in the ~Curve section")
+    las = _read(path)
     index = las.curves[0]
-    have = ", ".join(f"{c.mnemonic} ({c.unit or 'no unit'})" for c in las.curves)
-
-    def curve(name: str, what: str):
-        if name not in curves:
-            raise FogmonError(f"{path}: field {what}: no curve {name!r} in the file (it has: {have})")
-        return curves[name]
-
-    tname = options.get("time_channel")
-    if tname:
-        tc = curve(tname, "time_channel")
-    elif index.unit.lower() in TIME_UNITS:
-        tc = index
-    elif index.unit.lower() in DEPTH_UNITS:
-        raise FogmonError(f"{path}: depth-indexed (index curve {index.mnemonic} in {index.unit}); the Allan "
-                          f"deviation needs time: name the time curve with --time-channel (curves: {have})")
-    else:
-        raise FogmonError(f"{path}: the index curve {index.mnemonic} has unit {index.unit!r}, not a time "
-                          f"({', '.join(TIME_UNITS)}); name the time curve with --time-channel")
-    t_per = TIME_UNITS.get(tc.unit.lower())
-    if t_per is None:
-        raise FogmonError(f"{path}: field time_channel: curve {tc.mnemonic} has unit {tc.unit!r}, not a time "
-                          f"({', '.join(TIME_UNITS)})")
-    rname = options.get("channel")
-    if rname:
-        rc = curve(rname, "channel")
-    else:
-        rates = [c for c in las.curves if _is_rate(c.unit)]
-        if len(rates) != 1:
-            raise FogmonError(f"{path}: {len(rates) or 'no'} curves with an angular-rate unit; name the rate "
-                              f"curve with --channel (curves: {have})")
-        rc = rates[0]
+    tc, t_per = _time_curve(path, las, options.get("time_channel"))
+    rc = _rate_curve(path, las, options.get("channel"))
     unit = options.get("rate_unit") or rc.unit
     where = f"{path} curve {rc.mnemonic}"
     factor = dph_per_unit(unit, where)
@@ -96,3 +59,60 @@ def open_source(path: str, options: dict) -> StampedSource:
                          where=where, time_field=f"curve {tc.mnemonic}", meta={"sensor": f"{rc.mnemonic} ({unit})"},
                          max_abs_dph=options["max_rate_dph"],
                          counters={"rows_without_time": int(np.count_nonzero(~has_t))} if not has_t.all() else None)
+
+
+def _read(path: str):
+    """The LAS file ``path`` read by lasio, with at least one curve."""
+    import lasio
+    try:
+        las = lasio.read(path, ignore_header_errors=False)
+    except Exception as e:  # lasio raises many error types for broken files
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable LAS file ({why})") from None
+    if not las.curves:
+        raise FogmonError(f"{path}: no curves in the ~Curve section")
+    return las
+
+
+def _have(las) -> str:
+    """The file's curves and their units, for error messages."""
+    return ", ".join(f"{c.mnemonic} ({c.unit or 'no unit'})" for c in las.curves)
+
+
+def _curve(path: str, las, name: str, what: str):
+    """The curve ``name`` (given as option ``what``) of ``las``."""
+    curves = {c.mnemonic: c for c in las.curves}
+    if name not in curves:
+        raise FogmonError(f"{path}: field {what}: no curve {name!r} in the file (it has: {_have(las)})")
+    return curves[name]
+
+
+def _time_curve(path: str, las, name: str | None):
+    """The time curve (``name``, else the index curve if its unit is a time) and its s per unit."""
+    index = las.curves[0]
+    if name:
+        tc = _curve(path, las, name, "time_channel")
+    elif index.unit.lower() in TIME_UNITS:
+        tc = index
+    elif index.unit.lower() in DEPTH_UNITS:
+        raise FogmonError(f"{path}: depth-indexed (index curve {index.mnemonic} in {index.unit}); the Allan "
+                          f"deviation needs time: name the time curve with --time-channel (curves: {_have(las)})")
+    else:
+        raise FogmonError(f"{path}: the index curve {index.mnemonic} has unit {index.unit!r}, not a time "
+                          f"({', '.join(TIME_UNITS)}); name the time curve with --time-channel")
+    t_per = TIME_UNITS.get(tc.unit.lower())
+    if t_per is None:
+        raise FogmonError(f"{path}: field time_channel: curve {tc.mnemonic} has unit {tc.unit!r}, not a time "
+                          f"({', '.join(TIME_UNITS)})")
+    return tc, t_per
+
+
+def _rate_curve(path: str, las, name: str | None):
+    """The rate curve: ``name``, else the only curve with an angular-rate unit."""
+    if name:
+        return _curve(path, las, name, "channel")
+    rates = [c for c in las.curves if _is_rate(c.unit)]
+    if len(rates) != 1:
+        raise FogmonError(f"{path}: {len(rates) or 'no'} curves with an angular-rate unit; name the rate "
+                          f"curve with --channel (curves: {_have(las)})")
+    return rates[0]

@@ -58,25 +58,10 @@ def parse_columns(spec: str) -> tuple[list[str], int | None]:
     """``'seq:256,rate_dps,temp_c,-'`` -> (names, seq modulus). Raises FogmonError naming
     the bad field."""
     names, modulus = [], None
-    fields = [f.strip() for f in spec.split(",")]
-    for i, f in enumerate(fields, 1):
-        if f in ("-", "_"):
-            names.append("-")
-            continue
-        if f.startswith("seq"):
-            if f == "seq":
-                names.append("seq")
-                continue
-            m = re.fullmatch(r"seq:(\d+)", f)
-            if not m or int(m.group(1)) < 2:
-                raise FogmonError(f"--columns field {i} {f!r}: write seq or seq:N with N >= 2")
-            modulus = int(m.group(1))
-            names.append("seq")
-            continue
-        if f == "time_s" or not _NAME.match(f):
-            raise FogmonError(f"--columns field {i} {f!r}: not a usable column name "
-                              f"(time comes from --rate-hz and the counter; use - to ignore a field)")
-        names.append(f)
+    for i, f in enumerate((f.strip() for f in spec.split(",")), 1):
+        name, mod = _column(i, f)
+        names.append(name)
+        modulus = mod or modulus
     real = [n for n in names if n != "-"]
     dup = {n for n in real if real.count(n) > 1}
     if dup:
@@ -87,6 +72,35 @@ def parse_columns(spec: str) -> tuple[list[str], int | None]:
         raise FogmonError(f"--columns needs exactly one rate column (one of {', '.join(RATE_COLUMNS)}) or one per "
                           f"axis (rate_x_dph, rate_y_dps, ...), got {spec!r}")
     return names, modulus
+
+
+def _column(i: int, f: str) -> tuple[str, int | None]:
+    """The column name of --columns field ``i`` (1-based) ``f`` ("-" ignored, "seq" the
+    counter) and the counter's modulus if ``f`` gives one."""
+    if f in ("-", "_"):
+        return "-", None
+    if f == "seq":
+        return "seq", None
+    if f.startswith("seq"):
+        m = re.fullmatch(r"seq:(\d+)", f)
+        if not m or int(m.group(1)) < 2:
+            raise FogmonError(f"--columns field {i} {f!r}: write seq or seq:N with N >= 2")
+        return "seq", int(m.group(1))
+    if f == "time_s" or not _NAME.match(f):
+        raise FogmonError(f"--columns field {i} {f!r}: not a usable column name "
+                          f"(time comes from --rate-hz and the counter; use - to ignore a field)")
+    return f, None
+
+
+def _picked_axes(by_axis: dict[str, tuple[str, str]], axis: str | None, columns: str) -> list[str]:
+    """The axes decoded: those of --axis ``axis`` (comma-separated), else every rate
+    column's axis of ``by_axis`` (axis -> (column, unit); "" for a one-axis log)."""
+    picked = list(by_axis) if axis is None or "" in by_axis else axis.split(",")
+    missing = [a for a in picked if a not in by_axis]
+    if missing:
+        raise FogmonError(f"--axis {axis}: --columns {columns!r} has no rate column of axis "
+                          f"{', '.join(missing)} (it has: {', '.join(by_axis)})")
+    return picked
 
 
 class LinesCodec:
@@ -107,11 +121,7 @@ class LinesCodec:
         self.seq_modulus = (mod or 2 ** 62) if has_seq else None
         rates = {n: r for n in self._names if (r := rate_column(n)) is not None}
         by_axis = {a: (n, u) for n, (a, u) in rates.items()}
-        picked = list(by_axis) if axis is None or "" in by_axis else axis.split(",")
-        missing = [a for a in picked if a not in by_axis]
-        if missing:
-            raise FogmonError(f"--axis {axis}: --columns {columns!r} has no rate column of axis "
-                              f"{', '.join(missing)} (it has: {', '.join(by_axis)})")
+        picked = _picked_axes(by_axis, axis, columns)
         self.axes: tuple[str, ...] = tuple(picked) if len(picked) > 1 else ()
         self._rates = [(by_axis[a][0], units.dph_scale(by_axis[a][1], self.sample_rate_hz),
                         f"valid_{a}" if f"valid_{a}" in self._names else None) for a in picked]
