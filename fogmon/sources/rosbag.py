@@ -85,46 +85,14 @@ def open_source(path: str, options: dict) -> StampedSource:
         why = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({why})") from None
     try:
-        imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
-        topic = options.get("topic")
-        if topic is None:
-            if len(imu) != 1:
-                raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
-                                  f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
-            topic = imu[0]
-        conns = [c for c in reader.connections if c.topic == topic]
-        if not conns:
-            raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
-                              f"{', '.join(imu) or 'none'})")
-        other = {c.msgtype for c in conns} - {IMU_TYPE}
-        if other:
-            raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
-        n = sum(c.msgcount for c in conns)
-        ns = np.empty(n, np.int64)      # header stamps, integer ns (exact)
-        v = np.empty((n, 6))            # angular_velocity x, y, z (rad/s), linear_acceleration x, y, z (m/s^2)
-        i = 0
-        layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
-        for conn, _, raw in reader.messages(connections=conns):
-            if len(raw) not in layouts:
-                msg = reader.deserialize(raw, conn.msgtype)
-                layouts[len(raw)] = _verified_layout(raw, reader.is2, msg)
-            lay = layouts[len(raw)]
-            if lay is None:
-                msg = reader.deserialize(raw, conn.msgtype)
-                ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-                v[i] = _vectors(msg)
-            else:
-                sec, nsec = lay[0].unpack_from(raw, lay[1])
-                ns[i] = sec * 1_000_000_000 + nsec
-                v[i] = _VECTORS.unpack_from(raw, lay[2])
-            i += 1
+        topic, conns = _topic(path, reader, options.get("topic"))
+        ns, v = _read_messages(reader, conns)
     finally:
         reader.close()
-    ns, v = ns[:i], v[:i]
     where = f"{path} topic {topic}"
-    if i and not np.any(ns):
+    if len(ns) and not np.any(ns):
         raise FogmonError(f"{where}: field header.stamp: zero in every message (the driver does not stamp them)")
-    t0 = int(ns[0]) if i else 0
+    t0 = int(ns[0]) if len(ns) else 0
     cols = [IMU_AXES.index(a) for a in axes]
     field = f"angular_velocity.{','.join(axes)}"
     several = len(axes) > 1
@@ -135,3 +103,47 @@ def open_source(path: str, options: dict) -> StampedSource:
                         max_abs_dph=options["max_rate_dph"], axes=axes if several else ())
     src.ros_topic = topic  # the topic a Kalibr export names
     return src
+
+
+def _topic(path: str, reader, topic: str | None) -> tuple[str, list]:
+    """The Imu topic to read (``topic``, or the file's only Imu topic) and its connections;
+    a one-line FogmonError naming the file's Imu topics when there is no such topic."""
+    imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+    if topic is None:
+        if len(imu) != 1:
+            raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
+                              f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
+        topic = imu[0]
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
+                          f"{', '.join(imu) or 'none'})")
+    other = {c.msgtype for c in conns} - {IMU_TYPE}
+    if other:
+        raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
+    return topic, conns
+
+
+def _read_messages(reader, conns: list) -> tuple[np.ndarray, np.ndarray]:
+    """Header stamps (integer ns, exact) and (angular_velocity x, y, z in rad/s,
+    linear_acceleration x, y, z in m/s^2) of every message of ``conns``, read from the
+    raw bytes at offsets verified once per message length."""
+    n = sum(c.msgcount for c in conns)
+    ns = np.empty(n, np.int64)
+    v = np.empty((n, 6))
+    i = 0
+    layouts: dict[int, tuple | None] = {}   # message length -> verified field offsets
+    for conn, _, raw in reader.messages(connections=conns):
+        if len(raw) not in layouts:
+            layouts[len(raw)] = _verified_layout(raw, reader.is2, reader.deserialize(raw, conn.msgtype))
+        lay = layouts[len(raw)]
+        if lay is None:
+            msg = reader.deserialize(raw, conn.msgtype)
+            ns[i] = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            v[i] = _vectors(msg)
+        else:
+            sec, nsec = lay[0].unpack_from(raw, lay[1])
+            ns[i] = sec * 1_000_000_000 + nsec
+            v[i] = _VECTORS.unpack_from(raw, lay[2])
+        i += 1
+    return ns[:i], v[:i]

@@ -24,24 +24,10 @@ def open_source(path: str, options: dict) -> StampedSource:
     """Topic ``options['topic']`` (NAME or NAME:INSTANCE), axes ``options['axis']``
     (``imu_axes``) of the ULog ``path`` as a StampedSource (temperature as aux ``temp_c``
     where logged)."""
-    import pyulog
     topic = options.get("topic") or "sensor_gyro"
-    name, _, inst = topic.partition(":")
     axes = imu_axes(options, path)
-    if name not in AXIS_FIELDS:
-        raise FogmonError(f"{path}: field topic: {name!r} is not a gyro topic fogmon reads ({', '.join(AXIS_FIELDS)})")
-    if inst and not inst.isdigit():
-        raise FogmonError(f"{path}: field topic: instance {inst!r} of {topic!r} is not a whole number")
-    try:
-        log = pyulog.ULog(path, [name])
-    except Exception as e:  # pyulog raises plain exceptions for broken files
-        why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FogmonError(f"{path}: not a readable ULog file ({why})") from None
-    found = [d for d in log.data_list if d.name == name]
-    data = next((d for d in found if d.multi_id == int(inst or 0)), None)
-    if data is None:
-        have = ", ".join(f"{d.name}:{d.multi_id}" for d in found) or "none"
-        raise FogmonError(f"{path}: field topic: no {topic!r} in the log (instances of {name}: {have})")
+    data = _topic_data(path, topic)
+    name = data.name
     d = data.data
     fields = [AXIS_FIELDS[name][a] for a in axes]
     for field in fields:
@@ -57,3 +43,27 @@ def open_source(path: str, options: dict) -> StampedSource:
                          np.asarray(rate, dtype=np.float64) * DPH_PER_RPS, aux,
                          name=f"PX4 ULog {os.path.basename(path)} {what}", where=where, time_field=time_field,
                          meta={"sensor": what}, max_abs_dph=options["max_rate_dph"], axes=axes if several else ())
+
+
+def _topic_data(path: str, topic: str):
+    """The logged data of ``topic`` (NAME or NAME:INSTANCE) in the ULog ``path``; a
+    one-line FogmonError for a topic fogmon does not read, a broken file or a missing
+    instance (naming the instances the log has)."""
+    import pyulog
+
+    name, _, inst = topic.partition(":")
+    if name not in AXIS_FIELDS:
+        raise FogmonError(f"{path}: field topic: {name!r} is not a gyro topic fogmon reads ({', '.join(AXIS_FIELDS)})")
+    if inst and not inst.isdigit():
+        raise FogmonError(f"{path}: field topic: instance {inst!r} of {topic!r} is not a whole number")
+    try:
+        log = pyulog.ULog(path, [name])
+    except Exception as e:  # pyulog raises plain exceptions for broken files
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise FogmonError(f"{path}: not a readable ULog file ({why})") from None
+    found = [d for d in log.data_list if d.name == name]
+    data = next((d for d in found if d.multi_id == int(inst or 0)), None)
+    if data is None:
+        have = ", ".join(f"{d.name}:{d.multi_id}" for d in found) or "none"
+        raise FogmonError(f"{path}: field topic: no {topic!r} in the log (instances of {name}: {have})")
+    return data
