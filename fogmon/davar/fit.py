@@ -382,11 +382,18 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     misfit[use] = rw == 0
     rest = np.setdiff1d(np.flatnonzero(ok), use)
     if len(rest):
-        m_rest = np.asarray(m, dtype=np.int64)[rest]
-        nu_rest = _NoiseModel(tau[rest], m_rest, np.asarray(n_terms)[rest], n_samples)(a)
-        z = np.log(avar[rest] / np.maximum(tau[rest][:, None] ** POWERS @ a, 1e-300))
-        misfit[rest] = np.abs(z) / np.sqrt(2.0 / nu_rest + MISFIT_FLOOR**2) >= TUKEY_C
+        misfit[rest] = _misfit_outside(a, tau[rest], avar[rest], np.asarray(m, dtype=np.int64)[rest],
+                                       np.asarray(n_terms)[rest], n_samples)
     return a, se, misfit, upper
+
+
+def _misfit_outside(a: np.ndarray, tau: np.ndarray, avar: np.ndarray, m: np.ndarray, n_terms: np.ndarray,
+                    n_samples: int) -> np.ndarray:
+    """Taus outside the fitted subset that the fitted terms ``a`` cannot describe: the
+    Tukey rejection of their log residual from the model, scaled by its sampling spread."""
+    nu = _NoiseModel(tau, m, n_terms, n_samples)(a)
+    z = np.log(avar / np.maximum(tau[:, None] ** POWERS @ a, 1e-300))
+    return np.abs(z) / np.sqrt(2.0 / nu + MISFIT_FLOOR**2) >= TUKEY_C
 
 
 _QUICK_RTOL = 1e-3  # model convergence of quick_avar_terms

@@ -16,6 +16,7 @@ them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -496,19 +497,7 @@ def outliers(ctx: Context) -> Candidate | None:
     z_cut = min(law.z_even, ev.thr)
     se = np.where(ev.z != 0.0, np.abs(ev.amp / np.where(ev.z != 0.0, ev.z, 1.0)), 0.0)
     se = np.where(se > 0, se, float(np.median(se[se > 0])) if (se > 0).any() else 0.0)
-    removed = np.zeros(ctx.n)
-    first_z = np.zeros(ctx.n)
-    amp, z = ev.amp, ev.z
-    y = ctx.y.copy()
-    for _ in range(OUTLIER_PASSES):
-        new = detectors.find_spikes(z, z_cut, min_sep=ev.sep)
-        new = new[first_z[new] == 0.0]
-        if not len(new):
-            break
-        removed[new] += amp[new]
-        first_z[new] = np.abs(z[new])
-        y[new] -= amp[new]
-        amp, z = spike_scan(ctx, np.where(ctx.valid, y, 0.0))
+    removed, first_z = _outlier_passes(ctx, ev, z_cut)
     idx = np.flatnonzero(first_z > 0)
     if not len(idx):
         return None
@@ -531,24 +520,47 @@ def outliers(ctx: Context) -> Candidate | None:
             f"rate and amplitude distribution ({POPULATION_K} parameters) vs {ev.bic_glitches:.1f} listing "
             f"{len(ev.glitch_idx)} glitch(es) one by one; outliers replaced by the interpolation from their "
             f"neighbours plus the model's conditional noise")
+    return Candidate("outliers", params, {"rate_per_h": math.sqrt(len(idx)) / hours}, law.gain / ev.sep,
+                     POPULATION_K, text, rate, None, functools.partial(_population_heldout, ctx, ev),
+                     listing={"times_s": ctx.t_s[idx], "amplitudes_dph": a, "abs_z": first_z[idx]})
+
+
+def _outlier_passes(ctx: Context, ev, z_cut: float) -> tuple[np.ndarray, np.ndarray]:
+    """The spike scan repeated on the cleaned residual (clusters), at most OUTLIER_PASSES
+    times: per sample the amplitude removed (deg/h) and the |z| it was first found at (0:
+    not an outlier)."""
+    removed = np.zeros(ctx.n)
+    first_z = np.zeros(ctx.n)
+    amp, z = ev.amp, ev.z
+    y = ctx.y.copy()
+    for _ in range(OUTLIER_PASSES):
+        new = detectors.find_spikes(z, z_cut, min_sep=ev.sep)
+        new = new[first_z[new] == 0.0]
+        if not len(new):
+            break
+        removed[new] += amp[new]
+        first_z[new] = np.abs(z[new])
+        y[new] -= amp[new]
+        amp, z = spike_scan(ctx, np.where(ctx.valid, y, 0.0))
+    return removed, first_z
+
+
+def _population_heldout(ctx: Context, ev) -> list[tuple[float, float]]:
+    """The held-out check of an outlier population: the contamination law fitted on one
+    half of the record, its log-likelihood gain on the other half against the gain it
+    claims there (per independent spike statistic), both ways."""
     tested = ctx.valid & (ev.z != 0.0)
     half = np.arange(ctx.n) < ctx.n // 2
-
-    def heldout():
-        res = []
-        for fit_m, test_m in ((half, ~half), (~half, half)):
-            law_f = detectors.fit_contamination(ev.z[tested & fit_m])
-            zt = ev.z[tested & test_m]
-            if law_f is None:
-                res.append((0.0, 0.0))
-                continue
-            share = len(zt) / max(int((tested & fit_m).sum()), 1)
-            res.append((law_f.loglik_gain(zt) / ev.sep, law_f.gain / ev.sep * share))
-        return res
-
-    return Candidate("outliers", params, {"rate_per_h": math.sqrt(len(idx)) / hours}, law.gain / ev.sep,
-                     POPULATION_K, text, rate, None, heldout,
-                     listing={"times_s": ctx.t_s[idx], "amplitudes_dph": a, "abs_z": first_z[idx]})
+    res = []
+    for fit_m, test_m in ((half, ~half), (~half, half)):
+        law_f = detectors.fit_contamination(ev.z[tested & fit_m])
+        zt = ev.z[tested & test_m]
+        if law_f is None:
+            res.append((0.0, 0.0))
+            continue
+        share = len(zt) / max(int((tested & fit_m).sum()), 1)
+        res.append((law_f.loglik_gain(zt) / ev.sep, law_f.gain / ev.sep * share))
+    return res
 
 
 MEAN_CANDIDATES = {
@@ -862,6 +874,30 @@ def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tu
     return d0 - float(r.fun), lines, float(r.x)
 
 
+def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
+    """The held-out check of vibration lines: refitted on one half of the record from the
+    fitted (centre, rms, bandwidth) ``lines``, the deviance they gain on the other half,
+    and on the half they were refitted on, both ways."""
+    sample_rate_hz, n = ctx.sample_rate_hz, ctx.n
+    out = []
+    h = n // 2
+    halves = (slice(0, h), slice(h, 2 * h))
+    bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
+    for a, b in ((0, 1), (1, 0)):
+        ga, la, Na = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
+        S0b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx))
+        S1b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx) if Na is None else Na)
+        fl = LEAKAGE_FLOOR * float(np.median(S0b))
+        pb = {"freq_hz": [x[0] for x in la], "sigma_dph": [x[1] for x in la], "bandwidth_hz": [x[2] for x in la]}
+        gb = (
+            bps[b].deviance(S0b, fl) - bps[b].deviance(S1b + lines_psd(pb, sample_rate_hz, bps[b].omega), fl)
+            if la
+            else 0.0
+        )
+        out.append((float(gb), float(ga)))
+    return out  # (tested on the second half, on the first)
+
+
 def vibration_lines(ctx: Context) -> Candidate | None:
     """Narrowband random vibration: lines proposed by detectors.spectral_lines on the
     residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
@@ -898,25 +934,6 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         wiener = np.where(np.isfinite(S_all) & (S_all > 0), S_l / S_all, 0.0)
     est = np.fft.irfft(wiener * ctx.Yf, n)
 
-    def heldout():
-        out = []
-        h = n // 2
-        halves = (slice(0, h), slice(h, 2 * h))
-        bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
-        for a, b in ((0, 1), (1, 0)):
-            ga, la, Na = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
-            S0b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx))
-            S1b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx) if Na is None else Na)
-            fl = LEAKAGE_FLOOR * float(np.median(S0b))
-            pb = {"freq_hz": [x[0] for x in la], "sigma_dph": [x[1] for x in la], "bandwidth_hz": [x[2] for x in la]}
-            gb = (
-                bps[b].deviance(S0b, fl) - bps[b].deviance(S1b + lines_psd(pb, sample_rate_hz, bps[b].omega), fl)
-                if la
-                else 0.0
-            )
-            out.append((float(gb), float(ga)))
-        return out  # (tested on the second half, on the first)
-
     ev = ("Whittle fit of the residual spectrum: narrowband random vibration, "
           + "; ".join(f"{f:.4g} Hz (-3 dB bandwidth {bw:.3g} Hz, rms {sig:.3g} deg/h, ADEV hump near "
                       f"tau = {0.371 / f:.3g} s)" for f, sig, bw in lines)
@@ -924,7 +941,7 @@ def vibration_lines(ctx: Context) -> Candidate | None:
           + ("" if N is None else f"; white level refitted under the lines: N {ctx.stoch.noise.N_dpsh:.4g} -> "
                                   f"{N:.4g} deg/sqrt(h)"))
     return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines) + (N is not None), ev,
-                     rate=est, heldout=heldout, white_n0_dpsh=N)
+                     rate=est, heldout=functools.partial(_lines_heldout, ctx, lines), white_n0_dpsh=N)
 
 
 # ---------------------------------------------------------------- noise (coefficients)

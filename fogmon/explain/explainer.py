@@ -17,6 +17,7 @@ all cores.
 """
 from __future__ import annotations
 
+import functools
 import math
 import multiprocessing as mp
 import os
@@ -421,40 +422,10 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     rejected: list[tuple[str, float, str]] = []
     deferred: dict[str, tuple[float, str]] = {}  # kind -> (bic gain, why): retried after an acceptance
     while len(accepted) < opt.max_effects:
-        chosen = None
-        for tier in tiers(cands):
-            for c in tier:
-                if c.kind in refused or c.kind in deferred:
-                    continue
-                bg = c.bic_gain(ctx.penalty)
-                if bg <= 0:
-                    break
-                line = _inside_line(c, cands, ctx.sample_rate_hz / ctx.n)
-                if line is not None:
-                    deferred[c.kind] = (bg, f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
-                                            f"vibration_lines fits (random vibration, not one coherent sinusoid)")
-                    continue
-                ok, note = _heldout(ctx, c)
-                if not ok:
-                    rejected.append((c.kind, bg, f"failed the held-out check: {note}"))
-                    refused.add(c.kind)
-                    continue
-                trial = _try(c, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, len(accepted), progress)
-                overfit = _new_deficit(current, trial[4]) if c.rate is None else None
-                if overfit is not None:
-                    rejected.append((c.kind, bg, f"makes the model noisier than the recording at tau {overfit} s "
-                                                 f"(the spectral fit trades long taus for short ones)"))
-                    refused.add(c.kind)
-                    continue
-                if not _lowers(current.score.value, trial[4].score.value):
-                    deferred[c.kind] = (bg, f"does not lower the score ({current.score.value:.3f} -> "
-                                            f"{trial[4].score.value:.3f}): what it fits is within chance "
-                                            f"next to what is still missing")
-                    continue
-                chosen = (c, bg, note, trial)
-                break
-            if chosen is not None:
-                break
+        trial_of = functools.partial(_try, y=y, stoch=stoch, null=null, ctx=ctx, counts=counts, aux=aux, t=t,
+                                     valid=valid, like=like, grid=grid, B=B, opt=opt, n_acc=len(accepted),
+                                     progress=progress)
+        chosen = _choose(cands, ctx, current, refused, deferred, rejected, trial_of)
         if chosen is None:
             break
         c, bg, note, (y, stoch, null, ctx, after, cands) = chosen
@@ -466,17 +437,72 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     rejected += [(k, bg, why) for k, (bg, why) in deferred.items()]
     rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
-    # the stochastic part's coefficients: the model's, with N0 of a white-level effect and
-    # the noise kind's corrections (R is the deterministic part's, unchanged)
-    fitted = SensorModel(model.sample_rate_hz, model.bias_dph, replace(stoch.noise, R_dphh=model.noise.R_dphh),
-                         [*model.effects, *(a.cand.effect() for a in accepted if a.cand.corrected_noise is None)],
-                         dict(model.meta))
-    fitted = validate_model(fitted)
+    fitted = _fitted_model(model, stoch, accepted)
     accepted.sort(key=lambda a: -a.cand.gain)
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
     current = replace(current, regions=mismatch.locate(current.regions, y, valid, grid, current.null))
     return Result(rec, model, fitted, grid, t, valid, y0, y, before, current, accepted, rejected, B, baseline,
                   too_short_warnings(model, grid))
+
+
+def _judge(c: catalogue.Candidate, cands: list[catalogue.Candidate], ctx: catalogue.Context, current: Analysis,
+           trial_of: Callable) -> tuple[str, float, str, tuple | None]:
+    """What the search does with candidate ``c`` (its BIC gain ``bg`` and why): ("stop", ...)
+    when bg is not positive (the rest of its tier is no better), ("defer", bg, why) to retry
+    it after an acceptance, ("reject", bg, why) for good, or ("accept", bg, held-out note,
+    the trial of ``trial_of(c)``)."""
+    bg = c.bic_gain(ctx.penalty)
+    if bg <= 0:
+        return "stop", bg, "", None
+    line = _inside_line(c, cands, ctx.sample_rate_hz / ctx.n)
+    if line is not None:
+        return "defer", bg, (f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
+                             f"vibration_lines fits (random vibration, not one coherent sinusoid)"), None
+    ok, note = _heldout(ctx, c)
+    if not ok:
+        return "reject", bg, f"failed the held-out check: {note}", None
+    trial = trial_of(c)
+    overfit = _new_deficit(current, trial[4]) if c.rate is None else None
+    if overfit is not None:
+        return "reject", bg, (f"makes the model noisier than the recording at tau {overfit} s "
+                              f"(the spectral fit trades long taus for short ones)"), None
+    if not _lowers(current.score.value, trial[4].score.value):
+        return "defer", bg, (f"does not lower the score ({current.score.value:.3f} -> "
+                             f"{trial[4].score.value:.3f}): what it fits is within chance "
+                             f"next to what is still missing"), None
+    return "accept", bg, note, trial
+
+
+def _choose(cands: list[catalogue.Candidate], ctx: catalogue.Context, current: Analysis, refused: set[str],
+            deferred: dict[str, tuple[float, str]], rejected: list[tuple[str, float, str]],
+            trial_of: Callable) -> tuple | None:
+    """The first candidate, tier by tier, that passes every test (``_judge``), as
+    (candidate, BIC gain, held-out note, trial); None when none does. Candidates refused
+    or deferred are skipped; what is refused, deferred or rejected is recorded."""
+    for tier in tiers(cands):
+        for c in tier:
+            if c.kind in refused or c.kind in deferred:
+                continue
+            verdict, bg, why, trial = _judge(c, cands, ctx, current, trial_of)
+            if verdict == "stop":
+                break
+            if verdict == "defer":
+                deferred[c.kind] = (bg, why)
+            elif verdict == "reject":
+                rejected.append((c.kind, bg, why))
+                refused.add(c.kind)
+            else:
+                return c, bg, why, trial
+    return None
+
+
+def _fitted_model(model: SensorModel, stoch: SensorModel, accepted: list[Accepted]) -> SensorModel:
+    """The model with the accepted effects: the stochastic part's coefficients (the model's,
+    with N0 of a white-level effect and the noise kind's corrections; R is the
+    deterministic part's, unchanged) and every accepted effect but the noise kind's."""
+    return validate_model(SensorModel(
+        model.sample_rate_hz, model.bias_dph, replace(stoch.noise, R_dphh=model.noise.R_dphh),
+        [*model.effects, *(a.cand.effect() for a in accepted if a.cand.corrected_noise is None)], dict(model.meta)))
 
 
 #: explain needs this share of the sample grid present and outside platform motion
