@@ -20,8 +20,11 @@ from fogmon.sources.base import Codec
 from fogmon.sources.grid import GridAssembler
 from fogmon.sources.live import LiveSource
 
+#: a read waits this long (s) for bytes to gather: about 20 reads per second however
+#: fast the device sends, so the cost per read (decode, grid, queue) does not grow with
+#: its byte rate; the samples' times come from the byte stream, not from the reads
 READ_TIMEOUT_S = 0.05
-#: bytes asked for per read at most (the OS buffer is drained in chunks this large)
+#: bytes asked for per read (a read returns earlier only with this many)
 READ_MAX_BYTES = 1 << 16
 
 
@@ -78,7 +81,7 @@ class SerialSource(LiveSource):
         self._need_break = True
 
     def _read(self, ser) -> list:
-        data = ser.read(max(1, min(ser.in_waiting, READ_MAX_BYTES)))
+        data = ser.read(READ_MAX_BYTES)
         return [("data", data, self._clock())] if data else []
 
     # -- consumer ------------------------------------------------------------------------
