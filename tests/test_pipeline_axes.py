@@ -194,7 +194,8 @@ ONE_AXIS_SUMMARY = "\n".join([
     '        2.56       2.8871       2.6493        3.203      56.27      9497',
     '        5.12       2.5216       2.2159       3.0028      22.34      7449',
     '       10.24       1.6454         1.31       2.5239      5.291      3426',
-    '       20.48          nan          nan          nan        nan         0',
+    '       20.48   no valid Allan term (the record is too short, or every term '
+    'spans a gap or platform motion)',
     '',
     'IEEE-952 noise coefficients (whole run, with intervals):',
     '  Q_arcsec    not identifiable from this record (< 0.04882 arcsec, 95 % upper limit)',

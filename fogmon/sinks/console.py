@@ -113,7 +113,8 @@ def adev_axes_lines(results: dict) -> list[str]:
     out = [f"  {'tau_s':>10} " + " ".join(f"{a:>{AXIS_COLUMN}}" for a in results)]
     tau_s = next(iter(results.values())).tau_s
     for i in range(len(tau_s)):
-        cells = [f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" for r in results.values()]
+        cells = [f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if r.n_terms[i] else "no valid term"
+                 for r in results.values()]
         out.append(f"  {tau_s[i]:10.4g} " + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
     return out
 
@@ -139,6 +140,10 @@ def adev_lines(a) -> list[str]:
     """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms."""
     out = [f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}"]
     for i in range(len(a.tau_s)):
+        if not a.n_terms[i]:
+            out.append(f"  {a.tau_s[i]:10.4g}   no valid Allan term (the record is too short, or every term "
+                       f"spans a gap or platform motion)")
+            continue
         out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {a.lo_dph[i]:12.5g} {a.hi_dph[i]:12.5g} "
                    f"{a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
     return out
