@@ -88,22 +88,31 @@ def three_axis_rrd(path: str) -> None:
     from fogmon.sinks.rerun_sink import RerunSink
 
     model = model_from_dict(tomllib.loads(THREE_AXIS_MODEL))
-    axes, fs = model.axes, model.sample_rate_hz
+    axes, sample_rate_hz = model.axes, model.sample_rate_hz
     recs = [simulate(model.for_axis(a), THREE_AXIS_DURATION_S, seed=k + 1) for k, a in enumerate(axes)]
     t, rate = recs[0].t_s, np.column_stack([r.rate_dph for r in recs])
-    engines = {a: StreamingDadev(fs, THREE_AXIS_WINDOW_S, hop_s=THREE_AXIS_WINDOW_S / 8) for a in axes}
+    engines = {a: StreamingDadev(sample_rate_hz, THREE_AXIS_WINDOW_S, hop_s=THREE_AXIS_WINDOW_S / 8) for a in axes}
     e0 = engines[axes[0]]
     sink = RerunSink(rrd_path=path)
-    sink.start(StreamInfo("simulated three-axis gyro", fs, THREE_AXIS_WINDOW_S, e0.hop_n / fs, e0.m / fs, (),
-                          axes=axes))
+    sink.start(
+        StreamInfo(
+            "simulated three-axis gyro",
+            sample_rate_hz,
+            THREE_AXIS_WINDOW_S,
+            e0.hop_n / sample_rate_hz,
+            e0.m / sample_rate_hz,
+            (),
+            axes=axes,
+        )
+    )
     for k in range(0, len(t), 36_000):
         block = Block.make(t[k:k + 36_000], rate[k:k + 36_000], axes=axes)
         sink.block(block)
         for a in axes:
             res = engines[a].push(block.axis(a).rate_dph)
             if len(res):
-                sink.frames(res, fit_noise(res), t[0] + res.end_index / fs, axis=a)
-    sink.finish(Summary("simulated three-axis gyro", fs, THREE_AXIS_WINDOW_S, e0.hop_n / fs))
+                sink.frames(res, fit_noise(res), t[0] + res.end_index / sample_rate_hz, axis=a)
+    sink.finish(Summary("simulated three-axis gyro", sample_rate_hz, THREE_AXIS_WINDOW_S, e0.hop_n / sample_rate_hz))
 
 
 def _shrink(src: str, dst: str) -> int:

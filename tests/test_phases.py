@@ -46,16 +46,16 @@ def test_the_pipeline_reports_the_phases_of_a_drilling_run():
 
     from fogmon.pipeline import Pipeline, PipelineConfig
 
-    fs, n = 10.0, 36_000                                     # 1 h at 10 Hz
-    t = np.arange(n) / fs
+    sample_rate_hz, n = 10.0, 36_000                                     # 1 h at 10 Hz
+    t = np.arange(n) / sample_rate_hz
     connection = (t % 1200.0) >= 900.0                     # 15 min drilling, 5 min connection
     pumps = np.where(connection, 0.0, 1.0)
     rot = np.where(connection, 0.0, 720.0)                 # 120 rpm while drilling
     rng = np.random.default_rng(5)
-    white = 60 * 0.05 * np.sqrt(fs) * rng.standard_normal(n)      # N = 0.05 deg/sqrt(h)
+    white = 60 * 0.05 * np.sqrt(sample_rate_hz) * rng.standard_normal(n)      # N = 0.05 deg/sqrt(h)
     rate = 3600.0 * rot + white                            # the gyro reads the string's rotation
     sink = Collect()
-    src = ListSource(t, rate, [3600] * 10, fs, aux={"pumps": pumps, "rot_dps": rot})
+    src = ListSource(t, rate, [3600] * 10, sample_rate_hz, aux={"pumps": pumps, "rot_dps": rot})
     summary = Pipeline(src, PipelineConfig(window_s=120.0, hop_s=30.0, keep_motion=True)).run([sink])
     states = summary.phases["states"]
     assert set(states) == {"pumps on, rotating", "pumps off, not rotating"}

@@ -335,11 +335,11 @@ def pair_coherence(rec: Recording, results: dict[str, Result], a: str, b: str, w
     reported with its p Bonferroni-corrected over the taus tested; None when no tau has
     MIN_TERMS_N terms on both axes."""
     ya, yb = on_recording_grid(rec, results[a]), on_recording_grid(rec, results[b])
-    fs = rec.sample_rate_hz
+    sample_rate_hz = rec.sample_rate_hz
     if white:
         seg = segment_n(len(ya))
         t = correlation_test(segment_adev0(ya, seg), segment_adev0(yb, seg))
-        return None if t is None else Coherence((a, b), 1.0 / fs, t[0], t[1], t[2], t[3])
+        return None if t is None else Coherence((a, b), 1.0 / sample_rate_hz, t[0], t[1], t[2], t[3])
     taus = _mismatch_taus_n(results[a]) | _mismatch_taus_n(results[b])
     n = len(ya)
     usable = sorted(m for m in taus if n // m - 1 >= MIN_TERMS_N)
@@ -354,4 +354,4 @@ def pair_coherence(rec: Recording, results: dict[str, Result], a: str, b: str, w
     if not found:
         return None
     m, (r, terms, n_eff, p) = min(found, key=lambda mt: mt[1][3])
-    return Coherence((a, b), m / fs, r, terms, n_eff, min(1.0, p * len(found)), len(found))
+    return Coherence((a, b), m / sample_rate_hz, r, terms, n_eff, min(1.0, p * len(found)), len(found))
