@@ -31,39 +31,35 @@ TRANSITION = "transition"
 STEADY = "steady"
 
 
-def sample_states(aux: Mapping[str, np.ndarray]) -> np.ndarray | None:
-    """The state name of every sample from ``pumps`` and ``rot_dps`` (None when the aux has
-    neither channel; "" where a channel is NaN)."""
-    parts = []
-    if "pumps" in aux:
-        p = np.asarray(aux["pumps"], dtype=float)
-        parts.append((np.where(p > PUMPS_ON, "pumps on", "pumps off"), np.isnan(p)))
-    if "rot_dps" in aux:
-        r = np.asarray(aux["rot_dps"], dtype=float)
-        parts.append((np.where(np.abs(r) > ROTATING_DPS, "rotating", "not rotating"), np.isnan(r)))
-    if not parts:
-        return None
-    names = parts[0][0].astype(object)
-    unknown = parts[0][1].copy()
-    for words, nan in parts[1:]:
-        names = names + ", " + words.astype(object)
-        unknown |= nan
-    names[unknown] = ""
-    return names
+#: Each state channel: the words for its two values (off, on) and the test for "on".
+_WORDS = {"pumps": ("pumps off", "pumps on"), "rot_dps": ("not rotating", "rotating")}
+
+
+def _on(name: str, x: np.ndarray) -> np.ndarray:
+    return x > PUMPS_ON if name == "pumps" else np.abs(x) > ROTATING_DPS
 
 
 def window_state(aux: Mapping[str, np.ndarray]) -> str:
     """The state of a window from its aux samples: STEADY without state channels, the
-    state of at least STATE_FRACTION of its known samples, else TRANSITION."""
-    states = sample_states(aux)
-    if states is None:
+    state of at least STATE_FRACTION of its known samples (a sample is unknown where a
+    state channel is NaN), else TRANSITION. Samples are counted by an integer code (one
+    bit per channel), not by name, so a long window costs one bincount."""
+    names = [c for c in STATE_CHANNELS if c in aux]
+    if not names:
         return STEADY
-    known = states[states != ""]
-    if not len(known):
+    code = np.zeros(len(aux[names[0]]), dtype=np.int64)
+    known = np.ones(len(code), dtype=bool)
+    for bit, name in enumerate(names):
+        x = np.asarray(aux[name], dtype=float)
+        code |= _on(name, x).astype(np.int64) << bit
+        known &= ~np.isnan(x)
+    counts = np.bincount(code[known], minlength=1 << len(names))
+    if not counts.sum():
         return TRANSITION
-    values, counts = np.unique(known.astype(str), return_counts=True)
     k = int(np.argmax(counts))
-    return str(values[k]) if counts[k] >= STATE_FRACTION * len(known) else TRANSITION
+    if counts[k] < STATE_FRACTION * counts.sum():
+        return TRANSITION
+    return ", ".join(_WORDS[name][(k >> bit) & 1] for bit, name in enumerate(names))
 
 
 @dataclass
