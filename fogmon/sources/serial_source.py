@@ -31,11 +31,11 @@ READ_MAX_BYTES = 1 << 16
 class SerialSource(LiveSource):
     """Live serial gyro. ``port`` is a device path or pyserial URL, ``codec`` one of the
     decoders of fogmon.sources.codecs; ``opener`` (tests, custom transports) returns an
-    open pyserial port instead of opening ``port``. Taps get ``raw(bytes)`` for every
-    byte decoded and ``outage(elapsed_s, missing_est)`` for every reopen of the port, in
-    stream order. Counters: the codec's (frames_ok, crc_errors, bytes_skipped, ...), the
-    grid's (seq_gaps, samples_missing, invalid_samples), ``disconnects``,
-    ``reconnects``."""
+    open pyserial port with a read timeout (a read waits that long for bytes to gather)
+    instead of opening ``port``. Taps get ``raw(bytes)`` for every byte decoded and
+    ``outage(elapsed_s, missing_est)`` for every reopen of the port, in stream order.
+    Counters: the codec's (frames_ok, crc_errors, bytes_skipped, ...), the grid's
+    (seq_gaps, samples_missing, invalid_samples), ``disconnects``, ``reconnects``."""
 
     device_errors = (serial.SerialException, OSError, ValueError)
 
