@@ -31,6 +31,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.ndimage import median_filter
 
 from fogmon.block import Event
@@ -70,36 +71,44 @@ def block_samples(sample_rate_hz: float) -> int:
 _TRIMMED_STD_80 = 0.6616
 
 
+@njit(cache=True)
 def _trimmed_sigma(x: np.ndarray) -> np.ndarray:
     """Per row of ``x`` (NaN = none): the standard deviation of its middle 80 % over that
     of a normal variable's, i.e. a robust sigma that, unlike a MAD, stays right for
-    quantized values, where most of them tie."""
-    d = np.sort(x, axis=1)                               # NaNs sort last
-    n = np.sum(np.isfinite(d), axis=1, keepdims=True)
-    k = n // 10
-    rank = np.arange(d.shape[1])
-    mid = np.where((rank >= k) & (rank < n - k), d, np.nan)
-    return np.nanstd(mid, axis=1) / _TRIMMED_STD_80
+    quantized values, where most of them tie (NaN for a row with no value)."""
+    out = np.full(x.shape[0], np.nan)
+    for i in range(x.shape[0]):
+        row = x[i]
+        v = np.sort(row[np.isfinite(row)])
+        k = len(v) // 10
+        if len(v) - 2 * k > 0:
+            out[i] = np.std(v[k:len(v) - k]) / _TRIMMED_STD_80
+    return out
 
 
 def robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
     """Per row of ``y`` (blocks x samples, NaN = none): sigma of one sample (deg/h) from
     the robust sigma of first differences (insensitive to a slow trend and to a few
     outliers; right for quantized rates too)."""
-    return _trimmed_sigma(np.diff(y, axis=1)) / np.sqrt(2.0)
+    return _trimmed_sigma(np.diff(np.asarray(y, dtype=np.float64), axis=1)) / np.sqrt(2.0)
 
 
+@njit(cache=True)
 def _block_means(y: np.ndarray, sigma_1: float) -> np.ndarray:
     """Robust mean rate (deg/h) of each row of ``y`` (blocks x samples, NaN = no sample):
     samples beyond K_OUTLIER x ``sigma_1`` from the block median are left out; a block in
-    fast motion, where most samples are that far, keeps its median."""
-    with warnings.catch_warnings():          # all-NaN blocks (gaps) are expected
-        warnings.simplefilter("ignore", RuntimeWarning)
-        mean = np.nanmedian(y, axis=1)
-        kept = np.where(np.abs(y - mean[:, None]) > K_OUTLIER * sigma_1, np.nan, y)
-        ok = np.sum(np.isfinite(kept), axis=1) >= y.shape[1] // 4
-        mean[ok] = np.nanmean(kept[ok], axis=1)
-    return mean
+    fast motion, where most samples are that far, keeps its median (NaN ``sigma_1``: the
+    plain mean; a row with no sample: NaN)."""
+    out = np.full(y.shape[0], np.nan)
+    for i in range(y.shape[0]):
+        row = y[i]
+        v = row[np.isfinite(row)]
+        if not len(v):
+            continue
+        med = np.median(v)
+        kept = v[~(np.abs(v - med) > K_OUTLIER * sigma_1)]
+        out[i] = np.mean(kept) if len(kept) >= y.shape[1] // 4 else med
+    return out
 
 
 def _quiet_scales(sigmas: np.ndarray, means: np.ndarray) -> tuple[float, float]:
@@ -123,9 +132,7 @@ def _blocks(rate_dph: np.ndarray, valid: np.ndarray, m: int) -> tuple[np.ndarray
     each block's sample sigma in deg/h)."""
     y = np.where(valid, rate_dph, np.nan).reshape(-1, m).astype(np.float64)
     enough = np.sum(np.isfinite(y), axis=1) >= m // 2
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return y, enough, robust_sigma_of_diffs(y)
+    return y, enough, robust_sigma_of_diffs(y)
 
 
 def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample_rate_hz: float) -> list[MotionSpan]:
@@ -251,7 +258,7 @@ class MotionGate:
             y, enough, sig = _blocks(self._y[a:a + nb * m], self._v[a:a + nb * m], m)
             if np.isnan(self._sigma_1) and np.any(enough):
                 self._sigma_1 = float(np.quantile(sig[enough], QUIET_QUANTILE))
-            means = _block_means(y, self._sigma_1) if self._sigma_1 > 0 else np.nanmean(y, axis=1)
+            means = _block_means(y, self._sigma_1 if self._sigma_1 > 0 else np.nan)
             for k in range(nb):
                 if enough[k]:
                     events += self._judge(a + k * m, float(sig[k]), float(means[k]))
