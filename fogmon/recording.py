@@ -491,10 +491,8 @@ def append_replay_rows(fh, t_s, rate_dph, aux: dict | None = None) -> None:
     if not len(cols[0]):
         return
     m = np.column_stack(cols)
-    fmt = ",".join(["%.12g"] * m.shape[1])
-    buf = io.StringIO()
-    np.savetxt(buf, m, fmt=fmt)
-    fh.write(buf.getvalue())
+    row = ",".join(["%.12g"] * m.shape[1]) + "\n"
+    fh.write((row * len(m)) % tuple(m.ravel().tolist()))   # one C-level format: what np.savetxt writes
 
 
 def recording_from_arrays(t_s, rate_dph, aux=None, meta=None, axes: tuple[str, ...] = ()) -> Recording:
