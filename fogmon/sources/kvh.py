@@ -55,16 +55,20 @@ def crc32_mpeg2(data: bytes) -> int:
     return int(f"{r:032b}"[::-1], 2)
 
 
-def _crc_ok(frame: bytes) -> bool:
-    # CRC over a frame including its own big-endian CRC is 0 <=> reflected CRC == ~0.
-    return binascii.crc32(frame.translate(_REV8)) == 0xFFFFFFFF
-
-
 #: format letter -> (header, frame length, struct layout of the frame without CRC)
 FORMATS = {
     "a": (b"\xfe\x81\xff\x55", 36, struct.Struct(">4x6fBBh")),
     "b": (b"\xfe\x81\xff\x56", 40, struct.Struct(">4x6fIBBh")),
     "c": (b"\xfe\x81\xff\x57", 38, struct.Struct(">4x7fBB")),
+}
+#: the same layouts as numpy records (whole frames, CRC included), to unpack many at once
+_RECORDS = {
+    "a": np.dtype([("hdr", "V4"), ("sensor", ">f4", 6), ("status", "u1"), ("seq", "u1"), ("temp", ">i2"),
+                   ("crc", "V4")]),
+    "b": np.dtype([("hdr", "V4"), ("sensor", ">f4", 6), ("time_us", ">u4"), ("status", "u1"), ("seq", "u1"),
+                   ("temp", ">i2"), ("crc", "V4")]),
+    "c": np.dtype([("hdr", "V4"), ("sensor", ">f4", 6), ("temp", ">f4"), ("status", "u1"), ("seq", "u1"),
+                   ("crc", "V4")]),
 }
 AXES = ("x", "y", "z")
 SEQ_MODULUS = 128
@@ -156,38 +160,26 @@ class KvhCodec:
         accel = f", accel {self.accel}" if self._accel_names else ""
         return f"KVH format {self.fmt.upper()} ({self.rot}, {self.units}{accel}), {what}, {self.sample_rate_hz:g} Hz"
 
-    def _status_seq_temp(self, f: tuple) -> tuple[int, int, float, int]:
-        """Status byte, sequence counter and temperature (deg C; format C: the latest
-        reading, sent every 4th frame) of an unpacked frame, and 1 if its temperature
-        reading was implausible (made NaN), else 0."""
-        if self.fmt == "c":
-            status, seq = f[7], f[8]
-            if seq % 4:
-                return status, seq, self._last_temp_c, 0
-            self._last_temp_c, bad = _plausible_temp_c(float(f[6]))   # held until the next reading
-            return status, seq, self._last_temp_c, bad
-        status, seq, reading = (f[6], f[7], f[8]) if self.fmt == "a" else (f[7], f[8], f[9])
-        temp_c, bad = _plausible_temp_c(float(reading))
-        return status, seq, temp_c, bad
-
     def feed(self, data: bytes) -> Frames:
         self._buf += data
-        seqs, sensors, status_bytes, temps, runs = self._scan()
-        return self._frames(seqs, sensors, status_bytes, temps, runs)
+        return self._frames(*self._scan())
 
-    def _scan(self) -> tuple[list[int], list[tuple], list[int], list[float], list[int]]:
+    def _scan(self) -> tuple[np.ndarray, list[int]]:
         """The whole frames in the buffer (then dropped from it; a partial frame stays),
-        found by header and CRC, with counters: per frame its counter, the six gyro/accel
-        fields, status byte, temperature (deg C) and the bytes skipped before it."""
-        buf = self._buf
-        n = len(buf)
-        L, hdr, layout = self.frame_len, self.header, self._layout
-        seqs, sensors, status_bytes, temps, runs = [], [], [], [], []
-        crc_err = skipped = bad_temp = 0
+        found by header and CRC, with counters: the good frames as numpy records and the
+        bytes skipped before each. Back-to-back good frames are checked as a run (header
+        compare over all of them, one C CRC call each)."""
+        data = bytes(self._buf)
+        n = len(data)
+        L, hdr = self.frame_len, self.header
+        rev = memoryview(data.translate(_REV8))       # CRCs of frames are slices of it
+        starts: list[int] = []
+        runs: list[int] = []
+        crc_err = skipped = 0
         run = self._run
         i = 0
         while True:
-            j = buf.find(hdr, i)
+            j = data.find(hdr, i)
             if j < 0:
                 keep = max(i, n - (len(hdr) - 1))  # a header may straddle the chunk end
                 skipped += keep - i
@@ -199,50 +191,60 @@ class KvhCodec:
             if j + L > n:
                 i = j
                 break
-            frame = bytes(buf[j:j + L])
-            if not _crc_ok(frame):
+            good = _good_run(data, rev, j, L, hdr)
+            if not good:
                 crc_err += 1
                 skipped += 1
                 run += 1
                 i = j + 1
                 continue
-            f = layout.unpack_from(frame)
-            status, seq, temp, implausible = self._status_seq_temp(f)
-            bad_temp += implausible
-            seqs.append(seq & 0x7F)
-            sensors.append(f[:6])                  # gyro x/y/z, accel x/y/z
-            status_bytes.append(status)
-            temps.append(temp)
-            runs.append(run)
+            starts.extend(range(j, j + good * L, L))
+            runs += [run] + [0] * (good - 1)
             run = 0
-            i = j + L
-        del buf[:i]
+            i = j + good * L
+        del self._buf[:i]
         self._run = run
         c = self.counters
-        c["frames_ok"] += len(seqs)
+        c["frames_ok"] += len(starts)
         c["crc_errors"] += crc_err
         c["bytes_skipped"] += skipped
-        c[plausibility.TEMP_COUNTER] += bad_temp
-        return seqs, sensors, status_bytes, temps, runs
+        raw = np.frombuffer(data, np.uint8)
+        rows = raw[np.asarray(starts, dtype=np.int64)[:, None] + np.arange(L)] if starts else np.zeros((0, L), np.uint8)
+        return rows.view(_RECORDS[self.fmt]).reshape(-1), runs
 
-    def _frames(self, seqs: list[int], sensors: list[tuple], status_bytes: list[int], temps: list[float],
-                runs: list[int]) -> Frames:
-        """The scanned frames as Frames: rate in deg/h of the decoded axes, gated; aux
-        temp_c and, with --kvh-accel, the accelerations in g."""
+    def _temps(self, rec: np.ndarray) -> np.ndarray:
+        """Temperature (deg C) of each frame: NaN where implausible (counted); format C:
+        the latest reading, sent when seq % 4 == 0 and held until the next."""
+        t_lo, t_hi = plausibility.TEMP_RANGE_C
+        reading = rec["temp"].astype(np.float64)
+        sent = rec["seq"] % 4 == 0 if self.fmt == "c" else np.ones(len(rec), bool)
+        bad = sent & ~((reading >= t_lo) & (reading <= t_hi))
+        self.counters[plausibility.TEMP_COUNTER] += int(bad.sum())
+        temps = np.where(bad, np.nan, reading)
+        if self.fmt != "c" or not len(rec):
+            return temps
+        last = np.maximum.accumulate(np.where(sent, np.arange(len(rec)), -1))
+        held = np.where(last >= 0, temps[np.maximum(last, 0)], self._last_temp_c)
+        self._last_temp_c = float(held[-1])
+        return held
+
+    def _frames(self, rec: np.ndarray, runs: list[int]) -> Frames:
+        """The scanned frames (numpy records) as Frames: rate in deg/h of the decoded axes,
+        gated; aux temp_c and, with --kvh-accel, the accelerations in g."""
         c = self.counters
         ai = self._axis_i
-        bits = np.asarray(status_bytes, dtype=np.uint8).reshape(-1, 1)
+        bits = rec["status"].reshape(-1, 1)
         valid = (bits >> np.asarray(ai, dtype=np.uint8) & 1).astype(bool)
-        gyro_accel = np.asarray(sensors, dtype=np.float64).reshape(-1, 6)
+        gyro_accel = rec["sensor"].astype(np.float64)
         rate_dph = to_dph(gyro_accel[:, ai], output_unit(self.rot, self.units), self.sample_rate_hz)
         if not self.axes:
             rate_dph, valid = rate_dph[:, 0], valid[:, 0]
         rate, bad = plausibility.gate(rate_dph, self.max_rate_dph, valid)
         c[plausibility.COUNTER] += bad
-        aux: dict = {"temp_c": temps}
+        aux: dict = {"temp_c": self._temps(rec)}
         if self._accel_names:
             aux = {**self._accel_aux(gyro_accel, bits), **aux}
-        return Frames.from_lists(seqs, rate, valid, aux, runs, self.frame_len, self.axes)
+        return Frames.from_lists(rec["seq"] & 0x7F, rate, valid, aux, runs, self.frame_len, self.axes)
 
     def _accel_aux(self, gyro_accel: np.ndarray, bits: np.ndarray) -> dict[str, np.ndarray]:
         """The decoded axes' accelerations (g) as aux channels: NaN where the status byte
@@ -257,11 +259,14 @@ class KvhCodec:
         return dict(zip(self._accel_names, accel_g.T, strict=True))
 
 
-def _plausible_temp_c(temp_c: float) -> tuple[float, int]:
-    """A temperature reading (deg C), NaN when outside plausibility.TEMP_RANGE_C (NaN too),
-    and 1 if it was, else 0."""
-    t_lo, t_hi = plausibility.TEMP_RANGE_C
-    return (temp_c, 0) if t_lo <= temp_c <= t_hi else (math.nan, 1)
+def _good_run(data: bytes, rev: memoryview, j: int, L: int, hdr: bytes) -> int:
+    """How many good frames of length ``L`` follow back to back from ``j`` in ``data``
+    (header in place and CRC right; ``rev`` is ``data`` bit-reversed for the CRC)."""
+    k = (len(data) - j) // L
+    heads = np.frombuffer(data, np.uint8, count=k * L, offset=j).reshape(k, L)[:, :len(hdr)]
+    ok = (heads == np.frombuffer(hdr, np.uint8)).all(axis=1)
+    ok &= np.fromiter((binascii.crc32(rev[a:a + L]) == 0xFFFFFFFF for a in range(j, j + k * L, L)), bool, k)
+    return k if ok.all() else int(np.argmin(ok))
 
 
 def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),
