@@ -271,7 +271,7 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     port = PacedPort(data, 50, FS, lead, consumed=lambda: archive.counters["rows_written"])
     src = SerialSource("fake", 921600, make_codec("kvh-a", axis="z", kvh_rot="rate", kvh_units="deg", sample_rate_hz=FS,
                                                                    max_rate_dph=MAX_RATE_DPH),
-                       opener=lambda: port, clock=port.clock)
+                       opener=lambda: port, clock=port.clock, read_pause_s=0)   # paced by the data
     archive = Archive(str(arch), src)
     # the port is paced by the pipeline, not by the clock: no wall-clock stop (a loaded host
     # would otherwise end the run before its 4.5 s of recording)

@@ -20,19 +20,25 @@ from fogmon.sources.base import Codec
 from fogmon.sources.grid import GridAssembler
 from fogmon.sources.live import LiveSource
 
-#: a read waits this long (s) for bytes to gather: about 20 reads per second however
-#: fast the device sends, so the cost per read (decode, grid, queue) does not grow with
-#: its byte rate; the samples' times come from the byte stream, not from the reads
+#: the reader sleeps this long (s, a live block's length) between reads and then takes
+#: every byte waiting: 10 wake-ups per second however the device or its USB adapter
+#: delivers (a blocking read wakes for every chunk, up to a thousand a second), so the
+#: cost per read (decode, grid, queue) does not grow with the byte rate. The OS buffers
+#: the bytes meanwhile; the samples' times come from the byte stream, not from the reads.
+READ_PAUSE_S = 0.1
+#: with nothing waiting, a read waits at most this long (s) for a first byte
 READ_TIMEOUT_S = 0.05
-#: bytes asked for per read (a read returns earlier only with this many)
+#: bytes taken per read at most (a backlog after a host stall is taken in several reads)
 READ_MAX_BYTES = 1 << 16
 
 
 class SerialSource(LiveSource):
     """Live serial gyro. ``port`` is a device path or pyserial URL, ``codec`` one of the
     decoders of fogmon.sources.codecs; ``opener`` (tests, custom transports) returns an
-    open pyserial port with a read timeout (a read waits that long for bytes to gather)
-    instead of opening ``port``. Taps get ``raw(bytes)`` for every byte decoded and
+    open pyserial port (``read``, ``in_waiting``, ``close``; a read timeout keeps a silent
+    port from blocking the reader) instead of opening ``port``; ``read_pause_s`` is the
+    sleep between reads (READ_PAUSE_S; 0 for a port that paces itself). Taps get
+    ``raw(bytes)`` for every byte decoded and
     ``outage(elapsed_s, missing_est)`` for every reopen of the port, in stream order.
     Counters: the codec's (frames_ok, crc_errors, bytes_skipped, ...), the grid's
     (seq_gaps, samples_missing, invalid_samples), ``disconnects``, ``reconnects``."""
@@ -40,7 +46,8 @@ class SerialSource(LiveSource):
     device_errors = (serial.SerialException, OSError, ValueError)
 
     def __init__(self, port: str, baud: int, codec: Codec, block_s: float = 0.1, idle_s: float = 0.5,
-                 backoff_s: tuple[float, float] = (0.05, 2.0), opener=None, clock=time.monotonic) -> None:
+                 backoff_s: tuple[float, float] = (0.05, 2.0), opener=None, clock=time.monotonic,
+                 read_pause_s: float = READ_PAUSE_S) -> None:
         super().__init__(GridAssembler(codec.sample_rate_hz, codec.seq_modulus, codec.aux_names, axes=codec.axes),
                          block_s, idle_s, backoff_s, clock)
         self.port, self.baud, self.codec = port, int(baud), codec
@@ -50,6 +57,7 @@ class SerialSource(LiveSource):
         self._opener = opener or (lambda: serial.serial_for_url(port, baudrate=self.baud, timeout=READ_TIMEOUT_S))
         self._last_t: float | None = None     # when the last byte before now was read (s, clock)
         self._need_break = False              # the port was reopened: the next frame follows an outage
+        self.read_pause_s = read_pause_s
 
     @property
     def decoder_counters(self) -> dict[str, int]:
@@ -81,7 +89,9 @@ class SerialSource(LiveSource):
         self._need_break = True
 
     def _read(self, ser) -> list:
-        data = ser.read(READ_MAX_BYTES)
+        if self.read_pause_s and self._stop.wait(self.read_pause_s):
+            return []
+        data = ser.read(min(ser.in_waiting, READ_MAX_BYTES) or 1)
         return [("data", data, self._clock())] if data else []
 
     # -- consumer ------------------------------------------------------------------------
