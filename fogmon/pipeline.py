@@ -206,9 +206,15 @@ class Pipeline:
         """One AxisAnalysis per axis of the stream (one named "" for a one-axis stream);
         FogmonError when an option cannot apply to these axes."""
         cfg = self.config
-        if any(cfg.axis_methods.get(a, cfg.methods).thermal is not None for a in axes):
+        if axes and cfg.methods.thermal is not None:
             raise FogmonError(f"--thermal-cal: the calibration is for one axis and {self.source.name} has axes "
                               f"{', '.join(axes)}: select one with --axis NAME")
+        calibrated = sorted(a for a, m in cfg.axis_methods.items() if m.thermal is not None)
+        if calibrated and set(axes) - set(calibrated):
+            what = (f"not for {', '.join(a for a in axes if a not in calibrated)}" if axes
+                    else f"{self.source.name} is one axis")
+            raise FogmonError(f"--thermal-cal: the calibration has a thermal_drift effect for axes "
+                              f"{', '.join(calibrated)} and {what}: select calibrated axes with --axis")
         if axes and cfg.model is not None:
             missing = [a for a in axes if cfg.model.axes and a not in cfg.model.axes]
             if missing:

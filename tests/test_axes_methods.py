@@ -2,14 +2,19 @@
 each axis gives what the one-axis command gives on that axis alone."""
 from __future__ import annotations
 
+import argparse
 import re
 
 import numpy as np
 import pytest
+from doubles import Collect, ListSource
 
 from fogmon.cli import main
+from fogmon.cli.pipeline_options import add_pipeline_arguments, pipeline_config
 from fogmon.errors import FogmonError
 from fogmon.methods.live_thermal import axis_thermal_effect, thermal_effect
+from fogmon.methods.thermal import correct_thermal
+from fogmon.pipeline import Pipeline
 from fogmon.recording import read_replay_log, recording_from_arrays, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model
 from fogmon.sim.scenarios import ChamberParams, thermal_chamber
@@ -108,3 +113,37 @@ def test_thermal_axis_without_temperature_is_one_line(tmp_path, capsys):
     assert main(["thermal", str(p)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "r.csv: no temp_c column for axis y (temp_c or temp_c_y)" in err
+
+
+def test_live_thermal_cal_per_axis_equals_the_offline_correction(imu, tmp_path, capsys):
+    """`--thermal-cal` with one thermal_drift effect per axis (what `fogmon thermal
+    --out-model` writes for the three-axis run) corrects each axis live with its own
+    calibration and temperature, as the offline correction does; a file that does not
+    calibrate every axis of the stream is a one-line error."""
+    cal, cal_xy = tmp_path / "cal.toml", tmp_path / "cal_xy.toml"
+    run(capsys, "thermal", str(imu / "imu.csv"), "--out-model", str(cal))
+    run(capsys, "thermal", str(imu / "imu.csv"), "--axis", "x,y", "--out-model", str(cal_xy))
+    rec = read_replay_log(imu / "imu.csv")
+
+    def live(cal_path, *more):
+        p = argparse.ArgumentParser()
+        add_pipeline_arguments(p)
+        cfg = pipeline_config(p.parse_args(["--thermal-cal", str(cal_path), "--keep-motion", "--window-s", "600",
+                                            *more]))
+        n = len(rec.t_s)
+        src = ListSource(rec.t_s, rec.rate_dph, [777] * (n // 777) + [n % 777], FS, aux=rec.aux, axes=AXES)
+        sink = Collect()
+        Pipeline(src, cfg).run([sink])
+        return sink
+
+    sink = live(cal)
+    assert sink.summary.analysed == "rate_dph - thermal drift"
+    model = load_model(cal)
+    for j, a in enumerate(AXES):
+        corrected = np.concatenate([b.aux[f"rate_corrected_dph_{a}"] for b in sink.blocks])
+        temp = rec.aux["temp_c_z" if a == "z" else "temp_c"]
+        offline = correct_thermal(rec.t_s, rec.rate_dph[:, j], temp, axis_thermal_effect(model, "cal.toml", a))
+        assert np.max(np.abs(corrected - offline)) < 1e-8     # deg/h: the rounding of 4800 s of running sums
+    with pytest.raises(FogmonError, match=r"--thermal-cal: the calibration has a thermal_drift effect for axes x, y "
+                                          r"and not for z: select calibrated axes with --axis"):
+        live(cal_xy)

@@ -8,11 +8,12 @@ from dataclasses import replace
 
 import numpy as np
 
+from fogmon.block import parse_axes
 from fogmon.cli.values import number, positive
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
 from fogmon.errors import FogmonError
 from fogmon.methods.live import LiveMethods
-from fogmon.methods.live_thermal import thermal_effect
+from fogmon.methods.live_thermal import axis_thermal_effect, thermal_effect
 from fogmon.pipeline import LIVE_WINDOW_SAMPLES, MAX_WINDOW_SAMPLES, MIN_WINDOW_SAMPLES, PipelineConfig
 from fogmon.sim.model import SensorModel, load_model
 from fogmon.sinks.base import Sink
@@ -172,16 +173,21 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                           keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
                           rotate_s=args.rotate_s,
                           progress=not args.no_progress and sys.stderr.isatty() and (realtime is None or realtime > 1),
-                          methods=methods, axis_methods=_axis_methods(args, model, methods),
+                          methods=methods, axis_methods=_axis_methods(args, model, cal, methods),
                           model=model, model_alpha=args.model_alpha)
 
 
 def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: SensorModel | None) -> LiveMethods:
-    """The live methods asked for; FogmonError naming the option when a file lacks what
-    it needs."""
+    """The live methods asked for (of a one-axis stream; a stream of several axes takes
+    ``_axis_methods`` where they differ); FogmonError naming the option when a file lacks
+    what it needs."""
     thermal = None
     if cal is not None and not args.raw_rate:
-        thermal = thermal_effect(cal, args.thermal_cal)
+        one = _one_axis(args)
+        if _cal_axes(cal) and one:        # a calibration per axis, one axis picked: that axis's
+            thermal = axis_thermal_effect(cal, args.thermal_cal, one)
+        elif not _cal_axes(cal):
+            thermal = thermal_effect(cal, args.thermal_cal)
     kalman = None
     if args.denoise == "kalman":
         src = next(((m, f) for m, f in ((model, args.model), (cal, args.thermal_cal)) if m is not None), None)
@@ -190,6 +196,19 @@ def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: Sens
                               "--thermal-cal")
         kalman = _kalman_n_k(src[0].noise, src[1])
     return LiveMethods(thermal, args.reject_outliers, kalman)
+
+
+def _one_axis(args: argparse.Namespace) -> str | None:
+    """The axis ``--axis`` picks when it picks exactly one, else None."""
+    axis = getattr(args, "axis", None)
+    names = parse_axes(axis) if axis else ()
+    return names[0] if len(names) == 1 else None
+
+
+def _cal_axes(cal: SensorModel) -> list[str]:
+    """The axes a thermal calibration names in its thermal_drift effects (what `fogmon
+    thermal --out-model` writes for a recording of several axes); empty for a one-axis file."""
+    return sorted({a for e in cal.effects if e.kind == "thermal_drift" for a in e.axes})
 
 
 def _kalman_n_k(noise, where: str) -> tuple[float, float]:
@@ -201,13 +220,20 @@ def _kalman_n_k(noise, where: str) -> tuple[float, float]:
     return noise.N_dpsh, noise.K_dphsh
 
 
-def _axis_methods(args: argparse.Namespace, model: SensorModel | None, methods: LiveMethods) -> dict[str, LiveMethods]:
-    """Each axis's live methods where a --model of several axes gives the Kalman channel
-    its own N and K (its [noise.<axis>]); empty otherwise (every axis uses ``methods``)."""
-    if methods.kalman_n_k is None or model is None or not model.axes:
-        return {}
-    return {a: replace(methods, kalman_n_k=_kalman_n_k(model.for_axis(a).noise, f"{args.model} [noise.{a}]"))
-            for a in model.axes}
+def _axis_methods(args: argparse.Namespace, model: SensorModel | None, cal: SensorModel | None,
+                  methods: LiveMethods) -> dict[str, LiveMethods]:
+    """Each axis's live methods where they differ from ``methods``: the Kalman channel's
+    own N and K from a --model of several axes (its [noise.<axis>]), the thermal
+    correction from a --thermal-cal with one thermal_drift effect per axis; empty when
+    every axis uses ``methods``."""
+    out: dict[str, LiveMethods] = {}
+    if methods.kalman_n_k is not None and model is not None and model.axes:
+        out = {a: replace(methods, kalman_n_k=_kalman_n_k(model.for_axis(a).noise, f"{args.model} [noise.{a}]"))
+               for a in model.axes}
+    if cal is not None and not args.raw_rate and not _one_axis(args):
+        for a in _cal_axes(cal):
+            out[a] = replace(out.get(a, methods), thermal=axis_thermal_effect(cal, args.thermal_cal, a))
+    return out
 
 
 def build_sinks(args: argparse.Namespace) -> list[Sink]:
