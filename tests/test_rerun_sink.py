@@ -184,15 +184,18 @@ def test_model_span_leaves_out_misfit_and_unmeasured_taus():
 
 
 def test_rrd_heatmap_legend_and_labels(run_rrd):
-    """The DADEV heatmap is a colour image of the latest windows (rows: taus) with tau,
-    time and colour-scale labels in units; the ADEV view has a legend."""
+    """The DADEV heatmap is a colour image of the latest windows (rows: taus) with tau
+    and time labels in units, beside its colour scale labelled in deg/h (drawn once);
+    the ADEV view has a legend."""
     path, engine_out = run_rrd[0], run_rrd[5]
     n_taus = len(engine_out.frames_[0][0].tau_s)
     n_windows = sum(len(te) for _, _, te in engine_out.frames_)
     images = read_column(path, "/dadev/heatmap/map/image", "Image:format")
     assert images and images[-1][1][0]["width"] == n_windows and images[-1][1][0]["height"] == n_taus
     labels = max(read_column(path, "/dadev/heatmap/labels", "Points2D:labels"), key=lambda r: r[0])[1]
-    assert any(x.endswith(" deg/h") for x in labels) and sum(x.endswith(" s") for x in labels) >= 6
+    assert sum(x.endswith(" s") for x in labels) >= 6
+    scale = read_column(path, "/dadev/heatmap/scale_labels", "Points2D:labels")   # fixed: drawn once, static
+    assert len(scale) == 1 and scale[0][0] is None and scale[0][1] and all(x.endswith(" deg/h") for x in scale[0][1])
     legend = read_column(path, "/adev_curve/log10/legend", "Points2D:labels")[0][1]
     assert legend == ["measured ADEV, current window", "68.3 % confidence bounds",
                       "IEEE-952 model over the fitted taus"]

@@ -98,17 +98,36 @@ def heatmap_bounds():
 def log_heatmap(rec, entity: str, values: np.ndarray, lo: float, hi: float, colormap: str,
                 row_ticks: tuple[Sequence[int] | np.ndarray, Sequence[str]],
                 col_ticks: tuple[Sequence[int] | np.ndarray, Sequence[str]],
-                scale_ticks: tuple[Sequence[float] | np.ndarray, Sequence[str]], static: bool = False) -> None:
+                scale_ticks: tuple[Sequence[float] | np.ndarray, Sequence[str]] | None, static: bool = False) -> None:
     """``values`` (rows x columns, row 0 on top) as an image of HEAT_W x HEAT_H view units
     under ``entity`` (a view's origin), coloured on ``colormap`` over lo..hi; labelled
-    rows and columns (indices, texts) with tick marks, and a colour scale on the right
-    labelled at ``scale_ticks`` (values in lo..hi, texts)."""
+    rows and columns (indices, texts) with tick marks, and the colour scale of
+    ``log_heatmap_scale`` at ``scale_ticks`` (None: left as drawn before, for a sink that
+    redraws the map every window on a fixed scale)."""
     import rerun as rr
 
     n_rows, n_cols = np.shape(values)
     sx, sy = HEAT_W / n_cols, HEAT_H / n_rows
     rec.log(f"{entity}/map", rr.Transform3D(scale=[sx, sy, 1.0]), static=static)
     rec.log(f"{entity}/map/image", rr.Image(colourise(values, lo, hi, colormap)), static=static)
+    ry = [(r + 0.5) * sy for r in row_ticks[0]]
+    cx = [(c + 0.5) * sx for c in col_ticks[0]]
+    ticks = [[[-1.5, y], [0.0, y]] for y in ry] + [[[x, HEAT_H], [x, HEAT_H + 1.5]] for x in cx]
+    rec.log(f"{entity}/ticks", rr.LineStrips2D(ticks, colors=[LABEL_COLOUR], radii=rr.Radius.ui_points(0.5)),
+            static=static)
+    pos = [[-HEAT_LEFT / 2, y - LABEL_DROP] for y in ry] + [[x, HEAT_H + 1.5] for x in cx]
+    rec.log(f"{entity}/labels", rr.Points2D(pos, labels=[*row_ticks[1], *col_ticks[1]],
+                                            colors=[LABEL_COLOUR], radii=rr.Radius.ui_points(0.0)), static=static)
+    if scale_ticks is not None:
+        log_heatmap_scale(rec, entity, lo, hi, colormap, scale_ticks, static)
+
+
+def log_heatmap_scale(rec, entity: str, lo: float, hi: float, colormap: str,
+                      scale_ticks: tuple[Sequence[float] | np.ndarray, Sequence[str]], static: bool = False) -> None:
+    """The colour scale right of ``log_heatmap``'s map under ``entity``: ``colormap``
+    over lo..hi (top: hi), labelled at ``scale_ticks`` (values in lo..hi, texts)."""
+    import rerun as rr
+
     steps = 64
     grad = np.linspace(hi, lo, steps)[:, None].repeat(2, axis=1)
     x0 = HEAT_W + SCALE_GAP
@@ -116,17 +135,12 @@ def log_heatmap(rec, entity: str, values: np.ndarray, lo: float, hi: float, colo
             static=static)
     rec.log(f"{entity}/scale/image", rr.Image(colourise(grad, lo, hi, colormap)), static=static)
     x1 = x0 + SCALE_WIDTH
-    ry = [(r + 0.5) * sy for r in row_ticks[0]]
-    cx = [(c + 0.5) * sx for c in col_ticks[0]]
-    sy_ = [(hi - v) / (hi - lo) * HEAT_H for v in scale_ticks[0]]
-    ticks = ([[[-1.5, y], [0.0, y]] for y in ry] + [[[x, HEAT_H], [x, HEAT_H + 1.5]] for x in cx]
-             + [[[x1, y], [x1 + 1.5, y]] for y in sy_])
-    rec.log(f"{entity}/ticks", rr.LineStrips2D(ticks, colors=[LABEL_COLOUR], radii=rr.Radius.ui_points(0.5)),
-            static=static)
-    pos = ([[-HEAT_LEFT / 2, y - LABEL_DROP] for y in ry] + [[x, HEAT_H + 1.5] for x in cx]
-           + [[x1 + HEAT_RIGHT / 2, y - LABEL_DROP] for y in sy_])
-    rec.log(f"{entity}/labels", rr.Points2D(pos, labels=[*row_ticks[1], *col_ticks[1], *scale_ticks[1]],
-                                            colors=[LABEL_COLOUR], radii=rr.Radius.ui_points(0.0)), static=static)
+    sy = [(hi - v) / (hi - lo) * HEAT_H for v in scale_ticks[0]]
+    rec.log(f"{entity}/scale_ticks", rr.LineStrips2D([[[x1, y], [x1 + 1.5, y]] for y in sy], colors=[LABEL_COLOUR],
+                                                     radii=rr.Radius.ui_points(0.5)), static=static)
+    rec.log(f"{entity}/scale_labels", rr.Points2D([[x1 + HEAT_RIGHT / 2, y - LABEL_DROP] for y in sy],
+                                                  labels=list(scale_ticks[1]), colors=[LABEL_COLOUR],
+                                                  radii=rr.Radius.ui_points(0.0)), static=static)
 
 
 def decade_rows(values: np.ndarray) -> list[int]:

@@ -436,6 +436,7 @@ class _Heat:
     rows: list[np.ndarray] = field(default_factory=list)
     t_s: list[float] = field(default_factory=list)
     decades: tuple[int, int] | None = None
+    scale_sent: bool = False       # the colour scale is drawn (static) in the current .rrd piece
 
 
 class RerunSink(Sink):
@@ -709,11 +710,15 @@ class RerunSink(Sink):
         n_cols = heat.shape[1]
         rows = rp.decade_rows(tau)
         cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
-        decades = np.arange(lo, hi + 1)
-        rp.log_heatmap(self.rec, axis_path(axis, HEATMAP), heat, lo, hi, HEATMAP_COLORMAP,
+        entity = axis_path(axis, HEATMAP)
+        if not h.scale_sent:     # fixed from the first frames on: drawn once, not every window
+            decades = np.arange(lo, hi + 1)
+            rp.log_heatmap_scale(self.rec, entity, lo, hi, HEATMAP_COLORMAP,
+                                 (decades, [f"{10.0**d:g} deg/h" for d in decades]), static=True)
+            h.scale_sent = True
+        rp.log_heatmap(self.rec, entity, heat, lo, hi, HEATMAP_COLORMAP,
                        ([len(tau) - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
-                       (cols, [f"{h.t_s[c]:.6g} s" for c in cols]),
-                       (decades, [f"{10.0**d:g} deg/h" for d in decades]))
+                       (cols, [f"{h.t_s[c]:.6g} s" for c in cols]), None)
 
     def _log_curve(self, axis, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
         """One window's ADEV curve and bounds of axis ``axis``, and its model (``model`` at
@@ -782,6 +787,8 @@ class RerunSink(Sink):
         self._open_piece()
         self._log_static(self.rec.file)
         self._legend_sent = False
+        for h in self._heat.values():
+            h.scale_sent = False
 
     def finish(self, summary) -> None:
         """Flush everything, complete the .rrd, keep serving a replay's viewers until
