@@ -48,6 +48,7 @@ import time
 import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -182,11 +183,18 @@ def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> t
 
 def model_taus(tau_s: np.ndarray) -> np.ndarray:
     """The taus (s) the model curve is drawn at: every tau of the grid and, between
-    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade)."""
-    tau = np.asarray(tau_s, dtype=np.float64)
+    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade); read-only,
+    computed once per tau grid (every window of a run has the same)."""
+    return _model_taus(tuple(np.asarray(tau_s, dtype=np.float64).tolist()))
+
+
+@lru_cache(maxsize=8)
+def _model_taus(tau: tuple[float, ...]) -> np.ndarray:
     parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
              for a, b in zip(tau[:-1], tau[1:], strict=True)]
-    return np.concatenate([*parts, tau[-1:]])
+    out = np.concatenate([*parts, np.asarray(tau[-1:])])
+    out.flags.writeable = False
+    return out
 
 
 def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
