@@ -194,8 +194,8 @@ def run_once(mode: str, args, workdir: str, connect_url: str | None) -> bool:
     master, slave, tty = open_pty()
     arch = os.path.join(workdir, f"arch-{mode}")
     window = min(8.192, 2 ** math.floor(math.log2(n / 4)) / RATE_HZ)
-    cmd = [sys.executable, "-m", "fogmon", "monitor", "--serial", tty, "--protocol", "kvh-a", "--kvh-rot", "rate",
-           "--kvh-units", "deg", "--duration-s", f"{args.duration_s:g}", "--archive", arch,
+    cmd = [sys.executable, "-m", "fogmon", "monitor", "--serial", tty, "--protocol", "kvh-a", "--axis", "z",
+           "--kvh-rot", "rate", "--kvh-units", "deg", "--duration-s", f"{args.duration_s:g}", "--archive", arch,
            "--window-s", f"{window:g}", "--hop-s", f"{window / 8:g}", "--no-progress"]
     rrd = None
     if mode == "rrd":
