@@ -128,7 +128,7 @@ def worker(args) -> dict:
         protocol = protocols[i % len(protocols)]
         data = make_input(rng, protocol)
         try:
-            opts = {"kvh_rot": "rate", "kvh_units": "deg"} if protocol.startswith("kvh") else {}
+            opts = {"kvh_rot": "rate", "kvh_units": "deg", "axis": "z"} if protocol.startswith("kvh") else {}
             c1 = make_codec(protocol, columns="seq:256,rate_dps,temp_c", **opts)
             c2 = make_codec(protocol, columns="seq:256,rate_dps,temp_c", **opts)
             whole = c1.feed(data)
