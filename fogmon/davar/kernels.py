@@ -318,10 +318,13 @@ def _batch_terms(hi, lo, bad, j0, n, m, x, v):
 
 @njit(cache=True, fastmath=_FAST)
 def _range_sum(x, i0, i1):
-    """Sum of x[i0:i1] in any order (SIMD; +inf when it holds a +inf)."""
+    """Sum of x[i0:i1] in any order (SIMD; +inf when it holds a +inf). The loop runs over
+    a slice from 0: indexing x from a variable start defeats vectorisation (numba's
+    negative-index check)."""
+    u = x[i0:i1]
     s = 0.0
-    for i in range(i0, i1):
-        s += x[i]
+    for i in range(u.shape[0]):
+        s += u[i]
     return s
 
 
