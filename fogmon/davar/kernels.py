@@ -167,12 +167,13 @@ def _term_dd(hi, lo, j, m):
 
 
 @njit(cache=True, inline="always")
-def _dd_add(s, c, x):
-    """(s, c) + x for a double-double s + c and x >= 0, renormalised so |c| <= ulp(s) / 2."""
-    t, r = _two_sum(s, x)
-    r += c
-    u = t + r
-    return u, r - (u - t)
+def _renorm(s, c):
+    """The compensated pair (s, c) with c folded into s, so that |c| <= ulp(s) / 2 (exact:
+    Fast2Sum, |c| <= |s|). A cumulative sum adds TwoSum errors to c unnormalised (one
+    dependent add per segment) and is renormalised once per tile, so c never carries more
+    than the roundings of one tile's segments."""
+    u = s + c
+    return u, c - (u - s)
 
 
 @njit(cache=True, inline="always")
@@ -335,11 +336,12 @@ def window_sums(hi, lo, bad, ms, starts, w):
     (non-decreasing), from the double-double prefix sums ``hi``, ``lo`` and counts ``bad``
     of ``prefix_sums_dd``: O(N) per m for all windows. Per m the squared terms are formed
     in vectorised tiles of _TILE and summed (SIMD) between the cut points (window starts
-    and ends); the segment sums enter a double-double cumulative sum, recorded at each
-    window's start, and a window's sum is the cumulative sum at its end minus that
-    record. A segment lies inside every window it overlaps, so a window carries only the
-    roundings of its own segments (<= _TILE eps of its sum) and ~eps^2 of the cumulative
-    sum: a large glitch leaves no residue in the windows not holding it."""
+    and ends); the segment sums enter a compensated cumulative sum (TwoSum, ``_renorm``
+    per tile), recorded at each window's start, and a window's sum is the cumulative sum
+    at its end minus that record. A segment lies inside every window it overlaps, so a
+    window carries only the roundings of its own segments (<= _TILE eps of its sum) and
+    per segment <= 2 _TILE eps^2 of the cumulative sum: a large glitch leaves no residue
+    in the windows not holding it."""
     nt = starts.shape[0]
     nm = ms.shape[0]
     sums = np.zeros((nt, nm))
@@ -376,7 +378,8 @@ def window_sums(hi, lo, bad, ms, starts, w):
                     if seg == np.inf:
                         nh += 1
                     else:
-                        s, c = _dd_add(s, c, seg)
+                        s, r = _two_sum(s, seg)
+                        c += r
                     cnt += int(_range_sum(v, pos, p)) if gaps else p - pos
                     pos = p
                 if b - t0 > n or (b - t0 == n and not last):
@@ -397,6 +400,7 @@ def window_sums(hi, lo, bad, ms, starts, w):
                     qb += 1
                 if qb == nt:
                     break
+            s, c = _renorm(s, c)
     return sums, counts
 
 
@@ -749,14 +753,14 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
     """Recorded-sums update over buffer positions ``first .. first + n_new - 1`` (already
     appended; buffer position 0 is absolute sample ``base``). Per m only the term ending
     at each new sample is computed: it enters the cumulative sum of squared terms
-    (double-double cum_s + cum_c; valid-term count cum_n; a term spanning a huge sample
+    (compensated cum_s + cum_c, ``_renorm`` per tile; valid-term count cum_n; a term spanning a huge sample
     is +inf and enters only cum_h, the count of segments holding one). Window k (absolute samples
     k hop .. w - 1 + k hop) starts at term k hop, so the cumulative sum of the terms
     before it is recorded (ring slot k mod R of rec_*) when that term's predecessor
     enters, and at the window's last sample its sum is the cumulative sum minus that
     record: windows never recompute and no term is computed twice. Rounding: each
     window carries only the roundings of the SIMD segment sums inside it (<= _TILE eps
-    of its sum) and ~eps^2 of the cumulative sum since the last re-base (a large glitch
+    of its sum) and per segment <= 2 _TILE eps^2 of the cumulative sum since the last re-base (a large glitch
     that has left leaves no residue), however long the run. A window whose segments
     hold a +inf term has sum +inf. Windows emitted here are ``k_row0 + row`` (rows of
     out_sums/out_counts)."""
@@ -766,8 +770,9 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
     x = np.empty(_TILE)
     v = np.empty(_TILE)
     bounds = np.empty(2 * _TILE + 2, np.int64)
-    k_rec = np.empty(2 * _TILE + 1, np.int64)
-    k_out = np.empty(2 * _TILE + 1, np.int64)
+    s_rec = np.empty(2 * _TILE + 1, np.int64)  # per cut: ring slot of the record taken there, or -1
+    s_out = np.empty(2 * _TILE + 1, np.int64)  # per cut: ring slot of the window emitted there, or -1
+    r_out = np.empty(2 * _TILE + 1, np.int64)  # its output row
     seg = np.empty(2 * _TILE + 1)
     cnt = np.empty(2 * _TILE + 1)
     for t0 in range(first, stop, _TILE):
@@ -781,20 +786,24 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
             pr = kr * hop + 2 * m - 2 - a_abs
             ke = max(0, -(-(a_abs - w + 1) // hop))
             pe = w - 1 + ke * hop - a_abs
+            sr = kr % ring  # ring slots advance by one per window: no division per cut
+            se = ke % ring
             n_cut = 0
             bounds[0] = 0
             while min(pr, pe) < n:
                 p = min(pr, pe)
                 bounds[n_cut + 1] = p + 1
-                k_rec[n_cut] = kr if pr == p else -1
-                k_out[n_cut] = ke if pe == p else -1
+                s_rec[n_cut] = sr if pr == p else -1
+                s_out[n_cut] = se if pe == p else -1
+                r_out[n_cut] = ke - k_row0
                 n_cut += 1
                 if pr == p:
-                    kr += 1
                     pr += hop
+                    sr = sr + 1 if sr + 1 < ring else 0
                 if pe == p:
                     ke += 1
                     pe += hop
+                    se = se + 1 if se + 1 < ring else 0
             bounds[n_cut + 1] = n
             # the terms ending at the tile's samples; none before the record's first term
             i0 = min(n, max(0, 2 * m - 1 - a_abs))
@@ -815,22 +824,24 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
                 if seg[j] == np.inf:
                     nh += 1
                 else:
-                    s, c = _dd_add(s, c, seg[j])
+                    s, r = _two_sum(s, seg[j])
+                    c += r
                 nn += int(cnt[j]) if gaps else bounds[j + 1] - bounds[j]
                 if j == n_cut:
                     break
-                if k_rec[j] >= 0:
-                    slot = k_rec[j] % ring
+                if s_rec[j] >= 0:
+                    slot = s_rec[j]
                     rec_s[k, slot] = s
                     rec_c[k, slot] = c
                     rec_n[k, slot] = nn
                     rec_h[k, slot] = nh
-                if k_out[j] >= 0:
-                    slot = k_out[j] % ring
+                if s_out[j] >= 0:
+                    slot = s_out[j]
                     d, e = _two_sum(s, -rec_s[k, slot])
-                    row = k_out[j] - k_row0
+                    row = r_out[j]
                     out_sums[row, k] = d + (e + (c - rec_c[k, slot])) if nh == rec_h[k, slot] else np.inf
                     out_counts[row, k] = nn - rec_n[k, slot]
+            s, c = _renorm(s, c)
             cum_s[k], cum_c[k], cum_n[k], cum_h[k] = s, c, nn, nh
 
 
