@@ -330,44 +330,74 @@ def _range_sum(x, i0, i1):
 
 
 @njit(cache=True)
+def _open_windows(starts, w):
+    """The ring size of the records of windows begun and not yet ended: a power of two
+    (slot = window & (size - 1)) above the most windows of ``w`` samples starting at
+    ``starts`` (non-decreasing) that hold one sample."""
+    most = 0
+    p = 0
+    for q in range(starts.shape[0]):
+        while starts[p] + w < starts[q]:
+            p += 1
+        most = max(most, q - p + 1)
+    size = 1
+    while size <= most:
+        size *= 2
+    return size
+
+
+@njit(cache=True)
 def window_sums(hi, lo, bad, ms, starts, w):
     """Sums of squared valid terms (+inf for a window holding a huge sample) and
     valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
     (non-decreasing), from the double-double prefix sums ``hi``, ``lo`` and counts ``bad``
-    of ``prefix_sums_dd``: O(N) per m for all windows. Per m the squared terms are formed
-    in vectorised tiles of _TILE and summed (SIMD) between the cut points (window starts
-    and ends); the segment sums enter a compensated cumulative sum (TwoSum, ``_renorm``
-    per tile), recorded at each window's start, and a window's sum is the cumulative sum
-    at its end minus that record. A segment lies inside every window it overlaps, so a
-    window carries only the roundings of its own segments (<= _TILE eps of its sum) and
-    per segment <= 2 _TILE eps^2 of the cumulative sum: a large glitch leaves no residue
-    in the windows not holding it."""
+    of ``prefix_sums_dd``: O(N) per m for all windows. Per tile of _TILE terms and per m
+    (tiles outside, taus inside, so the prefix sums a tile reads come from the cache for
+    every tau) the squared terms are formed vectorised and summed (SIMD) between the cut
+    points (window starts and ends); the segment sums enter a compensated cumulative sum
+    per m (TwoSum, ``_renorm`` per tile), recorded at each window's start (a ring of
+    ``_open_windows`` slots), and a window's sum is the cumulative sum at its end minus
+    that record. A segment lies inside every window it overlaps, so a window carries only
+    the roundings of its own segments (<= _TILE eps of its sum) and per segment <= 2
+    _TILE eps^2 of the cumulative sum: a large glitch leaves no residue in the windows not
+    holding it."""
     nt = starts.shape[0]
     nm = ms.shape[0]
     sums = np.zeros((nt, nm))
     counts = np.zeros((nt, nm), np.int64)
-    s_at = np.empty(nt)
-    c_at = np.empty(nt)
-    n_at = np.empty(nt, np.int64)
-    h_at = np.empty(nt, np.int64)
+    if nt == 0:
+        return sums, counts
+    ring = _open_windows(starts, w)
+    s_at = np.empty((nm, ring))
+    c_at = np.empty((nm, ring))
+    n_at = np.empty((nm, ring), np.int64)
+    h_at = np.empty((nm, ring), np.int64)
+    # per m: cumulative sum (s, c), valid terms, segments holding a term spanning a huge
+    # sample, next window to record (qa) and to emit (qb)
+    cum_s = np.zeros(nm)
+    cum_c = np.zeros(nm)
+    cum_n = np.zeros(nm, np.int64)
+    cum_h = np.zeros(nm, np.int64)
+    qa_k = np.zeros(nm, np.int64)
+    qb_k = np.zeros(nm, np.int64)
     x = np.empty(_TILE)
     v = np.empty(_TILE)
     big = np.iinfo(np.int64).max
+    j_last = starts[0]  # one past the last term any m needs
     for k in range(nm):
-        m = ms[k]
-        if nt == 0 or 2 * m > w:
-            continue
-        span = w - 2 * m + 1  # terms per window
-        j_end = starts[nt - 1] + span  # one past the last term needed
-        s = 0.0
-        c = 0.0
-        cnt = 0
-        nh = 0  # segments holding a term spanning a huge sample
-        qa = 0  # next window to record
-        qb = 0  # next window to emit
-        for t0 in range(starts[0], j_end, _TILE):
+        if 2 * ms[k] <= w:
+            j_last = max(j_last, starts[nt - 1] + w - 2 * ms[k] + 1)
+    for t0 in range(starts[0], j_last, _TILE):
+        for k in range(nm):
+            m = ms[k]
+            qb = qb_k[k]
+            if 2 * m > w or qb == nt:
+                continue
+            span = w - 2 * m + 1  # terms per window
+            j_end = starts[nt - 1] + span  # one past the last term needed
             n = min(_TILE, j_end - t0)
             last = t0 + n == j_end
+            s, c, cnt, nh, qa = cum_s[k], cum_c[k], cum_n[k], cum_h[k], qa_k[k]
             gaps = _batch_terms(hi, lo, bad, t0, n, m, x, v)
             pos = 0
             while True:
@@ -385,22 +415,25 @@ def window_sums(hi, lo, bad, ms, starts, w):
                 if b - t0 > n or (b - t0 == n and not last):
                     break
                 while qa < nt and starts[qa] == b:
-                    s_at[qa] = s
-                    c_at[qa] = c
-                    n_at[qa] = cnt
-                    h_at[qa] = nh
+                    slot = qa & (ring - 1)
+                    s_at[k, slot] = s
+                    c_at[k, slot] = c
+                    n_at[k, slot] = cnt
+                    h_at[k, slot] = nh
                     qa += 1
                 while qb < nt and starts[qb] + span == b:
-                    if nh > h_at[qb]:
+                    slot = qb & (ring - 1)
+                    if nh > h_at[k, slot]:
                         sums[qb, k] = np.inf
                     else:
-                        d, e = _two_sum(s, -s_at[qb])
-                        sums[qb, k] = d + (e + (c - c_at[qb]))
-                    counts[qb, k] = cnt - n_at[qb]
+                        d, e = _two_sum(s, -s_at[k, slot])
+                        sums[qb, k] = d + (e + (c - c_at[k, slot]))
+                    counts[qb, k] = cnt - n_at[k, slot]
                     qb += 1
                 if qb == nt:
                     break
             s, c = _renorm(s, c)
+            cum_s[k], cum_c[k], cum_n[k], cum_h[k], qa_k[k], qb_k[k] = s, c, cnt, nh, qa, qb
     return sums, counts
 
 
