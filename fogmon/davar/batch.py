@@ -144,7 +144,8 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     if alpha.ndim == 2 and len(alpha) and alpha.strides[0] == 0:  # a row broadcast over windows (alpha_rows)
         alpha = alpha[0]
     if alpha.ndim <= 1:  # one noise type row for every window
-        runs = np.ascontiguousarray(np.broadcast_to(alpha, (1, nm)))
+        runs = np.empty((1, nm), dtype=np.int64)
+        runs[0] = alpha
         run = np.zeros(len(sums), dtype=np.int64)
     else:  # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
         alpha = np.broadcast_to(alpha, shape).reshape(-1, nm)
@@ -153,9 +154,12 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
         run = np.cumsum(new_run) - 1
         runs = np.ascontiguousarray(alpha[new_run])
     tables = [_gapless_tables(a.tobytes(), m.tobytes(), int(n_samples), float(confidence)) for a in runs]
-    edf_gapless, f_lo, f_hi = (np.array([t[i] for t in tables]).reshape(-1, nm) for i in range(3))
-    adev, lo, hi, edf, n_gapped = kernels.frame_stats(sums, counts, run, n_samples - 2 * m + 1, edf_gapless,
-                                                      f_lo, f_hi)
+    edf_gapless, f_lo, f_hi = ((tables[0][i].reshape(1, nm) if len(tables) == 1
+                                else np.array([t[i] for t in tables]).reshape(-1, nm)) for i in range(3))
+    # result arrays allocated here: a numba kernel returning new arrays pays ~2 us each to box them
+    adev, lo, hi, edf = (np.empty(sums.shape) for _ in range(4))
+    n_gapped = kernels.frame_stats(sums, counts, run, n_samples - 2 * m + 1, edf_gapless, f_lo, f_hi,
+                                   adev, lo, hi, edf)
     if n_gapped:
         gapped = counts != (n_samples - 2 * m + 1)
         edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])

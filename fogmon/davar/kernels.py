@@ -879,16 +879,13 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
 
 
 @njit(cache=True, error_model="numpy")
-def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
+def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi, adev, lo, hi, edf):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
-    terms), bounds and EDF from the gap-free tables of the row's alpha run; returns
-    (adev, lo, hi, edf, number of entries with fewer than ``full`` terms, whose EDF and
-    bounds the caller recomputes). Branch-free inner loop (SIMD)."""
+    terms), bounds and EDF from the gap-free tables of the row's alpha run, into
+    ``adev``, ``lo``, ``hi``, ``edf`` (shape of ``sums``); returns the number of entries
+    with fewer than ``full`` terms, whose EDF and bounds the caller recomputes.
+    Branch-free inner loop (SIMD)."""
     nt, nm = sums.shape
-    adev = np.empty((nt, nm))
-    lo = np.empty((nt, nm))
-    hi = np.empty((nt, nm))
-    edf = np.empty((nt, nm))
     n_gapped = 0
     for i in range(nt):
         r = run[i]
@@ -902,4 +899,4 @@ def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
             h_row[k] = a * fh[k]
             e_row[k] = eg[k]
             n_gapped += c[k] != full[k]
-    return adev, lo, hi, edf, n_gapped
+    return n_gapped
