@@ -879,6 +879,19 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
 
 
 @njit(cache=True, error_model="numpy")
+def model_holds(model, sums, counts, m, hold_z):
+    """|ln(avar / model)| <= hold_z sqrt(2 m / n + 0.01) at every tau with n > 0 terms,
+    avar = max(sum, 0) / (2 n) (deg/h)^2, ``model`` the model's Allan variance per tau."""
+    for k in range(m.shape[0]):
+        n = counts[k]
+        if n > 0:
+            z = np.log(max(sums[k], 0.0) / (2.0 * n) / model[k]) / np.sqrt(2.0 * m[k] / n + 0.01)
+            if not abs(z) <= hold_z:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi, adev, lo, hi, edf):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms), bounds and EDF from the gap-free tables of the row's alpha run, into
