@@ -10,7 +10,9 @@ Rows (issue 13's table), each beside its reference:
   ``allantools.oadev`` recomputed on every window;
 - push one sample per call (hop 1024) -- vs allantools' pure-Python ``oadev_realtime``
   (``add_frequency`` per sample, the same 46 taus);
-- push at hop 1 (a window per sample), fixed alpha, blocks of 8192 -- vs the engine alone;
+- push at hop 1 (a window per sample), fixed alpha, blocks of 8192 -- vs the engine alone,
+  and the engine alone at hop 1 vs at hop 32 (the same running sums, 1/32 of the windows
+  emitted: what the emission of a window per sample costs);
 - batch ``fogmon.dadev`` (default alpha) at hop 1024 and 64, ``fogmon.oadev`` -- vs a
   plain numpy prefix-sum DAVAR of the same windows;
 - the engine on a rate swinging +-1e6 deg/h (every sample "large": the side-prefix path)
@@ -144,6 +146,7 @@ def main(argv=None) -> int:
         "allantools oadev_realtime, per sample": realtime,
         "push alpha=0, hop 1": lambda: stream(y[:n_hop1], m, 1, 0),
         "engine alone (advance), hop 1": lambda: stream(y[:n_hop1], m, 1, 0, "advance"),
+        "engine alone (advance), hop 32": lambda: stream(y[:n_hop1], m, 32, 0, "advance"),
         "engine, +-1e6 deg/h swing, hop 1024": lambda: stream(swing, m, 1024, 0, "advance"),
         "engine, +-1e6 deg/h swing, hop 1": lambda: stream(swing[:n_hop1], m, 1, 0, "advance"),
         "batch dadev default, hop 1024": batch(dadev, y, 1.0, WINDOW, 1024, taus=m.astype(float)),
@@ -179,7 +182,8 @@ def main(argv=None) -> int:
         ("push alpha=0, hop 1024", "engine alone (advance), hop 1024"),
         ("engine alone (advance), hop 1024", at)])
     block("2. one sample per call", [("push one sample per call, hop 1024", "allantools oadev_realtime, per sample")])
-    block("3. hop 1", [("push alpha=0, hop 1", "engine alone (advance), hop 1")])
+    block("3. hop 1", [("push alpha=0, hop 1", "engine alone (advance), hop 1"),
+                       ("engine alone (advance), hop 1", "engine alone (advance), hop 32")])
     block("engine on large samples", [
         ("engine, +-1e6 deg/h swing, hop 1024", "engine alone (advance), hop 1024"),
         ("engine, +-1e6 deg/h swing, hop 1", "engine alone (advance), hop 1")])

@@ -1,7 +1,7 @@
 """Exactness of the fast paths of issue 13: one-sample pushes (staged) against block
 pushes, the branch-free frame statistics against the per-entry definitions, the tiled
-batch window sums against brute force, the held noise type against a refit, and a
-numba cache in a read-only directory."""
+batch window sums against brute force, the held noise type against a refit, the model
+test that holds it against its definition, and a numba cache in a read-only directory."""
 import os
 import subprocess
 import sys
@@ -11,7 +11,8 @@ import pytest
 from scipy.stats import chi2
 
 from fogmon.block import Block
-from fogmon.davar.batch import alpha_rows, dadev, oadev, row_alpha, statistics
+from fogmon.davar import kernels
+from fogmon.davar.batch import HOLD_Z, alpha_rows, dadev, oadev, row_alpha, statistics
 from fogmon.davar.confidence import edf_effective, edf_full
 from fogmon.davar.streaming import STAGE, StreamingDadev
 
@@ -152,6 +153,21 @@ def test_held_noise_type_is_refitted_when_the_curve_changes():
     np.testing.assert_array_equal(alpha[first], row_alpha(c[first], d.n_terms[first], d.m, w))
     np.testing.assert_array_equal(alpha[last], row_alpha(c[last], d.n_terms[last], d.m, w))
     assert alpha[last, -1] == -2 and alpha[first, -1] != -2
+
+
+def test_model_holds_is_the_z_test_at_every_tau_with_terms():
+    rng = np.random.default_rng(9)
+    m = np.array([1, 2, 4, 8, 16, 32], dtype=np.int64)
+    n = np.array([4000, 4000, 3990, 3000, 0, 10], dtype=np.int64)
+    model = np.full(6, 1.0)
+    for _ in range(200):
+        z_true = rng.normal(scale=2.0, size=6)
+        sums = 2.0 * n * np.exp(z_true * np.sqrt(2.0 * m / np.maximum(n, 1) + 0.01))
+        sums[rng.random(6) < 0.1] = 0.0  # avar 0: ln = -inf, never holds where there are terms
+        use = n > 0
+        with np.errstate(divide="ignore"):
+            z = np.log(sums[use] / (2.0 * n[use]) / model[use]) / np.sqrt(2.0 * m[use] / n[use] + 0.01)
+        assert kernels.model_holds(model, sums, n, m, HOLD_Z) == bool(np.all(np.abs(z) <= HOLD_Z))
 
 
 _RUN = ("import numpy as np; from fogmon.davar import kernels; "

@@ -75,17 +75,18 @@ HOLD_Z = 3.0
 refit's model at every tau keeps that refit's noise types (``alpha_rows``)."""
 
 
-def _model_holds(a, sums, counts, m) -> bool:
-    """The quick-fit model ``a`` still describes a window: |ln(avar / model)| <= HOLD_Z
-    sqrt(2 / nu + 0.1^2) at every tau with terms, nu = n_terms / m (about the EDF of
-    white rate noise, lower for the others: a loose test)."""
-    counts = np.asarray(counts)
-    use = counts > 0
-    tau = np.asarray(m, dtype=np.float64)[use]
-    model = (tau[:, None] ** POWERS) @ a
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = np.log(_avar(sums, counts)[use] / model) / np.sqrt(2.0 * tau / counts[use] + 0.01)
-    return bool(np.all(np.abs(z) <= HOLD_Z))
+def _model_curve(a, m) -> np.ndarray:
+    """Allan variance (deg/h)^2 per tau of the quick-fit terms ``a`` (tau in sample periods)."""
+    return (np.asarray(m, dtype=np.float64)[:, None] ** POWERS) @ a
+
+
+def _model_holds(model, sums, counts, m) -> bool:
+    """The quick-fit model curve ``model`` (``_model_curve``) still describes a window:
+    |ln(avar / model)| <= HOLD_Z sqrt(2 / nu + 0.1^2) at every tau with terms, nu =
+    n_terms / m (about the EDF of white rate noise, lower for the others: a loose test).
+    One numba call (``kernels.model_holds``): a dozen numpy calls on 46 values cost
+    ~100 us on a loaded machine between engine blocks."""
+    return bool(kernels.model_holds(model, sums, counts, m, HOLD_Z))
 
 
 def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
@@ -95,21 +96,21 @@ def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
     batch and streaming engines pick the same windows. ``prev`` is the state returned for
     the windows before these, or None. Returns (alpha (T x M; a read-only broadcast of one
     row when one row holds for all these windows), state)."""
-    alpha_now, terms_now, end_now = (np.zeros(len(m), dtype=np.int64), None, None) if prev is None else prev
+    alpha_now, model_now, end_now = (np.zeros(len(m), dtype=np.int64), None, None) if prev is None else prev
     if len(ends) == 0:
-        return np.zeros((0, len(m)), dtype=np.int64), (alpha_now, terms_now, end_now)
+        return np.zeros((0, len(m)), dtype=np.int64), (alpha_now, model_now, end_now)
     seg_start, seg_alpha = [0], [alpha_now]
     r = 0 if end_now is None else int(np.searchsorted(ends, end_now + every))
     tau_m = np.asarray(m, dtype=np.float64)
     while r < len(ends):
         end_now = int(ends[r])
-        if terms_now is None or not _model_holds(terms_now, sums[r], counts[r], m):
-            terms_now = _row_terms(sums[r], counts[r], m, n_samples)
-            alpha_now = dominant_alpha(terms_now, tau_m)
+        if model_now is None or not _model_holds(model_now, sums[r], counts[r], m):
+            terms = _row_terms(sums[r], counts[r], m, n_samples)
+            alpha_now, model_now = dominant_alpha(terms, tau_m), _model_curve(terms, m)
             seg_start.append(r)
             seg_alpha.append(alpha_now)
         r = int(np.searchsorted(ends, end_now + every))
-    state = (alpha_now, terms_now, end_now)
+    state = (alpha_now, model_now, end_now)
     if len(seg_alpha) == 1:  # one noise-type row for every window: a read-only view (see statistics)
         return np.broadcast_to(np.asarray(seg_alpha[0], dtype=np.int64), (len(ends), len(m))), state
     seg = np.searchsorted(np.array(seg_start), np.arange(len(ends)), side="right") - 1
@@ -141,7 +142,8 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     if alpha.ndim == 2 and len(alpha) and alpha.strides[0] == 0:  # a row broadcast over windows (alpha_rows)
         alpha = alpha[0]
     if alpha.ndim <= 1:  # one noise type row for every window
-        runs = np.ascontiguousarray(np.broadcast_to(alpha, (1, nm)))
+        runs = np.empty((1, nm), dtype=np.int64)
+        runs[0] = alpha
         run = np.zeros(len(sums), dtype=np.int64)
     else:  # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
         alpha = np.broadcast_to(alpha, shape).reshape(-1, nm)
@@ -150,9 +152,12 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
         run = np.cumsum(new_run) - 1
         runs = np.ascontiguousarray(alpha[new_run])
     tables = [_gapless_tables(a.tobytes(), m.tobytes(), int(n_samples), float(confidence)) for a in runs]
-    edf_gapless, f_lo, f_hi = (np.array([t[i] for t in tables]).reshape(-1, nm) for i in range(3))
-    adev, lo, hi, edf, n_gapped = kernels.frame_stats(sums, counts, run, n_samples - 2 * m + 1, edf_gapless,
-                                                      f_lo, f_hi)
+    edf_gapless, f_lo, f_hi = ((tables[0][i].reshape(1, nm) if len(tables) == 1
+                                else np.array([t[i] for t in tables]).reshape(-1, nm)) for i in range(3))
+    # result arrays allocated here: a numba kernel returning new arrays pays ~2 us each to box them
+    adev, lo, hi, edf = (np.empty(sums.shape) for _ in range(4))
+    n_gapped = kernels.frame_stats(sums, counts, run, n_samples - 2 * m + 1, edf_gapless, f_lo, f_hi,
+                                   adev, lo, hi, edf)
     if n_gapped:
         gapped = counts != (n_samples - 2 * m + 1)
         edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])

@@ -167,12 +167,13 @@ def _term_dd(hi, lo, j, m):
 
 
 @njit(cache=True, inline="always")
-def _dd_add(s, c, x):
-    """(s, c) + x for a double-double s + c and x >= 0, renormalised so |c| <= ulp(s) / 2."""
-    t, r = _two_sum(s, x)
-    r += c
-    u = t + r
-    return u, r - (u - t)
+def _renorm(s, c):
+    """The compensated pair (s, c) with c folded into s, so that |c| <= ulp(s) / 2 (exact:
+    Fast2Sum, |c| <= |s|). A cumulative sum adds TwoSum errors to c unnormalised (one
+    dependent add per segment) and is renormalised once per tile, so c never carries more
+    than the roundings of one tile's segments."""
+    u = s + c
+    return u, c - (u - s)
 
 
 @njit(cache=True, inline="always")
@@ -318,11 +319,31 @@ def _batch_terms(hi, lo, bad, j0, n, m, x, v):
 
 @njit(cache=True, fastmath=_FAST)
 def _range_sum(x, i0, i1):
-    """Sum of x[i0:i1] in any order (SIMD; +inf when it holds a +inf)."""
+    """Sum of x[i0:i1] in any order (SIMD; +inf when it holds a +inf). The loop runs over
+    a slice from 0: indexing x from a variable start defeats vectorisation (numba's
+    negative-index check)."""
+    u = x[i0:i1]
     s = 0.0
-    for i in range(i0, i1):
-        s += x[i]
+    for i in range(u.shape[0]):
+        s += u[i]
     return s
+
+
+@njit(cache=True)
+def _open_windows(starts, w):
+    """The ring size of the records of windows begun and not yet ended: a power of two
+    (slot = window & (size - 1)) above the most windows of ``w`` samples starting at
+    ``starts`` (non-decreasing) that hold one sample."""
+    most = 0
+    p = 0
+    for q in range(starts.shape[0]):
+        while starts[p] + w < starts[q]:
+            p += 1
+        most = max(most, q - p + 1)
+    size = 1
+    while size <= most:
+        size *= 2
+    return size
 
 
 @njit(cache=True)
@@ -330,39 +351,53 @@ def window_sums(hi, lo, bad, ms, starts, w):
     """Sums of squared valid terms (+inf for a window holding a huge sample) and
     valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
     (non-decreasing), from the double-double prefix sums ``hi``, ``lo`` and counts ``bad``
-    of ``prefix_sums_dd``: O(N) per m for all windows. Per m the squared terms are formed
-    in vectorised tiles of _TILE and summed (SIMD) between the cut points (window starts
-    and ends); the segment sums enter a double-double cumulative sum, recorded at each
-    window's start, and a window's sum is the cumulative sum at its end minus that
-    record. A segment lies inside every window it overlaps, so a window carries only the
-    roundings of its own segments (<= _TILE eps of its sum) and ~eps^2 of the cumulative
-    sum: a large glitch leaves no residue in the windows not holding it."""
+    of ``prefix_sums_dd``: O(N) per m for all windows. Per tile of _TILE terms and per m
+    (tiles outside, taus inside, so the prefix sums a tile reads come from the cache for
+    every tau) the squared terms are formed vectorised and summed (SIMD) between the cut
+    points (window starts and ends); the segment sums enter a compensated cumulative sum
+    per m (TwoSum, ``_renorm`` per tile), recorded at each window's start (a ring of
+    ``_open_windows`` slots), and a window's sum is the cumulative sum at its end minus
+    that record. A segment lies inside every window it overlaps, so a window carries only
+    the roundings of its own segments (<= _TILE eps of its sum) and per segment <= 2
+    _TILE eps^2 of the cumulative sum: a large glitch leaves no residue in the windows not
+    holding it."""
     nt = starts.shape[0]
     nm = ms.shape[0]
     sums = np.zeros((nt, nm))
     counts = np.zeros((nt, nm), np.int64)
-    s_at = np.empty(nt)
-    c_at = np.empty(nt)
-    n_at = np.empty(nt, np.int64)
-    h_at = np.empty(nt, np.int64)
+    if nt == 0:
+        return sums, counts
+    ring = _open_windows(starts, w)
+    s_at = np.empty((nm, ring))
+    c_at = np.empty((nm, ring))
+    n_at = np.empty((nm, ring), np.int64)
+    h_at = np.empty((nm, ring), np.int64)
+    # per m: cumulative sum (s, c), valid terms, segments holding a term spanning a huge
+    # sample, next window to record (qa) and to emit (qb)
+    cum_s = np.zeros(nm)
+    cum_c = np.zeros(nm)
+    cum_n = np.zeros(nm, np.int64)
+    cum_h = np.zeros(nm, np.int64)
+    qa_k = np.zeros(nm, np.int64)
+    qb_k = np.zeros(nm, np.int64)
     x = np.empty(_TILE)
     v = np.empty(_TILE)
     big = np.iinfo(np.int64).max
+    j_last = starts[0]  # one past the last term any m needs
     for k in range(nm):
-        m = ms[k]
-        if nt == 0 or 2 * m > w:
-            continue
-        span = w - 2 * m + 1  # terms per window
-        j_end = starts[nt - 1] + span  # one past the last term needed
-        s = 0.0
-        c = 0.0
-        cnt = 0
-        nh = 0  # segments holding a term spanning a huge sample
-        qa = 0  # next window to record
-        qb = 0  # next window to emit
-        for t0 in range(starts[0], j_end, _TILE):
+        if 2 * ms[k] <= w:
+            j_last = max(j_last, starts[nt - 1] + w - 2 * ms[k] + 1)
+    for t0 in range(starts[0], j_last, _TILE):
+        for k in range(nm):
+            m = ms[k]
+            qb = qb_k[k]
+            if 2 * m > w or qb == nt:
+                continue
+            span = w - 2 * m + 1  # terms per window
+            j_end = starts[nt - 1] + span  # one past the last term needed
             n = min(_TILE, j_end - t0)
             last = t0 + n == j_end
+            s, c, cnt, nh, qa = cum_s[k], cum_c[k], cum_n[k], cum_h[k], qa_k[k]
             gaps = _batch_terms(hi, lo, bad, t0, n, m, x, v)
             pos = 0
             while True:
@@ -373,27 +408,32 @@ def window_sums(hi, lo, bad, ms, starts, w):
                     if seg == np.inf:
                         nh += 1
                     else:
-                        s, c = _dd_add(s, c, seg)
+                        s, r = _two_sum(s, seg)
+                        c += r
                     cnt += int(_range_sum(v, pos, p)) if gaps else p - pos
                     pos = p
                 if b - t0 > n or (b - t0 == n and not last):
                     break
                 while qa < nt and starts[qa] == b:
-                    s_at[qa] = s
-                    c_at[qa] = c
-                    n_at[qa] = cnt
-                    h_at[qa] = nh
+                    slot = qa & (ring - 1)
+                    s_at[k, slot] = s
+                    c_at[k, slot] = c
+                    n_at[k, slot] = cnt
+                    h_at[k, slot] = nh
                     qa += 1
                 while qb < nt and starts[qb] + span == b:
-                    if nh > h_at[qb]:
+                    slot = qb & (ring - 1)
+                    if nh > h_at[k, slot]:
                         sums[qb, k] = np.inf
                     else:
-                        d, e = _two_sum(s, -s_at[qb])
-                        sums[qb, k] = d + (e + (c - c_at[qb]))
-                    counts[qb, k] = cnt - n_at[qb]
+                        d, e = _two_sum(s, -s_at[k, slot])
+                        sums[qb, k] = d + (e + (c - c_at[k, slot]))
+                    counts[qb, k] = cnt - n_at[k, slot]
                     qb += 1
                 if qb == nt:
                     break
+            s, c = _renorm(s, c)
+            cum_s[k], cum_c[k], cum_n[k], cum_h[k], qa_k[k], qb_k[k] = s, c, cnt, nh, qa, qb
     return sums, counts
 
 
@@ -746,14 +786,14 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
     """Recorded-sums update over buffer positions ``first .. first + n_new - 1`` (already
     appended; buffer position 0 is absolute sample ``base``). Per m only the term ending
     at each new sample is computed: it enters the cumulative sum of squared terms
-    (double-double cum_s + cum_c; valid-term count cum_n; a term spanning a huge sample
+    (compensated cum_s + cum_c, ``_renorm`` per tile; valid-term count cum_n; a term spanning a huge sample
     is +inf and enters only cum_h, the count of segments holding one). Window k (absolute samples
     k hop .. w - 1 + k hop) starts at term k hop, so the cumulative sum of the terms
     before it is recorded (ring slot k mod R of rec_*) when that term's predecessor
     enters, and at the window's last sample its sum is the cumulative sum minus that
     record: windows never recompute and no term is computed twice. Rounding: each
     window carries only the roundings of the SIMD segment sums inside it (<= _TILE eps
-    of its sum) and ~eps^2 of the cumulative sum since the last re-base (a large glitch
+    of its sum) and per segment <= 2 _TILE eps^2 of the cumulative sum since the last re-base (a large glitch
     that has left leaves no residue), however long the run. A window whose segments
     hold a +inf term has sum +inf. Windows emitted here are ``k_row0 + row`` (rows of
     out_sums/out_counts)."""
@@ -763,8 +803,9 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
     x = np.empty(_TILE)
     v = np.empty(_TILE)
     bounds = np.empty(2 * _TILE + 2, np.int64)
-    k_rec = np.empty(2 * _TILE + 1, np.int64)
-    k_out = np.empty(2 * _TILE + 1, np.int64)
+    s_rec = np.empty(2 * _TILE + 1, np.int64)  # per cut: ring slot of the record taken there, or -1
+    s_out = np.empty(2 * _TILE + 1, np.int64)  # per cut: ring slot of the window emitted there, or -1
+    r_out = np.empty(2 * _TILE + 1, np.int64)  # its output row
     seg = np.empty(2 * _TILE + 1)
     cnt = np.empty(2 * _TILE + 1)
     for t0 in range(first, stop, _TILE):
@@ -778,20 +819,24 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
             pr = kr * hop + 2 * m - 2 - a_abs
             ke = max(0, -(-(a_abs - w + 1) // hop))
             pe = w - 1 + ke * hop - a_abs
+            sr = kr % ring  # ring slots advance by one per window: no division per cut
+            se = ke % ring
             n_cut = 0
             bounds[0] = 0
             while min(pr, pe) < n:
                 p = min(pr, pe)
                 bounds[n_cut + 1] = p + 1
-                k_rec[n_cut] = kr if pr == p else -1
-                k_out[n_cut] = ke if pe == p else -1
+                s_rec[n_cut] = sr if pr == p else -1
+                s_out[n_cut] = se if pe == p else -1
+                r_out[n_cut] = ke - k_row0
                 n_cut += 1
                 if pr == p:
-                    kr += 1
                     pr += hop
+                    sr = sr + 1 if sr + 1 < ring else 0
                 if pe == p:
                     ke += 1
                     pe += hop
+                    se = se + 1 if se + 1 < ring else 0
             bounds[n_cut + 1] = n
             # the terms ending at the tile's samples; none before the record's first term
             i0 = min(n, max(0, 2 * m - 1 - a_abs))
@@ -812,36 +857,48 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
                 if seg[j] == np.inf:
                     nh += 1
                 else:
-                    s, c = _dd_add(s, c, seg[j])
+                    s, r = _two_sum(s, seg[j])
+                    c += r
                 nn += int(cnt[j]) if gaps else bounds[j + 1] - bounds[j]
                 if j == n_cut:
                     break
-                if k_rec[j] >= 0:
-                    slot = k_rec[j] % ring
+                if s_rec[j] >= 0:
+                    slot = s_rec[j]
                     rec_s[k, slot] = s
                     rec_c[k, slot] = c
                     rec_n[k, slot] = nn
                     rec_h[k, slot] = nh
-                if k_out[j] >= 0:
-                    slot = k_out[j] % ring
+                if s_out[j] >= 0:
+                    slot = s_out[j]
                     d, e = _two_sum(s, -rec_s[k, slot])
-                    row = k_out[j] - k_row0
+                    row = r_out[j]
                     out_sums[row, k] = d + (e + (c - rec_c[k, slot])) if nh == rec_h[k, slot] else np.inf
                     out_counts[row, k] = nn - rec_n[k, slot]
+            s, c = _renorm(s, c)
             cum_s[k], cum_c[k], cum_n[k], cum_h[k] = s, c, nn, nh
 
 
 @njit(cache=True, error_model="numpy")
-def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
+def model_holds(model, sums, counts, m, hold_z):
+    """|ln(avar / model)| <= hold_z sqrt(2 m / n + 0.01) at every tau with n > 0 terms,
+    avar = max(sum, 0) / (2 n) (deg/h)^2, ``model`` the model's Allan variance per tau."""
+    for k in range(m.shape[0]):
+        n = counts[k]
+        if n > 0:
+            z = np.log(max(sums[k], 0.0) / (2.0 * n) / model[k]) / np.sqrt(2.0 * m[k] / n + 0.01)
+            if not abs(z) <= hold_z:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi, adev, lo, hi, edf):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
-    terms), bounds and EDF from the gap-free tables of the row's alpha run; returns
-    (adev, lo, hi, edf, number of entries with fewer than ``full`` terms, whose EDF and
-    bounds the caller recomputes). Branch-free inner loop (SIMD)."""
+    terms), bounds and EDF from the gap-free tables of the row's alpha run, into
+    ``adev``, ``lo``, ``hi``, ``edf`` (shape of ``sums``); returns the number of entries
+    with fewer than ``full`` terms, whose EDF and bounds the caller recomputes.
+    Branch-free inner loop (SIMD)."""
     nt, nm = sums.shape
-    adev = np.empty((nt, nm))
-    lo = np.empty((nt, nm))
-    hi = np.empty((nt, nm))
-    edf = np.empty((nt, nm))
     n_gapped = 0
     for i in range(nt):
         r = run[i]
@@ -855,4 +912,4 @@ def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi):
             h_row[k] = a * fh[k]
             e_row[k] = eg[k]
             n_gapped += c[k] != full[k]
-    return adev, lo, hi, edf, n_gapped
+    return n_gapped
