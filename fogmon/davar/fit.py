@@ -20,15 +20,17 @@ from statistics import NormalDist
 
 import numpy as np
 
-from fogmon.davar.confidence import (
-    ALPHA_OF_TERM,
-    avar_relative_covariance,
-    covariance_matrices,
-    edf_mixture_from,
-    mixture_matrices,
-)
+from fogmon.davar.confidence import ALPHA_OF_TERM, covariance_matrices, mixture_matrices
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
-from fogmon.davar.scoring import fisher_scoring, robust_scoring
+from fogmon.davar.scoring import (
+    fisher_scoring,
+    mixture_correlation,
+    mixture_edf,
+    profile,
+    robust_scoring,
+    sandwich_variances,
+    upper_limits,
+)
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -121,10 +123,6 @@ def dominant_alpha(avar_terms: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
     return np.where(contrib.max(axis=-1) > 0, alpha, 0)
 
 
-_MIX_OF_TERM = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, 0, 0, 1]], dtype=np.float64)
-"""Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
-
-
 def octave_subset(m, m_max: int) -> np.ndarray:
     """Indices (sorted) of the averaging factors ``m`` the fit uses: for each power of two
     2^k <= ``m_max`` (n / 4, the octave grid's last), the m nearest to it in log2 within
@@ -146,7 +144,7 @@ class _NoiseModel:
     model A predicts (white rate noise where the model is still empty): EDF per tau
     (``__call__``, scaled for gaps) and correlation across taus (``correlation``); the
     mixture matrices of ``m`` and ``n_samples`` computed once per fit, the cross-tau ones
-    (cached per grid) only when first needed."""
+    (``cov``, cached per grid) only when first needed."""
 
     def __init__(self, tau, m, n_terms, n_samples: int):
         tau = np.asarray(tau, dtype=np.float64)
@@ -155,30 +153,24 @@ class _NoiseModel:
         self.mats = mixture_matrices(m, n_samples)
         full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
         self.full = full.astype(np.float64)
-        self.gap_scale = np.asarray(n_terms) / full
+        self.gap_scale = (np.asarray(n_terms) / full).astype(np.float64)
         self.m = np.asarray(m, dtype=np.int64)
-        self._cov: np.ndarray | None = None  # covariance_matrices of m, fetched on first use
+        self._cov: np.ndarray | None = None
 
-    def fractions(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
-        """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per
-        tau (rows of ``x``, default the fitted taus)."""
-        contrib = (self.x if x is None else x) * a
-        total = contrib.sum(axis=1)
-        frac = (contrib @ _MIX_OF_TERM) / np.where(total > 0, total, 1.0)[:, None]
-        frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
-        return frac
+    @property
+    def cov(self) -> np.ndarray:
+        """``confidence.covariance_matrices`` of the fitted taus, fetched on first use."""
+        if self._cov is None:
+            self._cov = covariance_matrices(self.m, self.n_samples)
+        return self._cov
 
     def __call__(self, a: np.ndarray) -> np.ndarray:
-        return edf_mixture_from(self.fractions(a), self.mats, self.full) * self.gap_scale
+        return mixture_edf(self.x, np.asarray(a, dtype=np.float64), self.mats, self.full, self.gap_scale)
 
     def correlation(self, a: np.ndarray) -> np.ndarray:
         """Correlation of the Allan variance estimates across the fitted taus (T x T):
-        exact for the model's mixture (``confidence.avar_relative_covariance``)."""
-        if self._cov is None:
-            self._cov = covariance_matrices(self.m, self.n_samples)
-        cov = avar_relative_covariance(self.fractions(a), self._cov, self.full)
-        sd = np.sqrt(np.diag(cov))
-        return cov / np.outer(sd, sd)
+        exact for the model's mixture (``scoring.mixture_correlation``)."""
+        return mixture_correlation(self.x, np.asarray(a, dtype=np.float64), self.cov)
 
 
 def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
@@ -223,55 +215,13 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def _variances(x, model, corr, cols, rw, nu, c2) -> tuple[np.ndarray, np.ndarray]:
-    """Variances of A over ``cols`` for the EDF-weighted estimator (weights
-    rw / ((2 / nu + c2) model^2)): (naive, sandwich). Naive: the inverse information of
-    the independence likelihood, (X'WX)^-1. Sandwich: with the Allan variances' standard
-    deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and their exact
-    correlation across taus ``corr`` (applied to the inadequacy part too: a misfit is
-    smooth in tau)."""
-    xs = x[:, cols]
-    scale = np.linalg.norm(xs, axis=0)
-    xs = xs / scale
-    w = rw / ((2.0 / nu + c2) * model**2)
-    sd = model * np.sqrt(2.0 / nu + c2)
-    cov_y = np.outer(sd, sd) * corr
-    wx = w[:, None] * xs
-    bread = np.linalg.pinv(xs.T @ wx)
-    cov = bread @ (wx.T @ cov_y @ wx) @ bread
-    return np.maximum(np.diag(bread), 0.0) / scale**2, np.maximum(np.diag(cov), 0.0) / scale**2
-
-
-def _eql_deviance(y, model, nu, rw, c2) -> float:
-    """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
-    with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
-    (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
-    v = 2.0 / nu + c2
-    r = y / model
-    return float(np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v))))
-
-
 def _profile(x, y, edf, rw, c2, a, terms, n: int, c: float | None) -> tuple[float, np.ndarray]:
     """Fisher scoring of the ``terms`` (mask) >= 0 with term ``n`` held at ``c`` (None:
-    free), from ``a``: returns (EQL deviance, A) at convergence."""
-    cols = terms.copy()
-    a = np.where(terms, a, 0.0)
-    if c is not None:
-        cols[n] = False
-        a[n] = c
-    a, model, nu = fisher_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.asarray(rw, dtype=np.float64),
-                                  a, False, float(c2), _ROBUST_RTOL, _MAX_ITER)
-    return _eql_deviance(y, model, nu, rw, c2), a
-
-
-def _term_variances(x, edf, rw, c2, a, n: int) -> tuple[float, float]:
-    """(naive, sandwich) variance of A_n (``_variances``) in the fit of the terms a > 0
-    and n, at the model ``a``."""
-    cols = a > 0
-    cols[n] = True
-    model = np.maximum(x @ a, 1e-300)
-    v = _variances(x, model, edf.correlation(a), cols, rw, edf(a), c2)
-    return v[0][int(np.sum(cols[:n]))], v[1][int(np.sum(cols[:n]))]
+    free), from ``a``: returns (EQL deviance, A) at convergence (``scoring.profile``)."""
+    d, a = profile(x, y, edf.mats, edf.full, edf.gap_scale, np.asarray(rw, dtype=np.float64), float(c2),
+                   np.asarray(a, dtype=np.float64), terms, n, 0.0 if c is None else float(c), c is not None,
+                   _ROBUST_RTOL, _MAX_ITER)
+    return float(d), a
 
 
 def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
@@ -280,51 +230,13 @@ def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
     fitted terms ``a > 0``, which stay free >= 0), rescaled by naive / sandwich variance
     of A_n at the profiled model (the magnitude adjustment of an independence likelihood
     for the taus' correlation, Chandler & Bate 2007, evaluated under the hypothesis
-    A_n = c as in a score test), reaches the squared 95 % normal quantile. Never below A_n-hat. For the
-    terms in the mask ``which`` (NaN for the others)."""
-    upper = np.where(which, np.inf, np.nan)
-    for n in np.flatnonzero(which).tolist():
-        terms = a > 0
-        terms[n] = True
-        d_min, a_hat = _profile(x, y, edf, rw, c2, a, terms, n, None)
-        naive, sand = _term_variances(x, edf, rw, c2, a_hat, n)
-        if not (sand > 0 and naive > 0):
-            continue
-        start = [a_hat]
-
-        def excess(c, start=start, terms=terms, n=n, d_min=d_min):  # bound now: called in this iteration only
-            d, start[0] = _profile(x, y, edf, rw, c2, start[0], terms, n, c)
-            naive_c, sand_c = _term_variances(x, edf, rw, c2, start[0], n)
-            return naive_c / sand_c * (d - d_min) - _UPPER_DEVIANCE
-        lo, step = a_hat[n], np.sqrt(sand)
-        f_lo, hi = -_UPPER_DEVIANCE, lo + step
-        for _ in range(60):
-            f_hi = excess(hi)
-            if f_hi > 0:
-                break
-            lo, f_lo, hi = hi, f_hi, hi + 2.0 * (hi - a_hat[n])
-        else:
-            continue
-        side = 0
-        for _ in range(40):  # Illinois regula falsi on the values seen (the profile is warm-started)
-            if hi - lo <= 1e-3 * max(hi, step):
-                break
-            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            mid = min(max(mid, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-            f_mid = excess(mid)
-            if abs(f_mid) < 1e-3:
-                hi = mid
-                break
-            if f_mid > 0:
-                hi, f_hi = mid, f_mid
-                f_lo = f_lo / 2.0 if side == 1 else f_lo
-                side = 1
-            else:
-                lo, f_lo = mid, f_mid
-                f_hi = f_hi / 2.0 if side == -1 else f_hi
-                side = -1
-        upper[n] = hi
-    return upper
+    A_n = c as in a score test), reaches the squared 95 % normal quantile; found to
+    1e-3 relative (``scoring.upper_limits``). Never below A_n-hat. For the terms in the
+    mask ``which`` (NaN for the others)."""
+    if not which.any():
+        return np.full(5, np.nan)
+    return upper_limits(x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, np.asarray(rw, dtype=np.float64),
+                        float(c2), a, which, _UPPER_DEVIANCE, _ROBUST_RTOL, _MAX_ITER)
 
 
 def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
@@ -368,7 +280,7 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
         se = np.full(5, np.inf)
         corr = edf.correlation(a)
         if free.any():
-            se[free] = np.sqrt(_variances(x, model, corr, free, rw, nu, c2)[1])
+            se[free] = np.sqrt(sandwich_variances(x, model, corr, free, rw, nu, c2)[1])
         weak = free & (a - IDENTIFY_Z * se <= 0)
         if not weak.any():
             break
@@ -376,7 +288,7 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     for n in np.flatnonzero(~free):  # the term's error if fitted with the others
         cols = free.copy()
         cols[n] = True
-        se[n] = np.sqrt(_variances(x, model, corr, cols, rw, nu, c2)[1][int(np.sum(cols[:n]))])
+        se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][int(np.sum(cols[:n]))])
     which = {"all": np.ones(5, dtype=bool), "unidentified": ~free, "none": np.zeros(5, dtype=bool)}[upper_limits]
     upper = np.maximum(_upper_limits(x, y, edf, rw, c2, a, which), a)
     misfit[use] = rw == 0

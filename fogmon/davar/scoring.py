@@ -1,7 +1,8 @@
 """Numba kernels of the IEEE-952 fit (fogmon/davar/fit.py): the Fisher-scoring iteration
 with the mixture-EDF weights and the small non-negative least-squares problems it solves
-(at most 5 columns, Lawson & Hanson with Householder least squares), so that an
-iteration costs microseconds instead of a hundred of Python and scipy overhead."""
+(at most 5 columns, Lawson & Hanson with Householder least squares), the sandwich
+variances and the profile-likelihood upper limits, so that an iteration costs
+microseconds instead of a hundred of Python and scipy overhead."""
 from __future__ import annotations
 
 import numpy as np
@@ -99,31 +100,93 @@ def nnls(a, b):
 
 
 @njit(cache=True, error_model="numpy")
-def mixture_edf(x, a, mats, full, gap_scale):
-    """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
-    predicts (white rate noise where it is empty): full / f'Mf scaled for gaps, as
-    ``fit._NoiseModel.__call__``."""
+def mixture_fractions(x, a):
+    """Share (taus x 4) of each noise class (confidence.MIX_ALPHAS) in the model Allan
+    variance sum_n A_n tau^n per tau (rows of ``x``: tau^n): white rate noise where the
+    model is empty."""
     t = x.shape[0]
-    nu = np.empty(t)
-    f = np.empty(4)
+    f = np.zeros((t, 4))
     for i in range(t):
-        f[:] = 0.0
         total = 0.0
         for n in range(5):
             c = x[i, n] * a[n]
             total += c
-            f[_CLASS[n]] += c
+            f[i, _CLASS[n]] += c
         if total > 0:
-            f /= total
+            f[i] /= total
         else:
-            f[:] = 0.0
-            f[1] = 1.0
+            f[i, :] = 0.0
+            f[i, 1] = 1.0
+    return f
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_edf(x, a, mats, full, gap_scale):
+    """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
+    predicts (``mixture_fractions``): full / f'Mf scaled for gaps
+    (confidence.edf_mixture_from with the mixture matrices ``mats``)."""
+    t = x.shape[0]
+    nu = np.empty(t)
+    f = mixture_fractions(x, a)
+    for i in range(t):
         q = 0.0
         for u in range(4):
             for v in range(4):
-                q += f[u] * mats[i, u, v] * f[v]
+                q += f[i, u] * mats[i, u, v] * f[i, v]
         nu[i] = full[i] / q * gap_scale[i]
     return nu
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_correlation(x, a, cov):
+    """Correlation (taus x taus) of the Allan variance estimates across the taus (rows of
+    ``x``) for the noise mixture of the model A: confidence.avar_relative_covariance
+    from its ``covariance_matrices`` ``cov``, normalised to unit diagonal (where the
+    term counts cancel)."""
+    f = mixture_fractions(x, a)
+    t = f.shape[0]
+    c = np.empty((t, t))
+    g = np.empty(4)
+    for p in range(t):
+        for q in range(p, t):
+            for k in range(4):
+                g[k] = np.sqrt(f[p, k] * f[q, k])
+            s = 0.0
+            for k in range(4):
+                for v in range(4):
+                    s += g[k] * cov[p, q, k, v] * g[v]
+            c[p, q] = s
+            c[q, p] = s
+    sd = np.sqrt(np.diag(c).copy())
+    for p in range(t):
+        for q in range(t):
+            c[p, q] /= sd[p] * sd[q]
+    return c
+
+
+@njit(cache=True, error_model="numpy")
+def sandwich_variances(x, model, corr, cols, rw, nu, c2):
+    """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
+    EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
+    Naive: the inverse information of the independence likelihood, (X'WX)^-1.
+    Sandwich: with the Allan variances' standard deviations model sqrt(2 / nu + c2) (c2:
+    model-inadequacy variance) and their exact correlation across taus ``corr``
+    (applied to the inadequacy part too: a misfit is smooth in tau)."""
+    idx = np.flatnonzero(cols)
+    t, k = x.shape[0], idx.shape[0]
+    xs = np.empty((t, k))
+    for j in range(k):
+        xs[:, j] = x[:, idx[j]]
+    scale = np.sqrt(np.sum(xs * xs, axis=0))
+    xs = xs / scale
+    v = 2.0 / nu + c2
+    w = rw / (v * model**2)
+    sd = model * np.sqrt(v)
+    cov_y = np.outer(sd, sd) * corr
+    wx = xs * w.reshape(t, 1)
+    bread = np.linalg.pinv(xs.T @ wx)
+    cov = bread @ (wx.T @ cov_y @ wx) @ bread
+    return np.maximum(np.diag(bread), 0.0) / scale**2, np.maximum(np.diag(cov), 0.0) / scale**2
 
 
 @njit(cache=True, error_model="numpy")
@@ -281,3 +344,101 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
         if np.all(rw > 0):
             break
     return found, best_a, best_rw, best_c2
+
+
+@njit(cache=True, error_model="numpy")
+def eql_deviance(y, model, nu, rw, c2):
+    """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
+    with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
+    (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
+    v = 2.0 / nu + c2
+    r = y / model
+    return np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v)))
+
+
+@njit(cache=True, error_model="numpy")
+def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max_iter):
+    """Fisher scoring of the ``terms`` (mask) >= 0, with term ``n`` held at ``c`` when
+    ``held``, from ``a``: returns (EQL deviance, A) at convergence."""
+    cols = terms.copy()
+    a0 = np.where(terms, a, 0.0)
+    if held:
+        cols[n] = False
+        a0[n] = c
+    a1, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, False, c2, rtol, max_iter)
+    return eql_deviance(y, model, nu, rw, c2), a1
+
+
+@njit(cache=True, error_model="numpy")
+def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
+    """(naive, sandwich) variance of A_n (``sandwich_variances``) in the fit of the terms
+    a > 0 and n, at the model ``a``."""
+    cols = a > 0
+    cols[n] = True
+    model = np.maximum(x @ a, 1e-300)
+    naive, sand = sandwich_variances(x, model, mixture_correlation(x, a, cov), cols, rw,
+                                     mixture_edf(x, a, mats, full, gap_scale), c2)
+    k = 0
+    for j in range(n):
+        k += cols[j]
+    return naive[k], sand[k]
+
+
+@njit(cache=True, error_model="numpy")
+def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, rtol, max_iter):
+    """fit._upper_limits without Python overhead: for each term n in ``which``, the
+    c > A_n-hat (the estimate with n added to the terms a > 0) where the profile
+    deviance rise (``profile``), rescaled by naive / sandwich variance of A_n at the
+    profiled model, reaches ``deviance``: bracketed by doubling steps from A_n-hat +
+    its sandwich standard error, then Illinois regula falsi (each profile warm-started
+    from the last) to 1e-3 of the bracket's top. inf where the variances vanish or no
+    bracket is found in 60 steps, NaN outside ``which``."""
+    upper = np.full(5, np.nan)
+    for n in range(5):
+        if not which[n]:
+            continue
+        upper[n] = np.inf
+        terms = a > 0
+        terms[n] = True
+        d_min, a_hat = profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, 0.0, False, rtol, max_iter)
+        naive, sand = term_variances(x, mats, full, gap_scale, cov, rw, c2, a_hat, n)
+        if not (sand > 0 and naive > 0):
+            continue
+        start = a_hat
+        lo, step = a_hat[n], np.sqrt(sand)
+        f_lo, hi, f_hi = -deviance, lo + step, 0.0
+        bracketed = False
+        for _ in range(60):
+            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, hi, True, rtol, max_iter)
+            naive_c, sand_c = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
+            f_hi = naive_c / sand_c * (d - d_min) - deviance
+            if f_hi > 0:
+                bracketed = True
+                break
+            lo, f_lo, hi = hi, f_hi, hi + 2.0 * (hi - a_hat[n])
+        if not bracketed:
+            continue
+        side = 0
+        for _ in range(40):
+            if hi - lo <= 1e-3 * max(hi, step):
+                break
+            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            mid = min(max(mid, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, mid, True, rtol, max_iter)
+            naive_c, sand_c = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
+            f_mid = naive_c / sand_c * (d - d_min) - deviance
+            if abs(f_mid) < 1e-3:
+                hi = mid
+                break
+            if f_mid > 0:
+                hi, f_hi = mid, f_mid
+                if side == 1:
+                    f_lo /= 2.0
+                side = 1
+            else:
+                lo, f_lo = mid, f_mid
+                if side == -1:
+                    f_hi /= 2.0
+                side = -1
+        upper[n] = hi
+    return upper
