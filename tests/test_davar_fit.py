@@ -172,6 +172,7 @@ def test_upper_limit_is_a_95_percent_bound_never_below_the_estimate():
     # RLG record: B, K, R unidentifiable; their printed bound (hi) is the one-sided 95 %
     # upper limit, above the estimate each term gets when it is fitted with the others
     from fogmon.davar import fit as fit_mod
+    from fogmon.davar.scoring import profile
     res = oadev(read_replay_log(RLG).rate_dph, 100.0)
     fit = fit_noise(res)
     a = fit.avar_terms
@@ -188,7 +189,8 @@ def test_upper_limit_is_a_95_percent_bound_never_below_the_estimate():
             x = res.tau_s[use][:, None] ** fit_mod.POWERS
             edf = fit_mod._NoiseModel(res.tau_s[use], res.m[use], res.n_terms[use], res.n_samples)
             rw = (~fit.misfit[use]).astype(float)
-            _, a_in = fit_mod._profile(x, res.adev_dph[use] ** 2, edf, rw, 0.0, a, terms, i, None)
+            _, a_in = profile(x, res.adev_dph[use] ** 2, edf.mats, edf.full, edf.gap_scale, rw, 0.0, a, terms, i,
+                              0.0, False, 1e-6, 50)
             assert fit_mod.avar_terms_to_coefficients(a_in)[i] <= c.upper, name
         else:
             assert c.hi < c.upper  # the 68.3 % interval's top is inside the 95 % one-sided limit

@@ -11,7 +11,8 @@ the sandwich covariance of this estimator with the exact covariance of the Allan
 variances across taus for that mixture (confidence.avar_relative_covariance); a term is
 identifiable when its 95 % interval excludes zero. Every term also gets a one-sided 95 %
 upper limit from the profile of the fit's own (extended quasi-) likelihood, rescaled for
-the correlation across taus (``_upper_limits``).
+the correlation across taus (``fit_avar``). The iterations run in numba
+(fogmon/davar/scoring.py), one call per fitted curve.
 """
 from __future__ import annotations
 
@@ -22,15 +23,7 @@ import numpy as np
 
 from fogmon.davar.confidence import ALPHA_OF_TERM, covariance_matrices, mixture_matrices
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
-from fogmon.davar.scoring import (
-    fisher_scoring,
-    mixture_correlation,
-    mixture_edf,
-    profile,
-    robust_scoring,
-    sandwich_variances,
-    upper_limits,
-)
+from fogmon.davar.scoring import fisher_scoring, fit_terms, mixture_correlation, mixture_edf
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -55,6 +48,7 @@ _RTOL = 1e-9
 UPPER_CONFIDENCE = 0.95
 """One-sided confidence of every term's upper limit (``Coefficient.upper``)."""
 _UPPER_DEVIANCE = NormalDist().inv_cdf(UPPER_CONFIDENCE) ** 2  # 2.706: signed root at -1.645
+_UPPER_MODES = {"none": 0, "unidentified": 1, "all": 2}  # scoring.fit_terms' upper_mode
 
 
 @dataclass(frozen=True)
@@ -185,26 +179,6 @@ def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
                           from_data, float(c2), rtol, _MAX_ITER)
 
 
-def _robust_scoring(x, cols, y, edf, starts):
-    """Fisher scoring iteratively reweighted by Tukey's biweight of the standardized log
-    residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
-    vector in ``starts`` in turn; keeps the solution with the least total Tukey loss (an
-    earlier start wins ties) and stops early when a solution rejects no tau; the winner
-    is then scored to full precision. A start whose weights come to keep fewer than two
-    taus has failed. Returns (A, model, nu, robust weights, model-inadequacy variance
-    c2), or None when every start failed (nothing the five terms describe). The
-    model-inadequacy variance c2 (Paule-Mandel: the c2 >= 0 with sum rw r^2 / (v + c2) =
-    degrees of freedom) is estimated when the kept taus' residuals exceed their sampling
-    variances v = 2 / nu by more than BIRGE_GATE (reduced chi-square), else 0. The
-    iteration runs in numba (``scoring.robust_scoring``)."""
-    found, a, rw, c2 = robust_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.array(starts, dtype=np.float64),
-                                      TUKEY_C, MISFIT_FLOOR**2, BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER,
-                                      _ROBUST_RTOL, _MAX_ITER)
-    if not found:
-        return None
-    return (*_scoring(x, cols, y, edf, rw, a, c2), rw, c2)
-
-
 def _starts(n: int) -> list[np.ndarray]:
     """Robust starting weights: all taus, then up to _N_RUN_STARTS evenly spread runs of
     half of them (so that a stretch the five terms cannot describe, e.g. a vibration
@@ -215,45 +189,34 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def _profile(x, y, edf, rw, c2, a, terms, n: int, c: float | None) -> tuple[float, np.ndarray]:
-    """Fisher scoring of the ``terms`` (mask) >= 0 with term ``n`` held at ``c`` (None:
-    free), from ``a``: returns (EQL deviance, A) at convergence (``scoring.profile``)."""
-    d, a = profile(x, y, edf.mats, edf.full, edf.gap_scale, np.asarray(rw, dtype=np.float64), float(c2),
-                   np.asarray(a, dtype=np.float64), terms, n, 0.0 if c is None else float(c), c is not None,
-                   _ROBUST_RTOL, _MAX_ITER)
-    return float(d), a
-
-
-def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
-    """One-sided UPPER_CONFIDENCE upper limit of every A_n: the c > A_n-hat where the
-    profile deviance D(c) (``_profile``; A_n-hat the estimate with term n added to the
-    fitted terms ``a > 0``, which stay free >= 0), rescaled by naive / sandwich variance
-    of A_n at the profiled model (the magnitude adjustment of an independence likelihood
-    for the taus' correlation, Chandler & Bate 2007, evaluated under the hypothesis
-    A_n = c as in a score test), reaches the squared 95 % normal quantile; found to
-    1e-3 relative (``scoring.upper_limits``). Never below A_n-hat. For the terms in the
-    mask ``which`` (NaN for the others)."""
-    if not which.any():
-        return np.full(5, np.nan)
-    return upper_limits(x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, np.asarray(rw, dtype=np.float64),
-                        float(c2), a, which, _UPPER_DEVIANCE, _ROBUST_RTOL, _MAX_ITER)
-
-
 def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
              upper_limits: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
-    On the taus of ``octave_subset``: robust Fisher scoring (``_robust_scoring``) with all
-    five terms, then backward elimination: while a fitted term's 95 % interval reaches
-    zero, the weakest one is dropped and the rest refitted. Returns (A_n, standard error
-    of A_n, misfit mask over ``tau_s``: taus the terms cannot describe (robust weight 0,
-    or for taus outside the subset the same Tukey rejection of their residual from the
-    model), one-sided 95 % upper limit of A_n (``_upper_limits``; ``upper_limits``
-    "all" terms, the "unidentified" ones or "none", NaN where not computed)); dropped terms have
-    A_n = 0 and the standard error they would have if fitted alongside the others. A_n
-    NaN (not identifiable) when fewer than 2 usable taus or when the robust weights
-    reject all but one tau."""
+    On the taus of ``octave_subset`` (``scoring.fit_terms``): robust Fisher scoring with
+    all five terms, iteratively reweighted by Tukey's biweight of the standardized log
+    residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2) from each of the robust
+    weight vectors of ``_starts`` (the least total Tukey loss wins, an earlier start ties;
+    a start that rejects no tau ends the search; one keeping fewer than two taus has
+    failed), with a model-inadequacy variance c2 (Paule-Mandel: the c2 >= 0 with
+    sum rw r^2 / (v + c2) = degrees of freedom) where the kept taus' reduced chi-square
+    exceeds BIRGE_GATE, else 0; then backward elimination: while a fitted term's 95 %
+    interval reaches zero, the weakest one is dropped and the rest refitted. Returns
+    (A_n, standard error of A_n, misfit mask over ``tau_s``: taus the terms cannot
+    describe (robust weight 0, or for taus outside the subset the same Tukey rejection of
+    their residual from the model), one-sided UPPER_CONFIDENCE upper limit of A_n for
+    ``upper_limits`` "all" terms, the "unidentified" ones or "none" (NaN where not
+    computed): the c > A_n-hat (A_n-hat the estimate with term n added to the fitted
+    terms, which stay free >= 0) where the profile deviance of the extended
+    quasi-likelihood, rescaled by naive / sandwich variance of A_n at the profiled model
+    (the magnitude adjustment of an independence likelihood for the taus' correlation,
+    Chandler & Bate 2007, evaluated under the hypothesis A_n = c as in a score test),
+    rises by the squared 95 % normal quantile, found to 1e-3 relative
+    (``scoring.upper_limits``), never below the estimate); dropped terms have A_n = 0
+    and the standard error they would have if fitted alongside the others. A_n NaN (not
+    identifiable) when fewer than 2 usable taus or when the robust weights reject all
+    but one tau."""
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
@@ -267,30 +230,14 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     y, nt = avar[use], np.asarray(n_terms)[use]
     m_int = np.asarray(m, dtype=np.int64)[use]
     x = tau[use][:, None] ** POWERS
-    active = np.ones(5, dtype=bool)
-    starts = _starts(len(y))
     edf = _NoiseModel(tau[use], m_int, nt, n_samples)
-    while True:
-        scored = _robust_scoring(x, active, y, edf, starts)
-        if scored is None:  # the robust weights reject all taus: nothing is identifiable
-            return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
-        a, model, nu, rw, c2 = scored
-        starts = [rw]
-        free = a > 0
-        se = np.full(5, np.inf)
-        corr = edf.correlation(a)
-        if free.any():
-            se[free] = np.sqrt(sandwich_variances(x, model, corr, free, rw, nu, c2)[1])
-        weak = free & (a - IDENTIFY_Z * se <= 0)
-        if not weak.any():
-            break
-        active[np.flatnonzero(weak)[np.argmin(a[weak] / se[weak])]] = False
-    for n in np.flatnonzero(~free):  # the term's error if fitted with the others
-        cols = free.copy()
-        cols[n] = True
-        se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][int(np.sum(cols[:n]))])
-    which = {"all": np.ones(5, dtype=bool), "unidentified": ~free, "none": np.zeros(5, dtype=bool)}[upper_limits]
-    upper = np.maximum(_upper_limits(x, y, edf, rw, c2, a, which), a)
+    found, a, se, rw, _, upper = fit_terms(
+        x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, np.array(_starts(len(y))), TUKEY_C, MISFIT_FLOOR**2,
+        BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER, _ROBUST_RTOL, _RTOL, _MAX_ITER, IDENTIFY_Z,
+        _UPPER_MODES[upper_limits], _UPPER_DEVIANCE)
+    if not found:  # the robust weights reject all taus: nothing is identifiable
+        return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
+    upper = np.maximum(upper, a)
     misfit[use] = rw == 0
     rest = np.setdiff1d(np.flatnonzero(ok), use)
     if len(rest):

@@ -282,7 +282,7 @@ def _excess_variance(r, v, rw, n_free, gate):
 @njit(cache=True, error_model="numpy")
 def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol, max_robust,
                    rtol, max_iter):
-    """fit._robust_scoring without Python overhead: from each row of ``starts`` (robust
+    """Robust Fisher scoring of the terms ``cols``: from each row of ``starts`` (robust
     weights), Fisher scoring (to ``rtol``) reweighted by Tukey's biweight (cut-off
     ``tukey_c``) of z = ln(y / model) / sqrt(2 / nu + floor2), with the Paule-Mandel
     excess variance (``gate``), until the weights move less than ``rw_tol`` and c2 by
@@ -442,3 +442,65 @@ def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, r
                 side = -1
         upper[n] = hi
     return upper
+
+
+
+@njit(cache=True, error_model="numpy")
+def fit_terms(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw_tol, max_robust, robust_rtol,
+              rtol, max_iter, identify_z, upper_mode, deviance):
+    """The fit of fit.fit_avar on its taus, in one call: ``robust_scoring`` of the active
+    terms (all five at first) from the robust weights ``starts``, the winner scored to
+    ``rtol``; backward elimination: while a fitted term's A_n - ``identify_z`` se_n
+    reaches zero, the weakest (least A_n / se_n) is dropped and the rest refitted from
+    the last robust weights. Standard errors: sandwich (``sandwich_variances``, with the
+    exact correlation across taus ``mixture_correlation`` of the covariance matrices
+    ``cov``); a dropped term's as if fitted alongside the others. Upper limits
+    (``upper_limits``) of no term, the terms not identified or every term
+    (``upper_mode`` 0, 1, 2; NaN elsewhere). Returns (found, A, se, robust weights, c2,
+    upper); found False when every robust start failed."""
+    active = np.ones(5, np.bool_)
+    se = np.full(5, np.inf)
+    while True:
+        found, a, rw, c2 = robust_scoring(x, active, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
+                                          max_robust, robust_rtol, max_iter)
+        if not found:
+            return False, a, se, rw, c2, np.full(5, np.nan)
+        from_data = True
+        for j in range(5):
+            if active[j] and a[j] > 0:
+                from_data = False
+        a0 = np.zeros(5) if from_data else np.where(active, a, 0.0)
+        a, model, nu = fisher_scoring(x, active, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
+        starts = rw.reshape(1, rw.shape[0]).copy()
+        free = a > 0
+        se = np.full(5, np.inf)
+        corr = mixture_correlation(x, a, cov)
+        if free.any():
+            sand = sandwich_variances(x, model, corr, free, rw, nu, c2)[1]
+            k = 0
+            for j in range(5):
+                if free[j]:
+                    se[j] = np.sqrt(sand[k])
+                    k += 1
+        drop = -1
+        for j in range(5):
+            if free[j] and a[j] - identify_z * se[j] <= 0 and (drop < 0 or a[j] / se[j] < a[drop] / se[drop]):
+                drop = j
+        if drop < 0:
+            break
+        active[drop] = False
+    for n in range(5):
+        if not free[n]:
+            cols = free.copy()
+            cols[n] = True
+            k = 0
+            for j in range(n):
+                k += cols[j]
+            se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][k])
+    which = np.zeros(5, np.bool_)
+    for n in range(5):
+        which[n] = upper_mode == 2 or (upper_mode == 1 and not free[n])
+    upper = np.full(5, np.nan)
+    if which.any():
+        upper = upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, robust_rtol, max_iter)
+    return True, a, se, rw, c2, upper
