@@ -164,29 +164,115 @@ def mixture_correlation(x, a, cov):
     return c
 
 
+@njit(cache=True)
+def symmetric_pinv(a):
+    """Pseudo-inverse of a small symmetric matrix from its eigen-decomposition by cyclic
+    Jacobi rotations: eigenvalues within 1e-15 of the largest in magnitude count as zero
+    (numpy.linalg.pinv's default cut-off of the singular values). Plain loops: numba's
+    LAPACK binding would add ~9 CPU s to the first run's compile for a 5 x 5 matrix."""
+    k = a.shape[0]
+    d = a.copy()
+    v = np.eye(k)
+    for _ in range(64):
+        off = 0.0
+        norm = 0.0
+        for p in range(k):
+            norm += d[p, p] ** 2
+            for q in range(p + 1, k):
+                off += d[p, q] ** 2
+        if not off > 1e-36 * norm:
+            break
+        for p in range(k):
+            for q in range(p + 1, k):
+                if d[p, q] == 0.0:
+                    continue
+                theta = (d[q, q] - d[p, p]) / (2.0 * d[p, q])
+                if abs(theta) > 1e150:
+                    t = 0.5 / theta
+                else:
+                    t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                    if theta < 0:
+                        t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for r in range(k):
+                    drp, drq = d[r, p], d[r, q]
+                    d[r, p] = c * drp - s * drq
+                    d[r, q] = s * drp + c * drq
+                for r in range(k):
+                    dpr, dqr = d[p, r], d[q, r]
+                    d[p, r] = c * dpr - s * dqr
+                    d[q, r] = s * dpr + c * dqr
+                for r in range(k):
+                    vrp, vrq = v[r, p], v[r, q]
+                    v[r, p] = c * vrp - s * vrq
+                    v[r, q] = s * vrp + c * vrq
+    cut = 0.0
+    for p in range(k):
+        cut = max(cut, 1e-15 * abs(d[p, p]))
+    out = np.zeros((k, k))
+    for p in range(k):
+        if abs(d[p, p]) > cut:
+            for r in range(k):
+                for q in range(k):
+                    out[r, q] += v[r, p] * v[q, p] / d[p, p]
+    return out
+
+
 @njit(cache=True, error_model="numpy")
 def sandwich_variances(x, model, corr, cols, rw, nu, c2):
     """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
     EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
-    Naive: the inverse information of the independence likelihood, (X'WX)^-1.
-    Sandwich: with the Allan variances' standard deviations model sqrt(2 / nu + c2) (c2:
-    model-inadequacy variance) and their exact correlation across taus ``corr``
-    (applied to the inadequacy part too: a misfit is smooth in tau)."""
+    Naive: the inverse information of the independence likelihood, (X'WX)^-1 (columns
+    scaled to unit norm; ``symmetric_pinv``). Sandwich: with the Allan variances'
+    standard deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and
+    their exact correlation across taus ``corr`` (applied to the inadequacy part too: a
+    misfit is smooth in tau)."""
     idx = np.flatnonzero(cols)
     t, k = x.shape[0], idx.shape[0]
     xs = np.empty((t, k))
+    wx = np.empty((t, k))
+    g = np.empty((t, k))
+    scale = np.zeros(k)
     for j in range(k):
-        xs[:, j] = x[:, idx[j]]
-    scale = np.sqrt(np.sum(xs * xs, axis=0))
-    xs = xs / scale
-    v = 2.0 / nu + c2
-    w = rw / (v * model**2)
-    sd = model * np.sqrt(v)
-    cov_y = np.outer(sd, sd) * corr
-    wx = xs * w.reshape(t, 1)
-    bread = np.linalg.pinv(xs.T @ wx)
-    cov = bread @ (wx.T @ cov_y @ wx) @ bread
-    return np.maximum(np.diag(bread), 0.0) / scale**2, np.maximum(np.diag(cov), 0.0) / scale**2
+        for i in range(t):
+            scale[j] += x[i, idx[j]] ** 2
+        scale[j] = np.sqrt(scale[j])
+    for i in range(t):
+        v = 2.0 / nu[i] + c2
+        w = rw[i] / (v * model[i] ** 2)
+        sd = model[i] * np.sqrt(v)
+        for j in range(k):
+            xs[i, j] = x[i, idx[j]] / scale[j]
+            wx[i, j] = w * xs[i, j]
+            g[i, j] = wx[i, j] * sd
+    info = np.zeros((k, k))
+    meat = np.zeros((k, k))
+    for p in range(k):
+        for q in range(p, k):
+            s_info = 0.0
+            s_meat = 0.0
+            for i in range(t):
+                s_info += xs[i, p] * wx[i, q]
+                inner = 0.0
+                for u in range(t):
+                    inner += corr[i, u] * g[u, q]
+                s_meat += g[i, p] * inner
+            info[p, q] = s_info
+            info[q, p] = s_info
+            meat[p, q] = s_meat
+            meat[q, p] = s_meat
+    bread = symmetric_pinv(info)
+    naive = np.empty(k)
+    sand = np.empty(k)
+    for p in range(k):
+        acc = 0.0
+        for q in range(k):
+            for r in range(k):
+                acc += bread[p, q] * meat[q, r] * bread[r, p]
+        naive[p] = max(bread[p, p], 0.0) / scale[p] ** 2
+        sand[p] = max(acc, 0.0) / scale[p] ** 2
+    return naive, sand
 
 
 @njit(cache=True, error_model="numpy")
@@ -279,7 +365,7 @@ def _excess_variance(r, v, rw, n_free, gate):
     return excess_variance_root(rw[keep] * r[keep] ** 2, v[keep], float(dof))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol, max_robust,
                    rtol, max_iter):
     """Robust Fisher scoring of the terms ``cols``: from each row of ``starts`` (robust
@@ -346,7 +432,7 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
     return found, best_a, best_rw, best_c2
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def eql_deviance(y, model, nu, rw, c2):
     """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
     with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
@@ -356,7 +442,7 @@ def eql_deviance(y, model, nu, rw, c2):
     return np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max_iter):
     """Fisher scoring of the ``terms`` (mask) >= 0, with term ``n`` held at ``c`` when
     ``held``, from ``a``: returns (EQL deviance, A) at convergence."""
@@ -369,7 +455,7 @@ def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max
     return eql_deviance(y, model, nu, rw, c2), a1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
     """(naive, sandwich) variance of A_n (``sandwich_variances``) in the fit of the terms
     a > 0 and n, at the model ``a``."""
@@ -384,15 +470,16 @@ def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
     return naive[k], sand[k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, rtol, max_iter):
-    """fit._upper_limits without Python overhead: for each term n in ``which``, the
-    c > A_n-hat (the estimate with n added to the terms a > 0) where the profile
-    deviance rise (``profile``), rescaled by naive / sandwich variance of A_n at the
-    profiled model, reaches ``deviance``: bracketed by doubling steps from A_n-hat +
-    its sandwich standard error, then Illinois regula falsi (each profile warm-started
-    from the last) to 1e-3 of the bracket's top. inf where the variances vanish or no
-    bracket is found in 60 steps, NaN outside ``which``."""
+    """For each term n in ``which``: the c > A_n-hat (the estimate with n added to the
+    terms a > 0) where the rise of the profile deviance (``profile``) from its minimum,
+    rescaled by naive / sandwich variance of A_n at the profiled model, reaches
+    ``deviance``: bracketed by doubling steps from A_n-hat + its sandwich standard
+    error, then Illinois regula falsi to 1e-3 of the bracket's top (or of the step),
+    each profile warm-started from the last. inf where the variances vanish or no
+    bracket is found in 60 steps, NaN outside ``which``. One profile per loop pass (the
+    free estimate first), so that the scoring is compiled in once."""
     upper = np.full(5, np.nan)
     for n in range(5):
         if not which[n]:
@@ -400,49 +487,50 @@ def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, r
         upper[n] = np.inf
         terms = a > 0
         terms[n] = True
-        d_min, a_hat = profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, 0.0, False, rtol, max_iter)
-        naive, sand = term_variances(x, mats, full, gap_scale, cov, rw, c2, a_hat, n)
-        if not (sand > 0 and naive > 0):
-            continue
-        start = a_hat
-        lo, step = a_hat[n], np.sqrt(sand)
-        f_lo, hi, f_hi = -deviance, lo + step, 0.0
-        bracketed = False
-        for _ in range(60):
-            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, hi, True, rtol, max_iter)
-            naive_c, sand_c = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
-            f_hi = naive_c / sand_c * (d - d_min) - deviance
-            if f_hi > 0:
-                bracketed = True
-                break
-            lo, f_lo, hi = hi, f_hi, hi + 2.0 * (hi - a_hat[n])
-        if not bracketed:
-            continue
-        side = 0
-        for _ in range(40):
-            if hi - lo <= 1e-3 * max(hi, step):
-                break
-            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            mid = min(max(mid, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, mid, True, rtol, max_iter)
-            naive_c, sand_c = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
-            f_mid = naive_c / sand_c * (d - d_min) - deviance
-            if abs(f_mid) < 1e-3:
-                hi = mid
-                break
-            if f_mid > 0:
-                hi, f_hi = mid, f_mid
-                if side == 1:
-                    f_lo /= 2.0
-                side = 1
+        start = a.copy()
+        d_min = a_n = lo = f_lo = hi = f_hi = step = c = 0.0
+        phase = doublings = steps = side = 0  # phase 0: the free estimate A_n-hat, 1: bracketing, 2: regula falsi
+        for _ in range(1 + 60 + 40):
+            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, c, phase > 0, rtol, max_iter)
+            naive, sand = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
+            if phase == 0:
+                if not (sand > 0 and naive > 0):
+                    break
+                d_min, a_n, step = d, start[n], np.sqrt(sand)
+                lo, f_lo, hi = a_n, -deviance, a_n + step
+                phase, c = 1, hi
+                continue
+            f = naive / sand * (d - d_min) - deviance
+            if phase == 1:
+                if not f > 0:
+                    doublings += 1
+                    if doublings == 60:
+                        break
+                    lo, f_lo, hi = hi, f, hi + 2.0 * (hi - a_n)
+                    c = hi
+                    continue
+                f_hi, phase = f, 2
             else:
-                lo, f_lo = mid, f_mid
-                if side == -1:
-                    f_hi /= 2.0
-                side = -1
-        upper[n] = hi
+                steps += 1
+                if abs(f) < 1e-3:
+                    upper[n] = c
+                    break
+                if f > 0:
+                    hi, f_hi = c, f
+                    if side == 1:
+                        f_lo /= 2.0
+                    side = 1
+                else:
+                    lo, f_lo = c, f
+                    if side == -1:
+                        f_hi /= 2.0
+                    side = -1
+            if steps == 40 or hi - lo <= 1e-3 * max(hi, step):
+                upper[n] = hi
+                break
+            c = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            c = min(max(c, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
     return upper
-
 
 
 @njit(cache=True, error_model="numpy")
