@@ -18,25 +18,40 @@ _EPS = 2.0**-52
 @njit(cache=True)
 def _least_squares(a, b):
     """x minimising |a x - b| (n x k, n >= k) by Householder QR; 0 for a column that is
-    dependent on the ones before it."""
+    dependent on the ones before it. Plain loops (array expressions cost numba several
+    times the compile)."""
     n, k = a.shape
     r = a.copy()
     q = b.copy()
+    v = np.empty(n)
     for j in range(k):
-        norm = np.sqrt(np.sum(r[j:, j] ** 2))
+        norm = 0.0
+        for i in range(j, n):
+            norm += r[i, j] ** 2
+        norm = np.sqrt(norm)
         if norm == 0.0:
             continue
         alpha = -norm if r[j, j] > 0 else norm
-        v = r[j:, j].copy()
-        v[0] -= alpha
-        vv = np.sum(v * v)
+        vv = 0.0
+        for i in range(j, n):
+            v[i] = r[i, j] - (alpha if i == j else 0.0)
+            vv += v[i] * v[i]
         if vv == 0.0:
             continue
-        for c in range(j, k):
-            r[j:, c] -= (2.0 * np.sum(v * r[j:, c]) / vv) * v
-        q[j:] -= (2.0 * np.sum(v * q[j:]) / vv) * v
+        for c in range(j, k + 1):  # the columns of r, then q
+            s = 0.0
+            for i in range(j, n):
+                s += v[i] * (r[i, c] if c < k else q[i])
+            f = 2.0 * s / vv
+            for i in range(j, n):
+                if c < k:
+                    r[i, c] -= f * v[i]
+                else:
+                    q[i] -= f * v[i]
     x = np.zeros(k)
-    scale = np.max(np.abs(np.diag(r[:k, :k]))) if k else 0.0
+    scale = 0.0
+    for j in range(k):
+        scale = max(scale, abs(r[j, j]))
     for j in range(k - 1, -1, -1):
         s = q[j]
         for c in range(j + 1, k):
@@ -56,7 +71,13 @@ def nnls(a, b):
     skip = np.zeros(k, np.bool_)
     tol = 10.0 * _EPS * max(n, k) * max(1.0, np.max(np.abs(a)))
     for _ in range(4 * k + 4):
-        w = a.T @ (b - a @ x)
+        w = np.zeros(k)
+        for i in range(n):
+            res = b[i]
+            for j in range(k):
+                res -= a[i, j] * x[j]
+            for j in range(k):
+                w[j] += a[i, j] * res
         j_max = -1
         w_max = tol
         for j in range(k):
