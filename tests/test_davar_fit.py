@@ -221,3 +221,36 @@ def test_upper_limits_cover_the_truth_near_detectability():
         truth = coverage_truth(name, level, 2**COVERAGE_LOG2_SAMPLES)[name]
         assert np.mean(res[:, 1] >= truth) >= 0.95 - 2 * np.sqrt(0.95 * 0.05 / 100), name
         assert np.all(res[:, 1] >= res[:, 2])
+
+
+def test_sandwich_variances_match_numpy_linear_algebra():
+    # the numba loops and Jacobi pseudo-inverse against the same formulas in numpy
+    # (numpy.linalg.pinv, matrix products), including a column dependent on the others
+    from fogmon.davar.scoring import sandwich_variances, symmetric_pinv
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        t = 8
+        x = np.exp(rng.normal(size=(t, 5)))
+        if trial % 4 == 0:
+            x[:, 3] = 2.0 * x[:, 1]  # rank-deficient information matrix
+        cols = rng.random(5) < 0.7
+        cols[trial % 5] = True
+        model, nu, rw = np.exp(rng.normal(size=t)), rng.uniform(5, 500, t), rng.uniform(0.2, 1.0, t)
+        g = rng.normal(size=(t, t + 2))
+        cov = g @ g.T
+        corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
+        c2 = 0.01 * (trial % 2)
+        xs = x[:, cols]
+        scale = np.linalg.norm(xs, axis=0)
+        xs = xs / scale
+        w = rw / ((2.0 / nu + c2) * model**2)
+        sd = model * np.sqrt(2.0 / nu + c2)
+        wx = w[:, None] * xs
+        info = xs.T @ wx
+        bread = np.linalg.pinv(info)
+        sand = bread @ (wx.T @ (np.outer(sd, sd) * corr) @ wx) @ bread
+        got = sandwich_variances(x, model, corr, cols, rw, nu, c2)
+        assert np.allclose(got[0], np.maximum(np.diag(bread), 0) / scale**2, rtol=1e-9, atol=0), trial
+        assert np.allclose(got[1], np.maximum(np.diag(sand), 0) / scale**2, rtol=1e-9, atol=0), trial
+        sym = (info + info.T) / 2
+        assert np.allclose(symmetric_pinv(sym), np.linalg.pinv(sym), rtol=1e-9, atol=1e-12 * np.abs(bread).max())
