@@ -254,3 +254,17 @@ def test_sandwich_variances_match_numpy_linear_algebra():
         assert np.allclose(got[1], np.maximum(np.diag(sand), 0) / scale**2, rtol=1e-9, atol=0), trial
         sym = (info + info.T) / 2
         assert np.allclose(symmetric_pinv(sym), np.linalg.pinv(sym), rtol=1e-9, atol=1e-12 * np.abs(bread).max())
+
+
+def test_mixture_correlation_is_the_normalised_relative_covariance():
+    from fogmon.davar.confidence import MIX_ALPHAS, avar_relative_covariance
+    from fogmon.davar.fit import _NoiseModel
+    from fogmon.davar.scoring import mixture_correlation, mixture_fractions
+    m = 2 ** np.arange(9)
+    edf = _NoiseModel(m / FS, m, 4096 - 2 * m + 1, 4096)
+    for a in (np.array([1e-3, 1.0, 0.02, 1e-4, 0.0]), np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(5)):
+        f = mixture_fractions(edf.x, a)
+        assert f.shape == (len(m), len(MIX_ALPHAS)) and np.allclose(f.sum(axis=1), 1.0)
+        cov = avar_relative_covariance(f, edf.cov, edf.full)
+        assert np.allclose(mixture_correlation(edf.x, a, edf.cov), cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov))),
+                           rtol=1e-12, atol=1e-14)

@@ -23,7 +23,7 @@ import numpy as np
 
 from fogmon.davar.confidence import ALPHA_OF_TERM, covariance_matrices, mixture_matrices
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
-from fogmon.davar.scoring import fisher_scoring, fit_terms, mixture_correlation, mixture_edf
+from fogmon.davar.scoring import fisher_scoring, fit_terms, mixture_edf
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -136,9 +136,9 @@ def octave_subset(m, m_max: int) -> np.ndarray:
 class _NoiseModel:
     """Sampling statistics of the Allan variances of a record whose noise is the mixture a
     model A predicts (white rate noise where the model is still empty): EDF per tau
-    (``__call__``, scaled for gaps) and correlation across taus (``correlation``); the
-    mixture matrices of ``m`` and ``n_samples`` computed once per fit, the cross-tau ones
-    (``cov``, cached per grid) only when first needed."""
+    (``__call__``, scaled for gaps); the mixture matrices of ``m`` and ``n_samples``
+    computed once per fit, the cross-tau ones (``cov``, cached per grid: the correlation
+    across taus, ``scoring.mixture_correlation``) only when first needed."""
 
     def __init__(self, tau, m, n_terms, n_samples: int):
         tau = np.asarray(tau, dtype=np.float64)
@@ -160,11 +160,6 @@ class _NoiseModel:
 
     def __call__(self, a: np.ndarray) -> np.ndarray:
         return mixture_edf(self.x, np.asarray(a, dtype=np.float64), self.mats, self.full, self.gap_scale)
-
-    def correlation(self, a: np.ndarray) -> np.ndarray:
-        """Correlation of the Allan variance estimates across the fitted taus (T x T):
-        exact for the model's mixture (``scoring.mixture_correlation``)."""
-        return mixture_correlation(self.x, np.asarray(a, dtype=np.float64), self.cov)
 
 
 def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
