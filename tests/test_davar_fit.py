@@ -254,6 +254,7 @@ def test_sandwich_variances_match_numpy_linear_algebra():
         assert np.allclose(got[1], np.maximum(np.diag(sand), 0) / scale**2, rtol=1e-9, atol=0), trial
         sym = (info + info.T) / 2
         assert np.allclose(symmetric_pinv(sym), np.linalg.pinv(sym), rtol=1e-9, atol=1e-12 * np.abs(bread).max())
+    assert np.isnan(symmetric_pinv(np.array([[1.0, np.nan], [np.nan, 1.0]]))).all()
 
 
 def test_mixture_correlation_is_the_normalised_relative_covariance():

@@ -190,8 +190,11 @@ def symmetric_pinv(a):
     """Pseudo-inverse of a small symmetric matrix from its eigen-decomposition by cyclic
     Jacobi rotations: eigenvalues within 1e-15 of the largest in magnitude count as zero
     (numpy.linalg.pinv's default cut-off of the singular values). Plain loops: numba's
-    LAPACK binding would add ~9 CPU s to the first run's compile for a 5 x 5 matrix."""
+    LAPACK binding would add ~9 CPU s to the first run's compile for a 5 x 5 matrix.
+    NaN everywhere when ``a`` holds a non-finite value (where numpy's SVD raises)."""
     k = a.shape[0]
+    if not np.all(np.isfinite(a)):
+        return np.full((k, k), np.nan)
     d = a.copy()
     v = np.eye(k)
     for _ in range(64):
