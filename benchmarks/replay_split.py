@@ -2,7 +2,8 @@
 into import, compile (numba kernels compiled or loaded from the cache, done up front on
 tiny inputs with the run's types: the engine in both modes, oadev and a fit; a kernel
 first needed later is compiled inside its phase), read (the source's block iterator),
-engine (StreamingDadev.push, the whole-run oadev), fits (fit_noise), sinks (the sinks'
+engine (StreamingDadev.push, the whole-run oadev), fits (fit_noise; ``fit_cov``: its part computing the
+cross-tau covariance matrices, once per tau grid and process), sinks (the sinks'
 methods) and the rest; ``first_sample``: CPU s from the first import to the first block
 (compile included, which the plain command does after it). Prints one ``key=value``
 line per figure.
@@ -72,6 +73,7 @@ def main(log: str, rrd: str) -> int:
     S.push = timed("engine", S.push)
     fogmon.davar.batch.oadev = timed("engine", fogmon.davar.batch.oadev)
     fogmon.davar.fit.fit_noise = timed("fits", fogmon.davar.fit.fit_noise)
+    fogmon.davar.fit.covariance_matrices = timed("fit_cov", fogmon.davar.fit.covariance_matrices)
     for mod in (fogmon.sinks.console, fogmon.sinks.rerun_sink):
         for cls in vars(mod).values():
             if isinstance(cls, type) and cls.__module__ == mod.__name__:
@@ -90,7 +92,8 @@ def main(log: str, rrd: str) -> int:
     print(f"compile={t_compile:.3f}")
     for k in ("read", "engine", "fits", "sinks"):
         print(f"{k}={SPENT.get(k, 0.0):.3f}")
-    print(f"other={run - sum(SPENT.values()):.3f}")
+    print(f"fit_cov={SPENT.get('fit_cov', 0.0):.3f}")
+    print(f"other={run - sum(v for k, v in SPENT.items() if k != 'fit_cov'):.3f}")
     print(f"first_sample={(FIRST[0] if FIRST else total) - T0:.3f}")
     print(f"total={total:.3f}")
     return 0

@@ -401,6 +401,16 @@ def _shown(cell: str) -> str:
     return repr(c) if len(c) <= _CELL_SHOWN else repr(c[:_CELL_SHOWN]) + f"... ({len(c)} characters)"
 
 
+def _float64_column(col) -> np.ndarray:
+    """A float64 pyarrow ChunkedArray as a numpy array, read from its chunks' data
+    buffers (pyarrow's to_numpy imports pandas: ~0.3 CPU s of start-up); ValueError when
+    it holds nulls."""
+    if col.null_count:
+        raise ValueError("null cells")
+    parts = [np.frombuffer(c.buffers()[1], dtype=np.float64, count=len(c), offset=8 * c.offset) for c in col.chunks]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
 def _parse_fast(block: bytes, ncol: int) -> np.ndarray | None:
     """Rows of ``block`` by a C parser (pyarrow, numpy's loadtxt where there are comment
     lines); None when anything looks wrong (the row-by-row parser then names it)."""
@@ -418,7 +428,7 @@ def _parse_fast(block: bytes, ncol: int) -> np.ndarray | None:
                                  parse_options=pacsv.ParseOptions(quote_char=False),
                                  convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(names, pa.float64()),
                                                                       null_values=[], strings_can_be_null=False))
-            a = np.column_stack([tbl.column(j).to_numpy(zero_copy_only=False) for j in range(ncol)])
+            a = np.column_stack([_float64_column(tbl.column(j)) for j in range(ncol)])
         except (pa.ArrowInvalid, ValueError):
             a = None
     if a is None:

@@ -172,6 +172,7 @@ def test_upper_limit_is_a_95_percent_bound_never_below_the_estimate():
     # RLG record: B, K, R unidentifiable; their printed bound (hi) is the one-sided 95 %
     # upper limit, above the estimate each term gets when it is fitted with the others
     from fogmon.davar import fit as fit_mod
+    from fogmon.davar.scoring import profile
     res = oadev(read_replay_log(RLG).rate_dph, 100.0)
     fit = fit_noise(res)
     a = fit.avar_terms
@@ -188,7 +189,8 @@ def test_upper_limit_is_a_95_percent_bound_never_below_the_estimate():
             x = res.tau_s[use][:, None] ** fit_mod.POWERS
             edf = fit_mod._NoiseModel(res.tau_s[use], res.m[use], res.n_terms[use], res.n_samples)
             rw = (~fit.misfit[use]).astype(float)
-            _, a_in = fit_mod._profile(x, res.adev_dph[use] ** 2, edf, rw, 0.0, a, terms, i, None)
+            _, a_in = profile(x, res.adev_dph[use] ** 2, edf.mats, edf.full, edf.gap_scale, rw, 0.0, a, terms, i,
+                              0.0, False, 1e-6, 50)
             assert fit_mod.avar_terms_to_coefficients(a_in)[i] <= c.upper, name
         else:
             assert c.hi < c.upper  # the 68.3 % interval's top is inside the 95 % one-sided limit
@@ -219,3 +221,51 @@ def test_upper_limits_cover_the_truth_near_detectability():
         truth = coverage_truth(name, level, 2**COVERAGE_LOG2_SAMPLES)[name]
         assert np.mean(res[:, 1] >= truth) >= 0.95 - 2 * np.sqrt(0.95 * 0.05 / 100), name
         assert np.all(res[:, 1] >= res[:, 2])
+
+
+def test_sandwich_variances_match_numpy_linear_algebra():
+    # the numba loops and Jacobi pseudo-inverse against the same formulas in numpy
+    # (numpy.linalg.pinv, matrix products), including a column dependent on the others
+    from fogmon.davar.scoring import sandwich_variances, symmetric_pinv
+    rng = np.random.default_rng(5)
+    for trial in range(20):
+        t = 8
+        x = np.exp(rng.normal(size=(t, 5)))
+        if trial % 4 == 0:
+            x[:, 3] = 2.0 * x[:, 1]  # rank-deficient information matrix
+        cols = rng.random(5) < 0.7
+        cols[trial % 5] = True
+        model, nu, rw = np.exp(rng.normal(size=t)), rng.uniform(5, 500, t), rng.uniform(0.2, 1.0, t)
+        g = rng.normal(size=(t, t + 2))
+        cov = g @ g.T
+        corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
+        c2 = 0.01 * (trial % 2)
+        xs = x[:, cols]
+        scale = np.linalg.norm(xs, axis=0)
+        xs = xs / scale
+        w = rw / ((2.0 / nu + c2) * model**2)
+        sd = model * np.sqrt(2.0 / nu + c2)
+        wx = w[:, None] * xs
+        info = xs.T @ wx
+        bread = np.linalg.pinv(info)
+        sand = bread @ (wx.T @ (np.outer(sd, sd) * corr) @ wx) @ bread
+        got = sandwich_variances(x, model, corr, cols, rw, nu, c2)
+        assert np.allclose(got[0], np.maximum(np.diag(bread), 0) / scale**2, rtol=1e-9, atol=0), trial
+        assert np.allclose(got[1], np.maximum(np.diag(sand), 0) / scale**2, rtol=1e-9, atol=0), trial
+        sym = (info + info.T) / 2
+        assert np.allclose(symmetric_pinv(sym), np.linalg.pinv(sym), rtol=1e-9, atol=1e-12 * np.abs(bread).max())
+    assert np.isnan(symmetric_pinv(np.array([[1.0, np.nan], [np.nan, 1.0]]))).all()
+
+
+def test_mixture_correlation_is_the_normalised_relative_covariance():
+    from fogmon.davar.confidence import MIX_ALPHAS, avar_relative_covariance
+    from fogmon.davar.fit import _NoiseModel
+    from fogmon.davar.scoring import mixture_correlation, mixture_fractions
+    m = 2 ** np.arange(9)
+    edf = _NoiseModel(m / FS, m, 4096 - 2 * m + 1, 4096)
+    for a in (np.array([1e-3, 1.0, 0.02, 1e-4, 0.0]), np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(5)):
+        f = mixture_fractions(edf.x, a)
+        assert f.shape == (len(m), len(MIX_ALPHAS)) and np.allclose(f.sum(axis=1), 1.0)
+        cov = avar_relative_covariance(f, edf.cov, edf.full)
+        assert np.allclose(mixture_correlation(edf.x, a, edf.cov), cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov))),
+                           rtol=1e-12, atol=1e-14)

@@ -11,7 +11,8 @@ the sandwich covariance of this estimator with the exact covariance of the Allan
 variances across taus for that mixture (confidence.avar_relative_covariance); a term is
 identifiable when its 95 % interval excludes zero. Every term also gets a one-sided 95 %
 upper limit from the profile of the fit's own (extended quasi-) likelihood, rescaled for
-the correlation across taus (``_upper_limits``).
+the correlation across taus (``fit_avar``). The iterations run in numba
+(fogmon/davar/scoring.py), one call per fitted curve.
 """
 from __future__ import annotations
 
@@ -20,15 +21,9 @@ from statistics import NormalDist
 
 import numpy as np
 
-from fogmon.davar.confidence import (
-    ALPHA_OF_TERM,
-    avar_relative_covariance,
-    covariance_matrices,
-    edf_mixture_from,
-    mixture_matrices,
-)
+from fogmon.davar.confidence import ALPHA_OF_TERM, covariance_matrices, mixture_matrices
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
-from fogmon.davar.scoring import fisher_scoring, robust_scoring
+from fogmon.davar.scoring import fisher_scoring, fit_terms, mixture_edf
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -53,6 +48,7 @@ _RTOL = 1e-9
 UPPER_CONFIDENCE = 0.95
 """One-sided confidence of every term's upper limit (``Coefficient.upper``)."""
 _UPPER_DEVIANCE = NormalDist().inv_cdf(UPPER_CONFIDENCE) ** 2  # 2.706: signed root at -1.645
+_UPPER_MODES = {"none": 0, "unidentified": 1, "all": 2}  # scoring.fit_terms' upper_mode
 
 
 @dataclass(frozen=True)
@@ -121,10 +117,6 @@ def dominant_alpha(avar_terms: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
     return np.where(contrib.max(axis=-1) > 0, alpha, 0)
 
 
-_MIX_OF_TERM = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, 0, 0, 1]], dtype=np.float64)
-"""Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
-
-
 def octave_subset(m, m_max: int) -> np.ndarray:
     """Indices (sorted) of the averaging factors ``m`` the fit uses: for each power of two
     2^k <= ``m_max`` (n / 4, the octave grid's last), the m nearest to it in log2 within
@@ -144,9 +136,9 @@ def octave_subset(m, m_max: int) -> np.ndarray:
 class _NoiseModel:
     """Sampling statistics of the Allan variances of a record whose noise is the mixture a
     model A predicts (white rate noise where the model is still empty): EDF per tau
-    (``__call__``, scaled for gaps) and correlation across taus (``correlation``); the
-    mixture matrices of ``m`` and ``n_samples`` computed once per fit, the cross-tau ones
-    (cached per grid) only when first needed."""
+    (``__call__``, scaled for gaps); the mixture matrices of ``m`` and ``n_samples``
+    computed once per fit, the cross-tau ones (``cov``, cached per grid: the correlation
+    across taus, ``scoring.mixture_correlation``) only when first needed."""
 
     def __init__(self, tau, m, n_terms, n_samples: int):
         tau = np.asarray(tau, dtype=np.float64)
@@ -155,30 +147,19 @@ class _NoiseModel:
         self.mats = mixture_matrices(m, n_samples)
         full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
         self.full = full.astype(np.float64)
-        self.gap_scale = np.asarray(n_terms) / full
+        self.gap_scale = (np.asarray(n_terms) / full).astype(np.float64)
         self.m = np.asarray(m, dtype=np.int64)
-        self._cov: np.ndarray | None = None  # covariance_matrices of m, fetched on first use
+        self._cov: np.ndarray | None = None
 
-    def fractions(self, a: np.ndarray, x: np.ndarray | None = None) -> np.ndarray:
-        """Share of each noise class (confidence.MIX_ALPHAS) in the model Allan variance per
-        tau (rows of ``x``, default the fitted taus)."""
-        contrib = (self.x if x is None else x) * a
-        total = contrib.sum(axis=1)
-        frac = (contrib @ _MIX_OF_TERM) / np.where(total > 0, total, 1.0)[:, None]
-        frac[total <= 0] = (0.0, 1.0, 0.0, 0.0)
-        return frac
-
-    def __call__(self, a: np.ndarray) -> np.ndarray:
-        return edf_mixture_from(self.fractions(a), self.mats, self.full) * self.gap_scale
-
-    def correlation(self, a: np.ndarray) -> np.ndarray:
-        """Correlation of the Allan variance estimates across the fitted taus (T x T):
-        exact for the model's mixture (``confidence.avar_relative_covariance``)."""
+    @property
+    def cov(self) -> np.ndarray:
+        """``confidence.covariance_matrices`` of the fitted taus, fetched on first use."""
         if self._cov is None:
             self._cov = covariance_matrices(self.m, self.n_samples)
-        cov = avar_relative_covariance(self.fractions(a), self._cov, self.full)
-        sd = np.sqrt(np.diag(cov))
-        return cov / np.outer(sd, sd)
+        return self._cov
+
+    def __call__(self, a: np.ndarray) -> np.ndarray:
+        return mixture_edf(self.x, np.asarray(a, dtype=np.float64), self.mats, self.full, self.gap_scale)
 
 
 def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
@@ -193,26 +174,6 @@ def _scoring(x, cols, y, edf, rw, a=None, c2=0.0, rtol=_RTOL):
                           from_data, float(c2), rtol, _MAX_ITER)
 
 
-def _robust_scoring(x, cols, y, edf, starts):
-    """Fisher scoring iteratively reweighted by Tukey's biweight of the standardized log
-    residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2), from each robust weight
-    vector in ``starts`` in turn; keeps the solution with the least total Tukey loss (an
-    earlier start wins ties) and stops early when a solution rejects no tau; the winner
-    is then scored to full precision. A start whose weights come to keep fewer than two
-    taus has failed. Returns (A, model, nu, robust weights, model-inadequacy variance
-    c2), or None when every start failed (nothing the five terms describe). The
-    model-inadequacy variance c2 (Paule-Mandel: the c2 >= 0 with sum rw r^2 / (v + c2) =
-    degrees of freedom) is estimated when the kept taus' residuals exceed their sampling
-    variances v = 2 / nu by more than BIRGE_GATE (reduced chi-square), else 0. The
-    iteration runs in numba (``scoring.robust_scoring``)."""
-    found, a, rw, c2 = robust_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.array(starts, dtype=np.float64),
-                                      TUKEY_C, MISFIT_FLOOR**2, BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER,
-                                      _ROBUST_RTOL, _MAX_ITER)
-    if not found:
-        return None
-    return (*_scoring(x, cols, y, edf, rw, a, c2), rw, c2)
-
-
 def _starts(n: int) -> list[np.ndarray]:
     """Robust starting weights: all taus, then up to _N_RUN_STARTS evenly spread runs of
     half of them (so that a stretch the five terms cannot describe, e.g. a vibration
@@ -223,125 +184,34 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def _variances(x, model, corr, cols, rw, nu, c2) -> tuple[np.ndarray, np.ndarray]:
-    """Variances of A over ``cols`` for the EDF-weighted estimator (weights
-    rw / ((2 / nu + c2) model^2)): (naive, sandwich). Naive: the inverse information of
-    the independence likelihood, (X'WX)^-1. Sandwich: with the Allan variances' standard
-    deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and their exact
-    correlation across taus ``corr`` (applied to the inadequacy part too: a misfit is
-    smooth in tau)."""
-    xs = x[:, cols]
-    scale = np.linalg.norm(xs, axis=0)
-    xs = xs / scale
-    w = rw / ((2.0 / nu + c2) * model**2)
-    sd = model * np.sqrt(2.0 / nu + c2)
-    cov_y = np.outer(sd, sd) * corr
-    wx = w[:, None] * xs
-    bread = np.linalg.pinv(xs.T @ wx)
-    cov = bread @ (wx.T @ cov_y @ wx) @ bread
-    return np.maximum(np.diag(bread), 0.0) / scale**2, np.maximum(np.diag(cov), 0.0) / scale**2
-
-
-def _eql_deviance(y, model, nu, rw, c2) -> float:
-    """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
-    with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
-    (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
-    v = 2.0 / nu + c2
-    r = y / model
-    return float(np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v))))
-
-
-def _profile(x, y, edf, rw, c2, a, terms, n: int, c: float | None) -> tuple[float, np.ndarray]:
-    """Fisher scoring of the ``terms`` (mask) >= 0 with term ``n`` held at ``c`` (None:
-    free), from ``a``: returns (EQL deviance, A) at convergence."""
-    cols = terms.copy()
-    a = np.where(terms, a, 0.0)
-    if c is not None:
-        cols[n] = False
-        a[n] = c
-    a, model, nu = fisher_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, np.asarray(rw, dtype=np.float64),
-                                  a, False, float(c2), _ROBUST_RTOL, _MAX_ITER)
-    return _eql_deviance(y, model, nu, rw, c2), a
-
-
-def _term_variances(x, edf, rw, c2, a, n: int) -> tuple[float, float]:
-    """(naive, sandwich) variance of A_n (``_variances``) in the fit of the terms a > 0
-    and n, at the model ``a``."""
-    cols = a > 0
-    cols[n] = True
-    model = np.maximum(x @ a, 1e-300)
-    v = _variances(x, model, edf.correlation(a), cols, rw, edf(a), c2)
-    return v[0][int(np.sum(cols[:n]))], v[1][int(np.sum(cols[:n]))]
-
-
-def _upper_limits(x, y, edf, rw, c2, a, which: np.ndarray) -> np.ndarray:
-    """One-sided UPPER_CONFIDENCE upper limit of every A_n: the c > A_n-hat where the
-    profile deviance D(c) (``_profile``; A_n-hat the estimate with term n added to the
-    fitted terms ``a > 0``, which stay free >= 0), rescaled by naive / sandwich variance
-    of A_n at the profiled model (the magnitude adjustment of an independence likelihood
-    for the taus' correlation, Chandler & Bate 2007, evaluated under the hypothesis
-    A_n = c as in a score test), reaches the squared 95 % normal quantile. Never below A_n-hat. For the
-    terms in the mask ``which`` (NaN for the others)."""
-    upper = np.where(which, np.inf, np.nan)
-    for n in np.flatnonzero(which).tolist():
-        terms = a > 0
-        terms[n] = True
-        d_min, a_hat = _profile(x, y, edf, rw, c2, a, terms, n, None)
-        naive, sand = _term_variances(x, edf, rw, c2, a_hat, n)
-        if not (sand > 0 and naive > 0):
-            continue
-        start = [a_hat]
-
-        def excess(c, start=start, terms=terms, n=n, d_min=d_min):  # bound now: called in this iteration only
-            d, start[0] = _profile(x, y, edf, rw, c2, start[0], terms, n, c)
-            naive_c, sand_c = _term_variances(x, edf, rw, c2, start[0], n)
-            return naive_c / sand_c * (d - d_min) - _UPPER_DEVIANCE
-        lo, step = a_hat[n], np.sqrt(sand)
-        f_lo, hi = -_UPPER_DEVIANCE, lo + step
-        for _ in range(60):
-            f_hi = excess(hi)
-            if f_hi > 0:
-                break
-            lo, f_lo, hi = hi, f_hi, hi + 2.0 * (hi - a_hat[n])
-        else:
-            continue
-        side = 0
-        for _ in range(40):  # Illinois regula falsi on the values seen (the profile is warm-started)
-            if hi - lo <= 1e-3 * max(hi, step):
-                break
-            mid = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            mid = min(max(mid, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-            f_mid = excess(mid)
-            if abs(f_mid) < 1e-3:
-                hi = mid
-                break
-            if f_mid > 0:
-                hi, f_hi = mid, f_mid
-                f_lo = f_lo / 2.0 if side == 1 else f_lo
-                side = 1
-            else:
-                lo, f_lo = mid, f_mid
-                f_hi = f_hi / 2.0 if side == -1 else f_hi
-                side = -1
-        upper[n] = hi
-    return upper
-
-
 def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
              upper_limits: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
-    On the taus of ``octave_subset``: robust Fisher scoring (``_robust_scoring``) with all
-    five terms, then backward elimination: while a fitted term's 95 % interval reaches
-    zero, the weakest one is dropped and the rest refitted. Returns (A_n, standard error
-    of A_n, misfit mask over ``tau_s``: taus the terms cannot describe (robust weight 0,
-    or for taus outside the subset the same Tukey rejection of their residual from the
-    model), one-sided 95 % upper limit of A_n (``_upper_limits``; ``upper_limits``
-    "all" terms, the "unidentified" ones or "none", NaN where not computed)); dropped terms have
-    A_n = 0 and the standard error they would have if fitted alongside the others. A_n
-    NaN (not identifiable) when fewer than 2 usable taus or when the robust weights
-    reject all but one tau."""
+    On the taus of ``octave_subset`` (``scoring.fit_terms``): robust Fisher scoring with
+    all five terms, iteratively reweighted by Tukey's biweight of the standardized log
+    residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2) from each of the robust
+    weight vectors of ``_starts`` (the least total Tukey loss wins, an earlier start ties;
+    a start that rejects no tau ends the search; one keeping fewer than two taus has
+    failed), with a model-inadequacy variance c2 (Paule-Mandel: the c2 >= 0 with
+    sum rw r^2 / (v + c2) = degrees of freedom) where the kept taus' reduced chi-square
+    exceeds BIRGE_GATE, else 0; then backward elimination: while a fitted term's 95 %
+    interval reaches zero, the weakest one is dropped and the rest refitted. Returns
+    (A_n, standard error of A_n, misfit mask over ``tau_s``: taus the terms cannot
+    describe (robust weight 0, or for taus outside the subset the same Tukey rejection of
+    their residual from the model), one-sided UPPER_CONFIDENCE upper limit of A_n for
+    ``upper_limits`` "all" terms, the "unidentified" ones or "none" (NaN where not
+    computed): the c > A_n-hat (A_n-hat the estimate with term n added to the fitted
+    terms, which stay free >= 0) where the profile deviance of the extended
+    quasi-likelihood, rescaled by naive / sandwich variance of A_n at the profiled model
+    (the magnitude adjustment of an independence likelihood for the taus' correlation,
+    Chandler & Bate 2007, evaluated under the hypothesis A_n = c as in a score test),
+    rises by the squared 95 % normal quantile, found to 1e-3 relative
+    (``scoring.upper_limits``), never below the estimate); dropped terms have A_n = 0
+    and the standard error they would have if fitted alongside the others. A_n NaN (not
+    identifiable) when fewer than 2 usable taus or when the robust weights reject all
+    but one tau."""
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
@@ -355,30 +225,14 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     y, nt = avar[use], np.asarray(n_terms)[use]
     m_int = np.asarray(m, dtype=np.int64)[use]
     x = tau[use][:, None] ** POWERS
-    active = np.ones(5, dtype=bool)
-    starts = _starts(len(y))
     edf = _NoiseModel(tau[use], m_int, nt, n_samples)
-    while True:
-        scored = _robust_scoring(x, active, y, edf, starts)
-        if scored is None:  # the robust weights reject all taus: nothing is identifiable
-            return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
-        a, model, nu, rw, c2 = scored
-        starts = [rw]
-        free = a > 0
-        se = np.full(5, np.inf)
-        corr = edf.correlation(a)
-        if free.any():
-            se[free] = np.sqrt(_variances(x, model, corr, free, rw, nu, c2)[1])
-        weak = free & (a - IDENTIFY_Z * se <= 0)
-        if not weak.any():
-            break
-        active[np.flatnonzero(weak)[np.argmin(a[weak] / se[weak])]] = False
-    for n in np.flatnonzero(~free):  # the term's error if fitted with the others
-        cols = free.copy()
-        cols[n] = True
-        se[n] = np.sqrt(_variances(x, model, corr, cols, rw, nu, c2)[1][int(np.sum(cols[:n]))])
-    which = {"all": np.ones(5, dtype=bool), "unidentified": ~free, "none": np.zeros(5, dtype=bool)}[upper_limits]
-    upper = np.maximum(_upper_limits(x, y, edf, rw, c2, a, which), a)
+    found, a, se, rw, _, upper = fit_terms(
+        x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, np.array(_starts(len(y))), TUKEY_C, MISFIT_FLOOR**2,
+        BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER, _ROBUST_RTOL, _RTOL, _MAX_ITER, IDENTIFY_Z,
+        _UPPER_MODES[upper_limits], _UPPER_DEVIANCE)
+    if not found:  # the robust weights reject all taus: nothing is identifiable
+        return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
+    upper = np.maximum(upper, a)
     misfit[use] = rw == 0
     rest = np.setdiff1d(np.flatnonzero(ok), use)
     if len(rest):

@@ -1,7 +1,8 @@
 """Numba kernels of the IEEE-952 fit (fogmon/davar/fit.py): the Fisher-scoring iteration
 with the mixture-EDF weights and the small non-negative least-squares problems it solves
-(at most 5 columns, Lawson & Hanson with Householder least squares), so that an
-iteration costs microseconds instead of a hundred of Python and scipy overhead."""
+(at most 5 columns, Lawson & Hanson with Householder least squares), the sandwich
+variances and the profile-likelihood upper limits, so that an iteration costs
+microseconds instead of a hundred of Python and scipy overhead."""
 from __future__ import annotations
 
 import numpy as np
@@ -17,25 +18,40 @@ _EPS = 2.0**-52
 @njit(cache=True)
 def _least_squares(a, b):
     """x minimising |a x - b| (n x k, n >= k) by Householder QR; 0 for a column that is
-    dependent on the ones before it."""
+    dependent on the ones before it. Plain loops (array expressions cost numba several
+    times the compile)."""
     n, k = a.shape
     r = a.copy()
     q = b.copy()
+    v = np.empty(n)
     for j in range(k):
-        norm = np.sqrt(np.sum(r[j:, j] ** 2))
+        norm = 0.0
+        for i in range(j, n):
+            norm += r[i, j] ** 2
+        norm = np.sqrt(norm)
         if norm == 0.0:
             continue
         alpha = -norm if r[j, j] > 0 else norm
-        v = r[j:, j].copy()
-        v[0] -= alpha
-        vv = np.sum(v * v)
+        vv = 0.0
+        for i in range(j, n):
+            v[i] = r[i, j] - (alpha if i == j else 0.0)
+            vv += v[i] * v[i]
         if vv == 0.0:
             continue
-        for c in range(j, k):
-            r[j:, c] -= (2.0 * np.sum(v * r[j:, c]) / vv) * v
-        q[j:] -= (2.0 * np.sum(v * q[j:]) / vv) * v
+        for c in range(j, k + 1):  # the columns of r, then q
+            s = 0.0
+            for i in range(j, n):
+                s += v[i] * (r[i, c] if c < k else q[i])
+            f = 2.0 * s / vv
+            for i in range(j, n):
+                if c < k:
+                    r[i, c] -= f * v[i]
+                else:
+                    q[i] -= f * v[i]
     x = np.zeros(k)
-    scale = np.max(np.abs(np.diag(r[:k, :k]))) if k else 0.0
+    scale = 0.0
+    for j in range(k):
+        scale = max(scale, abs(r[j, j]))
     for j in range(k - 1, -1, -1):
         s = q[j]
         for c in range(j + 1, k):
@@ -55,7 +71,13 @@ def nnls(a, b):
     skip = np.zeros(k, np.bool_)
     tol = 10.0 * _EPS * max(n, k) * max(1.0, np.max(np.abs(a)))
     for _ in range(4 * k + 4):
-        w = a.T @ (b - a @ x)
+        w = np.zeros(k)
+        for i in range(n):
+            res = b[i]
+            for j in range(k):
+                res -= a[i, j] * x[j]
+            for j in range(k):
+                w[j] += a[i, j] * res
         j_max = -1
         w_max = tol
         for j in range(k):
@@ -99,31 +121,182 @@ def nnls(a, b):
 
 
 @njit(cache=True, error_model="numpy")
-def mixture_edf(x, a, mats, full, gap_scale):
-    """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
-    predicts (white rate noise where it is empty): full / f'Mf scaled for gaps, as
-    ``fit._NoiseModel.__call__``."""
+def mixture_fractions(x, a):
+    """Share (taus x 4) of each noise class (confidence.MIX_ALPHAS) in the model Allan
+    variance sum_n A_n tau^n per tau (rows of ``x``: tau^n): white rate noise where the
+    model is empty."""
     t = x.shape[0]
-    nu = np.empty(t)
-    f = np.empty(4)
+    f = np.zeros((t, 4))
     for i in range(t):
-        f[:] = 0.0
         total = 0.0
         for n in range(5):
             c = x[i, n] * a[n]
             total += c
-            f[_CLASS[n]] += c
+            f[i, _CLASS[n]] += c
         if total > 0:
-            f /= total
+            f[i] /= total
         else:
-            f[:] = 0.0
-            f[1] = 1.0
+            f[i, :] = 0.0
+            f[i, 1] = 1.0
+    return f
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_edf(x, a, mats, full, gap_scale):
+    """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
+    predicts (``mixture_fractions``): full / f'Mf scaled for gaps
+    (confidence.edf_mixture_from with the mixture matrices ``mats``)."""
+    t = x.shape[0]
+    nu = np.empty(t)
+    f = mixture_fractions(x, a)
+    for i in range(t):
         q = 0.0
         for u in range(4):
             for v in range(4):
-                q += f[u] * mats[i, u, v] * f[v]
+                q += f[i, u] * mats[i, u, v] * f[i, v]
         nu[i] = full[i] / q * gap_scale[i]
     return nu
+
+
+@njit(cache=True, error_model="numpy")
+def mixture_correlation(x, a, cov):
+    """Correlation (taus x taus) of the Allan variance estimates across the taus (rows of
+    ``x``) for the noise mixture of the model A: confidence.avar_relative_covariance
+    from its ``covariance_matrices`` ``cov``, normalised to unit diagonal (where the
+    term counts cancel)."""
+    f = mixture_fractions(x, a)
+    t = f.shape[0]
+    c = np.empty((t, t))
+    g = np.empty(4)
+    for p in range(t):
+        for q in range(p, t):
+            for k in range(4):
+                g[k] = np.sqrt(f[p, k] * f[q, k])
+            s = 0.0
+            for k in range(4):
+                for v in range(4):
+                    s += g[k] * cov[p, q, k, v] * g[v]
+            c[p, q] = s
+            c[q, p] = s
+    sd = np.sqrt(np.diag(c).copy())
+    for p in range(t):
+        for q in range(t):
+            c[p, q] /= sd[p] * sd[q]
+    return c
+
+
+@njit(cache=True)
+def symmetric_pinv(a):
+    """Pseudo-inverse of a small symmetric matrix from its eigen-decomposition by cyclic
+    Jacobi rotations: eigenvalues within 1e-15 of the largest in magnitude count as zero
+    (numpy.linalg.pinv's default cut-off of the singular values). Plain loops: numba's
+    LAPACK binding would add ~9 CPU s to the first run's compile for a 5 x 5 matrix.
+    NaN everywhere when ``a`` holds a non-finite value (where numpy's SVD raises)."""
+    k = a.shape[0]
+    if not np.all(np.isfinite(a)):
+        return np.full((k, k), np.nan)
+    d = a.copy()
+    v = np.eye(k)
+    for _ in range(64):
+        off = 0.0
+        norm = 0.0
+        for p in range(k):
+            norm += d[p, p] ** 2
+            for q in range(p + 1, k):
+                off += d[p, q] ** 2
+        if not off > 1e-36 * norm:
+            break
+        for p in range(k):
+            for q in range(p + 1, k):
+                if d[p, q] == 0.0:
+                    continue
+                theta = (d[q, q] - d[p, p]) / (2.0 * d[p, q])
+                if abs(theta) > 1e150:
+                    t = 0.5 / theta
+                else:
+                    t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                    if theta < 0:
+                        t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for r in range(k):
+                    drp, drq = d[r, p], d[r, q]
+                    d[r, p] = c * drp - s * drq
+                    d[r, q] = s * drp + c * drq
+                for r in range(k):
+                    dpr, dqr = d[p, r], d[q, r]
+                    d[p, r] = c * dpr - s * dqr
+                    d[q, r] = s * dpr + c * dqr
+                for r in range(k):
+                    vrp, vrq = v[r, p], v[r, q]
+                    v[r, p] = c * vrp - s * vrq
+                    v[r, q] = s * vrp + c * vrq
+    cut = 0.0
+    for p in range(k):
+        cut = max(cut, 1e-15 * abs(d[p, p]))
+    out = np.zeros((k, k))
+    for p in range(k):
+        if abs(d[p, p]) > cut:
+            for r in range(k):
+                for q in range(k):
+                    out[r, q] += v[r, p] * v[q, p] / d[p, p]
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def sandwich_variances(x, model, corr, cols, rw, nu, c2):
+    """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
+    EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
+    Naive: the inverse information of the independence likelihood, (X'WX)^-1 (columns
+    scaled to unit norm; ``symmetric_pinv``). Sandwich: with the Allan variances'
+    standard deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and
+    their exact correlation across taus ``corr`` (applied to the inadequacy part too: a
+    misfit is smooth in tau)."""
+    idx = np.flatnonzero(cols)
+    t, k = x.shape[0], idx.shape[0]
+    xs = np.empty((t, k))
+    wx = np.empty((t, k))
+    g = np.empty((t, k))
+    scale = np.zeros(k)
+    for j in range(k):
+        for i in range(t):
+            scale[j] += x[i, idx[j]] ** 2
+        scale[j] = np.sqrt(scale[j])
+    for i in range(t):
+        v = 2.0 / nu[i] + c2
+        w = rw[i] / (v * model[i] ** 2)
+        sd = model[i] * np.sqrt(v)
+        for j in range(k):
+            xs[i, j] = x[i, idx[j]] / scale[j]
+            wx[i, j] = w * xs[i, j]
+            g[i, j] = wx[i, j] * sd
+    info = np.zeros((k, k))
+    meat = np.zeros((k, k))
+    for p in range(k):
+        for q in range(p, k):
+            s_info = 0.0
+            s_meat = 0.0
+            for i in range(t):
+                s_info += xs[i, p] * wx[i, q]
+                inner = 0.0
+                for u in range(t):
+                    inner += corr[i, u] * g[u, q]
+                s_meat += g[i, p] * inner
+            info[p, q] = s_info
+            info[q, p] = s_info
+            meat[p, q] = s_meat
+            meat[q, p] = s_meat
+    bread = symmetric_pinv(info)
+    naive = np.empty(k)
+    sand = np.empty(k)
+    for p in range(k):
+        acc = 0.0
+        for q in range(k):
+            for r in range(k):
+                acc += bread[p, q] * meat[q, r] * bread[r, p]
+        naive[p] = max(bread[p, p], 0.0) / scale[p] ** 2
+        sand[p] = max(acc, 0.0) / scale[p] ** 2
+    return naive, sand
 
 
 @njit(cache=True, error_model="numpy")
@@ -216,10 +389,10 @@ def _excess_variance(r, v, rw, n_free, gate):
     return excess_variance_root(rw[keep] * r[keep] ** 2, v[keep], float(dof))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol, max_robust,
                    rtol, max_iter):
-    """fit._robust_scoring without Python overhead: from each row of ``starts`` (robust
+    """Robust Fisher scoring of the terms ``cols``: from each row of ``starts`` (robust
     weights), Fisher scoring (to ``rtol``) reweighted by Tukey's biweight (cut-off
     ``tukey_c``) of z = ln(y / model) / sqrt(2 / nu + floor2), with the Paule-Mandel
     excess variance (``gate``), until the weights move less than ``rw_tol`` and c2 by
@@ -281,3 +454,165 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
         if np.all(rw > 0):
             break
     return found, best_a, best_rw, best_c2
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def eql_deviance(y, model, nu, rw, c2):
+    """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
+    with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
+    (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
+    v = 2.0 / nu + c2
+    r = y / model
+    return np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v)))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max_iter):
+    """Fisher scoring of the ``terms`` (mask) >= 0, with term ``n`` held at ``c`` when
+    ``held``, from ``a``: returns (EQL deviance, A) at convergence."""
+    cols = terms.copy()
+    a0 = np.where(terms, a, 0.0)
+    if held:
+        cols[n] = False
+        a0[n] = c
+    a1, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, False, c2, rtol, max_iter)
+    return eql_deviance(y, model, nu, rw, c2), a1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
+    """(naive, sandwich) variance of A_n (``sandwich_variances``) in the fit of the terms
+    a > 0 and n, at the model ``a``."""
+    cols = a > 0
+    cols[n] = True
+    model = np.maximum(x @ a, 1e-300)
+    naive, sand = sandwich_variances(x, model, mixture_correlation(x, a, cov), cols, rw,
+                                     mixture_edf(x, a, mats, full, gap_scale), c2)
+    k = 0
+    for j in range(n):
+        k += cols[j]
+    return naive[k], sand[k]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, rtol, max_iter):
+    """For each term n in ``which``: the c > A_n-hat (the estimate with n added to the
+    terms a > 0) where the rise of the profile deviance (``profile``) from its minimum,
+    rescaled by naive / sandwich variance of A_n at the profiled model, reaches
+    ``deviance``: bracketed by doubling steps from A_n-hat + its sandwich standard
+    error, then Illinois regula falsi to 1e-3 of the bracket's top (or of the step),
+    each profile warm-started from the last. inf where the variances vanish or no
+    bracket is found in 60 steps, NaN outside ``which``. One profile per loop pass (the
+    free estimate first), so that the scoring is compiled in once."""
+    upper = np.full(5, np.nan)
+    for n in range(5):
+        if not which[n]:
+            continue
+        upper[n] = np.inf
+        terms = a > 0
+        terms[n] = True
+        start = a.copy()
+        d_min = a_n = lo = f_lo = hi = f_hi = step = c = 0.0
+        phase = doublings = steps = side = 0  # phase 0: the free estimate A_n-hat, 1: bracketing, 2: regula falsi
+        for _ in range(1 + 60 + 40):
+            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, c, phase > 0, rtol, max_iter)
+            naive, sand = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
+            if phase == 0:
+                if not (sand > 0 and naive > 0):
+                    break
+                d_min, a_n, step = d, start[n], np.sqrt(sand)
+                lo, f_lo, hi = a_n, -deviance, a_n + step
+                phase, c = 1, hi
+                continue
+            f = naive / sand * (d - d_min) - deviance
+            if phase == 1:
+                if not f > 0:
+                    doublings += 1
+                    if doublings == 60:
+                        break
+                    lo, f_lo, hi = hi, f, hi + 2.0 * (hi - a_n)
+                    c = hi
+                    continue
+                f_hi, phase = f, 2
+            else:
+                steps += 1
+                if abs(f) < 1e-3:
+                    upper[n] = c
+                    break
+                if f > 0:
+                    hi, f_hi = c, f
+                    if side == 1:
+                        f_lo /= 2.0
+                    side = 1
+                else:
+                    lo, f_lo = c, f
+                    if side == -1:
+                        f_hi /= 2.0
+                    side = -1
+            if steps == 40 or hi - lo <= 1e-3 * max(hi, step):
+                upper[n] = hi
+                break
+            c = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            c = min(max(c, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+    return upper
+
+
+@njit(cache=True, error_model="numpy")
+def fit_terms(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw_tol, max_robust, robust_rtol,
+              rtol, max_iter, identify_z, upper_mode, deviance):
+    """The fit of fit.fit_avar on its taus, in one call: ``robust_scoring`` of the active
+    terms (all five at first) from the robust weights ``starts``, the winner scored to
+    ``rtol``; backward elimination: while a fitted term's A_n - ``identify_z`` se_n
+    reaches zero, the weakest (least A_n / se_n) is dropped and the rest refitted from
+    the last robust weights. Standard errors: sandwich (``sandwich_variances``, with the
+    exact correlation across taus ``mixture_correlation`` of the covariance matrices
+    ``cov``); a dropped term's as if fitted alongside the others. Upper limits
+    (``upper_limits``) of no term, the terms not identified or every term
+    (``upper_mode`` 0, 1, 2; NaN elsewhere). Returns (found, A, se, robust weights, c2,
+    upper); found False when every robust start failed."""
+    active = np.ones(5, np.bool_)
+    se = np.full(5, np.inf)
+    while True:
+        found, a, rw, c2 = robust_scoring(x, active, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
+                                          max_robust, robust_rtol, max_iter)
+        if not found:
+            return False, a, se, rw, c2, np.full(5, np.nan)
+        from_data = True
+        for j in range(5):
+            if active[j] and a[j] > 0:
+                from_data = False
+        a0 = np.zeros(5) if from_data else np.where(active, a, 0.0)
+        a, model, nu = fisher_scoring(x, active, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
+        starts = rw.reshape(1, rw.shape[0]).copy()
+        free = a > 0
+        se = np.full(5, np.inf)
+        corr = mixture_correlation(x, a, cov)
+        if free.any():
+            sand = sandwich_variances(x, model, corr, free, rw, nu, c2)[1]
+            k = 0
+            for j in range(5):
+                if free[j]:
+                    se[j] = np.sqrt(sand[k])
+                    k += 1
+        drop = -1
+        for j in range(5):
+            if free[j] and a[j] - identify_z * se[j] <= 0 and (drop < 0 or a[j] / se[j] < a[drop] / se[drop]):
+                drop = j
+        if drop < 0:
+            break
+        active[drop] = False
+    for n in range(5):
+        if not free[n]:
+            cols = free.copy()
+            cols[n] = True
+            k = 0
+            for j in range(n):
+                k += cols[j]
+            se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][k])
+    which = np.zeros(5, np.bool_)
+    for n in range(5):
+        which[n] = upper_mode == 2 or (upper_mode == 1 and not free[n])
+    upper = np.full(5, np.nan)
+    if which.any():
+        upper = upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, robust_rtol, max_iter)
+    return True, a, se, rw, c2, upper
