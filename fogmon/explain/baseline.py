@@ -112,11 +112,13 @@ def fit_chi2(av: np.ndarray, edf: np.ndarray, pred: np.ndarray) -> float:
 
 #: The baseline's low-pass on the white noise (a Gauss-Markov term) is sought with
 #: correlation times on LOWPASS_GRID_N log-spaced points from LOWPASS_TAU_C_SAMPLES[0] to
-#: [1] sample intervals (first-order corners from 0.008 to 1.6 x the sample rate: a
-#: sensor's filter, not a slow process - that is the markov effect's, from 5 samples
-#: up), the best refined by golden section on ln tau_c. It is charged TERM_CHI2 per
-#: parameter (correlation time, variance) like a noise term.
-LOWPASS_TAU_C_SAMPLES = (0.1, 20.0)
+#: [1] sample intervals (first-order corners from 0.04 to 1.6 x the sample rate: a
+#: sensor's filter acting at the shortest taus), the best refined by golden section on
+#: ln tau_c. A best fit at either end is refused: at the short end it is white noise, at
+#: the long end a slower process (a hump such as the G ring's microseism, left to the
+#: effects). It is charged TERM_CHI2 per parameter (correlation time, variance) like a
+#: noise term.
+LOWPASS_TAU_C_SAMPLES = (0.1, 4.0)
 LOWPASS_GRID_N = 40
 LOWPASS_PARAMS = 2
 
@@ -144,7 +146,8 @@ def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_
     """The terms the data need (:func:`_best_terms`) and, when the shortest tau's Allan
     variance lies below that fit (the ADEV bends below the white-noise slope), low-pass
     filtered white noise - a Gauss-Markov term of short correlation time - fitted with
-    them, kept only if it lowers the criterion by more than LOWPASS_PARAMS x TERM_CHI2.
+    them, kept only if its best correlation time is inside the LOWPASS_TAU_C_SAMPLES grid
+    and it lowers the criterion by more than LOWPASS_PARAMS x TERM_CHI2.
     Returns (coefficients, with ``markov_sigma_dph`` when the low-pass is kept, terms,
     its correlation time s or None)."""
     crit, fit, terms = _best_terms(tau_s, av, edf)
@@ -157,6 +160,8 @@ def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_
 
     grid = [math.log(x / sample_rate_hz) for x in np.geomspace(*LOWPASS_TAU_C_SAMPLES, LOWPASS_GRID_N)]
     i = min(range(len(grid)), key=lambda j: trial(grid[j])[0])
+    if i in (0, len(grid) - 1):
+        return fit, terms, None
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     r = (math.sqrt(5.0) - 1.0) / 2.0
     for _ in range(20):  # golden section on ln tau_c
