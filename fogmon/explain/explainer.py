@@ -435,7 +435,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         current = after
         deferred.clear()
     rejected += [(k, bg, why) for k, (bg, why) in deferred.items()]
-    rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
+    rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the frequency search's chance bar"
+                  if c.search_bar > c.k * ctx.penalty else "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
     fitted = _fitted_model(model, stoch, accepted)
     accepted.sort(key=lambda a: -a.cand.gain)
