@@ -19,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.explain.catalogue import NOISE_UNIT, noise_text
-from fogmon.explain.detectors import spectral_lines
+from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
@@ -120,14 +120,22 @@ def _verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
         parts.append("Missing physics, in order of importance: "
                      + "; ".join(effect_summary(a.cand.kind, a.cand.params, _model_noise(res))
                                  for a in res.accepted) + ".")
-        if sa <= 1.5 and not mism_after:
-            parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left): "
-                         f"add them to the sensor model (--out-model) or remove the deterministic ones "
-                         f"from the data (--out-corrected).")
+        unexplained = [m for m in mism_after if not m.get("nonstationary")]
+        bursts = len(mism_after) - len(unexplained)
+        named = (f" ({bursts} more left are non-stationary bursts named in the warnings, not missing physics)"
+                 if bursts else "")
+        if sa <= 1.5 and not unexplained:
+            parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left"
+                         f"{named}): add them to the sensor model (--out-model) or remove the deterministic "
+                         f"ones from the data (--out-corrected).")
+        elif not unexplained:
+            parts.append(f"With these added the score is {sa:.2f}; the {bursts} region(s) left are non-stationary "
+                         f"bursts named in the warnings (band-limited rms far above the rest of the record), "
+                         f"not missing physics: no stationary effect kind models them.")
         else:
-            left = f"; strongest left: {_region_text(mism_after[0])}" if mism_after else ""
-            parts.append(f"With these added the score is {sa:.2f} and {len(mism_after)} region(s) remain{left}: "
-                         f"the catalogue does not explain everything - inspect those times and taus.")
+            left = f"; strongest left: {_region_text(unexplained[0])}"
+            parts.append(f"With these added the score is {sa:.2f} and {len(unexplained)} region(s) remain{left}"
+                         f"{named}: the catalogue does not explain everything - inspect those times and taus.")
     else:
         parts.append("No catalogued effect passes BIC and the held-out check and lowers the score; the "
                      "mismatch may come from "
@@ -143,13 +151,13 @@ def _line_hint(res: Result, left: list[dict]) -> str:
     frequencies that tau band responds to (a sinusoid of frequency f peaks in the ADEV
     at tau = 0.371 / f), e.g. vehicle sway or drill-string vibration that is not one
     coherent sinusoid over the record (so `periodic` cannot model it)."""
-    excess = [r for r in left if r["sign"] == "excess"]
+    excess = [r for r in left if r["sign"] == "excess" and not r.get("nonstationary")]
     if not excess:
         return ""
     r = excess[0]
     sample_rate_hz = res.grid.sample_rate_hz
-    lines = spectral_lines(res.residual_after, sample_rate_hz, 0.371 / (2.0 * r["tau_max_s"]),
-                           min(sample_rate_hz / 2, 0.371 / (0.5 * r["tau_min_s"])))
+    lines = spectral_lines(res.residual_after, sample_rate_hz,
+                           *tau_band_hz(r["tau_min_s"], r["tau_max_s"], sample_rate_hz))
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
@@ -171,7 +179,8 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
     """The report (docs/formats.md, explain report); ``times_file`` names the outliers file relative
     to the report (an ``outliers`` effect's ``times_file`` parameter)."""
     mism = [r.as_json() for r in res.before.regions]
-    mism_after = [r.as_json() for r in res.after.regions]
+    mism_after = [{**r.as_json(), "nonstationary": any(r is x for x in res.nonstationary)}
+                  for r in res.after.regions]
     effects = []
     for a in res.accepted:
         c = a.cand
