@@ -33,6 +33,7 @@ from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import Effect, Noise, SensorModel, validate_effect, validate_model
+from fogmon.sim.noise import ar1_adev_exact
 
 
 def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | None = None,
@@ -82,16 +83,9 @@ def model_avar(tau_s: np.ndarray, fit: dict[str, float], markov_unit: np.ndarray
 def markov_unit_avar(tau_s: np.ndarray, sample_rate_hz: float, tau_c_s: float) -> np.ndarray:
     """Allan variance at ``tau_s`` (multiples of the sample interval) of a unit-variance
     sampled first-order Gauss-Markov process - white noise through a first-order
-    low-pass, autocovariance r(k) = a^|k|, a = exp(-1 / (sample_rate_hz tau_c_s)), as the
-    simulator's ``markov`` effect - exactly: avar(m) = sum_{|k| < 2m} c_m(k) r(k) / (2 m^2),
-    c_m(k) = 2m - 3|k| for |k| <= m and |k| - 2m beyond."""
-    a = math.exp(-1.0 / (sample_rate_hz * tau_c_s))
-    out = np.empty(len(tau_s))
-    for i, m in enumerate(np.maximum(np.round(np.asarray(tau_s) * sample_rate_hz), 1).astype(np.int64)):
-        k = np.arange(1, 2 * m)
-        c = np.where(k <= m, 2 * m - 3 * k, k - 2 * m).astype(float)
-        out[i] = (2.0 * m + 2.0 * float(c @ a ** k)) / (2.0 * m * m)
-    return out
+    low-pass, as the simulator's ``markov`` effect (exact, :func:`ar1_adev_exact`)."""
+    m = np.maximum(np.round(np.asarray(tau_s) * sample_rate_hz), 1)
+    return ar1_adev_exact(m, 1.0, tau_c_s, sample_rate_hz) ** 2
 
 
 NAMES = ("Q", "N", "B", "K", "R")
