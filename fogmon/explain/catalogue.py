@@ -630,7 +630,7 @@ def markov(ctx: Context) -> Candidate | None:
     grid = np.geomspace(5.0 / ctx.sample_rate_hz, T / 20.0, 36)
     for tc in grid:
         P = markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
-        v = _newton_variance(bp, S0, P, floor)
+        v = _newton_variance(bp, S0, P)
         if v <= 0:
             continue
         g = d0 - bp.deviance(S0 + v * P, floor)
@@ -642,7 +642,7 @@ def markov(ctx: Context) -> Candidate | None:
     sigma = math.sqrt(v)
     # se of sigma from the curvature in v
     P = markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
-    S = np.maximum(S0 + v * P, max(floor, 1e-300))
+    S = S0 + v * P
     info = float(np.sum(bp.count * P ** 2 / S ** 2))
     se_sigma = math.sqrt(1.0 / info) / (2 * sigma) if info > 0 else float("nan")
     ev = (f"Whittle fit of the residual spectrum: Gauss-Markov sigma {_fmt(sigma, se_sigma)} deg/h, "
@@ -650,12 +650,10 @@ def markov(ctx: Context) -> Candidate | None:
     return Candidate("markov", {"tau_c_s": float(tc), "sigma_dph": sigma}, {"sigma_dph": se_sigma}, g, 2, ev)
 
 
-def _newton_variance(bp: BinnedPeriodogram, S0: np.ndarray, P: np.ndarray, floor: float) -> float:
-    """Variance v >= 0 of the PSD shape ``P`` added to ``S0`` that maximizes the Whittle
-    likelihood, by Newton steps, the PSD floored as in ``bp.deviance`` (a filter's zero)."""
+def _newton_variance(bp: BinnedPeriodogram, S0: np.ndarray, P: np.ndarray) -> float:
     v = 0.0
     for _ in range(30):
-        S = np.maximum(S0 + v * P, max(floor, 1e-300))
+        S = S0 + v * P
         g1 = float(np.sum(bp.count * P * (1.0 / S - bp.I / S ** 2)))
         g2 = float(np.sum(bp.count * P ** 2 * (-1.0 / S ** 2 + 2.0 * bp.I / S ** 3)))
         if g2 <= 0:
