@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from fogmon.cli import main
-from fogmon.davar.theory import adev_model
-from fogmon.explain.baseline import baseline_model, curve_noise_fit
+from fogmon.davar.theory import adev_model, markov_adev
+from fogmon.explain.baseline import baseline_model, curve_noise_fit, markov_unit_avar
 from fogmon.recording import write_replay_log
-from fogmon.sim.model import Noise, SensorModel
+from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
 
@@ -37,3 +37,28 @@ def test_explain_without_model_on_stationary_noise_finds_nothing(tmp_path):
     rep = json.loads((tmp_path / "r.json").read_text())
     assert rep["model"].startswith("baseline") and rep["effects"] == [] and rep["mismatches"] == []
     assert rep["baseline_model"]["N_dpsh"] == pytest.approx(0.01, rel=0.15)
+
+
+def test_markov_unit_avar_is_the_sampled_gauss_markov_allan_variance():
+    tau = 2.0 ** np.arange(0, 12) / 100.0
+    # a correlation time of many samples, averaging over 8 and more samples: the
+    # continuous-time formula (IEEE-952 C.4; point samples differ from it at a few samples)
+    assert markov_unit_avar(tau[3:], 100.0, 2.0) == pytest.approx(markov_adev(tau[3:], 1.0, 2.0) ** 2, rel=0.01)
+    # one sample: (y1 - y0)^2 / 2 = 1 - a
+    assert markov_unit_avar(tau[:1], 100.0, 2.0)[0] == pytest.approx(1.0 - np.exp(-1.0 / 200.0), rel=1e-9)
+    # a correlation time far below a sample: white noise of unit variance, 1/m
+    assert markov_unit_avar(tau, 100.0, 1e-4) == pytest.approx(1.0 / (tau * 100.0), rel=1e-9)
+
+
+def test_baseline_fits_the_sensor_low_pass_instead_of_flicker():
+    """White noise through a first-order low-pass (a MEMS gyro's filter, corner 30 Hz at
+    250 Hz): the ADEV bends below the white slope at the shortest taus. The baseline
+    names the filtered white noise (its correlation time and level) and invents no
+    flicker from the bend."""
+    tau_c = 1.0 / (2.0 * np.pi * 30.0)
+    m = SensorModel(250.0, 0.0, Noise(N_dpsh=0.01), [Effect("markov", {"tau_c_s": tau_c, "sigma_dph": 130.0})])
+    b = baseline_model(simulate(m, duration_s=120.0, seed=3))
+    assert [e.kind for e in b.effects] == ["markov"]
+    assert b.effects[0].params["tau_c_s"] == pytest.approx(tau_c, rel=0.1)
+    assert b.effects[0].params["sigma_dph"] == pytest.approx(130.0, rel=0.05)
+    assert b.noise.B_dph == 0.0 and b.noise.K_dphsh == 0.0

@@ -144,3 +144,66 @@ def test_spectral_lines_finds_an_incoherent_resonance_and_nothing_in_white_noise
     lines = spectral_lines(white + sway, sample_rate_hz, 0.05, 50.0)
     assert lines and abs(lines[0][0] - 2.5) < 0.05 and lines[0][1] > 10
     assert all(abs(f - lines[0][0]) > 0.1 * lines[0][0] for f, _ in lines[1:])
+
+
+def test_band_rms_burst_names_a_band_limited_burst_and_not_stationary_noise():
+    """White noise, 900 s at 20 Hz; a burst of 0.03-0.08 Hz noise over 60 s (6x the
+    white noise's rms in that band, like the G ring's long-period ground motion): found in
+    the band of taus 6.4..12.8 s over its span, and nothing of the kind in a span of the
+    stationary part."""
+    from scipy.signal import butter, sosfiltfilt
+
+    from fogmon.explain.explainer import BURST_Z
+
+    sample_rate_hz, n = 20.0, 18000
+    rng = np.random.default_rng(4)
+    y = rng.normal(0.0, 1.0, n)
+    sos = butter(4, [0.03, 0.08], btype="bandpass", fs=sample_rate_hz, output="sos")
+    band = sosfiltfilt(sos, rng.normal(0.0, 1.0, n))
+    y[6000:7200] += 6.0 * np.std(sosfiltfilt(sos, y)) * band[6000:7200] / np.std(band)
+    ok = np.ones(n, bool)
+    b = detectors.band_rms_burst(y, ok, sample_rate_hz, 6000, 7200, 0.0145, 0.116)
+    assert b is not None and b.rms_ratio > 1.8 and b.z > BURST_Z and b.spans_n >= 10
+    quiet = detectors.band_rms_burst(y, ok, sample_rate_hz, 12000, 13200, 0.0145, 0.116)
+    assert quiet is not None and abs(quiet.z) < 1
+    # a high-pass band (up to Nyquist) works too; too few other spans: no test
+    assert detectors.band_rms_burst(y, ok, sample_rate_hz, 100, 250, 3.71, 10.0) is not None
+    assert detectors.band_rms_burst(y, ok, sample_rate_hz, 0, 8000, 0.0145, 0.116) is None
+
+
+def test_tau_band_is_an_octave_beyond_the_peaks_of_the_taus():
+    lo, hi = detectors.tau_band_hz(6.4, 12.8, 20.0)
+    assert lo == pytest.approx(0.371 / 25.6) and hi == pytest.approx(0.371 / 3.2)
+    assert detectors.tau_band_hz(0.05, 0.05, 20.0)[1] == 10.0  # capped at the Nyquist frequency
+
+
+def test_chance_line_gain_is_the_false_alarm_level_of_a_frequency_search():
+    """Baluev's false-alarm law inverted, and checked on white noise: of 300 records of
+    12000 samples, the periodic candidate's gain passed BIC (3 ln n = 28.2) in 6 (about
+    2 %, as the law says at that level); the search bar at 1e-3 is above all of them."""
+    import math
+
+    from fogmon.explain.catalogue import SEARCH_FALSE_ALARM, chance_line_gain
+
+    u = chance_line_gain(12000, SEARCH_FALSE_ALARM)
+    fap = 6000 * math.sqrt(math.pi / 3) * math.sqrt(u / 2) * math.exp(-u / 2)
+    assert fap == pytest.approx(SEARCH_FALSE_ALARM, rel=1e-6)
+    bic = 3 * math.log(12000)
+    assert 6000 * math.sqrt(math.pi / 3) * math.sqrt(bic / 2) * math.exp(-bic / 2) == pytest.approx(0.017, abs=0.002)
+    assert u > 31.3 + 2  # the largest chance gain among the 300 records was 31.3
+
+
+def test_periodic_candidate_of_a_chance_peak_stays_below_its_bar():
+    """A white-noise record whose strongest periodogram line passes BIC by chance (seed
+    64 of the 300 above: gain 31.3 > 28.2) is refused by the frequency search's bar."""
+    import math
+
+    from fogmon.explain import catalogue, explainer
+
+    sample_rate_hz, n = 10.0, 12000
+    t = np.arange(n) / sample_rate_hz
+    y = 60 * 0.01 * math.sqrt(sample_rate_hz) * np.random.default_rng(64).standard_normal(n)
+    ctx = explainer._whittle(SensorModel(sample_rate_hz, 0.0, Noise(N_dpsh=0.01), []), {}, t, np.ones(n, bool),
+                             y - y.mean())
+    c = catalogue.periodic(ctx)
+    assert c.gain > 3 * ctx.penalty and c.bic_gain(ctx.penalty) < 0

@@ -8,12 +8,18 @@ that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
    of their Allan variance (an effect confined to a few windows does not move it);
 3. IEEE-952 terms by non-negative least squares on the relative Allan-variance error:
    N always, each of Q, B, K only when it lowers the chi-square by more than chance,
-   R = 0 (a drift has a sign: the rate_ramp effect fits it);
+   R = 0 (a drift has a sign: the rate_ramp effect fits it); when the ADEV at the
+   shortest tau lies below that fit (it bends below the white-noise slope: the
+   sensor's own low-pass), white noise through a first-order low-pass - a
+   Gauss-Markov term of short correlation time, simulated as a ``markov`` effect - is
+   fitted together with them, kept only when it lowers the chi-square by more than
+   chance;
 4. whole-record ADEV points at longer taus refine those terms while they stay
    consistent with them, but cannot add a term.
 
-Bias: the mean rate (deg/h). No effects: explaining against this model asks "what in
-this recording is not stationary IEEE-952 noise?"."""
+Bias: the mean rate (deg/h). No effects but that filtered white noise: explaining
+against this model asks "what in this recording is not stationary IEEE-952 noise, as
+the sensor's low-pass shapes it?"."""
 from __future__ import annotations
 
 import math
@@ -26,16 +32,19 @@ from fogmon.davar.theory import POWERS, adev_model, avar_terms_to_coefficients
 from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
-from fogmon.sim.model import Noise, SensorModel, validate_effect, validate_model
+from fogmon.sim.model import Effect, Noise, SensorModel, validate_effect, validate_model
+from fogmon.sim.noise import ar1_adev_exact
 
 
 def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | None = None,
-                    edf_cap: float = 50.0, ramp: bool = True, terms: tuple[str, ...] | None = None
-                    ) -> dict[str, float]:
+                    edf_cap: float = 50.0, ramp: bool = True, terms: tuple[str, ...] | None = None,
+                    markov_unit: np.ndarray | None = None) -> dict[str, float]:
     """IEEE-952 coefficients (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h), R deg/h^2)
     minimizing sum_i w_i (model_avar_i / avar_i - 1)^2 over the taus, all A_n >= 0, with
     w_i = min(edf_i, edf_cap) / edf_cap: equal weight wherever the point is well
-    determined, less at the few-EDF longest taus."""
+    determined, less at the few-EDF longest taus. With ``markov_unit`` (the Allan
+    variance of a unit-variance Gauss-Markov term at each tau, :func:`markov_unit_avar`)
+    that term's variance is fitted with them and returned as ``markov_sigma_dph``."""
     ok = np.isfinite(adev_dph) & (adev_dph > 0)
     tau, av = np.asarray(tau_s)[ok], np.asarray(adev_dph)[ok] ** 2
     if edf is None:
@@ -43,16 +52,40 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     else:
         e = np.minimum(np.asarray(edf, dtype=float)[ok], edf_cap)
         w = np.sqrt(e / max(float(np.max(e)), 1e-300))
-    X = tau[:, None] ** POWERS[None, :] / av[:, None] * w[:, None]
+    cols = tau[:, None] ** POWERS[None, :]
+    if markov_unit is not None:
+        cols = np.column_stack((cols, np.asarray(markov_unit)[ok]))
+    X = cols / av[:, None] * w[:, None]
     if not ramp:  # R left at 0 (a drift has a sign: it is the rate_ramp effect's to fit)
-        X[:, -1] = 0.0
+        X[:, 4] = 0.0
     if terms is not None:
         X[:, [i for i, nm in enumerate(NAMES) if nm not in terms]] = 0.0
     scale = np.max(np.abs(X), axis=0)
     scale[scale == 0] = 1.0
     a, _ = nnls(X / scale, w)
-    coef = avar_terms_to_coefficients(a / scale)
-    return dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef), strict=True))
+    a = a / scale
+    coef = avar_terms_to_coefficients(a[:5])
+    out = dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef), strict=True))
+    if markov_unit is not None:
+        out["markov_sigma_dph"] = math.sqrt(float(a[5]))
+    return out
+
+
+def model_avar(tau_s: np.ndarray, fit: dict[str, float], markov_unit: np.ndarray | None = None) -> np.ndarray:
+    """Allan variance ((deg/h)^2) at ``tau_s`` of a :func:`curve_noise_fit` result."""
+    ieee = {k: v for k, v in fit.items() if k != "markov_sigma_dph"}
+    av = adev_model(tau_s, **ieee) ** 2
+    if markov_unit is not None:
+        av = av + fit["markov_sigma_dph"] ** 2 * np.asarray(markov_unit)
+    return av
+
+
+def markov_unit_avar(tau_s: np.ndarray, sample_rate_hz: float, tau_c_s: float) -> np.ndarray:
+    """Allan variance at ``tau_s`` (multiples of the sample interval) of a unit-variance
+    sampled first-order Gauss-Markov process - white noise through a first-order
+    low-pass, as the simulator's ``markov`` effect (exact, :func:`ar1_adev_exact`)."""
+    m = np.maximum(np.round(np.asarray(tau_s) * sample_rate_hz), 1)
+    return ar1_adev_exact(m, 1.0, tau_c_s, sample_rate_hz) ** 2
 
 
 NAMES = ("Q", "N", "B", "K", "R")
@@ -63,28 +96,79 @@ NAMES = ("Q", "N", "B", "K", "R")
 TERM_CHI2 = 6.63
 
 
-def fit_chi2(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float]) -> float:
-    """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance against the fit."""
-    pred = adev_model(tau_s, **fit) ** 2
+def fit_chi2(av: np.ndarray, edf: np.ndarray, pred: np.ndarray) -> float:
+    """Sum over taus of the Wilson-Hilferty z^2 of each Allan variance ``av`` against the
+    fit's ``pred`` (:func:`model_avar`)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.array([_wh_z(a / p, e) if p > 0 else np.inf for a, p, e in zip(av, pred, edf, strict=True)])
     return float(np.sum(z ** 2))
 
 
-def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray) -> tuple[dict[str, float], tuple]:
-    """:func:`curve_noise_fit` (R = 0, weights by the full degrees of freedom, so that
-    the fit and the chi-square that judges it agree) with N always and each of Q, B, K
-    only if the data need it: of the 8 term sets, the one with the least chi-square
-    (:func:`fit_chi2`) + TERM_CHI2 per term. Returns (coefficients, the terms used)."""
+#: The baseline's low-pass on the white noise (a Gauss-Markov term) is sought with
+#: correlation times on LOWPASS_GRID_N log-spaced points from LOWPASS_TAU_C_SAMPLES[0] to
+#: [1] sample intervals (first-order corners from 0.04 to 1.6 x the sample rate: a
+#: sensor's filter acting at the shortest taus), the best refined by golden section on
+#: ln tau_c. A best fit at either end is refused: at the short end it is white noise, at
+#: the long end a slower process (a hump such as the G ring's microseism, left to the
+#: effects). It is charged TERM_CHI2 per parameter (correlation time, variance) like a
+#: noise term.
+LOWPASS_TAU_C_SAMPLES = (0.1, 4.0)
+LOWPASS_GRID_N = 40
+LOWPASS_PARAMS = 2
+
+
+def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, markov_unit: np.ndarray | None = None
+                ) -> tuple[float, dict[str, float], tuple[str, ...]]:
+    """(criterion, coefficients, terms) of the term set, N always and each of Q, B, K
+    only if the data need it, with the least chi-square (:func:`fit_chi2`) + TERM_CHI2
+    per term; :func:`curve_noise_fit` with R = 0 and weights by the full degrees of
+    freedom, so that the fit and the chi-square that judges it agree."""
     best = None
     for k in range(8):
         terms = ("N",) + tuple(nm for i, nm in enumerate(("Q", "B", "K")) if k >> i & 1)
-        fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms)
-        crit = fit_chi2(tau_s, av, edf, fit) + TERM_CHI2 * len(terms)
+        fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms,
+                              markov_unit=markov_unit)
+        crit = fit_chi2(av, edf, model_avar(tau_s, fit, markov_unit)) + TERM_CHI2 * len(terms)
         if best is None or crit < best[0]:
             best = (crit, fit, terms)
     assert best is not None  # the loop ran at least once
-    return best[1], best[2]
+    return best
+
+
+def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_rate_hz: float
+                     ) -> tuple[dict[str, float], tuple[str, ...], float | None]:
+    """The terms the data need (:func:`_best_terms`) and, when the shortest tau's Allan
+    variance lies below that fit (the ADEV bends below the white-noise slope), low-pass
+    filtered white noise - a Gauss-Markov term of short correlation time - fitted with
+    them, kept only if its best correlation time is inside the LOWPASS_TAU_C_SAMPLES grid
+    and it lowers the criterion by more than LOWPASS_PARAMS x TERM_CHI2.
+    Returns (coefficients, with ``markov_sigma_dph`` when the low-pass is kept, terms,
+    its correlation time s or None)."""
+    crit, fit, terms = _best_terms(tau_s, av, edf)
+    if not av[0] < model_avar(tau_s[:1], fit)[0]:
+        return fit, terms, None
+
+    def trial(ln_tc: float) -> tuple[float, dict[str, float], tuple[str, ...]]:
+        c, f, t = _best_terms(tau_s, av, edf, markov_unit_avar(tau_s, sample_rate_hz, math.exp(ln_tc)))
+        return c + LOWPASS_PARAMS * TERM_CHI2, f, t
+
+    grid = [math.log(x / sample_rate_hz) for x in np.geomspace(*LOWPASS_TAU_C_SAMPLES, LOWPASS_GRID_N)]
+    i = min(range(len(grid)), key=lambda j: trial(grid[j])[0])
+    if i in (0, len(grid) - 1):
+        return fit, terms, None
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    r = (math.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(20):  # golden section on ln tau_c
+        c, d = hi - r * (hi - lo), lo + r * (hi - lo)
+        if trial(c)[0] < trial(d)[0]:
+            hi = d
+        else:
+            lo = c
+    ln_tc = min((grid[i], (lo + hi) / 2.0), key=lambda x: trial(x)[0])
+    best = trial(ln_tc)
+    if best[0] < crit:
+        return best[1], best[2], math.exp(ln_tc)
+    return fit, terms, None
 
 
 #: A whole-record ADEV point beyond the windows' taus joins the baseline fit only while its
@@ -162,45 +246,56 @@ def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, sam
     return out
 
 
-def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> dict[str, float]:
+def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> tuple[dict[str, float], float | None]:
     """IEEE-952 Q, N, B, K (R = 0: a drift is the rate_ramp effect's) of the recording's
-    stationary noise, fitted so that an effect does not inflate them:
-    :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`)
-    at the windows' taus, with the terms those robust points need
+    stationary noise and, when the sensor's low-pass shows, the Gauss-Markov term of its
+    filtered white noise (``markov_sigma_dph`` in the coefficients, and its correlation
+    time in s, else None), fitted so that an effect does not inflate them:
+    :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`) at
+    the windows' taus, with the terms those robust points need
     (:func:`parsimonious_fit`), refined with the whole-record ADEV at longer taus, in
-    order, while each point stays within EXTEND_Z of the windows' fit. The long taus
-    only refine: a term only they would need (what a periodic term, a drift or a step
-    does there as well) is not added - it is left for the effects and the mismatch map
-    to judge."""
+    order, while each point stays within EXTEND_Z of the windows' fit. The long taus only
+    refine: a term only they would need (what a periodic term, a drift or a step does
+    there as well) is not added - it is left for the effects and the mismatch map to
+    judge."""
     whole = oadev(y, sample_rate_hz, taus="octave", valid=ok, alpha=0)
     tau_w, av_w, edf_w = robust_avar(y, ok, sample_rate_hz)
     nw = len(tau_w)
     keep = np.isfinite(av_w)
     tau, av, edf = list(tau_w[keep]), list(av_w[keep]), list(edf_w[keep])
-    fit0, terms = parsimonious_fit(np.array(tau), np.array(av), np.array(edf))
+    fit0, terms, tau_c = parsimonious_fit(np.array(tau), np.array(av), np.array(edf), sample_rate_hz)
+
+    def unit(taus):
+        return None if tau_c is None else markov_unit_avar(np.asarray(taus), sample_rate_hz, tau_c)
+
     for j in range(nw, len(whole.tau_s)):
         a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
-        pred = float(adev_model(np.array([whole.tau_s[j]]), **fit0)[0]) ** 2
+        pred = float(model_avar(whole.tau_s[j:j + 1], fit0, unit(whole.tau_s[j:j + 1]))[0])
         if not (np.isfinite(a) and pred > 0) or _wh_z(a / pred, e) > EXTEND_Z:
             break
         tau.append(float(whole.tau_s[j]))
         av.append(a)
         edf.append(e)
-    return curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
-                           terms=terms)
+    fit = curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
+                          terms=terms, markov_unit=unit(tau))
+    return fit, tau_c
 
 
 def baseline_model(rec: Recording) -> SensorModel:
-    """Stationary IEEE-952 model (no effects) fitted to ``rec`` robustly
-    (:func:`robust_noise_fit` of :func:`aux_projected`); bias the mean rate (deg/h)."""
+    """Stationary IEEE-952 model fitted to ``rec`` robustly (:func:`robust_noise_fit` of
+    :func:`aux_projected`), with the sensor's low-pass-filtered white noise as a
+    ``markov`` effect when the fit found it; bias the mean rate (deg/h)."""
     blk = rec.to_block()
     y = blk.error_rate_dph
     ok = blk.valid & np.isfinite(y)
     if ok.sum() < 64:
         raise FogmonError(f"{rec.name}: too few valid samples ({int(ok.sum())}) to fit a baseline model")
-    vals = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok, rec.sample_rate_hz)
-    if not any(vals.values()):
+    vals, tau_c = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok,
+                                   rec.sample_rate_hz)
+    sigma = vals.pop("markov_sigma_dph", 0.0)
+    if not (any(vals.values()) or sigma):
         raise FogmonError(f"{rec.name}: no IEEE-952 noise term found for a baseline model")
-    model = SensorModel(rec.sample_rate_hz, float(np.mean(y[ok])), Noise(**vals), [],
+    effects = [] if tau_c is None or not sigma else [Effect("markov", {"tau_c_s": tau_c, "sigma_dph": sigma})]
+    model = SensorModel(rec.sample_rate_hz, float(np.mean(y[ok])), Noise(**vals), effects,
                         {"origin": f"fogmon explain baseline fitted from {rec.name}"})
     return validate_model(model)

@@ -1,9 +1,10 @@
 """Matched time-domain tests run beside the mismatch map (docs/explain.md): isolated spikes
 and a single bias step, both as Whittle GLS scans over every sample position, so
 they are optimal for the model's noise colour (a spike far below the raw-sample
-noise is found when that noise is quantization, i.e. blue).
+noise is found when that noise is quantization, i.e. blue); and, for what is left
+unexplained, narrowband lines and band-limited rms bursts.
 
-Both scans cost a few FFTs of the record whatever its length.
+The scans cost a few FFTs of the record whatever its length.
 """
 from __future__ import annotations
 
@@ -205,3 +206,66 @@ def spectral_lines(y: np.ndarray, sample_rate_hz: float, f_lo_hz: float, f_hi_hz
         if all(abs(fb[i] - fb[j]) > 0.1 * fb[j] for j in best):
             best.append(i)
     return [(float(fb[i]), float(pb[i] / med)) for i in best]
+
+
+def tau_band_hz(tau_min_s: float, tau_max_s: float, sample_rate_hz: float) -> tuple[float, float]:
+    """(low, high) frequency (Hz) an Allan deviation at taus tau_min_s..tau_max_s responds
+    to: a sinusoid of frequency f peaks at tau = 0.371 / f; the band reaches an octave
+    beyond the peaks of tau_max_s and tau_min_s on either side, up to the Nyquist frequency."""
+    return 0.371 / (2.0 * tau_max_s), min(sample_rate_hz / 2.0, 0.371 / (0.5 * tau_min_s))
+
+
+@dataclass(frozen=True)
+class Burst:
+    """Band-limited rms of a span against the record's other spans of its length:
+    ``rms_ratio`` (span / median of the others), ``z`` = ln(rms_ratio) / sd, ``sd`` the
+    larger of the chance scatter of a Gaussian noise's log rms in that band and span
+    and the others' robust scatter, over ``spans_n`` other spans."""
+
+    f_lo_hz: float
+    f_hi_hz: float
+    rms_ratio: float
+    z: float
+    sd: float
+    spans_n: int
+
+
+#: a burst test needs this many other spans of the same length in the record
+BURST_MIN_SPANS = 4
+
+
+def band_rms_burst(y: np.ndarray, valid: np.ndarray, sample_rate_hz: float, i0: int, i1: int,
+                   f_lo_hz: float, f_hi_hz: float) -> Burst | None:
+    """Rms of ``y`` (deg/h, 0 where not ``valid``) through a zero-phase 4-pole Butterworth
+    band-pass f_lo_hz..f_hi_hz (a high-pass when f_hi_hz is the Nyquist frequency) over
+    samples i0..i1, against the median rms of the record's non-overlapping spans of the
+    same length that do not touch it (:class:`Burst`). The chance scatter of a log rms
+    is 1 / (2 sqrt(W D)) for a band W Hz wide over D s (2 W D degrees of freedom).
+    None when fewer than BURST_MIN_SPANS such spans exist."""
+    from scipy.signal import butter, sosfiltfilt
+
+    n = len(y)
+    L = max(i1 - i0, 16)
+    nyq = sample_rate_hz / 2.0
+    lo = max(f_lo_hz, 1.0 / (n / sample_rate_hz))
+    if f_hi_hz >= 0.95 * nyq:
+        sos = butter(4, lo, btype="highpass", fs=sample_rate_hz, output="sos")
+        width = nyq - lo
+    else:
+        sos = butter(4, [lo, f_hi_hz], btype="bandpass", fs=sample_rate_hz, output="sos")
+        width = f_hi_hz - lo
+    x = sosfiltfilt(sos, np.where(valid, y, 0.0))
+
+    def rms(a: int, b: int) -> float:
+        v = valid[a:b]
+        return math.sqrt(float(np.mean(x[a:b][v] ** 2))) if v.sum() > L // 2 else float("nan")
+
+    others = np.array([rms(a, a + L) for a in range(0, n - L + 1, L) if a + L <= i0 or a >= i1])
+    others = others[np.isfinite(others) & (others > 0)]
+    here = rms(i0, i1)
+    if len(others) < BURST_MIN_SPANS or not here > 0:
+        return None
+    med = float(np.median(others))
+    ln_o = np.log(others)
+    sd = max(0.5 / math.sqrt(width * L / sample_rate_hz), 1.4826 * float(np.median(np.abs(ln_o - np.median(ln_o)))))
+    return Burst(lo, f_hi_hz, here / med, math.log(here / med) / sd, sd, len(others))

@@ -99,6 +99,8 @@ class Result:
     n_boot: int = 0
     baseline: bool = False
     warnings: list[dict] = field(default_factory=list)
+    #: the regions left after (of ``after``) that a ``nonstationary`` warning names
+    nonstationary: list[mismatch.Region] = field(default_factory=list)
 
     @property
     def deterministic_fit(self) -> np.ndarray:
@@ -435,14 +437,16 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         current = after
         deferred.clear()
     rejected += [(k, bg, why) for k, (bg, why) in deferred.items()]
-    rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the BIC bar") for c in cands
+    rejected += [(c.kind, c.bic_gain(ctx.penalty), "below the frequency search's chance bar"
+                  if c.search_bar > c.k * ctx.penalty else "below the BIC bar") for c in cands
                  if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
     fitted = _fitted_model(model, stoch, accepted)
     accepted.sort(key=lambda a: -a.cand.gain)
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
     current = replace(current, regions=mismatch.locate(current.regions, y, valid, grid, current.null))
+    bursts, named = nonstationary_warnings(current, y, valid, grid)
     return Result(rec, model, fitted, grid, t, valid, y0, y, before, current, accepted, rejected, B, baseline,
-                  too_short_warnings(model, grid))
+                  too_short_warnings(model, grid) + bursts, named)
 
 
 def _judge(c: catalogue.Candidate, cands: list[catalogue.Candidate], ctx: catalogue.Context, current: Analysis,
@@ -579,3 +583,68 @@ def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
             warn(f"the model's Gauss-Markov correlation time ({e.params['tau_c_s']:.6g} s) is beyond the longest "
                  f"tau this {dur:.6g} s record supports ({tau_max:.6g} s)")
     return out
+
+
+#: A region left after the selection is a non-stationary burst when the residual's rms in
+#: the band its taus respond to stands at least this many standard deviations above the
+#: record's other spans of its length (detectors.band_rms_burst) and it spans at most
+#: BURST_MAX_SHARE of the record
+BURST_Z = 3.0
+BURST_MAX_SHARE = 0.5
+
+
+def nonstationary_warnings(after: Analysis, y: np.ndarray, valid: np.ndarray, grid: mismatch.Grid
+                           ) -> tuple[list[dict], list[mismatch.Region]]:
+    """``nonstationary`` warnings (docs/formats.md) for the excess regions left in
+    ``after`` that are band-limited rms bursts of the residual ``y`` (BURST_Z), and for a
+    whole-record excess those bursts account for (without their spans the whole-record
+    ADEV at its taus is inside the null's threshold); with the regions they name. Such
+    excess is non-stationary noise - ground motion, a disturbance - that no stationary
+    effect kind models, not missing sensor physics."""
+    fs = grid.sample_rate_hz
+    out: list[dict] = []
+    named: list[mismatch.Region] = []
+    spans: list[tuple[int, int]] = []
+    for r in after.regions:
+        if r.whole_record or r.sign < 0:
+            continue
+        i0 = max(int(round((r.t_start_s - grid.t0_s) * fs)), 0)
+        i1 = min(int(round((r.t_end_s - grid.t0_s) * fs)), grid.n)
+        if i1 - i0 > BURST_MAX_SHARE * grid.n:
+            continue
+        lo, hi = detectors.tau_band_hz(r.tau_min_s, r.tau_max_s, fs)
+        b = detectors.band_rms_burst(y, valid, fs, i0, i1, lo, hi)
+        if b is None or b.z < BURST_Z:
+            continue
+        spans.append((i0, i1))
+        named.append(r)
+        out.append({"kind": "nonstationary", "t_start_s": r.t_start_s, "t_end_s": r.t_end_s,
+                    "text": f"the excess at tau {r.tau_min_s:g}..{r.tau_max_s:g} s over t = {r.t_start_s:.6g}.."
+                            f"{r.t_end_s:.6g} s is a burst: the residual's rms in the "
+                            f"{b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz band (what those taus respond to) is "
+                            f"{b.rms_ratio:.2f}x the median of the record's "
+                            f"{b.spans_n} other spans of {(i1 - i0) / fs:.4g} s (z = {b.z:.1f}, scatter "
+                            f"{b.sd:.2f} in ln rms): non-stationary noise (ground motion, a disturbance) that "
+                            f"no stationary effect kind models, not missing sensor physics"})
+    if not spans:
+        return out, named
+    keep = valid.copy()
+    for i0, i1 in spans:
+        keep[i0:i1] = False
+    _, whole = mismatch.log_avar(np.where(keep, y, np.nan), keep, grid)
+    _, zw = mismatch.zscores(after.cell, whole, after.null)
+    thr = after.null.threshold_whole
+    t1 = grid.t0_s + grid.n / fs
+    for r in after.regions:
+        if not (r.whole_record and r.sign > 0):
+            continue
+        at = (grid.tau_whole_s >= r.tau_min_s - 1e-12) & (grid.tau_whole_s <= r.tau_max_s + 1e-12)
+        z_left = float(np.nanmax(np.abs(zw[at]))) if np.isfinite(zw[at]).any() else float("nan")
+        if not z_left < thr:
+            continue
+        named.append(r)
+        out.append({"kind": "nonstationary", "t_start_s": grid.t0_s, "t_end_s": t1,
+                    "text": f"the whole-record excess at tau {r.tau_min_s:g}..{r.tau_max_s:g} s (ADEV ratio "
+                            f"{r.ratio:.3g}) is the bursts': without their spans the whole-record ADEV there is "
+                            f"inside the null (largest |z| {z_left:.2f} < {thr:.2f})"})
+    return out, named

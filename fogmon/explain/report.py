@@ -19,10 +19,10 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.explain.catalogue import NOISE_UNIT, noise_text
-from fogmon.explain.detectors import spectral_lines
+from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
 from fogmon.recording import write_replay_log
-from fogmon.sim.model import EFFECT_KINDS, Effect, save_model
+from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
 
 
 def json_safe(x):
@@ -65,8 +65,44 @@ def _model_noise(res: Result) -> dict:
     return {k: getattr(nz, k) for k in NOISE_UNIT}
 
 
+def baseline_low_pass(model: SensorModel) -> dict | None:
+    """The baseline's low-pass-filtered white noise (its ``markov`` effect, docs/explain.md,
+    "The baseline"): correlation time tau_c_s (s), sigma_dph (deg/h), corner_hz = 1 / (2 pi
+    tau_c) (Hz) and white_N_dpsh, the white-noise level (deg/sqrt(h)) it has at taus far
+    beyond tau_c (sampled first-order Gauss-Markov: sigma^2 tau0 (1 + a) / (1 - a) = (60 N)^2,
+    a = exp(-tau0 / tau_c)); None when the baseline has none."""
+    mk = [e for e in model.effects if e.kind == "markov"]
+    if not mk:
+        return None
+    tau_c, sigma = float(mk[0].params["tau_c_s"]), float(mk[0].params["sigma_dph"])
+    tau0 = 1.0 / float(model.sample_rate_hz)
+    a = math.exp(-tau0 / tau_c)
+    return {"tau_c_s": tau_c, "sigma_dph": sigma, "corner_hz": 1.0 / (2.0 * math.pi * tau_c),
+            "white_N_dpsh": math.sqrt(sigma ** 2 * tau0 * (1.0 + a) / (1.0 - a)) / 60.0}
+
+
+def _baseline_text(res: Result) -> str:
+    """How the baseline was fitted, one sentence (empty with a model)."""
+    if not res.baseline:
+        return ""
+    lp = baseline_low_pass(res.model)
+    if lp is None:
+        return ""
+    return (f"The recording's ADEV bends below the white-noise slope at the shortest taus (the sensor's own "
+            f"low-pass), so the baseline holds white noise through a first-order low-pass, corner "
+            f"{lp['corner_hz']:.3g} Hz (a Gauss-Markov term, sigma {lp['sigma_dph']:.4g} deg/h, tau_c "
+            f"{lp['tau_c_s']:.3g} s; N {lp['white_N_dpsh']:.4g} deg/sqrt(h) at longer taus), fitted with "
+            f"the IEEE-952 terms before any effect was judged.")
+
+
 def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
     """One paragraph a gyro engineer can act on."""
+    base = _baseline_text(res)
+    text = _verdict(res, mism, mism_after)
+    return f"{text} {base}" if base else text
+
+
+def _verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
     sb, sa = res.before.score.value, res.after.score.value
     ref = "the baseline stationary model fitted from the recording" if res.baseline else "the model"
     if not res.accepted and not mism:
@@ -84,14 +120,22 @@ def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
         parts.append("Missing physics, in order of importance: "
                      + "; ".join(effect_summary(a.cand.kind, a.cand.params, _model_noise(res))
                                  for a in res.accepted) + ".")
-        if sa <= 1.5 and not mism_after:
-            parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left): "
-                         f"add them to the sensor model (--out-model) or remove the deterministic ones "
-                         f"from the data (--out-corrected).")
+        unexplained = [m for m in mism_after if not m.get("nonstationary")]
+        bursts = len(mism_after) - len(unexplained)
+        named = (f" ({bursts} more left are non-stationary bursts named in the warnings, not missing physics)"
+                 if bursts else "")
+        if sa <= 1.5 and not unexplained:
+            parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left"
+                         f"{named}): add them to the sensor model (--out-model) or remove the deterministic "
+                         f"ones from the data (--out-corrected).")
+        elif not unexplained:
+            parts.append(f"With these added the score is {sa:.2f}; the {bursts} region(s) left are non-stationary "
+                         f"bursts named in the warnings (band-limited rms far above the rest of the record), "
+                         f"not missing physics: no stationary effect kind models them.")
         else:
-            left = f"; strongest left: {_region_text(mism_after[0])}" if mism_after else ""
-            parts.append(f"With these added the score is {sa:.2f} and {len(mism_after)} region(s) remain{left}: "
-                         f"the catalogue does not explain everything - inspect those times and taus.")
+            left = f"; strongest left: {_region_text(unexplained[0])}"
+            parts.append(f"With these added the score is {sa:.2f} and {len(unexplained)} region(s) remain{left}"
+                         f"{named}: the catalogue does not explain everything - inspect those times and taus.")
     else:
         parts.append("No catalogued effect passes BIC and the held-out check and lowers the score; the "
                      "mismatch may come from "
@@ -107,13 +151,13 @@ def _line_hint(res: Result, left: list[dict]) -> str:
     frequencies that tau band responds to (a sinusoid of frequency f peaks in the ADEV
     at tau = 0.371 / f), e.g. vehicle sway or drill-string vibration that is not one
     coherent sinusoid over the record (so `periodic` cannot model it)."""
-    excess = [r for r in left if r["sign"] == "excess"]
+    excess = [r for r in left if r["sign"] == "excess" and not r.get("nonstationary")]
     if not excess:
         return ""
     r = excess[0]
     sample_rate_hz = res.grid.sample_rate_hz
-    lines = spectral_lines(res.residual_after, sample_rate_hz, 0.371 / (2.0 * r["tau_max_s"]),
-                           min(sample_rate_hz / 2, 0.371 / (0.5 * r["tau_min_s"])))
+    lines = spectral_lines(res.residual_after, sample_rate_hz,
+                           *tau_band_hz(r["tau_min_s"], r["tau_max_s"], sample_rate_hz))
     if not lines:
         return ""
     where = ", ".join(f"{f:.3g} Hz ({ratio:.0f}x the band median)" for f, ratio in lines)
@@ -135,7 +179,8 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
     """The report (docs/formats.md, explain report); ``times_file`` names the outliers file relative
     to the report (an ``outliers`` effect's ``times_file`` parameter)."""
     mism = [r.as_json() for r in res.before.regions]
-    mism_after = [r.as_json() for r in res.after.regions]
+    mism_after = [{**r.as_json(), "nonstationary": any(r is x for x in res.nonstationary)}
+                  for r in res.after.regions]
     effects = []
     for a in res.accepted:
         c = a.cand
@@ -177,7 +222,8 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
     if res.baseline:
         nz = res.model.noise
         rep["baseline_model"] = {"bias_dph": res.model.bias_dph, "Q_arcsec": nz.Q_arcsec, "N_dpsh": nz.N_dpsh,
-                                 "B_dph": nz.B_dph, "K_dphsh": nz.K_dphsh, "R_dphh": nz.R_dphh}
+                                 "B_dph": nz.B_dph, "K_dphsh": nz.K_dphsh, "R_dphh": nz.R_dphh,
+                                 "low_pass": baseline_low_pass(res.model)}
     return json_safe(rep)
 
 
@@ -192,6 +238,10 @@ def console_summary(rep: dict) -> str:
     lines = [f"fogmon explain: {os.path.basename(rep['recording'])} vs {rep['model']}",
              f"  score before {rep['score_before']:.2f} -> after {rep['score_after']:.2f} (about 1 = chance)",
              f"  mismatch regions: {len(rep['mismatches'])} before, {len(rep['mismatches_after'])} after"]
+    lp = (rep.get("baseline_model") or {}).get("low_pass")
+    if lp:
+        lines.insert(1, f"  baseline: white noise through a first-order low-pass, corner {lp['corner_hz']:.3g} Hz "
+                        f"(N {lp['white_N_dpsh']:.4g} deg/sqrt(h) at longer taus)")
     for r in rep["mismatches"][:5]:
         lines.append("    - " + _region_text(r))
     if len(rep["mismatches"]) > 5:
