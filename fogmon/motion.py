@@ -32,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.ndimage import median_filter
 
 from fogmon.block import Event
 
@@ -140,6 +139,8 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
     ``rate_dph`` in deg/h with the reference rotation already removed, ``valid`` False
     where there is no sample), in time order; empty for a stationary recording. The
     reference of each block is centred on it (see ``MotionTracker`` for the causal one)."""
+    from scipy.ndimage import median_filter  # offline only: the live gate's start-up does without it
+
     m = block_samples(sample_rate_hz)
     nb = len(rate_dph) // m
     y, enough, sig = _blocks(rate_dph[:nb * m], np.asarray(valid)[:nb * m], m)
@@ -178,6 +179,8 @@ def _burst_departure(y: np.ndarray, ref: np.ndarray, limit: float) -> np.ndarray
     beyond ``limit`` on one side of all three (more than half of them depart: a burst),
     else 0. One or two extreme samples never make a burst; taking the nearest reference
     keeps a level change inside a block (a bias step) from looking like one."""
+    from scipy.ndimage import median_filter
+
     if not np.isfinite(limit) or limit <= 0:
         return np.zeros(y.size)
     near = np.stack([ref, np.r_[ref[:1], ref[:-1]], np.r_[ref[1:], ref[-1:]]])
