@@ -169,6 +169,25 @@ class PipelineConfig:
     model_alpha: float = 0.01
 
 
+def _check_axis_options(cfg: PipelineConfig, axes: tuple[str, ...], source_name: str) -> None:
+    """FogmonError naming the option when a one-axis --thermal-cal, a per-axis calibration
+    or a --model of several axes does not cover the stream's ``axes`` (() = one axis)."""
+    if axes and cfg.methods.thermal is not None:
+        raise FogmonError(f"--thermal-cal: the calibration is for one axis and {source_name} has axes "
+                          f"{', '.join(axes)}: select one with --axis NAME")
+    calibrated = sorted(a for a, m in cfg.axis_methods.items() if m.thermal is not None)
+    if calibrated and set(axes) - set(calibrated):
+        what = f"not for {', '.join(a for a in axes if a not in calibrated)}" if axes else f"{source_name} is one axis"
+        raise FogmonError(f"--thermal-cal: the calibration has a thermal_drift effect for axes "
+                          f"{', '.join(calibrated)} and {what}: select calibrated axes with --axis")
+    if axes and cfg.model is not None:
+        missing = [a for a in axes if cfg.model.axes and a not in cfg.model.axes]
+        if missing:
+            raise FogmonError(f"--model: the model has no [noise.{missing[0]}] table (its axes: "
+                              f"{', '.join(cfg.model.axes)}; the stream's: {', '.join(axes)}); "
+                              f"select one of its axes with --axis NAME")
+
+
 class Pipeline:
     """One run of ``source`` into sinks, split by event the way can.Notifier is: ``run``
     reads the source (a reader thread for a live one) and calls ``start`` before the first
@@ -206,21 +225,7 @@ class Pipeline:
         """One AxisAnalysis per axis of the stream (one named "" for a one-axis stream);
         FogmonError when an option cannot apply to these axes."""
         cfg = self.config
-        if axes and cfg.methods.thermal is not None:
-            raise FogmonError(f"--thermal-cal: the calibration is for one axis and {self.source.name} has axes "
-                              f"{', '.join(axes)}: select one with --axis NAME")
-        calibrated = sorted(a for a, m in cfg.axis_methods.items() if m.thermal is not None)
-        if calibrated and set(axes) - set(calibrated):
-            what = (f"not for {', '.join(a for a in axes if a not in calibrated)}" if axes
-                    else f"{self.source.name} is one axis")
-            raise FogmonError(f"--thermal-cal: the calibration has a thermal_drift effect for axes "
-                              f"{', '.join(calibrated)} and {what}: select calibrated axes with --axis")
-        if axes and cfg.model is not None:
-            missing = [a for a in axes if cfg.model.axes and a not in cfg.model.axes]
-            if missing:
-                raise FogmonError(f"--model: the model has no [noise.{missing[0]}] table (its axes: "
-                                  f"{', '.join(cfg.model.axes)}; the stream's: {', '.join(axes)}); "
-                                  f"select one of its axes with --axis NAME")
+        _check_axis_options(cfg, axes, self.source.name)
         self.axes = axes
         self.summary.axes = {a: AxisSummary() for a in axes}
         bands: list[tuple[SensorModel, ModelBand]] = []   # one band per distinct axis model
