@@ -27,6 +27,7 @@ block mean. One or two extreme samples stay outliers.
 from __future__ import annotations
 
 import warnings
+from bisect import bisect_left, insort
 from collections import deque
 from dataclasses import dataclass
 
@@ -214,6 +215,30 @@ def _runs(idx: np.ndarray, gap: int) -> list[tuple[int, int]]:
     return list(zip(np.r_[idx[0], idx[cut + 1]].tolist(), np.r_[idx[cut], idx[-1]].tolist(), strict=True))
 
 
+class _RunningMedian:
+    """The median of the last ``n`` values pushed (finite floats): a FIFO beside a sorted
+    copy, so a push costs a bisect and a short memmove and the median a lookup, where
+    ``np.median`` of the window would sort it at every block."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self._fifo: deque[float] = deque()
+        self._sorted: list[float] = []
+
+    def __len__(self) -> int:
+        return len(self._fifo)
+
+    def push(self, x: float) -> None:
+        if len(self._fifo) == self.n:
+            del self._sorted[bisect_left(self._sorted, self._fifo.popleft())]
+        self._fifo.append(x)
+        insort(self._sorted, x)
+
+    def median(self) -> float:
+        s, k = self._sorted, len(self._sorted)
+        return s[k // 2] if k % 2 else (s[k // 2 - 1] + s[k // 2]) / 2
+
+
 class MotionGate:
     """The live form of ``find_motion``: causal and bounded. ``push`` takes the analysed
     rate (deg/h) of each incoming block and returns the samples it has judged, in order
@@ -233,7 +258,7 @@ class MotionGate:
         n_hist = max(self.WARMUP_BLOCKS, int(self.HISTORY_S * sample_rate_hz / self.m))
         self._sig: deque[float] = deque(maxlen=n_hist)
         self._means: deque[float] = deque(maxlen=n_hist)
-        self._ref: deque[float] = deque(maxlen=_reference_blocks(sample_rate_hz) // 2 + 1)
+        self._ref = _RunningMedian(_reference_blocks(sample_rate_hz) // 2 + 1)
         self._gap = _merge_blocks(sample_rate_hz)
         self._limit = float("nan")
         self._sigma_1 = float("nan")
@@ -293,7 +318,7 @@ class MotionGate:
             if len(self._means) >= self.WARMUP_BLOCKS:
                 self._limit = _limit(*_quiet_scales(np.asarray(self._sig), np.asarray(self._means)))
         self._n_judged += 1
-        dev = abs(mean - float(np.median(self._ref))) if self._ref else 0.0
+        dev = abs(mean - self._ref.median()) if len(self._ref) else 0.0
         self._means.append(mean)
         moving = len(self._means) > self.WARMUP_BLOCKS and bool(dev > self._limit)   # NaN limit: never
         out: list[Event] = []
@@ -308,7 +333,7 @@ class MotionGate:
                 self._span[1], self._span[2] = t1, max(self._span[2], dev)
             self._quiet_blocks, self._mask_next = 0, True
         else:
-            self._ref.append(mean)
+            self._ref.push(mean)
             if self._mask_next:
                 assert self._span is not None, "_mask_next is set only while a span is open"
                 self._mask(a, a + m)
