@@ -147,3 +147,14 @@ def test_live_thermal_cal_per_axis_equals_the_offline_correction(imu, tmp_path, 
     with pytest.raises(FogmonError, match=r"--thermal-cal: the calibration has a thermal_drift effect for axes x, y "
                                           r"and not for z: select calibrated axes with --axis"):
         live(cal_xy)
+
+
+def test_raw_rate_with_a_thermal_calibration_says_it_is_not_applied(imu, tmp_path, capsys):
+    """`--raw-rate` analyses the rate as recorded: a `--thermal-cal` given with it is not
+    applied, and the run says so in one line instead of ignoring the file silently."""
+    cal = tmp_path / "cal.toml"
+    run(capsys, "thermal", str(imu / "imu_x.csv"), "--out-model", str(cal))
+    assert main(["replay", str(imu / "imu_x.csv"), "--thermal-cal", str(cal), "--raw-rate", "--quiet",
+                 "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"--thermal-cal {cal}: not applied, --raw-rate analyses the rate as recorded" in err

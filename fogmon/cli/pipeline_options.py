@@ -4,6 +4,7 @@ place that reads these options from an argparse namespace."""
 from __future__ import annotations
 
 import argparse
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -11,7 +12,7 @@ import numpy as np
 from fogmon.block import parse_axes
 from fogmon.cli.values import number, positive
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
-from fogmon.errors import FogmonError
+from fogmon.errors import FogmonError, FogmonWarning
 from fogmon.methods.live import LiveMethods
 from fogmon.methods.live_thermal import axis_thermal_effect, thermal_effect
 from fogmon.pipeline import LIVE_WINDOW_SAMPLES, MAX_WINDOW_SAMPLES, MIN_WINDOW_SAMPLES, PipelineConfig
@@ -182,7 +183,10 @@ def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: Sens
     ``_axis_methods`` where they differ); FogmonError naming the option when a file lacks
     what it needs."""
     thermal = None
-    if cal is not None and not args.raw_rate:
+    if cal is not None and args.raw_rate:
+        warnings.warn(f"--thermal-cal {args.thermal_cal}: not applied, --raw-rate analyses the rate as recorded",
+                      FogmonWarning, stacklevel=2)
+    elif cal is not None:
         one = _one_axis(args)
         if _cal_axes(cal) and one:        # a calibration per axis, one axis picked: that axis's
             thermal = axis_thermal_effect(cal, args.thermal_cal, one)
