@@ -188,10 +188,10 @@ def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: Sens
                       FogmonWarning, stacklevel=2)
     elif cal is not None:
         one = _one_axis(args)
-        if _cal_axes(cal) and one:        # a calibration per axis, one axis picked: that axis's
-            thermal = axis_thermal_effect(cal, args.thermal_cal, one)
-        elif not _cal_axes(cal):
+        if not _cal_axes(cal):
             thermal = thermal_effect(cal, args.thermal_cal)
+        elif one:                         # a calibration per axis, one axis picked: that axis's
+            thermal = axis_thermal_effect(cal, args.thermal_cal, one)
     kalman = None
     if args.denoise == "kalman":
         src = next(((m, f) for m, f in ((model, args.model), (cal, args.thermal_cal)) if m is not None), None)

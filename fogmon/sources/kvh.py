@@ -261,12 +261,14 @@ class KvhCodec:
 
 def _good_run(data: bytes, rev: memoryview, j: int, L: int, hdr: bytes) -> int:
     """How many good frames of length ``L`` follow back to back from ``j`` in ``data``
-    (header in place and CRC right; ``rev`` is ``data`` bit-reversed for the CRC)."""
-    k = (len(data) - j) // L
-    heads = np.frombuffer(data, np.uint8, count=k * L, offset=j).reshape(k, L)[:, :len(hdr)]
-    ok = (heads == np.frombuffer(hdr, np.uint8)).all(axis=1)
-    ok &= np.fromiter((binascii.crc32(rev[a:a + L]) == 0xFFFFFFFF for a in range(j, j + k * L, L)), bool, k)
-    return k if ok.all() else int(np.argmin(ok))
+    (header in place and CRC right; ``rev`` is ``data`` bit-reversed for the CRC). Stops at
+    the first bad one, so a corrupted stream costs one check per frame, not per frame left."""
+    n = 0
+    for a in range(j, len(data) - L + 1, L):
+        if not data.startswith(hdr, a) or binascii.crc32(rev[a:a + L]) != 0xFFFFFFFF:
+            break
+        n += 1
+    return n
 
 
 def encode_frame(fmt: str, seq: int, gyro_xyz=(0.0, 0.0, 0.0), accel_xyz=(0.0, 0.0, 0.0),
