@@ -26,7 +26,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fogmon import stopping
+from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.davar.fit import NoiseFit
 from fogmon.davar.jumps import JumpDetector
@@ -270,7 +270,8 @@ class Pipeline:
         --duration-s and read in a thread."""
         cfg = self.config
         if self.total_n is None:
-            _warm_up(self.sample_rate_hz, self.window_s, self.hop_s, cfg.taus)
+            with startup.loading():
+                _warm_up(self.sample_rate_hz, self.window_s, self.hop_s, cfg.taus)
             if cfg.duration_s is not None and isinstance(self.source, LiveSource):
                 self.source.limit(live_samples(cfg.duration_s, self.sample_rate_hz))  # nothing after the cut is read
             self.reader = _ThreadedBlocks(self.source)
@@ -299,8 +300,11 @@ class Pipeline:
             self.pacer.wait(float(b.t_s[-1]))
             with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
                 if not self.started:
-                    self.start(b)
-                self.block(b, b_piece)
+                    with startup.loading():    # the first block loads Rerun and the numba kernels
+                        self.start(b)
+                        self.block(b, b_piece)
+                else:
+                    self.block(b, b_piece)
         return not self.done
 
     def _check_wall_limit(self) -> None:
