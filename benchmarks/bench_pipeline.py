@@ -20,7 +20,8 @@
 3. `fogmon replay` of the bundled demo (replay_logs/lasergyro_z_100hz.csv, 184,718 samples)
    cold (an empty numba cache: every kernel compiled) and warm (the cache the cold run
    wrote), in CPU seconds split into import, compile, read, engine, fits, sinks
-   (benchmarks/replay_split.py), and the plain command's CPU time warm
+   (benchmarks/replay_split.py), the plain command's CPU time warm, and warm the CPU
+   time until the first block has reached every sink (replay_split.py --first-sample)
    (targets: < 1 s before the first sample, < 3 s in all, fits < 10 %).
 
 Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--monitor-window-s 65.536] [--skip-monitor]
@@ -267,7 +268,7 @@ def bench_demo(tmp: str) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": os.path.join(tmp, "numba_cache")}
     rrd = os.path.join(tmp, "demo.rrd")
     print(f"`fogmon replay` of {DEMO.name} (CPU s; numba cache {env['NUMBA_CACHE_DIR']}):")
-    keys = ("import", "compile", "read", "engine", "fits", "sinks", "other", "first_sample", "total")
+    keys = ("import", "compile", "read", "engine", "fits", "sinks", "other", "first_read", "total")
     print("  " + " ".join(f"{k:>12s}" for k in ("run",) + keys))
     split = {}
     for run in ("cold", "warm"):
@@ -283,8 +284,11 @@ def bench_demo(tmp: str) -> None:
                            "--quiet"], env)
     w = split["warm"]
     print(f"  plain `fogmon replay`, warm: {cpu:.2f} CPU s (exit {p.returncode})")
-    print(f"  {'PASS' if w['first_sample'] < 1.0 else 'FAIL'}  warm: before the first sample < 1 s: "
-          f"{w['first_sample']:.2f} s (import {w['import']:.2f} + compile/cache load {w['compile']:.2f})")
+    p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "replay_split.py"), str(DEMO), rrd, "--first-sample"],
+                       capture_output=True, text=True, env=env)
+    first = float(dict(line.split("=", 1) for line in p.stdout.splitlines() if "=" in line).get("first_sample", "nan"))
+    print(f"  {'PASS' if first < 1.0 else 'FAIL'}  warm: before the first sample < 1 s: {first:.2f} s (the "
+          f"program's own order, interpreter start-up included, until the first block is in every sink)")
     print(f"  {'PASS' if cpu < 3.0 else 'FAIL'}  warm: whole demo < 3 s: {cpu:.2f} s")
     print(f"  {'PASS' if w['fits'] < 0.1 * w['total'] else 'FAIL'}  warm: fits < 10 % of the replay: "
           f"{100 * w['fits'] / w['total']:.1f} % ({w['fits']:.2f} s, of which {w['fit_cov']:.2f} s the cross-tau "

@@ -26,7 +26,7 @@ from typing import TextIO
 
 import numpy as np
 
-from fogmon import stopping
+from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.davar.fit import NoiseFit
 from fogmon.davar.jumps import JumpDetector
@@ -122,21 +122,23 @@ class ReplayProgress:
     FORMAT = "{percentage:5.1f}%|{bar:30}| {n:.1f}/{total:.1f} s of recording{postfix} [{elapsed}<{remaining}]"
 
     def __init__(self, total_s: float, enabled: bool, stream: TextIO | None = None):
-        from tqdm import tqdm
+        self._bar = None
+        if enabled and total_s > 0:   # tqdm imported only to be shown
+            from tqdm import tqdm
 
-        self._bar = tqdm(total=total_s, file=stream or sys.stderr, disable=not (enabled and total_s > 0),
-                         mininterval=0.2, bar_format=self.FORMAT)
+            self._bar = tqdm(total=total_s, file=stream or sys.stderr, mininterval=0.2, bar_format=self.FORMAT)
 
     def update(self, done_s: float, wall_s: float) -> None:
         """``done_s`` s of recording analysed in ``wall_s`` s of wall time."""
-        if self._bar.disable:
+        if self._bar is None:
             return
         if wall_s > 0:
             self._bar.set_postfix_str(f"x{done_s / wall_s:,.0f} real time", refresh=False)
         self._bar.update(min(done_s, self._bar.total) - self._bar.n)
 
     def close(self) -> None:
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
 
 # ----------------------------------------------------------------------------- run
@@ -270,7 +272,8 @@ class Pipeline:
         --duration-s and read in a thread."""
         cfg = self.config
         if self.total_n is None:
-            _warm_up(self.sample_rate_hz, self.window_s, self.hop_s, cfg.taus)
+            with startup.loading():
+                _warm_up(self.sample_rate_hz, self.window_s, self.hop_s, cfg.taus)
             if cfg.duration_s is not None and isinstance(self.source, LiveSource):
                 self.source.limit(live_samples(cfg.duration_s, self.sample_rate_hz))  # nothing after the cut is read
             self.reader = _ThreadedBlocks(self.source)
@@ -299,8 +302,11 @@ class Pipeline:
             self.pacer.wait(float(b.t_s[-1]))
             with stopping.shielded():  # a block reaches every sink, or none: stop between blocks
                 if not self.started:
-                    self.start(b)
-                self.block(b, b_piece)
+                    with startup.loading():    # the first block loads Rerun and the numba kernels
+                        self.start(b)
+                        self.block(b, b_piece)
+                else:
+                    self.block(b, b_piece)
         return not self.done
 
     def _check_wall_limit(self) -> None:

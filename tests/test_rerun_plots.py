@@ -23,3 +23,16 @@ def test_colourise_clips_to_the_end_colours_and_blackens_nan():
     np.testing.assert_array_equal(rgb[0, 3], rgb[0, 2])       # above hi: the hi colour
     np.testing.assert_array_equal(rgb[0, 4], [0, 0, 0])
     assert not np.array_equal(rgb[0, 1], rgb[0, 2])
+
+
+def test_colourise_gives_matplotlibs_colours_and_viridis_needs_no_matplotlib():
+    import matplotlib
+
+    from fogmon.sinks.rerun_plots import _VIRIDIS
+
+    np.testing.assert_array_equal(
+        _VIRIDIS, np.round(255 * matplotlib.colormaps["viridis"](np.arange(256))[:, :3]).astype(np.uint8))
+    x = np.linspace(-1.5, 1.5, 1001)
+    for cmap in ("viridis", "RdBu_r"):
+        want = np.round(255 * matplotlib.colormaps[cmap](np.clip((x + 1.0) / 2.0, 0.0, 1.0))[:, :3]).astype(np.uint8)
+        np.testing.assert_array_equal(colourise(x, -1.0, 1.0, cmap), want)

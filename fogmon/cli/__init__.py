@@ -8,7 +8,7 @@ import importlib
 import sys
 import warnings
 
-from fogmon import __version__, stopping
+from fogmon import __version__, startup, stopping
 from fogmon.errors import FogmonError, FogmonWarning
 
 #: sub-command -> one-line help
@@ -60,8 +60,11 @@ def _one_line_warnings(command: str, show):
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None:   # the fogmon program itself, not a caller's process (fogmon.startup)
+        startup.own_process()
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser(argv).parse_args(argv)
+    with startup.loading():   # the command's module and its libraries
+        args = build_parser(argv).parse_args(argv)
     try:
         with stopping.installed(), warnings.catch_warnings():  # SIGTERM/SIGHUP stop a command as Ctrl-C does
             warnings.simplefilter("default", FogmonWarning)  # each distinct warning once

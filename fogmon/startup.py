@@ -1,0 +1,52 @@
+"""The fogmon program's start-up: the cyclic garbage collector paused while libraries load.
+
+Loading numpy, numba (its registries, scipy.linalg), Rerun, pandas and the numba kernels
+allocates a few hundred thousand objects that live as long as the process, and every
+collection on the way scans them again: 0.3 CPU s of the demo replay's ~3.5.
+``loading()`` pauses the collector over such a phase, then freezes what is alive
+(``gc.freeze``: left out of every later collection); objects freed by reference counting
+are freed as always. Only in the program's own process (``own_process``): in a program
+that imports fogmon the collector is left alone, since a freeze would keep the cyclic
+garbage it has not collected yet for good.
+"""
+from __future__ import annotations
+
+import gc
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+#: A phase longer than this (CPU s) compiled numba kernels (tens of s on a first run):
+#: its garbage (~280 k objects, ~50 MB on the demo replay) is collected before the
+#: freeze, which costs ~0.4 s there; a phase that loaded cached kernels leaves ~10 k.
+COMPILED_CPU_S = 5.0
+
+_own_process = False
+
+
+def own_process() -> None:
+    """Called by the ``fogmon`` program (``fogmon.cli.main`` run as the program): from now
+    on ``loading()`` phases pause the collector and freeze."""
+    global _own_process
+    _own_process = True
+
+
+@contextmanager
+def loading() -> Iterator[None]:
+    """In the program's own process: no cyclic garbage collection inside; at the end every
+    live object is frozen and the collector is back as it was (phases nested: at the end
+    of the outermost). Elsewhere nothing changes."""
+    if not _own_process:
+        yield
+        return
+    enabled = gc.isenabled()
+    gc.disable()
+    t0 = time.process_time()
+    try:
+        yield
+    finally:
+        if time.process_time() - t0 > COMPILED_CPU_S:
+            gc.collect()
+        gc.freeze()
+        if enabled:
+            gc.enable()
