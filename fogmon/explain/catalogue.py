@@ -32,10 +32,12 @@ from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar
 from fogmon.explain import detectors
 from fogmon.explain.fitting import (
     BinnedPeriodogram,
+    GlsFit,
     Whittle,
     avar1_of_psd,
     filter_gain2,
     lines_psd,
+    low_band_flicker,
     markov_psd,
     model_psd,
     rfft_omega,
@@ -116,6 +118,18 @@ def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
     return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.sample_rate_hz)
 
 
+def judged_gls(ctx: Context, Xf: np.ndarray) -> GlsFit:
+    """Whittle GLS of the residual on the transformed design ``Xf``, judged against the
+    noise its own residual shows at the slowest frequencies: refitted with the PSD
+    raised there by that residual's significant flicker excess (low_band_flicker), so a
+    drift, step or settling that is significant only against a model PSD extrapolated
+    below its calibrated band - not against the sensor's own bias wander - loses that
+    significance (its gain, coefficients and standard errors are the refit's)."""
+    fit = ctx.wh.gls(Xf, ctx.Yf)
+    S = low_band_flicker(ctx.wh.S, ctx.Yf - Xf.reshape(len(ctx.Yf), -1) @ fit.beta, ctx.n)
+    return fit if S is ctx.wh.S else Whittle(S, ctx.n, ctx.valid).gls(Xf, ctx.Yf)
+
+
 def _fmt(x: float, se: float) -> str:
     return f"{x:.4g} +- {se:.2g}"
 
@@ -174,9 +188,9 @@ def periodic(ctx: Context) -> Candidate | None:
             gd = g(d)
     f = c if gc > gd else d
     X = cols(f)
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
     h = 0.02 * ctx.sample_rate_hz / n
-    curv = (2 * fit.chi2_gain - g(f + h) - g(f - h)) / h ** 2
+    curv = (2 * g(f) - g(f + h) - g(f - h)) / h ** 2
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
     amp = math.hypot(sa, ca)
@@ -197,7 +211,7 @@ def bias_step(ctx: Context) -> Candidate | None:
     n = ctx.n
     n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, int(0.01 * n), int(0.99 * n))
     X = (np.arange(n) >= n0).astype(float)[:, None]
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     t_step = float(ctx.t_s[n0] - 0.5 / ctx.sample_rate_hz)
     params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
     ev = f"change-point scan: bias step of {_fmt(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
@@ -226,7 +240,7 @@ def rate_ramp(ctx: Context) -> Candidate | None:
 
     t0, _ = _scan_1d(ctx, make, t[0] + T * np.linspace(0.0, 0.9, 16))
     X = make(t0)
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     params = {"slope_dphh": float(fit.beta[0]), "t0_s": float(t0)}
     ev = f"trend regression: rate slope {_fmt(fit.beta[0], fit.se[0])} deg/h^2 from t = {t0:.6g} s"
     return Candidate("rate_ramp", params, {"slope_dphh": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
@@ -247,7 +261,7 @@ def warm_up(ctx: Context) -> Candidate | None:
     tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.sample_rate_hz
     ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14))
     X = make(ltau)
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     tau = math.exp(ltau)
     params = {"amplitude_dph": float(fit.beta[0]), "tau_s": tau, "t0_s": t0}
     ev = f"settling fit: A = {_fmt(fit.beta[0], fit.se[0])} deg/h, tau = {tau:.4g} s from t = {t0:.6g} s"
@@ -267,7 +281,8 @@ def scale_factor(ctx: Context) -> Candidate | None:
         if best is None or fit.chi2_gain - len(names) * ctx.penalty > best[0].chi2_gain - len(best[2]) * ctx.penalty:
             best = (fit, X, names)
     assert best is not None  # the loop ran at least once
-    fit, X, names = best
+    _, X, names = best
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     params = {"ppm": 0.0, "asym_ppm": 0.0}
     se = {}
     for i, nm in enumerate(names):
@@ -326,8 +341,9 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
         if best is None or score > best[0]:
             best = (score, fit, names, label)
     assert best is not None  # the loop ran at least once
-    _, fit, names, label = best
+    _, _, names, label = best
     X = np.column_stack([cols[nm] for nm in names])
+    fit = judged_gls(ctx, np.column_stack([fcols[nm] for nm in names]))
     v = dict(zip(names, fit.beta.tolist(), strict=True))
     s = dict(zip(names, fit.se.tolist(), strict=True))
     c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
