@@ -120,3 +120,21 @@ def test_sim_of_a_vibration_lines_model_has_the_stated_rms_and_peak(tmp_path):
     a = np.concatenate([b.rate_dph for b in iter_simulate(m, duration_s=60.0, seed=4, chunk_samples=777)])
     b = np.concatenate([b.rate_dph for b in iter_simulate(m, duration_s=60.0, seed=4)])
     assert np.array_equal(a, b)                                  # one realization whatever the chunking
+
+
+def test_lines_refit_a_baseline_low_pass_level_that_held_their_power():
+    """A baseline without N whose white noise is a first-order low-pass (a MEMS filter)
+    was fitted with the lines' power in its level (105.6 deg/h: the Allan variance at tau0
+    of both): vibration_lines refits that level under the lines instead of adding their
+    power a second time."""
+    lowpass = Effect("markov", {"tau_c_s": 0.008, "sigma_dph": 100.0})
+    line = Effect("vibration_lines", {"freq_hz": [116.0], "sigma_dph": [15.0], "bandwidth_hz": [0.1]})
+    rec = simulate(SensorModel(250.0, 0.0, Noise(), [lowpass, line]), duration_s=120.0, seed=3)
+    y = rec.rate_dph - rec.rate_dph.mean()
+    baseline = SensorModel(250.0, 0.0, Noise(), [Effect("markov", {"tau_c_s": 0.008, "sigma_dph": 105.6})])
+    ctx = _whittle(stochastic_part(baseline), {}, rec.t_s, np.ones(len(y), bool), y)
+    c = catalogue.vibration_lines(ctx)
+    assert c is not None and c.bic_gain(ctx.penalty) > 0 and c.stoch_base is not None
+    assert c.params["freq_hz"][0] == pytest.approx(116.0, abs=0.1)
+    assert c.stoch_base.effects[0].params["sigma_dph"] == pytest.approx(100.0, rel=0.01)
+    assert "sigma 105.6 -> " in c.evidence

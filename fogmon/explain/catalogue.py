@@ -30,12 +30,15 @@ from fogmon.davar.batch import oadev
 from fogmon.davar.fit import IDENTIFY_Z, fit_avar
 from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.explain import detectors
+from fogmon.explain.baseline import LOWPASS_TAU_C_SAMPLES
 from fogmon.explain.fitting import (
     BinnedPeriodogram,
+    GlsFit,
     Whittle,
     avar1_of_psd,
     filter_gain2,
     lines_psd,
+    low_band_flicker,
     markov_psd,
     model_psd,
     rfft_omega,
@@ -90,6 +93,9 @@ class Candidate:
     #: the white level N0 (deg/sqrt(h)) the stochastic model takes with this effect
     #: (a white-level regression's intercept), None: unchanged
     white_n0_dpsh: float | None = None
+    #: the stochastic model this noise-type effect joins, its white-equivalent level
+    #: refitted under it (vibration_lines, with_white_level); None: the current one
+    stoch_base: SensorModel | None = None
     #: every sample an ``outliers`` effect holds: times_s (s), amplitudes_dph (deg/h),
     #: abs_z (arrays; written to the outliers file, not into the report)
     listing: dict | None = field(default=None, repr=False)
@@ -114,6 +120,18 @@ class Candidate:
 def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
     """Rate (deg/h) of a mean-type effect with the given parameters on the context grid."""
     return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.sample_rate_hz)
+
+
+def judged_gls(ctx: Context, Xf: np.ndarray) -> GlsFit:
+    """Whittle GLS of the residual on the transformed design ``Xf``, judged against the
+    noise its own residual shows at the slowest frequencies: refitted with the PSD
+    raised there by that residual's significant flicker excess (low_band_flicker), so a
+    drift, step or settling that is significant only against a model PSD extrapolated
+    below its calibrated band - not against the sensor's own bias wander - loses that
+    significance (its gain, coefficients and standard errors are the refit's)."""
+    fit = ctx.wh.gls(Xf, ctx.Yf)
+    S = low_band_flicker(ctx.wh.S, ctx.Yf - Xf.reshape(len(ctx.Yf), -1) @ fit.beta, ctx.n)
+    return fit if S is ctx.wh.S else Whittle(S, ctx.n, ctx.valid).gls(Xf, ctx.Yf)
 
 
 def _fmt(x: float, se: float) -> str:
@@ -174,9 +192,9 @@ def periodic(ctx: Context) -> Candidate | None:
             gd = g(d)
     f = c if gc > gd else d
     X = cols(f)
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
     h = 0.02 * ctx.sample_rate_hz / n
-    curv = (2 * fit.chi2_gain - g(f + h) - g(f - h)) / h ** 2
+    curv = (2 * g(f) - g(f + h) - g(f - h)) / h ** 2
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
     amp = math.hypot(sa, ca)
@@ -197,7 +215,7 @@ def bias_step(ctx: Context) -> Candidate | None:
     n = ctx.n
     n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, int(0.01 * n), int(0.99 * n))
     X = (np.arange(n) >= n0).astype(float)[:, None]
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     t_step = float(ctx.t_s[n0] - 0.5 / ctx.sample_rate_hz)
     params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
     ev = f"change-point scan: bias step of {_fmt(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
@@ -226,7 +244,7 @@ def rate_ramp(ctx: Context) -> Candidate | None:
 
     t0, _ = _scan_1d(ctx, make, t[0] + T * np.linspace(0.0, 0.9, 16))
     X = make(t0)
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     params = {"slope_dphh": float(fit.beta[0]), "t0_s": float(t0)}
     ev = f"trend regression: rate slope {_fmt(fit.beta[0], fit.se[0])} deg/h^2 from t = {t0:.6g} s"
     return Candidate("rate_ramp", params, {"slope_dphh": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
@@ -247,7 +265,7 @@ def warm_up(ctx: Context) -> Candidate | None:
     tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.sample_rate_hz
     ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14))
     X = make(ltau)
-    fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     tau = math.exp(ltau)
     params = {"amplitude_dph": float(fit.beta[0]), "tau_s": tau, "t0_s": t0}
     ev = f"settling fit: A = {_fmt(fit.beta[0], fit.se[0])} deg/h, tau = {tau:.4g} s from t = {t0:.6g} s"
@@ -267,7 +285,8 @@ def scale_factor(ctx: Context) -> Candidate | None:
         if best is None or fit.chi2_gain - len(names) * ctx.penalty > best[0].chi2_gain - len(best[2]) * ctx.penalty:
             best = (fit, X, names)
     assert best is not None  # the loop ran at least once
-    fit, X, names = best
+    _, X, names = best
+    fit = judged_gls(ctx, ctx.wh.fft(X))
     params = {"ppm": 0.0, "asym_ppm": 0.0}
     se = {}
     for i, nm in enumerate(names):
@@ -326,8 +345,9 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
         if best is None or score > best[0]:
             best = (score, fit, names, label)
     assert best is not None  # the loop ran at least once
-    _, fit, names, label = best
+    _, _, names, label = best
     X = np.column_stack([cols[nm] for nm in names])
+    fit = judged_gls(ctx, np.column_stack([fcols[nm] for nm in names]))
     v = dict(zip(names, fit.beta.tolist(), strict=True))
     s = dict(zip(names, fit.se.tolist(), strict=True))
     c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
@@ -866,19 +886,56 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, sample_rate_hz: float, n: i
     return bp.deviance(S0, floor) - bp.deviance(S, floor), sorted(lines)
 
 
-def _white_parts(ctx: Context, omega: np.ndarray, n: int):
-    """(PSD of the model without its white noise, PSD of unit white noise N = 1 through
-    the model's filters) at ``omega``, or None when white-level effects set N."""
-    if any(EFFECT_KINDS[e.kind].nature == "white_level" for e in ctx.stoch.effects) or ctx.stoch.noise.N_dpsh <= 0:
+def _low_pass_index(model: SensorModel) -> int | None:
+    """Index in ``model.effects`` of its white noise through a low-pass - a ``markov``
+    term whose correlation time is at most the baseline's low-pass range (a MEMS
+    filter, docs/explain.md "The baseline") - when the model has no N of its own, else
+    None."""
+    if model.noise.N_dpsh > 0:
         return None
-    return (model_psd(_replace_white(ctx.stoch, 0.0), omega, n),
-            model_psd(_replace_white(ctx.stoch, 1.0, drop_other=True), omega, n))
+    tc_max = LOWPASS_TAU_C_SAMPLES[1] / float(model.sample_rate_hz)
+    return next((i for i, e in enumerate(model.effects)
+                 if e.kind == "markov" and e.params["tau_c_s"] <= tc_max * (1 + 1e-9)), None)
+
+
+def with_white_level(model: SensorModel, level: float) -> SensorModel:
+    """``model`` with its white-equivalent level set to ``level``: N (deg/sqrt(h)), or
+    the sigma (deg/h) of its low-pass term when it has one instead (_low_pass_index)."""
+    i = _low_pass_index(model)
+    if i is None:
+        return replace(model, noise=replace(model.noise, N_dpsh=level))
+    eff = list(model.effects)
+    eff[i] = Effect("markov", {**eff[i].params, "sigma_dph": level}, eff[i].axes)
+    return replace(model, effects=eff)
+
+
+def _white_parts(ctx: Context, omega: np.ndarray, n: int):
+    """(PSD of the model without its white-equivalent noise, PSD of that noise at level
+    1, its current level) at ``omega``: N and unit white noise through the model's
+    filters, or - without N - the low-pass term's sigma and its unit PSD; None when
+    white-level effects set N or the model has neither."""
+    st = ctx.stoch
+    if any(EFFECT_KINDS[e.kind].nature == "white_level" for e in st.effects):
+        return None
+    i = _low_pass_index(st)
+    if i is None:
+        if st.noise.N_dpsh <= 0:
+            return None
+        return (model_psd(_replace_white(st, 0.0), omega, n),
+                model_psd(_replace_white(st, 1.0, drop_other=True), omega, n), st.noise.N_dpsh)
+    one = with_white_level(st, 1.0)
+    unit = SensorModel(st.sample_rate_hz, 0.0, Noise(0.0, 0.0, 0.0, 0.0, 0.0),
+                       [e for j, e in enumerate(one.effects) if j == i or e.kind == "bandwidth"])
+    return (model_psd(with_white_level(st, 0.0), omega, n), model_psd(unit, omega, n),
+            float(st.effects[i].params["sigma_dph"]))
 
 
 def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tuple[float, float]]):
-    """fit_lines on the model PSD, then the white level N refitted under the lines (the
-    lines' skirts were counted as white noise before) by the same Whittle likelihood.
-    Returns (deviance drop, lines, N (deg/sqrt(h)) or None when not refitted)."""
+    """fit_lines on the model PSD, then the model's white-equivalent level (N, or the
+    sigma of its low-pass term, _white_parts) refitted under the lines (their power was
+    counted in it before: the lines' skirts as white noise, or lines near Nyquist in a
+    baseline's low-pass level) by the same Whittle likelihood. Returns (deviance drop,
+    lines, the stochastic model with the refitted level or None when not refitted)."""
     sample_rate_hz = ctx.sample_rate_hz
     S0 = model_psd(ctx.stoch, bp.omega, n, white_rms_dpsh(ctx.stoch, ctx))
     floor = LEAKAGE_FLOOR * float(np.median(S0))
@@ -891,11 +948,10 @@ def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tu
     d0 = bp.deviance(S0, floor)
     if parts is None:
         return d0 - bp.deviance(S0 + S_l, floor), lines, None
-    other, unit = parts
-    N0 = ctx.stoch.noise.N_dpsh
-    r = minimize_scalar(lambda N: bp.deviance(other + N * N * unit + S_l, floor), bounds=(0.0, 2.0 * N0),
-                        method="bounded", options={"xatol": 1e-4 * N0})
-    return d0 - float(r.fun), lines, float(r.x)
+    other, unit, level0 = parts
+    r = minimize_scalar(lambda v: bp.deviance(other + v * v * unit + S_l, floor), bounds=(0.0, 2.0 * level0),
+                        method="bounded", options={"xatol": 1e-4 * level0})
+    return d0 - float(r.fun), lines, with_white_level(ctx.stoch, float(r.x))
 
 
 def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
@@ -907,10 +963,11 @@ def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
     h = n // 2
     halves = (slice(0, h), slice(h, 2 * h))
     bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
+    wr = white_rms_dpsh(ctx.stoch, ctx)
     for a, b in ((0, 1), (1, 0)):
-        ga, la, Na = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
-        S0b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx))
-        S1b = model_psd(ctx.stoch, bps[b].omega, h, white_rms_dpsh(ctx.stoch, ctx) if Na is None else Na)
+        ga, la, refit = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
+        S0b = model_psd(ctx.stoch, bps[b].omega, h, wr)
+        S1b = S0b if refit is None else model_psd(refit, bps[b].omega, h, white_rms_dpsh(refit, ctx))
         fl = LEAKAGE_FLOOR * float(np.median(S0b))
         pb = {"freq_hz": [x[0] for x in la], "sigma_dph": [x[1] for x in la], "bandwidth_hz": [x[2] for x in la]}
         gb = (
@@ -927,7 +984,8 @@ def vibration_lines(ctx: Context) -> Candidate | None:
     residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
     0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle likelihood
     of the residual's binned periodogram under the model PSD plus the band-pass lines,
-    and the white level N refitted under them (lines_and_white). The removable
+    and the model's white-equivalent level (N, or a baseline's low-pass sigma) refitted
+    under them (lines_and_white). The removable
     estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
     residual's DFT."""
     sample_rate_hz, n = ctx.sample_rate_hz, ctx.n
@@ -946,14 +1004,15 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         8 * sample_rate_hz / (2 ** math.ceil(math.log2(8 * sample_rate_hz / f_lo)))
     )  # a few Welch bins: the start bandwidth
     starts = [(f, max(res, 4 * sample_rate_hz / n)) for f, _ in props]
-    gain, lines, N = lines_and_white(ctx, _periodogram(ctx), n, starts)
+    gain, lines, refit = lines_and_white(ctx, _periodogram(ctx), n, starts)
     if not lines:
         return None
     params = {"freq_hz": [ln[0] for ln in lines], "sigma_dph": [ln[1] for ln in lines],
               "bandwidth_hz": [ln[2] for ln in lines]}
     w = rfft_omega(n)
     S_l = lines_psd(params, sample_rate_hz, w)
-    S_all = model_psd(ctx.stoch, w, n, white_rms_dpsh(ctx.stoch, ctx) if N is None else N) + S_l
+    base = ctx.stoch if refit is None else refit
+    S_all = model_psd(base, w, n, white_rms_dpsh(base, ctx)) + S_l
     with np.errstate(divide="ignore", invalid="ignore"):  # DC (inf) and a filter's zeros (0)
         wiener = np.where(np.isfinite(S_all) & (S_all > 0), S_l / S_all, 0.0)
     est = np.fft.irfft(wiener * ctx.Yf, n)
@@ -962,10 +1021,18 @@ def vibration_lines(ctx: Context) -> Candidate | None:
           + "; ".join(f"{f:.4g} Hz (-3 dB bandwidth {bw:.3g} Hz, rms {sig:.3g} deg/h, ADEV hump near "
                       f"tau = {0.371 / f:.3g} s)" for f, sig, bw in lines)
           + " - band-limited noise, not one coherent sinusoid"
-          + ("" if N is None else f"; white level refitted under the lines: N {ctx.stoch.noise.N_dpsh:.4g} -> "
-                                  f"{N:.4g} deg/sqrt(h)"))
-    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines) + (N is not None), ev,
-                     rate=est, heldout=functools.partial(_lines_heldout, ctx, lines), white_n0_dpsh=N)
+          + ("" if refit is None else "; " + _refit_text(ctx.stoch, refit)))
+    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines) + (refit is not None), ev,
+                     rate=est, heldout=functools.partial(_lines_heldout, ctx, lines), stoch_base=refit)
+
+
+def _refit_text(old: SensorModel, new: SensorModel) -> str:
+    """What a refit of the white-equivalent level under lines changed (with_white_level)."""
+    i = _low_pass_index(old)
+    if i is None:
+        return f"white level refitted under the lines: N {old.noise.N_dpsh:.4g} -> {new.noise.N_dpsh:.4g} deg/sqrt(h)"
+    return (f"the low-pass white noise's level refitted under the lines (their power was in it): sigma "
+            f"{old.effects[i].params['sigma_dph']:.4g} -> {new.effects[i].params['sigma_dph']:.4g} deg/h")
 
 
 # ---------------------------------------------------------------- noise (coefficients)

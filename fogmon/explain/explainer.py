@@ -379,8 +379,9 @@ def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, lik
         if c.corrected_noise is not None:  # the noise kind: corrected coefficients, no new effect
             stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, c.corrected_noise, stoch.effects)
         else:
-            noise = stoch.noise if c.white_n0_dpsh is None else replace(stoch.noise, N_dpsh=c.white_n0_dpsh)
-            stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, noise, [*stoch.effects, c.effect()])
+            base = stoch if c.stoch_base is None else c.stoch_base
+            noise = base.noise if c.white_n0_dpsh is None else replace(base.noise, N_dpsh=c.white_n0_dpsh)
+            stoch_new = SensorModel(stoch.sample_rate_hz, 0.0, noise, [*base.effects, c.effect()])
         if progress:
             progress(f"bootstrap null with {c.kind} added: {B} simulations", 0, 0)
         null_new = bootstrap(stoch_new, like, grid, B, opt.seed + 7919 * (n_acc + 1), opt.alpha,
@@ -503,10 +504,14 @@ def _choose(cands: list[catalogue.Candidate], ctx: catalogue.Context, current: A
 def _fitted_model(model: SensorModel, stoch: SensorModel, accepted: list[Accepted]) -> SensorModel:
     """The model with the accepted effects: the stochastic part's coefficients (the model's,
     with N0 of a white-level effect and the noise kind's corrections; R is the
-    deterministic part's, unchanged) and every accepted effect but the noise kind's."""
+    deterministic part's, unchanged), the model's own effects (its noise-type ones as the
+    stochastic part holds them: a low-pass level refitted under vibration lines) and
+    every accepted effect but the noise kind's."""
+    held = iter(stoch.effects)  # stochastic_part keeps the model's noise-type effects first, in order
+    own = [e if EFFECT_KINDS[e.kind].nature == "mean" else next(held) for e in model.effects]
     return validate_model(SensorModel(
         model.sample_rate_hz, model.bias_dph, replace(stoch.noise, R_dphh=model.noise.R_dphh),
-        [*model.effects, *(a.cand.effect() for a in accepted if a.cand.corrected_noise is None)], dict(model.meta)))
+        [*own, *(a.cand.effect() for a in accepted if a.cand.corrected_noise is None)], dict(model.meta)))
 
 
 #: explain needs this share of the sample grid present and outside platform motion

@@ -17,7 +17,8 @@ The model's PSD is calibrated to the recording in octave bands holding >= 32 bin
 (band median of |Y_k|^2 / (n S_k), divided by ln 2, the median of a unit exponential):
 a wrong white-noise level or an unmodelled noise hump then cannot masquerade as a
 deterministic effect. Bands below 32 bins (the slowest frequencies, where drifts live)
-keep the lowest calibrated band's factor.
+keep the lowest calibrated band's factor; there, a mean-type effect is judged against the
+noise its own residual shows (:func:`low_band_flicker`).
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
+from scipy.optimize import minimize_scalar
 
 MIN_BAND_BINS = 32
 
@@ -82,6 +84,41 @@ def calibrate_psd(S: np.ndarray, Yf: np.ndarray, n: int) -> np.ndarray:
         factors[1:first_ok[0]] = first_ok[1]
     out = S * factors
     out[0] = np.inf
+    return out
+
+
+#: A flicker (1/f) excess below the first calibrated band joins the PSD only when it raises
+#: the Whittle log-likelihood of those bins by more than this (likelihood ratio; the 99 %
+#: point of chi-square with 1 degree of freedom, as a baseline noise term's): a null
+#: residual's chance low-frequency scatter then rarely costs a real effect its power.
+LOW_FLICKER_CHI2 = 6.63
+
+
+def low_band_flicker(S: np.ndarray, Rf: np.ndarray, n: int) -> np.ndarray:
+    """``S`` (calibrated, :func:`calibrate_psd`) with the residual's own flicker excess
+    added below its first calibrated band: the bins 1..K-1 (K = MIN_BAND_BINS) get
+    b S_K K / k, a 1/f continuation of the PSD level at bin K, with b >= 0 fitted by
+    the Whittle likelihood of the residual's DFT ``Rf`` there; ``S`` itself when the
+    excess is not significant (LOW_FLICKER_CHI2) or the record has no calibrated band.
+    Those bins are where drifts, steps and settling live and where the model's PSD is
+    only extrapolated: a sensor's bias wander the model lacks (bias instability) must
+    not pose as such an effect."""
+    K = MIN_BAND_BINS
+    if len(S) < 2 * K:
+        return S
+    P = np.abs(Rf[1:K]) ** 2 / n
+    S0 = S[1:K]
+    F = S[K] * K / np.arange(1, K)
+
+    def nll(ln_b: float) -> float:
+        s = S0 + math.exp(ln_b) * F
+        return float(np.sum(P / s + np.log(s)))
+
+    r = minimize_scalar(nll, bounds=(-20.0, 10.0), method="bounded")
+    if 2.0 * (float(np.sum(P / S0 + np.log(S0))) - float(r.fun)) <= LOW_FLICKER_CHI2:
+        return S
+    out = S.copy()
+    out[1:K] = S0 + math.exp(float(r.x)) * F
     return out
 
 
