@@ -967,24 +967,35 @@ def model_holds(model, sums, counts, m, hold_z):
 
 
 @njit(cache=True, error_model="numpy")
-def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi, adev, lo, hi, edf):
+def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
-    terms), bounds and EDF from the gap-free tables of the row's alpha run, into
-    ``adev``, ``lo``, ``hi``, ``edf`` (shape of ``sums``); returns the number of entries
-    with fewer than ``full`` terms, whose EDF and bounds the caller recomputes.
-    Branch-free inner loop (SIMD)."""
+    terms) and bounds from the gap-free chi2 factors of the row's alpha run, into
+    ``adev``, ``lo``, ``hi`` (shape of ``sums``); returns the number of entries with
+    fewer than ``full`` terms, whose bounds the caller recomputes. A row with every
+    count full divides by 2 full (the same values, no int-to-float conversion per
+    entry); inner loops branch-free (SIMD)."""
     nt, nm = sums.shape
+    two_full = 2.0 * full
     n_gapped = 0
     for i in range(nt):
         r = run[i]
-        fl, fh, eg = f_lo[r], f_hi[r], edf_gapless[r]
+        fl, fh = f_lo[r], f_hi[r]
         s, c = sums[i], counts[i]
-        a_row, l_row, h_row, e_row = adev[i], lo[i], hi[i], edf[i]
+        a_row, l_row, h_row = adev[i], lo[i], hi[i]
+        gapped = 0
         for k in range(nm):
-            a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
-            a_row[k] = a
-            l_row[k] = a * fl[k]
-            h_row[k] = a * fh[k]
-            e_row[k] = eg[k]
-            n_gapped += c[k] != full[k]
+            gapped += c[k] != full[k]
+        n_gapped += gapped
+        if gapped:
+            for k in range(nm):
+                a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
+                a_row[k] = a
+                l_row[k] = a * fl[k]
+                h_row[k] = a * fh[k]
+        else:
+            for k in range(nm):
+                a = np.sqrt(max(s[k], 0.0) / two_full[k])
+                a_row[k] = a
+                l_row[k] = a * fl[k]
+                h_row[k] = a * fh[k]
     return n_gapped

@@ -141,8 +141,10 @@ class StreamingDadev:
         a0 = self._base + self._len
         k0 = -(-(max(a0, w - 1) - (w - 1)) // self.hop_n)
         ends = np.arange(w - 1 + k0 * self.hop_n, a0 + len(y), self.hop_n, dtype=np.int64)
-        sums = np.empty((len(ends), len(self.m)))
-        counts = np.empty((len(ends), len(self.m)), dtype=np.int64)
+        # one block for both: freed together, the next call's block reuses the memory
+        # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
+        block = np.empty((2, len(ends), len(self.m)))
+        sums, counts = block[0], block[1].view(np.int64)
         i = row = 0
         while i < len(y):
             # re-anchor when the buffer is full, or once early when most samples since the
