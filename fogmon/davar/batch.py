@@ -159,7 +159,9 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
     adev, lo, hi = np.empty((3,) + sums.shape)
     full = n_samples - 2 * m + 1
-    n_gapped = kernels.frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi)
+    # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
+    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts, run, full, f_lo, f_hi,
+                                   adev, lo, hi)
     # one noise-type row and no gap: every window's EDF is the gap-free row (a read-only broadcast)
     edf = np.broadcast_to(edf_gapless[0], sums.shape) if n_gapped == 0 and len(tables) == 1 else edf_gapless[run]
     if n_gapped:

@@ -535,7 +535,10 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums).
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). Returns True
+    when no count changed after the first emitted row: then only row 0 of
+    ``out_counts`` is sure to be written, and it holds every row's counts (hop 1
+    without gaps writes no count per window).
 
     Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
     squared terms and a SIMD sum of the tile's change, added to the compensated window
@@ -578,6 +581,7 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
     e_tile = e_head
+    fixed = True  # no count changed since the first emitted row: dense tiles write no counts
     for t0 in range(start, stop, _TILE):
         n = min(_TILE, stop - t0)
         e_end = e_tile
@@ -598,6 +602,8 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
                 plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
+            if fixed and has_dn:  # counts change from here on
+                fixed = _unfix(out_counts, e_head, e_tile, cnt)
             # dn is read by the emission scan and the exact path: zero the unwritten rows
             for j in range(4 if has_dn or not plain or e_end > e_tile else 0):
                 if not wrote[j]:
@@ -622,13 +628,31 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
                         k = ks[j]
-                        sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
+                        s, c, n_k, err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
+                        if fixed and n_k != cnt[k]:
+                            fixed = _unfix(out_counts, e_head, e_tile, cnt)
+                        sum_s[k], sum_c[k], cnt[k] = s, c, n_k
                 _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at)
                 if not dense:
-                    _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts)
+                    _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
+                               cnt)
         if dense:
-            _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts)
+            _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
         e_tile = e_end
+    if fixed and e_tile > 0:
+        _unfix(out_counts, 0, 1, cnt)
+    return fixed
+
+
+@njit(cache=True)
+def _unfix(out_counts, e0, e1, cnt):
+    """Write the counts ``cnt`` (encoded) to rows e0 .. e1 - 1, which were emitted while
+    no count changed (and so without them). Returns False."""
+    for e in range(e0, e1):
+        c_row = out_counts[e]
+        for k in range(c_row.shape[0]):
+            c_row[k] = cnt[k] & _LOW
+    return False
 
 
 @njit(cache=True)
@@ -720,18 +744,24 @@ def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
 
 
 @njit(cache=True)
-def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts):
+def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, fixed, cnt):
     """Copy the windows emitted in a tile from ``w_at``/``n_at`` (sum and encoded count
     per tau at the emitting sample's tile position) to their rows of ``out_sums`` and
     ``out_counts``, taus k0 .. k1 - 1 (all of them: a whole row at a time, where
-    writing one tau's column of many rows would cost a cache line per value)."""
+    writing one tau's column of many rows would cost a cache line per value). ``fixed``:
+    every count is ``cnt`` (encoded), and none is written."""
+    c_fix = cnt[k0:k1]
     for e in range(e0, e1):
         i = emit_pos[e] - t0
         w_i, n_i, s_row, c_row = w_at[k0:k1, i], n_at[k0:k1, i], out_sums[e, k0:k1], out_counts[e, k0:k1]
-        for k in range(k1 - k0):
-            n = n_i[k]
-            s_row[k] = w_i[k] if n < _FLAG else np.inf
-            c_row[k] = n & _LOW
+        if fixed:
+            for k in range(k1 - k0):
+                s_row[k] = w_i[k] if c_fix[k] < _FLAG else np.inf
+        else:
+            for k in range(k1 - k0):
+                n = n_i[k]
+                s_row[k] = w_i[k] if n < _FLAG else np.inf
+                c_row[k] = n & _LOW
 
 
 @njit(cache=True, inline="always")
@@ -970,17 +1000,18 @@ def model_holds(model, sums, counts, m, hold_z):
 def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms) and bounds from the gap-free chi2 factors of the row's alpha run, into
-    ``adev``, ``lo``, ``hi`` (shape of ``sums``); returns the number of entries with
-    fewer than ``full`` terms, whose bounds the caller recomputes. A row with every
-    count full divides by 2 full (the same values, no int-to-float conversion per
-    entry); inner loops branch-free (SIMD)."""
+    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``counts`` may be one row for all);
+    returns the number of entries with fewer than ``full`` terms, whose bounds the
+    caller recomputes. A row with every count full divides by 2 full (the same values,
+    no int-to-float conversion per entry); inner loops branch-free (SIMD)."""
     nt, nm = sums.shape
     two_full = 2.0 * full
+    last = counts.shape[0] - 1
     n_gapped = 0
     for i in range(nt):
         r = run[i]
         fl, fh = f_lo[r], f_hi[r]
-        s, c = sums[i], counts[i]
+        s, c = sums[i], counts[min(i, last)]
         a_row, l_row, h_row = adev[i], lo[i], hi[i]
         gapped = 0
         for k in range(nm):
