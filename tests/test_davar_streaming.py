@@ -66,6 +66,30 @@ def test_huge_glitches_and_gaps_leave_no_residue_in_any_window(hop):
     assert np.max(np.abs(cur.adev_dph / oadev(y[-w:], 1.0, valid=valid[-w:]).adev_dph - 1)) <= 1e-9
 
 
+def test_hop_1_counts_are_one_row_in_a_block_where_none_changes():
+    """At hop 1 a block in which no window's valid-term counts differ returns them as one
+    read-only row broadcast (no count written per window); a gap, a huge sample and a
+    large glitch whose leaving forces exact recomputes (the counts stay) give every
+    window its own counts and sums, equal to the batch engine."""
+    n, w = 40000, 4096
+    y = rate(n, 11)
+    valid = np.ones(n, bool)
+    valid[21000] = False
+    y[30000:30010] += 3e7
+    y[36000] = 1e9
+    engine = StreamingDadev(1.0, w, taus=12, hop_s=1, alpha=0, reanchor=6000)
+    blocks = [engine.push(y[i:i + 5000], valid[i:i + 5000]) for i in range(0, n, 5000)]
+    ref = dadev(y, 1.0, w, 1, valid=valid, taus=12, alpha=0)
+    assert np.array_equal(np.concatenate([b.n_terms for b in blocks]), ref.n_terms)
+    got = np.concatenate([b.adev_dph for b in blocks])
+    assert np.array_equal(np.isinf(got), np.isinf(ref.adev_dph)) and np.isinf(got).any()
+    ok = np.isfinite(ref.adev_dph)
+    assert np.max(np.abs(got[ok] / ref.adev_dph[ok] - 1)) <= 1e-9
+    # the gap's windows end in blocks 4-5, the huge sample's from block 7 (its terms are
+    # counted apart, so the engine writes that block's counts)
+    assert [b.n_terms.strides[0] == 0 for b in blocks] == [True] * 4 + [False, False, True, False]
+
+
 def test_hop_longer_than_the_window():
     n = 20000
     y = rate(n, 4)

@@ -154,12 +154,18 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     tables = [_gapless_tables(a.tobytes(), m.tobytes(), int(n_samples), float(confidence)) for a in runs]
     edf_gapless, f_lo, f_hi = ((tables[0][i].reshape(1, nm) if len(tables) == 1
                                 else np.array([t[i] for t in tables]).reshape(-1, nm)) for i in range(3))
-    # result arrays allocated here: a numba kernel returning new arrays pays ~2 us each to box them
-    adev, lo, hi, edf = (np.empty(sums.shape) for _ in range(4))
-    n_gapped = kernels.frame_stats(sums, counts, run, n_samples - 2 * m + 1, edf_gapless, f_lo, f_hi,
-                                   adev, lo, hi, edf)
+    # result arrays allocated here (a numba kernel returning new arrays pays ~2 us each to
+    # box them), in one block: freed together, the next call's block reuses the memory
+    # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
+    adev, lo, hi = np.empty((3,) + sums.shape)
+    full = n_samples - 2 * m + 1
+    # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
+    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts, run, full, f_lo, f_hi,
+                                   adev, lo, hi)
+    # one noise-type row and no gap: every window's EDF is the gap-free row (a read-only broadcast)
+    edf = np.broadcast_to(edf_gapless[0], sums.shape) if n_gapped == 0 and len(tables) == 1 else edf_gapless[run]
     if n_gapped:
-        gapped = counts != (n_samples - 2 * m + 1)
+        gapped = counts != full
         edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])
         lo[gapped], hi[gapped] = chi2_bounds(adev[gapped], edf[gapped], confidence)
     return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))

@@ -535,7 +535,10 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums).
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). Returns True
+    when no count changed after the first emitted row: then only row 0 of
+    ``out_counts`` is sure to be written, and it holds every row's counts (hop 1
+    without gaps writes no count per window).
 
     Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
     squared terms and a SIMD sum of the tile's change, added to the compensated window
@@ -567,6 +570,10 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
     dn = np.empty((4, _TILE), np.int64)
+    # per tau, the sums and encoded counts of the windows a tile emits (rows padded: a
+    # stride of a power of two maps a column's values to one cache set)
+    w_at = np.empty((nm, _TILE + 8))
+    n_at = np.empty((nm, _TILE + 8), np.int64)
     tot = np.empty(4)
     grow = np.empty(4)
     bnd = np.empty(4)
@@ -574,11 +581,15 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
     e_tile = e_head
+    fixed = True  # no count changed since the first emitted row: dense tiles write no counts
     for t0 in range(start, stop, _TILE):
         n = min(_TILE, stop - t0)
         e_end = e_tile
         while e_end < emit_pos.shape[0] and emit_pos[e_end] < t0 + n:
             e_end += 1
+        # every sample from the tile's first emission to its last emits (hop 1): whole
+        # rows are written from w_at / n_at after the tile (see _scan_plain)
+        dense = e_end > e_tile and emit_pos[e_end - 1] - emit_pos[e_tile] == e_end - 1 - e_tile
         for g in range(0, nm, 4):
             has_dn = False
             plain = True
@@ -591,6 +602,8 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
                 plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
+            if fixed and has_dn:  # counts change from here on
+                fixed = _unfix(out_counts, e_head, e_tile, cnt)
             # dn is read by the emission scan and the exact path: zero the unwritten rows
             for j in range(4 if has_dn or not plain or e_end > e_tile else 0):
                 if not wrote[j]:
@@ -598,8 +611,12 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
             if plain and (has_dn or e_end > e_tile):  # the bound must also hold at every emitted window
                 for j in range(4):
                     bnd[j] = err[ks[j]] + grow[j]
-                plain = _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
-                                    cnt, out_sums, out_counts)
+                if dense:
+                    plain = _scan_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
+                                        cnt, w_at, n_at)
+                else:
+                    plain = _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
+                                        cnt, out_sums, out_counts)
             if plain:
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
@@ -611,10 +628,31 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 for j in range(4):
                     if j == 0 or ks[j] != ks[j - 1]:
                         k = ks[j]
-                        sum_s[k], sum_c[k], cnt[k], err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
-                _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt,
-                                  out_sums, out_counts)
+                        s, c, n_k, err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
+                        if fixed and n_k != cnt[k]:
+                            fixed = _unfix(out_counts, e_head, e_tile, cnt)
+                        sum_s[k], sum_c[k], cnt[k] = s, c, n_k
+                _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at)
+                if not dense:
+                    _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
+                               cnt)
+        if dense:
+            _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
         e_tile = e_end
+    if fixed and e_tile > 0:
+        _unfix(out_counts, 0, 1, cnt)
+    return fixed
+
+
+@njit(cache=True)
+def _unfix(out_counts, e0, e1, cnt):
+    """Write the counts ``cnt`` (encoded) to rows e0 .. e1 - 1, which were emitted while
+    no count changed (and so without them). Returns False."""
+    for e in range(e0, e1):
+        c_row = out_counts[e]
+        for k in range(c_row.shape[0]):
+            c_row[k] = cnt[k] & _LOW
+    return False
 
 
 @njit(cache=True)
@@ -660,6 +698,72 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
     return True
 
 
+@njit(cache=True)
+def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
+    """``_emit_plain`` for a tile in which every sample from the first emission (e0 <
+    e1) to the last emits (hop 1): the running sums at these samples go to ``w_at``,
+    the counts to ``n_at`` (see ``_emit_rows``), by a branch-free scan of four
+    independent chains; then the bound is checked at the least emitted sum per slot."""
+    k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
+    s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
+    c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
+    n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
+    p0 = p1 = p2 = p3 = 0.0
+    i0 = emit_pos[e0] - t0
+    i1 = emit_pos[e1 - 1] - t0 + 1
+    for i in range(i0):
+        p0 += xi[0, i] - xo[0, i]
+        p1 += xi[1, i] - xo[1, i]
+        p2 += xi[2, i] - xo[2, i]
+        p3 += xi[3, i] - xo[3, i]
+    # slices: a loop counter from 0 indexes them without wrap-around checks
+    a0, a1, a2, a3 = w_at[k0, i0:i1], w_at[k1, i0:i1], w_at[k2, i0:i1], w_at[k3, i0:i1]
+    x0, x1, x2, x3 = xi[0, i0:i1], xi[1, i0:i1], xi[2, i0:i1], xi[3, i0:i1]
+    o0, o1, o2, o3 = xo[0, i0:i1], xo[1, i0:i1], xo[2, i0:i1], xo[3, i0:i1]
+    for i in range(i1 - i0):
+        p0 += x0[i] - o0[i]
+        p1 += x1[i] - o1[i]
+        p2 += x2[i] - o2[i]
+        p3 += x3[i] - o3[i]
+        a0[i], a1[i], a2[i], a3[i] = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
+    if not (_within(bnd[0], a0.min()) and _within(bnd[1], a1.min()) and _within(bnd[2], a2.min())
+            and _within(bnd[3], a3.min())):
+        return False
+    if has_dn:
+        for i in range(n):
+            n0 += dn[0, i]
+            n1 += dn[1, i]
+            n2 += dn[2, i]
+            n3 += dn[3, i]
+            n_at[k0, i], n_at[k1, i], n_at[k2, i], n_at[k3, i] = n0, n1, n2, n3
+    else:
+        n_at[k0, i0:i1], n_at[k1, i0:i1], n_at[k2, i0:i1], n_at[k3, i0:i1] = n0, n1, n2, n3
+    # slots past the last tau repeat it with the same values
+    cnt[k3], cnt[k2], cnt[k1], cnt[k0] = n3, n2, n1, n0
+    return True
+
+
+@njit(cache=True)
+def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, fixed, cnt):
+    """Copy the windows emitted in a tile from ``w_at``/``n_at`` (sum and encoded count
+    per tau at the emitting sample's tile position) to their rows of ``out_sums`` and
+    ``out_counts``, taus k0 .. k1 - 1 (all of them: a whole row at a time, where
+    writing one tau's column of many rows would cost a cache line per value). ``fixed``:
+    every count is ``cnt`` (encoded), and none is written."""
+    c_fix = cnt[k0:k1]
+    for e in range(e0, e1):
+        i = emit_pos[e] - t0
+        w_i, n_i, s_row, c_row = w_at[k0:k1, i], n_at[k0:k1, i], out_sums[e, k0:k1], out_counts[e, k0:k1]
+        if fixed:
+            for k in range(k1 - k0):
+                s_row[k] = w_i[k] if c_fix[k] < _FLAG else np.inf
+        else:
+            for k in range(k1 - k0):
+                n = n_i[k]
+                s_row[k] = w_i[k] if n < _FLAG else np.inf
+                c_row[k] = n & _LOW
+
+
 @njit(cache=True, inline="always")
 def _within(bound, window_sum):
     """A rounding bound small enough for a window sum (deg/h)^2."""
@@ -667,8 +771,8 @@ def _within(bound, window_sum):
 
 
 @njit(cache=True)
-def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, out_sums, out_counts):
-    """Term-by-term TwoSum accumulation of a tile, writing emitted windows on the way."""
+def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at):
+    """Term-by-term TwoSum accumulation of a tile, the emitted windows into ``w_at``/``n_at``."""
     for j in range(4):
         if j > 0 and ks[j] == ks[j - 1]:
             continue
@@ -683,7 +787,8 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
             c += r + de
             n_ += dn[j, i]
             if e < e1 and emit_pos[e] == t0 + i:
-                _put(out_sums, out_counts, e, k, s + c, n_)
+                w_at[k, i] = s + c
+                n_at[k, i] = n_
                 e += 1
         sum_s[k] = s
         sum_c[k] = c
@@ -892,24 +997,36 @@ def model_holds(model, sums, counts, m, hold_z):
 
 
 @njit(cache=True, error_model="numpy")
-def frame_stats(sums, counts, run, full, edf_gapless, f_lo, f_hi, adev, lo, hi, edf):
+def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
-    terms), bounds and EDF from the gap-free tables of the row's alpha run, into
-    ``adev``, ``lo``, ``hi``, ``edf`` (shape of ``sums``); returns the number of entries
-    with fewer than ``full`` terms, whose EDF and bounds the caller recomputes.
-    Branch-free inner loop (SIMD)."""
+    terms) and bounds from the gap-free chi2 factors of the row's alpha run, into
+    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``counts`` may be one row for all);
+    returns the number of entries with fewer than ``full`` terms, whose bounds the
+    caller recomputes. A row with every count full divides by 2 full (the same values,
+    no int-to-float conversion per entry); inner loops branch-free (SIMD)."""
     nt, nm = sums.shape
+    two_full = 2.0 * full
+    last = counts.shape[0] - 1
     n_gapped = 0
     for i in range(nt):
         r = run[i]
-        fl, fh, eg = f_lo[r], f_hi[r], edf_gapless[r]
-        s, c = sums[i], counts[i]
-        a_row, l_row, h_row, e_row = adev[i], lo[i], hi[i], edf[i]
+        fl, fh = f_lo[r], f_hi[r]
+        s, c = sums[i], counts[min(i, last)]
+        a_row, l_row, h_row = adev[i], lo[i], hi[i]
+        gapped = 0
         for k in range(nm):
-            a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
-            a_row[k] = a
-            l_row[k] = a * fl[k]
-            h_row[k] = a * fh[k]
-            e_row[k] = eg[k]
-            n_gapped += c[k] != full[k]
+            gapped += c[k] != full[k]
+        n_gapped += gapped
+        if gapped:
+            for k in range(nm):
+                a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
+                a_row[k] = a
+                l_row[k] = a * fl[k]
+                h_row[k] = a * fh[k]
+        else:
+            for k in range(nm):
+                a = np.sqrt(max(s[k], 0.0) / two_full[k])
+                a_row[k] = a
+                l_row[k] = a * fl[k]
+                h_row[k] = a * fh[k]
     return n_gapped

@@ -129,7 +129,9 @@ class StreamingDadev:
     def advance(self, rate_dph, valid=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The engine alone: feed samples like :meth:`push` and return, for the windows
         completed at hop boundaries, (end_index (T), sums of squared terms (deg/h)^2
-        (T x M), valid-term counts (T x M)); Allan variance = sums / (2 counts)."""
+        (T x M), valid-term counts (T x M; at hops below RECORD_MIN_HOP a read-only
+        broadcast of one row when every window has the same)); Allan variance = sums /
+        (2 counts)."""
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
@@ -141,9 +143,12 @@ class StreamingDadev:
         a0 = self._base + self._len
         k0 = -(-(max(a0, w - 1) - (w - 1)) // self.hop_n)
         ends = np.arange(w - 1 + k0 * self.hop_n, a0 + len(y), self.hop_n, dtype=np.int64)
-        sums = np.empty((len(ends), len(self.m)))
-        counts = np.empty((len(ends), len(self.m)), dtype=np.int64)
+        # one block for both: freed together, the next call's block reuses the memory
+        # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
+        block = np.empty((2, len(ends), len(self.m)))
+        sums, counts = block[0], block[1].view(np.int64)
         i = row = 0
+        spans = []  # running sums: row spans whose counts are all in their first row (see kernels.stream_update)
         while i < len(y):
             # re-anchor when the buffer is full, or once early when most samples since the
             # last re-reference are large (a reference level taken from a glitch)
@@ -170,13 +175,19 @@ class StreamingDadev:
                 kernels.stream_record(self._len, take, self._base, w, self.hop_n, self.m, self._pre,
                                       self._s, self._c, self._n, self._h, self._rec_s, self._rec_c, self._rec_n,
                                       self._rec_h, k0 + row, sums[row:row_end], counts[row:row_end])
-            else:
-                kernels.stream_update(self._len, take, w, self.m, self._pre, self._s, self._c,
-                                      self._n, self._err, ends[row:row_end] - self._base, sums[row:row_end],
-                                      counts[row:row_end])
+            elif kernels.stream_update(self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
+                                       ends[row:row_end] - self._base, sums[row:row_end],
+                                       counts[row:row_end]) and row_end > row:
+                spans.append((row, row_end))
             self._len += take
             i += take
             row = row_end
+        if spans and sum(b - a for a, b in spans) == len(ends) and all(
+                np.array_equal(counts[a], counts[0]) for a, _ in spans):
+            counts = np.broadcast_to(counts[0], counts.shape)  # no gap: one row of counts (read-only)
+        else:
+            for a, b in spans:
+                counts[a + 1:b] = counts[a]
         n = self._base + self._len
         self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop_n) * self.hop_n
         return ends, sums, counts
