@@ -141,3 +141,18 @@ def test_without_model_the_bundled_simulations_name_their_own_physics(tmp_path, 
         if e["kind"] == "scale_factor":
             assert e["params"]["ppm"] == pytest.approx(truth.effects[2].params["ppm"], rel=0.2)
     assert rep["score_after"] < 1.5
+
+
+def test_the_verdict_says_explained_only_within_chance():
+    # no region and no effect, but a score above chance (a figure the catalogue cannot
+    # fix): the verdict must not say the model explains the recording
+    from types import SimpleNamespace
+
+    from fogmon.explain.report import verdict
+
+    for s, explained in ((mismatch.Score(1.0, 1.1, 0.9, 0.8), True), (mismatch.Score(1.0, 1.2, 2.9, 0.8), False)):
+        res = SimpleNamespace(before=SimpleNamespace(score=s, null=SimpleNamespace(alpha=0.01)),
+                              after=SimpleNamespace(score=s), accepted=[], baseline=False, model=None)
+        text = verdict(res, [], [])
+        assert ("explains the recording" in text) is explained, text
+        assert explained or "spikes 2.90" in text and "above chance" in text

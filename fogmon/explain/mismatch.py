@@ -371,6 +371,10 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
 #: Power of the score's smooth maximum of its four figures (and of the axes' scores).
 SCORE_POWER = 8.0
 
+#: A score at or below this is within chance: above it happens by chance in well under 1 %
+#: of null records (:class:`Score`, docs/explain.md "The score").
+CHANCE_SCORE = 1.5
+
 
 def smooth_max(values) -> float:
     """The power mean (mean of c^SCORE_POWER)^(1/SCORE_POWER) of non-negative figures:

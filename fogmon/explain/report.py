@@ -21,6 +21,7 @@ import numpy as np
 from fogmon.explain.catalogue import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
+from fogmon.explain.mismatch import CHANCE_SCORE
 from fogmon.recording import write_replay_log
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
 
@@ -106,9 +107,14 @@ def _verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
     sb, sa = res.before.score.value, res.after.score.value
     ref = "the baseline stationary model fitted from the recording" if res.baseline else "the model"
     if not res.accepted and not mism:
-        return (f"{ref[0].upper() + ref[1:]} explains the recording: no (time, tau) cell lies beyond the "
-                f"{100 * res.before.null.alpha:g} % family-wise threshold and no candidate effect passes "
-                f"BIC and a held-out check and lowers the score (score {sb:.2f}, about 1 = chance).")
+        none = (f"no (time, tau) cell lies beyond the {100 * res.before.null.alpha:g} % family-wise threshold "
+                f"and no candidate effect passes BIC and a held-out check and lowers the score")
+        if sb <= CHANCE_SCORE:
+            return f"{ref[0].upper() + ref[1:]} explains the recording: {none} (score {sb:.2f}, about 1 = chance)."
+        comp = res.before.score.as_json()
+        top = max(comp, key=comp.__getitem__)
+        return (f"Against {ref}, {none}; yet the score is {sb:.2f}, above chance (about 1; its largest figure: "
+                f"{top} {comp[top]:.2f}): the recording departs from it in a way no effect fogmon knows explains.")
     parts = []
     if mism:
         parts.append(f"Against {ref} the recording shows {len(mism)} mismatch region(s) "
@@ -124,7 +130,7 @@ def _verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
         bursts = len(mism_after) - len(unexplained)
         named = (f" ({bursts} more left are non-stationary bursts named in the warnings, not missing physics)"
                  if bursts else "")
-        if sa <= 1.5 and not unexplained:
+        if sa <= CHANCE_SCORE and not unexplained:
             parts.append(f"With these added the recording is within chance (score {sa:.2f}, no mismatch left"
                          f"{named}): add them to the sensor model (--out-model) or remove the deterministic "
                          f"ones from the data (--out-corrected).")
