@@ -11,6 +11,7 @@ of Allan variance estimates across taus (``avar_relative_covariance``).
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -209,39 +210,24 @@ def _phase_acv(t: np.ndarray, alpha: int) -> np.ndarray:
         return np.where(a > 0, t * t * np.log(np.where(a > 0, a, 1.0)), 0.0)
 
 
-def _term_xcov_raw(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
+def _term_xcov_raw(lag: np.ndarray, ma: np.ndarray, mb: np.ndarray, alpha: int) -> np.ndarray:
     """Covariance (up to a constant) of the Allan term of factor ``ma`` at j with that of
-    ``mb`` at j + lag."""
-    off = (np.arange(3)[None, :] * mb - np.arange(3)[:, None] * ma).ravel()
-    return (np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel() * _phase_acv(lag[..., None] + off, alpha)).sum(-1)
+    ``mb`` at j + lag (arrays of one shape)."""
+    i, j = np.divmod(np.arange(9), 3)
+    off = j * np.asarray(mb)[..., None] - i * np.asarray(ma)[..., None]
+    return (_SECOND_DIFF[i] * _SECOND_DIFF[j] * _phase_acv(np.asarray(lag)[..., None] + off, alpha)).sum(-1)
 
 
-@lru_cache(maxsize=1 << 12)
-def _term_sd(m: int, alpha: int) -> float:
-    """Standard deviation (same constant) of an Allan term of factor m."""
-    return float(np.sqrt(_term_xcov_raw(np.zeros(1), m, m, alpha)[0]))
-
-
-def _term_xcov(lag: np.ndarray, ma: int, mb: int, alpha: int) -> np.ndarray:
-    """Correlation of the Allan term of factor ``ma`` at j with that of ``mb`` at j + lag."""
-    return _term_xcov_raw(lag, ma, mb, alpha) / (_term_sd(ma, alpha) * _term_sd(mb, alpha))
-
-
-def _pair_count(lag: np.ndarray, ma_terms: int, mb_terms: int) -> np.ndarray:
+def _pair_count(lag: np.ndarray, ma_terms, mb_terms) -> np.ndarray:
     """Number of term pairs (j, j + lag) with 0 <= j < ma_terms and 0 <= j + lag < mb_terms."""
     return np.maximum(np.minimum(ma_terms, mb_terms - lag) - np.maximum(0, -lag), 0).astype(np.float64)
 
 
-@lru_cache(maxsize=1 << 14)
-def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
-    """C[k, l] = sum over lags of N(lag) rho_k(lag) rho_l(lag) for the overlapping Allan
-    variances of factors ma and mb (noise types MIX_ALPHAS; rho the cross-correlation of
-    their terms, N the number of term pairs at that lag): the relative covariance of the
-    two Allan variances of a mixture is 2 g'Cg / (M_a M_b), g_k = sqrt(f_a,k f_b,k).
-    Lags run over the terms' overlap (plus 4 max(ma, mb) for flicker's tail): summed
-    exactly on segments up to 48 lags between the kinks p ma - q mb, by 12-point
-    Gauss-Legendre (exact for the white and random-walk polynomials) on longer ones."""
-    n_a, n_b = n_samples - 2 * ma + 1, n_samples - 2 * mb + 1
+def _pair_lags(ma: int, mb: int, n_a: int, n_b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lags (float) and quadrature weights of the sum over lags of ``covariance_matrices``
+    for factors ma, mb with n_a, n_b terms: the terms' overlap plus 4 max(ma, mb) for
+    flicker's tail, every lag on segments up to _EXACT_SEGMENT between the kinks
+    p ma - q mb, the kink and 12-point Gauss-Legendre on longer ones."""
     kinks = (np.arange(3)[:, None] * ma - np.arange(3)[None, :] * mb).ravel()
     lo = max(kinks.min() - 4 * max(ma, mb), -(n_a - 1))
     hi = min(kinks.max() + 4 * max(ma, mb), n_b - 1) + 1
@@ -255,36 +241,61 @@ def _cross_matrix(ma: int, mb: int, n_samples: int) -> np.ndarray:
             half = 0.5 * (b - a - 1)
             lags += [np.array([float(a)]), half * _GAUSS_X + 0.5 * (a + b)]
             wts += [np.ones(1), half * _GAUSS_W]
-    lag = np.concatenate(lags)
-    w = np.concatenate(wts) * _pair_count(lag, n_a, n_b)
-    rho = [_term_xcov(lag, ma, mb, al) for al in MIX_ALPHAS[1:]]
-    # white angle noise: X is white, so terms correlate only at the kink lags
-    k_lag, inv = np.unique(kinks, return_inverse=True)
-    k_lag = k_lag.astype(np.float64)
-    rho_q = np.bincount(inv, weights=np.outer(_SECOND_DIFF, _SECOND_DIFF).ravel(), minlength=len(k_lag)) / 6.0
-    w_q = _pair_count(k_lag, n_a, n_b)
-    c = np.empty((4, 4))
-    c[0, 0] = np.sum(w_q * rho_q**2)
-    for k, al in enumerate(MIX_ALPHAS[1:]):
-        c[0, k + 1] = c[k + 1, 0] = np.sum(w_q * rho_q * _term_xcov(k_lag, ma, mb, al))
-        for k2 in range(k, 3):
-            c[k + 1, k2 + 1] = c[k2 + 1, k + 1] = np.sum(w * rho[k] * rho[k2])
-    return c
+    return np.concatenate(lags), np.concatenate(wts)
 
 
 def covariance_matrices(m, n_samples: int) -> np.ndarray:
-    """The (len(m), len(m), 4, 4) matrices ``_cross_matrix`` of every pair of averaging
-    factors ``m`` over ``n_samples`` gap-free rate samples (cached per grid; all 2 m <= n)."""
+    """The (len(m), len(m), 4, 4) matrices C[k, l] = sum over lags of N(lag) rho_k(lag)
+    rho_l(lag) of every pair of averaging factors ``m`` (ma, mb) over ``n_samples``
+    gap-free rate samples (all 2 m <= n; cached per grid): for noise types MIX_ALPHAS,
+    rho the cross-correlation of the two factors' Allan terms, N the number of term
+    pairs at that lag. The relative covariance of the two Allan variances of a mixture is
+    2 g'Cg / (M_a M_b), g_k = sqrt(f_a,k f_b,k). Lags as ``_pair_lags`` (exact for the
+    white and random-walk polynomials); white angle noise correlates terms only at the
+    kink lags. All pairs are evaluated in one vectorised pass."""
     return _covariance_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
 @lru_cache(maxsize=64)
 def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
+    ia, ib = np.triu_indices(len(m))
+    ma, mb = np.array(m, dtype=np.int64)[ia], np.array(m, dtype=np.int64)[ib]
+    n_a, n_b = n_samples - 2 * ma + 1, n_samples - 2 * mb + 1
+    parts = [_pair_lags(int(a), int(b), int(na), int(nb)) for a, b, na, nb in zip(ma, mb, n_a, n_b, strict=True)]
+    pair = np.repeat(np.arange(len(ma)), [len(lg) for lg, _ in parts])
+    lag = np.concatenate([lg for lg, _ in parts])
+    w = np.concatenate([wt for _, wt in parts]) * _pair_count(lag, n_a[pair], n_b[pair])
+    # white angle noise: X is white, so terms correlate only at the kink lags p ma - q mb
+    # (each distinct kink once, its weights summed)
+    p, q = np.divmod(np.arange(9), 3)
+    kinks = p * ma[:, None] - q * mb[:, None]
+    k_pair, k_lag, inv = _distinct_rows(np.repeat(np.arange(len(ma)), 9), kinks.ravel())
+    rho_q = np.bincount(inv, weights=np.tile(_SECOND_DIFF[p] * _SECOND_DIFF[q], len(ma)),
+                        minlength=len(k_lag)) / 6.0
+    w_q = _pair_count(k_lag, n_a[k_pair], n_b[k_pair])
+    c = np.empty((len(ma), 4, 4))
+    c[:, 0, 0] = np.bincount(k_pair, weights=w_q * rho_q**2, minlength=len(ma))
+    rho = []
+    for k, al in enumerate(MIX_ALPHAS[1:]):
+        sd = {int(x): math.sqrt(_term_xcov_raw(np.zeros(1), np.array([x]), np.array([x]), al)[0]) for x in m}
+        scale = np.array([sd[int(a)] * sd[int(b)] for a, b in zip(ma, mb, strict=True)])
+        rho.append(_term_xcov_raw(lag, ma[pair], mb[pair], al) / scale[pair])
+        rho_at_kinks = _term_xcov_raw(k_lag, ma[k_pair], mb[k_pair], al) / scale[k_pair]
+        c[:, 0, k + 1] = c[:, k + 1, 0] = np.bincount(k_pair, weights=w_q * rho_q * rho_at_kinks, minlength=len(ma))
+    for k in range(3):
+        for k2 in range(k, 3):
+            c[:, k + 1, k2 + 1] = c[:, k2 + 1, k + 1] = np.bincount(pair, weights=w * rho[k] * rho[k2],
+                                                                    minlength=len(ma))
     out = np.empty((len(m), len(m), 4, 4))
-    for a in range(len(m)):
-        for b in range(a, len(m)):
-            out[a, b] = out[b, a] = _cross_matrix(m[a], m[b], n_samples)
+    out[ia, ib] = c
+    out[ib, ia] = c
     return out
+
+
+def _distinct_rows(group: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct (group, value) pairs (group, value, each input's index among them)."""
+    key, inv = np.unique(np.stack([group, value], axis=1), axis=0, return_inverse=True)
+    return key[:, 0], key[:, 1].astype(np.float64), inv.ravel()
 
 
 def avar_relative_covariance(fractions: np.ndarray, matrices: np.ndarray, n_terms_full: np.ndarray) -> np.ndarray:
