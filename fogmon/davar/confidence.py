@@ -11,7 +11,6 @@ of Allan variance estimates across taus (``avar_relative_covariance``).
 """
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
@@ -256,10 +255,29 @@ def covariance_matrices(m, n_samples: int) -> np.ndarray:
     return _covariance_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
+_PAIR_CACHE: dict[tuple[int, int, int], np.ndarray] = {}
+_PAIR_CACHE_MAX = 1 << 14  # pairs kept (grids whose usable taus differ share their pairs)
+
+
 @lru_cache(maxsize=64)
 def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
     ia, ib = np.triu_indices(len(m))
-    ma, mb = np.array(m, dtype=np.int64)[ia], np.array(m, dtype=np.int64)[ib]
+    keys = [(m[a], m[b], n_samples) for a, b in zip(ia, ib, strict=True)]
+    todo = sorted({k for k in keys if k not in _PAIR_CACHE})
+    if todo:
+        if len(_PAIR_CACHE) + len(todo) > _PAIR_CACHE_MAX:
+            _PAIR_CACHE.clear()
+        ma, mb = (np.array([k[i] for k in todo], dtype=np.int64) for i in (0, 1))
+        _PAIR_CACHE.update(zip(todo, _cross_matrices(ma, mb, n_samples), strict=True))
+    c = np.array([_PAIR_CACHE[k] for k in keys])
+    out = np.empty((len(m), len(m), 4, 4))
+    out[ia, ib] = c
+    out[ib, ia] = c
+    return out
+
+
+def _cross_matrices(ma: np.ndarray, mb: np.ndarray, n_samples: int) -> np.ndarray:
+    """``covariance_matrices``' (4, 4) matrix of each pair of factors (ma[i], mb[i])."""
     n_a, n_b = n_samples - 2 * ma + 1, n_samples - 2 * mb + 1
     parts = [_pair_lags(int(a), int(b), int(na), int(nb)) for a, b, na, nb in zip(ma, mb, n_a, n_b, strict=True)]
     pair = np.repeat(np.arange(len(ma)), [len(lg) for lg, _ in parts])
@@ -277,8 +295,7 @@ def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
     c[:, 0, 0] = np.bincount(k_pair, weights=w_q * rho_q**2, minlength=len(ma))
     rho = []
     for k, al in enumerate(MIX_ALPHAS[1:]):
-        sd = {int(x): math.sqrt(_term_xcov_raw(np.zeros(1), np.array([x]), np.array([x]), al)[0]) for x in m}
-        scale = np.array([sd[int(a)] * sd[int(b)] for a, b in zip(ma, mb, strict=True)])
+        scale = _term_sd(ma, al) * _term_sd(mb, al)
         rho.append(_term_xcov_raw(lag, ma[pair], mb[pair], al) / scale[pair])
         rho_at_kinks = _term_xcov_raw(k_lag, ma[k_pair], mb[k_pair], al) / scale[k_pair]
         c[:, 0, k + 1] = c[:, k + 1, 0] = np.bincount(k_pair, weights=w_q * rho_q * rho_at_kinks, minlength=len(ma))
@@ -286,10 +303,12 @@ def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
         for k2 in range(k, 3):
             c[:, k + 1, k2 + 1] = c[:, k2 + 1, k + 1] = np.bincount(pair, weights=w * rho[k] * rho[k2],
                                                                     minlength=len(ma))
-    out = np.empty((len(m), len(m), 4, 4))
-    out[ia, ib] = c
-    out[ib, ia] = c
-    return out
+    return c
+
+
+def _term_sd(m: np.ndarray, alpha: int) -> np.ndarray:
+    """Standard deviation (the constant of ``_term_xcov_raw``) of an Allan term of each factor m."""
+    return np.sqrt(_term_xcov_raw(np.zeros(len(m)), m, m, alpha))
 
 
 def _distinct_rows(group: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
