@@ -467,6 +467,8 @@ def _judge(c: catalogue.Candidate, cands: list[catalogue.Candidate], ctx: catalo
     if not ok:
         return "reject", bg, f"failed the held-out check: {note}", None
     trial = trial_of(c)
+    # not for effects with an estimate: subtracted ones, and vibration lines, whose band-pass shape
+    # may leave a deficit elsewhere; guarded, real sway lines were refused (docs/explain.md, limits)
     overfit = _new_deficit(current, trial[4]) if c.rate is None else None
     if overfit is not None:
         return "reject", bg, (f"makes the model noisier than the recording at tau {overfit} s "
