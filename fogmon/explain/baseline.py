@@ -117,6 +117,15 @@ LOWPASS_GRID_N = 40
 LOWPASS_PARAMS = 2
 
 
+def low_pass_index(model: SensorModel) -> int | None:
+    """Index in ``model.effects`` of the sensor's low-pass-filtered white noise: the first
+    ``markov`` term whose correlation time lies in the baseline's low-pass range
+    (LOWPASS_TAU_C_SAMPLES; a longer one is bias wander, not a filter), else None."""
+    tc_max = LOWPASS_TAU_C_SAMPLES[1] / float(model.sample_rate_hz)
+    return next((i for i, e in enumerate(model.effects)
+                 if e.kind == "markov" and e.params["tau_c_s"] <= tc_max * (1 + 1e-9)), None)
+
+
 def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, markov_unit: np.ndarray | None = None
                 ) -> tuple[float, dict[str, float], tuple[str, ...]]:
     """(criterion, coefficients, terms) of the term set, N always and each of Q, B, K

@@ -30,7 +30,7 @@ from fogmon.davar.batch import oadev
 from fogmon.davar.fit import IDENTIFY_Z, fit_avar
 from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.explain import detectors
-from fogmon.explain.baseline import LOWPASS_TAU_C_SAMPLES
+from fogmon.explain.baseline import low_pass_index
 from fogmon.explain.fitting import (
     BinnedPeriodogram,
     GlsFit,
@@ -887,15 +887,10 @@ def fit_lines(bp: BinnedPeriodogram, S0: np.ndarray, sample_rate_hz: float, n: i
 
 
 def _low_pass_index(model: SensorModel) -> int | None:
-    """Index in ``model.effects`` of its white noise through a low-pass - a ``markov``
-    term whose correlation time is at most the baseline's low-pass range (a MEMS
-    filter, docs/explain.md "The baseline") - when the model has no N of its own, else
-    None."""
-    if model.noise.N_dpsh > 0:
-        return None
-    tc_max = LOWPASS_TAU_C_SAMPLES[1] / float(model.sample_rate_hz)
-    return next((i for i, e in enumerate(model.effects)
-                 if e.kind == "markov" and e.params["tau_c_s"] <= tc_max * (1 + 1e-9)), None)
+    """Index in ``model.effects`` of its white noise through a low-pass (``low_pass_index``)
+    when the model has no N of its own (that term is then its white-equivalent level),
+    else None."""
+    return None if model.noise.N_dpsh > 0 else low_pass_index(model)
 
 
 def with_white_level(model: SensorModel, level: float) -> SensorModel:

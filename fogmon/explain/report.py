@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from fogmon.explain.baseline import low_pass_index
 from fogmon.explain.catalogue import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
@@ -67,15 +68,15 @@ def _model_noise(res: Result) -> dict:
 
 
 def baseline_low_pass(model: SensorModel) -> dict | None:
-    """The baseline's low-pass-filtered white noise (its ``markov`` effect, docs/explain.md,
+    """The baseline's low-pass-filtered white noise (``baseline.low_pass_index``, docs/explain.md,
     "The baseline"): correlation time tau_c_s (s), sigma_dph (deg/h), corner_hz = 1 / (2 pi
     tau_c) (Hz) and white_N_dpsh, the white-noise level (deg/sqrt(h)) it has at taus far
     beyond tau_c (sampled first-order Gauss-Markov: sigma^2 tau0 (1 + a) / (1 - a) = (60 N)^2,
     a = exp(-tau0 / tau_c)); None when the baseline has none."""
-    mk = [e for e in model.effects if e.kind == "markov"]
-    if not mk:
+    i = low_pass_index(model)
+    if i is None:
         return None
-    tau_c, sigma = float(mk[0].params["tau_c_s"]), float(mk[0].params["sigma_dph"])
+    tau_c, sigma = float(model.effects[i].params["tau_c_s"]), float(model.effects[i].params["sigma_dph"])
     tau0 = 1.0 / float(model.sample_rate_hz)
     a = math.exp(-tau0 / tau_c)
     return {"tau_c_s": tau_c, "sigma_dph": sigma, "corner_hz": 1.0 / (2.0 * math.pi * tau_c),
