@@ -190,10 +190,10 @@ def periodic(ctx: Context) -> Candidate | None:
             a, c, gc = c, d, gd
             d = a + r * (b - a)
             gd = g(d)
-    f = c if gc > gd else d
+    f, gf = (c, gc) if gc > gd else (d, gd)
     X = cols(f)
     h = 0.02 * ctx.sample_rate_hz / n
-    curv = (2 * g(f) - g(f + h) - g(f - h)) / h ** 2
+    curv = (2 * gf - g(f + h) - g(f - h)) / h ** 2
     fit = judged_gls(ctx, ctx.wh.fft(X))
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
