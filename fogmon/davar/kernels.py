@@ -527,7 +527,7 @@ def _put(out_sums, out_counts, e, k, s, n):
 
 
 @njit(cache=True)
-def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
+def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, stats):
     """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
     buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
     least the ``w`` samples before ``first`` or starts at the record's first sample,
@@ -535,10 +535,13 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). Returns True
-    when no count changed after the first emitted row: then only row 0 of
-    ``out_counts`` is sure to be written, and it holds every row's counts (hop 1
-    without gaps writes no count per window).
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``stats``:
+    None, or (run, full, f_lo, f_hi, out_lo, out_hi) of ``frame_stats`` (one alpha run),
+    which then turns each tile's rows, while they are in the cache, into adev (in
+    ``out_sums``) and bounds. Returns (fixed, entries with gaps: ``frame_stats``'s
+    count, whose bounds the caller recomputes). ``fixed``: no count changed after the
+    first emitted row; then only row 0 of ``out_counts`` is sure to be written, and it
+    holds every row's counts (hop 1 without gaps writes no count per window).
 
     Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
     squared terms and a SIMD sum of the tile's change, added to the compensated window
@@ -566,6 +569,7 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 e += 1
             p += 1
         e_head = e
+    n_gapped = _rows_stats(stats, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
     start = max(first, w)
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
@@ -580,6 +584,8 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     ks = np.empty(4, np.int64)
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
+    c_fix = np.empty((1, nm), np.int64)  # the counts of rows emitted while ``fixed``
+    rows = np.empty((_TILE if stats is not None else 0, nm))  # a dense tile's sums, with ``stats``
     e_tile = e_head
     fixed = True  # no count changed since the first emitted row: dense tiles write no counts
     for t0 in range(start, stop, _TILE):
@@ -636,12 +642,32 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 if not dense:
                     _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
                                cnt)
+        src = out_sums[e_tile:e_end]
         if dense:
-            _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
+            if stats is not None:  # the sums go to ``rows``, adev and bounds to the output rows
+                src = rows[:e_end - e_tile]
+            _emit_rows(w_at, n_at, 0, nm, t0, 0, e_end - e_tile, emit_pos[e_tile:e_end], src,
+                       out_counts[e_tile:e_end], fixed, cnt)
+        if stats is not None:
+            for k in range(nm):
+                c_fix[0, k] = cnt[k] & _LOW
+            n_gapped += _rows_stats(stats, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
         e_tile = e_end
     if fixed and e_tile > 0:
         _unfix(out_counts, 0, 1, cnt)
-    return fixed
+    return fixed, n_gapped
+
+
+@njit(cache=True)
+def _rows_stats(stats, sums, counts, out_adev, e0):
+    """``frame_stats`` of the windows' ``sums`` (rows) into rows e0 .. of ``out_adev``
+    and ``stats``' lo and hi (``stats`` and return value: see ``stream_update``; 0 when
+    ``stats`` is None)."""
+    if stats is None:
+        return 0
+    run, full, f_lo, f_hi, out_lo, out_hi = stats
+    e1 = e0 + sums.shape[0]
+    return frame_stats(sums, counts, run, full, f_lo, f_hi, out_adev[e0:e1], out_lo[e0:e1], out_hi[e0:e1])
 
 
 @njit(cache=True)
@@ -1000,33 +1026,30 @@ def model_holds(model, sums, counts, m, hold_z):
 def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms) and bounds from the gap-free chi2 factors of the row's alpha run, into
-    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``counts`` may be one row for all);
-    returns the number of entries with fewer than ``full`` terms, whose bounds the
-    caller recomputes. A row with every count full divides by 2 full (the same values,
-    no int-to-float conversion per entry); inner loops branch-free (SIMD)."""
+    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``adev`` may be ``sums`` itself, at
+    the cost of the SIMD loop: its alias check fails;
+    ``counts`` may be one row for all); returns the number of entries with fewer than
+    ``full`` terms, whose bounds the caller recomputes. 1 / (2 count) is formed first,
+    once per row of counts, so the inner loop multiplies, branch-free (SIMD; a division
+    per entry, or forming it inside the loop, ran it 2 x slower)."""
     nt, nm = sums.shape
-    two_full = 2.0 * full
-    last = counts.shape[0] - 1
+    inv = np.empty((counts.shape[0], nm))
     n_gapped = 0
+    for i in range(counts.shape[0]):
+        c = counts[i]
+        for k in range(nm):
+            inv[i, k] = 1.0 / (2.0 * c[k])  # 1 / 0 = inf: NaN below
+            n_gapped += c[k] != full[k]
+    last = counts.shape[0] - 1
+    if last == 0:
+        n_gapped *= nt
     for i in range(nt):
         r = run[i]
-        fl, fh = f_lo[r], f_hi[r]
-        s, c = sums[i], counts[min(i, last)]
-        a_row, l_row, h_row = adev[i], lo[i], hi[i]
-        gapped = 0
+        fl, fh, iv = f_lo[r], f_hi[r], inv[min(i, last)]
+        s, a_row, l_row, h_row = sums[i], adev[i], lo[i], hi[i]
         for k in range(nm):
-            gapped += c[k] != full[k]
-        n_gapped += gapped
-        if gapped:
-            for k in range(nm):
-                a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
-                a_row[k] = a
-                l_row[k] = a * fl[k]
-                h_row[k] = a * fh[k]
-        else:
-            for k in range(nm):
-                a = np.sqrt(max(s[k], 0.0) / two_full[k])
-                a_row[k] = a
-                l_row[k] = a * fl[k]
-                h_row[k] = a * fh[k]
+            a = np.sqrt(max(s[k], 0.0) * iv[k])
+            a_row[k] = a
+            l_row[k] = a * fl[k]
+            h_row[k] = a * fh[k]
     return n_gapped
