@@ -116,7 +116,7 @@ class StreamingDadev:
             # running sums and a fixed noise type: the kernel turns the sums into adev and
             # bounds tile by tile while they are in the cache (see kernels.stream_update)
             edf_gapless, f_lo, f_hi = gapless_tables(self.alpha, self.m, w, self.confidence)
-            ends, adev, counts, lo, hi, n_gapped = self._run(rate_dph, valid, (f_lo, f_hi))
+            ends, adev, counts, (lo, hi), n_gapped = self._run(rate_dph, valid, (f_lo, f_hi))
             edf = gapped_edf(adev, lo, hi, counts, edf_gapless, np.zeros(len(ends), np.int64), n_gapped, self.m, w,
                              self.confidence)
             return self._result(ends, adev, lo, hi, edf, counts)
@@ -128,7 +128,8 @@ class StreamingDadev:
         return self._frames(ends, sums, counts, alpha)
 
     def _frames(self, ends, sums, counts, alpha) -> DadevResult:
-        return self._result(ends, *statistics(sums, counts, self.m, self.window_n, alpha, self.confidence), counts)
+        adev, lo, hi, edf = statistics(sums, counts, self.m, self.window_n, alpha, self.confidence)
+        return self._result(ends, adev, lo, hi, edf, counts)
 
     def _result(self, ends, adev, lo, hi, edf, counts) -> DadevResult:
         w = self.window_n
@@ -144,10 +145,10 @@ class StreamingDadev:
         (2 counts)."""
         return self._run(rate_dph, valid, None)[:3]
 
-    def _run(self, rate_dph, valid, stats):
+    def _run(self, rate_dph, valid, stats: tuple[np.ndarray, np.ndarray] | None):
         """``advance``; with ``stats`` = (f_lo, f_hi) (the gap-free chi2 factors of a
         fixed noise type, running sums only) the kernel returns adev in place of the sums:
-        (end_index, adev, counts, lo, hi, entries with gaps; see kernels.stream_update)."""
+        (end_index, adev, counts, (lo, hi), entries with gaps; see kernels.stream_update)."""
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
@@ -163,11 +164,8 @@ class StreamingDadev:
         # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
         block = np.empty((2 if stats is None else 4, len(ends), len(self.m)))
         sums, counts = block[0], block[1].view(np.int64)
-        lo = hi = None
+        bounds = block[2:]  # lo and hi with ``stats`` (else empty)
         n_gapped = 0
-        if stats is not None:
-            lo, hi = block[2], block[3]
-            frame = np.zeros(len(ends), np.int64), w - 2 * self.m + 1, stats[0], stats[1]
         i = row = 0
         spans = []  # running sums: row spans whose counts are all in their first row (see kernels.stream_update)
         while i < len(y):
@@ -200,7 +198,8 @@ class StreamingDadev:
                 fixed, gapped = kernels.stream_update(
                     self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
                     ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end],
-                    None if stats is None else frame + (lo[row:row_end], hi[row:row_end]))
+                    None if stats is None else (np.zeros(row_end - row, np.int64), w - 2 * self.m + 1, *stats,
+                                                bounds[0, row:row_end], bounds[1, row:row_end]))
                 n_gapped += gapped
                 if fixed and row_end > row:
                     spans.append((row, row_end))
@@ -215,7 +214,7 @@ class StreamingDadev:
                 counts[a + 1:b] = counts[a]
         n = self._base + self._len
         self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop_n) * self.hop_n
-        return ends, sums, counts, lo, hi, n_gapped
+        return ends, sums, counts, bounds, n_gapped
 
     def current(self) -> AdevResult:
         """Overlapping ADEV of the current (possibly still filling) window, whatever the
