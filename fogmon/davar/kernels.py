@@ -574,10 +574,11 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
     dn = np.empty((4, _TILE), np.int64)
-    # per tau, the sums and encoded counts of the windows a tile emits (rows padded: a
-    # stride of a power of two maps a column's values to one cache set)
-    w_at = np.empty((nm, _TILE + 8))
-    n_at = np.empty((nm, _TILE + 8), np.int64)
+    # per tile sample, the sums and encoded counts per tau of the window it emits: the
+    # layout of the output rows, so a dense tile's rows are copied (or, with ``stats``,
+    # read by frame_stats) whole
+    w_at = np.empty((_TILE, nm))
+    n_at = np.empty((_TILE, nm), np.int64)
     tot = np.empty(4)
     grow = np.empty(4)
     bnd = np.empty(4)
@@ -585,7 +586,6 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
     c_fix = np.empty((1, nm), np.int64)  # the counts of rows emitted while ``fixed``
-    rows = np.empty((_TILE if stats is not None else 0, nm))  # a dense tile's sums, with ``stats``
     e_tile = e_head
     fixed = True  # no count changed since the first emitted row: dense tiles write no counts
     for t0 in range(start, stop, _TILE):
@@ -609,17 +609,18 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 grow[j] = 3.0 * n * _EPS * mag
                 plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
             if fixed and has_dn:  # counts change from here on
-                fixed = _unfix(out_counts, e_head, e_tile, cnt)
-            # dn is read by the emission scan and the exact path: zero the unwritten rows
-            for j in range(4 if has_dn or not plain or e_end > e_tile else 0):
+                fixed = _unfix(out_counts, e_head, e_tile, cnt, n_at, g, n)
+            # dn is read by the emission scans when a tau has count changes (and by the
+            # exact path, see below): zero the unwritten rows
+            for j in range(4 if has_dn else 0):
                 if not wrote[j]:
                     dn[j, :n] = 0
             if plain and (has_dn or e_end > e_tile):  # the bound must also hold at every emitted window
                 for j in range(4):
                     bnd[j] = err[ks[j]] + grow[j]
                 if dense:
-                    plain = _scan_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
-                                        cnt, w_at, n_at)
+                    plain = _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s,
+                                        sum_c, cnt, w_at, n_at)
                 else:
                     plain = _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
                                         cnt, out_sums, out_counts)
@@ -636,25 +637,27 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                         k = ks[j]
                         s, c, n_k, err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
                         if fixed and n_k != cnt[k]:
-                            fixed = _unfix(out_counts, e_head, e_tile, cnt)
+                            fixed = _unfix(out_counts, e_head, e_tile, cnt, n_at, g, n)
                         sum_s[k], sum_c[k], cnt[k] = s, c, n_k
+                if not has_dn:
+                    dn[:, :n] = 0
                 _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at)
                 if not dense:
                     _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
                                cnt)
         src = out_sums[e_tile:e_end]
-        if dense:
-            if stats is not None:  # the sums go to ``rows``, adev and bounds to the output rows
-                src = rows[:e_end - e_tile]
-            _emit_rows(w_at, n_at, 0, nm, t0, 0, e_end - e_tile, emit_pos[e_tile:e_end], src,
-                       out_counts[e_tile:e_end], fixed, cnt)
-        if stats is not None:
-            for k in range(nm):
-                c_fix[0, k] = cnt[k] & _LOW
-            n_gapped += _rows_stats(stats, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
+        huge = False
+        for k in range(nm):
+            c_fix[0, k] = cnt[k] & _LOW
+            huge |= cnt[k] >= _FLAG
+        if dense and stats is not None and fixed and not huge:  # frame_stats reads the sums in w_at
+            src = w_at[emit_pos[e_tile] - t0:emit_pos[e_end - 1] - t0 + 1]
+        elif dense:
+            _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
+        n_gapped += _rows_stats(stats, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
         e_tile = e_end
     if fixed and e_tile > 0:
-        _unfix(out_counts, 0, 1, cnt)
+        _unfix(out_counts, 0, 1, cnt, n_at, 0, 0)
     return fixed, n_gapped
 
 
@@ -671,13 +674,17 @@ def _rows_stats(stats, sums, counts, out_adev, e0):
 
 
 @njit(cache=True)
-def _unfix(out_counts, e0, e1, cnt):
+def _unfix(out_counts, e0, e1, cnt, n_at, k1, n):
     """Write the counts ``cnt`` (encoded) to rows e0 .. e1 - 1, which were emitted while
-    no count changed (and so without them). Returns False."""
+    no count changed (and so without them), and to the tile's ``n_at[:n, :k1]`` (the
+    taus scanned before the change, which wrote none). Returns False."""
     for e in range(e0, e1):
         c_row = out_counts[e]
         for k in range(c_row.shape[0]):
             c_row[k] = cnt[k] & _LOW
+    for i in range(n):
+        for k in range(k1):
+            n_at[i, k] = cnt[k]
     return False
 
 
@@ -725,11 +732,12 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
 
 
 @njit(cache=True)
-def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
+def _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
     """``_emit_plain`` for a tile in which every sample from the first emission (e0 <
     e1) to the last emits (hop 1): the running sums at these samples go to ``w_at``,
-    the counts to ``n_at`` (see ``_emit_rows``), by a branch-free scan of four
-    independent chains; then the bound is checked at the least emitted sum per slot."""
+    the counts to ``n_at`` (none while the counts are ``fixed`` and ``dn`` is zero; see
+    ``_emit_rows``), by a branch-free scan of four independent chains, which also
+    track the least emitted sum per slot for the bound check."""
     k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
     s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
     c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
@@ -743,17 +751,20 @@ def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
         p2 += xi[2, i] - xo[2, i]
         p3 += xi[3, i] - xo[3, i]
     # slices: a loop counter from 0 indexes them without wrap-around checks
-    a0, a1, a2, a3 = w_at[k0, i0:i1], w_at[k1, i0:i1], w_at[k2, i0:i1], w_at[k3, i0:i1]
     x0, x1, x2, x3 = xi[0, i0:i1], xi[1, i0:i1], xi[2, i0:i1], xi[3, i0:i1]
     o0, o1, o2, o3 = xo[0, i0:i1], xo[1, i0:i1], xo[2, i0:i1], xo[3, i0:i1]
+    rows = w_at[i0:i1]
+    m0 = m1 = m2 = m3 = np.inf
     for i in range(i1 - i0):
         p0 += x0[i] - o0[i]
         p1 += x1[i] - o1[i]
         p2 += x2[i] - o2[i]
         p3 += x3[i] - o3[i]
-        a0[i], a1[i], a2[i], a3[i] = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
-    if not (_within(bnd[0], a0.min()) and _within(bnd[1], a1.min()) and _within(bnd[2], a2.min())
-            and _within(bnd[3], a3.min())):
+        w0, w1, w2, w3 = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
+        row = rows[i]
+        row[k0], row[k1], row[k2], row[k3] = w0, w1, w2, w3
+        m0, m1, m2, m3 = min(m0, w0), min(m1, w1), min(m2, w2), min(m3, w3)
+    if not (_within(bnd[0], m0) and _within(bnd[1], m1) and _within(bnd[2], m2) and _within(bnd[3], m3)):
         return False
     if has_dn:
         for i in range(n):
@@ -761,9 +772,10 @@ def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
             n1 += dn[1, i]
             n2 += dn[2, i]
             n3 += dn[3, i]
-            n_at[k0, i], n_at[k1, i], n_at[k2, i], n_at[k3, i] = n0, n1, n2, n3
-    else:
-        n_at[k0, i0:i1], n_at[k1, i0:i1], n_at[k2, i0:i1], n_at[k3, i0:i1] = n0, n1, n2, n3
+            n_at[i, k0], n_at[i, k1], n_at[i, k2], n_at[i, k3] = n0, n1, n2, n3
+    elif not fixed:
+        for i in range(i0, i1):
+            n_at[i, k0], n_at[i, k1], n_at[i, k2], n_at[i, k3] = n0, n1, n2, n3
     # slots past the last tau repeat it with the same values
     cnt[k3], cnt[k2], cnt[k1], cnt[k0] = n3, n2, n1, n0
     return True
@@ -779,7 +791,7 @@ def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, f
     c_fix = cnt[k0:k1]
     for e in range(e0, e1):
         i = emit_pos[e] - t0
-        w_i, n_i, s_row, c_row = w_at[k0:k1, i], n_at[k0:k1, i], out_sums[e, k0:k1], out_counts[e, k0:k1]
+        w_i, n_i, s_row, c_row = w_at[i, k0:k1], n_at[i, k0:k1], out_sums[e, k0:k1], out_counts[e, k0:k1]
         if fixed:
             for k in range(k1 - k0):
                 s_row[k] = w_i[k] if c_fix[k] < _FLAG else np.inf
@@ -813,8 +825,8 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
             c += r + de
             n_ += dn[j, i]
             if e < e1 and emit_pos[e] == t0 + i:
-                w_at[k, i] = s + c
-                n_at[k, i] = n_
+                w_at[i, k] = s + c
+                n_at[i, k] = n_
                 e += 1
         sum_s[k] = s
         sum_c[k] = c
