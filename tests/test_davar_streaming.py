@@ -90,6 +90,39 @@ def test_hop_1_counts_are_one_row_in_a_block_where_none_changes():
     assert [b.n_terms.strides[0] == 0 for b in blocks] == [True] * 4 + [False, False, True, False]
 
 
+@pytest.mark.parametrize("hop", [1, 5])
+def test_fixed_alpha_push_statistics_equal_batch_at_small_hops(hop):
+    """With a fixed alpha at running-sum hops the kernel turns the sums into adev and
+    bounds tile by tile (kernels.stream_update's ``stats``): adev, bounds, EDF and counts
+    equal the batch engine's, through gaps (a short one, and one longer than the
+    blocks, whose windows keep the same reduced counts), a huge sample, and a large
+    glitch whose leaving forces exact recomputes; adev equals the engine's own sums
+    (``advance``, the same blocks)."""
+    n, w = 30000, 2048
+    y = rate(n, 13)
+    valid = np.ones(n, bool)
+    valid[6000:6003] = False
+    valid[12000:12100] = False
+    y[17000] += 3e7
+    y[24000] = np.inf
+    engine = StreamingDadev(1.0, w, taus=12, hop_s=hop, alpha=-1)
+    got = stream(engine, y, valid, seed=4)
+    ref = dadev(y, 1.0, w, hop, valid=valid, taus=12, alpha=-1)
+    assert np.array_equal(got["n_terms"], ref.n_terms)
+    for k in ("adev_dph", "lo_dph", "hi_dph", "edf"):
+        want = getattr(ref, k)
+        assert np.array_equal(np.isnan(got[k]), np.isnan(want)) and np.array_equal(np.isinf(got[k]), np.isinf(want))
+        ok = np.isfinite(want)
+        assert np.max(np.abs(got[k][ok] / want[ok] - 1)) <= 1e-9, k
+    assert np.isinf(got["adev_dph"]).any() and (got["n_terms"] < ref.n_terms.max(axis=0)).any()
+    fused, plain = (StreamingDadev(1.0, w, taus=12, hop_s=hop, alpha=-1) for _ in range(2))
+    adev = np.concatenate([fused.push(y[i:i + 4096], valid[i:i + 4096]).adev_dph for i in range(0, n, 4096)])
+    sums, counts = (np.concatenate(x) for x in zip(*[plain.advance(y[i:i + 4096], valid[i:i + 4096])[1:]
+                                                     for i in range(0, n, 4096)], strict=True))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        np.testing.assert_allclose(adev, np.sqrt(sums / (2.0 * counts)), rtol=1e-15)
+
+
 def test_hop_longer_than_the_window():
     n = 20000
     y = rate(n, 4)

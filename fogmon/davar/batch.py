@@ -158,17 +158,36 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     # box them), in one block: freed together, the next call's block reuses the memory
     # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
     adev, lo, hi = np.empty((3,) + sums.shape)
-    full = n_samples - 2 * m + 1
     # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
-    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts, run, full, f_lo, f_hi,
-                                   adev, lo, hi)
-    # one noise-type row and no gap: every window's EDF is the gap-free row (a read-only broadcast)
-    edf = np.broadcast_to(edf_gapless[0], sums.shape) if n_gapped == 0 and len(tables) == 1 else edf_gapless[run]
+    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts, run,
+                                   n_samples - 2 * m + 1, f_lo, f_hi, adev, lo, hi)
+    edf = gapped_edf(adev, lo, hi, counts, edf_gapless, run, n_gapped, m, n_samples, confidence)
+    return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))
+
+
+def gapless_tables(alpha, m, n_samples: int, confidence: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gap-free EDF per tau and the chi2 factors lo / adev, hi / adev, each (1, M), for
+    one noise-type row ``alpha`` (int, per tau m) of windows of ``n_samples``."""
+    a = np.ascontiguousarray(np.broadcast_to(alpha, np.shape(m)), dtype=np.int64)
+    tables = _gapless_tables(a.tobytes(), np.ascontiguousarray(m, dtype=np.int64).tobytes(), int(n_samples),
+                             float(confidence))
+    return tuple(t.reshape(1, -1) for t in tables)
+
+
+def gapped_edf(adev, lo, hi, counts, edf_gapless, run, n_gapped: int, m, n_samples: int, confidence: float):
+    """EDF per window x tau (shape of ``adev``) after ``kernels.frame_stats``: each row
+    the gap-free row ``edf_gapless[run]`` (a read-only broadcast when one row holds for
+    all and no entry has a gap); the ``n_gapped`` entries with fewer terms than a
+    gap-free window get their effective EDF and their bounds lo, hi recomputed (in place)."""
+    if n_gapped == 0 and len(edf_gapless) == 1:
+        return np.broadcast_to(edf_gapless[0], adev.shape)
+    edf = edf_gapless[run]
     if n_gapped:
-        gapped = counts != full
+        counts = np.broadcast_to(counts, adev.shape)
+        gapped = counts != n_samples - 2 * np.asarray(m) + 1
         edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])
         lo[gapped], hi[gapped] = chi2_bounds(adev[gapped], edf[gapped], confidence)
-    return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))
+    return edf
 
 
 def oadev(rate_dph, sample_rate_hz: float, taus="octave", valid=None, confidence: float = CONFIDENCE,

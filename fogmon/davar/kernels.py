@@ -527,7 +527,7 @@ def _put(out_sums, out_counts, e, k, s, n):
 
 
 @njit(cache=True)
-def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
+def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, stats):
     """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
     buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
     least the ``w`` samples before ``first`` or starts at the record's first sample,
@@ -535,10 +535,13 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). Returns True
-    when no count changed after the first emitted row: then only row 0 of
-    ``out_counts`` is sure to be written, and it holds every row's counts (hop 1
-    without gaps writes no count per window).
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``stats``:
+    None, or (run, full, f_lo, f_hi, out_lo, out_hi) of ``frame_stats`` (one alpha run),
+    which then turns each tile's rows, while they are in the cache, into adev (in
+    ``out_sums``) and bounds. Returns (fixed, entries with gaps: ``frame_stats``'s
+    count, whose bounds the caller recomputes). ``fixed``: no count changed after the
+    first emitted row; then only row 0 of ``out_counts`` is sure to be written, and it
+    holds every row's counts (hop 1 without gaps writes no count per window).
 
     Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
     squared terms and a SIMD sum of the tile's change, added to the compensated window
@@ -566,20 +569,23 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 e += 1
             p += 1
         e_head = e
+    n_gapped = _rows_stats(stats, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
     start = max(first, w)
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
     dn = np.empty((4, _TILE), np.int64)
-    # per tau, the sums and encoded counts of the windows a tile emits (rows padded: a
-    # stride of a power of two maps a column's values to one cache set)
-    w_at = np.empty((nm, _TILE + 8))
-    n_at = np.empty((nm, _TILE + 8), np.int64)
+    # per tile sample, the sums and encoded counts per tau of the window it emits: the
+    # layout of the output rows, so a dense tile's rows are copied (or, with ``stats``,
+    # read by frame_stats) whole
+    w_at = np.empty((_TILE, nm))
+    n_at = np.empty((_TILE, nm), np.int64)
     tot = np.empty(4)
     grow = np.empty(4)
     bnd = np.empty(4)
     ks = np.empty(4, np.int64)
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
+    c_fix = np.empty((1, nm), np.int64)  # the counts of rows emitted while ``fixed``
     e_tile = e_head
     fixed = True  # no count changed since the first emitted row: dense tiles write no counts
     for t0 in range(start, stop, _TILE):
@@ -603,17 +609,18 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 grow[j] = 3.0 * n * _EPS * mag
                 plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
             if fixed and has_dn:  # counts change from here on
-                fixed = _unfix(out_counts, e_head, e_tile, cnt)
-            # dn is read by the emission scan and the exact path: zero the unwritten rows
-            for j in range(4 if has_dn or not plain or e_end > e_tile else 0):
+                fixed = _unfix(out_counts, e_head, e_tile, cnt, n_at, g, n)
+            # dn is read by the emission scans when a tau has count changes (and by the
+            # exact path, see below): zero the unwritten rows
+            for j in range(4 if has_dn else 0):
                 if not wrote[j]:
                     dn[j, :n] = 0
             if plain and (has_dn or e_end > e_tile):  # the bound must also hold at every emitted window
                 for j in range(4):
                     bnd[j] = err[ks[j]] + grow[j]
                 if dense:
-                    plain = _scan_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
-                                        cnt, w_at, n_at)
+                    plain = _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s,
+                                        sum_c, cnt, w_at, n_at)
                 else:
                     plain = _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
                                         cnt, out_sums, out_counts)
@@ -630,28 +637,54 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                         k = ks[j]
                         s, c, n_k, err[k] = window_sum(pre, t0 - w, w, ms[k], scratch, True)
                         if fixed and n_k != cnt[k]:
-                            fixed = _unfix(out_counts, e_head, e_tile, cnt)
+                            fixed = _unfix(out_counts, e_head, e_tile, cnt, n_at, g, n)
                         sum_s[k], sum_c[k], cnt[k] = s, c, n_k
+                if not has_dn:
+                    dn[:, :n] = 0
                 _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at)
                 if not dense:
                     _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
                                cnt)
-        if dense:
+        src = out_sums[e_tile:e_end]
+        huge = False
+        for k in range(nm):
+            c_fix[0, k] = cnt[k] & _LOW
+            huge |= cnt[k] >= _FLAG
+        if dense and stats is not None and fixed and not huge:  # frame_stats reads the sums in w_at
+            src = w_at[emit_pos[e_tile] - t0:emit_pos[e_end - 1] - t0 + 1]
+        elif dense:
             _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
+        n_gapped += _rows_stats(stats, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
         e_tile = e_end
     if fixed and e_tile > 0:
-        _unfix(out_counts, 0, 1, cnt)
-    return fixed
+        _unfix(out_counts, 0, 1, cnt, n_at, 0, 0)
+    return fixed, n_gapped
 
 
 @njit(cache=True)
-def _unfix(out_counts, e0, e1, cnt):
+def _rows_stats(stats, sums, counts, out_adev, e0):
+    """``frame_stats`` of the windows' ``sums`` (rows) into rows e0 .. of ``out_adev``
+    and ``stats``' lo and hi (``stats`` and return value: see ``stream_update``; 0 when
+    ``stats`` is None)."""
+    if stats is None:
+        return 0
+    run, full, f_lo, f_hi, out_lo, out_hi = stats
+    e1 = e0 + sums.shape[0]
+    return frame_stats(sums, counts, run, full, f_lo, f_hi, out_adev[e0:e1], out_lo[e0:e1], out_hi[e0:e1])
+
+
+@njit(cache=True)
+def _unfix(out_counts, e0, e1, cnt, n_at, k1, n):
     """Write the counts ``cnt`` (encoded) to rows e0 .. e1 - 1, which were emitted while
-    no count changed (and so without them). Returns False."""
+    no count changed (and so without them), and to the tile's ``n_at[:n, :k1]`` (the
+    taus scanned before the change, which wrote none). Returns False."""
     for e in range(e0, e1):
         c_row = out_counts[e]
         for k in range(c_row.shape[0]):
             c_row[k] = cnt[k] & _LOW
+    for i in range(n):
+        for k in range(k1):
+            n_at[i, k] = cnt[k]
     return False
 
 
@@ -699,11 +732,12 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
 
 
 @njit(cache=True)
-def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
+def _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
     """``_emit_plain`` for a tile in which every sample from the first emission (e0 <
     e1) to the last emits (hop 1): the running sums at these samples go to ``w_at``,
-    the counts to ``n_at`` (see ``_emit_rows``), by a branch-free scan of four
-    independent chains; then the bound is checked at the least emitted sum per slot."""
+    the counts to ``n_at`` (none while the counts are ``fixed`` and ``dn`` is zero; see
+    ``_emit_rows``), by a branch-free scan of four independent chains, which also
+    track the least emitted sum per slot for the bound check."""
     k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
     s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
     c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
@@ -717,17 +751,20 @@ def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
         p2 += xi[2, i] - xo[2, i]
         p3 += xi[3, i] - xo[3, i]
     # slices: a loop counter from 0 indexes them without wrap-around checks
-    a0, a1, a2, a3 = w_at[k0, i0:i1], w_at[k1, i0:i1], w_at[k2, i0:i1], w_at[k3, i0:i1]
     x0, x1, x2, x3 = xi[0, i0:i1], xi[1, i0:i1], xi[2, i0:i1], xi[3, i0:i1]
     o0, o1, o2, o3 = xo[0, i0:i1], xo[1, i0:i1], xo[2, i0:i1], xo[3, i0:i1]
+    rows = w_at[i0:i1]
+    m0 = m1 = m2 = m3 = np.inf
     for i in range(i1 - i0):
         p0 += x0[i] - o0[i]
         p1 += x1[i] - o1[i]
         p2 += x2[i] - o2[i]
         p3 += x3[i] - o3[i]
-        a0[i], a1[i], a2[i], a3[i] = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
-    if not (_within(bnd[0], a0.min()) and _within(bnd[1], a1.min()) and _within(bnd[2], a2.min())
-            and _within(bnd[3], a3.min())):
+        w0, w1, w2, w3 = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
+        row = rows[i]
+        row[k0], row[k1], row[k2], row[k3] = w0, w1, w2, w3
+        m0, m1, m2, m3 = min(m0, w0), min(m1, w1), min(m2, w2), min(m3, w3)
+    if not (_within(bnd[0], m0) and _within(bnd[1], m1) and _within(bnd[2], m2) and _within(bnd[3], m3)):
         return False
     if has_dn:
         for i in range(n):
@@ -735,9 +772,10 @@ def _scan_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
             n1 += dn[1, i]
             n2 += dn[2, i]
             n3 += dn[3, i]
-            n_at[k0, i], n_at[k1, i], n_at[k2, i], n_at[k3, i] = n0, n1, n2, n3
-    else:
-        n_at[k0, i0:i1], n_at[k1, i0:i1], n_at[k2, i0:i1], n_at[k3, i0:i1] = n0, n1, n2, n3
+            n_at[i, k0], n_at[i, k1], n_at[i, k2], n_at[i, k3] = n0, n1, n2, n3
+    elif not fixed:
+        for i in range(i0, i1):
+            n_at[i, k0], n_at[i, k1], n_at[i, k2], n_at[i, k3] = n0, n1, n2, n3
     # slots past the last tau repeat it with the same values
     cnt[k3], cnt[k2], cnt[k1], cnt[k0] = n3, n2, n1, n0
     return True
@@ -753,7 +791,7 @@ def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, f
     c_fix = cnt[k0:k1]
     for e in range(e0, e1):
         i = emit_pos[e] - t0
-        w_i, n_i, s_row, c_row = w_at[k0:k1, i], n_at[k0:k1, i], out_sums[e, k0:k1], out_counts[e, k0:k1]
+        w_i, n_i, s_row, c_row = w_at[i, k0:k1], n_at[i, k0:k1], out_sums[e, k0:k1], out_counts[e, k0:k1]
         if fixed:
             for k in range(k1 - k0):
                 s_row[k] = w_i[k] if c_fix[k] < _FLAG else np.inf
@@ -787,8 +825,8 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
             c += r + de
             n_ += dn[j, i]
             if e < e1 and emit_pos[e] == t0 + i:
-                w_at[k, i] = s + c
-                n_at[k, i] = n_
+                w_at[i, k] = s + c
+                n_at[i, k] = n_
                 e += 1
         sum_s[k] = s
         sum_c[k] = c
@@ -1000,33 +1038,30 @@ def model_holds(model, sums, counts, m, hold_z):
 def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms) and bounds from the gap-free chi2 factors of the row's alpha run, into
-    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``counts`` may be one row for all);
-    returns the number of entries with fewer than ``full`` terms, whose bounds the
-    caller recomputes. A row with every count full divides by 2 full (the same values,
-    no int-to-float conversion per entry); inner loops branch-free (SIMD)."""
+    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``adev`` may be ``sums`` itself, at
+    2.8 x the time, measured: the vectorised loop wants them apart;
+    ``counts`` may be one row for all); returns the number of entries with fewer than
+    ``full`` terms, whose bounds the caller recomputes. 1 / (2 count) is formed first,
+    once per row of counts, so the inner loop multiplies, branch-free (SIMD; a division
+    per entry, or forming it inside the loop, ran it 2 x slower)."""
     nt, nm = sums.shape
-    two_full = 2.0 * full
-    last = counts.shape[0] - 1
+    inv = np.empty((counts.shape[0], nm))
     n_gapped = 0
+    for i in range(counts.shape[0]):
+        c = counts[i]
+        for k in range(nm):
+            inv[i, k] = 1.0 / (2.0 * c[k])  # 1 / 0 = inf: NaN below
+            n_gapped += c[k] != full[k]
+    last = counts.shape[0] - 1
+    if last == 0:
+        n_gapped *= nt
     for i in range(nt):
         r = run[i]
-        fl, fh = f_lo[r], f_hi[r]
-        s, c = sums[i], counts[min(i, last)]
-        a_row, l_row, h_row = adev[i], lo[i], hi[i]
-        gapped = 0
+        fl, fh, iv = f_lo[r], f_hi[r], inv[min(i, last)]
+        s, a_row, l_row, h_row = sums[i], adev[i], lo[i], hi[i]
         for k in range(nm):
-            gapped += c[k] != full[k]
-        n_gapped += gapped
-        if gapped:
-            for k in range(nm):
-                a = np.sqrt(max(s[k], 0.0) / (2.0 * c[k]))  # 0 / 0 = NaN without terms
-                a_row[k] = a
-                l_row[k] = a * fl[k]
-                h_row[k] = a * fh[k]
-        else:
-            for k in range(nm):
-                a = np.sqrt(max(s[k], 0.0) / two_full[k])
-                a_row[k] = a
-                l_row[k] = a * fl[k]
-                h_row[k] = a * fh[k]
+            a = np.sqrt(max(s[k], 0.0) * iv[k])
+            a_row[k] = a
+            l_row[k] = a * fl[k]
+            h_row[k] = a * fh[k]
     return n_gapped

@@ -26,7 +26,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.davar import kernels
-from fogmon.davar.batch import _prepare, _samples, alpha_rows, row_alpha, statistics
+from fogmon.davar.batch import _prepare, _samples, alpha_rows, gapless_tables, gapped_edf, row_alpha, statistics
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 
@@ -111,17 +111,28 @@ class StreamingDadev:
                     self._empty = self._frames(np.zeros(0, np.int64), np.zeros((0, len(self.m))),
                                                np.zeros((0, len(self.m)), np.int64), 0)
                 return self._empty
+        w = self.window_n
+        if self.alpha is not None and not self._recorded:
+            # running sums and a fixed noise type: the kernel turns the sums into adev and
+            # bounds tile by tile while they are in the cache (see kernels.stream_update)
+            edf_gapless, f_lo, f_hi = gapless_tables(self.alpha, self.m, w, self.confidence)
+            ends, adev, counts, (lo, hi), n_gapped = self._run(rate_dph, valid, (f_lo, f_hi))
+            edf = gapped_edf(adev, lo, hi, counts, edf_gapless, np.zeros(len(ends), np.int64), n_gapped, self.m, w,
+                             self.confidence)
+            return self._result(ends, adev, lo, hi, edf, counts)
         ends, sums, counts = self.advance(rate_dph, valid)
         alpha = self.alpha
         if alpha is None:
-            w = self.window_n
             alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop_n, w // 4),
                                                  self._alpha_prev)
         return self._frames(ends, sums, counts, alpha)
 
     def _frames(self, ends, sums, counts, alpha) -> DadevResult:
+        adev, lo, hi, edf = statistics(sums, counts, self.m, self.window_n, alpha, self.confidence)
+        return self._result(ends, adev, lo, hi, edf, counts)
+
+    def _result(self, ends, adev, lo, hi, edf, counts) -> DadevResult:
         w = self.window_n
-        adev, lo, hi, edf = statistics(sums, counts, self.m, w, alpha, self.confidence)
         return DadevResult((ends - (w - 1) / 2.0) / self.sample_rate_hz, ends, self.m / self.sample_rate_hz, self.m,
                            adev, lo, hi, edf, counts, self.sample_rate_hz, w / self.sample_rate_hz,
                            self.hop_n / self.sample_rate_hz, self.confidence)
@@ -132,6 +143,12 @@ class StreamingDadev:
         (T x M), valid-term counts (T x M; at hops below RECORD_MIN_HOP a read-only
         broadcast of one row when every window has the same)); Allan variance = sums /
         (2 counts)."""
+        return self._run(rate_dph, valid, None)[:3]
+
+    def _run(self, rate_dph, valid, stats: tuple[np.ndarray, np.ndarray] | None):
+        """``advance``; with ``stats`` = (f_lo, f_hi) (the gap-free chi2 factors of a
+        fixed noise type, running sums only) the kernel returns adev in place of the sums:
+        (end_index, adev, counts, (lo, hi), entries with gaps; see kernels.stream_update)."""
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
@@ -145,8 +162,10 @@ class StreamingDadev:
         ends = np.arange(w - 1 + k0 * self.hop_n, a0 + len(y), self.hop_n, dtype=np.int64)
         # one block for both: freed together, the next call's block reuses the memory
         # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
-        block = np.empty((2, len(ends), len(self.m)))
+        block = np.empty((2 if stats is None else 4, len(ends), len(self.m)))
         sums, counts = block[0], block[1].view(np.int64)
+        bounds = block[2:]  # lo and hi with ``stats`` (else empty)
+        n_gapped = 0
         i = row = 0
         spans = []  # running sums: row spans whose counts are all in their first row (see kernels.stream_update)
         while i < len(y):
@@ -175,10 +194,15 @@ class StreamingDadev:
                 kernels.stream_record(self._len, take, self._base, w, self.hop_n, self.m, self._pre,
                                       self._s, self._c, self._n, self._h, self._rec_s, self._rec_c, self._rec_n,
                                       self._rec_h, k0 + row, sums[row:row_end], counts[row:row_end])
-            elif kernels.stream_update(self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
-                                       ends[row:row_end] - self._base, sums[row:row_end],
-                                       counts[row:row_end]) and row_end > row:
-                spans.append((row, row_end))
+            else:
+                fixed, gapped = kernels.stream_update(
+                    self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
+                    ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end],
+                    None if stats is None else (np.zeros(row_end - row, np.int64), w - 2 * self.m + 1, *stats,
+                                                bounds[0, row:row_end], bounds[1, row:row_end]))
+                n_gapped += gapped
+                if fixed and row_end > row:
+                    spans.append((row, row_end))
             self._len += take
             i += take
             row = row_end
@@ -190,7 +214,7 @@ class StreamingDadev:
                 counts[a + 1:b] = counts[a]
         n = self._base + self._len
         self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop_n) * self.hop_n
-        return ends, sums, counts
+        return ends, sums, counts, bounds, n_gapped
 
     def current(self) -> AdevResult:
         """Overlapping ADEV of the current (possibly still filling) window, whatever the
