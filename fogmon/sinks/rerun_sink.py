@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fogmon import stopping
+from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
@@ -524,6 +524,7 @@ class RerunSink(Sink):
 
     def _setup(self, first: Block) -> None:
         """Open the streams and send the blueprint; the first block frames the ADEV view."""
+        startup.arrow_without_pandas()
         import rerun as rr
 
         info = self.info
