@@ -1,9 +1,9 @@
 """The fogmon program's start-up: the cyclic garbage collector paused while libraries load,
 and pyarrow's arrays made without importing pandas (``arrow_without_pandas``).
 
-Loading numpy, numba (its registries, scipy.linalg), Rerun, pandas and the numba kernels
+Loading numpy, numba (its registries, scipy.linalg), Rerun and the numba kernels
 allocates a few hundred thousand objects that live as long as the process, and every
-collection on the way scans them again: 0.3 CPU s of the demo replay's ~3.5.
+collection on the way scans them again: 0.3 CPU s of the demo replay (then ~3.5 CPU s).
 ``loading()`` pauses the collector over such a phase, then freezes what is alive
 (``gc.freeze``: left out of every later collection); objects freed by reference counting
 are freed as always. Only in the program's own process (``own_process``): in a program
