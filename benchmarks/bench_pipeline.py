@@ -21,11 +21,12 @@
    cold (an empty numba cache: every kernel compiled) and warm (the cache the cold run
    wrote), in CPU seconds split into import, compile, read, engine, fits, sinks
    (benchmarks/replay_split.py), the plain command's CPU time warm, and warm the CPU
-   time until the first block has reached every sink (replay_split.py --first-sample)
-   (targets: < 1 s before the first sample, < 3 s in all, fits < 10 %).
+   time until the first block has reached every sink (replay_split.py --first-sample);
+   warm figures are medians of --demo-runs interleaved runs of each (the machine is
+   shared) (targets: < 1 s before the first sample, < 3 s in all, fits < 10 %).
 
 Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--monitor-window-s 65.536] [--skip-monitor]
-       [--skip-hour] [--skip-demo] [--skip-axes] [--axes-rrd]
+       [--skip-hour] [--skip-demo] [--demo-runs 5] [--skip-axes] [--axes-rrd]
 """
 from __future__ import annotations
 
@@ -264,36 +265,48 @@ def _child_cpu_s(cmd, env) -> tuple[float, subprocess.CompletedProcess]:
     return (after.children_user - before.children_user) + (after.children_system - before.children_system), p
 
 
-def bench_demo(tmp: str) -> None:
+def _split(cmd, env) -> dict[str, float]:
+    """The ``key=value`` figures replay_split.py prints (empty, with its error, on failure)."""
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    vals = dict(line.split("=", 1) for line in p.stdout.splitlines() if "=" in line)
+    if p.returncode or vals.get("rc") != "0":
+        print(p.stderr[-2000:])
+        return {}
+    return {k: float(v) for k, v in vals.items()}
+
+
+def bench_demo(tmp: str, runs: int) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": os.path.join(tmp, "numba_cache")}
     rrd = os.path.join(tmp, "demo.rrd")
-    print(f"`fogmon replay` of {DEMO.name} (CPU s; numba cache {env['NUMBA_CACHE_DIR']}):")
+    split_cmd = [sys.executable, str(ROOT / "benchmarks" / "replay_split.py"), str(DEMO), rrd]
+    plain_cmd = [sys.executable, "-m", "fogmon", "replay", str(DEMO), "--rrd", rrd, "--no-progress", "--quiet"]
+    print(f"`fogmon replay` of {DEMO.name} (CPU s; numba cache {env['NUMBA_CACHE_DIR']}; warm: medians of {runs} "
+          f"runs of each, interleaved):")
     keys = ("import", "compile", "read", "engine", "fits", "sinks", "other", "first_read", "total")
     print("  " + " ".join(f"{k:>12s}" for k in ("run",) + keys))
-    split = {}
-    for run in ("cold", "warm"):
-        p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "replay_split.py"), str(DEMO), rrd],
-                           capture_output=True, text=True, env=env)
-        vals = dict(line.split("=", 1) for line in p.stdout.splitlines() if "=" in line)
-        if p.returncode or vals.get("rc") != "0":
-            print(p.stderr[-2000:])
-            return
-        split[run] = {k: float(vals[k]) for k in (*keys, "fit_cov")}
-        print("  " + " ".join(f"{x:>12s}" for x in [run] + [f"{split[run][k]:.2f}" for k in keys]))
-    cpu, p = _child_cpu_s([sys.executable, "-m", "fogmon", "replay", str(DEMO), "--rrd", rrd, "--no-progress",
-                           "--quiet"], env)
-    w = split["warm"]
-    print(f"  plain `fogmon replay`, warm: {cpu:.2f} CPU s (exit {p.returncode})")
-    p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "replay_split.py"), str(DEMO), rrd, "--first-sample"],
-                       capture_output=True, text=True, env=env)
-    first = float(dict(line.split("=", 1) for line in p.stdout.splitlines() if "=" in line).get("first_sample", "nan"))
-    print(f"  {'PASS' if first < 1.0 else 'FAIL'}  warm: before the first sample < 1 s: {first:.2f} s (the "
-          f"program's own order, interpreter start-up included, until the first block is in every sink)")
+    cold = _split(split_cmd, env)
+    if not cold:
+        return
+    warm: dict[str, list[float]] = {}
+    for _ in range(runs):
+        for k, v in _split(split_cmd, env).items():
+            warm.setdefault(k, []).append(v)
+        warm.setdefault("plain", []).append(_child_cpu_s(plain_cmd, env)[0])
+        warm.setdefault("first_sample", []).append(_split([*split_cmd, "--first-sample"], env)["first_sample"])
+    w = {k: float(np.median(v)) for k, v in warm.items()}
+    for run, row in (("cold", cold), ("warm", w)):
+        print("  " + " ".join(f"{x:>12s}" for x in [run] + [f"{row[k]:.2f}" for k in keys]))
+    cpu, first = w["plain"], w["first_sample"]
+    spread = {k: f"{min(warm[k]):.2f}-{max(warm[k]):.2f}" for k in ("plain", "first_sample")}
+    print(f"  plain `fogmon replay`, warm: {cpu:.2f} CPU s ({spread['plain']})")
+    print(f"  {'PASS' if first < 1.0 else 'FAIL'}  warm: before the first sample < 1 s: {first:.2f} s "
+          f"({spread['first_sample']}; the program's own order, interpreter start-up included, until the first "
+          f"block is in every sink)")
     print(f"  {'PASS' if cpu < 3.0 else 'FAIL'}  warm: whole demo < 3 s: {cpu:.2f} s")
     print(f"  {'PASS' if w['fits'] < 0.1 * w['total'] else 'FAIL'}  warm: fits < 10 % of the replay: "
           f"{100 * w['fits'] / w['total']:.1f} % ({w['fits']:.2f} s, of which {w['fit_cov']:.2f} s the cross-tau "
           f"covariance matrices, once per tau grid)")
-    print(f"  first-run cost (cold - warm): {split['cold']['total'] - w['total']:.1f} CPU s")
+    print(f"  first-run cost (cold - warm): {cold['total'] - w['total']:.1f} CPU s")
 
 
 def main() -> None:
@@ -302,6 +315,7 @@ def main() -> None:
     ap.add_argument("--skip-monitor", action="store_true")
     ap.add_argument("--skip-hour", action="store_true", help="skip the one-hour 1 kHz replay")
     ap.add_argument("--skip-demo", action="store_true", help="skip the cold/warm replay of the bundled demo")
+    ap.add_argument("--demo-runs", type=int, default=5, help="warm runs of the demo (medians printed)")
     ap.add_argument("--skip-axes", action="store_true", help="skip the three-axis replay and live measurements")
     ap.add_argument("--axes-rrd", action="store_true", help="the three-axis measurements also write an .rrd")
     ap.add_argument("--monitor-window-s", type=float, default=LIVE_WINDOW_S,
@@ -309,7 +323,7 @@ def main() -> None:
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_demo:
-            bench_demo(tmp)
+            bench_demo(tmp, a.demo_runs)
         if not a.skip_hour:
             bench_replay(tmp)
         if not a.skip_axes and not a.skip_hour:

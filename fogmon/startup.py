@@ -1,8 +1,9 @@
-"""The fogmon program's start-up: the cyclic garbage collector paused while libraries load.
+"""The fogmon program's start-up: the cyclic garbage collector paused while libraries load,
+and pyarrow's arrays made without importing pandas (``arrow_without_pandas``).
 
-Loading numpy, numba (its registries, scipy.linalg), Rerun, pandas and the numba kernels
+Loading numpy, numba (its registries, scipy.linalg), Rerun and the numba kernels
 allocates a few hundred thousand objects that live as long as the process, and every
-collection on the way scans them again: 0.3 CPU s of the demo replay's ~3.5.
+collection on the way scans them again: 0.3 CPU s of the demo replay (then ~3.5 CPU s).
 ``loading()`` pauses the collector over such a phase, then freezes what is alive
 (``gc.freeze``: left out of every later collection); objects freed by reference counting
 are freed as always. Only in the program's own process (``own_process``): in a program
@@ -12,9 +13,11 @@ garbage it has not collected yet for good.
 from __future__ import annotations
 
 import gc
+import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib.machinery import ModuleSpec
 
 #: A phase longer than this (CPU s) compiled numba kernels (tens of s on a first run):
 #: its garbage (~280 k objects, ~50 MB on the demo replay) is collected before the
@@ -50,3 +53,31 @@ def loading() -> Iterator[None]:
         gc.freeze()
         if enabled:
             gc.enable()
+
+
+class _NoPandas:
+    """A meta-path finder for which pandas cannot be imported."""
+
+    def find_spec(self, name: str, path: object = None, target: object = None) -> ModuleSpec | None:
+        if name == "pandas":
+            raise ImportError("pandas is not imported for pyarrow (fogmon.startup.arrow_without_pandas)")
+        return None
+
+
+def arrow_without_pandas() -> None:
+    """In the program's own process, before Rerun's first pyarrow array: pyarrow's first
+    ``pa.array`` call imports pandas (0.3-0.45 CPU s) only to ask whether its input is a
+    pandas object; fogmon never hands it one. This makes that first question find no
+    pandas: later calls of that kind take it as absent, and what needs pandas itself
+    (``to_pandas``, ``Table.from_pandas``) imports it then, as always. Nothing changes
+    elsewhere, or once pandas is imported."""
+    if not _own_process or "pandas" in sys.modules:
+        return
+    import pyarrow as pa
+
+    finder = _NoPandas()
+    sys.meta_path.insert(0, finder)
+    try:
+        pa.array([0])
+    finally:
+        sys.meta_path.remove(finder)

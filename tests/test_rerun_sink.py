@@ -339,6 +339,19 @@ def test_the_server_dies_with_fogmon_even_on_sigkill(process_groups):
                Path(f"/proc/{server_pid}/stat").read_text().split()[2] == "Z", "the server process is still there")
 
 
+def test_the_program_writes_an_rrd_without_importing_pandas(tmp_path):
+    """`fogmon replay --rrd` as the program runs it (its own process): Rerun's pyarrow
+    arrays do not import pandas (0.3-0.45 CPU s of start-up, fogmon.startup)."""
+    demo = Path(__file__).resolve().parents[1] / "replay_logs" / "lasergyro_z_100hz.csv"
+    rrd = tmp_path / "demo.rrd"
+    code = ("import sys\nfrom fogmon.cli import main\n"
+            f"sys.argv = ['fogmon', 'replay', {str(demo)!r}, '--rrd', {str(rrd)!r}, '--quiet', '--no-progress']\n"
+            "rc = main()\nprint('pandas' in sys.modules)\nsys.exit(rc)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.splitlines()[-1] == "False" and rrd.stat().st_size > 0
+
+
 def test_no_rrd_is_left_when_no_sample_came(tmp_path):
     fresh, kept = tmp_path / "new.rrd", tmp_path / "old.rrd"
     kept.write_bytes(b"an earlier recording")

@@ -1,5 +1,7 @@
 """fogmon.startup: the collector paused over loading phases, in the program's own process only."""
 import gc
+import subprocess
+import sys
 
 import pytest
 
@@ -34,3 +36,34 @@ def test_the_programs_own_phases_pause_then_freeze(monkeypatch, unfrozen):
         assert not gc.isenabled()      # left as it was
     finally:
         gc.enable()
+
+
+def test_the_programs_rerun_arrays_do_not_import_pandas():
+    # in a fresh process: pandas may be imported in this one
+    code = """
+import sys
+import numpy as np
+from fogmon import startup
+from fogmon.sinks import rerun_sink
+startup.own_process()
+startup.arrow_without_pandas()
+import rerun as rr
+rerun_sink.blueprint(curve_bounds=((-1, 3), (-2, 1)))
+rr.Scalars.columns(scalars=np.arange(3.0))
+assert "pandas" not in sys.modules
+import pandas as pd
+import pyarrow as pa
+t = pa.Table.from_pandas(pd.DataFrame({"c": pd.Categorical(["a", "b"])}))
+assert pa.types.is_dictionary(t.schema.field("c").type)    # pandas users are served as always
+"""
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_a_program_that_imports_fogmon_keeps_arrow_as_it_is():
+    code = """
+import sys
+from fogmon import startup
+startup.arrow_without_pandas()
+assert "pyarrow" not in sys.modules and "pandas" not in sys.modules
+"""
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -1,7 +1,8 @@
 """Rerun sink: the monitor's screen, live (gRPC) and/or headless (.rrd), rerun-sdk 0.41.
 
-Everything is on the ``time`` timeline = recording time in s (not wall clock), sent in
-columns (``send_columns``) so a 1 kHz gyro costs a few Python calls per flush.
+Everything is on the ``time`` timeline = recording time in s (not wall clock; Rerun's
+``log_time`` is off), sent in columns (``send_columns``) once per flush (FLUSH_WALL_S), so
+a 1 kHz gyro costs a few Python calls per flush and a replay a few per entity.
 Entities (units in every name; "log10" said where the value is a log):
 
 - ``rate/rate_dph`` raw rate in deg/h (and ``rate/error_dph`` = rate_dph - 3600 x rot_dps,
@@ -46,14 +47,14 @@ import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
-from typing import TYPE_CHECKING
+from functools import lru_cache, partial
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fogmon import stopping
+from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
@@ -67,10 +68,11 @@ if TYPE_CHECKING:
 DISPLAY_MAX_HZ = 100.0
 #: Columns (windows) in the DADEV heatmap image.
 HEATMAP_WINDOWS = 256
-#: Flush raw samples to Rerun at least this often (wall time, s) or every FLUSH_SAMPLES.
-#: Each flush costs ~0.4 ms of CPU per channel (Rerun's column encoding), whatever its
+#: Send what is waiting (raw samples; windows' curves, coefficients, DADEV rows; counters
+#: and events) to Rerun at least this often (wall time, s) or every FLUSH_SAMPLES raw
+#: samples, each entity's rows in one call. A call costs ~0.2-0.5 ms of CPU whatever its
 #: length: once a second keeps a live three-axis KVH's raw traces near 0.3 % of a core and
-#: still refreshes them faster than a person reads them.
+#: still refreshes the views faster than a person reads them.
 FLUSH_WALL_S = 1.0
 FLUSH_SAMPLES = 1 << 16
 #: At the end, wait at most this long (s) for Rerun to deliver everything.
@@ -447,6 +449,82 @@ class _Heat:
     scale_sent: bool = False       # the colour scale is drawn (static) in the current .rrd piece
 
 
+@dataclass
+class _Rows:
+    """One entity's rows waiting for the next flush: their times (s), their values, and
+    ``send(rec, entity, t_s, values)``, which sends them in columns."""
+
+    send: Callable[[Any, str, np.ndarray, list], None]
+    t_s: list[float] = field(default_factory=list)
+    values: list = field(default_factory=list)
+
+
+def _time_index(t_s: np.ndarray) -> list:
+    """The ``time`` index of rows at ``t_s`` (s)."""
+    import rerun as rr
+
+    return [rr.TimeColumn(TIMELINE, duration=t_s)]
+
+
+def _ui_radii(points: float, n: int) -> np.ndarray:
+    """``n`` radii of ``points`` UI points each (Rerun's negative-radius convention)."""
+    import rerun as rr
+
+    return np.full(n, rr.Radius.ui_points(points), dtype=np.float32)
+
+
+def _send_scalars(rec, entity: str, t_s: np.ndarray, values: list) -> None:
+    """Scalars rows (each row a value or equal-length values)."""
+    import rerun as rr
+
+    rec.send_columns(entity, indexes=_time_index(t_s), columns=rr.Scalars.columns(scalars=np.array(values)))
+
+
+def _send_texts(rec, entity: str, t_s: np.ndarray, values: list) -> None:
+    """TextLog rows, each (text, level)."""
+    import rerun as rr
+
+    rec.send_columns(entity, indexes=_time_index(t_s), columns=rr.TextLog.columns(
+        text=[v[0] for v in values], level=[v[1] for v in values]))
+
+
+def _send_curves(rec, entity: str, t_s: np.ndarray, values: list, colour: tuple[int, int, int]) -> None:
+    """Measured ADEV curves, each row a (k, 2) array of points: a line through them and the points."""
+    import rerun as rr
+
+    n = len(values)
+    rec.send_columns(entity, indexes=_time_index(t_s), columns=[
+        *rr.LineStrips2D.columns(strips=values, colors=[colour] * n, radii=_ui_radii(1.5, n)),
+        *rr.Points2D.columns(positions=np.concatenate(values)).partition([len(v) for v in values]),
+        *rr.Points2D.columns(colors=[colour] * n, radii=_ui_radii(3.0, n))])
+
+
+def _send_bounds(rec, entity: str, t_s: np.ndarray, values: list, colour: tuple[int, int, int]) -> None:
+    """Confidence bounds, each row (lower line, upper line)."""
+    import rerun as rr
+
+    n = len(values)
+    rec.send_columns(entity, indexes=_time_index(t_s), columns=[
+        *rr.LineStrips2D.columns(strips=[line for v in values for line in v]).partition([2] * n),
+        *rr.LineStrips2D.columns(colors=[colour] * n, radii=_ui_radii(1.0, n))])
+
+
+def _send_models(rec, entity: str, t_s: np.ndarray, values: list, colour: tuple[int, int, int]) -> None:
+    """Model curves, each row a line, or None: cleared (no model drawn in that window)."""
+    import rerun as rr
+
+    drawn = [i for i, v in enumerate(values) if v is not None]
+    cleared = [i for i, v in enumerate(values) if v is None]
+    if drawn:
+        n = len(drawn)
+        rec.send_columns(entity, indexes=_time_index(t_s[drawn]), columns=rr.LineStrips2D.columns(
+            strips=[values[i] for i in drawn], colors=[colour] * n, radii=_ui_radii(1.0, n),
+            draw_order=[40.0] * n))   # above the measured curve it follows
+    if cleared:
+        rec.send_columns(entity, indexes=_time_index(t_s[cleared]),
+                         columns=rr.Clear.columns(is_recursive=[False] * len(cleared)))
+
+
 class RerunSink(Sink):
     """Streams the pipeline into Rerun: ``rrd_path`` (file; with ``rotate`` one file per
     piece, named by fogmon.pieces: OUT-0001.rrd, ..., each a complete recording with the
@@ -473,7 +551,8 @@ class RerunSink(Sink):
         self._last_flush = time.monotonic()
         self._legend_sent = False
         self._band_alpha: float | None = None
-        self._pending_events: list[Event] = []
+        self._rows: dict[str, _Rows] = {}    # entity -> rows waiting for the next flush
+        self._pending_events: list[Event] = []   # before the first sample: entities not known yet
         if connect_url:
             _check_listening(connect_url)
         if rrd_path:
@@ -524,6 +603,7 @@ class RerunSink(Sink):
 
     def _setup(self, first: Block) -> None:
         """Open the streams and send the blueprint; the first block frames the ADEV view."""
+        startup.arrow_without_pandas()
         import rerun as rr
 
         info = self.info
@@ -541,6 +621,7 @@ class RerunSink(Sink):
         live = [rr.GrpcSink(url) for url in (self.server_url, self.connect_url) if url]
         if live:
             self.rec.live = rr.RecordingStream("fogmon", recording_id=self._recording_id)
+            self.rec.live.set_log_time_enabled(False)
             self.rec.live.set_sinks(*live, default_blueprint=self._blueprint)
         if self.rrd_path:
             self._open_piece()
@@ -554,6 +635,7 @@ class RerunSink(Sink):
         path = self._piece_path()
         assert self.rec is not None, "the streams open with the first block"
         self.rec.file = rr.RecordingStream("fogmon", recording_id=self._recording_id)
+        self.rec.file.set_log_time_enabled(False)
         self.rec.file.save(path, default_blueprint=self._blueprint)
         self.pieces.append(path)
         self._probe = None
@@ -610,7 +692,8 @@ class RerunSink(Sink):
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
-        if self.rec is None:
+        first = self.rec is None
+        if first:
             self._setup(block)
         chans = {}
         for a in self._styles:
@@ -620,51 +703,52 @@ class RerunSink(Sink):
                 chans[axis_path(a, "rate/error_dph")] = np.where(b.valid, b.error_rate_dph, np.nan)
         chans.update({f"aux/{k}": v for k, v in block.aux.items()})
         self.dec.push(block.t_s, chans)
-        if time.monotonic() - self._last_flush > FLUSH_WALL_S or self.dec.pending() >= FLUSH_SAMPLES:
-            self._flush_raw()
+        if first or time.monotonic() - self._last_flush > FLUSH_WALL_S or self.dec.pending() >= FLUSH_SAMPLES:
+            self._flush()     # the first samples at once: a viewer shows them while the kernels load
 
-    def _flush_raw(self, final: bool = False) -> None:
+    def _flush(self, final: bool = False) -> None:
+        """Send the raw samples' completed display bins (all with ``final``) and every
+        entity's waiting rows."""
         import rerun as rr
 
         self._last_flush = time.monotonic()
+        assert self.rec is not None, "the streams open with the first block"
         t, vals = self.dec.take(final)
-        if not len(t):
-            return
         for ent, v in vals.items():
             ok = np.isfinite(v)
-            if not ok.any():
-                continue
-            assert self.rec is not None, "the streams open with the first block"
-            self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
-                                  columns=rr.Scalars.columns(scalars=v[ok]))
+            if ok.any():
+                self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
+                                      columns=rr.Scalars.columns(scalars=v[ok]))
+        for ent, rows in self._rows.items():
+            if rows.t_s:
+                rows.send(self.rec, ent, np.array(rows.t_s, dtype=np.float64), rows.values)
+                rows.t_s, rows.values = [], []
+
+    def _queue(self, entity: str, send: Callable[[Any, str, np.ndarray, list], None], t_s, values) -> None:
+        """Rows of ``entity`` (times in s, values) for the next flush, sent by ``send``."""
+        rows = self._rows.get(entity)
+        if rows is None:
+            rows = self._rows[entity] = _Rows(send)
+        rows.t_s.extend(float(t) for t in t_s)
+        rows.values.extend(values)
 
     def frames(self, dadev, fit, t_end_s: np.ndarray, axis: str = "") -> None:
-        import rerun as rr
-
         assert self.rec is not None, "the streams open with the first block"
         if axis not in self._styles:
             raise ValueError(f"RerunSink.frames: axis {axis!r} is not one of the stream's axes {self.info.axes}")
         rec = self.rec
-        self._flush_raw()
-        idx = [rr.TimeColumn(TIMELINE, duration=t_end_s)]
         with np.errstate(divide="ignore", invalid="ignore"):
             log_adev = np.log10(np.asarray(dadev.adev_dph, dtype=np.float64))
-        rec.send_columns(axis_path(axis, "dadev/log10_adev_dph"), indexes=idx,
-                         columns=rr.Scalars.columns(scalars=log_adev))
+        self._queue(axis_path(axis, "dadev/log10_adev_dph"), _send_scalars, t_end_s, list(log_adev))
         for name in COEFFICIENTS:
             c = getattr(fit, name)
             v, lo, hi = (np.asarray(getattr(c, a), dtype=np.float64) for a in ("value", "lo", "hi"))
             ident = np.asarray(c.identifiable, dtype=bool)
             ok = ident & np.isfinite(v) & np.isfinite(lo) & np.isfinite(hi)
-            if ok.any():
-                rec.send_columns(axis_path(axis, f"coef/{name}"),
-                                 indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[ok])],
-                                 columns=rr.Scalars.columns(scalars=np.column_stack([v[ok], lo[ok], hi[ok]])))
+            self._queue(axis_path(axis, f"coef/{name}"), _send_scalars, t_end_s[ok],
+                        list(np.column_stack([v[ok], lo[ok], hi[ok]])))
             up = ~ident & np.isfinite(hi)     # not identifiable: hi is the 95 % upper limit
-            if up.any():
-                rec.send_columns(axis_path(axis, f"coef/{name}/{UPPER_LIMIT}"),
-                                 indexes=[rr.TimeColumn(TIMELINE, duration=t_end_s[up])],
-                                 columns=rr.Scalars.columns(scalars=hi[up]))
+            self._queue(axis_path(axis, f"coef/{name}/{UPPER_LIMIT}"), _send_scalars, t_end_s[up], list(hi[up]))
         if not self._legend_sent:
             self._log_legend(dadev.confidence)
         tau = np.asarray(dadev.tau_s, dtype=np.float64)
@@ -675,9 +759,8 @@ class RerunSink(Sink):
         dense = model_taus(tau)
         model = np.asarray(fit.model_adev_dph(dense), dtype=np.float64).reshape(len(t_end_s), len(dense))
         for i in range(len(t_end_s)):
-            rec.set_time(TIMELINE, duration=float(t_end_s[i]))
-            self._log_curve(axis, lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau, misfit[i], dense,
-                            model[i])
+            self._queue_curve(axis, float(t_end_s[i]), lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau,
+                              misfit[i], dense, model[i])
 
     def _log_legend(self, confidence: float) -> None:
         """The ADEV-curve view's legend (static; the bounds' confidence is known from the
@@ -728,68 +811,48 @@ class RerunSink(Sink):
                        ([len(tau) - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
                        (cols, [f"{h.t_s[c]:.6g} s" for c in cols]), None)
 
-    def _log_curve(self, axis, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
-        """One window's ADEV curve and bounds of axis ``axis``, and its model (``model`` at
-        taus ``dense``) over the taus the fit used."""
-        import rerun as rr
-
+    def _queue_curve(self, axis, t_s, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
+        """The ADEV curve and bounds of axis ``axis`` in the window ending at ``t_s`` (s),
+        and its model (``model`` at taus ``dense``) over the taus the fit used, for the
+        next flush."""
         with np.errstate(divide="ignore", invalid="ignore"):
             ly, llo, lhi = (np.log10(np.asarray(a, dtype=np.float64)) for a in (adev, lo, hi))
         ok = np.isfinite(ly)
         if not ok.any():
             return
         curve, st = axis_path(axis, CURVE), self._styles[axis]
-        pts = np.column_stack([lx[ok], ly[ok]])
-        assert self.rec is not None, "the streams open with the first block"
-        self.rec.log(f"{curve}/adev_dph",
-                     rr.LineStrips2D([pts], colors=[st.measured], radii=rr.Radius.ui_points(1.5)),
-                     rr.Points2D(pts, radii=rr.Radius.ui_points(3.0), colors=[st.measured]))
+        self._queue(f"{curve}/adev_dph", partial(_send_curves, colour=st.measured), [t_s],
+                    [np.column_stack([lx[ok], ly[ok]])])
         b = ok & np.isfinite(llo) & np.isfinite(lhi)
-        self.rec.log(f"{curve}/bounds", rr.LineStrips2D(
-            [np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]])],
-            colors=[st.bounds], radii=rr.Radius.ui_points(1.0)))
+        self._queue(f"{curve}/bounds", partial(_send_bounds, colour=st.bounds), [t_s],
+                    [(np.column_stack([lx[b], llo[b]]), np.column_stack([lx[b], lhi[b]]))])
         span = model_span(tau, adev, misfit)
         with np.errstate(divide="ignore", invalid="ignore"):
             lm = np.log10(model)
         m_ok = (np.isfinite(lm) & (dense >= span[0]) & (dense <= span[1])) if span is not None else np.zeros(0, bool)
-        if m_ok.sum() < 2:
-            self.rec.log(f"{curve}/model_ieee952", rr.Clear(recursive=False))
-            return
-        self.rec.log(f"{curve}/model_ieee952", rr.LineStrips2D(
-            [np.column_stack([np.log10(dense[m_ok]), lm[m_ok]])], colors=[st.model],
-            radii=rr.Radius.ui_points(1.0), draw_order=40.0))   # above the measured curve it follows
+        line = np.column_stack([np.log10(dense[m_ok]), lm[m_ok]]) if m_ok.sum() >= 2 else None
+        self._queue(f"{curve}/model_ieee952", partial(_send_models, colour=st.model), [t_s], [line])
 
     def events(self, events: Sequence[Event]) -> None:
-        import rerun as rr
-
-        if not events:
-            return
+        """Events for the next flush: an axis's under it (several axes), the whole
+        stream's at ``events``."""
         if self.rec is None:   # before the first sample (e.g. a source reconnecting)
             self._pending_events.extend(events)
             return
-        by_entity: dict[str, list[Event]] = {}
-        for e in events:    # an axis's events under it (several axes); the whole stream's at ``events``
-            by_entity.setdefault(axis_path(e.axis, "events") if e.axis in self.info.axes else "events", []).append(e)
-        for entity, evs in by_entity.items():
-            t = np.array([e.t_s for e in evs], dtype=np.float64)
-            self.rec.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=t)],
-                                  columns=rr.TextLog.columns(text=[f"{e.kind}: {e.message}" for e in evs],
-                                                             level=[_LEVELS.get(e.kind, "INFO") for e in evs]))
+        for e in events:
+            self._queue(axis_path(e.axis, "events") if e.axis in self.info.axes else "events", _send_texts,
+                        [e.t_s], [(f"{e.kind}: {e.message}", _LEVELS.get(e.kind, "INFO"))])
 
     def source_counters(self, t_s: float, counters: dict[str, int]) -> None:
-        import rerun as rr
-
         for k, v in counters.items():
-            assert self.rec is not None, "the streams open with the first block"
-            self.rec.send_columns(f"counters/{k}", indexes=[rr.TimeColumn(TIMELINE, duration=[t_s])],
-                                  columns=rr.Scalars.columns(scalars=[float(v)]))
+            self._queue(f"counters/{k}", _send_scalars, [t_s], [float(v)])
 
     def rotate(self, piece: int, t_s: float) -> None:
         """Close the current .rrd piece (complete, with its footer) and start the next;
         the live stream goes on."""
         if not (self.rotate_files and self.rec is not None and self.rec.file is not None):
             return
-        self._flush_raw(final=True)
+        self._flush(final=True)
         _close_stream(self.rec.file)
         self._piece = piece
         self._open_piece()
@@ -804,7 +867,7 @@ class RerunSink(Sink):
         if self.rec is None:
             self._discard_probe()
         else:
-            self._flush_raw(final=True)
+            self._flush(final=True)
             if self.rec.file is not None:
                 _close_stream(self.rec.file)
             if self.pieces:
