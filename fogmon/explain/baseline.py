@@ -122,9 +122,15 @@ def fit_chi2(av: np.ndarray, edf: np.ndarray, pred: np.ndarray) -> float:
 #: counts: a first-order Gauss-Markov term beside white noise and a first-order
 #: Butterworth beside white noise span the same spectra (one pole, a numerator in cos w)
 #: but for the sign of the Nyquist term, so on a Gauss-Markov record they tie by chance
-#: unless the Butterworth pays for its choice.
+#: unless the Butterworth pays for its choice. A Butterworth is fitted without Q: beside
+#: an unfiltered quantization noise, whose PSD rises to Nyquist, it would describe a
+#: filter that leaves that noise alone (the G ring's decimation filter acts on both; the
+#: ``bandwidth`` effect, over the whole rate, is what fits it). Its cutoff stays below
+#: 0.45 x the sample rate: nearer Nyquist it only trims the shortest tau while its PSD's
+#: zero at Nyquist, without a floor N, tells the Whittle tests that the record has no
+#: power there (xio_fusion_z: 0.473 x fs, every mean-type test then out of scale).
 LOWPASS_TAU_C_SAMPLES = (0.1, 4.0)
-LOWPASS_CUTOFF_FS = (0.04, 0.49)
+LOWPASS_CUTOFF_FS = (0.04, 0.45)
 LOWPASS_ORDERS = (1, 2, 3, 4)
 LOWPASS_GRID_N = 40
 LOWPASS_PARAMS = {"markov": 2, "lowpass_noise": 3}
@@ -164,15 +170,15 @@ def _lowpass_shapes(sample_rate_hz: float) -> list[tuple[str, tuple[float, float
     return out
 
 
-def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, lowpass_unit: np.ndarray | None = None
-                ) -> tuple[float, dict[str, float], tuple[str, ...]]:
-    """(criterion, coefficients, terms) of the term set, N always and each of Q, B, K
-    only if the data need it, with the least chi-square (:func:`fit_chi2`) + TERM_CHI2
-    per term; :func:`curve_noise_fit` with R = 0 and weights by the full degrees of
-    freedom, so that the fit and the chi-square that judges it agree."""
+def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, lowpass_unit: np.ndarray | None = None,
+                optional: tuple[str, ...] = ("Q", "B", "K")) -> tuple[float, dict[str, float], tuple[str, ...]]:
+    """(criterion, coefficients, terms) of the term set, N always and each of
+    ``optional`` only if the data need it, with the least chi-square (:func:`fit_chi2`)
+    + TERM_CHI2 per term; :func:`curve_noise_fit` with R = 0 and weights by the full
+    degrees of freedom, so that the fit and the chi-square that judges it agree."""
     best = None
-    for k in range(8):
-        terms = ("N",) + tuple(nm for i, nm in enumerate(("Q", "B", "K")) if k >> i & 1)
+    for k in range(1 << len(optional)):
+        terms = ("N",) + tuple(nm for i, nm in enumerate(optional) if k >> i & 1)
         fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms,
                               lowpass_unit=lowpass_unit)
         crit = fit_chi2(av, edf, model_avar(tau_s, fit, lowpass_unit)) + TERM_CHI2 * len(terms)
@@ -188,8 +194,11 @@ def _search_shape(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_rat
     """(criterion incl. LOWPASS_PARAMS[kind] x TERM_CHI2, coefficients, terms, kind, shape) of the
     best low-pass of one shape, or None when its best parameter is at an end of ``bounds``."""
 
+    optional = ("B", "K") if kind == "lowpass_noise" else ("Q", "B", "K")
+
     def trial(ln_x: float) -> tuple[float, dict[str, float], tuple[str, ...]]:
-        c, f, t = _best_terms(tau_s, av, edf, lowpass_unit_avar(tau_s, sample_rate_hz, kind, shape_of(math.exp(ln_x))))
+        unit = lowpass_unit_avar(tau_s, sample_rate_hz, kind, shape_of(math.exp(ln_x)))
+        c, f, t = _best_terms(tau_s, av, edf, unit, optional)
         return c + LOWPASS_PARAMS[kind] * TERM_CHI2, f, t
 
     grid = [math.log(x) for x in np.geomspace(*bounds, LOWPASS_GRID_N)]
