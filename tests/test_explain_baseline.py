@@ -8,8 +8,10 @@ import pytest
 from fogmon.cli import main
 from fogmon.davar.theory import adev_model, markov_adev
 from fogmon.explain.baseline import baseline_model, curve_noise_fit, markov_unit_avar
+from fogmon.explain.report import baseline_low_pass
 from fogmon.recording import write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel
+from fogmon.sim.noise import lowpass_adev_exact
 from fogmon.sim.simulate import simulate
 
 
@@ -62,3 +64,37 @@ def test_baseline_fits_the_sensor_low_pass_instead_of_flicker():
     assert b.effects[0].params["tau_c_s"] == pytest.approx(tau_c, rel=0.1)
     assert b.effects[0].params["sigma_dph"] == pytest.approx(130.0, rel=0.05)
     assert b.noise.B_dph == 0.0 and b.noise.K_dphsh == 0.0
+
+
+def test_baseline_fits_a_sharper_low_pass_beside_an_unfiltered_white_floor():
+    """White noise through a 2-pole Butterworth at 40 Hz beside unfiltered white noise (a
+    floor near Nyquist, as the PX4 MEMS record has) at 250 Hz: the baseline holds a
+    ``lowpass_noise`` term of order above 1 near 40 Hz and N as the floor, not a
+    first-order Gauss-Markov term."""
+    truth = Effect("lowpass_noise", {"cutoff_hz": 40.0, "order": 2, "sigma_dph": 110.0})
+    b = baseline_model(simulate(SensorModel(250.0, 0.0, Noise(N_dpsh=0.08), [truth]), duration_s=120.0, seed=4))
+    assert [e.kind for e in b.effects] == ["lowpass_noise"]
+    assert b.effects[0].params["order"] >= 2
+    assert b.effects[0].params["cutoff_hz"] == pytest.approx(40.0, rel=0.1)
+    assert b.effects[0].params["sigma_dph"] == pytest.approx(110.0, rel=0.05)
+    assert b.noise.N_dpsh == pytest.approx(0.08, rel=0.1)
+    assert b.noise.B_dph == 0.0 and b.noise.K_dphsh == 0.0
+    lp = baseline_low_pass(b)
+    assert lp["kind"] == "lowpass_noise" and lp["corner_hz"] == b.effects[0].params["cutoff_hz"]
+    # the white level at long taus: the filtered part's (sigma^2 tau0 / sum h^2 = (60 N)^2) and the floor's
+    m = np.array([4096])
+    avar = (lowpass_adev_exact(m, b.effects[0].params["sigma_dph"], lp["corner_hz"], lp["order"], 250.0) ** 2
+            + (60.0 * b.noise.N_dpsh) ** 2 * 250.0 / m)
+    assert lp["white_N_dpsh"] == pytest.approx(60.0 ** -1 * np.sqrt(avar[0] * m[0] / 250.0), rel=1e-3)
+
+
+def test_a_filter_over_quantization_noise_is_left_to_the_bandwidth_effect():
+    """Q and N through a 4-pole decimation filter at 8.25 Hz of 20 Hz (the G ring's): a
+    Butterworth on the white noise beside an unfiltered Q would lower the baseline's
+    criterion (883 -> 681 with order 4, seed 1) while describing a filter that leaves the
+    quantization noise alone, so the Butterworth shapes are fitted without Q and the
+    filter is left to explain's ``bandwidth`` effect, over the whole rate."""
+    m = SensorModel(20.0, 0.0, Noise(Q_arcsec=1e-6, N_dpsh=4e-8),
+                    [Effect("bandwidth", {"cutoff_hz": 8.25, "order": 4, "taps": []})])
+    b = baseline_model(simulate(m, duration_s=900.0, seed=1))
+    assert b.effects == [] and b.noise.Q_arcsec > 0

@@ -17,7 +17,7 @@ from fogmon.explain.fitting import (
     rfft_omega,
 )
 from fogmon.sim.model import Effect, Noise, SensorModel
-from fogmon.sim.noise import ar1_adev_exact
+from fogmon.sim.noise import ar1_adev_exact, lowpass_adev_exact
 
 
 def test_whittle_gls_with_white_psd_equals_ols_with_intercept():
@@ -58,6 +58,19 @@ def test_markov_psd_matches_exact_ar1_allan_variance():
     assert avar1_of_psd(S, n) == pytest.approx(
         float(ar1_adev_exact(np.array([1.0]), sigma, tc, sample_rate_hz)[0]) ** 2, rel=1e-3
     )
+
+
+def test_model_psd_of_lowpass_noise_matches_its_exact_allan_variance():
+    """A ``lowpass_noise`` term in model_psd: the Allan variance at tau0 its PSD implies is
+    the generator's exact one, beside the white floor N."""
+    sample_rate_hz, n = 250.0, 1 << 16
+    m = SensorModel(sample_rate_hz, 0.0, Noise(N_dpsh=0.08),
+                    [Effect("lowpass_noise", {"sigma_dph": 110.0, "cutoff_hz": 31.7, "order": 2})])
+    S = model_psd(m, rfft_omega(n), n)
+    S[0] = 0.0
+    exact = (lowpass_adev_exact(np.array([1]), 110.0, 31.7, 2, sample_rate_hz)[0] ** 2
+             + (60 * 0.08) ** 2 * sample_rate_hz)
+    assert avar1_of_psd(S, n) == pytest.approx(exact, rel=1e-6)
 
 
 def test_model_psd_includes_filter_and_flicker():

@@ -40,6 +40,7 @@ EVERY_KIND = [
     Effect("outliers", {"rate_per_h": 36.5, "amplitude_quantiles_dph": [1.0, 2.0, 7.5], "quantile_probs": [0, 0.5, 1],
                         "positive_fraction": 0.25, "count": 73, "times_file": "run.outliers.csv"}),
     Effect("vibration_lines", {"freq_hz": [2.2, 5.5], "sigma_dph": [0.3, 0.1], "bandwidth_hz": [0.1, 0.05]}),
+    Effect("lowpass_noise", {"sigma_dph": 110.5, "cutoff_hz": 31.7, "order": 2}),
 ]
 
 
@@ -51,7 +52,8 @@ def full_model() -> SensorModel:
 def test_catalogue_covers_contract_kinds_and_names_aux_and_nature():
     contract = {"thermal_drift", "periodic", "glitches", "bias_step", "vibration_noise", "rate_ramp",
                 "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth", "vibration_lines", "noise"}
-    assert set(EFFECT_KINDS) == contract | {"outliers"}  # an addition (docs/explain.md)
+    assert set(EFFECT_KINDS) == contract | {"outliers", "lowpass_noise"}  # additions (docs/explain.md)
+    assert EFFECT_KINDS["lowpass_noise"].nature == "noise"
     assert EFFECT_KINDS["vibration_lines"].nature == "noise"
     assert EFFECT_KINDS["noise"].nature == "coefficients"
     assert EFFECT_KINDS["thermal_drift"].aux == "temp_c"
@@ -259,6 +261,9 @@ def _effect_strategy():
                                                        "positive_fraction": f, "count": c, "times_file": name}),
                 st.floats(0, 1e5), st.lists(st.floats(0, 1e6), min_size=8, max_size=8), st.floats(0, 1),
                 st.integers(0, 10**6), st.text(max_size=12))
+        if kind == "lowpass_noise":  # a cutoff below the Nyquist frequency of the 100 Hz model
+            return st.builds(lambda s, c, o: Effect(kind, {"sigma_dph": s, "cutoff_hz": c, "order": o}),
+                             st.floats(0.0, 1e6), st.floats(1e-3, 49.0), st.integers(1, 8))
         if kind == "vibration_lines":  # lines inside (0, Nyquist) of the 100 Hz model
             return st.lists(st.tuples(st.floats(1.0, 40.0), st.floats(0.0, 1e3), st.floats(1e-3, 1.0)),
                             max_size=4).map(lambda ls: Effect(kind, {

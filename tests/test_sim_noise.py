@@ -17,11 +17,14 @@ from fogmon.sim.noise import (
     FLICKER_FLOOR,
     Flicker,
     GaussMarkov,
+    LowpassNoise,
     RandomWalk,
     WhiteAngle,
     WhiteRate,
     ar1_adev_exact,
     flicker_adev_exact,
+    lowpass_adev_exact,
+    lowpass_filter,
 )
 from fogmon.sim.simulate import iter_simulate, simulate
 
@@ -41,6 +44,7 @@ GENERATORS = {
     "B": lambda rng: Flicker(0.1, 100.0, rng, tau_hi_s=1e4),
     "K": lambda rng: RandomWalk(1.0, 100.0, rng),
     "GM": lambda rng: GaussMarkov(1.0, 3.0, 100.0, rng),
+    "LP": lambda rng: LowpassNoise(1.0, 7.0, 3, 100.0, rng),
 }
 
 
@@ -118,3 +122,30 @@ def test_quick_validation_all_terms_within_tolerance():
     for name, build, theory, tau_min, tol, alpha in val.cases(sample_rate_hz, n):
         ok, tau, ratio = val.run_case(name, build, theory, tau_min, tol, alpha, sample_rate_hz, n, 40, sigmas=3.5)
         assert ok, (name, tau, ratio)
+
+
+@pytest.mark.parametrize("cutoff_hz,order", [(31.7, 1), (10.0, 2), (4.0, 4), (45.0, 3)])
+def test_lowpass_noise_adev_exact_against_its_psd_integral(cutoff_hz, order):
+    """lowpass_noise's exact ADEV (from its autocovariance) against an independent
+    reference: AVAR(m) = integral over the circle of S(nu) sin^4(pi m nu) / (m^2 sin^2(pi nu)),
+    S = sigma^2 |H|^2 / mean |H|^2, on a grid of 2^21 frequencies."""
+    from scipy.signal import sosfreqz
+
+    sample_rate_hz, sigma = 100.0, 2.5
+    nu = (np.arange(1 << 21) + 0.5) / (1 << 21) / 2.0  # midpoints over (0, 1/2)
+    _, h = sosfreqz(lowpass_filter(cutoff_hz, order, sample_rate_hz), worN=2 * np.pi * nu)
+    S = sigma ** 2 * np.abs(h) ** 2 / np.mean(np.abs(h) ** 2)
+    m = np.array([1, 2, 3, 5, 16, 100, 1000])
+    ref = [2.0 * np.mean(S * np.sin(np.pi * k * nu) ** 4 / (k * k * np.sin(np.pi * nu) ** 2)) for k in m]
+    assert lowpass_adev_exact(m, sigma, cutoff_hz, order, sample_rate_hz) ** 2 == pytest.approx(ref, rel=1e-6)
+
+
+def test_lowpass_noise_generator_is_stationary_from_its_first_sample_with_its_exact_adev():
+    sample_rate_hz, sigma, cutoff_hz, order = 250.0, 110.0, 31.7, 2
+    first = np.array([LowpassNoise(sigma, cutoff_hz, order, sample_rate_hz, np.random.default_rng(s)).generate(2)
+                      for s in range(4000)])
+    assert np.std(first[:, 0]) == pytest.approx(sigma, rel=0.05)  # 4000 draws: 1.1 % scatter
+    x = LowpassNoise(sigma, cutoff_hz, order, sample_rate_hz, np.random.default_rng(1)).generate(1_000_000)
+    m = np.array([1, 2, 4, 16, 64])
+    taus, ad, _, _ = allantools.oadev(x, rate=sample_rate_hz, data_type="freq", taus=m / sample_rate_hz)
+    assert np.allclose(ad, lowpass_adev_exact(m, sigma, cutoff_hz, order, sample_rate_hz), rtol=0.02)

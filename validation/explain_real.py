@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
+from fogmon.explain.report import low_pass_text
 from fogmon.recording import read_replay_log
 
 #: A transient counts as located when a region holding its time is shorter than this
@@ -265,9 +266,7 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
         print("    baseline: bias {bias_dph:.4g} deg/h, Q {Q_arcsec:.3g} arcsec, N {N_dpsh:.3g} deg/sqrt(h), "
               "B {B_dph:.3g} deg/h, K {K_dphsh:.3g} deg/h/sqrt(h), R {R_dphh:.3g} deg/h^2".format(**bl))
         if bl.get("low_pass"):
-            print("    baseline low-pass: white noise through a first-order low-pass, corner {corner_hz:.3g} Hz "
-                  "(Gauss-Markov sigma {sigma_dph:.4g} deg/h, tau_c {tau_c_s:.3g} s; N {white_N_dpsh:.4g} "
-                  "deg/sqrt(h) at longer taus)".format(**bl["low_pass"]))
+            print(f"    baseline low-pass: {low_pass_text(bl['low_pass'])}")
     for e in rep["effects"]:
         print(f"    effect {effect_text(e)}")
     for r in rep["mismatches"]:

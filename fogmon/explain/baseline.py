@@ -10,10 +10,11 @@ that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
    N always, each of Q, B, K only when it lowers the chi-square by more than chance,
    R = 0 (a drift has a sign: the rate_ramp effect fits it); when the ADEV at the
    shortest tau lies below that fit (it bends below the white-noise slope: the
-   sensor's own low-pass), white noise through a first-order low-pass - a
-   Gauss-Markov term of short correlation time, simulated as a ``markov`` effect - is
-   fitted together with them, kept only when it lowers the chi-square by more than
-   chance;
+   sensor's own low-pass), white noise through a low-pass - a first-order Gauss-Markov
+   term of short correlation time (a ``markov`` effect) or white noise through a
+   Butterworth low-pass of order 1..4 (a ``lowpass_noise`` effect), whichever fits best,
+   N then being the unfiltered white floor - is fitted together with them, kept only
+   when it lowers the chi-square by more than chance;
 4. whole-record ADEV points at longer taus refine those terms while they stay
    consistent with them, but cannot add a term.
 
@@ -22,7 +23,9 @@ against this model asks "what in this recording is not stationary IEEE-952 noise
 the sensor's low-pass shapes it?"."""
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy.optimize import nnls
@@ -33,18 +36,18 @@ from fogmon.errors import FogmonError
 from fogmon.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import Effect, Noise, SensorModel, validate_effect, validate_model
-from fogmon.sim.noise import ar1_adev_exact
+from fogmon.sim.noise import ar1_adev_exact, lowpass_adev_exact
 
 
 def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | None = None,
                     edf_cap: float = 50.0, ramp: bool = True, terms: tuple[str, ...] | None = None,
-                    markov_unit: np.ndarray | None = None) -> dict[str, float]:
+                    lowpass_unit: np.ndarray | None = None) -> dict[str, float]:
     """IEEE-952 coefficients (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h), R deg/h^2)
     minimizing sum_i w_i (model_avar_i / avar_i - 1)^2 over the taus, all A_n >= 0, with
     w_i = min(edf_i, edf_cap) / edf_cap: equal weight wherever the point is well
-    determined, less at the few-EDF longest taus. With ``markov_unit`` (the Allan
-    variance of a unit-variance Gauss-Markov term at each tau, :func:`markov_unit_avar`)
-    that term's variance is fitted with them and returned as ``markov_sigma_dph``."""
+    determined, less at the few-EDF longest taus. With ``lowpass_unit`` (the Allan
+    variance of a unit-variance low-pass term at each tau, :func:`lowpass_unit_avar`)
+    that term's variance is fitted with them and returned as ``lowpass_sigma_dph``."""
     ok = np.isfinite(adev_dph) & (adev_dph > 0)
     tau, av = np.asarray(tau_s)[ok], np.asarray(adev_dph)[ok] ** 2
     if edf is None:
@@ -53,8 +56,8 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
         e = np.minimum(np.asarray(edf, dtype=float)[ok], edf_cap)
         w = np.sqrt(e / max(float(np.max(e)), 1e-300))
     cols = tau[:, None] ** POWERS[None, :]
-    if markov_unit is not None:
-        cols = np.column_stack((cols, np.asarray(markov_unit)[ok]))
+    if lowpass_unit is not None:
+        cols = np.column_stack((cols, np.asarray(lowpass_unit)[ok]))
     X = cols / av[:, None] * w[:, None]
     if not ramp:  # R left at 0 (a drift has a sign: it is the rate_ramp effect's to fit)
         X[:, 4] = 0.0
@@ -66,17 +69,17 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     a = a / scale
     coef = avar_terms_to_coefficients(a[:5])
     out = dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef), strict=True))
-    if markov_unit is not None:
-        out["markov_sigma_dph"] = math.sqrt(float(a[5]))
+    if lowpass_unit is not None:
+        out["lowpass_sigma_dph"] = math.sqrt(float(a[5]))
     return out
 
 
-def model_avar(tau_s: np.ndarray, fit: dict[str, float], markov_unit: np.ndarray | None = None) -> np.ndarray:
+def model_avar(tau_s: np.ndarray, fit: dict[str, float], lowpass_unit: np.ndarray | None = None) -> np.ndarray:
     """Allan variance ((deg/h)^2) at ``tau_s`` of a :func:`curve_noise_fit` result."""
-    ieee = {k: v for k, v in fit.items() if k != "markov_sigma_dph"}
+    ieee = {k: v for k, v in fit.items() if k != "lowpass_sigma_dph"}
     av = adev_model(tau_s, **ieee) ** 2
-    if markov_unit is not None:
-        av = av + fit["markov_sigma_dph"] ** 2 * np.asarray(markov_unit)
+    if lowpass_unit is not None:
+        av = av + fit["lowpass_sigma_dph"] ** 2 * np.asarray(lowpass_unit)
     return av
 
 
@@ -104,79 +107,135 @@ def fit_chi2(av: np.ndarray, edf: np.ndarray, pred: np.ndarray) -> float:
     return float(np.sum(z ** 2))
 
 
-#: The baseline's low-pass on the white noise (a Gauss-Markov term) is sought with
-#: correlation times on LOWPASS_GRID_N log-spaced points from LOWPASS_TAU_C_SAMPLES[0] to
-#: [1] sample intervals (first-order corners from 0.04 to 1.6 x the sample rate: a
-#: sensor's filter acting at the shortest taus), the best refined by golden section on
-#: ln tau_c. A best fit at either end is refused: at the short end it is white noise, at
-#: the long end a slower process (a hump such as the G ring's microseism, left to the
-#: effects). It is charged TERM_CHI2 per parameter (correlation time, variance) like a
-#: noise term.
+#: The baseline's low-pass on the white noise is sought among shapes of different order:
+#: a sampled first-order Gauss-Markov term (``markov``; correlation times from
+#: LOWPASS_TAU_C_SAMPLES[0] to [1] sample intervals, first-order corners from 0.04 to 1.6 x
+#: the sample rate) and white noise through a Butterworth low-pass of each order in
+#: LOWPASS_ORDERS (``lowpass_noise``; cutoffs from LOWPASS_CUTOFF_FS[0] to [1] x the sample
+#: rate), each beside the IEEE-952 terms, whose N is then the unfiltered white floor. Per
+#: shape LOWPASS_GRID_N log-spaced points, the best refined by golden section on the log
+#: of the parameter. A best fit at either end of its range is refused: at the fast end it
+#: is white noise, at the slow end a slower process (a hump such as the G ring's
+#: microseism, left to the effects). Each shape is charged TERM_CHI2 per parameter like a
+#: noise term (LOWPASS_PARAMS: the markov term's correlation time and variance; a
+#: Butterworth's cutoff, variance and order) and the least criterion wins. The order
+#: counts: a first-order Gauss-Markov term beside white noise and a first-order
+#: Butterworth beside white noise span the same spectra (one pole, a numerator in cos w)
+#: but for the sign of the Nyquist term, so on a Gauss-Markov record they tie by chance
+#: unless the Butterworth pays for its choice. A Butterworth is fitted without Q: beside
+#: an unfiltered quantization noise, whose PSD rises to Nyquist, it would describe a
+#: filter that leaves that noise alone (the G ring's decimation filter acts on both; the
+#: ``bandwidth`` effect, over the whole rate, is what fits it). Its cutoff stays below
+#: 0.45 x the sample rate: nearer Nyquist it only trims the shortest tau while its PSD's
+#: zero at Nyquist, without a floor N, tells the Whittle tests that the record has no
+#: power there (xio_fusion_z: 0.473 x fs, every mean-type test then out of scale).
 LOWPASS_TAU_C_SAMPLES = (0.1, 4.0)
+LOWPASS_CUTOFF_FS = (0.04, 0.45)
+LOWPASS_ORDERS = (1, 2, 3, 4)
 LOWPASS_GRID_N = 40
-LOWPASS_PARAMS = 2
+LOWPASS_PARAMS = {"markov": 2, "lowpass_noise": 3}
 
 
 def low_pass_index(model: SensorModel) -> int | None:
     """Index in ``model.effects`` of the sensor's low-pass-filtered white noise: the first
-    ``markov`` term whose correlation time lies in the baseline's low-pass range
-    (LOWPASS_TAU_C_SAMPLES; a longer one is bias wander, not a filter), else None."""
+    ``lowpass_noise`` term, or ``markov`` term whose correlation time lies in the
+    baseline's low-pass range (LOWPASS_TAU_C_SAMPLES; a longer one is bias wander, not a
+    filter), else None."""
     tc_max = LOWPASS_TAU_C_SAMPLES[1] / float(model.sample_rate_hz)
-    return next((i for i, e in enumerate(model.effects)
-                 if e.kind == "markov" and e.params["tau_c_s"] <= tc_max * (1 + 1e-9)), None)
+    return next((i for i, e in enumerate(model.effects) if e.kind == "lowpass_noise"
+                 or (e.kind == "markov" and e.params["tau_c_s"] <= tc_max * (1 + 1e-9))), None)
 
 
-def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, markov_unit: np.ndarray | None = None
-                ) -> tuple[float, dict[str, float], tuple[str, ...]]:
-    """(criterion, coefficients, terms) of the term set, N always and each of Q, B, K
-    only if the data need it, with the least chi-square (:func:`fit_chi2`) + TERM_CHI2
-    per term; :func:`curve_noise_fit` with R = 0 and weights by the full degrees of
-    freedom, so that the fit and the chi-square that judges it agree."""
+def lowpass_unit_avar(tau_s: np.ndarray, sample_rate_hz: float, kind: str, shape: dict) -> np.ndarray:
+    """Allan variance at ``tau_s`` of the unit-variance low-pass term ``kind`` with the
+    parameters ``shape`` (the effect's, without sigma_dph): :func:`markov_unit_avar` or
+    the exact ``lowpass_noise`` one (:func:`lowpass_adev_exact`)."""
+    if kind == "markov":
+        return markov_unit_avar(tau_s, sample_rate_hz, shape["tau_c_s"])
+    m = np.maximum(np.round(np.asarray(tau_s) * sample_rate_hz), 1)
+    return lowpass_adev_exact(m, 1.0, shape["cutoff_hz"], shape["order"], sample_rate_hz) ** 2
+
+
+def _butterworth_shape(order: int, cutoff_hz: float) -> dict:
+    return {"cutoff_hz": cutoff_hz, "order": order}
+
+
+def _lowpass_shapes(sample_rate_hz: float) -> list[tuple[str, tuple[float, float], Callable[[float], dict]]]:
+    """(kind, range of the searched parameter, parameter -> shape) of each low-pass shape."""
+    tc = (LOWPASS_TAU_C_SAMPLES[0] / sample_rate_hz, LOWPASS_TAU_C_SAMPLES[1] / sample_rate_hz)
+    fc = (LOWPASS_CUTOFF_FS[0] * sample_rate_hz, LOWPASS_CUTOFF_FS[1] * sample_rate_hz)
+    out: list[tuple[str, tuple[float, float], Callable[[float], dict]]] = [
+        ("markov", tc, lambda x: {"tau_c_s": x})]
+    out += [("lowpass_noise", fc, functools.partial(_butterworth_shape, k)) for k in LOWPASS_ORDERS]
+    return out
+
+
+def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, lowpass_unit: np.ndarray | None = None,
+                optional: tuple[str, ...] = ("Q", "B", "K")) -> tuple[float, dict[str, float], tuple[str, ...]]:
+    """(criterion, coefficients, terms) of the term set, N always and each of
+    ``optional`` only if the data need it, with the least chi-square (:func:`fit_chi2`)
+    + TERM_CHI2 per term; :func:`curve_noise_fit` with R = 0 and weights by the full
+    degrees of freedom, so that the fit and the chi-square that judges it agree."""
     best = None
-    for k in range(8):
-        terms = ("N",) + tuple(nm for i, nm in enumerate(("Q", "B", "K")) if k >> i & 1)
+    for k in range(1 << len(optional)):
+        terms = ("N",) + tuple(nm for i, nm in enumerate(optional) if k >> i & 1)
         fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms,
-                              markov_unit=markov_unit)
-        crit = fit_chi2(av, edf, model_avar(tau_s, fit, markov_unit)) + TERM_CHI2 * len(terms)
+                              lowpass_unit=lowpass_unit)
+        crit = fit_chi2(av, edf, model_avar(tau_s, fit, lowpass_unit)) + TERM_CHI2 * len(terms)
         if best is None or crit < best[0]:
             best = (crit, fit, terms)
     assert best is not None  # the loop ran at least once
     return best
 
 
-def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_rate_hz: float
-                     ) -> tuple[dict[str, float], tuple[str, ...], float | None]:
-    """The terms the data need (:func:`_best_terms`) and, when the shortest tau's Allan
-    variance lies below that fit (the ADEV bends below the white-noise slope), low-pass
-    filtered white noise - a Gauss-Markov term of short correlation time - fitted with
-    them, kept only if its best correlation time is inside the LOWPASS_TAU_C_SAMPLES grid
-    and it lowers the criterion by more than LOWPASS_PARAMS x TERM_CHI2.
-    Returns (coefficients, with ``markov_sigma_dph`` when the low-pass is kept, terms,
-    its correlation time s or None)."""
-    crit, fit, terms = _best_terms(tau_s, av, edf)
-    if not av[0] < model_avar(tau_s[:1], fit)[0]:
-        return fit, terms, None
+def _search_shape(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_rate_hz: float, kind: str,
+                  bounds: tuple[float, float], shape_of: Callable[[float], dict]
+                  ) -> tuple[float, dict[str, float], tuple[str, ...], str, dict] | None:
+    """(criterion incl. LOWPASS_PARAMS[kind] x TERM_CHI2, coefficients, terms, kind, shape) of the
+    best low-pass of one shape, or None when its best parameter is at an end of ``bounds``."""
 
-    def trial(ln_tc: float) -> tuple[float, dict[str, float], tuple[str, ...]]:
-        c, f, t = _best_terms(tau_s, av, edf, markov_unit_avar(tau_s, sample_rate_hz, math.exp(ln_tc)))
-        return c + LOWPASS_PARAMS * TERM_CHI2, f, t
+    optional = ("B", "K") if kind == "lowpass_noise" else ("Q", "B", "K")
 
-    grid = [math.log(x / sample_rate_hz) for x in np.geomspace(*LOWPASS_TAU_C_SAMPLES, LOWPASS_GRID_N)]
+    def trial(ln_x: float) -> tuple[float, dict[str, float], tuple[str, ...]]:
+        unit = lowpass_unit_avar(tau_s, sample_rate_hz, kind, shape_of(math.exp(ln_x)))
+        c, f, t = _best_terms(tau_s, av, edf, unit, optional)
+        return c + LOWPASS_PARAMS[kind] * TERM_CHI2, f, t
+
+    grid = [math.log(x) for x in np.geomspace(*bounds, LOWPASS_GRID_N)]
     i = min(range(len(grid)), key=lambda j: trial(grid[j])[0])
     if i in (0, len(grid) - 1):
-        return fit, terms, None
-    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+        return None
+    lo, hi = grid[i - 1], grid[i + 1]
     r = (math.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(20):  # golden section on ln tau_c
+    for _ in range(20):  # golden section on the log of the parameter
         c, d = hi - r * (hi - lo), lo + r * (hi - lo)
         if trial(c)[0] < trial(d)[0]:
             hi = d
         else:
             lo = c
-    ln_tc = min((grid[i], (lo + hi) / 2.0), key=lambda x: trial(x)[0])
-    best = trial(ln_tc)
+    ln_x = min((grid[i], (lo + hi) / 2.0), key=lambda x: trial(x)[0])
+    return (*trial(ln_x), kind, shape_of(math.exp(ln_x)))
+
+
+def parsimonious_fit(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_rate_hz: float
+                     ) -> tuple[dict[str, float], tuple[str, ...], tuple[str, dict] | None]:
+    """The terms the data need (:func:`_best_terms`) and, when the shortest tau's Allan
+    variance lies below that fit (the ADEV bends below the white-noise slope), low-pass
+    filtered white noise fitted with them: of the shapes of :func:`_lowpass_shapes` the
+    one with the least criterion, kept only if its best parameter is inside its range and
+    it lowers the criterion by more than LOWPASS_PARAMS[kind] x TERM_CHI2.
+    Returns (coefficients, with ``lowpass_sigma_dph`` when the low-pass is kept, terms,
+    (effect kind, its parameters but sigma) or None)."""
+    crit, fit, terms = _best_terms(tau_s, av, edf)
+    if not av[0] < model_avar(tau_s[:1], fit)[0]:
+        return fit, terms, None
+    found = [r for kind, bounds, shape_of in _lowpass_shapes(sample_rate_hz)
+             if (r := _search_shape(tau_s, av, edf, sample_rate_hz, kind, bounds, shape_of)) is not None]
+    if not found:
+        return fit, terms, None
+    best = min(found, key=lambda r: r[0])
     if best[0] < crit:
-        return best[1], best[2], math.exp(ln_tc)
+        return best[1], best[2], (best[3], best[4])
     return fit, terms, None
 
 
@@ -255,11 +314,12 @@ def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, sam
     return out
 
 
-def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> tuple[dict[str, float], float | None]:
+def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
+                     ) -> tuple[dict[str, float], tuple[str, dict] | None]:
     """IEEE-952 Q, N, B, K (R = 0: a drift is the rate_ramp effect's) of the recording's
-    stationary noise and, when the sensor's low-pass shows, the Gauss-Markov term of its
-    filtered white noise (``markov_sigma_dph`` in the coefficients, and its correlation
-    time in s, else None), fitted so that an effect does not inflate them:
+    stationary noise and, when the sensor's low-pass shows, the term of its filtered
+    white noise (``lowpass_sigma_dph`` in the coefficients, and (effect kind, its
+    parameters but sigma), else None), fitted so that an effect does not inflate them:
     :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`) at
     the windows' taus, with the terms those robust points need
     (:func:`parsimonious_fit`), refined with the whole-record ADEV at longer taus, in
@@ -272,10 +332,10 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> tu
     nw = len(tau_w)
     keep = np.isfinite(av_w)
     tau, av, edf = list(tau_w[keep]), list(av_w[keep]), list(edf_w[keep])
-    fit0, terms, tau_c = parsimonious_fit(np.array(tau), np.array(av), np.array(edf), sample_rate_hz)
+    fit0, terms, lowpass = parsimonious_fit(np.array(tau), np.array(av), np.array(edf), sample_rate_hz)
 
     def unit(taus):
-        return None if tau_c is None else markov_unit_avar(np.asarray(taus), sample_rate_hz, tau_c)
+        return None if lowpass is None else lowpass_unit_avar(np.asarray(taus), sample_rate_hz, *lowpass)
 
     for j in range(nw, len(whole.tau_s)):
         a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
@@ -286,25 +346,25 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float) -> tu
         av.append(a)
         edf.append(e)
     fit = curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
-                          terms=terms, markov_unit=unit(tau))
-    return fit, tau_c
+                          terms=terms, lowpass_unit=unit(tau))
+    return fit, lowpass
 
 
 def baseline_model(rec: Recording) -> SensorModel:
     """Stationary IEEE-952 model fitted to ``rec`` robustly (:func:`robust_noise_fit` of
     :func:`aux_projected`), with the sensor's low-pass-filtered white noise as a
-    ``markov`` effect when the fit found it; bias the mean rate (deg/h)."""
+    ``markov`` or ``lowpass_noise`` effect when the fit found it; bias the mean rate (deg/h)."""
     blk = rec.to_block()
     y = blk.error_rate_dph
     ok = blk.valid & np.isfinite(y)
     if ok.sum() < 64:
         raise FogmonError(f"{rec.name}: too few valid samples ({int(ok.sum())}) to fit a baseline model")
-    vals, tau_c = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok,
-                                   rec.sample_rate_hz)
-    sigma = vals.pop("markov_sigma_dph", 0.0)
+    vals, lowpass = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok,
+                                     rec.sample_rate_hz)
+    sigma = vals.pop("lowpass_sigma_dph", 0.0)
     if not (any(vals.values()) or sigma):
         raise FogmonError(f"{rec.name}: no IEEE-952 noise term found for a baseline model")
-    effects = [] if tau_c is None or not sigma else [Effect("markov", {"tau_c_s": tau_c, "sigma_dph": sigma})]
+    effects = [] if lowpass is None or not sigma else [Effect(lowpass[0], {**lowpass[1], "sigma_dph": sigma})]
     model = SensorModel(rec.sample_rate_hz, float(np.mean(y[ok])), Noise(**vals), effects,
                         {"origin": f"fogmon explain baseline fitted from {rec.name}"})
     return validate_model(model)

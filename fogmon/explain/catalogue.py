@@ -748,7 +748,7 @@ def _replace_white(model: SensorModel, N: float, drop_other: bool = False) -> Se
     nz = model.noise
     noise = Noise(0.0, N, 0.0, 0.0, 0.0) if drop_other else Noise(nz.Q_arcsec, N, nz.B_dph, nz.K_dphsh, nz.R_dphh)
     eff = [e for e in model.effects
-           if e.kind == "bandwidth" or (not drop_other and e.kind in ("markov", "vibration_lines"))]
+           if e.kind == "bandwidth" or (not drop_other and e.kind in ("markov", "lowpass_noise", "vibration_lines"))]
     return SensorModel(model.sample_rate_hz, model.bias_dph, noise, eff)
 
 
@@ -900,7 +900,7 @@ def with_white_level(model: SensorModel, level: float) -> SensorModel:
     if i is None:
         return replace(model, noise=replace(model.noise, N_dpsh=level))
     eff = list(model.effects)
-    eff[i] = Effect("markov", {**eff[i].params, "sigma_dph": level}, eff[i].axes)
+    eff[i] = Effect(eff[i].kind, {**eff[i].params, "sigma_dph": level}, eff[i].axes)
     return replace(model, effects=eff)
 
 

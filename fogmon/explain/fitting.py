@@ -187,9 +187,10 @@ class Whittle:
 def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None) -> np.ndarray:
     """Noise PSD (see :func:`noise_psd`) of a SensorModel's stochastic part at ``omega``
     for an n-sample record: IEEE-952 terms (flicker as the simulator's exact sum of
-    Gauss-Markov terms), ``markov`` and ``vibration_lines`` effects and ``bandwidth`` filters. ``white_dpsh``
+    Gauss-Markov terms), ``markov``, ``lowpass_noise`` and ``vibration_lines`` effects and ``bandwidth``
+    filters. ``white_dpsh``
     overrides N (deg/sqrt(h)), e.g. with the RMS level of white-level effects."""
-    from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus
+    from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus, lowpass_psd
 
     sample_rate_hz = float(model.sample_rate_hz)
     nz = model.noise
@@ -205,6 +206,9 @@ def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None)
     for e in model.effects:
         if e.kind == "vibration_lines":
             S = S + lines_psd(e.params, sample_rate_hz, omega)
+        if e.kind == "lowpass_noise":
+            p = e.params
+            S = S + lowpass_psd(omega, p["sigma_dph"], p["cutoff_hz"], p["order"], sample_rate_hz)
     for e in model.effects:
         if e.kind == "bandwidth":
             S = S * filter_gain2(e.params, sample_rate_hz, omega)
@@ -226,8 +230,9 @@ def filter_gain2(params: dict, sample_rate_hz: float, omega: np.ndarray) -> np.n
     if params.get("taps"):
         _, h = signal.freqz(params["taps"], [1.0], worN=omega)
     else:
-        sos = signal.butter(int(params["order"]), params["cutoff_hz"], fs=sample_rate_hz, output="sos")
-        _, h = signal.sosfreqz(sos, worN=omega)
+        from fogmon.sim.noise import lowpass_filter
+
+        _, h = signal.sosfreqz(lowpass_filter(params["cutoff_hz"], params["order"], sample_rate_hz), worN=omega)
     return np.abs(h) ** 2
 
 

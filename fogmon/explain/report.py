@@ -25,6 +25,7 @@ from fogmon.explain.explainer import Result
 from fogmon.explain.mismatch import CHANCE_SCORE
 from fogmon.recording import write_replay_log
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
+from fogmon.sim.noise import lowpass_impulse
 
 
 def json_safe(x):
@@ -69,18 +70,44 @@ def _model_noise(res: Result) -> dict:
 
 def baseline_low_pass(model: SensorModel) -> dict | None:
     """The baseline's low-pass-filtered white noise (``baseline.low_pass_index``, docs/explain.md,
-    "The baseline"): correlation time tau_c_s (s), sigma_dph (deg/h), corner_hz = 1 / (2 pi
-    tau_c) (Hz) and white_N_dpsh, the white-noise level (deg/sqrt(h)) it has at taus far
-    beyond tau_c (sampled first-order Gauss-Markov: sigma^2 tau0 (1 + a) / (1 - a) = (60 N)^2,
-    a = exp(-tau0 / tau_c)); None when the baseline has none."""
+    "The baseline"): ``kind`` (``markov``: a first-order Gauss-Markov term; ``lowpass_noise``:
+    white noise through a Butterworth low-pass), ``order``, ``corner_hz`` (1 / (2 pi tau_c),
+    or the Butterworth -3 dB cutoff), ``sigma_dph`` (deg/h), ``tau_c_s`` (s, markov only,
+    else None), ``floor_N_dpsh`` (the unfiltered white noise N beside it, deg/sqrt(h)) and
+    ``white_N_dpsh``, the white-noise level (deg/sqrt(h)) of both at taus far beyond the
+    corner: N_f^2 + floor^2, (60 N_f)^2 the filtered part's PSD at 0 per unit normalized
+    frequency / fs (markov: sigma^2 tau0 (1 + a) / (1 - a), a = exp(-tau0 / tau_c);
+    lowpass_noise: sigma^2 tau0 / sum of h^2, h its impulse response); None when the
+    baseline has none."""
     i = low_pass_index(model)
     if i is None:
         return None
-    tau_c, sigma = float(model.effects[i].params["tau_c_s"]), float(model.effects[i].params["sigma_dph"])
-    tau0 = 1.0 / float(model.sample_rate_hz)
-    a = math.exp(-tau0 / tau_c)
-    return {"tau_c_s": tau_c, "sigma_dph": sigma, "corner_hz": 1.0 / (2.0 * math.pi * tau_c),
-            "white_N_dpsh": math.sqrt(sigma ** 2 * tau0 * (1.0 + a) / (1.0 - a)) / 60.0}
+    p = model.effects[i].params
+    sigma, tau0, floor = float(p["sigma_dph"]), 1.0 / float(model.sample_rate_hz), float(model.noise.N_dpsh)
+    out = {"kind": model.effects[i].kind, "sigma_dph": sigma, "floor_N_dpsh": floor}
+    if out["kind"] == "markov":
+        tau_c = float(p["tau_c_s"])
+        a = math.exp(-tau0 / tau_c)
+        out.update(order=1, corner_hz=1.0 / (2.0 * math.pi * tau_c), tau_c_s=tau_c)
+        psd0 = sigma ** 2 * (1.0 + a) / (1.0 - a)
+    else:
+        h = lowpass_impulse(p["cutoff_hz"], p["order"], model.sample_rate_hz)
+        out.update(order=int(p["order"]), corner_hz=float(p["cutoff_hz"]), tau_c_s=None)
+        psd0 = sigma ** 2 / float(np.sum(h * h))
+    return {**out, "white_N_dpsh": math.sqrt(psd0 * tau0 / 3600.0 + floor ** 2)}
+
+
+def low_pass_text(lp: dict) -> str:
+    """The baseline's low-pass (:func:`baseline_low_pass`) in words, with units."""
+    floor = (f", beside unfiltered white noise N {lp['floor_N_dpsh']:.4g} deg/sqrt(h)" if lp["floor_N_dpsh"] > 0
+             else "")
+    if lp["kind"] == "markov":
+        shape = (f"white noise through a first-order low-pass, corner {lp['corner_hz']:.3g} Hz (a Gauss-Markov "
+                 f"term, sigma {lp['sigma_dph']:.4g} deg/h, tau_c {lp['tau_c_s']:.3g} s")
+    else:
+        shape = (f"white noise through a Butterworth low-pass of order {lp['order']}, cutoff "
+                 f"{lp['corner_hz']:.3g} Hz (sigma {lp['sigma_dph']:.4g} deg/h")
+    return f"{shape}{floor}; N {lp['white_N_dpsh']:.4g} deg/sqrt(h) at longer taus)"
 
 
 def _baseline_text(res: Result) -> str:
@@ -91,10 +118,8 @@ def _baseline_text(res: Result) -> str:
     if lp is None:
         return ""
     return (f"The recording's ADEV bends below the white-noise slope at the shortest taus (the sensor's own "
-            f"low-pass), so the baseline holds white noise through a first-order low-pass, corner "
-            f"{lp['corner_hz']:.3g} Hz (a Gauss-Markov term, sigma {lp['sigma_dph']:.4g} deg/h, tau_c "
-            f"{lp['tau_c_s']:.3g} s; N {lp['white_N_dpsh']:.4g} deg/sqrt(h) at longer taus), fitted with "
-            f"the IEEE-952 terms before any effect was judged.")
+            f"low-pass), so the baseline holds {low_pass_text(lp)}, fitted with the IEEE-952 terms before any "
+            f"effect was judged.")
 
 
 def verdict(res: Result, mism: list[dict], mism_after: list[dict]) -> str:
@@ -247,8 +272,7 @@ def console_summary(rep: dict) -> str:
              f"  mismatch regions: {len(rep['mismatches'])} before, {len(rep['mismatches_after'])} after"]
     lp = (rep.get("baseline_model") or {}).get("low_pass")
     if lp:
-        lines.insert(1, f"  baseline: white noise through a first-order low-pass, corner {lp['corner_hz']:.3g} Hz "
-                        f"(N {lp['white_N_dpsh']:.4g} deg/sqrt(h) at longer taus)")
+        lines.insert(1, f"  baseline: {low_pass_text(lp)}")
     for r in rep["mismatches"][:5]:
         lines.append("    - " + _region_text(r))
     if len(rep["mismatches"]) > 5:

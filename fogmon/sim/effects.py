@@ -9,7 +9,7 @@ parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
   per sample (vibration_noise, temperature_noise); the simulator scales one white
   sequence by N0 + sum of these (floored at 0).
 - noise: ``noise_generator(effect, sample_rate_hz, rng)`` -> a stateful generator (markov,
-  outliers, vibration_lines).
+  lowpass_noise, outliers, vibration_lines).
 - filter: ``BandwidthFilter(params, sample_rate_hz)`` applied to the whole simulated rate.
 
 ``lookback_s(effect)`` is how much earlier data a mean-type effect needs to be exact
@@ -19,11 +19,11 @@ Time ``t_s`` is recording time in s (the recording's own clock with ``--like``).
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import butter, lfilter, lfilter_zi, sosfilt, sosfilt_zi
+from scipy.signal import lfilter, lfilter_zi, sosfilt, sosfilt_zi
 
 from fogmon.errors import FogmonError
 from fogmon.sim.model import EFFECT_KINDS, Effect
-from fogmon.sim.noise import GaussMarkov, NarrowbandLine
+from fogmon.sim.noise import GaussMarkov, LowpassNoise, NarrowbandLine, lowpass_filter
 
 
 def _aux(effect: Effect, aux: dict) -> np.ndarray:
@@ -177,12 +177,15 @@ def white_level_dpsh(effect: Effect, t_s, aux: dict) -> np.ndarray:
 
 
 def noise_generator(effect: Effect, sample_rate_hz: float, rng: np.random.Generator):
-    """Stateful generator of a noise-type effect (``markov``, ``outliers``, ``vibration_lines``)."""
+    """Stateful generator of a noise-type effect (``markov``, ``lowpass_noise``, ``outliers``,
+    ``vibration_lines``)."""
     p = effect.params
     if effect.kind == "outliers":
         return OutlierSpikes(p, sample_rate_hz, rng)
     if effect.kind == "vibration_lines":
         return NarrowbandLines(p, sample_rate_hz, rng)
+    if effect.kind == "lowpass_noise":
+        return LowpassNoise(p["sigma_dph"], p["cutoff_hz"], p["order"], sample_rate_hz, rng)
     return GaussMarkov(p["sigma_dph"], p["tau_c_s"], sample_rate_hz, rng)
 
 
@@ -248,7 +251,7 @@ class BandwidthFilter:
             if params["cutoff_hz"] >= sample_rate_hz / 2:
                 raise FogmonError(f"bandwidth: cutoff_hz {params['cutoff_hz']:g} must be below "
                                   f"the Nyquist frequency {sample_rate_hz / 2:g} Hz")
-            self.sos = butter(params["order"], params["cutoff_hz"], fs=sample_rate_hz, output="sos")
+            self.sos = lowpass_filter(params["cutoff_hz"], params["order"], sample_rate_hz)
         self._zi: np.ndarray | None = None
 
     def apply(self, x: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ constraint), the aux channel it needs and its nature:
 - ``"white_level"``: adds to the white-noise level N in deg/sqrt(h) sample by sample
   (``fogmon.sim.effects.white_level_dpsh``); N = N0 + sum of these, the same white
   sequence scaled;
-- ``"noise"``: an extra stochastic rate term (``markov``);
+- ``"noise"``: an extra stochastic rate term (``markov``, ``lowpass_noise``, ...);
 - ``"filter"``: acts on the whole simulated rate (``bandwidth``);
 - ``"coefficients"``: corrected [noise] coefficients (``noise``): written by
   ``fogmon explain`` into its report only; a model file carries them in [noise].
@@ -171,6 +171,16 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         },
         None, "filter", "the sensor's own low-pass/decimation filter applied to the whole rate",
         lambda p: f"sensor low-pass: Butterworth order {p['order']} at {p['cutoff_hz']:.4g} Hz"),
+    "lowpass_noise": EffectKind(
+        {
+            "sigma_dph": Param("deg/h", "standard deviation of the filtered noise", check=">=0"),
+            "cutoff_hz": Param("Hz", "Butterworth -3 dB frequency (below the Nyquist frequency)", check=">0"),
+            "order": Param("", "Butterworth order", "int", ">0"),
+        },
+        None, "noise", "white noise through a Butterworth low-pass (the bandwidth kind's filter) added to the "
+                       "rate: the filtered part of the sensor's white noise, beside an unfiltered white floor N",
+        lambda p: (f"white noise through a Butterworth low-pass of order {p['order']} at {p['cutoff_hz']:.4g} Hz, "
+                   f"{p['sigma_dph']:.4g} deg/h rms")),
     "outliers": EffectKind(
         {
             "rate_per_h": Param("1/h", "mean number of outliers per hour (a Poisson process on the sample grid)",
@@ -387,8 +397,8 @@ def validate_model(model: SensorModel, where: str = "model") -> SensorModel:
                                   f"(axes: {', '.join(axis_noise)})")
         effects.append(replace(validate_effect(e.kind, e.params, at), axes=tuple(e.axes)))
     for i, e in enumerate(effects):
-        if e.kind == "bandwidth" and e.params["cutoff_hz"] >= sample_rate_hz / 2:
-            raise FogmonError(f"{where}: [[effect]] #{i + 1} (bandwidth): cutoff_hz must be below the "
+        if e.kind in ("bandwidth", "lowpass_noise") and e.params["cutoff_hz"] >= sample_rate_hz / 2:
+            raise FogmonError(f"{where}: [[effect]] #{i + 1} ({e.kind}): cutoff_hz must be below the "
                               f"Nyquist frequency {sample_rate_hz / 2:g} Hz, got {e.params['cutoff_hz']:g}")
         if e.kind == "vibration_lines":
             for j, (f, bw) in enumerate(zip(e.params["freq_hz"], e.params["bandwidth_hz"], strict=True)):

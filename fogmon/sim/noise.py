@@ -24,6 +24,9 @@ memory while staying one reproducible realization per seed.
 - R (rate ramp): (R/3600) (t - t_start); sigma = R tau / (3600 sqrt(2)).
 - Gauss-Markov (``markov`` effect): exact sampled AR(1), x_k = a x_{k-1} + sqrt(1-a^2) sigma e_k,
   a = exp(-tau0/tau_c), started in its stationary distribution.
+- Low-pass noise (``lowpass_noise`` effect): white noise through a Butterworth low-pass
+  (:func:`lowpass_filter`, the ``bandwidth`` effect's filter), scaled to sigma rms,
+  started stationary by a burn-in as long as the impulse response it keeps.
 - Narrowband line (``vibration_lines`` effect): white noise through a 4-pole
   Butterworth band-pass (-3 dB edges f -+ bw/2), scaled to sigma rms; each line has its
   own random stream.
@@ -33,7 +36,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import butter, lfilter, sosfilt, sosfreqz
+from scipy.signal import butter, lfilter, sos2zpk, sosfilt, sosfreqz
 
 from fogmon.davar.theory import FLICKER_FACTOR
 
@@ -111,6 +114,83 @@ class NarrowbandLine:
             return np.zeros(0)
         y, self._zi = sosfilt(self.sos, self.rng.standard_normal(n), zi=self._zi)
         return self.scale * y
+
+
+def lowpass_filter(cutoff_hz: float, order: int, sample_rate_hz: float) -> np.ndarray:
+    """Second-order sections of the Butterworth low-pass of ``order`` with its -3 dB
+    point at ``cutoff_hz`` (below the Nyquist frequency): the ``bandwidth`` effect's
+    filter and the ``lowpass_noise`` effect's."""
+    return butter(int(order), cutoff_hz, fs=sample_rate_hz, output="sos")
+
+
+#: A low-pass's impulse response is followed until the energy it has left is below this
+#: fraction of its total (the burn-in of LowpassNoise, the support of lowpass_acf).
+LOWPASS_TAIL = 1e-15
+
+
+def lowpass_impulse(cutoff_hz: float, order: int, sample_rate_hz: float) -> np.ndarray:
+    """Impulse response of :func:`lowpass_filter` up to where its remaining energy is
+    below LOWPASS_TAIL of the total (bounded by its slowest pole's radius r: the tail
+    from sample L on decays as r^L, with a margin for the other poles)."""
+    sos = lowpass_filter(cutoff_hz, order, sample_rate_hz)
+    r = float(np.max(np.abs(sos2zpk(sos)[1])))
+    n = int(math.ceil(math.log(LOWPASS_TAIL) / (2.0 * math.log(r)))) + 16 * int(order) + 16
+    impulse = np.zeros(n)
+    impulse[0] = 1.0
+    return sosfilt(sos, impulse)
+
+
+def lowpass_acf(sigma_dph: float, cutoff_hz: float, order: int, sample_rate_hz: float) -> np.ndarray:
+    """Autocovariance ((deg/h)^2) at lags 0, 1, ... of ``lowpass_noise`` (white noise through
+    :func:`lowpass_filter`, variance sigma^2); 0 beyond the lags returned."""
+    h = lowpass_impulse(cutoff_hz, order, sample_rate_hz)
+    r = np.correlate(h, h, mode="full")[len(h) - 1:]
+    return sigma_dph ** 2 * r / r[0]
+
+
+def lowpass_adev_exact(m, sigma_dph: float, cutoff_hz: float, order: int, sample_rate_hz: float) -> np.ndarray:
+    """Exact overlapping-ADEV expectation (deg/h) of ``lowpass_noise`` at averaging factors
+    m: AVAR = (4 V(m) - V(2m)) / (2 m^2), V(m) = m r_0 + 2 sum_{k<m} (m - k) r_k the
+    variance of a sum of m samples (r: :func:`lowpass_acf`)."""
+    r = lowpass_acf(sigma_dph, cutoff_hz, order, sample_rate_hz)
+    k = np.arange(len(r), dtype=float)
+    s0, s1 = np.cumsum(r[1:]), np.cumsum(k[1:] * r[1:])
+
+    def var_sum(mm: np.ndarray) -> np.ndarray:
+        j = np.minimum(mm, len(r)) - 2  # index of lag min(mm, len(r)) - 1 in s0, s1
+        tail = np.where(j >= 0, mm * s0[np.maximum(j, 0)] - s1[np.maximum(j, 0)], 0.0)
+        return mm * r[0] + 2.0 * tail
+
+    m = np.asarray(m, dtype=np.int64)
+    return np.sqrt(np.maximum((4.0 * var_sum(m) - var_sum(2 * m)) / (2.0 * m.astype(float) ** 2), 0.0))
+
+
+class LowpassNoise:
+    """``lowpass_noise``: white noise through :func:`lowpass_filter`, scaled to
+    ``sigma_dph`` rms (deg/h), started stationary (a burn-in as long as the impulse
+    response :func:`lowpass_impulse` keeps)."""
+
+    def __init__(self, sigma_dph: float, cutoff_hz: float, order: int, sample_rate_hz: float,
+                 rng: np.random.Generator):
+        self.sos = lowpass_filter(cutoff_hz, order, sample_rate_hz)
+        h = lowpass_impulse(cutoff_hz, order, sample_rate_hz)
+        self.scale = float(sigma_dph) / math.sqrt(float(np.sum(h * h)))
+        self.rng = rng
+        _, self._zi = sosfilt(self.sos, rng.standard_normal(len(h)), zi=np.zeros((len(self.sos), 2)))
+
+    def generate(self, n: int) -> np.ndarray:
+        if n == 0:
+            return np.zeros(0)
+        y, self._zi = sosfilt(self.sos, self.rng.standard_normal(n), zi=self._zi)
+        return self.scale * y
+
+
+def lowpass_psd(omega: np.ndarray, sigma_dph: float, cutoff_hz: float, order: int, sample_rate_hz: float
+                ) -> np.ndarray:
+    """Two-sided PSD ((deg/h)^2 per unit normalized frequency) of ``lowpass_noise`` at
+    angular normalized frequencies ``omega``: sigma^2 |H|^2 / sum of h^2."""
+    h = lowpass_impulse(cutoff_hz, order, sample_rate_hz)
+    return sigma_dph ** 2 / float(np.sum(h * h)) * line_gain2(lowpass_filter(cutoff_hz, order, sample_rate_hz), omega)
 
 
 #: burn-in of a narrowband line generator, in envelope time constants 1 / (pi bandwidth)
