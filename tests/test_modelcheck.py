@@ -72,7 +72,8 @@ def test_window_estimator_is_the_engine_oadev():
 
 def test_band_level_matches_exact_theory_and_brackets_median(band_dir):
     model = SensorModel(FS, 0.0, Noise(Q_arcsec=0.3, N_dpsh=0.05, B_dph=0.05, K_dphsh=0.02, R_dphh=0.5),
-                        [Effect("markov", {"tau_c_s": 5.0, "sigma_dph": 0.2})])
+                        [Effect("markov", {"tau_c_s": 5.0, "sigma_dph": 0.2}),
+                         Effect("lowpass_noise", {"sigma_dph": 8.0, "cutoff_hz": 0.1 * FS, "order": 2})])
     band = make_band(model, band_dir, replicates=200)
     assert band.theory_dph is not None
     # relative sd of one window's avar is ~3 sd(u); the mean of B has 1/sqrt(B) of it

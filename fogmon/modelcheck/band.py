@@ -31,7 +31,8 @@ if TYPE_CHECKING:
 # are imported inside the functions that use them: a run without --model never needs them
 
 #: Effect natures the band holds: stationary random processes the simulator makes from
-#: the model alone (``markov``, ``vibration_lines``: "noise"; ``bandwidth``: "filter").
+#: the model alone (``markov``, ``lowpass_noise``, ``vibration_lines``: "noise"; ``bandwidth``:
+#: "filter").
 #: Effects that need an aux channel or follow a time schedule are left out.
 BAND_NATURES = ("noise", "filter")
 
@@ -66,8 +67,8 @@ def theory_adev_dph(model: SensorModel, m: np.ndarray, sample_rate_hz: float,
     """Exact expected ADEV (deg/h, sqrt of the mean Allan variance) of the simulator's
     band model at averaging factors m, for a simulation of ``duration_s`` s (it sets the
     flicker generator's longest correlation time); None when the model holds an effect
-    without a closed form (bandwidth filter, vibration lines)."""
-    from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact
+    without a closed form here (bandwidth filter, vibration lines)."""
+    from fogmon.sim.noise import ar1_adev_exact, default_flicker_tau_hi_s, flicker_adev_exact, lowpass_adev_exact
 
     bm = band_model(model, sample_rate_hz)
     sample_rate_hz = float(sample_rate_hz)
@@ -83,9 +84,13 @@ def theory_adev_dph(model: SensorModel, m: np.ndarray, sample_rate_hz: float,
             + flicker_adev_exact(m, nz.B_dph, sample_rate_hz, default_flicker_tau_hi_s(sample_rate_hz, duration_s)) ** 2
         )
     for e in bm.effects:
-        if e.kind != "markov":
+        p = e.params
+        if e.kind == "markov":
+            avar = avar + ar1_adev_exact(m, p["sigma_dph"], p["tau_c_s"], sample_rate_hz) ** 2
+        elif e.kind == "lowpass_noise":
+            avar = avar + lowpass_adev_exact(m, p["sigma_dph"], p["cutoff_hz"], p["order"], sample_rate_hz) ** 2
+        else:
             return None
-        avar = avar + ar1_adev_exact(m, e.params["sigma_dph"], e.params["tau_c_s"], sample_rate_hz) ** 2
     return np.sqrt(avar)
 
 
