@@ -94,7 +94,7 @@ class Candidate:
     #: (a white-level regression's intercept), None: unchanged
     white_n0_dpsh: float | None = None
     #: the stochastic model this noise-type effect joins, its white-equivalent level
-    #: refitted under it (vibration_lines, with_white_level); None: the current one
+    #: refitted under it (vibration_lines: with_white_level, filtered_levels); None: the current one
     stoch_base: SensorModel | None = None
     #: every sample an ``outliers`` effect holds: times_s (s), amplitudes_dph (deg/h),
     #: abs_z (arrays; written to the outliers file, not into the report)
@@ -1034,8 +1034,8 @@ def vibration_lines(ctx: Context) -> Candidate | None:
     residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
     0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle likelihood
     of the residual's binned periodogram under the model PSD plus the band-pass lines,
-    and the model's white-equivalent level (N, or a baseline's low-pass sigma) refitted
-    under them (lines_and_white). The removable
+    and the model's white-equivalent level (N, or a baseline's low-pass sigma; N and Q
+    under a bandwidth filter) refitted under them (lines_and_white). The removable
     estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
     residual's DFT."""
     sample_rate_hz, n = ctx.sample_rate_hz, ctx.n
