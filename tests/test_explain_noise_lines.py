@@ -138,3 +138,21 @@ def test_lines_refit_a_baseline_low_pass_level_that_held_their_power():
     assert c.params["freq_hz"][0] == pytest.approx(116.0, abs=0.1)
     assert c.stoch_base.effects[0].params["sigma_dph"] == pytest.approx(100.0, rel=0.01)
     assert "sigma 105.6 -> " in c.evidence
+
+
+def test_lines_under_a_filter_refit_n_and_q_jointly():
+    """A model whose bandwidth filter joined after N and Q were split without it (the G
+    ring's baseline: N too high, Q too low for its 4-pole decimation filter): vibration_lines
+    refits both under the lines and the filter, near the truth."""
+    bw = Effect("bandwidth", {"cutoff_hz": 8.0, "order": 4, "taps": []})
+    line = Effect("vibration_lines", {"freq_hz": [3.0], "sigma_dph": [1.5], "bandwidth_hz": [0.05]})
+    rec = simulate(SensorModel(20.0, 0.0, Noise(Q_arcsec=0.15, N_dpsh=0.01), [bw, line]), duration_s=1800.0, seed=5)
+    y = rec.rate_dph - rec.rate_dph.mean()
+    model = SensorModel(20.0, 0.0, Noise(Q_arcsec=0.105, N_dpsh=0.015), [bw])
+    ctx = _whittle(stochastic_part(model), {}, rec.t_s, np.ones(len(y), bool), y)
+    c = catalogue.vibration_lines(ctx)
+    assert c is not None and c.bic_gain(ctx.penalty) > 0 and c.stoch_base is not None
+    assert min(abs(f - 3.0) for f in c.params["freq_hz"]) < 0.05 and c.k == 3 * len(c.params["freq_hz"]) + 2
+    assert c.stoch_base.noise.N_dpsh == pytest.approx(0.01, rel=0.1)      # seeds 5-7: 0.0101-0.0104
+    assert c.stoch_base.noise.Q_arcsec == pytest.approx(0.15, rel=0.1)    # 0.141-0.143
+    assert "N 0.015 -> " in c.evidence and "Q 0.105 -> " in c.evidence

@@ -94,7 +94,7 @@ class Candidate:
     #: (a white-level regression's intercept), None: unchanged
     white_n0_dpsh: float | None = None
     #: the stochastic model this noise-type effect joins, its white-equivalent level
-    #: refitted under it (vibration_lines, with_white_level); None: the current one
+    #: refitted under it (vibration_lines: with_white_level, filtered_levels); None: the current one
     stoch_base: SensorModel | None = None
     #: every sample an ``outliers`` effect holds: times_s (s), amplitudes_dph (deg/h),
     #: abs_z (arrays; written to the outliers file, not into the report)
@@ -727,6 +727,52 @@ def bandwidth(ctx: Context) -> Candidate | None:
     return Candidate("bandwidth", p, {}, g, 2, ev)
 
 
+#: the noise levels refitted under vibration lines when the model holds a bandwidth
+#: filter (filtered_levels): IEEE-952 name, unit
+FILTERED_LEVELS = (("N_dpsh", "deg/sqrt(h)"), ("Q_arcsec", "arcsec"))
+#: a refitted noise level is at most this many times its previous value
+LEVEL_MAX_RATIO = 2.0
+
+
+def filtered_levels(model: SensorModel, bp: BinnedPeriodogram, extra: np.ndarray | float,
+                    floor: float) -> tuple[SensorModel, list[str]] | None:
+    """``model`` (holding a ``bandwidth`` filter) with its N and Q (those it has)
+    refitted jointly by the Whittle likelihood of ``bp`` under its PSD plus ``extra``
+    (PSD at the bins, e.g. vibration lines): a baseline splits them on the shortest
+    taus' ADEV, where the filter acts, before the filter is in the model, and the
+    filter acts on both (sim BandwidthFilter). Returns (the model, the names refitted),
+    or None without such a filter, without N and Q, or with white-level effects (they
+    set N)."""
+    nz = model.noise
+    names = [nm for nm, _ in FILTERED_LEVELS if getattr(nz, nm) > 0]
+    if (not names or not any(e.kind == "bandwidth" for e in model.effects)
+            or any(EFFECT_KINDS[e.kind].nature == "white_level" for e in model.effects)):
+        return None
+    n = bp.n
+    other = model_psd(replace(model, noise=replace(nz, **{nm: 0.0 for nm in names})), bp.omega, n)
+    filters = [e for e in model.effects if e.kind == "bandwidth"]
+    units = np.array([model_psd(SensorModel(model.sample_rate_hz, 0.0, replace(Noise(0.0, 0.0, 0.0, 0.0, 0.0),
+                                                                               **{nm: getattr(nz, nm)}), filters),
+                                bp.omega, n) for nm in names])
+
+    def dev(x):  # x: variances relative to the current ones
+        S = np.maximum(other + extra + x @ units, max(floor, 1e-300))
+        r = bp.count * (1.0 / S - bp.I / S ** 2)
+        return float(np.sum(bp.count * (np.log(S) + bp.I / S))), units @ r
+
+    r = minimize(dev, np.ones(len(names)), jac=True, method="L-BFGS-B",
+                 bounds=[(0.0, LEVEL_MAX_RATIO ** 2)] * len(names))
+    return replace(model, noise=replace(nz, **{nm: getattr(nz, nm) * math.sqrt(x) for nm, x in
+                                              zip(names, r.x, strict=True)})), names
+
+
+def _levels_text(old: SensorModel, new: SensorModel, names: list[str]) -> str:
+    """``names`` (FILTERED_LEVELS) with their values in ``old`` and ``new``, units."""
+    units = dict(FILTERED_LEVELS)
+    return ", ".join(f"{nm.split('_')[0]} {getattr(old.noise, nm):.4g} -> {getattr(new.noise, nm):.4g} {units[nm]}"
+                     for nm in names)
+
+
 def _segment_levels(ctx: Context, seg: int):
     """Per-segment white level N (deg/sqrt(h)) from the Allan variance at tau0, and
     segment index boundaries."""
@@ -927,26 +973,35 @@ def _white_parts(ctx: Context, omega: np.ndarray, n: int):
 
 def lines_and_white(ctx: Context, bp: BinnedPeriodogram, n: int, starts: list[tuple[float, float]]):
     """fit_lines on the model PSD, then the model's white-equivalent level (N, or the
-    sigma of its low-pass term, _white_parts) refitted under the lines (their power was
-    counted in it before: the lines' skirts as white noise, or lines near Nyquist in a
-    baseline's low-pass level) by the same Whittle likelihood. Returns (deviance drop,
-    lines, the stochastic model with the refitted level or None when not refitted)."""
+    sigma of its low-pass term, _white_parts; N and Q under a bandwidth filter,
+    filtered_levels) refitted under the lines (their power was counted in it before:
+    the lines' skirts as white noise, or lines near Nyquist in a baseline's low-pass
+    level) by the same Whittle likelihood. Returns (deviance drop, lines, the stochastic
+    model with the refitted levels or None when not refitted, the levels refitted)."""
     sample_rate_hz = ctx.sample_rate_hz
     S0 = model_psd(ctx.stoch, bp.omega, n, white_rms_dpsh(ctx.stoch, ctx))
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     _, lines = fit_lines(bp, S0, sample_rate_hz, n, starts, ctx.penalty)
     parts = _white_parts(ctx, bp.omega, n)
     if not lines:
-        return 0.0, lines, None
-    S_l = lines_psd({"freq_hz": [x[0] for x in lines], "sigma_dph": [x[1] for x in lines],
-                     "bandwidth_hz": [x[2] for x in lines]}, sample_rate_hz, bp.omega)
+        return 0.0, lines, None, 0
+    S_l = _lines_at(lines, sample_rate_hz, bp.omega)
     d0 = bp.deviance(S0, floor)
+    both = filtered_levels(ctx.stoch, bp, S_l, floor)
+    if both is not None:
+        return d0 - bp.deviance(model_psd(both[0], bp.omega, n) + S_l, floor), lines, both[0], len(both[1])
     if parts is None:
-        return d0 - bp.deviance(S0 + S_l, floor), lines, None
+        return d0 - bp.deviance(S0 + S_l, floor), lines, None, 0
     other, unit, level0 = parts
-    r = minimize_scalar(lambda v: bp.deviance(other + v * v * unit + S_l, floor), bounds=(0.0, 2.0 * level0),
-                        method="bounded", options={"xatol": 1e-4 * level0})
-    return d0 - float(r.fun), lines, with_white_level(ctx.stoch, float(r.x))
+    r = minimize_scalar(lambda v: bp.deviance(other + v * v * unit + S_l, floor),
+                        bounds=(0.0, LEVEL_MAX_RATIO * level0), method="bounded", options={"xatol": 1e-4 * level0})
+    return d0 - float(r.fun), lines, with_white_level(ctx.stoch, float(r.x)), 1
+
+
+def _lines_at(lines: list[tuple[float, float, float]], sample_rate_hz: float, omega: np.ndarray) -> np.ndarray:
+    """PSD at ``omega`` of fitted lines (centre Hz, rms deg/h, bandwidth Hz)."""
+    return lines_psd({"freq_hz": [x[0] for x in lines], "sigma_dph": [x[1] for x in lines],
+                      "bandwidth_hz": [x[2] for x in lines]}, sample_rate_hz, omega)
 
 
 def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
@@ -960,7 +1015,7 @@ def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
     bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
     wr = white_rms_dpsh(ctx.stoch, ctx)
     for a, b in ((0, 1), (1, 0)):
-        ga, la, refit = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
+        ga, la, refit, _ = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
         S0b = model_psd(ctx.stoch, bps[b].omega, h, wr)
         S1b = S0b if refit is None else model_psd(refit, bps[b].omega, h, white_rms_dpsh(refit, ctx))
         fl = LEAKAGE_FLOOR * float(np.median(S0b))
@@ -979,8 +1034,8 @@ def vibration_lines(ctx: Context) -> Candidate | None:
     residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
     0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle likelihood
     of the residual's binned periodogram under the model PSD plus the band-pass lines,
-    and the model's white-equivalent level (N, or a baseline's low-pass sigma) refitted
-    under them (lines_and_white). The removable
+    and the model's white-equivalent level (N, or a baseline's low-pass sigma; N and Q
+    under a bandwidth filter) refitted under them (lines_and_white). The removable
     estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
     residual's DFT."""
     sample_rate_hz, n = ctx.sample_rate_hz, ctx.n
@@ -999,7 +1054,7 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         8 * sample_rate_hz / (2 ** math.ceil(math.log2(8 * sample_rate_hz / f_lo)))
     )  # a few Welch bins: the start bandwidth
     starts = [(f, max(res, 4 * sample_rate_hz / n)) for f, _ in props]
-    gain, lines, refit = lines_and_white(ctx, _periodogram(ctx), n, starts)
+    gain, lines, refit, levels = lines_and_white(ctx, _periodogram(ctx), n, starts)
     if not lines:
         return None
     params = {"freq_hz": [ln[0] for ln in lines], "sigma_dph": [ln[1] for ln in lines],
@@ -1017,13 +1072,16 @@ def vibration_lines(ctx: Context) -> Candidate | None:
                       f"tau = {0.371 / f:.3g} s)" for f, sig, bw in lines)
           + " - band-limited noise, not one coherent sinusoid"
           + ("" if refit is None else "; " + _refit_text(ctx.stoch, refit)))
-    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines) + (refit is not None), ev,
+    return Candidate("vibration_lines", params, {}, float(gain), LINE_PARAMS * len(lines) + levels, ev,
                      rate=est, heldout=functools.partial(_lines_heldout, ctx, lines), stoch_base=refit)
 
 
 def _refit_text(old: SensorModel, new: SensorModel) -> str:
     """What a refit of the white-equivalent level under lines changed (with_white_level)."""
     i = _low_pass_index(old)
+    if new.noise.Q_arcsec != old.noise.Q_arcsec:  # filtered_levels
+        names = [nm for nm, _ in FILTERED_LEVELS if getattr(new.noise, nm) != getattr(old.noise, nm)]
+        return f"{_levels_text(old, new, names)} refitted under the lines and the filter"
     if i is None:
         return f"white level refitted under the lines: N {old.noise.N_dpsh:.4g} -> {new.noise.N_dpsh:.4g} deg/sqrt(h)"
     return (f"the low-pass white noise's level refitted under the lines (their power was in it): sigma "
