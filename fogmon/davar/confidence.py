@@ -46,11 +46,15 @@ _GRID_PER_M = 256  # above this m: F = inf and at most 6 x this many lags (Riema
 
 
 def _sw(t: np.ndarray, alpha: int) -> np.ndarray:
-    """Greenhall (2004) eq. 7 for noise type ``alpha`` (2 .. -4) at lags ``t``."""
+    """Greenhall (2004) eq. 7 for noise type ``alpha`` (2 .. -4) at lags ``t``, up to a sign
+    per alpha: -|t| (alpha 2), |t|^(3 - alpha) (even alpha), t^(3 - alpha) ln|t| (odd)."""
     a = np.abs(t)
+    if alpha == 2:
+        return -a
+    if alpha % 2 == 0:
+        return a ** (3 - alpha)
     with np.errstate(divide="ignore", invalid="ignore"):
-        lg = np.where(a > 0, np.log(np.where(a > 0, a, 1.0)), 0.0)
-    return {2: -a, 1: t**2 * lg, 0: a**3, -1: t**4 * lg, -2: a**5, -3: t**6 * lg, -4: a**7}[alpha]
+        return t ** (3 - alpha) * np.where(a > 0, np.log(np.where(a > 0, a, 1.0)), 0.0)
 
 
 def _sz(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
