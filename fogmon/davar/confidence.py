@@ -11,6 +11,7 @@ of Allan variance estimates across taus (``avar_relative_covariance``).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import lru_cache
 
 import numpy as np
@@ -171,21 +172,20 @@ def _mixture_rho(m: np.ndarray, t: np.ndarray, start: np.ndarray) -> np.ndarray:
     m[i] on the segments start[2 i] .. start[2 i + 2] of t: the exact discrete
     autocorrelations for white and random-walk rate noise up to m = _GRID_PER_M, else
     Greenhall's with F = m (flicker), or F = inf beyond."""
-    owner = np.repeat(np.arange(len(m)), np.diff(np.r_[start[0::2], len(t)]))
+    bounds = np.r_[start[0::2], len(t)]
+    owner = np.repeat(np.arange(len(m)), np.diff(bounds))
     fin_m = m <= _GRID_PER_M
     fin = fin_m[owner]
+    f = m.astype(np.float64)
     rho = np.empty((3, len(t)))
     for k, alpha in enumerate(MIX_ALPHAS[1:]):
         rho[k, ~fin] = _sz(t[~fin], np.inf, alpha) / _sz(np.zeros(1), np.inf, alpha)
         if alpha in (0, -2):
             for i in np.flatnonzero(fin_m):
-                seg = slice(start[2 * i], start[2 * i + 2] if 2 * i + 2 < len(start) else len(t))
+                seg = slice(bounds[i], bounds[i + 1])
                 rho[k, seg] = _discrete_rho(int(m[i]), alpha, np.round(t[seg] * m[i]))
         elif fin.any():
-            f = m[fin_m].astype(np.float64)
-            norm = np.zeros(len(m))
-            norm[fin_m] = _sz(np.zeros(len(f)), f, alpha)
-            rho[k, fin] = _sz(t[fin], f[np.cumsum(fin_m)[owner[fin]] - 1], alpha) / norm[owner[fin]]
+            rho[k, fin] = _sz(t[fin], f[owner[fin]], alpha) / _sz(np.zeros(len(m)), f, alpha)[owner[fin]]
     return rho
 
 
@@ -213,11 +213,11 @@ def mixture_matrices(m, n_samples: int) -> np.ndarray:
     return _mixture_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
-_MIX_CACHE: dict = {}  # (m, n) -> its (4, 4) matrix (grids share their factors)
+_MIX_CACHE: dict[tuple[int, int], np.ndarray] = {}  # (m, n) -> its (4, 4) matrix (grids share factors)
 _CACHE_MAX = 1 << 14  # entries kept per cache
 
 
-def _cached_rows(cache: dict, keys: list, compute) -> np.ndarray:
+def _cached_rows(cache: dict, keys: list, compute: Callable[[list], np.ndarray]) -> np.ndarray:
     """The value of each key in ``cache``, the missing ones computed in one call of
     ``compute`` (sorted list of keys -> their values); the cache is emptied when full."""
     todo = sorted({k for k in keys if k not in cache})
@@ -316,7 +316,8 @@ def covariance_matrices(m, n_samples: int) -> np.ndarray:
     return _covariance_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
-_PAIR_CACHE: dict = {}  # (ma, mb, n) -> its (4, 4) matrix (grids whose usable taus differ share pairs)
+_PAIR_CACHE: dict[tuple[int, int, int], np.ndarray] = {}
+"""(ma, mb, n) -> the pair's (4, 4) matrix (grids whose usable taus differ share their pairs)."""
 
 
 @lru_cache(maxsize=64)
