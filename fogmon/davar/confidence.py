@@ -76,12 +76,13 @@ _TABLE2_D2 = {2: (35.0 / 18.0, 1.0), 1: (790.0, 410.0), 0: (2.0 / 3.0, 1.0 / 3.0
 _TABLE3_D2 = (15.23, 12.0)  # Greenhall's table 3 (b0, b1) for d = 2, alpha = 1
 
 
-def _basic_sum(j: int, big_m: float, s: float, f: float, alpha: int) -> float:
-    """Greenhall's BasicSum: sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_{0<j<J} (1 - j/M) sz(j/S)^2."""
+def _basic_sum(j: int, big_m: float, s: float, f: float, alpha: int) -> tuple[float, float]:
+    """Greenhall's BasicSum sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_{0<j<J} (1 - j/M) sz(j/S)^2,
+    and sz(0)^2 (sz evaluated once at all the lags)."""
     lag = np.arange(1, j, dtype=np.float64)
-    inner = 2.0 * (1.0 - lag / big_m) * _sz(lag / s, f, alpha) ** 2
-    ends = _sz(np.array([0.0, j / s]), f, alpha) ** 2
-    return float(ends[0] + (1.0 - j / big_m) * ends[1] + inner.sum())
+    sz2 = _sz(np.r_[0.0, lag / s, j / s], f, alpha) ** 2
+    inner = 2.0 * (1.0 - lag / big_m) * sz2[1:-1]
+    return float(sz2[0] + (1.0 - j / big_m) * sz2[-1] + inner.sum()), float(sz2[0])
 
 
 @lru_cache(maxsize=1 << 16)
@@ -100,21 +101,23 @@ def _edf_greenhall(alpha: int, m: int, n_samples: int) -> float:
     f = float(m)
     if alpha == 1:  # case 3
         if j <= _J_MAX:
-            return 1.0 / (_basic_sum(int(j), big_m, m, f, 1) / (_sz(np.zeros(1), f, 1)[0] ** 2 * big_m))
+            basic, sz0 = _basic_sum(int(j), big_m, m, f, 1)
+            return 1.0 / (basic / (sz0 * big_m))
         b = (_TABLE3_D2[0] + _TABLE3_D2[1] * np.log(m)) ** 2
         if r > 3:
             a0, a1 = _TABLE2_D2[1]
             return 1.0 / ((a0 - a1 / r) / (b * r))
         mp = _J_MAX / r
-        return 1.0 / (_basic_sum(_J_MAX, _J_MAX, mp, mp, 1) / (b * _J_MAX))
+        return 1.0 / (_basic_sum(_J_MAX, _J_MAX, mp, mp, 1)[0] / (b * _J_MAX))
     if j <= _J_MAX:  # case 2: alpha <= 0
         f = f if 3 * m <= _J_MAX else np.inf
-        return 1.0 / (_basic_sum(int(j), big_m, m, f, alpha) / (_sz(np.zeros(1), f, alpha)[0] ** 2 * big_m))
+        basic, sz0 = _basic_sum(int(j), big_m, m, f, alpha)
+        return 1.0 / (basic / (sz0 * big_m))
     if r > 3:
         a0, a1 = _TABLE2_D2[alpha]
         return 1.0 / ((a0 - a1 / r) / r)
-    return 1.0 / (_basic_sum(_J_MAX, _J_MAX, _J_MAX / r, np.inf, alpha)
-                  / (_sz(np.zeros(1), np.inf, alpha)[0] ** 2 * _J_MAX))
+    basic, sz0 = _basic_sum(_J_MAX, _J_MAX, _J_MAX / r, np.inf, alpha)
+    return 1.0 / (basic / (sz0 * _J_MAX))
 
 
 def _discrete_rho(m: int, alpha: int, j: np.ndarray) -> np.ndarray:
