@@ -111,13 +111,11 @@ def _block_means(y: np.ndarray, sigma_1: float) -> np.ndarray:
     return out
 
 
-def _quiet_scales(sigmas: np.ndarray, means: np.ndarray) -> tuple[float, float]:
-    """(noise of one sample, quiet scatter of a block mean), deg/h, from low quantiles of
-    the per-block sample sigmas and of the steps between consecutive block means."""
-    sigma_1 = float(np.quantile(sigmas, QUIET_QUANTILE))
-    steps = np.abs(np.diff(means))
-    s_block = float(np.quantile(steps, QUIET_QUANTILE)) / 0.3186 / np.sqrt(2.0)
-    return sigma_1, s_block
+def _quiet_scatter(means: np.ndarray) -> float:
+    """Quiet scatter of a block mean (deg/h), from a low quantile of the steps between
+    consecutive block ``means`` (the noise of one sample is the same quantile of the
+    per-block sample sigmas)."""
+    return float(np.quantile(np.abs(np.diff(means)), QUIET_QUANTILE)) / 0.3186 / np.sqrt(2.0)
 
 
 def _limit(sigma_1: float, s_block: float) -> float:
@@ -150,7 +148,7 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
         return []
     sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
     mu = _block_means(y[idx], sigma_1)
-    limit = _limit(*_quiet_scales(sig[idx], mu))
+    limit = _limit(sigma_1, _quiet_scatter(mu))
     if not np.isfinite(limit):
         return []
     ref = median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="nearest")
@@ -239,6 +237,34 @@ class _RunningMedian:
         return s[k // 2] if k % 2 else (s[k // 2 - 1] + s[k // 2]) / 2
 
 
+class _Window:
+    """The last ``n`` floats appended, readable in order as one array without a copy: each
+    value is stored twice, ``n`` apart, so the window is always a contiguous slice."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+        self._buf = np.empty(2 * n)
+        self._next = 0      # slot of the next value
+        self._count = 0
+
+    def __len__(self) -> int:
+        return self._count
+
+    def append(self, x: float) -> None:
+        i = self._next
+        self._buf[i] = self._buf[i + self.n] = x
+        self._next = i + 1 if i + 1 < self.n else 0
+        if self._count < self.n:
+            self._count += 1
+
+    def values(self) -> np.ndarray:
+        """The window, oldest first (a read-only view, valid until the next append)."""
+        end = self._next + self.n
+        view = self._buf[end - self._count:end]
+        view.flags.writeable = False
+        return view
+
+
 class MotionGate:
     """The live form of ``find_motion``: causal and bounded. ``push`` takes the analysed
     rate (deg/h) of each incoming block and returns the samples it has judged, in order
@@ -256,8 +282,8 @@ class MotionGate:
     def __init__(self, sample_rate_hz: float) -> None:
         self.m = block_samples(sample_rate_hz)
         n_hist = max(self.WARMUP_BLOCKS, int(self.HISTORY_S * sample_rate_hz / self.m))
-        self._sig: deque[float] = deque(maxlen=n_hist)
-        self._means: deque[float] = deque(maxlen=n_hist)
+        self._sig = _Window(n_hist)
+        self._means = _Window(n_hist)
         self._ref = _RunningMedian(_reference_blocks(sample_rate_hz) // 2 + 1)
         self._gap = _merge_blocks(sample_rate_hz)
         self._limit = float("nan")
@@ -314,9 +340,9 @@ class MotionGate:
         t0, t1 = float(self._t[a]), float(self._t[a + m - 1])
         self._sig.append(sig)
         if self._n_judged % self.RESCALE_BLOCKS == 0 or self._n_judged == self.WARMUP_BLOCKS:
-            self._sigma_1 = float(np.quantile(self._sig, QUIET_QUANTILE))
+            self._sigma_1 = float(np.quantile(self._sig.values(), QUIET_QUANTILE))
             if len(self._means) >= self.WARMUP_BLOCKS:
-                self._limit = _limit(*_quiet_scales(np.asarray(self._sig), np.asarray(self._means)))
+                self._limit = _limit(self._sigma_1, _quiet_scatter(self._means.values()))
         self._n_judged += 1
         dev = abs(mean - self._ref.median()) if len(self._ref) else 0.0
         self._means.append(mean)

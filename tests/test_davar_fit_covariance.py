@@ -108,3 +108,43 @@ def test_dense_grid_edf_is_the_exact_edf_within_a_fraction_of_a_percent():
               [1e-5, 1e-3, 1e-5, 1e-8, 1e-10]):
         a = np.array(a, dtype=np.float64)
         np.testing.assert_allclose(dense_grid_edf(a, tau, m, n_terms, n), exact(a), rtol=2e-3)
+
+
+def _pair_lags_one(ma: int, mb: int, n_a: int, n_b: int) -> tuple[np.ndarray, np.ndarray]:
+    """confidence._pair_lags of one pair written segment by segment (the reference of its
+    vectorised form)."""
+    from fogmon.davar.confidence import _EXACT_SEGMENT, _GAUSS_W, _GAUSS_X
+
+    kinks = (np.arange(3)[:, None] * ma - np.arange(3)[None, :] * mb).ravel()
+    lo = max(kinks.min() - 4 * max(ma, mb), -(n_a - 1))
+    hi = min(kinks.max() + 4 * max(ma, mb), n_b - 1) + 1
+    knots = np.unique(np.clip(np.concatenate([kinks, [lo, hi, 0, n_b - n_a]]), lo, hi))
+    lags, wts = [], []
+    for a, b in zip(knots[:-1], knots[1:], strict=True):
+        if b - a <= _EXACT_SEGMENT:
+            lags.append(np.arange(a, b, dtype=np.float64))
+            wts.append(np.ones(b - a))
+        else:
+            half = 0.5 * (b - a - 1)
+            lags += [np.array([float(a)]), half * _GAUSS_X + 0.5 * (a + b)]
+            wts += [np.ones(1), half * _GAUSS_W]
+    return np.concatenate(lags), np.concatenate(wts)
+
+
+@pytest.mark.parametrize("m, n", [((1, 2, 3, 7, 16, 30, 50, 64), 256), ((1, 2, 4, 8, 16, 32, 64, 128), 300),
+                                  (tuple(2 ** k for k in range(15)), 184718), ((1, 5, 100, 1000, 4000), 8001)])
+def test_vectorised_lag_grids_and_term_covariances_equal_the_pair_by_pair_forms(m, n):
+    from fogmon.davar.confidence import _SECOND_DIFF, _pair_lags, _phase_acv, _term_xcov_raw
+
+    ia, ib = np.triu_indices(len(m))
+    ma, mb = np.array(m)[ia], np.array(m)[ib]
+    pair, lag, w = _pair_lags(ma, mb, n - 2 * ma + 1, n - 2 * mb + 1)
+    for i, (a, b) in enumerate(zip(ma.tolist(), mb.tolist(), strict=True)):
+        want_lag, want_w = _pair_lags_one(a, b, n - 2 * a + 1, n - 2 * b + 1)
+        np.testing.assert_array_equal(lag[pair == i], want_lag)
+        np.testing.assert_array_equal(w[pair == i], want_w)
+    got = _term_xcov_raw(lag, ma[pair], mb[pair])
+    for k, alpha in enumerate((0, -1, -2)):  # sum over p, q of d_p d_q acv(lag + q mb - p ma)
+        want = sum(_SECOND_DIFF[p] * _SECOND_DIFF[q] * _phase_acv(lag + q * mb[pair] - p * ma[pair], alpha)
+                   for p in range(3) for q in range(3))
+        np.testing.assert_allclose(got[k], want, rtol=1e-12, atol=1e-12 * np.abs(want).max())

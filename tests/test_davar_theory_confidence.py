@@ -138,3 +138,54 @@ def test_mixture_edf_matches_monte_carlo_of_white_angle_plus_white_rate():
     mix = edf_mixture(np.array([[0.5, 0.5, 0.0, 0.0]]), [m], n)[0]
     assert mix == pytest.approx(_monte_carlo_edf(y, m), rel=0.08)  # Monte Carlo: 2.6 % standard error
     assert mix > 1.5 * edf_mixture(np.array([[0.0, 1.0, 0.0, 0.0]]), [m], n)[0]
+
+
+def test_greenhall_sw_is_eq_7_for_every_noise_type():
+    from fogmon.davar.confidence import _sw
+
+    t = np.linspace(-7.0, 7.0, 141)
+    a = np.abs(t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lg = np.where(a > 0, np.log(np.where(a > 0, a, 1.0)), 0.0)
+    want = {2: -a, 1: t**2 * lg, 0: a**3, -1: t**4 * lg, -2: a**5, -3: t**6 * lg, -4: a**7}
+    for alpha, w in want.items():
+        np.testing.assert_array_equal(_sw(t, alpha), w)
+
+
+def _mixture_matrix_one(m: int, n: int) -> np.ndarray:
+    """confidence.mixture_matrices of one factor m written out (the reference of the
+    form evaluating all factors together): sums over the lags j of (1 - |j| / M) rho_k rho_l."""
+    from fogmon.davar.confidence import _GRID_PER_M, _discrete_rho, _sz
+
+    big_m = n - 2 * m + 1
+    lag_max = min(3 * m, big_m - 1)
+    f = float(m) if m <= _GRID_PER_M else np.inf
+    if lag_max <= 3 * _GRID_PER_M:
+        j, step = np.arange(-lag_max, lag_max + 1, dtype=np.float64), 1.0
+    else:
+        j = np.linspace(-lag_max, lag_max, 6 * _GRID_PER_M + 1)
+        step = j[1] - j[0]
+    spikes = np.arange(-2.0, 3.0)
+
+    def rho(t):
+        return np.array([_discrete_rho(m, a, np.round(t * m)) if np.isfinite(f) and a in (0, -2)
+                         else _sz(t, f, a) / _sz(np.zeros(1), f, a) for a in (0, -1, -2)])
+    r, r_s = rho(j / m), rho(spikes)
+    w = step * np.maximum(1.0 - np.abs(j) / big_m, 0.0)
+    q = np.maximum(1.0 - np.abs(spikes) * m / big_m, 0.0) * np.array([1.0, -4.0, 6.0, -4.0, 1.0]) / 6.0
+    c = np.empty((4, 4))
+    c[0, 0] = q @ (np.array([1.0, -4.0, 6.0, -4.0, 1.0]) / 6.0)
+    c[0, 1:] = c[1:, 0] = r_s @ q
+    c[1:, 1:] = (r * w) @ r.T
+    return c
+
+
+@pytest.mark.parametrize("m, n", [(range(1, 40), 80), ((1, 2, 4, 8, 16, 32, 64, 128, 256, 512), 1030),
+                                  (tuple(2 ** k for k in range(15)), 184718), ((3, 100, 257, 300, 5000), 12000)])
+def test_mixture_matrices_of_all_factors_at_once_equal_one_factor_at_a_time(m, n):
+    from fogmon.davar.confidence import mixture_matrices
+
+    got = mixture_matrices(list(m) + [n], n)
+    assert np.isnan(got[-1]).all()  # 2 m > n
+    for k, c in zip(m, got, strict=False):
+        np.testing.assert_allclose(c, _mixture_matrix_one(k, n), rtol=1e-12, atol=1e-12 * np.abs(c).max())

@@ -135,3 +135,16 @@ def test_short_sway_bursts_are_motion_and_outlier_pairs_are_not():
     assert len(spans) == len(starts)
     for s, t0 in zip(spans, starts, strict=True):
         assert s.t_start_s <= t0 + 0.05 and s.t_end_s >= t0 + 0.3 and s.t_end_s - s.t_start_s < 1.5
+
+
+def test_history_window_is_the_last_n_values_in_order():
+    from collections import deque
+
+    from fogmon.motion import _Window
+
+    win, ref = _Window(5), deque(maxlen=5)
+    for x in np.random.default_rng(0).normal(size=23):
+        win.append(float(x))
+        ref.append(float(x))
+        np.testing.assert_array_equal(win.values(), list(ref))
+        assert len(win) == len(ref)

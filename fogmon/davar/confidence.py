@@ -11,6 +11,7 @@ of Allan variance estimates across taus (``avar_relative_covariance``).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import lru_cache
 
 import numpy as np
@@ -46,18 +47,23 @@ _GRID_PER_M = 256  # above this m: F = inf and at most 6 x this many lags (Riema
 
 
 def _sw(t: np.ndarray, alpha: int) -> np.ndarray:
-    """Greenhall (2004) eq. 7 for noise type ``alpha`` (2 .. -4) at lags ``t``."""
+    """Greenhall (2004) eq. 7 for noise type ``alpha`` (2 .. -4) at lags ``t``, up to a sign
+    per alpha: -|t| (alpha 2), |t|^(3 - alpha) (even alpha), t^(3 - alpha) ln|t| (odd)."""
     a = np.abs(t)
+    if alpha == 2:
+        return -a
+    if alpha % 2 == 0:
+        return a ** (3 - alpha)
     with np.errstate(divide="ignore", invalid="ignore"):
-        lg = np.where(a > 0, np.log(np.where(a > 0, a, 1.0)), 0.0)
-    return {2: -a, 1: t**2 * lg, 0: a**3, -1: t**4 * lg, -2: a**5, -3: t**6 * lg, -4: a**7}[alpha]
+        return t ** (3 - alpha) * np.where(a > 0, np.log(np.where(a > 0, a, 1.0)), 0.0)
 
 
-def _sz(t: np.ndarray, f: float, alpha: int) -> np.ndarray:
+def _sz(t: np.ndarray, f: float | np.ndarray, alpha: int) -> np.ndarray:
     """Greenhall eqs. 8-9 for the Allan variance (d = 2): autocovariance (up to a constant)
-    of the Allan terms at lag t (units of m samples), filter factor ``f`` (m, or inf)."""
+    of the Allan terms at lag t (units of m samples), filter factor ``f`` (m, also one per
+    lag, or inf)."""
     def sx(u):
-        if np.isinf(f):
+        if np.isscalar(f) and np.isinf(f):
             return _sw(u, alpha + 2)
         return f**2 * (2.0 * _sw(u, alpha) - _sw(u - 1.0 / f, alpha) - _sw(u + 1.0 / f, alpha))
     return 6.0 * sx(t) - 4.0 * (sx(t - 1.0) + sx(t + 1.0)) + sx(t - 2.0) + sx(t + 2.0)
@@ -70,12 +76,13 @@ _TABLE2_D2 = {2: (35.0 / 18.0, 1.0), 1: (790.0, 410.0), 0: (2.0 / 3.0, 1.0 / 3.0
 _TABLE3_D2 = (15.23, 12.0)  # Greenhall's table 3 (b0, b1) for d = 2, alpha = 1
 
 
-def _basic_sum(j: int, big_m: float, s: float, f: float, alpha: int) -> float:
-    """Greenhall's BasicSum: sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_{0<j<J} (1 - j/M) sz(j/S)^2."""
+def _basic_sum(j: int, big_m: float, s: float, f: float, alpha: int) -> tuple[float, float]:
+    """Greenhall's BasicSum sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_{0<j<J} (1 - j/M) sz(j/S)^2,
+    and sz(0)^2 (sz evaluated once at all the lags)."""
     lag = np.arange(1, j, dtype=np.float64)
-    inner = 2.0 * (1.0 - lag / big_m) * _sz(lag / s, f, alpha) ** 2
-    ends = _sz(np.array([0.0, j / s]), f, alpha) ** 2
-    return float(ends[0] + (1.0 - j / big_m) * ends[1] + inner.sum())
+    sz2 = _sz(np.r_[0.0, lag / s, j / s], f, alpha) ** 2
+    inner = 2.0 * (1.0 - lag / big_m) * sz2[1:-1]
+    return float(sz2[0] + (1.0 - j / big_m) * sz2[-1] + inner.sum()), float(sz2[0])
 
 
 @lru_cache(maxsize=1 << 16)
@@ -94,21 +101,23 @@ def _edf_greenhall(alpha: int, m: int, n_samples: int) -> float:
     f = float(m)
     if alpha == 1:  # case 3
         if j <= _J_MAX:
-            return 1.0 / (_basic_sum(int(j), big_m, m, f, 1) / (_sz(np.zeros(1), f, 1)[0] ** 2 * big_m))
+            basic, sz0 = _basic_sum(int(j), big_m, m, f, 1)
+            return 1.0 / (basic / (sz0 * big_m))
         b = (_TABLE3_D2[0] + _TABLE3_D2[1] * np.log(m)) ** 2
         if r > 3:
             a0, a1 = _TABLE2_D2[1]
             return 1.0 / ((a0 - a1 / r) / (b * r))
         mp = _J_MAX / r
-        return 1.0 / (_basic_sum(_J_MAX, _J_MAX, mp, mp, 1) / (b * _J_MAX))
+        return 1.0 / (_basic_sum(_J_MAX, _J_MAX, mp, mp, 1)[0] / (b * _J_MAX))
     if j <= _J_MAX:  # case 2: alpha <= 0
         f = f if 3 * m <= _J_MAX else np.inf
-        return 1.0 / (_basic_sum(int(j), big_m, m, f, alpha) / (_sz(np.zeros(1), f, alpha)[0] ** 2 * big_m))
+        basic, sz0 = _basic_sum(int(j), big_m, m, f, alpha)
+        return 1.0 / (basic / (sz0 * big_m))
     if r > 3:
         a0, a1 = _TABLE2_D2[alpha]
         return 1.0 / ((a0 - a1 / r) / r)
-    return 1.0 / (_basic_sum(_J_MAX, _J_MAX, _J_MAX / r, np.inf, alpha)
-                  / (_sz(np.zeros(1), np.inf, alpha)[0] ** 2 * _J_MAX))
+    basic, sz0 = _basic_sum(_J_MAX, _J_MAX, _J_MAX / r, np.inf, alpha)
+    return 1.0 / (basic / (sz0 * _J_MAX))
 
 
 def _discrete_rho(m: int, alpha: int, j: np.ndarray) -> np.ndarray:
@@ -124,39 +133,63 @@ def _discrete_rho(m: int, alpha: int, j: np.ndarray) -> np.ndarray:
     return np.where(ji <= mid, acf[np.minimum(ji, mid) + mid], 0.0) / acf[mid]
 
 
-@lru_cache(maxsize=1 << 12)
-def _mixture_matrix(m: int, n_samples: int) -> np.ndarray:
-    """C[k, l] = sum over lags j of (1 - |j|/M) rho_k(j) rho_l(j), rho the normalized
-    autocorrelation of the overlapping Allan terms of noise types MIX_ALPHAS (M = n - 2m + 1
-    terms, lags up to 3m as in Greenhall's BasicSum): the relative variance of the Allan
-    variance of a mixture with variance fractions f is 2 f'Cf / M."""
-    big_m = n_samples - 2 * m + 1
-    lag_max = min(3 * m, big_m - 1)
-    f = float(m) if m <= _GRID_PER_M else np.inf  # F = inf: Greenhall's large-m limit
-    if lag_max <= 3 * _GRID_PER_M:
-        j, step = np.arange(-lag_max, lag_max + 1, dtype=np.float64), 1.0
-    else:  # smooth ACFs: Riemann sum over 6 _GRID_PER_M + 1 lags
-        j = np.linspace(-lag_max, lag_max, 6 * _GRID_PER_M + 1)
-        step = j[1] - j[0]
-    t = j / m
-    w = step * np.maximum(1.0 - np.abs(j) / big_m, 0.0)
-    spikes = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])  # white angle noise: Allan terms m, 2m apart only
+_SPIKES = np.array([-2.0, -1.0, 0.0, 1.0, 2.0])
+"""Lags (units of m) at which white angle noise correlates Allan terms: m, 2m apart only."""
+_RHO_Q = np.array([1.0, -4.0, 6.0, -4.0, 1.0]) / 6.0  # white angle noise's autocorrelation there
 
-    def rho_of(alpha, tt):
-        if np.isfinite(f) and alpha in (0, -2):
-            return _discrete_rho(m, alpha, np.round(tt * m))
-        return _sz(tt, f, alpha) / _sz(np.zeros(1), f, alpha)
-    rho = [rho_of(a, t) for a in MIX_ALPHAS[1:]]
-    w_s = np.maximum(1.0 - np.abs(spikes) * m / big_m, 0.0)
-    rho_q = np.array([1.0, -4.0, 6.0, -4.0, 1.0]) / 6.0
-    rho_q_at = [rho_of(a, spikes) for a in MIX_ALPHAS[1:]]
-    c = np.empty((4, 4))
-    c[0, 0] = np.sum(w_s * rho_q**2)
+
+def _mixture_rows(m: np.ndarray, n_samples: int) -> np.ndarray:
+    """``mixture_matrices`` of factors ``m`` (all 2 m <= n_samples): C[k, l] = sum over lags
+    j of (1 - |j|/M) rho_k(j) rho_l(j), rho the normalized autocorrelation of the
+    overlapping Allan terms of noise types MIX_ALPHAS (M = n - 2m + 1 terms, lags up to 3m
+    as in Greenhall's BasicSum): the relative variance of the Allan variance of a mixture
+    with variance fractions f is 2 f'Cf / M. Every lag up to 3 _GRID_PER_M, beyond a
+    Riemann sum over 6 _GRID_PER_M + 1 lags (smooth ACFs). The lags of all m (each m's
+    followed by its _SPIKES) are evaluated together (``_mixture_rho``)."""
+    t, w, q = [], [], []
+    for k, big_m in zip(m, n_samples - 2 * m + 1, strict=True):
+        lag_max = min(3 * k, big_m - 1)
+        if lag_max <= 3 * _GRID_PER_M:
+            j, step = np.arange(-lag_max, lag_max + 1, dtype=np.float64), 1.0
+        else:
+            j = np.linspace(-lag_max, lag_max, 6 * _GRID_PER_M + 1)
+            step = j[1] - j[0]
+        t += [j / k, _SPIKES]
+        w += [step * np.maximum(1.0 - np.abs(j) / big_m, 0.0), np.maximum(1.0 - np.abs(_SPIKES) * k / big_m, 0.0)]
+        q += [np.zeros(len(j)), _RHO_Q]
+    size = np.array([len(x) for x in t])
+    start = np.r_[0, np.cumsum(size)[:-1]]  # segments: the lags of m[0], its spikes, the lags of m[1], ...
+    rho = _mixture_rho(m, np.concatenate(t), start)
+    w_all, q_all = np.concatenate(w), np.concatenate(q)
+    c = np.empty((len(m), 4, 4))
+    c[:, 0, 0] = np.add.reduceat(w_all * q_all**2, start)[1::2]
     for k in range(3):
-        c[0, k + 1] = c[k + 1, 0] = np.sum(w_s * rho_q * rho_q_at[k])
+        c[:, 0, k + 1] = c[:, k + 1, 0] = np.add.reduceat(w_all * q_all * rho[k], start)[1::2]
         for k2 in range(k, 3):
-            c[k + 1, k2 + 1] = c[k2 + 1, k + 1] = np.sum(w * rho[k] * rho[k2])
+            c[:, k + 1, k2 + 1] = c[:, k2 + 1, k + 1] = np.add.reduceat(w_all * rho[k] * rho[k2], start)[0::2]
     return c
+
+
+def _mixture_rho(m: np.ndarray, t: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """rho_k (rows: MIX_ALPHAS[1:]) at lags ``t`` (units of m) of the Allan terms of factor
+    m[i] on the segments start[2 i] .. start[2 i + 2] of t: the exact discrete
+    autocorrelations for white and random-walk rate noise up to m = _GRID_PER_M, else
+    Greenhall's with F = m (flicker), or F = inf beyond."""
+    bounds = np.r_[start[0::2], len(t)]
+    owner = np.repeat(np.arange(len(m)), np.diff(bounds))
+    fin_m = m <= _GRID_PER_M
+    fin = fin_m[owner]
+    f = m.astype(np.float64)
+    rho = np.empty((3, len(t)))
+    for k, alpha in enumerate(MIX_ALPHAS[1:]):
+        rho[k, ~fin] = _sz(t[~fin], np.inf, alpha) / _sz(np.zeros(1), np.inf, alpha)
+        if alpha in (0, -2):
+            for i in np.flatnonzero(fin_m):
+                seg = slice(bounds[i], bounds[i + 1])
+                rho[k, seg] = _discrete_rho(int(m[i]), alpha, np.round(t[seg] * m[i]))
+        elif fin.any():
+            rho[k, fin] = _sz(t[fin], f[owner[fin]], alpha) / _sz(np.zeros(len(m)), f, alpha)[owner[fin]]
+    return rho
 
 
 def edf_mixture(fractions: np.ndarray, m, n_samples: int) -> np.ndarray:
@@ -183,10 +216,30 @@ def mixture_matrices(m, n_samples: int) -> np.ndarray:
     return _mixture_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
+_MIX_CACHE: dict[tuple[int, int], np.ndarray] = {}  # (m, n) -> its (4, 4) matrix (grids share factors)
+_CACHE_MAX = 1 << 14  # entries kept per cache
+
+
+def _cached_rows(cache: dict, keys: list, compute: Callable[[list], np.ndarray]) -> np.ndarray:
+    """The value of each key in ``cache``, the missing ones computed in one call of
+    ``compute`` (sorted list of keys -> their values); the cache is emptied when full."""
+    todo = sorted({k for k in keys if k not in cache})
+    if todo:
+        if len(cache) + len(todo) > _CACHE_MAX:
+            cache.clear()
+        cache.update(zip(todo, compute(todo), strict=True))
+    return np.array([cache[k] for k in keys])
+
+
 @lru_cache(maxsize=256)
 def _mixture_matrices(m: tuple, n_samples: int) -> np.ndarray:
-    return np.array([_mixture_matrix(k, n_samples) if 2 * k <= n_samples else np.full((4, 4), np.nan)
-                     for k in m]).reshape(len(m), 4, 4)
+    ok = 2 * np.array(m, dtype=np.int64) <= n_samples
+    out = np.full((len(m), 4, 4), np.nan)
+    if ok.any():
+        keys = [(k, n_samples) for k in np.array(m)[ok].tolist()]
+        out[ok] = _cached_rows(_MIX_CACHE, keys, lambda todo: _mixture_rows(
+            np.array([k for k, _ in todo], dtype=np.int64), n_samples))
+    return out
 
 
 _SECOND_DIFF = np.array([1.0, -2.0, 1.0])
@@ -209,12 +262,13 @@ def _phase_acv(t: np.ndarray, alpha: int) -> np.ndarray:
         return np.where(a > 0, t * t * np.log(np.where(a > 0, a, 1.0)), 0.0)
 
 
-def _term_xcov_raw(lag: np.ndarray, ma: np.ndarray, mb: np.ndarray, alpha: int) -> np.ndarray:
+def _term_xcov_raw(lag: np.ndarray, ma: np.ndarray, mb: np.ndarray) -> np.ndarray:
     """Covariance (up to a constant) of the Allan term of factor ``ma`` at j with that of
-    ``mb`` at j + lag (arrays of one shape)."""
+    ``mb`` at j + lag (arrays of one shape), for each rate noise type MIX_ALPHAS[1:] (first axis)."""
     i, j = np.divmod(np.arange(9), 3)
-    off = j * np.asarray(mb)[..., None] - i * np.asarray(ma)[..., None]
-    return (_SECOND_DIFF[i] * _SECOND_DIFF[j] * _phase_acv(np.asarray(lag)[..., None] + off, alpha)).sum(-1)
+    t = np.asarray(lag)[..., None] + (j * np.asarray(mb)[..., None] - i * np.asarray(ma)[..., None])
+    coef = _SECOND_DIFF[i] * _SECOND_DIFF[j]
+    return np.stack([(coef * _phase_acv(t, alpha)).sum(-1) for alpha in MIX_ALPHAS[1:]])
 
 
 def _pair_count(lag: np.ndarray, ma_terms, mb_terms) -> np.ndarray:
@@ -222,25 +276,35 @@ def _pair_count(lag: np.ndarray, ma_terms, mb_terms) -> np.ndarray:
     return np.maximum(np.minimum(ma_terms, mb_terms - lag) - np.maximum(0, -lag), 0).astype(np.float64)
 
 
-def _pair_lags(ma: int, mb: int, n_a: int, n_b: int) -> tuple[np.ndarray, np.ndarray]:
-    """Lags (float) and quadrature weights of the sum over lags of ``covariance_matrices``
-    for factors ma, mb with n_a, n_b terms: the terms' overlap plus 4 max(ma, mb) for
+def _pair_lags(ma: np.ndarray, mb: np.ndarray, n_a: np.ndarray, n_b: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pair index, lag (float) and quadrature weight of the sum over lags of
+    ``covariance_matrices`` for each pair of factors (ma[i], mb[i]) with n_a[i], n_b[i]
+    terms, pair by pair in increasing lag: the terms' overlap plus 4 max(ma, mb) for
     flicker's tail, every lag on segments up to _EXACT_SEGMENT between the kinks
     p ma - q mb, the kink and 12-point Gauss-Legendre on longer ones."""
-    kinks = (np.arange(3)[:, None] * ma - np.arange(3)[None, :] * mb).ravel()
-    lo = max(kinks.min() - 4 * max(ma, mb), -(n_a - 1))
-    hi = min(kinks.max() + 4 * max(ma, mb), n_b - 1) + 1
-    knots = np.unique(np.clip(np.concatenate([kinks, [lo, hi, 0, n_b - n_a]]), lo, hi))
-    lags, wts = [], []
-    for a, b in zip(knots[:-1], knots[1:], strict=True):
-        if b - a <= _EXACT_SEGMENT:
-            lags.append(np.arange(a, b, dtype=np.float64))
-            wts.append(np.ones(b - a))
-        else:  # the kink lag itself, then the smooth lags a + 1 .. b - 1 as an integral
-            half = 0.5 * (b - a - 1)
-            lags += [np.array([float(a)]), half * _GAUSS_X + 0.5 * (a + b)]
-            wts += [np.ones(1), half * _GAUSS_W]
-    return np.concatenate(lags), np.concatenate(wts)
+    p, q = np.divmod(np.arange(9), 3)
+    kinks = p * ma[:, None] - q * mb[:, None]
+    reach = 4 * np.maximum(ma, mb)
+    lo = np.maximum(kinks.min(1) - reach, -(n_a - 1))
+    hi = np.minimum(kinks.max(1) + reach, n_b - 1) + 1
+    knots = np.column_stack([kinks, lo, hi, np.zeros_like(lo), n_b - n_a])
+    knots = np.sort(np.clip(knots, lo[:, None], hi[:, None]), axis=1)
+    distinct = np.ones(knots.shape, dtype=bool)
+    distinct[:, 1:] = np.diff(knots, axis=1) > 0
+    row, knot = np.nonzero(distinct)[0], knots[distinct]
+    seg = row[:-1] == row[1:]  # consecutive distinct knots of one pair bound a segment
+    a, b, seg_pair = knot[:-1][seg], knot[1:][seg], row[:-1][seg]
+    smooth_seg = b - a > _EXACT_SEGMENT
+    count = np.where(smooth_seg, 1 + len(_GAUSS_X), b - a)
+    of = np.repeat(np.arange(len(a)), count)
+    pos = np.arange(len(of)) - np.repeat(np.cumsum(count) - count, count)
+    a, b = a[of], b[of]
+    smooth = smooth_seg[of] & (pos > 0)  # on a long segment: the kink lag a itself, then the nodes
+    half = 0.5 * (b - a - 1)
+    node = np.clip(pos - 1, 0, len(_GAUSS_X) - 1)
+    lag = np.where(smooth, half * _GAUSS_X[node] + 0.5 * (a + b), a + pos)
+    return seg_pair[of], lag.astype(np.float64), np.where(smooth, half * _GAUSS_W[node], 1.0)
 
 
 def covariance_matrices(m, n_samples: int) -> np.ndarray:
@@ -256,20 +320,15 @@ def covariance_matrices(m, n_samples: int) -> np.ndarray:
 
 
 _PAIR_CACHE: dict[tuple[int, int, int], np.ndarray] = {}
-_PAIR_CACHE_MAX = 1 << 14  # pairs kept (grids whose usable taus differ share their pairs)
+"""(ma, mb, n) -> the pair's (4, 4) matrix (grids whose usable taus differ share their pairs)."""
 
 
 @lru_cache(maxsize=64)
 def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
     ia, ib = np.triu_indices(len(m))
     keys = [(m[a], m[b], n_samples) for a, b in zip(ia, ib, strict=True)]
-    todo = sorted({k for k in keys if k not in _PAIR_CACHE})
-    if todo:
-        if len(_PAIR_CACHE) + len(todo) > _PAIR_CACHE_MAX:
-            _PAIR_CACHE.clear()
-        ma, mb = (np.array([k[i] for k in todo], dtype=np.int64) for i in (0, 1))
-        _PAIR_CACHE.update(zip(todo, _cross_matrices(ma, mb, n_samples), strict=True))
-    c = np.array([_PAIR_CACHE[k] for k in keys])
+    c = _cached_rows(_PAIR_CACHE, keys, lambda todo: _cross_matrices(
+        np.array([k[0] for k in todo], dtype=np.int64), np.array([k[1] for k in todo], dtype=np.int64), n_samples))
     out = np.empty((len(m), len(m), 4, 4))
     out[ia, ib] = c
     out[ib, ia] = c
@@ -279,10 +338,8 @@ def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
 def _cross_matrices(ma: np.ndarray, mb: np.ndarray, n_samples: int) -> np.ndarray:
     """``covariance_matrices``' (4, 4) matrix of each pair of factors (ma[i], mb[i])."""
     n_a, n_b = n_samples - 2 * ma + 1, n_samples - 2 * mb + 1
-    parts = [_pair_lags(int(a), int(b), int(na), int(nb)) for a, b, na, nb in zip(ma, mb, n_a, n_b, strict=True)]
-    pair = np.repeat(np.arange(len(ma)), [len(lg) for lg, _ in parts])
-    lag = np.concatenate([lg for lg, _ in parts])
-    w = np.concatenate([wt for _, wt in parts]) * _pair_count(lag, n_a[pair], n_b[pair])
+    pair, lag, w = _pair_lags(ma, mb, n_a, n_b)
+    w = w * _pair_count(lag, n_a[pair], n_b[pair])
     # white angle noise: X is white, so terms correlate only at the kink lags p ma - q mb
     # (each distinct kink once, its weights summed)
     p, q = np.divmod(np.arange(9), 3)
@@ -293,12 +350,12 @@ def _cross_matrices(ma: np.ndarray, mb: np.ndarray, n_samples: int) -> np.ndarra
     w_q = _pair_count(k_lag, n_a[k_pair], n_b[k_pair])
     c = np.empty((len(ma), 4, 4))
     c[:, 0, 0] = np.bincount(k_pair, weights=w_q * rho_q**2, minlength=len(ma))
-    rho = []
-    for k, al in enumerate(MIX_ALPHAS[1:]):
-        scale = _term_sd(ma, al) * _term_sd(mb, al)
-        rho.append(_term_xcov_raw(lag, ma[pair], mb[pair], al) / scale[pair])
-        rho_at_kinks = _term_xcov_raw(k_lag, ma[k_pair], mb[k_pair], al) / scale[k_pair]
-        c[:, 0, k + 1] = c[:, k + 1, 0] = np.bincount(k_pair, weights=w_q * rho_q * rho_at_kinks, minlength=len(ma))
+    scale = _term_sd(ma) * _term_sd(mb)
+    rho = _term_xcov_raw(lag, ma[pair], mb[pair]) / scale[:, pair]
+    rho_at_kinks = _term_xcov_raw(k_lag, ma[k_pair], mb[k_pair]) / scale[:, k_pair]
+    for k in range(3):
+        c[:, 0, k + 1] = c[:, k + 1, 0] = np.bincount(k_pair, weights=w_q * rho_q * rho_at_kinks[k],
+                                                      minlength=len(ma))
     for k in range(3):
         for k2 in range(k, 3):
             c[:, k + 1, k2 + 1] = c[:, k2 + 1, k + 1] = np.bincount(pair, weights=w * rho[k] * rho[k2],
@@ -306,9 +363,10 @@ def _cross_matrices(ma: np.ndarray, mb: np.ndarray, n_samples: int) -> np.ndarra
     return c
 
 
-def _term_sd(m: np.ndarray, alpha: int) -> np.ndarray:
-    """Standard deviation (the constant of ``_term_xcov_raw``) of an Allan term of each factor m."""
-    return np.sqrt(_term_xcov_raw(np.zeros(len(m)), m, m, alpha))
+def _term_sd(m: np.ndarray) -> np.ndarray:
+    """Standard deviation (the constant of ``_term_xcov_raw``) of an Allan term of each
+    factor m (columns) for each noise type MIX_ALPHAS[1:] (rows)."""
+    return np.sqrt(_term_xcov_raw(np.zeros(len(m)), m, m))
 
 
 def _distinct_rows(group: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
