@@ -37,8 +37,9 @@ def own_process() -> None:
 @contextmanager
 def loading() -> Iterator[None]:
     """In the program's own process: no cyclic garbage collection inside; at the end every
-    live object is frozen and the collector is back as it was (phases nested: at the end
-    of the outermost). Elsewhere nothing changes."""
+    live object is frozen and the collector is back as it was (nested phases: each freezes
+    at its end, the collector comes back at the end of the outermost). Elsewhere nothing
+    changes."""
     if not _own_process:
         yield
         return

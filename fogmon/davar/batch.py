@@ -151,9 +151,9 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
         new_run[1:] = np.any(alpha[1:] != alpha[:-1], axis=1)
         run = np.cumsum(new_run) - 1
         runs = np.ascontiguousarray(alpha[new_run])
-    tables = [_gapless_tables(a.tobytes(), m.tobytes(), int(n_samples), float(confidence)) for a in runs]
-    edf_gapless, f_lo, f_hi = ((tables[0][i].reshape(1, nm) if len(tables) == 1
-                                else np.array([t[i] for t in tables]).reshape(-1, nm)) for i in range(3))
+    tables = [gapless_tables(a, m, n_samples, confidence) for a in runs]
+    edf_gapless, f_lo, f_hi = (tables[0][i] if len(tables) == 1 else np.array([t[i][0] for t in tables]).reshape(-1, nm)
+                               for i in range(3))
     # result arrays allocated here (a numba kernel returning new arrays pays ~2 us each to
     # box them), in one block: freed together, the next call's block reuses the memory
     # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
