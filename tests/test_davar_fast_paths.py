@@ -13,7 +13,7 @@ from scipy.stats import chi2
 from fogmon.block import Block
 from fogmon.davar import kernels
 from fogmon.davar.batch import HOLD_Z, alpha_rows, dadev, oadev, row_alpha, statistics
-from fogmon.davar.confidence import edf_effective, edf_full
+from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.streaming import STAGE, StreamingDadev
 
 
@@ -92,6 +92,24 @@ def test_frame_statistics_equal_their_definitions():
     rep = statistics(sums, counts, m, n, np.tile(alpha[0], (7, 1)), 0.9)
     for u, v in zip(one, rep, strict=True):
         np.testing.assert_array_equal(u, v)
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_dadev_intervals_formed_when_read_equal_their_definition(gap):
+    """DadevResult forms lo/hi when first read (and window(i) only row i's): they are the
+    chi-square interval of each entry's own EDF, one EDF row broadcast or not."""
+    y = 1000.0 + np.random.default_rng(5).normal(size=6000)
+    valid = np.ones(len(y), bool)
+    valid[2500:2510] = not gap
+    res = StreamingDadev(1.0, 1024, taus=8, hop_s=1, alpha=0).push(y, valid)
+    assert (res.edf.strides[0] == 0) is not gap  # gap-free: one EDF row broadcast over the windows
+    lo, hi = chi2_bounds(res.adev_dph, np.array(res.edf), 0.683)
+    np.testing.assert_array_equal(res.lo_dph, lo)
+    np.testing.assert_array_equal(res.hi_dph, hi)
+    for i in (0, 1700, len(res) - 1):
+        w = res.window(i)
+        np.testing.assert_array_equal(w.lo_dph, lo[i])
+        np.testing.assert_array_equal(w.hi_dph, hi[i])
 
 
 def _brute(seg, sv, m):

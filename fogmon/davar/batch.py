@@ -111,25 +111,31 @@ def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
             seg_alpha.append(alpha_now)
         r = int(np.searchsorted(ends, end_now + every))
     state = (alpha_now, model_now, end_now)
-    if len(seg_alpha) == 1:  # one noise-type row for every window: a read-only view (see statistics)
+    if len(seg_alpha) == 1:  # one noise-type row for every window: a read-only view (see adev_edf)
         return np.broadcast_to(np.asarray(seg_alpha[0], dtype=np.int64), (len(ends), len(m))), state
     seg = np.searchsorted(np.array(seg_start), np.arange(len(ends)), side="right") - 1
     return np.array(seg_alpha, dtype=np.int64)[seg], state
 
 
 @lru_cache(maxsize=256)
-def _gapless_tables(alpha: bytes, m: bytes, n_samples: int, confidence: float):
-    """Gap-free EDF per tau and the chi2 factors lo/sigma, hi/sigma for int64 ``alpha``
-    and ``m`` given as bytes (cached: streaming asks for the same ones block after block)."""
-    edf = edf_full(np.frombuffer(alpha, np.int64), np.frombuffer(m, np.int64), n_samples)
-    f_lo, f_hi = chi2_bounds(np.ones_like(edf), edf, confidence)
-    return edf, f_lo, f_hi
+def _gapless_edf(alpha: bytes, m: bytes, n_samples: int) -> np.ndarray:
+    """Gap-free EDF per tau for int64 ``alpha`` and ``m`` given as bytes (cached:
+    streaming asks for the same ones block after block)."""
+    return edf_full(np.frombuffer(alpha, np.int64), np.frombuffer(m, np.int64), n_samples)
 
 
-def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE):
-    """(adev_dph, lo_dph, hi_dph, edf) from sums of squared terms and valid-term counts
-    (shape (..., M)) of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar,
-    (M,) or (..., M)) defaults to the dominant term of an IEEE-952 fit of each window."""
+def gapless_edf(alpha, m, n_samples: int) -> np.ndarray:
+    """Gap-free EDF per tau, (1, M), for one noise-type row ``alpha`` (int, per tau m) of
+    windows of ``n_samples``."""
+    a = np.ascontiguousarray(np.broadcast_to(alpha, np.shape(m)), dtype=np.int64)
+    return _gapless_edf(a.tobytes(), np.ascontiguousarray(m, dtype=np.int64).tobytes(), int(n_samples)).reshape(1, -1)
+
+
+def adev_edf(sums, counts, m, n_samples: int, alpha=None) -> tuple[np.ndarray, np.ndarray]:
+    """(adev_dph, edf) from sums of squared terms and valid-term counts (shape (..., M))
+    of windows of ``n_samples``. ``alpha`` (noise type per tau, scalar, (M,) or (..., M))
+    defaults to the dominant term of an IEEE-952 fit of each window. The EDF is a
+    read-only broadcast of one row when one noise type row holds and no entry has a gap."""
     shape = np.shape(sums)
     nm = len(m)
     sums = np.asarray(sums, dtype=np.float64).reshape(-1, nm)
@@ -142,51 +148,43 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
     if alpha.ndim == 2 and len(alpha) and alpha.strides[0] == 0:  # a row broadcast over windows (alpha_rows)
         alpha = alpha[0]
     if alpha.ndim <= 1:  # one noise type row for every window
-        runs = np.empty((1, nm), dtype=np.int64)
-        runs[0] = alpha
+        edf_runs = gapless_edf(alpha, m, n_samples)
         run = np.zeros(len(sums), dtype=np.int64)
-    else:  # alpha is piecewise constant over windows: one EDF row and one chi2 table per run
+    else:  # alpha is piecewise constant over windows: one EDF row per run
         alpha = np.broadcast_to(alpha, shape).reshape(-1, nm)
         new_run = np.ones(len(alpha), dtype=bool)
         new_run[1:] = np.any(alpha[1:] != alpha[:-1], axis=1)
         run = np.cumsum(new_run) - 1
-        runs = np.ascontiguousarray(alpha[new_run])
-    tables = [gapless_tables(a, m, n_samples, confidence) for a in runs]
-    edf_gapless, f_lo, f_hi = (tables[0][i] if len(tables) == 1 else np.array([t[i][0] for t in tables]).reshape(-1, nm)
-                               for i in range(3))
-    # result arrays allocated here (a numba kernel returning new arrays pays ~2 us each to
-    # box them), in one block: freed together, the next call's block reuses the memory
-    # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
-    adev, lo, hi = np.empty((3,) + sums.shape)
+        edf_runs = np.concatenate([np.empty((0, nm)), *(gapless_edf(a, m, n_samples) for a in alpha[new_run])])
+    # the result array allocated here (a numba kernel returning a new array pays ~2 us to box it)
+    adev = np.empty(sums.shape)
     # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
-    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts, run,
-                                   n_samples - 2 * m + 1, f_lo, f_hi, adev, lo, hi)
-    edf = gapped_edf(adev, lo, hi, counts, edf_gapless, run, n_gapped, m, n_samples, confidence)
-    return tuple(x.reshape(shape) for x in (adev, lo, hi, edf))
+    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts,
+                                   n_samples - 2 * m + 1, adev)
+    edf = gapped_edf(edf_runs, run, counts, n_gapped, m, n_samples)
+    return adev.reshape(shape), edf.reshape(shape)
 
 
-def gapless_tables(alpha, m, n_samples: int, confidence: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gap-free EDF per tau and the chi2 factors lo / adev, hi / adev, each (1, M), for
-    one noise-type row ``alpha`` (int, per tau m) of windows of ``n_samples``."""
-    a = np.ascontiguousarray(np.broadcast_to(alpha, np.shape(m)), dtype=np.int64)
-    tables = _gapless_tables(a.tobytes(), np.ascontiguousarray(m, dtype=np.int64).tobytes(), int(n_samples),
-                             float(confidence))
-    return tuple(t.reshape(1, -1) for t in tables)
+def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE):
+    """(adev_dph, lo_dph, hi_dph, edf) of :func:`adev_edf`, with the two-sided
+    ``confidence`` chi-square interval."""
+    adev, edf = adev_edf(sums, counts, m, n_samples, alpha)
+    lo, hi = chi2_bounds(adev, edf, confidence)
+    return adev, lo, hi, edf
 
 
-def gapped_edf(adev, lo, hi, counts, edf_gapless, run, n_gapped: int, m, n_samples: int, confidence: float):
-    """EDF per window x tau (shape of ``adev``) after ``kernels.frame_stats``: each row
-    the gap-free row ``edf_gapless[run]`` (a read-only broadcast when one row holds for
-    all and no entry has a gap); the ``n_gapped`` entries with fewer terms than a
-    gap-free window get their effective EDF and their bounds lo, hi recomputed (in place)."""
-    if n_gapped == 0 and len(edf_gapless) == 1:
-        return np.broadcast_to(edf_gapless[0], adev.shape)
-    edf = edf_gapless[run]
+def gapped_edf(edf_runs, run, counts, n_gapped: int, m, n_samples: int) -> np.ndarray:
+    """EDF per window x tau (windows ``run``'s rows of the gap-free ``edf_runs``; a
+    read-only broadcast when one row holds for all and no entry has a gap) after
+    ``kernels.frame_stats``: its ``n_gapped`` entries with fewer terms than a gap-free
+    window get their effective EDF."""
+    if n_gapped == 0 and len(edf_runs) == 1:
+        return np.broadcast_to(edf_runs[0], (len(run), len(m)))
+    edf = edf_runs[run]
     if n_gapped:
-        counts = np.broadcast_to(counts, adev.shape)
+        counts = np.broadcast_to(counts, edf.shape)
         gapped = counts != n_samples - 2 * np.asarray(m) + 1
         edf[gapped] = edf_effective(edf[gapped], np.broadcast_to(m, edf.shape)[gapped], n_samples, counts[gapped])
-        lo[gapped], hi[gapped] = chi2_bounds(adev[gapped], edf[gapped], confidence)
     return edf
 
 
@@ -221,6 +219,6 @@ def dadev(rate_dph, sample_rate_hz: float, window_s: float, hop_s: float | None 
     end = starts + w - 1
     if alpha is None:
         alpha, _ = alpha_rows(sums, counts, end, m, w, max(hop, w // 4))
-    adev, lo, hi, edf = statistics(sums, counts, m, w, alpha, confidence)
-    return DadevResult(t0_s + (starts + (w - 1) / 2.0) / sample_rate_hz, end, m / sample_rate_hz, m, adev, lo, hi, edf,
-                       counts, float(sample_rate_hz), w / sample_rate_hz, hop / sample_rate_hz, confidence)
+    adev, edf = adev_edf(sums, counts, m, w, alpha)
+    return DadevResult(t0_s + (starts + (w - 1) / 2.0) / sample_rate_hz, end, m / sample_rate_hz, m, adev, edf, counts,
+                       float(sample_rate_hz), w / sample_rate_hz, hop / sample_rate_hz, confidence)

@@ -16,7 +16,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from fogmon.davar.result import CONFIDENCE
+#: Two-sided confidence of every interval fogmon reports (1 sigma of a normal).
+CONFIDENCE = 0.683
 
 ALPHA_OF_TERM = np.array([2, 0, -1, -2, -2])
 """Power-law exponent alpha of each IEEE-952 term Q, N, B, K, R (R treated as random walk)."""
@@ -393,22 +394,32 @@ def _quantiles(confidence: float) -> tuple[float, float]:
     return lo, 1.0 - lo
 
 
-def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
-    """Two-sided ``confidence`` interval (lo, hi) of a deviation ``adev`` (any unit) with
-    ``edf`` degrees of freedom (NIST SP1065 eq. 45). chi2 quantiles are evaluated once
-    per distinct EDF value."""
-    adev = np.asarray(adev, dtype=np.float64)
-    edf = np.broadcast_to(np.asarray(edf, dtype=np.float64), adev.shape)
+def chi2_factors(edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
+    """Interval factors (lo / sigma_hat, hi / sigma_hat) of a deviation with ``edf``
+    degrees of freedom at two-sided ``confidence`` (NIST SP1065 eq. 45); NaN where the
+    EDF is not positive. chi2 quantiles are evaluated once per distinct EDF value; an
+    EDF row broadcast over windows (the gap-free case) gives one row of factors."""
+    edf = np.asarray(edf, dtype=np.float64)
+    while edf.ndim > 1 and edf.strides[0] == 0 and edf.shape[0] > 1:
+        edf = edf[:1]  # the same row for every window
     from scipy.special import gammaincinv  # imported here: scipy costs start-up time
 
     q_lo, q_hi = _quantiles(float(confidence))
     ok = np.isfinite(edf) & (edf > 0)
-    f_lo = np.full(adev.shape, np.nan)
-    f_hi = np.full(adev.shape, np.nan)
+    f_lo = np.full(edf.shape, np.nan)
+    f_hi = np.full(edf.shape, np.nan)
     if ok.any():
         u, inv = np.unique(edf[ok], return_inverse=True)
         with np.errstate(divide="ignore", over="ignore"):  # tiny EDF: hi is +inf
             # the chi2 quantile with u degrees of freedom at q is 2 gammaincinv(u / 2, q)
             f_lo[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_hi)))[inv]
             f_hi[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_lo)))[inv]
+    return f_lo, f_hi
+
+
+def chi2_bounds(adev: np.ndarray, edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
+    """Two-sided ``confidence`` interval (lo, hi) of a deviation ``adev`` (any unit) with
+    ``edf`` degrees of freedom: adev times ``chi2_factors``."""
+    adev = np.asarray(adev, dtype=np.float64)
+    f_lo, f_hi = chi2_factors(np.broadcast_to(np.asarray(edf, dtype=np.float64), adev.shape), confidence)
     return adev * f_lo, adev * f_hi

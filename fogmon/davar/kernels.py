@@ -527,7 +527,7 @@ def _put(out_sums, out_counts, e, k, s, n):
 
 
 @njit(cache=True)
-def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, stats):
+def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, full):
     """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
     buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
     least the ``w`` samples before ``first`` or starts at the record's first sample,
@@ -535,11 +535,10 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``stats``:
-    None, or (run, full, f_lo, f_hi, out_lo, out_hi) of ``frame_stats`` (one alpha run),
-    which then turns each tile's rows, while they are in the cache, into adev (in
-    ``out_sums``) and bounds. Returns (fixed, entries with gaps: ``frame_stats``'s
-    count, whose bounds the caller recomputes). ``fixed``: no count changed after the
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``full``:
+    None, or the gap-free term counts per tau of ``frame_stats``, which then turns each
+    tile's rows, while they are in the cache, into adev (in ``out_sums``). Returns
+    (fixed, entries with gaps: ``frame_stats``'s count, 0 without ``full``). ``fixed``: no count changed after the
     first emitted row; then only row 0 of ``out_counts`` is sure to be written, and it
     holds every row's counts (hop 1 without gaps writes no count per window).
 
@@ -569,13 +568,13 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 e += 1
             p += 1
         e_head = e
-    n_gapped = _rows_stats(stats, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
+    n_gapped = _rows_stats(full, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
     start = max(first, w)
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
     dn = np.empty((4, _TILE), np.int64)
     # per tile sample, the sums and encoded counts per tau of the window it emits: the
-    # layout of the output rows, so a dense tile's rows are copied (or, with ``stats``,
+    # layout of the output rows, so a dense tile's rows are copied (or, with ``full``,
     # read by frame_stats) whole
     w_at = np.empty((_TILE, nm))
     n_at = np.empty((_TILE, nm), np.int64)
@@ -650,11 +649,11 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
         for k in range(nm):
             c_fix[0, k] = cnt[k] & _LOW
             huge |= cnt[k] >= _FLAG
-        if dense and stats is not None and fixed and not huge:  # frame_stats reads the sums in w_at
+        if dense and full is not None and fixed and not huge:  # frame_stats reads the sums in w_at
             src = w_at[emit_pos[e_tile] - t0:emit_pos[e_end - 1] - t0 + 1]
         elif dense:
             _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
-        n_gapped += _rows_stats(stats, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
+        n_gapped += _rows_stats(full, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
         e_tile = e_end
     if fixed and e_tile > 0:
         _unfix(out_counts, 0, 1, cnt, n_at, 0, 0)
@@ -662,15 +661,12 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
 
 
 @njit(cache=True)
-def _rows_stats(stats, sums, counts, out_adev, e0):
+def _rows_stats(full, sums, counts, out_adev, e0):
     """``frame_stats`` of the windows' ``sums`` (rows) into rows e0 .. of ``out_adev``
-    and ``stats``' lo and hi (``stats`` and return value: see ``stream_update``; 0 when
-    ``stats`` is None)."""
-    if stats is None:
+    (``full`` and return value: see ``stream_update``; 0 when ``full`` is None)."""
+    if full is None:
         return 0
-    run, full, f_lo, f_hi, out_lo, out_hi = stats
-    e1 = e0 + sums.shape[0]
-    return frame_stats(sums, counts, run, full, f_lo, f_hi, out_adev[e0:e1], out_lo[e0:e1], out_hi[e0:e1])
+    return frame_stats(sums, counts, full, out_adev[e0:e0 + sums.shape[0]])
 
 
 @njit(cache=True)
@@ -1035,15 +1031,14 @@ def model_holds(model, sums, counts, m, hold_z):
 
 
 @njit(cache=True, error_model="numpy")
-def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
+def frame_stats(sums, counts, full, adev):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
-    terms) and bounds from the gap-free chi2 factors of the row's alpha run, into
-    ``adev``, ``lo``, ``hi`` (shape of ``sums``; ``adev`` may be ``sums`` itself, at
-    2.8 x the time, measured: the vectorised loop wants them apart;
-    ``counts`` may be one row for all); returns the number of entries with fewer than
-    ``full`` terms, whose bounds the caller recomputes. 1 / (2 count) is formed first,
-    once per row of counts, so the inner loop multiplies, branch-free (SIMD; a division
-    per entry, or forming it inside the loop, ran it 2 x slower)."""
+    terms) into ``adev`` (shape of ``sums``; ``adev`` may be ``sums`` itself, at 2.8 x the
+    time, measured: the vectorised loop wants them apart; ``counts`` may be one row for
+    all); returns the number of entries with fewer than ``full`` terms (their EDF is
+    scaled by the caller). 1 / (2 count) is formed first, once per row of counts, so the
+    inner loop multiplies, branch-free (SIMD; a division per entry, or forming it inside
+    the loop, ran it 2 x slower)."""
     nt, nm = sums.shape
     inv = np.empty((counts.shape[0], nm))
     n_gapped = 0
@@ -1056,12 +1051,7 @@ def frame_stats(sums, counts, run, full, f_lo, f_hi, adev, lo, hi):
     if last == 0:
         n_gapped *= nt
     for i in range(nt):
-        r = run[i]
-        fl, fh, iv = f_lo[r], f_hi[r], inv[min(i, last)]
-        s, a_row, l_row, h_row = sums[i], adev[i], lo[i], hi[i]
+        iv, s, a_row = inv[min(i, last)], sums[i], adev[i]
         for k in range(nm):
-            a = np.sqrt(max(s[k], 0.0) * iv[k])
-            a_row[k] = a
-            l_row[k] = a * fl[k]
-            h_row[k] = a * fh[k]
+            a_row[k] = np.sqrt(max(s[k], 0.0) * iv[k])
     return n_gapped

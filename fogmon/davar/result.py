@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
-#: Two-sided confidence of every interval fogmon reports (1 sigma of a normal).
-CONFIDENCE = 0.683
+from fogmon.davar.confidence import CONFIDENCE, chi2_factors
+
+__all__ = ["CONFIDENCE", "AdevResult", "DadevResult"]
 
 
 @dataclass(frozen=True)
@@ -36,17 +38,17 @@ class DadevResult:
     """Dynamic Allan deviation: one overlapping ADEV per window.
 
     ``t_s`` (s, window-centre times, shape T), ``end_index`` (index of each window's last
-    sample, T), ``tau_s``/``m`` (M), ``adev_dph``, ``lo_dph``, ``hi_dph`` (deg/h),
-    ``edf``, ``n_terms`` (T x M); ``sample_rate_hz`` (Hz), ``window_s``, ``hop_s`` (s),
-    ``confidence``."""
+    sample, T), ``tau_s``/``m`` (M), ``adev_dph`` (deg/h), ``edf``, ``n_terms`` (T x M);
+    ``sample_rate_hz`` (Hz), ``window_s``, ``hop_s`` (s), ``confidence``. The interval
+    ``lo_dph``/``hi_dph`` (deg/h, T x M; chi-square at ``confidence`` for each entry's
+    EDF) is formed when first read: at small hops a push emits a window per sample and
+    most users read a few of them (``window(i)`` forms only row i's)."""
 
     t_s: np.ndarray
     end_index: np.ndarray
     tau_s: np.ndarray
     m: np.ndarray
     adev_dph: np.ndarray
-    lo_dph: np.ndarray
-    hi_dph: np.ndarray
     edf: np.ndarray
     n_terms: np.ndarray
     sample_rate_hz: float
@@ -57,6 +59,21 @@ class DadevResult:
     def __len__(self) -> int:
         return len(self.t_s)
 
+    @cached_property
+    def _factors(self) -> tuple[np.ndarray, np.ndarray]:
+        """chi2 interval factors of the EDF: one row when one EDF row holds for all windows."""
+        return chi2_factors(self.edf, self.confidence)
+
+    @cached_property
+    def lo_dph(self) -> np.ndarray:
+        """Lower end of each entry's interval (deg/h, T x M)."""
+        return self.adev_dph * self._factors[0]
+
+    @cached_property
+    def hi_dph(self) -> np.ndarray:
+        """Upper end of each entry's interval (deg/h, T x M)."""
+        return self.adev_dph * self._factors[1]
+
     @property
     def window_samples(self) -> int:
         """Window length in samples."""
@@ -64,6 +81,8 @@ class DadevResult:
 
     def window(self, i: int) -> AdevResult:
         """The ADEV of window ``i`` as an AdevResult."""
-        return AdevResult(self.tau_s, self.m, self.adev_dph[i], self.lo_dph[i], self.hi_dph[i],
-                          self.edf[i], self.n_terms[i], self.sample_rate_hz, self.window_samples,
-                          self.confidence)
+        f_lo, f_hi = self._factors
+        r = i if len(f_lo) > 1 else 0
+        adev = self.adev_dph[i]
+        return AdevResult(self.tau_s, self.m, adev, adev * f_lo[r], adev * f_hi[r], self.edf[i], self.n_terms[i],
+                          self.sample_rate_hz, self.window_samples, self.confidence)

@@ -26,7 +26,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.davar import kernels
-from fogmon.davar.batch import _prepare, _samples, alpha_rows, gapless_tables, gapped_edf, row_alpha, statistics
+from fogmon.davar.batch import _prepare, _samples, adev_edf, alpha_rows, gapless_edf, gapped_edf, row_alpha, statistics
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 
@@ -113,13 +113,12 @@ class StreamingDadev:
                 return self._empty
         w = self.window_n
         if self.alpha is not None and not self._recorded:
-            # running sums and a fixed noise type: the kernel turns the sums into adev and
-            # bounds tile by tile while they are in the cache (see kernels.stream_update)
-            edf_gapless, f_lo, f_hi = gapless_tables(self.alpha, self.m, w, self.confidence)
-            ends, adev, counts, (lo, hi), n_gapped = self._run(rate_dph, valid, (f_lo, f_hi))
-            edf = gapped_edf(adev, lo, hi, counts, edf_gapless, np.zeros(len(ends), np.int64), n_gapped, self.m, w,
-                             self.confidence)
-            return self._result(ends, adev, lo, hi, edf, counts)
+            # running sums and a fixed noise type: the kernel turns the sums into adev tile
+            # by tile while they are in the cache (see kernels.stream_update)
+            ends, adev, counts, n_gapped = self._run(rate_dph, valid, True)
+            edf = gapped_edf(gapless_edf(self.alpha, self.m, w), np.zeros(len(ends), np.int64), counts, n_gapped,
+                             self.m, w)
+            return self._result(ends, adev, edf, counts)
         ends, sums, counts = self.advance(rate_dph, valid)
         alpha = self.alpha
         if alpha is None:
@@ -128,13 +127,13 @@ class StreamingDadev:
         return self._frames(ends, sums, counts, alpha)
 
     def _frames(self, ends, sums, counts, alpha) -> DadevResult:
-        adev, lo, hi, edf = statistics(sums, counts, self.m, self.window_n, alpha, self.confidence)
-        return self._result(ends, adev, lo, hi, edf, counts)
+        adev, edf = adev_edf(sums, counts, self.m, self.window_n, alpha)
+        return self._result(ends, adev, edf, counts)
 
-    def _result(self, ends, adev, lo, hi, edf, counts) -> DadevResult:
+    def _result(self, ends, adev, edf, counts) -> DadevResult:
         w = self.window_n
         return DadevResult((ends - (w - 1) / 2.0) / self.sample_rate_hz, ends, self.m / self.sample_rate_hz, self.m,
-                           adev, lo, hi, edf, counts, self.sample_rate_hz, w / self.sample_rate_hz,
+                           adev, edf, counts, self.sample_rate_hz, w / self.sample_rate_hz,
                            self.hop_n / self.sample_rate_hz, self.confidence)
 
     def advance(self, rate_dph, valid=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -143,12 +142,12 @@ class StreamingDadev:
         (T x M), valid-term counts (T x M; at hops below RECORD_MIN_HOP a read-only
         broadcast of one row when every window has the same)); Allan variance = sums /
         (2 counts)."""
-        return self._run(rate_dph, valid, None)[:3]
+        return self._run(rate_dph, valid, False)[:3]
 
-    def _run(self, rate_dph, valid, stats: tuple[np.ndarray, np.ndarray] | None):
-        """``advance``; with ``stats`` = (f_lo, f_hi) (the gap-free chi2 factors of a
-        fixed noise type, running sums only) the kernel returns adev in place of the sums:
-        (end_index, adev, counts, (lo, hi), entries with gaps; see kernels.stream_update)."""
+    def _run(self, rate_dph, valid, to_adev: bool):
+        """``advance``; with ``to_adev`` (running sums only) the kernel returns adev in
+        place of the sums: (end_index, adev, counts, entries with gaps; see
+        kernels.stream_update)."""
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
@@ -162,9 +161,9 @@ class StreamingDadev:
         ends = np.arange(w - 1 + k0 * self.hop_n, a0 + len(y), self.hop_n, dtype=np.int64)
         # one block for both: freed together, the next call's block reuses the memory
         # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
-        block = np.empty((2 if stats is None else 4, len(ends), len(self.m)))
+        block = np.empty((2, len(ends), len(self.m)))
         sums, counts = block[0], block[1].view(np.int64)
-        bounds = block[2:]  # lo and hi with ``stats`` (else empty)
+        full = w - 2 * self.m + 1 if to_adev else None  # gap-free term counts: the kernel forms adev
         n_gapped = 0
         i = row = 0
         spans = []  # running sums: row spans whose counts are all in their first row (see kernels.stream_update)
@@ -198,8 +197,7 @@ class StreamingDadev:
                 fixed, gapped = kernels.stream_update(
                     self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
                     ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end],
-                    None if stats is None else (np.zeros(row_end - row, np.int64), w - 2 * self.m + 1, *stats,
-                                                bounds[0, row:row_end], bounds[1, row:row_end]))
+                    full)
                 n_gapped += gapped
                 if fixed and row_end > row:
                     spans.append((row, row_end))
@@ -214,7 +212,7 @@ class StreamingDadev:
                 counts[a + 1:b] = counts[a]
         n = self._base + self._len
         self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop_n) * self.hop_n
-        return ends, sums, counts, bounds, n_gapped
+        return ends, sums, counts, n_gapped
 
     def current(self) -> AdevResult:
         """Overlapping ADEV of the current (possibly still filling) window, whatever the
