@@ -397,14 +397,30 @@ def _quantiles(confidence: float) -> tuple[float, float]:
 def chi2_factors(edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
     """Interval factors (lo / sigma_hat, hi / sigma_hat) of a deviation with ``edf``
     degrees of freedom at two-sided ``confidence`` (NIST SP1065 eq. 45); NaN where the
-    EDF is not positive. chi2 quantiles are evaluated once per distinct EDF value; an
-    EDF row broadcast over windows (the gap-free case) gives one row of factors."""
+    EDF is not positive. An EDF row broadcast over windows (the gap-free case) gives one
+    row of factors, cached: streaming asks for the same row block after block."""
     edf = np.asarray(edf, dtype=np.float64)
     while edf.ndim > 1 and edf.strides[0] == 0 and edf.shape[0] > 1:
         edf = edf[:1]  # the same row for every window
+    if edf.ndim and edf.size == edf.shape[-1]:  # one row
+        f_lo, f_hi = _row_factors(np.ascontiguousarray(edf).tobytes(), float(confidence))
+        return f_lo.reshape(edf.shape), f_hi.reshape(edf.shape)
+    return _factors(edf, float(confidence))
+
+
+@lru_cache(maxsize=256)
+def _row_factors(edf: bytes, confidence: float) -> tuple[np.ndarray, np.ndarray]:
+    """``_factors`` of one EDF row given as float64 bytes (read-only results)."""
+    f_lo, f_hi = _factors(np.frombuffer(edf, np.float64), confidence)
+    f_lo.flags.writeable = f_hi.flags.writeable = False
+    return f_lo, f_hi
+
+
+def _factors(edf: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray]:
+    """``chi2_factors`` entry by entry: chi2 quantiles once per distinct EDF value."""
     from scipy.special import gammaincinv  # imported here: scipy costs start-up time
 
-    q_lo, q_hi = _quantiles(float(confidence))
+    q_lo, q_hi = _quantiles(confidence)
     ok = np.isfinite(edf) & (edf > 0)
     f_lo = np.full(edf.shape, np.nan)
     f_hi = np.full(edf.shape, np.nan)
