@@ -257,7 +257,8 @@ def rescored(a: Analysis, cands: list[catalogue.Candidate], penalty: float, cont
 
 def candidates(ctx: catalogue.Context, counts: dict) -> list[catalogue.Candidate]:
     """Every applicable catalogue entry fitted to the current residual, best BIC first
-    (refused kinds included: they still measure what is missing, the score's ``tests``)."""
+    (refused kinds included: they still measure what is missing, the score's ``tests``,
+    unless the map contradicted them, ``matched_tests_figure``)."""
     out = []
     for kind, fn in {**catalogue.MEAN_CANDIDATES, **catalogue.NOISE_CANDIDATES}.items():
         if counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
