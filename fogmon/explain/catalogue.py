@@ -16,6 +16,7 @@ them by BIC: accept when gain - k ln(n) > 0 and a held-out check passes.
 """
 from __future__ import annotations
 
+import copy
 import functools
 import math
 from collections.abc import Callable
@@ -636,12 +637,39 @@ def _stoch_psd(ctx: Context, bp: BinnedPeriodogram) -> np.ndarray:
     return model_psd(ctx.stoch, bp.omega, ctx.n, white_rms_dpsh(ctx.stoch, ctx))
 
 
+#: the markov candidate's Whittle fit keeps the frequencies where the model's
+#: ``bandwidth`` filters pass at least this share of the power (|H|^2, -20 dB)
+MARKOV_MIN_GAIN2 = 0.01
+
+
+def _passband(ctx: Context, bp: BinnedPeriodogram) -> tuple[BinnedPeriodogram, np.ndarray]:
+    """``bp`` restricted to the bins where the model's bandwidth filters pass at least
+    MARKOV_MIN_GAIN2 of the power, and the filters' |H|^2 there (all bins and 1 without
+    a filter). Near a filter's zero the model PSD falls below what a finite record's
+    periodogram shows there (the real filter's own shape, leakage), so a likelihood over
+    those bins measures the filter's zero, not a term under it."""
+    G = np.ones(len(bp.omega))
+    for e in ctx.stoch.effects:
+        if e.kind == "bandwidth":
+            G = G * filter_gain2(e.params, ctx.sample_rate_hz, bp.omega)
+    keep = G >= MARKOV_MIN_GAIN2
+    if keep.all():
+        return bp, G
+    band = copy.copy(bp)
+    band.count, band.I, band.k, band.omega = bp.count[keep], bp.I[keep], bp.k[keep], bp.omega[keep]
+    return band, G[keep]
+
+
 def markov(ctx: Context) -> Candidate | None:
     """Gauss-Markov term: Whittle likelihood over a log grid of correlation times
     (5 samples .. duration/20), variance by Newton steps (>= 0). A best fit at the
     longest correlation time is refused (a drift, left to the mean-type effects), and at
-    the shortest (a white-noise level change, left to the white-level effects)."""
-    bp = _periodogram(ctx)
+    the shortest (a white-noise level change, left to the white-level effects). Under a
+    ``bandwidth`` filter the term is filtered like the rest of the rate (sim
+    BandwidthFilter) and fitted over the filter's pass band (``_passband``): a
+    correlation time of 5 samples or more puts less than 1/(2 pi 5 x 0.45)^2 = 0.5 % of
+    its low-frequency PSD near Nyquist, so the bins left out carry next to nothing on it."""
+    bp, G = _passband(ctx, _periodogram(ctx))
     S0 = _stoch_psd(ctx, bp)
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     d0 = bp.deviance(S0, floor)
@@ -649,7 +677,7 @@ def markov(ctx: Context) -> Candidate | None:
     best = None
     grid = np.geomspace(5.0 / ctx.sample_rate_hz, T / 20.0, 36)
     for tc in grid:
-        P = markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
+        P = G * markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
         v = _newton_variance(bp, S0, P)
         if v <= 0:
             continue
@@ -661,11 +689,13 @@ def markov(ctx: Context) -> Candidate | None:
     g, tc, v = best
     sigma = math.sqrt(v)
     # se of sigma from the curvature in v
-    P = markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
+    P = G * markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
     S = S0 + v * P
     info = float(np.sum(bp.count * P ** 2 / S ** 2))
     se_sigma = math.sqrt(1.0 / info) / (2 * sigma) if info > 0 else float("nan")
-    ev = (f"Whittle fit of the residual spectrum: Gauss-Markov sigma {_fmt(sigma, se_sigma)} deg/h, "
+    band = ("" if G.min() == 1.0 else
+            f" over 0-{bp.omega[-1] * ctx.sample_rate_hz / (2 * math.pi):.4g} Hz (the bandwidth filter's pass band)")
+    ev = (f"Whittle fit of the residual spectrum{band}: Gauss-Markov sigma {_fmt(sigma, se_sigma)} deg/h, "
           f"correlation time {tc:.4g} s (ADEV hump {0.618 * sigma:.3g} deg/h near tau = {1.89 * tc:.3g} s)")
     return Candidate("markov", {"tau_c_s": float(tc), "sigma_dph": sigma}, {"sigma_dph": se_sigma}, g, 2, ev)
 

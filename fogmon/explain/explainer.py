@@ -227,22 +227,38 @@ def _whittle(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray
     return catalogue.Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), yy, stoch, wh, Yf)
 
 
+def matched_tests_figure(cands: list[catalogue.Candidate], penalty: float, contradicted: set[str]) -> float:
+    """The score's ``tests``: the strongest candidate's sqrt(gain / (k ln n)), candidates
+    of a kind the map contradicted (``contradicted``: added, it opened a whole-record
+    deficit, ``_judge``) left out - their statistic measured a misfit their shape does
+    not describe, and the map's own figures keep that misfit."""
+    return max([math.sqrt(max(c.gain, 0.0) / (c.k * penalty)) for c in cands if c.kind not in contradicted],
+               default=0.0)
+
+
 def analyse(y: np.ndarray, ctx: catalogue.Context, null: mismatch.Null, grid: mismatch.Grid,
-            cands: list[catalogue.Candidate]) -> Analysis:
-    """Map, regions and score of residual ``y`` (candidates: the matched tests run on it)."""
+            cands: list[catalogue.Candidate], contradicted: set[str]) -> Analysis:
+    """Map, regions and score of residual ``y`` (candidates: the matched tests run on it,
+    those of the ``contradicted`` kinds not counted, ``matched_tests_figure``)."""
     cell, whole = mismatch.log_avar(np.where(ctx.valid, y, np.nan), ctx.valid, grid)
     z, zw = mismatch.zscores(cell, whole, null)
     _, zs = catalogue.spike_scan(ctx)
     nv = int(ctx.valid.sum())
     spike_ratio = float(np.max(np.abs(zs))) / detectors.expected_max_abs_z(nv) if nv else 0.0
-    tests = max([math.sqrt(max(c.gain, 0.0) / (c.k * ctx.penalty)) for c in cands], default=0.0)
     regions = mismatch.find_regions(z, zw, null, grid)
+    tests = matched_tests_figure(cands, ctx.penalty, contradicted)
     return Analysis(cell, whole, z, zw, regions, mismatch.score(z, null, spike_ratio, tests), null)
+
+
+def rescored(a: Analysis, cands: list[catalogue.Candidate], penalty: float, contradicted: set[str]) -> Analysis:
+    """``a`` with its score's ``tests`` taken again without the ``contradicted`` kinds."""
+    return replace(a, score=replace(a.score, tests=matched_tests_figure(cands, penalty, contradicted)))
 
 
 def candidates(ctx: catalogue.Context, counts: dict) -> list[catalogue.Candidate]:
     """Every applicable catalogue entry fitted to the current residual, best BIC first
-    (refused kinds included: they still measure what is missing, the score's ``tests``)."""
+    (refused kinds included: they still measure what is missing, the score's ``tests``,
+    unless the map contradicted them, ``matched_tests_figure``)."""
     out = []
     for kind, fn in {**catalogue.MEAN_CANDIDATES, **catalogue.NOISE_CANDIDATES}.items():
         if counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
@@ -368,7 +384,8 @@ def _subtracted(c: catalogue.Candidate) -> bool:
     return c.nature == "mean" or c.kind == "outliers"
 
 
-def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, n_acc, progress):
+def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, like, grid, B, opt, n_acc, progress,
+         contradicted):
     """(residual, stochastic model, null, context, analysis, candidates) with ``c`` added:
     a mean-type effect, or outliers replaced in the residual, is subtracted (same null),
     a noise-type one joins the stochastic model (new bootstrap)."""
@@ -388,7 +405,8 @@ def _try(c: catalogue.Candidate, y, stoch, null, ctx, counts, aux, t, valid, lik
                              opt.workers, progress)
     ctx_new = _whittle(stoch_new, aux, t, valid, y_new)
     cands_new = candidates(ctx_new, {**counts, c.kind: counts.get(c.kind, 0) + 1})
-    return y_new, stoch_new, null_new, ctx_new, analyse(y_new, ctx_new, null_new, grid, cands_new), cands_new
+    after = analyse(y_new, ctx_new, null_new, grid, cands_new, contradicted)
+    return y_new, stoch_new, null_new, ctx_new, after, cands_new
 
 
 def explain(rec: Recording, model: SensorModel, options: Options | None = None,
@@ -418,8 +436,10 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     ctx = _whittle(stoch, aux, t, valid, y0)
     counts: dict[str, int] = {k: MAX_PER_KIND.get(k, 1) for k in BASELINE_EXCLUDED} if baseline else {}
     refused: set[str] = set()
+    contradicted: set[str] = set()  # refused kinds whose tests the score no longer counts (matched_tests_figure)
     cands = candidates(ctx, counts)
-    before = current = analyse(y0, ctx, null, grid, cands)
+    cands0 = cands
+    before = current = analyse(y0, ctx, null, grid, cands, contradicted)
     y = y0.copy()
     accepted: list[Accepted] = []
     rejected: list[tuple[str, float, str]] = []
@@ -427,8 +447,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     while len(accepted) < opt.max_effects:
         trial_of = functools.partial(_try, y=y, stoch=stoch, null=null, ctx=ctx, counts=counts, aux=aux, t=t,
                                      valid=valid, like=like, grid=grid, B=B, opt=opt, n_acc=len(accepted),
-                                     progress=progress)
-        chosen = _choose(cands, ctx, current, refused, deferred, rejected, trial_of)
+                                     progress=progress, contradicted=contradicted)
+        chosen, current = _choose(cands, ctx, current, refused, contradicted, deferred, rejected, trial_of)
         if chosen is None:
             break
         c, bg, note, (y, stoch, null, ctx, after, cands) = chosen
@@ -443,6 +463,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                  if c.bic_gain(ctx.penalty) <= 0 and c.kind not in refused]
     fitted = _fitted_model(model, stoch, accepted)
     accepted.sort(key=lambda a: -a.cand.gain)
+    before = rescored(before, cands0, ctx.penalty, contradicted)  # before and after count the same tests
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
     current = replace(current, regions=mismatch.locate(current.regions, y, valid, grid, current.null))
     bursts, named = nonstationary_warnings(current, y, valid, grid)
@@ -454,8 +475,9 @@ def _judge(c: catalogue.Candidate, cands: list[catalogue.Candidate], ctx: catalo
            trial_of: Callable) -> tuple[str, float, str, tuple | None]:
     """What the search does with candidate ``c`` (its BIC gain ``bg`` and why): ("stop", ...)
     when bg is not positive (the rest of its tier is no better), ("defer", bg, why) to retry
-    it after an acceptance, ("reject", bg, why) for good, or ("accept", bg, held-out note,
-    the trial of ``trial_of(c)``)."""
+    it after an acceptance, ("reject", bg, why) for good, ("contradicted", bg, why) for good
+    when the map contradicts it (added, it opens a whole-record deficit), or ("accept", bg,
+    held-out note, the trial of ``trial_of(c)``)."""
     bg = c.bic_gain(ctx.penalty)
     if bg <= 0:
         return "stop", bg, "", None
@@ -471,8 +493,9 @@ def _judge(c: catalogue.Candidate, cands: list[catalogue.Candidate], ctx: catalo
     # may leave a deficit elsewhere; guarded, real sway lines were refused (docs/explain.md, limits)
     overfit = _new_deficit(current, trial[4]) if c.rate is None else None
     if overfit is not None:
-        return "reject", bg, (f"makes the model noisier than the recording at tau {overfit} s "
-                              f"(the spectral fit trades long taus for short ones)"), None
+        return "contradicted", bg, (f"makes the model noisier than the recording at tau {overfit} s (the "
+                                    f"spectral fit trades long taus for short ones; its test no longer counts "
+                                    f"in the score)"), None
     if not _lowers(current.score.value, trial[4].score.value):
         return "defer", bg, (f"does not lower the score ({current.score.value:.3f} -> "
                              f"{trial[4].score.value:.3f}): what it fits is within chance "
@@ -481,11 +504,13 @@ def _judge(c: catalogue.Candidate, cands: list[catalogue.Candidate], ctx: catalo
 
 
 def _choose(cands: list[catalogue.Candidate], ctx: catalogue.Context, current: Analysis, refused: set[str],
-            deferred: dict[str, tuple[float, str]], rejected: list[tuple[str, float, str]],
-            trial_of: Callable) -> tuple | None:
+            contradicted: set[str], deferred: dict[str, tuple[float, str]], rejected: list[tuple[str, float, str]],
+            trial_of: Callable) -> tuple[tuple | None, Analysis]:
     """The first candidate, tier by tier, that passes every test (``_judge``), as
-    (candidate, BIC gain, held-out note, trial); None when none does. Candidates refused
-    or deferred are skipped; what is refused, deferred or rejected is recorded."""
+    (candidate, BIC gain, held-out note, trial), or None when none does; and ``current``
+    rescored without the tests of the kinds the map contradicted (the candidates after
+    them are judged against that score). Candidates refused or deferred are skipped; what
+    is refused, contradicted, deferred or rejected is recorded."""
     for tier in tiers(cands):
         for c in tier:
             if c.kind in refused or c.kind in deferred:
@@ -495,12 +520,15 @@ def _choose(cands: list[catalogue.Candidate], ctx: catalogue.Context, current: A
                 break
             if verdict == "defer":
                 deferred[c.kind] = (bg, why)
-            elif verdict == "reject":
+            elif verdict in ("reject", "contradicted"):
                 rejected.append((c.kind, bg, why))
                 refused.add(c.kind)
+                if verdict == "contradicted":
+                    contradicted.add(c.kind)
+                    current = rescored(current, cands, ctx.penalty, contradicted)
             else:
-                return c, bg, why, trial
-    return None
+                return (c, bg, why, trial), current
+    return None, current
 
 
 def _fitted_model(model: SensorModel, stoch: SensorModel, accepted: list[Accepted]) -> SensorModel:
