@@ -25,7 +25,9 @@ fitted from the recording) and `fogmon replay` (console summary), then
   missing and nothing invented where the physics is known (a quiet stationary record:
   only the sensor's own filter and lines, no region left but those the report names
   `nonstationary` bursts where the recording is independently known to hold a burst,
-  `bursts_s`).
+  `bursts_s`, and those at a band of stationary power the recording is independently
+  known to hold beyond what any catalogue effect can establish from it,
+  `unmodelled_bands_hz`: there a region left is the true report, "this is missing").
 
 Exit code 1 if any check fails (several are expected to fail today: they drive the fixes).
 """
@@ -51,6 +53,9 @@ from fogmon.recording import read_replay_log
 TRANSIENT_MAX_FRACTION = 0.2
 #: Raw outliers: samples farther than this many MADs from the median.
 OUTLIER_MADS = 8.0
+#: The frequency where the Allan variance's transfer function at tau peaks is this / tau
+#: (|H(f)|^2 ~ sin^4(pi f tau) / (pi f tau)^2, maximal at pi f tau = 1.1656).
+ALLAN_PEAK_F_TAU = 0.371
 #: A raw outlier cluster is accounted for by a glitch listed within this many samples
 #: (the development set's glitch-time tolerance, docs/explain.md).
 GLITCH_TOL_SAMPLES = 30
@@ -223,10 +228,20 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
             return r.get("nonstationary") and (bool(bursts) if r["whole_record"] else
                                                any(overlaps(r["t_start_s"], r["t_end_s"], a, b) for a, b in bursts))
 
+        bands = entry.get("unmodelled_bands_hz", [])
+
+        def known_band(r):
+            # a tau of the region whose Allan response peaks inside a known unmodelled band
+            return any(lo <= ALLAN_PEAK_F_TAU / r["tau_max_s"] <= hi or lo <= ALLAN_PEAK_F_TAU / r["tau_min_s"] <= hi
+                       or ALLAN_PEAK_F_TAU / r["tau_max_s"] <= lo <= ALLAN_PEAK_F_TAU / r["tau_min_s"]
+                       for lo, hi in bands)
+
         named = [r for r in after if known_burst(r)]
-        left = [r for r in after if not known_burst(r)]
+        at_band = [r for r in after if not known_burst(r) and known_band(r)]
+        left = [r for r in after if not known_burst(r) and not known_band(r)]
         label = "quiet stationary record: " if entry.get("quiet") else ""
-        out.append((f"{label}nothing missing, nothing invented (known physics: {', '.join(sorted(want)) or 'none'})",
+        out.append((f"{label}nothing missing but what is known to be left, nothing invented (known physics: "
+                    f"{', '.join(sorted(want)) or 'none'})",
                     not extra and not left,
                     f"effects {', '.join(e['kind'] for e in effects) or 'none'}"
                     + (f" (not known to be there: {', '.join(extra)})" if extra else "")
@@ -234,6 +249,9 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
                     + (f" ({', '.join(region_text(r) for r in left)})" if left else "")
                     + (f", {len(named)} more named non-stationary bursts at known bursts "
                        + ", ".join(f"{a:g}..{b:g} s" for a, b in bursts) if named else "")
+                    + (f", {len(at_band)} more at a known unmodelled band "
+                       + ", ".join(f"{a:g}..{b:g} Hz" for a, b in bands)
+                       + " (" + ", ".join(region_text(r) for r in at_band) + ")" if at_band else "")
                     + f"; score {rep['score_before']:.3g} -> {rep['score_after']:.3g}"))
     return out
 
