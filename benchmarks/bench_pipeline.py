@@ -21,9 +21,12 @@
    cold (an empty numba cache: every kernel compiled) and warm (the cache the cold run
    wrote), in CPU seconds split into import, compile, read, engine, fits, sinks
    (benchmarks/replay_split.py), the plain command's CPU time warm, and warm the CPU
-   time until the first block has reached every sink (replay_split.py --first-sample);
-   warm figures are medians of --demo-runs interleaved runs of each (the machine is
-   shared) (targets: < 1 s before the first sample, < 3 s in all, fits < 10 %).
+   time until the first block has reached every sink (replay_split.py --first-sample),
+   beside the same for a process that only imports numpy and Rerun and sends one block
+   to an .rrd (benchmarks/rerun_floor.py: what any program writing a Rerun recording
+   spends before its first sample); warm figures are medians of --demo-runs interleaved
+   runs of each (the machine is shared) (targets: < 1 s before the first sample, < 3 s
+   in all, fits < 10 %).
 
 Usage: python benchmarks/bench_pipeline.py [--monitor-s 30] [--monitor-window-s 65.536] [--skip-monitor]
        [--skip-hour] [--skip-demo] [--demo-runs 5] [--skip-axes] [--axes-rrd]
@@ -279,6 +282,7 @@ def bench_demo(tmp: str, runs: int) -> None:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": os.path.join(tmp, "numba_cache")}
     rrd = os.path.join(tmp, "demo.rrd")
     split_cmd = [sys.executable, str(ROOT / "benchmarks" / "replay_split.py"), str(DEMO), rrd]
+    floor_cmd = [sys.executable, str(ROOT / "benchmarks" / "rerun_floor.py"), rrd]
     plain_cmd = [sys.executable, "-m", "fogmon", "replay", str(DEMO), "--rrd", rrd, "--no-progress", "--quiet"]
     print(f"`fogmon replay` of {DEMO.name} (CPU s; numba cache {env['NUMBA_CACHE_DIR']}; warm: medians of {runs} "
           f"runs of each, interleaved):")
@@ -293,15 +297,17 @@ def bench_demo(tmp: str, runs: int) -> None:
             warm.setdefault(k, []).append(v)
         warm.setdefault("plain", []).append(_child_cpu_s(plain_cmd, env)[0])
         warm.setdefault("first_sample", []).append(_split([*split_cmd, "--first-sample"], env)["first_sample"])
+        warm.setdefault("floor", []).append(_split(floor_cmd, env)["first_sample"])
     w = {k: float(np.median(v)) for k, v in warm.items()}
     for run, row in (("cold", cold), ("warm", w)):
         print("  " + " ".join(f"{x:>12s}" for x in [run] + [f"{row[k]:.2f}" for k in keys]))
     cpu, first = w["plain"], w["first_sample"]
-    spread = {k: f"{min(warm[k]):.2f}-{max(warm[k]):.2f}" for k in ("plain", "first_sample")}
+    spread = {k: f"{min(warm[k]):.2f}-{max(warm[k]):.2f}" for k in ("plain", "first_sample", "floor")}
     print(f"  plain `fogmon replay`, warm: {cpu:.2f} CPU s ({spread['plain']})")
     print(f"  {'PASS' if first < 1.0 else 'FAIL'}  warm: before the first sample < 1 s: {first:.2f} s "
           f"({spread['first_sample']}; the program's own order, interpreter start-up included, until the first "
-          f"block is in every sink)")
+          f"block is in every sink); numpy + Rerun alone, one block into an .rrd: {w['floor']:.2f} s "
+          f"({spread['floor']}), {first / w['floor']:.2f}x")
     print(f"  {'PASS' if cpu < 3.0 else 'FAIL'}  warm: whole demo < 3 s: {cpu:.2f} s")
     print(f"  {'PASS' if w['fits'] < 0.1 * w['total'] else 'FAIL'}  warm: fits < 10 % of the replay: "
           f"{100 * w['fits'] / w['total']:.1f} % ({w['fits']:.2f} s, of which {w['fit_cov']:.2f} s the cross-tau "
