@@ -615,8 +615,21 @@ MEAN_CANDIDATES = {
 
 
 # ---------------------------------------------------------------- noise-type
-def _periodogram(ctx: Context) -> BinnedPeriodogram:
-    return BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid, ctx.y, 0.0)), ctx.n)
+def _periodogram(ctx: Context, part: slice = slice(None)) -> BinnedPeriodogram:
+    """Binned periodogram of the residual (or of ``part`` of it)."""
+    y = np.where(ctx.valid[part], ctx.y[part], 0.0)
+    return BinnedPeriodogram(np.fft.rfft(y), len(y))
+
+
+def _passband(ctx: Context, bp: BinnedPeriodogram) -> BinnedPeriodogram:
+    """``bp`` over the model's pass band (``passband_gain2``): the bins where its filters
+    pass at least PASSBAND_MIN_GAIN2 of the power, all bins without a filter."""
+    keep = passband_gain2(ctx.stoch, bp.omega) >= PASSBAND_MIN_GAIN2
+    if keep.all():
+        return bp
+    band = copy.copy(bp)
+    band.count, band.I, band.k, band.omega = bp.count[keep], bp.I[keep], bp.k[keep], bp.omega[keep]
+    return band
 
 
 def white_rms_dpsh(model: SensorModel, ctx: Context) -> float:
@@ -637,27 +650,24 @@ def _stoch_psd(ctx: Context, bp: BinnedPeriodogram) -> np.ndarray:
     return model_psd(ctx.stoch, bp.omega, ctx.n, white_rms_dpsh(ctx.stoch, ctx))
 
 
-#: the markov candidate's Whittle fit keeps the frequencies where the model's
-#: ``bandwidth`` filters pass at least this share of the power (|H|^2, -20 dB)
-MARKOV_MIN_GAIN2 = 0.01
+#: the calibrated Whittle GLS of the mean-type candidates and the spike test
+#: (explainer._whittle), the markov fit and the lines' proposals keep the frequencies
+#: where the model's ``bandwidth`` filters pass at least this share of the power (|H|^2, -20 dB)
+PASSBAND_MIN_GAIN2 = 0.01
 
 
-def _passband(ctx: Context, bp: BinnedPeriodogram) -> tuple[BinnedPeriodogram, np.ndarray]:
-    """``bp`` restricted to the bins where the model's bandwidth filters pass at least
-    MARKOV_MIN_GAIN2 of the power, and the filters' |H|^2 there (all bins and 1 without
-    a filter). Near a filter's zero the model PSD falls below what a finite record's
-    periodogram shows there (the real filter's own shape, leakage), so a likelihood over
-    those bins measures the filter's zero, not a term under it."""
-    G = np.ones(len(bp.omega))
-    for e in ctx.stoch.effects:
+def passband_gain2(model: SensorModel, omega: np.ndarray) -> np.ndarray:
+    """|H|^2 of the model's ``bandwidth`` filters at ``omega`` (rad/sample; 1 without a
+    filter); the pass band is where it is at least PASSBAND_MIN_GAIN2. Beyond it the
+    model PSD is orders of magnitude below its pass-band level (floored in the fits),
+    so a likelihood there measures the filter's exact shape (on a real sensor the
+    fitted filter is not the real one), not a term under it; and a term there is
+    attenuated by the filter as much as the noise."""
+    G = np.ones(len(omega))
+    for e in model.effects:
         if e.kind == "bandwidth":
-            G = G * filter_gain2(e.params, ctx.sample_rate_hz, bp.omega)
-    keep = G >= MARKOV_MIN_GAIN2
-    if keep.all():
-        return bp, G
-    band = copy.copy(bp)
-    band.count, band.I, band.k, band.omega = bp.count[keep], bp.I[keep], bp.k[keep], bp.omega[keep]
-    return band, G[keep]
+            G = G * filter_gain2(e.params, float(model.sample_rate_hz), omega)
+    return G
 
 
 def markov(ctx: Context) -> Candidate | None:
@@ -669,7 +679,8 @@ def markov(ctx: Context) -> Candidate | None:
     BandwidthFilter) and fitted over the filter's pass band (``_passband``): a
     correlation time of 5 samples or more puts less than 1/(2 pi 5 x 0.45)^2 = 0.5 % of
     its low-frequency PSD near Nyquist, so the bins left out carry next to nothing on it."""
-    bp, G = _passband(ctx, _periodogram(ctx))
+    bp = _passband(ctx, _periodogram(ctx))
+    G = passband_gain2(ctx.stoch, bp.omega)
     S0 = _stoch_psd(ctx, bp)
     floor = LEAKAGE_FLOOR * float(np.median(S0))
     d0 = bp.deviance(S0, floor)
@@ -1042,7 +1053,7 @@ def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
     out = []
     h = n // 2
     halves = (slice(0, h), slice(h, 2 * h))
-    bps = [BinnedPeriodogram(np.fft.rfft(np.where(ctx.valid[sl], ctx.y[sl], 0.0)), h) for sl in halves]
+    bps = [_periodogram(ctx, sl) for sl in halves]
     wr = white_rms_dpsh(ctx.stoch, ctx)
     for a, b in ((0, 1), (1, 0)):
         ga, la, refit, _ = lines_and_white(ctx, bps[a], h, [(f, bw) for f, _, bw in lines])
@@ -1062,20 +1073,21 @@ def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
 def vibration_lines(ctx: Context) -> Candidate | None:
     """Narrowband random vibration: lines proposed by detectors.spectral_lines on the
     residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
-    0.49 fs), each then fitted (centre, -3 dB bandwidth, rms) by the Whittle likelihood
-    of the residual's binned periodogram under the model PSD plus the band-pass lines,
-    and the model's white-equivalent level (N, or a baseline's low-pass sigma; N and Q
-    under a bandwidth filter) refitted under them (lines_and_white). The removable
-    estimate is the Wiener smoother S_lines / (S_model + S_lines) applied to the
-    residual's DFT."""
+    0.49 fs or the top of the model's pass band, _passband), each then fitted
+    (centre, -3 dB bandwidth, rms) by the Whittle likelihood of the residual's binned
+    periodogram under the model PSD plus the band-pass lines, and the model's
+    white-equivalent level (N, or a baseline's low-pass sigma; N and Q under a
+    bandwidth filter) refitted under them (lines_and_white). The removable estimate is
+    the Wiener smoother S_lines / (S_model + S_lines) applied to the residual's DFT."""
     sample_rate_hz, n = ctx.sample_rate_hz, ctx.n
     T = n / sample_rate_hz
     f_lo = max(50.0 / T, sample_rate_hz / 1000.0)
+    bp = _periodogram(ctx)
     props = detectors.spectral_lines(
         np.where(ctx.valid, _whitened(ctx), np.nan),
         sample_rate_hz,
         f_lo,
-        0.49 * sample_rate_hz,
+        min(0.49, float(_passband(ctx, bp).omega[-1]) / (2 * np.pi)) * sample_rate_hz,
         min_ratio=LINE_MIN_RATIO,
     )[:MAX_LINES]
     if not props:
@@ -1084,7 +1096,7 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         8 * sample_rate_hz / (2 ** math.ceil(math.log2(8 * sample_rate_hz / f_lo)))
     )  # a few Welch bins: the start bandwidth
     starts = [(f, max(res, 4 * sample_rate_hz / n)) for f, _ in props]
-    gain, lines, refit, levels = lines_and_white(ctx, _periodogram(ctx), n, starts)
+    gain, lines, refit, levels = lines_and_white(ctx, bp, n, starts)
     if not lines:
         return None
     params = {"freq_hz": [ln[0] for ln in lines], "sigma_dph": [ln[1] for ln in lines],
@@ -1243,10 +1255,7 @@ def noise(ctx: Context) -> Candidate | None:
         halves = (slice(0, h), slice(h, 2 * h))
         for a, b in ((0, 1), (1, 0)):
             fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
-            yb = np.where(ctx.valid[halves[b]], ctx.y[halves[b]], 0.0)
-            bpb = BinnedPeriodogram(np.fft.rfft(yb), h)
-            ya = np.where(ctx.valid[halves[a]], ctx.y[halves[a]], 0.0)
-            bpa = BinnedPeriodogram(np.fft.rfft(ya), h)
+            bpb, bpa = _periodogram(ctx, halves[b]), _periodogram(ctx, halves[a])
             if not fa:
                 out.append((0.0, 0.0))
                 continue

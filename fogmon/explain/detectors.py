@@ -161,7 +161,7 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
     d[0] = 1.0
     S = wh.S.copy()
     S[0] = 1.0
-    Zb = Yf / (S * d)
+    Zb = Yf / S / d  # S may be inf (no weight): real division first, no inf / inf
     Zb[0] = 0.0
     bq = np.fft.irfft(Zb, n)
     b = bq - bq[0]
