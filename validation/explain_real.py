@@ -232,8 +232,8 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
 
         def known_band(r):
             # a tau of the region whose Allan response peaks inside a known unmodelled band
-            return any(lo <= ALLAN_PEAK_F_TAU / r["tau_max_s"] <= hi or lo <= ALLAN_PEAK_F_TAU / r["tau_min_s"] <= hi
-                       or ALLAN_PEAK_F_TAU / r["tau_max_s"] <= lo <= ALLAN_PEAK_F_TAU / r["tau_min_s"]
+            # (the peaks' interval over the region's taus meets the band)
+            return any(ALLAN_PEAK_F_TAU / r["tau_max_s"] <= hi and lo <= ALLAN_PEAK_F_TAU / r["tau_min_s"]
                        for lo, hi in bands)
 
         named = [r for r in after if known_burst(r)]

@@ -622,9 +622,8 @@ def _periodogram(ctx: Context, part: slice = slice(None)) -> BinnedPeriodogram:
 
 
 def _passband(ctx: Context, bp: BinnedPeriodogram) -> BinnedPeriodogram:
-    """``bp`` over the model's pass band (``passband_gain2``): the bins where its filters
-    pass at least PASSBAND_MIN_GAIN2 of the power, all bins without a filter."""
-    keep = passband_gain2(ctx.stoch, bp.omega) >= PASSBAND_MIN_GAIN2
+    """``bp`` over the model's pass band (``in_passband``)."""
+    keep = in_passband(ctx.stoch, bp.omega)
     if keep.all():
         return bp
     band = copy.copy(bp)
@@ -668,6 +667,12 @@ def passband_gain2(model: SensorModel, omega: np.ndarray) -> np.ndarray:
         if e.kind == "bandwidth":
             G = G * filter_gain2(e.params, float(model.sample_rate_hz), omega)
     return G
+
+
+def in_passband(model: SensorModel, omega: np.ndarray) -> np.ndarray:
+    """The frequencies ``omega`` (rad/sample) where the model's ``bandwidth`` filters pass
+    at least PASSBAND_MIN_GAIN2 of the power (all of them without a filter)."""
+    return passband_gain2(model, omega) >= PASSBAND_MIN_GAIN2
 
 
 def markov(ctx: Context) -> Candidate | None:
@@ -1073,7 +1078,7 @@ def _lines_heldout(ctx: Context, lines: list) -> list[tuple[float, float]]:
 def vibration_lines(ctx: Context) -> Candidate | None:
     """Narrowband random vibration: lines proposed by detectors.spectral_lines on the
     residual whitened by the model PSD (between max(50 / duration, fs / 1000) and
-    0.49 fs or the top of the model's pass band, _passband), each then fitted
+    0.49 fs or the top of the model's pass band, in_passband), each then fitted
     (centre, -3 dB bandwidth, rms) by the Whittle likelihood of the residual's binned
     periodogram under the model PSD plus the band-pass lines, and the model's
     white-equivalent level (N, or a baseline's low-pass sigma; N and Q under a
@@ -1087,7 +1092,7 @@ def vibration_lines(ctx: Context) -> Candidate | None:
         np.where(ctx.valid, _whitened(ctx), np.nan),
         sample_rate_hz,
         f_lo,
-        min(0.49, float(_passband(ctx, bp).omega[-1]) / (2 * np.pi)) * sample_rate_hz,
+        min(0.49, float(bp.omega[in_passband(ctx.stoch, bp.omega)][-1]) / (2 * np.pi)) * sample_rate_hz,
         min_ratio=LINE_MIN_RATIO,
     )[:MAX_LINES]
     if not props:

@@ -211,7 +211,7 @@ def default_n_boot(n: int) -> int:
 # ---------------------------------------------------------------- analysis
 def _whittle(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray, y: np.ndarray):
     """The context of the candidates: the model PSD calibrated to the residual over the
-    model's pass band (``catalogue.passband_gain2``), and no weight outside it: an octave
+    model's pass band (``catalogue.in_passband``), and no weight outside it: an octave
     band holding a filter's zero would otherwise take its factor from bins where the
     model is floored, and the bins next to them would show a false excess."""
     n = len(y)
@@ -220,7 +220,7 @@ def _whittle(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray
     S = np.maximum(S, 1e-4 * np.median(S[1:]))  # a PSD near 0 must not give one bin all the weight
     yy = np.where(valid, y, 0.0)
     Yf = np.fft.rfft(yy)
-    keep = catalogue.passband_gain2(stoch, omega) >= catalogue.PASSBAND_MIN_GAIN2
+    keep = catalogue.in_passband(stoch, omega)
     S_cal = np.full(len(S), np.inf)
     S_cal[keep] = calibrate_psd(S[keep], Yf[keep], n)  # a low-pass's pass band: the bins 0..K
     wh = Whittle(S_cal, n, valid)
