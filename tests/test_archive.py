@@ -275,7 +275,7 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     archive = Archive(str(arch), src)
     # the port is paced by the pipeline, not by the clock: no wall-clock stop (a loaded host
     # would otherwise end the run before its 4.5 s of recording)
-    monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)
+    monkeypatch.setattr("fogmon.pipeline.run.LIVE_WALL_SLACK_S", 1e6)
     run_pipeline(src, _args(window_s=0.64, rotate_s=1.0, duration_s=4.5), sinks=[archive])
     n = int(4.5 * FS)
     want = [k for k in range(n) if k not in (200, 400)]

@@ -5,7 +5,7 @@ import numpy as np
 
 from fogmon.davar.jumps import JUMP_MIN_INDEPENDENT, JumpDetector, jump_threshold
 from fogmon.davar.result import CONFIDENCE
-from fogmon.pipeline import JumpDetector as PipelineJumpDetector
+from fogmon.pipeline.axis import JumpDetector as PipelineJumpDetector
 from fogmon.sinks.base import COEFFICIENTS
 
 

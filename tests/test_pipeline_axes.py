@@ -11,7 +11,8 @@ from doubles import Collect, ListSource
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.methods.live import LiveMethods
-from fogmon.pipeline import Pipeline, PipelineConfig, _Dropped, _ThreadedBlocks, run_pipeline
+from fogmon.pipeline import Pipeline, PipelineConfig, run_pipeline
+from fogmon.pipeline.reader import _Dropped, _ThreadedBlocks
 from fogmon.sim.model import Noise, SensorModel, validate_effect
 from fogmon.sinks.console import ConsoleSink, format_summary
 

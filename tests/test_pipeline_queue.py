@@ -6,7 +6,8 @@ import threading
 import numpy as np
 
 from fogmon.block import Block, Event
-from fogmon.pipeline import _Tail, _ThreadedBlocks
+from fogmon.pipeline.axis import _Tail
+from fogmon.pipeline.reader import _ThreadedBlocks
 
 RATE_HZ = 10.0
 

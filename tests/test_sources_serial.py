@@ -269,7 +269,7 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     src = scripted_source(split(data, [997] * 40, ), [0.2] * 40)
     archive = Archive(str(tmp_path / "arch"), src)
     ev = Events()
-    monkeypatch.setattr("fogmon.pipeline.LIVE_WALL_SLACK_S", 1e6)   # scripted device: no wall-clock stop
+    monkeypatch.setattr("fogmon.pipeline.run.LIVE_WALL_SLACK_S", 1e6)   # scripted device: no wall-clock stop
     summary = run_pipeline(src, _args(window_s=0.64, duration_s=4.0), sinks=[ev, archive])
     c = summary.counters
     assert summary.n_samples == 798                      # frames 798, 799 lost: the grid ends at 797
