@@ -38,7 +38,7 @@ with startup.loading():      # the imports, as fogmon.cli.main's
     import fogmon.davar.streaming
     import fogmon.pipeline
     import fogmon.sinks.console
-    import fogmon.sinks.rerun_sink
+    import fogmon.sinks.rerun.sink
     import fogmon.sources.replay
 
 SPENT: dict[str, float] = {}
@@ -112,7 +112,7 @@ def split(log: str, rrd: str) -> int:
     fogmon.davar.batch.oadev = timed("engine", fogmon.davar.batch.oadev)
     fogmon.davar.fit.fit_noise = timed("fits", fogmon.davar.fit.fit_noise)
     fogmon.davar.fit.covariance_matrices = timed("fit_cov", fogmon.davar.fit.covariance_matrices)
-    for mod in (fogmon.sinks.console, fogmon.sinks.rerun_sink):
+    for mod in (fogmon.sinks.console, fogmon.sinks.rerun.sink):
         for cls in vars(mod).values():
             if isinstance(cls, type) and cls.__module__ == mod.__name__:
                 for name in ("start", "block", "frames", "events", "source_counters", "rotate", "finish"):

@@ -65,7 +65,7 @@ def _run(cmd: list[str], what: str) -> None:
 
 def _screenshot(rrd: str, png: str) -> None:
     """The viewer's window on ``rrd`` with its saved layout, as ``png``."""
-    from fogmon.sinks.rerun_sink import _rerun_binary
+    from fogmon.sinks.rerun.server import _rerun_binary
 
     _run(["xvfb-run", "-a", "-s", "-screen 0 1920x1080x24", _rerun_binary(), "--window-size", WINDOW,
           "--screenshot-to", png, rrd], f"rerun --screenshot-to on {rrd}")
@@ -85,7 +85,7 @@ def three_axis_rrd(path: str) -> None:
     from fogmon.sim.model import model_from_dict
     from fogmon.sim.simulate import simulate
     from fogmon.sinks.base import StreamInfo, Summary
-    from fogmon.sinks.rerun_sink import RerunSink
+    from fogmon.sinks.rerun.sink import RerunSink
 
     model = model_from_dict(tomllib.loads(THREE_AXIS_MODEL))
     axes, sample_rate_hz = model.axes, model.sample_rate_hz

@@ -73,14 +73,14 @@ def test_every_module_imports_alone():
 
 
 def test_pipeline_and_sinks_import_in_either_order():
-    sinks = ("fogmon.sinks.base", "fogmon.sinks.console", "fogmon.sinks.rerun_sink", "fogmon.sinks.archive")
+    sinks = ("fogmon.sinks.base", "fogmon.sinks.console", "fogmon.sinks.rerun.sink", "fogmon.sinks.archive")
     for order in (("fogmon.pipeline", *sinks), (*sinks, "fogmon.pipeline")):
         r = _imports(*order)
         assert r.returncode == 0, r.stderr
 
 
 def test_library_code_does_not_import_the_command_line():
-    r = _imports("fogmon.pipeline", "fogmon.sources.open", "fogmon.sinks.console", "fogmon.sinks.rerun_sink",
+    r = _imports("fogmon.pipeline", "fogmon.sources.open", "fogmon.sinks.console", "fogmon.sinks.rerun.sink",
                  "fogmon.sinks.archive")
     assert r.returncode == 0, r.stderr
     code = ("import sys, fogmon.pipeline, fogmon.sources.open, fogmon.sinks.console, fogmon.sinks.archive\n"

@@ -12,7 +12,8 @@ from fogmon.davar.batch import dadev
 from fogmon.davar.fit import fit_noise
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.sinks.base import COEFFICIENTS, StreamInfo, Summary
-from fogmon.sinks.rerun_sink import AXIS_COLOURS, RerunSink
+from fogmon.sinks.rerun.sink import RerunSink
+from fogmon.sinks.rerun.style import AXIS_COLOURS
 
 AXES = ("x", "y", "z")
 N_DPSH = {"x": 0.05, "y": 0.1, "z": 0.2}          # white noise per axis, deg/sqrt(h)

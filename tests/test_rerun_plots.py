@@ -1,7 +1,7 @@
 """Pure helpers of the labelled Rerun plots: tick values, labelled rows, colours."""
 import numpy as np
 
-from fogmon.sinks.rerun_plots import colourise, decade_rows, nice_ticks
+from fogmon.sinks.rerun.plots import colourise, decade_rows, nice_ticks
 
 
 def test_nice_ticks_are_round_and_inside_the_range():
@@ -28,7 +28,7 @@ def test_colourise_clips_to_the_end_colours_and_blackens_nan():
 def test_colourise_gives_matplotlibs_colours_and_viridis_needs_no_matplotlib():
     import matplotlib
 
-    from fogmon.sinks.rerun_plots import _VIRIDIS
+    from fogmon.sinks.rerun.plots import _VIRIDIS
 
     np.testing.assert_array_equal(
         _VIRIDIS, np.round(255 * matplotlib.colormaps["viridis"](np.arange(256))[:, :3]).astype(np.uint8))

@@ -23,7 +23,9 @@ from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig as _args, run_pipeline
 from fogmon.sinks.base import COEFFICIENTS, Summary
 from fogmon.sinks.console import format_summary
-from fogmon.sinks.rerun_sink import RerunSink, _Decimator, model_span, start_grpc_server, stop_process_group
+from fogmon.sinks.rerun.columns import _Decimator
+from fogmon.sinks.rerun.server import start_grpc_server, stop_process_group
+from fogmon.sinks.rerun.sink import RerunSink, model_span
 
 
 def read_scalars(path, entity):
@@ -324,7 +326,7 @@ def test_the_server_dies_with_fogmon_even_on_sigkill(process_groups):
     """The rerun server is fogmon's own child (not the launcher's grandchild) with a death
     signal: SIGKILL of the process that started it frees the port."""
     port = _free_port()
-    code = ("import sys; from fogmon.sinks.rerun_sink import start_grpc_server; "
+    code = ("import sys; from fogmon.sinks.rerun.server import start_grpc_server; "
             f"p, url = start_grpc_server('127.0.0.1', {port}); print(p.pid, flush=True); sys.stdin.read()")
     parent = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                               text=True, start_new_session=True)

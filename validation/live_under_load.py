@@ -336,7 +336,7 @@ def main(argv=None) -> int:
             if mode == "connect":
                 import socket
 
-                from fogmon.sinks.rerun_sink import start_grpc_server
+                from fogmon.sinks.rerun.server import start_grpc_server
                 with socket.socket() as s:
                     s.bind(("127.0.0.1", 0))
                     port = s.getsockname()[1]

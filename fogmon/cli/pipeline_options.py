@@ -246,7 +246,7 @@ def build_sinks(args: argparse.Namespace) -> list[Sink]:
 
     out: list[Sink] = []
     if args.rrd or args.connect or args.serve:
-        from fogmon.sinks.rerun_sink import RerunSink
+        from fogmon.sinks.rerun.sink import RerunSink
         out.append(RerunSink(rrd_path=args.rrd, connect_url=args.connect, serve=args.serve, bind=args.bind,
                              port=args.port, rotate=bool(args.rotate_s)))
     out.append(ConsoleSink(quiet=args.quiet))

@@ -500,7 +500,7 @@ def rrd_layout(x_dec: tuple[int, int], y_dec: tuple[int, int], prefix: str = "",
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from fogmon.sinks.rerun_plots import heatmap_bounds, loglog_bounds
+    from fogmon.sinks.rerun.plots import heatmap_bounds, loglog_bounds
 
     whole = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
     return rrb.Vertical(
@@ -536,7 +536,7 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec, prefix: str = "") -> Non
     family-wise band, before and after, on a labelled log-log plot with a legend."""
     import rerun as rr
 
-    from fogmon.sinks import rerun_plots as rp
+    from fogmon.sinks.rerun import plots as rp
 
     ent = f"{prefix}adev/log10"
     rec.log(ent, rp.loglog_transform(), static=True)
@@ -567,7 +567,7 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
     regions outlined."""
     import rerun as rr
 
-    from fogmon.sinks import rerun_plots as rp
+    from fogmon.sinks.rerun import plots as rp
 
     z = np.asarray(a.z, dtype=np.float64).T[::-1]          # rows: largest tau on top
     n_rows, n_cols = z.shape

@@ -36,15 +36,10 @@ A one-axis stream keeps the paths and layout above.
 from __future__ import annotations
 
 import contextlib
-import errno
 import math
 import os
-import re
-import signal
-import socket
 import subprocess
 import sys
-import tempfile
 import time
 import uuid
 from collections.abc import Callable, Sequence
@@ -58,11 +53,31 @@ from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.pieces import piece_path
-from fogmon.sinks import rerun_plots as rp
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
+from fogmon.sinks.rerun import plots as rp
+from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, axis_path, blueprint
+from fogmon.sinks.rerun.columns import (
+    _Decimator,
+    _Rows,
+    _send_bounds,
+    _send_curves,
+    _send_models,
+    _send_scalars,
+    _send_texts,
+)
+from fogmon.sinks.rerun.server import _check_listening, start_grpc_server, stop_process_group
+from fogmon.sinks.rerun.style import (
+    BAND_COLOUR,
+    BOUNDS_COLOUR,
+    HEATMAP_COLORMAP,
+    MEASURED_COLOUR,
+    MODEL_COLOUR,
+    _styles,
+)
 
 if TYPE_CHECKING:
     from rerun import RecordingStream
+
 
 #: Raw rate and aux channels are shown at no more than this many points per second.
 DISPLAY_MAX_HZ = 100.0
@@ -77,18 +92,8 @@ FLUSH_WALL_S = 1.0
 FLUSH_SAMPLES = 1 << 16
 #: At the end, wait at most this long (s) for Rerun to deliver everything.
 FLUSH_TIMEOUT_S = 30.0
-TIMELINE = "time"
-#: Entity of the ADEV curve (x = log10 tau/s, y = log10 ADEV/(deg/h), rerun_plots.loglog_transform).
-CURVE = "adev_curve/log10"
-#: Entity (view origin) of the DADEV heatmap (rerun_plots.log_heatmap).
-HEATMAP = "dadev/heatmap"
 #: Model points per decade of tau drawn over the fitted range.
 MODEL_POINTS_PER_DECADE = 20
-#: Colours of the ADEV-curve view (its legend uses the same).
-MEASURED_COLOUR, BOUNDS_COLOUR, MODEL_COLOUR = (255, 255, 255), (120, 160, 255), (255, 170, 0)
-#: the --model band around the live curve
-BAND_COLOUR = (200, 90, 200)
-HEATMAP_COLORMAP = "viridis"
 #: Height (view units, above the image) of the axis-name label of a multi-axis heatmap.
 HEATMAP_TITLE_Y = -2.5
 #: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
@@ -96,80 +101,6 @@ UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO", "implausible": "WARN", "bad_input": "WARN",
            "platform_motion": "WARN"}
-_ANSI = re.compile(r"\x1b\[[0-9;]*m")
-#: Colours of the axes of a multi-axis stream, in the order of StreamInfo.axes (x red, y green,
-#: z blue, as 3-D viewers draw them), repeated beyond six axes.
-AXIS_COLOURS = ((235, 90, 80), (90, 200, 100), (90, 150, 255), (230, 180, 40), (200, 110, 220), (70, 200, 200))
-#: What the views' titles call those colours.
-AXIS_COLOUR_NAMES = ("red", "green", "blue", "yellow", "purple", "cyan")
-_COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
-                "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
-
-
-def axis_path(axis: str, path: str) -> str:
-    """The entity of ``path`` for axis ``axis`` of a multi-axis stream (``axis/<axis>/<path>``);
-    ``path`` itself for a one-axis stream (``axis`` "")."""
-    return f"axis/{axis}/{path}" if axis else path
-
-
-def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False,
-              axes: tuple[str, ...] = ()):
-    """The default layout: rate and aux over time | current ADEV curve and DADEV heatmap |
-    a grid of the five coefficient tracks (tall enough for tick labels) and the event log.
-    Time-series views show the whole recording with linked time axes; the time cursor
-    follows the newest data. ``curve_bounds`` ((x0, x1), (y0, y1)) in decades frames the
-    ADEV-curve view; ``error_rate``: a view of rate_dph - 3600 x rot_dps beside the raw rate.
-    With ``axes`` (several): the rates, ADEV curves and each coefficient's tracks of all
-    axes overlaid in one view each, one heatmap per axis side by side, the events of all."""
-    import rerun.blueprint as rrb
-
-    of = f" of axes {', '.join(axes)}" if axes else ""
-    top: list[rrb.Container | rrb.View] = [
-        _series(*_over_axes("rate/rate_dph", axes), f"Rate (deg/h){of} over recording time (s)")]
-    if error_rate:
-        top.append(_series(*_over_axes("rate/error_dph", axes),
-                           f"Error rate_dph - 3600 x rot_dps (deg/h){of}, analysed"))
-    if aux_names:
-        top.append(_series("/aux", "$origin/**", "Aux channels (units in names)"))
-    origin, contents = _over_axes("adev_curve", axes)
-    curve = rrb.Spatial2DView(origin=origin, contents=contents,
-                              name=f"Current window: ADEV (deg/h) vs tau (s){of}, log-log",
-                              visual_bounds=rp.loglog_bounds(*curve_bounds) if curve_bounds is not None else None)
-    heat = [rrb.Tabs(
-        rrb.Spatial2DView(origin=f"/{axis_path(a, HEATMAP)}",
-                          name=f"{_axis_title(a)}DADEV heatmap: ADEV (deg/h, colour) by tau (s, rows) and window "
-                               "end time (s, columns)", visual_bounds=rp.heatmap_bounds()),
-        _series(f"/{axis_path(a, 'dadev/log10_adev_dph')}", "$origin/**",
-                f"{_axis_title(a)}DADEV: log10 ADEV (deg/h) per tau (s) over time"),
-    ) for a in (axes or ("",))]
-    key = ", ".join(f"{a} {AXIS_COLOUR_NAMES[k % len(AXIS_COLOUR_NAMES)]}" for k, a in enumerate(axes))
-    coefs = [_series(*_over_axes(f"coef/{n}", axes), f"{n} ({u}): value, interval or upper limit"
-                     + (f" ({key})" if axes else ""), legend=not axes)    # 3 series per axis: a key, no legend
-             for n, u in COEFFICIENTS.items()]
-    side = rrb.Tabs(rrb.TextLogView(origin=(ev := _over_axes("events", axes))[0], contents=ev[1],
-                                    name=f"Events{' (all axes)' if axes else ''}"),
-                    _series("/counters", "$origin/**", "Source counters"),
-                    rrb.TextDocumentView(origin="/session", name="Session"))
-    shares = [1, 1.2] if not axes else [1.6, *[0.8] * len(heat)]
-    return rrb.Blueprint(rrb.Vertical(rrb.Horizontal(*top), rrb.Horizontal(curve, *heat, column_shares=shares),
-                                      rrb.Grid(*coefs, side, grid_columns=3),
-                                      row_shares=[1.4, 1.6, 2.4]),
-                         rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
-                         collapse_panels=True)
-
-
-def _over_axes(path: str, axes: tuple[str, ...]) -> tuple[str, list[str] | str]:
-    """(origin, contents) of a view of ``path``: of one axis, its entity and children; of
-    several, ``/`` with every axis's ``axis/<name>/path`` and its children."""
-    if not axes:
-        return f"/{path}", "$origin/**"
-    shared = {"adev_curve": ["/adev_curve/**"], "events": ["/events"]}.get(path, [])  # grid, legend; stream events
-    return "/", [*shared, *(f"/{axis_path(a, path)}/**" for a in axes)]
-
-
-def _axis_title(axis: str) -> str:
-    """The prefix of a one-axis view's title ("Axis x: "; none for a one-axis stream)."""
-    return f"Axis {axis}: " if axis else ""
 
 
 def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> tuple[float, float] | None:
@@ -208,175 +139,6 @@ def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
     return top - max(3, math.ceil(0.3 * n_taus)), top + 1
 
 
-def _series(origin: str, contents: list[str] | str, name: str, legend: bool = True):
-    """A time-series view of the whole recording (``contents``: entity queries, as Rerun's)."""
-    import rerun as rr
-    import rerun.blueprint as rrb
-
-    shown = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
-    return rrb.TimeSeriesView(origin=origin, contents=contents, name=name, axis_x=rrb.TimeAxis(view_range=shown),
-                              plot_legend=None if legend else rrb.PlotLegend(visible=False))
-
-
-def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[subprocess.Popen, str]:
-    """Start a headless Rerun gRPC server (`rerun --serve-grpc`) listening on ``bind:port``;
-    returns the process and the URL SDKs and viewers connect to. A port already in use
-    is a one-line FogmonError before anything starts. The server is the rerun binary
-    itself (not the Python launcher, which would run it as a grandchild), in its own
-    process group, and on Linux dies with the thread that started it, even when fogmon
-    is killed with SIGKILL (prctl PR_SET_PDEATHSIG): no server is ever left behind."""
-    check_port_free(bind, port)
-    # a file that lives as long as the server, not a pipe: a long-running server must never block on its log
-    log = tempfile.TemporaryFile()  # noqa: SIM115
-    proc = subprocess.Popen([_rerun_binary(), "--serve-grpc", "--bind", bind, "--port", str(port)],
-                            start_new_session=True, preexec_fn=_die_with_parent(), stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=log)
-    host = "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
-    deadline = time.monotonic() + timeout_s
-    try:
-        with log:
-            while time.monotonic() < deadline:
-                if proc.poll() is not None:
-                    log.seek(0)
-                    lines = _ANSI.sub("", log.read().decode(errors="replace")).strip().splitlines()
-                    raise FogmonError(f"--serve: rerun server on {bind}:{port} exited: "
-                                      f"{lines[-1].strip() if lines else proc.returncode}")
-                try:
-                    with socket.create_connection((host, port), timeout=0.2):
-                        if proc.poll() is None:      # our server answered, not one that held the port
-                            return proc, f"rerun+http://{host}:{port}/proxy"
-                except OSError:
-                    time.sleep(0.1)
-        raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
-    except BaseException:   # also Ctrl-C while waiting: leave no server behind
-        stop_process_group(proc)
-        raise
-
-
-def check_port_free(bind: str, port: int) -> None:
-    """A one-line FogmonError unless a server could listen on ``bind:port`` now."""
-    try:
-        family, kind, proto, _, addr = socket.getaddrinfo(bind or None, port, type=socket.SOCK_STREAM,
-                                                          flags=socket.AI_PASSIVE)[0]
-    except socket.gaierror as e:
-        raise FogmonError(f"--bind {bind}: not an address to listen on ({e.strerror})") from None
-    with socket.socket(family, kind, proto) as s:
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as servers do: TIME_WAIT is no conflict
-        try:
-            s.bind(addr)
-        except OSError as e:
-            if e.errno == errno.EADDRINUSE:
-                raise FogmonError(f"--serve: port {port} on {bind} is already in use (another fogmon --serve or "
-                                  f"Rerun server/viewer; to send to a running viewer use --connect); stop it or "
-                                  f"give another --port") from None
-            raise FogmonError(f"--serve: cannot listen on {bind}:{port}: {e.strerror}") from None
-
-
-def _rerun_binary() -> str:
-    """The rerun executable shipped with rerun-sdk (what its `rerun` launcher runs), or
-    RERUN_CLI_PATH as the launcher honours it."""
-    import rerun_cli
-
-    exe = os.environ.get("RERUN_CLI_PATH") or os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
-    if not os.path.isfile(exe):
-        raise FogmonError(f"--serve: the rerun executable of rerun-sdk is missing ({exe})")
-    return exe
-
-
-def _die_with_parent():
-    """A ``preexec_fn`` (Linux; None elsewhere) giving the child SIGKILL when the thread
-    that started it ends, which includes fogmon being killed. Everything it calls is
-    resolved before the fork."""
-    if not sys.platform.startswith("linux"):
-        return None
-    import ctypes
-
-    prctl = ctypes.CDLL(None, use_errno=True).prctl
-    parent = os.getpid()
-    pr_set_pdeathsig, sigkill = 1, int(signal.SIGKILL)
-
-    def preexec() -> None:
-        prctl(pr_set_pdeathsig, sigkill)
-        if os.getppid() != parent:   # fogmon died before the death signal was armed
-            os._exit(1)
-
-    return preexec
-
-
-def _check_listening(url: str, timeout_s: float = 2.0) -> None:
-    """A one-line error unless something accepts TCP connections at the URL's host:port
-    (a Rerun SDK would otherwise wait, then block at the end, for a viewer that is not there)."""
-    from urllib.parse import urlsplit
-
-    try:
-        u = urlsplit(url)
-        host, port = u.hostname, u.port
-    except ValueError:
-        host = port = None
-    if not host or not port:
-        raise FogmonError(f"--connect {url}: expected a URL like rerun+http://127.0.0.1:9876/proxy")
-    try:
-        socket.create_connection((host, port), timeout=timeout_s).close()
-    except OSError:
-        raise FogmonError(f"--connect {url}: no Rerun viewer listening at {host}:{port} "
-                          f"(start one with `rerun`, or use --serve or --rrd)") from None
-
-
-def stop_process_group(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
-    """Terminate a process started with ``start_new_session=True`` and all its children."""
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            proc.wait(timeout=timeout_s)
-            return
-        except subprocess.TimeoutExpired:
-            continue
-
-
-class _Decimator:
-    """Means of ``step`` consecutive samples (invalid/NaN ignored), carrying the remainder."""
-
-    def __init__(self, step: int):
-        self.step = step
-        self._t: list[np.ndarray] = []
-        self._v: dict[str, list[np.ndarray]] = {}
-
-    def push(self, t: np.ndarray, values: dict[str, np.ndarray]) -> None:
-        self._t.append(t)
-        for k, v in values.items():
-            self._v.setdefault(k, []).append(v)
-
-    def pending(self) -> int:
-        return sum(len(t) for t in self._t)
-
-    def take(self, final: bool = False) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """(times, {name: values}) of completed bins; time = first sample of each bin."""
-        if not self._t:
-            return np.zeros(0), {}
-        t = np.concatenate(self._t)
-        vals = {k: np.concatenate(v) for k, v in self._v.items()}
-        s = self.step
-        n_full = (len(t) // s) * s if not final else len(t)
-        keep = slice(n_full, None)
-        self._t = [t[keep]] if n_full < len(t) else []
-        self._v = {k: [v[keep]] for k, v in vals.items()} if n_full < len(t) else {}
-        if s == 1:
-            return t[:n_full], {k: v[:n_full] for k, v in vals.items()}
-        nb = -(-n_full // s)
-        pad = nb * s - n_full
-        tb = t[:n_full:s]
-        out = {}
-        for k, v in vals.items():
-            x = np.concatenate([v[:n_full], np.full(pad, np.nan)]).reshape(nb, s)
-            cnt = np.count_nonzero(np.isfinite(x), axis=1)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                out[k] = np.where(cnt > 0, np.nansum(x, axis=1) / np.maximum(cnt, 1), np.nan)
-        return tb, out
-
-
 class _Streams:
     """The Rerun recording streams that get every call: ``live`` (gRPC: --serve, --connect)
     and ``file`` (the current .rrd piece, replaced at each --rotate-s seam)."""
@@ -401,43 +163,6 @@ class _Streams:
             r.set_time(*args, **kwargs)
 
 
-@dataclass(frozen=True)
-class _Style:
-    """How one axis is drawn: the prefix of its series names ("x: "; "" for a one-axis
-    stream) and its colours (RGB; ``rate`` None: Rerun's default)."""
-
-    label: str
-    rate: tuple[int, int, int] | None
-    measured: tuple[int, int, int]
-    bounds: tuple[int, int, int]
-    model: tuple[int, int, int]
-    band: tuple[int, int, int]
-    coef: dict[str, tuple[int, int, int]]
-
-
-def _styles(axes: tuple[str, ...]) -> dict[str, _Style]:
-    """Axis name ("" for a one-axis stream) -> its style. Several axes: each its
-    AXIS_COLOURS colour, in shades (``_shades``) for its bounds, model and model band."""
-    if not axes:
-        return {"": _Style("", None, MEASURED_COLOUR, BOUNDS_COLOUR, MODEL_COLOUR, BAND_COLOUR, _COEF_COLORS)}
-    out = {}
-    for k, a in enumerate(axes):
-        c = AXIS_COLOURS[k % len(AXIS_COLOURS)]
-        out[a] = _Style(f"{a}: ", c, c, *_shades(c), dict.fromkeys(COEFFICIENTS, c))
-    return out
-
-
-def _shades(colour: tuple[int, int, int]) -> tuple[tuple[int, int, int], tuple[int, int, int], tuple[int, int, int]]:
-    """An axis colour's shades for its confidence bounds (darker), model (lighter) and model band (greyed)."""
-    return _mix(colour, (0, 0, 0), 0.45), _mix(colour, (255, 255, 255), 0.35), _mix(colour, (128, 128, 128), 0.6)
-
-
-def _mix(colour: tuple[int, int, int], to: tuple[int, int, int], f: float) -> tuple[int, int, int]:
-    """``colour`` moved a fraction ``f`` towards ``to``."""
-    r, g, b = (round(c + f * (t - c)) for c, t in zip(colour, to, strict=True))
-    return r, g, b
-
-
 @dataclass
 class _Heat:
     """One axis's heatmap: log10 ADEV rows of the latest windows, their end times (s), and
@@ -447,82 +172,6 @@ class _Heat:
     t_s: list[float] = field(default_factory=list)
     decades: tuple[int, int] | None = None
     scale_sent: bool = False       # the colour scale is drawn (static) in the current .rrd piece
-
-
-@dataclass
-class _Rows:
-    """One entity's rows waiting for the next flush: their times (s), their values, and
-    ``send(rec, entity, t_s, values)``, which sends them in columns."""
-
-    send: Callable[[Any, str, np.ndarray, list], None]
-    t_s: list[float] = field(default_factory=list)
-    values: list = field(default_factory=list)
-
-
-def _time_index(t_s: np.ndarray) -> list:
-    """The ``time`` index of rows at ``t_s`` (s)."""
-    import rerun as rr
-
-    return [rr.TimeColumn(TIMELINE, duration=t_s)]
-
-
-def _ui_radii(points: float, n: int) -> np.ndarray:
-    """``n`` radii of ``points`` UI points each (Rerun's negative-radius convention)."""
-    import rerun as rr
-
-    return np.full(n, rr.Radius.ui_points(points), dtype=np.float32)
-
-
-def _send_scalars(rec, entity: str, t_s: np.ndarray, values: list) -> None:
-    """Scalars rows (each row a value or equal-length values)."""
-    import rerun as rr
-
-    rec.send_columns(entity, indexes=_time_index(t_s), columns=rr.Scalars.columns(scalars=np.array(values)))
-
-
-def _send_texts(rec, entity: str, t_s: np.ndarray, values: list) -> None:
-    """TextLog rows, each (text, level)."""
-    import rerun as rr
-
-    rec.send_columns(entity, indexes=_time_index(t_s), columns=rr.TextLog.columns(
-        text=[v[0] for v in values], level=[v[1] for v in values]))
-
-
-def _send_curves(rec, entity: str, t_s: np.ndarray, values: list, colour: tuple[int, int, int]) -> None:
-    """Measured ADEV curves, each row a (k, 2) array of points: a line through them and the points."""
-    import rerun as rr
-
-    n = len(values)
-    rec.send_columns(entity, indexes=_time_index(t_s), columns=[
-        *rr.LineStrips2D.columns(strips=values, colors=[colour] * n, radii=_ui_radii(1.5, n)),
-        *rr.Points2D.columns(positions=np.concatenate(values)).partition([len(v) for v in values]),
-        *rr.Points2D.columns(colors=[colour] * n, radii=_ui_radii(3.0, n))])
-
-
-def _send_bounds(rec, entity: str, t_s: np.ndarray, values: list, colour: tuple[int, int, int]) -> None:
-    """Confidence bounds, each row (lower line, upper line)."""
-    import rerun as rr
-
-    n = len(values)
-    rec.send_columns(entity, indexes=_time_index(t_s), columns=[
-        *rr.LineStrips2D.columns(strips=[line for v in values for line in v]).partition([2] * n),
-        *rr.LineStrips2D.columns(colors=[colour] * n, radii=_ui_radii(1.0, n))])
-
-
-def _send_models(rec, entity: str, t_s: np.ndarray, values: list, colour: tuple[int, int, int]) -> None:
-    """Model curves, each row a line, or None: cleared (no model drawn in that window)."""
-    import rerun as rr
-
-    drawn = [i for i, v in enumerate(values) if v is not None]
-    cleared = [i for i, v in enumerate(values) if v is None]
-    if drawn:
-        n = len(drawn)
-        rec.send_columns(entity, indexes=_time_index(t_s[drawn]), columns=rr.LineStrips2D.columns(
-            strips=[values[i] for i in drawn], colors=[colour] * n, radii=_ui_radii(1.0, n),
-            draw_order=[40.0] * n))   # above the measured curve it follows
-    if cleared:
-        rec.send_columns(entity, indexes=_time_index(t_s[cleared]),
-                         columns=rr.Clear.columns(is_recursive=[False] * len(cleared)))
 
 
 class RerunSink(Sink):
