@@ -50,8 +50,8 @@ sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
 from fogmon.block import Block  # noqa: E402
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config  # noqa: E402
 from fogmon.davar.batch import dadev  # noqa: E402
+from fogmon.formats.replay_log import write_replay_log  # noqa: E402
 from fogmon.pipeline import default_window_s, run_pipeline  # noqa: E402
-from fogmon.recording import write_replay_log  # noqa: E402
 
 FS = 1000.0
 LIVE_WINDOW_S = default_window_s(FS, None)

@@ -1,4 +1,4 @@
-"""Reading speed of the other-format readers (fogmon.sources.formats), as ratios to the
+"""Reading speed of the other-format readers (fogmon.sources.files, table: fogmon.sources.open), as ratios to the
 replay-log CSV reader on the same samples, measured in the same run: open the file and
 iterate every block. Files are written with the test suite's writers (tests/test_readers.py).
 
@@ -19,7 +19,7 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 import test_readers as w  # noqa: E402  (the writers)
 
-from fogmon.recording import write_replay_log  # noqa: E402
+from fogmon.formats.replay_log import write_replay_log  # noqa: E402
 from fogmon.sources.open import open_replay_source  # noqa: E402
 from fogmon.sources.options import SourceOptions  # noqa: E402
 

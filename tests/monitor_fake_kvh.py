@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from sources_fake_device import open_pty  # noqa: E402
 
-from fogmon.sources.kvh import encode_frame  # noqa: E402
+from fogmon.sources.codecs.kvh import encode_frame  # noqa: E402
 
 RATE_HZ = 1000
 BIAS_DPH = 15.0

@@ -10,7 +10,7 @@ import threading
 import time
 import tty
 
-from fogmon.sources.kvh import encode_frame
+from fogmon.sources.codecs.kvh import encode_frame
 
 #: frame k carries k deg/s, beyond a real DSP-1760's range (+-490 deg/s) once k > 735: decoders of
 #: these streams lift the plausibility gate to this (deg/h) so that every frame stays a sample

@@ -15,9 +15,9 @@ from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, has_open, stream
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
-from fogmon.recording import read_replay_log
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.sinks.archive import Archive
-from fogmon.sources.replay import open_raw_capture
+from fogmon.sources.files.capture import open_raw_capture
 
 FS = 200.0
 #: A safety bound (s) on waiting for the monitor: it synchronises on data (the port open,
@@ -261,10 +261,11 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     from doubles import args_for
 
     from fogmon.pipeline import PipelineConfig as _args, run_pipeline
-    from fogmon.sources.codecs import make_codec
+    from fogmon.sources.codecs.protocols import make_codec
+    from fogmon.sources.devices.serial_port import SerialSource
+    from fogmon.sources.files.capture import RawCaptureSource
+    from fogmon.sources.files.replay_log import ReplayLogSet
     from fogmon.sources.open import open_replay_source
-    from fogmon.sources.replay import RawCaptureSource, ReplayLogSet
-    from fogmon.sources.serial_source import SerialSource
 
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
     arch, lead = tmp_path / "arch", 60
@@ -374,7 +375,8 @@ def test_can_capture_pieces_replay_as_one_frame_stream(tmp_path):
     from doubles import args_for
     from test_sources_can import DBC, gyro_msgs
 
-    from fogmon.sources.can_source import CanSource, load_dbc
+    from fogmon.sources.codecs.can import load_dbc
+    from fogmon.sources.devices.can_bus import CanSource
     from fogmon.sources.open import open_replay_source
 
     sample_rate_hz = 100.0

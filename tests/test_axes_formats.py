@@ -8,8 +8,8 @@ import pytest
 from fogmon.cli import build_parser, main
 from fogmon.cli.source_options import source_options
 from fogmon.errors import FogmonError
-from fogmon.parquet_log import ParquetLogWriter, read_parquet_log
-from fogmon.recording import ReplayLogReader, read_replay_log, write_replay_log
+from fogmon.formats.parquet_log import ParquetLogWriter, read_parquet_log
+from fogmon.formats.replay_log import ReplayLogReader, read_replay_log, write_replay_log
 from fogmon.sources.open import open_replay_source
 
 AXES = ("x", "y", "z")
@@ -168,15 +168,15 @@ def test_archive_of_multi_axis_pieces_picks_axes_without_decoding_again(tmp_path
 
 @pytest.mark.parametrize("axis", ["x,w", "w"])
 def test_imu_readers_take_x_y_z_all_one_or_several(axis):
-    from fogmon.sources.stamped import imu_axes
+    from fogmon.sources.files.stamped import imu_axes
 
-    assert imu_axes({"axis": None}, "run.bag") == ("x", "y", "z")
-    assert imu_axes({"axis": "z"}, "run.bag") == ("z",)
-    assert imu_axes({"axis": "y,x"}, "run.bag") == ("y", "x")
+    assert imu_axes(None, "run.bag") == ("x", "y", "z")
+    assert imu_axes("z", "run.bag") == ("z",)
+    assert imu_axes("y,x", "run.bag") == ("y", "x")
     with pytest.raises(FogmonError, match=rf"run.bag: --axis {axis}: the gyro axes of an IMU are x, y and z"):
-        imu_axes({"axis": axis}, "run.bag")
+        imu_axes(axis, "run.bag")
     with pytest.raises(FogmonError, match="run.bag: --axis x,x: an axis is named twice"):
-        imu_axes({"axis": "x,x"}, "run.bag")
+        imu_axes("x,x", "run.bag")
 
 
 def test_convert_keeps_rows_valid_on_every_axis_and_says_how_many_it_left_out(tmp_path, capsys):

@@ -12,10 +12,11 @@ from doubles import Collect, ListSource
 from fogmon.cli import main
 from fogmon.cli.pipeline_options import add_pipeline_arguments, pipeline_config
 from fogmon.errors import FogmonError
+from fogmon.formats.recording import recording_from_arrays
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.methods.live_thermal import axis_thermal_effect, thermal_effect
 from fogmon.methods.thermal import correct_thermal
 from fogmon.pipeline import Pipeline
-from fogmon.recording import read_replay_log, recording_from_arrays, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model
 from fogmon.sim.scenarios import ChamberParams, thermal_chamber
 from fogmon.sim.simulate import simulate

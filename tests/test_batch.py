@@ -19,10 +19,10 @@ from fogmon.cli import main
 from fogmon.fleet import tables
 from fogmon.fleet.chunks import plan_chunks
 from fogmon.fleet.tasks import _Collect, check
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
-from fogmon.recording import write_replay_log
 from fogmon.sinks.base import COEFFICIENTS
-from fogmon.sources.kvh import encode_frame
+from fogmon.sources.codecs.kvh import encode_frame
 from fogmon.sources.open import open_replay_source
 
 OPTS = {"window_s": None, "hop_s": None, "taus": "octave", "raw_rate": False, "keep_motion": False}

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fogmon.cli import main
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import load_model
 
 

@@ -15,8 +15,8 @@ import pytest
 from test_rerun_sink import read_scalars, read_texts
 
 from fogmon.cli import main
-from fogmon.recording import read_replay_log
-from fogmon.sources.replay import open_raw_capture
+from fogmon.formats.replay_log import read_replay_log
+from fogmon.sources.files.capture import open_raw_capture
 
 HERE = Path(__file__).resolve().parent
 

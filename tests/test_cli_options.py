@@ -20,7 +20,7 @@ from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import MAX_PER_DECADE, tau_grid
 from fogmon.errors import FogmonError, FogmonWarning
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sinks.base import Summary
 from fogmon.sinks.console import format_summary
 

@@ -17,7 +17,7 @@ from test_rerun_sink import read_scalars
 
 from fogmon.cli import main
 from fogmon.davar.batch import dadev
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 
 ROOT = Path(__file__).resolve().parents[1]
 

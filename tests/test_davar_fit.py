@@ -8,7 +8,7 @@ from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import NAMES, fit_noise
 from fogmon.davar.result import AdevResult
 from fogmon.davar.theory import adev_model
-from fogmon.recording import read_replay_log
+from fogmon.formats.replay_log import read_replay_log
 
 FS = 100.0
 RLG = Path(__file__).resolve().parents[1] / "replay_logs" / "lasergyro_z_100hz.csv"

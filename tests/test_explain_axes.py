@@ -13,7 +13,7 @@ from test_explain_invariants import assert_invariants
 from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.explain.axes import axis_models, correlation_test, one_axis_model
-from fogmon.recording import recording_from_arrays
+from fogmon.formats.recording import recording_from_arrays
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model
 from fogmon.sim.simulate import simulate
 
@@ -47,9 +47,9 @@ def three_axis_recording(effects, seed=10):
 
 def _explain_cli(tmp_path, monkeypatch, rec, *opts):
     """`fogmon explain` on the in-memory ``rec`` (the CLI's reader returns it)."""
-    import fogmon.sources.formats
+    import fogmon.sources.open
 
-    monkeypatch.setattr(fogmon.sources.formats, "read_recording", lambda path, args=None: rec)
+    monkeypatch.setattr(fogmon.sources.open, "read_recording", lambda path, opts=None: rec)
     model = tmp_path / "model.toml"
     model.write_text("[sensor]\nsample_rate_hz = 10.0\nbias_dph = 1.0\n[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.01\n"
                      "B_dph = 0.01\nK_dphsh = 0.0\nR_dphh = 0.0\n")

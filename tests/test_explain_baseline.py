@@ -9,7 +9,7 @@ from fogmon.cli import main
 from fogmon.davar.theory import adev_model, markov_adev
 from fogmon.explain.baseline import baseline_model, curve_noise_fit, markov_unit_avar
 from fogmon.explain.report import baseline_low_pass
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.noise import lowpass_adev_exact
 from fogmon.sim.simulate import simulate

@@ -12,7 +12,7 @@ from test_explain_invariants import assert_invariants
 from fogmon.cli import main
 from fogmon.explain import mismatch
 from fogmon.explain.explainer import Options, explain
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import simulate
 

@@ -15,7 +15,7 @@ from fogmon.explain import mismatch
 from fogmon.explain.baseline import baseline_model
 from fogmon.explain.explainer import Options, explain, too_short_warnings
 from fogmon.explain.report import build_report
-from fogmon.recording import read_replay_log
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model
 from fogmon.sim.simulate import simulate
 

@@ -12,7 +12,7 @@ from test_explain_invariants import assert_invariants
 from fogmon.cli import main
 from fogmon.explain import catalogue
 from fogmon.explain.explainer import _whittle, stochastic_part
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import iter_simulate, simulate
 

@@ -13,7 +13,7 @@ from fogmon.errors import FogmonError
 from fogmon.explain import detectors
 from fogmon.explain.explainer import Options, explain
 from fogmon.explain.report import build_report
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import OUTLIER_QUANTILE_PROBS, Effect, Noise, SensorModel, save_model, validate_effect
 from fogmon.sim.simulate import iter_simulate, simulate
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from fogmon.cli import main
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 
 RLG = Path(__file__).resolve().parents[1] / "replay_logs" / "lasergyro_z_100hz.csv"
 

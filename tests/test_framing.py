@@ -1,7 +1,7 @@
 """Line framing holds at most ``max_line`` bytes, however long a device sends without a
 newline: an over-long line is one counted framing error, not unbounded buffering."""
-from fogmon.sources.dsp3000 import Dsp3000Codec
-from fogmon.sources.framing import LineFramer
+from fogmon.sources.codecs.dsp3000 import Dsp3000Codec
+from fogmon.sources.codecs.framing import LineFramer
 
 
 def test_an_endless_line_fed_in_pieces_stays_bounded_and_counts_once():

@@ -10,11 +10,11 @@ import pytest
 from doubles import Collect, ListSource
 
 from fogmon.errors import FogmonError
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.methods.live import CORRECTED, DRIFT, KALMAN, LiveMethods
 from fogmon.methods.live_thermal import thermal_effect
 from fogmon.methods.thermal import calibrate_thermal, correct_thermal
 from fogmon.pipeline import Pipeline, PipelineConfig
-from fogmon.recording import read_replay_log
 from fogmon.sim.model import load_model
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from fogmon.errors import FogmonError
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.methods.live_thermal import LiveThermalCorrection, thermal_effect
 from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
-from fogmon.recording import read_replay_log
 from fogmon.sim.model import load_model
 
 ROOT = Path(__file__).resolve().parents[1]

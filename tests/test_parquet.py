@@ -14,12 +14,13 @@ import pyarrow.parquet as pq
 import pytest
 
 from fogmon.cli import main
-from fogmon.parquet_log import META_KEY, read_parquet_log
-from fogmon.recording import read_replay_log, write_replay_log
-from fogmon.sinks.parquet_pieces import piece_files
+from fogmon.formats.archive import piece_files
+from fogmon.formats.parquet_log import META_KEY, read_parquet_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
+from fogmon.sources.files.capture import open_raw_capture
+from fogmon.sources.files.parquet import ParquetLogSource
+from fogmon.sources.files.replay_log import ReplayLogSource
 from fogmon.sources.open import open_replay_source
-from fogmon.sources.parquet import ParquetLogSource
-from fogmon.sources.replay import ReplayLogSource, open_raw_capture
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -100,7 +101,7 @@ def test_bad_parquet_input_is_one_line(tmp_path, capsys):
 
 
 def test_convert_raw_capture_keeps_its_sidecar_facts(tmp_path, capsys):
-    from fogmon.sources.kvh import encode_frame
+    from fogmon.sources.codecs.kvh import encode_frame
     raw = tmp_path / "raw.bin"
     rng = np.random.default_rng(0)
     frames = [encode_frame("a", i % 128, (0.0, 0.0, 1e-7 * rng.standard_normal()), temp_c=30) for i in range(3000)]
@@ -138,7 +139,7 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
     sys.path.insert(0, str(HERE))
     from sources_fake_device import has_open, open_pty
 
-    from fogmon.sources.kvh import encode_frame
+    from fogmon.sources.codecs.kvh import encode_frame
     n_sent, rows = 2250, 500
     master, slave, port = open_pty()
     rng = np.random.default_rng(1)

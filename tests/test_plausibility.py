@@ -17,12 +17,14 @@ from test_rerun_sink import read_scalars, read_texts
 
 from fogmon.cli import main
 from fogmon.errors import ERROR_COUNTERS, FogmonError
-from fogmon.recording import write_replay_log
+from fogmon.formats.capture import DECODER_FIELDS
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sources import plausibility as pl
-from fogmon.sources.codecs import OPTION_KEYS, codec_from_options, make_codec
+from fogmon.sources.codecs.kvh import encode_frame
+from fogmon.sources.codecs.protocols import codec_from_options, make_codec
+from fogmon.sources.files.capture import open_raw_capture
+from fogmon.sources.files.replay_log import ReplayLogSource
 from fogmon.sources.grid import ErrorEvents, GridAssembler
-from fogmon.sources.kvh import encode_frame
-from fogmon.sources.replay import ReplayLogSource, open_raw_capture
 
 RAD_TO_DPH = 180 / math.pi * 3600
 
@@ -134,7 +136,7 @@ def test_lines_gate_default_and_override():
 
 # ----------------------------------------------------------------------------- option plumbing
 def test_codec_options_carry_the_gate_and_rebuild_it():
-    assert "max_rate_dph" in OPTION_KEYS
+    assert "max_rate_dph" in DECODER_FIELDS
     for protocol, default in (("kvh-b", pl.KVH_DSP17XX_MAX_ABS_DPH), ("dsp3000", pl.KVH_DSP3000_MAX_ABS_DPH),
                               ("lines", pl.GENERIC_MAX_ABS_DPH)):
         assert make_codec(protocol).options()["max_rate_dph"] == default
@@ -325,8 +327,8 @@ def test_monitor_archive_sidecar_records_the_gate_and_its_replay_uses_it(tmp_pat
 def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decoding_again(tmp_path):
     from doubles import args_for
 
+    from fogmon.sources.files.replay_log import ReplayLogSet
     from fogmon.sources.open import open_replay_source
-    from fogmon.sources.replay import ReplayLogSet
 
     t, r, sample_rate_hz = noisy(n=200)
     for k, sl in ((1, slice(0, 100)), (2, slice(100, 200))):

@@ -392,10 +392,11 @@ def test_mdf4_can_bus_logging_with_a_dbc_replays_like_the_csv(signal, tmp_path):
 
 def test_explain_reads_a_bag_like_its_csv(bag, tmp_path):
     """The batch path (explain) gets the same Recording from a reader as from the replay log."""
-    from fogmon.recording import read_replay_log
-    from fogmon.sources.formats import read_recording
-    rec = read_recording(str(bag), build_parser(["explain", "x", "--report", "r"]).parse_args(
-        ["explain", str(bag), "--report", "r.json", "--axis", "y"]))
+    from fogmon.cli.source_options import source_options
+    from fogmon.formats.replay_log import read_replay_log
+    from fogmon.sources.open import read_recording
+    rec = read_recording(str(bag), source_options(build_parser(["explain", "x", "--report", "r"]).parse_args(
+        ["explain", str(bag), "--report", "r.json", "--axis", "y"])))
     ref = read_replay_log(csv_replay_file(tmp_path, rec.rate_dph, rec.t_s, rec.sample_rate_hz))
     np.testing.assert_array_equal(rec.rate_dph, ref.rate_dph)
     np.testing.assert_array_equal(rec.grid_index(), ref.grid_index())
@@ -434,8 +435,9 @@ def test_las_nulls_and_implausible_rates_are_counted_invalid_samples(signal, tmp
 def test_ros_fast_layout_reads_what_full_deserialization_reads(bag, monkeypatch):
     """Messages read by field offsets (verified on one message per length) equal the
     messages deserialized one by one by rosbags."""
-    from fogmon.sources import rosbag
-    opts = {"axis": "y", "max_rate_dph": 1e12}
+    from fogmon.sources.files import rosbag
+    from fogmon.sources.options import SourceOptions
+    opts = SourceOptions(axis="y", max_rate_dph=1e12)
     fast = rosbag.open_source(str(bag), opts).to_recording()
     monkeypatch.setattr(rosbag, "_verified_layout", lambda *a: None)
     slow = rosbag.open_source(str(bag), opts).to_recording()
@@ -467,6 +469,6 @@ def test_sim_like_takes_the_time_base_of_a_ulog(signal, tmp_path, capsys):
                      "K_dphsh = 0.0\nR_dphh = 0.0\n")
     out = tmp_path / "sim.csv"
     assert main(["sim", "--model", str(model), "--like", str(path), "--out", str(out), "--seed", "1"]) == 0
-    from fogmon.recording import read_replay_log
+    from fogmon.formats.replay_log import read_replay_log
     sim = read_replay_log(out)
     assert len(sim) == N - 12 and "temp_c" in sim.aux       # the ULog's samples, gap and temperature

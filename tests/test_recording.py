@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from fogmon.errors import FogmonError
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 
 
 def _write(tmp_path, text, name="r.csv"):
@@ -64,7 +64,7 @@ def test_off_grid_sample_is_an_error(tmp_path):
 
 
 # -- the chunked reader: results and errors do not depend on where chunks are cut -------
-from fogmon.recording import ReplayLogReader  # noqa: E402
+from fogmon.formats.replay_log import ReplayLogReader  # noqa: E402
 
 
 def _chunked(p, chunk_bytes, tolerate=False):
@@ -164,7 +164,7 @@ def test_header_only_file_is_a_one_line_error_without_warnings(tmp_path, recwarn
 
 
 def test_rate_without_metadata_from_the_first_samples(tmp_path):
-    from fogmon.recording import RATE_SAMPLES
+    from fogmon.formats.recording import RATE_SAMPLES
     t = np.concatenate([np.arange(RATE_SAMPLES + 1) / 100.0,
                         RATE_SAMPLES / 100.0 + 1 + np.arange(RATE_SAMPLES * 2) / 50.0])
     p = tmp_path / "x.csv"

@@ -9,7 +9,8 @@ from fogmon.cli import main as cli_main
 from fogmon.davar.batch import oadev
 from fogmon.davar.theory import adev_model
 from fogmon.errors import FogmonError
-from fogmon.recording import recording_from_arrays, write_replay_log
+from fogmon.formats.recording import recording_from_arrays
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, save_model, validate_effect
 from fogmon.sim.scenarios import make_scenario
 from fogmon.sim.simulate import iter_simulate, simulate
@@ -196,7 +197,7 @@ def test_cli_like_three_axis_and_axis_selects_one(tmp_path, monkeypatch):
     src = tmp_path / "like3.csv"
     write_replay_log(src, like.t_s, like.rate_dph, like.aux, like.meta, axes=AXES)
     # the recording as the reader gives it (this test is about the simulator, not the reader)
-    monkeypatch.setattr("fogmon.sources.formats.read_recording", lambda path, args=None: like)
+    monkeypatch.setattr("fogmon.sources.open.read_recording", lambda path, opts=None: like)
     model = tmp_path / "m.toml"
     save_model(SensorModel(100.0, 0.0, Noise(N_dpsh=0.05), [THERMAL]), model)
     out, out_z = tmp_path / "s.csv", tmp_path / "z.csv"
@@ -239,7 +240,7 @@ def test_cli_axis_must_name_an_axis_of_the_run(tmp_path, capsys):
 
 
 def test_simulated_source_of_a_three_axis_model_counts_samples_not_axis_cells():
-    from fogmon.sources.simulated import SimulatedSource
+    from fogmon.sources.devices.simulated import SimulatedSource
 
     like = three_axis_like()
     src = SimulatedSource(SensorModel(100.0, 0.0, Noise(N_dpsh=0.05)), like=like, seed=2)

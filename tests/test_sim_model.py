@@ -205,7 +205,7 @@ def test_cli_sim_bad_values_are_usage_errors(tmp_path, capsys, argv, message):
                                                                              "bad value '20,nan'"),
 ])
 def test_cli_sim_bad_outputs_fail_at_once_and_create_nothing(tmp_path, capsys, out, extra, message):
-    from fogmon.recording import write_replay_log
+    from fogmon.formats.replay_log import write_replay_log
     like = tmp_path / "like.csv"
     write_replay_log(like, [0.0, 0.01, 0.02], [1.0, 2.0, 3.0], meta={"sample_rate_hz": 100})
     before = sorted(tmp_path.iterdir())

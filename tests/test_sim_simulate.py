@@ -6,11 +6,12 @@ import pytest
 
 from fogmon.cli import main as cli_main
 from fogmon.errors import FogmonError
-from fogmon.recording import read_replay_log, recording_from_arrays, write_replay_log
+from fogmon.formats.recording import recording_from_arrays
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, save_model
 from fogmon.sim.scenarios import ChamberParams, MwdParams, OrbitParams, make_scenario, mwd_run, orbit, thermal_chamber
 from fogmon.sim.simulate import iter_simulate, simulate
-from fogmon.sources.simulated import SimulatedSource
+from fogmon.sources.devices.simulated import SimulatedSource
 
 MWD = SensorModel(100.0, 0.5, Noise(N_dpsh=0.02, B_dph=0.05), [
     Effect("thermal_drift",

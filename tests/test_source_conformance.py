@@ -9,15 +9,16 @@ import pytest
 from sources_fake_device import MAX_RATE_DPH, stream
 
 from fogmon.block import Block
-from fogmon.capture import CAPTURE_FORMAT, write_sidecar
-from fogmon.recording import write_replay_log
+from fogmon.formats.capture import CAPTURE_FORMAT, write_sidecar
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import Noise, SensorModel, save_model
 from fogmon.sources.base import CaptureSource, Codec, Source
-from fogmon.sources.can_source import CanSource, load_dbc
-from fogmon.sources.codecs import PROTOCOLS, codec_from_options, make_codec
+from fogmon.sources.codecs.can import load_dbc
+from fogmon.sources.codecs.protocols import PROTOCOLS, codec_from_options, make_codec
+from fogmon.sources.devices.can_bus import CanSource
+from fogmon.sources.devices.serial_port import SerialSource
 from fogmon.sources.open import open_replay_source
 from fogmon.sources.options import SourceOptions
-from fogmon.sources.serial_source import SerialSource
 
 FS = 100.0
 
@@ -58,7 +59,7 @@ def _can_log(tmp_path):
 def _model(tmp_path):
     p = tmp_path / "m.toml"
     save_model(SensorModel(FS, 1.0, Noise(N_dpsh=0.05)), p)
-    from fogmon.sources.simulated import SimulatedSource
+    from fogmon.sources.devices.simulated import SimulatedSource
     return SimulatedSource(str(p), duration_s=5.0, seed=3), 500
 
 

@@ -18,17 +18,18 @@ from doubles import args_for
 from sources_fake_device import MAX_RATE_DPH, open_pty, write_all
 
 from fogmon.block import Block
-from fogmon.capture import read_sidecar
 from fogmon.errors import FogmonError
+from fogmon.formats.capture import read_sidecar
 from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Summary
-from fogmon.sources.can_source import CanDecoder, CanSource
-from fogmon.sources.codecs import make_codec
-from fogmon.sources.kvh import G0_MPS2, KvhCodec, encode_frame
-from fogmon.sources.lines import LinesCodec
+from fogmon.sources.codecs.can import CanDecoder
+from fogmon.sources.codecs.kvh import G0_MPS2, KvhCodec, encode_frame
+from fogmon.sources.codecs.lines import LinesCodec
+from fogmon.sources.codecs.protocols import make_codec
+from fogmon.sources.devices.can_bus import CanSource
+from fogmon.sources.devices.serial_port import SerialSource
+from fogmon.sources.files.capture import open_raw_capture
 from fogmon.sources.open import open_live_source, open_replay_source
-from fogmon.sources.replay import open_raw_capture
-from fogmon.sources.serial_source import SerialSource
 
 FS = 200.0
 N = 300
@@ -407,7 +408,7 @@ def test_convert_writes_a_multi_axis_replay_log_by_the_archive_rule(tmp_path, ca
     assert header[:4] == ["time_s", "rate_x_dph", "rate_y_dph", "rate_z_dph"]
     np.testing.assert_array_equal(rows[:, 1:4], rate[full])
     assert main(["convert", str(raw), str(tmp_path / "out.parquet"), *opts]) == 0
-    from fogmon.parquet_log import read_parquet_log
+    from fogmon.formats.parquet_log import read_parquet_log
     back = read_parquet_log(tmp_path / "out.parquet")
     assert back.axes == ("x", "y", "z")
     np.testing.assert_array_equal(back.rate_dph, rate[full])

@@ -14,10 +14,11 @@ from doubles import args_for
 from hypothesis import given, settings, strategies as st
 
 from fogmon.errors import FogmonError
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
-from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
-from fogmon.sources.can_source import CanDecoder, CanSource, load_dbc
+from fogmon.sources.codecs.can import CanDecoder, load_dbc
+from fogmon.sources.devices.can_bus import CanSource
 from fogmon.sources.open import open_live_source, open_replay_source
 
 DBC = str(resources.files("fogmon") / "data" / "gyro_example.dbc")

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from sources_fake_device import frame_k, stream
 
-from fogmon.sources.kvh import FORMATS, KvhCodec, crc32_mpeg2, encode_frame
+from fogmon.sources.codecs.kvh import FORMATS, KvhCodec, crc32_mpeg2, encode_frame
 
 VECTOR = bytes.fromhex("fe81ff55 37a96a6e 38586c1f b75bf862 bf803e78 bb650d28 3b0a37ac 77 3d 0028 4bfa34d8"
                        .replace(" ", ""))

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from fogmon.errors import FogmonError
-from fogmon.sources.codecs import make_codec
-from fogmon.sources.dsp3000 import Dsp3000Codec
-from fogmon.sources.lines import LinesCodec, parse_columns
+from fogmon.sources.codecs.dsp3000 import Dsp3000Codec
+from fogmon.sources.codecs.lines import LinesCodec, parse_columns
+from fogmon.sources.codecs.protocols import make_codec
 from fogmon.sources.plausibility import KVH_DSP3000_MAX_ABS_DPH
 
 

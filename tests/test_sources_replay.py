@@ -10,9 +10,9 @@ from sources_fake_device import stream
 
 from fogmon.cli import main
 from fogmon.errors import FogmonError
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
+from fogmon.sources.files.replay_log import ReplayLogSource
 from fogmon.sources.open import open_replay_source
-from fogmon.sources.replay import ReplayLogSource
 
 HEAD = "# fogmon replay log v1\n# sample_rate_hz: 10\ntime_s,rate_dph,temp_c\n"
 
@@ -191,7 +191,7 @@ def test_no_newline_file_via_cli_is_one_line_exit_2(tmp_path, capsys):
 
 
 def test_archive_pieces_checked_when_opened(tmp_path):
-    from fogmon.sources.replay import ReplayLogSet
+    from fogmon.sources.files.replay_log import ReplayLogSet
     t = np.arange(300) / 10.0
     for k, sl in enumerate((slice(0, 100), slice(150, 300)), 1):
         write_replay_log(tmp_path / f"samples-000{k}.csv", t[sl], np.ones(len(t[sl])), {"temp_c": t[sl]},

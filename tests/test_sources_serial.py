@@ -14,13 +14,13 @@ import pytest
 import serial
 from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
-from fogmon.recording import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Sink
-from fogmon.sources.kvh import KvhCodec
-from fogmon.sources.replay import open_raw_capture
-from fogmon.sources.serial_source import SerialSource
+from fogmon.sources.codecs.kvh import KvhCodec
+from fogmon.sources.devices.serial_port import SerialSource
+from fogmon.sources.files.capture import open_raw_capture
 
 FS = 200.0
 FAULTS = {5: "corrupt", 6: "drop", 7: "drop", 40: "truncate", 41: "garbage", 90: "corrupt", 91: "corrupt",
@@ -252,7 +252,7 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     decodes to exactly samples.csv with the same counters."""
     from fogmon.pipeline import PipelineConfig as _args, run_pipeline
     from fogmon.sinks.base import Sink
-    from fogmon.sources.replay import open_raw_capture
+    from fogmon.sources.files.capture import open_raw_capture
 
     faults = {k: "corrupt" for k in (10, 11, 150, 151, 152, 420, 777, 799, 800, 830, 900)}
     faults.update({k: "drop" for k in (50, 51, 500, 798, 850)})

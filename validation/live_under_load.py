@@ -48,10 +48,10 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 from sources_fake_device import has_open, open_pty  # noqa: E402
 
 from fogmon.errors import FogmonError  # noqa: E402
-from fogmon.pieces import find_pieces  # noqa: E402
-from fogmon.recording import read_replay_log  # noqa: E402
-from fogmon.sources.kvh import encode_frame  # noqa: E402
-from fogmon.sources.replay import open_raw_capture  # noqa: E402
+from fogmon.formats.archive import find_pieces  # noqa: E402
+from fogmon.formats.replay_log import read_replay_log  # noqa: E402
+from fogmon.sources.codecs.kvh import encode_frame  # noqa: E402
+from fogmon.sources.files.capture import open_raw_capture  # noqa: E402
 
 RATE_HZ = 1000
 DPS_PER_K = 1e-3            # frame k sends k x 0.001 deg/s = 3.6 k deg/h

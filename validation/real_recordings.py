@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 MANIFEST = Path(__file__).with_name("real_recordings.toml")

@@ -1,5 +1,5 @@
 """`fogmon convert IN OUT.parquet`: a recording (replay-log CSV, Parquet log, raw serial
-capture, CAN log, archive folder) as a Parquet replay log (fogmon.parquet_log), or as
+capture, CAN log, archive folder) as a Parquet replay log (fogmon.formats.parquet_log), or as
 a replay-log CSV when OUT ends in .csv. The samples are those `fogmon replay IN` would
 analyse: decoded, on their grid, valid ones only (gaps stay time gaps)."""
 from __future__ import annotations
@@ -66,9 +66,9 @@ def _convert(source, input_path: str, output: str, ext: str) -> tuple[int, int, 
     else a replay-log CSV); no half-written output on any error. Returns the samples
     written, the valid samples left out without aux values and those left out with only
     some axes valid."""
-    from fogmon.capture import read_sidecar
-    from fogmon.parquet_log import ParquetLogWriter
-    from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.formats.capture import read_sidecar
+    from fogmon.formats.parquet_log import ParquetLogWriter
+    from fogmon.formats.replay_log import append_replay_rows, write_replay_header
     from fogmon.sinks.archive import replay_rows
 
     blocks = source.blocks()

@@ -9,7 +9,7 @@ import sys
 from typing import Any, TextIO
 
 from fogmon.cli.outputs import check_outputs
-from fogmon.cli.source_options import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.export import add_export_argument, export_request, write_export
 
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.explain.baseline import baseline_model
     from fogmon.explain.explainer import Options, explain, without_motion
     from fogmon.sim.model import load_model
-    from fogmon.sources.formats import read_recording
+    from fogmon.sources.open import read_recording
 
     png = os.path.splitext(args.report)[0] + ".png"
     outliers_csv = report.outliers_path(args.report)
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     progress = (lambda stage, done=0, total=0: None) if args.quiet else StageProgress()
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
-    rec = read_recording(args.recording, args)
+    rec = read_recording(args.recording, source_options(args))
     if rec.axes and args.axis:
         rec = rec.for_axis(args.axis)
     if rec.axes:

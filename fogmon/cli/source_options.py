@@ -9,8 +9,8 @@ from fogmon.block import parse_axes
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility as pl
-from fogmon.sources.codecs import PROTOCOLS
-from fogmon.sources.kvh import ACCEL_UNITS
+from fogmon.sources.codecs.kvh import ACCEL_UNITS
+from fogmon.sources.codecs.protocols import PROTOCOLS
 from fogmon.sources.options import SourceOptions
 
 #: The highest --rate-hz accepted (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz).

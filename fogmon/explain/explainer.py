@@ -30,8 +30,8 @@ import numpy as np
 from fogmon.errors import FogmonError
 from fogmon.explain import catalogue, detectors, mismatch
 from fogmon.explain.fitting import Whittle, calibrate_psd, model_psd, rfft_omega
+from fogmon.formats.recording import Recording
 from fogmon.motion import find_motion, motion_mask
-from fogmon.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import ramp_dph

@@ -23,7 +23,7 @@ from fogmon.explain.catalogue import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
 from fogmon.explain.mismatch import CHANCE_SCORE
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
 from fogmon.sim.noise import lowpass_impulse
 

@@ -324,7 +324,8 @@ def explain_recording(path: str, model_path: str, options: dict, axis: str = "")
     from fogmon.cli import explain as explain_cli
     from fogmon.explain import report
     from fogmon.explain.explainer import Options, explain, without_motion
-    from fogmon.recording import read_replay_log, recording_from_arrays
+    from fogmon.formats.recording import recording_from_arrays
+    from fogmon.formats.replay_log import read_replay_log
     from fogmon.sim.model import load_model
 
     try:

@@ -41,7 +41,7 @@ import numpy as np
 
 from fogmon.block import Block, axis_aux
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording
+from fogmon.formats.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import Flicker, RandomWalk, WhiteAngle, WhiteRate, default_flicker_tau_hi_s, ramp_dph

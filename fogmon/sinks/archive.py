@@ -1,7 +1,7 @@
 """The archive: while monitoring, everything a live source delivers goes to disk, so
 nothing is lost.
 
-Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.pieces:
+Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.formats.archive:
 piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
@@ -46,17 +46,13 @@ from typing import Any
 import numpy as np
 
 from fogmon.block import Block
-from fogmon.capture import new_sidecar, write_sidecar
 from fogmon.errors import FogmonError
-from fogmon.pieces import find_pieces, piece_path
-from fogmon.recording import append_replay_rows, write_replay_header
+from fogmon.formats.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE, find_pieces, piece_files, piece_path
+from fogmon.formats.capture import new_sidecar, write_sidecar
+from fogmon.formats.replay_log import append_replay_rows, write_replay_header
 from fogmon.sinks.base import Sink, Summary
-from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces, piece_files
+from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces
 from fogmon.sources.base import CaptureSource, Source
-
-REPLAY_LOG = "samples.csv"
-SERIAL_CAPTURE = "raw.bin"
-CAN_CAPTURE = "frames.asc"
 
 
 def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
@@ -69,11 +65,6 @@ def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
     for a in block.aux.values():
         keep &= np.isfinite(a)
     return keep, partial, int(valid.sum() - keep.sum())
-
-
-def default_archive_dir(base: str = ".") -> str:
-    """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
-    return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
 
 
 class _KeepOpen(io.StringIO):

@@ -69,7 +69,7 @@ class CaptureSource(Source, Protocol):
 
     def capture_spec(self) -> dict[str, Any]:
         """The capture's sidecar base: ``kind`` ('serial' or 'can'), the decoder options
-        (codecs.OPTION_KEYS or the CAN decoder's), the device; ``dbc_path`` for CAN."""
+        (fogmon.formats.capture.DECODER_FIELDS or CAN_DECODER_FIELDS), the device; ``dbc_path`` for CAN."""
         ...
 
     def add_tap(self, tap: RawTap) -> None:
@@ -104,7 +104,7 @@ class Codec(Protocol):
         ...
 
     def options(self) -> dict[str, Any]:
-        """The options that rebuild this decoder (codecs.codec_from_options)."""
+        """The options that rebuild this decoder (codecs.protocols.codec_from_options)."""
         ...
 
     def describe(self) -> str:

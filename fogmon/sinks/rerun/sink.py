@@ -52,7 +52,7 @@ import numpy as np
 from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
-from fogmon.pieces import piece_path
+from fogmon.formats.archive import piece_path
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 from fogmon.sinks.rerun import plots as rp
 from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, axis_path, blueprint
@@ -176,7 +176,7 @@ class _Heat:
 
 class RerunSink(Sink):
     """Streams the pipeline into Rerun: ``rrd_path`` (file; with ``rotate`` one file per
-    piece, named by fogmon.pieces: OUT-0001.rrd, ..., each a complete recording with the
+    piece, named by fogmon.formats.archive: OUT-0001.rrd, ..., each a complete recording with the
     blueprint, all with one recording id so the viewer joins them), ``connect_url`` (a
     running viewer or server), ``serve`` (start a gRPC server on ``bind:port``), any
     combination; with ``serve_wait`` a server keeps serving after the run until Ctrl-C

@@ -5,7 +5,7 @@ Such files carry one time stamp per sample (header stamps, logger clocks) with j
 no sequence counter. Each stamp step is rounded to a whole number of median steps, so a
 step of k periods (k >= 2) means k - 1 samples are missing: they become invalid
 placeholders with a ``gap`` event and are counted, as in a replay log
-(fogmon.sources.replay). Rounding step by step (not against the first stamp) keeps a clock
+(fogmon.sources.files.replay_log). Rounding step by step (not against the first stamp) keeps a clock
 that runs slightly off its nominal rate from turning into false gaps. The nominal rate is
 then the grid periods over the span of the stamps. A step under half a period (a repeated
 or backward stamp) is a one-line error naming the file, the sample and the time field.
@@ -22,10 +22,10 @@ import numpy as np
 
 from fogmon.block import Block, Event, parse_axes
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording
+from fogmon.formats.recording import Recording
 from fogmon.sources import plausibility
+from fogmon.sources.files.replay_log import FAST_BLOCK
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
-from fogmon.sources.replay import FAST_BLOCK
 
 #: deg/h per rad/s (ROS sensor_msgs/Imu and PX4 topics give rad/s)
 DPH_PER_RPS = 3600.0 * 180.0 / math.pi
@@ -73,7 +73,7 @@ class StampedSource:
     ``counters`` the reader gives (what it left out and why). ``to_recording()`` gives
     the same samples as a Recording for the batch commands (explain)."""
 
-    #: the ROS topic the samples came from (set by fogmon.sources.rosbag; a Kalibr export names it)
+    #: the ROS topic the samples came from (set by fogmon.sources.files.rosbag; a Kalibr export names it)
     ros_topic: str | None = None
 
     def __init__(self, t_s, rate_dph, aux: dict | None, *, name: str, where: str, time_field: str,
@@ -151,12 +151,11 @@ class StampedSource:
                          path=self.where, axes=self.axes)
 
 
-def imu_axes(options: dict, path: str) -> tuple[str, ...]:
-    """The gyro axes ``options['axis']`` (``--axis``) asks of an IMU recording ``path``:
+def imu_axes(asked: str | None, path: str) -> tuple[str, ...]:
+    """The gyro axes ``asked`` (``--axis``: a name or a comma list) of an IMU recording ``path``:
     all three, IMU_AXES, when not given; one (``z``: a one-axis source, as this reader
     always gave) or several in the order given (``x,y``). A name other than x, y, z is
     a FogmonError naming the file."""
-    asked = options.get("axis")
     if asked is None:
         return IMU_AXES
     try:

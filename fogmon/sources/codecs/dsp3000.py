@@ -9,9 +9,9 @@ import math
 
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
+from fogmon.sources.codecs.framing import LineFramer
+from fogmon.sources.codecs.kvh import output_unit
 from fogmon.sources.frames import Frames
-from fogmon.sources.framing import LineFramer
-from fogmon.sources.kvh import output_unit
 from fogmon.units import to_dph
 
 DEFAULT_RATE_HZ = 100.0
@@ -23,7 +23,7 @@ class Dsp3000Codec:
     ``implausible_samples`` (lines flagged valid whose rate is beyond ``max_rate_dph``
     deg/h, None = the DSP-3000 range x margin: made invalid)."""
 
-    seq_modulus = None
+    seq_modulus: int | None = None
     protocol = "dsp3000"
     aux_names: tuple[str, ...] = ()
     axes: tuple[str, ...] = ()          # one axis

@@ -2,23 +2,29 @@
 as received (serial bytes, or a python-can ASC log of CAN frames); its sidecar ``X.json``
 holds the format tag, the kind, the decoder options and the outages, so that replaying
 it decodes and gates exactly like the live monitor did. The one place that writes
-(fogmon.sinks.archive) and reads (fogmon.sources.replay, fogmon.sources.open) it."""
+(fogmon.sinks.archive) and reads (fogmon.sources.files.capture) it. The values a
+decoder option may take are the decoders' to know: the reader passes them (``choices``)."""
 from __future__ import annotations
 
 import json
 import math
 import os
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from fogmon.errors import FogmonError
-from fogmon.sources.codecs import OPTION_KEYS, PROTOCOLS
-from fogmon.sources.kvh import ACCEL_UNITS
 
 SIDECAR_SUFFIX = ".json"
 CAPTURE_FORMAT = "fogmon capture v1"
 
-#: The decoder options a serial capture's sidecar may hold (names of codec options()).
-DECODER_FIELDS = OPTION_KEYS
+#: The decoder options a serial capture's sidecar may hold: the names of the serial
+#: codecs' options() and of fogmon.sources.codecs.protocols.make_codec's parameters.
+DECODER_FIELDS = ("protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "axis", "columns", "max_rate_dph",
+                  "kvh_accel")
+#: The decoder options a CAN capture's sidecar may hold: the names of the CAN decoder's
+#: options() (fogmon.sources.codecs.can.CanDecoder); the DBC is the separate ``dbc``.
+CAN_DECODER_FIELDS = ("message", "rate_signal", "rate_unit", "temp_signal", "counter_signal", "valid_signal",
+                      "sample_rate_hz", "max_rate_dph")
 
 
 def _text(v, folder):
@@ -78,11 +84,12 @@ def _breaks(v, folder):
 
 
 #: Sidecar fields -> check (None if fine, else why not). ``format`` and ``kind`` are
-#: required; unknown fields are ignored (newer writers may add some).
+#: required; unknown fields are ignored (newer writers may add some). ``protocol`` and
+#: ``kvh_accel`` are checked against the reader's ``choices`` (read_sidecar).
 SIDECAR_FIELDS = {
-    "kind": _one_of("serial", "can"), "protocol": _one_of(*PROTOCOLS), "sample_rate_hz": _number(0, True),
+    "kind": _one_of("serial", "can"), "protocol": _text, "sample_rate_hz": _number(0, True),
     "kvh_rot": _one_of("rate", "delta"), "kvh_units": _one_of("deg", "rad"), "axis": _axes,
-    "kvh_accel": _one_of(*ACCEL_UNITS),
+    "kvh_accel": _text,
     "columns": _text, "max_rate_dph": _number(0, True), "breaks": _breaks, "piece": _count, "started_utc": _text,
     "port": _text, "baud": _count, "channel": _text_or_null, "interface": _text_or_null, "dbc": _file_in_folder,
     "message": _text_or_null, "rate_signal": _text_or_null, "rate_unit": _text_or_null,
@@ -90,10 +97,12 @@ SIDECAR_FIELDS = {
 }
 
 
-def read_sidecar(path: str) -> dict | None:
+def read_sidecar(path: str, choices: Mapping[str, Sequence[str]] | None = None) -> dict | None:
     """The capture sidecar ``path + '.json'`` as a dict (checked field by field: a bad
     one is a one-line FogmonError naming the file and the field), or None when there is
-    none."""
+    none. ``choices``: field -> the values it may take, for the fields whose values the
+    decoders define (``protocol``, ``kvh_accel``: fogmon.sources.files.capture passes
+    them); without them those fields need only be text."""
     side = path + SIDECAR_SUFFIX
     if not os.path.exists(side):
         return None
@@ -111,7 +120,8 @@ def read_sidecar(path: str) -> dict | None:
     if "sample_rate_hz" in d and "sample_rate_hz" not in d:  # the name earlier versions wrote
         d["sample_rate_hz"] = d.pop("sample_rate_hz")
     folder = os.path.dirname(os.path.abspath(side))
-    for name, check in SIDECAR_FIELDS.items():
+    checks = {**SIDECAR_FIELDS, **{k: _one_of(*v) for k, v in (choices or {}).items()}}
+    for name, check in checks.items():
         why = check(d[name], folder) if name in d else None
         if why:
             raise FogmonError(f"{side}: field {name}: {why}")

@@ -10,7 +10,7 @@ options) and ``counters`` (the decoder's counts)).
 Written in row groups as data arrives (``ParquetLogWriter``); read row group by row group
 (``ParquetRows``: memory of one row group, whatever the file size), as one recording
 over several files (an archive's pieces and the row-group parts of a piece still being
-written, see fogmon.sinks.archive)."""
+written, see fogmon.formats.archive)."""
 from __future__ import annotations
 
 import json
@@ -21,7 +21,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording, rate_axes, rate_columns, sample_rate_from
+from fogmon.formats.recording import Recording, rate_axes, rate_columns, sample_rate_from
 
 FORMAT = "fogmon replay log v1 (parquet)"
 META_KEY = b"fogmon"
@@ -133,10 +133,11 @@ def file_info(pf, path: str) -> tuple[dict, tuple[str, ...]]:
 
 class ParquetRows:
     """A Parquet replay log (one file, or several in order: pieces of one recording) as
-    the rows a ``ReplayLogSource`` takes: ``meta``, ``axes``, ``aux_names``, ``sample_rate_hz``,
-    ``name`` and ``chunks()`` yielding one row group at a time (checked: finite
-    values, time strictly increasing; a bad row is a one-line error naming file, row and
-    column, or skipped and counted with ``tolerate``)."""
+    the rows a ``ReplayLogSource`` (fogmon.sources.files.replay_log) takes: ``meta``,
+    ``axes``, ``aux_names``, ``sample_rate_hz``, ``name`` and ``chunks()`` yielding one
+    row group at a time (checked: finite values, time strictly increasing; a bad row is
+    a one-line error naming file, row and column, or skipped and counted with
+    ``tolerate``)."""
 
     def __init__(self, paths: str | os.PathLike | Sequence[str], tolerate: bool = False) -> None:
         self.paths = [os.fspath(paths)] if isinstance(paths, (str, os.PathLike)) else [os.fspath(p) for p in paths]
@@ -216,7 +217,7 @@ class ParquetRows:
 
 
 class _Rows:
-    """One row group's rows (the shape of fogmon.recording.Rows; ``line_of`` None: a
+    """One row group's rows (the shape of fogmon.formats.replay_log.Rows; ``line_of`` None: a
     Parquet file has rows, not lines, and errors name the time value)."""
 
     line_of = None

@@ -8,7 +8,7 @@ wrong one). A depth-indexed file (index unit m or ft) is refused unless a time c
 named; its depth then rides along as aux ``depth_m``. The only curve in deg C, if any,
 becomes aux ``temp_c``. LAS null values are counted invalid samples (``null_samples``);
 rows without a time are left out and counted (``rows_without_time``). Time stamps go on
-fogmon's grid as fogmon.sources.stamped describes."""
+fogmon's grid as fogmon.sources.files.stamped describes."""
 from __future__ import annotations
 
 import os
@@ -16,7 +16,8 @@ import os
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import StampedSource, dph_per_unit
+from fogmon.sources.files.stamped import StampedSource, dph_per_unit
+from fogmon.sources.options import SourceOptions
 
 #: time unit (lower case) -> s per unit
 TIME_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0,
@@ -35,15 +36,15 @@ def _is_rate(unit: str) -> bool:
         return False
 
 
-def open_source(path: str, options: dict) -> StampedSource:
+def open_source(path: str, opts: SourceOptions) -> StampedSource:
     """The time and rate curves of the LAS file ``path`` as a StampedSource; a missing
     curve or a depth index without a time curve is a one-line FogmonError naming the
     file and the field."""
     las = _read(path)
     index = las.curves[0]
-    tc, t_per = _time_curve(path, las, options.get("time_channel"))
-    rc = _rate_curve(path, las, options.get("channel"))
-    unit = options.get("rate_unit") or rc.unit
+    tc, t_per = _time_curve(path, las, opts.time_channel)
+    rc = _rate_curve(path, las, opts.channel)
+    unit = opts.rate_unit or rc.unit
     where = f"{path} curve {rc.mnemonic}"
     factor = dph_per_unit(unit, where)
     t = np.asarray(tc.data, dtype=np.float64) * t_per
@@ -57,7 +58,7 @@ def open_source(path: str, options: dict) -> StampedSource:
     return StampedSource(t[has_t], (np.asarray(rc.data, dtype=np.float64) * factor)[has_t], aux,
                          name=f"LAS {os.path.basename(path)} curve {rc.mnemonic} ({unit}) over {tc.mnemonic}",
                          where=where, time_field=f"curve {tc.mnemonic}", meta={"sensor": f"{rc.mnemonic} ({unit})"},
-                         max_abs_dph=options["max_rate_dph"],
+                         max_abs_dph=opts.file_gate_dph,
                          counters={"rows_without_time": int(np.count_nonzero(~has_t))} if not has_t.all() else None)
 
 

@@ -1,4 +1,6 @@
-"""A gyro on a CAN bus (python-can + cantools) and its logs.
+"""The CAN/DBC codec: CAN frames of a gyro described in a DBC file (cantools) -> Frames
+in deg/h. The live bus (fogmon.sources.devices.can_bus) and CAN logs
+(fogmon.sources.files.can_log) decode with it.
 
 The user describes the gyro's frame in a DBC file; options name the message and the
 signals for rate, temperature, counter and validity (defaults: the signals called
@@ -24,23 +26,16 @@ clock message of its period joins the next sample, a fixed lag of one sample per
 """
 from __future__ import annotations
 
-import contextlib
-import functools
 import math
-import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from typing import Any
 
-import can
 import numpy as np
 
 from fogmon import units
-from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
-from fogmon.sources.grid import ErrorEvents, GridAssembler
-from fogmon.sources.live import LiveSource
 
 STALL_S = 0.5
 
@@ -278,160 +273,3 @@ class CanDecoder:
             return self._latest.pop(j)
         self.counters[f"axis_frames_missing_{self.axes[j]}"] += 1
         return None
-
-
-def _push_segments(grid: GridAssembler, segs, events) -> Block:
-    blocks = []
-    for i, (brk, frames) in enumerate(segs):
-        if brk is not None:
-            grid.mark_break(brk)
-        blocks.append(grid.push(frames, events if i == 0 else ()))
-    if not blocks:
-        return grid.push(Frames.empty(grid.aux_names, grid.axes), events)
-    return Block.concat(blocks)
-
-
-class CanSource(LiveSource):
-    """Live CAN gyro on any python-can interface, read by a reader thread that reopens
-    the bus with backoff when it fails (``disconnect``/``reconnect`` events; see
-    fogmon.sources.live). Taps (the archive) get every frame received via
-    ``tap.frame(msg)``. Counters: the decoder's, the grid's, ``disconnects``,
-    ``reconnects``."""
-
-    device_errors = (can.CanError, OSError, ValueError, ImportError)
-
-    def __init__(self, channel: str, interface: str, db, bitrate: int | None = None, dbc_path: str | None = None,
-                 block_s: float = 0.1, idle_s: float = 0.5, backoff_s=(0.05, 2.0), **decoder_options) -> None:
-        self.decoder = CanDecoder(db, **decoder_options)
-        super().__init__(GridAssembler(self.decoder.sample_rate_hz, self.decoder.seq_modulus, self.decoder.aux_names,
-                                       axes=self.decoder.axes), block_s, idle_s, backoff_s)
-        self.channel, self.interface, self.bitrate, self.dbc_path = channel, interface, bitrate, dbc_path
-        self.sample_rate_hz = self.decoder.sample_rate_hz
-        self.aux_names = self.decoder.aux_names
-        self.name = f"{self.decoder.describe()} on {interface}:{channel}"
-
-    @property
-    def decoder_counters(self) -> dict[str, int]:
-        return self.decoder.counters
-
-    @property
-    def counters(self) -> dict[str, int]:
-        return {**self.decoder.counters, **self.grid.counters, **self._own}
-
-    def capture_spec(self) -> dict:
-        return {"kind": "can", **self.decoder.options(), "dbc_path": self.dbc_path,
-                "channel": self.channel, "interface": self.interface}
-
-    def _what(self) -> str:
-        return f"--can {self.channel} --interface {self.interface}"
-
-    def _open(self):
-        kw: dict[str, Any] = {"bitrate": self.bitrate} if self.bitrate else {}
-        return can.Bus(interface=self.interface, channel=self.channel, **kw)
-
-    def _close(self, bus) -> None:
-        with contextlib.suppress(Exception):  # a dead bus may fail to shut down; it is gone either way
-            bus.shutdown()
-
-    def _read(self, bus) -> list:
-        m = bus.recv(timeout=0.05)
-        msgs = []
-        while m is not None:
-            msgs.append(m)
-            for tap in self._taps:
-                tap.frame(m)
-            if len(msgs) >= 1024:
-                break
-            try:
-                m = bus.recv(timeout=0.0)
-            except self.device_errors:   # keep what was read; the next call meets the error again
-                break
-        items: list[tuple] = []
-        for brk, frames in self.decoder.feed(msgs):
-            if brk is not None:
-                items.append(("break", brk))
-            items.append(("frames", frames))
-        return items
-
-
-class CanLogSource:
-    """A CAN log python-can reads (.asc .blf .trc .csv .log .mf4) decoded with a DBC; or
-    the pieces of one ASC log (an archive's frames-NNNN.asc), read in order with their
-    absolute timestamps so that one decoder sees one continuous stream of frames."""
-
-    CHUNK = 4096
-
-    def __init__(self, path: str | list[str], db, **decoder_options) -> None:
-        self.paths = [path] if isinstance(path, str) else list(path)
-        self.path = self.paths[0]
-        self._db, self._options = db, decoder_options
-        self.decoder = CanDecoder(db, **decoder_options)
-        self.sample_rate_hz = self.decoder.sample_rate_hz
-        self.aux_names = self.decoder.aux_names
-        self.axes = self.decoder.axes
-        self.grid = GridAssembler(self.sample_rate_hz, self.decoder.seq_modulus, self.aux_names, axes=self.axes)
-        what = os.path.basename(self.path) + (
-            f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
-        self.name = f"CAN log {what}: {self.decoder.describe()}"
-        self._closed = False
-
-    @property
-    def counters(self) -> dict[str, int]:
-        return {**self.decoder.counters, **self.grid.counters}
-
-    @functools.cached_property
-    def n_samples(self) -> int:
-        """Samples on the grid, from a counting pass over the log (pipelines size their
-        default window with it)."""
-        return sum(len(b) for b in CanLogSource(self.paths, self._db, **self._options).blocks())
-
-    def blocks(self) -> Iterator[Block]:
-        errors = ErrorEvents(self.decoder.counters)
-        # pieces: absolute ASC timestamps, so the gap between two pieces is measured
-        kwargs = {"relative_timestamp": False} if len(self.paths) > 1 else {}
-        for path in self.paths:
-            try:
-                reader = can.LogReader(path, **kwargs)
-            except Exception as e:  # unknown suffix, unreadable header, ...
-                raise FogmonError(f"{path}: cannot read as a CAN log: {e}") from None
-            it = iter(reader)
-            try:
-                while not self._closed:
-                    chunk = []
-                    try:
-                        for m in it:
-                            chunk.append(m)
-                            if len(chunk) >= self.CHUNK:
-                                break
-                    except Exception as e:  # a corrupt log: say where, do not trace back
-                        raise FogmonError(f"{path}: unreadable CAN log after "
-                                          f"{self.decoder.counters['frames_ok']} frames: {e}") from None
-                    if not chunk:
-                        break
-                    segs = self.decoder.feed(chunk)
-                    b = _push_segments(self.grid, segs, errors.poll(self.grid.t_next_s))
-                    if len(b):
-                        yield b
-            finally:
-                reader.stop()
-
-    def close(self) -> None:
-        self._closed = True
-
-
-def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar: dict | None) -> CanLogSource:
-    """A CAN log source (or the pieces of one ASC log, in order); decoder options from the
-    (first piece's) sidecar, overridden by the command line; the DBC from ``--dbc`` or the
-    sidecar's copy, which read_sidecar has confined to the sidecar's folder."""
-    first = path if isinstance(path, str) else path[0]
-    opts = {}
-    if sidecar:
-        opts.update({k: sidecar[k] for k in ("message", "rate_signal", "rate_unit", "temp_signal",
-                                              "counter_signal", "valid_signal", "sample_rate_hz", "max_rate_dph")
-                     if sidecar.get(k) is not None})
-        if not dbc and sidecar.get("dbc"):
-            dbc = os.path.join(os.path.dirname(os.path.abspath(first)), sidecar["dbc"])
-    opts.update({k: v for k, v in options.items() if v is not None})
-    if not dbc:
-        raise FogmonError(f"{first}: a CAN log needs --dbc F describing the gyro's frames")
-    return CanLogSource(path, load_dbc(dbc), **opts)

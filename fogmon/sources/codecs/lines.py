@@ -31,8 +31,8 @@ import re
 from fogmon import units
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
+from fogmon.sources.codecs.framing import LineFramer
 from fogmon.sources.frames import Frames
-from fogmon.sources.framing import LineFramer
 
 DEFAULT_RATE_HZ = 100.0
 #: rate column name -> its unit (fogmon.units): a rate, or an angle per sample

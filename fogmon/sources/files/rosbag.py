@@ -2,10 +2,10 @@
 files with sensor_msgs/Imu messages, read with ``rosbags`` (``fogmon[ros]``).
 
 One topic (``--topic``, default the only Imu topic); ``angular_velocity`` (rad/s ->
-deg/h) of the axes ``--axis`` asks (fogmon.sources.stamped.imu_axes): without it all
+deg/h) of the axes ``--axis`` asks (fogmon.sources.files.stamped.imu_axes): without it all
 three, a multi-axis source with ``linear_acceleration`` as aux channels ``accel_<axis>_g``
 (m/s^2 -> g); with one axis a one-axis source of that gyro alone. Time base:
-``header.stamp`` of each message (s), on fogmon's grid as fogmon.sources.stamped
+``header.stamp`` of each message (s), on fogmon's grid as fogmon.sources.files.stamped
 describes (missing messages become counted invalid placeholders); time 0 is the first
 message's stamp, whose Unix time is kept in the metadata (``t0_unix_s``)."""
 from __future__ import annotations
@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import DPH_PER_RPS, IMU_AXES, StampedSource, imu_axes
+from fogmon.sources.files.stamped import DPH_PER_RPS, IMU_AXES, StampedSource, imu_axes
+from fogmon.sources.options import SourceOptions
 from fogmon.units import G0_MPS2
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -73,11 +74,11 @@ def _verified_layout(raw: bytes, ros2: bool, msg) -> tuple | None:
     return None
 
 
-def open_source(path: str, options: dict) -> StampedSource:
-    """The Imu topic ``options['topic']``, axes ``options['axis']`` (``imu_axes``) of the
+def open_source(path: str, opts: SourceOptions) -> StampedSource:
+    """The Imu topic ``opts.topic``, axes ``opts.axis`` (``imu_axes``) of the
     bag or MCAP file ``path`` as a StampedSource; a missing topic or a topic of another
     type is a one-line FogmonError naming the file and the Imu topics it has."""
-    axes = imu_axes(options, path)
+    axes = imu_axes(opts.axis, path)
     try:
         reader = _reader(path)
         reader.open()
@@ -85,7 +86,7 @@ def open_source(path: str, options: dict) -> StampedSource:
         why = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({why})") from None
     try:
-        topic, conns = _topic(path, reader, options.get("topic"))
+        topic, conns = _topic(path, reader, opts.topic)
         ns, v = _read_messages(reader, conns)
     finally:
         reader.close()
@@ -100,7 +101,7 @@ def open_source(path: str, options: dict) -> StampedSource:
     src = StampedSource((ns - t0) * 1e-9, v[:, cols if several else cols[0]] * DPH_PER_RPS, accel,
                         name=f"ROS {os.path.basename(path)} {topic} {field}", where=where, time_field="header.stamp",
                         meta={"sensor": f"{topic} {field}", "t0_unix_s": repr(t0 * 1e-9)},
-                        max_abs_dph=options["max_rate_dph"], axes=axes if several else ())
+                        max_abs_dph=opts.file_gate_dph, axes=axes if several else ())
     src.ros_topic = topic  # the topic a Kalibr export names
     return src
 

@@ -107,7 +107,7 @@ class KvhCodec:
     ``skipped`` is the bytes skipped since the previous good frame (across ``feed``
     calls): 0 when the two are back to back (the time base relies on it)."""
 
-    seq_modulus = SEQ_MODULUS
+    seq_modulus: int | None = SEQ_MODULUS
 
     def __init__(self, fmt: str = "a", rot: str = "delta", units: str = "rad",
                  axis: str | None = None, sample_rate_hz: float = DEFAULT_RATE_HZ,

@@ -34,7 +34,7 @@ READ_MAX_BYTES = 1 << 16
 
 class SerialSource(LiveSource):
     """Live serial gyro. ``port`` is a device path or pyserial URL, ``codec`` one of the
-    decoders of fogmon.sources.codecs; ``opener`` (tests, custom transports) returns an
+    decoders of fogmon.sources.codecs (``protocols.make_codec``); ``opener`` (tests, custom transports) returns an
     open pyserial port (``read``, ``in_waiting``, ``close``; a read timeout keeps a silent
     port from blocking the reader) instead of opening ``port``; ``read_pause_s`` is the
     sleep between reads (READ_PAUSE_S; 0 for a port that paces itself). Taps get

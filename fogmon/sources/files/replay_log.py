@@ -1,15 +1,9 @@
-"""Replay sources: a replay-log CSV (docs/formats.md) and a raw serial capture (the
-bytes a device sent, decoded again with its protocol). Both yield the same blocks a live
-source would, as fast as they can (the pipeline paces ``--realtime``; a replay log can
-also pace itself for use outside it).
-
-A raw capture ``X`` may have a sidecar ``X.json`` (written by the archive) naming the
-protocol and decoder options and the outages seen while recording
-(``"breaks": [{"offset": byte offset, "missing_est": samples, "elapsed_s": s}, ...]``), so that replaying it
-gives exactly the samples the live monitor saw."""
+"""A replay-log CSV replayed (docs/formats.md): its rows on the uniform sample grid, time
+gaps as invalid placeholders, in the same blocks a live source would yield, as fast as
+they can (the pipeline paces ``--realtime``; a replay log can also pace itself for use
+outside it); an archive's pieces as one recording (``ReplayLogSet``)."""
 from __future__ import annotations
 
-import functools
 import math
 import os
 from collections import deque
@@ -18,12 +12,12 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from fogmon.block import Block, Event
-from fogmon.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
 from fogmon.errors import FogmonError
-from fogmon.recording import CHUNK_BYTES, ReplayLogReader, Rows, grid_positions, pick_axes
+from fogmon.formats.recording import grid_positions, pick_axes
+from fogmon.formats.replay_log import CHUNK_BYTES, ReplayLogReader, Rows
 from fogmon.sources import plausibility
-from fogmon.sources.codecs import codec_from_options
-from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents, GridAssembler
+from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
+from fogmon.sources.options import SourceOptions
 from fogmon.sources.pacing import Pacer
 
 #: samples per block when replaying as fast as possible
@@ -48,7 +42,7 @@ class ReplayLogSource:
     (() for one axis). Counters, as far as the blocks yielded so far reach:
     ``samples`` (rows), ``samples_missing``, ``seq_gaps`` (time gaps), ``skipped_rows``
     (only with ``tolerate=True``), ``implausible_samples``. ``reader`` replaces the CSV
-    reader of ``path`` by another of the same rows (a Parquet log: fogmon.parquet_log)."""
+    reader of ``path`` by another of the same rows (a Parquet log: fogmon.formats.parquet_log)."""
 
     def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
                  max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES,
@@ -187,104 +181,8 @@ class _LogGrid:
         return b, int(np.count_nonzero(self._present[:m])), len(gaps)
 
 
-class RawCaptureSource:
-    """Bytes a serial device sent, decoded again. ``path`` is one capture file or the
-    pieces of one (an archive's raw-NNNN.bin), read in order as one byte stream, so the
-    decoder's state (a frame split across two pieces, the sequence counter) carries
-    across. ``options`` are the decoder options (``protocol``, ``sample_rate_hz``, ``kvh_rot``,
-    ``kvh_units``, ``kvh_accel``, ``axis``, ``columns``; ``axes`` the codec's); ``breaks``
-    the outages [(byte offset in the stream, estimated samples lost)]. Counters: the decoder's and the grid's (see
-    GridAssembler)."""
-
-    CHUNK = 1 << 16
-
-    def __init__(self, path: str | Sequence[str], options: dict, breaks=()) -> None:
-        self.paths = [path] if isinstance(path, str) else list(path)
-        for p in self.paths:
-            if not os.path.isfile(p):
-                raise FogmonError(f"{p}: no such file")
-        self._options = dict(options)
-        self.codec = codec_from_options(options)
-        self.sample_rate_hz = self.codec.sample_rate_hz
-        self.axes: tuple[str, ...] = self.codec.axes
-        self.grid = GridAssembler(self.sample_rate_hz, self.codec.seq_modulus, self.codec.aux_names, axes=self.axes)
-        what = os.path.basename(self.paths[0]) + (
-            f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
-        self.name = f"raw capture {what}: {self.codec.describe()}"
-        self._breaks = sorted((int(o), float(e)) for o, e in breaks)
-        self._closed = False
-
-    @property
-    def counters(self) -> dict[str, int]:
-        return {**self.codec.counters, **self.grid.counters}
-
-    @functools.cached_property
-    def n_samples(self) -> int:
-        """Samples on the grid, from a counting pass over the file(s) (pipelines size their
-        default window with it)."""
-        return sum(len(b) for b in RawCaptureSource(self.paths, self._options, self._breaks).blocks())
-
-    def blocks(self) -> Iterator[Block]:
-        pos = 0
-        breaks = list(self._breaks)
-        errors = ErrorEvents(self.codec.counters)
-        for path in self.paths:
-            try:
-                fh = open(path, "rb")  # noqa: SIM115 (closed by the with below; only opening errors are caught)
-            except OSError as e:
-                raise FogmonError(f"{path}: cannot read: {e.strerror}") from None
-            with fh:
-                while not self._closed:
-                    end = pos + self.CHUNK
-                    if breaks and breaks[0][0] <= end:
-                        end = breaks[0][0]
-                    data = fh.read(end - pos)
-                    at_break = bool(breaks) and pos + len(data) == breaks[0][0]
-                    if not data and not at_break:
-                        break
-                    pos += len(data)
-                    frames = self.codec.feed(data)
-                    if len(frames):
-                        yield self.grid.push(frames, errors.poll(self.grid.t_next_s))
-                    if at_break:
-                        off, est = breaks.pop(0)
-                        self.grid.mark_break(est)
-
-    def close(self) -> None:
-        self._closed = True
-
-
-def open_raw_capture(path: str | Sequence[str], overrides: dict | None = None) -> RawCaptureSource:
-    """A raw capture (or the pieces of one, in order) with the decoder options of its
-    sidecar(s), overridden by ``overrides`` (the command line); without a sidecar
-    ``overrides['protocol']`` is required. Pieces must agree on the decoder options;
-    their outages are placed in the joined byte stream."""
-    paths = [path] if isinstance(path, str) else list(path)
-    opts: dict | None = None
-    breaks, offset = [], 0
-    for p in paths:
-        side = read_sidecar(p) or {}
-        piece_opts = {k: side[k] for k in DECODER_FIELDS if k in side}
-        if opts is None:
-            opts = piece_opts
-        elif piece_opts != opts:
-            raise FogmonError(f"{p}{SIDECAR_SUFFIX}: decoder options {piece_opts} differ from those of "
-                              f"{paths[0]}{SIDECAR_SUFFIX} ({opts}): not pieces of one capture")
-        breaks += [(offset + b["offset"], float(b["missing_est"])) for b in side.get("breaks", [])]
-        try:
-            offset += os.path.getsize(p)
-        except OSError:
-            raise FogmonError(f"{p}: no such file") from None
-    opts = opts or {}
-    opts.update({k: v for k, v in (overrides or {}).items() if v is not None})
-    if "protocol" not in opts:
-        raise FogmonError(f"{paths[0]}: a raw serial capture needs --protocol "
-                          f"(or a {os.path.basename(paths[0])}{SIDECAR_SUFFIX} sidecar naming it)")
-    return RawCaptureSource(paths, opts, breaks)
-
-
 class ReplayLogSet:
-    """Replay-log pieces (an archive's samples-NNNN.csv, fogmon.pieces) replayed as one
+    """Replay-log pieces (an archive's samples-NNNN.csv, fogmon.formats.archive) replayed as one
     recording, each read in chunks. Every piece is checked when the set is opened. The
     sample grid goes on across the seams: samples missing between two pieces become
     invalid placeholders with a ``gap`` event, as inside one log; pieces that overlap in
@@ -359,3 +257,8 @@ def _seam_gap(t_end: float, missing: int, sample_rate_hz: float, aux: list[str],
         rate = np.full((len(t), len(axes)), np.nan) if axes else nan
         ev = (Event(float(t[0]), "gap", f"{missing} sample(s) missing at t={t[0]:.6f} s (between two pieces)"),)
         yield Block(t, rate, np.zeros(rate.shape, bool), {k: nan for k in aux}, ev if i == 0 else (), axes)
+
+
+def open_source(path: str, opts: SourceOptions) -> ReplayLogSource:
+    """The replay-log CSV ``path`` (``tolerate_bad_rows``, ``file_gate_dph``, ``axis``)."""
+    return ReplayLogSource(path, tolerate=opts.tolerate_bad_rows, max_abs_dph=opts.file_gate_dph, axis=opts.axis)

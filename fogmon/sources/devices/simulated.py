@@ -12,9 +12,10 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording
+from fogmon.formats.recording import Recording
 from fogmon.sim.model import SensorModel, load_model
 from fogmon.sim.simulate import CHUNK_SAMPLES, iter_simulate, present_samples, simulated_axes
+from fogmon.sources.options import SourceOptions
 from fogmon.sources.pacing import Pacer
 
 #: block length (s) when paced, as for the replay sources
@@ -66,3 +67,8 @@ class SimulatedSource:
 
     def close(self) -> None:
         self._closed = True
+
+
+def open_source(path: str, opts: SourceOptions) -> SimulatedSource:
+    """The sensor model file ``path`` streamed as an endless simulation (no option applies)."""
+    return SimulatedSource(path)

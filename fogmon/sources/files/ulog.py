@@ -2,10 +2,10 @@
 
 Topic (``--topic``): ``sensor_gyro`` (default; fields x, y, z in rad/s and temperature in
 deg C; ``sensor_gyro:1`` for the second instance) or ``sensor_combined`` (gyro_rad[0..2]
-in rad/s). Axes ``--axis`` (fogmon.sources.stamped.imu_axes: without it all three, a
+in rad/s). Axes ``--axis`` (fogmon.sources.files.stamped.imu_axes: without it all three, a
 multi-axis source; one axis, a one-axis source). Time base: the topic's
 ``timestamp_sample`` (us since boot) where it has one, else ``timestamp``, on fogmon's
-grid as fogmon.sources.stamped describes; times stay in s since boot."""
+grid as fogmon.sources.files.stamped describes; times stay in s since boot."""
 from __future__ import annotations
 
 import os
@@ -13,19 +13,20 @@ import os
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import DPH_PER_RPS, StampedSource, imu_axes
+from fogmon.sources.files.stamped import DPH_PER_RPS, StampedSource, imu_axes
+from fogmon.sources.options import SourceOptions
 
 #: topic -> field of each axis (rad/s)
 AXIS_FIELDS = {"sensor_gyro": {"x": "x", "y": "y", "z": "z"},
                "sensor_combined": {"x": "gyro_rad[0]", "y": "gyro_rad[1]", "z": "gyro_rad[2]"}}
 
 
-def open_source(path: str, options: dict) -> StampedSource:
-    """Topic ``options['topic']`` (NAME or NAME:INSTANCE), axes ``options['axis']``
+def open_source(path: str, opts: SourceOptions) -> StampedSource:
+    """Topic ``opts.topic`` (NAME or NAME:INSTANCE), axes ``opts.axis``
     (``imu_axes``) of the ULog ``path`` as a StampedSource (temperature as aux ``temp_c``
     where logged)."""
-    topic = options.get("topic") or "sensor_gyro"
-    axes = imu_axes(options, path)
+    topic = opts.topic or "sensor_gyro"
+    axes = imu_axes(opts.axis, path)
     data = _topic_data(path, topic)
     name = data.name
     d = data.data
@@ -42,7 +43,7 @@ def open_source(path: str, options: dict) -> StampedSource:
     return StampedSource(np.asarray(d[time_field], dtype=np.float64) * 1e-6,
                          np.asarray(rate, dtype=np.float64) * DPH_PER_RPS, aux,
                          name=f"PX4 ULog {os.path.basename(path)} {what}", where=where, time_field=time_field,
-                         meta={"sensor": what}, max_abs_dph=options["max_rate_dph"], axes=axes if several else ())
+                         meta={"sensor": what}, max_abs_dph=opts.file_gate_dph, axes=axes if several else ())
 
 
 def _topic_data(path: str, topic: str):

@@ -2,8 +2,8 @@
 
 ``--channel NAME``: a rate channel, its unit from the file (deg/h, deg/s, rad/s, ...;
 ``--rate-unit`` when the file has none), its own time stamps (s) on fogmon's grid as
-fogmon.sources.stamped describes. Raw CAN frames in the MDF bus-logging format are a CAN
-log instead: give ``--dbc`` (fogmon.sources.can_source, through python-can's MF4 reader)."""
+fogmon.sources.files.stamped describes. Raw CAN frames in the MDF bus-logging format are a CAN
+log instead: give ``--dbc`` (fogmon.sources.files.can_log, through python-can's MF4 reader)."""
 from __future__ import annotations
 
 import os
@@ -11,14 +11,15 @@ import os
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.stamped import StampedSource, dph_per_unit
+from fogmon.sources.files.stamped import StampedSource, dph_per_unit
+from fogmon.sources.options import SourceOptions
 
 #: channel names listed in an error before the rest are only counted
 SHOWN_CHANNELS = 12
 
 
-def open_source(path: str, options: dict) -> StampedSource:
-    """Channel ``options['channel']`` of the MDF file ``path`` as a StampedSource; a
+def open_source(path: str, opts: SourceOptions) -> StampedSource:
+    """Channel ``opts.channel`` of the MDF file ``path`` as a StampedSource; a
     missing channel is a one-line FogmonError naming the file and listing channels."""
     import asammdf
     try:
@@ -28,7 +29,7 @@ def open_source(path: str, options: dict) -> StampedSource:
         raise FogmonError(f"{path}: not a readable MDF file ({why})") from None
     with mdf:
         names = sorted(n for n in mdf.channels_db if n not in ("t", "time"))  # not the master time
-        channel = options.get("channel")
+        channel = opts.channel
         shown = ", ".join(names[:SHOWN_CHANNELS]) + (f" and {len(names) - SHOWN_CHANNELS} more"
                                                      if len(names) > SHOWN_CHANNELS else "")
         if not channel:
@@ -41,7 +42,7 @@ def open_source(path: str, options: dict) -> StampedSource:
         except Exception as e:  # several groups hold the name, or the channel cannot be decoded
             raise FogmonError(f"{path}: field channel: {channel!r}: {str(e).splitlines()[0]}") from None
         where = f"{path} channel {channel}"
-        unit = options.get("rate_unit") or sig.unit
+        unit = opts.rate_unit or sig.unit
         factor = dph_per_unit(unit, where)
         rate = np.asarray(sig.samples, dtype=np.float64) * factor
         invalid = getattr(sig, "invalidation_bits", None)   # samples the logger marked invalid
@@ -50,4 +51,4 @@ def open_source(path: str, options: dict) -> StampedSource:
         return StampedSource(np.asarray(sig.timestamps, dtype=np.float64), rate, None,
                              name=f"MDF4 {os.path.basename(path)} channel {channel} ({unit})", where=where,
                              time_field="time", meta={"sensor": f"{channel} ({unit})"},
-                             max_abs_dph=options["max_rate_dph"])
+                             max_abs_dph=opts.file_gate_dph)
