@@ -24,13 +24,11 @@ class _Names:
     """What FogmonError and FogmonWarning share: a message naming parameters in
     backticks (``message``), shown plainly by ``str`` and as flags by ``render``."""
 
-    args: tuple
-
     @property
     def message(self) -> str:
         """The message as raised, parameter names in backticks (to pass on in another
         message, so that it can still be rendered)."""
-        return Exception.__str__(self)  # type: ignore[arg-type]
+        return Exception.__str__(self)  # type: ignore[arg-type]  # only mixed into Exceptions
 
     def __str__(self) -> str:
         return render_names(self.message)
