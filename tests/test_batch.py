@@ -24,8 +24,7 @@ from fogmon.pipeline import PipelineConfig, run_pipeline
 from fogmon.sinks.base import COEFFICIENTS
 from fogmon.sources.codecs.kvh import encode_frame
 from fogmon.sources.open import open_replay_source
-
-OPTS = {"window_s": None, "hop_s": None, "taus": "octave", "raw_rate": False, "keep_motion": False}
+from fogmon.sources.options import SourceOptions
 
 
 def _log(path, n, sample_rate_hz, seed, motion=False, gap=False):
@@ -61,7 +60,7 @@ def fleet(tmp_path_factory):
 
 def _replay(path: str):
     """What `fogmon replay PATH` computes (its library: run_pipeline), collected."""
-    plan = check(path, OPTS)
+    plan = check(path, SourceOptions(), PipelineConfig())
     col = _Collect()
     run_pipeline(open_replay_source(path), PipelineConfig(), [col])
     return plan, col

@@ -9,12 +9,13 @@ from fogmon.cli.batch import _recording_row
 from fogmon.fleet import tasks
 from fogmon.fleet.chunks import plan_chunks
 from fogmon.fleet.report import by_gyro
-from fogmon.pipeline import OVERALL_MAX_SAMPLES
+from fogmon.pipeline import OVERALL_MAX_SAMPLES, PipelineConfig
+from fogmon.sources.options import SourceOptions
 
 AXES = ("x", "y", "z")
 FS = 100.0
 N = 20_000
-OPTS = {"window_s": 20.48, "hop_s": 20.48}
+SRC, CFG = SourceOptions(), PipelineConfig(window_s=20.48, hop_s=20.48)
 
 
 @pytest.fixture
@@ -28,7 +29,7 @@ def recordings(monkeypatch):
     t = np.arange(N) / FS
     sizes = [4096] * (N // 4096) + [N % 4096]
 
-    def fake_open(path, options):
+    def fake_open(path, source):
         if path == "three.csv":
             return ListSource(t, rate, sizes, FS, axes=AXES)
         return ListSource(t, rate[:, AXES.index(path[0])].copy(), sizes, FS)
@@ -37,23 +38,23 @@ def recordings(monkeypatch):
 
 
 def test_a_plan_names_the_axes_of_its_recording(recordings):
-    plan = tasks.check("three.csv", OPTS)
+    plan = tasks.check("three.csv", SRC, CFG)
     assert not plan.error and plan.axes == AXES and plan.n_samples == N
-    assert tasks.check("y.csv", OPTS).axes == ()
+    assert tasks.check("y.csv", SRC, CFG).axes == ()
 
 
 def test_each_axis_in_chunks_equals_its_one_axis_recording(recordings):
-    plan = tasks.check("three.csv", OPTS)
+    plan = tasks.check("three.csv", SRC, CFG)
     w = h = 2048
     chunks = plan_chunks(N, w, h, 8192, OVERALL_MAX_SAMPLES)
     assert len(chunks) >= 3
     for a in AXES:
-        masked = tasks.motion_pass(plan, OPTS, a)
-        row, win = _recording_row(plan, a, chunks, [tasks.run_chunk(plan, c, OPTS, masked, a) for c in chunks],
+        masked = tasks.motion_pass(plan, SRC, CFG, a)
+        row, win = _recording_row(plan, a, chunks, [tasks.run_chunk(plan, c, SRC, CFG, masked, a) for c in chunks],
                                   masked)
-        one = tasks.check(f"{a}.csv", OPTS)
+        one = tasks.check(f"{a}.csv", SRC, CFG)
         whole = plan_chunks(N, w, h, N, OVERALL_MAX_SAMPLES)
-        ref_row, ref_win = _recording_row(one, "", whole, [tasks.run_chunk(one, c, OPTS) for c in whole], None)
+        ref_row, ref_win = _recording_row(one, "", whole, [tasks.run_chunk(one, c, SRC, CFG) for c in whole], None)
         assert row["axis"] == a and row["error"] == "" and set(win.column("axis").to_pylist()) == {a}
         for k in ("samples", "samples_invalid", "windows", "motion_samples_excluded", "duration_s"):
             assert row[k] == ref_row[k], k
@@ -65,8 +66,8 @@ def test_each_axis_in_chunks_equals_its_one_axis_recording(recordings):
             if name not in ("recording", "axis"):
                 np.testing.assert_allclose(np.asarray(win.column(name), float), np.asarray(ref_win.column(name), float),
                                            rtol=1e-9, atol=0, err_msg=name)
-    assert tasks.motion_pass(plan, OPTS, "y").samples_excluded > 400     # the turn is y's alone
-    assert tasks.motion_pass(plan, OPTS, "x").samples_excluded == 0
+    assert tasks.motion_pass(plan, SRC, CFG, "y").samples_excluded > 400     # the turn is y's alone
+    assert tasks.motion_pass(plan, SRC, CFG, "x").samples_excluded == 0
 
 
 def test_the_fleet_report_follows_each_axis_of_a_gyro():

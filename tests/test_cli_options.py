@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fogmon.cli import main
+from fogmon.cli import command_flags, main
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.davar.taus import MAX_PER_DECADE, tau_grid
@@ -169,7 +169,7 @@ def test_can_bus_with_only_foreign_frames_exits_1_naming_what_arrived(tmp_path, 
 
 def test_run_shorter_than_the_window_says_why():
     s = Summary("KVH", 100.0, 655.36, 81.92, n_samples=12_000, t_first_s=0.0, t_last_s=119.99)
-    text = format_summary(s)
+    text = format_summary(s, command_flags("replay"))
     assert ("  0 DADEV windows of 655.36 s every 81.92 s\n  no DADEV window: the window is 65536 samples = 655.36 s "
             "at 100 Hz and the run had 12,000 samples (120 s); use --window-s 20.48 (or any window up to 120 s)"
             ) in text

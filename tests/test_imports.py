@@ -1,5 +1,6 @@
 """No import cycle: every fogmon module imports alone in a fresh interpreter, and the
-pipeline and the sinks import in either order; library code never imports fogmon.cli."""
+pipeline and the sinks import in either order; library code (everything outside
+fogmon/cli) never imports fogmon.cli nor argparse, at any level (inside functions too)."""
 from __future__ import annotations
 
 import ast
@@ -77,6 +78,61 @@ def test_pipeline_and_sinks_import_in_either_order():
     for order in (("fogmon.pipeline", *sinks), (*sinks, "fogmon.pipeline")):
         r = _imports(*order)
         assert r.returncode == 0, r.stderr
+
+
+def _every_import(path: Path, root: Path = ROOT) -> list[tuple[int, str]]:
+    """(line, module) of every import in the file at ``path`` of the package at ``root``,
+    at any level (inside functions and classes too), relative imports resolved, ``from m
+    import n`` as m and m.n, and importlib.import_module / __import__ of a literal (or
+    f-string) name."""
+    name = ".".join(path.relative_to(root.parent).with_suffix("").parts)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    package = package.removesuffix(".__init__")
+    out: list[tuple[int, str]] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[:len(parts) - node.level + 1] + ([node.module] if node.module else []))
+            out.append((node.lineno, base))
+            out += [(node.lineno, f"{base}.{a.name}") for a in node.names]
+        elif isinstance(node, ast.Call) and node.args and (
+                (isinstance(node.func, ast.Attribute) and node.func.attr == "import_module")
+                or (isinstance(node.func, ast.Name) and node.func.id in ("import_module", "__import__"))):
+            arg = node.args[0]
+            if isinstance(arg, ast.JoinedStr) and arg.values and isinstance(arg.values[0], ast.Constant):
+                arg = arg.values[0]
+            if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+                out.append((node.lineno, arg.value))
+    return out
+
+
+def _library_files() -> list[Path]:
+    """Every module outside fogmon/cli but the entry point (``python -m fogmon``)."""
+    return [p for p in sorted(ROOT.rglob("*.py"))
+            if p.relative_to(ROOT).parts[0] != "cli" and p.name != "__main__.py"]
+
+
+def test_every_import_is_found_at_any_level(tmp_path):
+    pkg = tmp_path / "fogmon" / "sub"
+    pkg.mkdir(parents=True)
+    (pkg / "m.py").write_text("def f():\n    from .. import cli\n    import argparse\n"
+                              "    importlib.import_module(f'fogmon.cli.{x}')\n", encoding="utf-8")
+    found = [m for _, m in _every_import(pkg / "m.py", tmp_path / "fogmon")]
+    assert found == ["fogmon", "fogmon.cli", "argparse", "fogmon.cli."]
+
+
+def test_library_code_never_imports_the_command_line_nor_argparse():
+    """Library code gets plain parameters and option dataclasses (SourceOptions,
+    PipelineConfig, explain's Options), never an argparse namespace: python-can's rule
+    (argparse in can/cli.py only)."""
+    bad = [f"{p.relative_to(ROOT.parent)}:{line}: imports {m}" for p in _library_files()
+           for line, m in _every_import(p)
+           if m == "argparse" or m.startswith("argparse.") or m == "fogmon.cli" or m.startswith("fogmon.cli.")]
+    assert not bad, "\n".join(bad)
 
 
 def test_library_code_does_not_import_the_command_line():

@@ -9,6 +9,7 @@ import pytest
 from doubles import Collect, ListSource
 
 from fogmon.block import Block, Event
+from fogmon.cli import command_flags
 from fogmon.errors import FogmonError
 from fogmon.methods.live import LiveMethods
 from fogmon.pipeline import Pipeline, PipelineConfig, run_pipeline
@@ -232,7 +233,7 @@ def one_axis_run():
 
 def test_a_one_axis_run_prints_what_it_printed_before_axes():
     col, s = one_axis_run()
-    assert format_summary(s) == ONE_AXIS_SUMMARY
+    assert format_summary(s, command_flags("replay")) == ONE_AXIS_SUMMARY   # what `fogmon replay` prints
     assert [(e.kind, round(e.t_s, 3), e.axis) for e in col.events_] == [
         ("model_band", 20.47, ""), ("outlier", 60.02, ""), ("platform_motion", 60.16, ""),
         ("platform_motion", 74.55, "")]

@@ -39,8 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fogmon.cli.outputs import check_outputs
     from fogmon.cli.source_options import source_options
+    from fogmon.outputs import check_outputs
     from fogmon.sources.open import open_replay_source
 
     ext = os.path.splitext(args.output)[1].lower()

@@ -9,6 +9,7 @@ import argparse
 
 import numpy as np
 
+from fogmon.cli import render
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
@@ -58,7 +59,7 @@ def evaluate(rec: Recording, period_s: float, pauta_k: float) -> list[str]:
         bi, ncyc = cycle_bias_instability(blk.t_s[ok], rate[ok], period_s)
         out.append(f"  bias instability (std of {ncyc} per-cycle means, {period_s:g} s) = {bi:.4g} deg/h")
     except FogmonError as e:
-        out.append(f"  bias instability: not available ({e})")
+        out.append(f"  bias instability: not available ({render(e, 'inorbit')})")
     if ok.all():
         out.append("  wavelet (db4) energy by band:")
         out += [f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %"

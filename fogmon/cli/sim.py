@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fogmon.cli.outputs import check_outputs
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.outputs import check_outputs
 
 if TYPE_CHECKING:
     from fogmon.formats.recording import Recording

@@ -81,8 +81,8 @@ def _add_can_arguments(c, live: bool) -> None:
     """The CAN bus (live) and CAN decoder (DBC) options."""
     if live:
         c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
-        c.add_argument("--interface", default="socketcan", metavar="I", help="python-can interface: socketcan, "
-                       "pcan, kvaser, vector, slcan, virtual, ... (default: socketcan)")
+        c.add_argument("--interface", default=SourceOptions.interface, metavar="I", help="python-can interface: "
+                       f"socketcan, pcan, kvaser, vector, slcan, virtual, ... (default: {SourceOptions.interface})")
         c.add_argument("--can-bitrate", type=number(1_000, 8_000_000, integer=True), metavar="BPS",
                        help="CAN bit rate in bit/s, 1,000..8,000,000, for interfaces that set it (default: "
                             "leave the interface as configured)")

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fogmon.block import select_aux
-from fogmon.cli.outputs import check_outputs
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.outputs import check_outputs
 
 if TYPE_CHECKING:
     from fogmon.sim.model import Effect, SensorModel

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from fogmon.errors import FogmonError
 
 #: file endings read as recordings when a folder is walked (a raw serial capture only
-#: with its .json sidecar; CAN logs need --dbc or a sidecar)
+#: with its .json sidecar; CAN logs need a DBC (``dbc``) or a sidecar)
 RECORDING_SUFFIXES = (".csv", ".parquet", ".asc", ".blf", ".trc", ".log", ".mf4")
 
 

@@ -1,5 +1,5 @@
-"""Output paths of the commands that write files, checked before any analysis starts: a
-bad path is a one-line FogmonError at once, not a traceback after minutes of work."""
+"""Output paths, checked before any analysis starts: a bad path is a one-line FogmonError
+at once, not a traceback after minutes of work."""
 from __future__ import annotations
 
 import os
@@ -13,10 +13,11 @@ def _same(a: str, b: str) -> bool:
 
 
 def check_outputs(outputs: dict[str, str | None], inputs: Iterable[str | None] = ()) -> None:
-    """FogmonError naming the option unless every output path (option -> path; None:
-    not asked for) can be written as a file: its folder exists and is writable, it is
-    not a folder, and it is neither one of the ``inputs`` nor another output. The check
-    leaves nothing behind (an existing file is opened for appending, unchanged)."""
+    """FogmonError naming the output unless every output path (what names it in a
+    message, e.g. "`report`" or "`export` kalibr" -> path; None: not asked for) can be
+    written as a file: its folder exists and is writable, it is not a folder, and it is
+    neither one of the ``inputs`` nor another output. The check leaves nothing behind
+    (an existing file is opened for appending, unchanged)."""
     given = [(opt, path) for opt, path in outputs.items() if path]
     in_paths = [p for p in inputs if p]
     for i, (opt, path) in enumerate(given):
