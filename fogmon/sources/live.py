@@ -147,7 +147,11 @@ class LiveSource:
         ended = False
         try:
             while not ended:
-                timeout = last_yield + self.block_s - self._clock()
+                # wait for input until the next yield is due: block_s after the last one when
+                # something is held, idle_s when nothing is (a silent device wakes this loop
+                # twice a second, not continuously)
+                due = last_yield + (self.block_s if parts or events else self.idle_s)
+                timeout = due - self._clock()
                 try:
                     item = self._q.get(timeout=timeout) if timeout > 0 else self._q.get_nowait()
                 except queue.Empty:
