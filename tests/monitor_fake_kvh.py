@@ -13,9 +13,12 @@ BAD_EVERY-th frame (as line noise would). Options:
 - ``--drop K:N`` (repeatable): the N frames from frame K vanish whole, without a byte
   gap (a device-side drop, an OS buffer overrun at frame boundaries);
 - ``--wait``: send a zero byte every 20 ms (line noise, no frame) until a line arrives on
-  stdin; frame 0 is due then.
+  stdin; frame 0 is due then;
+- ``--report S``: every S s print ``at T s: N frames written, W s waited for room``
+  (frames due and written so far, dropped ones included; how long the pty was full,
+  i.e. the reader behind).
 
-At the end it prints ``sent N frames`` (frames due, dropped ones included). Without
+At the end it prints ``sent N frames``. Without
 ``--count`` every gyro sends delta angles in rad: z a constant 15 deg/h, x and y
 0 deg/h, each plus its own white angle-rate noise of N = 0.05 deg/sqrt(h) (per-sample
 rate std 60 N sqrt(fs) deg/h); the accelerometers send 1 g along z (a level unit) and
@@ -64,7 +67,7 @@ def counting_frames(n0: int, n: int) -> bytes:
 
 
 def run(seconds: float, bad_every: int = 0, rate_hz: float = RATE_HZ, count: bool = False,
-        drops: tuple[tuple[int, int], ...] = (), wait: bool = False) -> None:
+        drops: tuple[tuple[int, int], ...] = (), wait: bool = False, report_s: float = 0.0) -> None:
     master, slave, path = open_pty()
     print(path, flush=True)
     while wait and not select.select([sys.stdin], [], [], 0.02)[0]:
@@ -76,16 +79,23 @@ def run(seconds: float, bad_every: int = 0, rate_hz: float = RATE_HZ, count: boo
     gone = set().union(*(range(k, k + n) for k, n in drops))
     t0 = time.monotonic()
     n = 0
+    waited = 0.0
+    next_report = report_s
     while time.monotonic() - t0 < seconds:
+        if report_s and time.monotonic() - t0 >= next_report:
+            print(f"at {time.monotonic() - t0:.3f} s: {n} frames written, {waited:.3f} s waited for room", flush=True)
+            next_report += report_s
         due = int((time.monotonic() - t0) * rate_hz)
         if due > n:
             data = counting_frames(n, due - n) if count else frames(n, due - n, rng, bad_every, rng_xy, rate_hz)
             if gone:
                 data = b"".join(data[36 * i:36 * i + 36] for i in range(due - n) if n + i not in gone)
             view = memoryview(data)
+            w0 = time.monotonic()
             while view and time.monotonic() - t0 < seconds:  # the pty holds ~20 kB: wait, do not drop
                 if select.select([], [master], [], 0.1)[1]:
                     view = view[os.write(master, view):]
+            waited += time.monotonic() - w0
             n = due
         time.sleep(0.002 if rate_hz > 1000 else 0.01)
     print(f"sent {n} frames", flush=True)
@@ -99,9 +109,10 @@ def main(argv=None) -> None:
     ap.add_argument("--count", action="store_true")
     ap.add_argument("--drop", action="append", default=[], metavar="K:N")
     ap.add_argument("--wait", action="store_true")
+    ap.add_argument("--report", type=float, default=0.0, metavar="S")
     a = ap.parse_args(argv)
     drops = tuple((int(d.split(":")[0]), int(d.split(":")[1])) for d in a.drop)
-    run(a.seconds, a.bad_every, a.rate_hz, a.count, drops, a.wait)
+    run(a.seconds, a.bad_every, a.rate_hz, a.count, drops, a.wait, a.report)
 
 
 if __name__ == "__main__":

@@ -123,6 +123,25 @@ def test_late_reads_and_a_slow_device_clock_place_no_wrap():
     assert g.counters["clock_wraps"] == 0 and g.counters["samples_missing"] == 0
 
 
+def test_a_device_that_sends_late_and_catches_up_places_no_wrap():
+    """The device holds its frames for 2 s, then sends them as fast as a pty takes them
+    (555 frames per read every 0.1 s): the grid is up to 2 s behind the host clock, but
+    less at every look as it catches up, so no wrap is placed; then it loses 256 frames
+    for good, and the clock places exactly those."""
+    g = GridAssembler(FS, 128)
+    k = 0
+    for wake in range(1, 200):
+        t = wake / 10
+        due = int(t * FS) if not 5.0 <= t < 7.0 else 5000
+        part = list(range(k, min(due, k + 555)))
+        k += len(part)
+        part = [x for x in part if not 15_000 <= x < 15_256]
+        if part:
+            g.push(Frames.from_lists([x % 128 for x in part], [float(x) for x in part], [True] * len(part)))
+            g.observe_clock(t)
+    assert g.counters["clock_wraps"] == 2 and g.counters["samples_missing"] == 256
+
+
 def test_the_clock_decision_replays_from_the_sidecar_record():
     """What the clock decided (grid.decisions) placed again by ``place`` on a grid without
     a clock gives the same samples and counters."""

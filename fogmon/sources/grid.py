@@ -23,7 +23,8 @@ the bytes, and they arrive later but continuous.
 3. the host clock, for a live byte stream (``observe_clock``): when frames vanish whole
    (an OS buffer overrun at frame boundaries, a device-side drop of a whole counter wrap
    or more) neither the bytes nor the counter can tell, and the grid falls behind the
-   host clock by whole wraps. When it stays behind by half a wrap or more for
+   host clock by whole wraps. When it stays behind by half a wrap or more, steadily (a
+   device that sends late catches up, and the lag shrinks as it does), for
    CLOCK_CONFIRM_S, the whole wraps the clock implies are placed before the next frame
    (a ``gap`` event by the host clock, counted as ``clock_wraps``): a shift of a whole
    wrap never passes silently. The samples between the loss and that point sit early
@@ -62,11 +63,12 @@ MAX_SAMPLE_RATE_HZ = 1e6
 #: four aux channels)
 MAX_GAP_S = 3600.0
 MAX_GAP_SAMPLES = 2**24
-#: the grid must stay behind the host clock by half a counter wrap or more for this long
-#: (s), over at least CLOCK_CONFIRM_N looks, before the clock's whole wraps are placed: a
-#: late read (USB latency, a busy host) is over sooner
-CLOCK_CONFIRM_S = 0.3
-CLOCK_CONFIRM_N = 3
+#: the grid must stay behind the host clock by half a counter wrap or more, varying by
+#: less than half a wrap, for this long (s) and over at least CLOCK_CONFIRM_N looks, before
+#: the clock's whole wraps are placed: a late read (USB latency, a busy host) is over
+#: sooner, and a device that sends late catches up (the lag shrinks) meanwhile
+CLOCK_CONFIRM_S = 0.5
+CLOCK_CONFIRM_N = 4
 #: the device may run this much slower than ``sample_rate_hz`` (relative) without a wrap
 #: being inferred: ten times a crystal's 100 ppm
 CLOCK_DRIFT = 1e-3
@@ -217,9 +219,12 @@ class GridAssembler:
             self._clk_base = min(behind, base + CLOCK_DRIFT * self.sample_rate_hz * (t_host_s - self._clk_t))
             self._clk_t, self._clk_up, self._clk_ok = t_host_s, (), (t_host_s, self.t_next_s)
             return
-        up = self._clk_up = (*self._clk_up, (t_host_s, excess))
-        if len(up) >= CLOCK_CONFIRM_N and t_host_s - up[0][0] >= CLOCK_CONFIRM_S:
-            self._wraps = (int(min(e for _, e in up) / M + 0.5), self._clk_ok[1])
+        up = self._clk_up = tuple(x for x in (*self._clk_up, (t_host_s, excess))
+                                  if x[0] >= t_host_s - CLOCK_CONFIRM_S)   # the looks of the last CLOCK_CONFIRM_S
+        lows = [e for _, e in up]
+        if (t_host_s - self._clk_ok[0] > CLOCK_CONFIRM_S and len(up) >= CLOCK_CONFIRM_N
+                and max(lows) - min(lows) < M / 2):
+            self._wraps = (int(min(lows) / M + 0.5), self._clk_ok[1])
             self._clk_up = ()
 
     # -- rules 1 and 2 ---------------------------------------------------------------------

@@ -37,6 +37,11 @@ READ_TIMEOUT_S = 0.05
 #: bytes one wake takes at most; a longer backlog (after a long host stall) is taken by
 #: the next wakes, without a pause
 READ_MAX_BYTES = 1 << 20
+#: what Linux hands one read of a tty at most (its line discipline's buffer, 4 KiB less
+#: one byte: ``in_waiting`` shows no more): after a read that took this much, more may be
+#: on its way from the driver, so the reader waits for it (up to READ_TIMEOUT_S) before it
+#: counts the port drained, and the next wake comes after READ_PAUSE_S / 10
+READ_BURST_BYTES = 4095
 #: how late (s) the bytes of a device may reach a read that found nothing more waiting
 #: (USB latency, the kernel handing input over, a busy host), when the clock bounds a gap
 CLOCK_SLACK_S = 1.0
@@ -70,6 +75,7 @@ class SerialSource(LiveSource):
         self._need_break = False              # the port was reopened: the next frame follows an outage
         self.read_pause_s = read_pause_s
         self._drained = True                  # (reader) the last wake took everything waiting
+        self._burst = False                   # (reader) ... and at least READ_BURST_BYTES
         self._ref_t: float | None = None      # (consumer) when a read last found nothing more waiting (s)
         self._frames_after: float | None = None  # the last frames pushed were sent after this (s)
 
@@ -106,22 +112,27 @@ class SerialSource(LiveSource):
         """One wake: every byte waiting, as one ``("data", bytes, t_s, drained)`` item;
         ``drained``: a read at clock time ``t_s`` found nothing more waiting (so every byte
         sent before then, less the delivery latency, is in the item or before it)."""
-        if self.read_pause_s and self._drained and self._stop.wait(self.read_pause_s):
+        pause = self.read_pause_s / (10 if self._burst else 1)
+        if pause and self._drained and self._stop.wait(pause):
             return []
         chunks: list[bytes] = []
-        total = waiting = 0
+        total = waiting = last = 0
         t = self._clock()
         while total < READ_MAX_BYTES:
             t = self._clock()
             waiting = ser.in_waiting
-            if not waiting:
+            if waiting:
+                data = ser.read(min(waiting, READ_MAX_BYTES - total))
+            elif last >= READ_BURST_BYTES:       # the kernel may not have handed the rest over yet
+                data = ser.read(1)
+            else:
                 break
-            data = ser.read(min(waiting, READ_MAX_BYTES - total))
             if not data:
                 break
             chunks.append(data)
             total += len(data)
-        self._drained = not waiting
+            last = len(data)
+        self._drained, self._burst = not waiting, total >= READ_BURST_BYTES
         if chunks:
             return [("data", b"".join(chunks), t if self._drained else self._clock(), self._drained)]
         data = ser.read(1)    # nothing waiting: wait up to the port's timeout (a vanished device raises here)
