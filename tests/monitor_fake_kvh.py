@@ -92,7 +92,7 @@ def run(seconds: float, bad_every: int = 0, rate_hz: float = RATE_HZ, count: boo
                 data = b"".join(data[36 * i:36 * i + 36] for i in range(due - n) if n + i not in gone)
             view = memoryview(data)
             w0 = time.monotonic()
-            while view and time.monotonic() - t0 < seconds:  # the pty holds ~20 kB: wait, do not drop
+            while view and time.monotonic() - t0 < seconds + 5:  # the pty holds ~20 kB: wait, do not drop
                 if select.select([], [master], [], 0.1)[1]:
                     view = view[os.write(master, view):]
             waited += time.monotonic() - w0

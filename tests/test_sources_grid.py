@@ -142,6 +142,15 @@ def test_a_device_that_sends_late_and_catches_up_places_no_wrap():
     assert g.counters["clock_wraps"] == 2 and g.counters["samples_missing"] == 256
 
 
+def test_a_device_slower_than_its_rate_is_no_loss_but_a_loss_on_top_of_it_is():
+    """The device runs 1 % slower than ``sample_rate_hz`` (ten times the drift allowed):
+    the grid falls behind the clock gradually, never by a step, so nothing is placed for
+    it; 128 frames lost at once on top of it are one wrap, exactly."""
+    g = GridAssembler(FS, 128)
+    looks(g, range(60_000), lambda k: k / (FS * 0.99), lost=range(30_000, 30_128))
+    assert g.counters["clock_wraps"] == 1 and g.counters["samples_missing"] == 128
+
+
 def test_the_clock_decision_replays_from_the_sidecar_record():
     """What the clock decided (grid.decisions) placed again by ``place`` on a grid without
     a clock gives the same samples and counters."""

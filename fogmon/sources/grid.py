@@ -20,15 +20,19 @@ samples lost is decided, in this order, by
 A host stall (CPU load, GC, a slow sink) therefore never creates a gap: the OS buffers
 the bytes, and they arrive later but continuous.
 
-3. the host clock, for a live byte stream (``observe_clock``): when frames vanish whole
-   (an OS buffer overrun at frame boundaries, a device-side drop of a whole counter wrap
-   or more) neither the bytes nor the counter can tell, and the grid falls behind the
-   host clock by whole wraps. When it stays behind by half a wrap or more, steadily (a
-   device that sends late catches up, and the lag shrinks as it does), for
-   CLOCK_CONFIRM_S, the whole wraps the clock implies are placed before the next frame
-   (a ``gap`` event by the host clock, counted as ``clock_wraps``): a shift of a whole
-   wrap never passes silently. The samples between the loss and that point sit early
-   by those wraps (the event says since when).
+3. the host clock, for a live byte stream (``observe_clock``, at every read that found
+   nothing more waiting): when frames vanish whole (an OS buffer overrun at frame
+   boundaries, a device-side drop of a whole counter wrap or more) neither the bytes nor
+   the counter can tell, and the grid falls behind the host clock by whole wraps, in one
+   step. When it steps back by half a wrap or more from one look to the next and then
+   stays there, varying by less than half a wrap, for CLOCK_CONFIRM_S, the whole wraps of
+   that step are placed before the next frame (a ``gap`` event by the host clock, counted
+   as ``clock_wraps``): a shift of a whole wrap never passes silently. The samples
+   between the loss and that point sit early by those wraps (the event says since when).
+   A device that sends late catches up (the lag shrinks) and one slower than its rate
+   falls behind gradually (no step): neither is taken for a loss. Assumed: the bytes
+   reach the host's buffer less than half a wrap after the device sent them (a device
+   buffers no more).
 
 Plausible gaps only: every count that sizes an array is checked first. The gaps of one
 push may hold at most ``max_gap`` samples (``gap_limit``: what the time the source can
@@ -165,12 +169,14 @@ class GridAssembler:
         self._frames_in = 0          # frames pushed so far
         self._placed: tuple[Placed, ...] = ()   # to place, frame counted from the first frame pushed
         # the host clock (rule 3): the baseline (samples the grid is behind the clock, + a
-        # constant) and when it was set (host s); looks behind by half a wrap or more
-        # ((host s, excess), ...); the last look that was not (host s, grid t_s); wraps due
+        # constant) and when it was set (host s); the previous look (excess over the
+        # baseline, grid t_s); a step up (the excess before it, grid t_s before it, host s
+        # of the first look after it) and the looks since (host s, excess); wraps due
         self._clk_base: float | None = None
         self._clk_t = 0.0
+        self._clk_prev = (0.0, 0.0)
+        self._clk_step: tuple[float, float, float] | None = None
         self._clk_up: tuple[tuple[float, float], ...] = ()
-        self._clk_ok = (0.0, 0.0)
         self._wraps: tuple[int, float] | None = None
         self.counters = {"seq_gaps": 0, "samples_missing": 0, "invalid_samples": 0,
                          **{f"invalid_samples_{a}": 0 for a in self.axes}, "implausible_gaps": 0}
@@ -212,20 +218,27 @@ class GridAssembler:
         behind = t_host_s * self.sample_rate_hz - self.next_index
         base = self._clk_base
         if base is None or behind <= base:        # the first look, or the stream ahead of the baseline
-            self._clk_base, self._clk_t, self._clk_up, self._clk_ok = behind, t_host_s, (), (t_host_s, self.t_next_s)
+            self._clk_base, self._clk_t, self._clk_prev = behind, t_host_s, (0.0, self.t_next_s)
+            self._clk_step, self._clk_up = None, ()
             return
         excess = behind - base
+        before, self._clk_prev = self._clk_prev, (excess, self.t_next_s)
         if excess < M / 2:                        # no wrap lost; the baseline follows a slow drift
             self._clk_base = min(behind, base + CLOCK_DRIFT * self.sample_rate_hz * (t_host_s - self._clk_t))
-            self._clk_t, self._clk_up, self._clk_ok = t_host_s, (), (t_host_s, self.t_next_s)
+            self._clk_t, self._clk_step, self._clk_up = t_host_s, None, ()
+            return
+        if excess - before[0] >= M / 2 and self._clk_step is None:   # a step up since the previous look
+            self._clk_step = (*before, t_host_s)
+        if self._clk_step is None:                # behind by creeping up (a slow device), not by a step
             return
         up = self._clk_up = tuple(x for x in (*self._clk_up, (t_host_s, excess))
                                   if x[0] >= t_host_s - CLOCK_CONFIRM_S)   # the looks of the last CLOCK_CONFIRM_S
         lows = [e for _, e in up]
-        if (t_host_s - self._clk_ok[0] > CLOCK_CONFIRM_S and len(up) >= CLOCK_CONFIRM_N
-                and max(lows) - min(lows) < M / 2):
-            self._wraps = (int(min(lows) / M + 0.5), self._clk_ok[1])
-            self._clk_up = ()
+        e0, t0_s, t_step = self._clk_step
+        if t_host_s - t_step >= CLOCK_CONFIRM_S and len(up) >= CLOCK_CONFIRM_N and max(lows) - min(lows) < M / 2:
+            wraps = int((min(lows) - e0) / M + 0.5)
+            self._wraps = (wraps, t0_s) if wraps > 0 else None
+            self._clk_step, self._clk_up = None, ()
 
     # -- rules 1 and 2 ---------------------------------------------------------------------
     def _missing_before_first(self, seq0: int, skipped0: int, frame_bytes: int) -> tuple[int, int]:
