@@ -312,27 +312,33 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
 # -- reading as fast as the device sends; idle costs nothing ------------------------------
 class CappedPort:
     """A port holding ``data`` of which, like a tty, at most 4095 bytes are visible to
-    ``in_waiting`` at a time (the kernel hands the rest over as the reader takes them)."""
+    ``in_waiting`` at a time (the kernel hands the rest over as the reader takes them);
+    ``late``: after each full 4095 bytes taken, the kernel has not handed the next over
+    yet when the reader looks (``in_waiting`` 0), but does while a read waits."""
 
-    def __init__(self, data: bytes):
-        self.data, self.pos = data, 0
+    def __init__(self, data: bytes, late: bool = False):
+        self.data, self.pos, self.late, self.held = data, 0, late, False
 
     @property
     def in_waiting(self):
-        return min(len(self.data) - self.pos, 4095)
+        return 0 if self.held else min(len(self.data) - self.pos, 4095)
 
     def read(self, n):
+        self.held = False
         out = self.data[self.pos:self.pos + min(n, self.in_waiting)]
         self.pos += len(out)
+        self.held = self.late and len(out) == 4095
         return out
 
 
-def test_one_wake_takes_every_byte_waiting():
-    """300 kB waiting (4 s of a 2 kHz format A stream) behind a 4 kB window: one wake of
-    the reader takes all of it, as one item that says it found nothing more waiting."""
+@pytest.mark.parametrize("late", [False, True])
+def test_one_wake_takes_every_byte_waiting(late):
+    """300 kB waiting (4 s of a 2 kHz format A stream) behind a 4 kB window, handed over
+    at once or late: one wake of the reader takes all of it, as one item that says it
+    found nothing more waiting."""
     data, _ = stream(8300)
     src = SerialSource("capped", 921600, KvhCodec("a", "rate", "deg", "z", 2000.0, MAX_RATE_DPH))
-    (item,) = src._read(CappedPort(data))
+    (item,) = src._read(CappedPort(data, late))
     assert item[0] == "data" and item[1] == data and item[3] is True
 
 

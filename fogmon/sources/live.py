@@ -157,7 +157,11 @@ class LiveSource:
                 except queue.Empty:
                     item = None
                 if item is not None:
-                    ended = self._handle(item, parts, events)
+                    try:
+                        ended = self._handle(item, parts, events)
+                    except FogmonError:            # (what came before it is delivered first)
+                        yield self._take(parts, events, errors)
+                        raise
                     if not ended and self._clock() - last_yield < self.block_s:
                         continue
                 now = self._clock()
