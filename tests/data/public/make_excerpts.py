@@ -200,6 +200,10 @@ def build(m: Mirror) -> dict[str, bytes]:
         m.read(CSS, "examples/data-processing/LOG/2F6913DB/00000004/00000001.MF4"), 0.0, 35.0)
     for suffix in (".asc", ".blf", ".trc", ".log", ".csv"):
         out[f"can/canmod_imu_8s{suffix}"] = can_log_as(clean, suffix)
+    # the same DBC with a cycle time that contradicts the log (20 ms, the log runs at 100 Hz)
+    out["can/canmod-gps_cycle20ms.dbc"] = dbc.rstrip() + (
+        b'\nBA_DEF_ BO_  "GenMsgCycleTime" INT 0 65535;\nBA_DEF_DEF_  "GenMsgCycleTime" 0;'
+        b'\nBA_ "GenMsgCycleTime" BO_ 9 20;\n')
     orig("can/cantools_timing.dbc", CANTOOLS, "tests/files/dbc/timing.dbc")
     orig("can/cantools_vehicle.dbc", CANTOOLS, "tests/files/dbc/vehicle.dbc")
 
