@@ -23,25 +23,30 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from fogmon.explain.candidates import coefficients, lines, mean, spectral, spikes, white_level
 from fogmon.explain.candidates.base import Candidate, Context
+from fogmon.explain.candidates.coefficients import noise
+from fogmon.explain.candidates.lines import vibration_lines
+from fogmon.explain.candidates.mean import bias_step, periodic, rate_ramp, scale_factor, thermal_drift, warm_up
+from fogmon.explain.candidates.spectral import bandwidth, markov
+from fogmon.explain.candidates.spikes import glitches, outliers
+from fogmon.explain.candidates.white_level import temperature_noise, vibration_noise
 
 #: kind -> the function fitting it to a context (None: not applicable to this residual)
 CANDIDATES: dict[str, Callable[[Context], Candidate | None]] = {
-    "periodic": mean.periodic,
-    "bias_step": mean.bias_step,
-    "rate_ramp": mean.rate_ramp,
-    "warm_up": mean.warm_up,
-    "scale_factor": mean.scale_factor,
-    "thermal_drift": mean.thermal_drift,
-    "glitches": spikes.glitches,
-    "outliers": spikes.outliers,
-    "markov": spectral.markov,
-    "bandwidth": spectral.bandwidth,
-    "vibration_noise": white_level.vibration_noise,
-    "temperature_noise": white_level.temperature_noise,
-    "vibration_lines": lines.vibration_lines,
-    "noise": coefficients.noise,
+    "periodic": periodic,
+    "bias_step": bias_step,
+    "rate_ramp": rate_ramp,
+    "warm_up": warm_up,
+    "scale_factor": scale_factor,
+    "thermal_drift": thermal_drift,
+    "glitches": glitches,
+    "outliers": outliers,
+    "markov": markov,
+    "bandwidth": bandwidth,
+    "vibration_noise": vibration_noise,
+    "temperature_noise": temperature_noise,
+    "vibration_lines": vibration_lines,
+    "noise": noise,
 }
 
 __all__ = ["CANDIDATES", "Candidate", "Context"]
