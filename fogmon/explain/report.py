@@ -19,7 +19,7 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.explain.baseline import low_pass_index
-from fogmon.explain.catalogue import NOISE_UNIT, noise_text
+from fogmon.explain.candidates.coefficients import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
 from fogmon.explain.mismatch import CHANCE_SCORE
