@@ -11,7 +11,8 @@ from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
 from fogmon.explain import mismatch
-from fogmon.explain.explainer import Options, explain
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import simulate

@@ -29,7 +29,8 @@ from scipy.stats import norm
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.bootstrap import Progress
-from fogmon.explain.explainer import Options, Result, explain, without_motion
+from fogmon.explain.explainer import Result, explain, without_motion
+from fogmon.explain.options import Options
 from fogmon.formats.recording import Recording
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, validate_model
 

@@ -14,25 +14,13 @@ from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, rescored
 from fogmon.explain.bootstrap import Progress, bootstrap, default_n_boot
 from fogmon.explain.caveats import nonstationary_warnings, too_short_warnings
+from fogmon.explain.options import Options
 from fogmon.explain.selection import Accepted, Selection, Setting
 from fogmon.formats.recording import Recording
 from fogmon.motion import find_motion, motion_mask
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import ramp_dph
-
-
-@dataclass
-class Options:
-    """Map window (s, default duration/8), bootstrap replicates (default by length),
-    family-wise significance, seed, effect budget, worker processes."""
-
-    window_s: float | None = None
-    n_boot: int | None = None
-    alpha: float = 0.01
-    seed: int = 12345
-    max_effects: int = 8
-    workers: int = 0  # 0: os.cpu_count()
 
 
 @dataclass
