@@ -153,6 +153,8 @@ def test_rrd_raw_rate_aux_and_events(run_rrd):
     texts = read_texts(path, "/events")
     assert "100.00 s  crc_error: frame 42: bad CRC" in texts          # the recording time leads each message
     assert rgb(read_column(path, "/aux/temp_c", "SeriesLines:colors")[0][1][0]) == aux_colour(0)
+    _, frames = read_scalars(path, "/aux/temp_c/y_range")           # rounded out, as the tracks' (below)
+    assert frames[-1][0] <= temp.min() and temp.max() <= frames[-1][1] and _nice(*frames[-1])
 
 
 def test_event_text_leads_with_the_time_and_says_the_kind_once():

@@ -94,8 +94,7 @@ def _aux_views(aux_names: Sequence[str]) -> list:
 
     if not aux_names:
         return []
-    views = [_series(f"/aux/{n}", "$origin/**", f"Aux {n} (unit in its name) over time (s)", legend=False)
-             for n in aux_names]
+    views = [_series(f"/aux/{n}", "$origin/**", f"Aux {n}", legend=False) for n in aux_names]
     cols = len(views) if len(views) <= 3 else math.ceil(len(views) / 2)
     return [rrb.Grid(*views, grid_columns=cols)]
 

@@ -8,7 +8,8 @@ Entities (units in every name; "log10" said where the value is a log):
 - ``rate/rate_dph`` raw rate in deg/h (and ``rate/error_dph`` = rate_dph - 3600 x rot_dps,
   what DAVAR analyses, when the recording has a reference rotation). Above DISPLAY_MAX_HZ it is shown as the mean of
   consecutive valid samples (decimated for display only; the engine sees every sample,
-  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels.
+  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels,
+  with ``aux/<name>/y_range`` the channel's range so far rounded out, like the tracks'.
 - ``dadev/log10_adev_dph`` log10 of the ADEV (deg/h) at every tau, one row per window
   (time = the window's last sample); ``dadev/heatmap`` the latest HEATMAP_WINDOWS windows
   as a colour image (``image``; rows: tau, largest at the top; columns: windows, newest
@@ -98,6 +99,9 @@ FLUSH_SAMPLES = 1 << 16
 FLUSH_TIMEOUT_S = 30.0
 #: Model points per decade of tau drawn over the fitted range.
 MODEL_POINTS_PER_DECADE = 20
+#: Steps of an aux channel's rounded y range (plots.nice_range) when its views share two
+#: rows (more than three channels): about 60 pixels tall, room for two labelled ticks.
+AUX_STEPS = 3
 #: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
 UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
@@ -267,6 +271,12 @@ class RerunSink(Sink):
             b = first.axis(a) if a else first
             y = b.error_rate_dph if error_rate else b.rate_dph
             y_decs.append(_adev_decades(y[b.valid & np.isfinite(y)], len(tau)))
+        for lo, _, hi in info.model_bands.values():      # the --model band is drawn whole
+            with np.errstate(divide="ignore", invalid="ignore"):
+                band = np.log10(np.r_[np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)])
+            if np.isfinite(band).any():
+                y_decs.append((math.floor(np.nanmin(band[np.isfinite(band)])),
+                               math.ceil(np.nanmax(band[np.isfinite(band)]))))
         self._decades = (x_dec, (min(d[0] for d in y_decs), max(d[1] for d in y_decs)))
         self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes)
         self.rec = _Streams()
@@ -322,6 +332,9 @@ class RerunSink(Sink):
         for k, name in enumerate(info.aux_names):
             label = name if self.step == 1 else f"{name} (mean of {self.step} samples)"
             rec.log(f"aux/{name}", rr.SeriesLines(names=[label], colors=[aux_colour(k)]), static=True)
+            rec.log(f"aux/{name}/{Y_RANGE}", rr.SeriesPoints(
+                names=["y axis range (rounded out), bottom", "y axis range (rounded out), top"],
+                colors=[(0, 0, 0, 0)] * 2, marker_sizes=[0.0, 0.0]), static=True)
         axes = f"axes: {', '.join(info.axes)}\n" if info.axes else ""
         rec.log("session", rr.TextDocument(
             f"source: {info.source_name}\n{axes}analysed: {info.analysed} (deg/h)\n"
@@ -374,6 +387,8 @@ class RerunSink(Sink):
             if ok.any():
                 self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
                                       columns=rr.Scalars.columns(scalars=v[ok]))
+                if ent.startswith("aux/"):
+                    self._queue_aux_range(ent, float(t[ok][-1]), v[ok])
         for ent, rows in self._rows.items():
             if rows.t_s:
                 rows.send(self.rec, ent, np.array(rows.t_s, dtype=np.float64), rows.values)
@@ -433,6 +448,15 @@ class RerunSink(Sink):
         ok = np.isfinite(run_lo) & np.isfinite(run_hi)
         self._queue(axis_path(axis, f"coef/{name}/{Y_RANGE}"), _send_scalars, t_end_s[ok],
                     [np.array(rp.nice_range(a, b)) for a, b in zip(run_lo[ok], run_hi[ok], strict=True)])
+
+    def _queue_aux_range(self, entity: str, t_s: float, values: np.ndarray) -> None:
+        """An aux channel's range so far, rounded out (plots.nice_range: at most AUX_STEPS
+        steps, its views being small), as ``aux/<name>/y_range`` points at ``t_s`` (s)."""
+        lo, hi = self._y_ranges.get(entity, (math.inf, -math.inf))
+        lo, hi = min(lo, float(values.min())), max(hi, float(values.max()))
+        self._y_ranges[entity] = (lo, hi)
+        steps = AUX_STEPS if len(self.info.aux_names) > 3 else 6     # more than 3: two rows of small views
+        self._queue(f"{entity}/{Y_RANGE}", _send_scalars, [t_s], [np.array(rp.nice_range(lo, hi, steps))])
 
     def _log_legend(self, confidence: float) -> None:
         """The ADEV-curve view's legend (static; the bounds' confidence is known from the
