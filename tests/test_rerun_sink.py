@@ -153,8 +153,22 @@ def test_rrd_raw_rate_aux_and_events(run_rrd):
     texts = read_texts(path, "/events")
     assert "100.00 s  crc_error: frame 42: bad CRC" in texts          # the recording time leads each message
     assert rgb(read_column(path, "/aux/temp_c", "SeriesLines:colors")[0][1][0]) == aux_colour(0)
-    _, frames = read_scalars(path, "/aux/temp_c/y_range")           # rounded out, as the tracks' (below)
-    assert frames[-1][0] <= temp.min() and temp.max() <= frames[-1][1] and _nice(*frames[-1])
+    assert len(read_scalars(path, "/aux/temp_c/y_range")[0]) == 0      # one aux view: tall, its own range
+
+
+def test_many_aux_channels_get_rounded_y_ranges(tmp_path):
+    """More than three aux channels share two rows of small views: each gets its range
+    so far rounded out to <= 3 steps of a power of ten (two labelled ticks)."""
+    t, r = _white(3000, 10.0, seed=3)
+    aux = {f"c{k}": np.linspace(0.0, 720.0 * (k + 1), 3000) for k in range(4)}
+    path = str(tmp_path / "aux.rrd")
+    run_pipeline(ListSource(t, r, [1000] * 3, 10.0, aux=aux), _args(window_s=51.2, hop_s=12.8),
+                 sinks=[RerunSink(rrd_path=path)])
+    for k, v in enumerate(aux.values()):
+        _, frames = read_scalars(path, f"/aux/c{k}/y_range")
+        lo, hi = frames[-1]
+        assert lo <= v.min() and v.max() <= hi and round((hi - lo) / 10 ** np.floor(np.log10(hi - lo))) <= 3
+    assert tuple(read_scalars(path, "/aux/c0/y_range")[1][-1]) == (0.0, 1000.0)
 
 
 def test_event_text_leads_with_the_time_and_says_the_kind_once():

@@ -95,7 +95,7 @@ def _aux_views(aux_names: Sequence[str]) -> list:
     if not aux_names:
         return []
     views = [_series(f"/aux/{n}", "$origin/**", f"Aux {n}", legend=False) for n in aux_names]
-    cols = len(views) if len(views) <= 3 else math.ceil(len(views) / 2)
+    cols = len(views) if len(views) <= 3 else math.ceil(len(views) / 2)     # sink.AUX_ONE_ROW
     return [rrb.Grid(*views, grid_columns=cols)]
 
 

@@ -8,8 +8,8 @@ Entities (units in every name; "log10" said where the value is a log):
 - ``rate/rate_dph`` raw rate in deg/h (and ``rate/error_dph`` = rate_dph - 3600 x rot_dps,
   what DAVAR analyses, when the recording has a reference rotation). Above DISPLAY_MAX_HZ it is shown as the mean of
   consecutive valid samples (decimated for display only; the engine sees every sample,
-  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels,
-  with ``aux/<name>/y_range`` the channel's range so far rounded out, like the tracks'.
+  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels
+  (with more than AUX_ONE_ROW, ``aux/<name>/y_range``: the range so far rounded out).
 - ``dadev/log10_adev_dph`` log10 of the ADEV (deg/h) at every tau, one row per window
   (time = the window's last sample); ``dadev/heatmap`` the latest HEATMAP_WINDOWS windows
   as a colour image (``image``; rows: tau, largest at the top; columns: windows, newest
@@ -99,9 +99,10 @@ FLUSH_SAMPLES = 1 << 16
 FLUSH_TIMEOUT_S = 30.0
 #: Model points per decade of tau drawn over the fitted range.
 MODEL_POINTS_PER_DECADE = 20
-#: Steps of an aux channel's rounded y range (plots.nice_range) when its views share two
-#: rows (more than three channels): about 60 pixels tall, room for two labelled ticks.
-AUX_STEPS = 3
+#: More aux channels than this share two rows of small views (about 60 pixels tall), whose
+#: y ranges are rounded out (plots.nice_range) to at most AUX_STEPS steps: two labelled
+#: ticks. In one row (about 200 pixels) the data's own range is labelled.
+AUX_ONE_ROW, AUX_STEPS = 3, 3
 #: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
 UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
@@ -332,9 +333,10 @@ class RerunSink(Sink):
         for k, name in enumerate(info.aux_names):
             label = name if self.step == 1 else f"{name} (mean of {self.step} samples)"
             rec.log(f"aux/{name}", rr.SeriesLines(names=[label], colors=[aux_colour(k)]), static=True)
-            rec.log(f"aux/{name}/{Y_RANGE}", rr.SeriesPoints(
-                names=["y axis range (rounded out), bottom", "y axis range (rounded out), top"],
-                colors=[(0, 0, 0, 0)] * 2, marker_sizes=[0.0, 0.0]), static=True)
+            if len(info.aux_names) > AUX_ONE_ROW:
+                rec.log(f"aux/{name}/{Y_RANGE}", rr.SeriesPoints(
+                    names=["y axis range (rounded out), bottom", "y axis range (rounded out), top"],
+                    colors=[(0, 0, 0, 0)] * 2, marker_sizes=[0.0, 0.0]), static=True)
         axes = f"axes: {', '.join(info.axes)}\n" if info.axes else ""
         rec.log("session", rr.TextDocument(
             f"source: {info.source_name}\n{axes}analysed: {info.analysed} (deg/h)\n"
@@ -387,7 +389,7 @@ class RerunSink(Sink):
             if ok.any():
                 self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
                                       columns=rr.Scalars.columns(scalars=v[ok]))
-                if ent.startswith("aux/"):
+                if ent.startswith("aux/") and len(self.info.aux_names) > AUX_ONE_ROW:
                     self._queue_aux_range(ent, float(t[ok][-1]), v[ok])
         for ent, rows in self._rows.items():
             if rows.t_s:
@@ -450,13 +452,12 @@ class RerunSink(Sink):
                     [np.array(rp.nice_range(a, b)) for a, b in zip(run_lo[ok], run_hi[ok], strict=True)])
 
     def _queue_aux_range(self, entity: str, t_s: float, values: np.ndarray) -> None:
-        """An aux channel's range so far, rounded out (plots.nice_range: at most AUX_STEPS
-        steps, its views being small), as ``aux/<name>/y_range`` points at ``t_s`` (s)."""
+        """An aux channel's range so far, rounded out (plots.nice_range, AUX_STEPS), as
+        ``aux/<name>/y_range`` points at ``t_s`` (s)."""
         lo, hi = self._y_ranges.get(entity, (math.inf, -math.inf))
         lo, hi = min(lo, float(values.min())), max(hi, float(values.max()))
         self._y_ranges[entity] = (lo, hi)
-        steps = AUX_STEPS if len(self.info.aux_names) > 3 else 6     # more than 3: two rows of small views
-        self._queue(f"{entity}/{Y_RANGE}", _send_scalars, [t_s], [np.array(rp.nice_range(lo, hi, steps))])
+        self._queue(f"{entity}/{Y_RANGE}", _send_scalars, [t_s], [np.array(rp.nice_range(lo, hi, AUX_STEPS))])
 
     def _log_legend(self, confidence: float) -> None:
         """The ADEV-curve view's legend (static; the bounds' confidence is known from the
