@@ -64,6 +64,12 @@ def read_texts(path, entity):
     return out
 
 
+def read_event_messages(path, entity):
+    """The events' messages in an .rrd without the recording time that leads each
+    (``sink.event_text``: "12.50 s  crc_error: ...")."""
+    return [x.split(" s  ", 1)[1] for x in read_texts(path, entity)]
+
+
 def read_views(path):
     """The views of an .rrd's blueprint: display name -> {class, origin, contents, and
     ``props``: its properties (``/view/<id>/<property>`` -> {component: value})}."""
