@@ -4,7 +4,6 @@ columns' names (``rate_dph``, or ``rate_<axis>_dph`` per axis), the nominal samp
 (Hz) and the uniform sample grid the samples sit on (s)."""
 from __future__ import annotations
 
-import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -119,7 +118,7 @@ def sample_rate_from(meta: dict, t_s: np.ndarray, name: str) -> float:
     if len(t_s) < 2:
         raise FogmonError(f"{name}: too few samples to know the sample rate")
     step = float(np.median(np.diff(t_s[:RATE_SAMPLES])))
-    if not 1.0 / MAX_SAMPLE_RATE_HZ <= step:
+    if not step >= 1.0 / MAX_SAMPLE_RATE_HZ:
         raise FogmonError(f"{name}: column time_s: median step {step!r} s: not time stamps of a sample rate "
                           f"up to {MAX_SAMPLE_RATE_HZ:g} Hz")
     return 1.0 / step

@@ -33,7 +33,7 @@ from fogmon.formats.replay_log import read_replay_log
 from fogmon.sources.base import Source
 from fogmon.sources.codecs.protocols import CODECS, PROTOCOLS, make_codec
 from fogmon.sources.files.capture import read_capture_sidecar
-from fogmon.sources.files.listing import Entry, stamped_entry
+from fogmon.sources.files.listing import Entry, reading, stamped_entry
 from fogmon.sources.options import SourceOptions
 
 T = TypeVar("T")
@@ -163,14 +163,9 @@ def _module(r: Reader, path: str) -> ModuleType:
 def _guarded(r: Reader, path: str, call: Callable[[], T]) -> T:
     """``call()``, with any exception other than a FogmonError turned into one line naming
     the file, the format and the exception (a corrupt file, whatever library reads it)."""
-    try:
+    with reading(f"{path}: not a readable {r.what} file"):
         return call()
-    except FogmonError:
-        raise
-    except Exception as e:  # any library's error on a corrupt file: one line, never a traceback
-        why = (str(e).splitlines() or [""])[0][:200]
-        raise FogmonError(f"{path}: not a readable {r.what} file ({type(e).__name__}{': ' + why if why else ''})"
-                          ) from None
+    raise AssertionError("unreachable")
 
 
 def open_replay_source(path: str | os.PathLike, opts: SourceOptions | None = None) -> Source:

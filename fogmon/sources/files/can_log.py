@@ -12,6 +12,7 @@ memory), so a broken log, a message that never occurs or a wrong rate is a one-l
 error before any work."""
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from collections import Counter
@@ -26,7 +27,7 @@ from fogmon.sources import plausibility
 from fogmon.sources.codecs import can as can_codec
 from fogmon.sources.codecs.can import CanDecoder, load_dbc
 from fogmon.sources.files.capture import read_capture_sidecar
-from fogmon.sources.files.listing import Entry, quiet, stamped_entry
+from fogmon.sources.files.listing import Entry, reading, stamped_entry
 from fogmon.sources.files.stamped import StampedSource
 from fogmon.sources.options import SourceOptions
 
@@ -60,39 +61,25 @@ def _messages(paths: list[str], first: str):
     log python-can cannot read."""
     kwargs = {"relative_timestamp": False} if len(paths) > 1 else {}
     for path in paths:
-        try:
-            with quiet():
-                reader = can.LogReader(path, **kwargs)
-        except Exception as e:  # unknown suffix, unreadable header, ...
-            raise FogmonError(f"{path}: cannot read as a CAN log ({type(e).__name__}: {_first_line(e)})") from None
-        it = iter(reader)
+        with reading(f"{path}: cannot read as a CAN log"):   # unknown suffix, unreadable header, ...
+            reader = can.LogReader(path, **kwargs)
+            it = iter(reader)
         n = 0
         try:
             while True:
-                chunk = []
-                try:
-                    with quiet():
-                        for m in it:
-                            chunk.append(m)
-                            if len(chunk) >= CHUNK:
-                                break
-                except Exception as e:  # a corrupt log: say where, do not trace back
-                    raise FogmonError(f"{path}: unreadable CAN log after {n + len(chunk)} frames "
-                                      f"({type(e).__name__}: {_first_line(e)})") from None
+                chunk: list = []
+                with reading(f"{path}: unreadable CAN log after {n} frames"):    # a corrupt log
+                    for m in it:
+                        chunk.append(m)
+                        if len(chunk) >= CHUNK:
+                            break
                 if not chunk:
                     break
                 n += len(chunk)
                 yield chunk
         finally:
-            with quiet():
-                try:
-                    reader.stop()
-                except Exception:  # noqa: S110 (closing a broken log: nothing more to say)
-                    pass
-
-
-def _first_line(e: BaseException) -> str:
-    return (str(e).splitlines() or [""])[0][:200]
+            with contextlib.suppress(FogmonError), reading(f"{path}: closing"):
+                reader.stop()
 
 
 def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar: dict | None,

@@ -20,7 +20,7 @@ from datetime import datetime
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.files.listing import Entry, quiet, stamped_entry
+from fogmon.sources.files.listing import Entry, reading, stamped_entry
 from fogmon.sources.files.stamped import StampedSource, dph_per_unit
 from fogmon.sources.options import SourceOptions
 
@@ -190,12 +190,8 @@ def open_source(path: str, opts: SourceOptions) -> StampedSource:
 def _read(path: str):
     """The LAS file ``path`` read by lasio, with at least one curve."""
     import lasio
-    try:
-        with quiet():
-            las = lasio.read(path, ignore_header_errors=False)
-    except Exception as e:  # lasio raises many error types for broken files
-        why = str(e).splitlines()[0][:200] if str(e) else ""
-        raise FogmonError(f"{path}: not a readable LAS file ({type(e).__name__}: {why})") from None
+    with reading(f"{path}: not a readable LAS file"):   # lasio raises many error types for broken files
+        las = lasio.read(path, ignore_header_errors=False)
     if not las.curves:
         raise FogmonError(f"{path}: no curves in the ~Curve section")
     return las

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fogmon.errors import FogmonError
+
 
 @dataclass(frozen=True)
 class Entry:
@@ -75,3 +77,63 @@ def quiet() -> Iterator[None]:
     finally:
         logging.disable(previous)
         sys.stdout.flush()
+
+
+@contextlib.contextmanager
+def reading(what: str) -> Iterator[None]:
+    """A third-party read, ``quiet()``: any exception other than a FogmonError becomes a
+    one-line FogmonError ``what (ExceptionType: its first line)``, raised once the
+    library's objects are released (so that their clean-up output is dropped too)."""
+    why = None
+    with quiet():
+        try:
+            yield
+        except FogmonError:
+            raise
+        except Exception as e:  # any library error on a corrupt file: one line, never a traceback
+            text = (str(e).splitlines() or [""])[0][:200]
+            why = f"{type(e).__name__}{': ' + text if text else ''}"
+    if why is not None:
+        raise FogmonError(f"{what} ({why})")
+
+
+class BoundedFile(io.RawIOBase):
+    """A file read through a budget: reading more than ``times`` times its size (a reader
+    looping on a corrupt file: seeking back to the same bytes forever) raises OSError, so
+    that every reader given it ends in bounded time."""
+
+    def __init__(self, path: str, times: int = 8) -> None:
+        super().__init__()
+        self._fh = open(path, "rb")  # noqa: SIM115 (closed by close())
+        self._fh.seek(0, io.SEEK_END)
+        self._budget = times * max(self._fh.tell(), 1 << 16)
+        self._fh.seek(0)
+        self.name = path
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def readinto(self, b) -> int:
+        n = self._fh.readinto(b)
+        self._budget -= max(n or 0, 1)
+        if self._budget < 0:
+            raise OSError(f"{self.name}: the reader went over the file again and again (a corrupt file)")
+        return n
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        return self._fh.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+    def close(self) -> None:
+        self._fh.close()
+        super().close()
+
+
+def bounded(path: str, times: int = 8) -> io.BufferedReader:
+    """``path`` opened for reading through a BoundedFile (a buffered binary file)."""
+    return io.BufferedReader(BoundedFile(path, times))

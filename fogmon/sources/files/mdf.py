@@ -12,7 +12,7 @@ import os
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.files.listing import Entry, point_to_info, quiet, stamped_entry
+from fogmon.sources.files.listing import Entry, point_to_info, reading, stamped_entry
 from fogmon.sources.files.stamped import StampedSource, dph_per_unit
 from fogmon.sources.options import SourceOptions
 
@@ -22,12 +22,9 @@ MASTER_NAMES = ("t", "time")
 
 def _read(path: str):
     import asammdf
-    try:
-        with quiet():
-            return asammdf.MDF(path)
-    except Exception as e:  # asammdf raises MdfException and plain errors for broken files
-        why = str(e).splitlines()[0][:200] if str(e) else ""
-        raise FogmonError(f"{path}: not a readable MDF file ({type(e).__name__}: {why})") from None
+    with reading(f"{path}: not a readable MDF file"):   # asammdf raises MdfException and plain errors
+        return asammdf.MDF(path)
+    raise AssertionError("unreachable")
 
 
 def info(path: str, opts: SourceOptions) -> list[Entry]:
@@ -35,8 +32,8 @@ def info(path: str, opts: SourceOptions) -> list[Entry]:
     the type; rate and span from the group's master time)."""
     mdf = _read(path)
     out = []
-    try:
-        with quiet(), mdf:
+    with reading(f"{path}: unreadable MDF channel"), mdf:
+        if True:
             for name, where in sorted(mdf.channels_db.items()):
                 if name in MASTER_NAMES:
                     continue
@@ -46,8 +43,6 @@ def info(path: str, opts: SourceOptions) -> list[Entry]:
                         continue
                     t = mdf.get_master(group)
                     out.append(stamped_entry(name, f"channel {group}/{index}", t, getattr(ch, "unit", "") or ""))
-    except Exception as e:  # a corrupt group
-        raise FogmonError(f"{path}: unreadable MDF channel ({type(e).__name__}: {str(e)[:200]})") from None
     return out
 
 
@@ -64,15 +59,11 @@ def open_source(path: str, opts: SourceOptions) -> StampedSource:
         if channel not in mdf.channels_db:
             raise FogmonError(f"{path}: `channel`: no channel {channel!r} in the file (it has: "
                               f"{point_to_info(path, 'channels', names)})")
-        try:
-            with quiet():
-                sig = mdf.get(channel)
-                values, stamps = np.asarray(sig.samples, dtype=np.float64), np.asarray(sig.timestamps, np.float64)
-                invalid = getattr(sig, "invalidation_bits", None)   # samples the logger marked invalid
-                invalid = None if invalid is None else np.asarray(invalid, dtype=bool)
-        except Exception as e:  # several groups hold the name, or the channel cannot be decoded
-            why = str(e).splitlines()[0][:200] if str(e) else type(e).__name__
-            raise FogmonError(f"{path}: `channel` {channel!r}: {why}") from None
+        with reading(f"{path}: `channel` {channel!r}"):   # several groups hold the name, or undecodable
+            sig = mdf.get(channel)
+            values, stamps = np.asarray(sig.samples, dtype=np.float64), np.asarray(sig.timestamps, np.float64)
+            invalid = getattr(sig, "invalidation_bits", None)   # samples the logger marked invalid
+            invalid = None if invalid is None else np.asarray(invalid, dtype=bool)
         where = f"{path} channel {channel}"
         unit = opts.rate_unit or sig.unit
         if values.ndim != 1 or values.shape != stamps.shape:

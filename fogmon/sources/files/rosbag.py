@@ -15,6 +15,7 @@ types instead: the Imu topic is read, the channels of unknown types are skipped 
 counted (``channels_skipped``)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 from pathlib import Path
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from fogmon.errors import FogmonError
-from fogmon.sources.files.listing import Entry, point_to_info, quiet, stamped_entry
+from fogmon.sources.files.listing import Entry, point_to_info, reading, stamped_entry
 from fogmon.sources.files.stamped import DPH_PER_RPS, IMU_AXES, StampedSource, imu_axes
 from fogmon.sources.options import SourceOptions
 from fogmon.units import G0_MPS2
@@ -64,18 +65,18 @@ def _open(path: str):
     from rosbags.typesys import Stores, get_typestore
     store = get_typestore(Stores.ROS2_HUMBLE)
     try:
-        with quiet():
+        with reading(f"{path}: not a readable ROS bag or MCAP file"):   # rosbags' own error types, and others
             reader = AnyReader([Path(path)], default_typestore=store)
             reader.open()
         return reader
-    except Exception as e:  # rosbags raises its own error types (and others) for unreadable files
+    except FogmonError as e:
         first = e
     try:
-        with quiet():
+        with reading(""):
             return _Rosbag2(path, store)
-    except Exception:  # not a ROS 2 storage either: the first error says why
-        why = str(first).splitlines()[0][:200] if str(first) else ""
-        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({type(first).__name__}: {why})") from None
+    except FogmonError:    # not a ROS 2 storage either: the first error says why
+        pass
+    raise first
 
 
 def _topics(reader) -> list[str]:
@@ -136,14 +137,10 @@ def open_source(path: str, opts: SourceOptions) -> StampedSource:
     skipped = len(getattr(reader, "unknown", ()))
     try:
         topic, conns = _topic(path, reader, opts.topic)
-        try:
-            with quiet():
-                ns, v = _read_messages(reader, conns)
-        except Exception as e:  # a corrupt message or chunk: rosbags' own errors, struct errors
-            why = str(e).splitlines()[0][:200] if str(e) else ""
-            raise FogmonError(f"{path}: topic {topic}: unreadable message ({type(e).__name__}: {why})") from None
+        with reading(f"{path}: topic {topic}: unreadable message"):   # a corrupt message or chunk
+            ns, v = _read_messages(reader, conns)
     finally:
-        with quiet():
+        with contextlib.suppress(FogmonError), reading(""):
             reader.close()
     where = f"{path} topic {topic}"
     if len(ns) and not np.any(ns):
@@ -190,15 +187,13 @@ def info(path: str, opts: SourceOptions) -> list[Entry]:
     reader = _open(path)
     out = []
     try:
-        with quiet():
+        with reading(f"{path}: unreadable messages"):   # a corrupt chunk
             for c in sorted(reader.connections, key=lambda c: c.topic):
                 t = [ts * 1e-9 for _, ts, _ in reader.messages(connections=[c])]
                 unit = "rad/s, m/s^2" if c.msgtype == IMU_TYPE else ""
                 out.append(stamped_entry(c.topic, c.msgtype, t, unit))
-    except Exception as e:  # a corrupt chunk
-        raise FogmonError(f"{path}: unreadable messages ({type(e).__name__}: {str(e)[:200]})") from None
     finally:
-        with quiet():
+        with contextlib.suppress(FogmonError), reading(""):
             reader.close()
     return out
 

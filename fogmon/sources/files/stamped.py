@@ -157,8 +157,9 @@ class StampedSource:
 def irregular_message(timing: Timing, where: str) -> str:
     """Why an irregular series is refused and the resampling that fixes it."""
     hint = timing.resample_hint_hz()
-    return (f"{where}: irregular time stamps: {timing.describe()} ({(timing.gaps + timing.bursts) / (timing.n - 1):.0%} "
-            f"of the steps are gaps or under half a period): the Allan deviation would keep few whole terms; "
+    odd = (timing.gaps + timing.bursts) / (timing.n - 1)
+    return (f"{where}: irregular time stamps: {timing.describe()} ({odd:.0%} of the steps are gaps or under half a "
+            f"period): the Allan deviation would keep few whole terms; "
             f"give `resample_hz` (block means on a coarser grid, e.g. {_nice(hint)}; docs/readers.md)")
 
 

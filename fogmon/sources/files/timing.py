@@ -28,7 +28,7 @@ and the field; so are gaps beyond what the file can mean (the stamps spanning mo
 ``fogmon.formats.recording.MAX_SAMPLE_RATE_HZ``).
 
 A series with many gaps or steps under half a period (more than
-``IRREGULAR_GAP_FRACTION`` of its steps: a topic logged at alternating steps, a lossy
+``IRREGULAR_GAP_FRACTION`` of its steps, and more than ``IRREGULAR_MIN``: a topic logged at alternating steps, a lossy
 logger) leaves the Allan deviation few whole terms or no grid; it is refused with the
 resampling that fixes it (``resample_hz``): block means on a coarser uniform grid
 (``block_means``)."""
@@ -49,7 +49,9 @@ LOOKAHEAD = 32
 #: than this fraction of the steps do not sit on one grid: only whole periods count as gaps
 STRETCH_FRACTION = 0.002
 #: a series with more gaps and bursts than this fraction of its steps is irregular
-IRREGULAR_GAP_FRACTION = 0.01
+IRREGULAR_GAP_FRACTION = 0.05
+#: ... and more than this many of them (a short log with a few gaps is not irregular)
+IRREGULAR_MIN = 10
 #: a nominal rate (DBC cycle time, ``sample_rate_hz``) that differs from the stamps' by more
 #: than this fraction is refused (unless forced)
 RATE_TOLERANCE = 0.01
@@ -85,8 +87,9 @@ class Timing:
 
     @property
     def irregular(self) -> bool:
-        """More gaps and bursts than IRREGULAR_GAP_FRACTION of the steps."""
-        return self.gaps + self.bursts > IRREGULAR_GAP_FRACTION * max(self.n - 1, 1)
+        """More gaps and bursts than IRREGULAR_GAP_FRACTION of the steps and IRREGULAR_MIN."""
+        odd = self.gaps + self.bursts
+        return odd > IRREGULAR_MIN and odd > IRREGULAR_GAP_FRACTION * max(self.n - 1, 1)
 
     def resample_hint_hz(self) -> float:
         """A coarser rate whose blocks nearly all hold a sample: the grid rate / (the

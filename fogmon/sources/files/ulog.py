@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 
 from fogmon.errors import FogmonError, FogmonWarning
-from fogmon.sources.files.listing import Entry, quiet, stamped_entry
+from fogmon.sources.files.listing import Entry, bounded, reading, stamped_entry
 from fogmon.sources.files.stamped import DPH_PER_RPS, StampedSource, imu_axes
 from fogmon.sources.options import SourceOptions
 
@@ -32,12 +32,9 @@ def _read(path: str, topics: list[str] | None):
     """The ULog ``path`` read by pyulog (only ``topics``; None: all), or a one-line
     FogmonError naming the file."""
     import pyulog
-    try:
-        with quiet():
-            return pyulog.ULog(path, topics)
-    except Exception as e:  # pyulog raises plain exceptions for broken files
-        why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FogmonError(f"{path}: not a readable ULog file ({type(e).__name__}: {why})") from None
+    with reading(f"{path}: not a readable ULog file"), bounded(path) as fh:   # pyulog: plain exceptions
+        return pyulog.ULog(fh, topics)
+    raise AssertionError("unreachable")
 
 
 def _time_field(d: dict) -> str:
