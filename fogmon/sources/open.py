@@ -163,7 +163,7 @@ def _module(r: Reader, path: str) -> ModuleType:
 def _guarded(r: Reader, path: str, call: Callable[[], T]) -> T:
     """``call()``, with any exception other than a FogmonError turned into one line naming
     the file, the format and the exception (a corrupt file, whatever library reads it)."""
-    with reading(f"{path}: not a readable {r.what} file"):
+    with reading(f"{path}: not a readable {r.what} file", silent=False):
         return call()
     raise AssertionError("unreachable")
 
@@ -210,7 +210,9 @@ def read_recording(path: str | os.PathLike, opts: SourceOptions | None = None) -
 def recording_of(source: Source, path: str) -> Recording:
     """The samples of a finite ``source`` valid on every axis, on their grid times, with
     ``sample_rate_hz`` metadata (a Recording as read_replay_log gives one)."""
-    t, rate, aux = [], [], {}
+    t: list[np.ndarray] = []
+    rate: list[np.ndarray] = []
+    aux: dict[str, list[np.ndarray]] = {}
     axes: tuple[str, ...] = ()
     for b in source.blocks():
         keep = b.valid.all(axis=1) if b.valid.ndim == 2 else b.valid

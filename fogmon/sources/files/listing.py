@@ -80,12 +80,13 @@ def quiet() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def reading(what: str) -> Iterator[None]:
-    """A third-party read, ``quiet()``: any exception other than a FogmonError becomes a
-    one-line FogmonError ``what (ExceptionType: its first line)``, raised once the
-    library's objects are released (so that their clean-up output is dropped too)."""
+def reading(what: str, silent: bool = True) -> Iterator[None]:
+    """A third-party read, ``quiet()`` (unless not ``silent``: fogmon's own code that may
+    warn): any exception other than a FogmonError becomes a one-line FogmonError ``what
+    (ExceptionType: its first line)``, raised once the library's objects are released
+    (so that their clean-up output is dropped too)."""
     why = None
-    with quiet():
+    with quiet() if silent else contextlib.nullcontext():
         try:
             yield
         except FogmonError:

@@ -39,8 +39,6 @@ def info(path: str, opts: SourceOptions) -> list[Entry]:
                     continue
                 for group, index in where:
                     ch = mdf.groups[group].channels[index]
-                    if getattr(ch, "channel_type", 0) in (2, 3):     # a master channel under another name
-                        continue
                     t = mdf.get_master(group)
                     out.append(stamped_entry(name, f"channel {group}/{index}", t, getattr(ch, "unit", "") or ""))
     return out

@@ -66,22 +66,23 @@ class StampedSource:
         aux = {k: np.asarray(v, dtype=np.float64) for k, v in (aux or {}).items()}
         ok = np.ones(rate.shape, bool) if valid is None else np.asarray(valid, bool)
         if ok.ndim < rate.ndim:                     # one flag per sample: every axis
-            ok = np.repeat(ok[:, None], rate.shape[1], axis=1)
+            ok = np.repeat(ok[:, None], rate.shape[-1], axis=1)
         flagged = ~ok
         extra = dict(counters or {})
-        idx, self.timing = grid_index(t, where, time_field, seq, modulus) if resample_hz is None else (None, None)
+        self.timing: Timing | None = None
+        idx: np.ndarray
         if resample_hz is not None:
             idx, rate, aux, flagged, n_bad = _resampled(t, rate, aux, flagged, resample_hz, max_abs_dph, where,
                                                         time_field)
             extra.update({"samples_averaged": len(t), plausibility.COUNTER: n_bad})
             self.sample_rate_hz = float(resample_hz)
         else:
-            assert self.timing is not None
+            idx, self.timing = grid_index(t, where, time_field, seq, modulus)
             if self.timing.irregular:
                 raise FogmonError(irregular_message(self.timing, where))
             self.sample_rate_hz = check_nominal(self.timing, nominal_hz, nominal_what, where, force_rate)
         check_grid_length(int(idx[-1]) + 1, len(idx), where, time_field)
-        self._idx = idx
+        self._idx: np.ndarray = idx
         self.t_first_s = float(t[0])
         self._rate, self._aux, self._flagged = rate, aux, flagged
         self.aux_names = list(self._aux)

@@ -92,9 +92,9 @@ class Timing:
         return odd > IRREGULAR_MIN and odd > IRREGULAR_GAP_FRACTION * max(self.n - 1, 1)
 
     def resample_hint_hz(self) -> float:
-        """A coarser rate whose blocks nearly all hold a sample: the grid rate / (the
-        99th percentile of the gaps' lengths + 1)."""
-        return self.rate_hz / (self.runs_p99 + 1)
+        """A coarser rate whose blocks nearly all hold a sample whatever their phase and
+        the jitter: the grid rate / (the 99th percentile of the gaps' lengths + 2)."""
+        return self.rate_hz / (self.runs_p99 + 2)
 
     def describe(self) -> str:
         """One line: the mean rate, the grid and what is irregular."""
@@ -166,7 +166,7 @@ def grid_index(t_s, where: str, time_field: str, seq=None, modulus: int | None =
     seq_a = None if seq is None else np.asarray(seq, dtype=np.int64)
     rise = _rises(t, med)
     off = np.abs(rise - np.rint(rise))
-    stretchy = np.count_nonzero((rise > 0.25) & (off > 0.25)) > STRETCH_FRACTION * len(rise)
+    stretchy = bool(np.count_nonzero((rise > 0.25) & (off > 0.25)) > STRETCH_FRACTION * len(rise))
     period = med
     for _ in range(2):
         gaps = _gaps(_rises(t, period), stretchy, seq_a, modulus)
