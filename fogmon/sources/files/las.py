@@ -4,13 +4,14 @@ memory tools write them.
 A time curve (``time_channel``, default the index curve when it is a time: unit s, ms,
 min, h; or a clock: unit HHMMSS / values ``hh:mm:ss``, with the day from a date curve
 (unit D or named DATE) when there is one and past midnight otherwise; or date-times
-``2020-01-01T00:00:00``, ``01-JAN-2020 00:00:00``: ``clock_seconds``) and a rate curve (``channel``, default the only curve whose unit is an
-angular rate), units from the ~Curve section (``rate_unit`` overrides a missing or
-wrong one). A depth-indexed file (index unit m or ft) is refused unless a time curve is
-named; its depth then rides along as aux ``depth_m``. The only curve in deg C, if any,
-becomes aux ``temp_c``. LAS null values are counted invalid samples (``null_samples``);
-rows without a time are left out and counted (``rows_without_time``). Time stamps go on
-fogmon's grid as fogmon.sources.files.stamped describes."""
+``2020-01-01T00:00:00``, ``01-JAN-2020 00:00:00``: ``clock_seconds``) and a rate curve
+(``channel``, default the only curve whose unit is an angular rate), units from the
+~Curve section (``rate_unit`` overrides a missing or wrong one). A depth-indexed file
+(index unit m or ft) is refused unless a time curve is named; its depth then rides along
+as aux ``depth_m``. The only curve in deg C, if any, becomes aux ``temp_c``. LAS null
+values are counted invalid samples (``null_samples``); rows without a time are left out
+and counted (``rows_without_time``). Time stamps go on fogmon's grid as
+fogmon.sources.files.stamped describes."""
 from __future__ import annotations
 
 import os
