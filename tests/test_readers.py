@@ -156,7 +156,7 @@ def test_ros_axis_and_unit_conversion(bag, signal):
 
 
 def test_ros_wrong_topic_is_one_line_naming_file_and_field(bag, capsys):
-    one_line_error(["replay", str(bag), "--topic", "/imu/nope"], capsys, str(bag), "field topic",
+    one_line_error(["replay", str(bag), "--topic", "/imu/nope"], capsys, str(bag), "--topic:",
                    "'/imu/nope'", "/imu/data")
     one_line_error(["replay", str(bag), "--topic", "/temp"], capsys, "std_msgs/msg/Float64", "not sensor_msgs/msg/Imu")
 
@@ -198,7 +198,7 @@ def test_ulog_replays_like_the_csv_of_its_float32_values(signal, tmp_path):
 def test_ulog_wrong_topic_is_one_line(signal, tmp_path, capsys):
     path = tmp_path / "flight.ulg"
     _ulog(path, *signal)
-    one_line_error(["replay", str(path), "--topic", "sensor_gyro:2"], capsys, str(path), "field topic",
+    one_line_error(["replay", str(path), "--topic", "sensor_gyro:2"], capsys, str(path), "--topic:",
                    "sensor_gyro:0")
     one_line_error(["replay", str(path), "--topic", "vehicle_status"], capsys, "not a gyro topic")
 
@@ -316,7 +316,7 @@ def test_mdf4_channel_replays_like_the_csv(signal, tmp_path):
 def test_mdf4_missing_channel_and_unit(signal, tmp_path, capsys):
     path = tmp_path / "bench.mf4"
     _mdf(path, *signal)
-    one_line_error(["replay", str(path), "--channel", "GyroX"], capsys, str(path), "field channel", "'GyroX'",
+    one_line_error(["replay", str(path), "--channel", "GyroX"], capsys, str(path), "--channel:", "'GyroX'",
                    "GyroZ")
     one_line_error(["replay", str(path)], capsys, "needs --channel NAME", "GyroZ, Temp")
     one_line_error(["replay", str(path), "--channel", "Temp"], capsys, "channel Temp", "'degC'", "--rate-unit")
@@ -352,7 +352,7 @@ def test_las_depth_indexed_needs_a_time_curve(signal, tmp_path, capsys):
     _las(path, *signal, depth_index=True)
     one_line_error(["replay", str(path)], capsys, str(path), "depth-indexed", "--time-channel")
     one_line_error(["replay", str(path), "--time-channel", "TIME", "--channel", "ROT"], capsys,
-                   "field channel", "'ROT'", "GYRO (DEG/HR)")
+                   "--channel:", "'ROT'", "GYRO (DEG/HR)")
     src = open_replay_source(str(path), source_options(build_parser(["replay", "x"]).parse_args(
         ["replay", str(path), "--time-channel", "TIME"])))
     rec = src.to_recording()

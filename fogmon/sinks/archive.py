@@ -1,7 +1,7 @@
 """The archive: while monitoring, everything a live source delivers goes to disk, so
 nothing is lost.
 
-Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.formats.archive:
+Under one directory, in pieces of ``rotate_s`` s of recording time (fogmon.formats.archive:
 piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
@@ -12,7 +12,7 @@ piece k holds recording time [(k-1) S, k S) from the first sample; numbered from
   valid: a sample with only some axes valid is left out and counted
   (``partial_samples_dropped``); the raw capture keeps it, and ``fogmon replay`` of the
   capture decodes it with every axis as the device sent it. With ``samples_format="parquet"``
-  (``--archive-format parquet``) ``samples-NNNN.parquet`` instead, written in row groups
+  (``archive_format`` parquet) ``samples-NNNN.parquet`` instead, written in row groups
   (fogmon.sinks.parquet_pieces: a SIGKILL loses at most the row group being filled).
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
   serial gyro ``raw-NNNN.bin`` (the bytes exactly as received) plus ``raw-NNNN.bin.json``
@@ -30,7 +30,7 @@ SIGKILL loses at most the last ``flush_s`` of data and never leaves a half-writt
 row. The raw taps may be called from another thread than the pipeline's (the source's
 decoding thread, right after it decoded those bytes): the raw capture keeps being written
 even while the pipeline is slow, and holds exactly the input the source decoded and
-counted (a ``--duration-s`` run ends it with the run's last frame).
+counted (a run of ``duration_s`` ends it with the run's last frame).
 """
 from __future__ import annotations
 
@@ -95,14 +95,14 @@ class Archive(Sink):
         try:
             os.makedirs(self.directory, exist_ok=True)
         except OSError as e:
-            raise FogmonError(f"--archive {self.directory}: cannot create: {e.strerror}") from None
+            raise FogmonError(f"`archive` {self.directory}: cannot create: {e.strerror}") from None
         held = [p for name in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE) for p in find_pieces(self.directory, name)]
         held += piece_files(self.directory)
         if held:
-            raise FogmonError(f"--archive {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
+            raise FogmonError(f"`archive` {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
                               f"give a new folder")
         if not os.access(self.directory, os.W_OK):
-            raise FogmonError(f"--archive {self.directory}: cannot write there")
+            raise FogmonError(f"`archive` {self.directory}: cannot write there")
         self.source = source
         self.flush_s = float(flush_s)
         self._clock = clock

@@ -33,7 +33,7 @@ class Dsp3000Codec:
         self, rot: str = "rate", sample_rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None
     ) -> None:
         if rot not in ("rate", "delta"):
-            raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
+            raise FogmonError(f"`kvh_rot` must be rate or delta, got {rot!r}")
         sample_rate_hz = check_sample_rate(sample_rate_hz)
         self.rot, self.sample_rate_hz = rot, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP3000_MAX_ABS_DPH)

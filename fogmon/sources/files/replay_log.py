@@ -1,6 +1,6 @@
 """A replay-log CSV replayed (docs/formats.md): its rows on the uniform sample grid, time
 gaps as invalid placeholders, in the same blocks a live source would yield, as fast as
-they can (the pipeline paces ``--realtime``; a replay log can also pace itself for use
+they can (the pipeline paces: ``realtime``; a replay log can also pace itself for use
 outside it); an archive's pieces as one recording (``ReplayLogSet``)."""
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
-from fogmon.formats.recording import grid_positions, pick_axes
+from fogmon.formats.recording import RATE_SAMPLES, check_grid_length, check_stated_rate, grid_positions, pick_axes
 from fogmon.formats.replay_log import CHUNK_BYTES, ReplayLogReader, Rows
 from fogmon.sources import plausibility
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
@@ -37,7 +37,7 @@ class ReplayLogSource:
     reads the whole file once to check it (a bad row is a one-line error naming file,
     line and column before any work starts) and to know ``n_samples`` (grid length) and
     ``t_first_s``/``t_last_s``. A multi-axis log (``rate_<axis>_dph`` columns) gives
-    multi-axis blocks; ``axis`` (``--axis``: a name or a comma list, ``pick_axes``) keeps
+    multi-axis blocks; ``axis`` (a name or a comma list, ``pick_axes``) keeps
     those axes only, one of them as a one-axis block. ``axes``: the axes of the blocks
     (() for one axis). Counters, as far as the blocks yielded so far reach:
     ``samples`` (rows), ``samples_missing``, ``seq_gaps`` (time gaps), ``skipped_rows``
@@ -46,7 +46,7 @@ class ReplayLogSource:
 
     def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
                  max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES,
-                 reader=None, axis: str | None = None) -> None:
+                 reader=None, axis: str | None = None, force_rate: bool = False) -> None:
         self._reader = reader = reader or ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
         self.meta = reader.meta
         self._pick = pick_axes(reader.axes, axis, reader.name)
@@ -59,15 +59,23 @@ class ReplayLogSource:
         t0: float | None = None
         t_last = math.nan
         last = -1
+        rows_read = 0
+        first: list[np.ndarray] = []   # the first RATE_SAMPLES time stamps: the stated rate's check
         for rows in reader.chunks():  # the checking pass
             if not len(rows):
                 continue
             if t0 is None:
                 t0 = float(rows.t_s[0])
+            if rows_read < RATE_SAMPLES:
+                first.append(rows.t_s[:RATE_SAMPLES - rows_read])
+                if not force_rate and rows_read + len(rows) >= min(RATE_SAMPLES, 3):
+                    check_stated_rate(self.meta, np.concatenate(first), reader.name)
+            rows_read += len(rows)
             last = int(grid_positions(rows.t_s, t0, self.sample_rate_hz, reader.name, last, rows.line_of)[-1])
             t_last = float(rows.t_s[-1])
         if t0 is None:
             raise FogmonError(f"{reader.name}: no data rows")
+        check_grid_length(last + 1, rows_read, reader.name)
         self.t_first_s: float = t0
         self.t_last_s, self.n_samples = t_last, last + 1
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
@@ -95,7 +103,7 @@ class ReplayLogSource:
             yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)), b.axes)
 
     def _picked(self, b: Block) -> Block:
-        """A block of the log's columns with the axes ``--axis`` keeps."""
+        """A block of the log's columns with the axes ``axis`` keeps."""
         return b if self._pick is None else b.select(self._pick)
 
     def _grid_blocks(self) -> Iterator[tuple[Block, int, int]]:
@@ -261,4 +269,5 @@ def _seam_gap(t_end: float, missing: int, sample_rate_hz: float, aux: list[str],
 
 def open_source(path: str, opts: SourceOptions) -> ReplayLogSource:
     """The replay-log CSV ``path`` (``tolerate_bad_rows``, ``file_gate_dph``, ``axis``)."""
-    return ReplayLogSource(path, tolerate=opts.tolerate_bad_rows, max_abs_dph=opts.file_gate_dph, axis=opts.axis)
+    return ReplayLogSource(path, tolerate=opts.tolerate_bad_rows, max_abs_dph=opts.file_gate_dph, axis=opts.axis,
+                           force_rate=opts.force_rate)
