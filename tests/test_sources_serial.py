@@ -14,6 +14,7 @@ import pytest
 import serial
 from sources_fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
+from fogmon.errors import FogmonError
 from fogmon.formats.replay_log import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
 from fogmon.sinks.archive import Archive
@@ -439,3 +440,16 @@ def test_an_implausible_counter_jump_is_no_gap_and_replays_the_same(tmp_path):
     assert [m.split(" at ")[0] for m in msgs] == ["the sequence counter went from 299 to 0",
                                                   "the sequence counter went from 499 to 5500"]
     replay_matches(archive, blocks, src)
+
+
+def test_a_sidecar_outage_beyond_any_gap_is_one_line_naming_it(tmp_path):
+    """A capture sidecar saying 1e9 samples were lost in an outage (a corrupt number) is
+    one line naming the sidecar, not 1e9 placeholders."""
+    data, _ = stream(100)
+    cap = tmp_path / "raw.bin"
+    cap.write_bytes(data)
+    side = {"format": "fogmon capture v1", "kind": "serial", "protocol": "kvh-a", "axis": "z",
+            "breaks": [{"offset": 36 * 50, "missing_est": 1e9, "elapsed_s": 1.0}]}
+    (tmp_path / "raw.bin.json").write_text(json.dumps(side))
+    with pytest.raises(FogmonError, match=r"raw\.bin\.json: field breaks: an outage of 1e\+09 samples"):
+        list(open_raw_capture(str(cap)).blocks())

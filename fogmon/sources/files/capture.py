@@ -89,10 +89,13 @@ class RawCaptureSource:
                         yield self.grid.push(frames, errors.poll(self.grid.t_next_s))
                     if at_break:
                         brk = breaks.pop(0)
-                        if len(brk) > 2:
-                            self.grid.place(brk[2])
-                        else:
-                            self.grid.mark_break(brk[1])
+                        try:
+                            if len(brk) > 2:
+                                self.grid.place(brk[2])
+                            else:
+                                self.grid.mark_break(brk[1])
+                        except FogmonError as e:     # (a sidecar's number beyond any gap)
+                            raise FogmonError(f"{path}{SIDECAR_SUFFIX}: field breaks: {e}") from None
 
     def close(self) -> None:
         self._closed = True
