@@ -2,16 +2,18 @@
 (tests/monitor_fake_kvh.py, frame k carrying k deg/s so every sample tells which frame
 it came from) against the serial source and `fogmon monitor`.
 
-1. Throughput, at each of --rates (default 2 kHz and 4 kHz: 72 and 144 kB/s) for
-   --seconds s (default 20):
+1. Throughput, at each of --rates (default 2 kHz and 4 kHz: 72 and 144 kB/s); the device
+   sends --seconds s (default 20) of frames at its pace, waiting (not dropping) when the
+   pty is full:
    a) the serial source alone (SerialSource.blocks() of all three axes, counted in this
-      process): its lag behind the device at the end (s of samples sent but not yet
-      decoded), the CPU this process used (getrusage, % of one core), samples lost and
-      samples off their slot (both must be 0; the lag under 1 s);
-   b) `fogmon monitor` (three axes, archive, console): how far the archive's last row is
-      behind the device at the end (the archive is written every 0.5 s), the monitor's
-      CPU (% of one core, from /proc), every frame of the --duration-s run archived on
-      its own slot, no sample missing (the lag under 2 s).
+      process): frames decoded of those sent, how long after the device's last frame the
+      source had decoded it (must be under 1 s), how long the device waited for room (the
+      reader behind), the CPU this process used (getrusage, % of one core), samples lost
+      and samples off their slot (both must be 0);
+   b) `fogmon monitor` (three axes, archive, console): frames archived of those sent, how
+      long after the device's last frame the archive held it (it is written every 0.5 s;
+      must be under 2 s), the monitor's CPU (% of one core, from /proc), every frame on
+      its own slot and nothing missing.
 2. An idle device: `fogmon monitor` on a pty that sends nothing, its CPU over --seconds s
    once it has opened the port (must be under 2 % of one core).
 3. A counter-wrap loss: at 1 kHz the device loses runs of 128, 256 and 384 frames (1, 2
