@@ -52,6 +52,7 @@ from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pip
 from fogmon.davar.batch import dadev  # noqa: E402
 from fogmon.formats.replay_log import write_replay_log  # noqa: E402
 from fogmon.pipeline import default_window_s, run_pipeline  # noqa: E402
+from fogmon.sources.base import OfflineSource  # noqa: E402
 
 FS = 1000.0
 LIVE_WINDOW_S = default_window_s(FS, None)
@@ -62,7 +63,7 @@ BLOCK = 8192
 AXES = ("x", "y", "z")
 
 
-class MemorySource:
+class MemorySource(OfflineSource):
     """One hour of 1 kHz white noise (N = 0.05 deg/sqrt(h)) plus 10 deg/h bias, in blocks
     (``axes``: ``rate`` has one column per axis)."""
 
@@ -141,7 +142,7 @@ def bench_replay_axes(tmp: str, rrd: bool) -> None:
     print(f"  three axes / one axis = {ratio:.2f} (target < 3: {'PASS' if ratio < 3 else 'FAIL'})")
 
 
-class PacedSource:
+class PacedSource(OfflineSource):
     """A live-like source (``n_samples`` None): ``seconds`` s of 1 kHz samples of ``axes``
     (one axis when empty) in 10 ms blocks, each yielded when its last sample's time has
     come on the wall clock; records the process's CPU and wall time once ``skip_s`` s

@@ -10,10 +10,11 @@ import numpy as np
 from fogmon.block import Block
 from fogmon.cli.source_options import add_source_arguments, source_options
 from fogmon.sinks.base import Sink
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.options import SourceOptions
 
 
-class ListSource:
+class ListSource(OfflineSource):
     """A finite source serving pre-made blocks (block sizes chosen by the test); with
     ``axes``, ``rate`` has one column per axis (NaN: an invalid sample of that axis)."""
 

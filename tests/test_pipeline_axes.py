@@ -154,6 +154,7 @@ def test_dropped_blocks_of_several_axes_become_placeholders_of_several_axes():
     class Empty:
         name, sample_rate_hz, n_samples, counters = "empty", FS, None, {}
         axes = ()        # a source that learns its axes only with its first block
+        live, opened_s = True, None
 
         def blocks(self):
             yield Block.make(np.arange(2) / FS, np.ones((2, 3)), aux={"temp_c": np.ones(2)}, axes=AXES)
@@ -161,7 +162,10 @@ def test_dropped_blocks_of_several_axes_become_placeholders_of_several_axes():
         def close(self):
             pass
 
-    reader = _ThreadedBlocks(Empty(), wait=False)
+        def limit(self, n_samples):
+            pass
+
+    reader = _ThreadedBlocks(Empty())
     assert len(list(reader)) == 1                            # read: its axes and channels are known
     got = list(reader._placeholders(_Dropped(0.02, 5, 1, [])))
     assert len(got) == 1 and got[0].axes == AXES and got[0].rate_dph.shape == (5, 3)

@@ -14,10 +14,13 @@ RATE_HZ = 10.0
 
 class CountingSource:
     """Blocks of 10 samples on a 10 Hz grid; ``produced`` counts the blocks handed out;
-    after ``pause_after`` blocks it sets ``paused`` and waits for ``resume``."""
+    after ``pause_after`` blocks it sets ``paused`` and waits for ``resume``. ``live``:
+    it stands for a device (fogmon.sources.base.Source.live)."""
 
-    def __init__(self, n_blocks: int, pause_after: int | None = None):
-        self.sample_rate_hz, self.aux_names, self.axes = RATE_HZ, ("temp_c",), ()
+    opened_s = None
+
+    def __init__(self, n_blocks: int, pause_after: int | None = None, live: bool = False):
+        self.sample_rate_hz, self.aux_names, self.axes, self.live = RATE_HZ, ("temp_c",), (), live
         self.n_blocks, self.pause_after = n_blocks, pause_after
         self.resume, self.paused = threading.Event(), threading.Event()
         self.produced = 0
@@ -39,10 +42,13 @@ class CountingSource:
         self.closed = True
         self.resume.set()
 
+    def limit(self, n_samples):
+        pass
+
 
 def test_a_source_that_can_wait_is_held_back_when_the_queue_is_full():
     src = CountingSource(10)
-    q = _ThreadedBlocks(src, max_samples=30, wait=True)
+    q = _ThreadedBlocks(src, max_samples=30)
     with q._cond:
         assert q._cond.wait_for(lambda: q.held_back >= 1, timeout=120)
         assert q._n == 30 and src.produced == 4      # 3 blocks queued, the 4th waits for room
@@ -53,7 +59,7 @@ def test_a_source_that_can_wait_is_held_back_when_the_queue_is_full():
 
 def test_closing_releases_a_held_back_reader():
     src = CountingSource(100)
-    q = _ThreadedBlocks(src, max_samples=20, wait=True)
+    q = _ThreadedBlocks(src, max_samples=20)
     with q._cond:
         assert q._cond.wait_for(lambda: q.held_back >= 1, timeout=120)
     src.close()
@@ -63,8 +69,8 @@ def test_closing_releases_a_held_back_reader():
 
 
 def test_a_live_device_is_never_held_back_its_excess_is_dropped_and_reported():
-    src = CountingSource(9, pause_after=6)
-    q = _ThreadedBlocks(src, max_samples=30, wait=False)
+    src = CountingSource(9, pause_after=6, live=True)
+    q = _ThreadedBlocks(src, max_samples=30)
     assert src.paused.wait(timeout=120)           # blocks 0..5 read while nobody consumed
     it = iter(q)
     first = [next(it) for _ in range(4)]          # 3 queued blocks, then the placeholder for blocks 3..5

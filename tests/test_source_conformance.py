@@ -116,6 +116,8 @@ class TestFiniteSources:
         assert src.n_samples == n
         assert all(isinstance(v, int) for v in src.counters.values())
         assert not isinstance(src, CaptureSource)
+        assert src.live is False and src.opened_s is None         # read at the reader's pace
+        src.limit(n // 2)                                         # the pipeline cuts a file itself
         _typed: Source = src  # noqa: F841  (mypy checks the protocol)
 
     def test_blocks_cover_the_grid_once(self, finite_source):
@@ -144,6 +146,8 @@ def test_live_sources_are_capture_sources_with_no_length():
     can_src = CanSource("conformance", "virtual", load_dbc(DBC), dbc_path=DBC)
     for src in (serial_src, can_src):
         assert isinstance(src, CaptureSource) and src.n_samples is None and src.sample_rate_hz > 0
+        assert src.live is True and src.opened_s is None                  # not opened yet
+        _typed: Source = src  # noqa: F841
         spec = src.capture_spec()
         assert spec["kind"] in ("serial", "can") and src.pending == 0
         assert all(isinstance(v, int) for v in src.counters.values())

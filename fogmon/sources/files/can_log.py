@@ -12,6 +12,7 @@ import can
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.formats.capture import CAN_DECODER_FIELDS
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.codecs.can import CanDecoder, load_dbc
 from fogmon.sources.files.capture import read_capture_sidecar
 from fogmon.sources.frames import Frames
@@ -30,7 +31,7 @@ def _push_segments(grid: GridAssembler, segs, events) -> Block:
     return Block.concat(blocks)
 
 
-class CanLogSource:
+class CanLogSource(OfflineSource):
     """A CAN log python-can reads (.asc .blf .trc .csv .log .mf4) decoded with a DBC; or
     the pieces of one ASC log (an archive's frames-NNNN.asc), read in order with their
     absolute timestamps so that one decoder sees one continuous stream of frames."""

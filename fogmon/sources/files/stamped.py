@@ -24,6 +24,7 @@ from fogmon.block import Block, Event, parse_axes
 from fogmon.errors import FogmonError
 from fogmon.formats.recording import Recording
 from fogmon.sources import plausibility
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.files.replay_log import FAST_BLOCK
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
 
@@ -61,7 +62,7 @@ def grid_index(t_s: np.ndarray, where: str, time_field: str) -> tuple[np.ndarray
     return idx, float(idx[-1]) / float(t[-1] - t[0])
 
 
-class StampedSource:
+class StampedSource(OfflineSource):
     """Samples with their own time stamps -> Blocks on the uniform grid (see the module
     docstring). ``t_s`` (s), ``rate_dph`` (deg/h; with ``axes``, one column per axis),
     ``aux`` channels by name (arrays of the same length); ``where`` names the data in
