@@ -143,3 +143,15 @@ def test_library_code_does_not_import_the_command_line():
             "print(sorted(m for m in sys.modules if m.startswith('fogmon.cli')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_no_test_module_imports_another():
+    """Test modules, validation/ and benchmarks/ share code through tests/helpers only:
+    none imports a test module or a conftest, at any level (test modules of the same
+    name live in different folders, imported by pytest's importlib mode)."""
+    repo = ROOT.parent
+    tests = {p.stem for p in (repo / "tests").rglob("test_*.py")} | {"conftest"}
+    files = [p for d in ("tests", "validation", "benchmarks") for p in sorted((repo / d).rglob("*.py"))]
+    bad = [f"{p.relative_to(repo)}:{line}: imports {m}" for p in files for line, m in _every_import(p, repo / "tests")
+           if m.split(".")[0] in tests or m.startswith("tests")]
+    assert len(files) > 60 and not bad, "\n".join(bad)
