@@ -1,5 +1,5 @@
 """Live devices at their limits: a fake KVH DSP-1760 in binary format A on a pty
-(tests/monitor_fake_kvh.py, frame k carrying k deg/s so every sample tells which frame
+(tests/helpers/fake_kvh.py, frame k carrying k deg/s so every sample tells which frame
 it came from) against the serial source and `fogmon monitor`.
 
 1. Throughput, at each of --rates (default 2 kHz and 4 kHz: 72 and 144 kB/s); the device
@@ -47,7 +47,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 
-from sources_fake_device import has_open, open_pty  # noqa: E402
+from helpers.fake_device import has_open, open_pty  # noqa: E402
 
 from fogmon.formats.archive import find_pieces  # noqa: E402
 from fogmon.formats.replay_log import read_replay_log  # noqa: E402
@@ -56,7 +56,7 @@ from fogmon.sources.devices.serial_port import SerialSource  # noqa: E402
 from fogmon.sources.files.capture import open_raw_capture  # noqa: E402
 from fogmon.sources.grid import CLOCK_CONFIRM_S  # noqa: E402
 
-FAKE = os.path.join(ROOT, "tests", "monitor_fake_kvh.py")
+FAKE = os.path.join(ROOT, "tests", "helpers", "fake_kvh.py")
 COUNT = ["--kvh-rot", "rate", "--kvh-units", "deg", "--max-rate-dph", "1e9"]
 ENV = {**os.environ, "PYTHONPATH": ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")}
 

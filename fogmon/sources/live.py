@@ -37,8 +37,9 @@ class LiveSource:
     device, for messages and errors) and, for ``("data", ...)`` items, ``_consume``."""
 
     device_errors: tuple[type[BaseException], ...] = (OSError,)
-    #: a live device has no length (fogmon.sources.base.Source)
+    #: a live device has no length and is read as its data arrives (fogmon.sources.base.Source)
     n_samples: int | None = None
+    live = True
     name: str
     sample_rate_hz: float
     aux_names: tuple[str, ...]

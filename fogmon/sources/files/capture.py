@@ -16,6 +16,7 @@ from collections.abc import Iterator, Sequence
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.formats.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.codecs.protocols import SIDECAR_CHOICES, codec_from_options
 from fogmon.sources.grid import ErrorEvents, GridAssembler, Placed
 from fogmon.sources.options import SourceOptions
@@ -27,7 +28,7 @@ def read_capture_sidecar(path: str) -> dict | None:
     return read_sidecar(path, SIDECAR_CHOICES)
 
 
-class RawCaptureSource:
+class RawCaptureSource(OfflineSource):
     """Bytes a serial device sent, decoded again. ``path`` is one capture file or the
     pieces of one (an archive's raw-NNNN.bin), read in order as one byte stream, so the
     decoder's state (a frame split across two pieces, the sequence counter) carries
