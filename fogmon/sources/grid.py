@@ -303,10 +303,11 @@ class GridAssembler:
         missing[0] += held
         notes = self._clock_wraps(missing, why) if self._started else {}
         self._wraps = None
-        while self._placed and self._placed[0].frame < self._frames_in + n:
+        while self._placed and self._placed[0].frame < self._frames_in + n:   # what a live run's clock decided
             p, self._placed = self._placed[0], self._placed[1:]
             i = max(p.frame - self._frames_in, 0)
             missing[i], why[i] = p.missing, p.rule
+            implausible = [x for x in implausible if x[0] != i]
             if p.rule == IMPLAUSIBLE:
                 implausible.append((i, self._last_seq if i == 0 else int(seq[i - 1])))
             if p.wraps and "clock_wraps" in self.counters:

@@ -210,3 +210,23 @@ def test_an_outage_beyond_any_gap_is_an_error_and_sample_rates_are_bounded():
     with pytest.raises(FogmonError, match="sample_rate_hz must be > 0 and at most 1,000,000 Hz, got 1e[+]12"):
         GridAssembler(1e12, None)
     assert gap_limit(FS, 2.0, 128) == 2129 and gap_limit(1e6, math.inf) == MAX_GAP_SAMPLES + 1
+
+
+def test_a_long_silence_the_clock_vouches_for_replays_the_same():
+    """A ``lines`` board with an unbounded counter falls silent for 2 h and comes back
+    counting on: live, its clock vouches for the 2 h (placed, though more than a gap
+    without a clock may hold), and that decision replays the same."""
+    live = GridAssembler(10.0, 2**62)
+    live.push(Frames.from_lists([0, 1], [1.0, 1.0], [True, True]))
+    live.max_gap = gap_limit(10.0, 7201.0, 2**62)
+    b = live.push(Frames.from_lists([72_002], [1.0], [True]))
+    assert len(b) == 72_001 and live.counters["implausible_gaps"] == 0
+    assert live.decisions == [Placed(0, 72_000, 0)]
+    replay = GridAssembler(10.0, 2**62)
+    replay.push(Frames.from_lists([0, 1], [1.0, 1.0], [True, True]))
+    replay.place(live.decisions[0])
+    assert len(replay.push(Frames.from_lists([72_002], [1.0], [True]))) == 72_001
+    assert replay.counters == live.counters
+    alone = GridAssembler(10.0, 2**62)            # without the record: more than a gap may hold
+    alone.push(Frames.from_lists([0, 1], [1.0, 1.0], [True, True]))
+    assert len(alone.push(Frames.from_lists([72_002], [1.0], [True]))) == 1
