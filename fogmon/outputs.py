@@ -224,7 +224,8 @@ def space_note(path: str) -> str:
 def write_failed(name: str, path: str, e: OSError | str) -> FogmonError:
     """The one-line error of a write that failed (disk full, quota, I/O error, file
     size limit): what, where, the free space."""
-    why = e if isinstance(e, str) else (e.strerror or str(e))
+    # the system's words for the errno (pyarrow wraps them in its own)
+    why = e if isinstance(e, str) else os.strerror(e.errno) if e.errno else (e.strerror or str(e))
     if isinstance(e, OSError) and e.errno == errno.EFBIG:
         why += " (a file-size limit: ulimit -f)"
     return FogmonError(f"{name + ' ' if name else ''}{path}: cannot write: {why} ({space_note(path)})")

@@ -149,30 +149,37 @@ def _check_axis(axis: str, axes: tuple[str, ...]) -> None:
 def _write(out: str, blocks, meta: dict, info: dict, n_expected: float, model_path: str) -> int:
     """Write the simulated ``blocks`` as a replay log ``out`` (valid samples; ``info``
     from iter_simulate gives the sample rate): after the first block, the free space is
-    checked against ``n_expected`` rows at the bytes per row measured on it; no file on
-    any error (fogmon.formats.log_writer). Returns the samples written."""
+    checked against ``n_expected`` rows at the bytes per row measured on it; a
+    non-finite rate is refused; no file on any error (fogmon.formats.log_writer).
+    Returns the samples written."""
     from fogmon.formats.log_writer import LogWriter
     from fogmon.outputs import check_space
     from fogmon.sim.simulate import present_samples
 
-    first = next(blocks)
-    w = LogWriter(out, list(first.aux), {"sample_rate_hz": info["sample_rate_hz"], **meta}, first.axes, name="`out`")
-    try:
-        for i, b in enumerate(itertools.chain([first], blocks)):
-            v = present_samples(b)
-            rate = b.rate_dph[v]
-            if not np.isfinite(rate).all():
-                k = int(np.flatnonzero(~np.isfinite(rate.reshape(len(rate), -1)).any(axis=1))[0])
-                raise FogmonError(f"`model` {model_path}: the simulated rate is not finite at {b.t_s[v][k]:g} s "
-                                  f"(a noise coefficient or an effect of the model too large for float64); "
-                                  f"nothing written")
-            w.write(b.t_s[v], rate, {k: a[v] for k, a in b.aux.items()})
-            if i == 0 and w.rows:
-                left = n_expected - w.rows
-                check_space("`out`", out, left * w.bytes_per_row,
-                            f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")
-        w.close()
-    except BaseException:
-        w.abort()   # no half-written replay log
-        raise
+    with np.errstate(over="ignore", invalid="ignore"):   # inf is refused below, by name, not warned about
+        first = next(blocks)
+        meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
+        w = LogWriter(out, list(first.aux), meta, first.axes, name="`out`")
+        try:
+            for i, b in enumerate(itertools.chain([first], blocks)):
+                v = present_samples(b)
+                _check_finite(b.t_s[v], b.rate_dph[v], model_path)
+                w.write(b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
+                if i == 0 and w.rows:
+                    left = n_expected - w.rows
+                    check_space("`out`", out, left * w.bytes_per_row,
+                                f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")
+            w.close()
+        except BaseException:
+            w.abort()   # no half-written replay log
+            raise
     return w.rows
+
+
+def _check_finite(t_s: np.ndarray, rate_dph: np.ndarray, model_path: str) -> None:
+    """FogmonError naming the model when a simulated rate is not finite (a coefficient
+    too large for float64)."""
+    bad = ~np.isfinite(rate_dph.reshape(len(rate_dph), -1)).all(axis=1)
+    if bad.any():
+        raise FogmonError(f"`model` {model_path}: the simulated rate is not finite at {t_s[bad][0]:g} s (a noise "
+                          f"coefficient or an effect of the model too large for float64); nothing written")

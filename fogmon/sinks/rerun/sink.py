@@ -527,7 +527,7 @@ class RerunSink(Sink):
                 os.remove(path)
             self.pieces.remove(path)
             self.error = write_failed("`rrd_path`", path, f"Rerun: {why}")
-            print(f"fogmon: warning: {path} could not be completed and is removed ({self.error})", file=sys.stderr)
+            print(f"fogmon: warning: {path}: Rerun could not complete it ({why}); removed", file=sys.stderr)
         return ok
 
     def _serve_until_stopped(self) -> None:
