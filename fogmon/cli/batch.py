@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"fogmon batch: {len(paths)} recordings on {len(client.scheduler_info()['workers'])} Dask workers "
                   f"({args.scheduler or 'local cluster'})", file=sys.stderr)
         plans, bad = _check_inputs(client, paths, source, config, show, args.scheduler)
-        os.makedirs(args.out, exist_ok=True)     # some input is readable: the outputs can be written
+        _make_out(args.out)                      # some input is readable: the outputs can be written
         jobs = _submit(client, plans, args, source, config)
         if show:
             from distributed import progress
@@ -176,6 +176,16 @@ def run(args: argparse.Namespace) -> int:
         if cluster is not None:
             cluster.close()
     return _finish(args, plans, bad, jobs, windows, rows)
+
+
+def _make_out(folder: str) -> None:
+    """The --out folder (in an existing one: checked before); FogmonError on a full disk."""
+    from fogmon.outputs import write_failed
+
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise write_failed("`out`", folder, e) from None
 
 
 def _check_model(args: argparse.Namespace) -> None:

@@ -241,7 +241,7 @@ class Archive(Sink):
         if self.error is not None:
             if not self._stop_sent:      # once: the pipeline ends the run, its summary printed
                 self._stop_sent = True
-                raise StopRun(f"the archive could not write: {self.error}")
+                raise StopRun(f"the archive could not write: {self.error.message}")
             return
         if self._aux_names is None and len(block):
             self._aux_names, self._axes = list(block.aux), block.axes
