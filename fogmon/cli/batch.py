@@ -109,10 +109,13 @@ def _local_cluster(n: int):
         finally:
             signal.signal(signal.SIGINT, handler)
     cluster = None
-    try:   # a Ctrl-C while the cluster starts interrupts once it has started (then it is closed)
+    # a Ctrl-C while the cluster starts interrupts once it has started (then it is closed); the
+    # workers' own log lines stay off the terminal (a recording's failure is reported by its
+    # task; workers stopped with the cluster would log heartbeat errors)
+    try:
         with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}), stopping.shielded():
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.ERROR)
+                                   silence_logs=logging.CRITICAL)
     except KeyboardInterrupt:
         if cluster is not None:
             _quiet_shutdown()
