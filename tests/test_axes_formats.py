@@ -173,7 +173,7 @@ def test_imu_readers_take_x_y_z_all_one_or_several(axis):
     assert imu_axes(None, "run.bag") == ("x", "y", "z")
     assert imu_axes("z", "run.bag") == ("z",)
     assert imu_axes("y,x", "run.bag") == ("y", "x")
-    with pytest.raises(FogmonError, match=rf"run.bag: --axis {axis}: the gyro axes of an IMU are x, y and z"):
+    with pytest.raises(FogmonError, match=rf"run.bag: axis {axis}: the gyro axes of an IMU are x, y and z"):
         imu_axes(axis, "run.bag")
     with pytest.raises(FogmonError, match="run.bag: axis x,x: an axis is named twice"):
         imu_axes("x,x", "run.bag")

@@ -145,8 +145,8 @@ def test_live_thermal_cal_per_axis_equals_the_offline_correction(imu, tmp_path, 
         temp = rec.aux["temp_c_z" if a == "z" else "temp_c"]
         offline = correct_thermal(rec.t_s, rec.rate_dph[:, j], temp, axis_thermal_effect(model, "cal.toml", a))
         assert np.max(np.abs(corrected - offline)) < 1e-8     # deg/h: the rounding of 4800 s of running sums
-    with pytest.raises(FogmonError, match=r"--thermal-cal: the calibration has a thermal_drift effect for axes x, y "
-                                          r"and not for z: select calibrated axes with --axis"):
+    with pytest.raises(FogmonError, match=r"^thermal: the calibration has a thermal_drift effect for axes x, y "
+                                          r"and not for z: select calibrated axes with axis$"):
         live(cal_xy)
 
 

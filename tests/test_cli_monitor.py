@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from doubles import archive_in
-from test_rerun_sink import read_scalars, read_texts
+from test_rerun_sink import read_event_messages, read_scalars
 
 from fogmon.cli import main
 from fogmon.formats.replay_log import read_replay_log
@@ -47,7 +47,7 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     assert len(t_rate) <= 200         # 1 kHz shown as means of 10 samples
     crc = int(next(ln for ln in out.splitlines() if ln.strip().startswith("crc_errors")).split()[1])
     assert crc >= 2                    # 2 s at 1 kHz, every 500th frame bad
-    texts = read_texts(str(rrd), "/events")
+    texts = read_event_messages(str(rrd), "/events")
     assert sum(int(x.split()[1]) for x in texts if x.startswith("crc_error:")) == crc
     # the raw capture ends where samples.csv does (the --duration-s cut) and decodes to the same counters
     raw = open_raw_capture(sorted(str(p) for p in arch.glob("raw-*.bin")))

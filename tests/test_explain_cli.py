@@ -11,7 +11,8 @@ from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
 from fogmon.explain import mismatch
-from fogmon.explain.explainer import Options, explain
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import simulate
@@ -85,6 +86,9 @@ def _check_rrd(path, rep):
             "/verdict"} <= static
     if any(not m["whole_record"] for m in rep["mismatches"]):
         assert "/zmap_before/map/regions" in static            # flagged regions outlined on the map
+    if any(m["whole_record"] for m in rep["mismatches"]):     # no time: boxed on the ADEV plot, noted on the map
+        assert {"/adev/log10/whole_record_regions/boxes", "/zmap_before/note"} <= static
+    assert {"/adev/log10/before/model_band/bars", "/adev/log10/after/model_band/bars"} <= static
     n_windows, n_taus = rep["method"]["n_windows"], len(rep["method"]["taus_s"])
     for ch in reader.stream().filter(content="/zmap_before/map/image"):
         fmt = ch.to_record_batch().column("Image:format").to_pylist()[0][0]

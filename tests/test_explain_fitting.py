@@ -166,7 +166,7 @@ def test_band_rms_burst_names_a_band_limited_burst_and_not_stationary_noise():
     stationary part."""
     from scipy.signal import butter, sosfiltfilt
 
-    from fogmon.explain.explainer import BURST_Z
+    from fogmon.explain.caveats import BURST_Z
 
     sample_rate_hz, n = 20.0, 18000
     rng = np.random.default_rng(4)
@@ -196,7 +196,7 @@ def test_chance_line_gain_is_the_false_alarm_level_of_a_frequency_search():
     2 %, as the law says at that level); the search bar at 1e-3 is above all of them."""
     import math
 
-    from fogmon.explain.catalogue import SEARCH_FALSE_ALARM, chance_line_gain
+    from fogmon.explain.candidates.mean import SEARCH_FALSE_ALARM, chance_line_gain
 
     u = chance_line_gain(12000, SEARCH_FALSE_ALARM)
     fap = 6000 * math.sqrt(math.pi / 3) * math.sqrt(u / 2) * math.exp(-u / 2)
@@ -211,14 +211,15 @@ def test_periodic_candidate_of_a_chance_peak_stays_below_its_bar():
     64 of the 300 above: gain 31.3 > 28.2) is refused by the frequency search's bar."""
     import math
 
-    from fogmon.explain import catalogue, explainer
+    from fogmon.explain import analysis
+    from fogmon.explain.candidates import mean
 
     sample_rate_hz, n = 10.0, 12000
     t = np.arange(n) / sample_rate_hz
     y = 60 * 0.01 * math.sqrt(sample_rate_hz) * np.random.default_rng(64).standard_normal(n)
-    ctx = explainer._whittle(SensorModel(sample_rate_hz, 0.0, Noise(N_dpsh=0.01), []), {}, t, np.ones(n, bool),
+    ctx = analysis.whittle_context(SensorModel(sample_rate_hz, 0.0, Noise(N_dpsh=0.01), []), {}, t, np.ones(n, bool),
                              y - y.mean())
-    c = catalogue.periodic(ctx)
+    c = mean.periodic(ctx)
     assert c.gain > 3 * ctx.penalty and c.bic_gain(ctx.penalty) < 0
 
 
@@ -245,7 +246,8 @@ def test_bias_wander_the_model_lacks_is_not_a_bias_step(seed):
     """A flicker bias wander (B 0.5 deg/h) that a white-noise model lacks makes a bias step
     pass BIC against that model's PSD; judged against the residual's own low-frequency
     noise it does not, while a real step in white noise keeps its full gain."""
-    from fogmon.explain import catalogue, explainer
+    from fogmon.explain import analysis
+    from fogmon.explain.candidates import mean
     from fogmon.sim.simulate import simulate
 
     white = SensorModel(100.0, 0.0, Noise(N_dpsh=0.01), [])
@@ -253,8 +255,8 @@ def test_bias_wander_the_model_lacks_is_not_a_bias_step(seed):
     def step_of(model):
         rec = simulate(model, duration_s=300.0, seed=seed)
         y = rec.rate_dph - rec.rate_dph.mean()
-        ctx = explainer._whittle(white, {}, rec.t_s, np.ones(len(y), bool), y)
-        c = catalogue.bias_step(ctx)
+        ctx = analysis.whittle_context(white, {}, rec.t_s, np.ones(len(y), bool), y)
+        c = mean.bias_step(ctx)
         return c, ctx.wh.gls(ctx.wh.fft(c.design), ctx.Yf).chi2_gain, 2 * ctx.penalty
 
     c, plain, bar = step_of(SensorModel(100.0, 0.0, Noise(N_dpsh=0.01, B_dph=0.5), []))

@@ -13,7 +13,9 @@ import pytest
 from fogmon.cli import main
 from fogmon.explain import mismatch
 from fogmon.explain.baseline import baseline_model
-from fogmon.explain.explainer import Options, explain, too_short_warnings
+from fogmon.explain.caveats import too_short_warnings
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.explain.report import build_report
 from fogmon.formats.replay_log import read_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model

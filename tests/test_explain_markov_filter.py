@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from test_explain_noise_lines import _explain
 
-from fogmon.explain import catalogue
-from fogmon.explain.explainer import _whittle, matched_tests_figure, stochastic_part
+from fogmon.explain.analysis import matched_tests_figure, whittle_context
+from fogmon.explain.candidates import spectral
+from fogmon.explain.candidates.base import Candidate
+from fogmon.explain.explainer import stochastic_part
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
@@ -24,10 +26,10 @@ def test_markov_candidate_under_a_filter_is_finite_and_recovers_the_truth():
     rec = simulate(truth, duration_s=1800.0, seed=3)
     model = stochastic_part(SensorModel(20.0, 0.0, NOISE, [FILTER]))
     y = rec.rate_dph - rec.rate_dph.mean()
-    ctx = _whittle(model, {}, rec.t_s, np.ones(len(y), bool), y)
+    ctx = whittle_context(model, {}, rec.t_s, np.ones(len(y), bool), y)
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)  # no division by the filter's zeros
-        c = catalogue.markov(ctx)
+        c = spectral.markov(ctx)
     assert c is not None and math.isfinite(c.gain) and c.gain > 100 * ctx.penalty
     assert c.params["sigma_dph"] == pytest.approx(1.0, rel=0.2)
     assert c.params["tau_c_s"] == pytest.approx(5.0, rel=0.4)
@@ -44,8 +46,8 @@ def test_explain_adds_the_markov_term_under_the_filter(tmp_path):
 
 
 def test_matched_tests_figure_leaves_out_contradicted_kinds():
-    big = catalogue.Candidate("markov", {}, {}, gain=1.6e5, k=2, evidence="")
-    small = catalogue.Candidate("bandwidth", {}, {}, gain=400.0, k=2, evidence="")
+    big = Candidate("markov", {}, {}, gain=1.6e5, k=2, evidence="")
+    small = Candidate("bandwidth", {}, {}, gain=400.0, k=2, evidence="")
     pen = math.log(216000)
     assert matched_tests_figure([big, small], pen, set()) == pytest.approx(math.sqrt(1.6e5 / (2 * pen)))
     assert matched_tests_figure([big, small], pen, {"markov"}) == pytest.approx(math.sqrt(400.0 / (2 * pen)))

@@ -10,8 +10,9 @@ from scipy.signal import welch
 from test_explain_invariants import assert_invariants
 
 from fogmon.cli import main
-from fogmon.explain import catalogue
-from fogmon.explain.explainer import _whittle, stochastic_part
+from fogmon.explain.analysis import whittle_context
+from fogmon.explain.candidates import coefficients, lines
+from fogmon.explain.explainer import stochastic_part
 from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel, load_model, save_model
 from fogmon.sim.simulate import iter_simulate, simulate
@@ -85,8 +86,8 @@ def test_a_null_gives_neither_kind(seed):
     model = SensorModel(20.0, 0.0, Noise(Q_arcsec=0.2, N_dpsh=0.01, B_dph=0.01))
     rec = simulate(model, duration_s=1800.0, seed=seed)
     y = rec.rate_dph - rec.rate_dph.mean()
-    ctx = _whittle(stochastic_part(model), {}, rec.t_s, np.ones(len(y), bool), y)
-    for fn in (catalogue.noise, catalogue.vibration_lines):
+    ctx = whittle_context(stochastic_part(model), {}, rec.t_s, np.ones(len(y), bool), y)
+    for fn in (coefficients.noise, lines.vibration_lines):
         c = fn(ctx)
         assert c is None or c.bic_gain(ctx.penalty) <= 0, (c.kind, c.params, c.gain)
 
@@ -98,8 +99,8 @@ def test_a_broad_band_like_a_microseism_is_a_line():
     band = Effect("vibration_lines", {"freq_hz": [0.3], "sigma_dph": [1.0], "bandwidth_hz": [0.2]})
     rec = simulate(SensorModel(20.0, 0.0, nz, [band]), duration_s=1800.0, seed=4)
     y = rec.rate_dph - rec.rate_dph.mean()
-    ctx = _whittle(stochastic_part(SensorModel(20.0, 0.0, nz)), {}, rec.t_s, np.ones(len(y), bool), y)
-    c = catalogue.vibration_lines(ctx)
+    ctx = whittle_context(stochastic_part(SensorModel(20.0, 0.0, nz)), {}, rec.t_s, np.ones(len(y), bool), y)
+    c = lines.vibration_lines(ctx)
     assert c is not None and c.bic_gain(ctx.penalty) > 0
     (f,), (s,), (bw,) = c.params["freq_hz"], c.params["sigma_dph"], c.params["bandwidth_hz"]
     assert abs(f - 0.3) < 0.05 and s == pytest.approx(1.0, rel=0.2) and bw == pytest.approx(0.2, rel=0.3)
@@ -132,8 +133,8 @@ def test_lines_refit_a_baseline_low_pass_level_that_held_their_power():
     rec = simulate(SensorModel(250.0, 0.0, Noise(), [lowpass, line]), duration_s=120.0, seed=3)
     y = rec.rate_dph - rec.rate_dph.mean()
     baseline = SensorModel(250.0, 0.0, Noise(), [Effect("markov", {"tau_c_s": 0.008, "sigma_dph": 105.6})])
-    ctx = _whittle(stochastic_part(baseline), {}, rec.t_s, np.ones(len(y), bool), y)
-    c = catalogue.vibration_lines(ctx)
+    ctx = whittle_context(stochastic_part(baseline), {}, rec.t_s, np.ones(len(y), bool), y)
+    c = lines.vibration_lines(ctx)
     assert c is not None and c.bic_gain(ctx.penalty) > 0 and c.stoch_base is not None
     assert c.params["freq_hz"][0] == pytest.approx(116.0, abs=0.1)
     assert c.stoch_base.effects[0].params["sigma_dph"] == pytest.approx(100.0, rel=0.01)
@@ -149,8 +150,8 @@ def test_lines_under_a_filter_refit_n_and_q_jointly():
     rec = simulate(SensorModel(20.0, 0.0, Noise(Q_arcsec=0.15, N_dpsh=0.01), [bw, line]), duration_s=1800.0, seed=5)
     y = rec.rate_dph - rec.rate_dph.mean()
     model = SensorModel(20.0, 0.0, Noise(Q_arcsec=0.105, N_dpsh=0.015), [bw])
-    ctx = _whittle(stochastic_part(model), {}, rec.t_s, np.ones(len(y), bool), y)
-    c = catalogue.vibration_lines(ctx)
+    ctx = whittle_context(stochastic_part(model), {}, rec.t_s, np.ones(len(y), bool), y)
+    c = lines.vibration_lines(ctx)
     assert c is not None and c.bic_gain(ctx.penalty) > 0 and c.stoch_base is not None
     assert min(abs(f - 3.0) for f in c.params["freq_hz"]) < 0.05 and c.k == 3 * len(c.params["freq_hz"]) + 2
     assert c.stoch_base.noise.N_dpsh == pytest.approx(0.01, rel=0.1)      # seeds 5-7: 0.0101-0.0104

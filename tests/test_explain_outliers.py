@@ -11,7 +11,8 @@ from test_explain_invariants import assert_invariants
 from fogmon.cli import main
 from fogmon.errors import FogmonError
 from fogmon.explain import detectors
-from fogmon.explain.explainer import Options, explain
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.explain.report import build_report
 from fogmon.formats.replay_log import read_replay_log, write_replay_log
 from fogmon.sim.model import OUTLIER_QUANTILE_PROBS, Effect, Noise, SensorModel, save_model, validate_effect

@@ -5,10 +5,12 @@ import numpy as np
 import pytest
 from test_explain_noise_lines import _explain
 
-from fogmon.explain import catalogue
-from fogmon.explain.explainer import _whittle, candidates, stochastic_part
+from fogmon.explain.analysis import whittle_context
+from fogmon.explain.candidates.base import in_passband
+from fogmon.explain.explainer import stochastic_part
 from fogmon.explain.fitting import rfft_omega
 from fogmon.explain.mismatch import CHANCE_SCORE
+from fogmon.explain.selection import candidates
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
@@ -19,8 +21,8 @@ def test_the_candidates_see_only_the_pass_band():
     # the record of the finding: a periodic term at 9.24 Hz (|H|^2 1e-3) had gain 160
     rec = simulate(TRUTH, duration_s=1800.0, seed=4)
     y = rec.rate_dph - rec.rate_dph.mean()
-    ctx = _whittle(stochastic_part(TRUTH), {}, rec.t_s, np.ones(len(y), bool), y)
-    stop = ~catalogue.in_passband(TRUTH, rfft_omega(ctx.n))
+    ctx = whittle_context(stochastic_part(TRUTH), {}, rec.t_s, np.ones(len(y), bool), y)
+    stop = ~in_passband(TRUTH, rfft_omega(ctx.n))
     assert stop.any() and np.all(ctx.wh.w[stop] == 0.0)
     cands = candidates(ctx, {})
     assert all(c.bic_gain(ctx.penalty) <= 0 for c in cands)

@@ -137,8 +137,8 @@ def test_a_one_axis_thermal_calibration_on_several_axes_is_a_one_line_error():
     cal = validate_effect("thermal_drift", {"k0_poly_dph": [0.0], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0,
                                             "k2_neg": 0.0}, "test")
     src = ListSource(t, rate, SIZES, FS, aux=aux, axes=AXES)
-    with pytest.raises(FogmonError, match=r"--thermal-cal: the calibration is for one axis and test source has "
-                                          r"axes x, y, z: select one with --axis NAME"):
+    with pytest.raises(FogmonError, match=r"^thermal: the calibration is for one axis and test source has "
+                                          r"axes x, y, z: select one with axis NAME$"):
         Pipeline(src, PipelineConfig(window_s=20.48, methods=LiveMethods(thermal=cal))).run([Collect()])
 
 
@@ -146,7 +146,7 @@ def test_a_model_without_the_stream_s_axis_is_a_one_line_error():
     t, rate, aux = three_axis_data()
     model = replace(MODEL, axis_noise={"x": MODEL.noise, "y": MODEL.noise})
     src = ListSource(t, rate, SIZES, FS, aux=aux, axes=AXES)
-    with pytest.raises(FogmonError, match=r"--model: the model has no \[noise.z\] table"):
+    with pytest.raises(FogmonError, match=r"^model: the model has no \[noise.z\] table"):
         Pipeline(src, PipelineConfig(window_s=20.48, model=model)).run([Collect()])
 
 
@@ -304,7 +304,7 @@ def test_a_model_of_several_axes_on_one_axis_says_which_noise_it_checks(tmp_path
     m.write_text(MODEL3)
     t, rate, aux = three_axis_data()
     src = ListSource(t[:4096], rate[:4096, 0].copy(), [4096], FS)
-    with pytest.warns(FogmonWarning, match=r"--model has \[noise.<axis>\] tables \(x, y, z\) and test source is one "
+    with pytest.warns(FogmonWarning, match=r"^model has \[noise.<axis>\] tables \(x, y, z\) and test source is one "
                                            r"axis: it is checked against the model's \[noise\] table"):
         Pipeline(src, PipelineConfig(window_s=10.24, model=load_model(m), keep_motion=True)).run([Collect()])
 

@@ -48,7 +48,7 @@ def test_gate_with_device_flags_counts_garbage_in_valid_samples_only():
 
 @pytest.mark.parametrize("value", [0, -1.0, math.nan, math.inf, "x", "1e"])
 def test_max_rate_dph_must_be_a_finite_positive_number(value):
-    with pytest.raises(FogmonError, match="--max-rate-dph must be a finite number > 0 deg/h"):
+    with pytest.raises(FogmonError, match="^max_rate_dph must be a finite number > 0 deg/h"):
         pl.max_rate_dph(value, 1.0)
     assert pl.max_rate_dph(None, 7.0) == 7.0 and pl.max_rate_dph(5, 7.0) == 5.0
 

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_rerun_sink import read_column, read_scalars, read_texts, read_views
+from test_rerun_sink import read_column, read_scalars, read_texts, read_views, rgb
 
 from fogmon.block import Block, Event
 from fogmon.davar.batch import dadev
 from fogmon.davar.fit import fit_noise
 from fogmon.davar.streaming import StreamingDadev
 from fogmon.sinks.base import COEFFICIENTS, StreamInfo, Summary
+from fogmon.sinks.rerun.plots import nice_range, stacked_label_texts
 from fogmon.sinks.rerun.sink import RerunSink
 from fogmon.sinks.rerun.style import AXIS_COLOURS
 
@@ -19,11 +20,6 @@ AXES = ("x", "y", "z")
 N_DPSH = {"x": 0.05, "y": 0.1, "z": 0.2}          # white noise per axis, deg/sqrt(h)
 SAMPLE_RATE_HZ, WINDOW_S, HOP_S, N = 10.0, 51.2, 12.8, 6000
 BAND_DPH = (0.5, 1.0, 2.0)                      # a made-up --model band: lo, median, hi = these x N's ADEV
-
-
-def rgb(packed):
-    """(r, g, b) of a Rerun colour (0xRRGGBBAA)."""
-    return (packed >> 24) & 255, (packed >> 16) & 255, (packed >> 8) & 255
 
 
 @pytest.fixture(scope="module")
@@ -120,30 +116,32 @@ def test_each_axis_curve_heatmap_band_and_events(three_axis_rrd):
         n_windows = sum(len(x[2]) for x in frames[a])
         image = read_column(path, f"/axis/{a}/dadev/heatmap/map/image", "Image:format")[-1][1][0]
         assert (image["width"], image["height"]) == (n_windows, len(tau))
+        bars = read_column(path, f"/axis/{a}/adev_curve/log10/model_band/bars", "LineStrips2D:strips")[0][1]
+        assert len(bars) == len(tau)                                      # one bar per tau, lo to hi
+        np.testing.assert_allclose(np.array(bars)[:, :, 1], np.log10(np.column_stack([bands[a][0], bands[a][2]])),
+                                   rtol=1e-6)
     legend = read_column(path, "/adev_curve/log10/legend", "Points2D:labels")[0][1]
-    assert legend == ["axis x: measured ADEV, current window", "axis y: measured ADEV, current window",
-                      "axis z: measured ADEV, current window", "darker: 68.3 % confidence bounds",
-                      "lighter: IEEE-952 model over the fitted taus",
-                      "greyed: --model band (family-wise 0.01 per window)"]
+    assert stacked_label_texts(legend) == ["axis x: measured ADEV", "axis y: measured ADEV", "axis z: measured ADEV",
+                                           "darker: 68.3 % bounds", "lighter: IEEE-952 model", "greyed: --model band"]
     assert read_column(path, "/adev_curve/log10/grid", "LineStrips2D:strips")      # one shared decade grid
-    assert read_texts(path, "/axis/y/events") == ["coef_jump: N_dpsh x2.0 (test)"]
-    assert read_texts(path, "/events") == ["gap: test gap 2000"]
+    assert read_texts(path, "/axis/y/events") == ["500.00 s  axis y: coef_jump: N_dpsh x2.0 (test)"]
+    assert read_texts(path, "/events") == ["203.00 s  gap: test gap 2000"]       # t[2000] + 1 s
 
 
 def test_blueprint_overlays_the_axes_and_sets_heatmaps_side_by_side(three_axis_rrd):
     path = three_axis_rrd[0]
     views = read_views(path)
-    curve = views["Current window: ADEV (deg/h) vs tau (s) of axes x, y, z, log-log"]
+    curve = views["Current window: ADEV (deg/h) vs tau (s), log-log"]
     assert curve["class"] == "2D" and curve["origin"] == "/"
     assert curve["contents"] == ["/adev_curve/**", "/axis/x/adev_curve/**", "/axis/y/adev_curve/**",
                                  "/axis/z/adev_curve/**"]
     assert views["Rate (deg/h) of axes x, y, z over recording time (s)"]["contents"] == [
         f"/axis/{a}/rate/rate_dph/**" for a in AXES]
     for name, unit in COEFFICIENTS.items():
-        v = views[f"{name} ({unit}): value, interval or upper limit (x red, y green, z blue)"]
+        v = views[f"{name} ({unit}): x red, y green, z blue; \u25bc upper limit"]
         assert v["class"] == "TimeSeries" and v["contents"] == [f"/axis/{a}/coef/{name}/**" for a in AXES]
-    heatmaps = sorted(v["origin"] for n, v in views.items() if "DADEV heatmap" in n)
-    assert heatmaps == [f"/axis/{a}/dadev/heatmap" for a in AXES]
+    heatmaps = sorted((n, v["origin"]) for n, v in views.items() if "DADEV heatmap" in n)
+    assert heatmaps == [(f"{a}: DADEV heatmap", f"/axis/{a}/dadev/heatmap") for a in AXES]
     assert views["Events (all axes)"]["contents"] == ["/events", *(f"/axis/{a}/events/**" for a in AXES)]
     # one colour per axis in every view: rate, coefficient tracks, ADEV curve (above)
     for k, a in enumerate(AXES):
@@ -153,3 +151,16 @@ def test_blueprint_overlays_the_axes_and_sets_heatmaps_side_by_side(three_axis_r
             assert {rgb(c) for c in read_column(path, ent, col)[0][1]} == {AXIS_COLOURS[k]}
         assert read_column(path, f"/axis/{a}/coef/B_dph", "SeriesLines:names")[0][1] == [
             f"{a}: B_dph (deg/h)", f"{a}: lo", f"{a}: hi"]
+
+
+def test_coefficient_views_share_one_rounded_y_range_over_the_axes(three_axis_rrd):
+    """The axes' tracks of a coefficient share a view, so each axis's ``y_range`` is the
+    rounded range of all axes drawn so far: together nice, not a union of per-axis ranges."""
+    path = three_axis_rrd[0]
+    for name in COEFFICIENTS:
+        drawn = np.concatenate([np.r_[read_scalars(path, f"/axis/{a}/coef/{name}")[1].ravel(),
+                                      read_scalars(path, f"/axis/{a}/coef/{name}/upper_limit")[1].ravel()]
+                                for a in AXES])
+        last = [read_scalars(path, f"/axis/{a}/coef/{name}/y_range")[1][-1] for a in AXES]
+        lo, hi = min(r[0] for r in last), max(r[1] for r in last)
+        assert (lo, hi) == pytest.approx(nice_range(drawn.min(), drawn.max()))

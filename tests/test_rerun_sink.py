@@ -24,8 +24,10 @@ from fogmon.pipeline import PipelineConfig as _args, run_pipeline
 from fogmon.sinks.base import COEFFICIENTS, Summary
 from fogmon.sinks.console import format_summary
 from fogmon.sinks.rerun.columns import _Decimator
+from fogmon.sinks.rerun.plots import NO_DATA_KEY, stacked_label_texts
 from fogmon.sinks.rerun.server import start_grpc_server, stop_process_group
-from fogmon.sinks.rerun.sink import RerunSink, model_span
+from fogmon.sinks.rerun.sink import RerunSink, event_text, model_span
+from fogmon.sinks.rerun.style import aux_colour
 
 
 def read_scalars(path, entity):
@@ -62,8 +64,15 @@ def read_texts(path, entity):
     return out
 
 
+def read_event_messages(path, entity):
+    """The events' messages in an .rrd without the recording time that leads each
+    (``sink.event_text``: "12.50 s  crc_error: ...")."""
+    return [x.split(" s  ", 1)[1] for x in read_texts(path, entity)]
+
+
 def read_views(path):
-    """The views of an .rrd's blueprint: display name -> {class, origin, contents}."""
+    """The views of an .rrd's blueprint: display name -> {class, origin, contents, and
+    ``props``: its properties (``/view/<id>/<property>`` -> {component: value})}."""
     reader = RrdReader(path)
     (store,) = reader.blueprints()
     parts: dict[str, dict] = {}
@@ -71,13 +80,22 @@ def read_views(path):
         ent = str(ch.entity_path)
         if not ent.startswith("/view/"):
             continue
-        view = parts.setdefault(ent.split("/")[2], {})
+        view = parts.setdefault(ent.split("/")[2], {"props": {}})
         for row in ch.to_record_batch().to_pylist():
+            if ent.count("/") > 2 and row.get("ViewContents:query") is None:   # PlotLegend, TextLogColumns, ...
+                view["props"].setdefault(ent.split("/", 3)[3], {}).update(
+                    {k: v for k, v in row.items() if ":" in k and v is not None})
+                continue
             for k, col in (("class", "ViewBlueprint:class_identifier"), ("name", "ViewBlueprint:display_name"),
                            ("origin", "ViewBlueprint:space_origin"), ("contents", "ViewContents:query")):
                 if row.get(col) is not None:
                     view[k] = row[col] if k == "contents" else row[col][0]
     return {v["name"]: v for v in parts.values()}
+
+
+def rgb(packed):
+    """(r, g, b) of a Rerun colour (0xRRGGBBAA)."""
+    return (packed >> 24) & 255, (packed >> 16) & 255, (packed >> 8) & 255
 
 
 def _free_port():
@@ -139,7 +157,62 @@ def test_rrd_raw_rate_aux_and_events(run_rrd):
     ta, tv = read_scalars(path, "/aux/temp_c")
     np.testing.assert_array_equal(tv[:, 0], temp)
     texts = read_texts(path, "/events")
-    assert any(x == "crc_error: frame 42: bad CRC" for x in texts)
+    assert "100.00 s  crc_error: frame 42: bad CRC" in texts          # the recording time leads each message
+    assert rgb(read_column(path, "/aux/temp_c", "SeriesLines:colors")[0][1][0]) == aux_colour(0)
+    assert len(read_scalars(path, "/aux/temp_c/y_range")[0]) == 0      # one aux view: tall, its own range
+
+
+def test_many_aux_channels_get_rounded_y_ranges(tmp_path):
+    """More than three aux channels share two rows of small views: each gets its range
+    so far rounded out to <= 3 steps of a power of ten (two labelled ticks)."""
+    t, r = _white(3000, 10.0, seed=3)
+    aux = {f"c{k}": np.linspace(0.0, 720.0 * (k + 1), 3000) for k in range(4)}
+    path = str(tmp_path / "aux.rrd")
+    run_pipeline(ListSource(t, r, [1000] * 3, 10.0, aux=aux), _args(window_s=51.2, hop_s=12.8),
+                 sinks=[RerunSink(rrd_path=path)])
+    for k, v in enumerate(aux.values()):
+        _, frames = read_scalars(path, f"/aux/c{k}/y_range")
+        lo, hi = frames[-1]
+        assert lo <= v.min() and v.max() <= hi and round((hi - lo) / 10 ** np.floor(np.log10(hi - lo))) <= 3
+    assert tuple(read_scalars(path, "/aux/c0/y_range")[1][-1]) == (0.0, 1000.0)
+
+
+def test_event_text_leads_with_the_time_and_says_the_kind_once():
+    assert event_text(Event(8.96, "platform_motion", "platform motion ended: 1 .. 2 s")) == (
+        "8.96 s  platform motion ended: 1 .. 2 s")
+    assert event_text(Event(1234.5, "coef_jump", "N_dpsh x2.0", axis="y"), of_axis=True) == (
+        "1234.50 s  axis y: coef_jump: N_dpsh x2.0")
+
+
+def _nice(lo, hi):
+    """Whether lo..hi are multiples of a power of ten 1..6 steps of it apart."""
+    for k in range(-12, 12):
+        step = 10.0 ** k
+        n = (hi - lo) / step
+        if (abs(lo / step - round(lo / step)) < 1e-6 and abs(hi / step - round(hi / step)) < 1e-6
+                and 1 - 1e-9 <= n <= 6 + 1e-9):
+            return True
+    return False
+
+
+def test_coefficient_tracks_have_a_rounded_y_range_for_readable_ticks(run_rrd):
+    """``coef/<name>/y_range``: at every window, invisible points at the range of all the
+    track drew so far (value, interval, upper limits) rounded out to multiples of a power
+    of ten (<= 6 steps), so Rerun labels the y axis; the tracks' views have no legend."""
+    path = run_rrd[0]
+    views = read_views(path)
+    for name in COEFFICIENTS:
+        t_v, v = read_scalars(path, f"/coef/{name}")
+        t_u, u = read_scalars(path, f"/coef/{name}/upper_limit")
+        t_r, r = read_scalars(path, f"/coef/{name}/y_range")
+        assert len(t_r) and set(np.round(np.r_[t_v, t_u], 9)) <= set(np.round(t_r, 9))
+        for t, (lo, hi) in zip(t_r, r, strict=True):
+            drawn = np.r_[v[t_v <= t + 1e-9].ravel(), u[t_u <= t + 1e-9].ravel()]
+            assert lo <= drawn.min() and drawn.max() <= hi and _nice(lo, hi), (name, t, lo, hi)
+        colours = read_column(path, f"/coef/{name}/y_range", "SeriesPoints:colors")[0][1]
+        assert all(c & 255 == 0 for c in colours)                     # alpha 0: invisible
+        (view,) = [x for x in views.values() if x["origin"] == f"/coef/{name}"]
+        assert view["props"]["PlotLegend"]["PlotLegend:visible"] == [False]
 
 
 def test_rrd_coefficient_upper_limits_where_not_identifiable(run_rrd):
@@ -198,19 +271,27 @@ def test_rrd_heatmap_legend_and_labels(run_rrd):
     assert sum(x.endswith(" s") for x in labels) >= 6
     scale = read_column(path, "/dadev/heatmap/scale_labels", "Points2D:labels")   # fixed: drawn once, static
     assert len(scale) == 1 and scale[0][0] is None and scale[0][1] and all(x.endswith(" deg/h") for x in scale[0][1])
+    key = read_column(path, "/dadev/heatmap/no_data_key", "Points2D:labels")    # the colour of NaN cells, keyed
+    assert key == [(None, [NO_DATA_KEY])]
     legend = read_column(path, "/adev_curve/log10/legend", "Points2D:labels")[0][1]
-    assert legend == ["measured ADEV, current window", "68.3 % confidence bounds",
-                      "IEEE-952 model over the fitted taus"]
+    assert stacked_label_texts(legend) == ["measured ADEV, current window", "68.3 % confidence bounds",
+                                           "IEEE-952 model (fitted taus)"]
 
 
-def test_one_axis_layout_is_unchanged(run_rrd):
-    """A one-axis stream's views show today's entities, each with its children."""
+def test_one_axis_layout(run_rrd):
+    """A one-axis stream's views show its entities, each with its children: one view
+    per aux channel, an event log of level and message only (the time leads the message)."""
     views = read_views(run_rrd[0]).values()
     assert sorted((v["class"], v["origin"]) for v in views) == sorted(
-        [("TimeSeries", "/rate/rate_dph"), ("TimeSeries", "/aux"), ("2D", "/adev_curve"), ("2D", "/dadev/heatmap"),
-         ("TimeSeries", "/dadev/log10_adev_dph"), *(("TimeSeries", f"/coef/{n}") for n in COEFFICIENTS),
+        [("TimeSeries", "/rate/rate_dph"), ("TimeSeries", "/aux/temp_c"), ("2D", "/adev_curve"),
+         ("2D", "/dadev/heatmap"), ("TimeSeries", "/dadev/log10_adev_dph"),
+         *(("TimeSeries", f"/coef/{n}") for n in COEFFICIENTS),
          ("TextLog", "/events"), ("TimeSeries", "/counters"), ("TextDocument", "/session")])
     assert all(v["contents"] == ["$origin/**"] for v in views)
+    (log,) = [v for v in views if v["class"] == "TextLog"]
+    cols = log["props"]["TextLogColumns"]
+    assert [c["visible"] for c in cols["TextLogColumns:timeline_columns"]] == [False]
+    assert [(c["kind"], c["visible"]) for c in cols["TextLogColumns:text_log_columns"]] == [(2, True), (3, True)]
 
 
 def test_decimator_means_valid_samples_across_pushes():

@@ -127,8 +127,8 @@ def test_accelerometer_units_and_bad_options():
     assert np.isnan([f.aux[f"accel_{a}_g"][1] for a in "xyz"]).all() and c.counters["implausible_accel_g"] == 2
     c = KvhCodec("a", accel="none")
     assert c.aux_names == ("temp_c",) and c.axes == ("x", "y", "z") and c.options()["kvh_accel"] == "none"
-    for kw, msg in [({"axis": "q"}, "--axis"), ({"axis": "x,x"}, "^axis x,x: an axis is named twice$"),
-                    ({"accel": "mps"}, "--kvh-accel")]:
+    for kw, msg in [({"axis": "q"}, "^axis must be x, y, z"), ({"axis": "x,x"}, "^axis x,x: an axis is named twice$"),
+                    ({"accel": "mps"}, "^kvh_accel must be one of")]:
         with pytest.raises(FogmonError, match=msg):
             KvhCodec("a", **kw)
 

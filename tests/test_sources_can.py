@@ -58,9 +58,9 @@ def test_decoder_defaults_from_dbc():
     assert d.sample_rate_hz == FS and d.seq_modulus == 16 and d.rate_unit == "deg/s"
 
 
-@pytest.mark.parametrize("kw,msg", [({"message": "NOPE"}, "--can-message 'NOPE'"),
-                                    ({"rate_signal": "omega"}, "--can-rate 'omega'"),
-                                    ({"temp_signal": "t"}, "--can-temp 't'"),
+@pytest.mark.parametrize("kw,msg", [({"message": "NOPE"}, "^can_message 'NOPE'"),
+                                    ({"rate_signal": "omega"}, "^can_rate 'omega'"),
+                                    ({"temp_signal": "t"}, "^can_temp 't'"),
                                     ({"rate_unit": "furlong/s"}, "unit 'furlong/s'")])
 def test_decoder_option_errors_are_one_line(kw, msg):
     with pytest.raises(FogmonError, match=msg) as e:
@@ -69,7 +69,7 @@ def test_decoder_option_errors_are_one_line(kw, msg):
 
 
 def test_live_can_needs_dbc_and_bad_dbc_is_one_line(tmp_path):
-    with pytest.raises(FogmonError, match="--dbc"):
+    with pytest.raises(FogmonError, match="^can needs dbc F"):
         open_live_source(args_for("--can", "x", "--interface", "virtual"))
     bad = tmp_path / "bad.dbc"
     bad.write_text("BO_ nonsense\n")
@@ -139,7 +139,7 @@ def test_can_log_without_dbc_is_one_line_error(tmp_path):
     with can.Logger(path) as log:
         for m in gyro_msgs(range(3)):
             log.on_message_received(m)
-    with pytest.raises(FogmonError, match="needs --dbc"):
+    with pytest.raises(FogmonError, match="needs dbc F"):
         open_replay_source(path, args_for())
 
 

@@ -55,7 +55,7 @@ def test_raw_capture_with_protocol_option_and_sidecar(tmp_path):
     data, intact = stream(300, {7: "drop", 100: "corrupt", 150: "garbage"})
     p = tmp_path / "cap.bin"
     p.write_bytes(data)
-    with pytest.raises(FogmonError, match="not a replay log; for a raw serial capture give --protocol"):
+    with pytest.raises(FogmonError, match="not a replay log; for a raw serial capture give protocol "):
         open_replay_source(str(p), args_for())
     src = open_replay_source(str(p), args_for("--protocol", "kvh-a", "--kvh-rot", "rate", "--kvh-units", "deg",
                                               "--axis", "z", "--rate-hz", "200"))

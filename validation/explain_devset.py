@@ -41,7 +41,8 @@ import numpy as np
 
 from fogmon.explain.axes import explain_axes
 from fogmon.explain.baseline import baseline_model
-from fogmon.explain.explainer import Options, explain
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.explain.report import build_report
 from fogmon.formats.recording import recording_from_arrays
 from fogmon.sim import effects as fx

@@ -171,9 +171,9 @@ def summary_counters(out: str) -> tuple[dict[str, int], int]:
 def event_totals(rrd: str) -> dict[str, int]:
     """Sums of the counts the .rrd's events carry: crc_error 'N frame(s) failed', gap
     'N sample(s) lost' and 'N more gaps, M samples lost'."""
-    from test_rerun_sink import read_texts
+    from test_rerun_sink import read_event_messages
     tot = {"crc_errors": 0, "samples_missing": 0, "seq_gaps": 0}
-    for x in read_texts(rrd, "/events"):
+    for x in read_event_messages(rrd, "/events"):
         if x.startswith("crc_error:"):
             tot["crc_errors"] += int(x.split()[1])
         elif x.startswith("gap:"):

@@ -20,7 +20,7 @@ MAX_BOOTSTRAP = 10_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from fogmon.explain.explainer import Options
+    from fogmon.explain.options import Options
 
     default = Options()   # the library's defaults
     p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns; several axes: "
@@ -91,7 +91,7 @@ class StageProgress:
 
 def _options(args: argparse.Namespace):
     """explain's Options of the command line."""
-    from fogmon.explain.explainer import Options
+    from fogmon.explain.options import Options
 
     return Options(window_s=args.window_s, n_boot=args.bootstrap, alpha=args.alpha, seed=args.seed,
                    max_effects=args.max_effects)

@@ -22,7 +22,7 @@ from fogmon.sinks.base import COEFFICIENTS, Sink
 from fogmon.sources.options import SourceOptions
 
 if TYPE_CHECKING:
-    from fogmon.explain.explainer import Options
+    from fogmon.explain.options import Options
 
 #: the PipelineConfig fields of `fogmon replay` the tasks use (the others keep their defaults)
 ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion")
@@ -328,7 +328,8 @@ def explain_recording(path: str, model_path: str, source: SourceOptions, config:
     ``config.keep_motion``: the score before and after the effects it found, and their
     kinds (comma-separated); or ``explain_error``."""
     from fogmon.explain import report
-    from fogmon.explain.explainer import Options, explain, without_motion
+    from fogmon.explain.explainer import explain, without_motion
+    from fogmon.explain.options import Options
     from fogmon.formats.recording import recording_from_arrays
     from fogmon.formats.replay_log import read_replay_log
     from fogmon.sim.model import load_model

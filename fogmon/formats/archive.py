@@ -4,7 +4,7 @@ pieces, and finding them. The one place that knows it: the writers (fogmon.sinks
 fogmon.sinks.parquet_pieces) and the readers (fogmon.sources.files.archive, fogmon.fleet)
 use it.
 
-Rotated outputs (``--rotate-s S``): a long run is written as numbered pieces, each a
+Rotated outputs (``rotate_s`` = S s): a long run is written as numbered pieces, each a
 complete file of its kind, named by inserting the piece number before the extension:
 ``samples.csv`` -> ``samples-0001.csv``, ``samples-0002.csv``, ...; ``run.rrd`` ->
 ``run-0001.rrd``, ... Piece k holds the samples of recording time [(k-1) S, k S) from

@@ -158,9 +158,9 @@ def rate_axes(cols: list[str], where: str, shown: str) -> tuple[str, ...]:
 
 
 def pick_axes(axes: tuple[str, ...], asked: str | None, name: str) -> tuple[str, ...] | None:
-    """The axes ``--axis`` ``asked`` (a name or a comma list) keeps of a recording
-    ``name`` with ``axes``: None when nothing is to be picked (not asked, or a one-axis
-    recording, where --axis is left to the decoders and readers that take it, as it
+    """The axes ``asked`` (the ``axis`` option: a name or a comma list) keeps of a
+    recording ``name`` with ``axes``: None when nothing is to be picked (not asked, or a
+    one-axis recording, where ``axis`` is left to the decoders and readers that take it, as it
     always was). An axis the recording does not have is a FogmonError listing its axes."""
     if asked is None or not axes:
         return None

@@ -51,7 +51,7 @@ class AxisAnalysis:
         from fogmon.motion import MotionGate
 
         self.name, self.summary, self.sample_rate_hz = name, summary, sample_rate_hz
-        self.engine = StreamingDadev(sample_rate_hz, window_s, taus=config.taus, hop_s=hop_s)  # checks --taus
+        self.engine = StreamingDadev(sample_rate_hz, window_s, taus=config.taus, hop_s=hop_s)  # checks taus
         self.jumps = JumpDetector(window_s)
         self.tail = _Tail(OVERALL_MAX_SAMPLES)
         self.motion = None if config.keep_motion else MotionGate(sample_rate_hz)
@@ -163,7 +163,7 @@ class AxisAnalysis:
             summary.overall = oadev(rate, sample_rate_hz, taus=taus, valid=valid)
         except FogmonError as e:  # a run shorter than the window can be too short for every tau
             axis = f"axis {self.name}: " if self.name else ""
-            warnings.warn(f"{axis}no whole-run Allan deviation: {e}", FogmonWarning, stacklevel=2)
+            warnings.warn(f"{axis}no whole-run Allan deviation: {e.message}", FogmonWarning, stacklevel=2)
         else:
             summary.overall_first_s = t_last_s - (len(rate) - 1) / sample_rate_hz
             summary.overall_fit = fit_noise(summary.overall)

@@ -1,7 +1,7 @@
 """What a run is asked to do and the window policy: ``PipelineConfig`` (the frozen options
 fogmon.cli builds, or a caller by hand), the default window and hop (``default_window_s``,
 ``window_and_hop``: checked against the sample rate and the samples the run will have),
-the samples of a live ``--duration-s`` run (``live_samples``), and the check that per-axis
+the samples of a live run of ``duration_s`` (``live_samples``), and the check that per-axis
 options cover the stream's axes.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from fogmon.errors import FogmonError
 from fogmon.methods.live import LiveMethods
 from fogmon.sim.model import SensorModel
 
-#: What ``--taus`` gives ``tau_grid``: a grid name, N per decade, or tau values in s.
+#: What ``taus`` gives ``tau_grid``: a grid name, N per decade, or tau values in s.
 TauSpec = str | int | np.ndarray
 #: Default window bounds in samples (the window is a power of two inside these).
 MIN_WINDOW_SAMPLES = 2**10
@@ -66,35 +66,35 @@ def default_window_s(sample_rate_hz: float, n_samples: int | None) -> float:
 
 
 def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None) -> tuple[float, float]:
-    """Window and hop (s) from ``--window-s``/``--hop-s`` or their defaults, checked
+    """Window and hop (s) from ``window_s``/``hop_s`` or their defaults, checked
     against the sample rate and the samples the run will have (the record's ``total_n``,
-    None when live, cut to ``--duration-s``); FogmonError naming the option otherwise."""
+    None when live, cut to ``duration_s``); FogmonError naming the option otherwise."""
     duration_s = config.duration_s
     n_run = total_n
     if duration_s is not None:
         n_cut = round(duration_s * sample_rate_hz)
         if n_cut < 1:
-            raise FogmonError(f"--duration-s {duration_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
+            raise FogmonError(f"`duration_s` {duration_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         n_run = n_cut if total_n is None else min(total_n, n_cut)
     if n_run is not None and n_run < 8:
-        what = "the recording has" if n_run == total_n else "--duration-s leaves"
+        what = "the recording has" if n_run == total_n else "`duration_s` leaves"
         raise FogmonError(f"{what} {n_run} samples at {sample_rate_hz:g} Hz: an Allan deviation needs at least 8")
     window_s = config.window_s
     if window_s is None:
         window_s = default_window_s(sample_rate_hz, n_run)
-        if total_n is None:  # live: the live window unless --duration-s asks for a shorter run
+        if total_n is None:  # live: the live window unless duration_s asks for a shorter run
             window_s = min(window_s, default_window_s(sample_rate_hz, None))
     if n_run is not None and window_s * sample_rate_hz > n_run:
-        what = "the recording" if n_run == total_n else "the --duration-s run"
-        raise FogmonError(f"--window-s {window_s:g} s is longer than {what} "
+        what = "the recording" if n_run == total_n else "the `duration_s` run"
+        raise FogmonError(f"`window_s` {window_s:g} s is longer than {what} "
                           f"({n_run / sample_rate_hz:g} s = {n_run} samples)")
     if window_s * sample_rate_hz < 8:
-        raise FogmonError(f"--window-s {window_s:g} s holds fewer than 8 samples at {sample_rate_hz:g} Hz")
+        raise FogmonError(f"`window_s` {window_s:g} s holds fewer than 8 samples at {sample_rate_hz:g} Hz")
     hop_s = config.hop_s or window_s / 8
     if hop_s * sample_rate_hz < 1:
-        raise FogmonError(f"--hop-s {hop_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
+        raise FogmonError(f"`hop_s` {hop_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
     if hop_s > window_s:
-        raise FogmonError(f"--hop-s {hop_s:g} s is longer than the window ({window_s:g} s): the samples "
+        raise FogmonError(f"`hop_s` {hop_s:g} s is longer than the window ({window_s:g} s): the samples "
                           f"between windows would never be analysed")
     return window_s, hop_s
 
@@ -106,19 +106,19 @@ def live_samples(duration_s: float, sample_rate_hz: float) -> int:
 
 
 def _check_axis_options(cfg: PipelineConfig, axes: tuple[str, ...], source_name: str) -> None:
-    """FogmonError naming the option when a one-axis --thermal-cal, a per-axis calibration
-    or a --model of several axes does not cover the stream's ``axes`` (() = one axis)."""
+    """FogmonError naming the option when a one-axis ``thermal`` calibration, a per-axis
+    calibration or a ``model`` of several axes does not cover the stream's ``axes`` (() = one axis)."""
     if axes and cfg.methods.thermal is not None:
-        raise FogmonError(f"--thermal-cal: the calibration is for one axis and {source_name} has axes "
-                          f"{', '.join(axes)}: select one with --axis NAME")
+        raise FogmonError(f"`thermal`: the calibration is for one axis and {source_name} has axes "
+                          f"{', '.join(axes)}: select one with `axis` NAME")
     calibrated = sorted(a for a, m in cfg.axis_methods.items() if m.thermal is not None)
     if calibrated and set(axes) - set(calibrated):
         what = f"not for {', '.join(a for a in axes if a not in calibrated)}" if axes else f"{source_name} is one axis"
-        raise FogmonError(f"--thermal-cal: the calibration has a thermal_drift effect for axes "
-                          f"{', '.join(calibrated)} and {what}: select calibrated axes with --axis")
+        raise FogmonError(f"`thermal`: the calibration has a thermal_drift effect for axes "
+                          f"{', '.join(calibrated)} and {what}: select calibrated axes with `axis`")
     if axes and cfg.model is not None:
         missing = [a for a in axes if cfg.model.axes and a not in cfg.model.axes]
         if missing:
-            raise FogmonError(f"--model: the model has no [noise.{missing[0]}] table (its axes: "
+            raise FogmonError(f"`model`: the model has no [noise.{missing[0]}] table (its axes: "
                               f"{', '.join(cfg.model.axes)}; the stream's: {', '.join(axes)}); "
-                              f"select one of its axes with --axis NAME")
+                              f"select one of its axes with `axis` NAME")

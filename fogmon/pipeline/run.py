@@ -4,9 +4,9 @@ source -> StreamingDadev (ring-buffer DAVAR) -> fit_noise per completed window -
 A live gyro and a replay differ only in the source. Blocks are processed as they come
 (Python overhead per block, not per sample); every completed window (one per hop) is
 fitted with the IEEE-952 model and handed to the sinks with its recording time; the run
-ends at the end of the source, at ``--duration-s`` of recording time, or on Ctrl-C
+ends at the end of the source, at ``duration_s`` of recording time, or on Ctrl-C
 (SIGTERM, SIGHUP: fogmon.stopping), and always closes the source and the sinks so the
-.rrd and the archive are complete. With ``--rotate-s`` blocks are cut where a new piece
+.rrd and the archive are complete. With ``rotate_s`` blocks are cut where a new piece
 of the outputs begins and the sinks are told (``Sink.rotate``) before its first block.
 A stream of several axes (``Block.axes``) runs one engine, fit, motion gate, live
 methods and model check per axis (``AxisAnalysis``), each equal to a one-axis run of
@@ -39,7 +39,7 @@ from fogmon.sources.pacing import Pacer
 
 #: What DAVAR analyses when the recording has a reference rotation.
 ERROR_EXPR = "rate_dph - 3600 x rot_dps"
-#: A live run with --duration-s also stops reading the device this long (s, or 10 % more)
+#: A live run with ``duration_s`` also stops reading the device this long (s, or 10 % more)
 #: after that much wall time from opening the source, should the device fall silent (what
 #: was read is kept).
 LIVE_WALL_SLACK_S = 2.0
@@ -63,13 +63,13 @@ class Pipeline:
         rotate_s = config.rotate_s
         self.piece_n = int(round(rotate_s * sample_rate_hz)) if rotate_s else None
         if self.piece_n is not None and self.piece_n < 1:
-            raise FogmonError(f"--rotate-s {rotate_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
+            raise FogmonError(f"`rotate_s` {rotate_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         self.pacer = pacer if pacer is not None else Pacer(config.realtime)
         self.sinks: list[Sink] = []
         self.summary = Summary(source.name, sample_rate_hz, self.window_s, self.hop_s)
         self.axes: tuple[str, ...] = ()
         self.analyses: list[AxisAnalysis] = []
-        self._set_axes(tuple(source.axes))  # checks --taus, builds the model bands
+        self._set_axes(tuple(source.axes))  # checks taus, builds the model bands
         self.started = self.done = self.use_ref = False
         self.t_origin = math.nan      # recording time of the first sample (s), once it came
         self.piece = 1
@@ -126,7 +126,7 @@ class Pipeline:
 
     def _blocks(self) -> Iterable[Block]:
         """The source's blocks; a live one compiles the kernels first, is cut at
-        --duration-s and read in a thread."""
+        ``duration_s`` and read in a thread."""
         cfg = self.config
         if self.total_n is None:
             with startup.loading():
@@ -167,7 +167,7 @@ class Pipeline:
         return not self.done
 
     def _check_wall_limit(self) -> None:
-        """A live source that stalls still stops on time with --duration-s (what it read
+        """A live source that stalls still stops on time with ``duration_s`` (what it read
         is kept): closed after the run's duration plus LIVE_WALL_SLACK_S of wall time."""
         duration_s = self.config.duration_s
         if duration_s is None or self.total_n is not None or self.source_closed_early:
@@ -188,8 +188,8 @@ class Pipeline:
             self._set_axes(first.axes)
         model = self.config.model
         if not self.axes and model is not None and model.axes:
-            warnings.warn(f"--model has [noise.<axis>] tables ({', '.join(model.axes)}) and {self.source.name} is "
-                          f"one axis: it is checked against the model's [noise] table and every effect (--axis NAME "
+            warnings.warn(f"`model` has [noise.<axis>] tables ({', '.join(model.axes)}) and {self.source.name} is "
+                          f"one axis: it is checked against the model's [noise] table and every effect (`axis` NAME "
                           f"picks an axis's model)", FogmonWarning, stacklevel=2)
         m = tau_grid(sample_rate_hz, int(round(self.window_s * sample_rate_hz)), self.config.taus)
         views = [first.axis(a.name) if a.name else first for a in self.analyses]

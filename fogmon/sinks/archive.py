@@ -1,7 +1,7 @@
 """The archive: while monitoring, everything a live source delivers goes to disk, so
 nothing is lost.
 
-Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.formats.archive:
+Under one directory, in pieces of ``rotate_s`` s of recording time (fogmon.formats.archive:
 piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
@@ -12,7 +12,7 @@ piece k holds recording time [(k-1) S, k S) from the first sample; numbered from
   valid: a sample with only some axes valid is left out and counted
   (``partial_samples_dropped``); the raw capture keeps it, and ``fogmon replay`` of the
   capture decodes it with every axis as the device sent it. With ``samples_format="parquet"``
-  (``--archive-format parquet``) ``samples-NNNN.parquet`` instead, written in row groups
+  (``archive_format`` parquet) ``samples-NNNN.parquet`` instead, written in row groups
   (fogmon.sinks.parquet_pieces: a SIGKILL loses at most the row group being filled).
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
   serial gyro ``raw-NNNN.bin`` (the bytes exactly as received) plus ``raw-NNNN.bin.json``
@@ -30,7 +30,7 @@ SIGKILL loses at most the last ``flush_s`` of data and never leaves a half-writt
 row. The raw taps may be called from another thread than the pipeline's (the source's
 decoding thread, right after it decoded those bytes): the raw capture keeps being written
 even while the pipeline is slow, and holds exactly the input the source decoded and
-counted (a ``--duration-s`` run ends it with the run's last frame).
+counted (a run of ``duration_s`` ends it with the run's last frame).
 
 One archive, one writer: the folder is locked (``flock`` of its lock file, which holds
 the writer's pid) before anything else, so a second writer gets a one-line error; a

@@ -187,9 +187,10 @@ def model_check_lines(mc: dict) -> list[str]:
 
 
 def phase_lines(ph: dict) -> list[str]:
-    """The operating phases of the session (from pumps/rot_dps) and, per state, the range
-    of every coefficient the window fits identified (docs/monitor.md)."""
-    out = [f"  phases (from pumps / rot_dps; {ph['transition_windows']} window(s) straddling a change are in none):"]
+    """The operating phases of the session (from the pumps / rot_dps channels it has) and,
+    per state, the range of every coefficient the window fits identified (docs/monitor.md)."""
+    src = " / ".join(ph.get("channels") or ("pumps", "rot_dps"))
+    out = [f"  phases (from {src}; {ph['transition_windows']} window(s) straddling a change are in none):"]
     for state, s in ph["states"].items():
         spans = ", ".join(f"{p['t_first_end_s']:.0f}..{p['t_last_end_s']:.0f} s" for p in s["phases"][:4])
         more = f", ... ({len(s['phases']) - 4} more)" if len(s["phases"]) > 4 else ""

@@ -26,7 +26,7 @@ class Source(Protocol):
     def axes(self) -> tuple[str, ...]:
         """The axes of its blocks, known before the first one (() for a one-axis source;
         a three-axis KVH, several CAN or ``lines`` rate columns, a multi-axis log, a ROS bag or
-        PX4 ULog IMU read without ``--axis``)."""
+        PX4 ULog IMU read without ``axis``)."""
         ...
 
     @property
@@ -41,7 +41,7 @@ class Source(Protocol):
         ...
 
     def blocks(self) -> Iterator[Block]:
-        """Yield blocks until the source ends (end of file, --duration-s, close())."""
+        """Yield blocks until the source ends (end of file, a live source's ``limit``, close())."""
         ...
 
     def close(self) -> None:

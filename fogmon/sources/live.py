@@ -12,7 +12,7 @@ grid and yields a block every ``block_s`` s while data flows and at least every
 ``idle_s`` s (possibly empty, carrying events) while it does not. Counters and error
 events are updated by the consumer only, together with the blocks it yields, so they
 agree with each other and with the samples delivered; ``limit(n)`` makes ``blocks()``
-end exactly at grid sample ``n`` (``--duration-s``), with nothing after it decoded,
+end exactly at grid sample ``n`` (a run's ``duration_s``), with nothing after it decoded,
 counted or handed to the taps."""
 from __future__ import annotations
 
@@ -181,7 +181,7 @@ class LiveSource:
 
     def _handle(self, item: tuple, parts: list[Block], events: list[Event]) -> bool:
         """One item of the reader thread's queue: blocks to ``parts``, events to
-        ``events``; True when the stream ended (device end or --duration-s limit)."""
+        ``events``; True when the stream ended (device end or the ``limit``)."""
         kind = item[0]
         if kind == "end":
             return True

@@ -58,7 +58,7 @@ READERS = {".bag": ROSBAG, ".mcap": ROSBAG, ".db3": ROSBAG, ".ulg": ULOG, ".mf4"
 
 
 def open_live_source(opts: SourceOptions) -> Source:
-    """The live source named by ``--serial`` or ``--can`` (exactly one)."""
+    """The live source named by ``serial`` or ``can`` (exactly one)."""
     if opts.serial and not opts.can:
         from fogmon.sources.devices.serial_port import SerialSource
         o = opts.codec_options()
@@ -69,11 +69,11 @@ def open_live_source(opts: SourceOptions) -> Source:
         from fogmon.sources.codecs.can import load_dbc
         from fogmon.sources.devices.can_bus import CanSource
         if not opts.dbc:
-            raise FogmonError("--can needs --dbc F describing the gyro's frames (example: "
+            raise FogmonError("`can` needs `dbc` F describing the gyro's frames (example: "
                               "fogmon/data/gyro_example.dbc)")
         return CanSource(opts.can, opts.interface, load_dbc(opts.dbc), bitrate=opts.can_bitrate,
                          dbc_path=opts.dbc, **opts.can_options())
-    raise FogmonError("give exactly one of --serial PORT or --can CHANNEL")
+    raise FogmonError("give exactly one of `serial` PORT or `can` CHANNEL")
 
 
 def _sniff(path: str) -> str:
@@ -99,7 +99,7 @@ def _sniff(path: str) -> str:
 
 def _by_name(path: str, opts: SourceOptions) -> Reader | None:
     """The reader a folder or a file's suffix names (None: its contents decide). An MDF4
-    file given ``--dbc`` or with a capture sidecar, and no ``--channel``, holds raw CAN
+    file given ``dbc`` or with a capture sidecar, and no ``channel``, holds raw CAN
     frames: python-can reads a .mf4 as a CAN log, a .mdf is told by its contents."""
     if os.path.isdir(path):
         return ROSBAG if os.path.isfile(os.path.join(path, "metadata.yaml")) else ARCHIVE
@@ -112,7 +112,7 @@ def _by_name(path: str, opts: SourceOptions) -> Reader | None:
 
 def _by_content(path: str, opts: SourceOptions) -> Reader:
     """The reader of a file its name does not decide: its capture sidecar's kind, else its
-    first line (a replay log, a python-can CSV log), else ``--protocol`` (a raw capture)."""
+    first line (a replay log, a python-can CSV log), else ``protocol`` (a raw capture)."""
     side = read_capture_sidecar(path)
     kind = side.get("kind") if side else _sniff(path)
     if kind in ("can", "can-csv"):
@@ -121,8 +121,8 @@ def _by_content(path: str, opts: SourceOptions) -> Reader:
         return RAW_CAPTURE
     if kind == "replay-log" or path.lower().endswith(".csv"):
         return REPLAY_LOG
-    raise FogmonError(f"{path}: not a replay log; for a raw serial capture give --protocol "
-                      f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with --dbc")
+    raise FogmonError(f"{path}: not a replay log; for a raw serial capture give `protocol` "
+                      f"({', '.join(PROTOCOLS)}), for a CAN log use .asc/.blf/.trc/.csv/.log with `dbc`")
 
 
 def reader_for(path: str, opts: SourceOptions | None = None) -> Reader:
@@ -146,10 +146,10 @@ def _module(r: Reader, path: str) -> ModuleType:
 
 def open_replay_source(path: str | os.PathLike, opts: SourceOptions | None = None) -> Source:
     """A source replaying ``path``: a replay-log CSV or Parquet log, a raw serial capture
-    (protocol from ``--protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc
-    .csv .log with ``--dbc`` or a sidecar), another tool's recording (ROS bag/MCAP, PX4
+    (protocol from ``protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc
+    .csv .log with ``dbc`` or a sidecar), another tool's recording (ROS bag/MCAP, PX4
     ULog, MDF4, LAS), a sensor model (its endless simulation) or an archive folder
-    (fogmon.sources.files.archive). Not paced: the pipeline paces (``--realtime``)."""
+    (fogmon.sources.files.archive). Not paced: the pipeline paces (``realtime``)."""
     opts = SourceOptions() if opts is None else opts
     path = os.fspath(path)
     if not os.path.exists(path):

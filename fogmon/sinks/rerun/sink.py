@@ -8,7 +8,8 @@ Entities (units in every name; "log10" said where the value is a log):
 - ``rate/rate_dph`` raw rate in deg/h (and ``rate/error_dph`` = rate_dph - 3600 x rot_dps,
   what DAVAR analyses, when the recording has a reference rotation). Above DISPLAY_MAX_HZ it is shown as the mean of
   consecutive valid samples (decimated for display only; the engine sees every sample,
-  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels.
+  the series name says "mean of k samples"). ``aux/<name>`` the same for aux channels
+  (with more than AUX_ONE_ROW, ``aux/<name>/y_range``: the range so far rounded out).
 - ``dadev/log10_adev_dph`` log10 of the ADEV (deg/h) at every tau, one row per window
   (time = the window's last sample); ``dadev/heatmap`` the latest HEATMAP_WINDOWS windows
   as a colour image (``image``; rows: tau, largest at the top; columns: windows, newest
@@ -17,17 +18,20 @@ Entities (units in every name; "log10" said where the value is a log):
 - ``adev_curve/log10/*`` the current window's ADEV curve with its confidence bounds and the
   fitted IEEE-952 model (drawn only over the taus the fit used: ``model_span``), as
   x = log10(tau / s), y = log10(ADEV / (deg/h)) with a labelled decade grid and a legend
-  (plot views have no log axes).
+  (plot views have no log axes); with --model the model's band (``model_band``: lo,
+  median, hi lines, and ``model_band/bars`` one bar per tau).
 - ``coef/<name>`` each IEEE-952 coefficient with its interval (series value, lo, hi;
   only windows where it is identifiable) - the "2-D diagram" of the MWD papers;
-  ``coef/<name>/upper_limit`` its 95 % upper limit in the windows where it is not.
-- ``events`` a text log (gaps, CRC errors, reconnects, coefficient jumps);
-  ``counters/<name>`` the source's counters.
+  ``coef/<name>/upper_limit`` its 95 % upper limit in the windows where it is not;
+  ``coef/<name>/y_range`` invisible points at the track's range so far rounded out
+  (plots.nice_range), so that the view's y axis shows tick values.
+- ``events`` a text log (gaps, CRC errors, reconnects, coefficient jumps), each message
+  starting with its recording time in s; ``counters/<name>`` the source's counters.
 
 Several axes (``StreamInfo.axes``): each axis's rate, DADEV, heatmap, ADEV curve (with
 its model band) and coefficients go under ``axis/<name>/`` (``axis/x/rate/rate_dph``,
 ``axis/x/adev_curve/log10/adev_dph``, ``axis/x/coef/N_dpsh``, ...), its events to
-``axis/<name>/events``; the decade grid and legend of the overlaid ADEV curves stay at
+``axis/<name>/events`` (the message says the axis); the decade grid and legend of the overlaid ADEV curves stay at
 ``adev_curve/log10``, aux channels at ``aux/<name>``, whole-stream events at ``events``.
 Each axis has one colour (AXIS_COLOURS) in every view: rates, ADEV curves and coefficient
 tracks of all axes overlaid, one heatmap per axis side by side (``blueprint`` with ``axes``).
@@ -56,7 +60,7 @@ from fogmon.formats.archive import piece_path
 from fogmon.outputs import Output, check_outputs, write_failed
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 from fogmon.sinks.rerun import plots as rp
-from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, axis_path, blueprint
+from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, Y_RANGE, axis_path, blueprint, heatmap_height
 from fogmon.sinks.rerun.columns import (
     _Decimator,
     _Rows,
@@ -74,6 +78,7 @@ from fogmon.sinks.rerun.style import (
     MEASURED_COLOUR,
     MODEL_COLOUR,
     _styles,
+    aux_colour,
 )
 
 if TYPE_CHECKING:
@@ -95,8 +100,10 @@ FLUSH_SAMPLES = 1 << 16
 FLUSH_TIMEOUT_S = 30.0
 #: Model points per decade of tau drawn over the fitted range.
 MODEL_POINTS_PER_DECADE = 20
-#: Height (view units, above the image) of the axis-name label of a multi-axis heatmap.
-HEATMAP_TITLE_Y = -2.5
+#: More aux channels than this share two rows of small views (about 60 pixels tall), whose
+#: y ranges are rounded out (plots.nice_range) to at most AUX_STEPS steps: two labelled
+#: ticks. In one row (about 200 pixels) the data's own range is labelled.
+AUX_ONE_ROW, AUX_STEPS = 3, 3
 #: Child of ``coef/<name>``: the 95 % upper limit in windows where the coefficient is not identifiable.
 UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
@@ -202,6 +209,7 @@ class RerunSink(Sink):
         self._legend_sent = False
         self._band_alpha: float | None = None
         self._rows: dict[str, _Rows] = {}    # entity -> rows waiting for the next flush
+        self._y_ranges: dict[str, tuple[float, float]] = {}   # coefficient -> (min, max) drawn so far, all axes
         self._pending_events: list[Event] = []   # before the first sample: entities not known yet
         if connect_url:
             _check_listening(connect_url)
@@ -244,6 +252,12 @@ class RerunSink(Sink):
             b = first.axis(a) if a else first
             y = b.error_rate_dph if error_rate else b.rate_dph
             y_decs.append(_adev_decades(y[b.valid & np.isfinite(y)], len(tau)))
+        for lo, _, hi in info.model_bands.values():      # the --model band is drawn whole
+            with np.errstate(divide="ignore", invalid="ignore"):
+                band = np.log10(np.r_[np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)])
+            if np.isfinite(band).any():
+                y_decs.append((math.floor(np.nanmin(band[np.isfinite(band)])),
+                               math.ceil(np.nanmax(band[np.isfinite(band)]))))
         self._decades = (x_dec, (min(d[0] for d in y_decs), max(d[1] for d in y_decs)))
         self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes)
         self.rec = _Streams()
@@ -292,9 +306,16 @@ class RerunSink(Sink):
                 rec.log(axis_path(a, f"coef/{n}/{UPPER_LIMIT}"), rr.SeriesPoints(
                     names=[f"{st.label}upper limit (not identifiable)"], colors=[c], markers=["down"],
                     marker_sizes=[3.0]), static=True)
-        for name in info.aux_names:
+                rec.log(axis_path(a, f"coef/{n}/{Y_RANGE}"), rr.SeriesPoints(
+                    names=["y axis range (rounded out), bottom", "y axis range (rounded out), top"],
+                    colors=[(0, 0, 0, 0)] * 2, marker_sizes=[0.0, 0.0]), static=True)
+        for k, name in enumerate(info.aux_names):
             label = name if self.step == 1 else f"{name} (mean of {self.step} samples)"
-            rec.log(f"aux/{name}", rr.SeriesLines(names=[label]), static=True)
+            rec.log(f"aux/{name}", rr.SeriesLines(names=[label], colors=[aux_colour(k)]), static=True)
+            if len(info.aux_names) > AUX_ONE_ROW:
+                rec.log(f"aux/{name}/{Y_RANGE}", rr.SeriesPoints(
+                    names=["y axis range (rounded out), bottom", "y axis range (rounded out), top"],
+                    colors=[(0, 0, 0, 0)] * 2, marker_sizes=[0.0, 0.0]), static=True)
         axes = f"axes: {', '.join(info.axes)}\n" if info.axes else ""
         rec.log("session", rr.TextDocument(
             f"source: {info.source_name}\n{axes}analysed: {info.analysed} (deg/h)\n"
@@ -308,15 +329,15 @@ class RerunSink(Sink):
         for a, st in self._styles.items():
             if a:
                 rec.log(axis_path(a, CURVE), rp.loglog_transform(), static=True)
-                rp.log_legend(rec, f"{axis_path(a, HEATMAP)}/title", [(f"axis {a}", st.measured)],
-                              top_left=(rp.HEAT_W / 2, HEATMAP_TITLE_Y), step=0.0)
             band = info.model_bands.get(a)
             if band is not None and len(tau):
                 lx = np.log10(tau)
-                lines = [np.column_stack([lx, np.log10(np.asarray(b, dtype=np.float64))]) for b in band]
+                lb = [np.log10(np.asarray(b, dtype=np.float64)) for b in band]
+                lines = [np.column_stack([lx, y]) for y in lb]
                 radii = np.array([rr.Radius.ui_points(w) for w in (1.0, 0.5, 1.0)], dtype=np.float32)
                 rec.log(f"{axis_path(a, CURVE)}/model_band", rr.LineStrips2D(lines, colors=[st.band], radii=radii),
                         static=True)
+                rp.log_band_bars(rec, f"{axis_path(a, CURVE)}/model_band/bars", lx, lb[0], lb[2], st.band)
 
     # -- data -----------------------------------------------------------------
     def block(self, block: Block) -> None:
@@ -347,6 +368,8 @@ class RerunSink(Sink):
             if ok.any():
                 self.rec.send_columns(ent, indexes=[rr.TimeColumn(TIMELINE, duration=t[ok])],
                                       columns=rr.Scalars.columns(scalars=v[ok]))
+                if ent.startswith("aux/") and len(self.info.aux_names) > AUX_ONE_ROW:
+                    self._queue_aux_range(ent, float(t[ok][-1]), v[ok])
         for ent, rows in self._rows.items():
             if rows.t_s:
                 rows.send(self.rec, ent, np.array(rows.t_s, dtype=np.float64), rows.values)
@@ -377,6 +400,8 @@ class RerunSink(Sink):
                         list(np.column_stack([v[ok], lo[ok], hi[ok]])))
             up = ~ident & np.isfinite(hi)     # not identifiable: hi is the 95 % upper limit
             self._queue(axis_path(axis, f"coef/{name}/{UPPER_LIMIT}"), _send_scalars, t_end_s[up], list(hi[up]))
+            drawn = np.where(ok[:, None], np.column_stack([v, lo, hi]), np.where(up, hi, np.nan)[:, None])
+            self._queue_y_range(axis, name, t_end_s, drawn)
         if not self._legend_sent:
             self._log_legend(dadev.confidence)
         tau = np.asarray(dadev.tau_s, dtype=np.float64)
@@ -390,26 +415,47 @@ class RerunSink(Sink):
             self._queue_curve(axis, float(t_end_s[i]), lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau,
                               misfit[i], dense, model[i])
 
+    def _queue_y_range(self, axis: str, name: str, t_end_s: np.ndarray, drawn: np.ndarray) -> None:
+        """The rounded-out range (plots.nice_range) of everything coefficient ``name``'s
+        tracks (of every axis: they share a view) drew up to each window of ``axis``
+        (``drawn``: windows x values, NaN: not drawn), as ``coef/<name>/y_range`` points at
+        the windows' ends: the view fits its y axis to them."""
+        w_lo, w_hi = np.fmin.reduce(drawn, axis=1), np.fmax.reduce(drawn, axis=1)
+        prev = self._y_ranges.get(name, (np.nan, np.nan))
+        run_lo = np.fmin.accumulate(np.r_[prev[0], w_lo])[1:]
+        run_hi = np.fmax.accumulate(np.r_[prev[1], w_hi])[1:]
+        if len(run_lo):
+            self._y_ranges[name] = (float(run_lo[-1]), float(run_hi[-1]))
+        ok = np.isfinite(run_lo) & np.isfinite(run_hi)
+        self._queue(axis_path(axis, f"coef/{name}/{Y_RANGE}"), _send_scalars, t_end_s[ok],
+                    [np.array(rp.nice_range(a, b)) for a, b in zip(run_lo[ok], run_hi[ok], strict=True)])
+
+    def _queue_aux_range(self, entity: str, t_s: float, values: np.ndarray) -> None:
+        """An aux channel's range so far, rounded out (plots.nice_range, AUX_STEPS), as
+        ``aux/<name>/y_range`` points at ``t_s`` (s)."""
+        lo, hi = self._y_ranges.get(entity, (math.inf, -math.inf))
+        lo, hi = min(lo, float(values.min())), max(hi, float(values.max()))
+        self._y_ranges[entity] = (lo, hi)
+        self._queue(f"{entity}/{Y_RANGE}", _send_scalars, [t_s], [np.array(rp.nice_range(lo, hi, AUX_STEPS))])
+
     def _log_legend(self, confidence: float) -> None:
         """The ADEV-curve view's legend (static; the bounds' confidence is known from the
         first frames): what each line is; with several axes, each axis's colour and the
         shades of its bounds, model and band."""
-        (_, x1), (_, y1) = self._decades
         alpha = self._band_alpha
-        band = [] if alpha is None else [f"--model band (family-wise {alpha:g} per window)"]
+        band = [] if alpha is None else ["--model band" + ("" if self.info.axes else
+                                                           f", family-wise {alpha:g}/window")]
         if not self.info.axes:
             items = [("measured ADEV, current window", MEASURED_COLOUR),
                      (f"{100 * confidence:.1f} % confidence bounds", BOUNDS_COLOUR),
-                     ("IEEE-952 model over the fitted taus", MODEL_COLOUR),
+                     ("IEEE-952 model (fitted taus)", MODEL_COLOUR),
                      *((b, BAND_COLOUR) for b in band)]
         else:
-            first = next(iter(self._styles.values()))     # the shades shown in the first axis's colour
-            items = [*((f"axis {a}: measured ADEV, current window", st.measured) for a, st in self._styles.items()),
-                     (f"darker: {100 * confidence:.1f} % confidence bounds", first.bounds),
-                     ("lighter: IEEE-952 model over the fitted taus", first.model),
-                     *((f"greyed: {b}", first.band) for b in band)]
-        rp.log_legend(self.rec, f"{CURVE}/legend", items, top_left=(x1 - 1.3, y1 + 0.1),
-                      step=-0.4 if self.info.axes else -0.5)
+            items = [*((f"axis {a}: measured ADEV", st.measured) for a, st in self._styles.items()),
+                     (f"darker: {100 * confidence:.1f} % bounds", rp.LABEL_COLOUR),    # shades of each axis's colour
+                     ("lighter: IEEE-952 model", rp.LABEL_COLOUR),
+                     *((f"greyed: {b}", rp.LABEL_COLOUR) for b in band)]
+        rp.log_loglog_legend(self.rec, f"{CURVE}/legend", items, *self._decades)
         self._legend_sent = True
 
     def _log_heatmap(self, axis: str, log_adev: np.ndarray, t_end_s: np.ndarray, tau: np.ndarray) -> None:
@@ -428,16 +474,17 @@ class RerunSink(Sink):
         heat = np.stack(h.rows, axis=1)[::-1]  # rows: largest tau on top
         n_cols = heat.shape[1]
         rows = rp.decade_rows(tau)
-        cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, 5)).round().astype(int))
-        entity = axis_path(axis, HEATMAP)
+        n_labels = 5 if len(self._styles) == 1 else 3     # several axes: narrow heatmaps side by side
+        cols = np.unique(np.linspace(0, n_cols - 1, min(n_cols, n_labels)).round().astype(int))
+        entity, height = axis_path(axis, HEATMAP), heatmap_height(self.info.axes)
         if not h.scale_sent:     # fixed from the first frames on: drawn once, not every window
             decades = np.arange(lo, hi + 1)
             rp.log_heatmap_scale(self.rec, entity, lo, hi, HEATMAP_COLORMAP,
-                                 (decades, [f"{10.0**d:g} deg/h" for d in decades]), static=True)
+                                 (decades, [f"{10.0**d:g} deg/h" for d in decades]), static=True, height=height)
             h.scale_sent = True
         rp.log_heatmap(self.rec, entity, heat, lo, hi, HEATMAP_COLORMAP,
                        ([len(tau) - 1 - i for i in rows], [f"{tau[i]:.3g} s" for i in rows]),
-                       (cols, [f"{h.t_s[c]:.6g} s" for c in cols]), None)
+                       (cols, [_time_label(h.t_s[c]) for c in cols]), None, height=height)
 
     def _queue_curve(self, axis, t_s, lx, adev, lo, hi, tau, misfit, dense, model) -> None:
         """The ADEV curve and bounds of axis ``axis`` in the window ending at ``t_s`` (s),
@@ -468,8 +515,9 @@ class RerunSink(Sink):
             self._pending_events.extend(events)
             return
         for e in events:
-            self._queue(axis_path(e.axis, "events") if e.axis in self.info.axes else "events", _send_texts,
-                        [e.t_s], [(f"{e.kind}: {e.message}", _LEVELS.get(e.kind, "INFO"))])
+            own = e.axis in self.info.axes
+            self._queue(axis_path(e.axis, "events") if own else "events", _send_texts,
+                        [e.t_s], [(event_text(e, own), _LEVELS.get(e.kind, "INFO"))])
 
     def source_counters(self, t_s: float, counters: dict[str, int]) -> None:
         for k, v in counters.items():
@@ -538,6 +586,18 @@ class RerunSink(Sink):
                 time.sleep(0.5)
         except KeyboardInterrupt:   # Ctrl-C where fogmon's stop handlers are not installed
             pass
+
+
+def _time_label(t_s: float) -> str:
+    """A heatmap column's label: its window's end time, whole seconds from 100 s on."""
+    return f"{t_s:.0f} s" if abs(t_s) >= 100 else f"{t_s:.4g} s"
+
+
+def event_text(e: Event, of_axis: bool = False) -> str:
+    """An event's line in the event log: its recording time (s), with ``of_axis`` its
+    axis, its kind (left out where the message starts with it in words) and message."""
+    kind = "" if e.message.lower().startswith(e.kind.replace("_", " ")) else f"{e.kind}: "
+    return f"{e.t_s:.2f} s  {f'axis {e.axis}: ' if of_axis else ''}{kind}{e.message}"
 
 
 def _rerun_call(fn, **kwargs) -> None:

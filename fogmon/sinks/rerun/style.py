@@ -1,6 +1,7 @@
 """How the monitor's Rerun views are coloured: the ADEV curve's measured, bounds, model
-and model-band colours, the coefficients' colours, the heatmap's colormap, and for a
-stream of several axes one colour per axis with its shades (``_styles``).
+and model-band colours, the coefficients' colours, the heatmap's colormap, one colour
+per aux channel (``aux_colour``), and for a stream of several axes one colour per axis
+with its shades (``_styles``).
 """
 from __future__ import annotations
 
@@ -18,6 +19,9 @@ HEATMAP_COLORMAP = "viridis"
 AXIS_COLOURS = ((235, 90, 80), (90, 200, 100), (90, 150, 255), (230, 180, 40), (200, 110, 220), (70, 200, 200))
 #: What the views' titles call those colours.
 AXIS_COLOUR_NAMES = ("red", "green", "blue", "yellow", "purple", "cyan")
+#: Colours of the aux channels, in the order of StreamInfo.aux_names (each in its own
+#: view), repeated beyond six channels; none is an axis colour.
+AUX_COLOURS = ((255, 190, 90), (180, 140, 255), (120, 220, 200), (240, 120, 170), (200, 200, 120), (150, 200, 255))
 _COEF_COLORS = {"Q_arcsec": (230, 159, 0), "N_dpsh": (86, 180, 233), "B_dph": (0, 158, 115),
                 "K_dphsh": (213, 94, 0), "R_dphh": (204, 121, 167)}
 
@@ -57,3 +61,8 @@ def _mix(colour: tuple[int, int, int], to: tuple[int, int, int], f: float) -> tu
     """``colour`` moved a fraction ``f`` towards ``to``."""
     r, g, b = (round(c + f * (t - c)) for c, t in zip(colour, to, strict=True))
     return r, g, b
+
+
+def aux_colour(k: int) -> tuple[int, int, int]:
+    """The colour of the ``k``-th aux channel."""
+    return AUX_COLOURS[k % len(AUX_COLOURS)]

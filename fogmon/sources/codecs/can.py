@@ -9,10 +9,10 @@ The rate signal's DBC unit (deg/h, deg/s, rad/s, or deg, rad, arcsec per sample)
 the conversion to deg/h. Lost frames are found from the rolling counter (its wrap is
 2**bit length) and from the frames' timestamps (a silence longer than half a counter
 wrap, or 0.5 s without a counter, is an outage whose length the timestamps give).
-Rates beyond ``--max-rate-dph`` (default the generic gate of fogmon.sources.plausibility,
+Rates beyond ``max_rate_dph`` (default the generic gate of fogmon.sources.plausibility,
 10,000 deg/s) make the sample invalid, counted as ``implausible_samples``.
 
-Several axes (``--can-rate x=GyroX,y=GyroY,z=GyroZ``, one signal per axis, possibly in
+Several axes (``can_rate`` ``x=GyroX,y=GyroY,z=GyroZ``, one signal per axis, possibly in
 different messages): the message carrying the first axis's signal is the sample clock.
 Each of its frames is one sample, placed on the grid by its counter and timestamps as
 for one axis; its temperature, counter and valid signals serve every axis. An axis whose
@@ -46,10 +46,10 @@ def load_dbc(path: str):
     try:
         return cantools.database.load_file(path, database_format="dbc")
     except FileNotFoundError:
-        raise FogmonError(f"--dbc {path}: no such file") from None
+        raise FogmonError(f"`dbc` {path}: no such file") from None
     except Exception as e:  # cantools raises several parser error types
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FogmonError(f"--dbc {path}: not a valid DBC file: {msg}") from None
+        raise FogmonError(f"`dbc` {path}: not a valid DBC file: {msg}") from None
 
 
 def _find_message(db, message: str | None, rate_signal: str):
@@ -58,28 +58,29 @@ def _find_message(db, message: str | None, rate_signal: str):
         try:
             return db.get_message_by_name(message)
         except KeyError:
-            raise FogmonError(f"--can-message {message!r} is not in the DBC (it has: "
+            raise FogmonError(f"`can_message` {message!r} is not in the DBC (it has: "
                               f"{', '.join(m.name for m in db.messages)})") from None
     having = [m for m in db.messages if any(s.name == rate_signal for s in m.signals)]
     if len(having) != 1:
-        raise FogmonError(f"--can-rate {rate_signal!r}: {'no' if not having else len(having)} DBC "
-                          f"messages carry it; name the signal with --can-rate and the message with "
-                          f"--can-message")
+        raise FogmonError(f"`can_rate` {rate_signal!r}: {'no' if not having else len(having)} DBC "
+                          f"messages carry it; name the signal with `can_rate` and the message with "
+                          f"`can_message`")
     return having[0]
 
 
 def _pick(msg, opt: str, given: str | None, default: str) -> str | None:
-    """The signal named by option ``--opt`` (must exist), else ``default`` if the message has it."""
+    """The signal ``given`` for option ``opt`` (a SourceOptions field; it must exist), else
+    ``default`` if the message has it."""
     names = [s.name for s in msg.signals]
     if given is None:
         return default if default in names else None
     if given not in names:
-        raise FogmonError(f"--{opt} {given!r}: message {msg.name} has no such signal (it has: {', '.join(names)})")
+        raise FogmonError(f"`{opt}` {given!r}: message {msg.name} has no such signal (it has: {', '.join(names)})")
     return given
 
 
 def parse_rate_signals(spec: str) -> list[tuple[str, str]]:
-    """``--can-rate``: ``SIGNAL`` -> [("", SIGNAL)] (one axis), ``x=GyroX,y=GyroY`` ->
+    """``can_rate``: ``SIGNAL`` -> [("", SIGNAL)] (one axis), ``x=GyroX,y=GyroY`` ->
     [("x", "GyroX"), ("y", "GyroY")]. A FogmonError names a bad item."""
     if "=" not in spec:
         return [("", spec)]
@@ -87,7 +88,7 @@ def parse_rate_signals(spec: str) -> list[tuple[str, str]]:
     for item in spec.split(","):
         axis, _, signal = (p.strip() for p in item.partition("="))
         if not (axis.isascii() and axis.isalnum()) or not signal or any(a == axis for a, _ in out):
-            raise FogmonError(f"--can-rate {spec!r}: write AXIS=SIGNAL,... with distinct axis names "
+            raise FogmonError(f"`can_rate` {spec!r}: write AXIS=SIGNAL,... with distinct axis names "
                               f"(letters/digits), got {item!r}")
         out.append((axis, signal))
     return out
@@ -97,10 +98,10 @@ def _rate_hz(msg, sample_rate_hz: float | None) -> float:
     """The sample rate (Hz): given, or from the message's DBC cycle time."""
     if sample_rate_hz is None:
         if not msg.cycle_time:
-            raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give --rate-hz")
+            raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give `sample_rate_hz`")
         sample_rate_hz = 1000.0 / msg.cycle_time
     if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-        raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+        raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
     return float(sample_rate_hz)
 
 
@@ -112,7 +113,7 @@ def _rate_units(signals: list[tuple[str, Any]], rate_unit: str | None) -> list[s
         unit = rate_unit or m.get_signal_by_name(sig).unit or ""
         key = units.canonical(unit)
         if key is None:
-            raise FogmonError(f"rate signal {m.name}.{sig} has unit {unit!r}: give --can-rate-unit "
+            raise FogmonError(f"rate signal {m.name}.{sig} has unit {unit!r}: give `can_rate_unit` "
                               f"(one of {', '.join(units.DPH_PER_UNIT)})")
         keys.append(key)
     return keys
@@ -136,20 +137,20 @@ class CanDecoder:
         msg = _find_message(db, message, signals[0][1])
         names = {s.name: s for s in msg.signals}
         if signals[0][1] not in names:
-            raise FogmonError(f"--can-rate {signals[0][1]!r}: message {msg.name} has no such signal "
+            raise FogmonError(f"`can_rate` {signals[0][1]!r}: message {msg.name} has no such signal "
                               f"(it has: {', '.join(names)})")
         self.message = msg
         self.rate_signal = rate_signal
         self.axes = tuple(a for a, _ in signals) if len(signals) > 1 else ()
         #: per axis: (signal, its message: the clock message or another)
         self._signals = [(sig, msg if sig in names else _find_message(db, None, sig)) for _, sig in signals]
-        self.temp_signal = _pick(msg, "can-temp", temp_signal, "temperature")
-        self.counter_signal = _pick(msg, "can-counter", counter_signal, "counter")
-        self.valid_signal = _pick(msg, "can-valid", valid_signal, "valid")
+        self.temp_signal = _pick(msg, "can_temp", temp_signal, "temperature")
+        self.counter_signal = _pick(msg, "can_counter", counter_signal, "counter")
+        self.valid_signal = _pick(msg, "can_valid", valid_signal, "valid")
         self.sample_rate_hz = _rate_hz(msg, sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
         keys = _rate_units(self._signals, rate_unit)
-        #: the rate unit: given (--can-rate-unit, every axis) or the first signal's DBC unit
+        #: the rate unit: given (``can_rate_unit``, every axis) or the first signal's DBC unit
         self.rate_unit = rate_unit or self._signals[0][1].get_signal_by_name(self._signals[0][0]).unit
         self._rate_unit_given = rate_unit
         self._scale = np.array([units.dph_scale(k, self.sample_rate_hz) for k in keys])

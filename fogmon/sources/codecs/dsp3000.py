@@ -32,9 +32,9 @@ class Dsp3000Codec:
         self, rot: str = "rate", sample_rate_hz: float = DEFAULT_RATE_HZ, max_rate_dph: float | None = None
     ) -> None:
         if rot not in ("rate", "delta"):
-            raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
+            raise FogmonError(f"`kvh_rot` must be rate or delta, got {rot!r}")
         if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+            raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
         self.rot, self.sample_rate_hz = rot, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP3000_MAX_ABS_DPH)
         self._framer = LineFramer(64)

@@ -25,7 +25,7 @@ plausibility.KVH_ACCEL_MAX_ABS_G (counted as ``implausible_accel_g``). The accel
 acceleration in g (the device's default linear format) or, after ``=LINFMT``, velocity
 increments per sample in m/s or ft/s (``=LINUNITS``): ``accel`` says which (``ACCEL_UNITS``)
 and ``none`` leaves them out (a gyro-only DSP-1760, whose accel fields are reserved).
-``--kvh-units`` is the gyros' angle unit only. One axis (``axis="z"``) is today's
+``units`` (``kvh_units``) is the gyros' angle unit only. One axis (``axis="z"``) is today's
 one-axis stream: that gyro alone, ``temp_c`` the only aux channel; several
 (``axis="x,y"``) a multi-axis stream of those gyros and their accelerometers.
 """
@@ -73,20 +73,20 @@ _RECORDS = {
 AXES = ("x", "y", "z")
 SEQ_MODULUS = 128
 DEFAULT_RATE_HZ = 1000.0
-#: accelerometer output (``--kvh-accel``) -> (g per unit, per sample: a velocity increment
+#: accelerometer output (``kvh_accel``) -> (g per unit, per sample: a velocity increment
 #: per sample, multiplied by the sample rate in Hz); "none": not decoded
 ACCEL_UNITS = {"g": (1.0, False), "dv-m": (1.0 / G0_MPS2, True), "dv-ft": (0.3048 / G0_MPS2, True),
                "none": (0.0, False)}
 
 
 def kvh_axes(axis: str | None) -> tuple[str, ...]:
-    """``--axis`` of a KVH decoder -> the gyros to decode: None = all three, ``"z"`` one,
+    """``axis`` of a KVH decoder -> the gyros to decode: None = all three, ``"z"`` one,
     ``"x,y"`` several (in the order given). A FogmonError names a bad or repeated axis."""
     if axis is None:
         return AXES
     names = parse_axes(str(axis))
     if any(a not in AXES for a in names):
-        raise FogmonError(f"--axis must be x, y, z or several of them separated by commas (x,y), got {axis!r}")
+        raise FogmonError(f"`axis` must be x, y, z or several of them separated by commas (x,y), got {axis!r}")
     return names
 
 
@@ -116,14 +116,14 @@ class KvhCodec:
         if fmt not in FORMATS:
             raise FogmonError(f"unknown KVH format {fmt!r} (use a, b or c)")
         if rot not in ("rate", "delta"):
-            raise FogmonError(f"--kvh-rot must be rate or delta, got {rot!r}")
+            raise FogmonError(f"`kvh_rot` must be rate or delta, got {rot!r}")
         if units not in ("deg", "rad"):
-            raise FogmonError(f"--kvh-units must be deg or rad, got {units!r}")
+            raise FogmonError(f"`kvh_units` must be deg or rad, got {units!r}")
         if accel not in ACCEL_UNITS:
-            raise FogmonError(f"--kvh-accel must be one of {', '.join(ACCEL_UNITS)}, got {accel!r}")
+            raise FogmonError(f"`kvh_accel` must be one of {', '.join(ACCEL_UNITS)}, got {accel!r}")
         names = kvh_axes(axis)
         if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+            raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
         self.fmt, self.rot, self.units, self.sample_rate_hz = fmt, rot, units, float(sample_rate_hz)
         self.axis, self.accel = ",".join(names), accel
         #: () for one gyro (today's one-axis stream), else the gyros decoded
@@ -230,7 +230,7 @@ class KvhCodec:
 
     def _frames(self, rec: np.ndarray, runs: list[int]) -> Frames:
         """The scanned frames (numpy records) as Frames: rate in deg/h of the decoded axes,
-        gated; aux temp_c and, with --kvh-accel, the accelerations in g."""
+        gated; aux temp_c and, with ``accel``, the accelerations in g."""
         c = self.counters
         ai = self._axis_i
         bits = rec["status"].reshape(-1, 1)

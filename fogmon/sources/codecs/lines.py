@@ -2,7 +2,7 @@
 microcontroller prints, one sample per line, fields separated by commas, semicolons,
 tabs or spaces.
 
-The column map (``--columns``) names each field in order:
+The column map (``columns``) names each field in order:
 
 - the rate, exactly one of ``rate_dph`` (deg/h), ``rate_dps`` (deg/s), ``rate_rps``
   (rad/s), ``delta_deg``, ``delta_rad``, ``delta_arcsec`` (angle per sample); or one
@@ -19,7 +19,7 @@ The column map (``--columns``) names each field in order:
   (``temp_c``, ``vib_g``, ``rot_dps``, ``depth_m`` have fixed meanings).
 
 Lines that do not parse (boot banners, a header row, truncated lines) are counted as
-``bad_lines``, their bytes as ``bytes_skipped``. A rate beyond ``--max-rate-dph`` (default
+``bad_lines``, their bytes as ``bytes_skipped``. A rate beyond ``max_rate_dph`` (default
 the generic gate of fogmon.sources.plausibility, 10,000 deg/s) makes the sample invalid,
 counted as ``implausible_samples``.
 """
@@ -65,17 +65,17 @@ def parse_columns(spec: str) -> tuple[list[str], int | None]:
     real = [n for n in names if n != "-"]
     dup = {n for n in real if real.count(n) > 1}
     if dup:
-        raise FogmonError(f"--columns names {', '.join(sorted(dup))} more than once")
+        raise FogmonError(f"`columns` names {', '.join(sorted(dup))} more than once")
     rates = [r for r in map(rate_column, names) if r is not None]
     axes = [a for a, _ in rates]
     if not rates or ("" in axes and len(rates) > 1) or len(set(axes)) != len(axes):
-        raise FogmonError(f"--columns needs exactly one rate column (one of {', '.join(RATE_COLUMNS)}) or one per "
+        raise FogmonError(f"`columns` needs exactly one rate column (one of {', '.join(RATE_COLUMNS)}) or one per "
                           f"axis (rate_x_dph, rate_y_dps, ...), got {spec!r}")
     return names, modulus
 
 
 def _column(i: int, f: str) -> tuple[str, int | None]:
-    """The column name of --columns field ``i`` (1-based) ``f`` ("-" ignored, "seq" the
+    """The column name of ``columns`` field ``i`` (1-based) ``f`` ("-" ignored, "seq" the
     counter) and the counter's modulus if ``f`` gives one."""
     if f in ("-", "_"):
         return "-", None
@@ -84,21 +84,21 @@ def _column(i: int, f: str) -> tuple[str, int | None]:
     if f.startswith("seq"):
         m = re.fullmatch(r"seq:(\d+)", f)
         if not m or int(m.group(1)) < 2:
-            raise FogmonError(f"--columns field {i} {f!r}: write seq or seq:N with N >= 2")
+            raise FogmonError(f"`columns` field {i} {f!r}: write seq or seq:N with N >= 2")
         return "seq", int(m.group(1))
     if f == "time_s" or not _NAME.match(f):
-        raise FogmonError(f"--columns field {i} {f!r}: not a usable column name "
-                          f"(time comes from --rate-hz and the counter; use - to ignore a field)")
+        raise FogmonError(f"`columns` field {i} {f!r}: not a usable column name "
+                          f"(time comes from `sample_rate_hz` and the counter; use - to ignore a field)")
     return f, None
 
 
 def _picked_axes(by_axis: dict[str, tuple[str, str]], axis: str | None, columns: str) -> list[str]:
-    """The axes decoded: those of --axis ``axis`` (comma-separated), else every rate
+    """The axes decoded: those of ``axis`` (comma-separated), else every rate
     column's axis of ``by_axis`` (axis -> (column, unit); "" for a one-axis log)."""
     picked = list(by_axis) if axis is None or "" in by_axis else axis.split(",")
     missing = [a for a in picked if a not in by_axis]
     if missing:
-        raise FogmonError(f"--axis {axis}: --columns {columns!r} has no rate column of axis "
+        raise FogmonError(f"`axis` {axis}: `columns` {columns!r} has no rate column of axis "
                           f"{', '.join(missing)} (it has: {', '.join(by_axis)})")
     return picked
 
@@ -113,7 +113,7 @@ class LinesCodec:
     def __init__(self, columns: str = "rate_dph", sample_rate_hz: float = DEFAULT_RATE_HZ,
                  max_rate_dph: float | None = None, axis: str | None = None) -> None:
         if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"--rate-hz must be > 0, got {sample_rate_hz}")
+            raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
         self.columns, self.sample_rate_hz = columns, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
         self._names, mod = parse_columns(columns)

@@ -22,12 +22,12 @@ def _log_axes(path: str) -> tuple[str, ...]:
 
 def open_source(directory: str, opts: SourceOptions) -> Source:
     """An archive folder (fogmon monitor --archive) as one recording: its replay-log pieces
-    samples-NNNN.csv in order; or, when the folder has none or the command line gives
-    decoder options (--protocol, --kvh-*, --axis, --columns, --rate-hz, --dbc, --can-*)
-    to decode it again, its raw capture pieces (raw-NNNN.bin or frames-NNNN.asc) as one
-    stream. One piece alone is replayed by naming its file. ``--max-rate-dph`` gates
-    whichever is replayed and does not by itself ask for decoding again, nor does
-    ``--axis`` when the pieces are multi-axis logs (it then picks their axes)."""
+    samples-NNNN.csv in order; or, when the folder has none or ``opts`` gives decoder
+    options (``SourceOptions.asks_decoding``: ``protocol``, ``kvh_*``, ``axis``, ``columns``,
+    ``sample_rate_hz``, ``dbc``, ``can_*``) to decode it again, its raw capture pieces
+    (raw-NNNN.bin or frames-NNNN.asc) as one stream. One piece alone is replayed by naming
+    its file. ``max_rate_dph`` gates whichever is replayed and does not by itself ask for
+    decoding again, nor does ``axis`` when the pieces are multi-axis logs (it then picks their axes)."""
     held = archive_files(directory)
     logs, serial, frames = held.logs, held.serial, held.frames
     decode = opts.asks_decoding(axis=not (opts.axis and logs and _log_axes(logs[0])))

@@ -97,7 +97,7 @@ class CanLogSource:
 
 def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar: dict | None) -> CanLogSource:
     """A CAN log source (or the pieces of one ASC log, in order); decoder options from the
-    (first piece's) sidecar, overridden by the command line; the DBC from ``--dbc`` or the
+    (first piece's) sidecar, overridden by ``options``; the DBC from ``dbc`` or the
     sidecar's copy, which fogmon.formats.capture.read_sidecar has confined to the sidecar's folder."""
     first = path if isinstance(path, str) else path[0]
     opts = {}
@@ -107,7 +107,7 @@ def open_can_log(path: str | list[str], dbc: str | None, options: dict, sidecar:
             dbc = os.path.join(os.path.dirname(os.path.abspath(first)), sidecar["dbc"])
     opts.update({k: v for k, v in options.items() if v is not None})
     if not dbc:
-        raise FogmonError(f"{first}: a CAN log needs --dbc F describing the gyro's frames")
+        raise FogmonError(f"{first}: a CAN log needs `dbc` F describing the gyro's frames")
     return CanLogSource(path, load_dbc(dbc), **opts)
 
 

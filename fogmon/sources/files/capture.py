@@ -1,6 +1,6 @@
 """A raw serial capture replayed: the bytes a device sent (an archive's raw-NNNN.bin
 pieces, or any file of them), decoded again with its protocol into the same blocks the
-live source yielded, as fast as they can (the pipeline paces ``--realtime``).
+live source yielded, as fast as they can (the pipeline paces: ``realtime``).
 
 A raw capture ``X`` may have a sidecar ``X.json`` (fogmon.formats.capture, written by the
 archive) naming the protocol and decoder options and the outages seen while recording
@@ -117,7 +117,7 @@ def open_raw_capture(path: str | Sequence[str], overrides: dict | None = None) -
     opts = opts or {}
     opts.update({k: v for k, v in (overrides or {}).items() if v is not None})
     if "protocol" not in opts:
-        raise FogmonError(f"{paths[0]}: a raw serial capture needs --protocol "
+        raise FogmonError(f"{paths[0]}: a raw serial capture needs `protocol` "
                           f"(or a {os.path.basename(paths[0])}{SIDECAR_SUFFIX} sidecar naming it)")
     return RawCaptureSource(paths, opts, breaks)
 

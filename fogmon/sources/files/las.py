@@ -1,9 +1,9 @@
 """LAS (Log ASCII Standard) well logs, read with ``lasio`` (``fogmon[las]``), as downhole
 memory tools write them.
 
-A time curve (``--time-channel``, default the index curve when its unit is a time: s,
-ms, min, h) and a rate curve (``--channel``, default the only curve whose unit is an
-angular rate), units from the ~Curve section (``--rate-unit`` overrides a missing or
+A time curve (``time_channel``, default the index curve when its unit is a time: s,
+ms, min, h) and a rate curve (``channel``, default the only curve whose unit is an
+angular rate), units from the ~Curve section (``rate_unit`` overrides a missing or
 wrong one). A depth-indexed file (index unit m or ft) is refused unless a time curve is
 named; its depth then rides along as aux ``depth_m``. The only curve in deg C, if any,
 becomes aux ``temp_c``. LAS null values are counted invalid samples (``null_samples``);
@@ -97,10 +97,10 @@ def _time_curve(path: str, las, name: str | None):
         tc = index
     elif index.unit.lower() in DEPTH_UNITS:
         raise FogmonError(f"{path}: depth-indexed (index curve {index.mnemonic} in {index.unit}); the Allan "
-                          f"deviation needs time: name the time curve with --time-channel (curves: {_have(las)})")
+                          f"deviation needs time: name the time curve with `time_channel` (curves: {_have(las)})")
     else:
         raise FogmonError(f"{path}: the index curve {index.mnemonic} has unit {index.unit!r}, not a time "
-                          f"({', '.join(TIME_UNITS)}); name the time curve with --time-channel")
+                          f"({', '.join(TIME_UNITS)}); name the time curve with `time_channel`")
     t_per = TIME_UNITS.get(tc.unit.lower())
     if t_per is None:
         raise FogmonError(f"{path}: field time_channel: curve {tc.mnemonic} has unit {tc.unit!r}, not a time "
@@ -115,5 +115,5 @@ def _rate_curve(path: str, las, name: str | None):
     rates = [c for c in las.curves if _is_rate(c.unit)]
     if len(rates) != 1:
         raise FogmonError(f"{path}: {len(rates) or 'no'} curves with an angular-rate unit; name the rate "
-                          f"curve with --channel (curves: {_have(las)})")
+                          f"curve with `channel` (curves: {_have(las)})")
     return rates[0]

@@ -1,9 +1,9 @@
 """ASAM MDF4 measurement files, read with ``asammdf`` (``fogmon[mdf]``).
 
-``--channel NAME``: a rate channel, its unit from the file (deg/h, deg/s, rad/s, ...;
-``--rate-unit`` when the file has none), its own time stamps (s) on fogmon's grid as
+``channel`` NAME: a rate channel, its unit from the file (deg/h, deg/s, rad/s, ...;
+``rate_unit`` when the file has none), its own time stamps (s) on fogmon's grid as
 fogmon.sources.files.stamped describes. Raw CAN frames in the MDF bus-logging format are a CAN
-log instead: give ``--dbc`` (fogmon.sources.files.can_log, through python-can's MF4 reader)."""
+log instead: give ``dbc`` (fogmon.sources.files.can_log, through python-can's MF4 reader)."""
 from __future__ import annotations
 
 import os
@@ -33,8 +33,8 @@ def open_source(path: str, opts: SourceOptions) -> StampedSource:
         shown = ", ".join(names[:SHOWN_CHANNELS]) + (f" and {len(names) - SHOWN_CHANNELS} more"
                                                      if len(names) > SHOWN_CHANNELS else "")
         if not channel:
-            raise FogmonError(f"{path}: an MDF4 file needs --channel NAME (the rate channel; it has: {shown}) or "
-                              f"--dbc F for raw CAN frames")
+            raise FogmonError(f"{path}: an MDF4 file needs `channel` NAME (the rate channel; it has: {shown}) or "
+                              f"`dbc` F for raw CAN frames")
         if channel not in mdf.channels_db:
             raise FogmonError(f"{path}: field channel: no channel {channel!r} in the file (it has: {shown})")
         try:

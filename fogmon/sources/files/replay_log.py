@@ -1,6 +1,6 @@
 """A replay-log CSV replayed (docs/formats.md): its rows on the uniform sample grid, time
 gaps as invalid placeholders, in the same blocks a live source would yield, as fast as
-they can (the pipeline paces ``--realtime``; a replay log can also pace itself for use
+they can (the pipeline paces: ``realtime``; a replay log can also pace itself for use
 outside it); an archive's pieces as one recording (``ReplayLogSet``)."""
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ class ReplayLogSource:
     reads the whole file once to check it (a bad row is a one-line error naming file,
     line and column before any work starts) and to know ``n_samples`` (grid length) and
     ``t_first_s``/``t_last_s``. A multi-axis log (``rate_<axis>_dph`` columns) gives
-    multi-axis blocks; ``axis`` (``--axis``: a name or a comma list, ``pick_axes``) keeps
+    multi-axis blocks; ``axis`` (a name or a comma list, ``pick_axes``) keeps
     those axes only, one of them as a one-axis block. ``axes``: the axes of the blocks
     (() for one axis). Counters, as far as the blocks yielded so far reach:
     ``samples`` (rows), ``samples_missing``, ``seq_gaps`` (time gaps), ``skipped_rows``
@@ -95,7 +95,7 @@ class ReplayLogSource:
             yield Block(b.t_s, rate, b.valid & ~bad, b.aux, b.events + tuple(errors.poll(t_event)), b.axes)
 
     def _picked(self, b: Block) -> Block:
-        """A block of the log's columns with the axes ``--axis`` keeps."""
+        """A block of the log's columns with the axes ``axis`` keeps."""
         return b if self._pick is None else b.select(self._pick)
 
     def _grid_blocks(self) -> Iterator[tuple[Block, int, int]]:

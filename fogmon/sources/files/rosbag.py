@@ -1,8 +1,8 @@
 """ROS 1 bags, ROS 2 bags (a folder with metadata.yaml, sqlite3 or MCAP storage) and MCAP
 files with sensor_msgs/Imu messages, read with ``rosbags`` (``fogmon[ros]``).
 
-One topic (``--topic``, default the only Imu topic); ``angular_velocity`` (rad/s ->
-deg/h) of the axes ``--axis`` asks (fogmon.sources.files.stamped.imu_axes): without it all
+One topic (``topic``, default the only Imu topic); ``angular_velocity`` (rad/s ->
+deg/h) of the axes ``axis`` asks (fogmon.sources.files.stamped.imu_axes): without it all
 three, a multi-axis source with ``linear_acceleration`` as aux channels ``accel_<axis>_g``
 (m/s^2 -> g); with one axis a one-axis source of that gyro alone. Time base:
 ``header.stamp`` of each message (s), on fogmon's grid as fogmon.sources.files.stamped
@@ -113,7 +113,7 @@ def _topic(path: str, reader, topic: str | None) -> tuple[str, list]:
     if topic is None:
         if len(imu) != 1:
             raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
-                              f"{(': ' + ', '.join(imu)) if imu else ''}; name one with --topic")
+                              f"{(': ' + ', '.join(imu)) if imu else ''}; name one with `topic`")
         topic = imu[0]
     conns = [c for c in reader.connections if c.topic == topic]
     if not conns:

@@ -152,7 +152,7 @@ class StampedSource:
 
 
 def imu_axes(asked: str | None, path: str) -> tuple[str, ...]:
-    """The gyro axes ``asked`` (``--axis``: a name or a comma list) of an IMU recording ``path``:
+    """The gyro axes ``asked`` (``axis``: a name or a comma list) of an IMU recording ``path``:
     all three, IMU_AXES, when not given; one (``z``: a one-axis source, as this reader
     always gave) or several in the order given (``x,y``). A name other than x, y, z is
     a FogmonError naming the file."""
@@ -161,9 +161,9 @@ def imu_axes(asked: str | None, path: str) -> tuple[str, ...]:
     try:
         names = parse_axes(asked)
     except FogmonError as e:
-        raise FogmonError(f"{path}: {e}") from None
+        raise FogmonError(f"{path}: {e.message}") from None
     if any(a not in IMU_AXES for a in names):
-        raise FogmonError(f"{path}: --axis {asked}: the gyro axes of an IMU are x, y and z (one, or several "
+        raise FogmonError(f"{path}: `axis` {asked}: the gyro axes of an IMU are x, y and z (one, or several "
                           f"separated by commas)")
     return names
 
@@ -177,5 +177,5 @@ def dph_per_unit(unit: str | None, where: str) -> float:
     name = canonical(u) if u else None
     if name is None or DPH_PER_UNIT[name][0] != "rate":
         rates = ", ".join(k for k, (m, _) in DPH_PER_UNIT.items() if m == "rate")
-        raise FogmonError(f"{where}: unit {unit!r} is not an angular rate fogmon knows ({rates}); give --rate-unit")
+        raise FogmonError(f"{where}: unit {unit!r} is not an angular rate fogmon knows ({rates}); give `rate_unit`")
     return DPH_PER_UNIT[name][1]

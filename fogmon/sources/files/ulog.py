@@ -1,8 +1,8 @@
 """PX4 ULog flight logs, read with ``pyulog`` (``fogmon[ulog]``).
 
-Topic (``--topic``): ``sensor_gyro`` (default; fields x, y, z in rad/s and temperature in
+Topic (``topic``): ``sensor_gyro`` (default; fields x, y, z in rad/s and temperature in
 deg C; ``sensor_gyro:1`` for the second instance) or ``sensor_combined`` (gyro_rad[0..2]
-in rad/s). Axes ``--axis`` (fogmon.sources.files.stamped.imu_axes: without it all three, a
+in rad/s). Axes ``axis`` (fogmon.sources.files.stamped.imu_axes: without it all three, a
 multi-axis source; one axis, a one-axis source). Time base: the topic's
 ``timestamp_sample`` (us since boot) where it has one, else ``timestamp``, on fogmon's
 grid as fogmon.sources.files.stamped describes; times stay in s since boot."""
