@@ -66,8 +66,12 @@ def run(args: argparse.Namespace) -> int:
         raise FogmonError(f"`archive` {parent}: is an archive folder; give the folder to make the run's archive "
                           f"folder in")
     source = open_live_source(source_options(args))
-    archive = Archive(default_archive_dir(parent), source, samples_format=args.archive_format,
-                      row_group_s=args.row_group_s, duration_s=args.duration_s)
+    try:
+        archive = Archive(default_archive_dir(parent), source, samples_format=args.archive_format,
+                          row_group_s=args.row_group_s, duration_s=args.duration_s)
+    except BaseException:
+        source.close()
+        raise
     sinks: list = []
     try:
         pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened

@@ -268,6 +268,11 @@ class Archive(Sink):
                     self.counters["rows_written"] += int(keep.sum())
         self._maybe_flush()
 
+    @property
+    def rows_on_disk(self) -> int:
+        """Rows of decoded samples handed to the OS (whole rows)."""
+        return self._rows_on_disk + (self._parquet.rows_on_disk if self._parquet is not None else 0)
+
     def _parquet_path(self) -> str | None:
         return self._parquet.path if self._parquet is not None else None
 
@@ -309,7 +314,8 @@ class Archive(Sink):
         if self._pieces:
             n = len(self._pieces)
             partial = self.counters.get("partial_samples_dropped", 0)
-            summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
+            rows = self.counters["rows_written"] if self.error is None else self.rows_on_disk
+            summary.outputs.append(f"archive {self.directory} ({rows} samples"
                                    + (f" in {n} pieces" if n > 1 else "")
                                    + (f"; {partial} with only some axes valid left out of the replay log, kept in "
                                       f"the raw capture" if partial else "")
@@ -478,7 +484,7 @@ class Archive(Sink):
         """Once SPACE_CHECK_S s of samples are on disk: measure the bytes per sample and
         warn when the free space will not last the rest of the run."""
         rate = float(self.source.sample_rate_hz)
-        rows = self._rows_on_disk + (self._parquet.rows_on_disk if self._parquet is not None else 0)
+        rows = self.rows_on_disk
         if rows < SPACE_CHECK_S * rate:
             return
         written = self._bytes_written + (self._parquet.bytes_on_disk if self._parquet is not None else 0)
