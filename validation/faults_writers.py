@@ -51,7 +51,7 @@ sys.path.insert(0, str(ROOT))
 from fogmon.formats.archive import FOLDER_PREFIX  # noqa: E402
 from fogmon.formats.replay_log import write_replay_log  # noqa: E402
 
-FAKE_KVH = ROOT / "tests" / "monitor_fake_kvh.py"
+FAKE_KVH = ROOT / "tests" / "helpers" / "fake_kvh.py"
 MODEL = ROOT / "fogmon" / "data" / "example_model.toml"
 DEMO = ROOT / "replay_logs" / "lasergyro_z_100hz.csv"
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -1,6 +1,6 @@
 """What each `fogmon` command writes and reads, from its options: the one output check
 (fogmon.outputs.check_outputs) that every command runs before any work. A command
-whose options write nothing (inorbit, updown) has no output to check."""
+whose options write nothing (inorbit, updown, info) has no output to check."""
 from __future__ import annotations
 
 import argparse
