@@ -356,7 +356,7 @@ class Archive(Sink):
         ``wraps`` of them whole counter wraps), which the bytes alone would not give again;
         recorded in the sidecar (``breaks``) at the current byte offset so a replay places
         the same (``missing_est`` too, for readers that know only outages)."""
-        with self._lock:
+        with self._lock, self._guard(lambda: self.capture_path):
             if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
                 self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing),
                                              "frame": int(frame), "missing": int(missing), "rule": int(rule),
