@@ -142,12 +142,12 @@ def axes_lines(s: Summary) -> list[str]:
 AXIS_COLUMN = 28
 
 
-def adev_axes_lines(results: dict) -> list[str]:
+def adev_axes_lines(results: dict, rows=None) -> list[str]:
     """AdevResults of several axes (same taus) side by side: tau_s, then per axis
-    adev_dph [lo_dph, hi_dph]."""
+    adev_dph [lo_dph, hi_dph]; ``rows``: the indices shown (None: all)."""
     out = [f"  {'tau_s':>10} " + " ".join(f"{a:>{AXIS_COLUMN}}" for a in results)]
     tau_s = next(iter(results.values())).tau_s
-    for i in range(len(tau_s)):
+    for i in range(len(tau_s)) if rows is None else rows:
         cells = [f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if r.n_terms[i] else "no valid term"
                  for r in results.values()]
         out.append(f"  {tau_s[i]:10.4g} " + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
@@ -173,10 +173,11 @@ def coefficient_axes_lines(fits: dict, names: Mapping[str, str] = COEFFICIENTS) 
     return out
 
 
-def adev_lines(a) -> list[str]:
-    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms."""
-    out = [f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}"]
-    for i in range(len(a.tau_s)):
+def adev_lines(a, unit: str = "dph", rows=None) -> list[str]:
+    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms (``unit``
+    "ug" for an accelerometer's, in micro-g); ``rows``: the indices shown (None: all)."""
+    out = [f"  {'tau_s':>10} {'adev_' + unit:>12} {'lo_' + unit:>12} {'hi_' + unit:>12} {'edf':>10} {'n_terms':>9}"]
+    for i in range(len(a.tau_s)) if rows is None else rows:
         if not a.n_terms[i]:
             out.append(f"  {a.tau_s[i]:10.4g}   no valid Allan term (the record is too short, or every term "
                        f"spans a gap or platform motion)")
