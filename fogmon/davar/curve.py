@@ -51,13 +51,13 @@ def adev_from_curve(tau_s, adev_dph, *, sample_rate_hz: float | None = None, n_t
     ``with_fit_intervals`` replaces them with those of the fitted model. A bad argument is
     a FogmonError."""
     if estimator not in ("overlapping", "non-overlapping"):
-        raise FogmonError(f"`estimator` must be overlapping or non-overlapping, got {estimator!r}")
+        raise ValueError(f"adev_from_curve: estimator must be overlapping or non-overlapping, got {estimator!r}")
     tau, adev = _curve_arrays(tau_s, adev_dph)
     said: list[str] = []
     rate_given = sample_rate_hz is not None
     if sample_rate_hz is None:
         sample_rate_hz = 1.0 / float(tau[0])
-        said.append(f"sample rate {sample_rate_hz:.10g} Hz (1 / the first tau; `sample_rate_hz` sets it)")
+        said.append(f"sample rate {sample_rate_hz:g} Hz (1 / the first tau; `sample_rate_hz` sets it)")
     m = _averaging_factors(tau, sample_rate_hz)
     n_terms = _positive("n_terms", n_terms, 1.0, "whole numbers >= 1")
     edf = _positive("edf", edf, 0.0, "finite and > 0", strict=True)
