@@ -92,6 +92,11 @@ class RawTap(Protocol):
     def outage(self, elapsed_s: float, missing_est: float) -> None:
         """The device was reopened after ``elapsed_s`` s; about ``missing_est`` samples lost."""
 
+    def placed(self, frame: int, missing: int, rule: int, wraps: int = 0) -> None:
+        """Before the ``frame``-th frame decoded from the next bytes the grid placed
+        ``missing`` samples by its clock (``rule``: an index of fogmon.sources.grid.WHY;
+        ``wraps`` whole counter wraps among them), which a replay of the bytes must repeat."""
+
 
 @runtime_checkable
 class CaptureSource(Source, Protocol):

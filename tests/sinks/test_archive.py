@@ -268,7 +268,7 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
     from fogmon.sources.open import open_replay_source
 
     data, _ = stream(1200, {150: "garbage", 200: "corrupt", 400: "drop"})
-    arch, lead = tmp_path / "arch", 60
+    arch, lead = tmp_path / "arch", 25     # (a wake of the reader takes all the device allows: up to `lead` frames)
     port = PacedPort(data, 50, FS, lead, consumed=lambda: archive.counters["rows_written"])
     src = SerialSource("fake", 921600, make_codec("kvh-a", axis="z", kvh_rot="rate", kvh_units="deg", sample_rate_hz=FS,
                                                                    max_rate_dph=MAX_RATE_DPH),
@@ -299,7 +299,9 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
         piece = open_raw_capture(str(arch / x))
         ks = np.rint(np.concatenate([b.rate_dph[b.valid] for b in piece.blocks()]) / 3600).astype(int)
         assert j == 0 or (arch / x).read_bytes()[:4] == bytes.fromhex("fe81ff55")     # a whole frame first
-        assert j * FS <= ks[0] <= j * FS + lead + 2          # after the samples' seam, by the pipeline's lag
+        # after the samples' seam, by the pipeline's lag: the device is up to `lead` frames ahead of the
+        # archive, and the cut comes at the end of the next wake's read, up to `lead` frames more
+        assert j * FS <= ks[0] <= j * FS + 2 * lead + 2
         assert set(range(ks[0], ks[-1] + 1)) - set(ks) <= {200, 400}    # consecutive but for the lost frames
     # the folder as one recording: the sample grid runs on across every seam
     for argv in ((), ("--kvh-rot", "rate")):          # decoder options: decode the raw pieces again

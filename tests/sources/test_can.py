@@ -242,3 +242,16 @@ def test_property_can_decoder_never_raises_and_accounts(frames):
     c = d.counters
     assert n == c["frames_ok"] and c["frames_ok"] + c["bad_frames"] + c["other_frames"] == len(msgs)
     assert all(np.isfinite(f.rate_dph).all() and ((f.seq >= 0) & (f.seq < 16)).all() for _, f in segs)
+
+
+def test_a_timestamp_jump_beyond_any_gap_is_a_one_line_error_not_an_allocation():
+    """The adapter's timestamps jump by 10**9 s (1e11 samples at 100 Hz) between two
+    frames: no sample grid bridges that; the run ends with one line naming the device."""
+    msgs = gyro_msgs(range(50), extra=False) + gyro_msgs(range(50, 60), t0=1_000_000.0 + 1e9, extra=False)
+    src = CanSource("x", "virtual", load_dbc(DBC))
+    src._open = lambda: FlakyBus(msgs, False)
+    n = 0
+    with pytest.raises(FogmonError, match=r"^--can x --interface virtual: an outage of 1e\+11 samples .* the run ends"):
+        for b in src.blocks():
+            n += len(b)
+    assert n == 50

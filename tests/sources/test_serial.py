@@ -14,11 +14,13 @@ import pytest
 import serial
 from helpers.fake_device import MAX_RATE_DPH, FakeKvh, frame_k, open_pty, stream, write_all
 
+from fogmon.errors import FogmonError
 from fogmon.formats.replay_log import read_replay_log
 from fogmon.pipeline import PipelineConfig, run_pipeline
 from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Sink
 from fogmon.sources.codecs.kvh import KvhCodec
+from fogmon.sources.codecs.lines import LinesCodec
 from fogmon.sources.devices.serial_port import SerialSource
 from fogmon.sources.files.capture import open_raw_capture
 
@@ -161,25 +163,44 @@ def test_unplug_replug_archive_keeps_every_sample_sent_while_connected(tmp_path)
 
 # -- time base from the device; counters that agree ---------------------------------------
 class ScriptedPort:
-    """A serial port replaying ``chunks`` one per read, whose clock jumps by ``stalls_s[i]``
-    before read i (the host did not read for that long; the OS kept the bytes): the
-    source's timing is scripted, not measured, so nothing depends on the machine's load."""
+    """A serial port whose reader gets ``chunks[i]`` at its wake i, the clock jumping by
+    ``stalls_s[i]`` (+ 1 ms) as that wake begins (the host did not read for that long;
+    the OS kept the bytes): the source's timing is scripted, not measured, so nothing
+    depends on the machine's load. ``drained``: after each chunk nothing more is waiting
+    (the chunk is all the device sent until then, so the host clock can check the
+    stream); else the next chunk is already waiting (a backlog: the clock cannot)."""
 
-    def __init__(self, chunks: list[bytes], stalls_s=()):
-        self.chunks, self.stalls_s = list(chunks), list(stalls_s)
-        self.i, self.now_s = 0, 0.0
+    def __init__(self, chunks: list[bytes], stalls_s=(), drained: bool = False):
+        self.chunks, self.stalls_s, self.drained = list(chunks), list(stalls_s), drained
+        self.i = self.pos = 0
+        self.now_s = 0.0
+        self.begun = False
+
+    def _begin(self):
+        if not self.begun:
+            self.now_s += (self.stalls_s[self.i] if self.i < len(self.stalls_s) else 0.0) + 0.001
+            self.begun = True
 
     @property
     def in_waiting(self):
-        return len(self.chunks[self.i]) if self.i < len(self.chunks) else 0
+        if self.i >= len(self.chunks):
+            return 0
+        self._begin()
+        left = len(self.chunks[self.i]) - self.pos
+        if left:
+            return left
+        self.i, self.pos, self.begun = self.i + 1, 0, False     # chunk i taken
+        return 0 if self.drained or self.i >= len(self.chunks) else len(self.chunks[self.i])
 
     def read(self, n):
         if self.i >= len(self.chunks):
             time.sleep(0.001)          # the device has nothing more to say
             return b""
-        self.now_s += (self.stalls_s[self.i] if self.i < len(self.stalls_s) else 0.0) + 0.001
-        self.i += 1
-        return self.chunks[self.i - 1]
+        if not self.begun:             # the next chunk waits for the next wake
+            return b""
+        data = self.chunks[self.i][self.pos:self.pos + n]
+        self.pos += len(data)
+        return data
 
     def clock(self):
         return self.now_s
@@ -188,8 +209,8 @@ class ScriptedPort:
         pass
 
 
-def scripted_source(chunks, stalls_s=(), sample_rate_hz=FS):
-    port = ScriptedPort(chunks, stalls_s)
+def scripted_source(chunks, stalls_s=(), sample_rate_hz=FS, drained=False):
+    port = ScriptedPort(chunks, stalls_s, drained)
     return SerialSource(
         "scripted",
         921600,
@@ -287,3 +308,148 @@ def test_counters_equal_events_and_the_archive_and_nothing_after_the_cut_counts(
     assert sum(len(b) for b in rb) == summary.n_samples
     np.testing.assert_array_equal(np.concatenate([b.t_s for b in rb])[v], rec.t_s)
     assert {k: replay.counters[k] for k in replay.counters} == {k: c[k] for k in replay.counters}
+
+
+# -- reading as fast as the device sends; idle costs nothing ------------------------------
+class CappedPort:
+    """A port holding ``data`` of which, like a tty, at most 4095 bytes are visible to
+    ``in_waiting`` at a time (the kernel hands the rest over as the reader takes them);
+    ``late``: after each full 4095 bytes taken, the kernel has not handed the next over
+    yet when the reader looks (``in_waiting`` 0), but does while a read waits."""
+
+    def __init__(self, data: bytes, late: bool = False):
+        self.data, self.pos, self.late, self.held = data, 0, late, False
+
+    @property
+    def in_waiting(self):
+        return 0 if self.held else min(len(self.data) - self.pos, 4095)
+
+    def read(self, n):
+        self.held = False
+        out = self.data[self.pos:self.pos + min(n, self.in_waiting)]
+        self.pos += len(out)
+        self.held = self.late and len(out) == 4095
+        return out
+
+
+@pytest.mark.parametrize("late", [False, True])
+def test_one_wake_takes_every_byte_waiting(late):
+    """300 kB waiting (4 s of a 2 kHz format A stream) behind a 4 kB window, handed over
+    at once or late: one wake of the reader takes all of it, as one item that says it
+    found nothing more waiting."""
+    data, _ = stream(8300)
+    src = SerialSource("capped", 921600, KvhCodec("a", "rate", "deg", "z", 2000.0, MAX_RATE_DPH))
+    (item,) = src._read(CappedPort(data, late))
+    assert item[0] == "data" and item[1] == data and item[3] is True
+
+
+def test_an_idle_device_leaves_the_consumer_waiting_not_polling():
+    """A silent device: the consumer waits on its queue until the next idle block is due
+    (one wait per idle block), never polls it in between (the clock advances only by the
+    waits, so a polling loop would never get anywhere)."""
+    import queue
+
+    class Clock:
+        now = 0.0
+
+        def __call__(self):
+            return self.now
+
+    class Queue:
+        def __init__(self, clock):
+            self.clock, self.waits, self.polls = clock, [], 0
+
+        def get(self, timeout):
+            self.waits.append(timeout)
+            self.clock.now += timeout
+            raise queue.Empty
+
+        def get_nowait(self):
+            self.polls += 1
+            if self.polls > 100:
+                raise RuntimeError("the consumer polls its queue")
+            raise queue.Empty
+
+        def put(self, item):
+            pass
+
+    clock = Clock()
+    src = SerialSource("silent", 921600, KvhCodec(), opener=lambda: ScriptedPort([]), clock=clock)
+    src._q = q = Queue(clock)
+    got = []
+    for b in src.blocks():
+        got.append(b)
+        if len(got) == 20:
+            break
+    assert all(len(b) == 0 for b in got) and q.polls == 0
+    assert len(q.waits) == 20 and np.allclose(q.waits, src.idle_s)
+
+
+# -- the host clock: whole counter wraps lost without a byte gap --------------------------
+def drained_source(chunks, codec, stalls_s):
+    port = ScriptedPort(chunks, stalls_s, drained=True)
+    return SerialSource("scripted", 921600, codec, opener=lambda: port, clock=port.clock, read_pause_s=0)
+
+
+def replay_matches(archive, blocks, src):
+    """The archive's raw capture decodes to the same grid, samples and counters."""
+    archive.close()
+    replay = open_raw_capture(archive.capture_path)
+    rb = list(replay.blocks())
+    for field in ("t_s", "valid"):
+        np.testing.assert_array_equal(np.concatenate([getattr(b, field) for b in rb]),
+                                      np.concatenate([getattr(b, field) for b in blocks]))
+    assert {k: replay.counters[k] for k in replay.counters} == {k: src.counters[k] for k in replay.counters}
+    return replay
+
+
+def test_wraps_lost_without_a_byte_gap_are_placed_by_the_clock_and_replay_the_same(tmp_path):
+    """A 1 kHz KVH read every 0.1 s loses frames 1000..1255 (two counter wraps) at a frame
+    boundary: the counter and the bytes see nothing; the host clock places the 256
+    samples within CLOCK_CONFIRM_S, counted (clock_wraps 2) and said (a gap event), every
+    later sample is on its own slot, and the archive's raw capture replays to the same."""
+    n, lost = 4000, set(range(1000, 1256))
+    data = [b"".join(frame_k(k) for k in range(i, i + 100) if k not in lost) for i in range(0, n, 100)]
+    src = drained_source(data, KvhCodec("a", "rate", "deg", "z", 1000.0, MAX_RATE_DPH), [0.099] * len(data))
+    archive = Archive(str(tmp_path / "arch"), src)
+    blocks, t, rate, valid = collect(src, n)
+    ks = np.rint(rate[valid] / 3600).astype(int)
+    slot = np.rint(t[valid] * 1000).astype(int)
+    assert len(t) == n and src.counters["clock_wraps"] == 2 and src.counters["samples_missing"] == 256
+    assert np.array_equal(slot[ks >= 1800], ks[ks >= 1800])          # on its slot again
+    assert np.all(slot[ks >= 1256] >= ks[ks >= 1256] - 256)
+    (gap,) = [e.message for b in blocks for e in b.events if e.kind == "gap"]
+    assert gap.startswith("256 sample(s) lost at t=") and "host clock: 2 whole counter wrap(s)" in gap
+    replay = replay_matches(archive, blocks, src)
+    assert replay.counters["clock_wraps"] == 2
+
+
+def test_an_implausible_counter_jump_is_no_gap_and_replays_the_same(tmp_path):
+    """A ``lines`` board with an unbounded counter at 100 Hz: it restarts (0 after 299) and
+    later jumps by 5000 (50 s within 0.1 s of host time; an hour would be plausible without
+    a clock): neither allocates placeholders; both are implausible events, counted, and
+    the raw capture replays to the same grid and counters."""
+    seqs = list(range(300)) + list(range(500)) + list(range(5500, 5700))
+    lines_ = [f"{s},{k * 0.001:.3f}\n".encode() for k, s in enumerate(seqs)]
+    data = [b"".join(lines_[i:i + 10]) for i in range(0, len(lines_), 10)]
+    src = drained_source(data, LinesCodec("seq,rate_dph", 100.0), [0.099] * len(data))
+    archive = Archive(str(tmp_path / "arch"), src)
+    blocks, t, rate, valid = collect(src, len(seqs))
+    assert len(t) == len(seqs) and valid.all() and src.counters["implausible_gaps"] == 2
+    msgs = [e.message for b in blocks for e in b.events if e.kind == "implausible"]
+    assert [m.split(" at ")[0] for m in msgs] == ["the sequence counter went from 299 to 0",
+                                                  "the sequence counter went from 499 to 5500"]
+    replay_matches(archive, blocks, src)
+
+
+def test_a_sidecar_outage_beyond_any_gap_is_one_line_naming_it(tmp_path):
+    """A capture sidecar saying 1e9 samples were lost in an outage (a corrupt number) is
+    one line naming the sidecar, not 1e9 placeholders."""
+    data, _ = stream(100)
+    cap = tmp_path / "raw.bin"
+    cap.write_bytes(data)
+    side = {"format": "fogmon capture v1", "kind": "serial", "protocol": "kvh-a", "axis": "z",
+            "breaks": [{"offset": 36 * 50, "missing_est": 1e9, "elapsed_s": 1.0}]}
+    (tmp_path / "raw.bin.json").write_text(json.dumps(side))
+    with pytest.raises(FogmonError, match=r"raw\.bin\.json: field breaks: an outage of 1e\+09 samples"):
+        list(open_raw_capture(str(cap)).blocks())
