@@ -143,7 +143,7 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
         raise FogmonError(f"{path}: no imu_utils axis file (data_{name}_{sim}<gyr|acc>_<x|y|z>.txt) beside it")
     notes = ["imu_utils: fully overlapping estimator; taus are multiples of the mean sample period measured from "
              f"the time stamps, so the rate is 1 / the first tau = {rate:.10g} Hz",
-             "imu_utils: gyro ADEV converted from its 57.3 deg/rad to deg/h (x 0.9999264); accelerometer ADEV from "
+             "imu_utils: gyro ADEV converted from its 57.3 deg/rad to deg/h (x 0.99992634); accelerometer ADEV from "
              "m/s^2 to micro-g (/ 9.80665e-6)"]
     if sim:
         notes.append("imu_utils sim_ files: these are imu_utils's own fitted curves, not measured ADEVs")
