@@ -152,11 +152,11 @@ ACCEL_KEYS = (_Key("accelerometer_noise_density", "VRW_mpsph", "VRW", "m/s/sqrt(
                    "m/s^3/sqrt(Hz)", "/ 216000"))
 
 
-def _key_value(k: _Key, by_axis: dict[str, dict[str, Term]]) -> tuple[float | None, str]:
+def _key_value(k: _Key, by_axis: dict[str, dict[str, Term]], what: str = "axis") -> tuple[float | None, str]:
     """The exported value of key ``k`` (the largest of the axes) and its comment."""
     a, t = _largest(by_axis, k.name)
     value = None if t.value is None else k.convert(t.value)
-    which = f" (axis {a}, the largest of {', '.join(by_axis)})" if len(by_axis) > 1 else ""
+    which = f" ({what} {a}, the largest of {', '.join(by_axis)})" if len(by_axis) > 1 else ""
     return value, f"{k.density_unit} = {k.symbol} {t.note(k.unit)} {k.how}{which}"
 
 
@@ -235,7 +235,7 @@ def _kalibr_section(title: str, keys: tuple[_Key, ...], by_axis: dict[str, dict[
     lines = [title]
     values = []
     for k in keys:
-        v, note = _key_value(k, by_axis)
+        v, note = _key_value(k, by_axis, what)
         values.append(v)
         lines.append(f"{k.key}: {_g(v)}   # {note}")
     lines += _per_axis(by_axis, names, what)

@@ -45,7 +45,7 @@ def test_imu_utils_set_is_read_from_any_of_its_files_in_fogmons_units():
     np.testing.assert_allclose(cf.curves[4].adev, raw / G0_MPS2 * 1e6, rtol=1e-15)   # m/s^2 -> micro-g
     raw = np.loadtxt(os.path.join(IMU_UTILS, "data_xsens_gyr_x.txt"))
     np.testing.assert_allclose(cf.curves[0].adev, raw * 180 / math.pi / 57.3, rtol=1e-15)   # its 57.3 deg/rad
-    assert IMU_UTILS_DPH == pytest.approx(0.999926344, abs=1e-9)
+    assert pytest.approx(0.999926344, abs=1e-9) == IMU_UTILS_DPH
 
 
 @pytest.mark.parametrize("sensor", ["xsens", "16448", "A3"])
