@@ -48,7 +48,8 @@ class AccelFit:
     @staticmethod
     def of(fit: NoiseFit) -> AccelFit:
         """The accelerometer coefficients of ``fit``, an IEEE-952 fit of an ADEV in micro-g."""
-        return AccelFit(*(_scaled(c, ACCEL_PER_GYRO[name][1]) for name, c in fit.coefficients().items()), noise=fit)
+        q, n, b, k, r = (_scaled(c, ACCEL_PER_GYRO[name][1]) for name, c in fit.coefficients().items())
+        return AccelFit(q, n, b, k, r, noise=fit)
 
     def coefficients(self) -> dict[str, Coefficient]:
         """Name (with unit) -> Coefficient, in the order of ACCEL_NAMES."""

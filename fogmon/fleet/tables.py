@@ -6,6 +6,7 @@ recordings with accelerometers also ``accel_windows.parquet`` and
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -49,8 +50,8 @@ def windows_table(name: str, axis: str, window_s: float, tau_s: np.ndarray, part
     return pa.table(cols)
 
 
-def write_tables(out_dir: str, windows: list, recordings: list[dict], accel_windows: list = (),
-                 accel_recordings: list[dict] = ()) -> tuple[str, str]:
+def write_tables(out_dir: str, windows: list, recordings: list[dict], accel_windows: Sequence = (),
+                 accel_recordings: Sequence[dict] = ()) -> tuple[str, str]:
     """Write the tables into ``out_dir`` (each as ``.tmp`` then renamed: never half
     written; the accelerometer tables only when some recording has accelerometers, else
     those of an earlier run there are removed); windows of recordings with other taus get

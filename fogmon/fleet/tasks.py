@@ -282,8 +282,9 @@ def run_chunk(plan: Plan, chunk, source: SourceOptions, config: PipelineConfig, 
 
         out.windows = timed(col.gyro.owned(chunk.feed_first, keep))
         out.accel_windows = {a: timed(x.owned(chunk.feed_first, keep)) for a, x in col.accels.items()}
-        out.accel_invalid = {ACCEL_CHANNEL.fullmatch(k).group(1): n for k, n in src.own_accel_invalid.items()
-                             if accels is None or ACCEL_CHANNEL.fullmatch(k).group(1) in accels}
+        names = {k: m.group(1) for k in src.own_accel_invalid if (m := ACCEL_CHANNEL.fullmatch(k))}
+        out.accel_invalid = {names[k]: n for k, n in src.own_accel_invalid.items()
+                             if accels is None or names[k] in accels}
         if chunk.last:
             out.record = _record_facts(summary, src.t0_s)
             out.accel_records = {a: _fit_facts(x.overall_fit, ACCEL_COEFFICIENTS) | {"fit_first_s": x.overall_first_s}
