@@ -61,6 +61,7 @@ class AxisAnalysis:
         self.watch: ModelWatch | None = None
         self.phases: PhaseLog | None = None
         self.aux_windows: AuxWindows | None = None   # the aux samples of each window (model check, phases)
+        self.moving = np.zeros(0, dtype=bool)   # of the samples last released: kept out as platform motion
 
     def suffixed(self, key: str) -> str:
         """``key`` as this axis names it: ``<key>_<axis>``, or ``key`` for a one-axis stream."""
@@ -104,10 +105,13 @@ class AxisAnalysis:
              dispatch: Callable[[Sequence[Event]], None]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The samples (deg/h), valid flags and platform-motion flags (None: no gate) to
         analyse now: with a motion gate, those it has judged, platform motion made invalid
-        (its events to ``dispatch``)."""
+        (its events to ``dispatch``); ``moving`` marks those the gate made invalid (the
+        accelerometers of the axis follow it)."""
         if self.motion is None:
+            self.moving = np.zeros(len(y), dtype=bool)
             return y, valid, None
         out = self.motion.push(t_s, y, valid)
+        self.moving = out.moved
         dispatch(self.named(out.events))
         return out.rate_dph, out.valid, out.moved
 
@@ -116,6 +120,7 @@ class AxisAnalysis:
         spans into the summary."""
         assert self.motion is not None
         out = self.motion.flush()
+        self.moving = out.moved
         dispatch(self.named(out.events))
         self.summary.motion_spans, self.summary.motion_samples = list(self.motion.spans), self.motion.samples_excluded
         return out.rate_dph, out.valid, out.moved
