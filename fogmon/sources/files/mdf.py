@@ -35,6 +35,17 @@ def _read(path: str):
     return mdf
 
 
+def check_layout(path: str) -> None:
+    """FogmonError unless the MDF file ``path`` opens and its channels lie inside their
+    records, checked without decoding its bus logging: asammdf decodes an MF4 CAN log
+    while it opens it (python-can's MF4 reader), where a corrupt channel crashes it."""
+    import asammdf
+    with reading(f"{path}: not a readable MDF file"):
+        mdf = asammdf.MDF(path, process_bus_logging=False)  # type: ignore[call-arg]  # an MDF4 option (mdf_v4.py)
+    with mdf:
+        _check_layout(mdf, path)
+
+
 def _check_layout(mdf, path: str) -> None:
     """FogmonError unless every channel lies inside its data group's record: asammdf's
     C extension reads a channel whose byte offset a corrupt file puts beyond the record
