@@ -31,7 +31,7 @@ def pub(*parts: str) -> str:
 
 def same_adev(rec) -> None:
     """fogmon's ADEV of a gap-free recording equals allantools.oadev on the same values."""
-    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
+    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave", exclude_motion=False)
     ok = np.isfinite(res.adev_dph)
     taus, dev, _, _ = allantools.oadev(rec.rate_dph, rate=rec.sample_rate_hz, data_type="freq",
                                        taus=res.tau_s[ok])
