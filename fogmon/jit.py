@@ -7,8 +7,8 @@ Every numba kernel is made by ``kernel``: nopython and cached on disk (``cache=T
   dtypes, Python or numpy scalars), so one compiled version serves every command and
   option (tests/test_jit.py runs the configurations and checks that no other version
   is made).
-- A kernel called only from other kernels is compiled for the types at its call sites,
-  never for a constant's value: numba would make one version per literal argument
+- A kernel called only from other kernels (no Python entry point) is compiled for the
+  types at its call sites, never for a constant's value: numba would make one version per literal argument
   (``f(x, 0)`` and ``f(x, n)``, ``g(.., True)`` and ``g(.., b)``), each costing the
   kernel's whole compile.
 - When a process compiles a declared kernel (not in the cache), it then compiles every
@@ -58,8 +58,12 @@ _warmed_up = False
 def kernel(*signatures: tuple, **options) -> Callable:
     """Decorator: ``numba.njit(cache=True, **options)`` (e.g. ``inline="always"``,
     ``fastmath``, ``error_model``) with the argument types ``signatures`` (tuples of
-    numba types, one per version; none for a kernel only other kernels call)."""
+    numba types, one per version). Without them the kernel is called only from other
+    kernels: it gets no Python entry point (numba's CPython and C wrappers, a compile of
+    their own per kernel)."""
     def wrap(fn):
+        if not signatures and "inline" not in options:
+            options.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)
         disp = numba.njit(cache=True, **options)(fn)
         template = disp.get_call_template
 
