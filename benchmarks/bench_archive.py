@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-from fogmon.recording import append_replay_rows, write_replay_header  # noqa: E402
+from fogmon.formats.replay_log import append_replay_rows, write_replay_header  # noqa: E402
 
 FS = 1000.0
 CHUNK = 1_000_000
@@ -32,7 +32,7 @@ CHUNK = 1_000_000
 READ = """
 import sys, time
 from fogmon.sources.open import open_replay_source
-from fogmon.recording import read_replay_log
+from fogmon.formats.replay_log import read_replay_log
 what, path = sys.argv[1], sys.argv[2]
 t0 = time.perf_counter()
 if what == "source":

@@ -27,7 +27,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-from fogmon.parquet_log import ParquetLogWriter  # noqa: E402
+from fogmon.formats.parquet_log import ParquetLogWriter  # noqa: E402
 
 FS = 1000.0
 CHUNK = 1 << 20

@@ -14,7 +14,8 @@ import math
 import time
 
 from fogmon.davar.batch import dadev
-from fogmon.explain.explainer import Options, explain
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.simulate import simulate
 

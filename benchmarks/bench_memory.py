@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT)]
 
-from fogmon.recording import write_replay_header  # noqa: E402
+from fogmon.formats.replay_log import write_replay_header  # noqa: E402
 
 FS = 2000.0
 ROWS_PER_WRITE = 2_000_000

@@ -17,8 +17,8 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from fogmon.sources.kvh import KvhCodec, encode_frame  # noqa: E402
-from fogmon.sources.replay import RawCaptureSource  # noqa: E402
+from fogmon.sources.codecs.kvh import KvhCodec, encode_frame  # noqa: E402
+from fogmon.sources.files.capture import RawCaptureSource  # noqa: E402
 
 
 def timed(fn, repeat: int = 3) -> float:
@@ -57,7 +57,7 @@ def main() -> None:
 
     import can
 
-    from fogmon.sources.can_source import CanDecoder, load_dbc
+    from fogmon.sources.codecs.can import CanDecoder, load_dbc
     db = load_dbc(str(resources.files("fogmon") / "data" / "gyro_example.dbc"))
     m = db.get_message_by_name("GYRO_RATE")
     nc = min(n, 50_000)

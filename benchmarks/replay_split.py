@@ -38,8 +38,9 @@ with startup.loading():      # the imports, as fogmon.cli.main's
     import fogmon.davar.streaming
     import fogmon.pipeline
     import fogmon.sinks.console
-    import fogmon.sinks.rerun_sink
-    import fogmon.sources.replay
+    import fogmon.sinks.rerun.sink
+    import fogmon.sources.files.capture
+    import fogmon.sources.files.replay_log
 
 SPENT: dict[str, float] = {}
 FIRST: list[float] = []
@@ -112,15 +113,16 @@ def split(log: str, rrd: str) -> int:
     fogmon.davar.batch.oadev = timed("engine", fogmon.davar.batch.oadev)
     fogmon.davar.fit.fit_noise = timed("fits", fogmon.davar.fit.fit_noise)
     fogmon.davar.fit.covariance_matrices = timed("fit_cov", fogmon.davar.fit.covariance_matrices)
-    for mod in (fogmon.sinks.console, fogmon.sinks.rerun_sink):
+    for mod in (fogmon.sinks.console, fogmon.sinks.rerun.sink):
         for cls in vars(mod).values():
             if isinstance(cls, type) and cls.__module__ == mod.__name__:
                 for name in ("start", "block", "frames", "events", "source_counters", "rotate", "finish"):
                     if name in vars(cls):
                         setattr(cls, name, timed("sinks", vars(cls)[name]))
-    for cls in vars(fogmon.sources.replay).values():
-        if isinstance(cls, type) and "blocks" in vars(cls):
-            cls.blocks = timed_iter(cls.blocks)
+    for mod in (fogmon.sources.files.replay_log, fogmon.sources.files.capture):
+        for cls in vars(mod).values():
+            if isinstance(cls, type) and cls.__module__ == mod.__name__ and "blocks" in vars(cls):
+                cls.blocks = timed_iter(cls.blocks)
     t = time.process_time()
     rc = replay(log, rrd)
     run = time.process_time() - t

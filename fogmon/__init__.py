@@ -32,9 +32,9 @@ _LAZY = {
     "tau_grid": "fogmon.davar.taus",
     "Block": "fogmon.block",
     "Event": "fogmon.block",
-    "Recording": "fogmon.recording",
-    "read_replay_log": "fogmon.recording",
-    "write_replay_log": "fogmon.recording",
+    "Recording": "fogmon.formats.recording",
+    "read_replay_log": "fogmon.formats.replay_log",
+    "write_replay_log": "fogmon.formats.replay_log",
     "FogmonError": "fogmon.errors",
 }
 

@@ -27,14 +27,14 @@ def is_axis_name(name: object) -> bool:
 
 
 def parse_axes(text: str) -> tuple[str, ...]:
-    """Axis names from ``--axis`` text: one name or a comma list (``x,y``); FogmonError
+    """Axis names from ``axis`` text: one name or a comma list (``x,y``); FogmonError
     for an empty, repeated or non-letters/digits name."""
     names = tuple(a.strip() for a in text.split(","))
     for a in names:
         if not is_axis_name(a):
-            raise FogmonError(f"--axis {text}: an axis name is letters and digits, got {a!r}")
+            raise FogmonError(f"`axis` {text}: an axis name is letters and digits, got {a!r}")
     if len(set(names)) < len(names):
-        raise FogmonError(f"--axis {text}: an axis is named twice")
+        raise FogmonError(f"`axis` {text}: an axis is named twice")
     return names
 
 

@@ -1,4 +1,4 @@
-"""Fitted IEEE-952 noise parameters in other tools' formats and units (``--export``):
+"""Fitted IEEE-952 noise parameters in other tools' formats and units (``export``):
 Kalibr imu.yaml, allan_variance_ros's imu.yaml with its console values, and a MATLAB
 ``gyroparams`` snippet. The one place that knows these unit conversions (docs/exports.md
 has the table and the discrete-time pitfalls).
@@ -13,10 +13,12 @@ filter tuned with it is conservative, not overconfident), and the file says so."
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from fogmon.davar.fit import NAMES
 from fogmon.errors import FogmonError
+from fogmon.outputs import check_outputs
 
 RAD_PER_DEG = math.pi / 180.0
 FORMATS = ("kalibr", "matlab", "ros")
@@ -195,32 +197,18 @@ def write_export(
 ) -> None:
     """Write ``fit`` (a whole-record NoiseFit) to ``path`` in format ``kind`` (FORMATS)."""
     if fit is None:
-        raise FogmonError(f"--export {kind} {path}: no noise fit to export (the record gave no Allan deviation)")
+        raise FogmonError(f"`export` {kind} {path}: no noise fit to export (the record gave no Allan deviation)")
     text = WRITERS[kind](fit, source, sample_rate_hz, topic)
     try:
         with open(path, "w", encoding="utf-8") as fh:
             fh.write(text)
     except OSError as e:
-        raise FogmonError(f"--export {kind} {path}: cannot write: {e.strerror}") from None
+        raise FogmonError(f"`export` {kind} {path}: cannot write: {e.strerror}") from None
 
 
-def add_export_argument(parser) -> None:
-    """``--export FORMAT FILE``."""
-    parser.add_argument("--export", nargs=2, metavar=("FORMAT", "FILE"),
-                        help="also write the fitted noise parameters for another tool: kalibr (imu.yaml, "
-                             "continuous-time rad/s/sqrt(Hz), rad/s^2/sqrt(Hz)), ros (allan_variance_ros-style "
-                             "imu.yaml) or matlab (gyroparams snippet); docs/exports.md")
-
-
-def export_request(args, inputs=()) -> tuple[str, str] | None:
-    """(format, file) of ``--export``, checked before any work: an unknown format or a
-    file that cannot be written (or is one of ``inputs``) is a FogmonError."""
-    from fogmon.cli.outputs import check_outputs
-    e = getattr(args, "export", None)
-    if not e:
-        return None
-    kind, path = e
+def check_export(kind: str, path: str, inputs: Iterable[str | None] = ()) -> None:
+    """FogmonError unless ``kind`` is one of FORMATS and ``path`` can be written (and is
+    none of ``inputs``): checked before any work."""
     if kind not in FORMATS:
-        raise FogmonError(f"--export {kind}: unknown format (one of {', '.join(FORMATS)})")
-    check_outputs({f"--export {kind}": path}, inputs)
-    return kind, path
+        raise FogmonError(f"`export` {kind}: unknown format (one of {', '.join(FORMATS)})")
+    check_outputs({f"`export` {kind}": path}, inputs)

@@ -2,12 +2,16 @@
 the drilling engineer's session summary (docs/monitor.md).
 
 A window's state comes from the aux channels that say what the tool is doing: ``pumps``
-(mud pumps, 1 on / 0 off) and ``rot_dps`` (drill-string or turntable rotation, deg/s).
-A window is in a state when at least STATE_FRACTION of its valid aux samples are;
-otherwise it straddles a change (``transition``) and belongs to no phase. Consecutive
-windows in one state make a phase; each phase keeps the range (min..max over its windows)
-of every IEEE-952 coefficient the window fits identified. Runs without those channels
-have one state, ``steady``.
+(mud pumps, 1 on / 0 off) and ``rot_dps`` (drill-string, turntable or orbital rotation,
+deg/s). States are named from the channels a recording has (``state_words``): with
+``pumps`` (a drilling run) "pumps on, rotating", "pumps off, not rotating", ...; with
+``rot_dps`` alone (a rate table, a gyro in orbit) the rotation is only said against its
+threshold ("|rot_dps| <= 1 deg/s"), since "not rotating" would be false of an orbiting
+gyro turning at 0.06 deg/s. A window is in a state when at least STATE_FRACTION of its
+valid aux samples are; otherwise it straddles a change (``transition``) and belongs to
+no phase. Consecutive windows in one state make a phase; each phase keeps the range
+(min..max over its windows) of every IEEE-952 coefficient the window fits identified.
+Runs without those channels have one state, ``steady``.
 """
 from __future__ import annotations
 
@@ -31,8 +35,23 @@ TRANSITION = "transition"
 STEADY = "steady"
 
 
-#: Each state channel: the words for its two values (off, on) and the test for "on".
-_WORDS = {"pumps": ("pumps off", "pumps on"), "rot_dps": ("not rotating", "rotating")}
+#: Each state channel: the words for its two values (off, on) in a drilling run (with
+#: ``pumps``), and the test for "on".
+_DRILLING_WORDS = {"pumps": ("pumps off", "pumps on"), "rot_dps": ("not rotating", "rotating")}
+
+
+def state_channels(names) -> tuple[str, ...]:
+    """The state channels (STATE_CHANNELS, in that order) among the channel ``names``."""
+    return tuple(c for c in STATE_CHANNELS if c in names)
+
+
+def state_words(channels: tuple[str, ...]) -> dict[str, tuple[str, str]]:
+    """Per state channel of a recording with exactly these ``channels`` (state_channels):
+    the words for its two values (off, on). Drilling words only with ``pumps``; a rotation
+    alone is said against its threshold."""
+    if "pumps" in channels:
+        return {c: _DRILLING_WORDS[c] for c in channels}
+    return {c: (f"|{c}| <= {ROTATING_DPS:g} deg/s", f"|{c}| > {ROTATING_DPS:g} deg/s") for c in channels}
 
 
 def _on(name: str, x: np.ndarray) -> np.ndarray:
@@ -44,7 +63,7 @@ def window_state(aux: Mapping[str, np.ndarray]) -> str:
     state of at least STATE_FRACTION of its known samples (a sample is unknown where a
     state channel is NaN), else TRANSITION. Samples are counted by an integer code (one
     bit per channel), not by name, so a long window costs one bincount."""
-    names = [c for c in STATE_CHANNELS if c in aux]
+    names = state_channels(aux)
     if not names:
         return STEADY
     code = np.zeros(len(aux[names[0]]), dtype=np.int64)
@@ -59,7 +78,8 @@ def window_state(aux: Mapping[str, np.ndarray]) -> str:
     k = int(np.argmax(counts))
     if counts[k] < STATE_FRACTION * counts.sum():
         return TRANSITION
-    return ", ".join(_WORDS[name][(k >> bit) & 1] for bit, name in enumerate(names))
+    words = state_words(names)
+    return ", ".join(words[name][(k >> bit) & 1] for bit, name in enumerate(names))
 
 
 @dataclass
@@ -87,6 +107,7 @@ class PhaseLog:
 
     def __init__(self) -> None:
         self.phases: list[Phase] = []
+        self.channels: tuple[str, ...] = ()   # the state channels the windows had
         self.transitions = 0
         self._broken = False  # a transition since the last phase's window: the next window starts a phase
 
@@ -95,6 +116,7 @@ class PhaseLog:
         """One window ending at ``t_end_s`` (s) with its aux samples and fitted coefficients
         (name -> value in IEEE-952 units, and whether identified); returns the phase it
         starts, if it starts one."""
+        self.channels = state_channels(aux)
         state = window_state(aux)
         if state == TRANSITION:
             self.transitions += 1
@@ -112,7 +134,8 @@ class PhaseLog:
     def summary(self) -> dict:
         """Per state: the phases (time span of their window ends, windows), their number,
         the windows, and the coefficient ranges over all its phases; windows straddling a
-        change of state (``transition_windows``) are in none."""
+        change of state (``transition_windows``) are in none; ``channels``: the state
+        channels the states were read from."""
         by_state: dict[str, dict] = {}
         for p in self.phases:
             s = by_state.setdefault(p.state, {"phases": [], "windows": 0, "ranges": {}})
@@ -122,4 +145,4 @@ class PhaseLog:
             for name, (lo, hi) in p.ranges.items():
                 a, b = s["ranges"].get(name, (lo, hi))
                 s["ranges"][name] = (min(a, lo), max(b, hi))
-        return {"states": by_state, "transition_windows": self.transitions}
+        return {"states": by_state, "transition_windows": self.transitions, "channels": list(self.channels)}

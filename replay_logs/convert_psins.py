@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 
 ARCSEC_PER_COUNT = 0.1
 TS_S = 0.01

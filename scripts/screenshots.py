@@ -28,6 +28,9 @@ import tomllib
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 #: Viewer window in logical points (the PNG has twice as many pixels before halving).
 WINDOW = "1600x1000"
+#: The virtual screen: the pointer starts at its centre, outside the window (drawn at twice
+#: its size in pixels), so no view shows a hover tooltip.
+SCREEN = "6800x4200"
 MAX_BYTES = 300_000
 #: The three-axis gyro of viewer_axes.png: white noise and bias instability differing by
 #: axis, an orbital-period term on z only (deg/sqrt(h), deg/h, s).
@@ -56,6 +59,17 @@ phase_rad = 0.0
 THREE_AXIS_DURATION_S, THREE_AXIS_WINDOW_S = 3600.0, 409.6
 
 
+def three_axis_aux(t_s):
+    """The aux channels of viewer_axes.png (each in its own view): a warming gyro
+    (temp_c, deg C) and its supply voltage (supply_v, V) with a 0.2 V dip at 30 min."""
+    import numpy as np
+
+    rng = np.random.default_rng(4)
+    temp_c = 25.0 + 8.0 * (1.0 - np.exp(-t_s / 900.0)) + 0.02 * rng.standard_normal(len(t_s))
+    supply_v = 15.0 - 0.2 * ((t_s > 1800.0) & (t_s < 1900.0)) + 0.005 * rng.standard_normal(len(t_s))
+    return {"temp_c": temp_c, "supply_v": supply_v}
+
+
 def _run(cmd: list[str], what: str) -> None:
     p = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if p.returncode != 0:
@@ -65,18 +79,19 @@ def _run(cmd: list[str], what: str) -> None:
 
 def _screenshot(rrd: str, png: str) -> None:
     """The viewer's window on ``rrd`` with its saved layout, as ``png``."""
-    from fogmon.sinks.rerun_sink import _rerun_binary
+    from fogmon.sinks.rerun.server import _rerun_binary
 
-    _run(["xvfb-run", "-a", "-s", "-screen 0 1920x1080x24", _rerun_binary(), "--window-size", WINDOW,
+    _run(["xvfb-run", "-a", "-s", f"-screen 0 {SCREEN}x24", _rerun_binary(), "--window-size", WINDOW,
           "--screenshot-to", png, rrd], f"rerun --screenshot-to on {rrd}")
     if not os.path.exists(png):
         sys.exit(f"screenshots: the viewer wrote no {png}")
 
 
 def three_axis_rrd(path: str) -> None:
-    """``path``: THREE_AXIS_MODEL simulated (fogmon.sim, one model per axis, seeds 1-3) and
-    sent to the Rerun sink as the pipeline does for several axes (3-axis blocks, one
-    StreamingDadev and fit per axis). Until `fogmon replay` takes several axes."""
+    """``path``: THREE_AXIS_MODEL simulated (fogmon.sim, one model per axis, seeds 1-3) with
+    ``three_axis_aux`` and sent to the Rerun sink as the pipeline does for several axes
+    (3-axis blocks, one StreamingDadev and fit per axis). Until `fogmon replay` takes
+    several axes."""
     import numpy as np
 
     from fogmon.block import Block
@@ -85,12 +100,13 @@ def three_axis_rrd(path: str) -> None:
     from fogmon.sim.model import model_from_dict
     from fogmon.sim.simulate import simulate
     from fogmon.sinks.base import StreamInfo, Summary
-    from fogmon.sinks.rerun_sink import RerunSink
+    from fogmon.sinks.rerun.sink import RerunSink
 
     model = model_from_dict(tomllib.loads(THREE_AXIS_MODEL))
     axes, sample_rate_hz = model.axes, model.sample_rate_hz
     recs = [simulate(model.for_axis(a), THREE_AXIS_DURATION_S, seed=k + 1) for k, a in enumerate(axes)]
     t, rate = recs[0].t_s, np.column_stack([r.rate_dph for r in recs])
+    aux = three_axis_aux(t)
     engines = {a: StreamingDadev(sample_rate_hz, THREE_AXIS_WINDOW_S, hop_s=THREE_AXIS_WINDOW_S / 8) for a in axes}
     e0 = engines[axes[0]]
     sink = RerunSink(rrd_path=path)
@@ -101,12 +117,13 @@ def three_axis_rrd(path: str) -> None:
             THREE_AXIS_WINDOW_S,
             e0.hop_n / sample_rate_hz,
             e0.m / sample_rate_hz,
-            (),
+            tuple(aux),
             axes=axes,
         )
     )
     for k in range(0, len(t), 36_000):
-        block = Block.make(t[k:k + 36_000], rate[k:k + 36_000], axes=axes)
+        block = Block.make(t[k:k + 36_000], rate[k:k + 36_000], aux={n: v[k:k + 36_000] for n, v in aux.items()},
+                           axes=axes)
         sink.block(block)
         for a in axes:
             res = engines[a].push(block.axis(a).rate_dph)
@@ -116,11 +133,13 @@ def three_axis_rrd(path: str) -> None:
 
 
 def _shrink(src: str, dst: str) -> int:
-    """Halve ``src`` and store it with an adaptive 256-colour palette as ``dst``; its size (bytes)."""
+    """Halve ``src`` (means of 2 x 2 pixels: a sharper filter rings at the heatmaps' cell
+    edges, drawing dark outlines that look like flagged regions) and store it with an
+    adaptive 256-colour palette as ``dst``; its size (bytes)."""
     from PIL import Image
 
     im = Image.open(src).convert("RGB")
-    im = im.resize((im.width // 2, im.height // 2), Image.LANCZOS)
+    im = im.resize((im.width // 2, im.height // 2), Image.BOX)
     im.quantize(colors=256, method=Image.Quantize.MEDIANCUT).save(dst, optimize=True)
     return os.path.getsize(dst)
 

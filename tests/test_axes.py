@@ -4,7 +4,7 @@ import pytest
 
 from fogmon.block import Block, axis_aux
 from fogmon.errors import FogmonError
-from fogmon.recording import recording_from_arrays
+from fogmon.formats.recording import recording_from_arrays
 
 AXES = ("x", "y", "z")
 

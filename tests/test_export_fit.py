@@ -13,7 +13,7 @@ import fogmon
 from fogmon.cli import main
 from fogmon.davar.fit import Coefficient
 from fogmon.export import kalibr_yaml, matlab_snippet, ros_yaml
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 
 
 class FakeFit:

@@ -97,7 +97,7 @@ def test_live_gate_keeps_a_turn_out_of_the_analysis():
 def test_explain_leaves_platform_motion_out_and_warns():
     from fogmon.errors import FogmonError
     from fogmon.explain.explainer import without_motion
-    from fogmon.recording import Recording
+    from fogmon.formats.recording import Recording
 
     t, r = stationary(6, duration_s=900.0)
     turn = (t >= 300.0) & (t < 330.0)

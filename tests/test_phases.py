@@ -19,6 +19,19 @@ def test_window_state_names_pumps_and_rotation_and_needs_a_clear_majority():
     assert window_state({"pumps": np.full(10, np.nan)}) == TRANSITION
 
 
+def test_states_are_named_from_the_channels_a_recording_has():
+    """Without a drilling channel (pumps) a rotation is only said against its threshold:
+    a gyro in orbit turns at 0.0645 deg/s and is not "not rotating"."""
+    orbit = {"rot_dps": np.full(100, 360.0 / 5580.0), "temp_c": np.full(100, 20.0)}
+    assert window_state(orbit) == "|rot_dps| <= 1 deg/s"
+    assert window_state({"rot_dps": np.full(100, 30.0)}) == "|rot_dps| > 1 deg/s"
+    assert window_state(aux(0, 0.004)) == "pumps off, not rotating"
+    log = PhaseLog()
+    log.frame(60.0, orbit, {"N_dpsh": 0.003}, {"N_dpsh": True})
+    s = log.summary()
+    assert list(s["states"]) == ["|rot_dps| <= 1 deg/s"] and s["channels"] == ["rot_dps"]
+
+
 def test_phases_split_at_every_change_and_transition_and_keep_identified_ranges():
     log = PhaseLog()
     ident = {"N_dpsh": True, "B_dph": True, "K_dphsh": False}
@@ -42,7 +55,7 @@ def test_the_pipeline_reports_the_phases_of_a_drilling_run():
     """Drilling (pumps on, string rotating) with connections (pumps off, still) between
     stands; the monitor's session summary splits the run at the connections and gives each
     state its coefficient ranges; a phase event marks each phase's first window."""
-    from doubles import Collect, ListSource
+    from helpers.doubles import Collect, ListSource
 
     from fogmon.pipeline import Pipeline, PipelineConfig
 

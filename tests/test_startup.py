@@ -44,11 +44,12 @@ def test_the_programs_rerun_arrays_do_not_import_pandas():
 import sys
 import numpy as np
 from fogmon import startup
-from fogmon.sinks import rerun_sink
+import fogmon.sinks.rerun.sink
+from fogmon.sinks.rerun.blueprint import blueprint
 startup.own_process()
 startup.arrow_without_pandas()
 import rerun as rr
-rerun_sink.blueprint(curve_bounds=((-1, 3), (-2, 1)))
+blueprint(curve_bounds=((-1, 3), (-2, 1)))
 rr.Scalars.columns(scalars=np.arange(3.0))
 assert "pandas" not in sys.modules
 import pandas as pd

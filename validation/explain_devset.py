@@ -41,9 +41,10 @@ import numpy as np
 
 from fogmon.explain.axes import explain_axes
 from fogmon.explain.baseline import baseline_model
-from fogmon.explain.explainer import Options, explain
+from fogmon.explain.explainer import explain
+from fogmon.explain.options import Options
 from fogmon.explain.report import build_report
-from fogmon.recording import recording_from_arrays
+from fogmon.formats.recording import recording_from_arrays
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, OUTLIER_QUANTILE_PROBS, Effect, Noise, SensorModel, validate_effect
 from fogmon.sim.scenarios import ChamberParams, MwdParams, mwd_run, thermal_chamber

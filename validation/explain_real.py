@@ -46,7 +46,7 @@ import numpy as np
 from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
 from fogmon.explain.report import low_pass_text
-from fogmon.recording import read_replay_log
+from fogmon.formats.replay_log import read_replay_log
 
 #: A transient counts as located when a region holding its time is shorter than this
 #: fraction of the record (issue 11).

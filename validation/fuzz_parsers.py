@@ -27,8 +27,8 @@ import time
 from multiprocessing import Pool
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from fogmon.sources.codecs import make_codec  # noqa: E402
-from fogmon.sources.kvh import FORMATS, encode_frame  # noqa: E402
+from fogmon.sources.codecs.kvh import FORMATS, encode_frame  # noqa: E402
+from fogmon.sources.codecs.protocols import make_codec  # noqa: E402
 from fogmon.sources.plausibility import TEMP_RANGE_C  # noqa: E402
 
 #: rates (deg/s) that are garbage or just beyond a gate, mixed into the inputs

@@ -37,8 +37,8 @@ from fogmon.davar.batch import dadev
 from fogmon.davar.fit import fit_noise
 from fogmon.davar.jumps import JUMP_Z, JumpDetector
 from fogmon.errors import FogmonWarning
+from fogmon.formats.replay_log import read_replay_log
 from fogmon.pipeline import default_window_s
-from fogmon.recording import read_replay_log
 
 ROOT = Path(__file__).resolve().parents[1]
 QUIET = ("gring_quiet_bjz_20hz.csv", "px4_quiet_z_250hz.csv")

@@ -45,13 +45,13 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 
-from sources_fake_device import has_open, open_pty  # noqa: E402
+from helpers.fake_device import has_open, open_pty  # noqa: E402
 
 from fogmon.errors import FogmonError  # noqa: E402
-from fogmon.pieces import find_pieces  # noqa: E402
-from fogmon.recording import read_replay_log  # noqa: E402
-from fogmon.sources.kvh import encode_frame  # noqa: E402
-from fogmon.sources.replay import open_raw_capture  # noqa: E402
+from fogmon.formats.archive import find_pieces  # noqa: E402
+from fogmon.formats.replay_log import read_replay_log  # noqa: E402
+from fogmon.sources.codecs.kvh import encode_frame  # noqa: E402
+from fogmon.sources.files.capture import open_raw_capture  # noqa: E402
 
 RATE_HZ = 1000
 DPS_PER_K = 1e-3            # frame k sends k x 0.001 deg/s = 3.6 k deg/h
@@ -171,9 +171,9 @@ def summary_counters(out: str) -> tuple[dict[str, int], int]:
 def event_totals(rrd: str) -> dict[str, int]:
     """Sums of the counts the .rrd's events carry: crc_error 'N frame(s) failed', gap
     'N sample(s) lost' and 'N more gaps, M samples lost'."""
-    from test_rerun_sink import read_texts
+    from helpers.rrd import read_event_messages
     tot = {"crc_errors": 0, "samples_missing": 0, "seq_gaps": 0}
-    for x in read_texts(rrd, "/events"):
+    for x in read_event_messages(rrd, "/events"):
         if x.startswith("crc_error:"):
             tot["crc_errors"] += int(x.split()[1])
         elif x.startswith("gap:"):
@@ -336,7 +336,7 @@ def main(argv=None) -> int:
             if mode == "connect":
                 import socket
 
-                from fogmon.sinks.rerun_sink import start_grpc_server
+                from fogmon.sinks.rerun.server import start_grpc_server
                 with socket.socket() as s:
                     s.bind(("127.0.0.1", 0))
                     port = s.getsockname()[1]

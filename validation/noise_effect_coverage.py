@@ -1,5 +1,5 @@
 """Coverage of the `noise` effect's 95 % intervals (docs/explain.md): simulated records
-whose model states the wrong N, corrected by fogmon.explain.catalogue.fit_coefficients.
+whose model states the wrong N, corrected by fogmon.explain.candidates.coefficients.fit_coefficients.
 
 Run:  python validation/noise_effect_coverage.py [--records 40] [--duration-s 3600]
 Prints the mean estimate, its scatter over the records, the mean stated standard error
@@ -11,7 +11,7 @@ import argparse
 
 import numpy as np
 
-from fogmon.explain.catalogue import fit_coefficients
+from fogmon.explain.candidates.coefficients import fit_coefficients
 from fogmon.sim.model import Noise, SensorModel
 from fogmon.sim.simulate import simulate
 

@@ -13,9 +13,9 @@ snapshot. ``--describe`` also prints the raw-data statistics the manifest's evid
 quotes (block standard deviations, the moving-RMS peak, the spectrum, gaps, > 8 MAD
 outliers).
 
-Readers beyond fogmon's own dependencies, needed only here: pymseed (miniSEED) and
-pyulog (PX4 ULog), both on PyPI. The fetched data is never committed (GPL-3.0 data among
-it is used for validation only).
+Readers beyond fogmon's own dependencies, needed only here: pymseed (miniSEED), pyulog
+(PX4 ULog) and rdata (R data files), all on PyPI. The fetched data is never committed
+(GPL-3.0 and CC BY-NC-SA 4.0 data among it is used for validation only).
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fogmon.recording import read_replay_log, write_replay_log
+from fogmon.formats.replay_log import read_replay_log, write_replay_log
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 MANIFEST = Path(__file__).with_name("real_recordings.toml")
@@ -118,6 +118,29 @@ def read_ulog(data: bytes, topic: str, column: str) -> tuple[np.ndarray, np.ndar
     return (ts - ts[0]) * 1e-6, d.data[column].astype(float)
 
 
+def read_rda(data: bytes, column: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """(time s = k / freq, the named column, freq Hz) of an R data file (.rda) holding one
+    ``imu`` matrix of the imudata/gmwm R packages: columns named in its ``dimnames``, the
+    sample rate in its ``freq`` attribute, no time stamps (uniform sampling)."""
+    import warnings
+
+    import rdata
+
+    obj = rdata.parser.parse_data(data).object.value[0]
+    attrs = {}
+    node = obj.attributes
+    with warnings.catch_warnings():  # rdata has no constructor for the class "imu": fine, we read it raw
+        warnings.simplefilter("ignore")
+        while node is not None and node.info.type.name == "LIST":
+            attrs[node.tag.value.value.decode()] = rdata.conversion.convert(node.value[0])
+            node = node.value[1] if len(node.value) > 1 else None
+        values = np.asarray(rdata.conversion.convert(obj), dtype=float)
+    names = [str(n) for n in attrs["dimnames"][1]]
+    matrix = values.reshape(attrs["dim"], order="F") if values.ndim == 1 else values
+    sample_rate_hz = float(np.asarray(attrs["freq"]).ravel()[0])
+    return np.arange(matrix.shape[0]) / sample_rate_hz, matrix[:, names.index(column)], sample_rate_hz
+
+
 def snap(t_s: np.ndarray, sample_rate_hz: float, name: str) -> tuple[np.ndarray, float]:
     """Timestamps moved to the nearest slot of the fs grid; (snapped times, largest shift s).
     Two samples in one slot would be a conversion error."""
@@ -133,6 +156,8 @@ def convert(entry: dict, original: bytes) -> tuple[np.ndarray, np.ndarray, float
     shift = 0.0
     if entry["reader"] == "mseed":
         t, x, sample_rate_hz = read_mseed(original, entry["channel"])
+    elif entry["reader"] == "rda":
+        t, x, sample_rate_hz = read_rda(original, entry["column"])
     else:
         if entry["reader"] == "csv":
             t, x = read_csv_column(original, entry["column"])

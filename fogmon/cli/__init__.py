@@ -1,15 +1,20 @@
 """The `fogmon` command: a thin dispatcher. Each sub-command lives in its own module
 ``fogmon.cli.<name>`` exposing ``add_arguments(parser)`` and ``run(args) -> int``;
-modules are imported only when their command runs, so ``--help`` is fast."""
+modules are imported only when their command runs, so ``--help`` is fast.
+
+Library messages name parameters in backticks (fogmon.errors); the command shows them as
+its flags (``command_flags``): every FogmonError and FogmonWarning is rendered so."""
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib
 import sys
 import warnings
+from collections.abc import Iterable
 
 from fogmon import __version__, startup, stopping
-from fogmon.errors import FogmonError, FogmonWarning
+from fogmon.errors import NAME, FogmonError, FogmonWarning, render_names
 
 #: sub-command -> one-line help
 COMMANDS = {
@@ -23,7 +28,22 @@ COMMANDS = {
     "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
     "convert": "convert a recording (replay log, raw capture, CAN log, archive) to a Parquet replay log",
     "batch": "analyse many recordings on Dask into windows.parquet + recordings.parquet (fleet report optional)",
+    "info": "what a recording or log holds: one line per topic/channel/signal/column (type, count, rate, span, unit)",
 }
+
+
+#: library parameter name -> the dest of the option that sets it, where the two differ
+ALIASES = {
+    "n_boot": "bootstrap",        # fogmon.explain Options.n_boot: explain --bootstrap
+    "thermal": "thermal_cal",     # fogmon.methods.live LiveMethods.thermal: --thermal-cal
+    "rrd_path": "rrd",            # the Rerun sink's rrd_path: --rrd
+    "n_samples": "record_s",      # fogmon.davar.curve adev_from_curve(n_samples=): fit --record-s
+}
+
+#: backticked names in library messages that no option sets: shown as written
+NO_FLAG = frozenset({
+    "rerun",                      # the Rerun viewer program (fogmon.sinks.rerun_sink)
+})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -48,12 +68,56 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     return p
 
 
+def flag_table(parser: argparse.ArgumentParser) -> dict[str, str]:
+    """dest -> long option string (``--rate-hz``) of every option of ``parser``."""
+    out: dict[str, str] = {}
+    for action in parser._actions:
+        long = [s for s in action.option_strings if s.startswith("--")]
+        if long:
+            out.setdefault(action.dest, long[0])
+    return out
+
+
+@functools.cache
+def _options(command: str) -> dict[str, str]:
+    """dest -> flag of `fogmon COMMAND`'s options (its parser built once, when needed)."""
+    p = _Parser(prog=f"fogmon {command}")
+    importlib.import_module(f"fogmon.cli.{command}").add_arguments(p)
+    return flag_table(p)
+
+
+def command_flags(command: str, names: Iterable[str] = ()) -> dict[str, str]:
+    """Parameter name -> flag for rendering the messages of `fogmon COMMAND`: its own
+    options (dest -> flag) and their ALIASES; a name of ``names`` it lacks is taken from
+    another command's options (a message telling to run that command with its option),
+    whose parsers are built only then, or else shown as written (in backticks)."""
+    own = _options(command)
+    table = {**{name: own[dest] for name, dest in ALIASES.items() if dest in own}, **own}
+    missing = {n for n in names if n not in table} - NO_FLAG
+    # explain last: its parser imports the explainer (seconds) for its defaults
+    for other in sorted(COMMANDS, key=lambda c: c == "explain"):
+        if not missing:
+            break
+        if other != command:
+            theirs = _options(other)
+            table.update({n: theirs[n] for n in missing & theirs.keys()})
+            missing -= theirs.keys()
+    return {**{n: f"`{n}`" for n in names if n not in table}, **table}
+
+
+def render(message: str | FogmonError | FogmonWarning, command: str) -> str:
+    """A library message (its parameter names in backticks) as `fogmon COMMAND` shows
+    it: each name as the command's flag for it."""
+    text = message.message if isinstance(message, (FogmonError, FogmonWarning)) else str(message)
+    return render_names(text, command_flags(command, NAME.findall(text)))
+
+
 def _one_line_warnings(command: str, show):
-    """A ``warnings.showwarning`` that prints FogmonWarnings as one line on stderr and
-    hands other warnings to ``show``."""
+    """A ``warnings.showwarning`` that prints FogmonWarnings as one line on stderr
+    (parameter names as flags) and hands other warnings to ``show``."""
     def showwarning(message, category, *args, **kwargs):
         if issubclass(category, FogmonWarning):
-            print(f"fogmon {command}: warning: {message}", file=sys.stderr)
+            print(f"fogmon {command}: warning: {render(message, command)}", file=sys.stderr)
         else:
             show(message, category, *args, **kwargs)
     return showwarning
@@ -71,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
             warnings.showwarning = _one_line_warnings(args.command, warnings.showwarning)
             return int(importlib.import_module(f"fogmon.cli.{args.command}").run(args) or 0)
     except FogmonError as e:
-        print(f"fogmon {args.command}: error: {e}", file=sys.stderr)
+        print(f"fogmon {args.command}: error: {render(e, args.command)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"fogmon {args.command}: interrupted ({stopping.stop_name()})", file=sys.stderr)

@@ -10,6 +10,8 @@ import sys
 
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.pipeline import PipelineConfig
+from fogmon.sources.options import SourceOptions
 
 #: default chunk length in samples (4.7 h at 1 kHz): long recordings are split into chunks
 DEFAULT_CHUNK_SAMPLES = 1 << 24
@@ -34,7 +36,7 @@ usage or input (nothing written)."""
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from fogmon.cli.pipeline_options import parse_taus
-    from fogmon.cli.source_options import add_source_arguments
+    from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
@@ -58,20 +60,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--window-s", type=positive, metavar="W", help="window length in s (default: as fogmon replay, "
                    "per recording: a quarter of it rounded down to a power of two of samples)")
     g.add_argument("--hop-s", type=positive, metavar="H", help="hop in s (default: window/8)")
-    g.add_argument("--taus", default="octave", type=parse_taus, metavar="T", help="averaging times as fogmon "
-                   "replay --taus (default octave)")
+    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="T",
+                   help=f"averaging times as fogmon replay --taus (default {PipelineConfig.taus})")
     g.add_argument("--raw-rate", action="store_true", help="analyse rate_dph as recorded even with rot_dps")
     g.add_argument("--keep-motion", action="store_true", help="analyse platform motion too (docs/motion.md)")
     parser.add_argument("--no-progress", action="store_true", help="no Dask progress bar")
     add_source_arguments(parser, mode="replay")
+    add_reader_arguments(parser)
 
 
-def _options(args: argparse.Namespace) -> dict:
-    """The options the tasks need (picklable): source decoding and analysis."""
-    keep = {"tolerate_bad_rows", "dbc", "protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "kvh_accel", "axis",
-            "columns", "max_rate_dph", "can_message", "can_rate", "can_rate_unit", "can_temp", "can_counter",
-            "can_valid", "window_s", "hop_s", "taus", "raw_rate", "keep_motion"}
-    return {k: v for k, v in vars(args).items() if k in keep}
+def _options(args: argparse.Namespace) -> tuple[SourceOptions, PipelineConfig]:
+    """What the tasks need (frozen dataclasses, picklable): how to read every recording
+    and how to analyse it."""
+    from fogmon.cli.source_options import source_options
+
+    return source_options(args), PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus,
+                                                raw_rate=args.raw_rate, keep_motion=args.keep_motion)
 
 
 def _client(args):
@@ -93,16 +97,16 @@ def run(args: argparse.Namespace) -> int:
 
     paths = expand_inputs(args.inputs)
     _check_outputs(args)
-    opts = _options(args)
+    source, config = _options(args)
     show = not args.no_progress and sys.stdout.isatty()     # Dask's text progress bar writes to stdout
     client, cluster = _client(args)
     try:
         if show:
             print(f"fogmon batch: {len(paths)} recordings on {len(client.scheduler_info()['workers'])} Dask workers "
                   f"({args.scheduler or 'local cluster'})", file=sys.stderr)
-        plans = _check_inputs(client, paths, opts, show)
+        plans = _check_inputs(client, paths, source, config, show)
         os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
-        jobs = _submit(client, plans, args, opts)
+        jobs = _submit(client, plans, args, source, config)
         if show:
             from distributed import progress
             progress([f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None])
@@ -116,8 +120,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """FogmonError unless --out, --model and --report can be used (before any work)."""
-    from fogmon.cli.outputs import check_outputs
     from fogmon.fleet import tables
+    from fogmon.outputs import check_outputs
 
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         raise FogmonError(f"--out {args.out}: is a file, give a folder")
@@ -136,27 +140,30 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_outputs({"--report": args.report})           # (a report inside a new --out folder is fine)
 
 
-def _check_inputs(client, paths: list[str], opts: dict, show: bool) -> list:
+def _check_inputs(client, paths: list[str], source: SourceOptions, config: PipelineConfig, show: bool) -> list:
     """Every input checked on the cluster (all rows): its plans, or FogmonError naming
     the bad inputs (the last one in the error, the others on stderr)."""
     from distributed import progress
 
+    from fogmon.cli import render
     from fogmon.fleet import tasks
 
-    checks = client.map(tasks.check, paths, options=opts, key=[f"check-{i}" for i in range(len(paths))])
+    checks = client.map(tasks.check, paths, source=source, config=config,
+                        key=[f"check-{i}" for i in range(len(paths))])
     if show:
         progress(checks)
     plans = client.gather(checks)
     bad = [p for p in plans if p.error]
     if bad:
         for p in bad[:-1]:
-            print(f"fogmon batch: error: {p.error}", file=sys.stderr)
+            print(f"fogmon batch: error: {render(p.error, 'batch')}", file=sys.stderr)
         raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
                                            " (nothing analysed)"))
     return plans
 
 
-def _submit(client, plans: list, args: argparse.Namespace, opts: dict) -> list[tuple]:
+def _submit(client, plans: list, args: argparse.Namespace, source: SourceOptions,
+            config: PipelineConfig) -> list[tuple]:
     """The tasks of every recording and axis, submitted: one tuple per (recording, axis) of
     (plan, axis, chunks, [chunk futures], explain future or None, motion future or None)."""
     from fogmon.fleet import tasks
@@ -173,10 +180,10 @@ def _submit(client, plans: list, args: argparse.Namespace, opts: dict) -> list[t
             key = f"{i}-{axis}" if axis else f"{i}"
             masked = None
             if len(chunks) > 1 and not args.keep_motion:
-                masked = client.submit(tasks.motion_pass, plan, opts, axis, key=f"motion-{key}")
-            futs = [client.submit(tasks.run_chunk, plan, c, opts, masked, axis, key=f"chunk-{key}-{c.index}")
-                    for c in chunks]
-            expl = client.submit(tasks.explain_recording, plan.path, args.model, opts, axis,
+                masked = client.submit(tasks.motion_pass, plan, source, config, axis, key=f"motion-{key}")
+            futs = [client.submit(tasks.run_chunk, plan, c, source, config, masked, axis,
+                                  key=f"chunk-{key}-{c.index}") for c in chunks]
+            expl = client.submit(tasks.explain_recording, plan.path, args.model, source, config, axis,
                                  key=f"explain-{key}") if args.model else None
             jobs.append((plan, axis, chunks, futs, expl, masked))
     return jobs
@@ -184,7 +191,9 @@ def _submit(client, plans: list, args: argparse.Namespace, opts: dict) -> list[t
 
 def _gather(client, jobs: list[tuple]) -> tuple[list, list[dict]]:
     """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed)
-    and the recordings-table rows."""
+    and the recordings-table rows (their errors as this command names options)."""
+    from fogmon.cli import render
+
     windows: list = []
     rows: list[dict] = []
     for plan, axis, chunks, futs, expl, masked in jobs:
@@ -193,6 +202,9 @@ def _gather(client, jobs: list[tuple]) -> tuple[list, list[dict]]:
                                   client.gather(masked) if masked is not None else None)
         if expl is not None:
             row.update(client.gather(expl))
+        for k in ("error", "explain_error"):
+            if row.get(k):
+                row[k] = render(row[k], "batch")
         rows.append(row)
         if win is not None:
             windows.append(win)
@@ -215,8 +227,9 @@ def _finish(args: argparse.Namespace, plans: list, jobs: list[tuple], windows: l
     print(f"fogmon batch: {len(rows) - len(failed)} of {len(rows)} {what} analysed "
           f"({sum(len(j[2]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
     if args.report:
+        from fogmon.cli import command_flags
         from fogmon.fleet.report import write_report
-        for f in write_report(args.report, r_path, w_path):
+        for f in write_report(args.report, r_path, w_path, command_flags("batch")):
             print(f"fogmon batch: wrote {f}")
     return 1 if failed or any(r.get("explain_error") for r in rows) else 0
 

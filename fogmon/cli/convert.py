@@ -1,5 +1,5 @@
 """`fogmon convert IN OUT.parquet`: a recording (replay-log CSV, Parquet log, raw serial
-capture, CAN log, archive folder) as a Parquet replay log (fogmon.parquet_log), or as
+capture, CAN log, archive folder) as a Parquet replay log (fogmon.formats.parquet_log), or as
 a replay-log CSV when OUT ends in .csv. The samples are those `fogmon replay IN` would
 analyse: decoded, on their grid, valid ones only (gaps stay time gaps)."""
 from __future__ import annotations
@@ -28,7 +28,7 @@ input (no output file is left behind)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from fogmon.cli.source_options import add_source_arguments
+    from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
@@ -36,11 +36,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "--protocol), CAN log (--dbc) or archive folder")
     parser.add_argument("output", metavar="OUT", help="OUT.parquet (Parquet replay log) or OUT.csv (replay log)")
     add_source_arguments(parser, mode="replay")
+    add_reader_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    from fogmon.cli.outputs import check_outputs
     from fogmon.cli.source_options import source_options
+    from fogmon.outputs import check_outputs
     from fogmon.sources.open import open_replay_source
 
     ext = os.path.splitext(args.output)[1].lower()
@@ -66,9 +67,9 @@ def _convert(source, input_path: str, output: str, ext: str) -> tuple[int, int, 
     else a replay-log CSV); no half-written output on any error. Returns the samples
     written, the valid samples left out without aux values and those left out with only
     some axes valid."""
-    from fogmon.capture import read_sidecar
-    from fogmon.parquet_log import ParquetLogWriter
-    from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.formats.capture import read_sidecar
+    from fogmon.formats.parquet_log import ParquetLogWriter
+    from fogmon.formats.replay_log import append_replay_rows, write_replay_header
     from fogmon.sinks.archive import replay_rows
 
     blocks = source.blocks()

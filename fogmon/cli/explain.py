@@ -8,10 +8,11 @@ import os
 import sys
 from typing import Any, TextIO
 
-from fogmon.cli.outputs import check_outputs
-from fogmon.cli.source_options import add_reader_arguments
+from fogmon.cli.export_options import add_export_argument, export_request
+from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
-from fogmon.export import add_export_argument, export_request, write_export
+from fogmon.export import write_export
+from fogmon.outputs import check_outputs
 
 #: Most bootstrap replicates: each is one simulation of the whole recording, and beyond
 #: this the Gumbel-fitted family-wise threshold no longer sharpens.
@@ -19,6 +20,9 @@ MAX_BOOTSTRAP = 10_000
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from fogmon.explain.options import Options
+
+    default = Options()   # the library's defaults
     p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns; several axes: "
                    "rate_<axis>_dph columns, each axis explained unless --axis picks one, docs/explain.md), or a "
                    "ROS bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
@@ -32,17 +36,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out-model", help="write the model with the fitted effects added (TOML)")
     p.add_argument("--out-corrected", help="write the recording with the fitted deterministic effects removed "
                    "(replay log v1)")
-    p.add_argument("--window-s", type=positive, help="mismatch-map window in s, at least 16 samples and at most "
-                   "half the recording (default: duration / 8); hop = window / 4, octave taus up to window / 4")
-    p.add_argument("--bootstrap", type=number(8, MAX_BOOTSTRAP, integer=True),
+    p.add_argument("--window-s", type=positive, default=default.window_s,
+                   help="mismatch-map window in s, at least 16 samples and at most half the recording (default: "
+                        "duration / 8); hop = window / 4, octave taus up to window / 4")
+    p.add_argument("--bootstrap", type=number(8, MAX_BOOTSTRAP, integer=True), default=default.n_boot,
                    help=f"bootstrap replicates of the model, 8..{MAX_BOOTSTRAP} (default: 100 up to 1e5 samples, "
                    "60 up to 4e5, else 40)")
-    p.add_argument("--alpha", type=number(0, 0.5, above=True), default=0.01,
-                   help="family-wise significance of the mismatch map, 0 < alpha <= 0.5 (default 0.01)")
-    p.add_argument("--seed", type=number(0, integer=True), default=12345,
-                   help="seed of the bootstrap simulations, an integer >= 0 (default 12345)")
-    p.add_argument("--max-effects", type=number(0, integer=True), default=8,
-                   help="most effects to add, >= 0 (default 8; 0: only locate the mismatches)")
+    p.add_argument("--alpha", type=number(0, 0.5, above=True), default=default.alpha,
+                   help=f"family-wise significance of the mismatch map, 0 < alpha <= 0.5 (default {default.alpha:g})")
+    p.add_argument("--seed", type=number(0, integer=True), default=default.seed,
+                   help=f"seed of the bootstrap simulations, an integer >= 0 (default {default.seed})")
+    p.add_argument("--max-effects", type=number(0, integer=True), default=default.max_effects,
+                   help=f"most effects to add, >= 0 (default {default.max_effects}; 0: only locate the mismatches)")
     p.add_argument("--keep-motion", action="store_true",
                    help="analyse platform motion too: by default stretches where the rate moves far beyond "
                         "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) are "
@@ -84,13 +89,21 @@ class StageProgress:
             self._tq = None
 
 
+def _options(args: argparse.Namespace):
+    """explain's Options of the command line."""
+    from fogmon.explain.options import Options
+
+    return Options(window_s=args.window_s, n_boot=args.bootstrap, alpha=args.alpha, seed=args.seed,
+                   max_effects=args.max_effects)
+
+
 def run(args: argparse.Namespace) -> int:
     from fogmon.explain import report
     from fogmon.explain.axes import one_axis_model
     from fogmon.explain.baseline import baseline_model
-    from fogmon.explain.explainer import Options, explain, without_motion
+    from fogmon.explain.explainer import explain, without_motion
     from fogmon.sim.model import load_model
-    from fogmon.sources.formats import read_recording
+    from fogmon.sources.open import read_recording
 
     png = os.path.splitext(args.report)[0] + ".png"
     outliers_csv = report.outliers_path(args.report)
@@ -102,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     progress = (lambda stage, done=0, total=0: None) if args.quiet else StageProgress()
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
-    rec = read_recording(args.recording, args)
+    rec = read_recording(args.recording, source_options(args))
     if rec.axes and args.axis:
         rec = rec.for_axis(args.axis)
     if rec.axes:
@@ -116,9 +129,7 @@ def run(args: argparse.Namespace) -> int:
     if model is None:
         progress("fitting a stationary IEEE-952 baseline model to the recording")
         model = baseline_model(rec)
-    res = explain(rec, model, Options(window_s=args.window_s, n_boot=args.bootstrap, alpha=args.alpha,
-                                      seed=args.seed, max_effects=args.max_effects),
-                  baseline=args.model is None, progress=progress)
+    res = explain(rec, model, _options(args), baseline=args.model is None, progress=progress)
     res.warnings[:0] = motion
     progress(f"writing {args.report}")
     held = report.write_outliers(res, outliers_csv)
@@ -149,7 +160,6 @@ def _run_axes(args: argparse.Namespace, rec, model, progress, export: bool) -> i
         write_axes_outputs,
         write_axes_rrd,
     )
-    from fogmon.explain.explainer import Options
 
     if export:
         raise FogmonError(f"--export writes one axis's noise coefficients and {rec.name} has axes "
@@ -160,9 +170,7 @@ def _run_axes(args: argparse.Namespace, rec, model, progress, export: bool) -> i
                    **{f"--report (its axis {a} outliers list)": p for a, p in held.items()},
                    "--rrd": args.rrd, "--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])
-    ares = explain_axes(rec, model, Options(window_s=args.window_s, n_boot=args.bootstrap, alpha=args.alpha,
-                                            seed=args.seed, max_effects=args.max_effects),
-                        keep_motion=args.keep_motion, progress=progress)
+    ares = explain_axes(rec, model, _options(args), keep_motion=args.keep_motion, progress=progress)
     progress(f"writing {args.report}")
     times = {a: os.path.basename(held[a]) for a, res in ares.results.items() if report.write_outliers(res, held[a])}
     rep = build_axes_report(ares, args.recording, args.model, times)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from fogmon.cli.export_options import add_export_argument, export_request
 from fogmon.cli.values import number, positive
-from fogmon.export import add_export_argument, export_request, write_export
+from fogmon.export import write_export
 
 EPILOG = """CURVE.csv: a header line tau_s,adev_dph (s, deg/h) and optionally edf or n_terms, then one
 row per tau, increasing; '#' lines are comments. Example:
@@ -34,6 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.cli import render
     from fogmon.davar.curve import adev_from_curve, read_curve_csv, with_fit_intervals
     from fogmon.davar.fit import fit_noise
     from fogmon.errors import FogmonError
@@ -52,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
                                        n_terms=cols.get("n_terms"), edf=cols.get("edf"), n_samples=n,
                                        confidence=args.confidence)
     except FogmonError as e:
-        raise FogmonError(f"{args.curve}: {e}") from None
+        raise FogmonError(f"{args.curve}: {e.message}") from None
     fit = fit_noise(result, confidence=args.confidence)
     result = with_fit_intervals(result, fit, "edf" in cols)
     lines = [
@@ -60,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         f"record {result.n_samples} samples at {result.sample_rate_hz:g} Hz = "
         f"{result.n_samples / result.sample_rate_hz:g} s"
     ]
-    lines += [f"  assumed: {s}" for s in said]
+    lines += [f"  assumed: {render(s, 'fit')}" for s in said]
     lines += ["", f"Allan deviation ({100 * args.confidence:.1f} % confidence bounds; EDF "
               f"{'as stated' if 'edf' in cols else 'for the noise type the fit finds at each tau'}):"]
     lines += adev_lines(result)

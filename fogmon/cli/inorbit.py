@@ -9,10 +9,11 @@ import argparse
 
 import numpy as np
 
-from fogmon.cli.source_options import add_reader_arguments
+from fogmon.cli import render
+from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording
+from fogmon.formats.recording import Recording
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,10 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from fogmon.recording import pick_axes
-    from fogmon.sources.formats import read_recording
+    from fogmon.formats.recording import pick_axes
+    from fogmon.sources.open import read_recording
 
-    rec = read_recording(args.recording, args)
+    rec = read_recording(args.recording, source_options(args))
     if args.period_s * rec.sample_rate_hz < 2:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
     for axis in pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names():
@@ -58,7 +59,7 @@ def evaluate(rec: Recording, period_s: float, pauta_k: float) -> list[str]:
         bi, ncyc = cycle_bias_instability(blk.t_s[ok], rate[ok], period_s)
         out.append(f"  bias instability (std of {ncyc} per-cycle means, {period_s:g} s) = {bi:.4g} deg/h")
     except FogmonError as e:
-        out.append(f"  bias instability: not available ({e})")
+        out.append(f"  bias instability: not available ({render(e, 'inorbit')})")
     if ok.all():
         out.append("  wavelet (db4) energy by band:")
         out += [f"    {lo:10.4g} .. {hi:<10.4g} Hz  {100 * share:6.2f} %"

@@ -10,8 +10,9 @@ import sys
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
 from fogmon.cli.source_options import add_source_arguments, source_options
 from fogmon.cli.values import positive
+from fogmon.formats.archive import default_archive_dir
 from fogmon.pipeline import Pipeline
-from fogmon.sinks.archive import Archive, default_archive_dir
+from fogmon.sinks.archive import Archive
 from fogmon.sinks.base import Summary
 from fogmon.sinks.parquet_pieces import ROW_GROUP_S
 from fogmon.sources.open import open_live_source

@@ -49,7 +49,7 @@ def _add_davar_arguments(parser: argparse.ArgumentParser) -> None:
                    help="analyse platform motion too: by default stretches where the rate moves far beyond "
                         "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) "
                         "are kept out of DAVAR and the fits, with platform_motion events (docs/motion.md)")
-    g.add_argument("--taus", default="octave", type=parse_taus, metavar="T",
+    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="T",
                    help="averaging times: octave (default), decade, all, an integer N = "
                         f"1..{MAX_PER_DECADE} (N log-spaced per decade), or tau values in s written with a "
                         "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
@@ -65,9 +65,9 @@ def _add_method_arguments(parser: argparse.ArgumentParser) -> None:
                         "effects, docs/modelcheck.md): a model_band event, with the taus, the ratio to the model, "
                         "the tau shape and the aux channel that co-varies, when the gyro leaves the band and when "
                         "it is back; the band is simulated once and cached (~/.cache/fogmon)")
-    m.add_argument("--model-alpha", type=number(0, 0.5, above=True), default=0.01, metavar="A",
-                   help="family-wise false-alarm probability per window of the model check, 0 < A <= 0.5 "
-                        "(default 0.01)")
+    m.add_argument("--model-alpha", type=number(0, 0.5, above=True), default=PipelineConfig.model_alpha,
+                   metavar="A", help="family-wise false-alarm probability per window of the model check, "
+                                     f"0 < A <= 0.5 (default {PipelineConfig.model_alpha:g})")
     m.add_argument("--thermal-cal", metavar="CAL.toml",
                    help="subtract the thermal drift K0(T) + K1 dT/dt + K2 d2T/dt2 calibrated by `fogmon thermal "
                         "--out-model CAL.toml` sample by sample (causal filters; needs temp_c); DAVAR and the fits "
@@ -167,7 +167,7 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         try:
             model = model.for_axis(axis)
         except FogmonError as e:
-            raise FogmonError(f"--model {args.model}: {e}") from None
+            raise FogmonError(f"--model {args.model}: {e.message}") from None
     cal = load_model(args.thermal_cal) if args.thermal_cal else None
     methods = _live_methods(args, model, cal)
     return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
@@ -241,13 +241,15 @@ def _axis_methods(args: argparse.Namespace, model: SensorModel | None, cal: Sens
 
 
 def build_sinks(args: argparse.Namespace) -> list[Sink]:
-    """The sinks the command line asks for: Rerun (file and/or live) and the console."""
+    """The sinks the command line asks for: Rerun (file and/or live) and the console
+    (naming parameters as the command's flags)."""
+    from fogmon.cli import command_flags
     from fogmon.sinks.console import ConsoleSink
 
     out: list[Sink] = []
     if args.rrd or args.connect or args.serve:
-        from fogmon.sinks.rerun_sink import RerunSink
+        from fogmon.sinks.rerun.sink import RerunSink
         out.append(RerunSink(rrd_path=args.rrd, connect_url=args.connect, serve=args.serve, bind=args.bind,
                              port=args.port, rotate=bool(args.rotate_s)))
-    out.append(ConsoleSink(quiet=args.quiet))
+    out.append(ConsoleSink(quiet=args.quiet, flags=command_flags(args.command) if "command" in args else None))
     return out

@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import argparse
 
+from fogmon.cli.export_options import add_export_argument, export_request
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
 from fogmon.cli.source_options import add_reader_arguments, add_source_arguments, source_options
 from fogmon.errors import FogmonError
-from fogmon.export import add_export_argument, export_request, write_export
+from fogmon.export import write_export
 from fogmon.pipeline import Pipeline
 from fogmon.sources.open import open_replay_source
 from fogmon.stopping import interrupted_exit_code

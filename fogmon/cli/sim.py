@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fogmon.cli.outputs import check_outputs
-from fogmon.cli.source_options import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.outputs import check_outputs
 
 if TYPE_CHECKING:
-    from fogmon.recording import Recording
+    from fogmon.formats.recording import Recording
     from fogmon.sim.model import SensorModel
 
 #: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
@@ -61,7 +61,7 @@ def _overrides(items: list[str]) -> dict[str, str]:
 
 
 def _first_seconds(rec, duration_s: float):
-    from fogmon.recording import Recording
+    from fogmon.formats.recording import Recording
     keep = rec.t_s < rec.t_s[0] + duration_s - 0.5 / rec.sample_rate_hz
     if not keep.any():
         raise FogmonError(f"--duration-s {duration_s:g} is shorter than one sample of {rec.name}")
@@ -111,9 +111,9 @@ def run(args) -> int:
 def _like(args: argparse.Namespace, model: SensorModel, meta: dict) -> tuple[Recording, float | None, float]:
     """The --like recording (its first --duration-s s if given), the duration left to
     iter_simulate (None: the recording's) and the samples expected; notes ``meta``."""
-    from fogmon.sources.formats import read_recording
+    from fogmon.sources.open import read_recording
 
-    like = read_recording(args.like, args)
+    like = read_recording(args.like, source_options(args))
     duration = args.duration_s
     if duration is not None:
         like = _first_seconds(like, duration)
@@ -153,7 +153,7 @@ def _write(out: str, blocks, meta: dict, info: dict) -> int:
     """Write the simulated ``blocks`` as a replay log ``out`` (valid samples; ``info``
     from iter_simulate gives the sample rate); no half-written file on any error.
     Returns the samples written."""
-    from fogmon.recording import append_replay_rows, write_replay_header
+    from fogmon.formats.replay_log import append_replay_rows, write_replay_header
     from fogmon.sim.simulate import present_samples
 
     first = next(blocks)

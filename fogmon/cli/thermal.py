@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fogmon.block import select_aux
-from fogmon.cli.outputs import check_outputs
-from fogmon.cli.source_options import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.outputs import check_outputs
 
 if TYPE_CHECKING:
     from fogmon.sim.model import Effect, SensorModel
@@ -47,14 +47,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from fogmon.recording import pick_axes, write_replay_log
+    from fogmon.formats.recording import pick_axes
+    from fogmon.formats.replay_log import write_replay_log
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
-    from fogmon.sources.formats import read_recording
+    from fogmon.sources.open import read_recording
 
     check_outputs({"--out-model": args.out_model, "--out-corrected": args.out_corrected},
                   inputs=[args.recording, args.model])
     base = load_model(args.model) if args.model else None
-    rec = read_recording(args.recording, args)
+    rec = read_recording(args.recording, source_options(args))
     axes = pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names()
     recs = {a: rec.for_axis(a) for a in axes}
     for a, one in recs.items():

@@ -8,7 +8,7 @@ import os
 
 import numpy as np
 
-from fogmon.cli.source_options import add_reader_arguments
+from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number
 from fogmon.errors import FogmonError
 
@@ -26,9 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
     import fogmon
-    from fogmon.sources.formats import read_recording
+    from fogmon.sources.open import read_recording
 
-    rec = read_recording(path, args)
+    rec = read_recording(path, source_options(args))
     if rec.axes:                                   # a three-axis IMU or multi-axis log: one gyro is calibrated
         if args.axis is None:
             raise FogmonError(f"{path}: has axes {', '.join(rec.axes)}; up/down calibrates one gyro: give --axis "

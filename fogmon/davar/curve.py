@@ -41,7 +41,7 @@ def adev_from_curve(tau_s, adev_dph, *, sample_rate_hz: float | None = None, n_t
     said: list[str] = []
     if sample_rate_hz is None:
         sample_rate_hz = 1.0 / float(tau[0])
-        said.append(f"sample rate {sample_rate_hz:g} Hz (1 / the first tau; --rate-hz sets it)")
+        said.append(f"sample rate {sample_rate_hz:g} Hz (1 / the first tau; `sample_rate_hz` sets it)")
     m = _averaging_factors(tau, sample_rate_hz)
     n_terms = _positive("n_terms", n_terms, 1.0, "whole numbers >= 1")
     edf = _positive("edf", edf, 0.0, "finite and > 0", strict=True)
@@ -89,7 +89,7 @@ def _averaging_factors(tau: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     if m[0] < 1 or off.max() > M_TOLERANCE:
         i = int(np.argmax(off)) if m[0] >= 1 else 0
         raise FogmonError(f"tau_s {tau[i]:g} s is not a whole multiple of the sample period {1 / sample_rate_hz:g} s "
-                          f"(give the record's sample rate with --rate-hz)")
+                          f"(give the record's sample rate with `sample_rate_hz`)")
     return m
 
 
@@ -113,7 +113,7 @@ def _record_samples(tau, m, sample_rate_hz, n_terms, n_samples, said: list[str])
         else:
             n_samples = int(ASSUMED_RECORD_TAUS * m[-1])
             said.append(f"record of {n_samples} samples = {n_samples / sample_rate_hz:g} s ({ASSUMED_RECORD_TAUS} x "
-                        f"the largest tau; an n_terms column or --record-s sets it)")
+                        f"the largest tau; an n_terms column or `n_samples` sets it)")
     n_samples = int(n_samples)
     if 2 * m[-1] > n_samples:
         raise FogmonError(f"the largest tau {tau[-1]:g} s needs a record of at least {2 * m[-1] / sample_rate_hz:g} s "

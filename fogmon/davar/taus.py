@@ -11,7 +11,7 @@ from fogmon.errors import FogmonError, FogmonWarning
 _DECADE_STEPS = (1, 2, 4)
 #: Most taus per decade an integer ``taus`` may ask for: neighbours are then 7 % apart,
 #: denser grids add no independent information (use "all" for every m). Above it an
-#: integer is far more likely meant as one tau in s (``--taus 1000``) and is refused.
+#: integer is far more likely meant as one tau in s (``taus`` 1000) and is refused.
 MAX_PER_DECADE = 32
 
 

@@ -28,8 +28,10 @@ from scipy.stats import norm
 
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
-from fogmon.explain.explainer import Options, Progress, Result, explain, without_motion
-from fogmon.recording import Recording
+from fogmon.explain.bootstrap import Progress
+from fogmon.explain.explainer import Result, explain, without_motion
+from fogmon.explain.options import Options
+from fogmon.formats.recording import Recording
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, validate_model
 
 #: segments of the record for the per-segment white levels

@@ -13,7 +13,7 @@ import numpy as np
 
 from fogmon.explain import report
 from fogmon.explain.axes import AxesResult
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import save_model
 
 

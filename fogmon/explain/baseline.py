@@ -33,7 +33,7 @@ from scipy.optimize import nnls
 from fogmon.davar.batch import oadev
 from fogmon.davar.theory import POWERS, adev_model, avar_terms_to_coefficients
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording
+from fogmon.formats.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import Effect, Noise, SensorModel, validate_effect, validate_model
 from fogmon.sim.noise import ar1_adev_exact, lowpass_adev_exact

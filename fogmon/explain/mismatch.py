@@ -394,7 +394,7 @@ class Score:
       independent normals,
     - ``tests``: the strongest matched test of a missing effect (every candidate of the
       catalogue fitted to the residual but a kind the map contradicted,
-      explainer.matched_tests_figure), sqrt(LR statistic / BIC penalty k ln n).
+      analysis.matched_tests_figure), sqrt(LR statistic / BIC penalty k ln n).
     Each is about 1 or below when the model explains the recording; above 1.5 happens
     by chance in well under 1 % of records. (The whole-record ADEV test has too few
     taus for a stable ratio; its findings are reported as mismatch regions and are

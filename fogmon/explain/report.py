@@ -19,11 +19,11 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.explain.baseline import low_pass_index
-from fogmon.explain.catalogue import NOISE_UNIT, noise_text
+from fogmon.explain.candidates.coefficients import NOISE_UNIT, noise_text
 from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
 from fogmon.explain.mismatch import CHANCE_SCORE
-from fogmon.recording import write_replay_log
+from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
 from fogmon.sim.noise import lowpass_impulse
 
@@ -428,7 +428,7 @@ def write_png(res: Result, path: str) -> None:
 
 
 #: Colours of the explain .rrd's ADEV plot: before / after the fitted effects.
-_RRD_COLOURS = {"before": ((230, 80, 70), (120, 50, 45)), "after": ((80, 150, 255), (45, 80, 130))}
+_RRD_COLOURS = {"before": ((230, 80, 70), (190, 110, 100)), "after": ((80, 150, 255), (100, 140, 200))}
 
 
 def write_rrd(res: Result, path: str) -> None:
@@ -500,7 +500,7 @@ def rrd_layout(x_dec: tuple[int, int], y_dec: tuple[int, int], prefix: str = "",
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from fogmon.sinks.rerun_plots import heatmap_bounds, loglog_bounds
+    from fogmon.sinks.rerun.plots import heatmap_bounds, loglog_bounds
 
     whole = rr.TimeRange(start=rr.TimeRangeBoundary.infinite(), end=rr.TimeRangeBoundary.infinite())
     return rrb.Vertical(
@@ -536,7 +536,7 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec, prefix: str = "") -> Non
     family-wise band, before and after, on a labelled log-log plot with a legend."""
     import rerun as rr
 
-    from fogmon.sinks import rerun_plots as rp
+    from fogmon.sinks.rerun import plots as rp
 
     ent = f"{prefix}adev/log10"
     rec.log(ent, rp.loglog_transform(), static=True)
@@ -556,9 +556,13 @@ def _rrd_adev(rec, res: Result, lx, logs, x_dec, y_dec, prefix: str = "") -> Non
         edges = [np.column_stack([lx[b], lo[b]]), np.column_stack([lx[b], hi[b]])]
         rec.log(f"{ent}/{w}/model_band", rr.LineStrips2D(edges, colors=[dim], radii=rr.Radius.ui_points(0.7)),
                 static=True)
+        rp.log_band_bars(rec, f"{ent}/{w}/model_band/bars", lx, lo, hi, dim, dx=-0.03 if w == "before" else 0.03)
         band = f"{100 * (1 - getattr(res, w).null.alpha):g} % family-wise band"
         items += [(f"recording residual {w} the effects", bright), (f"model {w}: median and {band}", dim)]
-    rp.log_legend(rec, f"{ent}/legend", items, top_left=(x_dec[1] - 1.3, y_dec[1] + 0.1), step=-0.4)
+    rp.log_loglog_legend(rec, f"{ent}/legend", items, x_dec, y_dec)
+    rp.log_tau_spans(rec, f"{ent}/whole_record_regions", [
+        (r.tau_min_s, r.tau_max_s, f"{w}: whole record, ADEV x{r.ratio:.2f}, |z| {r.max_abs_z:.1f}")
+        for w in ("before", "after") for r in getattr(res, w).regions if r.whole_record], y_dec, (255, 210, 0))
 
 
 def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
@@ -567,7 +571,7 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
     regions outlined."""
     import rerun as rr
 
-    from fogmon.sinks import rerun_plots as rp
+    from fogmon.sinks.rerun import plots as rp
 
     z = np.asarray(a.z, dtype=np.float64).T[::-1]          # rows: largest tau on top
     n_rows, n_cols = z.shape
@@ -586,6 +590,10 @@ def _rrd_zmap(rec, ent: str, a, g, lim: float) -> None:
         rows_r = n_rows - 1 - np.array([c[1] for c in r.cells])
         x0, x1, y0, y1 = w.min(), w.max() + 1, rows_r.min(), rows_r.max() + 1
         boxes.append([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
+    if whole := [r for r in a.regions if r.whole_record]:   # not tied to a time: boxed on the ADEV plot
+        taus = ", ".join(f"{r.tau_min_s:g}" + (f"..{r.tau_max_s:g}" if r.tau_max_s > r.tau_min_s else "")
+                         for r in whole)
+        rp.log_heatmap_note(rec, ent, f"+ whole-record mismatch at tau {taus} s: boxed on the ADEV plot", (255, 210, 0))
     if boxes:                                              # in the image's pixels (log_heatmap's map)
         rec.log(f"{ent}/map/regions", rr.LineStrips2D(boxes, colors=[(0, 0, 0)], radii=rr.Radius.ui_points(1.5)),
                 static=True)

@@ -9,17 +9,15 @@ from collections.abc import Sequence
 from fogmon.errors import FogmonError
 
 #: file endings read as recordings when a folder is walked (a raw serial capture only
-#: with its .json sidecar; CAN logs need --dbc or a sidecar)
+#: with its .json sidecar; CAN logs need a DBC (``dbc``) or a sidecar)
 RECORDING_SUFFIXES = (".csv", ".parquet", ".asc", ".blf", ".trc", ".log", ".mf4")
 
 
 def is_archive(folder: str) -> bool:
     """A `fogmon monitor` archive folder (one recording of several pieces)."""
-    from fogmon.pieces import find_pieces
-    from fogmon.sinks.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE
-    from fogmon.sinks.parquet_pieces import piece_files
+    from fogmon.formats.archive import archive_files
 
-    return bool(piece_files(folder) or any(find_pieces(folder, n) for n in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE)))
+    return bool(archive_files(folder))
 
 
 def _walk(folder: str) -> list[str]:

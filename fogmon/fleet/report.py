@@ -1,4 +1,4 @@
-"""The fleet report of `fogmon batch --report FLEET.html`: one page readable at a glance,
+"""The fleet report of `fogmon batch` (``write_report``, FLEET.html): one page readable at a glance,
 with FLEET-trends.png (N and B of every recording with their intervals, per gyro, in
 recording order) and FLEET.csv (the per-recording table) beside it.
 
@@ -7,16 +7,19 @@ the folder above it); its recordings are taken in name order (date-stamped names
 time). A gyro's N or B "changed" when its latest recording's whole-record estimate differs
 from its first's by more than ``Z_CHANGED`` combined standard errors (each standard error
 is half the 68.3 % interval; both estimates identifiable): |z| > 3 happens by chance with
-probability 0.27 % for one coefficient of one gyro. A run is "outside its model" when
-`--model` was given and its explain score (before fitting effects) exceeds
+probability 0.27 % for one coefficient of one gyro. A run is "outside its model" when a
+sensor model was given and its explain score (before fitting effects) exceeds
 ``SCORE_OUTSIDE`` (a null record exceeds 1.5 in well under 1 % of cases)."""
 from __future__ import annotations
 
 import html
 import math
 import os
+from collections.abc import Mapping
 
 import numpy as np
+
+from fogmon.errors import render_names
 
 Z_CHANGED = 3.0
 SCORE_OUTSIDE = 1.5
@@ -109,9 +112,11 @@ def _table(rows: list[dict], cols: list[tuple[str, str]]) -> str:
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
 
 
-def write_report(path: str, recordings_parquet: str, windows_parquet: str) -> list[str]:
+def write_report(path: str, recordings_parquet: str, windows_parquet: str,
+                 flags: Mapping[str, str] | None = None) -> list[str]:
     """Write FLEET.html, FLEET-trends.png and FLEET.csv from the batch tables; returns
-    the paths written."""
+    the paths written. The page names parameters plainly, or as their flags in ``flags``
+    (parameter name -> flag)."""
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
 
@@ -144,7 +149,8 @@ def write_report(path: str, recordings_parquet: str, windows_parquet: str) -> li
                                    ("explain_score_after", "score after effects"), ("explain_effects", "effects")])
                   if outside else "<p>None.</p>"]
     else:
-        parts.append("<h2>Runs outside their model</h2><p>Not checked: run fogmon batch with --model MODEL.toml.</p>")
+        parts.append(render_names("<h2>Runs outside their model</h2><p>Not checked: run fogmon batch with `model` "
+                                  "MODEL.toml.</p>", flags))
     parts += [f"<h2>Trends</h2><img src='{html.escape(os.path.basename(png))}' alt='N and B per recording'>",
               "<h2>All changes tested</h2>" + (_table(ch, [("gyro", "gyro"), ("coefficient", "coefficient"),
                                                             ("first_value", "first"), ("latest_value", "latest"),

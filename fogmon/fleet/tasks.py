@@ -1,15 +1,17 @@
 """What runs on a Dask worker for `fogmon batch`: checking a recording, the motion pass
 of a split recording, one chunk through the streaming pipeline of `fogmon replay`
 (fogmon.pipeline.run_pipeline, the same engine, fits and motion gate), and explain with
-a model. Every task takes and returns plain picklable values; a failure is returned as
-a one-line ``error`` (the recording is named by the caller), never raised."""
+a model. Every task takes picklable values (the options as frozen dataclasses: how to
+read a recording, SourceOptions; how to analyse it, PipelineConfig) and returns them; a
+failure is returned as a one-line ``error`` (the recording is named by the caller,
+parameters as `name`: fogmon.errors.render_names), never raised."""
 from __future__ import annotations
 
-import argparse
 import os
 import traceback
 from collections import deque
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,32 +19,32 @@ from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig, window_and_hop
 from fogmon.sinks.base import COEFFICIENTS, Sink
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.options import SourceOptions
 
-#: the options of `fogmon replay` that batch passes on (source decoding and the analysis)
+if TYPE_CHECKING:
+    from fogmon.explain.options import Options
+
+#: the PipelineConfig fields of `fogmon replay` the tasks use (the others keep their defaults)
 ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion")
 
 
-def _config(options: dict) -> PipelineConfig:
-    """The PipelineConfig of `fogmon replay` for the analysis options batch passes on."""
-    taus = options.get("taus")
-    return PipelineConfig(window_s=options.get("window_s"), hop_s=options.get("hop_s"),
-                          taus="octave" if taus is None else taus,
-                          raw_rate=bool(options.get("raw_rate")), keep_motion=bool(options.get("keep_motion")))
+def _analysis(config: PipelineConfig, **changes) -> PipelineConfig:
+    """A PipelineConfig of ``config``'s ANALYSIS_OPTIONS only, with ``changes``."""
+    return PipelineConfig(**{**{k: getattr(config, k) for k in ANALYSIS_OPTIONS}, **changes})
 
 
 def _failure(e: BaseException) -> str:
     if isinstance(e, FogmonError):
-        return str(e)
+        return e.message
     last = traceback.extract_tb(e.__traceback__)[-1] if e.__traceback__ else None
     where = f" ({os.path.basename(last.filename)}:{last.lineno})" if last else ""
     return f"{type(e).__name__}: {e}{where}".splitlines()[0]
 
 
-def _open(path: str, options: dict):
+def _open(path: str, source: SourceOptions):
     from fogmon.sources.open import open_replay_source
-    names = {f.name for f in fields(SourceOptions)}
-    return open_replay_source(path, SourceOptions(**{k: v for k, v in options.items() if k in names and v is not None}))
+    return open_replay_source(path, source)
 
 
 def input_kind(path: str) -> str:
@@ -70,17 +72,18 @@ class Plan:
     error: str = ""
 
 
-def check(path: str, options: dict) -> Plan:
-    """Open ``path`` as `fogmon replay` would (every row checked) and choose its window."""
+def check(path: str, source: SourceOptions, config: PipelineConfig) -> Plan:
+    """Open ``path`` as `fogmon replay` would with ``source`` (every row checked) and
+    choose its window as ``config`` asks."""
     plan = Plan(path, kind=input_kind(path))
     try:
-        src = _open(path, options)
+        src = _open(path, source)
         try:
             n = src.n_samples
             if n is None:
                 raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
             plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
-            plan.window_s, plan.hop_s = window_and_hop(_config(options), plan.sample_rate_hz, plan.n_samples)
+            plan.window_s, plan.hop_s = window_and_hop(_analysis(config), plan.sample_rate_hz, plan.n_samples)
             plan.axis, plan.axes = _axis(src), tuple(src.axes)
         finally:
             src.close()
@@ -102,7 +105,7 @@ def _blocks(source, axis: str):
     return (b.axis(axis) for b in source.blocks()) if axis else source.blocks()
 
 
-class _ChunkSource:
+class _ChunkSource(OfflineSource):
     """Samples ``first`` .. ``stop`` - 1 (grid indices) of axis ``axis`` ("": a one-axis
     source) of ``source``, read from its start; samples in ``masked`` runs [(a, b), ...]
     made invalid (the motion gate's decisions from the motion pass). Counts, in ``own`` =
@@ -196,10 +199,11 @@ class ChunkResult:
     error: str = ""
 
 
-def run_chunk(plan: Plan, chunk, options: dict, masked=None, axis: str = "") -> ChunkResult:
+def run_chunk(plan: Plan, chunk, source: SourceOptions, config: PipelineConfig, masked=None,
+              axis: str = "") -> ChunkResult:
     """Chunk ``chunk`` (fogmon.fleet.chunks.Chunk) of axis ``axis`` ("": a one-axis
-    recording) of the recording through ``run_pipeline`` with the window and hop of
-    ``plan``. ``masked``: the motion pass's runs when the recording is split (the
+    recording) of the recording through ``run_pipeline`` with the analysis of ``config``
+    and the window and hop of ``plan``. ``masked``: the motion pass's runs when the recording is split (the
     pipeline's own gate is then off: it would start afresh in each chunk), None to let
     the pipeline's gate run (one chunk)."""
     from fogmon.pipeline import run_pipeline
@@ -211,12 +215,12 @@ def run_chunk(plan: Plan, chunk, options: dict, masked=None, axis: str = "") -> 
             return out
         masked = masked.runs
     try:
-        src = _ChunkSource(_open(plan.path, options), chunk.feed_first, chunk.feed_stop,
+        src = _ChunkSource(_open(plan.path, source), chunk.feed_first, chunk.feed_stop,
                            (chunk.own_first, chunk.own_stop), masked if masked is not None else (), axis)
-        config = _config({**options, "window_s": plan.window_s, "hop_s": plan.hop_s,
-                          "keep_motion": bool(options.get("keep_motion")) or masked is not None})
+        run = _analysis(config, window_s=plan.window_s, hop_s=plan.hop_s,
+                        keep_motion=config.keep_motion or masked is not None)
         col = _Collect()
-        summary = run_pipeline(src, config, [col])
+        summary = run_pipeline(src, run, [col])
         out.own_samples, out.own_invalid = src.own_samples, src.own_invalid
         out.tau_s = col.tau_s
         if col.ends:
@@ -263,16 +267,17 @@ class MotionResult:
     error: str = ""
 
 
-def motion_pass(plan: Plan, options: dict, axis: str = "") -> MotionResult:
+def motion_pass(plan: Plan, source: SourceOptions, config: PipelineConfig, axis: str = "") -> MotionResult:
     """Run the pipeline's platform-motion gate (fogmon.motion.MotionGate) over the whole
     recording (its axis ``axis``; "": a one-axis recording), block by block as `fogmon
-    replay` does, and record which samples it made invalid, so that chunks analysed
-    separately see exactly the same samples."""
+    replay` does (on rate_dph - 3600 x rot_dps unless ``config.raw_rate``), and record
+    which samples it made invalid, so that chunks analysed separately see exactly the
+    same samples."""
     from fogmon.motion import MotionGate
 
     out = MotionResult(plan.path)
     try:
-        src = _open(plan.path, options)
+        src = _open(plan.path, source)
         gate = MotionGate(plan.sample_rate_hz)
         use_ref = None
         pending: deque[np.ndarray] = deque()    # valid flags handed to the gate, not yet released
@@ -299,7 +304,7 @@ def motion_pass(plan: Plan, options: dict, axis: str = "") -> MotionResult:
                 if not len(b):
                     continue
                 if use_ref is None:
-                    use_ref = "rot_dps" in b.aux and not options.get("raw_rate")
+                    use_ref = "rot_dps" in b.aux and not config.raw_rate
                 y = b.error_rate_dph if use_ref else b.rate_dph
                 v = b.valid & np.isfinite(y)
                 pending.append(v)
@@ -316,37 +321,35 @@ def motion_pass(plan: Plan, options: dict, axis: str = "") -> MotionResult:
     return out
 
 
-def explain_recording(path: str, model_path: str, options: dict, axis: str = "") -> dict:
-    """`fogmon explain RECORDING --model MODEL` with its default options (of axis
-    ``axis`` with the model's axis ``axis``; "": a one-axis recording): the score before
-    and after the effects it found, and their kinds (comma-separated); or
-    ``explain_error``."""
-    from fogmon.cli import explain as explain_cli
+def explain_recording(path: str, model_path: str, source: SourceOptions, config: PipelineConfig,
+                      axis: str = "", options: Options | None = None) -> dict:
+    """`fogmon explain` of the recording ``path`` against the sensor model ``model_path``
+    with explain's ``options`` (None: its defaults), of axis ``axis`` with the model's
+    axis ``axis`` ("": a one-axis recording), platform motion left out unless
+    ``config.keep_motion``: the score before and after the effects it found, and their
+    kinds (comma-separated); or ``explain_error``."""
     from fogmon.explain import report
-    from fogmon.explain.explainer import Options, explain, without_motion
-    from fogmon.recording import read_replay_log, recording_from_arrays
+    from fogmon.explain.explainer import explain, without_motion
+    from fogmon.explain.options import Options
+    from fogmon.formats.recording import recording_from_arrays
+    from fogmon.formats.replay_log import read_replay_log
     from fogmon.sim.model import load_model
 
     try:
-        p = argparse.ArgumentParser()
-        explain_cli.add_arguments(p)
-        a = p.parse_args([path, "--report", os.devnull, "--model", model_path])
         if input_kind(path) in ("csv", "parquet"):
             rec = read_replay_log(path)
             rec = rec.for_axis(axis) if axis else rec
         else:  # a capture, CAN log or archive: its valid samples, as `fogmon convert` writes them
-            src = _open(path, options)
+            src = _open(path, source)
             parts = [b for b in _blocks(src, axis) if len(b)]
             t = np.concatenate([b.t_s[b.valid] for b in parts])
             rec = recording_from_arrays(t, np.concatenate([b.rate_dph[b.valid] for b in parts]),
                                         {k: np.concatenate([b.aux[k][b.valid] for b in parts]) for k in parts[0].aux},
                                         {"sample_rate_hz": f"{src.sample_rate_hz:.12g}"})
-        if not options.get("keep_motion"):
+        if not config.keep_motion:
             rec, _ = without_motion(rec)
         model = load_model(model_path)
-        res = explain(rec, model.for_axis(axis) if axis else model,
-                      Options(window_s=a.window_s, n_boot=a.bootstrap, alpha=a.alpha, seed=a.seed,
-                              max_effects=a.max_effects))
+        res = explain(rec, model.for_axis(axis) if axis else model, Options() if options is None else options)
         rep = report.build_report(res, path, model_path)
         return {"explain_score_before": float(rep["score_before"]), "explain_score_after": float(rep["score_after"]),
                 "explain_effects": ",".join(e["kind"] for e in rep["effects"]), "explain_error": ""}

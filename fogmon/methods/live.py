@@ -1,6 +1,6 @@
 """The papers' methods applied to the live rate, block by block, before DAVAR: thermal
-drift correction (``--thermal-cal``), outlier rejection (``--reject-outliers``) and a
-Kalman-denoised channel (``--denoise kalman``). Each is causal (no future samples).
+drift correction (``thermal``), outlier rejection (``outlier_k``) and a
+Kalman-denoised channel (``kalman_n_k``). Each is causal (no future samples).
 
 What each adds to the block's aux channels (archived and drawn beside the raw rate):
 ``rate_corrected_dph`` and ``thermal_drift_dph`` (deg/h) with a thermal calibration,
@@ -86,7 +86,7 @@ class Conditioner:
         """FogmonError when the source lacks what a method needs (temp_c for the thermal
         correction)."""
         if self.thermal is not None and "temp_c" not in aux_names:
-            raise FogmonError(f"--thermal-cal: {source} has no temp_c channel (deg C); the thermal correction "
+            raise FogmonError(f"`thermal`: {source} has no temp_c channel (deg C); the thermal correction "
                               f"needs the sensor temperature")
 
     def push(self, t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray,

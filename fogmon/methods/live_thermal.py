@@ -35,18 +35,18 @@ class Corrected:
 
 
 def thermal_effect(model: SensorModel, name: str) -> Effect:
-    """The model's one ``thermal_drift`` effect (a calibration file written by
-    ``fogmon thermal --out-model``); FogmonError naming ``name`` otherwise."""
+    """The model's one ``thermal_drift`` effect (a calibration file: the ``out_model`` of
+    ``fogmon thermal``); FogmonError naming ``name`` otherwise."""
     found = [e for e in model.effects if e.kind == "thermal_drift"]
     if len(found) != 1:
         raise FogmonError(f"{name}: a thermal calibration needs exactly one [[effect]] with kind = "
-                          f"\"thermal_drift\" (fogmon thermal --out-model writes it); found {len(found)}")
+                          f"\"thermal_drift\" (fogmon thermal `out_model` writes it); found {len(found)}")
     return found[0]
 
 
 def axis_thermal_effect(model: SensorModel, name: str, axis: str) -> Effect:
     """The ``thermal_drift`` effect acting on ``axis`` (its ``axes`` name it, or it has
-    none: every axis) of a calibration file ``name``: what ``fogmon thermal --out-model``
+    none: every axis) of a calibration file ``name``: what ``fogmon thermal`` (``out_model``)
     writes for a multi-axis recording, one effect per axis (docs/methods.md); a one-axis
     calibration serves every axis. FogmonError naming the file and axis otherwise."""
     found = [e for e in model.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)]

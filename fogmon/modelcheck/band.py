@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from fogmon.explain.mismatch import Null
 
 # fogmon.explain.mismatch and fogmon.sim (scipy.ndimage, scipy.signal: a second of start-up)
-# are imported inside the functions that use them: a run without --model never needs them
+# are imported inside the functions that use them: a run without a model never needs them
 
 #: Effect natures the band holds: stationary random processes the simulator makes from
 #: the model alone (``markov``, ``lowpass_noise``, ``vibration_lines``: "noise"; ``bandwidth``:

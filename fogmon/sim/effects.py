@@ -14,7 +14,7 @@ parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
 
 ``lookback_s(effect)`` is how much earlier data a mean-type effect needs to be exact
 at the first sample of a chunk (the streaming simulator prepends that much).
-Time ``t_s`` is recording time in s (the recording's own clock with ``--like``).
+Time ``t_s`` is recording time in s (the recording's own clock when simulated ``like`` one).
 """
 from __future__ import annotations
 
@@ -30,8 +30,8 @@ def _aux(effect: Effect, aux: dict) -> np.ndarray:
     name = EFFECT_KINDS[effect.kind].aux
     if name not in aux:
         raise FogmonError(f"effect {effect.kind!r} needs the aux channel {name!r}, which the input lacks "
-                          f"(have: {', '.join(aux) or 'none'}); use --like a recording with that column "
-                          f"or a --scenario")
+                          f"(have: {', '.join(aux) or 'none'}); use `like` a recording with that column "
+                          f"or a `scenario`")
     return np.asarray(aux[name], dtype=float)
 
 

@@ -219,7 +219,7 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         {f"{k}{suffix}": Param(u.split(" (")[0], f"corrected {k}{' ' + what if what else ''}", check=">=0")
          for k, u in NOISE_UNITS.items() for suffix, what in (("", ""), ("_lo", "interval low end"),
                                                                 ("_hi", "interval high end"))},
-        None, "coefficients", "the model's own IEEE-952 coefficients corrected (report only; --out-model "
+        None, "coefficients", "the model's own IEEE-952 coefficients corrected (report only; `out_model` "
                               "writes them into [noise])",
         lambda p: "corrected noise: " + ", ".join(f"{k} {p[k]:.4g} [{p[k + '_lo']:.4g}, {p[k + '_hi']:.4g}]"
                                                   for k in NOISE_UNITS if k in p)),

@@ -5,7 +5,7 @@ channels by their replay-log names (docs/formats.md): ``temp_c`` deg C, ``rot_dp
 simulator interpolates them onto the gyro's sample times.
 
 Every default is documented on its parameter class (industry ranges, docs/sim.md) and
-overridable: ``mwd_run(MwdParams(rop_mph=10))`` or, from the CLI, ``--set rop_mph=10``.
+overridable: ``mwd_run(MwdParams(rop_mph=10))`` or ``scenario_params("mwd", {"rop_mph": "10"})``.
 
 Several axes: the parameter ``axes`` ("xyz": one axis per character) makes a scenario
 for a multi-axis gyro: ``Scenario.axes`` names them, channels every axis shares stay
@@ -244,7 +244,7 @@ def scenario_params(name: str, overrides: dict[str, str], duration_s: float | No
     if duration_s is not None:
         if "duration_s" not in known:
             raise FogmonError(f"scenario {name}: the duration follows from its profile; "
-                              "change dwell_s/plateaus_c instead of --duration-s")
+                              "change dwell_s/plateaus_c instead of `duration_s`")
         values["duration_s"] = float(duration_s)
     params = replace(params, **values)
     for k in ("sample_rate_hz", "lag1_s", "lag2_s", "lag_s", "period_s", "rop_mph", "stand_length_m", "ramp_c_per_min"):

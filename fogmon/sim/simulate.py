@@ -41,7 +41,7 @@ import numpy as np
 
 from fogmon.block import Block, axis_aux
 from fogmon.errors import FogmonError
-from fogmon.recording import Recording
+from fogmon.formats.recording import Recording
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import Flicker, RandomWalk, WhiteAngle, WhiteRate, default_flicker_tau_hi_s, ramp_dph
@@ -55,7 +55,7 @@ class _Plan:
 
     src_t: np.ndarray                   # times of the recording or aux samples (s)
     src_aux: dict[str, np.ndarray]      # their aux channels
-    idx: np.ndarray                     # --like: grid index of each recorded sample
+    idx: np.ndarray                     # like: grid index of each recorded sample
     n: int | None                       # samples to simulate, None = endless
     t0: float                           # time of grid sample 0 (s)
 
@@ -138,8 +138,8 @@ def _check_aux(model: SensorModel, have: set[str], axis: str = "") -> None:
         need = EFFECT_KINDS[e.kind].aux
         if need and need not in have:
             raise FogmonError(f"model effect #{i + 1} ({e.kind}){on} needs the aux channel {need!r}, which the "
-                              f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate --like a "
-                              f"recording with that column or use a --scenario")
+                              f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate `like` a "
+                              f"recording with that column or use a `scenario`")
 
 
 class _Parts:

@@ -1,7 +1,7 @@
 """The archive: while monitoring, everything a live source delivers goes to disk, so
 nothing is lost.
 
-Under one directory, in pieces of ``--rotate-s`` s of recording time (fogmon.pieces:
+Under one directory, in pieces of ``rotate_s`` s of recording time (fogmon.formats.archive:
 piece k holds recording time [(k-1) S, k S) from the first sample; numbered from 0001):
 
 - ``samples-NNNN.csv``: the decoded samples as a replay log (docs/formats.md), each
@@ -12,7 +12,7 @@ piece k holds recording time [(k-1) S, k S) from the first sample; numbered from
   valid: a sample with only some axes valid is left out and counted
   (``partial_samples_dropped``); the raw capture keeps it, and ``fogmon replay`` of the
   capture decodes it with every axis as the device sent it. With ``samples_format="parquet"``
-  (``--archive-format parquet``) ``samples-NNNN.parquet`` instead, written in row groups
+  (``archive_format`` parquet) ``samples-NNNN.parquet`` instead, written in row groups
   (fogmon.sinks.parquet_pieces: a SIGKILL loses at most the row group being filled).
 - the raw input as a capture ``fogmon replay`` decodes to the same samples: for a
   serial gyro ``raw-NNNN.bin`` (the bytes exactly as received) plus ``raw-NNNN.bin.json``
@@ -30,7 +30,7 @@ SIGKILL loses at most the last ``flush_s`` of data and never leaves a half-writt
 row. The raw taps may be called from another thread than the pipeline's (the source's
 decoding thread, right after it decoded those bytes): the raw capture keeps being written
 even while the pipeline is slow, and holds exactly the input the source decoded and
-counted (a ``--duration-s`` run ends it with the run's last frame).
+counted (a run of ``duration_s`` ends it with the run's last frame).
 """
 from __future__ import annotations
 
@@ -46,17 +46,13 @@ from typing import Any
 import numpy as np
 
 from fogmon.block import Block
-from fogmon.capture import new_sidecar, write_sidecar
 from fogmon.errors import FogmonError
-from fogmon.pieces import find_pieces, piece_path
-from fogmon.recording import append_replay_rows, write_replay_header
+from fogmon.formats.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE, find_pieces, piece_files, piece_path
+from fogmon.formats.capture import new_sidecar, write_sidecar
+from fogmon.formats.replay_log import append_replay_rows, write_replay_header
 from fogmon.sinks.base import Sink, Summary
-from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces, piece_files
+from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces
 from fogmon.sources.base import CaptureSource, Source
-
-REPLAY_LOG = "samples.csv"
-SERIAL_CAPTURE = "raw.bin"
-CAN_CAPTURE = "frames.asc"
 
 
 def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
@@ -71,11 +67,6 @@ def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
     return keep, partial, int(valid.sum() - keep.sum())
 
 
-def default_archive_dir(base: str = ".") -> str:
-    """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
-    return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
-
-
 class _KeepOpen(io.StringIO):
     """A StringIO that python-can's writer cannot close (we move its text to disk)."""
 
@@ -88,7 +79,7 @@ class Archive(Sink):
     archive yet). A pipeline sink (``run_pipeline(source, config, [..., archive])``):
     ``block`` (= ``write``) takes the decoded blocks, ``rotate`` starts the next piece,
     ``finish`` closes; the source feeds the raw capture through the tap methods
-    ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
+    ``raw(bytes)``, ``frame(can.Message)``, ``outage(elapsed_s, missing_est)`` and ``placed``
     (registered here with ``source.add_tap``). ``replay_log_path`` and ``capture_path``
     name the current piece's files. Counters: ``rows_written``, ``rows_without_aux``
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
@@ -104,14 +95,14 @@ class Archive(Sink):
         try:
             os.makedirs(self.directory, exist_ok=True)
         except OSError as e:
-            raise FogmonError(f"--archive {self.directory}: cannot create: {e.strerror}") from None
+            raise FogmonError(f"`archive` {self.directory}: cannot create: {e.strerror}") from None
         held = [p for name in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE) for p in find_pieces(self.directory, name)]
         held += piece_files(self.directory)
         if held:
-            raise FogmonError(f"--archive {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
+            raise FogmonError(f"`archive` {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
                               f"give a new folder")
         if not os.access(self.directory, os.W_OK):
-            raise FogmonError(f"--archive {self.directory}: cannot write there")
+            raise FogmonError(f"`archive` {self.directory}: cannot write there")
         self.source = source
         self.flush_s = float(flush_s)
         self._clock = clock
@@ -248,6 +239,19 @@ class Archive(Sink):
                                              "elapsed_s": float(elapsed_s)})
                 self._write_sidecar()
             self.flush()
+
+    def placed(self, frame: int, missing: int, rule: int, wraps: int = 0) -> None:
+        """The source's grid placed ``missing`` samples before the ``frame``-th frame decoded
+        from the next bytes by its clock (``rule``: an index of fogmon.sources.grid.WHY;
+        ``wraps`` of them whole counter wraps), which the bytes alone would not give again;
+        recorded in the sidecar (``breaks``) at the current byte offset so a replay places
+        the same (``missing_est`` too, for readers that know only outages)."""
+        with self._lock:
+            if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
+                self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing),
+                                             "frame": int(frame), "missing": int(missing), "rule": int(rule),
+                                             "wraps": int(wraps)})
+                self._write_sidecar()
 
     # -- capture pieces --------------------------------------------------------------------
     def _append_raw(self, data: bytes) -> None:

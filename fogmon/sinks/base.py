@@ -32,7 +32,7 @@ class StreamInfo:
     aux_names: tuple[str, ...]
     #: what DAVAR analyses: "rate_dph", or "rate_dph - 3600 x rot_dps" (error vs reference rotation)
     analysed: str = "rate_dph"
-    #: with --model: per axis ("" for a one-axis stream) the model's DADEV band at ``tau_s``
+    #: with a ``model`` (PipelineConfig): per axis ("" for a one-axis stream) the model's DADEV band at ``tau_s``
     #: (lo, median, hi in deg/h; lo/hi at the family-wise level of the live check), and
     #: that level (per window)
     model_bands: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
@@ -116,7 +116,7 @@ class Sink:
 
     def rotate(self, piece: int, t_s: float) -> None:
         """Piece ``piece`` (from 1) of the outputs begins with the next block, at recording
-        time ``t_s`` (--rotate-s)."""
+        time ``t_s`` (PipelineConfig ``rotate_s``)."""
 
     def source_counters(self, t_s: float, counters: dict[str, int]) -> None:
         """The source's counters at recording time ``t_s`` (s), after each set of frames."""

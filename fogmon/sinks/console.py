@@ -1,27 +1,30 @@
 """Console sink: events as they happen (stderr, rate-limited) and the end-of-run summary
 (stdout): the whole-run Allan deviation with its confidence bounds, the IEEE-952
 coefficients with their intervals, and the counters; and a replay's progress bar
-(stderr, tqdm, only on a terminal)."""
+(stderr, tqdm, only on a terminal). The text names the run's parameters as `name`
+(fogmon.errors): plainly, or as the flags of a table given (fogmon.cli's)."""
 from __future__ import annotations
 
 import math
 import sys
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TextIO
 
 from fogmon.block import Event
-from fogmon.pipeline import default_window_s
+from fogmon.errors import render_names
 from fogmon.sinks.base import COEFFICIENTS, AxisSummary, Sink, Summary
 from fogmon.stopping import stop_name
+from fogmon.window import default_window_s
 
 #: Events of one kind printed as they happen before the rest are only counted.
 MAX_EVENTS_PER_KIND = 10
 
 
-def format_summary(s: Summary) -> str:
+def format_summary(s: Summary, flags: Mapping[str, str] | None = None) -> str:
     """The summary as text (units in every heading); a run of several axes shows the
-    axes side by side (``axes_lines``)."""
+    axes side by side (``axes_lines``). Parameters are named plainly, or as their flags
+    in ``flags`` (parameter name -> flag)."""
     lines = []
     state = f"interrupted ({stop_name()})" if s.interrupted else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
@@ -35,8 +38,8 @@ def format_summary(s: Summary) -> str:
         lines.append(f"  {no_windows_reason(s)}")
     if s.analysed != "rate_dph":
         why = (["the gyro's error against the reference rotation"] if "rot_dps" in s.analysed else []) + \
-              (["the --thermal-cal drift subtracted sample by sample"] if "thermal" in s.analysed else [])
-        lines.append(f"  analysed: {s.analysed} (deg/h): {'; '.join(why)} (--raw-rate for rate_dph itself)")
+              (["the `thermal` drift subtracted sample by sample"] if "thermal" in s.analysed else [])
+        lines.append(f"  analysed: {s.analysed} (deg/h): {'; '.join(why)} (`raw_rate` for rate_dph itself)")
     lines += axes_lines(s) if s.axes else condition_lines(s, s) + result_lines(s, s)
     if s.counters or s.event_counts:
         lines.append("")
@@ -45,7 +48,7 @@ def format_summary(s: Summary) -> str:
             lines.append(f"  {k:<24} {v}")
     for o in s.outputs:
         lines.append(f"Wrote {o}{_open_hint(o)}")
-    return "\n".join(lines)
+    return render_names("\n".join(lines), flags)
 
 
 def condition_lines(x: AxisSummary, run: Summary) -> list[str]:
@@ -169,9 +172,9 @@ MAX_MOTION_SPANS = 20
 
 
 def model_check_lines(mc: dict) -> list[str]:
-    """The live model check of the session (--model): time inside / outside the band and
-    every departure."""
-    out = [f"  model band (--model, family-wise {mc['alpha_per_window']:g} per window): inside "
+    """The live model check of the session (``model``): time inside / outside the band
+    and every departure."""
+    out = [f"  model band (`model`, family-wise {mc['alpha_per_window']:g} per window): inside "
            f"{mc['time_inside_s']:.1f} s, outside {mc['time_outside_s']:.1f} s, not judged "
            f"{mc['time_unjudged_s']:.1f} s; {mc['n_departures']} departure(s)"]
     for d in mc["departures"]:
@@ -184,9 +187,10 @@ def model_check_lines(mc: dict) -> list[str]:
 
 
 def phase_lines(ph: dict) -> list[str]:
-    """The operating phases of the session (from pumps/rot_dps) and, per state, the range
-    of every coefficient the window fits identified (docs/monitor.md)."""
-    out = [f"  phases (from pumps / rot_dps; {ph['transition_windows']} window(s) straddling a change are in none):"]
+    """The operating phases of the session (from the pumps / rot_dps channels it has) and,
+    per state, the range of every coefficient the window fits identified (docs/monitor.md)."""
+    src = " / ".join(ph.get("channels") or ("pumps", "rot_dps"))
+    out = [f"  phases (from {src}; {ph['transition_windows']} window(s) straddling a change are in none):"]
     for state, s in ph["states"].items():
         spans = ", ".join(f"{p['t_first_end_s']:.0f}..{p['t_last_end_s']:.0f} s" for p in s["phases"][:4])
         more = f", ... ({len(s['phases']) - 4} more)" if len(s["phases"]) > 4 else ""
@@ -202,13 +206,13 @@ def motion_lines(s: AxisSummary, run: Summary) -> list[str]:
     spans = s.motion_spans
     pct = 100.0 * s.motion_samples / max(run.n_samples, 1)
     out = [f"  platform motion: {len(spans)} span(s), {s.motion_samples} samples ({pct:.1f} %) kept out of "
-           f"DAVAR and the fits (--keep-motion analyses them; docs/motion.md):"]
+           f"DAVAR and the fits (`keep_motion` analyses them; docs/motion.md):"]
     shown = [f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s (peak {m.peak_dph:.3g} deg/h)" for m in spans[:MAX_MOTION_SPANS]]
     for i in range(0, len(shown), 3):
         out.append("    " + ", ".join(shown[i:i + 3]))
     if len(spans) > MAX_MOTION_SPANS:
         rrd = [o for o in run.outputs if o.endswith(".rrd")]
-        where = f"all are in the event log of {rrd[0]}" if rrd else "--rrd keeps all of them in its event log"
+        where = f"all are in the event log of {rrd[0]}" if rrd else "`rrd_path` keeps all of them in its event log"
         out.append(f"    ... and {len(spans) - MAX_MOTION_SPANS} more ({where})")
     return out
 
@@ -225,12 +229,12 @@ def _open_hint(output: str) -> str:
 
 def no_windows_reason(s: Summary) -> str:
     """Why a run of at least one sample gave no DADEV window (it was shorter than one
-    window) and the --window-s that would give some."""
+    window) and the ``window_s`` that would give some."""
     w = round(s.window_s * s.sample_rate_hz)
     run_s = s.n_samples / s.sample_rate_hz
     return (
         f"no DADEV window: the window is {w} samples = {s.window_s:g} s at {s.sample_rate_hz:g} Hz and the run had "
-        f"{s.n_samples:,} samples ({run_s:g} s); use --window-s {default_window_s(s.sample_rate_hz, s.n_samples):g} "
+        f"{s.n_samples:,} samples ({run_s:g} s); use `window_s` {default_window_s(s.sample_rate_hz, s.n_samples):g} "
         f"(or any window up to {run_s:g} s)"
     )
 
@@ -270,13 +274,16 @@ def model_check(a, fit) -> str | None:
 
 
 class ConsoleSink(Sink):
-    """Prints events to ``err`` as they happen and the summary to ``out`` at the end."""
+    """Prints events to ``err`` as they happen and the summary to ``out`` at the end,
+    parameters named as their flags in ``flags`` (parameter name -> flag; None: plainly)."""
 
     finish_order = 10
 
-    def __init__(self, quiet: bool = False, out: TextIO | None = None, err: TextIO | None = None):
+    def __init__(self, quiet: bool = False, out: TextIO | None = None, err: TextIO | None = None,
+                 flags: Mapping[str, str] | None = None):
         self.quiet = quiet
         self.out, self.err = out, err
+        self.flags = flags
         self._seen: Counter = Counter()
 
     def events(self, events: Sequence[Event]) -> None:
@@ -286,7 +293,7 @@ class ConsoleSink(Sink):
             n = self._seen[e.kind]
             if n <= MAX_EVENTS_PER_KIND:
                 axis = f" (axis {e.axis})" if e.axis else ""
-                err.write(f"[{e.t_s:10.2f} s] {e.kind}{axis}: {e.message}\n")
+                err.write(f"[{e.t_s:10.2f} s] {e.kind}{axis}: {render_names(e.message, self.flags)}\n")
             elif n == MAX_EVENTS_PER_KIND + 1:
                 err.write(f"[{e.t_s:10.2f} s] {e.kind}: more of these are only counted (see the summary)\n")
 
@@ -294,5 +301,5 @@ class ConsoleSink(Sink):
         """The summary, unless quiet, failed, or empty (no sample: the command says so)."""
         if not self.quiet and not summary.failed and summary.n_samples:
             out = self.out or sys.stdout
-            out.write(format_summary(summary) + "\n")
+            out.write(format_summary(summary, self.flags) + "\n")
             out.flush()

@@ -1,6 +1,6 @@
 """The archive's decoded samples as Parquet (``fogmon monitor --archive-format parquet``):
-piece k is ``samples-NNNN.parquet`` (fogmon.parquet_log), written so that a SIGKILL
-loses at most the row group being filled.
+piece k is ``samples-NNNN.parquet`` (fogmon.formats.parquet_log; names: fogmon.formats.archive),
+written so that a SIGKILL loses at most the row group being filled.
 
 While piece k is written, each completed row group (``row_group_s`` s of samples) is
 its own complete Parquet file ``samples-NNNN.parquet.parts/part-MMMMMM.parquet``
@@ -8,42 +8,19 @@ its own complete Parquet file ``samples-NNNN.parquet.parts/part-MMMMMM.parquet``
 ends (rotation, end of run) its parts are joined into ``samples-NNNN.parquet`` (one row
 group per part, written as ``.tmp`` and renamed) and the parts folder is removed. A
 reader takes, per piece, the joined file when there is one, else the parts in order
-(``piece_files``): a killed monitor's archive replays up to its last row group."""
+(fogmon.formats.archive.piece_files): a killed monitor's archive replays up to its last
+row group."""
 from __future__ import annotations
 
 import os
-import re
 import shutil
 
 from fogmon.errors import FogmonError
-from fogmon.parquet_log import schema, table
-from fogmon.pieces import PIECE_DIGITS, piece_path
+from fogmon.formats.archive import PARQUET_LOG, PARTS_SUFFIX, part_name, piece_path
+from fogmon.formats.parquet_log import schema, table
 
-PARQUET_LOG = "samples.parquet"
-PARTS_SUFFIX = ".parts"
 #: default recording time per row group (s): what a SIGKILL can cost at most
 ROW_GROUP_S = 60.0
-
-
-def piece_files(directory: str) -> list[str]:
-    """The Parquet sample files of an archive folder in recording order: per piece its
-    joined file, or (a piece whose run was killed) its row-group parts."""
-    try:
-        entries = set(os.listdir(directory))
-    except OSError:
-        return []
-    stem, ext = os.path.splitext(PARQUET_LOG)
-    pat = re.compile(rf"{re.escape(stem)}-(\d{{{PIECE_DIGITS},}}){re.escape(ext)}({re.escape(PARTS_SUFFIX)})?")
-    pieces = sorted({int(m.group(1)) for e in entries if (m := pat.fullmatch(e))})
-    out: list[str] = []
-    for k in pieces:
-        name = piece_path(PARQUET_LOG, k)
-        if name in entries:
-            out.append(os.path.join(directory, name))
-            continue
-        parts = os.path.join(directory, name + PARTS_SUFFIX)
-        out += [os.path.join(parts, p) for p in sorted(os.listdir(parts)) if p.endswith(".parquet")]
-    return out
 
 
 class ParquetPieces:
@@ -84,7 +61,7 @@ class ParquetPieces:
         import pyarrow.parquet as pq
 
         self._parts += 1
-        path = os.path.join(self._parts_dir(), f"part-{self._parts:06d}.parquet")
+        path = os.path.join(self._parts_dir(), part_name(self._parts))
         pq.write_table(pa.concat_tables(self._buf), path + ".tmp", compression="zstd")
         os.replace(path + ".tmp", path)
         self._buf, self._held = [], 0
@@ -102,7 +79,7 @@ class ParquetPieces:
         try:
             with pq.ParquetWriter(final + ".tmp", self._schema, compression="zstd") as w:
                 for i in range(1, self._parts + 1):
-                    w.write_table(pq.read_table(os.path.join(parts, f"part-{i:06d}.parquet")))
+                    w.write_table(pq.read_table(os.path.join(parts, part_name(i))))
             os.replace(final + ".tmp", final)
         except OSError as e:
             raise FogmonError(f"{final}: cannot write: {e}") from None

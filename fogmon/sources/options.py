@@ -6,17 +6,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from fogmon.sources import plausibility
+
 
 @dataclass(frozen=True)
 class SourceOptions:
-    """Options of fogmon.sources.open: ``serial``/``baud`` or ``can``/``interface``/
+    """Options of fogmon.sources.open and its readers: ``serial``/``baud`` or ``can``/``interface``/
     ``can_bitrate`` (a live device), the serial decoder (``protocol``, ``sample_rate_hz`` Hz,
     ``kvh_rot``, ``kvh_units``, ``kvh_accel``, ``axis``, ``columns``; ``axis`` also picks the
     axes of a multi-axis replay log: a name or a comma list), the CAN decoder (``dbc``,
     ``can_message``, ``can_rate``, ``can_rate_unit``, ``can_temp``, ``can_counter``,
     ``can_valid``), the plausibility gate ``max_rate_dph`` (deg/h), for a replay log
-    ``tolerate_bad_rows``, and for other recording formats (fogmon.sources.formats)
-    ``topic``, ``channel``, ``time_channel``, ``rate_unit``."""
+    ``tolerate_bad_rows``, and for other recording formats (fogmon.sources.files: ROS bags,
+    ULogs, MDF4, LAS) ``topic``, ``channel``, ``time_channel``, ``rate_unit``. Files whose
+    samples carry time stamps (fogmon.sources.files.timing): ``resample_hz`` (block means
+    on a coarser uniform grid, Hz) and ``force_rate`` (use ``sample_rate_hz``, a DBC cycle
+    time or a replay log's stated rate although the stamps say otherwise)."""
 
     serial: str | None = None
     baud: int | None = None
@@ -43,6 +48,8 @@ class SourceOptions:
     channel: str | None = None
     time_channel: str | None = None
     rate_unit: str | None = None
+    resample_hz: float | None = None
+    force_rate: bool = False
 
     def codec_options(self) -> dict[str, Any]:
         """Serial decoder options given (None = not given), as make_codec names them."""
@@ -55,6 +62,12 @@ class SourceOptions:
         return {"message": self.can_message, "rate_signal": self.can_rate, "rate_unit": self.can_rate_unit,
                 "temp_signal": self.can_temp, "counter_signal": self.can_counter, "valid_signal": self.can_valid,
                 "sample_rate_hz": self.sample_rate_hz, "max_rate_dph": self.max_rate_dph}
+
+    @property
+    def file_gate_dph(self) -> float:
+        """The plausibility gate (deg/h) of a recording read from a file without a
+        device's range: ``max_rate_dph``, or the generic gate."""
+        return self.max_rate_dph or plausibility.GENERIC_MAX_ABS_DPH
 
     def asks_decoding(self, axis: bool = True) -> bool:
         """Whether a decoder option other than the gate (and, with ``axis=False``, other

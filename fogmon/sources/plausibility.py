@@ -4,7 +4,7 @@
 Every decoder and reader passes its rates through ``gate`` with the device's measurement
 range plus a margin; what falls outside becomes an invalid sample (rate NaN, so the engines
 drop exactly the Allan terms that span it) and is counted as ``implausible_samples``.
-Ranges are datasheet full scale x ``MARGIN``; ``--max-rate-dph`` overrides them. KVH
+Ranges are datasheet full scale x ``MARGIN``; ``max_rate_dph`` overrides them. KVH
 frames also carry a temperature: a reading outside ``TEMP_RANGE_C`` becomes NaN and is
 counted as ``implausible_temp_c``.
 """
@@ -63,7 +63,7 @@ def gate(rate_dph: ArrayLike, max_abs_dph: float, valid: ArrayLike | None = None
 
 
 def max_rate_dph(value: float | None, default_dph: float) -> float:
-    """The gate (deg/h) of a decoder: ``value`` (``--max-rate-dph``, or a capture
+    """The gate (deg/h) of a decoder: ``value`` (the option ``max_rate_dph``, or a capture
     sidecar's ``max_rate_dph``) when given, else the device's ``default_dph``. A value
     that is not a finite number > 0 is a FogmonError."""
     if value is None:
@@ -73,5 +73,5 @@ def max_rate_dph(value: float | None, default_dph: float) -> float:
     except (TypeError, ValueError):
         v = math.nan
     if not (math.isfinite(v) and v > 0):
-        raise FogmonError(f"--max-rate-dph must be a finite number > 0 deg/h, got {value!r}")
+        raise FogmonError(f"`max_rate_dph` must be a finite number > 0 deg/h, got {value!r}")
     return v

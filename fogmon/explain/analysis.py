@@ -1,0 +1,83 @@
+"""One comparison of a residual with a null (``Analysis``: map, z-scores, regions,
+score) and the context the candidates are fitted in (``whittle_context``: the model PSD
+calibrated to the residual)."""
+from __future__ import annotations
+
+import math
+from collections.abc import Set as AbstractSet
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fogmon.explain import detectors, mismatch
+from fogmon.explain.candidates.base import Candidate, Context, in_passband, white_level_rms_dpsh
+from fogmon.explain.candidates.spikes import spike_scan
+from fogmon.explain.fitting import Whittle, calibrate_psd, model_psd, rfft_omega
+from fogmon.sim.model import SensorModel
+
+
+@dataclass
+class Analysis:
+    """One comparison of a residual with a null: ln avar of the map and whole record,
+    z-scores, regions and score."""
+
+    cell: np.ndarray
+    whole: np.ndarray
+    z: np.ndarray
+    z_whole: np.ndarray
+    regions: list
+    score: mismatch.Score
+    null: mismatch.Null
+
+
+def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray, y: np.ndarray) -> Context:
+    """The context of the candidates: the model PSD calibrated to the residual over the
+    model's pass band (``in_passband``), and no weight outside it: an octave
+    band holding a filter's zero would otherwise take its factor from bins where the
+    model is floored, and the bins next to them would show a false excess."""
+    n = len(y)
+    omega = rfft_omega(n)
+    S = model_psd(stoch, omega, n, white_level_rms_dpsh(stoch, t, ctx_aux))
+    S = np.maximum(S, 1e-4 * np.median(S[1:]))  # a PSD near 0 must not give one bin all the weight
+    yy = np.where(valid, y, 0.0)
+    Yf = np.fft.rfft(yy)
+    keep = in_passband(stoch, omega)
+    S_cal = np.full(len(S), np.inf)
+    S_cal[keep] = calibrate_psd(S[keep], Yf[keep], n)  # a low-pass's pass band: the bins 0..K
+    wh = Whittle(S_cal, n, valid)
+    # The circular DFT joins the record's last sample to its first; for blue
+    # (quantization) noise the angle mismatch there is a one-sample rate spike at index 0
+    # that the GLS sees clearly: project it out (a nuisance regressor) before any test.
+    amp0 = float(detectors.spike_scan(wh, Yf)[0][0])
+    yy = yy.copy()
+    yy[0] -= amp0
+    Yf = Yf - amp0
+    return Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), yy, stoch, wh, Yf)
+
+
+def matched_tests_figure(cands: list[Candidate], penalty: float, contradicted: AbstractSet[str]) -> float:
+    """The score's ``tests``: the strongest candidate's sqrt(gain / (k ln n)), candidates
+    of a kind the map contradicted (``contradicted``: added, it opened a whole-record
+    deficit, ``Selection.judge``) left out - their statistic measured a misfit their shape does
+    not describe, and the map's own figures keep that misfit."""
+    return max([math.sqrt(max(c.gain, 0.0) / (c.k * penalty)) for c in cands if c.kind not in contradicted],
+               default=0.0)
+
+
+def analyse(y: np.ndarray, ctx: Context, null: mismatch.Null, grid: mismatch.Grid,
+            cands: list[Candidate], contradicted: AbstractSet[str]) -> Analysis:
+    """Map, regions and score of residual ``y`` (candidates: the matched tests run on it,
+    those of the ``contradicted`` kinds not counted, ``matched_tests_figure``)."""
+    cell, whole = mismatch.log_avar(np.where(ctx.valid, y, np.nan), ctx.valid, grid)
+    z, zw = mismatch.zscores(cell, whole, null)
+    _, zs = spike_scan(ctx)
+    nv = int(ctx.valid.sum())
+    spike_ratio = float(np.max(np.abs(zs))) / detectors.expected_max_abs_z(nv) if nv else 0.0
+    regions = mismatch.find_regions(z, zw, null, grid)
+    tests = matched_tests_figure(cands, ctx.penalty, contradicted)
+    return Analysis(cell, whole, z, zw, regions, mismatch.score(z, null, spike_ratio, tests), null)
+
+
+def rescored(a: Analysis, cands: list[Candidate], penalty: float, contradicted: AbstractSet[str]) -> Analysis:
+    """``a`` with its score's ``tests`` taken again without the ``contradicted`` kinds."""
+    return replace(a, score=replace(a.score, tests=matched_tests_figure(cands, penalty, contradicted)))

@@ -1,0 +1,182 @@
+"""What every candidate shares: the ``Context`` it is fitted in, the fitted ``Candidate``,
+the GLS helpers of the mean-type kinds (``unit_rate``, ``judged_gls``) and the spectral
+helpers of the noise-type ones (binned periodogram, the model's white level and pass
+band, ``replace_white``)."""
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fogmon.explain.fitting import BinnedPeriodogram, GlsFit, Whittle, filter_gain2, low_band_flicker, model_psd
+from fogmon.sim import effects as fx
+from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
+
+
+@dataclass
+class Context:
+    """What every candidate sees: uniform time grid ``t_s`` (s), gap-filled aux channels,
+    ``valid`` mask, sample rate, current residual ``y`` (deg/h, 0 where invalid), the
+    current stochastic model, the calibrated Whittle GLS and the residual's DFT."""
+
+    t_s: np.ndarray
+    aux: dict
+    valid: np.ndarray
+    sample_rate_hz: float
+    y: np.ndarray
+    stoch: SensorModel
+    wh: Whittle
+    Yf: np.ndarray
+    #: results shared by candidates within one round (the spike evidence)
+    cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def n(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def penalty(self) -> float:
+        return math.log(max(int(self.valid.sum()), 2))
+
+
+@dataclass
+class Candidate:
+    """A fitted effect: full parameters, standard errors of the fitted ones, the
+    likelihood-ratio ``gain``, parameter count ``k``, the rate it removes from the
+    residual (deg/h: a mean-type effect's deterministic rate, or an outlier population's
+    replacements) and the design used (for the held-out check), plus evidence."""
+
+    kind: str
+    params: dict
+    se: dict
+    gain: float
+    k: int
+    evidence: str
+    rate: np.ndarray | None = None
+    design: np.ndarray | None = None
+    heldout: Callable | None = field(default=None, repr=False)
+    #: the white level N0 (deg/sqrt(h)) the stochastic model takes with this effect
+    #: (a white-level regression's intercept), None: unchanged
+    white_n0_dpsh: float | None = None
+    #: the stochastic model this noise-type effect joins, its white-equivalent level
+    #: refitted under it (vibration_lines: with_white_level, filtered_levels); None: the current one
+    stoch_base: SensorModel | None = None
+    #: every sample an ``outliers`` effect holds: times_s (s), amplitudes_dph (deg/h),
+    #: abs_z (arrays; written to the outliers file, not into the report)
+    listing: dict | None = field(default=None, repr=False)
+    #: corrected IEEE-952 coefficients (the ``noise`` kind): replace the model's [noise]
+    corrected_noise: Noise | None = None
+    #: the gain a chance maximum of the candidate's own search exceeds with probability
+    #: SEARCH_FALSE_ALARM (a periodic term's frequency search): the bar when above BIC's
+    search_bar: float = 0.0
+
+    @property
+    def nature(self) -> str:
+        return EFFECT_KINDS[self.kind].nature
+
+    def bic_gain(self, penalty: float) -> float:
+        """The gain above the bar: BIC's k ln n, or ``search_bar`` when that is higher."""
+        return self.gain - max(self.k * penalty, self.search_bar)
+
+    def effect(self) -> Effect:
+        return validate_effect(self.kind, self.params, "fitted effect")
+
+
+def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
+    """Rate (deg/h) of a mean-type effect with the given parameters on the context grid."""
+    return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.sample_rate_hz)
+
+
+def judged_gls(ctx: Context, Xf: np.ndarray) -> GlsFit:
+    """Whittle GLS of the residual on the transformed design ``Xf``, judged against the
+    noise its own residual shows at the slowest frequencies: refitted with the PSD
+    raised there by that residual's significant flicker excess (low_band_flicker), so a
+    drift, step or settling that is significant only against a model PSD extrapolated
+    below its calibrated band - not against the sensor's own bias wander - loses that
+    significance (its gain, coefficients and standard errors are the refit's)."""
+    fit = ctx.wh.gls(Xf, ctx.Yf)
+    S = low_band_flicker(ctx.wh.S, ctx.Yf - Xf.reshape(len(ctx.Yf), -1) @ fit.beta, ctx.n)
+    return fit if S is ctx.wh.S else Whittle(S, ctx.n, ctx.valid).gls(Xf, ctx.Yf)
+
+
+def estimate_text(x: float, se: float) -> str:
+    """``x +- se`` for an evidence text."""
+    return f"{x:.4g} +- {se:.2g}"
+
+
+def periodogram(ctx: Context, part: slice = slice(None)) -> BinnedPeriodogram:
+    """Binned periodogram of the residual (or of ``part`` of it)."""
+    y = np.where(ctx.valid[part], ctx.y[part], 0.0)
+    return BinnedPeriodogram(np.fft.rfft(y), len(y))
+
+
+def passband_part(ctx: Context, bp: BinnedPeriodogram) -> BinnedPeriodogram:
+    """``bp`` over the model's pass band (``in_passband``)."""
+    keep = in_passband(ctx.stoch, bp.omega)
+    if keep.all():
+        return bp
+    band = copy.copy(bp)
+    band.count, band.I, band.k, band.omega = bp.count[keep], bp.I[keep], bp.k[keep], bp.omega[keep]
+    return band
+
+
+def white_rms_dpsh(model: SensorModel, ctx: Context) -> float:
+    """RMS over the record of the white level N(t) = N0 + white-level effects (deg/sqrt(h))."""
+    return white_level_rms_dpsh(model, ctx.t_s, ctx.aux)
+
+
+def white_level_rms_dpsh(model: SensorModel, t_s: np.ndarray, aux: dict) -> float:
+    """``white_rms_dpsh`` from the sample times ``t_s`` (s) and aux channels alone."""
+    level = np.full(len(t_s), model.noise.N_dpsh)
+    for e in model.effects:
+        if EFFECT_KINDS[e.kind].nature == "white_level":
+            level = level + fx.white_level_dpsh(e, t_s, aux)
+    return float(np.sqrt(np.mean(np.maximum(level, 0.0) ** 2)))
+
+
+def stoch_psd(ctx: Context, bp: BinnedPeriodogram) -> np.ndarray:
+    """The current stochastic model's PSD at the bins of ``bp``."""
+    return model_psd(ctx.stoch, bp.omega, ctx.n, white_rms_dpsh(ctx.stoch, ctx))
+
+
+#: the calibrated Whittle GLS of the mean-type candidates and the spike test
+#: (analysis.whittle_context), the markov fit and the lines' proposals keep the frequencies
+#: where the model's ``bandwidth`` filters pass at least this share of the power (|H|^2, -20 dB)
+PASSBAND_MIN_GAIN2 = 0.01
+
+
+def passband_gain2(model: SensorModel, omega: np.ndarray) -> np.ndarray:
+    """|H|^2 of the model's ``bandwidth`` filters at ``omega`` (rad/sample; 1 without a
+    filter); the pass band is where it is at least PASSBAND_MIN_GAIN2. Beyond it the
+    model PSD is orders of magnitude below its pass-band level (floored in the fits),
+    so a likelihood there measures the filter's exact shape (on a real sensor the
+    fitted filter is not the real one), not a term under it; and a term there is
+    attenuated by the filter as much as the noise."""
+    G = np.ones(len(omega))
+    for e in model.effects:
+        if e.kind == "bandwidth":
+            G = G * filter_gain2(e.params, float(model.sample_rate_hz), omega)
+    return G
+
+
+def in_passband(model: SensorModel, omega: np.ndarray) -> np.ndarray:
+    """The frequencies ``omega`` (rad/sample) where the model's ``bandwidth`` filters pass
+    at least PASSBAND_MIN_GAIN2 of the power (all of them without a filter)."""
+    return passband_gain2(model, omega) >= PASSBAND_MIN_GAIN2
+
+
+#: PSD floor relative to the median model PSD in the spectral fits (periodogram leakage)
+LEAKAGE_FLOOR = 1e-4
+
+
+def replace_white(model: SensorModel, N: float, drop_other: bool = False) -> SensorModel:
+    """``model`` with white level N (deg/sqrt(h)); ``drop_other``: that white noise alone
+    (through the model's filters), without the other terms."""
+    nz = model.noise
+    noise = Noise(0.0, N, 0.0, 0.0, 0.0) if drop_other else Noise(nz.Q_arcsec, N, nz.B_dph, nz.K_dphsh, nz.R_dphh)
+    eff = [e for e in model.effects
+           if e.kind == "bandwidth" or (not drop_other and e.kind in ("markov", "lowpass_noise", "vibration_lines"))]
+    return SensorModel(model.sample_rate_hz, model.bias_dph, noise, eff)

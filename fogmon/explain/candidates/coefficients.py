@@ -1,0 +1,166 @@
+"""The ``noise`` candidate: the model's own IEEE-952 coefficients (Q, N, B, K) are wrong;
+the terms the recording's Allan deviation puts outside their 95 % interval, corrected."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.stats import norm
+
+from fogmon.davar.batch import oadev
+from fogmon.davar.fit import IDENTIFY_Z, fit_avar
+from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
+from fogmon.explain.candidates.base import (
+    LEAKAGE_FLOOR,
+    Candidate,
+    Context,
+    periodogram,
+    stoch_psd,
+    white_rms_dpsh,
+)
+from fogmon.explain.fitting import model_psd, rfft_omega
+from fogmon.sim.model import Noise, SensorModel
+
+#: two-sided confidence of the intervals of the noise effect (and of "differs")
+NOISE_CONFIDENCE = 0.95
+#: the coefficients the noise effect may correct (index into theory.POWERS); R is the
+#: deterministic part's (a wrong R is a rate_ramp effect)
+NOISE_TERMS = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh")
+
+
+#: fixed-point steps refining the corrected terms (the first correction is exact when
+#: the terms do not interact in the fit)
+NOISE_ITERATIONS = 2
+
+
+def expected_avar(S: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
+    """Allan variance ((deg/h)^2) at averaging factors ``m`` of a process with PSD ``S``
+    at the rfft bins of an n-sample record: sum over the circle of
+    S 2 sin^4(m w / 2) / (m^2 sin^2(w / 2)) / n (the DC bin left out)."""
+    w = rfft_omega(n)[1:]
+    Sf = np.where(np.isfinite(S[1:]), S[1:], 0.0)
+    mult = np.full(len(w), 2.0)
+    if n % 2 == 0:
+        mult[-1] = 1.0
+    s2 = np.sin(w / 2.0) ** 2
+    return np.array([float(np.sum(mult * Sf * 2.0 * np.sin(mm * w / 2.0) ** 4 / (mm * mm * s2)) / n)
+                     for mm in np.asarray(m, dtype=float)])
+
+
+def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, sample_rate_hz: float, white_dpsh: float):
+    """Corrected IEEE-952 coefficients of ``stoch`` from the residual ``y`` (deg/h):
+    davar.fit.fit_avar (robust, octave taus, 95 % one-sided upper limits) on the
+    residual's overlapping ADEV and on the ADEV the current stochastic model predicts
+    for the same record (expected_avar of its PSD); each avar term is corrected by the
+    difference, A = A_model + (A_recording - A_expected), so that what the model's other
+    terms (flicker approximation, Gauss-Markov, lines, filters, white-level effects) do
+    to the fit cancels. Returns {name: (value, lo, hi, model value)} in coefficient
+    units for the terms whose model value lies outside the recording's NOISE_CONFIDENCE
+    interval (identified terms: A +- z se; others: 0 .. the 95 % upper limit), refined by
+    NOISE_ITERATIONS fixed-point steps A += A_recording - A_predicted(A) (the terms
+    interact in the fit), or None when the ADEV cannot be fitted."""
+    n = len(y)
+    r = oadev(np.where(valid, y, np.nan), sample_rate_hz, "octave", valid=valid)
+    a, se, _, up = fit_avar(r.tau_s, r.adev_dph ** 2, r.m, r.n_terms, n, "all")
+    S = model_psd(stoch, rfft_omega(n), n, white_dpsh)
+    ae, _, _, _ = fit_avar(r.tau_s, expected_avar(S, n, r.m), r.m, r.n_terms, n, "none")
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(ae))):
+        return None
+    nz = stoch.noise
+    am = coefficients_to_avar_terms(nz.Q_arcsec, nz.N_dpsh, nz.B_dph, nz.K_dphsh, 0.0)
+    z = float(norm.ppf(0.5 + NOISE_CONFIDENCE / 2.0))
+    ident = a - IDENTIFY_Z * se > 0
+    lo = np.where(ident, np.maximum(a - z * se, 0.0), 0.0)
+    hi = np.where(ident, a + z * se, np.maximum(up, a))
+    differ = np.array([not (lo[i] <= ae[i] <= hi[i]) and np.isfinite(hi[i]) for i in range(len(NOISE_TERMS))]
+                      + [False])
+    if not differ.any():
+        return {}
+    A = am.copy()
+    A[differ] = np.maximum(am + a - ae, 0.0)[differ]
+    conv = avar_terms_to_coefficients
+    for _ in range(NOISE_ITERATIONS):  # the terms interact in such a fit (flicker's short-tau excess
+        c = conv(A)                    # reads partly as N): fit(predicted ADEV of A) -> fit(recording)
+        noise = Noise(Q_arcsec=c[0], N_dpsh=c[1], B_dph=c[2], K_dphsh=c[3], R_dphh=0.0)
+        new = SensorModel(stoch.sample_rate_hz, 0.0, noise, stoch.effects)
+        Sk = model_psd(new, rfft_omega(n), n, white_dpsh - nz.N_dpsh + float(c[1]))
+        ak, _, _, _ = fit_avar(r.tau_s, expected_avar(Sk, n, r.m), r.m, r.n_terms, n, "none")
+        if not np.all(np.isfinite(ak)):
+            break
+        A[differ] = np.maximum(A + a - ak, 0.0)[differ]
+    shift = A - a
+    out = {}
+    for i, name in enumerate(NOISE_TERMS):
+        # a term flagged only through another one's error (B too small reads partly as N)
+        # is left alone when its model value is inside its own corrected interval
+        if not differ[i] or max(lo[i] + shift[i], 0.0) <= am[i] <= hi[i] + shift[i]:
+            continue
+        vals = [max(x + shift[i], 0.0) for x in (a[i], lo[i], hi[i])]
+        coef = [float(conv(np.eye(5)[i] * v)[i]) for v in vals]
+        out[name] = (*coef, float(getattr(nz, name)))
+    return out
+
+
+def _corrected(stoch: SensorModel, fit: dict) -> SensorModel:
+    return SensorModel(stoch.sample_rate_hz, stoch.bias_dph,
+                       replace(stoch.noise, **{k: v[0] for k, v in fit.items()}), stoch.effects, stoch.meta)
+
+
+NOISE_UNIT = {"Q_arcsec": "arcsec", "N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h", "K_dphsh": "deg/h/sqrt(h)"}
+
+
+def noise_text(name: str, value: float, lo: float, hi: float, model_value: float) -> str:
+    """"your N is 0.041 deg/sqrt(h) [0.039, 0.043], not 0.030" (an unidentified term:
+    "below <hi>")."""
+    u = NOISE_UNIT[name]
+    sym = name.split("_")[0]
+    if lo <= 0 and value <= 0:
+        return f"your {sym} is below {hi:.3g} {u} (95 % upper limit), not {model_value:.3g}"
+    return f"your {sym} is {value:.3g} {u} [{lo:.3g}, {hi:.3g}], not {model_value:.3g}"
+
+
+def noise(ctx: Context) -> Candidate | None:
+    """The model's own Q, N, B, K are wrong (fit_coefficients): the terms whose model
+    value lies outside the recording's 95 % interval, corrected; scored by the Whittle
+    likelihood of the residual's binned periodogram under the model PSD with and without
+    the correction (one parameter per corrected term)."""
+    wr = white_rms_dpsh(ctx.stoch, ctx)
+    fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.sample_rate_hz, wr)
+    if not fit:
+        return None
+    bp = periodogram(ctx)
+    new = _corrected(ctx.stoch, fit)
+    S0 = stoch_psd(ctx, bp)
+    S1 = model_psd(new, bp.omega, ctx.n, white_rms_dpsh(new, ctx))
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    gain = bp.deviance(S0, floor) - bp.deviance(S1, floor)
+    params = {}
+    for k, (v, lo, hi, _) in fit.items():
+        params.update({k: v, f"{k}_lo": lo, f"{k}_hi": hi})
+    se = {k: (hi - lo) / (2 * 1.959964) for k, (v, lo, hi, _) in fit.items()}
+
+    def heldout():
+        out = []
+        h = ctx.n // 2
+        halves = (slice(0, h), slice(h, 2 * h))
+        for a, b in ((0, 1), (1, 0)):
+            fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
+            bpb, bpa = periodogram(ctx, halves[b]), periodogram(ctx, halves[a])
+            if not fa:
+                out.append((0.0, 0.0))
+                continue
+            na = _corrected(ctx.stoch, fa)
+            gains = []
+            for bb in (bpb, bpa):
+                s0 = model_psd(ctx.stoch, bb.omega, h, wr)
+                s1 = model_psd(na, bb.omega, h, white_rms_dpsh(na, ctx))
+                fl = LEAKAGE_FLOOR * float(np.median(s0))
+                gains.append(bb.deviance(s0, fl) - bb.deviance(s1, fl))
+            out.append((float(gains[0]), float(gains[1])))
+        return out  # (tested on the second half, on the first)
+
+    ev = ("robust IEEE-952 fit of the residual's Allan deviation against the one the model predicts "
+          "(95 % intervals): " + "; ".join(noise_text(k, *v) for k, v in fit.items()))
+    return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
+                     corrected_noise=new.noise)
+

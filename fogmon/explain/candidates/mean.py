@@ -1,0 +1,245 @@
+"""Mean-type candidates: periodic, bias_step, rate_ramp, warm_up, scale_factor and
+thermal_drift, linear in their amplitude-type coefficients (regressors from the
+simulator's own effect functions with one coefficient set to 1, fitted by Whittle GLS
+with the calibrated noise PSD), their nonlinear parameters (period, step time, ramp
+start, settling time, temperature smoothing) by scans."""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from fogmon.explain import detectors
+from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate
+
+#: A periodic term's frequency search must find a line that chance (white residual,
+#: the model true) beats with this probability only. BIC's 3 ln n alone is about the 2 %
+#: point at 12000 samples (Baluev's law below; 6 of 300 white-noise records measured), and
+#: the held-out check cannot refute such a peak: selected as the whole record's maximum,
+#: it is a coherent sum of both halves, so each half predicts the other at its frequency.
+SEARCH_FALSE_ALARM = 1e-3
+
+
+def chance_line_gain(n: int, false_alarm: float) -> float:
+    """The chi-square gain u that the largest of a continuous frequency search over the
+    whole band of an n-sample record (two degrees of freedom per frequency) exceeds by
+    chance with probability ``false_alarm``: Baluev (2008, MNRAS 385, 1279) for even
+    sampling, P(max > u) = (n/2) sqrt(pi/3) sqrt(u/2) exp(-u/2), solved by fixed point."""
+    u = 2.0 * math.log(n / 2.0 / false_alarm)
+    for _ in range(20):
+        u = 2.0 * math.log(n / 2.0 * math.sqrt(math.pi / 3.0) * math.sqrt(u / 2.0) / false_alarm)
+    return u
+
+
+def periodic(ctx: Context) -> Candidate | None:
+    """Strongest line of the PSD-weighted periodogram (periods 3 samples .. duration/3),
+    frequency refined by golden-section search on the GLS chi-square; its bar is at
+    least :func:`chance_line_gain` at SEARCH_FALSE_ALARM."""
+    n = ctx.n
+    P = np.abs(ctx.Yf) ** 2 / (n * ctx.wh.S)
+    P[:3] = 0.0
+    P[-1] = 0.0
+    k = int(np.argmax(P))
+    t = ctx.t_s
+    tr = t - t[0]
+
+    def cols(f):
+        return np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
+
+    def g(f):
+        return ctx.wh.gls(ctx.wh.fft(cols(f)), ctx.Yf).chi2_gain
+
+    lo, hi = (k - 1) * ctx.sample_rate_hz / n, (k + 1) * ctx.sample_rate_hz / n
+    r = (math.sqrt(5) - 1) / 2
+    a, b = lo, hi
+    c, d = b - r * (b - a), a + r * (b - a)
+    gc, gd = g(c), g(d)
+    for _ in range(14):
+        if gc > gd:
+            b, d, gd = d, c, gc
+            c = b - r * (b - a)
+            gc = g(c)
+        else:
+            a, c, gc = c, d, gd
+            d = a + r * (b - a)
+            gd = g(d)
+    f, gf = (c, gc) if gc > gd else (d, gd)
+    X = cols(f)
+    h = 0.02 * ctx.sample_rate_hz / n
+    curv = (2 * gf - g(f + h) - g(f - h)) / h ** 2
+    fit = judged_gls(ctx, ctx.wh.fft(X))
+    se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
+    sa, ca = fit.beta
+    amp = math.hypot(sa, ca)
+    # A sin(2 pi f (t - t0) + ph0) = A sin(2 pi f t + phase) with phase = ph0 - 2 pi f t0
+    phase = math.remainder(math.atan2(ca, sa) - 2 * np.pi * f * t[0], 2 * np.pi)
+    period = 1.0 / f
+    se_amp = float(np.sqrt(np.mean(fit.se ** 2)))
+    params = {"period_s": period, "amplitude_dph": amp, "phase_rad": phase}
+    ev = (f"periodogram line at {period:.6g} s (PSD-weighted power {P[k]:.3g}x the noise), "
+          f"amplitude {estimate_text(amp, se_amp)} deg/h")
+    return Candidate("periodic", params, {"period_s": se_f / f ** 2, "amplitude_dph": se_amp,
+                                          "phase_rad": se_amp / max(amp, 1e-300)},
+                     fit.chi2_gain, 3, ev, X @ fit.beta, X, search_bar=chance_line_gain(n, SEARCH_FALSE_ALARM))
+
+
+def bias_step(ctx: Context) -> Candidate | None:
+    """Best single bias step over 1 %..99 % of the record (exact GLS scan)."""
+    n = ctx.n
+    n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, int(0.01 * n), int(0.99 * n))
+    X = (np.arange(n) >= n0).astype(float)[:, None]
+    fit = judged_gls(ctx, ctx.wh.fft(X))
+    t_step = float(ctx.t_s[n0] - 0.5 / ctx.sample_rate_hz)
+    params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
+    ev = f"change-point scan: bias step of {estimate_text(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
+    return Candidate("bias_step", params, {"step_dph": float(fit.se[0])}, fit.chi2_gain, 2, ev,
+                     X @ fit.beta, X)
+
+
+def _scan_1d(ctx: Context, make: Callable[[float], np.ndarray], grid: np.ndarray, refine: int = 8):
+    """Best value of a nonlinear parameter on ``grid`` then on a finer grid around it."""
+    gains = [ctx.wh.gls(ctx.wh.fft(make(v)), ctx.Yf).chi2_gain for v in grid]
+    i = int(np.argmax(gains))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    fine = np.linspace(lo, hi, refine + 2)[1:-1]
+    g2 = [ctx.wh.gls(ctx.wh.fft(make(v)), ctx.Yf).chi2_gain for v in fine]
+    j = int(np.argmax(g2))
+    return (fine[j], g2[j]) if g2[j] > gains[i] else (grid[i], gains[i])
+
+
+def rate_ramp(ctx: Context) -> Candidate | None:
+    """Linear rate drift starting at t0 (scanned over 0..90 % of the record)."""
+    t = ctx.t_s
+    T = t[-1] - t[0]
+
+    def make(t0):
+        return (np.maximum(t - t0, 0.0) / 3600.0)[:, None]
+
+    t0, _ = _scan_1d(ctx, make, t[0] + T * np.linspace(0.0, 0.9, 16))
+    X = make(t0)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
+    params = {"slope_dphh": float(fit.beta[0]), "t0_s": float(t0)}
+    ev = f"trend regression: rate slope {estimate_text(fit.beta[0], fit.se[0])} deg/h^2 from t = {t0:.6g} s"
+    return Candidate("rate_ramp", params, {"slope_dphh": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
+
+
+def warm_up(ctx: Context) -> Candidate | None:
+    """Exponential settling from the start of the record, time constant scanned on a
+    log grid from max(10 samples, 3 matched-filter lengths) to half the record."""
+    t = ctx.t_s
+    T = t[-1] - t[0]
+    t0 = float(t[0])
+
+    def make(ltau):
+        return np.exp(-(t - t0) / math.exp(ltau))[:, None]
+
+    # faster than a few matched-filter lengths it cannot be told from the record's ends
+    # (the circular GLS joins them) or from a glitch
+    tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.sample_rate_hz
+    ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14))
+    X = make(ltau)
+    fit = judged_gls(ctx, ctx.wh.fft(X))
+    tau = math.exp(ltau)
+    params = {"amplitude_dph": float(fit.beta[0]), "tau_s": tau, "t0_s": t0}
+    ev = f"settling fit: A = {estimate_text(fit.beta[0], fit.se[0])} deg/h, tau = {tau:.4g} s from t = {t0:.6g} s"
+    return Candidate("warm_up", params, {"amplitude_dph": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
+
+
+def scale_factor(ctx: Context) -> Candidate | None:
+    """Scale-factor error on rot_dps: symmetric, and with asymmetry (better BIC wins)."""
+    rot = ctx.aux.get("rot_dps")
+    if rot is None or not np.nanstd(rot) > 0:
+        return None
+    c_ppm = unit_rate("scale_factor", {"ppm": 1.0, "asym_ppm": 0.0}, ctx)
+    c_asym = unit_rate("scale_factor", {"ppm": 0.0, "asym_ppm": 1.0}, ctx)
+    best = None
+    for X, names in ((c_ppm[:, None], ("ppm",)), (np.column_stack((c_ppm, c_asym)), ("ppm", "asym_ppm"))):
+        fit = ctx.wh.gls(ctx.wh.fft(X), ctx.Yf)
+        if best is None or fit.chi2_gain - len(names) * ctx.penalty > best[0].chi2_gain - len(best[2]) * ctx.penalty:
+            best = (fit, X, names)
+    assert best is not None  # the loop ran at least once
+    _, X, names = best
+    fit = judged_gls(ctx, ctx.wh.fft(X))
+    params = {"ppm": 0.0, "asym_ppm": 0.0}
+    se = {}
+    for i, nm in enumerate(names):
+        params[nm] = float(fit.beta[i])
+        se[nm] = float(fit.se[i])
+    ev = ("regression on 3600 rot_dps: " + ", ".join(f"{nm} {estimate_text(params[nm], se[nm])}" for nm in names)
+          + f" (rotation rate std {np.nanstd(rot):.3g} deg/s)")
+    return Candidate("scale_factor", params, se, fit.chi2_gain, len(names), ev, X @ fit.beta, X)
+
+
+THERMAL_VARIANTS = {
+    "K0 linear, K1, K2": (("k0_1",), ("k1",), ("k2",)),
+    "K0 linear, K1/K2 by branch": (("k0_1",), ("k1_pos", "k1_neg"), ("k2_pos", "k2_neg")),
+    "K0 quadratic, K1, K2": (("k0_1", "k0_2"), ("k1",), ("k2",)),
+    "K0 quadratic, K1/K2 by branch": (("k0_1", "k0_2"), ("k1_pos", "k1_neg"), ("k2_pos", "k2_neg")),
+}
+
+
+def thermal_drift(ctx: Context) -> Candidate | None:
+    """K0(T) + K1 dT/dt + K2 d2T/dt2 (the simulator's definition): four nested variants
+    at each temperature smoothing of THERMAL_SMOOTHING (one more parameter when it is not
+    the simulator's default), the best BIC wins."""
+    temp = ctx.aux.get("temp_c")
+    if temp is None or not np.nanstd(temp) > 0:
+        return None
+    best = None
+    for smooth_s, diff_s in THERMAL_SMOOTHING:
+        c = _thermal_drift(ctx, temp, smooth_s, diff_s)
+        if best is None or c.bic_gain(ctx.penalty) > best.bic_gain(ctx.penalty):
+            best = c
+    return best
+
+
+#: (smooth_s, diff_step_s) tried for the temperature derivatives (the simulator's
+#: default first): a chamber's slow ramps need a longer smoothing than a drilling tool.
+THERMAL_SMOOTHING = ((10.0, 1.0), (30.0, 10.0), (100.0, 30.0))
+
+
+def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: float) -> Candidate:
+    sm = {"smooth_s": smooth_s, "diff_step_s": diff_s}
+    zero = {"k0_poly_dph": [], "k1_pos": 0.0, "k1_neg": 0.0, "k2_pos": 0.0, "k2_neg": 0.0, **sm}
+    unit = {
+        "k0_1": {**zero, "k0_poly_dph": [0.0, 1.0]}, "k0_2": {**zero, "k0_poly_dph": [0.0, 0.0, 1.0]},
+        "k1_pos": {**zero, "k1_pos": 1.0}, "k1_neg": {**zero, "k1_neg": 1.0},
+        "k2_pos": {**zero, "k2_pos": 1.0}, "k2_neg": {**zero, "k2_neg": 1.0},
+    }
+    cols = {k: unit_rate("thermal_drift", p, ctx) for k, p in unit.items()}
+    cols["k1"] = cols["k1_pos"] + cols["k1_neg"]
+    cols["k2"] = cols["k2_pos"] + cols["k2_neg"]
+    fcols = {k: ctx.wh.fft(v) for k, v in cols.items()}
+    best = None
+    for label, groups in THERMAL_VARIANTS.items():
+        names = [nm for g in groups for nm in g]
+        fit = ctx.wh.gls(np.column_stack([fcols[nm] for nm in names]), ctx.Yf)
+        score = fit.chi2_gain - len(names) * ctx.penalty
+        if best is None or score > best[0]:
+            best = (score, fit, names, label)
+    assert best is not None  # the loop ran at least once
+    _, _, names, label = best
+    X = np.column_stack([cols[nm] for nm in names])
+    fit = judged_gls(ctx, np.column_stack([fcols[nm] for nm in names]))
+    v = dict(zip(names, fit.beta.tolist(), strict=True))
+    s = dict(zip(names, fit.se.tolist(), strict=True))
+    c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
+    rate = X @ fit.beta
+    k0_part = X[:, :2] @ np.array([c1, c2]) if "k0_2" in v else X[:, 0] * c1
+    c0 = -float(np.mean(k0_part[ctx.valid]))
+    params = {"k0_poly_dph": [c0, c1, c2] if "k0_2" in v else [c0, c1],
+              "k1_pos": v.get("k1_pos", v.get("k1", 0.0)), "k1_neg": v.get("k1_neg", v.get("k1", 0.0)),
+              "k2_pos": v.get("k2_pos", v.get("k2", 0.0)), "k2_neg": v.get("k2_neg", v.get("k2", 0.0)), **sm}
+    se = {"k0_c1": s.get("k0_1"), "k1_pos": s.get("k1_pos", s.get("k1")), "k1_neg": s.get("k1_neg", s.get("k1")),
+          "k2_pos": s.get("k2_pos", s.get("k2")), "k2_neg": s.get("k2_neg", s.get("k2"))}
+    if "k0_2" in s:
+        se["k0_c2"] = s["k0_2"]
+    pp = float(np.ptp(rate[ctx.valid]))
+    ev = (f"regression on temperature and its derivatives ({label}; smoothing {smooth_s:g} s, "
+          f"difference step {diff_s:g} s): "
+          + ", ".join(f"{nm} {estimate_text(v[nm], s[nm])}" for nm in names)
+          + f"; predicted drift {pp:.3g} deg/h peak-to-peak over a {np.nanmax(temp) - np.nanmin(temp):.3g} degC span")
+    extra = 0 if (smooth_s, diff_s) == THERMAL_SMOOTHING[0] else 1  # a smoothing moved from the default is fitted
+    return Candidate("thermal_drift", params, se, fit.chi2_gain, len(names) + extra, ev, rate + c0, X)
+

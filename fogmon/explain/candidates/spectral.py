@@ -1,0 +1,116 @@
+"""Spectral noise-type candidates: a Gauss-Markov term (``markov``) and the sensor's own
+low-pass (``bandwidth``), each by the Whittle likelihood of the residual's binned
+periodogram under the model PSD with and without the term."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from fogmon.explain.candidates.base import (
+    LEAKAGE_FLOOR,
+    Candidate,
+    Context,
+    estimate_text,
+    passband_gain2,
+    passband_part,
+    periodogram,
+    stoch_psd,
+)
+from fogmon.explain.fitting import BinnedPeriodogram, filter_gain2, markov_psd
+
+
+def markov(ctx: Context) -> Candidate | None:
+    """Gauss-Markov term: Whittle likelihood over a log grid of correlation times
+    (5 samples .. duration/20), variance by Newton steps (>= 0). A best fit at the
+    longest correlation time is refused (a drift, left to the mean-type effects), and at
+    the shortest (a white-noise level change, left to the white-level effects). Under a
+    ``bandwidth`` filter the term is filtered like the rest of the rate (sim
+    BandwidthFilter) and fitted over the filter's pass band (``passband_part``): a
+    correlation time of 5 samples or more puts less than 1/(2 pi 5 x 0.45)^2 = 0.5 % of
+    its low-frequency PSD near Nyquist, so the bins left out carry next to nothing on it."""
+    bp = passband_part(ctx, periodogram(ctx))
+    G = passband_gain2(ctx.stoch, bp.omega)
+    S0 = stoch_psd(ctx, bp)
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    d0 = bp.deviance(S0, floor)
+    T = ctx.n / ctx.sample_rate_hz
+    best = None
+    grid = np.geomspace(5.0 / ctx.sample_rate_hz, T / 20.0, 36)
+    for tc in grid:
+        P = G * markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
+        v = _newton_variance(bp, S0, P)
+        if v <= 0:
+            continue
+        g = d0 - bp.deviance(S0 + v * P, floor)
+        if best is None or g > best[0]:
+            best = (g, tc, v)
+    if best is None or best[1] >= grid[-1] or best[1] <= grid[0]:
+        return None  # at the grid's ends it is a drift or a white-noise level, not a Gauss-Markov term
+    g, tc, v = best
+    sigma = math.sqrt(v)
+    # se of sigma from the curvature in v
+    P = G * markov_psd(bp.omega, ctx.sample_rate_hz, 1.0, tc)
+    S = S0 + v * P
+    info = float(np.sum(bp.count * P ** 2 / S ** 2))
+    se_sigma = math.sqrt(1.0 / info) / (2 * sigma) if info > 0 else float("nan")
+    band = ("" if G.min() == 1.0 else
+            f" over 0-{bp.omega[-1] * ctx.sample_rate_hz / (2 * math.pi):.4g} Hz (the bandwidth filter's pass band)")
+    ev = (f"Whittle fit of the residual spectrum{band}: Gauss-Markov sigma {estimate_text(sigma, se_sigma)} deg/h, "
+          f"correlation time {tc:.4g} s (ADEV hump {0.618 * sigma:.3g} deg/h near tau = {1.89 * tc:.3g} s)")
+    return Candidate("markov", {"tau_c_s": float(tc), "sigma_dph": sigma}, {"sigma_dph": se_sigma}, g, 2, ev)
+
+
+def _newton_variance(bp: BinnedPeriodogram, S0: np.ndarray, P: np.ndarray) -> float:
+    v = 0.0
+    for _ in range(30):
+        S = S0 + v * P
+        g1 = float(np.sum(bp.count * P * (1.0 / S - bp.I / S ** 2)))
+        g2 = float(np.sum(bp.count * P ** 2 * (-1.0 / S ** 2 + 2.0 * bp.I / S ** 3)))
+        if g2 <= 0:
+            break
+        v_new = max(v - g1 / g2, 0.0)
+        if abs(v_new - v) <= 1e-9 * max(v_new, 1e-300):
+            v = v_new
+            break
+        v = v_new
+    return v
+
+
+def bandwidth(ctx: Context) -> Candidate | None:
+    """The sensor's own low-pass: Butterworth order 1..4, cutoff on a log grid from
+    fs/500 to 0.49 fs, by Whittle likelihood of the residual spectrum."""
+    if any(e.kind == "bandwidth" for e in ctx.stoch.effects):
+        return None
+    bp = periodogram(ctx)
+    S0 = stoch_psd(ctx, bp)
+    floor = LEAKAGE_FLOOR * float(np.median(S0))
+    d0 = bp.deviance(S0, floor)
+
+    def gain(order, fc):
+        p = {"cutoff_hz": float(fc), "order": int(order), "taps": []}
+        return d0 - bp.deviance(S0 * filter_gain2(p, ctx.sample_rate_hz, bp.omega), floor), p
+
+    best = None
+    grid = np.geomspace(ctx.sample_rate_hz / 500.0, 0.49 * ctx.sample_rate_hz, 48)
+    for order in (1, 2, 3, 4):
+        gains = [gain(order, fc)[0] for fc in grid]
+        i = int(np.argmax(gains))
+        a, b = math.log(grid[max(i - 1, 0)]), math.log(grid[min(i + 1, len(grid) - 1)])
+        r = (math.sqrt(5) - 1) / 2
+        for _ in range(30):  # golden section on log cutoff
+            c, d = b - r * (b - a), a + r * (b - a)
+            if gain(order, math.exp(c))[0] > gain(order, math.exp(d))[0]:
+                b = d
+            else:
+                a = c
+        g, p = gain(order, math.exp((a + b) / 2))
+        if best is None or g > best[0]:
+            best = (g, p)
+    assert best is not None  # the loop ran at least once
+    g, p = best
+    ev = (f"Whittle fit of the residual spectrum: high frequencies fall below the model, as a "
+          f"Butterworth low-pass of order {p['order']} at {p['cutoff_hz']:.4g} Hz")
+    return Candidate("bandwidth", p, {}, g, 2, ev)
+
+

@@ -1,0 +1,120 @@
+"""The report's warnings about what the record cannot establish (docs/formats.md):
+``record_too_short`` (model terms the record is too short to test) and
+``nonstationary`` (excess left after the selection that is a burst of noise, which no
+stationary effect kind models)."""
+from __future__ import annotations
+
+import numpy as np
+
+from fogmon.explain import detectors, mismatch
+from fogmon.explain.analysis import Analysis
+from fogmon.sim.model import SensorModel
+
+#: A slow model term the record cannot test: its share of the model's Allan variance at
+#: the longest whole-record tau (duration / 4) is below this.
+UNTESTABLE_SHARE = 0.1
+
+
+def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
+    """``record_too_short`` warnings (docs/formats.md): a map with fewer than 3 taus
+    (window too short to show how the mismatch depends on tau), and model terms the
+    record is too short to test - IEEE-952 B, K, R below UNTESTABLE_SHARE of the model's
+    Allan variance even at tau = duration / 4, a periodic term with fewer than two
+    periods, a Gauss-Markov correlation time beyond duration / 4."""
+    from fogmon.davar.theory import coefficients_to_avar_terms
+
+    t0, t1 = grid.t0_s, grid.t0_s + grid.n / grid.sample_rate_hz
+    dur = grid.n / grid.sample_rate_hz
+    tau_max = float(grid.tau_whole_s[-1])
+    out = []
+
+    def warn(text):
+        out.append({"kind": "record_too_short", "t_start_s": t0, "t_end_s": t1, "text": text})
+
+    if len(grid.m) < 3:
+        warn(f"the map window ({grid.window_s:.6g} s) holds only {len(grid.m)} octave tau(s) up to "
+             f"{grid.tau_s[-1]:.6g} s: too few to show how a mismatch depends on tau (use a longer --window-s "
+             f"or a longer recording)")
+    nz = model.noise
+    terms = coefficients_to_avar_terms(nz.Q_arcsec, nz.N_dpsh, nz.B_dph, nz.K_dphsh, nz.R_dphh)
+    parts = [float(terms[i]) * tau_max ** float(p) for i, p in enumerate((-2, -1, 0, 1, 2))]
+    total = sum(parts)
+    for i, (name, value, unit) in enumerate((("B", nz.B_dph, "deg/h"), ("K", nz.K_dphsh, "deg/h/sqrt(h)"),
+                                             ("R", nz.R_dphh, "deg/h^2")), start=2):
+        if value > 0 and total > 0 and parts[i] < UNTESTABLE_SHARE * total:
+            warn(f"the model's {name} = {value:.4g} {unit} is {100 * parts[i] / total:.2g} % of its Allan "
+                 f"variance even at the longest tau this {dur:.6g} s record supports ({tau_max:.6g} s = duration/4): "
+                 f"the record cannot test it")
+    for e in model.effects:
+        if e.kind == "periodic" and e.params["period_s"] > dur / 2:
+            warn(f"the model's periodic term ({e.params['period_s']:.6g} s) completes fewer than two periods "
+                 f"in this {dur:.6g} s record: it cannot be told from a drift")
+        if e.kind == "markov" and e.params["tau_c_s"] > tau_max:
+            warn(f"the model's Gauss-Markov correlation time ({e.params['tau_c_s']:.6g} s) is beyond the longest "
+                 f"tau this {dur:.6g} s record supports ({tau_max:.6g} s)")
+    return out
+
+
+#: A region left after the selection is a non-stationary burst when the residual's rms in
+#: the band its taus respond to stands at least this many standard deviations above the
+#: record's other spans of its length (detectors.band_rms_burst) and it spans at most
+#: BURST_MAX_SHARE of the record
+BURST_Z = 3.0
+BURST_MAX_SHARE = 0.5
+
+
+def nonstationary_warnings(after: Analysis, y: np.ndarray, valid: np.ndarray, grid: mismatch.Grid
+                           ) -> tuple[list[dict], list[mismatch.Region]]:
+    """``nonstationary`` warnings (docs/formats.md) for the excess regions left in
+    ``after`` that are band-limited rms bursts of the residual ``y`` (BURST_Z), and for a
+    whole-record excess those bursts account for (without their spans the whole-record
+    ADEV at its taus is inside the null's threshold); with the regions they name. Such
+    excess is non-stationary noise - ground motion, a disturbance - that no stationary
+    effect kind models, not missing sensor physics."""
+    fs = grid.sample_rate_hz
+    out: list[dict] = []
+    named: list[mismatch.Region] = []
+    spans: list[tuple[int, int]] = []
+    for r in after.regions:
+        if r.whole_record or r.sign < 0:
+            continue
+        i0 = max(int(round((r.t_start_s - grid.t0_s) * fs)), 0)
+        i1 = min(int(round((r.t_end_s - grid.t0_s) * fs)), grid.n)
+        if i1 - i0 > BURST_MAX_SHARE * grid.n:
+            continue
+        lo, hi = detectors.tau_band_hz(r.tau_min_s, r.tau_max_s, fs)
+        b = detectors.band_rms_burst(y, valid, fs, i0, i1, lo, hi)
+        if b is None or b.z < BURST_Z:
+            continue
+        spans.append((i0, i1))
+        named.append(r)
+        out.append({"kind": "nonstationary", "t_start_s": r.t_start_s, "t_end_s": r.t_end_s,
+                    "text": f"the excess at tau {r.tau_min_s:g}..{r.tau_max_s:g} s over t = {r.t_start_s:.6g}.."
+                            f"{r.t_end_s:.6g} s is a burst: the residual's rms in the "
+                            f"{b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz band (what those taus respond to) is "
+                            f"{b.rms_ratio:.2f}x the median of the record's "
+                            f"{b.spans_n} other spans of {(i1 - i0) / fs:.4g} s (z = {b.z:.1f}, scatter "
+                            f"{b.sd:.2f} in ln rms): non-stationary noise (ground motion, a disturbance) that "
+                            f"no stationary effect kind models, not missing sensor physics"})
+    if not spans:
+        return out, named
+    keep = valid.copy()
+    for i0, i1 in spans:
+        keep[i0:i1] = False
+    _, whole = mismatch.log_avar(np.where(keep, y, np.nan), keep, grid)
+    _, zw = mismatch.zscores(after.cell, whole, after.null)
+    thr = after.null.threshold_whole
+    t1 = grid.t0_s + grid.n / fs
+    for r in after.regions:
+        if not (r.whole_record and r.sign > 0):
+            continue
+        at = (grid.tau_whole_s >= r.tau_min_s - 1e-12) & (grid.tau_whole_s <= r.tau_max_s + 1e-12)
+        z_left = float(np.nanmax(np.abs(zw[at]))) if np.isfinite(zw[at]).any() else float("nan")
+        if not z_left < thr:
+            continue
+        named.append(r)
+        out.append({"kind": "nonstationary", "t_start_s": grid.t0_s, "t_end_s": t1,
+                    "text": f"the whole-record excess at tau {r.tau_min_s:g}..{r.tau_max_s:g} s (ADEV ratio "
+                            f"{r.ratio:.3g}) is the bursts': without their spans the whole-record ADEV there is "
+                            f"inside the null (largest |z| {z_left:.2f} < {thr:.2f})"})
+    return out, named

@@ -1,0 +1,364 @@
+"""Forward selection of candidate physics (docs/explain.md): the frozen ``Selection``
+state - the current fit, the effects accepted, the kinds refused, contradicted or
+deferred, this round's candidates still to judge - whose ``step`` judges the next
+candidate (BIC, held-out check, the map's verdict, the score) and returns the next
+state; ``explain`` steps until the state is ``done``."""
+from __future__ import annotations
+
+from collections.abc import Mapping, Set as AbstractSet
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+from fogmon.explain import mismatch
+from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
+from fogmon.explain.bootstrap import Progress, bootstrap
+from fogmon.explain.candidates import CANDIDATES, Candidate, Context
+from fogmon.explain.fitting import Whittle
+from fogmon.formats.recording import Recording
+from fogmon.sim.model import SensorModel
+
+#: how many times a kind may be added (several spectral lines are common)
+MAX_PER_KIND = {"periodic": 4, "bias_step": 2, "vibration_lines": 2}
+#: kinds not tried against the baseline (no --model): its coefficients are the
+#: recording's own, so a corrected [noise] would not be a finding
+BASELINE_EXCLUDED = ("noise",)
+
+
+@dataclass
+class Accepted:
+    """An accepted effect with its selection statistics and per-effect scores."""
+
+    cand: Candidate
+    bic_gain: float
+    heldout: str
+    score_before: float
+    score_after: float
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """The residual against the model with the effects accepted so far, and what judges
+    it: the residual ``y`` (deg/h, 0 where invalid), the stochastic model ``stoch``, its
+    bootstrap ``null``, the candidates' context ``ctx``, the candidates ``cands`` fitted
+    to it (best BIC first, ``candidates``) and the map's ``analysis``."""
+
+    y: np.ndarray
+    stoch: SensorModel
+    null: mismatch.Null
+    ctx: Context
+    cands: list[Candidate]
+    analysis: Analysis
+
+
+@dataclass(frozen=True, eq=False)
+class Setting:
+    """What stays fixed while effects are selected: the sample grid's times ``t_s`` (s),
+    gap-filled ``aux`` channels and ``valid`` mask; ``like``, the recording (without its
+    rate) that bootstraps simulate like; the map ``grid``; the bootstrap's ``n_boot``
+    replicates, ``seed``, family-wise ``alpha`` and ``workers``; the effect budget
+    ``max_effects``; where ``progress`` goes."""
+
+    t_s: np.ndarray
+    aux: dict
+    valid: np.ndarray
+    like: Recording
+    grid: mismatch.Grid
+    n_boot: int
+    seed: int
+    alpha: float
+    workers: int
+    max_effects: int
+    progress: Progress | None = None
+
+    def fit(self, y: np.ndarray, stoch: SensorModel, null: mismatch.Null, counts: Mapping[str, int],
+            contradicted: AbstractSet[str]) -> Fit:
+        """The residual ``y`` (deg/h) judged against ``stoch`` and its ``null``: the
+        context, the candidates (``counts``: kind -> times added) and the analysis (the
+        tests of the ``contradicted`` kinds not counted in its score)."""
+        ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
+        cands = candidates(ctx, counts)
+        return Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
+
+
+@dataclass(frozen=True, eq=False)
+class Verdict:
+    """What the search does with one candidate (``Selection.judge``): ``action`` "stop"
+    (its BIC gain is not positive: the rest of its tier is no better), "defer" (retried
+    after the next acceptance), "reject" (for good), "contradicted" (for good: added, it
+    opens a whole-record deficit in the map) or "accept"; its ``bic_gain``, ``why`` (for
+    an accepted one its held-out note) and, accepted, the ``trial`` fit with it added."""
+
+    action: Literal["stop", "defer", "reject", "contradicted", "accept"]
+    bic_gain: float
+    why: str = ""
+    trial: Fit | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Selection:
+    """The state of the forward selection: the current ``fit`` (against the model with
+    the ``accepted`` effects; ``counts``: kind -> times added), the ``rejected``
+    candidates (kind, BIC gain, why) with the kinds ``refused`` for good (those of them
+    the map ``contradicted`` no longer count in the score's tests), the kinds
+    ``deferred`` until the next acceptance (kind -> (BIC gain, why)), and ``pending``:
+    this round's candidates still to judge, tier by tier (``tiers``)."""
+
+    setting: Setting
+    fit: Fit
+    counts: Mapping[str, int]
+    accepted: tuple[Accepted, ...] = ()
+    rejected: tuple[tuple[str, float, str], ...] = ()
+    refused: frozenset[str] = frozenset()
+    contradicted: frozenset[str] = frozenset()
+    deferred: Mapping[str, tuple[float, str]] = field(default_factory=dict)
+    pending: tuple[tuple[Candidate, ...], ...] = ()
+
+    @classmethod
+    def start(cls, setting: Setting, y: np.ndarray, stoch: SensorModel, null: mismatch.Null,
+              baseline: bool) -> Selection:
+        """The state before any effect: residual ``y`` (deg/h) against ``stoch`` and its
+        ``null`` (``baseline``: the model was fitted from the recording, BASELINE_EXCLUDED)."""
+        counts = {k: MAX_PER_KIND.get(k, 1) for k in BASELINE_EXCLUDED} if baseline else {}
+        fit = setting.fit(y, stoch, null, counts, frozenset())
+        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset()))
+
+    @property
+    def done(self) -> bool:
+        """No candidate left to judge in this round, or the effect budget spent."""
+        return not self.pending or len(self.accepted) >= self.setting.max_effects
+
+    def step(self) -> Selection:
+        """The state after judging the next pending candidate (``judge``): its tier
+        ended (stop), it deferred, rejected or contradicted (the score's tests then
+        taken again without it), or it accepted (a new round on the trial's fit)."""
+        c = self.pending[0][0]
+        v = self.judge(c)
+        if v.action == "stop":
+            return replace(self, pending=self.pending[1:])
+        tier = self.pending[0][1:]
+        rest = ((tier,) if tier else ()) + self.pending[1:]
+        if v.action == "defer":
+            return replace(self, deferred={**self.deferred, c.kind: (v.bic_gain, v.why)}, pending=rest)
+        if v.action in ("reject", "contradicted"):
+            out = replace(self, rejected=(*self.rejected, (c.kind, v.bic_gain, v.why)),
+                          refused=self.refused | {c.kind}, pending=rest)
+            if v.action == "reject":
+                return out
+            contradicted = self.contradicted | {c.kind}
+            f = self.fit
+            return replace(out, contradicted=contradicted,
+                           fit=replace(f, analysis=rescored(f.analysis, f.cands, f.ctx.penalty, contradicted)))
+        assert v.trial is not None  # an accepted candidate comes with its trial
+        before, after = self.fit.analysis.score.value, v.trial.analysis.score.value
+        accepted = (*self.accepted, Accepted(c, v.bic_gain, v.why, before, after))
+        if self.setting.progress:
+            self.setting.progress(f"effect {len(accepted)}: {c.kind} (score {before:.3g} -> {after:.3g})", 0, 0)
+        return replace(self, fit=v.trial, counts={**self.counts, c.kind: self.counts.get(c.kind, 0) + 1},
+                       accepted=accepted, deferred={}, pending=_pending(v.trial.cands, self.refused))
+
+    def judge(self, c: Candidate) -> Verdict:
+        """What the search does with candidate ``c`` of the current round: stop when its
+        BIC gain is not positive; defer a periodic term inside a resolved vibration line;
+        reject one failing the held-out check; then try it (``trial``): contradicted
+        when the map shows a new whole-record deficit (not for effects with an estimate:
+        subtracted ones, and vibration lines, whose band-pass shape may leave a deficit
+        elsewhere; guarded, real sway lines were refused, docs/explain.md, limits),
+        deferred when it does not lower the score, else accepted."""
+        ctx, current = self.fit.ctx, self.fit.analysis
+        bg = c.bic_gain(ctx.penalty)
+        if bg <= 0:
+            return Verdict("stop", bg)
+        line = _inside_line(c, self.fit.cands, ctx.sample_rate_hz / ctx.n)
+        if line is not None:
+            return Verdict("defer", bg, f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
+                                        f"vibration_lines fits (random vibration, not one coherent sinusoid)")
+        ok, note = _heldout(ctx, c)
+        if not ok:
+            return Verdict("reject", bg, f"failed the held-out check: {note}")
+        trial = self.trial(c)
+        after = trial.analysis
+        overfit = _new_deficit(current, after) if c.rate is None else None
+        if overfit is not None:
+            return Verdict("contradicted", bg, f"makes the model noisier than the recording at tau {overfit} s (the "
+                                               f"spectral fit trades long taus for short ones; its test no longer "
+                                               f"counts in the score)")
+        if not _lowers(current.score.value, after.score.value):
+            return Verdict("defer", bg, f"does not lower the score ({current.score.value:.3f} -> "
+                                        f"{after.score.value:.3f}): what it fits is within chance "
+                                        f"next to what is still missing")
+        return Verdict("accept", bg, note, trial)
+
+    def trial(self, c: Candidate) -> Fit:
+        """The fit with ``c`` added: a mean-type effect, or outliers replaced, is
+        subtracted from the residual (same null); a noise-type one joins the stochastic
+        model (a new bootstrap null)."""
+        s, f = self.setting, self.fit
+        if _subtracted(c):
+            y, stoch, null = np.where(s.valid, f.y - c.rate, 0.0), f.stoch, f.null
+        else:
+            y, stoch = f.y, _joined(f.stoch, c)
+            if s.progress:
+                s.progress(f"bootstrap null with {c.kind} added: {s.n_boot} simulations", 0, 0)
+            null = bootstrap(stoch, s.like, s.grid, s.n_boot, s.seed + 7919 * (len(self.accepted) + 1), s.alpha,
+                             s.workers, s.progress)
+        return s.fit(y, stoch, null, {**self.counts, c.kind: self.counts.get(c.kind, 0) + 1}, self.contradicted)
+
+    def rejections(self) -> list[tuple[str, float, str]]:
+        """Every candidate not accepted, as (kind, BIC gain, why): those rejected or
+        contradicted, those deferred when the search ended, and those of its last round
+        below the bar."""
+        pen = self.fit.ctx.penalty
+        return [*self.rejected, *((k, bg, why) for k, (bg, why) in self.deferred.items()),
+                *((c.kind, c.bic_gain(pen), "below the frequency search's chance bar"
+                   if c.search_bar > c.k * pen else "below the BIC bar") for c in self.fit.cands
+                  if c.bic_gain(pen) <= 0 and c.kind not in self.refused)]
+
+
+def candidates(ctx: Context, counts: Mapping[str, int]) -> list[Candidate]:
+    """Every applicable candidate (``CANDIDATES``) fitted to the current residual, best
+    BIC first (refused kinds included: they still measure what is missing, the score's
+    ``tests``, unless the map contradicted them, ``analysis.matched_tests_figure``)."""
+    out = []
+    for kind, fn in CANDIDATES.items():
+        if counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
+            continue
+        c = fn(ctx)
+        if c is not None:
+            out.append(c)
+    out.sort(key=lambda c: -c.bic_gain(ctx.penalty))
+    return out
+
+
+def _pending(cands: list[Candidate], refused: AbstractSet[str]) -> tuple[tuple[Candidate, ...], ...]:
+    """A round's candidates to judge, tier by tier (``tiers``; empty tiers left out),
+    without the kinds refused for good (each kind is fitted once per round, so nothing
+    else needs skipping within it)."""
+    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands))
+    return tuple(tier for tier in kept if tier)
+
+
+def _joined(stoch: SensorModel, c: Candidate) -> SensorModel:
+    """The stochastic model with the noise-type candidate ``c``: the noise kind's
+    corrected coefficients (no new effect), or its effect added to the model it joins
+    (``stoch_base``, with a white-level effect's N0)."""
+    if c.corrected_noise is not None:
+        return SensorModel(stoch.sample_rate_hz, 0.0, c.corrected_noise, stoch.effects)
+    base = stoch if c.stoch_base is None else c.stoch_base
+    noise = base.noise if c.white_n0_dpsh is None else replace(base.noise, N_dpsh=c.white_n0_dpsh)
+    return SensorModel(stoch.sample_rate_hz, 0.0, noise, [*base.effects, c.effect()])
+
+
+def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
+    """Selection order: effects tied to time structure or an aux channel (mean-type,
+    white-level) first; the broad spectral noise terms (markov, bandwidth) only when
+    none of those passes - a spectral term can always soak up part of a deterministic
+    signal's power, never the other way round. Corrected IEEE-952 coefficients (the
+    ``noise`` kind) compete in the first tier by BIC gain - every GLS test there assumes
+    the model's noise, so a wrong B or N can fake a step or a ramp - but never ahead of
+    a white-level effect: when an aux channel co-varies with the white level, the
+    physical effect is preferred over a corrected N."""
+    first = [c for c in cands if c.nature in ("mean", "white_level", "coefficients") or _subtracted(c)]
+    levels = [c for c in first if c.nature == "white_level"]
+    coef = [c for c in first if c.nature == "coefficients"]
+    if coef and levels:  # the coefficient correction moves behind the last white-level candidate
+        first = [c for c in first if c.nature != "coefficients"]
+        at = first.index(levels[-1]) + 1
+        first[at:at] = coef
+    return [first, [c for c in cands if c not in first]]
+
+
+def _heldout_mean(ctx: Context, X: np.ndarray) -> tuple[bool, str]:
+    """Fit on one half of the record, predict the other: wherever the half-fit is itself
+    significant (chi2 gain > 9) and predicts a visible effect in the other half
+    (expected chi2 > 9), the other half's chi-square must drop."""
+    n = ctx.n
+    half = np.arange(n) < n // 2
+    notes = []
+    ok = True
+
+    def centred(m):  # each half gets its own intercept (the bias is free in each half)
+        v = ctx.valid & m
+        return (np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v)
+
+    for fit_m, test_m, name in ((half, ~half, "second"), (~half, half, "first")):
+        yf, Xf, vf = centred(fit_m)
+        wf = Whittle(ctx.wh.S, n, vf)
+        fit = wf.gls(wf.fft(Xf), wf.fft(yf))
+        if fit.chi2_gain < 9.0:
+            notes.append(f"{name} half: n/a (not determined by the other half)")
+            continue
+        yt, Xt, vt = centred(test_m)
+        wt = Whittle(ctx.wh.S, n, vt)
+        XtF = wt.fft(Xt)
+        expected = wt.chi2(XtF @ fit.beta)
+        if expected < 9.0:
+            notes.append(f"{name} half: n/a (effect not visible there)")
+            continue
+        g = wt.gain_of(fit.beta, XtF, wt.fft(yt))
+        notes.append(f"{name} half: chi2 drop {g:.1f} (expected {expected:.1f})")
+        ok &= g > 0
+    return ok, "; ".join(notes)
+
+
+def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:
+    if c.design is not None:
+        return _heldout_mean(ctx, c.design)
+    if c.heldout is not None:
+        res = c.heldout()
+        ok = all(g > 0 for g, exp in res if exp >= 9.0)
+        return ok, "; ".join(f"{h} half: chi2 drop {g:.1f} (expected {e:.1f})"
+                             for h, (g, e) in zip(("second", "first"), res, strict=True))
+    return True, "n/a (spectral or spike fit on the whole record)"
+
+
+#: a fitted line this many frequency resolutions 1/T wide is resolved: band-limited
+#: noise, not a coherent sinusoid
+LINE_RESOLVED_BINS = 4.0
+
+
+def _inside_line(c: Candidate, cands: list[Candidate], df_hz: float) -> float | None:
+    """Centre (Hz) of a resolved vibration_lines line holding a periodic candidate's
+    frequency (within half its -3 dB bandwidth), or None: such a line is one random
+    process, which periodic terms would only chase bin by bin."""
+    if c.kind != "periodic":
+        return None
+    f = 1.0 / c.params["period_s"]
+    for o in cands:
+        if o.kind == "vibration_lines" and o.bic_gain(0.0) > 0:
+            for fl, bw in zip(o.params["freq_hz"], o.params["bandwidth_hz"], strict=True):
+                if bw >= LINE_RESOLVED_BINS * df_hz and abs(f - fl) <= bw / 2:
+                    return float(fl)
+    return None
+
+
+def _new_deficit(before: Analysis, after: Analysis) -> str | None:
+    """Tau band (text) of a whole-record deficit region present after a noise-type effect
+    was added but not before, or None."""
+    old = [(r.tau_min_s, r.tau_max_s) for r in before.regions if r.whole_record and r.sign < 0]
+    for r in after.regions:
+        if r.whole_record and r.sign < 0 and not any(lo <= r.tau_max_s and r.tau_min_s <= hi for lo, hi in old):
+            return f"{r.tau_min_s:.4g}..{r.tau_max_s:.4g}"
+    return None
+
+
+#: Smallest score drop an accepted effect must bring: the report rounds scores to 3
+#: decimals, and its invariant is score_after < score_before for every effect.
+MIN_SCORE_DROP = 0.002
+#: ... and at least this share of the score: the score's figures are ratios to bootstrap
+#: estimates (the null's median max |z| from 40..100 replicates is known to 1-2 %), so
+#: a smaller change is below what the score resolves, not an improvement (a real MEMS
+#: record had a bias step accepted for 5.85 -> 5.84)
+MIN_SCORE_DROP_SHARE = 0.01
+
+
+def _lowers(before: float, after: float) -> bool:
+    return after <= before - max(MIN_SCORE_DROP, MIN_SCORE_DROP_SHARE * before)
+
+
+def _subtracted(c: Candidate) -> bool:
+    """Whether ``c`` is taken out of the residual (the null stays): a mean-type effect, or
+    outliers replaced; other noise-type effects join the stochastic model (their ``rate``,
+    a vibration_lines' Wiener estimate, serves --out-corrected only)."""
+    return c.nature == "mean" or c.kind == "outliers"

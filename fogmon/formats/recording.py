@@ -1,0 +1,221 @@
+"""A recording in memory (``Recording``) and what the replay log's two forms, CSV
+(fogmon.formats.replay_log) and Parquet (fogmon.formats.parquet_log), share: the rate
+columns' names (``rate_dph``, or ``rate_<axis>_dph`` per axis), the nominal sample rate
+(Hz) and the uniform sample grid the samples sit on (s)."""
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fogmon.block import Block, axis_aux, is_axis_name, parse_axes
+from fogmon.errors import FogmonError
+
+#: the rate column of one axis of a multi-axis log
+_AXIS_RATE = re.compile(r"rate_(.*)_dph")
+#: without ``sample_rate_hz`` metadata the rate is 1 / the median interval of this many
+#: first samples (so a reader need not hold the file to know it)
+RATE_SAMPLES = 1 << 16
+#: the highest sample rate a recording may state (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz)
+MAX_SAMPLE_RATE_HZ = 1e6
+#: a file's time gaps may hold at most this many times the samples present in it: more is a
+#: corrupt time stamp or rate, not an outage (a laptop suspended overnight between two hours
+#: of recording is 4 times)
+MAX_MISSING_RATIO = 100
+#: a rate in `sample_rate_hz` metadata and the time stamps may differ by this fraction
+RATE_TOLERANCE = 0.01
+
+
+@dataclass
+class Recording:
+    """A whole recording in memory: ``t_s`` (s), ``rate_dph`` (deg/h), auxiliary
+    channels by column name, ``meta`` from ``# key: value`` lines, and how many bad
+    rows were skipped when reading tolerantly. Several axes: ``axes`` names them and
+    ``rate_dph`` has one column per axis (aux as in fogmon.block); ``for_axis(name)``
+    is the one-axis recording every one-axis analysis takes."""
+
+    t_s: np.ndarray
+    rate_dph: np.ndarray
+    aux: dict[str, np.ndarray] = field(default_factory=dict)
+    meta: dict[str, str] = field(default_factory=dict)
+    path: str | None = None
+    skipped_rows: int = 0
+    axes: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        return os.path.basename(self.path) if self.path else "<memory>"
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Nominal sample rate in Hz (``sample_rate_from``)."""
+        return sample_rate_from(self.meta, self.t_s, self.name)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t_s[-1] - self.t_s[0]) + 1.0 / self.sample_rate_hz if len(self.t_s) else 0.0
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    def grid_index(self) -> np.ndarray:
+        """Index of every sample on the uniform grid t0 + k / fs (``grid_positions``)."""
+        return grid_positions(self.t_s, float(self.t_s[0]) if len(self.t_s) else 0.0, self.sample_rate_hz, self.name)
+
+    def axis_names(self) -> tuple[str, ...]:
+        """The axes to analyse: ``axes``, or ("",) for a one-axis recording."""
+        return self.axes or ("",)
+
+    def for_axis(self, name: str) -> Recording:
+        """The one-axis recording of axis ``name`` (its rate column, its aux as
+        fogmon.block.axis_aux gives them, ``meta['axis']`` set); a one-axis recording
+        is returned as it is."""
+        if not self.axes:
+            return self
+        if name not in self.axes:
+            raise FogmonError(f"{self.name}: no axis {name!r} (axes: {', '.join(self.axes)})")
+        j = self.axes.index(name)
+        return Recording(self.t_s, self.rate_dph[:, j], axis_aux(self.aux, self.axes, name),
+                         {**self.meta, "axis": name}, self.path, self.skipped_rows)
+
+    def to_block(self) -> Block:
+        """The recording on its uniform sample grid: missing samples (time gaps) become
+        invalid placeholders (rate and aux NaN), so gaps are never joined."""
+        idx = self.grid_index()
+        n = int(idx[-1]) + 1 if len(idx) else 0
+        check_grid_length(n, len(idx), self.name)
+        sample_rate_hz = self.sample_rate_hz
+        t = self.t_s[0] + np.arange(n) / sample_rate_hz if n else np.zeros(0)
+        if n == len(idx):
+            return Block.make(self.t_s.copy(), self.rate_dph.copy(), aux={k: v.copy() for k, v in self.aux.items()},
+                              axes=self.axes)
+        t[idx] = self.t_s
+        rate = np.full((n, *self.rate_dph.shape[1:]), np.nan)
+        rate[idx] = self.rate_dph
+        aux = {}
+        for k, v in self.aux.items():
+            a = np.full(n, np.nan)
+            a[idx] = v
+            aux[k] = a
+        return Block.make(t, rate, aux=aux, axes=self.axes)
+
+
+def sample_rate_from(meta: dict, t_s: np.ndarray, name: str) -> float:
+    """Nominal sample rate (Hz): metadata ``sample_rate_hz`` when present, otherwise 1 /
+    the median interval of the first RATE_SAMPLES samples ``t_s`` (s)."""
+    if "sample_rate_hz" in meta:
+        try:
+            sample_rate_hz = float(meta["sample_rate_hz"])
+        except ValueError:
+            raise FogmonError(f"{name}: metadata sample_rate_hz is not a number: "
+                              f"{meta['sample_rate_hz']!r}") from None
+        if not (0 < sample_rate_hz <= MAX_SAMPLE_RATE_HZ):
+            raise FogmonError(f"{name}: metadata sample_rate_hz must be > 0 and <= {MAX_SAMPLE_RATE_HZ:g} Hz, got "
+                              f"{sample_rate_hz}")
+        return sample_rate_hz
+    if len(t_s) < 2:
+        raise FogmonError(f"{name}: too few samples to know the sample rate")
+    step = float(np.median(np.diff(t_s[:RATE_SAMPLES])))
+    if not step >= 1.0 / MAX_SAMPLE_RATE_HZ:
+        raise FogmonError(f"{name}: column time_s: median step {step!r} s: not time stamps of a sample rate "
+                          f"up to {MAX_SAMPLE_RATE_HZ:g} Hz")
+    return 1.0 / step
+
+
+def check_grid_length(n_grid: int, n_present: int, name: str, field: str = "time_s") -> None:
+    """A FogmonError when a grid of ``n_grid`` samples would hold more than
+    MAX_MISSING_RATIO times the ``n_present`` samples a file has in gaps: a corrupt time
+    stamp or rate, not an outage (checked before any array of that length is made)."""
+    if n_grid - n_present > MAX_MISSING_RATIO * max(n_present, 1):
+        raise FogmonError(f"{name}: column {field}: the time stamps span {n_grid:.4g} sample periods for "
+                          f"{n_present} samples (more than {MAX_MISSING_RATIO} times as many missing as present): a "
+                          f"corrupt time stamp or sample rate, not a gap")
+
+
+def check_stated_rate(meta: dict, t_s: np.ndarray, name: str) -> None:
+    """A FogmonError when the metadata ``sample_rate_hz`` and the median step of the
+    first RATE_SAMPLES time stamps ``t_s`` (s) differ by more than RATE_TOLERANCE (both
+    numbers named): a rate that says 100 Hz over stamps 20 ms apart would count every
+    other sample missing and halve every tau."""
+    if "sample_rate_hz" not in meta or len(t_s) < 3:
+        return
+    stated = sample_rate_from(meta, t_s, name)
+    measured = 1.0 / float(np.median(np.diff(t_s[:RATE_SAMPLES])))
+    if abs(stated / measured - 1.0) > RATE_TOLERANCE:
+        raise FogmonError(f"{name}: metadata sample_rate_hz says {stated:.6g} Hz but column time_s steps by "
+                          f"{1 / measured:.6g} s = {measured:.6g} Hz (median): correct or remove the "
+                          f"sample_rate_hz line, or give `force_rate` to keep {stated:.6g} Hz")
+
+
+def grid_positions(
+    t_s: np.ndarray, t0_s: float, sample_rate_hz: float, name: str, after: int = -1, line_of=None
+) -> np.ndarray:
+    """Index k of every sample on the uniform grid ``t0_s + k / fs`` (s, Hz). A sample more
+    than a quarter period off the grid, or two samples in one period (also against grid
+    index ``after`` of the sample before these), is a FogmonError naming the line when
+    ``line_of(i)`` gives it."""
+    k = (np.asarray(t_s) - t0_s) * sample_rate_hz
+    idx = np.rint(k).astype(np.int64)
+    off = np.abs(k - idx)
+
+    def where(i: int) -> str:
+        return f"line {line_of(i)}, column time_s: " if line_of else ""
+
+    if len(off) and off.max() > 0.25:
+        i = int(np.argmax(off))
+        raise FogmonError(f"{name}: {where(i)}sample at time_s={float(t_s[i])!r} is {off[i]:.2f} sample "
+                          f"periods off the {sample_rate_hz:g} Hz grid (is sample_rate_hz right?)")
+    if len(idx) and (idx[0] <= after or np.any(np.diff(idx) < 1)):
+        i = int(np.argmax(np.diff(idx, prepend=after) < 1))
+        raise FogmonError(f"{name}: {where(i)}two samples within one {1 / sample_rate_hz:g} s period at "
+                          f"time_s={float(t_s[i])!r}")
+    return idx
+
+
+def rate_axes(cols: list[str], where: str, shown: str) -> tuple[str, ...]:
+    """The axes a header's columns ``cols`` name: () for one axis (``rate_dph``), else
+    the ``<axis>`` of each ``rate_<axis>_dph`` column in header order. ``time_s`` and
+    exactly one of the two forms are required and an axis name is letters and digits:
+    FogmonError otherwise, starting with ``where`` (file and line) and naming the
+    column; ``shown`` is the header as error messages show it."""
+    if "time_s" not in cols:
+        raise FogmonError(f"{where}: missing required column 'time_s' (header has: {shown})")
+    per_axis = [(c, m.group(1)) for c in cols if (m := _AXIS_RATE.fullmatch(c))]
+    if not per_axis and "rate_dph" not in cols:
+        raise FogmonError(f"{where}: missing required column 'rate_dph' (one axis) or rate_<axis>_dph columns "
+                          f"(several axes) (header has: {shown})")
+    if per_axis and "rate_dph" in cols:
+        raise FogmonError(f"{where}, column {per_axis[0][0]}: a header has rate_dph (one axis) or "
+                          f"rate_<axis>_dph columns (several axes), not both")
+    for c, a in per_axis:
+        if not is_axis_name(a):
+            raise FogmonError(f"{where}, column {c}: axis name {a!r} is not letters and digits")
+    return tuple(a for _, a in per_axis)
+
+
+def pick_axes(axes: tuple[str, ...], asked: str | None, name: str) -> tuple[str, ...] | None:
+    """The axes ``asked`` (the ``axis`` option: a name or a comma list) keeps of a
+    recording ``name`` with ``axes``: None when nothing is to be picked (not asked, or a
+    one-axis recording, where ``axis`` is left to the decoders and readers that take it, as it
+    always was). An axis the recording does not have is a FogmonError listing its axes."""
+    if asked is None or not axes:
+        return None
+    want = parse_axes(asked)
+    for a in want:
+        if a not in axes:
+            raise FogmonError(f"{name}: no axis {a!r} (axes: {', '.join(axes)})")
+    return want
+
+
+def rate_columns(axes: tuple[str, ...]) -> list[str]:
+    """The rate column names: ``rate_dph`` for one axis, ``rate_<axis>_dph`` for several."""
+    return [f"rate_{a}_dph" for a in axes] if axes else ["rate_dph"]
+
+
+def recording_from_arrays(t_s, rate_dph, aux=None, meta=None, axes: tuple[str, ...] = ()) -> Recording:
+    """A Recording from arrays (for notebooks and tests); with ``axes``, ``rate_dph``
+    is (n, len(axes))."""
+    return Recording(np.asarray(t_s, float), np.asarray(rate_dph, float),
+                     {k: np.asarray(v, float) for k, v in (aux or {}).items()}, dict(meta or {}), axes=tuple(axes))
