@@ -6,11 +6,17 @@ in a temporary folder, empty at the start: what a new installation has):
 
 1. the README demo, ``fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd out.rrd``:
    its first run with the empty cache against its warm run (goal <= 6x);
-2. after that first run, in the same cache, three other configurations, each its first
-   run against its warm run (goal <= 2x each: nothing compiles again): a CAN replay (a
+2. after that first run, in the same cache, other configurations, each its first run
+   against its warm run (goal <= 2x each: nothing compiles again): a CAN replay (a
    .blf log of the bundled example DBC written by python-can, 100 Hz, 10 min with a
    lost stretch), ``--duration-s 5`` (a 5 s run: hop below 64 samples, the running-sum
-   engine) and ``fogmon explain`` of the bundled 1 Hz ``sim_mwd_run_1hz.csv``.
+   engine), a three-axis replay log (100 Hz, 1000 s), hop 1 (the demo's first 30 s,
+   ``--window-s 20 --hop-s 0.01``: a window per sample) and ``fogmon explain`` of the
+   bundled 1 Hz ``sim_mwd_run_1hz.csv``;
+3. then, in this process and from the same cache, issue 33's hop-1 ratio: the push at
+   hop 1 (alpha=0) against the engine alone at hop 1024, samples per CPU s, best of
+   ``--runs`` interleaved repeats (benchmarks/bench_davar.py's rows "push alpha=0,
+   hop 1" and "engine alone (advance), hop 1024"; goal >= 0.25x).
 
 Warm figures are medians of ``--runs`` runs of each, interleaved (the machine is shared);
 the first runs are single runs (a first run happens once). The first run's compile is
@@ -20,6 +26,8 @@ switched off (each kernel compiled when a run first needs it, numba's own way): 
 alternative it was measured against.
 
     python benchmarks/bench_first_run.py [--runs 3] [--lazy]
+
+Prints the load average before and after (the machine is shared).
 """
 from __future__ import annotations
 
@@ -59,6 +67,32 @@ def write_can_log(path: Path, seconds: float = 600.0, rate_hz: float = 100.0) ->
             data = msg.encode({"rate": r / 3600.0, "temperature": 20.0, "counter": k % 16, "valid": 1})
             log.on_message_received(can.Message(timestamp=1e6 + k / rate_hz, arbitration_id=msg.frame_id,
                                                 is_extended_id=False, data=data))
+
+
+def write_three_axis_log(path: Path, seconds: float = 1000.0, rate_hz: float = 100.0) -> None:
+    """A replay log of three axes x, y, z: white noise on biases of 10, -5 and 2 deg/h."""
+    from fogmon.formats.replay_log import write_replay_log
+
+    n = int(seconds * rate_hz)
+    rate = np.array([10.0, -5.0, 2.0]) + 0.5 * np.random.default_rng(4).standard_normal((n, 3))
+    write_replay_log(path, np.arange(n) / rate_hz, rate, meta={"sample_rate_hz": rate_hz}, axes=("x", "y", "z"))
+
+
+def hop1_ratio(runs: int) -> tuple[float, float, float]:
+    """(push alpha=0 at hop 1, engine alone at hop 1024: samples per CPU s, best of
+    ``runs`` interleaved repeats; their ratio), as benchmarks/bench_davar.py measures them."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from bench_davar import BLOCK, N_TAUS, WINDOW, log_taus, stream
+
+    m = log_taus(N_TAUS, WINDOW // 4)
+    y = 1000.0 + np.random.default_rng(0).normal(size=2_000_000)
+    n_hop1 = WINDOW + 32 * BLOCK
+    stream(y[:n_hop1], m, 1, 0)   # load the kernels
+    push = engine = 0.0
+    for _ in range(runs):
+        push = max(push, stream(y[:n_hop1], m, 1, 0))
+        engine = max(engine, stream(y, m, 1024, 0, "advance"))
+    return push, engine, push / engine
 
 
 def run(args: list[str], cache: Path, warm_up: bool) -> tuple[float, float | None]:
@@ -104,23 +138,36 @@ def main() -> None:
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
+        os.environ["NUMBA_CACHE_DIR"] = str(tmp / "cache")   # before numba's import: the hop-1 ratio's cache
         can_log = tmp / "gyro.blf"
         write_can_log(can_log)
+        axes_log = tmp / "axes3.csv"
+        write_three_axis_log(axes_log)
         configs = {
             "README demo: replay lasergyro_z_100hz.csv --rrd": ["replay", str(DEMO), "--rrd", str(tmp / "demo.rrd")],
             "CAN replay: replay gyro.blf --dbc (10 min, 100 Hz)": ["replay", str(can_log), "--dbc", str(DBC),
                                                                    "--rrd", str(tmp / "can.rrd")],
             "replay lasergyro_z_100hz.csv --duration-s 5": ["replay", str(DEMO), "--duration-s", "5",
                                                             "--rrd", str(tmp / "d5.rrd")],
+            "three axes: replay axes3.csv (100 Hz, 1000 s)": ["replay", str(axes_log), "--rrd", str(tmp / "ax.rrd")],
+            "hop 1: replay lasergyro_z_100hz.csv --duration-s 30": ["replay", str(DEMO), "--duration-s", "30",
+                                                                    "--window-s", "20", "--hop-s", "0.01",
+                                                                    "--rrd", str(tmp / "h1.rrd")],
             "explain sim_mwd_run_1hz.csv (1 Hz, 3 h)": ["explain", str(ONE_HZ), "--report", str(tmp / "ex.json"),
                                                         "--quiet"],
         }
+        print(f"load average {' '.join(f'{v:.1f}' for v in os.getloadavg())} (2 cores shared)")
         print(f"first run after an empty numba cache / warm run, CPU s (warm: medians of {a.runs}, interleaved); "
               f"the first row's first run fills the cache the others start from:")
         table(configs, tmp / "cache", a.runs, True)
         if a.lazy:
             print("the same without the warm-up (each kernel compiled when a run first needs it):")
             table(configs, tmp / "cache_lazy", a.runs, False)
+        push, engine, ratio = hop1_ratio(a.runs)
+        print(f"hop-1 push (alpha=0) {push / 1e6:.2f} M samples/CPU s, engine alone (advance, hop 1024) "
+              f"{engine / 1e6:.2f} M: {ratio:.3f}x  >= 0.25x: {'PASS' if ratio >= 0.25 else 'FAIL'} "
+              f"(best of {a.runs})")
+        print(f"load average {' '.join(f'{v:.1f}' for v in os.getloadavg())}")
 
 
 if __name__ == "__main__":
