@@ -30,7 +30,8 @@ class PipelineConfig:
     rejection, Kalman channel: fogmon.methods.live; ``axis_methods``: an axis's own, for
     the axes of a stream of several axes it names), ``model`` (check every window
     against the model's DADEV band at family-wise ``model_alpha`` per window:
-    fogmon.modelcheck)."""
+    fogmon.modelcheck), ``accels`` (the accelerometers analysed, by name: the aux channels
+    ``accel_<name>_g``; None: every one the stream has, (): none)."""
 
     window_s: float | None = None
     hop_s: float | None = None
@@ -45,6 +46,7 @@ class PipelineConfig:
     axis_methods: dict[str, LiveMethods] = field(default_factory=dict)
     model: SensorModel | None = None
     model_alpha: float = 0.01
+    accels: tuple[str, ...] | None = None
 
 
 def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None) -> tuple[float, float]:
