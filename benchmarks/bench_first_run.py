@@ -16,7 +16,8 @@ in a temporary folder, empty at the start: what a new installation has):
 3. then, in this process and from the same cache, issue 33's hop-1 ratio: the push at
    hop 1 (alpha=0) against the engine alone at hop 1024, samples per CPU s, best of
    ``--runs`` interleaved repeats (benchmarks/bench_davar.py's rows "push alpha=0,
-   hop 1" and "engine alone (advance), hop 1024"; goal >= 0.25x).
+   hop 1" and "engine alone (advance), hop 1024"; goal >= 0.25x), and the engine alone
+   at hop 1 (what the push at hop 1 can at most reach).
 
 Warm figures are medians of ``--runs`` runs of each, interleaved (the machine is shared);
 the first runs are single runs (a first run happens once). The first run's compile is
@@ -79,8 +80,9 @@ def write_three_axis_log(path: Path, seconds: float = 1000.0, rate_hz: float = 1
 
 
 def hop1_ratio(runs: int) -> tuple[float, float, float]:
-    """(push alpha=0 at hop 1, engine alone at hop 1024: samples per CPU s, best of
-    ``runs`` interleaved repeats; their ratio), as benchmarks/bench_davar.py measures them."""
+    """(push alpha=0 at hop 1, engine alone at hop 1, engine alone at hop 1024: samples
+    per CPU s, best of ``runs`` interleaved repeats), as benchmarks/bench_davar.py
+    measures them."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_davar import BLOCK, N_TAUS, WINDOW, log_taus, stream
 
@@ -88,11 +90,12 @@ def hop1_ratio(runs: int) -> tuple[float, float, float]:
     y = 1000.0 + np.random.default_rng(0).normal(size=2_000_000)
     n_hop1 = WINDOW + 32 * BLOCK
     stream(y[:n_hop1], m, 1, 0)   # load the kernels
-    push = engine = 0.0
+    push = engine1 = engine = 0.0
     for _ in range(runs):
         push = max(push, stream(y[:n_hop1], m, 1, 0))
+        engine1 = max(engine1, stream(y[:n_hop1], m, 1, 0, "advance"))
         engine = max(engine, stream(y, m, 1024, 0, "advance"))
-    return push, engine, push / engine
+    return push, engine1, engine
 
 
 def run(args: list[str], cache: Path, warm_up: bool) -> tuple[float, float | None]:
@@ -163,10 +166,12 @@ def main() -> None:
         if a.lazy:
             print("the same without the warm-up (each kernel compiled when a run first needs it):")
             table(configs, tmp / "cache_lazy", a.runs, False)
-        push, engine, ratio = hop1_ratio(a.runs)
-        print(f"hop-1 push (alpha=0) {push / 1e6:.2f} M samples/CPU s, engine alone (advance, hop 1024) "
+        push, engine1, engine = hop1_ratio(a.runs)
+        ratio = push / engine
+        print(f"hop-1 push (alpha=0) {push / 1e6:.2f} M samples/CPU s, engine alone (advance) at hop 1024 "
               f"{engine / 1e6:.2f} M: {ratio:.3f}x  >= 0.25x: {'PASS' if ratio >= 0.25 else 'FAIL'} "
-              f"(best of {a.runs})")
+              f"(best of {a.runs}); the engine alone at hop 1 {engine1 / 1e6:.2f} M, the push "
+              f"{push / engine1:.2f}x that")
         print(f"load average {' '.join(f'{v:.1f}' for v in os.getloadavg())}")
 
 
