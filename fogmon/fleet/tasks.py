@@ -84,7 +84,7 @@ def check(path: str, source: SourceOptions, config: PipelineConfig) -> Plan:
             if n is None:
                 raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
             plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
-            plan.window_s, plan.hop_s = window_and_hop(_analysis(config), plan.sample_rate_hz, plan.n_samples)
+            plan.window_s, plan.hop_s = window_and_hop(_analysis(config), plan.sample_rate_hz, plan.n_samples, path)
             plan.axis, plan.axes = _axis(src), tuple(src.axes)
         finally:
             src.close()

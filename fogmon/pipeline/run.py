@@ -59,7 +59,7 @@ class Pipeline:
         self.source, self.config = source, config
         self.sample_rate_hz = sample_rate_hz = float(source.sample_rate_hz)
         self.total_n = source.n_samples
-        self.window_s, self.hop_s = window_and_hop(config, sample_rate_hz, self.total_n)
+        self.window_s, self.hop_s = window_and_hop(config, sample_rate_hz, self.total_n, source.name)
         rotate_s = config.rotate_s
         self.piece_n = int(round(rotate_s * sample_rate_hz)) if rotate_s else None
         if self.piece_n is not None and self.piece_n < 1:

@@ -21,6 +21,8 @@ from fogmon.sources.files.stamped import StampedSource, dph_per_unit, nearest_sa
 from fogmon.sources.options import SourceOptions
 from fogmon.units import G_PER_UNIT, g_per_unit
 
+#: channel types (MDF4 cn_type) whose bytes lie in the data record: fixed length, master, sync
+IN_RECORD = (0, 2, 4)
 #: names of the master (time) channel, not listed as data
 MASTER_NAMES = ("t", "time")
 
@@ -28,8 +30,35 @@ MASTER_NAMES = ("t", "time")
 def _read(path: str):
     import asammdf
     with reading(f"{path}: not a readable MDF file"):   # asammdf raises MdfException and plain errors
-        return asammdf.MDF(path)
-    raise AssertionError("unreachable")
+        mdf = asammdf.MDF(path)
+    _check_layout(mdf, path)
+    return mdf
+
+
+def check_layout(path: str) -> None:
+    """FogmonError unless the MDF file ``path`` opens and its channels lie inside their
+    records, checked without decoding its bus logging: asammdf decodes an MF4 CAN log
+    while it opens it (python-can's MF4 reader), where a corrupt channel crashes it."""
+    import asammdf
+    with reading(f"{path}: not a readable MDF file"):
+        mdf = asammdf.MDF(path, process_bus_logging=False)  # type: ignore[call-arg]  # an MDF4 option (mdf_v4.py)
+    with mdf:
+        _check_layout(mdf, path)
+
+
+def _check_layout(mdf, path: str) -> None:
+    """FogmonError unless every channel lies inside its data group's record: asammdf's
+    C extension reads a channel whose byte offset a corrupt file puts beyond the record
+    out of bounds (a crash, not an exception)."""
+    for g, group in enumerate(getattr(mdf, "groups", ())):
+        cg = group.channel_group
+        record = int(cg.samples_byte_nr) + int(getattr(cg, "invalidation_bytes_nr", 0))
+        for ch in group.channels:
+            end = int(ch.byte_offset) + (int(ch.bit_offset) + int(ch.bit_count) + 7) // 8
+            if getattr(ch, "channel_type", 0) in IN_RECORD and end > record:
+                mdf.close()
+                raise FogmonError(f"{path}: not a readable MDF file (corrupt: channel {ch.name!r} of data group "
+                                  f"{g} ends at byte {end} of a {record}-byte record)")
 
 
 def info(path: str, opts: SourceOptions) -> list[Entry]:
