@@ -33,9 +33,10 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from fogmon.block import Event
+from fogmon.davar.kernels import heap_sort, median_of
+from fogmon.jit import F2, F8, kernel
 
 #: a block moves beyond K_BLOCK x the quiet scatter of block means ...
 K_BLOCK = 8.0
@@ -76,18 +77,33 @@ def block_samples(sample_rate_hz: float) -> int:
 _TRIMMED_STD_80 = 0.6616
 
 
-@njit(cache=True)
+@kernel((F2,))
 def _trimmed_sigma(x: np.ndarray) -> np.ndarray:
     """Per row of ``x`` (NaN = none): the standard deviation of its middle 80 % over that
     of a normal variable's, i.e. a robust sigma that, unlike a MAD, stays right for
-    quantized values, where most of them tie (NaN for a row with no value)."""
-    out = np.full(x.shape[0], np.nan)
+    quantized values, where most of them tie (NaN for a row with no value). Plain loops
+    (numba's np.sort and np.std cost seconds of compile): the std as numpy.std."""
+    out = np.empty(x.shape[0])
+    v = np.empty(x.shape[1])
     for i in range(x.shape[0]):
-        row = x[i]
-        v = np.sort(row[np.isfinite(row)])
-        k = len(v) // 10
-        if len(v) - 2 * k > 0:
-            out[i] = np.std(v[k:len(v) - k]) / _TRIMMED_STD_80
+        n = 0
+        for j in range(x.shape[1]):
+            if np.isfinite(x[i, j]):
+                v[n] = x[i, j]
+                n += 1
+        heap_sort(v, n)
+        k = n // 10
+        size = n - 2 * k
+        out[i] = np.nan
+        if size > 0:
+            mean = 0.0
+            for j in range(k, n - k):
+                mean += v[j]
+            mean = mean / size
+            ssd = 0.0
+            for j in range(k, n - k):
+                ssd += (v[j] - mean) * (v[j] - mean)
+            out[i] = (ssd / size) ** 0.5 / _TRIMMED_STD_80
     return out
 
 
@@ -98,21 +114,33 @@ def robust_sigma_of_diffs(y: np.ndarray) -> np.ndarray:
     return _trimmed_sigma(np.diff(np.asarray(y, dtype=np.float64), axis=1)) / np.sqrt(2.0)
 
 
-@njit(cache=True)
+@kernel((F2, F8))
 def _block_means(y: np.ndarray, sigma_1: float) -> np.ndarray:
     """Robust mean rate (deg/h) of each row of ``y`` (blocks x samples, NaN = no sample):
     samples beyond K_OUTLIER x ``sigma_1`` from the block median are left out; a block in
     fast motion, where most samples are that far, keeps its median (NaN ``sigma_1``: the
     plain mean; a row with no sample: NaN)."""
-    out = np.full(y.shape[0], np.nan)
+    out = np.empty(y.shape[0])
+    v = np.empty(y.shape[1])
+    w = np.empty(y.shape[1])
     for i in range(y.shape[0]):
-        row = y[i]
-        v = row[np.isfinite(row)]
-        if not len(v):
-            continue
-        med = np.median(v)
-        kept = v[~(np.abs(v - med) > K_OUTLIER * sigma_1)]
-        out[i] = np.mean(kept) if len(kept) >= y.shape[1] // 4 else med
+        n = 0
+        for j in range(y.shape[1]):
+            if np.isfinite(y[i, j]):
+                v[n] = y[i, j]
+                w[n] = y[i, j]
+                n += 1
+        med = median_of(w, n)
+        total = 0.0
+        kept = 0
+        for j in range(n):
+            if not abs(v[j] - med) > K_OUTLIER * sigma_1:
+                total += v[j]
+                kept += 1
+        if kept >= y.shape[1] // 4:
+            out[i] = total / kept if kept else np.nan
+        else:
+            out[i] = med
     return out
 
 
