@@ -6,6 +6,7 @@ it decodes and gates exactly like the live monitor did. The one place that write
 decoder option may take are the decoders' to know: the reader passes them (``choices``)."""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -80,6 +81,10 @@ def _breaks(v, folder):
         if not (isinstance(b, dict) and "offset" in b and "missing_est" in b and _count(b["offset"], folder) is None
                 and _number(0, False)(b["missing_est"], folder) is None):
             return f"item {i}: expected {{\"offset\": bytes >= 0, \"missing_est\": samples >= 0}}, got {b!r}"
+        placed = [k for k in ("frame", "missing", "rule", "wraps") if k in b]
+        if placed and (len(placed) != 4 or any(_count(b[k], folder) for k in placed)):
+            return (f"item {i}: a gap placed by the clock needs \"frame\", \"missing\", \"rule\" and \"wraps\" "
+                    f"as counts >= 0, got {b!r}")
     return None
 
 
@@ -136,10 +141,17 @@ def new_sidecar(spec: dict[str, Any], started_utc: str, piece: int) -> dict[str,
 
 
 def write_sidecar(capture_path: str, sidecar: dict[str, Any]) -> None:
-    """Write ``capture_path + SIDECAR_SUFFIX`` atomically (a reader never sees half of it)."""
+    """Write ``capture_path + SIDECAR_SUFFIX`` atomically (a reader never sees half of it;
+    on an OSError, such as a full disk, the sidecar is as before and no temporary file
+    is left)."""
     path = capture_path + SIDECAR_SUFFIX
     tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(sidecar, fh, indent=1)
-        fh.write("\n")
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(sidecar, fh, indent=1)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        raise

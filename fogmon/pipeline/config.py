@@ -1,6 +1,6 @@
 """What a run is asked to do and the window policy: ``PipelineConfig`` (the frozen options
-fogmon.cli builds, or a caller by hand), the default window and hop (``default_window_s``,
-``window_and_hop``: checked against the sample rate and the samples the run will have),
+fogmon.cli builds, or a caller by hand), the window and hop (``window_and_hop``: the
+defaults of fogmon.window, checked against the sample rate and the samples the run will have),
 the samples of a live run of ``duration_s`` (``live_samples``), and the check that per-axis
 options cover the stream's axes.
 """
@@ -14,16 +14,10 @@ import numpy as np
 from fogmon.errors import FogmonError
 from fogmon.methods.live import LiveMethods
 from fogmon.sim.model import SensorModel
+from fogmon.window import default_window_s
 
 #: What ``taus`` gives ``tau_grid``: a grid name, N per decade, or tau values in s.
 TauSpec = str | int | np.ndarray
-#: Default window bounds in samples (the window is a power of two inside these).
-MIN_WINDOW_SAMPLES = 2**10
-MAX_WINDOW_SAMPLES = 2**20
-#: Live default window in samples (65.5 s at 1 kHz, 655 s at 100 Hz).
-LIVE_WINDOW_SAMPLES = 2**16
-
-
 @dataclass(frozen=True)
 class PipelineConfig:
     """How a run analyses and paces (built from the command line by fogmon.cli, or by hand):
@@ -36,7 +30,8 @@ class PipelineConfig:
     rejection, Kalman channel: fogmon.methods.live; ``axis_methods``: an axis's own, for
     the axes of a stream of several axes it names), ``model`` (check every window
     against the model's DADEV band at family-wise ``model_alpha`` per window:
-    fogmon.modelcheck)."""
+    fogmon.modelcheck), ``accels`` (the accelerometers analysed, by name: the aux channels
+    ``accel_<name>_g``; None: every one the stream has, (): none)."""
 
     window_s: float | None = None
     hop_s: float | None = None
@@ -51,24 +46,15 @@ class PipelineConfig:
     axis_methods: dict[str, LiveMethods] = field(default_factory=dict)
     model: SensorModel | None = None
     model_alpha: float = 0.01
+    accels: tuple[str, ...] | None = None
 
 
-def default_window_s(sample_rate_hz: float, n_samples: int | None) -> float:
-    """Default window in s: for a record of ``n_samples`` a quarter of it rounded down to a
-    power of two of samples (within MIN..MAX_WINDOW_SAMPLES, never longer than the record);
-    live (``n_samples`` None) LIVE_WINDOW_SAMPLES."""
-    if n_samples is None:
-        return LIVE_WINDOW_SAMPLES / sample_rate_hz
-    quarter = max(n_samples // 4, 1)
-    n = 2 ** int(math.floor(math.log2(quarter)))
-    n = min(max(n, MIN_WINDOW_SAMPLES), MAX_WINDOW_SAMPLES, n_samples)
-    return n / sample_rate_hz
-
-
-def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None) -> tuple[float, float]:
+def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None,
+                   name: str = "the recording") -> tuple[float, float]:
     """Window and hop (s) from ``window_s``/``hop_s`` or their defaults, checked
     against the sample rate and the samples the run will have (the record's ``total_n``,
-    None when live, cut to ``duration_s``); FogmonError naming the option otherwise."""
+    None when live, cut to ``duration_s``); FogmonError naming the option (and the
+    recording, ``name``) otherwise."""
     duration_s = config.duration_s
     n_run = total_n
     if duration_s is not None:
@@ -77,7 +63,7 @@ def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int |
             raise FogmonError(f"`duration_s` {duration_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         n_run = n_cut if total_n is None else min(total_n, n_cut)
     if n_run is not None and n_run < 8:
-        what = "the recording has" if n_run == total_n else "`duration_s` leaves"
+        what = f"{name} has" if n_run == total_n else "`duration_s` leaves"
         raise FogmonError(f"{what} {n_run} samples at {sample_rate_hz:g} Hz: an Allan deviation needs at least 8")
     window_s = config.window_s
     if window_s is None:
