@@ -12,8 +12,8 @@ vibration/temperature noise, vibration lines, a corrected [noise]) trigger a new
 bootstrap. The replicate count adapts to the record length (100 up to 1e5 samples, 60
 up to 4e5, else 40) and the family-wise threshold comes from a Gumbel law fitted to
 the replicates' max |z|, so 40 replicates give a usable 1 % threshold; replicates run
-on all cores. The same replicates (by their seeds) are drawn again when a candidate's
-statistic is calibrated on them (``map_replicates``).
+on all cores. When the model holds a rate random walk, each replicate also gives the
+mean-type candidates' gains, whose law sets their chance bars (``scan_null``).
 """
 from __future__ import annotations
 
@@ -21,12 +21,14 @@ import multiprocessing as mp
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from fogmon.explain import mismatch
 from fogmon.explain.replicas import Replicas
+from fogmon.explain.scan_null import ScanGains, calibrated_kinds, scan_bars
 
 #: Progress callback: ``progress(stage, done, total)``; total 0 announces a stage, else
 #: ``done`` of ``total`` steps of it are complete.
@@ -87,22 +89,29 @@ def replicate_seeds(seed: int, n_boot: int) -> np.ndarray:
 
 
 class _MapOf:
-    """ln avar of the map cells and the whole record of a replicate (picklable)."""
+    """ln avar of the map cells and the whole record of a replicate, and the gains of
+    the candidates ``scans`` calibrates on it (scan_null.ScanGains; picklable)."""
 
-    def __init__(self, grid: mismatch.Grid):
-        self.grid = grid
+    def __init__(self, grid: mismatch.Grid, scans: ScanGains | None = None):
+        self.grid, self.scans = grid, scans
 
-    def __call__(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return mismatch.log_avar(r, np.isfinite(r), self.grid)
+    def __call__(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+        cells, whole = mismatch.log_avar(r, np.isfinite(r), self.grid)
+        return cells, whole, (self.scans(r) if self.scans is not None else {})
 
 
 def bootstrap(replicas: Replicas, grid: mismatch.Grid, n_boot: int, seed: int, alpha: float, workers: int,
               progress: Progress | None = None, mapper: Mapper | None = None) -> mismatch.Null:
     """Parametric bootstrap null: ``n_boot`` replicates of ``replicas`` (seeds from
     ``seed``) mapped on ``grid`` (by ``mapper``, else on ``workers`` processes), reported
-    to ``progress`` replicate by replicate."""
-    parts = map_replicates(replicas, replicate_seeds(seed, n_boot), _MapOf(grid), workers, progress, mapper=mapper)
-    return mismatch.build_null(np.array([c for c, _ in parts]), np.array([w for _, w in parts]), alpha)
+    to ``progress`` replicate by replicate; with the chance bars of the candidates
+    ``scan_null.calibrated_kinds`` names, measured on the same replicates."""
+    kinds = calibrated_kinds(replicas.stoch)
+    scans = ScanGains(replicas.stoch, replicas.t_s, replicas.aux, replicas.valid, kinds) if kinds else None
+    parts = map_replicates(replicas, replicate_seeds(seed, n_boot), _MapOf(grid, scans), workers, progress,
+                           mapper=mapper)
+    null = mismatch.build_null(np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), alpha)
+    return replace(null, scan_bars=scan_bars([p[2] for p in parts], alpha)) if kinds else null
 
 
 def default_n_boot(n: int) -> int:

@@ -78,7 +78,7 @@ class Setting:
         context, the candidates (``counts``: kind -> times added) and the analysis (the
         tests of the ``contradicted`` kinds not counted in its score)."""
         ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
-        cands = candidates(ctx, counts)
+        cands = candidates(ctx, counts, null.scan_bars)
         fit = Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
         for key in ("spike_scan", "spikes"):  # record-length arrays, computed again if needed (memory)
             ctx.cache.pop(key, None)
@@ -138,7 +138,7 @@ class Selection:
         taken again without it), or it accepted (a new round on the trial's fit)."""
         c = self.pending[0][0]
         if isinstance(c, _Light) and c.bic_gain(self.fit.ctx.penalty) > 0:
-            c = CANDIDATES[c.kind](self.fit.ctx) or c  # its arrays were let go: the same fit again
+            c = fitted(c.kind, self.fit.ctx, self.fit.null.scan_bars) or c  # its arrays were let go: fit again
         v = self.judge(c)
         if v.action == "stop":
             return replace(self, pending=self.pending[1:])
@@ -216,21 +216,29 @@ class Selection:
         below the bar."""
         pen = self.fit.ctx.penalty
         return [*self.rejected, *((k, bg, why) for k, (bg, why) in self.deferred.items()),
-                *((c.kind, c.bic_gain(pen), "below the frequency search's chance bar"
-                   if c.search_bar > c.k * pen else "below the BIC bar") for c in self.fit.cands
+                *((c.kind, c.bic_gain(pen), _below(c, pen, self.fit.null.scan_bars)) for c in self.fit.cands
                   if c.bic_gain(pen) <= 0 and c.kind not in self.refused)]
 
 
-def candidates(ctx: Context, counts: Mapping[str, int]) -> list[Candidate]:
+def _below(c: Candidate, penalty: float, bars: Mapping[str, float]) -> str:
+    """Which bar the candidate ``c`` stayed below."""
+    if c.search_bar <= c.k * penalty:
+        return "below the BIC bar"
+    if c.search_bar == bars.get(c.kind):
+        return "below the chance bar of the model's own noise (its rate random walk, simulated)"
+    return "below the frequency search's chance bar"
+
+
+def candidates(ctx: Context, counts: Mapping[str, int], bars: Mapping[str, float]) -> list[Candidate]:
     """Every applicable candidate (``CANDIDATES``) fitted to the current residual, best
     BIC first (refused kinds included: they still measure what is missing, the score's
     ``tests``, unless the map contradicted them, ``analysis.matched_tests_figure``)."""
     out: list[Candidate] = []
     best: dict[bool, int] = {}  # tier (first or not) -> index in out of its best candidate so far
-    for kind, fn in CANDIDATES.items():
+    for kind in CANDIDATES:
         if counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
             continue
-        c = fn(ctx)
+        c = fitted(kind, ctx, bars)
         if c is None:
             continue
         # only each tier's best candidate past its bar keeps its arrays (it is judged first);
@@ -246,6 +254,15 @@ def candidates(ctx: Context, counts: Mapping[str, int]) -> list[Candidate]:
             out.append(light(c))
     out.sort(key=lambda c: -c.bic_gain(ctx.penalty))
     return out
+
+
+def fitted(kind: str, ctx: Context, bars: Mapping[str, float]) -> Candidate | None:
+    """Candidate ``kind`` fitted to the context's residual (``CANDIDATES``), its bar
+    raised to the null's chance bar for the kind (``bars``: scan_null), if any."""
+    c = CANDIDATES[kind](ctx)
+    if c is not None and bars.get(kind, 0.0) > c.search_bar:
+        c = replace(c, search_bar=float(bars[kind]))
+    return c
 
 
 class _Light(Candidate):
