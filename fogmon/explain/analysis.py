@@ -37,8 +37,8 @@ def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.
     model is floored, and the bins next to them would show a false excess."""
     n = len(y)
     omega = rfft_omega(n)
-    S = model_psd(stoch, omega, n, white_level_rms_dpsh(stoch, t, ctx_aux))
-    S = np.maximum(S, 1e-4 * np.median(S[1:]))  # a PSD near 0 must not give one bin all the weight
+    S_model = model_psd(stoch, omega, n, white_level_rms_dpsh(stoch, t, ctx_aux))
+    S = np.maximum(S_model, 1e-4 * np.median(S_model[1:]))  # a PSD near 0 must not give one bin all the weight
     yy = np.where(valid, y, 0.0)
     Yf = np.fft.rfft(yy)
     keep = in_passband(stoch, omega)
@@ -48,11 +48,13 @@ def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.
     # The circular DFT joins the record's last sample to its first; for blue
     # (quantization) noise the angle mismatch there is a one-sample rate spike at index 0
     # that the GLS sees clearly: project it out (a nuisance regressor) before any test.
-    amp0 = float(detectors.spike_scan(wh, Yf)[0][0])
+    amp0 = detectors.spike_at_start(wh, Yf)
     yy = yy.copy()
     yy[0] -= amp0
     Yf = Yf - amp0
-    return Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), yy, stoch, wh, Yf)
+    ctx = Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), yy, stoch, wh, Yf)
+    ctx.cache["model_psd"] = S_model
+    return ctx
 
 
 def matched_tests_figure(cands: list[Candidate], penalty: float, contradicted: AbstractSet[str]) -> float:
@@ -70,7 +72,7 @@ def analyse(y: np.ndarray, ctx: Context, null: mismatch.Null, grid: mismatch.Gri
     those of the ``contradicted`` kinds not counted, ``matched_tests_figure``)."""
     cell, whole = mismatch.log_avar(np.where(ctx.valid, y, np.nan), ctx.valid, grid)
     z, zw = mismatch.zscores(cell, whole, null)
-    _, zs = spike_scan(ctx)
+    _, zs = spike_scan(ctx)  # (computed once per context)
     nv = int(ctx.valid.sum())
     spike_ratio = float(np.max(np.abs(zs))) / detectors.expected_max_abs_z(nv) if nv else 0.0
     regions = mismatch.find_regions(z, zw, null, grid)

@@ -28,7 +28,7 @@ from scipy.stats import norm
 
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
-from fogmon.explain.bootstrap import Progress
+from fogmon.explain.bootstrap import Mapper, Progress
 from fogmon.explain.explainer import Result, explain, without_motion
 from fogmon.explain.options import Options
 from fogmon.formats.recording import Recording
@@ -161,12 +161,13 @@ def one_axis_model(model: SensorModel, rec: Recording, axis: str | None = None) 
 
 # ---------------------------------------------------------------- explain
 def explain_axes(rec: Recording, model: SensorModel | None, options: Options | None = None,
-                 keep_motion: bool = False, progress: Progress | None = None) -> AxesResult:
+                 keep_motion: bool = False, progress: Progress | None = None,
+                 mapper: Mapper | None = None) -> AxesResult:
     """Explain every axis of the multi-axis ``rec`` against its model (``axis_models``;
     ``model`` None: a stationary baseline fitted from each axis), platform motion kept
     out of each axis unless ``keep_motion``; then the common causes (``common_causes``)
     and the fitted multi-axis model (``fitted_model``). Stages go to ``progress``
-    prefixed with the axis."""
+    prefixed with the axis; bootstrap replicates run by ``mapper`` (explain)."""
     from fogmon.explain.baseline import baseline_model
 
     opt = options or Options()
@@ -192,7 +193,7 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
             m = baseline_model(one)
         else:
             m = models[a]
-        res = explain(one, m, opt, baseline=model is None, progress=axis_progress)
+        res = explain(one, m, opt, baseline=model is None, progress=axis_progress, mapper=mapper)
         res.warnings[:0] = motion
         results[a] = res
     common = common_causes(rec, results, opt.alpha)

@@ -1,44 +1,43 @@
 """The parametric bootstrap null of explain (docs/explain.md): simulations of the model's
-stochastic part like the recording, mapped like the residual.
+stochastic part on the recording's grid (``replicas.Replicas``), mapped like the
+residual with the DAVAR engine's compensated kernels.
 
-Cost (the part of explain that dominates): each replicate is one run of the simulator's
-stochastic part `--like` the recording (bias, rotation and mean-type effects are left
-out: they do not change the null of a residual) and one pass of the DAVAR engine's
-compensated kernels for the map and the whole-record ADEV (no EDF work). Mean-type
-effects and an outlier population (its outliers are replaced in the residual) never
-change the null, so accepting them reuses it; only noise-type effects
-(markov, bandwidth, vibration/temperature noise) trigger a new bootstrap. The
-replicate count adapts to the record length (100 up to 1e5 samples, 60 up to 4e5,
-else 40) and the family-wise threshold comes from a Gumbel law fitted to the
-replicates' max |z|, so 40 replicates give a usable 1 % threshold; replicates run on
-all cores.
+Cost (the part of explain that dominates): each replicate is one draw of the stochastic
+part (bias, rotation and mean-type effects are left out: they do not change the null of
+a residual; one FFT of 2n for every stationary Gaussian term) and one pass of the DAVAR
+kernels for the map and the whole-record ADEV (no EDF work). Mean-type effects and an
+outlier population (its outliers are replaced in the residual) never change the null,
+so accepting them reuses it; only noise-type effects (markov, bandwidth,
+vibration/temperature noise, vibration lines, a corrected [noise]) trigger a new
+bootstrap. The replicate count adapts to the record length (100 up to 1e5 samples, 60
+up to 4e5, else 40) and the family-wise threshold comes from a Gumbel law fitted to
+the replicates' max |z|, so 40 replicates give a usable 1 % threshold; replicates run
+on all cores. When the model holds a rate random walk, each replicate also gives the
+mean-type candidates' gains, whose law sets their chance bars (``scan_null``).
 """
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 from fogmon.explain import mismatch
-from fogmon.formats.recording import Recording
-from fogmon.sim.model import SensorModel
-from fogmon.sim.simulate import iter_simulate
+from fogmon.explain.replicas import Replicas
+from fogmon.explain.scan_null import ScanGains, calibrated_kinds, scan_bars
 
 #: Progress callback: ``progress(stage, done, total)``; total 0 announces a stage, else
 #: ``done`` of ``total`` steps of it are complete.
 Progress = Callable[[str, int, int], None]
 
+#: below this many samples x replicates the replicates run in this process (a pool costs more)
+POOL_MIN_WORK = 2_000_000
 
-def _replicate(model: SensorModel, like: Recording, grid: mismatch.Grid, seed) -> tuple[np.ndarray, np.ndarray]:
-    """ln avar of the map cells and the whole record of one simulation of ``model``."""
-    r = np.concatenate([b.rate_dph for b in iter_simulate(model, like=like, seed=int(seed), chunk_samples=1 << 18)])
-    return mismatch.log_avar(r, np.isfinite(r), grid)
-
-
-_SHARED: tuple = ()  # (model, like, grid) in a bootstrap worker process, inherited by fork
+_SHARED: tuple = ()  # (replicas, fn) in a worker process, inherited by fork
 
 
 def _init_worker(shared: tuple) -> None:
@@ -46,30 +45,73 @@ def _init_worker(shared: tuple) -> None:
     _SHARED = shared
 
 
-def _replicate_in_worker(seed) -> tuple[np.ndarray, np.ndarray]:
-    model, like, grid = _SHARED
-    return _replicate(model, like, grid, seed)
+def _in_worker(seed) -> Any:
+    replicas, fn = _SHARED
+    return fn(replicas.draw(int(seed)))
 
 
-def bootstrap(stoch: SensorModel, like: Recording, grid: mismatch.Grid, n_boot: int, seed: int,
-              alpha: float, workers: int, progress: Progress | None = None) -> mismatch.Null:
-    """Parametric bootstrap null: ``n_boot`` simulations of ``stoch`` like the recording,
-    reported to ``progress`` replicate by replicate."""
-    seeds = np.random.SeedSequence(seed).generate_state(n_boot)
-    nw = max(1, min(workers or os.cpu_count() or 1, n_boot))
+#: Where replicates run: ``mapper(fn, replicas, seeds)`` returns [fn(replicas.draw(s)) for s
+#: in seeds], in order (``fn`` and ``replicas`` pickle): e.g. as tasks of a Dask cluster
+#: (fogmon.fleet.tasks). None: on this machine's cores (``map_replicates``).
+Mapper = Callable[[Callable[[np.ndarray], Any], Replicas, Sequence[int]], list]
+
+
+def map_replicates(replicas: Replicas, seeds: np.ndarray, fn: Callable[[np.ndarray], Any], workers: int,
+                   progress: Progress | None = None, stage: str = "bootstrap", mapper: Mapper | None = None) -> list:
+    """``fn(replicate)`` for the replicate of every seed (deg/h, NaN where not valid), in
+    order: by ``mapper``, else on ``workers`` processes (0: all cores; in this process
+    when it is a daemon, e.g. a Dask worker, which may not start processes);
+    ``progress(stage, done, total)`` replicate by replicate."""
+    n_rep = len(seeds)
+    nw = 1 if mp.current_process().daemon else max(1, min(workers or os.cpu_count() or 1, n_rep))
     report = progress or (lambda stage, done, total: None)
-    parts = []
-    if nw == 1 or grid.n * n_boot < 2_000_000:
+    if mapper is not None:
+        out = list(mapper(fn, replicas, [int(s) for s in seeds]))
+        report(stage, n_rep, n_rep)
+        return out
+    out = []
+    if nw == 1 or replicas.n * n_rep < POOL_MIN_WORK:
         for s in seeds:
-            parts.append(_replicate(stoch, like, grid, s))
-            report("bootstrap", len(parts), n_boot)
-    else:
-        with ProcessPoolExecutor(nw, mp_context=mp.get_context("fork"), initializer=_init_worker,
-                                 initargs=((stoch, like, grid),)) as ex:
-            for part in ex.map(_replicate_in_worker, seeds):
-                parts.append(part)
-                report("bootstrap", len(parts), n_boot)
-    return mismatch.build_null(np.array([c for c, _ in parts]), np.array([w for _, w in parts]), alpha)
+            out.append(fn(replicas.draw(int(s))))
+            report(stage, len(out), n_rep)
+        return out
+    with ProcessPoolExecutor(nw, mp_context=mp.get_context("fork"), initializer=_init_worker,
+                             initargs=((replicas, fn),)) as ex:
+        for part in ex.map(_in_worker, seeds):
+            out.append(part)
+            report(stage, len(out), n_rep)
+    return out
+
+
+def replicate_seeds(seed: int, n_boot: int) -> np.ndarray:
+    """The seeds of a bootstrap's ``n_boot`` replicates."""
+    return np.random.SeedSequence(seed).generate_state(n_boot)
+
+
+class _MapOf:
+    """ln avar of the map cells and the whole record of a replicate, and the gains of
+    the candidates ``scans`` calibrates on it (scan_null.ScanGains; picklable)."""
+
+    def __init__(self, grid: mismatch.Grid, scans: ScanGains | None = None):
+        self.grid, self.scans = grid, scans
+
+    def __call__(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[str, float]]:
+        cells, whole = mismatch.log_avar(r, np.isfinite(r), self.grid)
+        return cells, whole, (self.scans(r) if self.scans is not None else {})
+
+
+def bootstrap(replicas: Replicas, grid: mismatch.Grid, n_boot: int, seed: int, alpha: float, workers: int,
+              progress: Progress | None = None, mapper: Mapper | None = None) -> mismatch.Null:
+    """Parametric bootstrap null: ``n_boot`` replicates of ``replicas`` (seeds from
+    ``seed``) mapped on ``grid`` (by ``mapper``, else on ``workers`` processes), reported
+    to ``progress`` replicate by replicate; with the chance bars of the candidates
+    ``scan_null.calibrated_kinds`` names, measured on the same replicates."""
+    kinds = calibrated_kinds(replicas.stoch)
+    scans = ScanGains(replicas.stoch, replicas.t_s, replicas.aux, replicas.valid, kinds) if kinds else None
+    parts = map_replicates(replicas, replicate_seeds(seed, n_boot), _MapOf(grid, scans), workers, progress,
+                           mapper=mapper)
+    null = mismatch.build_null(np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), alpha)
+    return replace(null, scan_bars=scan_bars([p[2] for p in parts], alpha)) if kinds else null
 
 
 def default_n_boot(n: int) -> int:

@@ -142,13 +142,26 @@ def fit_contamination(z: np.ndarray, iterations: int = 100) -> Contamination | N
 
 def kernel_length(wh: Whittle) -> int:
     """Half-width (samples) of the GLS matched filter's response to one spike: where the
-    inverse-PSD autocorrelation falls below 1/e of its peak (1 for white noise)."""
-    Z = 1.0 / wh.S
-    Z[0] = 0.0
-    r = np.fft.irfft(Z, wh.n)
-    r = r / r[0]
-    below = np.flatnonzero(np.abs(r[: wh.n // 2]) < math.exp(-1.0))
-    return int(max(1, below[0])) if len(below) else wh.n // 4
+    inverse-PSD autocorrelation falls below 1/e of its peak (1 for white noise);
+    computed once per ``wh``."""
+    if "kernel_length" not in wh.memo:
+        Z = 1.0 / wh.S
+        Z[0] = 0.0
+        r = np.fft.irfft(Z, wh.n)
+        r = r / r[0]
+        below = np.flatnonzero(np.abs(r[: wh.n // 2]) < math.exp(-1.0))
+        wh.memo["kernel_length"] = int(max(1, below[0])) if len(below) else wh.n // 4
+    return wh.memo["kernel_length"]
+
+
+def spike_at_start(wh: Whittle, Yf: np.ndarray) -> float:
+    """The GLS amplitude of a one-sample spike at sample 0 (``spike_scan``'s amplitude
+    there, without its inverse FFT: the inverse DFT's first value is the plain sum)."""
+    Z = Yf / wh.S
+    n = wh.n
+    inner = Z[1: n // 2] if n % 2 == 0 else Z[1:]
+    b = 2.0 * float(np.sum(inner.real)) + (float(Z[-1].real) if n % 2 == 0 else 0.0)
+    return b / n / float(np.sum(wh.w))
 
 
 def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float, float]:
@@ -156,19 +169,24 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
 
     Returns (n0, step estimate in the residual's units, chi-square gain)."""
     n = wh.n
-    w = 2.0 * np.pi * np.arange(len(Yf)) / n
-    d = 1.0 - np.exp(1j * w)
+    d = 1.0 - np.exp((2j * np.pi / n) * np.arange(len(Yf)))
     d[0] = 1.0
     S = wh.S.copy()
     S[0] = 1.0
-    Zb = Yf / S / d  # S may be inf (no weight): real division first, no inf / inf
+    Zb = Yf / S  # S may be inf (no weight): real division first, no inf / inf
+    Zb /= d
     Zb[0] = 0.0
-    bq = np.fft.irfft(Zb, n)
-    b = bq - bq[0]
-    C = 1.0 / (S * np.abs(d) ** 2)
-    C[0] = 0.0
-    cq = np.fft.irfft(C, n)
-    A = 2.0 * (cq[0] - cq)
+    b = np.fft.irfft(Zb, n)
+    del Zb
+    b -= b[0]
+    d = d.real ** 2 + d.imag ** 2
+    d *= S
+    np.divide(1.0, d, out=d)  # C = 1 / (S |d|^2)
+    d[0] = 0.0
+    A = np.fft.irfft(d, n)
+    del d, S
+    A -= A[0]
+    A *= -2.0  # A = 2 (cq[0] - cq)
     sl = slice(max(lo, 1), max(min(hi, n), max(lo, 1) + 1))
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.where(A[sl] > 0, b[sl] ** 2 / A[sl], 0.0)

@@ -12,10 +12,11 @@ import numpy as np
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, rescored
-from fogmon.explain.bootstrap import Progress, bootstrap, default_n_boot
+from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, default_n_boot
 from fogmon.explain.caveats import nonstationary_warnings, too_short_warnings
 from fogmon.explain.options import Options
-from fogmon.explain.selection import Accepted, Selection, Setting
+from fogmon.explain.replicas import Replicas
+from fogmon.explain.selection import Accepted, Selection, Setting, light
 from fogmon.formats.recording import Recording
 from fogmon.motion import find_motion, motion_mask
 from fogmon.sim import effects as fx
@@ -104,9 +105,10 @@ def stochastic_part(model: SensorModel) -> SensorModel:
 
 
 def explain(rec: Recording, model: SensorModel, options: Options | None = None,
-            baseline: bool = False, progress: Progress | None = None) -> Result:
+            baseline: bool = False, progress: Progress | None = None, mapper: Mapper | None = None) -> Result:
     """Compare ``rec`` with ``model``, locate mismatches, select and fit missing physics;
-    stages and bootstrap replicates are reported to ``progress``."""
+    stages and bootstrap replicates are reported to ``progress``; the bootstrap
+    replicates run by ``mapper`` (e.g. as Dask tasks; None: on this machine's cores)."""
     opt = options or Options()
     report = progress or (lambda stage, done, total: None)
     model = validate_model(model)
@@ -119,23 +121,24 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         raise FogmonError(f"{rec.name}: more than {100 * (1 - MIN_STATIONARY_SHARE):.0f} % of the sample grid is "
                           f"missing (gaps)")
     y0 = raw - deterministic_dph(model, t, aux, sample_rate_hz)
+    del raw
     y0 = np.where(valid, y0 - np.nanmean(y0[valid]), 0.0)
-    like = Recording(rec.t_s, np.zeros(len(rec.t_s)), {k: v for k, v in rec.aux.items() if k != "rot_dps"},
-                     {"sample_rate_hz": repr(sample_rate_hz)}, rec.path)
     B = opt.n_boot or default_n_boot(n)
     stoch = stochastic_part(model)
     report(f"bootstrap null: {B} simulations of the model like the recording", 0, 0)
-    null = bootstrap(stoch, like, grid, B, opt.seed, opt.alpha, opt.workers, progress)
+    null = bootstrap(Replicas(stoch, t, aux, valid), grid, B, opt.seed, opt.alpha, opt.workers, progress, mapper)
     report("mismatch map and candidate effects", 0, 0)
-    setting = Setting(t, aux, valid, like, grid, B, opt.seed, opt.alpha, opt.workers, opt.max_effects, progress)
-    first = state = Selection.start(setting, y0.copy(), stoch, null, baseline)
+    setting = Setting(t, aux, valid, grid, B, opt.seed, opt.alpha, opt.workers, opt.max_effects, progress, mapper)
+    state = Selection.start(setting, y0.copy(), stoch, null, baseline)
+    # what `before` needs of the first round (its context is let go: memory)
+    first_analysis, first_tests = state.fit.analysis, [light(c) for c in state.fit.cands]
     while not state.done:
         state = state.step()
     fit = state.fit
     fitted = _fitted_model(model, fit.stoch, state.accepted)
     accepted = sorted(state.accepted, key=lambda a: -a.cand.gain)
     # before and after count the same tests
-    before = rescored(first.fit.analysis, first.fit.cands, fit.ctx.penalty, state.contradicted)
+    before = rescored(first_analysis, first_tests, fit.ctx.penalty, state.contradicted)
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
     after = replace(fit.analysis, regions=mismatch.locate(fit.analysis.regions, fit.y, valid, grid, fit.analysis.null))
     bursts, named = nonstationary_warnings(after, fit.y, valid, grid)

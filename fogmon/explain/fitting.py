@@ -51,15 +51,20 @@ def noise_psd(omega: np.ndarray, sample_rate_hz: float, Q_arcsec: float = 0.0, N
         if K_dphsh > 0:
             S += (K_dphsh / 60.0) ** 2 / sample_rate_hz / (4.0 * s2)
         for sigma, tau_c in markov:
-            S += markov_psd(w, sample_rate_hz, sigma, tau_c)
+            S += markov_psd(w, sample_rate_hz, sigma, tau_c, s2)
     S[w == 0] = np.inf
     return np.maximum(S, 1e-300)
 
 
-def markov_psd(omega: np.ndarray, sample_rate_hz: float, sigma_dph: float, tau_c_s: float) -> np.ndarray:
-    """PSD of the sampled first-order Gauss-Markov process (AR(1), a = exp(-tau0/tau_c))."""
-    a = math.exp(-1.0 / (sample_rate_hz * tau_c_s))
-    return sigma_dph ** 2 * (1.0 - a * a) / np.abs(1.0 - a * np.exp(-1j * omega)) ** 2
+def markov_psd(omega: np.ndarray, sample_rate_hz: float, sigma_dph: float, tau_c_s: float,
+               sin2_half: np.ndarray | None = None) -> np.ndarray:
+    """PSD of the sampled first-order Gauss-Markov process (AR(1), a = exp(-tau0/tau_c)):
+    sigma^2 (1 - a^2) / |1 - a e^(-i omega)|^2, the denominator as (1 - a)^2 + 4 a
+    sin^2(omega / 2) (``sin2_half``, when the caller has it)."""
+    x = 1.0 / (sample_rate_hz * tau_c_s)
+    a, u = math.exp(-x), -math.expm1(-x)  # u = 1 - a, exact for a near 1
+    s2 = np.sin(np.asarray(omega) / 2.0) ** 2 if sin2_half is None else sin2_half
+    return sigma_dph ** 2 * u * (1.0 + a) / (u * u + 4.0 * a * s2)
 
 
 def calibrate_psd(S: np.ndarray, Yf: np.ndarray, n: int) -> np.ndarray:
@@ -122,6 +127,22 @@ def low_band_flicker(S: np.ndarray, Rf: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
+def weighted_products(w: np.ndarray, Xf: np.ndarray, Yf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A = Re(X^H diag(w) X) (p x p) and b = Re(X^H diag(w) Y) (p) of complex columns Xf
+    (bins x p) and Yf (bins), as sums of real products in numpy's own loops (a threaded
+    BLAS call on such thin products spends more time waking threads than multiplying,
+    up to 40x on a loaded machine)."""
+    nb, p = Xf.shape
+    cols = np.ascontiguousarray(Xf.T, dtype=np.complex128).view(np.float64).reshape(p, nb, 2)
+    yv = np.ascontiguousarray(Yf, dtype=np.complex128).view(np.float64).reshape(nb, 2)
+    A, b = np.empty((p, p)), np.empty(p)
+    for i in range(p):
+        b[i] = np.einsum("k,kc,kc->", w, cols[i], yv)
+        for j in range(i + 1):
+            A[i, j] = A[j, i] = np.einsum("k,kc,kc->", w, cols[i], cols[j])
+    return A, b
+
+
 @dataclass(frozen=True)
 class GlsFit:
     """Result of a Whittle GLS fit: coefficients ``beta``, covariance ``cov`` and the
@@ -134,6 +155,14 @@ class GlsFit:
     @property
     def se(self) -> np.ndarray:
         return np.sqrt(np.maximum(np.diag(self.cov), 0.0))
+
+
+def _masked(x: np.ndarray, valid: np.ndarray | None) -> np.ndarray:
+    """``x`` (n or n x p) as float64, 0 where not ``valid`` (and NaN as 0, numpy.nan_to_num)."""
+    x = np.asarray(x, dtype=np.float64)
+    if valid is not None:
+        x = np.where(valid if x.ndim == 1 else valid[:, None], x, 0.0)
+    return x if np.isfinite(x).all() else np.nan_to_num(x)
 
 
 class Whittle:
@@ -151,21 +180,16 @@ class Whittle:
             mult[-1] = 1.0
         self.w = mult / (n * S)
         self.valid = None if valid is None or valid.all() else valid
+        #: values derived from S alone, computed once (detectors.kernel_length)
+        self.memo: dict = {}
 
     def fft(self, x: np.ndarray) -> np.ndarray:
         """DFT (rfft) of one column or of the columns of a 2-D array (n x p)."""
-        x = np.asarray(x, dtype=np.float64)
-        if self.valid is not None:
-            x = np.where(self.valid if x.ndim == 1 else self.valid[:, None], x, 0.0)
-        x = np.nan_to_num(x)
-        return np.fft.rfft(x, axis=0)
+        return np.fft.rfft(_masked(x, self.valid), axis=0)
 
     def gls(self, Xf: np.ndarray, Yf: np.ndarray) -> GlsFit:
         """Fit Y = X beta (both already transformed by :meth:`fft`; Xf is bins x p)."""
-        Xf = Xf.reshape(len(self.w), -1)
-        WX = Xf * self.w[:, None]
-        A = np.real(WX.conj().T @ Xf)
-        b = np.real(WX.conj().T @ Yf)
+        A, b = weighted_products(self.w, Xf.reshape(len(self.w), -1), Yf)
         try:
             cov = np.linalg.pinv(A, rcond=1e-12, hermitian=True)
         except np.linalg.LinAlgError:
@@ -182,6 +206,56 @@ class Whittle:
         positive when the effect predicts this data (held-out check)."""
         pred = Xf.reshape(len(self.w), -1) @ beta
         return self.chi2(Yf) - self.chi2(Yf - pred)
+
+
+#: a scan of a slow effect's nonlinear parameter runs on about this many block means of the
+#: record (``Coarse``): drifts, steps and settling lose nothing of their power
+COARSE_BLOCKS = 1 << 16
+
+
+class Coarse:
+    """The exact Whittle GLS of the block means of a record (blocks of ``b`` samples, the
+    first n' b samples of the record, n' = n // b): for scans of slow effects, each
+    design costs an FFT of n' samples instead of n. The block means' PSD is the
+    calibrated PSD ``S`` (rfft bins of the n-sample record) aliased through the block
+    average: at bin k' of the n' block means, sin^2(pi k' / n') / b^3 sum over l of
+    S(k' + l n') / sin^2(pi (k' + l n') / N) (N = n' b; S read at the nearest bin of
+    the n-sample record; no power where S is infinite, outside the model's pass band).
+    Invalid samples count as 0 in every block mean, as in the full GLS. A design is given
+    at the blocks' centre times ``t`` (s; its block mean for a design that varies slowly
+    over a block) and weighted by each block's valid share."""
+
+    def __init__(self, S: np.ndarray, y: np.ndarray, valid: np.ndarray | None, t_s: np.ndarray, b: int):
+        n = len(y)
+        self.b = b
+        nb = self.nb = n // b
+        N = nb * b
+        k = np.arange(N)
+        src = np.minimum(np.rint(np.minimum(k, N - k) * n / N).astype(np.int64), len(S) - 1)
+        Sf = np.where(np.isfinite(S), S, 0.0)[src]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(k > 0, Sf / np.sin(np.pi * k / N) ** 2, 0.0)
+        folded = ratio.reshape(b, nb).sum(axis=0)[: nb // 2 + 1]
+        kp = np.arange(nb // 2 + 1)
+        Sb = np.sin(np.pi * kp / nb) ** 2 / b ** 3 * folded
+        Sb[0] = np.inf
+        self.wh = Whittle(np.where(Sb > 0, Sb, np.inf), nb)
+        self.t = t_s[:N].reshape(nb, b).mean(axis=1)
+        self.share = None if valid is None else valid[:N].reshape(nb, b).mean(axis=1)
+        self.Yf = np.fft.rfft(_masked(y, valid)[:N].reshape(nb, b).mean(axis=1))
+
+    def gain(self, Xb: np.ndarray) -> float:
+        """GLS chi-square gain of the design ``Xb`` (n' or n' x p) at the blocks' centre times."""
+        Xb = np.asarray(Xb, dtype=np.float64)
+        if self.share is not None:
+            Xb = Xb * (self.share if Xb.ndim == 1 else self.share[:, None])
+        return self.wh.gls(np.fft.rfft(Xb, axis=0), self.Yf).chi2_gain
+
+
+def coarse_block(n: int) -> int:
+    """Block length (samples) of the scans on block means of an n-sample record: 1 (no
+    blocks) up to 2 COARSE_BLOCKS samples, else n // COARSE_BLOCKS."""
+    return 1 if n < 2 * COARSE_BLOCKS else n // COARSE_BLOCKS
 
 
 def model_psd(model, omega: np.ndarray, n: int, white_dpsh: float | None = None) -> np.ndarray:
@@ -226,14 +300,17 @@ def lines_psd(params: dict, sample_rate_hz: float, omega: np.ndarray) -> np.ndar
 
 
 def filter_gain2(params: dict, sample_rate_hz: float, omega: np.ndarray) -> np.ndarray:
-    """|H|^2 of a ``bandwidth`` effect (Butterworth or FIR) at ``omega`` (rad/sample)."""
+    """|H|^2 of a ``bandwidth`` effect (Butterworth or FIR) at ``omega`` (rad/sample). The
+    Butterworth is scipy's digital design (``sim.noise.lowpass_filter``: the analogue
+    prototype through the prewarped bilinear transform), so exactly
+    1 / (1 + (tan(omega / 2) / tan(pi fc / fs))^(2 order)) - closed form, no polynomial
+    evaluation (the same values to 1e-12 of the pass-band gain)."""
     if params.get("taps"):
         _, h = signal.freqz(params["taps"], [1.0], worN=omega)
-    else:
-        from fogmon.sim.noise import lowpass_filter
-
-        _, h = signal.sosfreqz(lowpass_filter(params["cutoff_hz"], params["order"], sample_rate_hz), worN=omega)
-    return np.abs(h) ** 2
+        return np.abs(h) ** 2
+    with np.errstate(over="ignore"):
+        x = np.tan(np.asarray(omega, dtype=np.float64) / 2.0) / math.tan(math.pi * params["cutoff_hz"] / sample_rate_hz)
+        return 1.0 / (1.0 + x ** (2 * int(params["order"])))
 
 
 def avar1_of_psd(S: np.ndarray, n: int) -> float:

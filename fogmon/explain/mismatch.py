@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import ndimage
@@ -149,6 +149,8 @@ class Null:
     gumbel_whole: Gumbel
     n_replicates: int
     alpha: float
+    #: candidate kind -> its chance bar from the replicates (scan_null; empty: the GLS's own law)
+    scan_bars: dict = field(default_factory=dict)
 
     @property
     def threshold(self) -> float:

@@ -6,17 +6,17 @@ state; ``explain`` steps until the state is ``done``."""
 from __future__ import annotations
 
 from collections.abc import Mapping, Set as AbstractSet
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
 import numpy as np
 
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
-from fogmon.explain.bootstrap import Progress, bootstrap
+from fogmon.explain.bootstrap import Mapper, Progress, bootstrap
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
 from fogmon.explain.fitting import Whittle
-from fogmon.formats.recording import Recording
+from fogmon.explain.replicas import Replicas
 from fogmon.sim.model import SensorModel
 
 #: how many times a kind may be added (several spectral lines are common)
@@ -55,15 +55,14 @@ class Fit:
 @dataclass(frozen=True, eq=False)
 class Setting:
     """What stays fixed while effects are selected: the sample grid's times ``t_s`` (s),
-    gap-filled ``aux`` channels and ``valid`` mask; ``like``, the recording (without its
-    rate) that bootstraps simulate like; the map ``grid``; the bootstrap's ``n_boot``
-    replicates, ``seed``, family-wise ``alpha`` and ``workers``; the effect budget
-    ``max_effects``; where ``progress`` goes."""
+    gap-filled ``aux`` channels and ``valid`` mask (the bootstraps' replicates are drawn
+    on them); the map ``grid``; the bootstrap's ``n_boot`` replicates, ``seed``,
+    family-wise ``alpha``, ``workers`` and ``mapper`` (bootstrap.Mapper); the effect
+    budget ``max_effects``; where ``progress`` goes."""
 
     t_s: np.ndarray
     aux: dict
     valid: np.ndarray
-    like: Recording
     grid: mismatch.Grid
     n_boot: int
     seed: int
@@ -71,6 +70,7 @@ class Setting:
     workers: int
     max_effects: int
     progress: Progress | None = None
+    mapper: Mapper | None = None
 
     def fit(self, y: np.ndarray, stoch: SensorModel, null: mismatch.Null, counts: Mapping[str, int],
             contradicted: AbstractSet[str]) -> Fit:
@@ -78,8 +78,11 @@ class Setting:
         context, the candidates (``counts``: kind -> times added) and the analysis (the
         tests of the ``contradicted`` kinds not counted in its score)."""
         ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
-        cands = candidates(ctx, counts)
-        return Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
+        cands = candidates(ctx, counts, null.scan_bars)
+        fit = Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
+        for key in ("spike_scan", "spikes"):  # record-length arrays, computed again if needed (memory)
+            ctx.cache.pop(key, None)
+        return fit
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,6 +137,8 @@ class Selection:
         ended (stop), it deferred, rejected or contradicted (the score's tests then
         taken again without it), or it accepted (a new round on the trial's fit)."""
         c = self.pending[0][0]
+        if isinstance(c, _Light) and c.bic_gain(self.fit.ctx.penalty) > 0:
+            c = fitted(c.kind, self.fit.ctx, self.fit.null.scan_bars) or c  # its arrays were let go: fit again
         v = self.judge(c)
         if v.action == "stop":
             return replace(self, pending=self.pending[1:])
@@ -201,8 +206,8 @@ class Selection:
             y, stoch = f.y, _joined(f.stoch, c)
             if s.progress:
                 s.progress(f"bootstrap null with {c.kind} added: {s.n_boot} simulations", 0, 0)
-            null = bootstrap(stoch, s.like, s.grid, s.n_boot, s.seed + 7919 * (len(self.accepted) + 1), s.alpha,
-                             s.workers, s.progress)
+            null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
+                             s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
         return s.fit(y, stoch, null, {**self.counts, c.kind: self.counts.get(c.kind, 0) + 1}, self.contradicted)
 
     def rejections(self) -> list[tuple[str, float, str]]:
@@ -211,24 +216,67 @@ class Selection:
         below the bar."""
         pen = self.fit.ctx.penalty
         return [*self.rejected, *((k, bg, why) for k, (bg, why) in self.deferred.items()),
-                *((c.kind, c.bic_gain(pen), "below the frequency search's chance bar"
-                   if c.search_bar > c.k * pen else "below the BIC bar") for c in self.fit.cands
+                *((c.kind, c.bic_gain(pen), _below(c, pen, self.fit.null.scan_bars)) for c in self.fit.cands
                   if c.bic_gain(pen) <= 0 and c.kind not in self.refused)]
 
 
-def candidates(ctx: Context, counts: Mapping[str, int]) -> list[Candidate]:
+def _below(c: Candidate, penalty: float, bars: Mapping[str, float]) -> str:
+    """Which bar the candidate ``c`` stayed below."""
+    if c.search_bar <= c.k * penalty:
+        return "below the BIC bar"
+    if c.search_bar == bars.get(c.kind):
+        return "below the chance bar of the model's own noise (its rate random walk, simulated)"
+    return "below the frequency search's chance bar"
+
+
+def candidates(ctx: Context, counts: Mapping[str, int], bars: Mapping[str, float]) -> list[Candidate]:
     """Every applicable candidate (``CANDIDATES``) fitted to the current residual, best
     BIC first (refused kinds included: they still measure what is missing, the score's
     ``tests``, unless the map contradicted them, ``analysis.matched_tests_figure``)."""
-    out = []
-    for kind, fn in CANDIDATES.items():
+    out: list[Candidate] = []
+    best: dict[bool, int] = {}  # tier (first or not) -> index in out of its best candidate so far
+    for kind in CANDIDATES:
         if counts.get(kind, 0) >= MAX_PER_KIND.get(kind, 1):
             continue
-        c = fn(ctx)
-        if c is not None:
+        c = fitted(kind, ctx, bars)
+        if c is None:
+            continue
+        # only each tier's best candidate past its bar keeps its arrays (it is judged first);
+        # the others are fitted again if they come to be judged (bounded memory)
+        tier, bg = _first_tier(c), c.bic_gain(ctx.penalty)
+        j = best.get(tier)
+        if bg > 0 and (j is None or bg > out[j].bic_gain(ctx.penalty)):
+            if j is not None:
+                out[j] = light(out[j])
+            best[tier] = len(out)
             out.append(c)
+        else:
+            out.append(light(c))
     out.sort(key=lambda c: -c.bic_gain(ctx.penalty))
     return out
+
+
+def fitted(kind: str, ctx: Context, bars: Mapping[str, float]) -> Candidate | None:
+    """Candidate ``kind`` fitted to the context's residual (``CANDIDATES``), its bar
+    raised to the null's chance bar for the kind (``bars``: scan_null), if any."""
+    c = CANDIDATES[kind](ctx)
+    if c is not None and bars.get(kind, 0.0) > c.search_bar:
+        c = replace(c, search_bar=float(bars[kind]))
+    return c
+
+
+class _Light(Candidate):
+    """A candidate without its record-length arrays and closures (``light``)."""
+
+
+def light(c: Candidate) -> Candidate:
+    """``c`` without its arrays and closures (what the score's tests and the report's
+    refusals read: kind, parameters, gain, bars), so that it holds no record-length data;
+    ``Selection.judge`` fits it again from the registry if it comes to be judged."""
+    if isinstance(c, _Light):
+        return c
+    return _Light(**{**{f.name: getattr(c, f.name) for f in fields(c)},
+                     "rate": None, "design": None, "heldout": None, "listing": None, "stoch_base": None})
 
 
 def _pending(cands: list[Candidate], refused: AbstractSet[str]) -> tuple[tuple[Candidate, ...], ...]:
@@ -259,7 +307,7 @@ def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
     the model's noise, so a wrong B or N can fake a step or a ramp - but never ahead of
     a white-level effect: when an aux channel co-varies with the white level, the
     physical effect is preferred over a corrected N."""
-    first = [c for c in cands if c.nature in ("mean", "white_level", "coefficients") or _subtracted(c)]
+    first = [c for c in cands if _first_tier(c)]
     levels = [c for c in first if c.nature == "white_level"]
     coef = [c for c in first if c.nature == "coefficients"]
     if coef and levels:  # the coefficient correction moves behind the last white-level candidate
@@ -267,6 +315,12 @@ def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
         at = first.index(levels[-1]) + 1
         first[at:at] = coef
     return [first, [c for c in cands if c not in first]]
+
+
+def _first_tier(c: Candidate) -> bool:
+    """Whether ``c`` is judged in the first tier (``tiers``): tied to time structure or an
+    aux channel, or the model's own coefficients."""
+    return c.nature in ("mean", "white_level", "coefficients") or _subtracted(c)
 
 
 def _heldout_mean(ctx: Context, X: np.ndarray) -> tuple[bool, str]:

@@ -7,6 +7,7 @@ failure is returned as a one-line ``error`` (the recording is named by the calle
 parameters as `name`: fogmon.errors.render_names), never raised."""
 from __future__ import annotations
 
+import contextlib
 import os
 import traceback
 from dataclasses import dataclass, field
@@ -398,10 +399,45 @@ def explain_recording(path: str, model_path: str, source: SourceOptions, config:
         if not config.keep_motion:
             rec, _ = without_motion(rec)
         model = load_model(model_path)
-        res = explain(rec, model.for_axis(axis) if axis else model, Options() if options is None else options)
+        with _cluster_replicates() as mapper:
+            res = explain(rec, model.for_axis(axis) if axis else model, Options() if options is None else options,
+                          mapper=mapper)
         rep = report.build_report(res, path, model_path)
         return {"explain_score_before": float(rep["score_before"]), "explain_score_after": float(rep["score_after"]),
                 "explain_effects": ",".join(e["kind"] for e in rep["effects"]), "explain_error": ""}
     except Exception as e:
         return {"explain_score_before": float("nan"), "explain_score_after": float("nan"), "explain_effects": "",
                 "explain_error": _failure(e)}
+
+
+@contextlib.contextmanager
+def _cluster_replicates():
+    """explain's bootstrap replicates as tasks of the Dask cluster this task runs on (the
+    task leaves its worker's thread pool meanwhile, so the replicates can run there too):
+    one long recording's bootstrap is spread over the cluster. None outside a Dask worker."""
+    from distributed import get_worker, worker_client
+
+    try:
+        get_worker()
+    except ValueError:
+        yield None
+        return
+    with worker_client() as client:
+        yield _DaskReplicates(client)
+
+
+class _DaskReplicates:
+    """A ``fogmon.explain.bootstrap.Mapper`` on a Dask client: the replicas and the
+    function scattered once, one task per replicate seed."""
+
+    def __init__(self, client):
+        self.client = client
+
+    def __call__(self, fn, replicas, seeds):
+        shared = self.client.scatter((replicas, fn), broadcast=True, hash=False)
+        return self.client.gather(self.client.map(_replicate, list(seeds), shared=shared, pure=False))
+
+
+def _replicate(seed: int, shared: tuple):
+    replicas, fn = shared
+    return fn(replicas.draw(seed))

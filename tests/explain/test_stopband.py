@@ -24,7 +24,7 @@ def test_the_candidates_see_only_the_pass_band():
     ctx = whittle_context(stochastic_part(TRUTH), {}, rec.t_s, np.ones(len(y), bool), y)
     stop = ~in_passband(TRUTH, rfft_omega(ctx.n))
     assert stop.any() and np.all(ctx.wh.w[stop] == 0.0)
-    cands = candidates(ctx, {})
+    cands = candidates(ctx, {}, {})
     assert all(c.bic_gain(ctx.penalty) <= 0 for c in cands)
     assert all(np.isfinite(c.gain) for c in cands)
 

@@ -11,7 +11,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fogmon.explain.fitting import BinnedPeriodogram, GlsFit, Whittle, filter_gain2, low_band_flicker, model_psd
+from fogmon.explain.fitting import (
+    BinnedPeriodogram,
+    GlsFit,
+    Whittle,
+    filter_gain2,
+    low_band_flicker,
+    model_psd,
+    rfft_omega,
+)
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
 
@@ -107,10 +115,22 @@ def estimate_text(x: float, se: float) -> str:
     return f"{x:.4g} +- {se:.2g}"
 
 
-def periodogram(ctx: Context, part: slice = slice(None)) -> BinnedPeriodogram:
-    """Binned periodogram of the residual (or of ``part`` of it)."""
+def periodogram(ctx: Context, part: slice | None = None) -> BinnedPeriodogram:
+    """Binned periodogram of the residual (computed once per context), or of ``part`` of it."""
+    if part is None:
+        if "periodogram" not in ctx.cache:
+            ctx.cache["periodogram"] = BinnedPeriodogram(ctx.Yf, ctx.n)  # ctx.y is 0 where not valid
+        return ctx.cache["periodogram"]
     y = np.where(ctx.valid[part], ctx.y[part], 0.0)
     return BinnedPeriodogram(np.fft.rfft(y), len(y))
+
+
+def model_psd_full(ctx: Context) -> np.ndarray:
+    """The current stochastic model's PSD at every rfft bin of the record, with the RMS of
+    its white level (``white_rms_dpsh``): computed once per context (analysis.whittle_context)."""
+    if "model_psd" not in ctx.cache:
+        ctx.cache["model_psd"] = model_psd(ctx.stoch, rfft_omega(ctx.n), ctx.n, white_rms_dpsh(ctx.stoch, ctx))
+    return ctx.cache["model_psd"]
 
 
 def passband_part(ctx: Context, bp: BinnedPeriodogram) -> BinnedPeriodogram:

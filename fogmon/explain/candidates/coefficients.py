@@ -14,6 +14,7 @@ from fogmon.explain.candidates.base import (
     LEAKAGE_FLOOR,
     Candidate,
     Context,
+    model_psd_full,
     periodogram,
     stoch_psd,
     white_rms_dpsh,
@@ -34,20 +35,29 @@ NOISE_ITERATIONS = 2
 
 
 def expected_avar(S: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
-    """Allan variance ((deg/h)^2) at averaging factors ``m`` of a process with PSD ``S``
-    at the rfft bins of an n-sample record: sum over the circle of
-    S 2 sin^4(m w / 2) / (m^2 sin^2(w / 2)) / n (the DC bin left out)."""
-    w = rfft_omega(n)[1:]
-    Sf = np.where(np.isfinite(S[1:]), S[1:], 0.0)
-    mult = np.full(len(w), 2.0)
-    if n % 2 == 0:
-        mult[-1] = 1.0
-    s2 = np.sin(w / 2.0) ** 2
-    return np.array([float(np.sum(mult * Sf * 2.0 * np.sin(mm * w / 2.0) ** 4 / (mm * mm * s2)) / n)
-                     for mm in np.asarray(m, dtype=float)])
+    """Allan variance ((deg/h)^2) at averaging factors ``m`` (2 m <= n / 2) of a process
+    with PSD ``S`` at the rfft bins of an n-sample record (the DC bin left out), from
+    its circular autocovariance r = irfft(S): (4 V(m) - V(2 m)) / (2 m^2), V(m) = m r_0
+    + 2 sum_{k<m} (m - k) r_k the variance of a sum of m samples - the same value as
+    sum over the circle of S 2 sin^4(m w / 2) / (m^2 sin^2(w / 2)) / n, in O(n) for
+    every m."""
+    Sf = np.where(np.isfinite(S), S, 0.0)
+    Sf[0] = 0.0
+    r = np.fft.irfft(Sf, n)
+    k = np.arange(len(r), dtype=float)
+    c0 = np.concatenate(([0.0], np.cumsum(r[1:])))      # c0[j] = sum_{1 <= k <= j} r_k
+    c1 = np.concatenate(([0.0], np.cumsum(k[1:] * r[1:])))
+
+    def var_sum(mm: np.ndarray) -> np.ndarray:
+        j = mm - 1
+        return mm * r[0] + 2.0 * (mm * c0[j] - c1[j])
+
+    m = np.asarray(m, dtype=np.int64)
+    return (4.0 * var_sum(m) - var_sum(2 * m)) / (2.0 * m.astype(float) ** 2)
 
 
-def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, sample_rate_hz: float, white_dpsh: float):
+def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, sample_rate_hz: float, white_dpsh: float,
+                     S: np.ndarray | None = None):
     """Corrected IEEE-952 coefficients of ``stoch`` from the residual ``y`` (deg/h):
     davar.fit.fit_avar (robust, octave taus, 95 % one-sided upper limits) on the
     residual's overlapping ADEV and on the ADEV the current stochastic model predicts
@@ -58,11 +68,12 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, sampl
     units for the terms whose model value lies outside the recording's NOISE_CONFIDENCE
     interval (identified terms: A +- z se; others: 0 .. the 95 % upper limit), refined by
     NOISE_ITERATIONS fixed-point steps A += A_recording - A_predicted(A) (the terms
-    interact in the fit), or None when the ADEV cannot be fitted."""
+    interact in the fit), or None when the ADEV cannot be fitted. ``S``: the model's PSD
+    at the record's rfft bins, when the caller has it."""
     n = len(y)
     r = oadev(np.where(valid, y, np.nan), sample_rate_hz, "octave", valid=valid)
     a, se, _, up = fit_avar(r.tau_s, r.adev_dph ** 2, r.m, r.n_terms, n, "all")
-    S = model_psd(stoch, rfft_omega(n), n, white_dpsh)
+    S = model_psd(stoch, rfft_omega(n), n, white_dpsh) if S is None else S
     ae, _, _, _ = fit_avar(r.tau_s, expected_avar(S, n, r.m), r.m, r.n_terms, n, "none")
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(ae))):
         return None
@@ -125,7 +136,7 @@ def noise(ctx: Context) -> Candidate | None:
     likelihood of the residual's binned periodogram under the model PSD with and without
     the correction (one parameter per corrected term)."""
     wr = white_rms_dpsh(ctx.stoch, ctx)
-    fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.sample_rate_hz, wr)
+    fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.sample_rate_hz, wr, model_psd_full(ctx))
     if not fit:
         return None
     bp = periodogram(ctx)

@@ -17,6 +17,7 @@ from fogmon.explain.candidates.base import (
     Candidate,
     Context,
     in_passband,
+    model_psd_full,
     periodogram,
     replace_white,
     white_rms_dpsh,
@@ -48,7 +49,7 @@ def _whitened(ctx: Context) -> np.ndarray:
     """The residual divided by the model PSD in the frequency domain (white where the
     model fits, a peak where a line is missing; not the calibrated PSD, whose octave
     bands would absorb part of a broad line)."""
-    S = model_psd(ctx.stoch, rfft_omega(ctx.n), ctx.n, white_rms_dpsh(ctx.stoch, ctx))
+    S = model_psd_full(ctx)
     S = np.maximum(S, LEAKAGE_FLOOR * float(np.median(S[1:])))  # a filter's zero: no division by 0
     S[0] = np.inf
     return np.fft.irfft(ctx.Yf / np.sqrt(S), ctx.n)

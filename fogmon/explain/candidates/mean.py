@@ -12,6 +12,7 @@ import numpy as np
 
 from fogmon.explain import detectors
 from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate
+from fogmon.explain.fitting import Coarse, coarse_block, weighted_products
 
 #: A periodic term's frequency search must find a line that chance (white residual,
 #: the model true) beats with this probability only. BIC's 3 ln n alone is about the 2 %
@@ -34,8 +35,10 @@ def chance_line_gain(n: int, false_alarm: float) -> float:
 
 def periodic(ctx: Context) -> Candidate | None:
     """Strongest line of the PSD-weighted periodogram (periods 3 samples .. duration/3),
-    frequency refined by golden-section search on the GLS chi-square; its bar is at
-    least :func:`chance_line_gain` at SEARCH_FALSE_ALARM."""
+    frequency refined within a bin of it to the maximum of the GLS chi-square of a
+    sinusoid (:func:`line_gain`: on a grid of LINE_STEPS_PER_BIN points per bin, then
+    golden section), then fitted by the calibrated GLS; its bar is at least
+    :func:`chance_line_gain` at SEARCH_FALSE_ALARM."""
     n = ctx.n
     P = np.abs(ctx.Yf) ** 2 / (n * ctx.wh.S)
     P[:3] = 0.0
@@ -44,30 +47,30 @@ def periodic(ctx: Context) -> Candidate | None:
     t = ctx.t_s
     tr = t - t[0]
 
-    def cols(f):
-        return np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
+    def g(nu):
+        return line_gain(ctx.wh.w, ctx.Yf, n, np.atleast_1d(nu))
 
-    def g(f):
-        return ctx.wh.gls(ctx.wh.fft(cols(f)), ctx.Yf).chi2_gain
-
-    lo, hi = (k - 1) * ctx.sample_rate_hz / n, (k + 1) * ctx.sample_rate_hz / n
+    grid = k + (np.arange(-LINE_STEPS_PER_BIN, LINE_STEPS_PER_BIN + 1)) / LINE_STEPS_PER_BIN
+    i = int(np.argmax(g(grid)))
+    a, b = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     r = (math.sqrt(5) - 1) / 2
-    a, b = lo, hi
     c, d = b - r * (b - a), a + r * (b - a)
-    gc, gd = g(c), g(d)
-    for _ in range(14):
+    gc, gd = float(g(c)[0]), float(g(d)[0])
+    for _ in range(12):
         if gc > gd:
             b, d, gd = d, c, gc
             c = b - r * (b - a)
-            gc = g(c)
+            gc = float(g(c)[0])
         else:
             a, c, gc = c, d, gd
             d = a + r * (b - a)
-            gd = g(d)
-    f, gf = (c, gc) if gc > gd else (d, gd)
-    X = cols(f)
-    h = 0.02 * ctx.sample_rate_hz / n
-    curv = (2 * gf - g(f + h) - g(f - h)) / h ** 2
+            gd = float(g(d)[0])
+    nu = c if gc > gd else d
+    h = 0.02
+    g3 = g(np.array([nu - h, nu, nu + h]))
+    curv = (2 * g3[1] - g3[0] - g3[2]) / (h * ctx.sample_rate_hz / n) ** 2
+    f = nu * ctx.sample_rate_hz / n
+    X = np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
     fit = judged_gls(ctx, ctx.wh.fft(X))
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
@@ -84,6 +87,41 @@ def periodic(ctx: Context) -> Candidate | None:
                      fit.chi2_gain, 3, ev, X @ fit.beta, X, search_bar=chance_line_gain(n, SEARCH_FALSE_ALARM))
 
 
+#: the frequency of a periodic term is searched on this many points per DFT bin (then golden section)
+LINE_STEPS_PER_BIN = 16
+#: a sinusoid's DFT is taken over this many bins either side of its frequency (and of its mirror image)
+LINE_KERNEL_BINS = 512
+
+
+def line_gain(w: np.ndarray, Yf: np.ndarray, n: int, nus: np.ndarray) -> np.ndarray:
+    """Whittle GLS chi-square gain of a sinusoid (sin and cos columns) at each continuous
+    frequency of ``nus`` (in DFT bins) for the residual's rfft ``Yf`` with the GLS weights
+    ``w`` (``Whittle.w``): the design's DFT in closed form, sum_t e^(2 pi i x t / n) =
+    (1 - e^(2 pi i x)) / (1 - e^(2 pi i x / n)) at x = +-nu - j, over the bins within
+    LINE_KERNEL_BINS of the line (the rest holds about 2 / (pi^2 LINE_KERNEL_BINS) of its
+    weight, 0.04 %), so each frequency costs O(LINE_KERNEL_BINS), not an FFT of the
+    record. Gaps are not in that design (the exact fit of the chosen frequency has them)."""
+    out = np.empty(len(nus))
+    nb = len(Yf)
+    for q, nu in enumerate(nus):
+        lo = max(1, int(nu) - LINE_KERNEL_BINS)
+        j = np.arange(lo, min(nb, int(nu) + LINE_KERNEL_BINS + 1))
+        d_plus, d_minus = _dirichlet(nu - j, n), _dirichlet(-nu - j, n)
+        X = np.column_stack(((d_plus - d_minus) / 2j, (d_plus + d_minus) / 2.0))
+        A, bb = weighted_products(w[j], X, Yf[j])
+        try:
+            out[q] = float(bb @ np.linalg.solve(A, bb))
+        except np.linalg.LinAlgError:
+            out[q] = 0.0
+    return out
+
+
+def _dirichlet(x: np.ndarray, n: int) -> np.ndarray:
+    """sum over t < n of e^(2 pi i x t / n) = e^(i pi x (n - 1) / n) n sinc(x) / sinc(x / n)
+    (n at x = 0)."""
+    return np.exp(1j * np.pi * x * (n - 1) / n) * (n * np.sinc(x) / np.sinc(x / n))
+
+
 def bias_step(ctx: Context) -> Candidate | None:
     """Best single bias step over 1 %..99 % of the record (exact GLS scan)."""
     n = ctx.n
@@ -97,15 +135,36 @@ def bias_step(ctx: Context) -> Candidate | None:
                      X @ fit.beta, X)
 
 
-def _scan_1d(ctx: Context, make: Callable[[float], np.ndarray], grid: np.ndarray, refine: int = 8):
-    """Best value of a nonlinear parameter on ``grid`` then on a finer grid around it."""
-    gains = [ctx.wh.gls(ctx.wh.fft(make(v)), ctx.Yf).chi2_gain for v in grid]
+def _scan_1d(ctx: Context, make: Callable[[float, np.ndarray], np.ndarray], grid: np.ndarray, refine: int = 8,
+             slow: Callable[[float], bool] = lambda v: True):
+    """Best value of a nonlinear parameter on ``grid`` then on a finer grid around it, by
+    the GLS gain of the design ``make(v, t)`` (at times t, s): on the record's block
+    means (``coarse``) for the values ``slow`` says vary slowly over a block (the final
+    fit is the caller's, on every sample)."""
+    co = coarse(ctx)
+
+    def gain(v):
+        if co is not None and slow(v):
+            return co.gain(make(v, co.t))
+        return ctx.wh.gls(ctx.wh.fft(make(v, ctx.t_s)), ctx.Yf).chi2_gain
+
+    gains = [gain(v) for v in grid]
     i = int(np.argmax(gains))
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     fine = np.linspace(lo, hi, refine + 2)[1:-1]
-    g2 = [ctx.wh.gls(ctx.wh.fft(make(v)), ctx.Yf).chi2_gain for v in fine]
+    g2 = [gain(v) for v in fine]
     j = int(np.argmax(g2))
     return (fine[j], g2[j]) if g2[j] > gains[i] else (grid[i], gains[i])
+
+
+def coarse(ctx: Context) -> Coarse | None:
+    """The GLS on the context's block means (fitting.Coarse, blocks of
+    fitting.coarse_block samples; computed once per context), or None for a record too
+    short to need it."""
+    if "coarse" not in ctx.cache:
+        b = coarse_block(ctx.n)
+        ctx.cache["coarse"] = None if b < 2 else Coarse(ctx.wh.S, ctx.y, ctx.wh.valid, ctx.t_s, b)
+    return ctx.cache["coarse"]
 
 
 def rate_ramp(ctx: Context) -> Candidate | None:
@@ -113,11 +172,11 @@ def rate_ramp(ctx: Context) -> Candidate | None:
     t = ctx.t_s
     T = t[-1] - t[0]
 
-    def make(t0):
-        return (np.maximum(t - t0, 0.0) / 3600.0)[:, None]
+    def make(t0, tt):
+        return (np.maximum(tt - t0, 0.0) / 3600.0)[:, None]
 
     t0, _ = _scan_1d(ctx, make, t[0] + T * np.linspace(0.0, 0.9, 16))
-    X = make(t0)
+    X = make(t0, t)
     fit = judged_gls(ctx, ctx.wh.fft(X))
     params = {"slope_dphh": float(fit.beta[0]), "t0_s": float(t0)}
     ev = f"trend regression: rate slope {estimate_text(fit.beta[0], fit.se[0])} deg/h^2 from t = {t0:.6g} s"
@@ -131,14 +190,16 @@ def warm_up(ctx: Context) -> Candidate | None:
     T = t[-1] - t[0]
     t0 = float(t[0])
 
-    def make(ltau):
-        return np.exp(-(t - t0) / math.exp(ltau))[:, None]
+    def make(ltau, tt):
+        return np.exp(-(tt - t0) / math.exp(ltau))[:, None]
 
     # faster than a few matched-filter lengths it cannot be told from the record's ends
     # (the circular GLS joins them) or from a glitch
     tau_lo = max(10.0, 3.0 * detectors.kernel_length(ctx.wh)) / ctx.sample_rate_hz
-    ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14))
-    X = make(ltau)
+    b = coarse_block(ctx.n)  # a settling over 4 blocks or more is scanned on block means
+    ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14),
+                       slow=lambda lt: math.exp(lt) * ctx.sample_rate_hz >= 4 * b)
+    X = make(ltau, t)
     fit = judged_gls(ctx, ctx.wh.fft(X))
     tau = math.exp(ltau)
     params = {"amplitude_dph": float(fit.beta[0]), "tau_s": tau, "t0_s": t0}

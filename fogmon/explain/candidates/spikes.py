@@ -33,17 +33,24 @@ def white_profile(model: SensorModel, ctx: Context) -> np.ndarray | None:
 
 def spike_scan(ctx: Context, y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """GLS amplitude (deg/h) and robust z of a one-sample spike at every sample
-    (detectors.spike_scan) of the residual (``y``, default the context's). When the
+    (detectors.spike_scan) of the residual (``y``, default the context's: computed once
+    per context). When the
     model's white level varies in time (vibration- or temperature-driven ARW), the
     residual is first divided by that level, so a sample that is large only because the
     model itself is noisier there is not a spike."""
+    if y is None and "spike_scan" in ctx.cache:
+        return ctx.cache["spike_scan"]
     sep = detectors.kernel_length(ctx.wh)
     block = max(4096, 64 * sep)
     prof = white_profile(ctx.stoch, ctx)
     if prof is None:
-        return detectors.spike_scan(ctx.wh, ctx.Yf if y is None else ctx.wh.fft(y), block=block)
-    amp, z = detectors.spike_scan(ctx.wh, ctx.wh.fft((ctx.y if y is None else y) / prof), block=block)
-    return amp * prof, z
+        out = detectors.spike_scan(ctx.wh, ctx.Yf if y is None else ctx.wh.fft(y), block=block)
+    else:
+        amp, z = detectors.spike_scan(ctx.wh, ctx.wh.fft((ctx.y if y is None else y) / prof), block=block)
+        out = amp * prof, z
+    if y is None:
+        ctx.cache["spike_scan"] = out
+    return out
 
 
 @dataclass
