@@ -130,7 +130,7 @@ def test_thermal_bad_values_are_usage_errors(chamber, capsys, argv, message):
 @pytest.mark.parametrize("argv, message", [
     (["--average-s", "1e9"], "--average-s 1e+09 s: the peak-to-peak drift needs at least two blocks in the "
                              "19200 s of chamber.csv"),
-    (["--diff-step-s", "1e9"], "--smooth-s 10 + 2 x --diff-step-s 1e+09 = 2e+09 s of filter settling leaves less "
+    (["--diff-step-s", "1e9"], "2 x --diff-step-s 1e+09 = 2e+09 s of filter settling leaves less "
                                "than half of the 19200 s of chamber.csv to fit"),
     (["--out-model", "{tmp}/no/cal.toml"], "--out-model {tmp}/no/cal.toml: folder {tmp}/no does not exist"),
     (["--out-corrected", "{tmp}"], "--out-corrected {tmp}: is a folder, give a file name"),

@@ -34,9 +34,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2,
                    help=f"degree of K0(T), the bias-vs-temperature polynomial, 0..{MAX_DEGREE} (default 2)")
     p.add_argument("--smooth-s", type=number(0), help="trailing smoothing of temp_c before differencing, s, >= 0 "
-                   "(default: the --model's thermal_drift value, else 10)")
+                   "(default: the --model's thermal_drift value, else chosen by the least residual)")
     p.add_argument("--diff-step-s", type=positive, help="step of the 3-point backward differences, s, > 0 "
-                   "(default: the --model's thermal_drift value, else 1)")
+                   "(default: the --model's thermal_drift value, else chosen by the least residual)")
     p.add_argument("--average-s", type=positive, default=100.0,
                    help="block length for the peak-to-peak drift figure, s, at most half the recording (default 100)")
     p.add_argument("--model", metavar="BASE.toml", help="sensor model to add the calibrated thermal_drift effect to "
@@ -82,24 +82,28 @@ def run(args) -> int:
     return 0
 
 
-def _filters(args, base, axis: str, rec) -> tuple[float, float]:
-    """(smooth_s, diff_step_s) of ``axis``: the options, else the base model's
-    thermal_drift acting on the axis, else 10 s and 1 s; checked against the record."""
+def _filters(args, base, axis: str, rec) -> tuple[float | None, float | None, str]:
+    """(smooth_s, diff_step_s, where from) of ``axis``: the options, else the base
+    model's thermal_drift acting on the axis, else None (chosen by the fit); checked
+    against the record."""
     drifts = [e.params for e in base.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)]
     prior: dict = drifts[0] if drifts else {}
-    smooth_s = args.smooth_s if args.smooth_s is not None else prior.get("smooth_s", 10.0)
-    diff_step_s = args.diff_step_s if args.diff_step_s is not None else prior.get("diff_step_s", 1.0)
-    settle_s = smooth_s + 2 * diff_step_s
+    smooth_s = args.smooth_s if args.smooth_s is not None else prior.get("smooth_s")
+    diff_step_s = args.diff_step_s if args.diff_step_s is not None else prior.get("diff_step_s")
+    settle_s = (smooth_s or 0.0) + 2 * (diff_step_s or 0.0)
     if settle_s >= rec.duration_s / 2:
-        raise FogmonError(f"--smooth-s {smooth_s:g} + 2 x --diff-step-s {diff_step_s:g} = {settle_s:g} s of filter "
-                          f"settling leaves less than half of the {rec.duration_s:g} s of {rec.name} to fit")
+        terms = [f"--smooth-s {smooth_s:g}" if smooth_s is not None else "",
+                 f"2 x --diff-step-s {diff_step_s:g}" if diff_step_s is not None else ""]
+        raise FogmonError(f"{' + '.join(t for t in terms if t)} = {settle_s:g} s of filter settling leaves less "
+                          f"than half of the {rec.duration_s:g} s of {rec.name} to fit")
     if args.average_s > rec.duration_s / 2:
         raise FogmonError(f"--average-s {args.average_s:g} s: the peak-to-peak drift needs at least two blocks in "
                           f"the {rec.duration_s:g} s of {rec.name}")
-    return smooth_s, diff_step_s
+    given = {"options": args.smooth_s is not None or args.diff_step_s is not None, "--model": bool(prior)}
+    return smooth_s, diff_step_s, ", ".join(k for k, v in given.items() if v)
 
 
-def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
+def _calibrate(rec, args, smooth_s: float | None, diff_step_s: float | None, source: str, prefix: str):
     """Calibrate one axis, print its coefficients and drift (lines starting with
     ``prefix``); (ThermalCalibration, corrected rate deg/h)."""
     from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
@@ -116,7 +120,13 @@ def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
     for k, unit in (("k1_pos", "deg/h per degC/s"), ("k1_neg", "deg/h per degC/s"),
                     ("k2_pos", "deg/h per degC/s^2"), ("k2_neg", "deg/h per degC/s^2")):
         lines.append(f"  {k:<9} {p[k]:+.6g} +/- {se[k]:.2g}  {unit}")
-    lines.append(f"  residual std {cal.residual_std_dph:.4g} deg/h per sample")
+    chosen = [n for n, v in (("smooth_s", smooth_s), ("diff_step_s", diff_step_s)) if v is None]
+    how = (f"{'both' if len(chosen) == 2 else chosen[0]} chosen: least residual of {cal.candidates} candidates"
+           if chosen else "")
+    how = "; ".join(x for x in (f"from {source}" if source else "", how) if x)
+    lines.append(f"  filters   smooth_s {p['smooth_s']:g} s, diff_step_s {p['diff_step_s']:g} s ({how})")
+    lines.append(f"  residual std {cal.residual_std_dph:.4g} deg/h per sample; +/- is 1 sigma under the residual noise "
+                 f"{_levels(cal)}")
     change = (f"{before / after:.1f}x smaller" if after < before else
               f"{after / before:.1f}x larger: the fit does not reduce this drift" if before > 0 else "no drift")
     lines.append(f"peak-to-peak drift of {args.average_s:g} s averages: {before:.4g} deg/h -> {after:.4g} deg/h "
@@ -124,6 +134,15 @@ def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
     for line in lines:
         print(prefix + line)
     return cal, corrected
+
+
+def _levels(cal) -> str:
+    """The residual noise levels the standard errors assume, '<' for 95 % upper limits."""
+    units = {"N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h", "K_dphsh": "deg/h/sqrt(h)"}
+    levels = " and ".join(f"{k[0]} {v:.3g} {units[k]}" for k, v in cal.residual_noise.items()
+                          if k not in cal.upper_limits or v)
+    limits = " or ".join(f"{k[0]} < {v:.3g} {units[k]}" for k, v in cal.upper_limits.items())
+    return levels + (f" and {limits} (95 % upper limits, the larger error)" if limits else "")
 
 
 def with_calibration(base: SensorModel, effects: dict[str, Effect], axes: tuple[str, ...]) -> SensorModel:
