@@ -8,6 +8,7 @@ import logging
 import os
 import sys
 
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig
@@ -16,12 +17,13 @@ from fogmon.sources.options import SourceOptions
 #: default chunk length in samples (4.7 h at 1 kHz): long recordings are split into chunks
 DEFAULT_CHUNK_SAMPLES = 1 << 24
 
-EPILOG = """examples:
-  fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
-  fogmon batch 'rig*/gyro-*.parquet' archives/ --out fleet/ --model datasheet.toml --report fleet/fleet.html
-  fogmon batch runs/ --out fleet/ --scheduler tcp://10.0.0.5:8786   # an existing Dask cluster
-
-Inputs: replay logs (.csv), Parquet logs (.parquet), raw serial captures with their .json
+EXAMPLES = """
+fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
+fogmon batch 'rig*/gyro-*.parquet' archives/ --out fleet/ --model datasheet.toml --report fleet/fleet.html
+fogmon batch runs/ --out fleet/ --scheduler tcp://10.0.0.5:8786   # an existing Dask cluster
+fogmon batch runs/ --out fleet/ --report fleet/fleet.html --group-by serial   # gyros by a header field
+"""
+NOTES = """Inputs: replay logs (.csv), Parquet logs (.parquet), raw serial captures with their .json
 sidecar (or --protocol), CAN logs (.asc .blf .trc .csv .log with --dbc or a sidecar),
 monitor archive folders; a folder is searched for them (an archive folder is one
 recording), a glob is expanded. Every input is checked (all rows) before any analysis
@@ -29,38 +31,42 @@ starts. One task per recording and axis; a recording longer than --chunk-s is sp
 into chunks overlapping by one window, with results equal to a single pass
 (docs/batch.md). Window, hop and taus are chosen per recording as `fogmon replay` does.
 Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
-B deg/h, K deg/h/sqrt(h), R deg/h^2). Exit code 0 when every recording was analysed,
-1 when some failed (named on stderr and in recordings.parquet, column error), 2 on bad
-usage or input (nothing written)."""
+B deg/h, K deg/h/sqrt(h), R deg/h^2)."""
+EXIT_CODES = """exit codes:
+  0              every recording was analysed
+  1              some failed (named on stderr and in recordings.parquet, column error)
+  2              bad usage or input: one line names the option, or the file, line and field
+                 (nothing written)
+  130, 143, 129  stopped by Ctrl-C, SIGTERM, SIGHUP"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from fogmon.cli.pipeline_options import parse_taus
     from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.epilog = EPILOG
+    set_epilog(parser, EXAMPLES, NOTES, EXIT_CODES)
     parser.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files, folders or globs")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder for windows.parquet and "
                         "recordings.parquet (created if needed; existing tables there are replaced)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (tcp://HOST:PORT; start "
                         "one with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`); the "
                         "workers must see the input paths. Default: a local cluster of --workers processes")
-    parser.add_argument("--workers", type=number(1, 1024, integer=True), metavar="N",
+    parser.add_argument("--workers", type=number(1, 1024, integer=True), metavar="PROCESSES",
                         help=f"processes of the local cluster, one thread each (default: the machine's cores, "
                              f"{len(os.sched_getaffinity(0))} here)")
     parser.add_argument("--model", metavar="MODEL.toml", help="also explain every recording against this sensor "
                         "model (the explain score before/after and the effect kinds per recording)")
     parser.add_argument("--report", metavar="FLEET.html", help="write the fleet report (HTML with its PNG figures "
                         "and a CSV of the per-recording table beside it)")
-    parser.add_argument("--chunk-s", type=positive, metavar="S", help="split recordings longer than S s of "
+    parser.add_argument("--chunk-s", type=positive, metavar="SECONDS", help="split recordings longer than SECONDS of "
                         f"recording time into chunks (default {DEFAULT_CHUNK_SAMPLES:,} samples: "
                         f"{DEFAULT_CHUNK_SAMPLES / 1000 / 3600:.1f} h at 1 kHz)")
     g = parser.add_argument_group("dynamic Allan deviation (as fogmon replay)")
-    g.add_argument("--window-s", type=positive, metavar="W", help="window length in s (default: as fogmon replay, "
+    g.add_argument("--window-s", type=positive, metavar="SECONDS",
+                   help="window length in s (default: as fogmon replay, "
                    "per recording: a quarter of it rounded down to a power of two of samples)")
-    g.add_argument("--hop-s", type=positive, metavar="H", help="hop in s (default: window/8)")
-    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="T",
+    g.add_argument("--hop-s", type=positive, metavar="SECONDS", help="hop in s (default: window/8)")
+    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="GRID",
                    help=f"averaging times as fogmon replay --taus (default {PipelineConfig.taus})")
     g.add_argument("--raw-rate", action="store_true", help="analyse rate_dph as recorded even with rot_dps")
     g.add_argument("--keep-motion", action="store_true", help="analyse platform motion too (docs/motion.md)")

@@ -5,32 +5,35 @@ from __future__ import annotations
 import argparse
 
 from fogmon.cli.export_options import add_export_argument, export_request
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.values import number, positive
 from fogmon.export import write_export
 
-EPILOG = """CURVE.csv: a header line tau_s,adev_dph (s, deg/h) and optionally edf or n_terms, then one
+EXAMPLES = """
+fogmon fit curve.csv                                     # intervals at 68.3 % (1 sigma)
+fogmon fit curve.csv --rate-hz 100 --record-s 7200 --confidence 0.95
+fogmon fit curve.csv --export kalibr imu.yaml
+"""
+NOTES = """CURVE.csv: a header line tau_s,adev_dph (s, deg/h) and optionally edf or n_terms, then one
 row per tau, increasing; '#' lines are comments. Example:
   # from Stable32, overlapping ADEV of a 2 h record at 100 Hz
   tau_s,adev_dph,n_terms
   0.01,12.1,719999
 
 The fit needs the record's sample rate and length and the terms behind each tau; what the
-curve does not state is assumed, and the output says what was assumed (docs/exports.md).
-  fogmon fit curve.csv --export kalibr imu.yaml
-Exit code 0 on success, 2 on bad usage or input."""
+curve does not state is assumed, and the output says what was assumed (docs/exports.md)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.formatter_class = argparse.RawDescriptionHelpFormatter
-    p.epilog = EPILOG
+    set_epilog(p, EXAMPLES, NOTES)
     p.add_argument("curve", metavar="CURVE.csv", help="Allan-deviation curve: columns tau_s (s), adev_dph (deg/h), "
                    "optional edf or n_terms")
     p.add_argument("--rate-hz", dest="sample_rate_hz", type=number(0, 1e6, above=True), metavar="HZ",
                    help="sample rate of the record behind the curve, Hz (default: 1 / the first tau)")
-    p.add_argument("--record-s", type=positive, metavar="S", help="length of that record, s (default: from "
+    p.add_argument("--record-s", type=positive, metavar="SECONDS", help="length of that record, s (default: from "
                    "n_terms, else assumed 4 x the largest tau)")
-    p.add_argument("--confidence", type=number(0, 1, above=True), default=0.683, metavar="C",
-                   help="two-sided confidence of the intervals, 0 < C < 1 (default 0.683 = 1 sigma)")
+    p.add_argument("--confidence", type=number(0, 1, above=True), default=0.683, metavar="PROBABILITY",
+                   help="two-sided confidence of the intervals, 0 < PROBABILITY < 1 (default 0.683 = 1 sigma)")
     add_export_argument(p)
 
 

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fogmon.block import select_aux
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
@@ -27,22 +28,37 @@ if TYPE_CHECKING:
 MAX_DEGREE = 6
 
 
+EXAMPLES = """
+fogmon thermal replay_logs/sim_thermal_chamber_1hz.csv
+fogmon thermal chamber.csv --model datasheet.toml --out-model calibrated.toml --out-corrected corrected.csv
+fogmon thermal imu.csv --axis x,y --degree 3 --smooth-s 30 --diff-step-s 10
+"""
+NOTES = """Prints K0(T) (a polynomial in deg C), K1 (deg/h per degC/s) and K2 (deg/h per degC/s^2), each
+with its 1-sigma error under the residual's own noise, the derivative filters (chosen by the
+least residual unless given or in --model) and the peak-to-peak drift of --average-s averages
+before and after the correction (docs/methods.md)."""
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    set_epilog(p, EXAMPLES, NOTES)
     p.add_argument("recording", metavar="RECORDING.csv",
                    help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
                    "temperature (docs/formats.md)")
-    p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2,
+    p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2, metavar="DEGREE",
                    help=f"degree of K0(T), the bias-vs-temperature polynomial, 0..{MAX_DEGREE} (default 2)")
-    p.add_argument("--smooth-s", type=number(0), help="trailing smoothing of temp_c before differencing, s, >= 0 "
+    p.add_argument("--smooth-s", type=number(0), metavar="SECONDS",
+                   help="trailing smoothing of temp_c before differencing, s, >= 0 "
                    "(default: the --model's thermal_drift value, else chosen by the least residual)")
-    p.add_argument("--diff-step-s", type=positive, help="step of the 3-point backward differences, s, > 0 "
+    p.add_argument("--diff-step-s", type=positive, metavar="SECONDS",
+                   help="step of the 3-point backward differences, s, > 0 "
                    "(default: the --model's thermal_drift value, else chosen by the least residual)")
-    p.add_argument("--average-s", type=positive, default=100.0,
+    p.add_argument("--average-s", type=positive, default=100.0, metavar="SECONDS",
                    help="block length for the peak-to-peak drift figure, s, at most half the recording (default 100)")
     p.add_argument("--model", metavar="BASE.toml", help="sensor model to add the calibrated thermal_drift effect to "
                    "(default: an empty model at the recording's sample rate)")
-    p.add_argument("--out-model", metavar="OUT.toml", help="write the model with the thermal_drift effect")
-    p.add_argument("--out-corrected", metavar="OUT.csv", help="write the recording with the predicted drift removed")
+    p.add_argument("--out-model", metavar="CALIBRATED.toml", help="write the model with the thermal_drift effect")
+    p.add_argument("--out-corrected", metavar="CORRECTED.csv",
+                   help="write the recording with the predicted drift removed")
     add_reader_arguments(p, axis=True)
 
 
