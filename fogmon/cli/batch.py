@@ -58,6 +58,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "model (the explain score before/after and the effect kinds per recording)")
     parser.add_argument("--report", metavar="FLEET.html", help="write the fleet report (HTML with its PNG figures "
                         "and a CSV of the per-recording table beside it)")
+    parser.add_argument("--group-by", metavar="KEY",
+                        help="what names a recording's gyro in the fleet report: a metadata key (a replay-log "
+                        "header '# KEY: value' line, a Parquet log's metadata, a capture sidecar field), 'folder' "
+                        "(each folder one gyro) or 'recording' (each its own). Default: a serial number "
+                        "(serial_number, serial, sn, ...), else the sensor name within its folder, else the "
+                        "recording alone; never the folder alone (docs/batch.md, Gyros)")
     parser.add_argument("--chunk-s", type=positive, metavar="SECONDS", help="split recordings longer than SECONDS of "
                         f"recording time into chunks (default {DEFAULT_CHUNK_SAMPLES:,} samples: "
                         f"{DEFAULT_CHUNK_SAMPLES / 1000 / 3600:.1f} h at 1 kHz)")
@@ -116,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
         if show:
             from distributed import progress
             progress([f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None])
-        windows, rows = _gather(client, jobs)
+        windows, rows = _gather(client, jobs, args.group_by)
     finally:
         client.close()
         if cluster is not None:
@@ -195,9 +201,10 @@ def _submit(client, plans: list, args: argparse.Namespace, source: SourceOptions
     return jobs
 
 
-def _gather(client, jobs: list[tuple]) -> tuple[list, list[dict]]:
+def _gather(client, jobs: list[tuple], group_by: str | None = None) -> tuple[list, list[dict]]:
     """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed)
-    and the recordings-table rows (their errors as this command names options)."""
+    and the recordings-table rows (their errors as this command names options; their gyro
+    as ``group_by`` asks)."""
     from fogmon.cli import render
 
     windows: list = []
@@ -205,7 +212,7 @@ def _gather(client, jobs: list[tuple]) -> tuple[list, list[dict]]:
     for plan, axis, chunks, futs, expl, masked in jobs:
         results = client.gather(futs)
         row, win = _recording_row(plan, axis, chunks, results,
-                                  client.gather(masked) if masked is not None else None)
+                                  client.gather(masked) if masked is not None else None, group_by)
         if expl is not None:
             row.update(client.gather(expl))
         for k in ("error", "explain_error"):
@@ -240,12 +247,16 @@ def _finish(args: argparse.Namespace, plans: list, jobs: list[tuple], windows: l
     return 1 if failed or any(r.get("explain_error") for r in rows) else 0
 
 
-def _recording_row(plan, axis: str, chunks, results, motion) -> tuple[dict, object]:
+def _recording_row(plan, axis: str, chunks, results, motion, group_by: str | None = None) -> tuple[dict, object]:
     """The recordings-table row of one recording's axis ``axis`` ("": a one-axis
-    recording, named by ``plan.axis``) and its windows table (None if failed)."""
+    recording, named by ``plan.axis``; its gyro as ``group_by`` asks, fleet.identity) and
+    its windows table (None if failed)."""
     from fogmon.fleet import tables
+    from fogmon.fleet.identity import gyro_identity
 
-    row = {"recording": plan.path, "axis": axis or plan.axis, "format": plan.kind,
+    gyro, named_by = gyro_identity(plan.path, plan.meta, group_by)
+    row = {"recording": plan.path, "gyro": gyro, "gyro_named_by": named_by, "axis": axis or plan.axis,
+           "format": plan.kind,
            "sample_rate_hz": plan.sample_rate_hz, "window_s": plan.window_s, "hop_s": plan.hop_s, "chunks": len(chunks)}
     errors = [r.error for r in results if r.error]
     last = results[-1].record
