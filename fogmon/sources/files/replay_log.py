@@ -16,6 +16,7 @@ from fogmon.errors import FogmonError
 from fogmon.formats.recording import RATE_SAMPLES, check_grid_length, check_stated_rate, grid_positions, pick_axes
 from fogmon.formats.replay_log import CHUNK_BYTES, ReplayLogReader, Rows
 from fogmon.sources import plausibility
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
 from fogmon.sources.options import SourceOptions
 from fogmon.sources.pacing import Pacer
@@ -30,7 +31,7 @@ def _block_len(sample_rate_hz: float, speed: float | None) -> int:
     return FAST_BLOCK if not speed else max(1, int(round(PACED_BLOCK_S * sample_rate_hz * speed)))
 
 
-class ReplayLogSource:
+class ReplayLogSource(OfflineSource):
     """A replay-log CSV on its uniform grid, read in chunks (memory independent of the
     file size): time gaps become invalid placeholders with a ``gap`` event; rates beyond
     +-``max_abs_dph`` (deg/h, fogmon.sources.plausibility) become invalid samples. Opening
@@ -189,7 +190,7 @@ class _LogGrid:
         return b, int(np.count_nonzero(self._present[:m])), len(gaps)
 
 
-class ReplayLogSet:
+class ReplayLogSet(OfflineSource):
     """Replay-log pieces (an archive's samples-NNNN.csv, fogmon.formats.archive) replayed as one
     recording, each read in chunks. Every piece is checked when the set is opened. The
     sample grid goes on across the seams: samples missing between two pieces become

@@ -23,6 +23,7 @@ from fogmon.block import Block, Event, parse_axes
 from fogmon.errors import FogmonError
 from fogmon.formats.recording import Recording, check_grid_length
 from fogmon.sources import plausibility
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.files.replay_log import FAST_BLOCK
 from fogmon.sources.files.timing import Timing, block_means, check_nominal, grid_index
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
@@ -33,7 +34,7 @@ DPH_PER_RPS = 3600.0 * 180.0 / math.pi
 IMU_AXES = ("x", "y", "z")
 
 
-class StampedSource:
+class StampedSource(OfflineSource):
     """Samples with their own time stamps -> Blocks on the uniform grid (see the module
     docstring). ``t_s`` (s), ``rate_dph`` (deg/h; with ``axes``, one column per axis),
     ``aux`` channels by name (arrays of the same length); ``where`` names the data in
