@@ -241,9 +241,10 @@ def _finish(args: argparse.Namespace, plans: list, jobs: list[tuple], windows: l
           f"({sum(len(j[2]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
     if args.report:
         from fogmon.cli import command_flags
-        from fogmon.fleet.report import write_report
+        from fogmon.fleet.report import gyro_summary, write_report
         for f in write_report(args.report, r_path, w_path, command_flags("batch")):
             print(f"fogmon batch: wrote {f}")
+        print(f"fogmon batch: the report compares {gyro_summary(rows)}")
     return 1 if failed or any(r.get("explain_error") for r in rows) else 0
 
 

@@ -69,13 +69,14 @@ def changes(rows: list[dict]) -> list[dict]:
     return out
 
 
-def _named_by(rows: list[dict]) -> str:
-    """How the gyros were named, e.g. "named by serial: 3, sensor + folder: 1"."""
+def gyro_summary(rows: list[dict]) -> str:
+    """E.g. "4 recordings of 3 gyros (gyro named by serial: 2, sensor + folder: 2)"."""
     counts: dict[str, int] = {}
     for r in rows:
         key = r.get("gyro_named_by") or "recording"
         counts[key] = counts.get(key, 0) + 1
-    return "recordings whose gyro is named by " + ", ".join(f"{k}: {n}" for k, n in sorted(counts.items()))
+    named = ", ".join(f"{k}: {n}" for k, n in sorted(counts.items()))
+    return f"{len(rows)} recordings of {len({gyro_of(r) for r in rows})} gyros (gyro named by {named})"
 
 
 def _trend_png(rows: list[dict], path: str) -> None:
@@ -143,8 +144,8 @@ def write_report(path: str, recordings_parquet: str, windows_parquet: str,
     outside = [r for r in rows if has_model and not r["error"] and r["explain_score_before"] > SCORE_OUTSIDE]
     failed = [r for r in rows if r["error"]]
     n_win = pq.ParquetFile(windows_parquet).metadata.num_rows
-    parts = [f"<h1>fogmon fleet report</h1><p>{len(rows)} recordings of {len({gyro_of(r) for r in rows})} "
-             f"gyros ({_named_by(rows)}), {n_win} windows; {len(failed)} failed. "
+    parts = [f"<h1>fogmon fleet report</h1><p>{html.escape(gyro_summary(rows))}, {n_win} windows; "
+             f"{len(failed)} failed. "
              f"Tables: {html.escape(os.path.basename(csv))}, "
              f"{html.escape(os.path.basename(recordings_parquet))}, {html.escape(os.path.basename(windows_parquet))}."
              "</p>",
