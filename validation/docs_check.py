@@ -112,7 +112,7 @@ def parse_doc(path: Path, rel: str) -> list[Command]:
         indent, lang, j = len(m.group(1)), m.group(2), i + 1
         while j < len(lines) and not lines[j].strip().startswith("```"):
             j += 1
-        body = [x[indent:] if x[:indent].isspace() else x.lstrip() for x in lines[i + 1:j]]
+        body = [x[indent:] if not indent or x[:indent].isspace() else x.lstrip() for x in lines[i + 1:j]]
         if lang in ("bash", "sh"):
             cmds += _bash_commands(rel, i + 2, body)
         elif lang == "python":
@@ -242,7 +242,7 @@ def run(cmd: Command, cwd: Path) -> tuple[int, str, float]:
     if cmd.lang == "python":
         script = cwd / "_docs_check_block.py"
         script.write_text(cmd.text, encoding="utf-8")
-        argv = [sys.executable, str(script)]
+        argv = [sys.executable, "-P", str(script)]    # -P: the installed fogmon, not the copy's (no numba cache)
     else:
         argv = ["bash", "-o", "pipefail", "-c", cmd.text]
     before = os.times()
