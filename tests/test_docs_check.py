@@ -50,3 +50,10 @@ def test_a_changed_number_is_a_mismatch_naming_both_lines():
     bad = dc.compare(cmd, printed)
     assert len(bad) == 2 and "+30.04" in bad[0] and "+30.3729" in bad[0] and "1.79" in bad[1]
     assert dc.compare(cmd, printed.replace("30.3729 +/- 0.92", "30.04 +/- 0.37").replace("1.593", "1.79")) == []
+
+
+def test_a_python_block_keeps_its_indentation(tmp_path):
+    (tmp_path / "doc.md").write_text("```python\nclass A:\n    x = 1\n```\n"
+                                     "- item:\n  ```python\n  if True:\n      y = 2\n  ```\n")
+    cmds = dc.parse_doc(tmp_path / "doc.md", "doc.md")
+    assert [c.text for c in cmds] == ["class A:\n    x = 1", "if True:\n    y = 2"]
