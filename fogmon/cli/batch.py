@@ -183,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         if show:
             from distributed import progress
             progress([f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None])
-        windows, rows = _gather(client, jobs, args.scheduler, args.group_by)
+        windows, rows, accels = _gather(client, jobs, args.scheduler, args.group_by)
     except KeyboardInterrupt:
         _quiet_shutdown()
         raise
@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
         client.close()
         if cluster is not None:
             cluster.close()
-    return _finish(args, plans, bad, jobs, windows, rows)
+    return _finish(args, plans, bad, jobs, windows, rows, accels)
 
 
 def _make_out(folder: str) -> None:
@@ -297,16 +297,18 @@ def _submit(client, plans: list, args: argparse.Namespace, source: SourceOptions
 
 
 def _gather(client, jobs: list[tuple], scheduler: str | None,
-            group_by: str | None = None) -> tuple[list, list[dict]]:
-    """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed)
-    and the recordings-table rows (their errors as this command names options; their gyro
-    as ``group_by`` asks)."""
+            group_by: str | None = None) -> tuple[list, list[dict], tuple[list, list[dict]]]:
+    """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed),
+    the recordings-table rows (their errors as this command names options; their gyro as
+    ``group_by`` asks) and the accelerometers' windows tables and rows."""
     from fogmon.cli import render
     from fogmon.fleet import tasks
 
     _wait(client, [f for j in jobs for f in (*j[3], j[4], j[5]) if f is not None], scheduler)
     windows: list = []
     rows: list[dict] = []
+    accel_windows: list = []
+    accel_rows: list[dict] = []
     for plan, axis, chunks, futs, expl, masked in jobs:
         path = plan.path
         results = [_result(f, lambda msg, c=c, path=path: tasks.ChunkResult(path, c.index, error=msg))
@@ -324,11 +326,14 @@ def _gather(client, jobs: list[tuple], scheduler: str | None,
         rows.append(row)
         if win is not None:
             windows.append(win)
-    return windows, rows
+            for accel_row, accel_win in _accel_rows(plan, results):
+                accel_rows.append(accel_row)
+                accel_windows.append(accel_win)
+    return windows, rows, (accel_windows, accel_rows)
 
 
 def _finish(args: argparse.Namespace, plans: list, bad: list, jobs: list[tuple], windows: list,
-            rows: list[dict]) -> int:
+            rows: list[dict], accels: tuple[list, list[dict]] = ([], [])) -> int:
     """Write the tables (and --report), say what was done, what failed and what could
     not be read; the exit code."""
     from fogmon.cli import render
@@ -336,7 +341,7 @@ def _finish(args: argparse.Namespace, plans: list, bad: list, jobs: list[tuple],
 
     failed = [row for row in rows if row["error"]]
     unread = [{"recording": p.path, "axis": "-", "format": p.kind, "error": render(p.error, "batch")} for p in bad]
-    w_path, r_path = tables.write_tables(args.out, windows, rows + unread)
+    w_path, r_path = tables.write_tables(args.out, windows, rows + unread, *accels)
     for row in failed:
         print(f"fogmon batch: {row['recording']}: failed: {row['error']}", file=sys.stderr)
     for row in rows:
@@ -346,6 +351,10 @@ def _finish(args: argparse.Namespace, plans: list, bad: list, jobs: list[tuple],
     what = "(recording, axis) pairs" if any(p.axes for p in plans) else "recordings"
     print(f"fogmon batch: {len(rows) - len(failed)} of {len(rows)} {what} analysed "
           f"({sum(len(j[2]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
+    if accels[1]:
+        print(f"fogmon batch: {len(accels[1])} accelerometers: {sum(len(t) for t in accels[0])} windows in "
+              f"{os.path.join(args.out, tables.ACCEL_WINDOWS)}, one row each in "
+              f"{os.path.join(args.out, tables.ACCEL_RECORDINGS)}")
     if args.report:
         from fogmon.cli import command_flags
         from fogmon.fleet.report import gyro_summary, write_report
@@ -357,6 +366,22 @@ def _finish(args: argparse.Namespace, plans: list, bad: list, jobs: list[tuple],
               f"and in {r_path}); the others are analysed", file=sys.stderr)
         return 2
     return 1 if failed or any(r.get("explain_error") for r in rows) else 0
+
+
+def _accel_rows(plan, results) -> list[tuple[dict, object]]:
+    """The accelerometers' rows and windows tables of one recording's chunks (those of
+    an axis's task: that axis's accelerometer)."""
+    from fogmon.fleet import tables
+
+    out = []
+    last = results[-1]
+    for a, rec in last.accel_records.items():
+        row = {"recording": plan.path, "accel": a, "sample_rate_hz": plan.sample_rate_hz, "window_s": plan.window_s,
+               "hop_s": plan.hop_s, "samples_invalid": sum(r.accel_invalid.get(a, 0) for r in results),
+               "windows": sum(len(r.accel_windows.get(a, {}).get("t_end_s", ())) for r in results), **rec}
+        out.append((row, tables.windows_table(plan.path, a, plan.window_s, results[0].tau_s,
+                                              [r.accel_windows.get(a, {}) for r in results], accel=True)))
+    return out
 
 
 def _recording_row(plan, axis: str, chunks, results, motion, group_by: str | None = None) -> tuple[dict, object]:

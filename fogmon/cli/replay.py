@@ -10,7 +10,6 @@ from fogmon.cli.helptext import set_epilog
 from fogmon.cli.output_options import check_command_outputs
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, output_errors, pipeline_config
 from fogmon.cli.source_options import add_reader_arguments, add_source_arguments, source_options
-from fogmon.errors import FogmonError
 from fogmon.export import write_export
 from fogmon.pipeline import Pipeline
 from fogmon.sources.open import open_replay_source
@@ -53,16 +52,15 @@ def run(args: argparse.Namespace) -> int:
     export = export_request(args)
     source = open_replay_source(args.recording, source_options(args))
     pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
-    if export and pipeline.axes:
-        raise FogmonError(f"--export {export[0]}: {args.recording} has axes {', '.join(pipeline.axes)} and an "
-                          f"export holds one gyro's fit: select one with --axis NAME")
     sinks = build_sinks(args)
     summary = pipeline.run(sinks)
     failed = output_errors(sinks)
     if failed:   # the summary is printed; a truncated output is never a success
         raise failed[0]
     if export and not summary.interrupted:
-        write_export(*export, summary.overall_fit, summary.source_name, summary.sample_rate_hz,
-                     getattr(source, "ros_topic", None))
-        print(f"Wrote {export[1]} ({export[0]} export of the whole-run fit)")
+        gyros = {a: x.overall_fit for a, x in summary.axes.items()} if summary.axes else summary.overall_fit
+        write_export(*export, gyros, summary.source_name, summary.sample_rate_hz, getattr(source, "ros_topic", None),
+                     {a: x.overall_fit for a, x in summary.accels.items()})
+        print(f"Wrote {export[1]} ({export[0]} export of the whole-run fit"
+              f"{', accelerometers ' + ', '.join(summary.accels) if summary.accels else ''})")
     return interrupted_exit_code() if summary.interrupted else 0

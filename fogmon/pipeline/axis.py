@@ -61,6 +61,8 @@ class AxisAnalysis:
         self.watch: ModelWatch | None = None
         self.phases: PhaseLog | None = None
         self.aux_windows: AuxWindows | None = None   # the aux samples of each window (model check, phases)
+        self._gate_in = _AuxFifo()   # valid flags handed to the motion gate, not yet released
+        self.moving = np.zeros(0, dtype=bool)   # of the samples last released: kept out as platform motion
 
     def suffixed(self, key: str) -> str:
         """``key`` as this axis names it: ``<key>_<axis>``, or ``key`` for a one-axis stream."""
@@ -103,12 +105,29 @@ class AxisAnalysis:
     def gate(self, t_s: np.ndarray, y: np.ndarray, valid: np.ndarray,
              dispatch: Callable[[Sequence[Event]], None]) -> tuple[np.ndarray, np.ndarray]:
         """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
-        has judged, platform motion made invalid (its events to ``dispatch``)."""
+        has judged, platform motion made invalid (its events to ``dispatch``); ``moving``
+        then marks those the gate made invalid (the accelerometers of the axis follow it)."""
         if self.motion is None:
+            self.moving = np.zeros(len(y), dtype=bool)
             return y, valid
-        y, valid, events = self.motion.push(t_s, y, valid)
+        self._gate_in.push({"valid": valid}, len(valid))
+        y, v_out, events = self.motion.push(t_s, y, valid)
+        self.moving = self._moved(v_out)
         dispatch(self.named(events))
-        return y, valid
+        return y, v_out
+
+    def flush_motion(self) -> tuple[np.ndarray, np.ndarray, list[Event]]:
+        """At the end of a run, the samples the motion gate still holds (as ``gate``
+        gives them, ``moving`` set) and its last events."""
+        assert self.motion is not None, "called with a motion gate only"
+        y, v_out, events = self.motion.flush()
+        self.moving = self._moved(v_out)
+        return y, v_out, events
+
+    def _moved(self, v_out: np.ndarray) -> np.ndarray:
+        """Which of the samples the gate released (valid flags ``v_out``) it made invalid."""
+        v_in = self._gate_in.take(len(v_out)).get("valid", np.zeros(0, dtype=bool))
+        return v_in & ~v_out
 
     def analyse(self, y: np.ndarray, valid: np.ndarray) -> DadevResult:
         """The next samples into DAVAR and the whole-run tail; the windows they complete."""

@@ -96,17 +96,17 @@ def test_batch_equals_replay_per_recording(fleet, local_run, capsys):
                                        rtol=1e-9, atol=0)
             assert row[f"identifiable_{c}"] == bool(co.identifiable)
         sel = rec_col == name
-        ends = np.concatenate(col.ends)
+        ends = np.concatenate(col.gyro.ends)
         assert sel.sum() == len(ends) == row["windows"]
         np.testing.assert_allclose(
             np.array(w["t_end_s"])[sel], s.t_first_s + ends / s.sample_rate_hz, rtol=0, atol=1e-9
         )
-        adev = np.concatenate(col.adev)
+        adev = np.concatenate(col.gyro.adev)
         for j, tau in enumerate(col.tau_s):
             np.testing.assert_allclose(np.array(w[tables.adev_column(tau)], float)[sel], adev[:, j], rtol=1e-9, atol=0)
         for c in tables.coefficient_columns():
             mine = np.array(w[c])[sel]
-            ref = np.concatenate([f[c] for f in col.fits])
+            ref = np.concatenate([f[c] for f in col.gyro.fits])
             if c.startswith("identifiable_"):
                 np.testing.assert_array_equal(mine, ref)
             else:

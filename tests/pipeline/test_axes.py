@@ -2,6 +2,7 @@
 summary equal a one-axis run of that axis (Block.axis) exactly; the console shows the
 axes side by side; a one-axis run prints what it printed before axes existed."""
 import io
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -244,19 +245,24 @@ def test_a_one_axis_run_prints_what_it_printed_before_axes():
     assert set(col.by_axis) == {""} and col.info.axes == () and s.axes == {}
 
 
-def test_replay_export_of_several_axes_asks_for_one_before_any_work(monkeypatch, tmp_path, capsys):
+def test_replay_export_of_several_axes_holds_the_largest_and_each_axis(monkeypatch, tmp_path, capsys):
     import fogmon.cli.replay as replay_cli
     from fogmon.cli import main
+    from fogmon.export import noise_density_rad
 
     t, rate, aux = three_axis_data()
     monkeypatch.setattr(replay_cli, "open_replay_source", lambda path, options: ListSource(t, rate, SIZES, FS,
                                                                                             aux=aux, axes=AXES))
     out = tmp_path / "imu.yaml"
-    assert main(["replay", "three.csv", "--export", "kalibr", str(out), "--no-progress"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].endswith("--export kalibr: three.csv has axes x, y, z and an export holds one gyro's fit: "
-                            "select one with --axis NAME") and len(err) == 1
-    assert not out.exists()
+    assert main(["replay", "three.csv", "--export", "kalibr", str(out), "--no-progress"]) == 0
+    assert "Wrote" in capsys.readouterr().out
+    yaml = out.read_text()
+    line = next(ln for ln in yaml.splitlines() if ln.startswith("gyroscope_noise_density:"))
+    n = {a: float(re.search(rf"#   axis {a}: N_dpsh ([0-9.e+-]+)", yaml).group(1)) for a in AXES}
+    largest = max(n, key=n.__getitem__)
+    assert f"(axis {largest}, the largest of x, y, z)" in line
+    assert float(line.split()[1]) == pytest.approx(noise_density_rad(n[largest]), rel=1e-5)
+    assert "accelerometer_noise_density" not in yaml.replace("#accelerometer_noise_density", "")   # none recorded
 
 
 MODEL3 = """

@@ -48,7 +48,7 @@ import time
 import uuid
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache, partial
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -60,6 +60,7 @@ from fogmon.formats.archive import piece_path
 from fogmon.outputs import Output, check_outputs, write_failed
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 from fogmon.sinks.rerun import plots as rp
+from fogmon.sinks.rerun.accel import AccelViews
 from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, Y_RANGE, axis_path, blueprint, heatmap_height
 from fogmon.sinks.rerun.columns import (
     _Decimator,
@@ -70,6 +71,7 @@ from fogmon.sinks.rerun.columns import (
     _send_scalars,
     _send_texts,
 )
+from fogmon.sinks.rerun.plots import model_span, model_taus
 from fogmon.sinks.rerun.server import _check_listening, start_grpc_server, stop_process_group
 from fogmon.sinks.rerun.style import (
     BAND_COLOUR,
@@ -98,8 +100,6 @@ FLUSH_WALL_S = 1.0
 FLUSH_SAMPLES = 1 << 16
 #: At the end, wait at most this long (s) for Rerun to deliver everything.
 FLUSH_TIMEOUT_S = 30.0
-#: Model points per decade of tau drawn over the fitted range.
-MODEL_POINTS_PER_DECADE = 20
 #: More aux channels than this share two rows of small views (about 60 pixels tall), whose
 #: y ranges are rounded out (plots.nice_range) to at most AUX_STEPS steps: two labelled
 #: ticks. In one row (about 200 pixels) the data's own range is labelled.
@@ -109,33 +109,6 @@ UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO", "implausible": "WARN", "bad_input": "WARN",
            "platform_motion": "WARN"}
-
-
-def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> tuple[float, float] | None:
-    """(first, last) tau (s) the fit described: measured and not flagged as misfit; the
-    model is drawn only there (beyond, it extrapolates terms the fit never saw). None
-    when no tau was fitted."""
-    used = np.isfinite(np.asarray(adev_dph, dtype=np.float64)) & ~np.asarray(misfit, dtype=bool)
-    if not used.any():
-        return None
-    k = np.flatnonzero(used)
-    return float(tau_s[k[0]]), float(tau_s[k[-1]])
-
-
-def model_taus(tau_s: np.ndarray) -> np.ndarray:
-    """The taus (s) the model curve is drawn at: every tau of the grid and, between
-    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade); read-only,
-    computed once per tau grid (every window of a run has the same)."""
-    return _model_taus(tuple(np.asarray(tau_s, dtype=np.float64).tolist()))
-
-
-@lru_cache(maxsize=8)
-def _model_taus(tau: tuple[float, ...]) -> np.ndarray:
-    parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
-             for a, b in zip(tau[:-1], tau[1:], strict=True)]
-    out = np.concatenate([*parts, np.asarray(tau[-1:])])
-    out.flags.writeable = False
-    return out
 
 
 def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
@@ -237,6 +210,8 @@ class RerunSink(Sink):
         self.dec = _Decimator(self.step)
         self._styles = _styles(info.axes)      # keys: the axis names, "" for a one-axis stream
         self._heat = {a: _Heat() for a in self._styles}
+        self.accel = AccelViews(info.accels, info.tau_s) if info.accels else None
+        self._accel_legend_sent = False
 
     def _setup(self, first: Block) -> None:
         """Open the streams and send the blueprint; the first block frames the ADEV view."""
@@ -259,7 +234,10 @@ class RerunSink(Sink):
                 y_decs.append((math.floor(np.nanmin(band[np.isfinite(band)])),
                                math.ceil(np.nanmax(band[np.isfinite(band)]))))
         self._decades = (x_dec, (min(d[0] for d in y_decs), max(d[1] for d in y_decs)))
-        self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes)
+        if self.accel is not None:
+            self.accel.frame_from(first.aux)
+        self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes,
+                                    self.accel.tab() if self.accel is not None else None)
         self.rec = _Streams()
         live = [rr.GrpcSink(url) for url in (self.server_url, self.connect_url) if url]
         if live:
@@ -322,6 +300,8 @@ class RerunSink(Sink):
             f"sample rate: {info.sample_rate_hz:g} Hz\nwindow: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
             f"taus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
+        if self.accel is not None:
+            self.accel.log_static(rec)
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
         rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
@@ -414,6 +394,13 @@ class RerunSink(Sink):
         for i in range(len(t_end_s)):
             self._queue_curve(axis, float(t_end_s[i]), lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau,
                               misfit[i], dense, model[i])
+
+    def accel_frames(self, dadev, fit, t_end_s: np.ndarray, accel: str) -> None:
+        assert self.rec is not None and self.accel is not None, "the streams open with the first block"
+        self.accel.frames(self._queue, dadev, fit, t_end_s, accel)
+        if not self._accel_legend_sent:
+            self.accel.log_legend(self.rec, dadev.confidence)
+            self._accel_legend_sent = True
 
     def _queue_y_range(self, axis: str, name: str, t_end_s: np.ndarray, drawn: np.ndarray) -> None:
         """The rounded-out range (plots.nice_range) of everything coefficient ``name``'s
@@ -534,7 +521,7 @@ class RerunSink(Sink):
         self._piece = piece
         self._open_piece()
         self._log_static(self.rec.file)
-        self._legend_sent = False
+        self._legend_sent = self._accel_legend_sent = False
         for h in self._heat.values():
             h.scale_sent = False
 
