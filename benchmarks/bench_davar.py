@@ -18,7 +18,8 @@ Rows (issue 13's table), each beside its reference:
   plain numpy prefix-sum DAVAR of the same windows;
 - the engine on a rate swinging +-1e6 deg/h (every sample "large": the side-prefix path)
   at hop 1024 and hop 1 -- vs the engine on the static rate.
-Then PASS/FAIL lines for the targets and the resident-memory growth over 1e7 pushed samples.
+Then PASS/FAIL lines for the targets (issue 13's; issue 33's hop-1 push against the engine at
+hop 1024) and the resident-memory growth over 1e7 pushed samples.
 
     python benchmarks/bench_davar.py [--samples 2000000] [--repeat 3]
 """
@@ -201,7 +202,7 @@ def main(argv=None) -> int:
     def target(ok, text):
         print(f"{'PASS' if ok else 'FAIL'}  {text}")
 
-    print("targets (issue 13):")
+    print("targets (issues 13, 33):")
     for hop in (1024, 64):
         v = res[f"push default alpha, hop {hop}"]
         target(v >= 10e6, f"default push at hop {hop} >= 10 M samples/s: {v / 1e6:.2f} M/s")
@@ -211,6 +212,8 @@ def main(argv=None) -> int:
     v = res["push alpha=0, hop 1"]
     target(v >= 5e6, f"hop-1 push >= 5 M samples/s: {v / 1e6:.2f} M/s (intervals formed when read; "
                      f"reading every window's: {res['push alpha=0, hop 1, every bound read'] / 1e6:.2f} M/s)")
+    r = v / res["engine alone (advance), hop 1024"]
+    target(r >= 0.25, f"hop-1 push >= 0.25x the engine (advance, hop 1024; issue 33): {r:.3f}x")
     for name, ref_name in [("batch dadev default, hop 1024", "numpy prefix-sum dadev, hop 1024"),
                            ("batch dadev default, hop 64", "numpy prefix-sum dadev, hop 64"),
                            ("batch oadev default", "numpy prefix-sum oadev")]:

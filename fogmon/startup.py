@@ -34,6 +34,11 @@ def own_process() -> None:
     _own_process = True
 
 
+def is_own_process() -> bool:
+    """This is the ``fogmon`` program's own process (see ``own_process``)."""
+    return _own_process
+
+
 @contextmanager
 def loading() -> Iterator[None]:
     """In the program's own process: no cyclic garbage collection inside; at the end every

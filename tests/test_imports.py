@@ -83,9 +83,9 @@ def _every_import(path: Path, root: Path = ROOT) -> list[tuple[int, str]]:
 #: its own layer and the layers below (docs/architecture.md). ``fogmon`` is the package's
 #: public API (it loads its names lazily), ``__main__`` runs the command.
 LAYERS = [
-    ("core", {"errors", "units", "block", "window", "stopping", "startup", "outputs"}),
+    ("core", {"errors", "units", "block", "window", "stopping", "startup", "outputs", "jit"}),
     ("formats", {"formats"}),
-    ("analysis", {"davar", "sim", "motion", "phases"}),
+    ("analysis", {"davar", "sim", "motion", "phases", "api"}),
     ("sources", {"sources"}),
     ("sinks", {"sinks"}),
     ("explain", {"explain"}),

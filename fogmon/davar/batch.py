@@ -22,10 +22,11 @@ from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 from fogmon.davar.theory import POWERS
 from fogmon.errors import FogmonError
+from fogmon.jit import c_array
 
 
 def _prepare(rate_dph, valid) -> tuple[np.ndarray, np.ndarray]:
-    y = np.ascontiguousarray(rate_dph, dtype=np.float64)
+    y = c_array(rate_dph, np.float64)
     if y.ndim != 1:
         raise FogmonError(f"rate_dph must be one-dimensional, got shape {y.shape}")
     ok = ~np.isnan(y)  # +-inf are huge samples, not gaps
@@ -86,7 +87,7 @@ def _model_holds(model, sums, counts, m) -> bool:
     n_terms / m (about the EDF of white rate noise, lower for the others: a loose test).
     One numba call (``kernels.model_holds``): a dozen numpy calls on 46 values cost
     ~100 us on a loaded machine between engine blocks."""
-    return bool(kernels.model_holds(model, sums, counts, m, HOLD_Z))
+    return bool(kernels.model_holds(model, sums, c_array(counts, np.int64), m, HOLD_Z))
 
 
 def alpha_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
@@ -159,8 +160,8 @@ def adev_edf(sums, counts, m, n_samples: int, alpha=None) -> tuple[np.ndarray, n
     # the result array allocated here (a numba kernel returning a new array pays ~2 us to box it)
     adev = np.empty(sums.shape)
     # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
-    n_gapped = kernels.frame_stats(sums, counts[:1] if counts.strides[0] == 0 else counts,
-                                   n_samples - 2 * m + 1, adev)
+    one_row = counts[:1] if counts.strides[0] == 0 else counts
+    n_gapped = kernels.frame_stats(c_array(sums, np.float64), c_array(one_row, np.int64), n_samples - 2 * m + 1, adev)
     edf = gapped_edf(edf_runs, run, counts, n_gapped, m, n_samples)
     return adev.reshape(shape), edf.reshape(shape)
 

@@ -23,40 +23,10 @@ tuple ``pre = (P, bad, bh, bl, hc)`` (``hc``: prefix count of huge samples).
 """
 from __future__ import annotations
 
-import contextlib
-import warnings
-
 import numpy as np
-from numba import njit
-from numba.core import caching
+from numba import types
 
-from fogmon.errors import FogmonWarning
-
-
-def _tolerate_unusable_numba_cache() -> None:
-    """A numba cache that cannot be read or written (corrupt files, an install directory
-    without write access) costs a compile in memory, never the run: numba's guard around
-    cache I/O (which forgives only EACCES, only on Windows) is widened to every error,
-    reported once per process as a FogmonWarning. A cache from other sources is ignored
-    by numba itself (it checks the source file's stamp)."""
-    if getattr(caching.Cache, "_fogmon_tolerant", False):
-        return
-    warned = []
-
-    @contextlib.contextmanager
-    def guard(self):
-        try:
-            yield
-        except Exception as e:  # noqa: BLE001 - any cache failure: compile in memory instead
-            if not warned:
-                warned.append(e)
-                warnings.warn(f"numba cache unusable ({type(e).__name__}: {e}); kernels are compiled in "
-                              f"memory for this run", FogmonWarning, stacklevel=1)
-    caching.Cache._guard_against_spurious_io_errors = guard
-    caching.Cache._fogmon_tolerant = True
-
-
-_tolerate_unusable_numba_cache()
+from fogmon.jit import B1, BOOL, F1, F2, F8, I1, I2, I8, kernel
 
 CEILING_DPH = 1e8
 """|rate| above this (deg/h, 27,800 deg/s: beyond any gyro) or infinite makes a sample
@@ -69,7 +39,7 @@ _LOW = _FLAG - 1  # mask of the plain counts
 _FAST = {"nsz", "arcp", "reassoc", "contract"}  # fastmath without "no inf" (terms may be +inf)
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _two_sum(s, x):
     """Return (s + x, rounding error of that addition)."""
     t = s + x
@@ -77,7 +47,7 @@ def _two_sum(s, x):
     return t, (s - (t - bp)) + (x - bp)
 
 
-@njit(cache=True)
+@kernel()
 def _compensated_sum(x, n):
     """Sum of x[:n] as (s, c) with s + c accurate to ~eps^2 relative to sum |x| (so a
     huge term that later leaves a window leaves no residue): four interleaved TwoSum
@@ -105,10 +75,44 @@ def _compensated_sum(x, n):
     return s, c + r
 
 
+_PRE = types.Tuple((F1, I1, F1, F1, I1))  # the streaming prefix arrays ``pre``, see the module docstring
 _REF_SAMPLES = 4096  # at most this many evenly spaced samples make the reference level
 
 
-@njit(cache=True)
+@kernel()
+def heap_sort(v, n):
+    """Sort v[:n] in place, ascending (no NaN). Plain loops: numba's np.sort and np.median
+    cost a second or two of compile on the first run."""
+    for i in range(n // 2 - 1, -1, -1):
+        _sift_down(v, i, n)
+    for end in range(n - 1, 0, -1):
+        v[0], v[end] = v[end], v[0]
+        _sift_down(v, 0, end)
+
+
+@kernel(inline="always")
+def _sift_down(v, root, end):
+    while 2 * root + 1 < end:
+        child = 2 * root + 1
+        if child + 1 < end and v[child] < v[child + 1]:
+            child += 1
+        if not v[root] < v[child]:
+            return
+        v[root], v[child] = v[child], v[root]
+        root = child
+
+
+@kernel()
+def median_of(v, n):
+    """Median of v[:n] (no NaN; v is sorted in place), as numpy.median: the mean of the
+    two middle values of an even count; NaN when n is 0."""
+    if n == 0:
+        return np.nan
+    heap_sort(v, n)
+    return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2
+
+
+@kernel()
 def _median_valid(y, valid, step):
     """Median of every step-th sample that is valid and within CEILING_DPH; NaN if none."""
     buf = np.empty(y.shape[0] // step + 1)
@@ -117,10 +121,10 @@ def _median_valid(y, valid, step):
         if valid[i] and abs(y[i]) <= CEILING_DPH:
             buf[n] = y[i]
             n += 1
-    return np.median(buf[:n]) if n > 0 else np.nan
+    return median_of(buf, n)
 
 
-@njit(cache=True)
+@kernel((F1, B1))
 def reference_level(y, valid):
     """Median (deg/h) of the valid samples within CEILING_DPH (of at most about
     _REF_SAMPLES evenly spaced ones), NaN without any: the level subtracted before the
@@ -130,7 +134,7 @@ def reference_level(y, valid):
     return _median_valid(y, valid, 1) if ref != ref and step > 1 else ref
 
 
-@njit(cache=True)
+@kernel((F1, B1, F8))
 def prefix_sums_dd(y, valid, ref):
     """Double-double prefix sums of ``y - ref`` over valid samples within CEILING_DPH
     (``hi``, ``lo``, n+1 each) and the prefix count ``bad`` (n+1): 1 per invalid sample,
@@ -159,14 +163,14 @@ def prefix_sums_dd(y, valid, ref):
     return hi, lo, bad
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _term_dd(hi, lo, j, m):
     a = j + m
     b = j + 2 * m
     return (((hi[b] - hi[a]) - (hi[a] - hi[j])) + ((lo[b] - lo[a]) - (lo[a] - lo[j]))) / m
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _renorm(s, c):
     """The compensated pair (s, c) with c folded into s, so that |c| <= ulp(s) / 2 (exact:
     Fast2Sum, |c| <= |s|). A cumulative sum adds TwoSum errors to c unnormalised (one
@@ -176,7 +180,7 @@ def _renorm(s, c):
     return u, c - (u - s)
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _dd_sub(s, c, bs, bc):
     """Double-double (s, c) - (bs, bc), renormalised."""
     t, r = _two_sum(s, -bs)
@@ -185,7 +189,7 @@ def _dd_sub(s, c, bs, bc):
     return u, r - (u - t)
 
 
-@njit(cache=True)
+@kernel((F1, B1, F1, B1, _PRE, I8, F8))
 def stream_append(y, valid, yraw, vraw, pre, length, ref):
     """Append samples to the linear buffer: raw values, validity and the prefix arrays
     ``pre`` (main sums of ``y - ref``, counts, large-sample side sums, huge counts; see
@@ -227,7 +231,7 @@ def stream_append(y, valid, yraw, vraw, pre, length, ref):
     return n_large
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _sq_term(pre, j, m):
     """(squared term of factor m starting at buffer position j, 1 if it is counted, 1 if
     it spans a huge sample). A term spanning a gap is (0, 0, 0), one spanning a huge
@@ -251,7 +255,7 @@ def _sq_term(pre, j, m):
     return t * t, 1, 0
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _side(h0, h1, h2, l0, l1, l2):
     """Second difference (h2 - h1) - (h1 - h0) of the double-double side sums, formed in
     double-double: exact whatever magnitude they hold (0 when they do not change)."""
@@ -261,13 +265,13 @@ def _side(h0, h1, h2, l0, l1, l2):
     return s + (e + ((e1 - e2) + ((l2 - l1) - (l1 - l0))))
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _no_gap_no_huge(pre, a, b):
     """Buffer positions a..b-1 hold no invalid and no huge sample (large ones may be)."""
     return (pre[1][b] - pre[1][a]) & _LOW == 0 and pre[4][b] == pre[4][a]
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _large_terms(pre, a0, n, m, x):
     """Squared terms of factor m starting at a0 .. a0+n-1 into x[:n] when none spans a
     gap or a huge sample: main and side second differences, branch-free (a plain term
@@ -287,7 +291,7 @@ _EPS = 2.0**-52
 _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain path may accumulate
 
 
-@njit(cache=True)
+@kernel()
 def _batch_terms(hi, lo, bad, j0, n, m, x, v):
     """Squared terms of factor m starting at samples j0 .. j0+n-1 into x[:n] from the
     double-double prefix sums (+inf where a term spans a huge sample, 0 where it spans a
@@ -317,7 +321,7 @@ def _batch_terms(hi, lo, bad, j0, n, m, x, v):
     return True
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def _range_sum(x, i0, i1):
     """Sum of x[i0:i1] in any order (SIMD; +inf when it holds a +inf). The loop runs over
     a slice from 0: indexing x from a variable start defeats vectorisation (numba's
@@ -329,7 +333,7 @@ def _range_sum(x, i0, i1):
     return s
 
 
-@njit(cache=True)
+@kernel()
 def _open_windows(starts, w):
     """The ring size of the records of windows begun and not yet ended: a power of two
     (slot = window & (size - 1)) above the most windows of ``w`` samples starting at
@@ -346,7 +350,7 @@ def _open_windows(starts, w):
     return size
 
 
-@njit(cache=True)
+@kernel((F1, F1, I1, I1, I1, I8))
 def window_sums(hi, lo, bad, ms, starts, w):
     """Sums of squared valid terms (+inf for a window holding a huge sample) and
     valid-term counts (T x M) for windows of ``w`` samples starting at ``starts``
@@ -437,7 +441,7 @@ def window_sums(hi, lo, bad, ms, starts, w):
     return sums, counts
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _tile_terms(pre, m, w, first, n, x_in, x_out, dn):
     """For new samples at buffer positions first..first+n-1: squared entering and
     leaving terms (0 when not plain) and the change in encoded valid-term count (valid
@@ -469,7 +473,7 @@ def _tile_terms(pre, m, w, first, n, x_in, x_out, dn):
     return True
 
 
-@njit(cache=True, fastmath=True)
+@kernel(fastmath=True)
 def _tile_totals(x_in, x_out, n):
     """(sum of x_in - x_out, sum of x_in + x_out) over n samples, in any order (SIMD)."""
     d = 0.0
@@ -480,7 +484,7 @@ def _tile_totals(x_in, x_out, n):
     return d, a
 
 
-@njit(cache=True)
+@kernel()
 def window_sum(pre, start, w, m, scratch, exact):
     """Recompute for the window of ``w`` samples from buffer position ``start``:
     (s, c, encoded count, bound) of the squared valid terms of factor m (count: valid
@@ -518,7 +522,7 @@ def window_sum(pre, start, w, m, scratch, exact):
     return s, c, n, 256.0 * _EPS * (s + c)
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _put(out_sums, out_counts, e, k, s, n):
     """Write window row e, tau k from its sum s and encoded count n: +inf when a term
     spans a huge sample; the count of valid terms."""
@@ -526,8 +530,9 @@ def _put(out_sums, out_counts, e, k, s, n):
     out_counts[e, k] = n & _LOW
 
 
-@njit(cache=True)
-def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, full):
+@kernel((I8, I8, I8, I1, _PRE, F1, F1, I1, F1, I1, F2, I2, BOOL, I1))
+def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, to_adev,
+                  full):
     """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
     buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
     least the ``w`` samples before ``first`` or starts at the record's first sample,
@@ -535,10 +540,11 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``full``:
-    None, or the gap-free term counts per tau of ``frame_stats``, which then turns each
-    tile's rows, while they are in the cache, into adev (in ``out_sums``). Returns
-    (fixed, entries with gaps: ``frame_stats``'s count, 0 without ``full``). ``fixed``: no count changed after the
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``to_adev``:
+    ``frame_stats`` with the gap-free term counts per tau ``full`` turns each tile's
+    rows, while they are in the cache, into adev (in ``out_sums``; ``full`` is not read
+    otherwise). Returns (fixed, entries with gaps: ``frame_stats``'s count, 0 without
+    ``to_adev``). ``fixed``: no count changed after the
     first emitted row; then only row 0 of ``out_counts`` is sure to be written, and it
     holds every row's counts (hop 1 without gaps writes no count per window).
 
@@ -568,7 +574,7 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 e += 1
             p += 1
         e_head = e
-    n_gapped = _rows_stats(full, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
+    n_gapped = _rows_stats(to_adev, full, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
     start = max(first, w)
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
@@ -649,27 +655,27 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
         for k in range(nm):
             c_fix[0, k] = cnt[k] & _LOW
             huge |= cnt[k] >= _FLAG
-        if dense and full is not None and fixed and not huge:  # frame_stats reads the sums in w_at
+        if dense and to_adev and fixed and not huge:  # frame_stats reads the sums in w_at
             src = w_at[emit_pos[e_tile] - t0:emit_pos[e_end - 1] - t0 + 1]
         elif dense:
             _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
-        n_gapped += _rows_stats(full, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
+        n_gapped += _rows_stats(to_adev, full, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
         e_tile = e_end
     if fixed and e_tile > 0:
         _unfix(out_counts, 0, 1, cnt, n_at, 0, 0)
     return fixed, n_gapped
 
 
-@njit(cache=True)
-def _rows_stats(full, sums, counts, out_adev, e0):
+@kernel()
+def _rows_stats(to_adev, full, sums, counts, out_adev, e0):
     """``frame_stats`` of the windows' ``sums`` (rows) into rows e0 .. of ``out_adev``
-    (``full`` and return value: see ``stream_update``; 0 when ``full`` is None)."""
-    if full is None:
+    (``to_adev``, ``full`` and return value: see ``stream_update``)."""
+    if not to_adev:
         return 0
     return frame_stats(sums, counts, full, out_adev[e0:e0 + sums.shape[0]])
 
 
-@njit(cache=True)
+@kernel()
 def _unfix(out_counts, e0, e1, cnt, n_at, k1, n):
     """Write the counts ``cnt`` (encoded) to rows e0 .. e1 - 1, which were emitted while
     no count changed (and so without them), and to the tile's ``n_at[:n, :k1]`` (the
@@ -684,7 +690,7 @@ def _unfix(out_counts, e0, e1, cnt, n_at, k1, n):
     return False
 
 
-@njit(cache=True)
+@kernel()
 def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, out_sums, out_counts):
     """Write the windows emitted in a plain tile (running sums from the tile's start) and
     advance the valid-term counts over the tile. Returns False, changing no state, when
@@ -727,7 +733,7 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
     return True
 
 
-@njit(cache=True)
+@kernel()
 def _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
     """``_emit_plain`` for a tile in which every sample from the first emission (e0 <
     e1) to the last emits (hop 1): the running sums at these samples go to ``w_at``,
@@ -777,7 +783,7 @@ def _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e0, e1, emit_pos, ks, bnd, sum
     return True
 
 
-@njit(cache=True)
+@kernel()
 def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, fixed, cnt):
     """Copy the windows emitted in a tile from ``w_at``/``n_at`` (sum and encoded count
     per tau at the emitting sample's tile position) to their rows of ``out_sums`` and
@@ -798,13 +804,13 @@ def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, f
                 c_row[k] = n & _LOW
 
 
-@njit(cache=True, inline="always")
+@kernel()
 def _within(bound, window_sum):
     """A rounding bound small enough for a window sum (deg/h)^2."""
     return bound == 0.0 or bound <= _BOUND_RTOL * window_sum
 
 
-@njit(cache=True)
+@kernel()
 def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at):
     """Term-by-term TwoSum accumulation of a tile, the emitted windows into ``w_at``/``n_at``."""
     for j in range(4):
@@ -829,7 +835,7 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
         cnt[k] = n_
 
 
-@njit(cache=True)
+@kernel((F1, B1, _PRE, I8, I8, I1, F1, F1, I1, F1, BOOL, F2, F2, F8))
 def stream_reanchor(yraw, vraw, pre, length, keep, ms, sum_s, sum_c, cnt, err, recorded, rec_s, rec_c, ref):
     """Keep the last ``keep`` samples at the buffer front, re-reference them to their
     reference level (``ref`` if they have none) and rebuild the prefix arrays. Running
@@ -865,7 +871,7 @@ def stream_reanchor(yraw, vraw, pre, length, keep, ms, sum_s, sum_c, cnt, err, r
     return ref
 
 
-@njit(cache=True)
+@kernel((_PRE, I8, I8, I1))
 def window_sums_exact(pre, start, n, ms):
     """Sums of squared valid terms (deg/h)^2 (+inf when one spans a huge sample) and
     valid-term counts, per m, of the ``n`` samples from buffer position ``start``,
@@ -882,7 +888,7 @@ def window_sums_exact(pre, start, n, ms):
     return sums, counts
 
 
-@njit(cache=True)
+@kernel()
 def _entering_terms(pre, a0, n, m, x, v):
     """Squared terms of factor m starting at buffer positions a0 .. a0+n-1 into x[:n] (0
     where a term spans a gap, +inf where it spans a huge sample). When some term is not
@@ -907,7 +913,7 @@ def _entering_terms(pre, a0, n, m, x, v):
     return True
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def _segment_sums(x, bounds, n_seg, out):
     """out[c] = sum of x[bounds[c] : bounds[c + 1]] for c < n_seg, in any order (SIMD;
     +inf when the segment holds a +inf)."""
@@ -919,7 +925,7 @@ def _segment_sums(x, bounds, n_seg, out):
         out[c] = s
 
 
-@njit(cache=True)
+@kernel((I8, I8, I8, I8, I8, I1, _PRE, F1, F1, I1, I1, F2, F2, I2, I2, I8, F2, I2))
 def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_h, rec_s, rec_c, rec_n, rec_h,
                   k_row0, out_sums, out_counts):
     """Recorded-sums update over buffer positions ``first .. first + n_new - 1`` (already
@@ -1017,7 +1023,7 @@ def stream_record(first, n_new, base, w, hop, ms, pre, cum_s, cum_c, cum_n, cum_
             cum_s[k], cum_c[k], cum_n[k], cum_h[k] = s, c, nn, nh
 
 
-@njit(cache=True, error_model="numpy")
+@kernel((F1, F1, I1, I1, F8), error_model="numpy")
 def model_holds(model, sums, counts, m, hold_z):
     """|ln(avar / model)| <= hold_z sqrt(2 m / n + 0.01) at every tau with n > 0 terms,
     avar = max(sum, 0) / (2 n) (deg/h)^2, ``model`` the model's Allan variance per tau."""
@@ -1030,7 +1036,7 @@ def model_holds(model, sums, counts, m, hold_z):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@kernel((F2, I2, I1, F2), error_model="numpy")
 def frame_stats(sums, counts, full, adev):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
     terms) into ``adev`` (shape of ``sums``; ``adev`` may be ``sums`` itself, at 2.8 x the

@@ -6,16 +6,73 @@ microseconds instead of a hundred of Python and scipy overhead."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-from fogmon.davar import kernels  # noqa: F401 - its import makes an unusable numba cache harmless
+from fogmon.jit import B1, BOOL, F1, F2, F3, F4, F8, I8, kernel
 
 _CLASS = np.array([0, 1, 2, 3, 3])
 """Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
 _EPS = 2.0**-52
 
 
-@njit(cache=True)
+@kernel()
+def _nonzero(mask, out):
+    """Write the indices of the True entries of ``mask`` to ``out``; returns their count.
+    (The kernels are plain loops: numpy's array functions, fancy indexing and array
+    expressions each cost numba a compile of their own on the first run.)"""
+    n = 0
+    for j in range(mask.shape[0]):
+        if mask[j]:
+            out[n] = j
+            n += 1
+    return n
+
+
+@kernel()
+def _model(x, a, floor, out):
+    """out = x a (rows of ``x``: tau^n), at least ``floor`` (NaN stays NaN); returns ``out``."""
+    for i in range(x.shape[0]):
+        v = 0.0
+        for j in range(x.shape[1]):
+            v += x[i, j] * a[j]
+        out[i] = v if not v < floor else floor
+    return out
+
+
+@kernel()
+def _where(mask, a, out):
+    """out[j] = a[j] where ``mask[j]``, else 0 (numpy.where(mask, a, 0.0)); returns ``out``."""
+    for j in range(mask.shape[0]):
+        out[j] = a[j] if mask[j] else 0.0
+    return out
+
+
+@kernel()
+def _filled(n, value):
+    """An array of n times ``value``."""
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = value
+    return out
+
+
+@kernel()
+def _positive(a, out):
+    """out[j] = a[j] > 0; returns ``out``."""
+    for j in range(a.shape[0]):
+        out[j] = a[j] > 0
+    return out
+
+
+@kernel()
+def _converged(new, old, rtol):
+    """max |new / old - 1| < rtol (False when a ratio is NaN)."""
+    for i in range(new.shape[0]):  # noqa: SIM110 - numba compiles no generator into all()
+        if not abs(new[i] / old[i] - 1.0) < rtol:
+            return False
+    return True
+
+
+@kernel()
 def _least_squares(a, b):
     """x minimising |a x - b| (n x k, n >= k) by Householder QR; 0 for a column that is
     dependent on the ones before it. Plain loops (array expressions cost numba several
@@ -60,7 +117,7 @@ def _least_squares(a, b):
     return x
 
 
-@njit(cache=True)
+@kernel()
 def nnls(a, b):
     """x >= 0 minimising |a x - b| (Lawson & Hanson's active-set algorithm; columns of
     ``a`` normalised by the caller). A column whose entry would not be positive is
@@ -69,7 +126,13 @@ def nnls(a, b):
     x = np.zeros(k)
     passive = np.zeros(k, np.bool_)
     skip = np.zeros(k, np.bool_)
-    tol = 10.0 * _EPS * max(n, k) * max(1.0, np.max(np.abs(a)))
+    idx = np.empty(k, np.int64)
+    a_max = 0.0
+    for i in range(n):
+        for j in range(k):
+            if abs(a[i, j]) > a_max:
+                a_max = abs(a[i, j])
+    tol = 10.0 * _EPS * max(n, k) * max(1.0, a_max)
     for _ in range(4 * k + 4):
         w = np.zeros(k)
         for i in range(n):
@@ -89,38 +152,52 @@ def nnls(a, b):
         s = np.zeros(k)
         first = True
         for _inner in range(3 * k + 3):
-            idx = np.flatnonzero(passive)
-            s[:] = 0.0
-            if idx.shape[0] == 0:
+            n_p = _nonzero(passive, idx)
+            for j in range(k):
+                s[j] = 0.0
+            if n_p == 0:
                 break
-            s_p = _least_squares(a[:, idx], b)
-            if np.all(s_p > tol):
-                s[idx] = s_p
+            a_p = np.empty((n, n_p))
+            for i in range(n):
+                for c in range(n_p):
+                    a_p[i, c] = a[i, idx[c]]
+            s_p = _least_squares(a_p, b)
+            all_positive = True
+            for c in range(n_p):
+                all_positive &= s_p[c] > tol
+            if all_positive:
+                for c in range(n_p):
+                    s[idx[c]] = s_p[c]
                 break
-            if first and s_p[np.searchsorted(idx, j_max)] <= tol:
+            c_new = 0
+            while idx[c_new] != j_max:
+                c_new += 1
+            if first and s_p[c_new] <= tol:
                 passive[j_max] = False  # the new column does not enter: try the next one
                 skip[j_max] = True
-                s[:] = x
+                for j in range(k):
+                    s[j] = x[j]
                 break
             first = False
             step = np.inf
-            for i in range(idx.shape[0]):
+            for i in range(n_p):
                 if s_p[i] <= tol:
                     d = x[idx[i]] - s_p[i]
                     step = min(step, x[idx[i]] / d if d > 0 else 0.0)
-            for i in range(idx.shape[0]):
+            for i in range(n_p):
                 x[idx[i]] += step * (s_p[i] - x[idx[i]])
-            for i in range(idx.shape[0]):
+            for i in range(n_p):
                 if x[idx[i]] <= tol:
                     passive[idx[i]] = False
                     x[idx[i]] = 0.0
         if not skip[j_max]:
-            skip[:] = False
+            for j in range(k):
+                skip[j] = False
         x = s
     return x
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def mixture_fractions(x, a):
     """Share (taus x 4) of each noise class (confidence.MIX_ALPHAS) in the model Allan
     variance sum_n A_n tau^n per tau (rows of ``x``: tau^n): white rate noise where the
@@ -133,15 +210,14 @@ def mixture_fractions(x, a):
             c = x[i, n] * a[n]
             total += c
             f[i, _CLASS[n]] += c
-        if total > 0:
-            f[i] /= total
-        else:
-            f[i, :] = 0.0
+        for u in range(4):
+            f[i, u] = f[i, u] / total if total > 0 else 0.0
+        if not total > 0:
             f[i, 1] = 1.0
     return f
 
 
-@njit(cache=True, error_model="numpy")
+@kernel((F2, F1, F3, F1, F1), error_model="numpy")
 def mixture_edf(x, a, mats, full, gap_scale):
     """EDF per tau of the noise mixture the model A (5 terms; rows of ``x``: tau^n)
     predicts (``mixture_fractions``): full / f'Mf scaled for gaps
@@ -158,7 +234,7 @@ def mixture_edf(x, a, mats, full, gap_scale):
     return nu
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def mixture_correlation(x, a, cov):
     """Correlation (taus x taus) of the Allan variance estimates across the taus (rows of
     ``x``) for the noise mixture of the model A: confidence.avar_relative_covariance
@@ -178,14 +254,16 @@ def mixture_correlation(x, a, cov):
                     s += g[k] * cov[p, q, k, v] * g[v]
             c[p, q] = s
             c[q, p] = s
-    sd = np.sqrt(np.diag(c).copy())
+    sd = np.empty(t)
+    for p in range(t):
+        sd[p] = np.sqrt(c[p, p])
     for p in range(t):
         for q in range(t):
             c[p, q] /= sd[p] * sd[q]
     return c
 
 
-@njit(cache=True)
+@kernel()
 def symmetric_pinv(a):
     """Pseudo-inverse of a small symmetric matrix from its eigen-decomposition by cyclic
     Jacobi rotations: eigenvalues within 1e-15 of the largest in magnitude count as zero
@@ -193,10 +271,18 @@ def symmetric_pinv(a):
     LAPACK binding would add ~9 CPU s to the first run's compile for a 5 x 5 matrix.
     NaN everywhere when ``a`` holds a non-finite value (where numpy's SVD raises)."""
     k = a.shape[0]
-    if not np.all(np.isfinite(a)):
-        return np.full((k, k), np.nan)
     d = a.copy()
-    v = np.eye(k)
+    v = np.zeros((k, k))
+    finite = True
+    for p in range(k):
+        v[p, p] = 1.0
+        for q in range(k):
+            finite &= np.isfinite(a[p, q])
+    if not finite:
+        for p in range(k):
+            for q in range(k):
+                d[p, q] = np.nan
+        return d
     for _ in range(64):
         off = 0.0
         norm = 0.0
@@ -243,7 +329,7 @@ def symmetric_pinv(a):
     return out
 
 
-@njit(cache=True, error_model="numpy")
+@kernel(error_model="numpy")
 def sandwich_variances(x, model, corr, cols, rw, nu, c2):
     """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
     EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
@@ -252,8 +338,8 @@ def sandwich_variances(x, model, corr, cols, rw, nu, c2):
     standard deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and
     their exact correlation across taus ``corr`` (applied to the inadequacy part too: a
     misfit is smooth in tau)."""
-    idx = np.flatnonzero(cols)
-    t, k = x.shape[0], idx.shape[0]
+    idx = np.empty(cols.shape[0], np.int64)
+    t, k = x.shape[0], _nonzero(cols, idx)
     xs = np.empty((t, k))
     wx = np.empty((t, k))
     g = np.empty((t, k))
@@ -299,7 +385,7 @@ def sandwich_variances(x, model, corr, cols, rw, nu, c2):
     return naive, sand
 
 
-@njit(cache=True, error_model="numpy")
+@kernel((F2, B1, F1, F3, F1, F1, F1, F1, BOOL, F8, F8, I8), error_model="numpy")
 def fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a, from_data, c2, rtol, max_iter):
     """Fisher scoring of the terms ``cols`` (mask over the 5 columns of x) >= 0 with the
     other terms held at their values in ``a``, robust weights ``rw``, model-inadequacy
@@ -308,50 +394,73 @@ def fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a, from_data, c2, rtol
     ``a``, until the model moves less than ``rtol`` (at most ``max_iter`` steps).
     Returns (A, model, nu at A). Rows with non-finite weights are left out of a step;
     a column without weight gets 0."""
-    t = x.shape[0]
+    t, n_terms = x.shape
     a = a.copy()
+    model = np.empty(t)
     if from_data:
-        a[:] = 0.0
-        model = y.copy()
+        for j in range(n_terms):
+            a[j] = 0.0
+        for i in range(t):
+            model[i] = y[i]
     else:
-        model = np.maximum(x @ a, 1e-300)
-    free = np.flatnonzero(cols)
+        _model(x, a, 1e-300, model)
+    free = np.empty(n_terms, np.int64)
+    n_free = _nonzero(cols, free)
     fixed = a.copy()
-    fixed[free] = 0.0
-    offset = x @ fixed
+    for c in range(n_free):
+        fixed[free[c]] = 0.0
+    offset = _model(x, fixed, -np.inf, np.empty(t))
+    sw = np.empty(t)
+    rows = np.empty(t, np.int64)
+    use = np.empty(n_terms, np.int64)
+    scale = np.zeros(n_terms)
     for _ in range(max_iter):
         nu = mixture_edf(x, a, mats, full, gap_scale)
-        sw = np.sqrt(rw / (2.0 / nu + c2)) / model
+        for i in range(t):
+            sw[i] = np.sqrt(rw[i] / (2.0 / nu[i] + c2)) / model[i]
         a_new = fixed.copy()
-        if free.shape[0]:
-            rows = np.zeros(t, np.bool_)
+        if n_free:
+            n_rows = 0
             for i in range(t):
-                rows[i] = np.isfinite((y[i] - offset[i]) * sw[i])
-                for j in free:
-                    rows[i] &= np.isfinite(x[i, j] * sw[i])
-            ri = np.flatnonzero(rows)
-            m_ = np.empty((ri.shape[0], free.shape[0]))
-            b_ = np.empty(ri.shape[0])
-            for r in range(ri.shape[0]):
-                i = ri[r]
+                ok = np.isfinite((y[i] - offset[i]) * sw[i])
+                for c in range(n_free):
+                    ok &= np.isfinite(x[i, free[c]] * sw[i])
+                if ok:
+                    rows[n_rows] = i
+                    n_rows += 1
+            m_ = np.empty((n_rows, n_free))
+            b_ = np.empty(n_rows)
+            for r in range(n_rows):
+                i = rows[r]
                 b_[r] = (y[i] - offset[i]) * sw[i]
-                for c in range(free.shape[0]):
+                for c in range(n_free):
                     m_[r, c] = x[i, free[c]] * sw[i]
-            scale = np.sqrt(np.sum(m_ * m_, axis=0)) if ri.shape[0] else np.zeros(free.shape[0])
-            use = np.flatnonzero(scale > 0)
-            if use.shape[0]:
-                sol = nnls(m_[:, use] / scale[use], b_)
-                for c in range(use.shape[0]):
+            n_use = 0
+            for c in range(n_free):
+                ss = 0.0
+                for r in range(n_rows):
+                    ss += m_[r, c] * m_[r, c]
+                scale[c] = np.sqrt(ss)
+                if scale[c] > 0:
+                    use[n_use] = c
+                    n_use += 1
+            if n_use:
+                m_use = np.empty((n_rows, n_use))
+                for r in range(n_rows):
+                    for c in range(n_use):
+                        m_use[r, c] = m_[r, use[c]] / scale[use[c]]
+                sol = nnls(m_use, b_)
+                for c in range(n_use):
                     a_new[free[use[c]]] = sol[c] / scale[use[c]]
-        model_new = np.maximum(x @ a_new, 1e-300)
-        done = np.max(np.abs(model_new / model - 1.0)) < rtol
+        model_new = _model(x, a_new, 1e-300, np.empty(t))
+        done = _converged(model_new, model, rtol)
         a, model = a_new, model_new
         if done:
             break
     return a, model, mixture_edf(x, a, mats, full, gap_scale)
 
 
-@njit(cache=True)
+@kernel()
 def excess_variance_root(r2w, v, dof):
     """The c2 >= 0 where sum r2w / (v + c2) = dof (Paule-Mandel), for sum r2w / v > dof:
     Newton's method from c2 = 0, monotone for this convex decreasing function, to full
@@ -371,7 +480,7 @@ def excess_variance_root(r2w, v, dof):
     return c2
 
 
-@njit(cache=True)
+@kernel()
 def _excess_variance(r, v, rw, n_free, gate):
     """Model-inadequacy variance c2 of ln(Allan variance) from the residuals ``r`` and
     sampling variances ``v`` of the taus kept (rw > 0): the Paule-Mandel root
@@ -385,11 +494,18 @@ def _excess_variance(r, v, rw, n_free, gate):
     dof = max(n - n_free, 1)
     if not chi > gate * dof:
         return 0.0
-    keep = np.flatnonzero(rw > 0)
-    return excess_variance_root(rw[keep] * r[keep] ** 2, v[keep], float(dof))
+    r2w = np.empty(n)
+    v_kept = np.empty(n)
+    k = 0
+    for i in range(r.shape[0]):
+        if rw[i] > 0:
+            r2w[k] = rw[i] * r[i] ** 2
+            v_kept[k] = v[i]
+            k += 1
+    return excess_variance_root(r2w, v_kept, float(dof))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol, max_robust,
                    rtol, max_iter):
     """Robust Fisher scoring of the terms ``cols``: from each row of ``starts`` (robust
@@ -419,7 +535,7 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
                 for j in range(5):
                     if cols[j] and a[j] > 0:
                         from_data = False
-                a0 = np.where(cols, a, 0.0)
+                a0 = _where(cols, a, np.empty(5))
             else:
                 a0 = np.zeros(5)
             a, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
@@ -427,8 +543,11 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
             rw_new = np.empty(t)
             total_loss = 0.0
             n_kept = 0
-            r = np.log(y / model)
-            v = 2.0 / nu
+            r = np.empty(t)
+            v = np.empty(t)
+            for i in range(t):
+                r[i] = np.log(y[i] / model[i])
+                v[i] = 2.0 / nu[i]
             for i in range(t):
                 z = r[i] / np.sqrt(v[i] + floor2)
                 u2 = (z / tukey_c) ** 2
@@ -444,34 +563,43 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
             for j in range(5):
                 n_free += a[j] > 0
             c2_new = _excess_variance(r, v, rw_new, n_free, gate)
-            done = np.max(np.abs(rw_new - rw)) < rw_tol and abs(c2_new - c2) <= 1e-3 * c2
+            done = True
+            for i in range(t):
+                done &= abs(rw_new[i] - rw[i]) < rw_tol
+            done &= abs(c2_new - c2) <= 1e-3 * c2
             rw, c2 = rw_new, c2_new
             if done:
                 break
         if total_loss < best_loss - 1e-9:
             best_a, best_rw, best_c2, best_loss = a, rw, c2, total_loss
             found = True
-        if np.all(rw > 0):
+        all_kept = True
+        for i in range(t):
+            all_kept &= rw[i] > 0
+        if all_kept:
             break
     return found, best_a, best_rw, best_c2
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def eql_deviance(y, model, nu, rw, c2):
     """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
     with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
     (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
-    v = 2.0 / nu + c2
-    r = y / model
-    return np.sum(rw * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v)))
+    d = 0.0
+    for i in range(y.shape[0]):
+        v = 2.0 / nu[i] + c2
+        r = y[i] / model[i]
+        d += rw[i] * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v))
+    return d
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max_iter):
     """Fisher scoring of the ``terms`` (mask) >= 0, with term ``n`` held at ``c`` when
     ``held``, from ``a``: returns (EQL deviance, A) at convergence."""
     cols = terms.copy()
-    a0 = np.where(terms, a, 0.0)
+    a0 = _where(terms, a, np.empty(5))
     if held:
         cols[n] = False
         a0[n] = c
@@ -479,13 +607,13 @@ def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max
     return eql_deviance(y, model, nu, rw, c2), a1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
     """(naive, sandwich) variance of A_n (``sandwich_variances``) in the fit of the terms
     a > 0 and n, at the model ``a``."""
-    cols = a > 0
+    cols = _positive(a, np.empty(5, np.bool_))
     cols[n] = True
-    model = np.maximum(x @ a, 1e-300)
+    model = _model(x, a, 1e-300, np.empty(x.shape[0]))
     naive, sand = sandwich_variances(x, model, mixture_correlation(x, a, cov), cols, rw,
                                      mixture_edf(x, a, mats, full, gap_scale), c2)
     k = 0
@@ -494,7 +622,7 @@ def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
     return naive[k], sand[k]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@kernel(error_model="numpy", inline="always")
 def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, rtol, max_iter):
     """For each term n in ``which``: the c > A_n-hat (the estimate with n added to the
     terms a > 0) where the rise of the profile deviance (``profile``) from its minimum,
@@ -504,12 +632,12 @@ def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, r
     each profile warm-started from the last. inf where the variances vanish or no
     bracket is found in 60 steps, NaN outside ``which``. One profile per loop pass (the
     free estimate first), so that the scoring is compiled in once."""
-    upper = np.full(5, np.nan)
+    upper = _filled(5, np.nan)
     for n in range(5):
         if not which[n]:
             continue
         upper[n] = np.inf
-        terms = a > 0
+        terms = _positive(a, np.empty(5, np.bool_))
         terms[n] = True
         start = a.copy()
         d_min = a_n = lo = f_lo = hi = f_hi = step = c = 0.0
@@ -557,7 +685,7 @@ def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, r
     return upper
 
 
-@njit(cache=True, error_model="numpy")
+@kernel((F2, F1, F3, F1, F1, F4, F2, F8, F8, F8, F8, I8, F8, F8, I8, F8, I8, F8), error_model="numpy")
 def fit_terms(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw_tol, max_robust, robust_rtol,
               rtol, max_iter, identify_z, upper_mode, deviance):
     """The fit of fit.fit_avar on its taus, in one call: ``robust_scoring`` of the active
@@ -571,23 +699,28 @@ def fit_terms(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, r
     (``upper_mode`` 0, 1, 2; NaN elsewhere). Returns (found, A, se, robust weights, c2,
     upper); found False when every robust start failed."""
     active = np.ones(5, np.bool_)
-    se = np.full(5, np.inf)
+    se = _filled(5, np.inf)
     while True:
         found, a, rw, c2 = robust_scoring(x, active, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
                                           max_robust, robust_rtol, max_iter)
         if not found:
-            return False, a, se, rw, c2, np.full(5, np.nan)
+            return False, a, se, rw, c2, _filled(5, np.nan)
         from_data = True
         for j in range(5):
             if active[j] and a[j] > 0:
                 from_data = False
-        a0 = np.zeros(5) if from_data else np.where(active, a, 0.0)
+        a0 = np.zeros(5) if from_data else _where(active, a, np.empty(5))
         a, model, nu = fisher_scoring(x, active, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
-        starts = rw.reshape(1, rw.shape[0]).copy()
-        free = a > 0
-        se = np.full(5, np.inf)
+        starts = np.empty((1, rw.shape[0]))
+        for i in range(rw.shape[0]):
+            starts[0, i] = rw[i]
+        free = _positive(a, np.empty(5, np.bool_))
+        se = _filled(5, np.inf)
         corr = mixture_correlation(x, a, cov)
-        if free.any():
+        n_free = 0
+        for j in range(5):
+            n_free += free[j]
+        if n_free:
             sand = sandwich_variances(x, model, corr, free, rw, nu, c2)[1]
             k = 0
             for j in range(5):
@@ -610,9 +743,11 @@ def fit_terms(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, r
                 k += cols[j]
             se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][k])
     which = np.zeros(5, np.bool_)
+    any_upper = False
     for n in range(5):
         which[n] = upper_mode == 2 or (upper_mode == 1 and not free[n])
-    upper = np.full(5, np.nan)
-    if which.any():
+        any_upper |= which[n]
+    upper = _filled(5, np.nan)
+    if any_upper:
         upper = upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, robust_rtol, max_iter)
     return True, a, se, rw, c2, upper

@@ -163,7 +163,7 @@ class StreamingDadev:
         # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
         block = np.empty((2, len(ends), len(self.m)))
         sums, counts = block[0], block[1].view(np.int64)
-        full = w - 2 * self.m + 1 if to_adev else None  # gap-free term counts: the kernel forms adev
+        full = w - 2 * self.m + 1  # gap-free term counts: with ``to_adev`` the kernel forms adev
         n_gapped = 0
         i = row = 0
         spans = []  # running sums: row spans whose counts are all in their first row (see kernels.stream_update)
@@ -196,8 +196,7 @@ class StreamingDadev:
             else:
                 fixed, gapped = kernels.stream_update(
                     self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
-                    ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end],
-                    full)
+                    ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end], to_adev, full)
                 n_gapped += gapped
                 if fixed and row_end > row:
                     spans.append((row, row_end))

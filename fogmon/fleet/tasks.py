@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import traceback
-from collections import deque
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -344,24 +343,18 @@ def motion_pass(plan: Plan, source: SourceOptions, config: PipelineConfig, axis:
         src = _open(plan.path, source)
         gate = MotionGate(plan.sample_rate_hz)
         use_ref = None
-        pending: deque[np.ndarray] = deque()    # valid flags handed to the gate, not yet released
         pos = 0                                 # grid index of the next sample released
         runs: list[tuple[int, int]] = []
 
-        def released(v_out: np.ndarray) -> None:
+        def released(moved: np.ndarray) -> None:
             nonlocal pos
-            n = len(v_out)
-            v_in = np.concatenate([pending.popleft() for _ in range(len(pending))]) if pending else np.zeros(0, bool)
-            rest = v_in[n:]
-            if len(rest):
-                pending.append(rest)
-            masked = np.flatnonzero(v_in[:n] & ~v_out)
+            masked = np.flatnonzero(moved)
             if len(masked):
                 cuts = np.flatnonzero(np.diff(masked) > 1)
                 starts = np.concatenate([[masked[0]], masked[cuts + 1]])
                 stops = np.concatenate([masked[cuts], [masked[-1]]]) + 1
                 runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist(), strict=True))
-            pos += n
+            pos += len(moved)
 
         try:
             for b in _blocks(src, axis):
@@ -370,12 +363,8 @@ def motion_pass(plan: Plan, source: SourceOptions, config: PipelineConfig, axis:
                 if use_ref is None:
                     use_ref = "rot_dps" in b.aux and not config.raw_rate
                 y = b.error_rate_dph if use_ref else b.rate_dph
-                v = b.valid & np.isfinite(y)
-                pending.append(v)
-                _, v_out, _ = gate.push(b.t_s, y, v)
-                released(v_out)
-            _, v_out, _ = gate.flush()
-            released(v_out)
+                released(gate.push(b.t_s, y, b.valid & np.isfinite(y)).moved)
+            released(gate.flush().moved)
         finally:
             src.close()
         out.runs = np.asarray(runs, dtype=np.int64).reshape(-1, 2)

@@ -74,7 +74,7 @@ class AccelAnalysis:
         from fogmon.davar.batch import oadev
 
         del self.engine
-        ug, valid = self.tail.take()
+        ug, valid, _ = self.tail.take()
         if len(ug) < 8 or not np.any(valid[1:] & valid[:-1]):
             return
         try:

@@ -282,10 +282,7 @@ class Pipeline:
                 self._drain(backlog)
         for a in self.analyses:
             if a.motion is not None and ok:   # the samples the gate still holds
-                y, valid, ev = a.flush_motion()
-                self._dispatch(a.named(ev))
-                self._analyse(a, y, valid)
-                a.summary.motion_spans, a.summary.motion_samples = list(a.motion.spans), a.motion.samples_excluded
+                self._analyse(a, *a.flush_gate(self._dispatch))
         if ok:
             self._send_counters()
         summary.wall_s = time.monotonic() - self.wall0
@@ -318,9 +315,10 @@ class Pipeline:
             for b_piece, b in _at_seams([big], self.t_origin, self.sample_rate_hz, self.piece_n):
                 self._deliver(b, b_piece)
 
-    def _analyse(self, a: AxisAnalysis, y: np.ndarray, valid: np.ndarray) -> None:
-        """DAVAR, fits, jump and model-band events of axis ``a`` for its next samples."""
-        res = a.analyse(y, valid)
+    def _analyse(self, a: AxisAnalysis, y: np.ndarray, valid: np.ndarray, moved: np.ndarray | None) -> None:
+        """DAVAR, fits, jump and model-band events of axis ``a`` for its next samples
+        (``moved``: those the motion gate made invalid)."""
+        res = a.analyse(y, valid, moved)
         if len(res):
             self.frames(a, res)
         for acc in self.accels.get(a.name, ()):

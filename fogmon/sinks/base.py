@@ -76,6 +76,8 @@ class AxisSummary:
     overall_first_s: float = math.nan
     motion_spans: list = field(default_factory=list)   # MotionSpan: kept out of DAVAR and the fits
     motion_samples: int = 0       # valid samples the motion gate made invalid
+    motion_in_tail: int = 0       # of them, samples in ``overall``'s span
+    fit_with_motion: NoiseFit | None = None   # the whole-run fit with those samples analysed too
     model_check: dict | None = None   # with a model: fogmon.modelcheck.ModelWatch.summary()
     phases: dict | None = None    # with pumps/rot_dps aux channels: fogmon.phases.PhaseLog.summary()
 

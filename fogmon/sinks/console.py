@@ -74,7 +74,7 @@ def result_lines(x: AxisSummary, run: Summary) -> list[str]:
         check = model_check(a, f) if a is not None else None
         if check is not None:
             lines.append(check)
-    return lines
+    return lines + motion_effect_lines(x)
 
 
 def accel_lines(s: Summary) -> list[str]:
@@ -135,6 +135,8 @@ def axes_lines(s: Summary) -> list[str]:
             check = model_check(x.overall, x.overall_fit) if x.overall is not None and x.overall_fit else None
             if check is not None:
                 lines.append(check.replace("model check:", f"model check (axis {a}):"))
+    for a, x in axes.items():
+        lines += motion_effect_lines(x, a)
     return lines
 
 
@@ -252,6 +254,30 @@ def motion_lines(s: AxisSummary, run: Summary) -> list[str]:
         where = f"all are in the event log of {rrd[0]}" if rrd else "`rrd_path` keeps all of them in its event log"
         out.append(f"    ... and {len(spans) - MAX_MOTION_SPANS} more ({where})")
     return out
+
+
+def motion_effect_lines(x: AxisSummary, axis: str = "") -> list[str]:
+    """What keeping platform motion out changed (``axis``: its name in a multi-axis run):
+    the whole-run coefficients without and with the samples the motion gate kept out,
+    value [lo, hi] or n/i (< 95 % upper limit)."""
+    if x.fit_with_motion is None or x.overall_fit is None or x.overall is None:
+        return []
+    pct = 100.0 * x.motion_in_tail / max(x.overall.n_samples, 1)
+    where = f" (axis {axis})" if axis else ""
+    rows = []
+    for name, unit in COEFFICIENTS.items():
+        cells = []
+        for f in (x.overall_fit, x.fit_with_motion):
+            c = getattr(f, name)
+            cells.append(f"{float(c.value):.4g} [{float(c.lo):.4g}, {float(c.hi):.4g}]" if bool(c.identifiable)
+                         else f"n/i (< {float(c.hi):.4g})")
+        rows.append((name, unit, *cells))
+    w = max(len(r[k]) for r in rows for k in (2, 3)) + 2
+    return ["", f"IEEE-952 noise coefficients{where} without and with platform motion ({x.motion_in_tail} samples, "
+                f"{pct:.1f} %, kept out above; `keep_motion` analyses them; n/i: not identifiable from this record, "
+                f"< its 95 % upper limit):",
+            f"  {'coefficient':<11} {'unit':<14}{'motion kept out':>{w}}{'motion analysed':>{w}}"] + \
+        [f"  {n:<11} {u:<14}{a:>{w}}{b:>{w}}" for n, u, a, b in rows]
 
 
 def _open_hint(output: str) -> str:

@@ -188,7 +188,8 @@ def test_model_holds_is_the_z_test_at_every_tau_with_terms():
         assert kernels.model_holds(model, sums, n, m, HOLD_Z) == bool(np.all(np.abs(z) <= HOLD_Z))
 
 
-_RUN = ("import numpy as np; from fogmon.davar import kernels; "
+_RUN = ("import numpy as np; from fogmon import jit; from fogmon.davar import kernels; "
+        "jit.warm_up_on_first_use = False; "  # one kernel (the warm-up of all: tests/test_jit.py)
         "print(kernels.reference_level(np.array([3.0, 1.0, 2.0]), np.ones(3, dtype=bool)))")
 
 

@@ -14,6 +14,13 @@ FS = 100.0
 RLG = REPO / "replay_logs" / "lasergyro_z_100hz.csv"
 
 
+def from_python(kernel):
+    """A kernel that only other kernels call (no Python entry point, fogmon.jit), made
+    callable from a test."""
+    import numba
+    return numba.njit(lambda *args: kernel(*args))
+
+
 def exact_result(n_samples, **coef) -> AdevResult:
     """An AdevResult whose ADEV is exactly the IEEE-952 model (octave taus)."""
     m = 2 ** np.arange(int(np.log2(n_samples // 4)) + 1)
@@ -149,6 +156,7 @@ def test_nnls_is_never_given_a_column_without_information():
     out of a step."""
     from fogmon.davar.fit import _NoiseModel
     from fogmon.davar.scoring import fisher_scoring, nnls
+    nnls = from_python(nnls)
     from fogmon.davar.theory import POWERS
     a = np.array([[1.0, 2.0], [2.0, 1.0], [2.0, 2.0]]) / 3.0
     assert np.allclose(nnls(a, a @ np.array([1.0, 2.0])), [1.0, 2.0])
@@ -227,6 +235,7 @@ def test_sandwich_variances_match_numpy_linear_algebra():
     # the numba loops and Jacobi pseudo-inverse against the same formulas in numpy
     # (numpy.linalg.pinv, matrix products), including a column dependent on the others
     from fogmon.davar.scoring import sandwich_variances, symmetric_pinv
+    sandwich_variances, symmetric_pinv = from_python(sandwich_variances), from_python(symmetric_pinv)
     rng = np.random.default_rng(5)
     for trial in range(20):
         t = 8
@@ -261,6 +270,7 @@ def test_mixture_correlation_is_the_normalised_relative_covariance():
     from fogmon.davar.confidence import MIX_ALPHAS, avar_relative_covariance
     from fogmon.davar.fit import _NoiseModel
     from fogmon.davar.scoring import mixture_correlation, mixture_fractions
+    mixture_correlation, mixture_fractions = from_python(mixture_correlation), from_python(mixture_fractions)
     m = 2 ** np.arange(9)
     edf = _NoiseModel(m / FS, m, 4096 - 2 * m + 1, 4096)
     for a in (np.array([1e-3, 1.0, 0.02, 1e-4, 0.0]), np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(5)):

@@ -31,7 +31,7 @@ def pub(*parts: str) -> str:
 
 def same_adev(rec) -> None:
     """fogmon's ADEV of a gap-free recording equals allantools.oadev on the same values."""
-    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
+    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave", exclude_motion=False)
     ok = np.isfinite(res.adev_dph)
     taus, dev, _, _ = allantools.oadev(rec.rate_dph, rate=rec.sample_rate_hz, data_type="freq",
                                        taus=res.tau_s[ok])
@@ -280,3 +280,24 @@ def test_mf4_can_log_with_a_corrupt_record_is_one_line_not_a_crash(tmp_path):
     with pytest.raises(FogmonError, match=r"bad\.mf4: not a readable MDF file \(corrupt: channel .* of data group 0"):
         open_replay_source(str(bad), SourceOptions(dbc=os.path.join(CAN_DIR, "canmod-gps.dbc"),
                                                    can_rate="AngularRateZ"))
+
+
+def test_mdf4_record_larger_than_its_data_is_one_line_not_a_long_allocation(tmp_path):
+    """A flipped bit in a channel group's record size made asammdf allocate GBs and sit
+    for minutes (fuzz_readers.py): a record larger than the group's data is refused."""
+    import struct
+
+    import asammdf
+    src = pub("mdf", "canmod_imu_decoded_8s.mf4")
+    with asammdf.MDF(src) as mdf:
+        cg = mdf.groups[2].channel_group
+        where = cg.address + 24 + 8 * cg.links_nr + 24      # cg_data_bytes: after record id, cycles, flags
+    with open(src, "rb") as fh:
+        data = bytearray(fh.read())
+    assert struct.unpack("<I", data[where:where + 4]) == (22,)
+    data[where:where + 4] = struct.pack("<I", 1 << 30)
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(FogmonError, match=r"bad\.mf4: not a readable MDF file \(corrupt: data group 2 has "
+                                          r"1073741824-byte records but its data blocks hold 176 bytes\)"):
+        file_info(str(bad))

@@ -53,6 +53,11 @@ def _check_layout(mdf, path: str) -> None:
     for g, group in enumerate(getattr(mdf, "groups", ())):
         cg = group.channel_group
         record = int(cg.samples_byte_nr) + int(getattr(cg, "invalidation_bytes_nr", 0))
+        held = sum(int(b.original_size) for b in getattr(group, "data_blocks", ()))
+        if held and record > held:   # asammdf would allocate buffers of the record size (GB from a flipped bit)
+            mdf.close()
+            raise FogmonError(f"{path}: not a readable MDF file (corrupt: data group {g} has {record}-byte records "
+                              f"but its data blocks hold {held} bytes)")
         for ch in group.channels:
             end = int(ch.byte_offset) + (int(ch.bit_offset) + int(ch.bit_count) + 7) // 8
             if getattr(ch, "channel_type", 0) in IN_RECORD and end > record:

@@ -1,0 +1,183 @@
+"""fogmon's numba kernels: compiled once, for every configuration.
+
+Every numba kernel is made by ``kernel``: nopython and cached on disk (``cache=True``).
+
+- A kernel called from Python declares its argument types (``kernel((F1, B1))``) and
+  its call sites pass exactly these (C-contiguous, writable arrays of the declared
+  dtypes, Python or numpy scalars), so one compiled version serves every command and
+  option (tests/test_jit.py runs the configurations and checks that no other version
+  is made).
+- A kernel called only from other kernels (no Python entry point) is compiled for the
+  types at its call sites, never for a constant's value: numba would make one version per literal argument
+  (``f(x, 0)`` and ``f(x, n)``, ``g(.., True)`` and ``g(.., b)``), each costing the
+  kernel's whole compile.
+- When a process compiles a declared kernel (not in the cache), it then compiles every
+  declared kernel the cache lacks (``warm_up``; a progress line on stderr in the fogmon
+  program), so the first run of any command compiles for all of them and no later
+  command or option compiles again (a warm run pays nothing for this). Not when that
+  kernel could not be saved (the cache is unusable): the run compiles only what it
+  needs, as numba does.
+
+A numba cache that cannot be read or written (corrupt files, an install directory
+without write access, ``NUMBA_CACHE_DIR`` pointing nowhere usable) costs a compile in
+memory and one FogmonWarning, never the run.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib
+import sys
+import time
+import warnings
+from collections.abc import Callable
+
+import numba
+import numpy as np
+from numba import types
+from numba.core import caching
+
+from fogmon import startup
+from fogmon.errors import FogmonWarning
+
+#: the modules that define kernels (``warm_up`` imports them; tests/test_jit.py checks the list)
+KERNEL_MODULES = ("fogmon.davar.kernels", "fogmon.davar.scoring", "fogmon.motion")
+
+# argument types of the declarations: scalars, C-contiguous 1-4 dimensional arrays
+F8, I8, BOOL, NONE = types.float64, types.int64, types.boolean, types.none
+F1, F2, F3, F4 = (types.Array(F8, d, "C") for d in (1, 2, 3, 4))
+I1, I2 = types.Array(I8, 1, "C"), types.Array(I8, 2, "C")
+B1 = types.Array(BOOL, 1, "C")
+
+#: False: no warm-up; each kernel is compiled when first needed (numba's own way)
+warm_up_on_first_use = True
+
+_declared: list[tuple[numba.core.registry.CPUDispatcher, tuple]] = []
+_warmed_up = False
+
+
+def kernel(*signatures: tuple, **options) -> Callable:
+    """Decorator: ``numba.njit(cache=True, **options)`` (e.g. ``inline="always"``,
+    ``fastmath``, ``error_model``) with the argument types ``signatures`` (tuples of
+    numba types, one per version). Without them the kernel is called only from other
+    kernels: it gets no Python entry point (numba's CPython and C wrappers, a compile of
+    their own per kernel)."""
+    def wrap(fn):
+        if not signatures and "inline" not in options:
+            options.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)
+        disp = numba.njit(cache=True, **options)(fn)
+        template = disp.get_call_template
+
+        def get_call_template(args, kws):  # a call from another kernel: types, not constants
+            return template(tuple(types.unliteral(a) for a in args),
+                            {k: types.unliteral(v) for k, v in kws.items()})
+        disp.get_call_template = get_call_template
+        if signatures:
+            _declared.append((disp, tuple(tuple(s) for s in signatures)))
+            compile_for_args = disp._compile_for_args
+
+            def first_compile_warms_up(*args, **kws):  # numba calls it when no version in memory matches
+                global _warmed_up
+                t0 = time.process_time()
+                misses = sum(disp.stats.cache_misses.values())
+                out = compile_for_args(*args, **kws)
+                if not _warmed_up and warm_up_on_first_use and sum(disp.stats.cache_misses.values()) > misses:
+                    _warmed_up = True   # this kernel was compiled: so, once, are the others the cache lacks
+                    if is_cached(disp, tuple(disp.typeof_pyval(a) for a in args)):  # (else the cache is unusable)
+                        warm_up(_progress_line(t0))
+                return out
+            disp._compile_for_args = first_compile_warms_up
+        return disp
+    return wrap
+
+
+def declared() -> list[tuple[str, numba.core.registry.CPUDispatcher, tuple]]:
+    """(qualified name, dispatcher, argument types) of every declared kernel version
+    (the kernel modules imported)."""
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
+    return [(f"{d.py_func.__module__}.{d.py_func.__name__}", d, s) for d, sigs in _declared for s in sigs]
+
+
+def is_cached(disp, signature: tuple) -> bool:
+    """The numba cache holds ``disp``'s version for these argument types (its index is
+    read, nothing is loaded); True when the dispatcher does not cache."""
+    cache = getattr(disp, "_cache", None)
+    if not isinstance(cache, caching.Cache):
+        return True
+    try:
+        key = cache._index_key(tuple(signature), disp.targetctx.codegen())
+        return key in cache._cache_file._load_index()
+    except Exception:  # noqa: BLE001 - an unreadable index: not cached
+        return False
+
+
+def warm_up(report: Callable[[int, int, str | None], None] | None = None) -> int:
+    """Compile every declared kernel version that the numba cache lacks; returns how many
+    were compiled. ``report(done, total, name)`` before each (``name`` None at the end).
+    Stops after a version that was not saved (the cache is unusable: compiling ahead
+    would be lost)."""
+    todo = [(name, d, s) for name, d, s in declared() if not is_cached(d, s)]
+    for i, (name, d, s) in enumerate(todo):
+        if report:
+            report(i, len(todo), name.rsplit(".", 1)[1])
+        d.compile(s)
+        if not is_cached(d, s):
+            todo = todo[:i + 1]
+            break
+    if report and todo:
+        report(len(todo), len(todo), None)
+    return len(todo)
+
+
+def c_array(a, dtype) -> np.ndarray:
+    """``a`` as a C-contiguous, writable array of ``dtype``: the form of a declared
+    kernel's array argument (copied only when it is not: a read-only or strided view)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
+def _progress_line(t0: float) -> Callable[[int, int, str | None], None] | None:
+    """The warm-up's progress on stderr, in the fogmon program only (a library user's
+    process prints nothing): one line updated in place on a terminal, else a line at the
+    start and one at the end (with the CPU time since ``t0``, ``time.process_time``)."""
+    if not startup.is_own_process():
+        return None
+    tty = sys.stderr.isatty()
+
+    def report(done: int, total: int, name: str | None) -> None:
+        head = "fogmon: compiling the numba kernels once (later runs load them from the cache)"
+        if name is None:
+            line = f"{head}: done in {time.process_time() - t0:.0f} CPU s"
+        elif tty:
+            line = f"{head}: {done + 1}/{total} {name}"
+        elif done == 0:
+            line = f"{head} ..."
+        else:
+            return
+        print(("\r\x1b[K" if tty else "") + line, end="\n" if name is None or not tty else "", file=sys.stderr,
+              flush=True)
+    return report
+
+
+def _tolerate_unusable_cache() -> None:
+    """numba's guard around cache I/O (which forgives only EACCES, only on Windows) is
+    widened to every error, reported once per process as a FogmonWarning. A cache from
+    other sources is ignored by numba itself (it checks the source file's stamp)."""
+    if getattr(caching.Cache, "_fogmon_tolerant", False):
+        return
+    warned: list[Exception] = []
+
+    @contextlib.contextmanager
+    def guard(self):
+        try:
+            yield
+        except Exception as e:  # noqa: BLE001 - any cache failure: compile in memory instead
+            if not warned:
+                warned.append(e)
+                warnings.warn(f"numba cache unusable ({type(e).__name__}: {e}); kernels are compiled in "
+                              f"memory for this run", FogmonWarning, stacklevel=1)
+    caching.Cache._guard_against_spurious_io_errors = guard  # type: ignore[method-assign]
+    caching.Cache._fogmon_tolerant = True  # type: ignore[attr-defined]
+
+
+_tolerate_unusable_cache()
