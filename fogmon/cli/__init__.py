@@ -48,9 +48,19 @@ NO_FLAG = frozenset({
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, exit 2 (argparse prints usage too)
-        self.print_usage(sys.stderr)
-        self.exit(2, f"fogmon: error: {message}\n")
+    def error(self, message: str):
+        """A usage error: one line naming the command and where its help is, exit 2
+        (not argparse's usage block: the one line that matters would scroll away)."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        """As argparse's, with arguments no option takes reported by the command's own
+        parser (its prog and help named), not by the top-level one."""
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            commands = getattr(self, "commands", {})
+            commands.get(getattr(ns, "command", None), self).error(f"unrecognized arguments: {' '.join(extra)}")
+        return ns
 
 
 def build_parser(argv: list[str]) -> argparse.ArgumentParser:
@@ -62,8 +72,10 @@ def build_parser(argv: list[str]) -> argparse.ArgumentParser:
     sub.required = True
     # Only the sub-command being run imports its module (fast --help).
     wanted = next((a for a in argv if not a.startswith("-")), None)
+    p.commands = {}  # type: ignore[attr-defined]
     for name, help_text in COMMANDS.items():
         sp = sub.add_parser(name, help=help_text, description=help_text)
+        p.commands[name] = sp  # type: ignore[attr-defined]
         if name == wanted:
             importlib.import_module(f"fogmon.cli.{name}").add_arguments(sp)
     return p

@@ -12,6 +12,7 @@ import threading
 import time
 
 from fogmon import stopping
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig
@@ -25,12 +26,13 @@ NO_WORKER_S = 60.0
 #: how often (s) waiting tasks check that the cluster still has a worker
 POLL_S = 2.0
 
-EPILOG = """examples:
-  fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
-  fogmon batch 'rig*/gyro-*.parquet' archives/ --out fleet/ --model datasheet.toml --report fleet/fleet.html
-  fogmon batch runs/ --out fleet/ --scheduler tcp://10.0.0.5:8786   # an existing Dask cluster
-
-Inputs: replay logs (.csv), Parquet logs (.parquet), raw serial captures with their .json
+EXAMPLES = """
+fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
+fogmon batch 'rig*/gyro-*.parquet' archives/ --out fleet/ --model datasheet.toml --report fleet/fleet.html
+fogmon batch runs/ --out fleet/ --scheduler tcp://10.0.0.5:8786   # an existing Dask cluster
+fogmon batch runs/ --out fleet/ --report fleet/fleet.html --group-by serial   # gyros by a header field
+"""
+NOTES = """Inputs: replay logs (.csv), Parquet logs (.parquet), raw serial captures with their .json
 sidecar (or --protocol), CAN logs (.asc .blf .trc .csv .log with --dbc or a sidecar),
 monitor archive folders; a folder is searched for them (an archive folder is one
 recording), a glob is expanded. Every input is checked (all rows) before any analysis
@@ -41,39 +43,49 @@ Every readable recording is analysed; one that cannot be read is named on stderr
 recordings.parquet (column error) and left out. When the cluster has no worker for
 60 s (none connected, or all died), batch gives up with an error. Rates in deg/h, times
 in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h),
-R deg/h^2). Exit code 0 when every recording was analysed, 1 when some analyses failed
-(named on stderr and in recordings.parquet), 2 on bad usage, when some inputs could not
-be read (the others analysed and written) or none could (nothing written), or when no
-worker is left."""
+R deg/h^2)."""
+EXIT_CODES = """exit codes:
+  0              every recording was analysed
+  1              some analyses failed (named on stderr and in recordings.parquet, column error)
+  2              bad usage or input: one line names the option, or the file, line and field;
+                 also when some inputs could not be read (the others analysed and written),
+                 none could (nothing written), or no worker is left
+  130, 143, 129  stopped by Ctrl-C, SIGTERM, SIGHUP"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from fogmon.cli.pipeline_options import parse_taus
     from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.epilog = EPILOG
+    set_epilog(parser, EXAMPLES, NOTES, EXIT_CODES)
     parser.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files, folders or globs")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder for windows.parquet and "
                         "recordings.parquet (created if needed; existing tables there are replaced)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (tcp://HOST:PORT; start "
                         "one with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`); the "
                         "workers must see the input paths. Default: a local cluster of --workers processes")
-    parser.add_argument("--workers", type=number(1, 1024, integer=True), metavar="N",
+    parser.add_argument("--workers", type=number(1, 1024, integer=True), metavar="PROCESSES",
                         help=f"processes of the local cluster, one thread each (default: the machine's cores, "
                              f"{len(os.sched_getaffinity(0))} here)")
     parser.add_argument("--model", metavar="MODEL.toml", help="also explain every recording against this sensor "
                         "model (the explain score before/after and the effect kinds per recording)")
     parser.add_argument("--report", metavar="FLEET.html", help="write the fleet report (HTML with its PNG figures "
                         "and a CSV of the per-recording table beside it)")
-    parser.add_argument("--chunk-s", type=positive, metavar="S", help="split recordings longer than S s of "
+    parser.add_argument("--group-by", metavar="KEY",
+                        help="what names a recording's gyro in the fleet report: a metadata key (a replay-log "
+                        "header '# KEY: value' line, a Parquet log's metadata, a capture sidecar field), 'folder' "
+                        "(each folder one gyro) or 'recording' (each its own). Default: a serial number "
+                        "(serial_number, serial, sn, ...), else the sensor name within its folder, else the "
+                        "recording alone; never the folder alone (docs/batch.md, Gyros)")
+    parser.add_argument("--chunk-s", type=positive, metavar="SECONDS", help="split recordings longer than SECONDS of "
                         f"recording time into chunks (default {DEFAULT_CHUNK_SAMPLES:,} samples: "
                         f"{DEFAULT_CHUNK_SAMPLES / 1000 / 3600:.1f} h at 1 kHz)")
     g = parser.add_argument_group("dynamic Allan deviation (as fogmon replay)")
-    g.add_argument("--window-s", type=positive, metavar="W", help="window length in s (default: as fogmon replay, "
+    g.add_argument("--window-s", type=positive, metavar="SECONDS",
+                   help="window length in s (default: as fogmon replay, "
                    "per recording: a quarter of it rounded down to a power of two of samples)")
-    g.add_argument("--hop-s", type=positive, metavar="H", help="hop in s (default: window/8)")
-    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="T",
+    g.add_argument("--hop-s", type=positive, metavar="SECONDS", help="hop in s (default: window/8)")
+    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="GRID",
                    help=f"averaging times as fogmon replay --taus (default {PipelineConfig.taus})")
     g.add_argument("--raw-rate", action="store_true", help="analyse rate_dph as recorded even with rot_dps")
     g.add_argument("--keep-motion", action="store_true", help="analyse platform motion too (docs/motion.md)")
@@ -171,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
         if show:
             from distributed import progress
             progress([f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None])
-        windows, rows, accels = _gather(client, jobs, args.scheduler)
+        windows, rows, accels = _gather(client, jobs, args.scheduler, args.group_by)
     except KeyboardInterrupt:
         _quiet_shutdown()
         raise
@@ -284,10 +296,11 @@ def _submit(client, plans: list, args: argparse.Namespace, source: SourceOptions
     return jobs
 
 
-def _gather(client, jobs: list[tuple], scheduler: str | None) -> tuple[list, list[dict], tuple[list, list[dict]]]:
+def _gather(client, jobs: list[tuple], scheduler: str | None,
+            group_by: str | None = None) -> tuple[list, list[dict], tuple[list, list[dict]]]:
     """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed),
-    the recordings-table rows (their errors as this command names options) and the
-    accelerometers' windows tables and rows."""
+    the recordings-table rows (their errors as this command names options; their gyro as
+    ``group_by`` asks) and the accelerometers' windows tables and rows."""
     from fogmon.cli import render
     from fogmon.fleet import tasks
 
@@ -302,7 +315,7 @@ def _gather(client, jobs: list[tuple], scheduler: str | None) -> tuple[list, lis
                    for f, c in zip(futs, chunks, strict=True)]
         motion = (_result(masked, lambda msg, path=path: tasks.MotionResult(path, error=msg))
                   if masked is not None else None)
-        row, win = _recording_row(plan, axis, chunks, results, motion)
+        row, win = _recording_row(plan, axis, chunks, results, motion, group_by)
         if expl is not None:
             row.update(_result(expl, lambda msg: {"explain_score_before": float("nan"),
                                                   "explain_score_after": float("nan"), "explain_effects": "",
@@ -344,9 +357,10 @@ def _finish(args: argparse.Namespace, plans: list, bad: list, jobs: list[tuple],
               f"{os.path.join(args.out, tables.ACCEL_RECORDINGS)}")
     if args.report:
         from fogmon.cli import command_flags
-        from fogmon.fleet.report import write_report
+        from fogmon.fleet.report import gyro_summary, write_report
         for f in write_report(args.report, r_path, w_path, command_flags("batch")):
             print(f"fogmon batch: wrote {f}")
+        print(f"fogmon batch: the report compares {gyro_summary(rows)}")
     if bad:
         print(f"fogmon batch: error: {len(bad)} of {len(bad) + len(plans)} inputs could not be read (named above "
               f"and in {r_path}); the others are analysed", file=sys.stderr)
@@ -370,12 +384,16 @@ def _accel_rows(plan, results) -> list[tuple[dict, object]]:
     return out
 
 
-def _recording_row(plan, axis: str, chunks, results, motion) -> tuple[dict, object]:
+def _recording_row(plan, axis: str, chunks, results, motion, group_by: str | None = None) -> tuple[dict, object]:
     """The recordings-table row of one recording's axis ``axis`` ("": a one-axis
-    recording, named by ``plan.axis``) and its windows table (None if failed)."""
+    recording, named by ``plan.axis``; its gyro as ``group_by`` asks, fleet.identity) and
+    its windows table (None if failed)."""
     from fogmon.fleet import tables
+    from fogmon.fleet.identity import gyro_identity
 
-    row = {"recording": plan.path, "axis": axis or plan.axis, "format": plan.kind,
+    gyro, named_by = gyro_identity(plan.path, plan.meta, group_by)
+    row = {"recording": plan.path, "gyro": gyro, "gyro_named_by": named_by, "axis": axis or plan.axis,
+           "format": plan.kind,
            "sample_rate_hz": plan.sample_rate_hz, "window_s": plan.window_s, "hop_s": plan.hop_s, "chunks": len(chunks)}
     errors = [r.error for r in results if r.error]
     last = results[-1].record

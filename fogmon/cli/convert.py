@@ -8,32 +8,33 @@ import argparse
 import itertools
 import os
 
+from fogmon.cli.helptext import set_epilog
 from fogmon.errors import FogmonError
 
-EPILOG = """examples:
-  fogmon convert run.csv run.parquet
-  fogmon convert raw-0001.bin run.parquet                  # decoder options from raw-0001.bin.json
-  fogmon convert frames.asc run.parquet --dbc gyro.dbc
-  fogmon convert runs/fogmon-archive-20261121T080000Z week.parquet
-  fogmon convert run.parquet run.csv
-
-The Parquet file keeps the replay-log columns (time_s s, rate_dph deg/h or one
+EXAMPLES = """
+fogmon convert run.csv run.parquet
+fogmon convert raw-0001.bin run.parquet                  # decoder options from raw-0001.bin.json
+fogmon convert frames.asc run.parquet --dbc gyro.dbc
+fogmon convert runs/fogmon-archive-20261121T080000Z week.parquet
+fogmon convert run.parquet run.csv
+"""
+NOTES = """The Parquet file keeps the replay-log columns (time_s s, rate_dph deg/h or one
 rate_<axis>_dph per axis, aux channels) as float64 in row groups of 65,536 rows, and
 in its key-value metadata (key "fogmon", JSON) the replay-log metadata, the units, the
 source and, for a raw capture, its decoder options and counters. A multi-axis recording
 keeps its axes (--axis picks some); a sample time where some axis is invalid is left
-out (a row holds every axis) and counted. Exit code 0 on success, 2 on bad usage or
-input (no output file is left behind)."""
+out (a row holds every axis) and counted."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.epilog = EPILOG
-    parser.add_argument("input", metavar="IN", help="replay-log CSV, Parquet log, raw serial capture (sidecar or "
+    set_epilog(parser, EXAMPLES, NOTES)
+    parser.add_argument("input", metavar="RECORDING",
+                        help="replay-log CSV, Parquet log, raw serial capture (sidecar or "
                         "--protocol), CAN log (--dbc) or archive folder")
-    parser.add_argument("output", metavar="OUT", help="OUT.parquet (Parquet replay log) or OUT.csv (replay log)")
+    parser.add_argument("output", metavar="OUT.parquet",
+                        help="OUT.parquet (Parquet replay log) or OUT.csv (replay log)")
     add_source_arguments(parser, mode="replay")
     add_reader_arguments(parser)
 

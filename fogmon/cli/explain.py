@@ -9,6 +9,7 @@ import sys
 from typing import Any, TextIO
 
 from fogmon.cli.export_options import add_export_argument, export_request
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.export import write_export
@@ -19,34 +20,56 @@ from fogmon.outputs import check_outputs, written
 MAX_BOOTSTRAP = 10_000
 
 
+EXAMPLES = """
+fogmon explain replay_logs/sim_in_orbit_1hz.csv --report report.json --out-model fitted.toml
+fogmon explain replay_logs/sim_mwd_run_1hz.csv --model replay_logs/sim_mwd_run.toml --report mwd.json --rrd mwd.rrd
+fogmon explain run.csv --model datasheet.toml --report r.json --out-corrected corrected.csv --window-s 600
+"""
+NOTES = """The report (JSON), its evidence figure (.png) and, for an outlier population, every outlier
+(.outliers.csv) are written; the console summary names each effect with its fitted parameters
+and the score before and after (about 1: within what chance explains; docs/explain.md)."""
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from fogmon.explain.options import Options
 
+    set_epilog(p, EXAMPLES, NOTES)
     default = Options()   # the library's defaults
-    p.add_argument("recording", help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns; several axes: "
+    p.add_argument("recording", metavar="RECORDING",
+                   help="replay log v1 (CSV: time_s, rate_dph in deg/h, aux columns; several axes: "
                    "rate_<axis>_dph columns, each axis explained unless --axis picks one, docs/explain.md), or a "
                    "ROS bag/MCAP, PX4 ULog, MDF4 or LAS file (docs/readers.md)")
-    p.add_argument("--model", help="sensor model TOML (docs/formats.md); without it a stationary IEEE-952 "
+    p.add_argument("--model", metavar="MODEL.toml",
+                   help="sensor model TOML (docs/formats.md); without it a stationary IEEE-952 "
                    "baseline is fitted from the recording and the recording is explained against that")
-    p.add_argument("--report", required=True, help="JSON report to write (docs/formats.md); a PNG of the "
+    p.add_argument("--report", required=True, metavar="REPORT.json",
+                   help="JSON report to write (docs/formats.md); a PNG of the "
                    "evidence is written next to it (same name, .png), and every outlier of an outlier population "
                    "(same name, .outliers.csv); with several axes one of each per axis (.<axis>.png, "
                    ".<axis>.outliers.csv)")
-    p.add_argument("--rrd", help="also write the evidence to this Rerun .rrd file")
-    p.add_argument("--out-model", help="write the model with the fitted effects added (TOML)")
-    p.add_argument("--out-corrected", help="write the recording with the fitted deterministic effects removed "
+    p.add_argument("--rrd", metavar="OUT.rrd",
+                   help="also write the evidence to this Rerun .rrd file")
+    p.add_argument("--out-model", metavar="FITTED.toml",
+                   help="write the model with the fitted effects added (TOML)")
+    p.add_argument("--out-corrected", metavar="CORRECTED.csv",
+                   help="write the recording with the fitted deterministic effects removed "
                    "(replay log v1)")
     p.add_argument("--window-s", type=positive, default=default.window_s,
+                   metavar="SECONDS",
                    help="mismatch-map window in s, at least 16 samples and at most half the recording (default: "
                         "duration / 8); hop = window / 4, octave taus up to window / 4")
     p.add_argument("--bootstrap", type=number(8, MAX_BOOTSTRAP, integer=True), default=default.n_boot,
+                   metavar="REPLICATES",
                    help=f"bootstrap replicates of the model, 8..{MAX_BOOTSTRAP} (default: 100 up to 1e5 samples, "
                    "60 up to 4e5, else 40)")
     p.add_argument("--alpha", type=number(0, 0.5, above=True), default=default.alpha,
+                   metavar="PROBABILITY",
                    help=f"family-wise significance of the mismatch map, 0 < alpha <= 0.5 (default {default.alpha:g})")
     p.add_argument("--seed", type=number(0, integer=True), default=default.seed,
+                   metavar="SEED",
                    help=f"seed of the bootstrap simulations, an integer >= 0 (default {default.seed})")
     p.add_argument("--max-effects", type=number(0, integer=True), default=default.max_effects,
+                   metavar="COUNT",
                    help=f"most effects to add, >= 0 (default {default.max_effects}; 0: only locate the mismatches)")
     p.add_argument("--keep-motion", action="store_true",
                    help="analyse platform motion too: by default stretches where the rate moves far beyond "

@@ -7,10 +7,17 @@ from __future__ import annotations
 import argparse
 
 from fogmon.cli.export_options import add_export_argument, export_request
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.values import number, positive
 from fogmon.export import write_export
 
-EPILOG = """CURVE: a CSV file with a header tau_s,adev_dph (s, deg/h; adev_ug or adev_mps2 for an
+EXAMPLES = """
+fogmon fit curve.csv                                     # intervals at 68.3 % (1 sigma)
+fogmon fit curve.csv --rate-hz 100 --record-s 7200 --confidence 0.95
+fogmon fit curve.csv --export kalibr imu.yaml
+fogmon fit data/data_xsens_acc_t.txt --rate-hz 100 --export kalibr imu.yaml   # imu_utils's curves
+"""
+NOTES = """CURVE: a CSV file with a header tau_s,adev_dph (s, deg/h; adev_ug or adev_mps2 for an
 accelerometer) and optionally edf or n_terms, then one row per tau, increasing; '#' lines
 are comments. Example:
   # from Stable32, overlapping ADEV of a 2 h record at 100 Hz
@@ -21,28 +28,24 @@ Or another tool's output, told by the file: imu_utils's data_<name>_<gyr|acc>_<t
 allan_variance.csv (its accelerometer and gyro curves).
 
 The fit needs the record's sample rate and length and the terms behind each tau; what the
-curve does not state is assumed, and the output says what was assumed (docs/exports.md).
-  fogmon fit curve.csv --export kalibr imu.yaml
-  fogmon fit data/data_xsens_acc_t.txt --rate-hz 100 --export kalibr imu.yaml
-Exit code 0 on success, 2 on bad usage or input."""
+curve does not state is assumed, and the output says what was assumed (docs/exports.md)."""
 
 #: a curve longer than this shows only the taus the fit uses (one per octave)
 MAX_ROWS_SHOWN = 100
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.formatter_class = argparse.RawDescriptionHelpFormatter
-    p.epilog = EPILOG
+    set_epilog(p, EXAMPLES, NOTES)
     p.add_argument("curve", metavar="CURVE", help="Allan-deviation curve: a CSV (columns tau_s (s), adev_dph "
                    "(deg/h) or adev_ug / adev_mps2, optional edf or n_terms), an imu_utils data file or an "
                    "allan_variance_ros allan_variance.csv")
     p.add_argument("--rate-hz", dest="sample_rate_hz", type=number(0, 1e6, above=True), metavar="HZ",
                    help="sample rate of the record behind the curve, Hz (default: what the file says, else 1 / the "
                         "first tau)")
-    p.add_argument("--record-s", type=positive, metavar="S", help="length of that record, s (default: from "
+    p.add_argument("--record-s", type=positive, metavar="SECONDS", help="length of that record, s (default: from "
                    "n_terms or the file's format, else assumed 4 x the largest tau)")
-    p.add_argument("--confidence", type=number(0, 1, above=True), default=0.683, metavar="C",
-                   help="two-sided confidence of the intervals, 0 < C < 1 (default 0.683 = 1 sigma)")
+    p.add_argument("--confidence", type=number(0, 1, above=True), default=0.683, metavar="PROBABILITY",
+                   help="two-sided confidence of the intervals, 0 < PROBABILITY < 1 (default 0.683 = 1 sigma)")
     add_export_argument(p)
 
 

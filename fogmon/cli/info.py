@@ -5,15 +5,24 @@ from __future__ import annotations
 
 import argparse
 
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
+
+EXAMPLES = """
+fogmon info replay_logs/lasergyro_z_100hz.csv
+fogmon info flight.ulg                                   # every topic: type, count, rate, span
+fogmon info bus.blf --dbc gyro.dbc                       # message and signal names with units
+"""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    set_epilog(p, EXAMPLES)
     p.add_argument("file", metavar="FILE", help="any file or folder fogmon reads: replay log (CSV, Parquet), raw "
                    "capture, CAN log (with --dbc: message names and units), ROS bag/MCAP, PX4 ULog, MDF4, LAS, "
                    "archive folder")
     p.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows")
-    p.add_argument("--protocol", help="a raw serial capture without a sidecar: its protocol (as fogmon replay)")
+    p.add_argument("--protocol", metavar="PROTOCOL",
+                   help="a raw serial capture without a sidecar: its protocol (as fogmon replay)")
     add_reader_arguments(p)
 
 

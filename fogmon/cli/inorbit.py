@@ -10,21 +10,28 @@ import argparse
 import numpy as np
 
 from fogmon.cli import render
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.formats.recording import Recording
 
+EXAMPLES = """
+fogmon inorbit replay_logs/sim_in_orbit_1hz.csv
+fogmon inorbit orbit3.csv --axis y --period-s 5580 --pauta-k 3.5
+"""
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from fogmon.methods.inorbit import ORBIT_PERIOD_S, PAUTA_K_MIN
+    set_epilog(p, EXAMPLES)
     p.add_argument("recording", metavar="RECORDING.csv",
                    help="replay log (rate_dph, or rate_<axis>_dph per axis: each axis evaluated; rot_dps is "
                    "subtracted when present), or another format (docs/formats.md)")
-    p.add_argument("--period-s", type=positive, default=ORBIT_PERIOD_S,
+    p.add_argument("--period-s", type=positive, default=ORBIT_PERIOD_S, metavar="SECONDS",
                    help="orbit (cycle) period for the per-cycle bias instability, s, at least 2 samples "
                         f"(default {ORBIT_PERIOD_S:g})")
-    p.add_argument("--pauta-k", type=number(PAUTA_K_MIN, above=True), default=3.0,
+    p.add_argument("--pauta-k", type=number(PAUTA_K_MIN, above=True), default=3.0, metavar="SIGMAS",
                    help=f"Pauta criterion threshold in sigmas, > sqrt(3) = {PAUTA_K_MIN:.4g} (below it the "
                         "iterated criterion rejects every sample) (default 3)")
     add_reader_arguments(p, axis=True)

@@ -8,6 +8,7 @@ import argparse
 import os
 import sys
 
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.output_options import check_command_outputs
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, output_errors, pipeline_config
 from fogmon.cli.source_options import add_source_arguments, source_options
@@ -20,29 +21,31 @@ from fogmon.sinks.base import Summary
 from fogmon.sinks.parquet_pieces import ROW_GROUP_S
 from fogmon.sources.open import open_live_source
 
-EPILOG = """examples:
-  fogmon monitor --serial /dev/ttyUSB0 --protocol kvh-a --connect        # into a running `rerun` viewer
-  fogmon monitor --serial /dev/ttyUSB0 --protocol dsp3000 --serve --duration-s 3600
-  fogmon monitor --can can0 --dbc gyro.dbc --rrd run.rrd --archive runs/
-
-Stop with Ctrl-C, SIGTERM or SIGHUP (or --duration-s): the archive and the .rrd are
+EXAMPLES = """
+fogmon monitor --serial /dev/ttyUSB0 --protocol kvh-a --connect        # into a running `rerun` viewer
+fogmon monitor --serial /dev/ttyUSB0 --protocol dsp3000 --serve --duration-s 3600
+fogmon monitor --can can0 --dbc gyro.dbc --rrd run.rrd --archive runs/
+fogmon monitor --serial /dev/ttyACM0 --protocol lines --columns seq:65536,rate_dps,temp_c --rate-hz 200
+"""
+NOTES = """Stop with Ctrl-C, SIGTERM or SIGHUP (or --duration-s): the archive and the .rrd are
 closed cleanly and the summary printed. Each run archives into a new folder
 DIR/fogmon-archive-YYYYmmddTHHMMSSZ (DIR: --archive, default the current folder; it must
 exist), in pieces of --rotate-s s (default one hour): samples-0001.csv, ... (replay logs)
 and the raw input (raw-0001.bin + .json or frames-0001.asc + .json); `fogmon replay
 DIR/fogmon-archive-...` replays them all as one recording, `fogmon replay
 DIR/fogmon-archive-.../samples-0002.csv` one piece. Rates in deg/h, times in s,
-coefficients in IEEE-952 units. Exit code 0 on success (also after Ctrl-C, SIGTERM or
-SIGHUP: stopping is how a live run ends), 1 when no sample arrived from the device (one
-line says what did arrive, if anything; an archive folder the run created is removed
-when nothing at all arrived) or when an output could not be written (a full disk: the
-run stops, the summary is printed, the archive keeps every whole row written), 2 on bad
-usage or input."""
+coefficients in IEEE-952 units."""
+EXIT_CODES = """exit codes:
+  0   success, also after Ctrl-C, SIGTERM or SIGHUP (stopping is how a live run ends)
+  1   no sample arrived from the device (one line says what did arrive, if anything; an
+      archive folder the run created is removed when nothing at all arrived), or an output
+      could not be written (a full disk: the run stops, the summary is printed, the archive
+      keeps every whole row written)
+  2   bad usage or input: one line names the option or the file (checked before the port opens)"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.epilog = EPILOG
+    set_epilog(parser, EXAMPLES, NOTES, EXIT_CODES)
     add_source_arguments(parser, mode="live")
     parser.add_argument("--archive", metavar="DIR",
                         help="existing folder in which each run makes its archive folder "
@@ -52,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="decoded samples as replay-log CSV pieces samples-NNNN.csv (default) or Parquet "
                              "pieces samples-NNNN.parquet written in row groups as data arrives (a SIGKILL loses at "
                              "most the row group being filled, see --row-group-s); the raw capture is kept either way")
-    parser.add_argument("--row-group-s", type=positive, default=ROW_GROUP_S, metavar="S",
+    parser.add_argument("--row-group-s", type=positive, default=ROW_GROUP_S, metavar="SECONDS",
                         help=f"--archive-format parquet: s of samples per row group (default {ROW_GROUP_S:g})")
     add_pipeline_arguments(parser, replay=False)
 

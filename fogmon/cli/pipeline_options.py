@@ -36,14 +36,14 @@ def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True)
 def _add_davar_arguments(parser: argparse.ArgumentParser) -> None:
     """Window, hop, taus and what the engine analyses."""
     g = parser.add_argument_group("dynamic Allan deviation (DAVAR)")
-    g.add_argument("--window-s", type=positive, metavar="W",
+    g.add_argument("--window-s", type=positive, metavar="SECONDS",
                    help="window length in s. Default: replay: a quarter of the recording (of its first "
                         "--duration-s s) rounded down to a power of two of samples, within "
                         f"{MIN_WINDOW_SAMPLES}..{MAX_WINDOW_SAMPLES} samples; live: {LIVE_WINDOW_SAMPLES} samples "
                         "(65.5 s at 1 kHz, 655.4 s at 100 Hz), or that rule applied to --duration-s when it "
                         "gives a shorter window")
-    g.add_argument("--hop-s", type=positive, metavar="H",
-                   help="a new ADEV + noise fit every H s of recording time, at most the window "
+    g.add_argument("--hop-s", type=positive, metavar="SECONDS",
+                   help="a new ADEV + noise fit every SECONDS of recording time, at most the window "
                         "(default: window/8)")
     g.add_argument("--raw-rate", action="store_true",
                    help="analyse rate_dph as recorded even when the recording has rot_dps; by default "
@@ -53,7 +53,7 @@ def _add_davar_arguments(parser: argparse.ArgumentParser) -> None:
                    help="analyse platform motion too: by default stretches where the rate moves far beyond "
                         "the sensor's noise with no rot_dps to say why (a turntable, a vehicle, a person) "
                         "are kept out of DAVAR and the fits, with platform_motion events (docs/motion.md)")
-    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="T",
+    g.add_argument("--taus", default=PipelineConfig.taus, type=parse_taus, metavar="GRID",
                    help="averaging times: octave (default), decade, all, an integer N = "
                         f"1..{MAX_PER_DECADE} (N log-spaced per decade), or tau values in s written with a "
                         "decimal point or comma-separated (1000.0 = one tau of 1000 s; 0.1,1,10). Only "
@@ -70,16 +70,18 @@ def _add_method_arguments(parser: argparse.ArgumentParser) -> None:
                         "the tau shape and the aux channel that co-varies, when the gyro leaves the band and when "
                         "it is back; the band is simulated once and cached (~/.cache/fogmon)")
     m.add_argument("--model-alpha", type=number(0, 0.5, above=True), default=PipelineConfig.model_alpha,
-                   metavar="A", help="family-wise false-alarm probability per window of the model check, "
-                                     f"0 < A <= 0.5 (default {PipelineConfig.model_alpha:g})")
+                   metavar="PROBABILITY",
+                   help="family-wise false-alarm probability per window of the model check, "
+                        f"0 < PROBABILITY <= 0.5 (default {PipelineConfig.model_alpha:g})")
     m.add_argument("--thermal-cal", metavar="CAL.toml",
                    help="subtract the thermal drift K0(T) + K1 dT/dt + K2 d2T/dt2 calibrated by `fogmon thermal "
                         "--out-model CAL.toml` sample by sample (causal filters; needs temp_c); DAVAR and the fits "
                         "see the corrected rate, rate_corrected_dph and thermal_drift_dph (deg/h) are archived "
                         "and drawn beside the raw rate; --raw-rate analyses the raw rate")
-    m.add_argument("--reject-outliers", nargs="?", const=7.0, type=number(2, 100, above=True), metavar="K",
-                   help="reject samples beyond K sigmas of one sample from the level the samples before them "
-                        "predict (a robust, causal Pauta criterion; default K = 7: 5.8e-10 of Gaussian samples); "
+    m.add_argument("--reject-outliers", nargs="?", const=7.0, type=number(2, 100, above=True), metavar="SIGMAS",
+                   help="reject samples beyond SIGMAS standard deviations of one sample from the level the "
+                        "samples before them predict (a robust, causal Pauta criterion; default 7: 5.8e-10 of "
+                        "Gaussian samples); "
                         "rejected samples are invalid for DAVAR, kept in the archive, counted "
                         "(outliers_rejected) and reported as outlier events")
     m.add_argument("--denoise", choices=("kalman",),
@@ -100,14 +102,14 @@ def _add_output_arguments(parser: argparse.ArgumentParser, replay: bool) -> None
     o.add_argument("--serve", action="store_true",
                    help="host a Rerun gRPC server that viewers connect to (`rerun URL` as printed); "
                         "keeps serving after a replay until Ctrl-C")
-    o.add_argument("--bind", default="127.0.0.1", metavar="ADDR",
+    o.add_argument("--bind", default="127.0.0.1", metavar="ADDRESS",
                    help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
-    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876,
+    o.add_argument("--port", type=number(1, 65535, integer=True), default=9876, metavar="PORT",
                    help="port --serve listens on, 1..65535 (default 9876)")
-    o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None,
-                   help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of S s of recording time "
+    o.add_argument("--rotate-s", type=_rotate_s, metavar="SECONDS", default=None,
+                   help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of SECONDS of recording time "
                          "each (default: one file, OUT.rrd itself)" if replay else
-                         f"start new archive files every S s of recording time: samples-NNNN.csv and the raw "
+                         f"start new archive files every SECONDS of recording time: samples-NNNN.csv and the raw "
                          f"capture pieces (default {ARCHIVE_ROTATE_S:g} = hourly; 0 = one piece); given, it also "
                          f"cuts the .rrd into OUT-0001.rrd, ... (by default --rrd OUT.rrd writes OUT.rrd itself)"))
     if not replay:
@@ -120,11 +122,11 @@ def _add_pacing_arguments(parser: argparse.ArgumentParser, replay: bool) -> None
     """--duration-s and, for a replay, --realtime."""
     p = parser.add_argument_group("pacing")
     if "--duration-s" not in parser._option_string_actions:  # the source options may define it
-        p.add_argument("--duration-s", type=positive, metavar="S",
-                       help="stop after S s of recording time")
+        p.add_argument("--duration-s", type=positive, metavar="SECONDS",
+                       help="stop after SECONDS of recording time")
     if replay and "--realtime" not in parser._option_string_actions:
-        p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="X",
-                       help="pace a replay at X times real time (default X = 1 when given; "
+        p.add_argument("--realtime", nargs="?", const=1.0, type=positive, metavar="FACTOR",
+                       help="pace a replay at FACTOR times real time (default 1 when given; "
                             "without --realtime a replay runs as fast as it can)")
     parser.set_defaults(realtime=None)  # a live run is never paced
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from fogmon.cli.export_options import add_export_argument, export_request
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.output_options import check_command_outputs
 from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, output_errors, pipeline_config
 from fogmon.cli.source_options import add_reader_arguments, add_source_arguments, source_options
@@ -14,24 +15,27 @@ from fogmon.pipeline import Pipeline
 from fogmon.sources.open import open_replay_source
 from fogmon.stopping import interrupted_exit_code
 
-EPILOG = """examples:
-  fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd lasergyro.rrd
-  fogmon replay run.csv --connect            # into a running viewer (start it with: rerun)
-  fogmon replay run.csv --serve --realtime 10
-  fogmon replay run.csv --window-s 600 --hop-s 60 --taus 8 --rrd run.rrd
-  fogmon replay runs/fogmon-archive-20261121T080000Z --rrd week.rrd --rotate-s 86400   # a whole archive
-
-Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
+EXAMPLES = """
+fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd lasergyro.rrd
+fogmon replay run.csv --connect            # into a running viewer (start it with: rerun)
+fogmon replay run.csv --serve --realtime 10
+fogmon replay run.csv --window-s 600 --hop-s 60 --taus 8 --rrd run.rrd
+fogmon replay runs/fogmon-archive-20261121T080000Z --rrd week.rrd --rotate-s 86400   # a whole archive
+fogmon replay bus.blf --dbc gyro.dbc --can-rate GyroZ --model datasheet.toml
+"""
+NOTES = """Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
 B deg/h, K deg/h/sqrt(h), R deg/h^2). Without --rrd/--connect/--serve only the console
-summary is printed. Ctrl-C, SIGTERM and SIGHUP stop it cleanly (the .rrd is complete).
-Exit code 0 on success, 2 on bad usage or input or when an output could not be written
-(a full disk: the .rrd is removed, the summary still printed), 128 + the signal if
-stopped (130 after Ctrl-C, 143 after SIGTERM, 129 after SIGHUP)."""
+summary is printed. Ctrl-C, SIGTERM and SIGHUP stop it cleanly (the .rrd is complete)."""
+EXIT_CODES = """exit codes:
+  0              success
+  2              bad usage or input: one line names the option, or the file, line and field
+                 (checked before the work starts); or an output could not be written (a full
+                 disk: the .rrd is removed, the summary still printed)
+  130, 143, 129  stopped by Ctrl-C, SIGTERM, SIGHUP (the outputs are completed)"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.epilog = EPILOG
+    set_epilog(parser, EXAMPLES, NOTES, EXIT_CODES)
     parser.add_argument("recording", metavar="RECORDING",
                         help="replay-log CSV (time_s, rate_dph, ...), raw serial capture (with --protocol), "
                              "CAN log .asc/.blf/.trc/.csv/.log/.mf4 (with --dbc), ROS bag/MCAP, PX4 ULog, MDF4, "

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
@@ -21,7 +22,18 @@ if TYPE_CHECKING:
     from fogmon.sim.model import SensorModel
 
 
+EXAMPLES = """
+fogmon sim --model fogmon/data/example_model.toml --duration-s 3600 --out sim.csv --seed 1
+fogmon sim --model fogmon/data/example_mwd_model.toml --like replay_logs/sim_mwd_run_1hz.csv --out mwd.csv
+fogmon sim --model fogmon/data/example_chamber_model.toml --scenario chamber --out chamber.csv --seed 1
+fogmon sim --model replay_logs/sim_in_orbit.toml --scenario orbit --set axes=xyz --duration-s 22320 --out orbit3.csv
+"""
+NOTES = """The sample rate is the model's ([sensor] sample_rate_hz), or the --like recording's. Rates in
+deg/h, times in s, IEEE-952 coefficients in their units (docs/sim.md)."""
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    set_epilog(p, EXAMPLES, NOTES)
     p.add_argument("--model", required=True, metavar="MODEL.toml",
                    help="sensor model file (docs/formats.md): rates deg/h, IEEE-952 noise Q_arcsec, "
                    "N_dpsh deg/sqrt(h), B_dph deg/h, K_dphsh deg/h/sqrt(h), R_dphh deg/h^2, [[effect]] tables")
@@ -29,14 +41,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "SIM.csv, or SIM.parquet for a Parquet replay log")
     p.add_argument("--like", metavar="RECORDING.csv", help="take the time base (sample times, gaps, sample rate) "
                    "and every aux column (temp_c, rot_dps, vib_g, ...) from this replay log, exactly")
-    p.add_argument("--duration-s", type=positive, metavar="D", help="length in s (required without --like/--scenario; "
-                   "with --like: only the first D s of the recording; with --scenario mwd/orbit: its length)")
-    p.add_argument("--seed", type=number(0, integer=True), metavar="S", help="random seed, an integer >= 0 "
+    p.add_argument("--duration-s", type=positive, metavar="SECONDS",
+                   help="length in s (required without --like/--scenario; with --like: only the first SECONDS of "
+                   "the recording; with --scenario mwd/orbit: its length)")
+    p.add_argument("--seed", type=number(0, integer=True), metavar="SEED", help="random seed, an integer >= 0 "
                    "(default: fresh entropy, written to the "
                    "output's metadata so the run can be repeated)")
-    p.add_argument("--scenario", choices=("mwd", "chamber", "orbit"), help="generate the aux channels when there "
-                   "is no recording: mwd = drilling run (stands, connections with pumps off, geothermal heating, "
-                   "vibration, string rotation), chamber = thermal-chamber plateaus joined by 1 C/min ramps, "
+    p.add_argument("--scenario", choices=("mwd", "chamber", "orbit"), metavar="mwd|chamber|orbit",
+                   help="generate the aux channels when there is no recording: mwd = drilling run (stands, "
+                   "connections with pumps off, geothermal heating, vibration, string rotation), chamber = "
+                   "thermal-chamber plateaus joined by 1 C/min ramps, "
                    "orbit = 5580 s orbit heating and orbital rate; --set axes=xyz for a three-axis gyro; "
                    "see docs/sim.md for every parameter")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

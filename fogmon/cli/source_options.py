@@ -26,8 +26,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
     live, replay = mode in ("live", "both"), mode in ("replay", "both")
     _add_serial_arguments(parser.add_argument_group("serial gyro" if live else "raw serial capture decoding"), live)
     _add_can_arguments(parser.add_argument_group("CAN gyro" if live else "CAN log decoding"), live)
-    parser.add_argument("--max-rate-dph", type=positive, metavar="X",
-                        help="plausibility gate in deg/h: a rate beyond +-X is a corrupt value, not data; the "
+    parser.add_argument("--max-rate-dph", type=positive, metavar="DEG/H",
+                        help="plausibility gate in deg/h: a rate beyond +-DEG/H is a corrupt value, not data; the "
                              "sample becomes invalid and is counted (implausible_samples) and reported. Default: "
                              f"the device's full scale x {pl.MARGIN:g}: kvh-a/b/c "
                              f"{pl.KVH_DSP17XX_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP17XX_FULL_SCALE_DPH / 3600:g} deg/s), "
@@ -45,10 +45,11 @@ def _add_serial_arguments(g, live: bool) -> None:
     if live:
         g.add_argument("--serial", metavar="PORT", help="serial port of the gyro (/dev/ttyUSB0, COM3, or a "
                        "pyserial URL such as loop:// or socket://HOST:PORT); reopened with backoff if it disappears")
-        g.add_argument("--baud", type=number(1, 50_000_000, integer=True), metavar="B", help="baud rate, "
+        g.add_argument("--baud", type=number(1, 50_000_000, integer=True), metavar="BAUD", help="baud rate, "
                        "1..50,000,000 (default per protocol: kvh-a/b/c 921600, "
                        "dsp3000 38400, lines 115200)")
-    g.add_argument("--protocol", choices=PROTOCOLS, help="serial protocol: kvh-a|kvh-b|kvh-c = KVH DSP-1750/1760/1775 "
+    g.add_argument("--protocol", choices=PROTOCOLS, metavar="PROTOCOL",
+                   help="serial protocol: kvh-a|kvh-b|kvh-c = KVH DSP-1750/1760/1775 "
                    "binary formats A/B/C, dsp3000 = KVH DSP-3000 ASCII (deg/s), lines = ASCII/CSV lines with "
                    "--columns (default for --serial: kvh-a; a raw capture takes it from its .json sidecar)")
     g.add_argument("--kvh-rot", choices=("rate", "delta"), help="what the gyro outputs: rate (units/s) or delta "
@@ -63,7 +64,7 @@ def _add_serial_arguments(g, live: bool) -> None:
                    "three-axis stream x,y,z with the accelerometers); the axes of a multi-axis replay log "
                    "(rate_<axis>_dph columns) to analyse (default: every axis); the gyros of a ROS bag or PX4 ULog "
                    "IMU, x, y, z, one or several (default: all three)")
-    g.add_argument("--columns", metavar="MAP", help="lines protocol: comma-separated name of every field in order, "
+    g.add_argument("--columns", metavar="NAMES", help="lines protocol: comma-separated name of every field in order, "
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
                    "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
@@ -82,12 +83,13 @@ def _add_can_arguments(c, live: bool) -> None:
     """The CAN bus (live) and CAN decoder (DBC) options."""
     if live:
         c.add_argument("--can", metavar="CHANNEL", help="CAN channel of the gyro (can0, PCAN_USBBUS1, ...)")
-        c.add_argument("--interface", default=SourceOptions.interface, metavar="I", help="python-can interface: "
+        c.add_argument("--interface", default=SourceOptions.interface, metavar="INTERFACE",
+                       help="python-can interface: "
                        f"socketcan, pcan, kvaser, vector, slcan, virtual, ... (default: {SourceOptions.interface})")
-        c.add_argument("--can-bitrate", type=number(1_000, 8_000_000, integer=True), metavar="BPS",
+        c.add_argument("--can-bitrate", type=number(1_000, 8_000_000, integer=True), metavar="BIT/S",
                        help="CAN bit rate in bit/s, 1,000..8,000,000, for interfaces that set it (default: "
                             "leave the interface as configured)")
-    c.add_argument("--dbc", metavar="F", help="DBC file describing the gyro's CAN frames (see "
+    c.add_argument("--dbc", metavar="GYRO.dbc", help="DBC file describing the gyro's CAN frames (see "
                    "fogmon/data/gyro_example.dbc)")
     c.add_argument("--can-message", metavar="NAME", help="DBC message carrying the rate (default: the message "
                    "holding --can-rate, or its first axis's signal; required if several do)")
@@ -153,10 +155,10 @@ def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = True) -> 
                    "date-times (default: the index curve when it is a time; a depth-indexed file needs it)")
     g.add_argument("--rate-unit", metavar="UNIT", help="MDF4/LAS: the rate's unit when the file does not say "
                    "it or says it wrongly: deg/h, deg/s, rad/s")
-    g.add_argument("--resample-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="F", help="files with time "
-                   "stamps: block means on a uniform F Hz grid (each 1/F s block: the mean of the samples stamped "
+    g.add_argument("--resample-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ", help="files with time "
+                   "stamps: block means on a uniform HZ grid (each 1/HZ s block: the mean of the samples stamped "
                    "in it; a block without one is a gap) for irregular logging (alternating steps, many gaps), "
-                   "which is refused otherwise; the Allan deviation then starts at 1/F s (docs/readers.md)")
+                   "which is refused otherwise; the Allan deviation then starts at 1/HZ s (docs/readers.md)")
     g.add_argument("--force-rate", action="store_true", help="use --rate-hz, the DBC cycle time or a replay "
                    "log's sample_rate_hz although the time stamps say another rate (they place the samples; "
                    "their clock is scaled to the rate given)")

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fogmon.block import select_aux
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
@@ -27,22 +28,37 @@ if TYPE_CHECKING:
 MAX_DEGREE = 6
 
 
+EXAMPLES = """
+fogmon thermal replay_logs/sim_thermal_chamber_1hz.csv
+fogmon thermal chamber.csv --model datasheet.toml --out-model calibrated.toml --out-corrected corrected.csv
+fogmon thermal imu.csv --axis x,y --degree 3 --smooth-s 30 --diff-step-s 10
+"""
+NOTES = """Prints K0(T) (a polynomial in deg C), K1 (deg/h per degC/s) and K2 (deg/h per degC/s^2), each
+with its 1-sigma error under the residual's own noise, the derivative filters (chosen by the
+least residual unless given or in --model) and the peak-to-peak drift of --average-s averages
+before and after the correction (docs/methods.md)."""
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    set_epilog(p, EXAMPLES, NOTES)
     p.add_argument("recording", metavar="RECORDING.csv",
                    help="replay log with a temp_c column (deg C), or a PX4 ULog or LAS file with a "
                    "temperature (docs/formats.md)")
-    p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2,
+    p.add_argument("--degree", type=number(0, MAX_DEGREE, integer=True), default=2, metavar="DEGREE",
                    help=f"degree of K0(T), the bias-vs-temperature polynomial, 0..{MAX_DEGREE} (default 2)")
-    p.add_argument("--smooth-s", type=number(0), help="trailing smoothing of temp_c before differencing, s, >= 0 "
-                   "(default: the --model's thermal_drift value, else 10)")
-    p.add_argument("--diff-step-s", type=positive, help="step of the 3-point backward differences, s, > 0 "
-                   "(default: the --model's thermal_drift value, else 1)")
-    p.add_argument("--average-s", type=positive, default=100.0,
+    p.add_argument("--smooth-s", type=number(0), metavar="SECONDS",
+                   help="trailing smoothing of temp_c before differencing, s, >= 0 "
+                   "(default: the --model's thermal_drift value, else chosen by the least residual)")
+    p.add_argument("--diff-step-s", type=positive, metavar="SECONDS",
+                   help="step of the 3-point backward differences, s, > 0 "
+                   "(default: the --model's thermal_drift value, else chosen by the least residual)")
+    p.add_argument("--average-s", type=positive, default=100.0, metavar="SECONDS",
                    help="block length for the peak-to-peak drift figure, s, at most half the recording (default 100)")
     p.add_argument("--model", metavar="BASE.toml", help="sensor model to add the calibrated thermal_drift effect to "
                    "(default: an empty model at the recording's sample rate)")
-    p.add_argument("--out-model", metavar="OUT.toml", help="write the model with the thermal_drift effect")
-    p.add_argument("--out-corrected", metavar="OUT.csv", help="write the recording with the predicted drift removed")
+    p.add_argument("--out-model", metavar="CALIBRATED.toml", help="write the model with the thermal_drift effect")
+    p.add_argument("--out-corrected", metavar="CORRECTED.csv",
+                   help="write the recording with the predicted drift removed")
     add_reader_arguments(p, axis=True)
 
 
@@ -84,24 +100,28 @@ def run(args) -> int:
     return 0
 
 
-def _filters(args, base, axis: str, rec) -> tuple[float, float]:
-    """(smooth_s, diff_step_s) of ``axis``: the options, else the base model's
-    thermal_drift acting on the axis, else 10 s and 1 s; checked against the record."""
+def _filters(args, base, axis: str, rec) -> tuple[float | None, float | None, str]:
+    """(smooth_s, diff_step_s, where from) of ``axis``: the options, else the base
+    model's thermal_drift acting on the axis, else None (chosen by the fit); checked
+    against the record."""
     drifts = [e.params for e in base.effects if e.kind == "thermal_drift" and (not e.axes or axis in e.axes)]
     prior: dict = drifts[0] if drifts else {}
-    smooth_s = args.smooth_s if args.smooth_s is not None else prior.get("smooth_s", 10.0)
-    diff_step_s = args.diff_step_s if args.diff_step_s is not None else prior.get("diff_step_s", 1.0)
-    settle_s = smooth_s + 2 * diff_step_s
+    smooth_s = args.smooth_s if args.smooth_s is not None else prior.get("smooth_s")
+    diff_step_s = args.diff_step_s if args.diff_step_s is not None else prior.get("diff_step_s")
+    settle_s = (smooth_s or 0.0) + 2 * (diff_step_s or 0.0)
     if settle_s >= rec.duration_s / 2:
-        raise FogmonError(f"--smooth-s {smooth_s:g} + 2 x --diff-step-s {diff_step_s:g} = {settle_s:g} s of filter "
-                          f"settling leaves less than half of the {rec.duration_s:g} s of {rec.name} to fit")
+        terms = [f"--smooth-s {smooth_s:g}" if smooth_s is not None else "",
+                 f"2 x --diff-step-s {diff_step_s:g}" if diff_step_s is not None else ""]
+        raise FogmonError(f"{' + '.join(t for t in terms if t)} = {settle_s:g} s of filter settling leaves less "
+                          f"than half of the {rec.duration_s:g} s of {rec.name} to fit")
     if args.average_s > rec.duration_s / 2:
         raise FogmonError(f"--average-s {args.average_s:g} s: the peak-to-peak drift needs at least two blocks in "
                           f"the {rec.duration_s:g} s of {rec.name}")
-    return smooth_s, diff_step_s
+    given = {"options": args.smooth_s is not None or args.diff_step_s is not None, "--model": bool(prior)}
+    return smooth_s, diff_step_s, ", ".join(k for k, v in given.items() if v)
 
 
-def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
+def _calibrate(rec, args, smooth_s: float | None, diff_step_s: float | None, source: str, prefix: str):
     """Calibrate one axis, print its coefficients and drift (lines starting with
     ``prefix``); (ThermalCalibration, corrected rate deg/h)."""
     from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
@@ -118,7 +138,13 @@ def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
     for k, unit in (("k1_pos", "deg/h per degC/s"), ("k1_neg", "deg/h per degC/s"),
                     ("k2_pos", "deg/h per degC/s^2"), ("k2_neg", "deg/h per degC/s^2")):
         lines.append(f"  {k:<9} {p[k]:+.6g} +/- {se[k]:.2g}  {unit}")
-    lines.append(f"  residual std {cal.residual_std_dph:.4g} deg/h per sample")
+    chosen = [n for n, v in (("smooth_s", smooth_s), ("diff_step_s", diff_step_s)) if v is None]
+    how = (f"{'both' if len(chosen) == 2 else chosen[0]} chosen: least residual of {cal.candidates} candidates"
+           if chosen else "")
+    how = "; ".join(x for x in (f"from {source}" if source else "", how) if x)
+    lines.append(f"  filters   smooth_s {p['smooth_s']:g} s, diff_step_s {p['diff_step_s']:g} s ({how})")
+    lines.append(f"  residual std {cal.residual_std_dph:.4g} deg/h per sample; +/- is 1 sigma under the residual noise "
+                 f"{_levels(cal)}")
     change = (f"{before / after:.1f}x smaller" if after < before else
               f"{after / before:.1f}x larger: the fit does not reduce this drift" if before > 0 else "no drift")
     lines.append(f"peak-to-peak drift of {args.average_s:g} s averages: {before:.4g} deg/h -> {after:.4g} deg/h "
@@ -126,6 +152,15 @@ def _calibrate(rec, args, smooth_s: float, diff_step_s: float, prefix: str):
     for line in lines:
         print(prefix + line)
     return cal, corrected
+
+
+def _levels(cal) -> str:
+    """The residual noise levels the standard errors assume, '<' for 95 % upper limits."""
+    units = {"N_dpsh": "deg/sqrt(h)", "B_dph": "deg/h", "K_dphsh": "deg/h/sqrt(h)"}
+    levels = " and ".join(f"{k[0]} {v:.3g} {units[k]}" for k, v in cal.residual_noise.items()
+                          if k not in cal.upper_limits or v)
+    limits = " or ".join(f"{k[0]} < {v:.3g} {units[k]}" for k, v in cal.upper_limits.items())
+    return levels + (f" and {limits} (95 % upper limits, the larger error)" if limits else "")
 
 
 def with_calibration(base: SensorModel, effects: dict[str, Effect], axes: tuple[str, ...]) -> SensorModel:

@@ -8,17 +8,24 @@ import os
 
 import numpy as np
 
+from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number
 from fogmon.errors import FogmonError
 
+EXAMPLES = """
+fogmon updown --up up.csv --down down.csv --lat-deg 52.38
+fogmon updown --up up.ulg --down down.ulg --lat-deg -33.9 --axis z    # the z gyro of an IMU log
+"""
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    set_epilog(p, EXAMPLES)
     p.add_argument("--up", required=True, metavar="UP.csv",
                    help="replay log (or another format, docs/formats.md), sensing axis pointing up")
     p.add_argument("--down", required=True, metavar="DOWN.csv",
                    help="replay log (or another format), sensing axis pointing down")
-    p.add_argument("--lat-deg", required=True, type=number(-90, 90),
+    p.add_argument("--lat-deg", required=True, type=number(-90, 90), metavar="DEGREES",
                    help="latitude of the test site, deg, -90..90 (south negative); near the equator the "
                         "vertical Earth rate is too small to calibrate a scale factor and the command says so")
     add_reader_arguments(p, axis=True)

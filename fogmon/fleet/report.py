@@ -2,9 +2,10 @@
 with FLEET-trends.png (N and B of every recording with their intervals, per gyro, in
 recording order) and FLEET.csv (the per-recording table) beside it.
 
-A gyro is the folder holding its recordings (an archive folder counts as a recording of
-the folder above it); its recordings are taken in name order (date-stamped names sort in
-time). A gyro's N or B "changed" when its latest recording's whole-record estimate differs
+A gyro is what the recordings table's ``gyro`` column names (fogmon.fleet.identity: a
+serial number, else the sensor name within its folder, else the recording alone, or
+`--group-by`; never the folder alone); its recordings are taken in name order
+(date-stamped names sort in time). A gyro's N or B "changed" when its latest recording's whole-record estimate differs
 from its first's by more than ``Z_CHANGED`` combined standard errors (each standard error
 is half the 68.3 % interval; both estimates identifiable): |z| > 3 happens by chance with
 probability 0.27 % for one coefficient of one gyro. A run is "outside its model" when a
@@ -27,9 +28,10 @@ SCORE_OUTSIDE = 1.5
 TREND_COEFS = (("N_dpsh", "N (deg/sqrt(h))"), ("B_dph", "B (deg/h)"))
 
 
-def gyro_of(recording: str) -> str:
-    """The gyro a recording belongs to: the name of its folder."""
-    return os.path.basename(os.path.dirname(os.path.normpath(recording))) or "."
+def gyro_of(row: dict) -> str:
+    """The gyro of a recordings-table row (its ``gyro`` column, fleet.identity; a table
+    without it: the recording alone)."""
+    return row.get("gyro") or os.path.basename(os.path.normpath(row["recording"]))
 
 
 def by_gyro(rows: list[dict]) -> dict[str, list[dict]]:
@@ -38,7 +40,7 @@ def by_gyro(rows: list[dict]) -> dict[str, list[dict]]:
     groups: dict[str, list[dict]] = {}
     for r in rows:
         if not r["error"]:
-            groups.setdefault(gyro_of(r["recording"]), []).append(r)
+            groups.setdefault(gyro_of(r), []).append(r)
     out: dict[str, list[dict]] = {}
     for g, rs in groups.items():
         if len({r.get("axis") for r in rs}) == 1:
@@ -66,6 +68,16 @@ def changes(rows: list[dict]) -> list[dict]:
                         "first_value": a[c], "latest_value": b[c], "z": z, "changed": bool(abs(z) > Z_CHANGED),
                         "tested": "yes" if ok else "no: not identifiable in both"})
     return out
+
+
+def gyro_summary(rows: list[dict]) -> str:
+    """E.g. "4 recordings of 3 gyros (gyro named by serial: 2, sensor + folder: 2)"."""
+    counts: dict[str, int] = {}
+    for r in rows:
+        key = r.get("gyro_named_by") or "recording"
+        counts[key] = counts.get(key, 0) + 1
+    named = ", ".join(f"{k}: {n}" for k, n in sorted(counts.items()))
+    return f"{len(rows)} recordings of {len({gyro_of(r) for r in rows})} gyros (gyro named by {named})"
 
 
 def _trend_png(rows: list[dict], path: str) -> None:
@@ -142,8 +154,9 @@ def write_report(path: str, recordings_parquet: str, windows_parquet: str,
     outside = [r for r in rows if has_model and not r["error"] and r["explain_score_before"] > SCORE_OUTSIDE]
     failed = [r for r in rows if r["error"]]
     n_win = pq.ParquetFile(windows_parquet).metadata.num_rows
-    parts = [f"<h1>fogmon fleet report</h1><p>{len(rows)} recordings of {len({gyro_of(r['recording']) for r in rows})} "
-             f"gyros, {n_win} windows; {len(failed)} failed. Tables: {html.escape(os.path.basename(csv))}, "
+    parts = [f"<h1>fogmon fleet report</h1><p>{html.escape(gyro_summary(rows))}, {n_win} windows; "
+             f"{len(failed)} failed. "
+             f"Tables: {html.escape(os.path.basename(csv))}, "
              f"{html.escape(os.path.basename(recordings_parquet))}, {html.escape(os.path.basename(windows_parquet))}."
              "</p>",
              f"<h2>Gyros whose N or B changed ({len(changed)})</h2><p>First vs latest recording of each gyro; "

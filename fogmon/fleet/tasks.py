@@ -17,6 +17,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
+from fogmon.fleet.identity import source_meta
 from fogmon.pipeline import PipelineConfig, window_and_hop
 from fogmon.pipeline.accel import ACCEL_CHANNEL
 from fogmon.sinks.base import ACCEL_COEFFICIENTS, COEFFICIENTS, Sink
@@ -60,7 +61,8 @@ def input_kind(path: str) -> str:
 class Plan:
     """A checked recording: sample rate (Hz), samples on its grid, window and hop (s,
     as `fogmon replay` chooses them), its axis (of a one-axis source) or ``axes`` (of a
-    source of several axes, each analysed as a recording of its own); or ``error``."""
+    source of several axes, each analysed as a recording of its own), the metadata that
+    may name its gyro (fleet.identity); or ``error``."""
 
     path: str
     sample_rate_hz: float = float("nan")
@@ -71,6 +73,7 @@ class Plan:
     axes: tuple[str, ...] = ()
     kind: str = ""
     error: str = ""
+    meta: dict = field(default_factory=dict)
 
 
 def check(path: str, source: SourceOptions, config: PipelineConfig) -> Plan:
@@ -86,6 +89,7 @@ def check(path: str, source: SourceOptions, config: PipelineConfig) -> Plan:
             plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
             plan.window_s, plan.hop_s = window_and_hop(_analysis(config), plan.sample_rate_hz, plan.n_samples, path)
             plan.axis, plan.axes = _axis(src), tuple(src.axes)
+            plan.meta = source_meta(src)
         finally:
             src.close()
     except Exception as e:

@@ -84,7 +84,9 @@ def test_replay_bad_option_values_are_usage_errors(log, capsys, argv, message):
     with pytest.raises(SystemExit) as e:
         main(["replay", str(log), *argv])
     assert e.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1].startswith(f"fogmon: error: {message}")
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon replay: error: {message}") and err.endswith(" (see fogmon replay --help)\n")
+    assert err.count("\n") == 1
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -212,4 +214,6 @@ def test_monitor_bad_port_values_are_usage_errors(capsys, argv, message):
     with pytest.raises(SystemExit) as e:
         main(["monitor", *argv])
     assert e.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1].startswith(f"fogmon: error: {message}")
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon monitor: error: {message}") and err.endswith(" (see fogmon monitor --help)\n")
+    assert err.count("\n") == 1

@@ -91,7 +91,9 @@ def test_replay_bad_usage_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
     assert e.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1].startswith("fogmon: error:")
+    err = capsys.readouterr().err
+    assert err.startswith("fogmon replay: error:") and err.endswith(" (see fogmon replay --help)\n")
+    assert err.count("\n") == 1                     # one line, not argparse's usage block before it
 
 
 def test_replay_help(capsys):

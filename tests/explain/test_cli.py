@@ -159,7 +159,7 @@ def test_bad_option_values_are_usage_errors(tmp_path, capsys, argv, message):
     with pytest.raises(SystemExit) as e:
         main(["explain", str(tmp_path / "rec.csv"), "--report", str(tmp_path / "r.json"), *argv])
     assert e.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1] == f"fogmon: error: {message}"
+    assert capsys.readouterr().err == f"fogmon explain: error: {message} (see fogmon explain --help)\n"
 
 
 @pytest.mark.parametrize("opts, message", [

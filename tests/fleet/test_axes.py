@@ -71,8 +71,8 @@ def test_each_axis_in_chunks_equals_its_one_axis_recording(recordings):
 
 
 def test_the_fleet_report_follows_each_axis_of_a_gyro():
-    rows = [{"recording": f"rig/g1/run{i}.csv", "axis": a, "error": ""} for i in (1, 2) for a in AXES]
-    rows += [{"recording": "rig/g2/run1.csv", "axis": "-", "error": ""}]
+    rows = [{"recording": f"rig/g1/run{i}.csv", "gyro": "g1", "axis": a, "error": ""} for i in (1, 2) for a in AXES]
+    rows += [{"recording": "rig/g2/run1.csv", "gyro": "g2", "axis": "-", "error": ""}]
     groups = by_gyro(rows)
     assert sorted(groups) == ["g1 axis x", "g1 axis y", "g1 axis z", "g2"]
     assert [r["recording"] for r in groups["g1 axis y"]] == ["rig/g1/run1.csv", "rig/g1/run2.csv"]

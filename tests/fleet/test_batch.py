@@ -206,7 +206,7 @@ def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_r
 
 
 def _row(rec, n, n_hw, ident=True, score=None):
-    row = {"recording": rec, "error": ""}
+    row = {"recording": rec, "gyro": rec.split("/")[1], "gyro_named_by": "serial", "error": ""}
     for c, v, hw in (("N_dpsh", n, n_hw), ("B_dph", 0.1, 0.01)):
         row.update({c: v, f"{c}_lo": v - hw, f"{c}_hi": v + hw, f"identifiable_{c}": ident})
     if score is not None:

@@ -188,7 +188,7 @@ def test_cli_sim_bad_values_are_usage_errors(tmp_path, capsys, argv, message):
     with pytest.raises(SystemExit) as e:
         main(["sim", "--model", EXAMPLE, "--out", str(out), *argv])
     assert e.value.code == 2 and not out.exists()
-    assert capsys.readouterr().err.strip().splitlines()[-1] == f"fogmon: error: {message}"
+    assert capsys.readouterr().err == f"fogmon sim: error: {message} (see fogmon sim --help)\n"
 
 
 @pytest.mark.parametrize("out, extra, message", [

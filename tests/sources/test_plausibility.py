@@ -187,7 +187,7 @@ def test_monitor_and_replay_offer_the_option(capsys):
         with pytest.raises(SystemExit):
             main([cmd, "--help"])
         out = " ".join(capsys.readouterr().out.split())
-        assert "--max-rate-dph X" in out and "kvh-a/b/c 2,646,000 (490 deg/s)" in out
+        assert "--max-rate-dph DEG/H" in out and "kvh-a/b/c 2,646,000 (490 deg/s)" in out
         assert "dsp3000 2,025,000 (375 deg/s)" in out and "36,000,000 (10,000 deg/s)" in out
 
 
