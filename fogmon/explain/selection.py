@@ -11,7 +11,7 @@ from typing import Literal
 
 import numpy as np
 
-from fogmon.explain import mismatch
+from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
 from fogmon.explain.bootstrap import Progress, bootstrap
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
@@ -71,6 +71,8 @@ class Setting:
     workers: int
     max_effects: int
     progress: Progress | None = None
+    #: the recording's metadata (units of its aux channels)
+    meta: Mapping[str, str] = field(default_factory=dict)
 
     def fit(self, y: np.ndarray, stoch: SensorModel, null: mismatch.Null, counts: Mapping[str, int],
             contradicted: AbstractSet[str]) -> Fit:
@@ -78,6 +80,7 @@ class Setting:
         context, the candidates (``counts``: kind -> times added) and the analysis (the
         tests of the ``contradicted`` kinds not counted in its score)."""
         ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
+        ctx.meta = dict(self.meta)
         cands = candidates(ctx, counts)
         return Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
 
@@ -151,6 +154,8 @@ class Selection:
             return replace(out, contradicted=contradicted,
                            fit=replace(f, analysis=rescored(f.analysis, f.cands, f.ctx.penalty, contradicted)))
         assert v.trial is not None  # an accepted candidate comes with its trial
+        if c.kind == lookalike.LAW:
+            c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
         before, after = self.fit.analysis.score.value, v.trial.analysis.score.value
         accepted = (*self.accepted, Accepted(c, v.bic_gain, v.why, before, after))
         if self.setting.progress:
@@ -170,6 +175,9 @@ class Selection:
         bg = c.bic_gain(ctx.penalty)
         if bg <= 0:
             return Verdict("stop", bg)
+        look = lookalike.refusal(c, self.fit.cands, ctx)
+        if look is not None:
+            return Verdict("defer", bg, look)
         line = _inside_line(c, self.fit.cands, ctx.sample_rate_hz / ctx.n)
         if line is not None:
             return Verdict("defer", bg, f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
@@ -211,14 +219,22 @@ class Selection:
         below the bar."""
         pen = self.fit.ctx.penalty
         return [*self.rejected, *((k, bg, why) for k, (bg, why) in self.deferred.items()),
-                *((c.kind, c.bic_gain(pen), "below the frequency search's chance bar"
-                   if c.search_bar > c.k * pen else "below the BIC bar") for c in self.fit.cands
+                *((c.kind, c.bic_gain(pen), _below(c, pen)) for c in self.fit.cands
                   if c.bic_gain(pen) <= 0 and c.kind not in self.refused)]
+
+
+def _below(c: Candidate, penalty: float) -> str:
+    """Why a candidate below its bar was not taken (``Candidate.bar``)."""
+    if c.search_bar <= c.k * penalty:
+        return "below the BIC bar"
+    return ("below the feature search's chance bar" if c.kind == lookalike.LAW
+            else "below the frequency search's chance bar")
 
 
 def candidates(ctx: Context, counts: Mapping[str, int]) -> list[Candidate]:
     """Every applicable candidate (``CANDIDATES``) fitted to the current residual, best
-    BIC first (refused kinds included: they still measure what is missing, the score's
+    BIC first but a channel law that passes its bar ahead of all (``lookalike.first``;
+    refused kinds included: they still measure what is missing, the score's
     ``tests``, unless the map contradicted them, ``analysis.matched_tests_figure``)."""
     out = []
     for kind, fn in CANDIDATES.items():
@@ -228,7 +244,7 @@ def candidates(ctx: Context, counts: Mapping[str, int]) -> list[Candidate]:
         if c is not None:
             out.append(c)
     out.sort(key=lambda c: -c.bic_gain(ctx.penalty))
-    return out
+    return lookalike.first(out, ctx.penalty)
 
 
 def _pending(cands: list[Candidate], refused: AbstractSet[str]) -> tuple[tuple[Candidate, ...], ...]:
