@@ -29,7 +29,9 @@ own ``<ch>_<axis>``). SeedSequence(seed) first spawns one child per axis, which 
 spawns that axis's term streams as above: the noise of different axes is independent,
 while a shared aux channel is a common cause (one ``vib_g`` sets the white-noise level
 of every axis, one ``temp_c`` drives every axis's thermal drift). A one-axis run keeps
-the streams above, so its output for a given seed is what it always was.
+the streams above, so its output for a given seed is what it always was. An
+``aux_response`` term on another axis's rate column (``rate_x_dph``) reads that axis's
+simulated rate before its own cross terms and filters (``_CrossRates``, docs/sim.md).
 """
 from __future__ import annotations
 
