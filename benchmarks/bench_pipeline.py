@@ -8,7 +8,7 @@
    Three axes: the same hour as three axes of one stream (a StreamingDadev, fits and
    motion gate per axis) from memory, against the same hour as one axis (target: < 3x);
    without an .rrd unless --axes-rrd.
-2. `fogmon monitor` on a fake 1 kHz KVH DSP-1760 (format A on a pty, tests/monitor_fake_kvh.py)
+2. `fogmon monitor` on a fake 1 kHz KVH DSP-1760 (format A on a pty, tests/helpers/fake_kvh.py)
    writing an .rrd and the archive, with the live default window (65.536 s at 1 kHz, hop
    8.192 s; --monitor-window-s for another): CPU share of one core (all its threads) in
    steady state, from 10 s after the first window: three axes (target < 10 %), one axis,
@@ -52,6 +52,7 @@ from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pip
 from fogmon.davar.batch import dadev  # noqa: E402
 from fogmon.formats.replay_log import write_replay_log  # noqa: E402
 from fogmon.pipeline import default_window_s, run_pipeline  # noqa: E402
+from fogmon.sources.base import OfflineSource  # noqa: E402
 
 FS = 1000.0
 LIVE_WINDOW_S = default_window_s(FS, None)
@@ -62,7 +63,7 @@ BLOCK = 8192
 AXES = ("x", "y", "z")
 
 
-class MemorySource:
+class MemorySource(OfflineSource):
     """One hour of 1 kHz white noise (N = 0.05 deg/sqrt(h)) plus 10 deg/h bias, in blocks
     (``axes``: ``rate`` has one column per axis)."""
 
@@ -141,7 +142,7 @@ def bench_replay_axes(tmp: str, rrd: bool) -> None:
     print(f"  three axes / one axis = {ratio:.2f} (target < 3: {'PASS' if ratio < 3 else 'FAIL'})")
 
 
-class PacedSource:
+class PacedSource(OfflineSource):
     """A live-like source (``n_samples`` None): ``seconds`` s of 1 kHz samples of ``axes``
     (one axis when empty) in 10 ms blocks, each yielded when its last sample's time has
     come on the wall clock; records the process's CPU and wall time once ``skip_s`` s
@@ -217,7 +218,8 @@ def _monitor_share(tmp: str, window_s: float, seconds: float, extra: list[str]) 
     """(CPU % of one core of a monitor of the fake KVH, all its threads, from 10 s after
     its first window for ``seconds``; its samples_missing; its exit code)."""
     lead_s = window_s + 10.0
-    dev = subprocess.Popen([sys.executable, str(ROOT / "tests" / "monitor_fake_kvh.py"), str(lead_s + seconds + 30)],
+    fake_kvh = ROOT / "tests" / "helpers" / "fake_kvh.py"
+    dev = subprocess.Popen([sys.executable, str(fake_kvh), str(lead_s + seconds + 30)],
                            stdout=subprocess.PIPE, text=True)
     port = dev.stdout.readline().strip()
     mon = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", port, "--protocol", "kvh-a",

@@ -1,6 +1,6 @@
 """Reading speed of the other-format readers (fogmon.sources.files, table: fogmon.sources.open), as ratios to the
 replay-log CSV reader on the same samples, measured in the same run: open the file and
-iterate every block. Files are written with the test suite's writers (tests/test_readers.py).
+iterate every block. Files are written with the test suite's writers (tests/helpers/recordings.py).
 
     python benchmarks/bench_readers.py [N_SAMPLES]
 """
@@ -17,7 +17,7 @@ import numpy as np
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
-import test_readers as w  # noqa: E402  (the writers)
+from helpers import recordings as w  # noqa: E402  (the writers)
 
 from fogmon.formats.replay_log import write_replay_log  # noqa: E402
 from fogmon.sources.open import open_replay_source  # noqa: E402
@@ -47,17 +47,16 @@ def main() -> None:
         write_replay_log(d / "ref.csv", t, rate, meta={"sample_rate_hz": sample_rate_hz})
         t_csv = timed(d / "ref.csv")
         print(f"replay-log CSV: {n / t_csv:,.0f} samples/s (reference)")
-        w.N = n
         cases = []
         w.write_imu_bag(d / "run.bag", t, rate, keep, "ros1")
         cases.append(("ROS 1 bag", d / "run.bag", {}))
         w.write_imu_bag(d / "bag2", t, rate, keep, "mcap")
         cases.append(("ROS 2 bag (MCAP storage)", d / "bag2", {}))
-        w._ulog(d / "f.ulg", t, rate, keep)
+        w.write_ulog(d / "f.ulg", t, rate, keep)
         cases.append(("PX4 ULog", d / "f.ulg", {}))
-        w._mdf(d / "b.mf4", t, rate, keep)
+        w.write_mdf(d / "b.mf4", t, rate, keep)
         cases.append(("MDF4 channel", d / "b.mf4", {"channel": "GyroZ"}))
-        w._las(d / "t.las", t, rate, keep)
+        w.write_las(d / "t.las", t, rate, keep)
         cases.append(("LAS", d / "t.las", {}))
         for name, path, opts in cases:
             s = timed(path, **opts)

@@ -1,4 +1,4 @@
-"""Fixtures shared by the test modules (test doubles are in doubles.py)."""
+"""Fixtures shared by the test modules (helpers they import: tests/helpers/)."""
 from __future__ import annotations
 
 import contextlib
@@ -16,7 +16,7 @@ HERE = Path(__file__).resolve().parent
 @pytest.fixture
 def fake_kvh():
     # every 500th frame with a bad CRC
-    p = subprocess.Popen([sys.executable, str(HERE / "monitor_fake_kvh.py"), "30", "500"], stdout=subprocess.PIPE,
+    p = subprocess.Popen([sys.executable, str(HERE / "helpers" / "fake_kvh.py"), "30", "500"], stdout=subprocess.PIPE,
                          text=True)
     try:
         yield p.stdout.readline().strip()

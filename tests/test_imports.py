@@ -1,12 +1,15 @@
-"""No import cycle: every fogmon module imports alone in a fresh interpreter, and the
-pipeline and the sinks import in either order; library code (everything outside
-fogmon/cli) never imports fogmon.cli nor argparse, at any level (inside functions too)."""
+"""The import picture of fogmon, counting every import at any level (inside functions
+too): no cycle; packages in layers, at most two arrows from a lower layer to a higher
+one; library code (everything outside fogmon/cli) never imports fogmon.cli nor
+argparse; every module imports alone in a fresh interpreter, and the pipeline and the
+sinks import in either order; no test module imports another."""
 from __future__ import annotations
 
 import ast
 import pkgutil
 import subprocess
 import sys
+from collections import defaultdict
 from pathlib import Path
 
 import pytest
@@ -21,40 +24,6 @@ MODULES = sorted(m.name for m in pkgutil.walk_packages([str(ROOT)], prefix="fogm
 def _imports(*names: str) -> subprocess.CompletedProcess:
     code = "import importlib\n" + "".join(f"importlib.import_module({n!r})\n" for n in names)
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-
-
-def _module_level_imports(name: str) -> set[str]:
-    """fogmon modules imported when ``name`` is imported (its top-level statements, not
-    the imports inside functions, which run later)."""
-    path = ROOT.joinpath(*name.split(".")[1:])
-    path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
-    tree = ast.parse(path.read_text(encoding="utf-8"))
-    out: set[str] = set()
-    for node in tree.body:
-        if isinstance(node, ast.Import):
-            out.update(a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.add(node.module)
-            out.update(f"{node.module}.{a.name}" for a in node.names)
-    return {m for m in out if m in MODULES}
-
-
-def test_no_import_cycle():
-    graph = {m: _module_level_imports(m) for m in MODULES}
-    state: dict[str, int] = {}
-
-    def visit(m: str, path: list[str]) -> None:
-        if state.get(m) == 1:
-            raise AssertionError("import cycle: " + " -> ".join(path[path.index(m):] + [m]))
-        if state.get(m) == 2:
-            return
-        state[m] = 1
-        for n in sorted(graph[m]):
-            visit(n, path + [m])
-        state[m] = 2
-
-    for m in MODULES:
-        visit(m, [])
 
 
 @pytest.mark.slow
@@ -110,6 +79,85 @@ def _every_import(path: Path, root: Path = ROOT) -> list[tuple[int, str]]:
     return out
 
 
+#: fogmon's packages and top-level modules in layers, lowest first: a module imports from
+#: its own layer and the layers below (docs/architecture.md). ``fogmon`` is the package's
+#: public API (it loads its names lazily), ``__main__`` runs the command.
+LAYERS = [
+    ("core", {"errors", "units", "block", "window", "stopping", "startup", "outputs"}),
+    ("formats", {"formats"}),
+    ("analysis", {"davar", "sim", "motion", "phases"}),
+    ("sources", {"sources"}),
+    ("sinks", {"sinks"}),
+    ("explain", {"explain"}),
+    ("methods", {"methods", "modelcheck"}),
+    ("pipeline", {"pipeline"}),
+    ("applications", {"export", "fleet"}),
+    ("command", {"cli", "__main__", "fogmon"}),
+]
+#: arrows from a lower layer to a higher one the picture may have (issue 27)
+MAX_UPWARD = 2
+
+
+def _name(path: Path) -> str:
+    return ".".join(path.relative_to(ROOT.parent).with_suffix("").parts).removesuffix(".__init__")
+
+
+def _unit(module: str) -> str:
+    """The package or top-level module of LAYERS ``module`` is in."""
+    return module.split(".")[1] if "." in module else module
+
+
+def _graph() -> dict[str, set[str]]:
+    """fogmon module -> the fogmon modules its imports name, at any level: ``from m import
+    n`` names m.n when that is a module (else m), ``import a.b`` names a.b."""
+    modules = {_name(p) for p in ROOT.rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for p in sorted(ROOT.rglob("*.py")):
+        by_line: dict[int, set[str]] = defaultdict(set)
+        for line, m in _every_import(p):
+            while m and m not in modules:
+                m = m.rpartition(".")[0]
+            if m:
+                by_line[line].add(m)
+        name = _name(p)
+        graph[name] = {m for found in by_line.values() for m in found
+                       if m != name and not any(o.startswith(m + ".") for o in found)}
+    return graph
+
+
+def test_no_import_cycle():
+    """Not even through an import inside a function (it runs later, but still ties the two
+    modules to each other)."""
+    graph = _graph()
+    state: dict[str, int] = {}
+
+    def visit(m: str, path: list[str]) -> None:
+        if state.get(m) == 1:
+            raise AssertionError("import cycle: " + " -> ".join(path[path.index(m):] + [m]))
+        if state.get(m) == 2:
+            return
+        state[m] = 1
+        for n in sorted(graph[m]):
+            visit(n, path + [m])
+        state[m] = 2
+
+    for m in sorted(graph):
+        visit(m, [])
+
+
+def test_the_layers_hold_every_package_and_at_most_two_arrows_point_up():
+    graph = _graph()
+    layer = {unit: i for i, (_, units) in enumerate(LAYERS) for unit in units}
+    assert sorted({_unit(m) for m in graph} - layer.keys()) == []          # a new package: give it a layer
+    up: dict[tuple[str, str], list[str]] = defaultdict(list)
+    for m, imported in sorted(graph.items()):
+        for n in sorted(imported):
+            if layer[_unit(m)] < layer[_unit(n)]:
+                up[(_unit(m), _unit(n))].append(f"{m} -> {n}")
+    assert len(up) <= MAX_UPWARD, "arrows up the layers:\n" + "\n".join(
+        f"{a} -> {b}: {', '.join(e)}" for (a, b), e in sorted(up.items()))
+
+
 def _library_files() -> list[Path]:
     """Every module outside fogmon/cli but the entry point (``python -m fogmon``)."""
     return [p for p in sorted(ROOT.rglob("*.py"))
@@ -143,3 +191,15 @@ def test_library_code_does_not_import_the_command_line():
             "print(sorted(m for m in sys.modules if m.startswith('fogmon.cli')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.stdout.strip() == "[]", out.stdout + out.stderr
+
+
+def test_no_test_module_imports_another():
+    """Test modules, validation/ and benchmarks/ share code through tests/helpers only:
+    none imports a test module or a conftest, at any level (test modules of the same
+    name live in different folders, imported by pytest's importlib mode)."""
+    repo = ROOT.parent
+    tests = {p.stem for p in (repo / "tests").rglob("test_*.py")} | {"conftest"}
+    files = [p for d in ("tests", "validation", "benchmarks") for p in sorted((repo / d).rglob("*.py"))]
+    bad = [f"{p.relative_to(repo)}:{line}: imports {m}" for p in files for line, m in _every_import(p, repo / "tests")
+           if m.split(".")[0] in tests or m.startswith("tests")]
+    assert len(files) > 60 and not bad, "\n".join(bad)

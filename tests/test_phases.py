@@ -55,7 +55,7 @@ def test_the_pipeline_reports_the_phases_of_a_drilling_run():
     """Drilling (pumps on, string rotating) with connections (pumps off, still) between
     stands; the monitor's session summary splits the run at the connections and gives each
     state its coefficient ranges; a phase event marks each phase's first window."""
-    from doubles import Collect, ListSource
+    from helpers.doubles import Collect, ListSource
 
     from fogmon.pipeline import Pipeline, PipelineConfig
 

@@ -45,7 +45,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests"))
 
-from sources_fake_device import has_open, open_pty  # noqa: E402
+from helpers.fake_device import has_open, open_pty  # noqa: E402
 
 from fogmon.errors import FogmonError  # noqa: E402
 from fogmon.formats.archive import find_pieces  # noqa: E402
@@ -171,7 +171,7 @@ def summary_counters(out: str) -> tuple[dict[str, int], int]:
 def event_totals(rrd: str) -> dict[str, int]:
     """Sums of the counts the .rrd's events carry: crc_error 'N frame(s) failed', gap
     'N sample(s) lost' and 'N more gaps, M samples lost'."""
-    from test_rerun_sink import read_event_messages
+    from helpers.rrd import read_event_messages
     tot = {"crc_errors": 0, "samples_missing": 0, "seq_gaps": 0}
     for x in read_event_messages(rrd, "/events"):
         if x.startswith("crc_error:"):

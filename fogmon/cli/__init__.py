@@ -28,6 +28,7 @@ COMMANDS = {
     "updown": "bias and scale-factor error from axis-up and axis-down recordings against Earth rate",
     "convert": "convert a recording (replay log, raw capture, CAN log, archive) to a Parquet replay log",
     "batch": "analyse many recordings on Dask into windows.parquet + recordings.parquet (fleet report optional)",
+    "info": "what a recording or log holds: one line per topic/channel/signal/column (type, count, rate, span, unit)",
 }
 
 

@@ -36,7 +36,7 @@ usage or input (nothing written)."""
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from fogmon.cli.pipeline_options import parse_taus
-    from fogmon.cli.source_options import add_source_arguments
+    from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
@@ -66,6 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--keep-motion", action="store_true", help="analyse platform motion too (docs/motion.md)")
     parser.add_argument("--no-progress", action="store_true", help="no Dask progress bar")
     add_source_arguments(parser, mode="replay")
+    add_reader_arguments(parser)
 
 
 def _options(args: argparse.Namespace) -> tuple[SourceOptions, PipelineConfig]:

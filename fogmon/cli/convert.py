@@ -28,7 +28,7 @@ input (no output file is left behind)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from fogmon.cli.source_options import add_source_arguments
+    from fogmon.cli.source_options import add_reader_arguments, add_source_arguments
 
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EPILOG
@@ -36,6 +36,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "--protocol), CAN log (--dbc) or archive folder")
     parser.add_argument("output", metavar="OUT", help="OUT.parquet (Parquet replay log) or OUT.csv (replay log)")
     add_source_arguments(parser, mode="replay")
+    add_reader_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:

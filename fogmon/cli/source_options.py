@@ -8,13 +8,14 @@ from dataclasses import fields
 from fogmon.block import parse_axes
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
+from fogmon.formats.recording import MAX_SAMPLE_RATE_HZ
 from fogmon.sources import plausibility as pl
 from fogmon.sources.codecs.kvh import ACCEL_UNITS
 from fogmon.sources.codecs.protocols import PROTOCOLS
 from fogmon.sources.options import SourceOptions
 
 #: The highest --rate-hz accepted (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz).
-MAX_RATE_HZ = 1e6
+MAX_RATE_HZ = MAX_SAMPLE_RATE_HZ
 
 
 def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") -> None:
@@ -66,15 +67,15 @@ def _add_serial_arguments(g, live: bool) -> None:
                    "exactly one rate column (rate_dph, rate_dps, rate_rps, delta_deg, delta_rad, delta_arcsec), "
                    "optional seq or seq:N (counter wrapping at N), valid, '-' to ignore, any other name = aux "
                    "channel (temp_c deg C, vib_g g, ...) (default: rate_dph)")
-    g.add_argument(
-        "--rate-hz",
-        dest="sample_rate_hz",
-        type=number(0, MAX_RATE_HZ, above=True),
-        metavar="HZ",
-        help="sample rate in Hz "
-        f"where the protocol does not tell it, > 0 and <= {MAX_RATE_HZ:g} (default: kvh-* 1000, "
-        "dsp3000 100, lines 100; CAN: the DBC message cycle time)",
-    )
+    _add_rate_hz(g)
+
+
+def _add_rate_hz(g) -> None:
+    g.add_argument("--rate-hz", dest="sample_rate_hz", type=number(0, MAX_RATE_HZ, above=True), metavar="HZ",
+                   help=f"sample rate in Hz, > 0 and <= {MAX_RATE_HZ:g}: where the protocol does not tell it "
+                        "(default: kvh-* 1000, dsp3000 100, lines 100); for files with time stamps (CAN logs, "
+                        "bags, ULog, MDF4, LAS) only checked against the rate the stamps give (more than 1 %% "
+                        "off: an error, unless --force-rate)")
 
 
 def _add_can_arguments(c, live: bool) -> None:
@@ -124,19 +125,39 @@ def source_options(args: argparse.Namespace) -> SourceOptions:
                             if given.get(f.name) is not None})
 
 
-def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = False) -> None:
-    """The reader options (``axis`` adds ``--axis`` too, for commands without the serial
-    decoder options that already have it)."""
-    g = parser.add_argument_group("other recording formats (ROS bag/MCAP, PX4 ULog, MDF4, LAS; docs/readers.md)")
+def _has(parser: argparse.ArgumentParser, flag: str) -> bool:
+    return flag in parser._option_string_actions   # an option another group of the command already added
+
+
+def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = True) -> None:
+    """The one set of reader options (CONTRACT section 3), for every command that reads
+    recordings: ``--topic``, ``--channel``, ``--time-channel``, ``--rate-unit``,
+    ``--resample-hz``, ``--force-rate`` and, unless the command's source options already
+    have them, ``--axis`` (``axis``), ``--rate-hz`` and the CAN log options (``--dbc``,
+    ``--can-rate``, ...)."""
+    g = parser.add_argument_group("reading a recording (ROS bag/MCAP, PX4 ULog, MDF4, LAS, CAN logs; "
+                                  "docs/readers.md; fogmon info FILE lists what a file holds)")
     g.add_argument("--topic", metavar="NAME", help="ROS bag/MCAP: the sensor_msgs/Imu topic (default: the only "
-                   "one); PX4 ULog: sensor_gyro (default; NAME:INSTANCE for another instance) or sensor_combined")
-    if axis:
+                   "one); PX4 ULog: sensor_combined or sensor_gyro, NAME:INSTANCE for another instance (default: "
+                   "the one with the most samples)")
+    if axis and not _has(parser, "--axis"):
         g.add_argument("--axis", type=axis_list, metavar="NAME", help="the axis to analyse, or a comma list (x,y): "
                        "gyros x, y, z of a ROS bag or PX4 ULog IMU, axes of a multi-axis replay log "
                        "(rate_<axis>_dph columns) (default: every axis)")
     g.add_argument("--channel", metavar="NAME", help="MDF4: the rate channel (unit from the file); LAS: the rate "
                    "curve (default: the only curve with a rate unit)")
-    g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve (default: the index curve when it "
-                   "is a time; a depth-indexed file needs it)")
+    g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve: seconds, a clock (HHMMSS) or "
+                   "date-times (default: the index curve when it is a time; a depth-indexed file needs it)")
     g.add_argument("--rate-unit", metavar="UNIT", help="MDF4/LAS: the rate's unit when the file does not say "
                    "it or says it wrongly: deg/h, deg/s, rad/s")
+    g.add_argument("--resample-hz", type=number(0, MAX_RATE_HZ, above=True), metavar="F", help="files with time "
+                   "stamps: block means on a uniform F Hz grid (each 1/F s block: the mean of the samples stamped "
+                   "in it; a block without one is a gap) for irregular logging (alternating steps, many gaps), "
+                   "which is refused otherwise; the Allan deviation then starts at 1/F s (docs/readers.md)")
+    g.add_argument("--force-rate", action="store_true", help="use --rate-hz, the DBC cycle time or a replay "
+                   "log's sample_rate_hz although the time stamps say another rate (they place the samples; "
+                   "their clock is scaled to the rate given)")
+    if not _has(parser, "--rate-hz"):
+        _add_rate_hz(g)
+    if not _has(parser, "--dbc"):
+        _add_can_arguments(parser.add_argument_group("CAN log decoding"), live=False)

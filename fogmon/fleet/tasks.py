@@ -19,6 +19,7 @@ from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig, window_and_hop
 from fogmon.sinks.base import COEFFICIENTS, Sink
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.options import SourceOptions
 
 if TYPE_CHECKING:
@@ -104,7 +105,7 @@ def _blocks(source, axis: str):
     return (b.axis(axis) for b in source.blocks()) if axis else source.blocks()
 
 
-class _ChunkSource:
+class _ChunkSource(OfflineSource):
     """Samples ``first`` .. ``stop`` - 1 (grid indices) of axis ``axis`` ("": a one-axis
     source) of ``source``, read from its start; samples in ``masked`` runs [(a, b), ...]
     made invalid (the motion gate's decisions from the motion pass). Counts, in ``own`` =

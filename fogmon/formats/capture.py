@@ -80,6 +80,10 @@ def _breaks(v, folder):
         if not (isinstance(b, dict) and "offset" in b and "missing_est" in b and _count(b["offset"], folder) is None
                 and _number(0, False)(b["missing_est"], folder) is None):
             return f"item {i}: expected {{\"offset\": bytes >= 0, \"missing_est\": samples >= 0}}, got {b!r}"
+        placed = [k for k in ("frame", "missing", "rule", "wraps") if k in b]
+        if placed and (len(placed) != 4 or any(_count(b[k], folder) for k in placed)):
+            return (f"item {i}: a gap placed by the clock needs \"frame\", \"missing\", \"rule\" and \"wraps\" "
+                    f"as counts >= 0, got {b!r}")
     return None
 
 

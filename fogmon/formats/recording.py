@@ -4,7 +4,6 @@ columns' names (``rate_dph``, or ``rate_<axis>_dph`` per axis), the nominal samp
 (Hz) and the uniform sample grid the samples sit on (s)."""
 from __future__ import annotations
 
-import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -19,6 +18,14 @@ _AXIS_RATE = re.compile(r"rate_(.*)_dph")
 #: without ``sample_rate_hz`` metadata the rate is 1 / the median interval of this many
 #: first samples (so a reader need not hold the file to know it)
 RATE_SAMPLES = 1 << 16
+#: the highest sample rate a recording may state (Hz): beyond any gyro's output rate (FOGs stop near 10 kHz)
+MAX_SAMPLE_RATE_HZ = 1e6
+#: a file's time gaps may hold at most this many times the samples present in it: more is a
+#: corrupt time stamp or rate, not an outage (a laptop suspended overnight between two hours
+#: of recording is 4 times)
+MAX_MISSING_RATIO = 100
+#: a rate in `sample_rate_hz` metadata and the time stamps may differ by this fraction
+RATE_TOLERANCE = 0.01
 
 
 @dataclass
@@ -78,6 +85,7 @@ class Recording:
         invalid placeholders (rate and aux NaN), so gaps are never joined."""
         idx = self.grid_index()
         n = int(idx[-1]) + 1 if len(idx) else 0
+        check_grid_length(n, len(idx), self.name)
         sample_rate_hz = self.sample_rate_hz
         t = self.t_s[0] + np.arange(n) / sample_rate_hz if n else np.zeros(0)
         if n == len(idx):
@@ -103,12 +111,42 @@ def sample_rate_from(meta: dict, t_s: np.ndarray, name: str) -> float:
         except ValueError:
             raise FogmonError(f"{name}: metadata sample_rate_hz is not a number: "
                               f"{meta['sample_rate_hz']!r}") from None
-        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"{name}: metadata sample_rate_hz must be > 0, got {sample_rate_hz}")
+        if not (0 < sample_rate_hz <= MAX_SAMPLE_RATE_HZ):
+            raise FogmonError(f"{name}: metadata sample_rate_hz must be > 0 and <= {MAX_SAMPLE_RATE_HZ:g} Hz, got "
+                              f"{sample_rate_hz}")
         return sample_rate_hz
     if len(t_s) < 2:
         raise FogmonError(f"{name}: too few samples to know the sample rate")
-    return 1.0 / float(np.median(np.diff(t_s[:RATE_SAMPLES])))
+    step = float(np.median(np.diff(t_s[:RATE_SAMPLES])))
+    if not step >= 1.0 / MAX_SAMPLE_RATE_HZ:
+        raise FogmonError(f"{name}: column time_s: median step {step!r} s: not time stamps of a sample rate "
+                          f"up to {MAX_SAMPLE_RATE_HZ:g} Hz")
+    return 1.0 / step
+
+
+def check_grid_length(n_grid: int, n_present: int, name: str, field: str = "time_s") -> None:
+    """A FogmonError when a grid of ``n_grid`` samples would hold more than
+    MAX_MISSING_RATIO times the ``n_present`` samples a file has in gaps: a corrupt time
+    stamp or rate, not an outage (checked before any array of that length is made)."""
+    if n_grid - n_present > MAX_MISSING_RATIO * max(n_present, 1):
+        raise FogmonError(f"{name}: column {field}: the time stamps span {n_grid:.4g} sample periods for "
+                          f"{n_present} samples (more than {MAX_MISSING_RATIO} times as many missing as present): a "
+                          f"corrupt time stamp or sample rate, not a gap")
+
+
+def check_stated_rate(meta: dict, t_s: np.ndarray, name: str) -> None:
+    """A FogmonError when the metadata ``sample_rate_hz`` and the median step of the
+    first RATE_SAMPLES time stamps ``t_s`` (s) differ by more than RATE_TOLERANCE (both
+    numbers named): a rate that says 100 Hz over stamps 20 ms apart would count every
+    other sample missing and halve every tau."""
+    if "sample_rate_hz" not in meta or len(t_s) < 3:
+        return
+    stated = sample_rate_from(meta, t_s, name)
+    measured = 1.0 / float(np.median(np.diff(t_s[:RATE_SAMPLES])))
+    if abs(stated / measured - 1.0) > RATE_TOLERANCE:
+        raise FogmonError(f"{name}: metadata sample_rate_hz says {stated:.6g} Hz but column time_s steps by "
+                          f"{1 / measured:.6g} s = {measured:.6g} Hz (median): correct or remove the "
+                          f"sample_rate_hz line, or give `force_rate` to keep {stated:.6g} Hz")
 
 
 def grid_positions(

@@ -1,6 +1,6 @@
 """What a run is asked to do and the window policy: ``PipelineConfig`` (the frozen options
-fogmon.cli builds, or a caller by hand), the default window and hop (``default_window_s``,
-``window_and_hop``: checked against the sample rate and the samples the run will have),
+fogmon.cli builds, or a caller by hand), the window and hop (``window_and_hop``: the
+defaults of fogmon.window, checked against the sample rate and the samples the run will have),
 the samples of a live run of ``duration_s`` (``live_samples``), and the check that per-axis
 options cover the stream's axes.
 """
@@ -14,16 +14,10 @@ import numpy as np
 from fogmon.errors import FogmonError
 from fogmon.methods.live import LiveMethods
 from fogmon.sim.model import SensorModel
+from fogmon.window import default_window_s
 
 #: What ``taus`` gives ``tau_grid``: a grid name, N per decade, or tau values in s.
 TauSpec = str | int | np.ndarray
-#: Default window bounds in samples (the window is a power of two inside these).
-MIN_WINDOW_SAMPLES = 2**10
-MAX_WINDOW_SAMPLES = 2**20
-#: Live default window in samples (65.5 s at 1 kHz, 655 s at 100 Hz).
-LIVE_WINDOW_SAMPLES = 2**16
-
-
 @dataclass(frozen=True)
 class PipelineConfig:
     """How a run analyses and paces (built from the command line by fogmon.cli, or by hand):
@@ -51,18 +45,6 @@ class PipelineConfig:
     axis_methods: dict[str, LiveMethods] = field(default_factory=dict)
     model: SensorModel | None = None
     model_alpha: float = 0.01
-
-
-def default_window_s(sample_rate_hz: float, n_samples: int | None) -> float:
-    """Default window in s: for a record of ``n_samples`` a quarter of it rounded down to a
-    power of two of samples (within MIN..MAX_WINDOW_SAMPLES, never longer than the record);
-    live (``n_samples`` None) LIVE_WINDOW_SAMPLES."""
-    if n_samples is None:
-        return LIVE_WINDOW_SAMPLES / sample_rate_hz
-    quarter = max(n_samples // 4, 1)
-    n = 2 ** int(math.floor(math.log2(quarter)))
-    n = min(max(n, MIN_WINDOW_SAMPLES), MAX_WINDOW_SAMPLES, n_samples)
-    return n / sample_rate_hz
 
 
 def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None) -> tuple[float, float]:

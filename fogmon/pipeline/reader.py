@@ -14,7 +14,6 @@ import numpy as np
 
 from fogmon.block import Block, Event
 from fogmon.sources.base import Source
-from fogmon.sources.live import LiveSource
 
 #: Samples read but not yet processed that a live run or an endless simulation may hold
 #: (2**20: 17 min at 1 kHz); beyond it a simulation waits and a live device's blocks are
@@ -44,7 +43,7 @@ class _ThreadedBlocks:
     keep a device unread and memory stays bounded.
 
     A source that can wait (a simulation, a file) is held back while the queue is full:
-    back-pressure. A live device (LiveSource, ``wait=False``) never is, since an OS serial
+    back-pressure. A live device (``source.live``, ``wait=False``) never is, since an OS serial
     buffer holds ~0.1 s of a 1 kHz KVH: when the pipeline is more than ``max_samples``
     behind, the blocks read meanwhile are dropped, counted (``blocks_dropped``,
     ``samples_dropped`` in ``counters``) and come out as invalid placeholders on the
@@ -57,7 +56,7 @@ class _ThreadedBlocks:
     def __init__(self, source: Source, max_samples: int = QUEUE_MAX_SAMPLES, wait: bool | None = None):
         self._source = source
         self.max_samples = max_samples
-        self.wait = not isinstance(source, LiveSource) if wait is None else wait
+        self.wait = not source.live if wait is None else wait
         self.counters = {} if self.wait else {"blocks_dropped": 0, "samples_dropped": 0}
         self._aux_names: tuple[str, ...] = ()  # of the blocks read, for placeholders
         self._axes: tuple[str, ...] = ()

@@ -34,7 +34,6 @@ from fogmon.pipeline.reader import _ThreadedBlocks
 from fogmon.sim.model import SensorModel
 from fogmon.sinks.base import AxisSummary, Sink, StreamInfo, Summary
 from fogmon.sources.base import Source
-from fogmon.sources.live import LiveSource
 from fogmon.sources.pacing import Pacer
 
 #: What DAVAR analyses when the recording has a reference rotation.
@@ -129,7 +128,7 @@ class Pipeline:
         if self.total_n is None:
             with startup.loading():
                 _warm_up(self.sample_rate_hz, self.window_s, self.hop_s, cfg.taus)
-            if cfg.duration_s is not None and isinstance(self.source, LiveSource):
+            if cfg.duration_s is not None and self.source.live:
                 self.source.limit(live_samples(cfg.duration_s, self.sample_rate_hz))  # nothing after the cut is read
             self.reader = _ThreadedBlocks(self.source)
         self.wall_start = time.monotonic()
@@ -170,7 +169,7 @@ class Pipeline:
         duration_s = self.config.duration_s
         if duration_s is None or self.total_n is not None or self.source_closed_early:
             return
-        opened = (self.source.opened_s if isinstance(self.source, LiveSource) else None) or self.wall_start
+        opened = self.source.opened_s or self.wall_start
         if time.monotonic() > opened + duration_s + max(LIVE_WALL_SLACK_S, 0.1 * duration_s):
             self.source.close()
             self.source_closed_early = True

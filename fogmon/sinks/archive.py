@@ -79,7 +79,7 @@ class Archive(Sink):
     archive yet). A pipeline sink (``run_pipeline(source, config, [..., archive])``):
     ``block`` (= ``write``) takes the decoded blocks, ``rotate`` starts the next piece,
     ``finish`` closes; the source feeds the raw capture through the tap methods
-    ``raw(bytes)``, ``frame(can.Message)`` and ``outage(elapsed_s, missing_est)``
+    ``raw(bytes)``, ``frame(can.Message)``, ``outage(elapsed_s, missing_est)`` and ``placed``
     (registered here with ``source.add_tap``). ``replay_log_path`` and ``capture_path``
     name the current piece's files. Counters: ``rows_written``, ``rows_without_aux``
     (valid samples whose aux channel was not yet known, e.g. KVH format C before its
@@ -239,6 +239,19 @@ class Archive(Sink):
                                              "elapsed_s": float(elapsed_s)})
                 self._write_sidecar()
             self.flush()
+
+    def placed(self, frame: int, missing: int, rule: int, wraps: int = 0) -> None:
+        """The source's grid placed ``missing`` samples before the ``frame``-th frame decoded
+        from the next bytes by its clock (``rule``: an index of fogmon.sources.grid.WHY;
+        ``wraps`` of them whole counter wraps), which the bytes alone would not give again;
+        recorded in the sidecar (``breaks``) at the current byte offset so a replay places
+        the same (``missing_est`` too, for readers that know only outages)."""
+        with self._lock:
+            if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
+                self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing),
+                                             "frame": int(frame), "missing": int(missing), "rule": int(rule),
+                                             "wraps": int(wraps)})
+                self._write_sidecar()
 
     # -- capture pieces --------------------------------------------------------------------
     def _append_raw(self, data: bytes) -> None:

@@ -13,9 +13,9 @@ from typing import TextIO
 
 from fogmon.block import Event
 from fogmon.errors import render_names
-from fogmon.pipeline import default_window_s
 from fogmon.sinks.base import COEFFICIENTS, AxisSummary, Sink, Summary
 from fogmon.stopping import stop_name
+from fogmon.window import default_window_s
 
 #: Events of one kind printed as they happen before the rest are only counted.
 MAX_EVENTS_PER_KIND = 10

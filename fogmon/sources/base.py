@@ -1,7 +1,7 @@
 """The interfaces at the sources' boundary, as typing Protocols.
 
-The rest of fogmon cannot tell a live gyro from a replay: it iterates ``blocks()`` and
-reads ``counters``. Sources convert to deg/h and s at this boundary and insert invalid
+The rest of fogmon cannot tell a live gyro from a replay but by ``live``: it iterates
+``blocks()`` and reads ``counters``. Sources convert to deg/h and s at this boundary and insert invalid
 placeholder samples for anything lost (see fogmon.block). A source whose raw input can
 be archived (a serial or CAN gyro) is also a ``CaptureSource``: the archive registers
 itself as its ``RawTap``. Serial decoders are ``Codec``s (fogmon.sources.codecs)."""
@@ -21,6 +21,18 @@ class Source(Protocol):
     name: str
     #: nominal sample rate in Hz (the uniform grid that Block samples sit on)
     sample_rate_hz: float
+    #: a device read as its data arrives (serial port, CAN bus: fogmon.sources.live), never
+    #: held back: the blocks it delivers while the pipeline is too far behind are dropped
+    #: and counted (fogmon.pipeline.reader). False for a file or a simulation, read at the
+    #: reader's pace (``OfflineSource``).
+    live: bool
+
+    @property
+    def opened_s(self) -> float | None:
+        """``time.monotonic()`` when a live device was first opened, None before that and
+        for a source that is not live (a run of ``duration_s`` on a device that falls
+        silent stops that long after it, plus some slack: fogmon.pipeline.run)."""
+        ...
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -48,6 +60,24 @@ class Source(Protocol):
         """Stop and release the device/file; ``blocks()`` then ends."""
         ...
 
+    def limit(self, n_samples: int | None) -> None:
+        """End ``blocks()`` after grid sample ``n_samples`` (None: no limit); called before
+        ``blocks()`` starts. A live device then decodes nothing after it, so its raw
+        capture ends with the run's last sample; a source that is not live may ignore it
+        (the pipeline cuts every source's blocks at the run's duration)."""
+        ...
+
+
+class OfflineSource:
+    """The ``Source`` members about devices as a file or a simulation has them (the base
+    class of those sources): not ``live``, never ``opened_s``, nothing to ``limit``."""
+
+    live = False
+    opened_s: float | None = None
+
+    def limit(self, n_samples: int | None) -> None:
+        """Nothing to do: the pipeline cuts the blocks at the run's duration."""
+
 
 class RawTap(Protocol):
     """Receives a live source's raw input in stream order (the archive), possibly from
@@ -61,6 +91,11 @@ class RawTap(Protocol):
 
     def outage(self, elapsed_s: float, missing_est: float) -> None:
         """The device was reopened after ``elapsed_s`` s; about ``missing_est`` samples lost."""
+
+    def placed(self, frame: int, missing: int, rule: int, wraps: int = 0) -> None:
+        """Before the ``frame``-th frame decoded from the next bytes the grid placed
+        ``missing`` samples by its clock (``rule``: an index of fogmon.sources.grid.WHY;
+        ``wraps`` whole counter wraps among them), which a replay of the bytes must repeat."""
 
 
 @runtime_checkable

@@ -1,19 +1,19 @@
-"""What a live source (serial port, CAN bus) shares: a reader thread that drains the
-device continuously and reopens it with exponential backoff when it disappears, and a
-consumer that turns what was read into Blocks on the sample grid.
+"""What a live source (serial port, CAN bus) shares: a reader thread that drains the device
+continuously and reopens it with exponential backoff when it disappears, and a consumer
+that turns what was read into Blocks on the sample grid.
 
 The reader thread does nothing but read, so the device's small kernel buffer never
 overflows while the rest of fogmon is busy; it queues what it read in stream order:
-``("data", bytes, t_read_s)`` (a byte stream, decoded by the consumer through the
-subclass's ``_consume``), ``("frames", Frames)`` and ``("break", samples lost estimate)``
-(sources that decode in the reader thread), ``("event", kind, message, counter)`` and
-``("reopened", t_down_s)``. The consumer (``blocks()``) decodes, counts, places on the
-grid and yields a block every ``block_s`` s while data flows and at least every
-``idle_s`` s (possibly empty, carrying events) while it does not. Counters and error
-events are updated by the consumer only, together with the blocks it yields, so they
-agree with each other and with the samples delivered; ``limit(n)`` makes ``blocks()``
-end exactly at grid sample ``n`` (a run's ``duration_s``), with nothing after it decoded,
-counted or handed to the taps."""
+``("data", bytes, t_read_s, drained)`` (a byte stream, decoded by the consumer through
+the subclass's ``_consume``; ``drained``: a read at ``t_read_s`` found nothing more
+waiting), ``("frames", Frames)`` and ``("break", samples lost estimate)`` (sources that
+decode in the reader thread), ``("event", kind, message, counter)`` and ``("reopened",
+t_down_s)``. The consumer (``blocks()``) decodes, counts, places on the grid and yields
+a block every ``block_s`` s while data flows and at least every ``idle_s`` s (possibly
+empty, carrying events) while it does not. Counters and error events are updated by the
+consumer only, together with the blocks it yields, so they agree with each other and
+with the samples delivered; ``limit(n)`` makes ``blocks()`` end exactly at grid sample
+``n`` (a run's ``duration_s``), with nothing after it decoded, counted or handed to the taps."""
 from __future__ import annotations
 
 import queue
@@ -37,8 +37,9 @@ class LiveSource:
     device, for messages and errors) and, for ``("data", ...)`` items, ``_consume``."""
 
     device_errors: tuple[type[BaseException], ...] = (OSError,)
-    #: a live device has no length (fogmon.sources.base.Source)
+    #: a live device has no length and is read as its data arrives (fogmon.sources.base.Source)
     n_samples: int | None = None
+    live = True
     name: str
     sample_rate_hz: float
     aux_names: tuple[str, ...]
@@ -147,13 +148,21 @@ class LiveSource:
         ended = False
         try:
             while not ended:
-                timeout = last_yield + self.block_s - self._clock()
+                # wait for input until the next yield is due: block_s after the last one when
+                # something is held, idle_s when nothing is (a silent device wakes this loop
+                # twice a second, not continuously)
+                due = last_yield + (self.block_s if parts or events else self.idle_s)
+                timeout = due - self._clock()
                 try:
                     item = self._q.get(timeout=timeout) if timeout > 0 else self._q.get_nowait()
                 except queue.Empty:
                     item = None
                 if item is not None:
-                    ended = self._handle(item, parts, events)
+                    try:
+                        ended = self._handle(item, parts, events)
+                    except FogmonError:            # (what came before it is delivered first)
+                        yield self._take(parts, events, errors)
+                        raise
                     if not ended and self._clock() - last_yield < self.block_s:
                         continue
                 now = self._clock()
@@ -194,7 +203,10 @@ class LiveSource:
                                 f"{self._what()} back after {self._clock() - item[1]:.2f} s"))
             self._reconnected()
         elif kind == "break":
-            self.grid.mark_break(item[1])
+            try:
+                self.grid.mark_break(item[1])
+            except FogmonError as e:
+                raise FogmonError(f"{self._what()}: {e}; the run ends here: start a new one") from None
         else:
             b, full = self._place(item[1]) if kind == "frames" else self._consume(item)
             if b is not None and len(b):

@@ -6,23 +6,37 @@ fogmon.sources with ``open_source(path, opts) -> Source``); a folder is an archi
 ROS 2 bag (its metadata.yaml), and a file its suffix does not decide is told by its
 capture sidecar or its first line. The serial protocols are the protocol table of
 fogmon.sources.codecs.protocols. Used by ``fogmon monitor``, ``fogmon replay``,
-``fogmon convert`` and, through ``read_recording``, the batch commands."""
+``fogmon convert``, ``fogmon info`` (``file_info``) and, through ``read_recording``, the
+batch commands.
+
+Every file reader is called through ``_guarded``: an exception a reader or its library
+raises on a corrupt file (other than a FogmonError) becomes one line naming the file, the
+format and what was wrong, never a traceback; the libraries' own output is kept off the
+terminal by each reader (fogmon.sources.files.listing.quiet)."""
 from __future__ import annotations
 
 import importlib
+import math
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
+from typing import TypeVar
+
+import numpy as np
 
 from fogmon.errors import FogmonError
 from fogmon.formats.capture import SIDECAR_SUFFIX
-from fogmon.formats.recording import Recording
+from fogmon.formats.recording import Recording, check_stated_rate
 from fogmon.formats.replay_log import read_replay_log
 from fogmon.sources.base import Source
 from fogmon.sources.codecs.protocols import CODECS, PROTOCOLS, make_codec
 from fogmon.sources.files.capture import read_capture_sidecar
+from fogmon.sources.files.listing import Entry, reading, stamped_entry
 from fogmon.sources.options import SourceOptions
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -30,8 +44,10 @@ class Reader:
     """A reader: ``module`` (fogmon.sources.<module>, with ``open_source(path, opts)``),
     ``what`` it reads (for messages), the optional dependency group of fogmon (``extra``)
     that installs the ``library`` it needs (None: none), and whether the batch commands
-    read it whole through its source's ``to_recording()`` (``whole``; otherwise as a
-    replay log, fogmon.formats.replay_log.read_replay_log)."""
+    read it whole through its source's ``to_recording()`` (``whole``; a replay log as
+    fogmon.formats.replay_log.read_replay_log, anything else from its blocks). A module
+    with ``info(path, opts) -> list[Entry]`` lists what the file holds (``fogmon info``);
+    the others are listed from their recording."""
 
     module: str
     what: str
@@ -46,7 +62,7 @@ MDF = Reader("files.mdf", "MDF4", "mdf", "asammdf", whole=True)
 LAS = Reader("files.las", "LAS", "las", "lasio", whole=True)
 SIMULATION = Reader("devices.simulated", "sensor model")
 PARQUET_LOG = Reader("files.parquet", "Parquet replay log")
-CAN_LOG = Reader("files.can_log", "CAN log")
+CAN_LOG = Reader("files.can_log", "CAN log", whole=True)
 RAW_CAPTURE = Reader("files.capture", "raw serial capture")
 REPLAY_LOG = Reader("files.replay_log", "replay log")
 ARCHIVE = Reader("files.archive", "archive folder")
@@ -144,6 +160,14 @@ def _module(r: Reader, path: str) -> ModuleType:
     return importlib.import_module(f"fogmon.sources.{r.module}")
 
 
+def _guarded(r: Reader, path: str, call: Callable[[], T]) -> T:
+    """``call()``, with any exception other than a FogmonError turned into one line naming
+    the file, the format and the exception (a corrupt file, whatever library reads it)."""
+    with reading(f"{path}: not a readable {r.what} file", silent=False):
+        return call()
+    raise AssertionError("unreachable")
+
+
 def open_replay_source(path: str | os.PathLike, opts: SourceOptions | None = None) -> Source:
     """A source replaying ``path``: a replay-log CSV or Parquet log, a raw serial capture
     (protocol from ``protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc
@@ -155,16 +179,94 @@ def open_replay_source(path: str | os.PathLike, opts: SourceOptions | None = Non
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
     r = reader_for(path, opts)
-    return _module(r, path).open_source(path, opts)
+    mod = _module(r, path)
+    return _guarded(r, path, lambda: mod.open_source(path, opts))
 
 
 def read_recording(path: str | os.PathLike, opts: SourceOptions | None = None) -> Recording:
-    """The whole recording at ``path`` in memory (the batch commands): another tool's
-    recording through its reader (``Reader.whole``), anything else as a replay log
-    (read_replay_log: CSV or Parquet)."""
+    """The whole recording at ``path`` in memory (the batch commands): a replay log as
+    read_replay_log (CSV or Parquet; its stated rate checked against its time stamps
+    unless ``force_rate``), another tool's recording through its reader
+    (``Reader.whole``), anything else (a raw capture, an archive) from its source's
+    blocks (the valid samples on their grid times)."""
     opts = SourceOptions() if opts is None else opts
     path = os.fspath(path)
-    r = _by_name(path, opts)
-    if r is not None and r.whole:
-        return _module(r, path).open_source(path, opts).to_recording()
-    return read_replay_log(path)
+    if not os.path.exists(path):
+        raise FogmonError(f"{path}: no such file")
+    r = reader_for(path, opts)
+    if r in (REPLAY_LOG, PARQUET_LOG):
+        rec = read_replay_log(path)
+        if not opts.force_rate:
+            check_stated_rate(rec.meta, rec.t_s, rec.name)
+        return rec
+    if r is SIMULATION:
+        raise FogmonError(f"{path}: a sensor model, not a recording (fogmon sim turns it into one)")
+    mod = _module(r, path)
+    if r.whole:
+        return _guarded(r, path, lambda: mod.open_source(path, opts).to_recording())
+    return _guarded(r, path, lambda: recording_of(mod.open_source(path, opts), path))
+
+
+def recording_of(source: Source, path: str) -> Recording:
+    """The samples of a finite ``source`` valid on every axis, on their grid times, with
+    ``sample_rate_hz`` metadata (a Recording as read_replay_log gives one)."""
+    t: list[np.ndarray] = []
+    rate: list[np.ndarray] = []
+    aux: dict[str, list[np.ndarray]] = {}
+    axes: tuple[str, ...] = ()
+    for b in source.blocks():
+        keep = b.valid.all(axis=1) if b.valid.ndim == 2 else b.valid
+        axes = b.axes
+        t.append(b.t_s[keep])
+        rate.append(b.rate_dph[keep])
+        for k, v in b.aux.items():
+            aux.setdefault(k, []).append(v[keep])
+    source.close()
+    if not t or not sum(len(x) for x in t):
+        raise FogmonError(f"{path}: no valid samples")
+    return Recording(np.concatenate(t), np.concatenate(rate), {k: np.concatenate(v) for k, v in aux.items()},
+                     {"sample_rate_hz": repr(source.sample_rate_hz)}, path=path, axes=axes)
+
+
+#: units of the replay log's columns with a fixed meaning (docs/formats.md)
+COLUMN_UNITS = {"time_s": "s", "temp_c": "deg C", "rot_dps": "deg/s", "vib_g": "g", "depth_m": "m"}
+
+
+def _column_unit(name: str) -> str:
+    for suffix, unit in (("_dph", "deg/h"), ("_dps", "deg/s"), ("_g", "g"), ("_c", "deg C"), ("_m", "m"),
+                         ("_s", "s")):
+        if name.endswith(suffix):
+            return COLUMN_UNITS.get(name, unit)
+    return ""
+
+
+def _recording_entries(rec: Recording, what: str) -> list[Entry]:
+    """One Entry per column of a recording (rate columns, then aux), counted where finite."""
+    cols = [(f"rate_{a}_dph" if a else "rate_dph", rec.rate_dph[:, j] if rec.axes else rec.rate_dph)
+            for j, a in enumerate(rec.axes or ("",))]
+    out = []
+    for name, v in [*cols, *rec.aux.items()]:
+        ok = np.isfinite(v)
+        out.append(stamped_entry(name, what, rec.t_s[ok], _column_unit(name)))
+    return out
+
+
+def file_info(path: str | os.PathLike, opts: SourceOptions | None = None) -> list[Entry]:
+    """What the file or folder ``path`` holds: one Entry per topic, channel, signal or
+    column (``fogmon info``). A FogmonError naming the file when it is unreadable."""
+    opts = SourceOptions() if opts is None else opts
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FogmonError(f"{path}: no such file")
+    r = reader_for(path, opts)
+    mod = _module(r, path)
+    if hasattr(mod, "info"):
+        return _guarded(r, path, lambda: mod.info(path, opts))
+    if r is SIMULATION:
+        src = _guarded(r, path, lambda: mod.open_source(path, opts))
+        return [Entry("rate_dph", "sensor model (an endless simulation)", 0, src.sample_rate_hz, math.nan, "deg/h")]
+    if r in (REPLAY_LOG, PARQUET_LOG):
+        return _guarded(r, path, lambda: _recording_entries(read_replay_log(path, tolerate=opts.tolerate_bad_rows),
+                                                            "column"))
+    rec = read_recording(path, opts)
+    return _recording_entries(rec, f"{r.what} samples")

@@ -18,7 +18,10 @@ class SourceOptions:
     ``can_message``, ``can_rate``, ``can_rate_unit``, ``can_temp``, ``can_counter``,
     ``can_valid``), the plausibility gate ``max_rate_dph`` (deg/h), for a replay log
     ``tolerate_bad_rows``, and for other recording formats (fogmon.sources.files: ROS bags,
-    ULogs, MDF4, LAS) ``topic``, ``channel``, ``time_channel``, ``rate_unit``."""
+    ULogs, MDF4, LAS) ``topic``, ``channel``, ``time_channel``, ``rate_unit``. Files whose
+    samples carry time stamps (fogmon.sources.files.timing): ``resample_hz`` (block means
+    on a coarser uniform grid, Hz) and ``force_rate`` (use ``sample_rate_hz``, a DBC cycle
+    time or a replay log's stated rate although the stamps say otherwise)."""
 
     serial: str | None = None
     baud: int | None = None
@@ -45,6 +48,8 @@ class SourceOptions:
     channel: str | None = None
     time_channel: str | None = None
     rate_unit: str | None = None
+    resample_hz: float | None = None
+    force_rate: bool = False
 
     def codec_options(self) -> dict[str, Any]:
         """Serial decoder options given (None = not given), as make_codec names them."""

@@ -36,6 +36,7 @@ from fogmon import units
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
+from fogmon.sources.grid import check_sample_rate
 
 STALL_S = 0.5
 
@@ -100,9 +101,7 @@ def _rate_hz(msg, sample_rate_hz: float | None) -> float:
         if not msg.cycle_time:
             raise FogmonError(f"DBC message {msg.name} has no GenMsgCycleTime: give `sample_rate_hz`")
         sample_rate_hz = 1000.0 / msg.cycle_time
-    if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-        raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
-    return float(sample_rate_hz)
+    return check_sample_rate(sample_rate_hz)
 
 
 def _rate_units(signals: list[tuple[str, Any]], rate_unit: str | None) -> list[str]:

@@ -12,6 +12,7 @@ from fogmon.sources import plausibility
 from fogmon.sources.codecs.framing import LineFramer
 from fogmon.sources.codecs.kvh import output_unit
 from fogmon.sources.frames import Frames
+from fogmon.sources.grid import check_sample_rate
 from fogmon.units import to_dph
 
 DEFAULT_RATE_HZ = 100.0
@@ -33,8 +34,7 @@ class Dsp3000Codec:
     ) -> None:
         if rot not in ("rate", "delta"):
             raise FogmonError(f"`kvh_rot` must be rate or delta, got {rot!r}")
-        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
+        sample_rate_hz = check_sample_rate(sample_rate_hz)
         self.rot, self.sample_rate_hz = rot, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.KVH_DSP3000_MAX_ABS_DPH)
         self._framer = LineFramer(64)

@@ -41,6 +41,7 @@ from fogmon.block import parse_axes
 from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.frames import Frames
+from fogmon.sources.grid import check_sample_rate
 from fogmon.units import G0_MPS2, to_dph
 
 #: bit-reversal of every byte value, to run CRC-32/MPEG-2 through zlib's reflected CRC-32.
@@ -122,8 +123,7 @@ class KvhCodec:
         if accel not in ACCEL_UNITS:
             raise FogmonError(f"`kvh_accel` must be one of {', '.join(ACCEL_UNITS)}, got {accel!r}")
         names = kvh_axes(axis)
-        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
+        sample_rate_hz = check_sample_rate(sample_rate_hz)
         self.fmt, self.rot, self.units, self.sample_rate_hz = fmt, rot, units, float(sample_rate_hz)
         self.axis, self.accel = ",".join(names), accel
         #: () for one gyro (today's one-axis stream), else the gyros decoded

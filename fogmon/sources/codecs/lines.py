@@ -33,6 +33,7 @@ from fogmon.errors import FogmonError
 from fogmon.sources import plausibility
 from fogmon.sources.codecs.framing import LineFramer
 from fogmon.sources.frames import Frames
+from fogmon.sources.grid import check_sample_rate
 
 DEFAULT_RATE_HZ = 100.0
 #: rate column name -> its unit (fogmon.units): a rate, or an angle per sample
@@ -112,8 +113,7 @@ class LinesCodec:
 
     def __init__(self, columns: str = "rate_dph", sample_rate_hz: float = DEFAULT_RATE_HZ,
                  max_rate_dph: float | None = None, axis: str | None = None) -> None:
-        if not (sample_rate_hz > 0 and math.isfinite(sample_rate_hz)):
-            raise FogmonError(f"`sample_rate_hz` must be > 0, got {sample_rate_hz}")
+        sample_rate_hz = check_sample_rate(sample_rate_hz)
         self.columns, self.sample_rate_hz = columns, float(sample_rate_hz)
         self.max_rate_dph = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
         self._names, mod = parse_columns(columns)

@@ -1,11 +1,16 @@
 """A gyro on a serial port (pyserial): bytes -> codec -> sample grid -> Blocks.
 
-The reader thread only reads (fogmon.sources.live); the consumer decodes, so the time
-base comes from the byte stream (fogmon.sources.grid): a host stall delays bytes but
-never turns into lost samples. Only when the port disappears (USB unplugged, adapter
-reset) and is reopened are the bytes of the outage gone; the samples lost meanwhile
-become invalid placeholders, their count from the clock (elapsed time x rate minus the
-frames that did arrive), made exact by the sequence counter.
+The reader thread only reads (fogmon.sources.live): every READ_PAUSE_S it takes every
+byte waiting, read after read until nothing more is (the kernel hands a tty's input
+over in pieces of about 4 KiB), so it keeps up with any device the decoder keeps up
+with. The consumer decodes, so the time base comes from the byte stream
+(fogmon.sources.grid): a host stall delays bytes but never turns into lost samples. Only
+when the port disappears (USB unplugged, adapter reset) and is reopened are the bytes of
+the outage gone; the samples lost meanwhile become invalid placeholders, their count
+from the clock (elapsed time x rate minus the frames that did arrive), made exact by the
+sequence counter. The host clock also watches the counter (grid rule 3: whole wraps
+lost without a byte gap) and bounds every gap (``gap_limit`` of the time since the
+previous frames could have been sent).
 """
 from __future__ import annotations
 
@@ -16,20 +21,30 @@ import time
 import serial
 
 from fogmon.block import Block
+from fogmon.errors import FogmonError
 from fogmon.sources.base import Codec
-from fogmon.sources.grid import GridAssembler
+from fogmon.sources.grid import GridAssembler, Placed, gap_limit
 from fogmon.sources.live import LiveSource
 
-#: the reader sleeps this long (s, a live block's length) between reads and then takes
+#: the reader sleeps this long (s, a live block's length) between wakes and then takes
 #: every byte waiting: 10 wake-ups per second however the device or its USB adapter
 #: delivers (a blocking read wakes for every chunk, up to a thousand a second), so the
-#: cost per read (decode, grid, queue) does not grow with the byte rate. The OS buffers
+#: cost per wake (decode, grid, queue) does not grow with the byte rate. The OS buffers
 #: the bytes meanwhile; the samples' times come from the byte stream, not from the reads.
 READ_PAUSE_S = 0.1
 #: with nothing waiting, a read waits at most this long (s) for a first byte
 READ_TIMEOUT_S = 0.05
-#: bytes taken per read at most (a backlog after a host stall is taken in several reads)
-READ_MAX_BYTES = 1 << 16
+#: bytes one wake takes at most; a longer backlog (after a long host stall) is taken by
+#: the next wakes, without a pause
+READ_MAX_BYTES = 1 << 20
+#: what Linux hands one read of a tty at most (its line discipline's buffer, 4 KiB less
+#: one byte: ``in_waiting`` shows no more): after a read that took this much, more may be
+#: on its way from the driver, so the reader waits for it (up to READ_TIMEOUT_S) before it
+#: counts the port drained, and the next wake comes after READ_PAUSE_S / 10
+READ_BURST_BYTES = 4095
+#: how late (s) the bytes of a device may reach a read that found nothing more waiting
+#: (USB latency, the kernel handing input over, a busy host), when the clock bounds a gap
+CLOCK_SLACK_S = 1.0
 
 
 class SerialSource(LiveSource):
@@ -37,9 +52,10 @@ class SerialSource(LiveSource):
     decoders of fogmon.sources.codecs (``protocols.make_codec``); ``opener`` (tests, custom transports) returns an
     open pyserial port (``read``, ``in_waiting``, ``close``; a read timeout keeps a silent
     port from blocking the reader) instead of opening ``port``; ``read_pause_s`` is the
-    sleep between reads (READ_PAUSE_S; 0 for a port that paces itself). Taps get
-    ``raw(bytes)`` for every byte decoded and
-    ``outage(elapsed_s, missing_est)`` for every reopen of the port, in stream order.
+    sleep between wakes (READ_PAUSE_S; 0 for a port that paces itself). Taps get
+    ``raw(bytes)`` for every byte decoded,
+    ``outage(elapsed_s, missing_est)`` for every reopen of the port and ``placed(...)``
+    for every gap the host clock decided (grid.Placed), in stream order.
     Counters: the codec's (frames_ok, crc_errors, bytes_skipped, ...), the grid's
     (seq_gaps, samples_missing, invalid_samples), ``disconnects``, ``reconnects``."""
 
@@ -58,6 +74,10 @@ class SerialSource(LiveSource):
         self._last_t: float | None = None     # when the last byte before now was read (s, clock)
         self._need_break = False              # the port was reopened: the next frame follows an outage
         self.read_pause_s = read_pause_s
+        self._drained = True                  # (reader) the last wake took everything waiting
+        self._burst = False                   # (reader) ... and at least READ_BURST_BYTES
+        self._ref_t: float | None = None      # (consumer) when a read last found nothing more waiting (s)
+        self._frames_after: float | None = None  # the last frames pushed were sent after this (s)
 
     @property
     def decoder_counters(self) -> dict[str, int]:
@@ -89,18 +109,43 @@ class SerialSource(LiveSource):
         self._need_break = True
 
     def _read(self, ser) -> list:
-        if self.read_pause_s and self._stop.wait(self.read_pause_s):
+        """One wake: every byte waiting, as one ``("data", bytes, t_s, drained)`` item;
+        ``drained``: a read at clock time ``t_s`` found nothing more waiting (so every byte
+        sent before then, less the delivery latency, is in the item or before it)."""
+        pause = self.read_pause_s / (10 if self._burst else 1)
+        if pause and self._drained and self._stop.wait(pause):
             return []
-        data = ser.read(min(ser.in_waiting, READ_MAX_BYTES) or 1)
-        return [("data", data, self._clock())] if data else []
+        chunks: list[bytes] = []
+        total = waiting = last = 0
+        t = self._clock()
+        while total < READ_MAX_BYTES:
+            t = self._clock()
+            waiting = ser.in_waiting
+            if waiting:
+                data = ser.read(min(waiting, READ_MAX_BYTES - total))
+            elif last >= READ_BURST_BYTES:       # the kernel may not have handed the rest over yet
+                data = ser.read(1)
+            else:
+                break
+            if not data:
+                break
+            chunks.append(data)
+            total += len(data)
+            last = len(data)
+        self._drained, self._burst = not waiting, total >= READ_BURST_BYTES
+        if chunks:
+            return [("data", b"".join(chunks), t if self._drained else self._clock(), self._drained)]
+        data = ser.read(1)    # nothing waiting: wait up to the port's timeout (a vanished device raises here)
+        self._drained = not data
+        return [("data", data, self._clock(), False)] if data else []
 
     # -- consumer ------------------------------------------------------------------------
     def _consume(self, item) -> tuple[Block | None, bool]:
-        _, data, t = item
+        _, data, t, drained = item
         if self._limit is None:
-            return self._apply(data, t), False
+            return self._apply(data, t, drained), False
         saved = self._save()
-        b = self._decode(data, t)
+        b = self._decode(data, t, drained)
         if self.grid.next_index < self._limit:
             self._tap(data, b)
             return b[0], False
@@ -109,7 +154,7 @@ class SerialSource(LiveSource):
 
         def index_after(p: int) -> int:
             self._load(saved)
-            self._decode(data[:p], t)
+            self._decode(data[:p], t, False)
             return self.grid.next_index
 
         lo, hi = 0, len(data)              # the longest prefix that stays within the limit
@@ -122,42 +167,60 @@ class SerialSource(LiveSource):
             mid = (lo + hi) // 2
             lo, hi = (lo, mid) if index_after(mid) >= target else (mid + 1, hi)
         self._load(saved)
-        return self._apply(data[:lo], t) if lo else None, True
+        return self._apply(data[:lo], t, False) if lo else None, True
 
-    def _apply(self, data: bytes, t: float) -> Block:
-        b = self._decode(data, t)
+    def _apply(self, data: bytes, t: float, drained: bool) -> Block:
+        b = self._decode(data, t, drained)
         self._tap(data, b)
         return b[0]
 
-    def _decode(self, data: bytes, t: float) -> tuple[Block, tuple[float, float] | None]:
-        """Feed ``data`` (read at clock time ``t``) to the codec and the grid: (block,
-        the outage (elapsed s, samples lost estimate) marked before its first frame)."""
+    def _decode(self, data: bytes, t: float, drained: bool) -> tuple[Block, tuple[float, float] | None, list[Placed]]:
+        """Feed ``data`` (read at clock time ``t``; ``drained``: nothing more was waiting
+        then) to the codec and the grid: (block, the outage (elapsed s, samples lost
+        estimate) marked before its first frame, the gaps the clock decided)."""
         frames = self.codec.feed(data)
         outage = None
         if self._need_break and len(frames):
             if self._last_t is not None:    # (nothing came before the outage: no gap to place)
                 elapsed = t - self._last_t
                 outage = (elapsed, max(0.0, elapsed * self.sample_rate_hz - len(frames)))
-                self.grid.mark_break(outage[1])
+                try:
+                    self.grid.mark_break(outage[1])
+                except FogmonError as e:
+                    raise FogmonError(f"{self._what()}: {e}; the run ends here: start a new one") from None
             self._need_break = False
+            self._ref_t = self._frames_after = None
         if not self._need_break:
             self._last_t = t
-        return self.grid.push(frames), outage
+        since = self._frames_after
+        self.grid.max_gap = None if since is None else gap_limit(
+            self.sample_rate_hz, t - since + CLOCK_SLACK_S, self.grid.seq_modulus)
+        b = self.grid.push(frames)
+        if len(frames):
+            self._frames_after = self._ref_t   # these frames were sent after the previous full read
+        if drained:
+            self._ref_t = t
+            if len(frames):
+                self.grid.observe_clock(t)
+        return b, outage, self.grid.decisions
 
     def _tap(self, data: bytes, decoded) -> None:
-        outage = decoded[1]
+        _, outage, placed = decoded
         for tap in self._taps:
             if outage is not None:
                 tap.outage(*outage)
+            for p in placed:
+                tap.placed(*p)
             tap.raw(data)
 
     def _save(self) -> tuple:
-        return _snapshot(self.codec), _snapshot(self.grid), self._need_break, self._last_t
+        return (_snapshot(self.codec), _snapshot(self.grid), self._need_break, self._last_t, self._ref_t,
+                self._frames_after)
 
     def _load(self, saved: tuple) -> None:
         _restore(self.codec, saved[0])
         _restore(self.grid, saved[1])
-        self._need_break, self._last_t = saved[2], saved[3]
+        self._need_break, self._last_t, self._ref_t, self._frames_after = saved[2:]
 
 
 def _snapshot(obj) -> dict:

@@ -15,6 +15,7 @@ from fogmon.errors import FogmonError
 from fogmon.formats.recording import Recording
 from fogmon.sim.model import SensorModel, load_model
 from fogmon.sim.simulate import CHUNK_SAMPLES, iter_simulate, present_samples, simulated_axes
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.options import SourceOptions
 from fogmon.sources.pacing import Pacer
 
@@ -22,7 +23,7 @@ from fogmon.sources.pacing import Pacer
 PACED_BLOCK_S = 0.1
 
 
-class SimulatedSource:
+class SimulatedSource(OfflineSource):
     """Source yielding a simulation of ``model`` (a SensorModel or a model file path).
     Counters: ``samples`` (valid samples yielded), ``blocks``, ``samples_missing``
     (gap placeholders copied from a ``like`` recording). ``axes``: the axes of a

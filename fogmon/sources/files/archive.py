@@ -41,7 +41,7 @@ def open_source(directory: str, opts: SourceOptions) -> Source:
             if any(side.get(k) != sides[0].get(k) for k in fields):
                 raise FogmonError(f"{p}: its sidecar's decoder options or DBC differ from {frames[0]}'s: "
                                   f"not pieces of one CAN log")
-        return open_can_log(frames, opts.dbc, opts.can_options(), sides[0])
+        return open_can_log(frames, opts.dbc, opts.can_options(), sides[0], opts.force_rate, opts.resample_hz)
     tolerate, max_abs_dph = opts.tolerate_bad_rows, opts.file_gate_dph
     if logs and logs[0].endswith(".parquet"):  # Parquet pieces (and parts of a piece never joined): one recording
         return ParquetLogSource(logs, tolerate=tolerate, max_abs_dph=max_abs_dph, axis=opts.axis)

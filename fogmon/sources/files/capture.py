@@ -4,8 +4,9 @@ live source yielded, as fast as they can (the pipeline paces: ``realtime``).
 
 A raw capture ``X`` may have a sidecar ``X.json`` (fogmon.formats.capture, written by the
 archive) naming the protocol and decoder options and the outages seen while recording
-(``"breaks": [{"offset": byte offset, "missing_est": samples, "elapsed_s": s}, ...]``), so that replaying it
-gives exactly the samples the live monitor saw."""
+(``"breaks": [{"offset": byte offset, "missing_est": samples, "elapsed_s": s}, ...]``) and the gaps its
+clock placed (``{"offset", "frame", "missing", "rule", "wraps"}``: fogmon.sources.grid.Placed), so that
+replaying it gives exactly the samples the live monitor saw."""
 from __future__ import annotations
 
 import functools
@@ -15,8 +16,9 @@ from collections.abc import Iterator, Sequence
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.formats.capture import DECODER_FIELDS, SIDECAR_SUFFIX, read_sidecar
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.codecs.protocols import SIDECAR_CHOICES, codec_from_options
-from fogmon.sources.grid import ErrorEvents, GridAssembler
+from fogmon.sources.grid import ErrorEvents, GridAssembler, Placed
 from fogmon.sources.options import SourceOptions
 
 
@@ -26,14 +28,15 @@ def read_capture_sidecar(path: str) -> dict | None:
     return read_sidecar(path, SIDECAR_CHOICES)
 
 
-class RawCaptureSource:
+class RawCaptureSource(OfflineSource):
     """Bytes a serial device sent, decoded again. ``path`` is one capture file or the
     pieces of one (an archive's raw-NNNN.bin), read in order as one byte stream, so the
     decoder's state (a frame split across two pieces, the sequence counter) carries
     across. ``options`` are the decoder options (``protocol``, ``sample_rate_hz``, ``kvh_rot``,
     ``kvh_units``, ``kvh_accel``, ``axis``, ``columns``; ``axes`` the codec's); ``breaks``
-    the outages [(byte offset in the stream, estimated samples lost)]. Counters: the decoder's and the grid's (see
-    GridAssembler)."""
+    the outages [(byte offset in the stream, estimated samples lost)] and the gaps placed by
+    the live run's clock [(byte offset, samples, fogmon.sources.grid.Placed)]. Counters: the
+    decoder's and the grid's (see GridAssembler)."""
 
     CHUNK = 1 << 16
 
@@ -50,7 +53,7 @@ class RawCaptureSource:
         what = os.path.basename(self.paths[0]) + (
             f" .. {os.path.basename(self.paths[-1])} ({len(self.paths)} pieces)" if len(self.paths) > 1 else "")
         self.name = f"raw capture {what}: {self.codec.describe()}"
-        self._breaks = sorted((int(o), float(e)) for o, e in breaks)
+        self._breaks = sorted(((int(b[0]), float(b[1]), *b[2:3]) for b in breaks), key=lambda b: b[0])
         self._closed = False
 
     @property
@@ -86,8 +89,14 @@ class RawCaptureSource:
                     if len(frames):
                         yield self.grid.push(frames, errors.poll(self.grid.t_next_s))
                     if at_break:
-                        off, est = breaks.pop(0)
-                        self.grid.mark_break(est)
+                        brk = breaks.pop(0)
+                        try:
+                            if len(brk) > 2:
+                                self.grid.place(brk[2])
+                            else:
+                                self.grid.mark_break(brk[1])
+                        except FogmonError as e:     # (a sidecar's number beyond any gap)
+                            raise FogmonError(f"{path}{SIDECAR_SUFFIX}: field breaks: {e}") from None
 
     def close(self) -> None:
         self._closed = True
@@ -109,7 +118,9 @@ def open_raw_capture(path: str | Sequence[str], overrides: dict | None = None) -
         elif piece_opts != opts:
             raise FogmonError(f"{p}{SIDECAR_SUFFIX}: decoder options {piece_opts} differ from those of "
                               f"{paths[0]}{SIDECAR_SUFFIX} ({opts}): not pieces of one capture")
-        breaks += [(offset + b["offset"], float(b["missing_est"])) for b in side.get("breaks", [])]
+        breaks += [(offset + b["offset"], float(b["missing_est"]),
+                    *([Placed(b["frame"], b["missing"], b["rule"], b["wraps"])] if "missing" in b else []))
+                   for b in side.get("breaks", [])]
         try:
             offset += os.path.getsize(p)
         except OSError:

@@ -13,9 +13,10 @@ import numpy as np
 
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
-from fogmon.formats.recording import grid_positions, pick_axes
+from fogmon.formats.recording import RATE_SAMPLES, check_grid_length, check_stated_rate, grid_positions, pick_axes
 from fogmon.formats.replay_log import CHUNK_BYTES, ReplayLogReader, Rows
 from fogmon.sources import plausibility
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
 from fogmon.sources.options import SourceOptions
 from fogmon.sources.pacing import Pacer
@@ -30,7 +31,7 @@ def _block_len(sample_rate_hz: float, speed: float | None) -> int:
     return FAST_BLOCK if not speed else max(1, int(round(PACED_BLOCK_S * sample_rate_hz * speed)))
 
 
-class ReplayLogSource:
+class ReplayLogSource(OfflineSource):
     """A replay-log CSV on its uniform grid, read in chunks (memory independent of the
     file size): time gaps become invalid placeholders with a ``gap`` event; rates beyond
     +-``max_abs_dph`` (deg/h, fogmon.sources.plausibility) become invalid samples. Opening
@@ -46,7 +47,7 @@ class ReplayLogSource:
 
     def __init__(self, path: str, speed: float | None = None, tolerate: bool = False,
                  max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH, chunk_bytes: int = CHUNK_BYTES,
-                 reader=None, axis: str | None = None) -> None:
+                 reader=None, axis: str | None = None, force_rate: bool = False) -> None:
         self._reader = reader = reader or ReplayLogReader(path, tolerate=tolerate, chunk_bytes=chunk_bytes)
         self.meta = reader.meta
         self._pick = pick_axes(reader.axes, axis, reader.name)
@@ -59,15 +60,23 @@ class ReplayLogSource:
         t0: float | None = None
         t_last = math.nan
         last = -1
+        rows_read = 0
+        first: list[np.ndarray] = []   # the first RATE_SAMPLES time stamps: the stated rate's check
         for rows in reader.chunks():  # the checking pass
             if not len(rows):
                 continue
             if t0 is None:
                 t0 = float(rows.t_s[0])
+            if rows_read < RATE_SAMPLES:
+                first.append(rows.t_s[:RATE_SAMPLES - rows_read])
+                if not force_rate and rows_read + len(rows) >= min(RATE_SAMPLES, 3):
+                    check_stated_rate(self.meta, np.concatenate(first), reader.name)
+            rows_read += len(rows)
             last = int(grid_positions(rows.t_s, t0, self.sample_rate_hz, reader.name, last, rows.line_of)[-1])
             t_last = float(rows.t_s[-1])
         if t0 is None:
             raise FogmonError(f"{reader.name}: no data rows")
+        check_grid_length(last + 1, rows_read, reader.name)
         self.t_first_s: float = t0
         self.t_last_s, self.n_samples = t_last, last + 1
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
@@ -181,7 +190,7 @@ class _LogGrid:
         return b, int(np.count_nonzero(self._present[:m])), len(gaps)
 
 
-class ReplayLogSet:
+class ReplayLogSet(OfflineSource):
     """Replay-log pieces (an archive's samples-NNNN.csv, fogmon.formats.archive) replayed as one
     recording, each read in chunks. Every piece is checked when the set is opened. The
     sample grid goes on across the seams: samples missing between two pieces become
@@ -261,4 +270,5 @@ def _seam_gap(t_end: float, missing: int, sample_rate_hz: float, aux: list[str],
 
 def open_source(path: str, opts: SourceOptions) -> ReplayLogSource:
     """The replay-log CSV ``path`` (``tolerate_bad_rows``, ``file_gate_dph``, ``axis``)."""
-    return ReplayLogSource(path, tolerate=opts.tolerate_bad_rows, max_abs_dph=opts.file_gate_dph, axis=opts.axis)
+    return ReplayLogSource(path, tolerate=opts.tolerate_bad_rows, max_abs_dph=opts.file_gate_dph, axis=opts.axis,
+                           force_rate=opts.force_rate)

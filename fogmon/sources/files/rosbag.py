@@ -7,9 +7,15 @@ three, a multi-axis source with ``linear_acceleration`` as aux channels ``accel_
 (m/s^2 -> g); with one axis a one-axis source of that gyro alone. Time base:
 ``header.stamp`` of each message (s), on fogmon's grid as fogmon.sources.files.stamped
 describes (missing messages become counted invalid placeholders); time 0 is the first
-message's stamp, whose Unix time is kept in the metadata (``t0_unix_s``)."""
+message's stamp, whose Unix time is kept in the metadata (``t0_unix_s``).
+
+A ROS 2 bag or MCAP file with a channel whose schema rosbags cannot parse (a service
+event type, a custom message) is read with rosbags' storage reader and its built-in
+types instead: the Imu topic is read, the channels of unknown types are skipped and
+counted (``channels_skipped``)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
 from pathlib import Path
@@ -17,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from fogmon.errors import FogmonError
+from fogmon.sources.files.listing import Entry, point_to_info, reading, stamped_entry
 from fogmon.sources.files.stamped import DPH_PER_RPS, IMU_AXES, StampedSource, imu_axes
 from fogmon.sources.options import SourceOptions
 from fogmon.units import G0_MPS2
@@ -24,10 +31,57 @@ from fogmon.units import G0_MPS2
 IMU_TYPE = "sensor_msgs/msg/Imu"
 
 
-def _reader(path: str):
+class _Rosbag2:
+    """rosbags' ROS 2 storage reader (MCAP, sqlite3) with the reader interface fogmon uses
+    (``connections``, ``messages``, ``deserialize``, ``is2``), deserializing with the
+    built-in ROS 2 types only: for a file one of whose schemas rosbags cannot parse."""
+
+    is2 = True
+
+    def __init__(self, path: str, typestore) -> None:
+        from rosbags.rosbag2 import Reader
+        self._reader = Reader(Path(path))
+        self._types = typestore
+        self._reader.open()
+        self.connections = self._reader.connections
+        #: connections of a type the built-in types do not hold (not readable here)
+        self.unknown = [c for c in self.connections if c.msgtype not in typestore.fielddefs]
+
+    def messages(self, connections=()):
+        return self._reader.messages(connections=connections)
+
+    def deserialize(self, raw: bytes, msgtype: str):
+        return self._types.deserialize_cdr(raw, msgtype)
+
+    def close(self) -> None:
+        self._reader.close()
+
+
+def _open(path: str):
+    """The opened reader of bag or MCAP ``path``: rosbags' AnyReader, or, for a ROS 2 file
+    whose schemas it cannot all parse, ``_Rosbag2``; a one-line FogmonError naming the
+    file when neither reads it."""
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
-    return AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    try:
+        with reading(f"{path}: not a readable ROS bag or MCAP file"):   # rosbags' own error types, and others
+            reader = AnyReader([Path(path)], default_typestore=store)
+            reader.open()
+        return reader
+    except FogmonError as e:
+        first = e
+    try:
+        with reading(""):
+            return _Rosbag2(path, store)
+    except FogmonError:    # not a ROS 2 storage either: the first error says why
+        pass
+    raise first
+
+
+def _topics(reader) -> list[str]:
+    """Every topic of the file with its type and message count, for messages."""
+    return [f"{c.topic} ({c.msgtype}, {c.msgcount})" for c in sorted(reader.connections, key=lambda c: c.topic)]
 
 
 _STAMP_ROS1 = struct.Struct("<II")   # header.stamp sec, nsec after the uint32 seq
@@ -79,17 +133,15 @@ def open_source(path: str, opts: SourceOptions) -> StampedSource:
     bag or MCAP file ``path`` as a StampedSource; a missing topic or a topic of another
     type is a one-line FogmonError naming the file and the Imu topics it has."""
     axes = imu_axes(opts.axis, path)
-    try:
-        reader = _reader(path)
-        reader.open()
-    except Exception as e:  # rosbags raises its own error types for unreadable files
-        why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FogmonError(f"{path}: not a readable ROS bag or MCAP file ({why})") from None
+    reader = _open(path)
+    skipped = len(getattr(reader, "unknown", ()))
     try:
         topic, conns = _topic(path, reader, opts.topic)
-        ns, v = _read_messages(reader, conns)
+        with reading(f"{path}: topic {topic}: unreadable message"):   # a corrupt message or chunk
+            ns, v = _read_messages(reader, conns)
     finally:
-        reader.close()
+        with contextlib.suppress(FogmonError), reading(""):
+            reader.close()
     where = f"{path} topic {topic}"
     if len(ns) and not np.any(ns):
         raise FogmonError(f"{where}: field header.stamp: zero in every message (the driver does not stamp them)")
@@ -101,7 +153,9 @@ def open_source(path: str, opts: SourceOptions) -> StampedSource:
     src = StampedSource((ns - t0) * 1e-9, v[:, cols if several else cols[0]] * DPH_PER_RPS, accel,
                         name=f"ROS {os.path.basename(path)} {topic} {field}", where=where, time_field="header.stamp",
                         meta={"sensor": f"{topic} {field}", "t0_unix_s": repr(t0 * 1e-9)},
-                        max_abs_dph=opts.file_gate_dph, axes=axes if several else ())
+                        max_abs_dph=opts.file_gate_dph, axes=axes if several else (),
+                        counters={"channels_skipped": skipped} if skipped else None, nominal_hz=opts.sample_rate_hz,
+                        force_rate=opts.force_rate, resample_hz=opts.resample_hz)
     src.ros_topic = topic  # the topic a Kalibr export names
     return src
 
@@ -110,19 +164,38 @@ def _topic(path: str, reader, topic: str | None) -> tuple[str, list]:
     """The Imu topic to read (``topic``, or the file's only Imu topic) and its connections;
     a one-line FogmonError naming the file's Imu topics when there is no such topic."""
     imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+    have = point_to_info(path, "topics", _topics(reader))
     if topic is None:
         if len(imu) != 1:
             raise FogmonError(f"{path}: {'no' if not imu else len(imu)} {IMU_TYPE} topics"
-                              f"{(': ' + ', '.join(imu)) if imu else ''}; name one with `topic`")
+                              f"{(': ' + ', '.join(imu)) if imu else ''}; name one with `topic` (the file has: "
+                              f"{have})")
         topic = imu[0]
     conns = [c for c in reader.connections if c.topic == topic]
     if not conns:
-        raise FogmonError(f"{path}: field topic: no topic {topic!r} in the file (its {IMU_TYPE} topics: "
-                          f"{', '.join(imu) or 'none'})")
+        raise FogmonError(f"{path}: `topic`: no topic {topic!r} in the file (it has: {have})")
     other = {c.msgtype for c in conns} - {IMU_TYPE}
     if other:
-        raise FogmonError(f"{path}: field topic: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE}")
+        raise FogmonError(f"{path}: `topic`: {topic!r} carries {', '.join(sorted(other))}, not {IMU_TYPE} (the "
+                          f"file has: {have})")
     return topic, conns
+
+
+def info(path: str, opts: SourceOptions) -> list[Entry]:
+    """One Entry per topic of the bag or MCAP file ``path``: its type, message count and
+    the rate and span of the times the recorder received the messages."""
+    reader = _open(path)
+    out = []
+    try:
+        with reading(f"{path}: unreadable messages"):   # a corrupt chunk
+            for c in sorted(reader.connections, key=lambda c: c.topic):
+                t = [ts * 1e-9 for _, ts, _ in reader.messages(connections=[c])]
+                unit = "rad/s, m/s^2" if c.msgtype == IMU_TYPE else ""
+                out.append(stamped_entry(c.topic, c.msgtype, t, unit))
+    finally:
+        with contextlib.suppress(FogmonError), reading(""):
+            reader.close()
+    return out
 
 
 def _read_messages(reader, conns: list) -> tuple[np.ndarray, np.ndarray]:

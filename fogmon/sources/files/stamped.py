@@ -1,17 +1,16 @@
 """Timestamped samples from another tool's recording (a ROS bag, a ULog, an MDF4 or a LAS
-file) on fogmon's uniform sample grid.
+file, a CAN log) on fogmon's uniform sample grid.
 
-Such files carry one time stamp per sample (header stamps, logger clocks) with jitter and
-no sequence counter. Each stamp step is rounded to a whole number of median steps, so a
-step of k periods (k >= 2) means k - 1 samples are missing: they become invalid
-placeholders with a ``gap`` event and are counted, as in a replay log
-(fogmon.sources.files.replay_log). Rounding step by step (not against the first stamp) keeps a clock
-that runs slightly off its nominal rate from turning into false gaps. The nominal rate is
-then the grid periods over the span of the stamps. A step under half a period (a repeated
-or backward stamp) is a one-line error naming the file, the sample and the time field.
-Sample times are the grid, ``t0 + k / fs`` (s). An IMU file (a ROS Imu message, a PX4
-gyro topic) gives its gyro axes as one multi-axis source (fogmon.block: one rate column
-per axis), or one axis as a one-axis source (``imu_axes``).
+The grid, the sample rate and what is irregular come from the stamps
+(fogmon.sources.files.timing): missing samples become invalid placeholders with a ``gap``
+event and are counted, as in a replay log (fogmon.sources.files.replay_log). A nominal
+rate the caller knows (a DBC cycle time, ``sample_rate_hz``) is checked against the
+stamps (``timing.check_nominal``); a forced one scales the stamps' clock to it. An
+irregular series is refused unless ``resample_hz`` asks for block means on a coarser
+grid (``timing.block_means``). Sample times are the grid, ``t0 + k / fs`` (s). An IMU
+file (a ROS Imu message, a PX4 gyro topic) gives its gyro axes as one multi-axis source
+(fogmon.block: one rate column per axis), or one axis as a one-axis source
+(``imu_axes``).
 """
 from __future__ import annotations
 
@@ -22,72 +21,71 @@ import numpy as np
 
 from fogmon.block import Block, Event, parse_axes
 from fogmon.errors import FogmonError
-from fogmon.formats.recording import Recording
+from fogmon.formats.recording import Recording, check_grid_length
 from fogmon.sources import plausibility
+from fogmon.sources.base import OfflineSource
 from fogmon.sources.files.replay_log import FAST_BLOCK
+from fogmon.sources.files.timing import Timing, block_means, check_nominal, grid_index
 from fogmon.sources.grid import MAX_GAP_EVENTS, ErrorEvents
 
 #: deg/h per rad/s (ROS sensor_msgs/Imu and PX4 topics give rad/s)
 DPH_PER_RPS = 3600.0 * 180.0 / math.pi
-#: a stamp step below this many nominal periods is two samples in one period: an error
-MIN_STEP_PERIODS = 0.5
 #: the gyro axes of an IMU message or topic
 IMU_AXES = ("x", "y", "z")
 
 
-def grid_index(t_s: np.ndarray, where: str, time_field: str) -> tuple[np.ndarray, float]:
-    """(grid index of every sample, nominal rate in Hz) from time stamps ``t_s`` (s, in
-    file order): index = cumulative sum of the steps rounded to whole periods of the
-    median step; rate = grid periods / time from the first stamp to the last (the median
-    step of jittered stamps is off by up to the jitter; the whole span is not).
-    ``where`` (file, topic) and ``time_field`` name the data in errors."""
-    t = np.asarray(t_s, dtype=np.float64)
-    if len(t) < 2:
-        raise FogmonError(f"{where}: {len(t)} sample(s): too few to know the sample rate")
-    if not np.all(np.isfinite(t)):
-        i = int(np.argmax(~np.isfinite(t)))
-        raise FogmonError(f"{where}: sample {i}, field {time_field}: time stamp is {t[i]!r}")
-    step = np.diff(t)
-    med = float(np.median(step))
-    if not med > 0:
-        raise FogmonError(f"{where}: field {time_field}: the median time step is {med!r} s (stamps not increasing)")
-    periods = step / med
-    if periods.min() < MIN_STEP_PERIODS:
-        i = int(np.argmin(periods)) + 1
-        raise FogmonError(f"{where}: sample {i}, field {time_field}: time stamp {t[i]!r} s is "
-                          f"{step[i - 1]:+.3g} s after the previous one (nominal step {med:.6g} s): repeated or "
-                          f"backward time stamps")
-    idx = np.concatenate(([0], np.cumsum(np.maximum(np.rint(periods), 1)).astype(np.int64)))
-    return idx, float(idx[-1]) / float(t[-1] - t[0])
-
-
-class StampedSource:
+class StampedSource(OfflineSource):
     """Samples with their own time stamps -> Blocks on the uniform grid (see the module
     docstring). ``t_s`` (s), ``rate_dph`` (deg/h; with ``axes``, one column per axis),
     ``aux`` channels by name (arrays of the same length); ``where`` names the data in
-    errors and events, ``name`` describes the source. Rates beyond +-``max_abs_dph``
-    become invalid and are counted. Counters, as far as the blocks yielded reach:
-    ``samples`` (present), ``samples_missing``, ``seq_gaps`` (time gaps),
-    ``implausible_samples``, and where the file has any, ``null_samples`` (values
-    present but not a number: invalid; these two count one per axis) plus the
-    ``counters`` the reader gives (what it left out and why). ``to_recording()`` gives
-    the same samples as a Recording for the batch commands (explain)."""
+    errors and events, ``name`` describes the source. ``valid`` (per sample, or per
+    sample and axis) marks what the device flagged invalid (counted ``invalid_samples``);
+    ``seq`` (rolling counter, ``modulus``) refines the gaps. ``nominal_hz`` (what
+    ``nominal_what`` says) is checked against the stamps unless ``force_rate``;
+    ``resample_hz`` gives block means instead. Rates beyond +-``max_abs_dph`` become
+    invalid and are counted. Counters, as far as the blocks yielded reach: ``samples``
+    (present), ``samples_missing``, ``seq_gaps`` (time gaps), ``implausible_samples``,
+    and where the file has any, ``null_samples`` (values present but not a number:
+    invalid; these two count one per axis) plus the ``counters`` the reader gives (what
+    it left out and why). ``timing``: what the stamps say (fogmon.sources.files.timing).
+    ``to_recording()`` gives the same samples as a Recording for the batch commands."""
 
     #: the ROS topic the samples came from (set by fogmon.sources.files.rosbag; a Kalibr export names it)
     ros_topic: str | None = None
 
     def __init__(self, t_s, rate_dph, aux: dict | None, *, name: str, where: str, time_field: str,
                  meta: dict | None = None, max_abs_dph: float = plausibility.GENERIC_MAX_ABS_DPH,
-                 counters: dict[str, int] | None = None, axes: tuple[str, ...] = ()) -> None:
+                 counters: dict[str, int] | None = None, axes: tuple[str, ...] = (), valid=None, seq=None,
+                 modulus: int | None = None, nominal_hz: float | None = None, nominal_what: str = "`sample_rate_hz`",
+                 force_rate: bool = False, resample_hz: float | None = None) -> None:
         t = np.asarray(t_s, dtype=np.float64)
-        self._idx, self.sample_rate_hz = grid_index(t, where, time_field)
-        self.t_first_s = float(t[0])
-        self._rate = np.asarray(rate_dph, dtype=np.float64)
+        rate = np.asarray(rate_dph, dtype=np.float64)
         #: the axes of the blocks (() for one axis)
         self.axes = tuple(axes)
-        if self._rate.shape != ((len(t), len(self.axes)) if self.axes else (len(t),)):
-            raise ValueError(f"rate_dph has shape {self._rate.shape} for {len(t)} stamps and axes {self.axes}")
-        self._aux = {k: np.asarray(v, dtype=np.float64) for k, v in (aux or {}).items()}
+        if rate.shape != ((len(t), len(self.axes)) if self.axes else (len(t),)):
+            raise ValueError(f"rate_dph has shape {rate.shape} for {len(t)} stamps and axes {self.axes}")
+        aux = {k: np.asarray(v, dtype=np.float64) for k, v in (aux or {}).items()}
+        ok = np.ones(rate.shape, bool) if valid is None else np.asarray(valid, bool)
+        if ok.ndim < rate.ndim:                     # one flag per sample: every axis
+            ok = np.repeat(ok[:, None], rate.shape[-1], axis=1)
+        flagged = ~ok
+        extra = dict(counters or {})
+        self.timing: Timing | None = None
+        idx: np.ndarray
+        if resample_hz is not None:
+            idx, rate, aux, flagged, n_bad = _resampled(t, rate, aux, flagged, resample_hz, max_abs_dph, where,
+                                                        time_field)
+            extra.update({"samples_averaged": len(t), plausibility.COUNTER: n_bad})
+            self.sample_rate_hz = float(resample_hz)
+        else:
+            idx, self.timing = grid_index(t, where, time_field, seq, modulus)
+            if self.timing.irregular:
+                raise FogmonError(irregular_message(self.timing, where))
+            self.sample_rate_hz = check_nominal(self.timing, nominal_hz, nominal_what, where, force_rate)
+        check_grid_length(int(idx[-1]) + 1, len(idx), where, time_field)
+        self._idx: np.ndarray = idx
+        self.t_first_s = float(t[0])
+        self._rate, self._aux, self._flagged = rate, aux, flagged
         self.aux_names = list(self._aux)
         self.name, self.where = name, where
         self.meta = {"sample_rate_hz": repr(self.sample_rate_hz), **(meta or {})}
@@ -95,7 +93,8 @@ class StampedSource:
         self.t_last_s = self.t_first_s + (self.n_samples - 1) / self.sample_rate_hz
         self._max_abs_dph = max_abs_dph
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, plausibility.COUNTER: 0,
-                         **({"null_samples": 0} if np.isnan(self._rate).any() else {}), **(counters or {})}
+                         **({"invalid_samples": 0} if flagged.any() else {}),
+                         **({"null_samples": 0} if np.isnan(self._rate[~flagged]).any() else {}), **extra}
         self._closed = False
 
     def blocks(self) -> Iterator[Block]:
@@ -118,10 +117,15 @@ class StampedSource:
                 aux[k][at] = v[a:b]
             present = np.zeros((stop - start, *self._rate.shape[1:]), bool)   # every axis of a sample read
             present[at] = True
-            null = present & np.isnan(rate)
-            rate, n_bad = plausibility.gate(rate, self._max_abs_dph, present & ~null)
+            flagged = np.zeros(present.shape, bool)
+            flagged[at] = self._flagged[a:b]
+            null = present & ~flagged & np.isnan(rate)
+            ok = present & ~flagged & ~null
+            rate, n_bad = plausibility.gate(np.where(ok, rate, np.nan), self._max_abs_dph, ok)
             if null.any():
                 c["null_samples"] += int(np.count_nonzero(null))
+            if flagged.any():
+                c["invalid_samples"] += int(np.count_nonzero(flagged.any(axis=1) if self.axes else flagged))
             gaps = gap_at[(idx[gap_at] + 1 >= start) & (idx[gap_at] + 1 < stop)]
             events = [Event(float(t[idx[g] + 1 - start]), "gap",
                             f"{int(step[g]) - 1} sample(s) missing at t={t[idx[g] + 1 - start]:.6f} s (time gap "
@@ -132,23 +136,55 @@ class StampedSource:
             c["samples_missing"] += stop - start - int(b - a)
             c["seq_gaps"] += len(gaps)
             c[plausibility.COUNTER] += n_bad
-            bad = present & ~null & np.isnan(rate)                  # made invalid by the gate
+            bad = ok & np.isnan(rate)                               # made invalid by the gate
             first = bad.any(axis=1) if self.axes else bad
             events += errors.poll(float(t[np.argmax(first)]))       # the first implausible sample's time
-            yield Block.make(t, rate, present, aux, events, self.axes)
+            yield Block.make(t, rate, ok, aux, events, self.axes)
 
     def close(self) -> None:
         self._closed = True
 
     def to_recording(self) -> Recording:
-        """The present, plausible samples on their grid times (gaps stay time gaps), with
-        ``sample_rate_hz`` metadata: what ``read_replay_log`` gives for the same data
-        (several axes: the samples plausible on every axis, as a replay log holds them)."""
+        """The present, valid, plausible samples on their grid times (gaps stay time
+        gaps), with ``sample_rate_hz`` metadata: what ``read_replay_log`` gives for the
+        same data (several axes: the samples plausible on every axis, as a replay log
+        holds them)."""
         t = self.t_first_s + self._idx / self.sample_rate_hz
-        rate, _ = plausibility.gate(self._rate, self._max_abs_dph)
+        rate, _ = plausibility.gate(np.where(self._flagged, np.nan, self._rate), self._max_abs_dph)
         keep = np.isfinite(rate).all(axis=1) if self.axes else np.isfinite(rate)
         return Recording(t[keep], rate[keep], {k: v[keep] for k, v in self._aux.items()}, dict(self.meta),
                          path=self.where, axes=self.axes)
+
+
+def irregular_message(timing: Timing, where: str) -> str:
+    """Why an irregular series is refused and the resampling that fixes it."""
+    hint = timing.resample_hint_hz()
+    odd = (timing.gaps + timing.bursts) / (timing.n - 1)
+    return (f"{where}: irregular time stamps: {timing.describe()} ({odd:.0%} of the steps are gaps or under half a "
+            f"period): the Allan deviation would keep few whole terms; "
+            f"give `resample_hz` (block means on a coarser grid, e.g. {_nice(hint)}; docs/readers.md)")
+
+
+def _nice(hz: float) -> str:
+    """A rate for a message: 3 significant digits, rounded down."""
+    if not hz > 0:
+        return "1"
+    e = 10 ** (math.floor(math.log10(hz)) - 2)
+    return f"{math.floor(hz / e) * e:.6g}"
+
+
+def _resampled(t: np.ndarray, rate: np.ndarray, aux: dict, flagged: np.ndarray, resample_hz: float,
+               max_abs_dph: float, where: str, time_field: str):
+    """(block index, block-mean rate, block-mean aux, no flags, implausible samples) of
+    ``timing.block_means`` over the samples that are valid and plausible."""
+    if len(t) < 2:
+        raise FogmonError(f"{where}: {len(t)} sample(s): too few to resample")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        grid_index(t, where, time_field)    # raises with the sample and the field
+    gated, n_bad = plausibility.gate(np.where(flagged, np.nan, rate), max_abs_dph, ~flagged & np.isfinite(rate))
+    j, means, _ = block_means(t, gated, resample_hz, where)
+    aux_means = {k: block_means(t, v, resample_hz, where)[1] for k, v in aux.items()}
+    return j, means, aux_means, np.zeros(means.shape, bool), n_bad
 
 
 def imu_axes(asked: str | None, path: str) -> tuple[str, ...]:

@@ -1,70 +1,116 @@
 """PX4 ULog flight logs, read with ``pyulog`` (``fogmon[ulog]``).
 
-Topic (``topic``): ``sensor_gyro`` (default; fields x, y, z in rad/s and temperature in
-deg C; ``sensor_gyro:1`` for the second instance) or ``sensor_combined`` (gyro_rad[0..2]
-in rad/s). Axes ``axis`` (fogmon.sources.files.stamped.imu_axes: without it all three, a
+Topic (``topic``): by default the gyro topic with the most samples among
+``sensor_combined`` (gyro_rad[0..2] in rad/s) and ``sensor_gyro`` (fields x, y, z in
+rad/s, temperature in deg C), any instance: real logs lack ``sensor_gyro`` or log it
+decimated (1 Hz) beside a 250 Hz ``sensor_combined``. ``NAME`` or ``NAME:INSTANCE`` picks
+one; a topic with under DECIMATED of the samples of the fullest gyro topic is read with a
+warning. Axes ``axis`` (fogmon.sources.files.stamped.imu_axes: without it all three, a
 multi-axis source; one axis, a one-axis source). Time base: the topic's
 ``timestamp_sample`` (us since boot) where it has one, else ``timestamp``, on fogmon's
-grid as fogmon.sources.files.stamped describes; times stay in s since boot."""
+grid as fogmon.sources.files.timing describes; times stay in s since boot."""
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
-from fogmon.errors import FogmonError
+from fogmon.errors import FogmonError, FogmonWarning
+from fogmon.sources.files.listing import Entry, bounded, reading, stamped_entry
 from fogmon.sources.files.stamped import DPH_PER_RPS, StampedSource, imu_axes
 from fogmon.sources.options import SourceOptions
 
 #: topic -> field of each axis (rad/s)
 AXIS_FIELDS = {"sensor_gyro": {"x": "x", "y": "y", "z": "z"},
                "sensor_combined": {"x": "gyro_rad[0]", "y": "gyro_rad[1]", "z": "gyro_rad[2]"}}
+#: a gyro topic with fewer than this fraction of the samples of the fullest one is decimated
+DECIMATED = 0.25
+
+
+def _read(path: str, topics: list[str] | None):
+    """The ULog ``path`` read by pyulog (only ``topics``; None: all), or a one-line
+    FogmonError naming the file."""
+    import pyulog
+    with reading(f"{path}: not a readable ULog file"), bounded(path) as fh:   # pyulog: plain exceptions
+        return pyulog.ULog(fh, topics)
+    raise AssertionError("unreachable")
+
+
+def _time_field(d: dict) -> str:
+    return "timestamp_sample" if "timestamp_sample" in d else "timestamp"
+
+
+def _label(data) -> str:
+    return f"{data.name}:{data.multi_id}"
+
+
+def _pick(path: str, log, topic: str | None):
+    """The logged data of ``topic`` (NAME or NAME:INSTANCE; None: the gyro topic with the
+    most samples) and a warning text when it is decimated (else None)."""
+    found = [d for d in log.data_list if d.name in AXIS_FIELDS and len(d.data.get("timestamp", ())) > 0]
+    have = ", ".join(f"{_label(d)} ({len(d.data['timestamp'])} samples)" for d in found) or "none"
+    if topic is None:
+        if not found:
+            raise FogmonError(f"{path}: no gyro topic ({', '.join(AXIS_FIELDS)}) in the log; fogmon info {path} "
+                              f"lists its topics")
+        data = max(found, key=lambda d: (len(d.data["timestamp"]), d.name == "sensor_combined"))
+    else:
+        name, _, inst = topic.partition(":")
+        if name not in AXIS_FIELDS:
+            raise FogmonError(f"{path}: `topic` {name!r} is not a gyro topic fogmon reads "
+                              f"({', '.join(AXIS_FIELDS)}; the log has: {have})")
+        if inst and not inst.isdigit():
+            raise FogmonError(f"{path}: `topic` instance {inst!r} of {topic!r} is not a whole number")
+        data = next((d for d in found if d.name == name and d.multi_id == int(inst or 0)), None)
+        if data is None:
+            raise FogmonError(f"{path}: `topic`: no {topic!r} in the log (gyro topics: {have})")
+    most = max(found, key=lambda d: len(d.data["timestamp"]))
+    n, n_most = len(data.data["timestamp"]), len(most.data["timestamp"])
+    warn = None
+    if n < DECIMATED * n_most:
+        e, e_most = _entry(data), _entry(most)
+        warn = (f"{path}: topic {_label(data)} holds {n} samples at {e.rate_hz:.4g} Hz, {_label(most)} {n_most} at "
+                f"{e_most.rate_hz:.4g} Hz: {_label(data)} is decimated (its Allan deviation starts at "
+                f"{1 / e.rate_hz:.3g} s)")
+    return data, warn
+
+
+def _entry(data) -> Entry:
+    d = data.data
+    fields = [f for f in d if f not in ("timestamp", "timestamp_sample")]
+    unit = "rad/s" if data.name in AXIS_FIELDS else ""
+    return stamped_entry(_label(data), f"topic ({len(fields)} fields)", np.asarray(d[_time_field(d)]) * 1e-6, unit)
+
+
+def info(path: str, opts: SourceOptions) -> list[Entry]:
+    """One Entry per topic instance of the ULog ``path`` (rate and span from its
+    ``timestamp_sample`` or ``timestamp``)."""
+    return [_entry(d) for d in sorted(_read(path, None).data_list, key=_label)]
 
 
 def open_source(path: str, opts: SourceOptions) -> StampedSource:
-    """Topic ``opts.topic`` (NAME or NAME:INSTANCE), axes ``opts.axis``
-    (``imu_axes``) of the ULog ``path`` as a StampedSource (temperature as aux ``temp_c``
-    where logged)."""
-    topic = opts.topic or "sensor_gyro"
+    """Topic ``opts.topic`` (see the module docstring), axes ``opts.axis``
+    (``imu_axes``) of the ULog ``path`` as a StampedSource (temperature as aux
+    ``temp_c`` where logged)."""
     axes = imu_axes(opts.axis, path)
-    data = _topic_data(path, topic)
-    name = data.name
-    d = data.data
+    data, warn = _pick(path, _read(path, list(AXIS_FIELDS)), opts.topic)
+    if warn:
+        warnings.warn(warn, FogmonWarning, stacklevel=2)
+    name, label, d = data.name, _label(data), data.data
     fields = [AXIS_FIELDS[name][a] for a in axes]
     for field in fields:
         if field not in d:
-            raise FogmonError(f"{path}: topic {topic}: no field {field} in the log")
-    time_field = "timestamp_sample" if "timestamp_sample" in d else "timestamp"
+            raise FogmonError(f"{path}: topic {label}: no field {field} in the log")
+    time_field = _time_field(d)
     aux = {"temp_c": d["temperature"]} if "temperature" in d else None
-    where = f"{path} topic {name}:{data.multi_id}"
     several = len(axes) > 1
     rate = np.column_stack([d[f] for f in fields]) if several else d[fields[0]]
-    what = f"{name}:{data.multi_id} {','.join(fields)}"
+    what = f"{label} {','.join(fields)}"
+    chosen = "" if opts.topic else " (the gyro topic with the most samples)"
     return StampedSource(np.asarray(d[time_field], dtype=np.float64) * 1e-6,
                          np.asarray(rate, dtype=np.float64) * DPH_PER_RPS, aux,
-                         name=f"PX4 ULog {os.path.basename(path)} {what}", where=where, time_field=time_field,
-                         meta={"sensor": what}, max_abs_dph=opts.file_gate_dph, axes=axes if several else ())
-
-
-def _topic_data(path: str, topic: str):
-    """The logged data of ``topic`` (NAME or NAME:INSTANCE) in the ULog ``path``; a
-    one-line FogmonError for a topic fogmon does not read, a broken file or a missing
-    instance (naming the instances the log has)."""
-    import pyulog
-
-    name, _, inst = topic.partition(":")
-    if name not in AXIS_FIELDS:
-        raise FogmonError(f"{path}: field topic: {name!r} is not a gyro topic fogmon reads ({', '.join(AXIS_FIELDS)})")
-    if inst and not inst.isdigit():
-        raise FogmonError(f"{path}: field topic: instance {inst!r} of {topic!r} is not a whole number")
-    try:
-        log = pyulog.ULog(path, [name])
-    except Exception as e:  # pyulog raises plain exceptions for broken files
-        why = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise FogmonError(f"{path}: not a readable ULog file ({why})") from None
-    found = [d for d in log.data_list if d.name == name]
-    data = next((d for d in found if d.multi_id == int(inst or 0)), None)
-    if data is None:
-        have = ", ".join(f"{d.name}:{d.multi_id}" for d in found) or "none"
-        raise FogmonError(f"{path}: field topic: no {topic!r} in the log (instances of {name}: {have})")
-    return data
+                         name=f"PX4 ULog {os.path.basename(path)} {what}{chosen}", where=f"{path} topic {label}",
+                         time_field=time_field, meta={"sensor": what}, max_abs_dph=opts.file_gate_dph,
+                         axes=axes if several else (), nominal_hz=opts.sample_rate_hz, force_rate=opts.force_rate,
+                         resample_hz=opts.resample_hz)
