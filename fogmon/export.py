@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from fogmon.davar.fit import NAMES
 from fogmon.errors import FogmonError
-from fogmon.outputs import check_outputs
+from fogmon.outputs import check_outputs, written
 
 RAD_PER_DEG = math.pi / 180.0
 FORMATS = ("kalibr", "matlab", "ros")
@@ -195,15 +195,13 @@ WRITERS = {"kalibr": kalibr_yaml, "ros": ros_yaml, "matlab": matlab_snippet}
 def write_export(
     kind: str, path: str, fit, source: str, sample_rate_hz: float | None, topic: str | None = None
 ) -> None:
-    """Write ``fit`` (a whole-record NoiseFit) to ``path`` in format ``kind`` (FORMATS)."""
+    """Write ``fit`` (a whole-record NoiseFit) to ``path`` in format ``kind`` (FORMATS):
+    complete or not at all (a disk error is a FogmonError naming the file)."""
     if fit is None:
         raise FogmonError(f"`export` {kind} {path}: no noise fit to export (the record gave no Allan deviation)")
     text = WRITERS[kind](fit, source, sample_rate_hz, topic)
-    try:
-        with open(path, "w", encoding="utf-8") as fh:
-            fh.write(text)
-    except OSError as e:
-        raise FogmonError(f"`export` {kind} {path}: cannot write: {e.strerror}") from None
+    with written(path, f"`export` {kind}") as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        fh.write(text)
 
 
 def check_export(kind: str, path: str, inputs: Iterable[str | None] = ()) -> None:

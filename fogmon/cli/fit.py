@@ -36,6 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fogmon.cli import render
+    from fogmon.cli.output_options import check_command_outputs
     from fogmon.davar.curve import adev_from_curve, read_curve_csv, with_fit_intervals
     from fogmon.davar.fit import fit_noise
     from fogmon.errors import FogmonError
@@ -43,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not args.confidence < 1:
         raise FogmonError(f"--confidence must be below 1, got {args.confidence:g}")
+    check_command_outputs(args)
     export = export_request(args, [args.curve])
     cols, _ = read_curve_csv(args.curve)
     n = None

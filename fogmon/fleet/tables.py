@@ -6,6 +6,7 @@ import os
 
 import numpy as np
 
+from fogmon.outputs import written
 from fogmon.sinks.base import COEFFICIENTS
 
 WINDOWS = "windows.parquet"
@@ -40,9 +41,10 @@ def windows_table(name: str, axis: str, window_s: float, tau_s: np.ndarray, part
 
 
 def write_tables(out_dir: str, windows: list, recordings: list[dict]) -> tuple[str, str]:
-    """Write both tables into ``out_dir`` (each as ``.tmp`` then renamed: never half
-    written); windows of recordings with other taus get nulls in the ADEV columns they
-    lack. Returns the two paths."""
+    """Write both tables into ``out_dir`` (each under a temporary name, then renamed:
+    never half written; a disk error is a FogmonError naming the file); windows of
+    recordings with other taus get nulls in the ADEV columns they lack. Returns the two
+    paths."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -54,7 +56,7 @@ def write_tables(out_dir: str, windows: list, recordings: list[dict]) -> tuple[s
     paths = []
     for tbl, name in ((w, WINDOWS), (r, RECORDINGS)):
         path = os.path.join(out_dir, name)
-        pq.write_table(tbl, path + ".tmp", compression="zstd")
-        os.replace(path + ".tmp", path)
+        with written(path, "`out`") as tmp:
+            pq.write_table(tbl, tmp, compression="zstd")
         paths.append(path)
     return paths[0], paths[1]

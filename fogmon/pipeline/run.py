@@ -32,7 +32,7 @@ from fogmon.pipeline.config import PipelineConfig, _check_axis_options, live_sam
 from fogmon.pipeline.progress import ReplayProgress
 from fogmon.pipeline.reader import _ThreadedBlocks
 from fogmon.sim.model import SensorModel
-from fogmon.sinks.base import AxisSummary, Sink, StreamInfo, Summary
+from fogmon.sinks.base import AxisSummary, Sink, StopRun, StreamInfo, Summary
 from fogmon.sources.base import Source
 from fogmon.sources.pacing import Pacer
 
@@ -114,6 +114,8 @@ class Pipeline:
                     break
         except KeyboardInterrupt:
             self.summary.interrupted = True
+        except StopRun as e:       # an output can take no more: end as a stop signal does
+            self.summary.stopped = str(e)
         except BaseException:
             self.summary.failed = True
             raise

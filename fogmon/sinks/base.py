@@ -76,6 +76,7 @@ class Summary(AxisSummary):
     interrupted: bool = False
     analysed: str = "rate_dph"    # what DAVAR analysed (see StreamInfo.analysed)
     failed: bool = False          # stopped by an error (reported by the caller, no summary)
+    stopped: str = ""             # why a sink ended the run early (StopRun: an output could take no more)
     counters: dict[str, int] = field(default_factory=dict)
     event_counts: dict[str, int] = field(default_factory=dict)
     outputs: list[str] = field(default_factory=list)
@@ -90,6 +91,12 @@ class Summary(AxisSummary):
     def speed_x(self) -> float:
         """Recording time / wall time."""
         return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
+
+
+class StopRun(Exception):
+    """Raised by a sink's ``block`` when its output can take no more (a full disk): the
+    pipeline ends the run as a stop signal does (every sink finished, the summary
+    printed) and notes the message in ``Summary.stopped``."""
 
 
 class Sink:

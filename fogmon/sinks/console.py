@@ -26,7 +26,7 @@ def format_summary(s: Summary, flags: Mapping[str, str] | None = None) -> str:
     axes side by side (``axes_lines``). Parameters are named plainly, or as their flags
     in ``flags`` (parameter name -> flag)."""
     lines = []
-    state = f"interrupted ({stop_name()})" if s.interrupted else "done"
+    state = f"interrupted ({stop_name()})" if s.interrupted else f"stopped ({s.stopped})" if s.stopped else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
     lost = "invalid/lost on some axis" if s.axes else "invalid/lost"
     speed = f"{s.speed_x:,.0f}" if s.speed_x >= 10 else f"{s.speed_x:.2g}"   # a live run: about x1

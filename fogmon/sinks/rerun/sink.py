@@ -57,6 +57,7 @@ from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.formats.archive import piece_path
+from fogmon.outputs import Output, check_outputs, write_failed
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 from fogmon.sinks.rerun import plots as rp
 from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, Y_RANGE, axis_path, blueprint, heatmap_height
@@ -201,9 +202,9 @@ class RerunSink(Sink):
         self.server_url: str | None = None
         self.rec: _Streams | None = None
         self.pieces: list[str] = []          # .rrd files written (one unless rotate)
+        self.error: FogmonError | None = None   # a .rrd that could not be written (removed)
         self._recording_id = str(uuid.uuid4())
         self._piece = 1
-        self._probe: str | None = None       # an empty file made to test --rrd, removed if no data came
         self._last_flush = time.monotonic()
         self._legend_sent = False
         self._band_alpha: float | None = None
@@ -215,11 +216,7 @@ class RerunSink(Sink):
         if rrd_path:
             self._check_rrd()
         if serve:
-            try:
-                self.server, self.server_url = start_grpc_server(bind, port)
-            except BaseException:
-                self._discard_probe()
-                raise
+            self.server, self.server_url = start_grpc_server(bind, port)
             print(f"fogmon: serving Rerun on {self.server_url} (open it with: rerun {self.server_url})",
                   file=sys.stderr)
 
@@ -228,27 +225,10 @@ class RerunSink(Sink):
         return piece_path(self.rrd_path, self._piece) if self.rotate_files else self.rrd_path
 
     def _check_rrd(self) -> None:
-        """Fail before the source is opened, not at the first sample."""
-        path = self._piece_path()
-        d = os.path.dirname(os.path.abspath(path))
-        try:
-            os.makedirs(d, exist_ok=True)
-        except OSError as e:
-            raise FogmonError(f"--rrd {self.rrd_path}: cannot create folder {d}: {e.strerror}") from None
-        if os.path.isdir(path):
-            raise FogmonError(f"--rrd {self.rrd_path}: is a folder, give a file name like out/run.rrd")
-        existed = os.path.exists(path)
-        try:
-            open(path, "ab").close()
-        except OSError as e:
-            raise FogmonError(f"--rrd {self.rrd_path}: cannot write: {e.strerror}") from None
-        self._probe = None if existed else path
-
-    def _discard_probe(self) -> None:
-        if self._probe is not None:
-            with contextlib.suppress(OSError):
-                os.remove(self._probe)
-            self._probe = None
+        """Fail before the source is opened, not at the first sample (fogmon.outputs: its
+        folder exists, it can be written; nothing is created)."""
+        assert self.rrd_path is not None, "called with --rrd only"
+        check_outputs([Output("`rrd_path`", self.rrd_path, pieces=self.rotate_files)])
 
     # -- set-up ---------------------------------------------------------------
     def start(self, info: StreamInfo) -> None:
@@ -301,7 +281,6 @@ class RerunSink(Sink):
         self.rec.file.set_log_time_enabled(False)
         self.rec.file.save(path, default_blueprint=self._blueprint)
         self.pieces.append(path)
-        self._probe = None
 
     def _log_static(self, rec) -> None:
         """Series names and styles, the session text, the ADEV view's scale and grid."""
@@ -550,7 +529,8 @@ class RerunSink(Sink):
         if not (self.rotate_files and self.rec is not None and self.rec.file is not None):
             return
         self._flush(final=True)
-        _close_stream(self.rec.file)
+        if not self._close_file():
+            return
         self._piece = piece
         self._open_piece()
         self._log_static(self.rec.file)
@@ -561,12 +541,10 @@ class RerunSink(Sink):
     def finish(self, summary) -> None:
         """Flush everything, complete the .rrd, keep serving a replay's viewers until
         Ctrl-C, then stop the server; without any sample only clean up."""
-        if self.rec is None:
-            self._discard_probe()
-        else:
+        if self.rec is not None:
             self._flush(final=True)
             if self.rec.file is not None:
-                _close_stream(self.rec.file)
+                self._close_file()
             if self.pieces:
                 summary.outputs.append(self.pieces[0] if len(self.pieces) == 1 else
                                        f"{self.pieces[0]} .. {self.pieces[-1]} ({len(self.pieces)} pieces)")
@@ -577,6 +555,28 @@ class RerunSink(Sink):
                 _rerun_call(self.rec.live.disconnect)
         if self.server is not None:
             stop_process_group(self.server)
+
+    def _close_file(self) -> bool:
+        """Complete the current .rrd piece; False when it could not be written (a full
+        disk: Rerun's file writer stopped): then the piece is removed with a warning,
+        ``error`` says why (fogmon.outputs.write_failed) and no more is written to files."""
+        assert self.rec is not None and self.rec.file is not None, "a .rrd piece is open"
+        path = self.pieces[-1]
+        try:
+            self.rec.file.flush(timeout_sec=FLUSH_TIMEOUT_S)
+            ok = True
+        except RuntimeError as e:
+            ok = False
+            why = str(e).splitlines()[0]
+        _rerun_call(self.rec.file.disconnect)
+        self.rec.file = None
+        if not ok:
+            with contextlib.suppress(OSError):
+                os.remove(path)
+            self.pieces.remove(path)
+            self.error = write_failed("`rrd_path`", path, f"Rerun: {why}")
+            print(f"fogmon: warning: {path}: Rerun could not complete it ({why}); removed", file=sys.stderr)
+        return ok
 
     def _serve_until_stopped(self) -> None:
         print(f"fogmon: done; still serving {self.server_url} for viewers - press Ctrl-C to stop", file=sys.stderr)
@@ -598,12 +598,6 @@ def event_text(e: Event, of_axis: bool = False) -> str:
     axis, its kind (left out where the message starts with it in words) and message."""
     kind = "" if e.message.lower().startswith(e.kind.replace("_", " ")) else f"{e.kind}: "
     return f"{e.t_s:.2f} s  {f'axis {e.axis}: ' if of_axis else ''}{kind}{e.message}"
-
-
-def _close_stream(rec) -> None:
-    """Deliver everything (at most FLUSH_TIMEOUT_S) and close: an .rrd gets its footer."""
-    _rerun_call(rec.flush, timeout_sec=FLUSH_TIMEOUT_S)
-    _rerun_call(rec.disconnect)
 
 
 def _rerun_call(fn, **kwargs) -> None:
