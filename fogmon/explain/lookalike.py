@@ -14,7 +14,10 @@ The rule, applied by the forward selection (fogmon.explain.selection) in three p
    bar beyond that candidate while the candidate adds more than its own bar beyond the
    law: the channel does not predict the timing and the sizes, the catalogue kind does.
    When neither adds anything beyond the other (one switch of a channel, one step of
-   the bias) the channel, which predicts the timing, is preferred.
+   the bias) the channel, which predicts the timing, is preferred - unless the
+   catalogue kind follows a channel itself (``scale_factor`` on rot_dps,
+   ``thermal_drift`` on temp_c: a rotation switched between 0 and one rate makes
+   rot_dps^2 the same feature as rot_dps), then its named physics is kept.
 3. **The evidence names what was refused** (``explained``): every catalogue kind (mean-
    or noise-type) that passed its bar before the law was accepted and no longer does
    after it is a look-alike the law explains; the accepted law's evidence says so with
@@ -27,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.explain.candidates.base import Candidate, Context
+from fogmon.sim.model import EFFECT_KINDS
 
 LAW = "aux_response"
 
@@ -57,10 +61,16 @@ def refusal(law: Candidate, cands: list[Candidate], ctx: Context) -> str | None:
         g_o = _gain(ctx, o.design)
         joint = _gain(ctx, np.column_stack((law.design, o.design)))
         law_beyond, o_beyond = joint - g_o, joint - g_law
-        if law_beyond <= law.bar(pen) and o_beyond > o.bar(pen):
+        if law_beyond > law.bar(pen):
+            continue
+        if o_beyond > o.bar(pen):
             return (f"a look-alike of {o.kind}: beyond it the law adds chi2 {law_beyond:.1f} (its bar "
                     f"{law.bar(pen):.1f}), while {o.kind} adds {o_beyond:.1f} beyond the law (bar {o.bar(pen):.1f}): "
                     f"the channels do not predict what {o.kind} fits")
+        if EFFECT_KINDS[o.kind].aux is not None:
+            return (f"a look-alike of {o.kind}: neither adds more than its bar beyond the other (the law "
+                    f"{law_beyond:.1f}, {o.kind} {o_beyond:.1f}), and {o.kind} follows a channel "
+                    f"({EFFECT_KINDS[o.kind].aux}) too: the catalogue's physics is kept")
     return None
 
 

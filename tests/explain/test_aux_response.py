@@ -15,7 +15,7 @@ from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import whittle_context
 from fogmon.explain.axes import _causes, with_other_rates
 from fogmon.explain.candidates.aux_response import CATALOGUE_FEATURES, _library, aux_response
-from fogmon.explain.candidates.mean import bias_step
+from fogmon.explain.candidates.mean import bias_step, scale_factor
 from fogmon.explain.explainer import explain
 from fogmon.explain.options import Options
 from fogmon.explain.physics import physics_of
@@ -106,6 +106,21 @@ def test_a_real_bias_step_refuses_a_channel_that_only_partly_follows_it():
     assert law.bic_gain(ctx.penalty) > 0 and step.bic_gain(ctx.penalty) > 0
     why = lookalike.refusal(law, [law, step], ctx)
     assert why is not None and why.startswith("a look-alike of bias_step")
+
+
+def test_a_tie_with_a_catalogue_kind_on_its_own_channel_keeps_the_catalogue():
+    """A rotation switched between 0 and one rate makes rot_dps^2 the same feature as
+    rot_dps: the scale factor (the catalogue's physics on that channel) is kept."""
+    n = 36000
+    rng = np.random.default_rng(10)
+    k = np.arange(n)
+    rot = np.where((k // 3000) % 2 == 1, 20.0, 0.0)
+    y = SIGMA * rng.standard_normal(n) + 3600.0 * rot * 30e-6
+    ctx = _ctx(y, {"rot_dps": rot})
+    law, sf = aux_response(ctx), scale_factor(ctx)
+    assert law.bic_gain(ctx.penalty) > 0 and sf.bic_gain(ctx.penalty) > 0
+    why = lookalike.refusal(law, [law, sf], ctx)
+    assert why is not None and why.startswith("a look-alike of scale_factor") and "catalogue's physics" in why
 
 
 def test_a_stepped_channel_is_judged_first_and_explains_the_step():
