@@ -85,3 +85,35 @@ def g_per_unit(unit: str) -> float | None:
 def coefficient_unit(name: str) -> str:
     """The unit of a noise coefficient from its name's suffix (Q_arcsec -> arcsec, VRW_mpsph -> m/s/sqrt(h))."""
     return SUFFIX_UNITS[name.rsplit("_", 1)[1]]
+
+
+#: aux column-name suffix (lower case) -> (quantity, unit): what a channel measures, read
+#: from its name (docs/formats.md: "carried along in the units its name says"); a
+#: recording's ``unit_<column>`` metadata line overrides it (``channel_unit``)
+CHANNEL_SUFFIXES: dict[str, tuple[str, str]] = {
+    "g": ("acceleration", "g"), "mps2": ("acceleration", "m/s^2"),
+    "c": ("temperature", "degC"), "degc": ("temperature", "degC"), "k": ("temperature", "K"),
+    "dps": ("angular rate", "deg/s"), "dph": ("angular rate", "deg/h"), "radps": ("angular rate", "rad/s"),
+    "rpm": ("angular rate", "rpm"),
+    "v": ("voltage", "V"), "mv": ("voltage", "mV"), "a": ("current", "A"), "ma": ("current", "mA"),
+    "ut": ("magnetic field", "uT"), "nt": ("magnetic field", "nT"), "mt": ("magnetic field", "mT"),
+    "gauss": ("magnetic field", "gauss"), "mgauss": ("magnetic field", "mgauss"),
+    "m": ("length", "m"), "pa": ("pressure", "Pa"), "hpa": ("pressure", "hPa"), "kpa": ("pressure", "kPa"),
+    "hz": ("frequency", "Hz"), "s": ("time", "s"), "pct": ("fraction", "%"),
+}
+#: units (lower case) a ``unit_<column>`` metadata line may name -> quantity
+UNIT_QUANTITIES = {u.lower(): q for q, u in CHANNEL_SUFFIXES.values()}
+
+
+def channel_unit(name: str, meta: dict | None = None) -> tuple[str, str]:
+    """(quantity, unit) of the aux column ``name``: a ``unit_<name>`` metadata entry of its
+    recording (``meta``) when present, else its name's suffix after the last ``_``
+    (CHANNEL_SUFFIXES: ``vib_g`` -> acceleration in g, ``mag_ut`` -> magnetic field in uT);
+    ("", "") when neither says. A rate column of another axis (``rate_x_dph``) is an
+    angular rate in deg/h."""
+    given = (meta or {}).get(f"unit_{name}")
+    if given:
+        return UNIT_QUANTITIES.get(given.strip().lower(), ""), given.strip()
+    if "_" in name:
+        return CHANNEL_SUFFIXES.get(name.rsplit("_", 1)[1].lower(), ("", ""))
+    return "", ""

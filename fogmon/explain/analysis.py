@@ -58,11 +58,12 @@ def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.
 
 
 def matched_tests_figure(cands: list[Candidate], penalty: float, contradicted: AbstractSet[str]) -> float:
-    """The score's ``tests``: the strongest candidate's sqrt(gain / (k ln n)), candidates
+    """The score's ``tests``: the strongest candidate's sqrt(gain / its bar) (k ln n, or its
+    search's chance bar when higher: ``Candidate.bar``, so below 1 when none passes), candidates
     of a kind the map contradicted (``contradicted``: added, it opened a whole-record
     deficit, ``Selection.judge``) left out - their statistic measured a misfit their shape does
     not describe, and the map's own figures keep that misfit."""
-    return max([math.sqrt(max(c.gain, 0.0) / (c.k * penalty)) for c in cands if c.kind not in contradicted],
+    return max([math.sqrt(max(c.gain, 0.0) / c.bar(penalty)) for c in cands if c.kind not in contradicted],
                default=0.0)
 
 

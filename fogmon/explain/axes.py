@@ -32,6 +32,7 @@ from fogmon.explain.bootstrap import Mapper, Progress
 from fogmon.explain.explainer import Result, explain, without_motion
 from fogmon.explain.options import Options
 from fogmon.formats.recording import Recording
+from fogmon.sim.features import Feature, other_axis, parse_feature
 from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, validate_model
 
 #: segments of the record for the per-segment white levels
@@ -72,6 +73,8 @@ class Common:
     measure: str
     pairs: list[Coherence]
     alpha: float
+    #: an ``aux_response`` law's feature (on the recording's columns), "" for other kinds
+    feature: str = ""
 
     @property
     def significant(self) -> bool:
@@ -82,7 +85,8 @@ class Common:
         """One paragraph: the coherence found, and whether it is beyond chance."""
         pairs = "; ".join(f"{c.axes[0]}-{c.axes[1]} r = {c.r:+.3f} at tau {c.tau_s:.4g} s "
                           f"(p = {c.p_value:.2g}, effective n {c.n_eff:.0f} of {c.terms_n})" for c in self.pairs)
-        head = (f"{self.kind} found on axes {', '.join(self.axes)}, each driven by the aux channel {self.channel}. "
+        what = f"{self.kind} ({self.feature})" if self.feature else self.kind
+        head = (f"{what} found on axes {', '.join(self.axes)}, each driven by the aux channel {self.channel}. "
                 f"Cross-axis coherence of {self.measure}: {pairs or 'no pair with enough data to test'}.")
         weak = [f"{c.axes[0]}-{c.axes[1]}" for c in self.pairs if not c.p_value < self.alpha]
         if self.significant:
@@ -93,7 +97,8 @@ class Common:
                 f"each axis's effect stands on its own evidence (its report).")
 
     def as_json(self, results: dict[str, Result]) -> dict:
-        return {"kind": self.kind, "aux_channel": self.channel, "axes": list(self.axes),
+        return {"kind": self.kind, "aux_channel": self.channel, **({"feature": self.feature} if self.feature else {}),
+                "axes": list(self.axes),
                 "params": {a: _params(results[a], self.kind) for a in self.axes}, "measure": self.measure,
                 "coherence": [c.as_json(self.alpha) for c in self.pairs], "significant": self.significant,
                 "alpha": self.alpha, "evidence": self.evidence()}
@@ -183,7 +188,7 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
         def axis_progress(stage: str, done: int = 0, total: int = 0, a: str = a) -> None:
             report(f"axis {a}: {stage}", done, total)
 
-        one = rec.for_axis(a)
+        one = with_other_rates(rec, a)
         motion: list[dict] = []
         if not keep_motion:
             axis_progress("looking for platform motion")
@@ -199,6 +204,15 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
     common = common_causes(rec, results, opt.alpha)
     base = model if model is not None else SensorModel(rec.sample_rate_hz, 0.0, results[axes[0]].model.noise, [])
     return AxesResult(rec, base, results, common, fitted_model(base, results), warnings, model is None)
+
+
+def with_other_rates(rec: Recording, axis: str) -> Recording:
+    """The one-axis recording of ``axis`` with every other axis's rate as an aux column
+    ``rate_<other>_dph`` (deg/h, the measured rate): the features of a cross-coupling law
+    (``aux_response``, fogmon.sim.features)."""
+    one = rec.for_axis(axis)
+    others = {f"rate_{b}_dph": rec.rate_dph[:, j] for j, b in enumerate(rec.axes) if b != axis}
+    return replace(one, aux={**one.aux, **others})
 
 
 def fitted_model(model: SensorModel, results: dict[str, Result]) -> SensorModel:
@@ -232,19 +246,19 @@ def channel_of(rec: Recording, axis: str, channel: str) -> str:
 
 
 def common_causes(rec: Recording, results: dict[str, Result], alpha: float) -> list[Common]:
-    """Aux-driven effect kinds accepted on two or more axes with the same aux column,
-    with the cross-axis coherence of the data (module docstring), in the order of the
-    axes' effects."""
-    groups: dict[tuple[str, str], list[str]] = {}
+    """Aux-driven effect kinds accepted on two or more axes with the same aux column (an
+    ``aux_response`` law: per term, the same feature of the same aux columns; a term on
+    another axis's rate is no common cause), with the cross-axis coherence of the data
+    (module docstring), in the order of the axes' effects."""
+    groups: dict[tuple[str, str, str], list[str]] = {}
     for a, res in results.items():
         for acc in res.accepted:
-            need = EFFECT_KINDS[acc.cand.kind].aux
-            if need is not None:
-                axes = groups.setdefault((acc.cand.kind, channel_of(rec, a, need)), [])
+            for channel, feature in _causes(rec, a, acc.cand.kind, acc.cand.params):
+                axes = groups.setdefault((acc.cand.kind, channel, feature), [])
                 if a not in axes:
                     axes.append(a)
     out = []
-    for (kind, channel), axes in groups.items():
+    for (kind, channel, feature), axes in groups.items():
         if len(axes) < 2:
             continue
         white = EFFECT_KINDS[kind].nature == "white_level"
@@ -252,7 +266,24 @@ def common_causes(rec: Recording, results: dict[str, Result], alpha: float) -> l
         seg_s = segment_n(int(rec.grid_index()[-1]) + 1) / rec.sample_rate_hz
         measure = (f"the white level (Allan deviation at tau0 of the residual per {seg_s:.4g} s segment)"
                    if white else "the residual's non-overlapping Allan differences at the mismatch taus")
-        out.append(Common(kind, channel, tuple(axes), measure, [p for p in pairs if p is not None], alpha))
+        out.append(Common(kind, channel, tuple(axes), measure, [p for p in pairs if p is not None], alpha, feature))
+    return out
+
+
+def _causes(rec: Recording, axis: str, kind: str, params: dict) -> list[tuple[str, str]]:
+    """(the recording's aux column(s), feature) an accepted effect of ``axis`` is driven by:
+    its kind's aux channel; each term of an ``aux_response`` that reads aux columns only
+    (its feature rewritten on the recording's columns); none for other kinds."""
+    if kind != "aux_response":
+        need = EFFECT_KINDS[kind].aux
+        return [(channel_of(rec, axis, need), "")] if need is not None else []
+    out = []
+    for t in params["terms"]:
+        f = parse_feature(t["feature"])
+        if any(other_axis(n) is not None for n in f.names):
+            continue
+        cols = tuple(channel_of(rec, axis, n) for n in f.names)
+        out.append((", ".join(dict.fromkeys(cols)), Feature(f.shape, cols).text))
     return out
 
 

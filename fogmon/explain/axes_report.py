@@ -66,7 +66,8 @@ def axes_verdict(ares: AxesResult, axes: dict[str, dict]) -> str:
     for c in ares.common:
         how = ("the axes' data cohere beyond chance on every pair" if c.significant else
                "but the axes' data do not cohere beyond chance on every pair (see its evidence)")
-        parts.append(f"Common cause: {c.kind} driven by {c.channel} on axes {', '.join(c.axes)}, {how}.")
+        what = f"{c.kind} ({c.feature})" if c.feature else c.kind
+        parts.append(f"Common cause: {what} driven by {c.channel} on axes {', '.join(c.axes)}, {how}.")
     if not ares.common:
         parts.append("No effect is shared across axes through one aux channel.")
     for w in ares.warnings:

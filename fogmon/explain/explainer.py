@@ -20,6 +20,7 @@ from fogmon.explain.selection import Accepted, Selection, Setting, light
 from fogmon.formats.recording import Recording
 from fogmon.motion import find_motion, motion_mask
 from fogmon.sim import effects as fx
+from fogmon.sim.features import channels_of
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import ramp_dph
 
@@ -67,10 +68,11 @@ def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> 
         raise FogmonError(f"{rec.name}: sample rate {fs_r:g} Hz does not match the model's "
                           f"[sensor] sample_rate_hz = {fs_m:g} Hz")
     for i, e in enumerate(model.effects):
-        need = EFFECT_KINDS[e.kind].aux
-        if need and need not in rec.aux:
-            raise FogmonError(f"model effect #{i + 1} ({e.kind}) needs the aux channel {need!r}, which "
-                              f"{rec.name} lacks (columns: {', '.join(['time_s', 'rate_dph', *rec.aux])})")
+        need = channels_of(e.params["terms"]) if e.kind == "aux_response" else [EFFECT_KINDS[e.kind].aux]
+        for c in need:
+            if c and c not in rec.aux:
+                raise FogmonError(f"model effect #{i + 1} ({e.kind}) needs the aux channel {c!r}, which "
+                                  f"{rec.name} lacks (columns: {', '.join(['time_s', 'rate_dph', *rec.aux])})")
 
 
 def _grid_arrays(rec: Recording):
@@ -128,7 +130,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     report(f"bootstrap null: {B} simulations of the model like the recording", 0, 0)
     null = bootstrap(Replicas(stoch, t, aux, valid), grid, B, opt.seed, opt.alpha, opt.workers, progress, mapper)
     report("mismatch map and candidate effects", 0, 0)
-    setting = Setting(t, aux, valid, grid, B, opt.seed, opt.alpha, opt.workers, opt.max_effects, progress, mapper)
+    setting = Setting(t, aux, valid, grid, B, opt.seed, opt.alpha, opt.workers, opt.max_effects, progress,
+                      mapper, rec.meta)
     state = Selection.start(setting, y0.copy(), stoch, null, baseline)
     # what `before` needs of the first round (its context is let go: memory)
     first_analysis, first_tests = state.fit.analysis, [light(c) for c in state.fit.cands]

@@ -11,7 +11,7 @@ from typing import Literal
 
 import numpy as np
 
-from fogmon.explain import mismatch
+from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
@@ -71,6 +71,8 @@ class Setting:
     max_effects: int
     progress: Progress | None = None
     mapper: Mapper | None = None
+    #: the recording's metadata (units of its aux channels)
+    meta: Mapping[str, str] = field(default_factory=dict)
 
     def fit(self, y: np.ndarray, stoch: SensorModel, null: mismatch.Null, counts: Mapping[str, int],
             contradicted: AbstractSet[str]) -> Fit:
@@ -78,6 +80,7 @@ class Setting:
         context, the candidates (``counts``: kind -> times added) and the analysis (the
         tests of the ``contradicted`` kinds not counted in its score)."""
         ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
+        ctx.meta = dict(self.meta)
         cands = candidates(ctx, counts, null.scan_bars)
         fit = Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
         for key in ("spike_scan", "spikes"):  # record-length arrays, computed again if needed (memory)
@@ -156,6 +159,8 @@ class Selection:
             return replace(out, contradicted=contradicted,
                            fit=replace(f, analysis=rescored(f.analysis, f.cands, f.ctx.penalty, contradicted)))
         assert v.trial is not None  # an accepted candidate comes with its trial
+        if c.kind == lookalike.LAW:
+            c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
         before, after = self.fit.analysis.score.value, v.trial.analysis.score.value
         accepted = (*self.accepted, Accepted(c, v.bic_gain, v.why, before, after))
         if self.setting.progress:
@@ -175,6 +180,9 @@ class Selection:
         bg = c.bic_gain(ctx.penalty)
         if bg <= 0:
             return Verdict("stop", bg)
+        look = lookalike.refusal(c, self.fit.cands, ctx)
+        if look is not None:
+            return Verdict("defer", bg, look)
         line = _inside_line(c, self.fit.cands, ctx.sample_rate_hz / ctx.n)
         if line is not None:
             return Verdict("defer", bg, f"its frequency lies inside the narrowband line at {line:.4g} Hz that "
@@ -226,12 +234,14 @@ def _below(c: Candidate, penalty: float, bars: Mapping[str, float]) -> str:
         return "below the BIC bar"
     if c.search_bar == bars.get(c.kind):
         return "below the chance bar of the model's own noise (its rate random walk, simulated)"
-    return "below the frequency search's chance bar"
+    return ("below the feature search's chance bar" if c.kind == lookalike.LAW
+            else "below the frequency search's chance bar")
 
 
 def candidates(ctx: Context, counts: Mapping[str, int], bars: Mapping[str, float]) -> list[Candidate]:
     """Every applicable candidate (``CANDIDATES``) fitted to the current residual, best
-    BIC first (refused kinds included: they still measure what is missing, the score's
+    BIC first but a channel law that passes its bar ahead of all (``lookalike.first``;
+    refused kinds included: they still measure what is missing, the score's
     ``tests``, unless the map contradicted them, ``analysis.matched_tests_figure``)."""
     out: list[Candidate] = []
     best: dict[bool, int] = {}  # tier (first or not) -> index in out of its best candidate so far
@@ -253,7 +263,7 @@ def candidates(ctx: Context, counts: Mapping[str, int], bars: Mapping[str, float
         else:
             out.append(light(c))
     out.sort(key=lambda c: -c.bic_gain(ctx.penalty))
-    return out
+    return lookalike.first(out, ctx.penalty)
 
 
 def fitted(kind: str, ctx: Context, bars: Mapping[str, float]) -> Candidate | None:

@@ -3,7 +3,7 @@ parameters. Natures (see ``fogmon.sim.model.EFFECT_KINDS``):
 
 - mean-type: ``mean_rate_dph(effect, t_s, aux, sample_rate_hz)`` -> deterministic deg/h
   contribution (thermal_drift, periodic, glitches, bias_step, rate_ramp, scale_factor,
-  warm_up). Each is linear in its amplitude-type parameters, so a fitter can evaluate
+  warm_up, aux_response). Each is linear in its amplitude-type parameters, so a fitter can evaluate
   it with one coefficient set to 1 to get a regressor.
 - white-level: ``white_level_dpsh(effect, t_s, aux)`` -> added ARW level in deg/sqrt(h)
   per sample (vibration_noise, temperature_noise); the simulator scales one white
@@ -22,6 +22,7 @@ import numpy as np
 from scipy.signal import lfilter, lfilter_zi, sosfilt, sosfilt_zi
 
 from fogmon.errors import FogmonError
+from fogmon.sim.features import Feature, parse_feature
 from fogmon.sim.model import EFFECT_KINDS, Effect
 from fogmon.sim.noise import GaussMarkov, LowpassNoise, NarrowbandLine, lowpass_filter
 
@@ -145,6 +146,38 @@ def warm_up(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
     return np.where(dt >= 0, p["amplitude_dph"] * np.exp(-np.maximum(dt, 0.0) / p["tau_s"]), 0.0)
 
 
+def feature_values(f: Feature, t_s, channels: dict, smooth_s: float = 10.0, diff_step_s: float = 1.0) -> np.ndarray:
+    """The feature ``f`` (fogmon.sim.features) at the sample times ``t_s`` (s) from the
+    channels by name (one value per sample): ``d(NAME)/dt`` of the channel smoothed over
+    ``smooth_s`` s by 3-point backward differences with step ``diff_step_s`` s
+    (``temperature_derivatives``, per second)."""
+    x = np.asarray(channels[f.names[0]], dtype=float)
+    if f.shape == "linear":
+        return x.copy()
+    if f.shape == "square":
+        return x * x
+    if f.shape == "abs":
+        return np.abs(x)
+    if f.shape == "rate":
+        return temperature_derivatives(t_s, x, smooth_s, diff_step_s)[1]
+    return x * np.asarray(channels[f.names[1]], dtype=float)
+
+
+def aux_response(t_s, aux, p, sample_rate_hz=None) -> np.ndarray:
+    """offset_dph + sum of coef x feature over the terms (deg/h); every channel a feature
+    reads must be in ``aux`` (another axis's rate column too)."""
+    t = np.asarray(t_s, dtype=float)
+    out = np.full(len(t), p["offset_dph"])
+    for term in p["terms"]:
+        f = parse_feature(term["feature"])
+        missing = [c for c in f.names if c not in aux]
+        if missing:
+            raise FogmonError(f"effect 'aux_response' term {f.text!r} needs the channel {missing[0]!r}, which the "
+                              f"input lacks (have: {', '.join(aux) or 'none'})")
+        out += term["coef"] * feature_values(f, t, aux, p["smooth_s"], p["diff_step_s"])
+    return out
+
+
 def vibration_noise(t_s, aux, p) -> np.ndarray:
     """Added ARW level gain * vib_g (deg/sqrt(h))."""
     return p["n_gain_dpsh_per_g"] * np.asarray(aux["vib_g"], dtype=float)
@@ -158,6 +191,7 @@ def temperature_noise(t_s, aux, p) -> np.ndarray:
 MEAN_EFFECTS = {
     "thermal_drift": thermal_drift, "periodic": periodic, "glitches": glitches,
     "bias_step": bias_step, "rate_ramp": rate_ramp, "scale_factor": scale_factor, "warm_up": warm_up,
+    "aux_response": aux_response,
 }
 WHITE_LEVEL_EFFECTS = {"vibration_noise": vibration_noise, "temperature_noise": temperature_noise}
 
@@ -217,7 +251,8 @@ class OutlierSpikes:
 
 def lookback_s(effect: Effect) -> float:
     """History (s) a mean-type effect needs before a chunk to be exact on it."""
-    if effect.kind == "thermal_drift":
+    if effect.kind == "thermal_drift" or (effect.kind == "aux_response" and any(
+            parse_feature(t["feature"]).shape == "rate" for t in effect.params["terms"])):
         return effect.params["smooth_s"] + 2.0 * effect.params["diff_step_s"]
     return 0.0
 

@@ -20,6 +20,9 @@ constraint), the aux channel it needs and its nature:
 - ``"filter"``: acts on the whole simulated rate (``bandwidth``);
 - ``"coefficients"``: corrected [noise] coefficients (``noise``): written by
   ``fogmon explain`` into its report only; a model file carries them in [noise].
+
+``aux_response`` is mean-type with no fixed aux channel: its ``terms`` name the channels
+they read (the feature grammar of ``fogmon.sim.features``).
 """
 from __future__ import annotations
 
@@ -36,6 +39,7 @@ import tomli_w
 
 from fogmon.block import is_axis_name
 from fogmon.errors import FogmonError
+from fogmon.sim.features import term_text, validate_terms
 
 #: IEEE-952 noise coefficient keys of the [noise] table and their units.
 NOISE_UNITS = {
@@ -49,8 +53,9 @@ NOISE_UNITS = {
 
 @dataclass(frozen=True)
 class Param:
-    """One effect parameter: ``unit`` (text), ``type`` ("float", "int", "str" or "list" of
-    floats), ``check`` ("any", ">=0", ">0"), ``default`` (None: required) and ``doc``."""
+    """One effect parameter: ``unit`` (text), ``type`` ("float", "int", "str", "list" of
+    floats or "terms", the term tables of ``aux_response``), ``check`` ("any", ">=0",
+    ">0"), ``default`` (None: required) and ``doc``."""
 
     unit: str
     doc: str
@@ -215,6 +220,24 @@ EFFECT_KINDS: dict[str, EffectKind] = {
         None, "noise", "narrowband random vibration: white noise through a 4-pole band-pass per line",
         lambda p: "vibration lines " + ", ".join(f"{f:.4g} Hz ({s:.3g} deg/h rms, {w:.3g} Hz wide)" for f, s, w in
                                                   zip(p["freq_hz"], p["sigma_dph"], p["bandwidth_hz"], strict=True))),
+    "aux_response": EffectKind(
+        {
+            "terms": Param("deg/h per unit of the feature", "terms {feature, coef, coef_lo, coef_hi, unit, physics, "
+                           "colinear}: rate += sum of coef x feature (fogmon.sim.features: NAME, NAME^2, abs(NAME), "
+                           "d(NAME)/dt, NAME*NAME2)", "terms"),
+            "physics": Param("", "short physics name(s) of the law (fogmon explain's physics table)", "str",
+                             default=""),
+            "smooth_s": Param("s", "trailing moving-average length applied to a channel before d(NAME)/dt",
+                              check=">=0", default=10.0),
+            "diff_step_s": Param("s", "step h of the 3-point backward differences of d(NAME)/dt", check=">0",
+                                 default=1.0),
+            "offset_dph": Param("deg/h", "constant added to the law: fogmon explain sets it so the law averages to 0 "
+                                "over the recording it was fitted on (the model's bias stays that record's mean)",
+                                default=0.0),
+        },
+        None, "mean", "rate error following measured conditions: a sparse sum of coefficient x feature of the aux "
+                      "channels or of another axis's rate",
+        lambda p: "; ".join(term_text(t) for t in p["terms"])),
     "noise": EffectKind(
         {f"{k}{suffix}": Param(u.split(" (")[0], f"corrected {k}{' ' + what if what else ''}", check=">=0")
          for k, u in NOISE_UNITS.items() for suffix, what in (("", ""), ("_lo", "interval low end"),
@@ -324,7 +347,9 @@ def validate_effect(kind: str, params: dict, where: str = "effect") -> Effect:
             out[k] = list(p.default) if isinstance(p.default, list) else p.default
             continue
         v = params[k]
-        if p.type == "str":
+        if p.type == "terms":
+            out[k] = validate_terms(v, where)
+        elif p.type == "str":
             if not isinstance(v, str):
                 raise FogmonError(f"{where}: parameter {k!r} must be a string, got {v!r}")
             out[k] = v

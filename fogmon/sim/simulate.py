@@ -29,7 +29,9 @@ own ``<ch>_<axis>``). SeedSequence(seed) first spawns one child per axis, which 
 spawns that axis's term streams as above: the noise of different axes is independent,
 while a shared aux channel is a common cause (one ``vib_g`` sets the white-noise level
 of every axis, one ``temp_c`` drives every axis's thermal drift). A one-axis run keeps
-the streams above, so its output for a given seed is what it always was.
+the streams above, so its output for a given seed is what it always was. An
+``aux_response`` term on another axis's rate column (``rate_x_dph``) reads that axis's
+simulated rate before its own cross terms and filters (``_CrossRates``, docs/sim.md).
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ from fogmon.block import Block, axis_aux
 from fogmon.errors import FogmonError
 from fogmon.formats.recording import Recording
 from fogmon.sim import effects as fx
+from fogmon.sim.features import channels_of, other_axis, parse_feature
 from fogmon.sim.model import EFFECT_KINDS, SensorModel, validate_model
 from fogmon.sim.noise import Flicker, RandomWalk, WhiteAngle, WhiteRate, default_flicker_tau_hi_s, ramp_dph
 
@@ -130,25 +133,41 @@ class _Plan:
         return t, aux, present
 
 
-def _check_aux(model: SensorModel, have: set[str], axis: str = "") -> None:
+def _check_aux(model: SensorModel, have: set[str], axis: str = "", rates: tuple[str, ...] = ()) -> None:
     """FogmonError when an effect of ``model`` needs an aux channel not in ``have``
-    (the channels axis ``axis`` sees; "" for a one-axis run)."""
+    (the channels axis ``axis`` sees; "" for a one-axis run) or, for an ``aux_response``,
+    a channel neither there nor a rate column of another simulated axis (``rates``:
+    the simulated axes) - or the axis's own rate column."""
     on = f" on axis {axis}" if axis else ""
     for i, e in enumerate(model.effects):
-        need = EFFECT_KINDS[e.kind].aux
-        if need and need not in have:
-            raise FogmonError(f"model effect #{i + 1} ({e.kind}){on} needs the aux channel {need!r}, which the "
-                              f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate `like` a "
-                              f"recording with that column or use a `scenario`")
+        need = [EFFECT_KINDS[e.kind].aux] if EFFECT_KINDS[e.kind].aux else []
+        if e.kind == "aux_response":
+            need = [c for c in channels_of(e.params["terms"]) if other_axis(c) not in rates]
+            own = f"rate_{axis}_dph"
+            if axis and any(own in parse_feature(t["feature"]).names for t in e.params["terms"]):
+                raise FogmonError(f"model effect #{i + 1} (aux_response){on} reads {own}, the axis's own rate: a "
+                                  f"feature is an aux channel or another axis's rate")
+        for c in need:
+            if c not in have:
+                raise FogmonError(f"model effect #{i + 1} ({e.kind}){on} needs the aux channel {c!r}, which the "
+                                  f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate `like` a "
+                                  f"recording with that column or use a `scenario`")
+
+
+def _reads_rates(e, rates: tuple[str, ...]) -> bool:
+    """Whether effect ``e`` is an ``aux_response`` reading a simulated axis's rate column."""
+    return e.kind == "aux_response" and any(other_axis(c) in rates for c in channels_of(e.params["terms"]))
 
 
 class _Parts:
     """The terms of one axis's simulated rate, built once per run from its one-axis
     model (random generators seeded from ``rngs``: Q, N, B, K, then one per effect);
-    ``view`` gives the aux channels the axis sees from all of them."""
+    ``view`` gives the aux channels the axis sees from all of them. ``cross``: its
+    ``aux_response`` effects that read other simulated axes' rates (``rates``)."""
 
     def __init__(self, model: SensorModel, plan: _Plan, rngs: list[np.random.Generator],
-                 view: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] = dict) -> None:
+                 view: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] = dict,
+                 rates: tuple[str, ...] = ()) -> None:
         sample_rate_hz, nz = plan.sample_rate_hz, model.noise
         self.model, self.plan, self.view = model, plan, view
         self.q = WhiteAngle(nz.Q_arcsec, sample_rate_hz, rngs[0]) if nz.Q_arcsec > 0 else None
@@ -159,15 +178,47 @@ class _Parts:
         self.k = RandomWalk(nz.K_dphsh, sample_rate_hz, rngs[3]) if nz.K_dphsh > 0 else None
         self.noises = [fx.noise_generator(e, sample_rate_hz, rngs[4 + i]) for i, e in enumerate(model.effects)
                        if EFFECT_KINDS[e.kind].nature == "noise"]
-        self.means = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "mean"]
+        means = [e for e in model.effects if EFFECT_KINDS[e.kind].nature == "mean"]
+        self.means = [e for e in means if not _reads_rates(e, rates)]
+        self.cross = [e for e in means if _reads_rates(e, rates)]
         self.filters = [fx.BandwidthFilter(e.params, sample_rate_hz) for e in model.effects
                         if EFFECT_KINDS[e.kind].nature == "filter"]
         #: samples before a chunk that mean-rate effects look back on
-        self.back = int(math.ceil(max([fx.lookback_s(e) for e in self.means] + [0.0]) * sample_rate_hz)) + 2
+        self.back = int(math.ceil(max([fx.lookback_s(e) for e in means] + [0.0]) * sample_rate_hz)) + 2
 
     def rate_dph(self, k0: int, k1: int, t: np.ndarray, all_aux: dict[str, np.ndarray]) -> np.ndarray:
         """The rate (deg/h) of grid samples ``k0:k1`` at times ``t`` (s) with the aux
-        channels ``all_aux`` (this axis sees ``view(all_aux)``)."""
+        channels ``all_aux`` (this axis sees ``view(all_aux)``), no cross terms."""
+        return self.finish(self.unfiltered(k0, k1, t, all_aux), k0, k1, t, all_aux)
+
+    def _add_means(self, rate: np.ndarray, effects: list, k0: int, k1: int, t: np.ndarray, aux: dict, kb: int,
+                   extra: dict[str, np.ndarray] | None = None) -> None:
+        """Add to ``rate`` (deg/h, grid samples ``k0:k1``) the mean-type ``effects``,
+        evaluated from grid sample ``kb`` on (their look-back), ``extra`` channels over ``kb:k1``."""
+        te, auxe = t, aux
+        if kb < k0:
+            te, back_aux, _ = self.plan.chunk(kb, k1)
+            auxe = self.view(back_aux)
+        if extra:
+            auxe = {**auxe, **extra}
+        for e in effects:
+            rate += fx.mean_rate_dph(e, te, auxe, self.plan.sample_rate_hz)[k0 - kb:]
+
+    def finish(self, rate: np.ndarray, k0: int, k1: int, t: np.ndarray, all_aux: dict[str, np.ndarray],
+               rates: dict[str, np.ndarray] | None = None, kb: int | None = None) -> np.ndarray:
+        """``rate`` (``unfiltered``) with the cross terms (``rates``: the simulated axes'
+        unfiltered rate columns over grid samples ``kb:k1``) and then the filters."""
+        if self.cross:
+            assert rates is not None and kb is not None, "cross terms need the axes' rates"
+            rate = rate.copy()
+            self._add_means(rate, self.cross, k0, k1, t, self.view(all_aux), kb, rates)
+        for f in self.filters:
+            rate = f.apply(rate)
+        return rate
+
+    def unfiltered(self, k0: int, k1: int, t: np.ndarray, all_aux: dict[str, np.ndarray]) -> np.ndarray:
+        """The rate (deg/h) of grid samples ``k0:k1`` before the filters and the cross
+        terms."""
         model, nz, n = self.model, self.model.noise, k1 - k0
         aux = self.view(all_aux)
         rate = np.full(n, model.bias_dph)
@@ -184,15 +235,7 @@ class _Parts:
         if nz.R_dphh:
             rate += ramp_dph(nz.R_dphh, t - self.plan.t0)
         if self.means:
-            kb = max(0, k0 - self.back)
-            te, auxe = t, aux
-            if kb < k0:
-                te, back_aux, _ = self.plan.chunk(kb, k1)
-                auxe = self.view(back_aux)
-            for e in self.means:
-                rate += fx.mean_rate_dph(e, te, auxe, self.plan.sample_rate_hz)[k0 - kb:]
-        for f in self.filters:
-            rate = f.apply(rate)
+            self._add_means(rate, self.means, k0, k1, t, aux, max(0, k0 - self.back))
         return rate
 
 
@@ -210,8 +253,9 @@ def _axis_parts(model: SensorModel, plan: _Plan, ss: np.random.SeedSequence, axe
     for a, child in zip(axes, ss.spawn(len(axes)), strict=True):
         one = model.for_axis(a)
         view = functools.partial(axis_aux, axes=named, name=a)
-        _check_aux(one, set(view(plan.src_aux)), a)
-        parts.append(_Parts(one, plan, [np.random.default_rng(c) for c in child.spawn(4 + len(one.effects))], view))
+        _check_aux(one, set(view(plan.src_aux)), a, axes)
+        parts.append(_Parts(one, plan, [np.random.default_rng(c) for c in child.spawn(4 + len(one.effects))], view,
+                            axes))
     return parts
 
 
@@ -239,16 +283,35 @@ def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Rec
         _check_aux(model, set(plan.src_aux))
         parts = [_Parts(model, plan, [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))])]
     k0 = 0
+    cross = _CrossRates(sim_axes, max(p.back for p in parts)) if any(p.cross for p in parts) else None
     while plan.n is None or k0 < plan.n:
         k1 = k0 + chunk_samples if plan.n is None else min(plan.n, k0 + chunk_samples)
         t, aux_c, present = plan.chunk(k0, k1)
-        rate = np.column_stack([p.rate_dph(k0, k1, t, aux_c) for p in parts]) if sim_axes else \
-            parts[0].rate_dph(k0, k1, t, aux_c)
+        pre = [p.unfiltered(k0, k1, t, aux_c) for p in parts]
+        rates, kb = cross.add(pre, k1) if cross is not None else (None, None)
+        done = [p.finish(r, k0, k1, t, aux_c, rates, kb) for p, r in zip(parts, pre, strict=True)]
+        rate = np.column_stack(done) if sim_axes else done[0]
         rate[~present] = np.nan
         out_aux = {name: np.where(present, a, np.nan) for name, a in aux_c.items()}
         valid = np.repeat(present[:, None], len(sim_axes), axis=1) if sim_axes else present.copy()
         yield Block(t, rate, valid, out_aux, axes=sim_axes)
         k0 = k1
+
+
+class _CrossRates:
+    """The axes' unfiltered rates of the current chunk and the ``back`` grid samples
+    before it, the features of the cross terms (``aux_response`` reading another axis's
+    rate column; its look-back for ``d(NAME)/dt``)."""
+
+    def __init__(self, axes: tuple[str, ...], back: int) -> None:
+        self.axes, self.back = axes, back
+        self.hist = np.zeros((0, len(axes)))
+
+    def add(self, pre: list[np.ndarray], k1: int) -> tuple[dict[str, np.ndarray], int]:
+        """(rate columns by name over grid samples kb:k1, kb) with the chunk's rates ``pre``."""
+        span = np.vstack([self.hist, np.column_stack(pre)])
+        self.hist = span[-self.back:]
+        return {f"rate_{a}_dph": span[:, j] for j, a in enumerate(self.axes)}, k1 - len(span)
 
 
 def present_samples(block: Block) -> np.ndarray:

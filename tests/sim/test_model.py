@@ -41,6 +41,11 @@ EVERY_KIND = [
                         "positive_fraction": 0.25, "count": 73, "times_file": "run.outliers.csv"}),
     Effect("vibration_lines", {"freq_hz": [2.2, 5.5], "sigma_dph": [0.3, 0.1], "bandwidth_hz": [0.1, 0.05]}),
     Effect("lowpass_noise", {"sigma_dph": 110.5, "cutoff_hz": 31.7, "order": 2}),
+    Effect("aux_response", {"terms": [{"feature": "vib_g^2", "coef": 0.0712, "coef_lo": 0.065, "coef_hi": 0.0774,
+                                       "unit": "deg/h per g^2", "physics": "vibration rectification",
+                                       "colinear": ["vib_g"]},
+                                      {"feature": "d(temp_coil_c)/dt", "coef": -3.5}],
+                            "physics": "vibration rectification", "offset_dph": -0.25}),
 ]
 
 
@@ -51,7 +56,8 @@ def full_model() -> SensorModel:
 
 def test_catalogue_covers_contract_kinds_and_names_aux_and_nature():
     contract = {"thermal_drift", "periodic", "glitches", "bias_step", "vibration_noise", "rate_ramp",
-                "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth", "vibration_lines", "noise"}
+                "scale_factor", "markov", "temperature_noise", "warm_up", "bandwidth", "vibration_lines", "noise",
+                "aux_response"}
     assert set(EFFECT_KINDS) == contract | {"outliers", "lowpass_noise"}  # additions (docs/explain.md)
     assert EFFECT_KINDS["lowpass_noise"].nature == "noise"
     assert EFFECT_KINDS["vibration_lines"].nature == "noise"
@@ -263,6 +269,12 @@ def _effect_strategy():
         if kind == "lowpass_noise":  # a cutoff below the Nyquist frequency of the 100 Hz model
             return st.builds(lambda s, c, o: Effect(kind, {"sigma_dph": s, "cutoff_hz": c, "order": o}),
                              st.floats(0.0, 1e6), st.floats(1e-3, 49.0), st.integers(1, 8))
+        if kind == "aux_response":  # terms of the feature grammar, finite coefficients
+            feature = st.sampled_from(["vib_g", "vib_g^2", "abs(mag_ut)", "d(temp_coil_c)/dt", "rate_x_dph",
+                                       "vib_g*mag_ut"])
+            return st.lists(st.tuples(feature, st.floats(-1e6, 1e6)), min_size=1, max_size=3,
+                            unique_by=lambda x: x[0]).map(lambda ts: Effect(kind, {
+                                "terms": [{"feature": f, "coef": c} for f, c in ts], "physics": "g-sensitivity"}))
         if kind == "vibration_lines":  # lines inside (0, Nyquist) of the 100 Hz model
             return st.lists(st.tuples(st.floats(1.0, 40.0), st.floats(0.0, 1e3), st.floats(1e-3, 1.0)),
                             max_size=4).map(lambda ls: Effect(kind, {

@@ -15,6 +15,8 @@ One module per family (``base``: what they share):
   over time - per-segment white level regressed on the segment mean of vib_g / temp_c.
 - ``lines``: vibration_lines, narrowband random vibration.
 - ``coefficients``: noise, the model's own IEEE-952 coefficients corrected.
+- ``aux_response``: a law outside the catalogue, a sparse sum of terms following the aux
+  channels and the other axes' rates (forward stepwise on the Whittle GLS).
 
 ``CANDIDATES`` maps each kind to its candidate function, in the order explain fits
 them (ties in BIC gain keep this order).
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from fogmon.explain.candidates.aux_response import aux_response
 from fogmon.explain.candidates.base import Candidate, Context
 from fogmon.explain.candidates.coefficients import noise
 from fogmon.explain.candidates.lines import vibration_lines
@@ -47,6 +50,7 @@ CANDIDATES: dict[str, Callable[[Context], Candidate | None]] = {
     "temperature_noise": temperature_noise,
     "vibration_lines": vibration_lines,
     "noise": noise,
+    "aux_response": aux_response,
 }
 
 __all__ = ["CANDIDATES", "Candidate", "Context"]

@@ -40,6 +40,8 @@ class Context:
     Yf: np.ndarray
     #: results shared by candidates within one round (the spike evidence)
     cache: dict = field(default_factory=dict, repr=False)
+    #: the recording's metadata (``unit_<column>`` lines name aux channels' units)
+    meta: dict = field(default_factory=dict, repr=False)
 
     @property
     def n(self) -> int:
@@ -85,9 +87,13 @@ class Candidate:
     def nature(self) -> str:
         return EFFECT_KINDS[self.kind].nature
 
+    def bar(self, penalty: float) -> float:
+        """The bar its gain must pass: BIC's k ln n, or ``search_bar`` when that is higher."""
+        return max(self.k * penalty, self.search_bar)
+
     def bic_gain(self, penalty: float) -> float:
-        """The gain above the bar: BIC's k ln n, or ``search_bar`` when that is higher."""
-        return self.gain - max(self.k * penalty, self.search_bar)
+        """The gain above the bar (``bar``)."""
+        return self.gain - self.bar(penalty)
 
     def effect(self) -> Effect:
         return validate_effect(self.kind, self.params, "fitted effect")

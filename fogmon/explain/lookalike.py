@@ -1,0 +1,88 @@
+"""Fair competition between a channel law (``aux_response``) and the catalogue kinds it can
+look like (docs/explain.md, "Laws outside the catalogue"): conditions switched in steps
+look like bias steps, an oscillating channel like a periodic term, a temperature-driven
+drift like a ramp, a rectified vibration's long-tau power like a wrong B or N.
+
+The rule, applied by the forward selection (fogmon.explain.selection) in three places:
+
+1. **The law is judged first** in its round (``first``) when it passes its bar: what a
+   channel explains must not be named as something else first (a catalogue kind, or
+   ``noise``, the model's own coefficients).
+2. **Unless the catalogue explains more** (``refusal``): for every mean-type catalogue
+   candidate of the round that passes its own bar, the joint GLS of both designs gives
+   each one's gain beyond the other. The law is deferred when it adds no more than its
+   bar beyond that candidate while the candidate adds more than its own bar beyond the
+   law: the channel does not predict the timing and the sizes, the catalogue kind does.
+   When neither adds anything beyond the other (one switch of a channel, one step of
+   the bias) the channel, which predicts the timing, is preferred - unless the
+   catalogue kind follows a channel itself (``scale_factor`` on rot_dps,
+   ``thermal_drift`` on temp_c: a rotation switched between 0 and one rate makes
+   rot_dps^2 the same feature as rot_dps), then its named physics is kept.
+3. **The evidence names what was refused** (``explained``): every catalogue kind (mean-
+   or noise-type) that passed its bar before the law was accepted and no longer does
+   after it is a look-alike the law explains; the accepted law's evidence says so with
+   both BIC gains.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from fogmon.explain.candidates.base import Candidate, Context
+from fogmon.sim.model import EFFECT_KINDS
+
+LAW = "aux_response"
+
+
+def first(cands: list[Candidate], penalty: float) -> list[Candidate]:
+    """``cands`` (best BIC gain first) with the channel law moved to the front when it
+    passes its bar."""
+    law = next((c for c in cands if c.kind == LAW), None)
+    if law is None or law.bic_gain(penalty) <= 0:
+        return cands
+    return [law, *(c for c in cands if c is not law)]
+
+
+def _gain(ctx: Context, X: np.ndarray) -> float:
+    return ctx.wh.gls(ctx.wh.fft(X), ctx.Yf).chi2_gain
+
+
+def refusal(law: Candidate, cands: list[Candidate], ctx: Context) -> str | None:
+    """Why the law ``law`` is a look-alike of a mean-type catalogue candidate of the round
+    that explains more (module docstring, 2), or None."""
+    if law.kind != LAW or law.design is None:
+        return None
+    pen = ctx.penalty
+    g_law = _gain(ctx, law.design)
+    for o in cands:
+        if o.kind == LAW or o.nature != "mean" or o.design is None or o.bic_gain(pen) <= 0:
+            continue
+        g_o = _gain(ctx, o.design)
+        joint = _gain(ctx, np.column_stack((law.design, o.design)))
+        law_beyond, o_beyond = joint - g_o, joint - g_law
+        if law_beyond > law.bar(pen):
+            continue
+        if o_beyond > o.bar(pen):
+            return (f"a look-alike of {o.kind}: beyond it the law adds chi2 {law_beyond:.1f} (its bar "
+                    f"{law.bar(pen):.1f}), while {o.kind} adds {o_beyond:.1f} beyond the law (bar {o.bar(pen):.1f}): "
+                    f"the channels do not predict what {o.kind} fits")
+        if EFFECT_KINDS[o.kind].aux is not None:
+            return (f"a look-alike of {o.kind}: neither adds more than its bar beyond the other (the law "
+                    f"{law_beyond:.1f}, {o.kind} {o_beyond:.1f}), and {o.kind} follows a channel "
+                    f"({EFFECT_KINDS[o.kind].aux}) too: the catalogue's physics is kept")
+    return None
+
+
+def explained(law: Candidate, before: list[Candidate], after: list[Candidate], penalty: float) -> Candidate:
+    """``law`` with its evidence naming the catalogue look-alikes it explains (module
+    docstring, 3): candidates of ``before`` (the round it was accepted in) that passed
+    their bar, whose kind in ``after`` (the next round) no longer does."""
+    now = {c.kind: c.bic_gain(penalty) for c in after}
+    gone = [(c.kind, c.bic_gain(penalty), now.get(c.kind)) for c in before
+            if c.kind != LAW and c.bic_gain(penalty) > 0 and not now.get(c.kind, 0.0) > 0]
+    if not gone:
+        return law
+    text = "; ".join(f"{k} (BIC gain {b:.1f} before the law, {'not fitted' if a is None else f'{a:.1f}'} after)"
+                     for k, b, a in gone)
+    return replace(law, evidence=f"{law.evidence}. Look-alikes refused, explained by the law: {text}")
