@@ -64,9 +64,9 @@ def run(args: argparse.Namespace) -> int:
     ]
     lines += [f"  assumed: {render(s, 'fit')}" for s in said]
     lines += ["", f"Allan deviation ({100 * args.confidence:.1f} % confidence bounds; EDF "
-              f"{'as stated' if 'edf' in cols else 'for the noise type the fit finds at each tau'}):"]
+              f"{'as stated' if 'edf' in cols else 'of the noise mixture the fit finds at each tau'}):"]
     lines += adev_lines(result)
-    lines += ["", "IEEE-952 noise coefficients (with intervals):"] + coefficient_lines(fit)
+    lines += ["", f"IEEE-952 noise coefficients ({100 * fit.confidence:.1f} % intervals):"] + coefficient_lines(fit)
     check = model_check(result, fit)
     if check:
         lines.append(check)

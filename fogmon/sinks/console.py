@@ -67,7 +67,7 @@ def result_lines(x: AxisSummary, run: Summary) -> list[str]:
         lines += adev_lines(a)
     f = x.overall_fit
     if f is not None:
-        lines += ["", "IEEE-952 noise coefficients (whole run, with intervals):"]
+        lines += ["", f"IEEE-952 noise coefficients (whole run, {100 * f.confidence:.1f} % intervals):"]
         lines += coefficient_lines(f)
         check = model_check(a, f) if a is not None else None
         if check is not None:
@@ -96,8 +96,9 @@ def axes_lines(s: Summary) -> list[str]:
         lines += adev_axes_lines(done)
     fits = {a: x.overall_fit for a, x in axes.items() if x.overall_fit is not None}
     if fits:
-        lines += ["", "IEEE-952 noise coefficients per axis (whole run, with intervals; n/i: not identifiable "
-                      "from this record, < its 95 % upper limit):"]
+        conf = next(iter(fits.values())).confidence
+        lines += ["", f"IEEE-952 noise coefficients per axis (whole run, {100 * conf:.1f} % intervals; n/i: not "
+                      f"identifiable from this record, < its 95 % upper limit):"]
         lines += coefficient_axes_lines(fits)
         for a, x in axes.items():
             check = model_check(x.overall, x.overall_fit) if x.overall is not None and x.overall_fit else None
@@ -239,33 +240,31 @@ def no_windows_reason(s: Summary) -> str:
     )
 
 
-#: The fitted model is reported as not describing the record beyond this ADEV ratio.
-MODEL_RATIO_WARN = 1.5
-
-
 def model_check(a, fit) -> str | None:
-    """Lines comparing the fitted IEEE-952 model's ADEV with the measured one: the
-    largest ratio (either way) and its tau over the taus the fit describes (a warning
-    beyond MODEL_RATIO_WARN), then the taus the robust fit flagged (``fit.misfit``)."""
+    """Lines testing the fitted IEEE-952 model against the measured ADEV
+    (``fogmon.davar.adequacy.check_model``: chi-square with each tau's EDF, family-wise
+    over the taus): a WARNING naming every tau where the model departs beyond chance and
+    by how much, else the largest factor; then the taus the robust fit flagged
+    (``fit.misfit``)."""
     import numpy as np
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.asarray(fit.model_adev_dph(a.tau_s), dtype=float) / np.asarray(a.adev_dph, dtype=float)
-    misfit = np.asarray(fit.misfit, dtype=bool)
-    ok = np.isfinite(ratio) & (ratio > 0) & ~misfit
-    if not ok.any():
+    from fogmon.davar.adequacy import check_model
+
+    c = check_model(a, fit)
+    if c is None:
         return None
-    worst = np.where(ok, np.abs(np.log(np.where(ok, ratio, 1.0))), -1.0)
-    i = int(np.argmax(worst))
-    r = float(max(ratio[i], 1 / ratio[i]))
-    side = "above" if ratio[i] > 1 else "below"
-    where = "every tau" if not misfit.any() else f"the {int(ok.sum())} taus it describes"
-    if r <= MODEL_RATIO_WARN:
-        line = f"  model check: the fitted model is within a factor {r:.2f} of the measured ADEV at {where}"
+    misfit = np.asarray(fit.misfit, dtype=bool)
+    where = "every tau" if not misfit.any() else f"the {c.n_taus} taus it describes"
+    test = f"chi-square with each tau's EDF, family-wise {100 * c.level:g} % over {c.n_taus} taus"
+    if not c.departs:
+        line = (f"  model check: the fitted model agrees with the measured ADEV within chance at {where} ({test}; "
+                f"largest factor {c.worst_ratio:.2f} at tau {c.worst_tau_s:.4g} s)")
     else:
-        line = (f"  model check: WARNING the fitted model is {r:.3g}x {side} the measured ADEV at tau "
-                f"{a.tau_s[i]:.4g} s: the five IEEE-952 terms do not describe this record (periodic or "
-                f"vibration terms, non-stationarity) or the fit failed; read the coefficients with care")
+        taus = ", ".join(f"{t:.4g} s (model {max(r, 1 / r):.3g}x {'above' if r > 1 else 'below'}, p {p:.2g})"
+                         for t, r, p in zip(c.tau_s, c.ratio, c.p, strict=True))
+        line = (f"  model check: WARNING the fitted model departs from the measured ADEV beyond chance ({test}) at "
+                f"tau {taus}: the five IEEE-952 terms do not describe this record (periodic or vibration terms, "
+                f"non-stationarity) or the fit failed; read the coefficients with care")
     if misfit.any():
         taus = ", ".join(f"{t:.4g}" for t in np.asarray(a.tau_s)[misfit])
         line += (f"\n  model check: tau {taus} s not described by the five terms (vibration or periodic "

@@ -161,15 +161,22 @@ def test_reference_rotation_is_subtracted_unless_raw_rate():
     assert s.motion_spans == [] and s.overall.adev_dph[-1] > 1e5   # ... unless asked: the 2.6e6 deg/h step
 
 
-def test_model_check_names_the_worst_tau():
+def test_model_check_is_a_chi_square_test_with_each_taus_edf():
     from types import SimpleNamespace
 
     from fogmon.sinks.console import model_check
 
-    a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]))
+    a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]),
+                        edf=np.array([1e4, 1e3, 4.0]))
     good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]), misfit=np.zeros(3, bool))
-    assert model_check(a, good) == ("  model check: the fitted model is within a factor 1.01 of the measured ADEV "
-                                    "at every tau")
-    bad = SimpleNamespace(model_adev_dph=lambda tau: np.full(3, 1.0), misfit=np.zeros(3, bool))
+    assert model_check(a, good) == ("  model check: the fitted model agrees with the measured ADEV within chance at "
+                                    "every tau (chi-square with each tau's EDF, family-wise 1 % over 3 taus; largest "
+                                    "factor 1.01 at tau 10 s)")
+    # 1.5x at an EDF of 4 is chance (the old fixed 1.5x threshold warned); 1.1x at an EDF of 1e4 is not
+    chance = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.32, 0.3]), misfit=np.zeros(3, bool))
+    assert "WARNING" not in model_check(a, chance)
+    bad = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.1, 0.32, 0.2]), misfit=np.zeros(3, bool))
     msg = model_check(a, bad)
-    assert msg.startswith("  model check: WARNING the fitted model is 5x above the measured ADEV at tau 100 s")
+    assert msg.startswith("  model check: WARNING the fitted model departs from the measured ADEV beyond chance "
+                          "(chi-square with each tau's EDF, family-wise 1 % over 3 taus) at tau 1 s (model 1.1x "
+                          "above, p ")
