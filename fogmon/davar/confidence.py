@@ -461,10 +461,18 @@ def _quantiles(confidence: float) -> tuple[float, float]:
     return lo, 1.0 - lo
 
 
+MIN_EDF = 1.0
+"""Below this EDF a deviation gets no interval (``chi2_factors``: NaN bounds, printed as
+"-"): with EDF << 1 nearly all of chi-square's mass lies near 0, so both quantiles can
+fall below the EDF and the interval excludes its own estimate (an EDF of 0.07 gave
+21.341 [61.635, 1.3915e+12]); such a tau holds less than one independent Allan term."""
+
+
 def chi2_factors(edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
     """Interval factors (lo / sigma_hat, hi / sigma_hat) of a deviation with ``edf``
-    degrees of freedom at two-sided ``confidence`` (NIST SP1065 eq. 45); NaN where the
-    EDF is not positive. An EDF row broadcast over windows (the gap-free case) gives one
+    degrees of freedom at two-sided ``confidence`` (NIST SP1065 eq. 45); NaN (no
+    interval) where the EDF is below MIN_EDF or the interval would not hold the estimate
+    (factors not around 1). An EDF row broadcast over windows (the gap-free case) gives one
     row of factors, cached: streaming asks for the same row block after block."""
     edf = np.asarray(edf, dtype=np.float64)
     while edf.ndim > 1 and edf.strides[0] == 0 and edf.shape[0] > 1:
@@ -488,15 +496,18 @@ def _factors(edf: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray
     from scipy.special import gammaincinv  # imported here: scipy costs start-up time
 
     q_lo, q_hi = _quantiles(confidence)
-    ok = np.isfinite(edf) & (edf > 0)
+    ok = np.isfinite(edf) & (edf >= MIN_EDF)
     f_lo = np.full(edf.shape, np.nan)
     f_hi = np.full(edf.shape, np.nan)
     if ok.any():
         u, inv = np.unique(edf[ok], return_inverse=True)
-        with np.errstate(divide="ignore", over="ignore"):  # tiny EDF: hi is +inf
+        with np.errstate(divide="ignore", over="ignore"):
             # the chi2 quantile with u degrees of freedom at q is 2 gammaincinv(u / 2, q)
             f_lo[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_hi)))[inv]
             f_hi[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_lo)))[inv]
+    excludes = ~((f_lo <= 1.0) & (f_hi >= 1.0))  # NaN too; a safeguard: at EDF >= 1 the quantiles straddle it
+    f_lo[excludes] = np.nan
+    f_hi[excludes] = np.nan
     return f_lo, f_hi
 
 

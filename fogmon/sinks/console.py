@@ -117,10 +117,26 @@ def adev_axes_lines(results: dict) -> list[str]:
     out = [f"  {'tau_s':>10} " + " ".join(f"{a:>{AXIS_COLUMN}}" for a in results)]
     tau_s = next(iter(results.values())).tau_s
     for i in range(len(tau_s)):
-        cells = [f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if r.n_terms[i] else "no valid term"
+        cells = [(f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if _has_interval(r, i)
+                  else f"{r.adev_dph[i]:.5g} [no interval]") if r.n_terms[i] else "no valid term"
                  for r in results.values()]
         out.append(f"  {tau_s[i]:10.4g} " + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
-    return out
+    return out + _no_interval_note(results.values())
+
+
+def _has_interval(a, i: int) -> bool:
+    return bool(math.isfinite(float(a.lo_dph[i])) and math.isfinite(float(a.hi_dph[i])))
+
+
+def _no_interval_note(results) -> list[str]:
+    """The footnote of ADEV tables with a tau printed without its interval (its EDF below
+    ``confidence.MIN_EDF``, where a chi-square interval can exclude its own estimate)."""
+    from fogmon.davar.confidence import MIN_EDF
+
+    if not any(r.n_terms[i] and not _has_interval(r, i) for r in results for i in range(len(r.tau_s))):
+        return []
+    return [f"  no interval: EDF below {MIN_EDF:g} (less than one independent Allan term at that tau), where "
+            f"the chi-square interval would not hold the estimate"]
 
 
 def coefficient_axes_lines(fits: dict) -> list[str]:
@@ -141,16 +157,17 @@ def coefficient_axes_lines(fits: dict) -> list[str]:
 
 
 def adev_lines(a) -> list[str]:
-    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms."""
+    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms ("-" and a
+    footnote where a tau has no interval: EDF below 1)."""
     out = [f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}"]
     for i in range(len(a.tau_s)):
         if not a.n_terms[i]:
             out.append(f"  {a.tau_s[i]:10.4g}   no valid Allan term (the record is too short, or every term "
                        f"spans a gap or platform motion)")
             continue
-        out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {a.lo_dph[i]:12.5g} {a.hi_dph[i]:12.5g} "
-                   f"{a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
-    return out
+        lo, hi = (f"{a.lo_dph[i]:12.5g}", f"{a.hi_dph[i]:12.5g}") if _has_interval(a, i) else (f"{'-':>12}",) * 2
+        out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {lo} {hi} {a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
+    return out + _no_interval_note([a])
 
 
 def coefficient_lines(f) -> list[str]:

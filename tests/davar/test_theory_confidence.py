@@ -203,3 +203,13 @@ def test_mixture_matrices_of_all_factors_at_once_equal_one_factor_at_a_time(m, n
     assert np.isnan(got[-1]).all()  # 2 m > n
     for k, c in zip(m, got, strict=False):  # the noise types' part (the ramp's row: test_davar_fit_covariance)
         np.testing.assert_allclose(c[:4, :4], _mixture_matrix_one(k, n), rtol=1e-12, atol=1e-12 * np.abs(c).max())
+
+
+def test_no_interval_below_one_edf_and_none_that_excludes_its_estimate():
+    # issue 30: "16.48  21.341 [61.635, 1.3915e+12] edf 0.07"
+    lo, hi = chi2_bounds(np.array([21.341]), np.array([0.07]))
+    assert np.isnan(lo[0]) and np.isnan(hi[0])
+    edf = np.geomspace(1.0, 1e6, 200)
+    for conf in (0.5, 0.683, 0.9, 0.95, 0.99):
+        lo, hi = chi2_bounds(np.ones(len(edf)), edf, conf)
+        assert np.all((lo <= 1.0) & (hi >= 1.0))

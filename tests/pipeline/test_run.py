@@ -161,6 +161,26 @@ def test_reference_rotation_is_subtracted_unless_raw_rate():
     assert s.motion_spans == [] and s.overall.adev_dph[-1] > 1e5   # ... unless asked: the 2.6e6 deg/h step
 
 
+def test_adev_tables_print_no_interval_below_one_edf():
+    from types import SimpleNamespace
+
+    from fogmon.davar.confidence import chi2_bounds
+    from fogmon.sinks.console import adev_axes_lines, adev_lines
+
+    adev, edf = np.array([2.0, 21.341]), np.array([50.0, 0.07])
+    lo, hi = chi2_bounds(adev, edf)
+    a = SimpleNamespace(tau_s=np.array([1.0, 16.48]), adev_dph=adev, lo_dph=lo, hi_dph=hi, edf=edf,
+                        n_terms=np.array([100, 3]))
+    lines = adev_lines(a)
+    assert lines[2].split() == ["16.48", "21.341", "-", "-", "0.07", "3"]
+    assert lines[-1].startswith("  no interval: EDF below 1")
+    side = adev_axes_lines({"x": a, "y": a})
+    assert side[2].split() == ["16.48", "21.341", "[no", "interval]", "21.341", "[no", "interval]"]
+    assert side[-1] == lines[-1]
+    a.edf, a.lo_dph, a.hi_dph = np.array([50.0, 2.0]), *chi2_bounds(adev, np.array([50.0, 2.0]))
+    assert not adev_lines(a)[-1].startswith("  no interval")
+
+
 def test_model_check_is_a_chi_square_test_with_each_taus_edf():
     from types import SimpleNamespace
 
