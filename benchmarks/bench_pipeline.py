@@ -224,7 +224,7 @@ def _monitor_share(tmp: str, window_s: float, seconds: float, extra: list[str]) 
     port = dev.stdout.readline().strip()
     mon = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", port, "--protocol", "kvh-a",
                             "--duration-s", str(lead_s + seconds + 5), "--window-s", str(window_s),
-                            "--archive", os.path.join(tmp, "arch"), "--rrd", os.path.join(tmp, "live.rrd"),
+                            "--archive", tmp, "--rrd", os.path.join(tmp, "live.rrd"),
                             "--no-progress", *extra],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            env={**os.environ, "PYTHONPATH": str(ROOT)})

@@ -5,6 +5,8 @@ coefficients)::
 
     fogmon.oadev(rate_dph, sample_rate_hz, taus="octave")          -> AdevResult
     fogmon.dadev(rate_dph, sample_rate_hz, window_s, hop_s=None)   -> DadevResult
+        both with exclude_motion=True: platform motion kept out as `fogmon replay`
+        does (fogmon.motion; False analyses every sample, as --keep-motion)
     fogmon.StreamingDadev(sample_rate_hz, window_s, taus="octave") -> ring-buffer updater
     fogmon.fit_noise(result)                                -> IEEE-952 Q, N, B, K, R
     fogmon.adev_from_curve(tau_s, adev_dph, n_terms=...)    -> (AdevResult, assumptions)
@@ -21,8 +23,8 @@ import importlib
 __version__ = "0.1.0"
 
 _LAZY = {
-    "oadev": "fogmon.davar.batch",
-    "dadev": "fogmon.davar.batch",
+    "oadev": "fogmon.api",
+    "dadev": "fogmon.api",
     "AdevResult": "fogmon.davar.result",
     "DadevResult": "fogmon.davar.result",
     "StreamingDadev": "fogmon.davar.streaming",

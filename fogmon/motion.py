@@ -30,6 +30,7 @@ import warnings
 from bisect import bisect_left, insort
 from collections import deque
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -50,6 +51,10 @@ MERGE_S = 10.0
 QUIET_QUANTILE = 0.25
 #: a burst: the median of this many consecutive samples beyond the burst limit, one side
 BURST_N = 5
+#: the live gate holds this long (s) at the start, then judges it all with scales from it
+WARMUP_S = 30.0
+#: ... and at least this many test blocks
+MIN_WARMUP_BLOCKS = 16
 
 
 @dataclass(frozen=True)
@@ -151,7 +156,7 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
     limit = _limit(sigma_1, _quiet_scatter(mu))
     if not np.isfinite(limit):
         return []
-    ref = median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="nearest")
+    ref = median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="mirror")   # the first block is judged too
     dev = np.abs(mu - ref)
     moved = np.zeros(nb)
     moved[idx] = np.where(dev > limit, dev, 0.0)
@@ -232,6 +237,13 @@ class _RunningMedian:
         self._fifo.append(x)
         insort(self._sorted, x)
 
+    def reset(self, values: np.ndarray) -> None:
+        """Hold ``values`` (oldest first) instead."""
+        self._fifo.clear()
+        self._sorted.clear()
+        for x in values.tolist():
+            self.push(x)
+
     def median(self) -> float:
         s, k = self._sorted, len(self._sorted)
         return s[k // 2] if k % 2 else (s[k // 2 - 1] + s[k // 2]) / 2
@@ -265,33 +277,109 @@ class _Window:
         return view
 
 
+class Released(NamedTuple):
+    """What ``MotionGate`` releases: the samples' rate (deg/h) and valid flags, in order,
+    platform motion made invalid; ``moved`` True where the gate made a valid sample
+    invalid (``valid | moved`` is the input's validity); the ``platform_motion`` events."""
+
+    rate_dph: np.ndarray
+    valid: np.ndarray
+    moved: np.ndarray
+    events: list[Event]
+
+
+def warmup_blocks(sample_rate_hz: float) -> int:
+    """Test blocks the live gate holds before it judges any: WARMUP_S of them, at least
+    MIN_WARMUP_BLOCKS."""
+    return max(MIN_WARMUP_BLOCKS, int(np.ceil(WARMUP_S * sample_rate_hz / block_samples(sample_rate_hz))))
+
+
+def densest_level(means: np.ndarray, half_width: float) -> float:
+    """The level (deg/h) most block ``means`` agree on: the median of the largest set of
+    them within +-``half_width`` of one of them. Quiet blocks agree to their scatter;
+    a turn's blocks spread over its rates, so motion over most of a start-up still
+    leaves its quiet level (NaN without means)."""
+    s = np.sort(means[np.isfinite(means)])
+    if not len(s):
+        return float("nan")
+    if not np.isfinite(half_width):
+        return float(np.median(s))
+    lo = np.searchsorted(s, s - half_width, side="left")
+    hi = np.searchsorted(s, s + half_width, side="right")
+    i = int(np.argmax(hi - lo))
+    return float(np.median(s[lo[i]:hi[i]]))
+
+
+@dataclass(frozen=True)
+class _Startup:
+    """The live gate's start-up judgement of its first blocks: the blocks with enough
+    samples (``idx``), each block's sample sigma (``sig``) and the robust means of those
+    (``means``), the quiet scales (``sigma_1``, ``limit``, deg/h) from them and their
+    reference ``ref`` (deg/h): the level most of their means agree on (NaN with fewer
+    than 4 blocks: nothing is judged)."""
+
+    idx: np.ndarray
+    sig: np.ndarray
+    means: np.ndarray
+    sigma_1: float
+    limit: float
+    ref: float
+
+    @classmethod
+    def of(cls, rate_dph: np.ndarray, valid: np.ndarray, m: int) -> _Startup:
+        y, enough, sig = _blocks(rate_dph, valid, m)
+        idx = np.flatnonzero(enough)
+        if len(idx) < 4:
+            return cls(idx, sig, _block_means(y[idx], np.nan), float("nan"), float("nan"), float("nan"))
+        sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
+        means = _block_means(y[idx], sigma_1 if sigma_1 > 0 else np.nan)
+        limit = _limit(sigma_1, _quiet_scatter(means))
+        return cls(idx, sig, means, sigma_1, limit, densest_level(means, limit / 2.0))
+
+
 class MotionGate:
     """The live form of ``find_motion``: causal and bounded. ``push`` takes the analysed
-    rate (deg/h) of each incoming block and returns the samples it has judged, in order
-    and with the moving ones (plus one block of margin each side) made invalid, held back
-    by at most two test blocks, and ``platform_motion`` events at the start and end of
-    each span; ``flush`` releases the rest at the end of a run. Each test block's
-    reference is the median of the non-moving block means of the last REFERENCE_S / 2;
-    the quiet scales are low quantiles over the last ``HISTORY_S``, refreshed every
-    ``RESCALE_BLOCKS`` blocks; nothing is judged during the first ``WARMUP_BLOCKS``."""
+    rate (deg/h) of each incoming block and returns (``Released``) the samples it has
+    judged, in order, the moving ones (plus one block of margin each side) made invalid,
+    and ``platform_motion`` events at the start and end of each span; ``flush``
+    releases the rest at the end of a run.
+
+    Start-up: the gate holds every sample until ``warmup_blocks`` test blocks with
+    samples have come (WARMUP_S, at least MIN_WARMUP_BLOCKS; or the run ends), takes the
+    quiet scales from them and, as their reference, the level most of their block
+    means agree on (``densest_level``), and judges them all: motion from the first
+    sample on is found, and nothing reaches the analysis unjudged. Then each test block
+    is judged as it completes, held back by at most two blocks: its reference is the
+    median of the non-moving block means of the last REFERENCE_S / 2; the quiet scales
+    are low quantiles over the last ``HISTORY_S``, refreshed every ``RESCALE_BLOCKS``
+    blocks. A departure that holds as a steady level (every block mean of the last
+    REFERENCE_S / 2 within the limit of their median) is a bias change, not motion: it
+    becomes the reference. The decisions do not depend on how the samples are cut into
+    pushes."""
 
     HISTORY_S = 3600.0
-    WARMUP_BLOCKS = 16
     RESCALE_BLOCKS = 64
 
     def __init__(self, sample_rate_hz: float) -> None:
         self.m = block_samples(sample_rate_hz)
-        n_hist = max(self.WARMUP_BLOCKS, int(self.HISTORY_S * sample_rate_hz / self.m))
+        self.warmup = warmup_blocks(sample_rate_hz)
+        n_hist = max(self.warmup, int(self.HISTORY_S * sample_rate_hz / self.m))
         self._sig = _Window(n_hist)
         self._means = _Window(n_hist)
-        self._ref = _RunningMedian(_reference_blocks(sample_rate_hz) // 2 + 1)
+        n_ref = _reference_blocks(sample_rate_hz) // 2 + 1
+        self._ref = _RunningMedian(n_ref)
+        self._recent = _Window(n_ref)      # every block mean judged: a steady new level
         self._gap = _merge_blocks(sample_rate_hz)
         self._limit = float("nan")
         self._sigma_1 = float("nan")
         self._n_judged = 0
+        self._warm = False
+        self._seen = 0                     # start-up: complete blocks looked at, of them with enough samples
+        self._seen_enough = 0
         self._t = np.empty(0)
         self._y = np.empty(0)
         self._v = np.empty(0, dtype=bool)
+        self._moved = np.empty(0, dtype=bool)
         self._judged = 0                   # samples at the buffer's start already judged
         self._span: list[float] | None = None      # open span: [t_start_s, t_end_s, peak_dph]
         self._quiet_blocks = 0             # non-moving blocks since the open span's last moving one
@@ -299,54 +387,106 @@ class MotionGate:
         self.spans: list[MotionSpan] = []  # closed spans, for the run's summary
         self.samples_excluded = 0
 
-    def push(self, t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray, list[Event]]:
-        """(rate deg/h, valid) of the samples released now, and the events."""
+    def push(self, t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray) -> Released:
+        """The samples released now (judged), and the events."""
         self._t = np.concatenate([self._t, t_s])
         self._y = np.concatenate([self._y, rate_dph])
         self._v = np.concatenate([self._v, valid])
+        self._moved = np.concatenate([self._moved, np.zeros(len(t_s), dtype=bool)])
+        events: list[Event] = []
+        if not self._warm:
+            n = self._warmup_samples()
+            if not n:
+                return self._take(0, events)
+            events += self._start(n)
+        events += self._judge_blocks()
+        return self._take(max(0, self._judged - self.m), events)   # the last judged block stays: margin
+
+    def flush(self) -> Released:
+        """Everything still held (the last partial block is not judged; a run shorter
+        than the start-up is judged as a whole), and the event closing a span still open."""
+        events = [] if self._warm else self._start(len(self._y) // self.m * self.m)
+        if self._span:
+            events.append(self._close(float(self._t[-1]) if len(self._t) else self._span[1]))
+        return self._take(len(self._y), events)
+
+    def _take(self, n: int, events: list[Event]) -> Released:
+        out = Released(self._y[:n], self._v[:n], self._moved[:n], events)
+        self._t, self._y, self._v, self._moved = self._t[n:], self._y[n:], self._v[n:], self._moved[n:]
+        self._judged = max(0, self._judged - n)
+        return out
+
+    def _warmup_samples(self) -> int:
+        """Start-up: once the first ``warmup`` blocks with enough samples are held and the
+        latest of them is at their reference level (motion under way goes on being held),
+        the samples to judge at once; also after 4 x ``warmup`` blocks, whatever they
+        hold. Else 0."""
+        m = self.m
+        for k in range(self._seen, len(self._v) // m):
+            self._seen = k + 1
+            enough = np.count_nonzero(self._v[k * m:(k + 1) * m]) >= m // 2
+            self._seen_enough += int(enough)
+            if self._seen >= 4 * self.warmup:
+                return self._seen * m
+            if enough and self._seen_enough >= self.warmup:
+                start = _Startup.of(self._y[:self._seen * m], self._v[:self._seen * m], m)
+                if not abs(start.means[-1] - start.ref) > start.limit:   # NaN: cannot judge, start
+                    return self._seen * m
+        return 0
+
+    def _start(self, n: int) -> list[Event]:
+        """Judge the first ``n`` samples (whole blocks) at once (``_Startup``)."""
+        self._warm = True
+        if n < self.m:
+            return []
+        start = _Startup.of(self._y[:n], self._v[:n], self.m)
+        self._sigma_1, self._limit = start.sigma_1, start.limit
+        events: list[Event] = []
+        for k, mean in zip(start.idx, start.means, strict=True):
+            events += self._judge(int(k) * self.m, float(start.sig[k]), float(mean), start.ref)
+        self._n_judged = len(start.idx)
+        self._judged = n
+        return events
+
+    def _judge_blocks(self) -> list[Event]:
+        """Judge the complete blocks not judged yet, in order, each against the running
+        reference; the scales refreshed every RESCALE_BLOCKS blocks (a block's robust mean
+        uses the sample noise known before it)."""
         m, a = self.m, self._judged
         nb = (len(self._y) - a) // m
+        if not nb:
+            return []
+        y, enough, sig = _blocks(self._y[a:a + nb * m], self._v[a:a + nb * m], m)
         events: list[Event] = []
-        if nb:
-            y, enough, sig = _blocks(self._y[a:a + nb * m], self._v[a:a + nb * m], m)
-            if np.isnan(self._sigma_1) and np.any(enough):
-                self._sigma_1 = float(np.quantile(sig[enough], QUIET_QUANTILE))
-            means = _block_means(y, self._sigma_1 if self._sigma_1 > 0 else np.nan)
-            for k in range(nb):
-                if enough[k]:
-                    events += self._judge(a + k * m, float(sig[k]), float(means[k]))
-            self._judged = a + nb * m
-        y, v = self._take(max(0, self._judged - m))    # the last judged block stays: margin
-        return y, v, events
+        means, first, sigma = np.empty(0), 0, float("nan")
+        for k in np.flatnonzero(enough).tolist():
+            if k - first >= len(means) or not _same(sigma, self._sigma_1):
+                sigma, first = self._sigma_1, k
+                means = _block_means(y[k:k + self.RESCALE_BLOCKS], sigma if sigma > 0 else np.nan)
+            ref = self._ref.median() if len(self._ref) else float("nan")
+            events += self._judge(a + k * m, float(sig[k]), float(means[k - first]), ref)
+            self._n_judged += 1
+            if self._n_judged % self.RESCALE_BLOCKS == 0:
+                self._sigma_1 = float(np.quantile(self._sig.values(), QUIET_QUANTILE))
+                if len(self._means) >= 4:
+                    self._limit = _limit(self._sigma_1, _quiet_scatter(self._means.values()))
+        self._judged = a + nb * m
+        return events
 
-    def _take(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        y, v = self._y[:n], self._v[:n]
-        self._t, self._y, self._v = self._t[n:], self._y[n:], self._v[n:]
-        self._judged = max(0, self._judged - n)
-        return y, v
-
-    def flush(self) -> tuple[np.ndarray, np.ndarray, list[Event]]:
-        """Everything still held (the last partial block is not judged), and the event
-        closing a span still open."""
-        events = [self._close(float(self._t[-1]) if len(self._t) else self._span[1])] if self._span else []
-        y, v = self._take(len(self._y))
-        return y, v, events
-
-    def _judge(self, a: int, sig: float, mean: float) -> list[Event]:
-        """Judge the block of samples a .. a+m of the buffer (sample sigma ``sig`` and
-        robust mean ``mean``, deg/h); the block before it is still held."""
+    def _judge(self, a: int, sig: float, mean: float, ref: float) -> list[Event]:
+        """Judge the block of samples a .. a+m of the buffer (sample sigma ``sig``, robust
+        mean ``mean`` and reference ``ref``, deg/h; NaN: none); the block before it is
+        still held."""
         m = self.m
         t0, t1 = float(self._t[a]), float(self._t[a + m - 1])
         self._sig.append(sig)
-        if self._n_judged % self.RESCALE_BLOCKS == 0 or self._n_judged == self.WARMUP_BLOCKS:
-            self._sigma_1 = float(np.quantile(self._sig.values(), QUIET_QUANTILE))
-            if len(self._means) >= self.WARMUP_BLOCKS:
-                self._limit = _limit(self._sigma_1, _quiet_scatter(self._means.values()))
-        self._n_judged += 1
-        dev = abs(mean - self._ref.median()) if len(self._ref) else 0.0
         self._means.append(mean)
-        moving = len(self._means) > self.WARMUP_BLOCKS and bool(dev > self._limit)   # NaN limit: never
+        self._recent.append(mean)
+        dev = abs(mean - ref)
+        moving = bool(dev > self._limit)              # NaN limit or reference: never
+        if moving and self._steady():                 # a bias change: the new level is the reference
+            self._ref.reset(self._recent.values())
+            moving = False
         out: list[Event] = []
         if moving:
             self._mask(max(0, a - m), a + m)            # this block and the one before it
@@ -371,8 +511,18 @@ class MotionGate:
                     out.append(self._close(t1))
         return out
 
+    def _steady(self) -> bool:
+        """Every block mean of the last REFERENCE_S / 2 lies within the limit of their
+        median: a level that holds, not motion."""
+        if len(self._recent) < self._recent.n:
+            return False
+        r = self._recent.values()
+        return bool(np.max(np.abs(r - np.median(r))) <= self._limit)
+
     def _mask(self, a: int, b: int) -> None:
-        self.samples_excluded += int(np.count_nonzero(self._v[a:b]))
+        hit = self._v[a:b]
+        self.samples_excluded += int(np.count_nonzero(hit))
+        self._moved[a:b] |= hit
         self._v[a:b] = False
 
     def _close(self, t_s: float) -> Event:
@@ -382,6 +532,33 @@ class MotionGate:
         self._span = None
         return Event(t_s, "platform_motion", f"platform motion ended: {a:.3f} .. {b:.3f} s, "
                      f"peak {peak:.4g} deg/h from the reference")
+
+
+def _same(a: float, b: float) -> bool:
+    """``a`` and ``b`` are the same float (NaN equals NaN)."""
+    return a == b or (a != a and b != b)
+
+
+@dataclass(frozen=True)
+class GatedRecord:
+    """``MotionGate`` over a whole record: ``valid`` with platform motion made invalid,
+    the ``spans`` (s from the first sample) and the valid samples kept out."""
+
+    valid: np.ndarray
+    spans: list[MotionSpan]
+    samples_excluded: int
+
+
+def gate_record(rate_dph: np.ndarray, sample_rate_hz: float, valid: np.ndarray | None = None) -> GatedRecord:
+    """The live gate's decisions over a whole record (``rate_dph`` in deg/h, NaN or
+    ``valid`` False: no sample): the same as `fogmon replay` makes on it, however the
+    replay cuts it into blocks."""
+    y = np.asarray(rate_dph, dtype=np.float64)
+    ok = np.isfinite(y) if valid is None else np.asarray(valid, dtype=bool) & np.isfinite(y)
+    gate = MotionGate(sample_rate_hz)
+    first = gate.push(np.arange(len(y)) / sample_rate_hz, y, ok)
+    rest = gate.flush()
+    return GatedRecord(np.concatenate([first.valid, rest.valid]), list(gate.spans), gate.samples_excluded)
 
 
 def motion_mask(t_s: np.ndarray, spans: list[MotionSpan]) -> np.ndarray:

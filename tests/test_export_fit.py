@@ -177,3 +177,56 @@ def test_explain_exports_the_fitted_models_noise(tmp_path, capsys):
     assert float(v["gyroscope_noise_density"]) == pytest.approx(0.1 * math.pi / 180 / 60, rel=1e-15)
     assert float(v["gyroscope_random_walk"]) == pytest.approx(0.02 * math.pi / 180 / 216000, rel=1e-15)
     assert float(v["update_rate"]) == 10.0
+
+
+class FakeAccel:
+    """An accelerometer's whole-record fit with chosen IEEE Std 1293 coefficients."""
+
+    def __init__(self, **values):
+        self.c = {}
+        for name in ("Q_mps", "VRW_mpsph", "Bias_ug", "AccRW_mpshsh", "Ramp_mpshh"):
+            v = values.get(name, 0.0)
+            self.c[name] = (Coefficient(0.0, 0.0, v[1], False, v[1]) if isinstance(v, tuple) else
+                            Coefficient(v, 0.9 * v, 1.1 * v, True, 1.2 * v))
+
+    def coefficients(self):
+        return self.c
+
+
+def test_kalibr_accelerometer_keys_are_the_documented_conversions_hand_computed():
+    acc = {"x": FakeAccel(VRW_mpsph=0.06, Bias_ug=20.0, AccRW_mpshsh=4.32),
+           "y": FakeAccel(VRW_mpsph=0.09, Bias_ug=10.0, AccRW_mpshsh=("upper", 21.6))}
+    text = kalibr_yaml(FakeFit(N_dpsh=0.1, K_dphsh=1.0), "imu.bag", 200.0, "/imu/data", acc)
+    v = yaml_values(text)
+    # VRW 0.09 m/s/sqrt(h) = 0.09 / 60 m/s^2/sqrt(Hz) (the largest axis, y);
+    # AccRW 21.6 m/s/h/sqrt(h) = 1e-4 m/s^3/sqrt(Hz)
+    assert float(v["accelerometer_noise_density"]) == pytest.approx(0.0015, rel=1e-15)
+    assert float(v["accelerometer_random_walk"]) == pytest.approx(1e-4, rel=1e-15)
+    assert "AccRW 21.6 m/s/h/sqrt(h) (95 % upper limit: not identifiable from this record)" in text
+    assert "(accelerometer y, the largest of x, y)" in text
+    assert "Bias 20 ug = 0.000196133 m/s^2" in text                 # 20e-6 x 9.80665
+    assert "white sigma 0.0212132 m/s^2" in text                    # 0.0015 x sqrt(200)
+    assert v["rostopic"] == "/imu/data" and float(v["update_rate"]) == 200.0
+
+
+def test_exports_name_no_made_up_topic_or_rate():
+    for writer in (kalibr_yaml, ros_yaml):
+        text = writer(FakeFit(N_dpsh=0.1), "run.csv", None)          # not ROS, rate unknown
+        v = yaml_values(text)
+        assert "rostopic" not in v and "update_rate" not in v and "/imu0" not in text and "null" not in text
+        assert "# update_rate: the record's sample rate is not known" in text
+
+
+def test_ros_and_matlab_accelerometer_outputs():
+    acc = {"x": FakeAccel(VRW_mpsph=0.2, Bias_ug=50.0, AccRW_mpshsh=10.0)}
+    text = ros_yaml(FakeFit(N_dpsh=0.06), "run.bag", 400.0, "/imu", acc)
+    assert float(yaml_values(text)["accelerometer_noise_density"]) == pytest.approx(0.2 / 60, rel=1e-15)
+    assert "# X Velocity Random Walk: 0.00333333 m/s/sqrt(s) 0.2 m/s/sqrt(hr)" in text
+    assert "# X Bias Instability: 0.000490332 m/s^2 6354.71 m/hr^2" in text      # 50 ug = 4.903325e-4; x 3600^2
+    assert "# X Accel Random Walk: 4.62963e-05 m/s^2/sqrt(s)" in text            # 10 / 216000
+    m = matlab_snippet(FakeFit(N_dpsh=0.06), "run.bag", 400.0, None, acc)
+    assert "accParams = accelparams(" in m
+    vals = dict(re.findall(r"'(\w+)', ([0-9.e+-]+)", m.split("accParams")[1]))
+    assert float(vals["NoiseDensity"]) == pytest.approx(0.2 / 60, rel=1e-15)
+    assert float(vals["BiasInstability"]) == pytest.approx(50e-6 * 9.80665, rel=1e-15)
+    assert float(vals["RandomWalk"]) == pytest.approx(10 / 216000, rel=1e-15)

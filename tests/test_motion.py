@@ -3,7 +3,7 @@ stationary IEEE-952 noise with drift, bias instability, rate ramps or glitches."
 import numpy as np
 import pytest
 
-from fogmon.motion import MotionGate, block_samples, find_motion, motion_mask, robust_sigma_of_diffs
+from fogmon.motion import REFERENCE_S, MotionGate, block_samples, find_motion, motion_mask, robust_sigma_of_diffs
 from fogmon.sim.model import Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
@@ -61,10 +61,10 @@ def test_motion_over_most_of_the_record_is_still_found():
 def run_gate(t, r, valid, sizes):
     gate, ys, vs, events, i = MotionGate(FS), [], [], [], 0
     for n in sizes:
-        y, v, ev = gate.push(t[i:i + n], r[i:i + n], valid[i:i + n])
+        y, v, _, ev = gate.push(t[i:i + n], r[i:i + n], valid[i:i + n])
         ys.append(y), vs.append(v), events.extend(ev)
         i += n
-    y, v, ev = gate.flush()
+    y, v, _, ev = gate.flush()
     ys.append(y), vs.append(v), events.extend(ev)
     return gate, np.concatenate(ys), np.concatenate(vs), events
 
@@ -92,6 +92,39 @@ def test_live_gate_keeps_a_turn_out_of_the_analysis():
     assert [e.kind for e in events] == ["platform_motion"] * 2
     (span,) = gate.spans
     assert abs(span.t_start_s - 600.0) < 2 * block / FS and abs(span.t_end_s - 630.0) < 2 * block / FS
+
+
+def hand_turn(t, t0):
+    """+90 deg in 1.5 s, held 1 s, back in 1.5 s (half-sine rate profiles, peak 94 deg/s), in deg/h."""
+    r = np.zeros_like(t)
+    for start, sign in ((t0, 1.0), (t0 + 2.5, -1.0)):
+        on = (t >= start) & (t < start + 1.5)
+        r[on] = sign * 3600.0 * 94.0 * np.sin(np.pi * (t[on] - start) / 1.5)
+    return r
+
+
+@pytest.mark.parametrize("t0", [0.0, 2.0, 20.0])
+def test_live_gate_judges_the_first_seconds_too(t0):
+    t, r = stationary(6, duration_s=600.0)
+    turning = hand_turn(t, t0)
+    r = r + turning
+    turn = np.abs(turning) > 3600.0 * 1.0          # faster than 1 deg/s (the 1 s hold between is at rest)
+    valid = np.ones(len(t), bool)
+    results = [run_gate(t, r, valid, sizes) for sizes in ([len(t)], [1] * 700 + [1000] * 59 + [len(t) - 59700])]
+    for gate, y, v, _ in results:
+        np.testing.assert_array_equal(y, r)
+        assert not v[turn].any()
+        assert np.count_nonzero(~v) < 4.0 * FS + 4 * block_samples(FS)
+        (span,) = gate.spans
+        assert span.t_start_s <= t0 + 2 * block_samples(FS) / FS
+    np.testing.assert_array_equal(results[0][2], results[1][2])     # the same however the samples come
+
+
+def test_live_gate_takes_a_lasting_bias_step_as_the_new_level():
+    t, r = stationary(1)
+    r = r + np.where(t > 600.0, 300.0, 0.0)
+    gate, _, v, _ = run_gate(t, r, np.ones(len(t), bool), [1000] * 180)
+    assert v[t > 600.0 + REFERENCE_S / 2 + 5.0].all()       # a level once it has held REFERENCE_S / 2
 
 
 def test_explain_leaves_platform_motion_out_and_warns():

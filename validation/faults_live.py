@@ -49,7 +49,7 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 
 from helpers.fake_device import has_open, open_pty  # noqa: E402
 
-from fogmon.formats.archive import find_pieces  # noqa: E402
+from fogmon.formats.archive import FOLDER_PREFIX, find_pieces  # noqa: E402
 from fogmon.formats.replay_log import read_replay_log  # noqa: E402
 from fogmon.sources.codecs.kvh import KvhCodec  # noqa: E402
 from fogmon.sources.devices.serial_port import SerialSource  # noqa: E402
@@ -108,8 +108,17 @@ def cpu_s(pid: int) -> float:
 
 
 def monitor(tty: str, arch: str, *extra: str) -> subprocess.Popen:
+    """`fogmon monitor` archiving into a new folder in ``arch`` (made here; run_folder finds it)."""
+    os.makedirs(arch, exist_ok=True)
     cmd = [sys.executable, "-m", "fogmon", "monitor", "--serial", tty, "--archive", arch, "--no-progress", *extra]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+
+
+def run_folder(arch: str) -> str:
+    """The archive folder a monitor made in ``arch`` (``--archive arch``: a new
+    fogmon-archive-* folder), or a path that does not exist before it has."""
+    found = sorted(e.path for e in os.scandir(arch) if e.name.startswith(FOLDER_PREFIX))
+    return found[0] if found else os.path.join(arch, "(none yet)")
 
 
 def wait_for(cond, proc: subprocess.Popen, what: str, timeout_s: float = 300.0) -> None:
@@ -148,7 +157,7 @@ def last_t(path: str) -> float:
 
 def archived(arch: str) -> tuple[np.ndarray, np.ndarray]:
     """(slot, frame number k) of every archived row: slot = t_s x rate, k from the z rate."""
-    recs = [read_replay_log(p) for p in find_pieces(arch, "samples.csv")]
+    recs = [read_replay_log(p) for p in find_pieces(run_folder(arch), "samples.csv")]
     t = np.concatenate([r.t_s for r in recs])
     z = np.concatenate([r.rate_dph if r.rate_dph.ndim == 1 else r.rate_dph[:, -1] for r in recs])
     rate = recs[0].sample_rate_hz
@@ -212,9 +221,9 @@ def monitor_throughput(rate_hz: float, seconds: float, work: str, check: Checks)
     dev = Device(seconds, rate_hz)
     arch = os.path.join(work, f"arch-{rate_hz:g}")
     mon = monitor(dev.tty, arch, "--rate-hz", f"{rate_hz:g}", *COUNT)
-    csv = os.path.join(arch, "samples-0001.csv")
     try:
-        wait_for(lambda: os.path.exists(os.path.join(arch, "raw-0001.bin")), mon, "the monitor to start")
+        wait_for(lambda: os.path.exists(os.path.join(run_folder(arch), "raw-0001.bin")), mon, "the monitor to start")
+        csv = os.path.join(run_folder(arch), "samples-0001.csv")
         c0, t0 = cpu_s(mon.pid), dev.go()
         dev.wait_end(seconds + 60)
         c1, wall = cpu_s(mon.pid), dev.ended - t0
@@ -272,7 +281,7 @@ def wrap_loss(work: str, check: Checks) -> None:
     arch = os.path.join(work, "arch-wraps")
     mon = monitor(dev.tty, arch, "--axis", "z", *COUNT, "--duration-s", f"{seconds:g}")
     try:
-        wait_for(lambda: os.path.exists(os.path.join(arch, "raw-0001.bin")), mon, "the monitor to start")
+        wait_for(lambda: os.path.exists(os.path.join(run_folder(arch), "raw-0001.bin")), mon, "the monitor to start")
         dev.go()
         out, err = mon.communicate(timeout=600)
     finally:
@@ -302,7 +311,7 @@ def wrap_loss(work: str, check: Checks) -> None:
           (counters.get("clock_wraps"), counters.get("samples_missing"), counters.get("seq_gaps")) == (6, lost, 3))
     check("every frame sent in the run archived", np.array_equal(k, np.flatnonzero(kept[:n])))
     check(f"every row from {CLOCK_CONFIRM_S + 0.3:g} s after a loss on its slot", on_slot == int(settled.sum()))
-    replay = open_raw_capture(find_pieces(arch, "raw.bin"))
+    replay = open_raw_capture(find_pieces(run_folder(arch), "raw.bin"))
     blocks = list(replay.blocks())
     vt = np.concatenate([b.t_s[b.valid] for b in blocks])
     keys = ("frames_ok", "seq_gaps", "samples_missing", "clock_wraps", "implausible_gaps")

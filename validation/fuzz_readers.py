@@ -175,8 +175,9 @@ class Runner:
                 return self.outbox.get(timeout=0.5)
             except queue.Empty:
                 if not self.proc.is_alive():
+                    code = self.proc.exitcode
                     self._start()
-                    return ("traceback", f"worker died (exit code {self.proc.exitcode})", 0)
+                    return ("traceback", f"worker died (exit code {code}: a crash in a library)", 0)
                 if time.monotonic() > end:
                     self.proc.kill()
                     self.proc.join()

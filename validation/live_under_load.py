@@ -48,7 +48,7 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 from helpers.fake_device import has_open, open_pty  # noqa: E402
 
 from fogmon.errors import FogmonError  # noqa: E402
-from fogmon.formats.archive import find_pieces  # noqa: E402
+from fogmon.formats.archive import FOLDER_PREFIX, find_pieces  # noqa: E402
 from fogmon.formats.replay_log import read_replay_log  # noqa: E402
 from fogmon.sources.codecs.kvh import encode_frame  # noqa: E402
 from fogmon.sources.files.capture import open_raw_capture  # noqa: E402
@@ -187,15 +187,22 @@ def event_totals(rrd: str) -> dict[str, int]:
     return tot
 
 
+def archive_in(parent: str) -> str:
+    """The archive folder `fogmon monitor --archive PARENT` made in PARENT ("" before it exists)."""
+    found = [e.path for e in os.scandir(parent) if e.name.startswith(FOLDER_PREFIX)]
+    return found[0] if found else ""
+
+
 def run_once(mode: str, args, workdir: str, connect_url: str | None) -> bool:
     rng = np.random.default_rng(args.seed)
     n = math.floor(args.duration_s * RATE_HZ - 0.5 + 1e-9) + 1   # samples of the --duration-s run
     plan = Plan(n + 5 * RATE_HZ, args.duration_s, rng)
     master, slave, tty = open_pty()
-    arch = os.path.join(workdir, f"arch-{mode}")
+    runs = os.path.join(workdir, f"arch-{mode}")   # the monitor makes its archive folder in it
+    os.makedirs(runs, exist_ok=True)
     window = min(8.192, 2 ** math.floor(math.log2(n / 4)) / RATE_HZ)
     cmd = [sys.executable, "-m", "fogmon", "monitor", "--serial", tty, "--protocol", "kvh-a", "--axis", "z",
-           "--kvh-rot", "rate", "--kvh-units", "deg", "--duration-s", f"{args.duration_s:g}", "--archive", arch,
+           "--kvh-rot", "rate", "--kvh-units", "deg", "--duration-s", f"{args.duration_s:g}", "--archive", runs,
            "--window-s", f"{window:g}", "--hop-s", f"{window / 8:g}", "--no-progress"]
     rrd = None
     if mode == "rrd":
@@ -212,7 +219,7 @@ def run_once(mode: str, args, workdir: str, connect_url: str | None) -> bool:
         while not has_open(mon.pid, tty) and mon.poll() is None:
             time.sleep(0.01)
         # frames begin once the monitor decodes what it reads (pyserial flushes the port while opening it)
-        while not os.path.exists(os.path.join(arch, "raw-0001.bin")) and mon.poll() is None:
+        while not os.path.exists(os.path.join(archive_in(runs), "raw-0001.bin")) and mon.poll() is None:
             time.sleep(0.01)
         dev.preamble.set()
         while dev.t0 is None:
@@ -247,6 +254,7 @@ def run_once(mode: str, args, workdir: str, connect_url: str | None) -> bool:
     # what was sent inside the run: frames 0 .. n_samples-1 on the monitor's grid
     fault = plan.fault[:n_samples]
     intact = np.flatnonzero(fault == 0)
+    arch = archive_in(runs)
     logs = find_pieces(arch, "samples.csv")
     recs = [read_replay_log(p) for p in logs]
     t = np.concatenate([r.t_s for r in recs]) if recs else np.zeros(0)

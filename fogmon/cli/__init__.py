@@ -43,6 +43,7 @@ ALIASES = {
 #: backticked names in library messages that no option sets: shown as written
 NO_FLAG = frozenset({
     "rerun",                      # the Rerun viewer program (fogmon.sinks.rerun_sink)
+    "exclude_motion",             # fogmon.oadev / dadev (fogmon.api); the commands' --keep-motion is its inverse
 })
 
 

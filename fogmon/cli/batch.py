@@ -6,8 +6,12 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
+import threading
+import time
 
+from fogmon import stopping
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig
@@ -15,6 +19,11 @@ from fogmon.sources.options import SourceOptions
 
 #: default chunk length in samples (4.7 h at 1 kHz): long recordings are split into chunks
 DEFAULT_CHUNK_SAMPLES = 1 << 24
+#: give up when the cluster has had no worker for this long (s): at the start (a
+#: --scheduler nobody serves) and while tasks wait (every worker died)
+NO_WORKER_S = 60.0
+#: how often (s) waiting tasks check that the cluster still has a worker
+POLL_S = 2.0
 
 EPILOG = """examples:
   fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
@@ -28,10 +37,14 @@ recording), a glob is expanded. Every input is checked (all rows) before any ana
 starts. One task per recording and axis; a recording longer than --chunk-s is split
 into chunks overlapping by one window, with results equal to a single pass
 (docs/batch.md). Window, hop and taus are chosen per recording as `fogmon replay` does.
-Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
-B deg/h, K deg/h/sqrt(h), R deg/h^2). Exit code 0 when every recording was analysed,
-1 when some failed (named on stderr and in recordings.parquet, column error), 2 on bad
-usage or input (nothing written)."""
+Every readable recording is analysed; one that cannot be read is named on stderr and in
+recordings.parquet (column error) and left out. When the cluster has no worker for
+60 s (none connected, or all died), batch gives up with an error. Rates in deg/h, times
+in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h),
+R deg/h^2). Exit code 0 when every recording was analysed, 1 when some analyses failed
+(named on stderr and in recordings.parquet), 2 on bad usage, when some inputs could not
+be read (the others analysed and written) or none could (nothing written), or when no
+worker is left."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -78,25 +91,73 @@ def _options(args: argparse.Namespace) -> tuple[SourceOptions, PipelineConfig]:
                                                 raw_rate=args.raw_rate, keep_motion=args.keep_motion)
 
 
+def _local_cluster(n: int):
+    """A local cluster of ``n`` worker processes, one thread each, that leave Ctrl-C to
+    this process (a terminal sends it to the whole process group; this process stops
+    them cleanly, so an interrupted batch prints no worker tracebacks): the workers are
+    forked from multiprocessing's fork server, started here with SIGINT ignored, which
+    every process forked from it inherits (also a worker restarted later). SIGINT is
+    ignored only while the fork server process is started (milliseconds)."""
+    import multiprocessing.forkserver
+
+    import dask
+    from distributed import LocalCluster
+
+    if threading.current_thread() is threading.main_thread():
+        handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            multiprocessing.forkserver.ensure_running()
+        finally:
+            signal.signal(signal.SIGINT, handler)
+    cluster = None
+    # a Ctrl-C while the cluster starts interrupts once it has started (then it is closed); the
+    # workers' own log lines stay off the terminal (a recording's failure is reported by its
+    # task; workers stopped with the cluster would log heartbeat errors)
+    try:
+        with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}), stopping.shielded():
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.CRITICAL)
+    except KeyboardInterrupt:
+        if cluster is not None:
+            _quiet_shutdown()
+            cluster.close()
+        raise
+    return cluster
+
+
 def _client(args):
-    from distributed import Client, LocalCluster
+    from distributed import Client
 
     if args.scheduler:
         try:
-            return Client(args.scheduler, timeout=30), None
+            client = Client(args.scheduler, timeout=30)
         except (OSError, TimeoutError) as e:
             raise FogmonError(f"--scheduler {args.scheduler}: cannot connect: {e}") from None
-    n = args.workers or len(os.sched_getaffinity(0))
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+        try:
+            client.wait_for_workers(1, timeout=NO_WORKER_S)
+        except TimeoutError:
+            client.close()
+            raise FogmonError(f"--scheduler {args.scheduler}: no Dask worker in {NO_WORKER_S:g} s (start one with "
+                              f"`dask worker {args.scheduler}`)") from None
+        return client, None
+    cluster = _local_cluster(args.workers or len(os.sched_getaffinity(0)))
     return Client(cluster), cluster
 
 
+def _quiet_shutdown() -> None:
+    """After Ctrl-C: the client's pending waits end with errors nobody collects; asyncio
+    and distributed would print them as tracebacks at exit."""
+    for name in ("asyncio", "distributed", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
 def run(args: argparse.Namespace) -> int:
+    from fogmon.cli.output_options import check_command_outputs
     from fogmon.fleet.inputs import expand_inputs
 
     paths = expand_inputs(args.inputs)
-    _check_outputs(args)
+    check_command_outputs(args, paths)
+    _check_model(args)
     source, config = _options(args)
     show = not args.no_progress and sys.stdout.isatty()     # Dask's text progress bar writes to stdout
     client, cluster = _client(args)
@@ -104,45 +165,78 @@ def run(args: argparse.Namespace) -> int:
         if show:
             print(f"fogmon batch: {len(paths)} recordings on {len(client.scheduler_info()['workers'])} Dask workers "
                   f"({args.scheduler or 'local cluster'})", file=sys.stderr)
-        plans = _check_inputs(client, paths, source, config, show)
-        os.makedirs(args.out, exist_ok=True)     # every input is good: the outputs can be written
+        plans, bad = _check_inputs(client, paths, source, config, show, args.scheduler)
+        _make_out(args.out)                      # some input is readable: the outputs can be written
         jobs = _submit(client, plans, args, source, config)
         if show:
             from distributed import progress
             progress([f for j in jobs for f in j[3]] + [j[4] for j in jobs if j[4] is not None])
-        windows, rows = _gather(client, jobs)
+        windows, rows, accels = _gather(client, jobs, args.scheduler)
+    except KeyboardInterrupt:
+        _quiet_shutdown()
+        raise
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    return _finish(args, plans, jobs, windows, rows)
+    return _finish(args, plans, bad, jobs, windows, rows, accels)
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
-    """FogmonError unless --out, --model and --report can be used (before any work)."""
-    from fogmon.fleet import tables
-    from fogmon.outputs import check_outputs
+def _make_out(folder: str) -> None:
+    """The --out folder (in an existing one: checked before); FogmonError on a full disk."""
+    from fogmon.outputs import write_failed
 
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise FogmonError(f"--out {args.out}: is a file, give a folder")
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise write_failed("`out`", folder, e) from None
+
+
+def _check_model(args: argparse.Namespace) -> None:
+    """FogmonError unless --model reads as a sensor model (before any work)."""
     if args.model and not os.path.isfile(args.model):
         raise FogmonError(f"--model {args.model}: no such file")
     if args.model:
         from fogmon.sim.model import load_model
         load_model(args.model)
-    parent = os.path.dirname(os.path.abspath(args.out))
-    if not os.path.isdir(args.out) and not (os.path.isdir(parent) and os.access(parent, os.W_OK)):
-        raise FogmonError(f"--out {args.out}: cannot create it (is {parent} a writable folder?)")
-    if os.path.isdir(args.out):
-        check_outputs({"--out": os.path.join(args.out, tables.WINDOWS)})
-    report_dir = os.path.dirname(os.path.abspath(args.report)) if args.report else None
-    if report_dir and (os.path.isdir(report_dir) or report_dir != os.path.abspath(args.out)):
-        check_outputs({"--report": args.report})           # (a report inside a new --out folder is fine)
 
 
-def _check_inputs(client, paths: list[str], source: SourceOptions, config: PipelineConfig, show: bool) -> list:
-    """Every input checked on the cluster (all rows): its plans, or FogmonError naming
-    the bad inputs (the last one in the error, the others on stderr)."""
+def _wait(client, futures: list, scheduler: str | None) -> None:
+    """Wait until ``futures`` are done; FogmonError when the cluster has had no worker
+    for NO_WORKER_S s meanwhile (every worker died: nothing can run any more)."""
+    from distributed import wait
+
+    alone_since: float | None = None
+    while True:
+        try:
+            wait(futures, timeout=POLL_S)
+            return
+        except TimeoutError:
+            pass
+        if client.scheduler_info(n_workers=-1).get("workers"):
+            alone_since = None
+            continue
+        now = time.monotonic()
+        alone_since = alone_since if alone_since is not None else now
+        if now - alone_since >= NO_WORKER_S:
+            left = sum(not f.done() for f in futures)
+            raise FogmonError(f"no Dask worker left at {scheduler or 'the local cluster'} for {NO_WORKER_S:g} s "
+                              f"({left} of {len(futures)} tasks not done): nothing written")
+
+
+def _result(future, failed):
+    """A task's result, or ``failed(message)`` when the task itself failed on the cluster
+    (e.g. KilledWorker: its worker died each time it ran it)."""
+    if future.status == "error":
+        e = future.exception()
+        return failed(f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}".rstrip(": "))
+    return future.result()
+
+
+def _check_inputs(client, paths: list[str], source: SourceOptions, config: PipelineConfig, show: bool,
+                  scheduler: str | None) -> tuple[list, list]:
+    """Every input checked on the cluster (all rows): the plans of the readable ones and
+    those of the unreadable (each named on stderr now); FogmonError when none is readable."""
     from distributed import progress
 
     from fogmon.cli import render
@@ -152,14 +246,15 @@ def _check_inputs(client, paths: list[str], source: SourceOptions, config: Pipel
                         key=[f"check-{i}" for i in range(len(paths))])
     if show:
         progress(checks)
-    plans = client.gather(checks)
+    _wait(client, checks, scheduler)
+    plans = [_result(f, lambda msg, p=p: tasks.Plan(p, kind=tasks.input_kind(p), error=msg))
+             for f, p in zip(checks, paths, strict=True)]
     bad = [p for p in plans if p.error]
-    if bad:
-        for p in bad[:-1]:
-            print(f"fogmon batch: error: {render(p.error, 'batch')}", file=sys.stderr)
-        raise FogmonError(bad[-1].error + (f" ({len(bad)} bad inputs, nothing analysed)" if len(bad) > 1 else
-                                           " (nothing analysed)"))
-    return plans
+    for p in bad:
+        print(f"fogmon batch: error: {render(p.error, 'batch')}", file=sys.stderr)
+    if len(bad) == len(plans):
+        raise FogmonError(f"no input could be read ({len(bad)} named above): nothing analysed")
+    return [p for p in plans if not p.error], bad
 
 
 def _submit(client, plans: list, args: argparse.Namespace, source: SourceOptions,
@@ -189,34 +284,51 @@ def _submit(client, plans: list, args: argparse.Namespace, source: SourceOptions
     return jobs
 
 
-def _gather(client, jobs: list[tuple]) -> tuple[list, list[dict]]:
-    """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed)
-    and the recordings-table rows (their errors as this command names options)."""
+def _gather(client, jobs: list[tuple], scheduler: str | None) -> tuple[list, list[dict], tuple[list, list[dict]]]:
+    """The results of ``jobs``: the windows tables (pyarrow, one per recording analysed),
+    the recordings-table rows (their errors as this command names options) and the
+    accelerometers' windows tables and rows."""
     from fogmon.cli import render
+    from fogmon.fleet import tasks
 
+    _wait(client, [f for j in jobs for f in (*j[3], j[4], j[5]) if f is not None], scheduler)
     windows: list = []
     rows: list[dict] = []
+    accel_windows: list = []
+    accel_rows: list[dict] = []
     for plan, axis, chunks, futs, expl, masked in jobs:
-        results = client.gather(futs)
-        row, win = _recording_row(plan, axis, chunks, results,
-                                  client.gather(masked) if masked is not None else None)
+        path = plan.path
+        results = [_result(f, lambda msg, c=c, path=path: tasks.ChunkResult(path, c.index, error=msg))
+                   for f, c in zip(futs, chunks, strict=True)]
+        motion = (_result(masked, lambda msg, path=path: tasks.MotionResult(path, error=msg))
+                  if masked is not None else None)
+        row, win = _recording_row(plan, axis, chunks, results, motion)
         if expl is not None:
-            row.update(client.gather(expl))
+            row.update(_result(expl, lambda msg: {"explain_score_before": float("nan"),
+                                                  "explain_score_after": float("nan"), "explain_effects": "",
+                                                  "explain_error": msg}))
         for k in ("error", "explain_error"):
             if row.get(k):
                 row[k] = render(row[k], "batch")
         rows.append(row)
         if win is not None:
             windows.append(win)
-    return windows, rows
+            for accel_row, accel_win in _accel_rows(plan, results):
+                accel_rows.append(accel_row)
+                accel_windows.append(accel_win)
+    return windows, rows, (accel_windows, accel_rows)
 
 
-def _finish(args: argparse.Namespace, plans: list, jobs: list[tuple], windows: list, rows: list[dict]) -> int:
-    """Write the tables (and --report), say what was done and what failed; the exit code."""
+def _finish(args: argparse.Namespace, plans: list, bad: list, jobs: list[tuple], windows: list,
+            rows: list[dict], accels: tuple[list, list[dict]] = ([], [])) -> int:
+    """Write the tables (and --report), say what was done, what failed and what could
+    not be read; the exit code."""
+    from fogmon.cli import render
     from fogmon.fleet import tables
 
     failed = [row for row in rows if row["error"]]
-    w_path, r_path = tables.write_tables(args.out, windows, rows)
+    unread = [{"recording": p.path, "axis": "-", "format": p.kind, "error": render(p.error, "batch")} for p in bad]
+    w_path, r_path = tables.write_tables(args.out, windows, rows + unread, *accels)
     for row in failed:
         print(f"fogmon batch: {row['recording']}: failed: {row['error']}", file=sys.stderr)
     for row in rows:
@@ -226,12 +338,36 @@ def _finish(args: argparse.Namespace, plans: list, jobs: list[tuple], windows: l
     what = "(recording, axis) pairs" if any(p.axes for p in plans) else "recordings"
     print(f"fogmon batch: {len(rows) - len(failed)} of {len(rows)} {what} analysed "
           f"({sum(len(j[2]) for j in jobs)} chunks): {n_win} windows in {w_path}, one row per recording in {r_path}")
+    if accels[1]:
+        print(f"fogmon batch: {len(accels[1])} accelerometers: {sum(len(t) for t in accels[0])} windows in "
+              f"{os.path.join(args.out, tables.ACCEL_WINDOWS)}, one row each in "
+              f"{os.path.join(args.out, tables.ACCEL_RECORDINGS)}")
     if args.report:
         from fogmon.cli import command_flags
         from fogmon.fleet.report import write_report
         for f in write_report(args.report, r_path, w_path, command_flags("batch")):
             print(f"fogmon batch: wrote {f}")
+    if bad:
+        print(f"fogmon batch: error: {len(bad)} of {len(bad) + len(plans)} inputs could not be read (named above "
+              f"and in {r_path}); the others are analysed", file=sys.stderr)
+        return 2
     return 1 if failed or any(r.get("explain_error") for r in rows) else 0
+
+
+def _accel_rows(plan, results) -> list[tuple[dict, object]]:
+    """The accelerometers' rows and windows tables of one recording's chunks (those of
+    an axis's task: that axis's accelerometer)."""
+    from fogmon.fleet import tables
+
+    out = []
+    last = results[-1]
+    for a, rec in last.accel_records.items():
+        row = {"recording": plan.path, "accel": a, "sample_rate_hz": plan.sample_rate_hz, "window_s": plan.window_s,
+               "hop_s": plan.hop_s, "samples_invalid": sum(r.accel_invalid.get(a, 0) for r in results),
+               "windows": sum(len(r.accel_windows.get(a, {}).get("t_end_s", ())) for r in results), **rec}
+        out.append((row, tables.windows_table(plan.path, a, plan.window_s, results[0].tau_s,
+                                              [r.accel_windows.get(a, {}) for r in results], accel=True)))
+    return out
 
 
 def _recording_row(plan, axis: str, chunks, results, motion) -> tuple[dict, object]:

@@ -5,7 +5,6 @@ analyse: decoded, on their grid, valid ones only (gaps stay time gaps)."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import itertools
 import os
 
@@ -40,20 +39,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.cli.output_options import check_command_outputs
     from fogmon.cli.source_options import source_options
-    from fogmon.outputs import check_outputs
+    from fogmon.formats.log_writer import check_log_suffix
     from fogmon.sources.open import open_replay_source
 
-    ext = os.path.splitext(args.output)[1].lower()
-    if ext not in (".parquet", ".csv"):
-        raise FogmonError(f"OUT {args.output}: name it .parquet (Parquet replay log) or .csv (replay log)")
-    check_outputs({"OUT": args.output}, inputs=[args.input])
+    check_command_outputs(args)
+    check_log_suffix("OUT", args.output)
     source = open_replay_source(args.input, source_options(args))
     if getattr(source, "n_samples", None) is None:
         raise FogmonError(f"{args.input}: an endless source (a sensor model) cannot be converted; "
                           f"use `fogmon sim --out`")
     try:
-        n, without_aux, partial = _convert(source, args.input, args.output, ext)
+        n, without_aux, partial = _convert(source, args.input, args.output)
     finally:
         source.close()
     print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
@@ -62,55 +60,42 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _convert(source, input_path: str, output: str, ext: str) -> tuple[int, int, int]:
-    """Write ``source``'s valid samples to ``output`` (a Parquet log for ext ".parquet",
-    else a replay-log CSV); no half-written output on any error. Returns the samples
-    written, the valid samples left out without aux values and those left out with only
-    some axes valid."""
+def _convert(source, input_path: str, output: str) -> tuple[int, int, int]:
+    """Write ``source``'s valid samples to ``output`` (a Parquet log for .parquet, else
+    a replay-log CSV; fogmon.formats.log_writer); after the first block, the free space
+    is checked against the source's samples at the bytes per row measured on it; no
+    half-written output on any error. Returns the samples written, the valid samples left
+    out without aux values and those left out with only some axes valid."""
     from fogmon.formats.capture import read_sidecar
-    from fogmon.formats.parquet_log import ParquetLogWriter
-    from fogmon.formats.replay_log import append_replay_rows, write_replay_header
+    from fogmon.formats.log_writer import LogWriter
+    from fogmon.outputs import check_space
     from fogmon.sinks.archive import replay_rows
 
     blocks = source.blocks()
     first = next(blocks, None)
     aux_names = list(first.aux) if first is not None else list(getattr(source, "aux_names", []))
     axes = first.axes if first is not None else source.axes
-    meta = _replay_meta(source)
     side = read_sidecar(input_path) if os.path.isfile(input_path) else None
-    n = without_aux = partial = 0
-    writer = fh = None
+    extra = {"source": source.name, **({"sidecar": side} if side else {})}
+    w = LogWriter(output, aux_names, _replay_meta(source), axes, extra, name="OUT")
+    without_aux = partial = seen = 0
     try:
-        if ext == ".parquet":
-            writer = ParquetLogWriter(output, aux_names, meta,
-                                      {"source": source.name, **({"sidecar": side} if side else {})}, axes=axes)
-        else:
-            fh = open(output, "w", encoding="utf-8", newline="\n")  # noqa: SIM115 - closed in the finally below
-            write_replay_header(fh, aux_names, meta, axes)
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep, b_partial, b_without_aux = replay_rows(b)
             without_aux += b_without_aux
             partial += b_partial
-            aux = {k: a[keep] for k, a in b.aux.items()}
-            if writer is not None:
-                writer.write(b.t_s[keep], b.rate_dph[keep], aux)
-            else:
-                append_replay_rows(fh, b.t_s[keep], b.rate_dph[keep], aux)
-            n += int(keep.sum())
-        if writer is not None:
-            writer.close(counters={**source.counters, "rows_without_aux": without_aux,
-                                   **({"partial_samples_dropped": partial} if axes else {})})
-        elif fh is not None:
-            fh.close()
+            seen += len(b)
+            w.write(b.t_s[keep], b.rate_dph[keep], {k: a[keep] for k, a in b.aux.items()})
+            if w.rows and seen == len(b):       # the first block: will the rest fit?
+                left = max(source.n_samples - seen, 0) * w.rows / seen
+                check_space("OUT", output, left * w.bytes_per_row,
+                            f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")
+        w.close(counters={**source.counters, "rows_without_aux": without_aux,
+                          **({"partial_samples_dropped": partial} if axes else {})})
     except BaseException:
-        if writer is not None:
-            writer.abort()
-        if fh is not None:
-            fh.close()
-            with contextlib.suppress(FileNotFoundError):
-                os.remove(output)   # no half-written output
+        w.abort()   # no half-written output
         raise
-    return n, without_aux, partial
+    return w.rows, without_aux, partial
 
 
 def _replay_meta(source) -> dict[str, str]:

@@ -12,7 +12,7 @@ from fogmon.cli.export_options import add_export_argument, export_request
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.export import write_export
-from fogmon.outputs import check_outputs
+from fogmon.outputs import check_outputs, written
 
 #: Most bootstrap replicates: each is one simulation of the whole recording, and beyond
 #: this the Gumbel-fitted family-wise threshold no longer sharpens.
@@ -98,6 +98,7 @@ def _options(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from fogmon.cli.output_options import check_command_outputs
     from fogmon.explain import report
     from fogmon.explain.axes import one_axis_model
     from fogmon.explain.baseline import baseline_model
@@ -107,11 +108,8 @@ def run(args: argparse.Namespace) -> int:
 
     png = os.path.splitext(args.report)[0] + ".png"
     outliers_csv = report.outliers_path(args.report)
-    check_outputs({"--report": args.report, "--report (its PNG)": png, "--report (its outliers list)": outliers_csv,
-                   "--rrd": args.rrd, "--out-model": args.out_model, "--out-corrected": args.out_corrected},
-                  inputs=[args.recording, args.model])
-    export = export_request(args, [args.recording, args.model, args.report, png, outliers_csv, args.rrd, args.out_model,
-                                   args.out_corrected])
+    check_command_outputs(args)
+    export = export_request(args)
     progress = (lambda stage, done=0, total=0: None) if args.quiet else StageProgress()
     model = load_model(args.model) if args.model else None
     progress(f"reading {args.recording}")
@@ -132,19 +130,49 @@ def run(args: argparse.Namespace) -> int:
     res = explain(rec, model, _options(args), baseline=args.model is None, progress=progress)
     res.warnings[:0] = motion
     progress(f"writing {args.report}")
-    held = report.write_outliers(res, outliers_csv)
+    held = _write_outliers(res, outliers_csv)
     rep = report.build_report(res, args.recording, args.model, os.path.basename(outliers_csv) if held else "")
-    report.write_report(rep, args.report)
-    report.write_png(res, png)
+    with written(args.report, "`report`") as tmp:
+        report.write_report(rep, tmp)
+    with written(png, "`report` (its PNG)") as tmp:
+        report.write_png(res, tmp)
     if args.rrd:
-        report.write_rrd(res, args.rrd)
-    report.write_outputs(res, args.out_model, args.out_corrected, outliers_csv if held else None)
+        with written(args.rrd, "`rrd`", RRD_ERRORS) as tmp:
+            report.write_rrd(res, tmp)
+    _write_models(args, lambda m, c: report.write_outputs(res, m, c, outliers_csv if held else None))
     if export:
         write_export(*export, res.fitted.noise, f"{args.recording} (explain: the fitted model's noise)",
                      res.fitted.sample_rate_hz)
     if not args.quiet:
         print(report.console_summary(rep))
     return 0
+
+
+#: what a failed Rerun file write raises (its file-writer thread gone: disk full, ...)
+RRD_ERRORS = (OSError, RuntimeError)
+
+
+def _write_outliers(res, path: str) -> int:
+    """The outliers list next to the report (complete or not written); the rows written.
+    Without an outliers effect, a list an earlier run left there is removed."""
+    from fogmon.explain import report
+
+    with written(path, "`report` (its outliers list)") as tmp:
+        n = report.write_outliers(res, tmp)
+    if not n:
+        report.write_outliers(res, path)   # writes nothing: removes an earlier run's list
+    return n
+
+
+def _write_models(args: argparse.Namespace, write) -> None:
+    """--out-model and --out-corrected by ``write(out_model, out_corrected)``, each
+    complete or not written."""
+    if args.out_model:
+        with written(args.out_model, "`out_model`") as tmp:
+            write(tmp, None)
+    if args.out_corrected:
+        with written(args.out_corrected, "`out_corrected`") as tmp:
+            write(None, tmp)
 
 
 def _run_axes(args: argparse.Namespace, rec, model, progress, export: bool) -> int:
@@ -166,20 +194,23 @@ def _run_axes(args: argparse.Namespace, rec, model, progress, export: bool) -> i
                           f"{', '.join(rec.axes)}: pick one with --axis NAME")
     pngs = {a: axis_file(args.report, a, ".png") for a in rec.axes}
     held = {a: axis_file(args.report, a, ".outliers.csv") for a in rec.axes}
-    check_outputs({"--report": args.report, **{f"--report (its axis {a} PNG)": p for a, p in pngs.items()},
-                   **{f"--report (its axis {a} outliers list)": p for a, p in held.items()},
-                   "--rrd": args.rrd, "--out-model": args.out_model, "--out-corrected": args.out_corrected},
-                  inputs=[args.recording, args.model])
+    check_outputs({"`report`": args.report, **{f"`report` (its axis {a} PNG)": p for a, p in pngs.items()},
+                   **{f"`report` (its axis {a} outliers list)": p for a, p in held.items()},
+                   "`rrd`": args.rrd, "`out_model`": args.out_model, "`out_corrected`": args.out_corrected},
+                  inputs=[args.recording, args.model, getattr(args, "dbc", None)])
     ares = explain_axes(rec, model, _options(args), keep_motion=args.keep_motion, progress=progress)
     progress(f"writing {args.report}")
-    times = {a: os.path.basename(held[a]) for a, res in ares.results.items() if report.write_outliers(res, held[a])}
+    times = {a: os.path.basename(held[a]) for a, res in ares.results.items() if _write_outliers(res, held[a])}
     rep = build_axes_report(ares, args.recording, args.model, times)
-    report.write_report(rep, args.report)
+    with written(args.report, "`report`") as tmp:
+        report.write_report(rep, tmp)
     for a, res in ares.results.items():
-        report.write_png(res, pngs[a])
+        with written(pngs[a], f"`report` (its axis {a} PNG)") as tmp:
+            report.write_png(res, tmp)
     if args.rrd:
-        write_axes_rrd(ares, args.rrd)
-    write_axes_outputs(ares, args.out_model, args.out_corrected, {a: held[a] for a in times})
+        with written(args.rrd, "`rrd`", RRD_ERRORS) as tmp:
+            write_axes_rrd(ares, tmp)
+    _write_models(args, lambda m, c: write_axes_outputs(ares, m, c, {a: held[a] for a in times}))
     if not args.quiet:
         print(axes_console_summary(rep))
     return 0

@@ -1,5 +1,7 @@
-"""`fogmon fit CURVE.csv`: the IEEE-952 fit, with intervals and upper limits, of an
-Allan-deviation curve made by another tool (fogmon.davar.curve, docs/exports.md)."""
+"""`fogmon fit CURVE`: the IEEE-952 fit, with intervals and upper limits, of the
+Allan-deviation curves another tool made: a CSV curve, imu_utils's data files,
+allan_variance_ros's allan_variance.csv (fogmon.formats.curves, fogmon.davar.curve,
+docs/exports.md); an accelerometer's as IEEE Std 1293 coefficients (fogmon.davar.accel)."""
 from __future__ import annotations
 
 import argparse
@@ -8,27 +10,37 @@ from fogmon.cli.export_options import add_export_argument, export_request
 from fogmon.cli.values import number, positive
 from fogmon.export import write_export
 
-EPILOG = """CURVE.csv: a header line tau_s,adev_dph (s, deg/h) and optionally edf or n_terms, then one
-row per tau, increasing; '#' lines are comments. Example:
+EPILOG = """CURVE: a CSV file with a header tau_s,adev_dph (s, deg/h; adev_ug or adev_mps2 for an
+accelerometer) and optionally edf or n_terms, then one row per tau, increasing; '#' lines
+are comments. Example:
   # from Stable32, overlapping ADEV of a 2 h record at 100 Hz
   tau_s,adev_dph,n_terms
   0.01,12.1,719999
+Or another tool's output, told by the file: imu_utils's data_<name>_<gyr|acc>_<t|x|y|z>.txt
+(any of them: the gyro and accelerometer curves of that sensor are read), allan_variance_ros's
+allan_variance.csv (its accelerometer and gyro curves).
 
 The fit needs the record's sample rate and length and the terms behind each tau; what the
 curve does not state is assumed, and the output says what was assumed (docs/exports.md).
   fogmon fit curve.csv --export kalibr imu.yaml
+  fogmon fit data/data_xsens_acc_t.txt --rate-hz 100 --export kalibr imu.yaml
 Exit code 0 on success, 2 on bad usage or input."""
+
+#: a curve longer than this shows only the taus the fit uses (one per octave)
+MAX_ROWS_SHOWN = 100
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.formatter_class = argparse.RawDescriptionHelpFormatter
     p.epilog = EPILOG
-    p.add_argument("curve", metavar="CURVE.csv", help="Allan-deviation curve: columns tau_s (s), adev_dph (deg/h), "
-                   "optional edf or n_terms")
+    p.add_argument("curve", metavar="CURVE", help="Allan-deviation curve: a CSV (columns tau_s (s), adev_dph "
+                   "(deg/h) or adev_ug / adev_mps2, optional edf or n_terms), an imu_utils data file or an "
+                   "allan_variance_ros allan_variance.csv")
     p.add_argument("--rate-hz", dest="sample_rate_hz", type=number(0, 1e6, above=True), metavar="HZ",
-                   help="sample rate of the record behind the curve, Hz (default: 1 / the first tau)")
+                   help="sample rate of the record behind the curve, Hz (default: what the file says, else 1 / the "
+                        "first tau)")
     p.add_argument("--record-s", type=positive, metavar="S", help="length of that record, s (default: from "
-                   "n_terms, else assumed 4 x the largest tau)")
+                   "n_terms or the file's format, else assumed 4 x the largest tau)")
     p.add_argument("--confidence", type=number(0, 1, above=True), default=0.683, metavar="C",
                    help="two-sided confidence of the intervals, 0 < C < 1 (default 0.683 = 1 sigma)")
     add_export_argument(p)
@@ -36,42 +48,117 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fogmon.cli import render
-    from fogmon.davar.curve import adev_from_curve, read_curve_csv, with_fit_intervals
-    from fogmon.davar.fit import fit_noise
+    from fogmon.cli.output_options import check_command_outputs
     from fogmon.errors import FogmonError
-    from fogmon.sinks.console import adev_lines, coefficient_lines, model_check
+    from fogmon.formats.curves import read_curves
 
     if not args.confidence < 1:
         raise FogmonError(f"--confidence must be below 1, got {args.confidence:g}")
+    check_command_outputs(args)
     export = export_request(args, [args.curve])
-    cols, _ = read_curve_csv(args.curve)
-    n = None
-    if args.record_s is not None:
-        rate = args.sample_rate_hz or 1.0 / float(cols["tau_s"][0])
-        n = int(round(args.record_s * rate))
-    try:
-        result, said = adev_from_curve(cols["tau_s"], cols["adev_dph"], sample_rate_hz=args.sample_rate_hz,
-                                       n_terms=cols.get("n_terms"), edf=cols.get("edf"), n_samples=n,
-                                       confidence=args.confidence)
-    except FogmonError as e:
-        raise FogmonError(f"{args.curve}: {e.message}") from None
-    fit = fit_noise(result, confidence=args.confidence)
-    result = with_fit_intervals(result, fit, "edf" in cols)
-    lines = [
-        f"fogmon fit: {args.curve}: {len(result.tau_s)} taus, {result.tau_s[0]:g}..{result.tau_s[-1]:g} s; "
-        f"record {result.n_samples} samples at {result.sample_rate_hz:g} Hz = "
-        f"{result.n_samples / result.sample_rate_hz:g} s"
-    ]
+    cf = read_curves(args.curve)
+    rate = args.sample_rate_hz or cf.rate_hz
+    n, said = _record_samples(cf, args.record_s, rate)
+    fits = []
+    for c in cf.curves:
+        try:
+            fits.append(_fit(c, cf, rate, n, args.confidence))
+        except FogmonError as e:
+            what = f" ({c.sensor} {c.axis})" if c.axis else ""
+            raise FogmonError(f"{args.curve}{what}: {e.message}") from None
+    r0 = fits[0][1]
+    said += [s for s in fits[0][2] if s not in said]
+    lines = [f"fogmon fit: {args.curve} ({cf.fmt}{', ' + str(len(cf.files)) + ' files' if len(cf.files) > 1 else ''}): "
+             f"{len(cf.curves)} curve{'s' if len(cf.curves) > 1 else ''}, {len(r0.tau_s)} taus, "
+             f"{r0.tau_s[0]:g}..{r0.tau_s[-1]:g} s; record {r0.n_samples} samples at {r0.sample_rate_hz:.10g} Hz = "
+             f"{r0.n_samples / r0.sample_rate_hz:g} s"]
+    lines += [f"  {s}" for s in cf.notes]
     lines += [f"  assumed: {render(s, 'fit')}" for s in said]
-    lines += ["", f"Allan deviation ({100 * args.confidence:.1f} % confidence bounds; EDF "
-              f"{'as stated' if 'edf' in cols else 'of the noise mixture the fit finds at each tau'}):"]
-    lines += adev_lines(result)
-    lines += ["", f"IEEE-952 noise coefficients ({100 * fit.confidence:.1f} % intervals):"] + coefficient_lines(fit)
-    check = model_check(result, fit)
-    if check:
-        lines.append(check)
+    for sensor in ("gyro", "accel"):
+        group = [f for f in fits if f[0].sensor == sensor]
+        if group:
+            lines += _report(group, cf.fmt == "csv" and len(fits) == 1, args.confidence)
     if export:
-        write_export(*export, fit, f"the curve {args.curve}", args.sample_rate_hz)
-        lines.append(f"Wrote {export[1]} ({export[0]} export of the fit)")
+        gyros = {c.axis: f for c, _, _, f in fits if c.sensor == "gyro"}
+        accels = {c.axis or "-": f for c, _, _, f in fits if c.sensor == "accel"}
+        write_export(*export, gyros.get("") if list(gyros) == [""] else gyros or None,
+                     f"the curve{'s' if len(cf.files) > 1 else ''} {args.curve} ({cf.fmt})",
+                     rate, None, accels)
+        lines.append(f"Wrote {export[1]} ({export[0]} export of the fit"
+                     f"{'' if rate else '; update_rate left out: the sample rate is not known'})")
     print("\n".join(lines))
     return 0
+
+
+def _record_samples(cf, record_s: float | None, rate: float | None) -> tuple[int | None, list[str]]:
+    """The record's samples: from ``record_s`` (s), else what the format implies (imu_utils:
+    the middle of 2 M .. 4 M - 1; allan_variance_ros: 2 x the first tau with no value),
+    else None (adev_from_curve assumes); and what was assumed."""
+    tau0 = float(cf.curves[0].tau_s[0])
+    fs = rate or 1.0 / tau0
+    if record_s is not None:
+        return int(round(record_s * fs)), []
+    if cf.record_m is not None:
+        n = 3 * cf.record_m
+        return n, [f"record of {n} samples = {n / fs:g} s (imu_utils's largest averaging factor M = {cf.record_m} is "
+                   f"the largest power of two <= N / 2, so N is 2 M .. 4 M - 1: the middle; `n_samples` sets it)"]
+    if cf.no_value_tau_s is not None:
+        n = int(round(2 * cf.no_value_tau_s * fs))
+        return n, [f"record of {n} samples = {n / fs:g} s (2 x {cf.no_value_tau_s:g} s, the first tau without a "
+                   f"value: at most that long; `n_samples` sets it)"]
+    return None, []
+
+
+def _fit(c, cf, rate: float | None, n: int | None, confidence: float):
+    """(curve, AdevResult with the fit's intervals, assumptions, NoiseFit or AccelFit)."""
+    from fogmon.davar.accel import AccelFit
+    from fogmon.davar.curve import adev_from_curve, with_fit_intervals
+    from fogmon.davar.fit import fit_noise
+
+    result, said = adev_from_curve(c.tau_s, c.adev, sample_rate_hz=rate, n_terms=c.n_terms, edf=c.edf,
+                                   n_samples=n, confidence=confidence, estimator=cf.estimator)
+    fit = fit_noise(result, confidence=confidence)
+    result = with_fit_intervals(result, fit, c.edf is not None or cf.estimator != "overlapping")
+    return c, result, said, AccelFit.of(fit) if c.sensor == "accel" else fit
+
+
+def _report(group: list, single: bool, confidence: float) -> list[str]:
+    """ADEV tables and coefficients of one sensor's curves (``single``: one CSV curve, as
+    a table of its own; else the axes side by side)."""
+    from fogmon.davar.fit import octave_subset
+    from fogmon.sinks.base import ACCEL_COEFFICIENTS, COEFFICIENTS
+    from fogmon.sinks.console import (
+        adev_axes_lines,
+        adev_lines,
+        coefficient_axes_lines,
+        coefficient_lines,
+        model_check,
+    )
+
+    accel = group[0][0].sensor == "accel"
+    unit, names = ("ug", ACCEL_COEFFICIENTS) if accel else ("dph", COEFFICIENTS)
+    r0 = group[0][1]
+    rows = None
+    if len(r0.tau_s) > MAX_ROWS_SHOWN:
+        rows = octave_subset(r0.m, int(r0.m[-1]))
+    shown = "" if rows is None else f"; {len(rows)} of the {len(r0.tau_s)} taus shown, one per octave"
+    what = ("Accelerometer " if accel else "") + "Allan deviation" + (" (micro-g" if accel else " (deg/h")
+    edf = "as stated" if group[0][0].edf is not None else "of the noise mixture the fit finds at each tau"
+    lines = ["", f"{what}, {100 * confidence:.1f} % confidence bounds; EDF {edf}{shown}):"]
+    terms = ("IEEE Std 1293 accelerometer noise coefficients" if accel else "IEEE-952 noise coefficients")
+    if single:
+        c, result, _, fit = group[0]
+        lines += adev_lines(result, unit, rows)
+        lines += ["", f"{terms} ({100 * confidence:.1f} % intervals):"] + coefficient_lines(fit, names)
+        check = model_check(result, fit.noise if accel else fit)
+        return lines + ([check] if check else [])
+    lines += adev_axes_lines({c.axis: r for c, r, _, _ in group}, rows)
+    lines += ["", f"{terms} per axis ({100 * confidence:.1f} % intervals; n/i: not identifiable, < its 95 % "
+                  f"upper limit):"]
+    lines += coefficient_axes_lines({c.axis: f for c, _, _, f in group}, names)
+    for c, r, _, f in group:
+        check = model_check(r, f.noise if accel else f)
+        if check:
+            lines.append(check.replace("model check:", f"model check ({'accelerometer' if accel else 'axis'} "
+                                                       f"{c.axis}):"))
+    return lines

@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.block import parse_axes
+from fogmon.cli.output_options import rotated
 from fogmon.cli.values import number, positive
 from fogmon.davar.taus import MAX_PER_DECADE, check_per_decade
 from fogmon.errors import FogmonError, FogmonWarning
@@ -18,6 +19,9 @@ from fogmon.methods.live_thermal import axis_thermal_effect, thermal_effect
 from fogmon.pipeline import LIVE_WINDOW_SAMPLES, MAX_WINDOW_SAMPLES, MIN_WINDOW_SAMPLES, PipelineConfig
 from fogmon.sim.model import SensorModel, load_model
 from fogmon.sinks.base import Sink
+
+#: default recording time (s) per archive piece of `fogmon monitor` (--rotate-s)
+ARCHIVE_ROTATE_S = 3600.0
 
 
 def add_pipeline_arguments(parser: argparse.ArgumentParser, replay: bool = True) -> None:
@@ -100,12 +104,14 @@ def _add_output_arguments(parser: argparse.ArgumentParser, replay: bool) -> None
                    help="address --serve listens on (default 127.0.0.1, this machine only; 0.0.0.0 for all)")
     o.add_argument("--port", type=number(1, 65535, integer=True), default=9876,
                    help="port --serve listens on, 1..65535 (default 9876)")
-    o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None if replay else 3600.0,
+    o.add_argument("--rotate-s", type=_rotate_s, metavar="S", default=None,
                    help=("write the .rrd as pieces OUT-0001.rrd, OUT-0002.rrd, ... of S s of recording time "
-                         "each (default: one file)" if replay else
-                         "start new output files every S s of recording time: the archive's samples-NNNN.csv "
-                         "and raw capture pieces, and the .rrd as OUT-NNNN.rrd (default 3600 = hourly; "
-                         "0 = one piece)"))
+                         "each (default: one file, OUT.rrd itself)" if replay else
+                         f"start new archive files every S s of recording time: samples-NNNN.csv and the raw "
+                         f"capture pieces (default {ARCHIVE_ROTATE_S:g} = hourly; 0 = one piece); given, it also "
+                         f"cuts the .rrd into OUT-0001.rrd, ... (by default --rrd OUT.rrd writes OUT.rrd itself)"))
+    if not replay:
+        parser.set_defaults(archive_rotate_s=ARCHIVE_ROTATE_S)
     o.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     o.add_argument("--quiet", action="store_true", help="no console summary at the end")
 
@@ -123,11 +129,11 @@ def _add_pacing_arguments(parser: argparse.ArgumentParser, replay: bool) -> None
     parser.set_defaults(realtime=None)  # a live run is never paced
 
 
-def _rotate_s(text: str) -> float | None:
-    """``--rotate-s``: S > 0, or 0 for no rotation (None)."""
+def _rotate_s(text: str) -> float:
+    """``--rotate-s``: S > 0, or 0 for no rotation."""
     try:
         if float(text) == 0:
-            return None
+            return 0.0
     except ValueError:
         pass
     return positive(text)
@@ -172,10 +178,17 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     methods = _live_methods(args, model, cal)
     return PipelineConfig(window_s=args.window_s, hop_s=args.hop_s, taus=args.taus, raw_rate=args.raw_rate,
                           keep_motion=args.keep_motion, duration_s=args.duration_s, realtime=realtime,
-                          rotate_s=args.rotate_s,
+                          rotate_s=_pieces_s(args),
                           progress=not args.no_progress and sys.stderr.isatty() and (realtime is None or realtime > 1),
                           methods=methods, axis_methods=_axis_methods(args, model, cal, methods),
                           model=model, model_alpha=args.model_alpha)
+
+
+def _pieces_s(args: argparse.Namespace) -> float | None:
+    """Recording time (s) per output piece: --rotate-s, else the monitor's archive default
+    (replay: none); None for one piece."""
+    rotate_s = args.rotate_s if args.rotate_s is not None else getattr(args, "archive_rotate_s", None)
+    return rotate_s or None
 
 
 def _live_methods(args: argparse.Namespace, model: SensorModel | None, cal: SensorModel | None) -> LiveMethods:
@@ -250,6 +263,12 @@ def build_sinks(args: argparse.Namespace) -> list[Sink]:
     if args.rrd or args.connect or args.serve:
         from fogmon.sinks.rerun.sink import RerunSink
         out.append(RerunSink(rrd_path=args.rrd, connect_url=args.connect, serve=args.serve, bind=args.bind,
-                             port=args.port, rotate=bool(args.rotate_s)))
+                             port=args.port, rotate=rotated(args)))
     out.append(ConsoleSink(quiet=args.quiet, flags=command_flags(args.command) if "command" in args else None))
     return out
+
+
+def output_errors(sinks) -> list[FogmonError]:
+    """The write errors the sinks met (a full disk under the .rrd or the archive), each
+    one line naming the file and the free space."""
+    return [e for s in sinks if (e := getattr(s, "error", None)) is not None]

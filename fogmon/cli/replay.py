@@ -6,26 +6,27 @@ from __future__ import annotations
 import argparse
 
 from fogmon.cli.export_options import add_export_argument, export_request
-from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, pipeline_config
+from fogmon.cli.output_options import check_command_outputs
+from fogmon.cli.pipeline_options import add_pipeline_arguments, build_sinks, output_errors, pipeline_config
 from fogmon.cli.source_options import add_reader_arguments, add_source_arguments, source_options
-from fogmon.errors import FogmonError
 from fogmon.export import write_export
 from fogmon.pipeline import Pipeline
 from fogmon.sources.open import open_replay_source
 from fogmon.stopping import interrupted_exit_code
 
 EPILOG = """examples:
-  fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd out/lasergyro.rrd
+  fogmon replay replay_logs/lasergyro_z_100hz.csv --rrd lasergyro.rrd
   fogmon replay run.csv --connect            # into a running viewer (start it with: rerun)
   fogmon replay run.csv --serve --realtime 10
-  fogmon replay run.csv --window-s 600 --hop-s 60 --taus 8 --rrd out/run.rrd
+  fogmon replay run.csv --window-s 600 --hop-s 60 --taus 8 --rrd run.rrd
   fogmon replay runs/fogmon-archive-20261121T080000Z --rrd week.rrd --rotate-s 86400   # a whole archive
 
 Rates in deg/h, times in s, coefficients in IEEE-952 units (Q arcsec, N deg/sqrt(h),
 B deg/h, K deg/h/sqrt(h), R deg/h^2). Without --rrd/--connect/--serve only the console
 summary is printed. Ctrl-C, SIGTERM and SIGHUP stop it cleanly (the .rrd is complete).
-Exit code 0 on success, 2 on bad usage or input, 128 + the signal if stopped (130 after
-Ctrl-C, 143 after SIGTERM, 129 after SIGHUP)."""
+Exit code 0 on success, 2 on bad usage or input or when an output could not be written
+(a full disk: the .rrd is removed, the summary still printed), 128 + the signal if
+stopped (130 after Ctrl-C, 143 after SIGTERM, 129 after SIGHUP)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,15 +44,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    export = export_request(args, [args.recording])
+    check_command_outputs(args)
+    export = export_request(args)
     source = open_replay_source(args.recording, source_options(args))
     pipeline = Pipeline(source, pipeline_config(args))  # options checked before any output is opened
-    if export and pipeline.axes:
-        raise FogmonError(f"--export {export[0]}: {args.recording} has axes {', '.join(pipeline.axes)} and an "
-                          f"export holds one gyro's fit: select one with --axis NAME")
-    summary = pipeline.run(build_sinks(args))
+    sinks = build_sinks(args)
+    summary = pipeline.run(sinks)
+    failed = output_errors(sinks)
+    if failed:   # the summary is printed; a truncated output is never a success
+        raise failed[0]
     if export and not summary.interrupted:
-        write_export(*export, summary.overall_fit, summary.source_name, summary.sample_rate_hz,
-                     getattr(source, "ros_topic", None))
-        print(f"Wrote {export[1]} ({export[0]} export of the whole-run fit)")
+        gyros = {a: x.overall_fit for a, x in summary.axes.items()} if summary.axes else summary.overall_fit
+        write_export(*export, gyros, summary.source_name, summary.sample_rate_hz, getattr(source, "ros_topic", None),
+                     {a: x.overall_fit for a, x in summary.accels.items()})
+        print(f"Wrote {export[1]} ({export[0]} export of the whole-run fit"
+              f"{', accelerometers ' + ', '.join(summary.accels) if summary.accels else ''})")
     return interrupted_exit_code() if summary.interrupted else 0

@@ -5,7 +5,6 @@ writes that axis alone as a one-axis log."""
 from __future__ import annotations
 
 import argparse
-import contextlib
 import itertools
 import os
 import sys
@@ -16,22 +15,18 @@ import numpy as np
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.outputs import check_outputs
 
 if TYPE_CHECKING:
     from fogmon.formats.recording import Recording
     from fogmon.sim.model import SensorModel
-
-#: Fewest bytes a replay-log row takes ("t,r\n" with one-digit numbers): a run that
-#: needs more than the free space of the output's folder at this rate cannot be written.
-MIN_ROW_BYTES = 4
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, metavar="MODEL.toml",
                    help="sensor model file (docs/formats.md): rates deg/h, IEEE-952 noise Q_arcsec, "
                    "N_dpsh deg/sqrt(h), B_dph deg/h, K_dphsh deg/h/sqrt(h), R_dphh deg/h^2, [[effect]] tables")
-    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (docs/formats.md)")
+    p.add_argument("--out", required=True, metavar="SIM.csv", help="replay log to write (docs/formats.md): "
+                   "SIM.csv, or SIM.parquet for a Parquet replay log")
     p.add_argument("--like", metavar="RECORDING.csv", help="take the time base (sample times, gaps, sample rate) "
                    "and every aux column (temp_c, rot_dps, vib_g, ...) from this replay log, exactly")
     p.add_argument("--duration-s", type=positive, metavar="D", help="length in s (required without --like/--scenario; "
@@ -70,10 +65,13 @@ def _first_seconds(rec, duration_s: float):
 
 
 def run(args) -> int:
+    from fogmon.cli.output_options import check_command_outputs
+    from fogmon.formats.log_writer import check_log_suffix
     from fogmon.sim.model import load_model
     from fogmon.sim.simulate import iter_simulate, simulated_axes
 
-    check_outputs({"--out": args.out}, inputs=[args.model, args.like])
+    check_command_outputs(args)
+    check_log_suffix("`out`", args.out)
     model = load_model(args.model)
     if args.set and not args.scenario:
         raise FogmonError("--set needs --scenario")
@@ -96,12 +94,11 @@ def run(args) -> int:
     if args.axis and sim_axes:
         _check_axis(args.axis, sim_axes)
         meta["axis"] = args.axis
-    _check_space(args.out, n_expected)
     info: dict = {}
     blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info, axes=axes)
     if args.axis:
         blocks = (b.axis(args.axis) for b in blocks)
-    n = _write(args.out, blocks, meta, info)
+    n = _write(args.out, blocks, meta, info, n_expected, args.model)
     written = f"axis {args.axis}" if args.axis and sim_axes else "axes " + ", ".join(sim_axes) if sim_axes else ""
     print(f"fogmon sim: wrote {n} samples{' of ' + written if written else ''} at {info['sample_rate_hz']} Hz to "
           f"{args.out} (seed {seed})")
@@ -149,34 +146,40 @@ def _check_axis(axis: str, axes: tuple[str, ...]) -> None:
         raise FogmonError(f"--axis {axis}: the simulation has no such axis (its axes: {', '.join(axes)})")
 
 
-def _write(out: str, blocks, meta: dict, info: dict) -> int:
+def _write(out: str, blocks, meta: dict, info: dict, n_expected: float, model_path: str) -> int:
     """Write the simulated ``blocks`` as a replay log ``out`` (valid samples; ``info``
-    from iter_simulate gives the sample rate); no half-written file on any error.
+    from iter_simulate gives the sample rate): after the first block, the free space is
+    checked against ``n_expected`` rows at the bytes per row measured on it; a
+    non-finite rate is refused; no file on any error (fogmon.formats.log_writer).
     Returns the samples written."""
-    from fogmon.formats.replay_log import append_replay_rows, write_replay_header
+    from fogmon.formats.log_writer import LogWriter
+    from fogmon.outputs import check_space
     from fogmon.sim.simulate import present_samples
 
-    first = next(blocks)
-    n = 0
-    try:
-        with open(out, "w", encoding="utf-8", newline="\n") as fh:
-            write_replay_header(fh, list(first.aux), {"sample_rate_hz": info["sample_rate_hz"], **meta}, first.axes)
-            for b in itertools.chain([first], blocks):
+    with np.errstate(over="ignore", invalid="ignore"):   # inf is refused below, by name, not warned about
+        first = next(blocks)
+        meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
+        w = LogWriter(out, list(first.aux), meta, first.axes, name="`out`")
+        try:
+            for i, b in enumerate(itertools.chain([first], blocks)):
                 v = present_samples(b)
-                append_replay_rows(fh, b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
-                n += int(v.sum())
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.remove(out)  # no half-written replay log
-        raise
-    return n
+                _check_finite(b.t_s[v], b.rate_dph[v], model_path)
+                w.write(b.t_s[v], b.rate_dph[v], {k: a[v] for k, a in b.aux.items()})
+                if i == 0 and w.rows:
+                    left = n_expected - w.rows
+                    check_space("`out`", out, left * w.bytes_per_row,
+                                f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")
+            w.close()
+        except BaseException:
+            w.abort()   # no half-written replay log
+            raise
+    return w.rows
 
 
-def _check_space(path: str, n_samples: float) -> None:
-    """FogmonError when ``n_samples`` rows cannot fit in the free space of ``path``'s folder."""
-    import shutil
-
-    free = shutil.disk_usage(os.path.dirname(os.path.abspath(path))).free
-    if n_samples * MIN_ROW_BYTES > free:
-        raise FogmonError(f"--out {path}: {n_samples:.3g} samples take at least {n_samples * MIN_ROW_BYTES:.3g} "
-                          f"bytes, the folder has {free:.3g} bytes free: shorten --duration-s")
+def _check_finite(t_s: np.ndarray, rate_dph: np.ndarray, model_path: str) -> None:
+    """FogmonError naming the model when a simulated rate is not finite (a coefficient
+    too large for float64)."""
+    bad = ~np.isfinite(rate_dph.reshape(len(rate_dph), -1)).all(axis=1)
+    if bad.any():
+        raise FogmonError(f"`model` {model_path}: the simulated rate is not finite at {t_s[bad][0]:g} s (a noise "
+                          f"coefficient or an effect of the model too large for float64); nothing written")

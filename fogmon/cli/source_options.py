@@ -146,6 +146,9 @@ def add_reader_arguments(parser: argparse.ArgumentParser, axis: bool = True) -> 
                        "(rate_<axis>_dph columns) (default: every axis)")
     g.add_argument("--channel", metavar="NAME", help="MDF4: the rate channel (unit from the file); LAS: the rate "
                    "curve (default: the only curve with a rate unit)")
+    g.add_argument("--accel-channel", dest="accel_channels", metavar="NAMES", help="MDF4: accelerometer channels "
+                   "(unit from the file: m/s^2, g, mg), a comma list, named x, y, z in that order or AXIS=NAME each; "
+                   "fitted as IEEE Std 1293 terms beside the gyro (docs/readers.md)")
     g.add_argument("--time-channel", metavar="NAME", help="LAS: the time curve: seconds, a clock (HHMMSS) or "
                    "date-times (default: the index curve when it is a time; a depth-indexed file needs it)")
     g.add_argument("--rate-unit", metavar="UNIT", help="MDF4/LAS: the rate's unit when the file does not say "

@@ -17,7 +17,7 @@ from fogmon.block import select_aux
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
 from fogmon.errors import FogmonError
-from fogmon.outputs import check_outputs
+from fogmon.outputs import written
 
 if TYPE_CHECKING:
     from fogmon.sim.model import Effect, SensorModel
@@ -47,13 +47,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from fogmon.cli.output_options import check_command_outputs
     from fogmon.formats.recording import pick_axes
     from fogmon.formats.replay_log import write_replay_log
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
     from fogmon.sources.open import read_recording
 
-    check_outputs({"--out-model": args.out_model, "--out-corrected": args.out_corrected},
-                  inputs=[args.recording, args.model])
+    check_command_outputs(args)
     base = load_model(args.model) if args.model else None
     rec = read_recording(args.recording, source_options(args))
     axes = pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names()
@@ -68,16 +68,18 @@ def run(args) -> int:
     for a, one in recs.items():
         cals[a], corrected[a] = _calibrate(one, args, *filters[a], prefix=f"{a}: " if a else "")
     if args.out_model:
-        save_model(with_calibration(base, {a: c.effect for a, c in cals.items()}, rec.axes), args.out_model)
+        with written(args.out_model, "`out_model`") as tmp:
+            save_model(with_calibration(base, {a: c.effect for a, c in cals.items()}, rec.axes), tmp)
         print(f"wrote {args.out_model}")
     if args.out_corrected:
         note = {"corrected": f"thermal_drift removed by fogmon thermal from {rec.name}"}
-        if len(axes) == 1:      # a one-axis recording, or one axis picked: a one-axis log
-            one = recs[axes[0]]
-            write_replay_log(args.out_corrected, one.t_s, corrected[axes[0]], one.aux, {**one.meta, **note})
-        else:
-            write_replay_log(args.out_corrected, rec.t_s, np.column_stack([corrected[a] for a in axes]),
-                             select_aux(rec.aux, rec.axes, axes), {**rec.meta, **note}, axes=axes)
+        with written(args.out_corrected, "`out_corrected`") as tmp:
+            if len(axes) == 1:      # a one-axis recording, or one axis picked: a one-axis log
+                one = recs[axes[0]]
+                write_replay_log(tmp, one.t_s, corrected[axes[0]], one.aux, {**one.meta, **note})
+            else:
+                write_replay_log(tmp, rec.t_s, np.column_stack([corrected[a] for a in axes]),
+                                 select_aux(rec.aux, rec.axes, axes), {**rec.meta, **note}, axes=axes)
         print(f"wrote {args.out_corrected}")
     return 0
 

@@ -25,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
-    import fogmon
+    from fogmon.davar.batch import oadev
     from fogmon.sources.open import read_recording
 
     rec = read_recording(path, source_options(args))
@@ -34,7 +34,7 @@ def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
             raise FogmonError(f"{path}: has axes {', '.join(rec.axes)}; up/down calibrates one gyro: give --axis "
                               f"NAME (the axis pointing up and down)")
         rec = rec.for_axis(args.axis)
-    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
+    res = oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
     ok = np.isfinite(res.adev_dph)
     # std of the mean of the record ~ ADEV at the longest reliable tau (conservative)
     sigma = float(res.adev_dph[ok][-1]) if ok.any() else float(np.std(rec.rate_dph) / math.sqrt(len(rec)))

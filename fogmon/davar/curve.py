@@ -1,17 +1,26 @@
-"""Allan-deviation curves made by other tools (Stable32, MATLAB allanvar, allantools...) as
-fogmon AdevResults, so that ``fit_noise`` gives their IEEE-952 fit with intervals.
+"""Allan-deviation curves made by other tools (Stable32, MATLAB allanvar, allantools,
+imu_utils, allan_variance_ros: fogmon.formats.curves reads their files) as fogmon
+AdevResults, so that ``fit_noise`` gives their IEEE-952 fit with intervals.
 
 The fit weighs each tau by the sampling statistics of an overlapping Allan variance over
 a record of ``n_samples`` samples at ``sample_rate_hz`` with ``n_terms`` valid terms per tau
 (fogmon.davar.fit). A curve carries at most part of that, so:
 - ``sample_rate_hz``: given, else 1 / the first tau (the curve starts at the sample period);
+  every tau must be a whole multiple m of the sample period to M_TOLERANCE (relative);
 - ``n_terms`` (valid overlapping terms per tau): given, else every term of a gap-free
-  record (n_samples - 2 m + 1);
+  record (n_samples - 2 m + 1); given, they must agree with the rate: gaps only ever
+  remove more terms at a longer tau, so the terms missing from a gap-free record's,
+  n_samples - 2 m + 1 - n_terms, are >= 0 and never fall as tau grows (a wrong rate
+  breaks this);
 - ``n_samples``: given, else from ``n_terms`` (max of n_terms + 2 m - 1), else assumed
   4 x the largest m (the curve ends at a quarter of the record, as octave grids do);
 - ``edf`` (equivalent degrees of freedom per tau) when the other tool stated them: the
   fit's weights are scaled so that white rate noise gets exactly that EDF
-  (n_terms = edf / EDF_white(m, n_samples) x (n_samples - 2 m + 1)).
+  (n_terms = edf / EDF_white(m, n_samples) x (n_samples - 2 m + 1));
+- ``estimator`` "non-overlapping" (allan_variance_ros): the EDF of white rate noise of the
+  non-overlapping estimator over M = floor((n_samples - 1) / m) bins, 2 (M - 1)^2 / (3 M - 4)
+  (its M - 1 differences of bin means are a moving average of correlation -1/2), is
+  the stated EDF.
 Every assumption made is returned as a sentence for the output."""
 from __future__ import annotations
 
@@ -24,21 +33,28 @@ from fogmon.davar.result import CONFIDENCE, AdevResult
 from fogmon.errors import FogmonError
 
 #: a tau further than this (relative) from a whole multiple of the sample period is refused
-M_TOLERANCE = 1e-6
+#: (imu_utils's taus are multiples of the period measured from the stamps: 0.009999989 s at 100 Hz)
+M_TOLERANCE = 1e-5
 #: without n_terms or a record length, the record is assumed this many times the largest tau
 ASSUMED_RECORD_TAUS = 4
 
 
 def adev_from_curve(tau_s, adev_dph, *, sample_rate_hz: float | None = None, n_terms=None, edf=None,
-                    n_samples: int | None = None, confidence: float = CONFIDENCE) -> tuple[AdevResult, list[str]]:
-    """(AdevResult, assumptions) for an Allan-deviation curve ``adev_dph`` (deg/h) at
-    ``tau_s`` (s, increasing), ready for ``fogmon.fit_noise``. Optional: ``sample_rate_hz``
-    (Hz), ``n_terms`` or ``edf`` per tau, ``n_samples`` of the record (see the module
-    docstring for what is assumed without them). The result's ``edf``, ``lo_dph`` and
-    ``hi_dph`` assume white rate noise until ``with_fit_intervals`` replaces them with
-    those of the fitted model. A bad argument is a FogmonError."""
+                    n_samples: int | None = None, confidence: float = CONFIDENCE,
+                    estimator: str = "overlapping") -> tuple[AdevResult, list[str]]:
+    """(AdevResult, assumptions) for an Allan-deviation curve ``adev_dph`` (deg/h; any unit
+    the fit reads alike, e.g. an accelerometer's micro-g) at ``tau_s`` (s, increasing),
+    ready for ``fogmon.fit_noise``. Optional: ``sample_rate_hz`` (Hz), ``n_terms`` or
+    ``edf`` per tau, ``n_samples`` of the record, ``estimator`` "overlapping" or
+    "non-overlapping" (see the module docstring for what is assumed without them). The
+    result's ``edf``, ``lo_dph`` and ``hi_dph`` assume white rate noise until
+    ``with_fit_intervals`` replaces them with those of the fitted model. A bad argument is
+    a FogmonError."""
+    if estimator not in ("overlapping", "non-overlapping"):
+        raise ValueError(f"adev_from_curve: estimator must be overlapping or non-overlapping, got {estimator!r}")
     tau, adev = _curve_arrays(tau_s, adev_dph)
     said: list[str] = []
+    rate_given = sample_rate_hz is not None
     if sample_rate_hz is None:
         sample_rate_hz = 1.0 / float(tau[0])
         said.append(f"sample rate {sample_rate_hz:g} Hz (1 / the first tau; `sample_rate_hz` sets it)")
@@ -48,15 +64,17 @@ def adev_from_curve(tau_s, adev_dph, *, sample_rate_hz: float | None = None, n_t
     n_samples = _record_samples(tau, m, sample_rate_hz, n_terms, n_samples, said)
     full = (n_samples - 2 * m + 1).astype(np.float64)
     white = edf_full(0, m, n_samples)
+    if edf is None and estimator == "non-overlapping":
+        bins = (n_samples - 1) // m
+        edf = nonoverlapping_white_edf(bins)
+        said.append("non-overlapping estimator: each tau weighed by the EDF of white rate noise over its "
+                    "floor((N - 1) / m) bins, 2 (M - 1)^2 / (3 M - 4) (the other noise types scaled alike)")
     if edf is not None:
         terms = edf / white * full
-        if n_terms is None:
+        if n_terms is None and estimator == "overlapping":
             said.append("the stated EDF weighs each tau (exact for white rate noise, scaled alike for the others)")
     elif n_terms is not None:
-        if np.any(n_terms > full):
-            i = int(np.argmax(n_terms > full))
-            raise FogmonError(f"n_terms {n_terms[i]:g} at tau {tau[i]:g} s is more than the {full[i]:g} overlapping "
-                              f"terms a record of {n_samples} samples has")
+        _check_terms(tau, m, n_terms, full, n_samples, sample_rate_hz, rate_given)
         terms = n_terms
     else:
         terms = full
@@ -65,6 +83,37 @@ def adev_from_curve(tau_s, adev_dph, *, sample_rate_hz: float | None = None, n_t
     lo, hi = chi2_bounds(adev, nu, confidence)
     return AdevResult(tau, m, adev, lo, hi, nu, terms, float(sample_rate_hz), n_samples,
                       confidence), said
+
+
+def nonoverlapping_white_edf(bins) -> np.ndarray:
+    """EDF of the non-overlapping Allan variance of white rate noise over ``bins`` bins
+    (>= 2): 2 (M - 1)^2 / (3 M - 4)."""
+    b = np.asarray(bins, dtype=np.float64)
+    return 2.0 * (b - 1.0) ** 2 / (3.0 * b - 4.0)
+
+
+def _check_terms(tau, m, n_terms, full, n_samples: int, sample_rate_hz: float, rate_given: bool) -> None:
+    """FogmonError unless the terms missing from a gap-free record's (``full`` -
+    ``n_terms``) are >= 0 and never fall as tau grows (gaps remove more terms at longer
+    taus): a sample rate that makes the averaging factors ``m`` wrong breaks this."""
+    missing = full - n_terms
+    rate = (f"`sample_rate_hz` {sample_rate_hz:.10g} Hz" if rate_given else
+            f"the sample rate {sample_rate_hz:.10g} Hz (assumed: 1 / the first tau)")
+    fits = ""
+    if len(tau) > 1 and n_terms[0] > n_terms[1]:   # gap-free: n_terms + 2 m constant, so this is the rate
+        fits = (f"; the n_terms of the first two taus fit {(n_terms[0] - n_terms[1]) / (2 * (tau[1] - tau[0])):.10g} "
+                f"Hz (2 terms fewer per sample period)")
+    if np.any(missing < 0):
+        i = int(np.argmax(missing < 0))
+        raise FogmonError(f"n_terms {int(n_terms[i])} at tau {tau[i]:.10g} s is {int(-missing[i])} more than the "
+                          f"{int(full[i])} overlapping terms (N - 2 m + 1, m = {int(m[i])}) a record of {n_samples} "
+                          f"samples has: the record is longer, or {rate} is wrong{fits}")
+    fell = np.flatnonzero(np.diff(missing) < 0)
+    if len(fell):
+        i = int(fell[0])
+        raise FogmonError(f"{rate} contradicts n_terms: at tau {tau[i]:.10g} s (m = {int(m[i])}) {int(missing[i])} "
+                          f"terms are missing from a gap-free record's, at {tau[i + 1]:.10g} s (m = {int(m[i + 1])}) "
+                          f"only {int(missing[i + 1])}, and gaps can only remove more terms at a longer tau{fits}")
 
 
 def _curve_arrays(tau_s, adev_dph) -> tuple[np.ndarray, np.ndarray]:
@@ -88,8 +137,9 @@ def _averaging_factors(tau: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     off = np.abs(k - m) / np.maximum(k, 1.0)
     if m[0] < 1 or off.max() > M_TOLERANCE:
         i = int(np.argmax(off)) if m[0] >= 1 else 0
-        raise FogmonError(f"tau_s {tau[i]:g} s is not a whole multiple of the sample period {1 / sample_rate_hz:g} s "
-                          f"(give the record's sample rate with `sample_rate_hz`)")
+        raise FogmonError(f"tau_s {tau[i]:.10g} s is not a whole multiple of the sample period "
+                          f"{1 / sample_rate_hz:.10g} s ({k[i]:.7g} periods, more than {M_TOLERANCE:g} from a whole "
+                          f"number; give the record's sample rate with `sample_rate_hz`)")
     return m
 
 
@@ -116,8 +166,9 @@ def _record_samples(tau, m, sample_rate_hz, n_terms, n_samples, said: list[str])
                         f"the largest tau; an n_terms column or `n_samples` sets it)")
     n_samples = int(n_samples)
     if 2 * m[-1] > n_samples:
-        raise FogmonError(f"the largest tau {tau[-1]:g} s needs a record of at least {2 * m[-1] / sample_rate_hz:g} s "
-                          f"({2 * m[-1]} samples), not {n_samples / sample_rate_hz:g} s")
+        raise FogmonError(f"the largest tau {tau[-1]:.10g} s needs a record of at least "
+                          f"{2 * m[-1] / sample_rate_hz:.10g} s ({2 * m[-1]} samples), not "
+                          f"{n_samples / sample_rate_hz:.10g} s ({n_samples} samples)")
     return n_samples
 
 
@@ -131,76 +182,3 @@ def with_fit_intervals(result: AdevResult, fit, edf_stated: bool) -> AdevResult:
                        result.n_samples, result.n_terms)
     lo, hi = chi2_bounds(result.adev_dph, nu, result.confidence)
     return replace(result, edf=nu, lo_dph=lo, hi_dph=hi)
-
-
-def read_curve_csv(path: str) -> tuple[dict[str, np.ndarray], list[int]]:
-    """Columns of an ADEV curve CSV (``tau_s,adev_dph`` and optionally ``edf`` or
-    ``n_terms``; ``#`` comment lines; BOM and CRLF accepted) as arrays, and the file line
-    of each row. A bad file is a one-line FogmonError naming file, line and column."""
-    cols: list[str] | None = None
-    rows: list[list[float]] = []
-    line_no: list[int] = []
-    for i, raw in enumerate(_text_lines(path), 1):
-        s = raw.strip()
-        if not s or s.startswith("#"):
-            continue
-        cells = [c.strip() for c in s.split(",")]
-        if cols is None:
-            cols = _curve_header(cells, path, i)
-            continue
-        row = _curve_row(cols, cells, path, i)
-        t = cols.index("tau_s")
-        if rows and row[t] <= rows[-1][t]:
-            raise FogmonError(f"{path}: line {i}, column tau_s: {row[t]:g} is not above the "
-                              f"previous tau ({rows[-1][t]:g}): taus must increase")
-        rows.append(row)
-        line_no.append(i)
-    if cols is None or len(rows) < 2:
-        raise FogmonError(f"{path}: needs a header (tau_s,adev_dph[,edf|n_terms]) and at least 2 rows")
-    a = np.array(rows, dtype=np.float64)
-    return {c: a[:, j] for j, c in enumerate(cols)}, line_no
-
-
-def _text_lines(path: str) -> list[str]:
-    """The lines of a UTF-8 text file (BOM and CRLF accepted), or a one-line FogmonError."""
-    try:
-        with open(path, encoding="utf-8-sig", newline=None) as fh:
-            return fh.read().splitlines()
-    except FileNotFoundError:
-        raise FogmonError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise FogmonError(f"{path}: is a folder, not a curve CSV") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise FogmonError(f"{path}: cannot read: {getattr(e, 'strerror', None) or e}") from None
-
-
-def _curve_header(cols: list[str], path: str, i: int) -> list[str]:
-    """The header's columns, checked: tau_s and adev_dph, optionally edf or n_terms."""
-    for need in ("tau_s", "adev_dph"):
-        if need not in cols:
-            raise FogmonError(f"{path}: line {i}: header has no column {need} (columns: tau_s,adev_dph "
-                              f"and optionally edf or n_terms)")
-    unknown = [c for c in cols if c not in ("tau_s", "adev_dph", "edf", "n_terms")]
-    if unknown or len(set(cols)) != len(cols):
-        raise FogmonError(f"{path}: line {i}: column {(unknown or cols)[0]!r}: unknown or repeated (columns: "
-                          f"tau_s, adev_dph, edf, n_terms)")
-    return cols
-
-
-def _curve_row(cols: list[str], cells: list[str], path: str, i: int) -> list[float]:
-    """One data row's values, checked cell by cell (n_terms whole >= 1, the others > 0)."""
-    if len(cells) != len(cols):
-        raise FogmonError(f"{path}: line {i}: {len(cells)} cells, the header has {len(cols)}")
-    row = []
-    for c, v in zip(cols, cells, strict=True):
-        try:
-            x = float(v)
-        except ValueError:
-            raise FogmonError(f"{path}: line {i}, column {c}: not a number: {v[:40]!r}") from None
-        bad = (not np.isfinite(x) or x <= 0 if c in ("tau_s", "adev_dph", "edf") else
-               not np.isfinite(x) or x < 1 or not float(x).is_integer())
-        if bad:
-            need = "a whole number >= 1" if c == "n_terms" else "a finite number > 0"
-            raise FogmonError(f"{path}: line {i}, column {c}: must be {need}, got {v[:40]!r}")
-        row.append(x)
-    return row

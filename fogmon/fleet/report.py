@@ -20,6 +20,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from fogmon.errors import render_names
+from fogmon.outputs import written
 
 Z_CHANGED = 3.0
 SCORE_OUTSIDE = 1.5
@@ -112,20 +113,29 @@ def _table(rows: list[dict], cols: list[tuple[str, str]]) -> str:
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
 
 
+def report_files(path: str) -> list[str]:
+    """The files the fleet report ``path`` (FLEET.html) is written as: itself,
+    FLEET-trends.png and FLEET.csv beside it."""
+    stem = os.path.splitext(path)[0]
+    return [path, stem + "-trends.png", stem + ".csv"]
+
+
 def write_report(path: str, recordings_parquet: str, windows_parquet: str,
                  flags: Mapping[str, str] | None = None) -> list[str]:
     """Write FLEET.html, FLEET-trends.png and FLEET.csv from the batch tables; returns
     the paths written. The page names parameters plainly, or as their flags in ``flags``
-    (parameter name -> flag)."""
+    (parameter name -> flag). Each file is complete or not written (fogmon.outputs.written;
+    a disk error is a FogmonError naming it)."""
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
 
     tbl = pq.read_table(recordings_parquet)
     rows = tbl.to_pylist()
-    stem = os.path.splitext(path)[0]
-    png, csv = stem + "-trends.png", stem + ".csv"
-    _trend_png(rows, png)
-    pacsv.write_csv(tbl, csv)
+    path, png, csv = report_files(path)
+    with written(png, "`report`") as tmp:
+        _trend_png(rows, tmp)
+    with written(csv, "`report`") as tmp:
+        pacsv.write_csv(tbl, tmp)
     ch = changes(rows)
     changed = [c for c in ch if c["changed"]]
     has_model = "explain_score_before" in tbl.column_names
@@ -162,8 +172,7 @@ def write_report(path: str, recordings_parquet: str, windows_parquet: str,
                                                                                   ("error", "error")])]
     style = ("<style>body{font-family:sans-serif;max-width:1100px;margin:1em auto}table{border-collapse:collapse}"
              "td,th{border:1px solid #ccc;padding:2px 6px;font-size:90%}</style>")
-    with open(path + ".tmp", "w", encoding="utf-8") as fh:
+    with written(path, "`report`") as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.write(f"<!doctype html><html><head><meta charset='utf-8'><title>fogmon fleet report</title>{style}</head>"
                  f"<body>{''.join(parts)}</body></html>\n")
-    os.replace(path + ".tmp", path)
     return [path, png, csv]

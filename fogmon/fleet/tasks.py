@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import traceback
-from collections import deque
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -18,7 +17,8 @@ import numpy as np
 from fogmon.block import Block
 from fogmon.errors import FogmonError
 from fogmon.pipeline import PipelineConfig, window_and_hop
-from fogmon.sinks.base import COEFFICIENTS, Sink
+from fogmon.pipeline.accel import ACCEL_CHANNEL
+from fogmon.sinks.base import ACCEL_COEFFICIENTS, COEFFICIENTS, Sink
 from fogmon.sources.base import OfflineSource
 from fogmon.sources.options import SourceOptions
 
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from fogmon.explain.options import Options
 
 #: the PipelineConfig fields of `fogmon replay` the tasks use (the others keep their defaults)
-ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion")
+ANALYSIS_OPTIONS = ("window_s", "hop_s", "taus", "raw_rate", "keep_motion", "accels")
 
 
 def _analysis(config: PipelineConfig, **changes) -> PipelineConfig:
@@ -83,7 +83,7 @@ def check(path: str, source: SourceOptions, config: PipelineConfig) -> Plan:
             if n is None:
                 raise FogmonError(f"{path}: an endless source (a sensor model) has no end to analyse")
             plan.sample_rate_hz, plan.n_samples = float(src.sample_rate_hz), int(n)
-            plan.window_s, plan.hop_s = window_and_hop(_analysis(config), plan.sample_rate_hz, plan.n_samples)
+            plan.window_s, plan.hop_s = window_and_hop(_analysis(config), plan.sample_rate_hz, plan.n_samples, path)
             plan.axis, plan.axes = _axis(src), tuple(src.axes)
         finally:
             src.close()
@@ -121,6 +121,7 @@ class _ChunkSource(OfflineSource):
         self._masked = np.asarray(masked, dtype=np.int64).reshape(-1, 2)
         self.t0_s: float | None = None   # time of the recording's first sample (s)
         self.own_samples = self.own_invalid = 0
+        self.own_accel_invalid: dict[str, int] = {}   # accelerometer aux channel -> NaN samples it owns
 
     @property
     def counters(self) -> dict:
@@ -138,6 +139,10 @@ class _ChunkSource(OfflineSource):
                 if lo < hi:
                     self.own_samples += hi - lo
                     self.own_invalid += int(hi - lo - np.count_nonzero(part.valid[lo:hi]))
+                    for k, v in part.aux.items():
+                        if ACCEL_CHANNEL.fullmatch(k):
+                            self.own_accel_invalid[k] = (self.own_accel_invalid.get(k, 0)
+                                                         + int(np.count_nonzero(~np.isfinite(v[lo:hi]))))
                 yield self._mask(part, pos + a)
             pos += len(b)
             if pos >= self.stop:
@@ -149,21 +154,60 @@ class _ChunkSource(OfflineSource):
         if not len(m):
             return b
         valid = b.valid.copy()
+        moved = np.zeros(len(b), dtype=bool)
         for a, z in m - at:
-            valid[max(a, 0):max(z, 0)] = False
-        return Block(b.t_s, b.rate_dph, valid, b.aux, b.events, b.axes)
+            moved[max(a, 0):max(z, 0)] = True
+        valid[moved] = False   # and the accelerometers that follow the gate (fogmon.pipeline.accel)
+        aux = {k: np.where(moved, np.nan, v) if ACCEL_CHANNEL.fullmatch(k) else v for k, v in b.aux.items()}
+        return Block(b.t_s, b.rate_dph, valid, aux, b.events, b.axes)
 
     def close(self) -> None:
         self._src.close()
 
 
+def _fit_columns(fit, names) -> dict[str, np.ndarray]:
+    """Coefficients ``names`` of a DADEV fit as columns: value, _lo, _hi, identifiable_."""
+    cols = {}
+    for c in names:
+        co = getattr(fit, c)
+        cols[c], cols[f"{c}_lo"], cols[f"{c}_hi"] = (np.asarray(x, np.float64) for x in (co.value, co.lo, co.hi))
+        cols[f"identifiable_{c}"] = np.asarray(co.identifiable, bool)
+    return cols
+
+
+@dataclass
+class _Windows:
+    """The windows of one sensor axis: end indices, ADEV rows, fit columns."""
+
+    ends: list[np.ndarray] = field(default_factory=list)
+    adev: list[np.ndarray] = field(default_factory=list)
+    fits: list[dict[str, np.ndarray]] = field(default_factory=list)
+
+    def add(self, dadev, cols: dict[str, np.ndarray]) -> None:
+        self.ends.append(np.asarray(dadev.end_index, np.int64))
+        self.adev.append(np.asarray(dadev.adev_dph, np.float64))
+        self.fits.append(cols)
+
+    def owned(self, first: int, keep) -> dict:
+        """The windows ``keep`` (a function of their grid end indices) chooses, as columns
+        (``t_end_s`` left to the caller: ``ends`` is the grid index from ``first``)."""
+        if not self.ends:
+            return {}
+        ends = first + np.concatenate(self.ends)
+        k = keep(ends)
+        out = {"ends": ends[k], "adev": np.concatenate(self.adev)[k]}
+        for name in self.fits[0]:
+            out[name] = np.concatenate([f[name] for f in self.fits])[k]
+        return out
+
+
 class _Collect(Sink):
-    """Keeps the windows the pipeline completes (end index, ADEV, fit) and its summary."""
+    """Keeps the windows the pipeline completes (end index, ADEV, fit), the
+    accelerometers' windows (``accels``: name -> _Windows) and the summary."""
 
     def __init__(self) -> None:
-        self.ends: list[np.ndarray] = []
-        self.adev: list[np.ndarray] = []
-        self.fits: list[dict[str, np.ndarray]] = []
+        self.gyro = _Windows()
+        self.accels: dict[str, _Windows] = {}
         self.tau_s: np.ndarray | None = None
         self.summary = None
 
@@ -171,14 +215,10 @@ class _Collect(Sink):
         self.tau_s = np.asarray(info.tau_s)
 
     def frames(self, dadev, fit, t_end_s, axis: str = "") -> None:
-        self.ends.append(np.asarray(dadev.end_index, np.int64))
-        self.adev.append(np.asarray(dadev.adev_dph, np.float64))
-        cols = {}
-        for c in COEFFICIENTS:
-            co = getattr(fit, c)
-            cols[c], cols[f"{c}_lo"], cols[f"{c}_hi"] = (np.asarray(x, np.float64) for x in (co.value, co.lo, co.hi))
-            cols[f"identifiable_{c}"] = np.asarray(co.identifiable, bool)
-        self.fits.append(cols)
+        self.gyro.add(dadev, _fit_columns(fit, COEFFICIENTS))
+
+    def accel_frames(self, dadev, fit, t_end_s, accel: str) -> None:
+        self.accels.setdefault(accel, _Windows()).add(dadev, _fit_columns(fit, ACCEL_COEFFICIENTS))
 
     def finish(self, summary) -> None:
         self.summary = summary
@@ -197,6 +237,9 @@ class ChunkResult:
     own_invalid: int = 0
     record: dict = field(default_factory=dict)
     error: str = ""
+    accel_windows: dict[str, dict] = field(default_factory=dict)   # accelerometer -> its windows, as ``windows``
+    accel_invalid: dict[str, int] = field(default_factory=dict)    # accelerometer -> NaN samples the chunk owns
+    accel_records: dict[str, dict] = field(default_factory=dict)   # last chunk: accelerometer -> its whole-record fit
 
 
 def run_chunk(plan: Plan, chunk, source: SourceOptions, config: PipelineConfig, masked=None,
@@ -217,24 +260,34 @@ def run_chunk(plan: Plan, chunk, source: SourceOptions, config: PipelineConfig, 
     try:
         src = _ChunkSource(_open(plan.path, source), chunk.feed_first, chunk.feed_stop,
                            (chunk.own_first, chunk.own_stop), masked if masked is not None else (), axis)
+        accels = config.accels   # an axis's task analyses that axis's accelerometer (as replay's gate pairs them)
+        if axis:
+            accels = (axis,) if accels is None or axis in accels else ()
         run = _analysis(config, window_s=plan.window_s, hop_s=plan.hop_s,
-                        keep_motion=config.keep_motion or masked is not None)
+                        keep_motion=config.keep_motion or masked is not None, accels=accels)
         col = _Collect()
         summary = run_pipeline(src, run, [col])
         out.own_samples, out.own_invalid = src.own_samples, src.own_invalid
         out.tau_s = col.tau_s
-        if col.ends:
-            ends = chunk.feed_first + np.concatenate(col.ends)
-            hop = int(round(plan.hop_s * plan.sample_rate_hz))
-            w = int(round(plan.window_s * plan.sample_rate_hz))
+        hop = int(round(plan.hop_s * plan.sample_rate_hz))
+        w = int(round(plan.window_s * plan.sample_rate_hz))
+
+        def keep(ends: np.ndarray) -> np.ndarray:
             k = (ends - (w - 1)) // hop
-            keep = (k >= chunk.k_first) & (k < chunk.k_stop)
-            out.windows = {"t_end_s": src.t0_s + ends[keep] / plan.sample_rate_hz,
-                           "adev": np.concatenate(col.adev)[keep]}
-            for name in col.fits[0]:
-                out.windows[name] = np.concatenate([f[name] for f in col.fits])[keep]
+            return (k >= chunk.k_first) & (k < chunk.k_stop)
+
+        def timed(cols: dict) -> dict:
+            return {"t_end_s": src.t0_s + cols.pop("ends") / plan.sample_rate_hz, **cols} if cols else {}
+
+        out.windows = timed(col.gyro.owned(chunk.feed_first, keep))
+        out.accel_windows = {a: timed(x.owned(chunk.feed_first, keep)) for a, x in col.accels.items()}
+        names = {k: m.group(1) for k in src.own_accel_invalid if (m := ACCEL_CHANNEL.fullmatch(k))}
+        out.accel_invalid = {names[k]: n for k, n in src.own_accel_invalid.items()
+                             if accels is None or names[k] in accels}
         if chunk.last:
             out.record = _record_facts(summary, src.t0_s)
+            out.accel_records = {a: _fit_facts(x.overall_fit, ACCEL_COEFFICIENTS) | {"fit_first_s": x.overall_first_s}
+                                 for a, x in summary.accels.items()}
     except Exception as e:
         out.error = _failure(e)
     return out
@@ -246,8 +299,14 @@ def _record_facts(summary, t0_s: float | None) -> dict:
     rec = {"t_first_s": t0_s, "t_last_s": summary.t_last_s,
            "gaps": int(summary.counters.get("seq_gaps", 0)),
            "motion_samples_excluded": int(summary.motion_samples), "fit_first_s": summary.overall_first_s}
-    fit = summary.overall_fit
-    for c in COEFFICIENTS:
+    return rec | _fit_facts(summary.overall_fit, COEFFICIENTS)
+
+
+def _fit_facts(fit, names) -> dict:
+    """A whole-record fit's coefficients ``names`` (value, _lo, _hi, identifiable_; NaN
+    and False without a fit)."""
+    rec: dict = {}
+    for c in names:
         co = getattr(fit, c, None)
         rec[c] = float(co.value) if co is not None else float("nan")
         rec[f"{c}_lo"] = float(co.lo) if co is not None else float("nan")
@@ -280,24 +339,18 @@ def motion_pass(plan: Plan, source: SourceOptions, config: PipelineConfig, axis:
         src = _open(plan.path, source)
         gate = MotionGate(plan.sample_rate_hz)
         use_ref = None
-        pending: deque[np.ndarray] = deque()    # valid flags handed to the gate, not yet released
         pos = 0                                 # grid index of the next sample released
         runs: list[tuple[int, int]] = []
 
-        def released(v_out: np.ndarray) -> None:
+        def released(moved: np.ndarray) -> None:
             nonlocal pos
-            n = len(v_out)
-            v_in = np.concatenate([pending.popleft() for _ in range(len(pending))]) if pending else np.zeros(0, bool)
-            rest = v_in[n:]
-            if len(rest):
-                pending.append(rest)
-            masked = np.flatnonzero(v_in[:n] & ~v_out)
+            masked = np.flatnonzero(moved)
             if len(masked):
                 cuts = np.flatnonzero(np.diff(masked) > 1)
                 starts = np.concatenate([[masked[0]], masked[cuts + 1]])
                 stops = np.concatenate([masked[cuts], [masked[-1]]]) + 1
                 runs.extend(zip((pos + starts).tolist(), (pos + stops).tolist(), strict=True))
-            pos += n
+            pos += len(moved)
 
         try:
             for b in _blocks(src, axis):
@@ -306,12 +359,8 @@ def motion_pass(plan: Plan, source: SourceOptions, config: PipelineConfig, axis:
                 if use_ref is None:
                     use_ref = "rot_dps" in b.aux and not config.raw_rate
                 y = b.error_rate_dph if use_ref else b.rate_dph
-                v = b.valid & np.isfinite(y)
-                pending.append(v)
-                _, v_out, _ = gate.push(b.t_s, y, v)
-                released(v_out)
-            _, v_out, _ = gate.flush()
-            released(v_out)
+                released(gate.push(b.t_s, y, b.valid & np.isfinite(y)).moved)
+            released(gate.flush().moved)
         finally:
             src.close()
         out.runs = np.asarray(runs, dtype=np.int64).reshape(-1, 2)

@@ -30,11 +30,43 @@ PARTS_SUFFIX = ".parts"
 SERIAL_CAPTURE = "raw.bin"
 #: a CAN gyro's raw capture pieces (python-can ASC logs, fogmon.formats.capture)
 CAN_CAPTURE = "frames.asc"
+#: the lock file of an archive being written (its writer's pid; fogmon.sinks.archive)
+LOCK = ".fogmon-archive.lock"
+#: the prefix of the folder each `fogmon monitor` run makes (``default_archive_dir``)
+FOLDER_PREFIX = "fogmon-archive-"
+
+_PIECE = rf"(-\d{{{PIECE_DIGITS},}})?"
+#: names an archive folder's readers take as part of the archive: the pieces (numbered or
+#: not) with their sidecars and Parquet parts folders, the DBC copy and the lock
+_ARCHIVE_NAMES = re.compile(rf"(samples{_PIECE}\.csv|samples{_PIECE}\.parquet({re.escape(PARTS_SUFFIX)})?|"
+                            rf"raw{_PIECE}\.bin(\.json)?|frames{_PIECE}\.asc(\.json)?|.*\.dbc|{re.escape(LOCK)})")
 
 
 def default_archive_dir(base: str = ".") -> str:
-    """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``."""
-    return os.path.join(base, datetime.now(UTC).strftime("fogmon-archive-%Y%m%dT%H%M%SZ"))
+    """A new time-stamped folder name under ``base``: ``fogmon-archive-YYYYmmddTHHMMSSZ``
+    (``-2``, ``-3``, ... added when a folder of that name exists: two runs started in
+    the same second)."""
+    path = os.path.join(base, datetime.now(UTC).strftime(f"{FOLDER_PREFIX}%Y%m%dT%H%M%SZ"))
+    n, out = 1, path
+    while os.path.lexists(out):
+        n += 1
+        out = f"{path}-{n}"
+    return out
+
+
+def is_archive_name(name: str) -> bool:
+    """True when a file or folder named ``name`` in an archive folder is read as part of
+    the archive (a piece, its sidecar or Parquet parts, the DBC copy, the lock)."""
+    return bool(_ARCHIVE_NAMES.fullmatch(name))
+
+
+def archive_of(path: str) -> str | None:
+    """The archive folder that would read a file at ``path`` as one of its own (a piece
+    name in an archive folder, or anything in a piece's parts folder), else None."""
+    folder, name = os.path.split(os.path.abspath(path))
+    if folder.endswith(PARTS_SUFFIX) and archive_files(os.path.dirname(folder)):
+        return os.path.dirname(folder)
+    return folder if is_archive_name(name) and archive_files(folder) else None
 
 
 def piece_path(path: str, piece: int) -> str:

@@ -6,6 +6,7 @@ it decodes and gates exactly like the live monitor did. The one place that write
 decoder option may take are the decoders' to know: the reader passes them (``choices``)."""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -140,10 +141,17 @@ def new_sidecar(spec: dict[str, Any], started_utc: str, piece: int) -> dict[str,
 
 
 def write_sidecar(capture_path: str, sidecar: dict[str, Any]) -> None:
-    """Write ``capture_path + SIDECAR_SUFFIX`` atomically (a reader never sees half of it)."""
+    """Write ``capture_path + SIDECAR_SUFFIX`` atomically (a reader never sees half of it;
+    on an OSError, such as a full disk, the sidecar is as before and no temporary file
+    is left)."""
     path = capture_path + SIDECAR_SUFFIX
     tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(sidecar, fh, indent=1)
-        fh.write("\n")
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            json.dump(sidecar, fh, indent=1)
+            fh.write("\n")
+        os.replace(tmp, path)
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        raise

@@ -13,6 +13,7 @@ over several files (an archive's pieces and the row-group parts of a piece still
 written, see fogmon.formats.archive)."""
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -22,6 +23,7 @@ import numpy as np
 
 from fogmon.errors import FogmonError
 from fogmon.formats.recording import Recording, rate_axes, rate_columns, sample_rate_from
+from fogmon.outputs import write_failed
 
 FORMAT = "fogmon replay log v1 (parquet)"
 META_KEY = b"fogmon"
@@ -59,22 +61,33 @@ class ParquetLogWriter:
     """One Parquet replay log written row group by row group: ``write`` buffers rows
     and writes a row group each ``row_group_rows`` rows (``rate_dph`` (n, len(axes)) with
     ``axes``); ``close`` writes the rest and the footer. The file is written as
-    ``path + '.tmp'`` and renamed on close, so a file named ``path`` is always complete."""
+    ``temp`` (default ``path + '.tmp'``) and renamed on close, so a file named ``path``
+    is always complete. A disk error removes what was written and is a FogmonError naming
+    the file (as ``name``, e.g. an option, calls it) and the free space."""
 
     def __init__(self, path: str, aux_names: Sequence[str], meta: dict, extra: dict | None = None,
-                 row_group_rows: int = ROW_GROUP_ROWS, axes: tuple[str, ...] = ()) -> None:
+                 row_group_rows: int = ROW_GROUP_ROWS, axes: tuple[str, ...] = (), temp: str | None = None,
+                 name: str = "") -> None:
         import pyarrow.parquet as pq
 
-        self.path = os.fspath(path)
+        self.path, self.name = os.fspath(path), name
+        self._file = temp or self.path + ".tmp"
         self.schema = schema(aux_names, meta, extra, axes)
         self.rows = 0
         self._n = int(row_group_rows)
         self._buf: list = []
         self._held = 0
+        self._writer = None
+        with self._on_error():
+            self._writer = pq.ParquetWriter(self._file, self.schema, compression="zstd")
+
+    @contextlib.contextmanager
+    def _on_error(self):
         try:
-            self._writer = pq.ParquetWriter(self.path + ".tmp", self.schema, compression="zstd")
+            yield
         except OSError as e:
-            raise FogmonError(f"{self.path}: cannot write: {e}") from None
+            self.abort()
+            raise write_failed(self.name, self.path, e) from None
 
     def write(self, t_s, rate_dph, aux: dict) -> None:
         if not len(t_s):
@@ -82,13 +95,15 @@ class ParquetLogWriter:
         self._buf.append(table(self.schema, t_s, rate_dph, aux))
         self._held += len(t_s)
         self.rows += len(t_s)
-        while self._held >= self._n:
-            self._write(self._n)
+        with self._on_error():
+            while self._held >= self._n:
+                self._write(self._n)
 
     def _write(self, n: int) -> None:
         import pyarrow as pa
 
         t = pa.concat_tables(self._buf)
+        assert self._writer is not None, "open until closed"
         self._writer.write_table(t.slice(0, n), row_group_size=n)
         rest = t.slice(n)
         self._buf, self._held = ([rest] if len(rest) else []), len(rest)
@@ -98,21 +113,24 @@ class ParquetLogWriter:
         the ``fogmon`` metadata) and give the file its name."""
         if self._writer is None:
             return
-        if self._held:
-            self._write(self._held)
-        if counters is not None:
-            info = json.loads(self.schema.metadata[META_KEY])
-            self._writer.add_key_value_metadata({META_KEY.decode(): json.dumps({**info, "counters": counters})})
-        self._writer.close()
-        self._writer = None
-        os.replace(self.path + ".tmp", self.path)
-
-    def abort(self) -> None:
-        """Stop without a file (an error while converting)."""
-        if self._writer is not None:
+        with self._on_error():
+            if self._held:
+                self._write(self._held)
+            if counters is not None:
+                info = json.loads(self.schema.metadata[META_KEY])
+                self._writer.add_key_value_metadata({META_KEY.decode(): json.dumps({**info, "counters": counters})})
             self._writer.close()
             self._writer = None
-            os.remove(self.path + ".tmp")
+            os.replace(self._file, self.path)
+
+    def abort(self) -> None:
+        """Stop without a file (an error while converting); idempotent."""
+        if self._writer is not None:
+            with contextlib.suppress(OSError):
+                self._writer.close()
+            self._writer = None
+        with contextlib.suppress(OSError):
+            os.remove(self._file)
 
 
 def file_info(pf, path: str) -> tuple[dict, tuple[str, ...]]:

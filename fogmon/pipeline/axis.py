@@ -61,6 +61,7 @@ class AxisAnalysis:
         self.watch: ModelWatch | None = None
         self.phases: PhaseLog | None = None
         self.aux_windows: AuxWindows | None = None   # the aux samples of each window (model check, phases)
+        self.moving = np.zeros(0, dtype=bool)   # of the samples last released: kept out as platform motion
 
     def suffixed(self, key: str) -> str:
         """``key`` as this axis names it: ``<key>_<axis>``, or ``key`` for a one-axis stream."""
@@ -101,21 +102,36 @@ class AxisAnalysis:
                          tuple(self.named(c.events)))
 
     def gate(self, t_s: np.ndarray, y: np.ndarray, valid: np.ndarray,
-             dispatch: Callable[[Sequence[Event]], None]) -> tuple[np.ndarray, np.ndarray]:
-        """The samples (deg/h) and valid flags to analyse now: with a motion gate, those it
-        has judged, platform motion made invalid (its events to ``dispatch``)."""
+             dispatch: Callable[[Sequence[Event]], None]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The samples (deg/h), valid flags and platform-motion flags (None: no gate) to
+        analyse now: with a motion gate, those it has judged, platform motion made invalid
+        (its events to ``dispatch``); ``moving`` marks those the gate made invalid (the
+        accelerometers of the axis follow it)."""
         if self.motion is None:
-            return y, valid
-        y, valid, events = self.motion.push(t_s, y, valid)
-        dispatch(self.named(events))
-        return y, valid
+            self.moving = np.zeros(len(y), dtype=bool)
+            return y, valid, None
+        out = self.motion.push(t_s, y, valid)
+        self.moving = out.moved
+        dispatch(self.named(out.events))
+        return out.rate_dph, out.valid, out.moved
 
-    def analyse(self, y: np.ndarray, valid: np.ndarray) -> DadevResult:
-        """The next samples into DAVAR and the whole-run tail; the windows they complete."""
+    def flush_gate(self, dispatch: Callable[[Sequence[Event]], None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At the end of the run: what the motion gate still holds (as ``gate``), and its
+        spans into the summary."""
+        assert self.motion is not None
+        out = self.motion.flush()
+        self.moving = out.moved
+        dispatch(self.named(out.events))
+        self.summary.motion_spans, self.summary.motion_samples = list(self.motion.spans), self.motion.samples_excluded
+        return out.rate_dph, out.valid, out.moved
+
+    def analyse(self, y: np.ndarray, valid: np.ndarray, moved: np.ndarray | None = None) -> DadevResult:
+        """The next samples into DAVAR and the whole-run tail (``moved``: the samples
+        the motion gate made invalid, for the fit with them); the windows they complete."""
         if self.aux_windows is not None:  # the aux samples of exactly these samples (model check, phases)
             self.aux_windows.push(self.aux_pending.take(len(y)), len(y))
         res = self.engine.push(y, valid)
-        self.tail.push(y, valid)
+        self.tail.push(y, valid, moved)
         return res
 
     def window_checks(self, res: DadevResult, fit: NoiseFit, t_end: np.ndarray) -> list[Event]:
@@ -150,13 +166,14 @@ class AxisAnalysis:
 
     def overall(self, t_last_s: float, taus: TauSpec) -> None:
         """The whole-run ADEV and fit (of the latest OVERALL_MAX_SAMPLES samples, the last
-        at ``t_last_s``) into the summary."""
+        at ``t_last_s``) into the summary; when the motion gate kept samples of them out,
+        also the fit with those samples in (``fit_with_motion``)."""
         from fogmon.davar.batch import oadev
         from fogmon.davar.fit import fit_noise
 
         summary, sample_rate_hz = self.summary, self.sample_rate_hz
         del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
-        rate, valid = self.tail.take()
+        rate, valid, moved = self.tail.take()
         if len(rate) < 8:
             return
         try:
@@ -164,9 +181,12 @@ class AxisAnalysis:
         except FogmonError as e:  # a run shorter than the window can be too short for every tau
             axis = f"axis {self.name}: " if self.name else ""
             warnings.warn(f"{axis}no whole-run Allan deviation: {e.message}", FogmonWarning, stacklevel=2)
-        else:
-            summary.overall_first_s = t_last_s - (len(rate) - 1) / sample_rate_hz
-            summary.overall_fit = fit_noise(summary.overall)
+            return
+        summary.overall_first_s = t_last_s - (len(rate) - 1) / sample_rate_hz
+        summary.overall_fit = fit_noise(summary.overall)
+        if moved.any():
+            summary.motion_in_tail = int(np.count_nonzero(moved))
+            summary.fit_with_motion = fit_noise(oadev(rate, sample_rate_hz, taus=taus, valid=valid | moved))
 
 
 class _AuxFifo:
@@ -196,34 +216,36 @@ class _AuxFifo:
 
 
 class _Tail:
-    """The latest ``n_max`` samples and valid flags, for the whole-run ADEV: a ring buffer
-    of fixed size holding copies (no block is kept alive; pages not yet written cost no
-    memory)."""
+    """The latest ``n_max`` samples, valid flags and platform-motion flags (the samples
+    the motion gate made invalid), for the whole-run ADEV: ring buffers of fixed size
+    holding copies (no block is kept alive; pages not yet written cost no memory)."""
 
     def __init__(self, n_max: int):
         self.n_max = n_max
         self._rate = np.empty(n_max)
         self._valid = np.empty(n_max, bool)
+        self._moved = np.empty(n_max, bool)
         self._total = 0  # samples pushed so far
 
-    def push(self, rate: np.ndarray, valid: np.ndarray) -> None:
+    def push(self, rate: np.ndarray, valid: np.ndarray, moved: np.ndarray | None = None) -> None:
         skip = max(len(rate) - self.n_max, 0)
         self._total += skip
-        for src, buf in ((rate[skip:], self._rate), (valid[skip:], self._valid)):
+        moved = np.zeros(len(rate), bool) if moved is None else moved
+        for src, buf in ((rate[skip:], self._rate), (valid[skip:], self._valid), (moved[skip:], self._moved)):
             at = self._total % self.n_max
             first = min(len(src), self.n_max - at)
             buf[at:at + first] = src[:first]
             buf[:len(src) - first] = src[first:]
         self._total += len(rate) - skip
 
-    def take(self) -> tuple[np.ndarray, np.ndarray]:
-        """(rate, valid) of the latest min(pushed, n_max) samples, oldest first; the
-        buffer is released (the tail is done)."""
+    def take(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rate, valid, moved) of the latest min(pushed, n_max) samples, oldest first;
+        the buffers are released (the tail is done)."""
         n, at = min(self._total, self.n_max), self._total % self.n_max
+        bufs = (self._rate, self._valid, self._moved)
         if self._total <= self.n_max:
-            out = self._rate[:n].copy(), self._valid[:n].copy()
+            rate, valid, moved = (b[:n].copy() for b in bufs)
         else:
-            out = (np.concatenate([self._rate[at:], self._rate[:at]]),
-                   np.concatenate([self._valid[at:], self._valid[:at]]))
-        self._rate, self._valid = np.empty(0), np.empty(0, bool)
-        return out
+            rate, valid, moved = (np.concatenate([b[at:], b[:at]]) for b in bufs)
+        self._rate, self._valid, self._moved = np.empty(0), np.empty(0, bool), np.empty(0, bool)
+        return rate, valid, moved

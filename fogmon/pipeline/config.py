@@ -30,7 +30,8 @@ class PipelineConfig:
     rejection, Kalman channel: fogmon.methods.live; ``axis_methods``: an axis's own, for
     the axes of a stream of several axes it names), ``model`` (check every window
     against the model's DADEV band at family-wise ``model_alpha`` per window:
-    fogmon.modelcheck)."""
+    fogmon.modelcheck), ``accels`` (the accelerometers analysed, by name: the aux channels
+    ``accel_<name>_g``; None: every one the stream has, (): none)."""
 
     window_s: float | None = None
     hop_s: float | None = None
@@ -45,12 +46,15 @@ class PipelineConfig:
     axis_methods: dict[str, LiveMethods] = field(default_factory=dict)
     model: SensorModel | None = None
     model_alpha: float = 0.01
+    accels: tuple[str, ...] | None = None
 
 
-def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None) -> tuple[float, float]:
+def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int | None,
+                   name: str = "the recording") -> tuple[float, float]:
     """Window and hop (s) from ``window_s``/``hop_s`` or their defaults, checked
     against the sample rate and the samples the run will have (the record's ``total_n``,
-    None when live, cut to ``duration_s``); FogmonError naming the option otherwise."""
+    None when live, cut to ``duration_s``); FogmonError naming the option (and the
+    recording, ``name``) otherwise."""
     duration_s = config.duration_s
     n_run = total_n
     if duration_s is not None:
@@ -59,7 +63,7 @@ def window_and_hop(config: PipelineConfig, sample_rate_hz: float, total_n: int |
             raise FogmonError(f"`duration_s` {duration_s:g} s is shorter than one sample at {sample_rate_hz:g} Hz")
         n_run = n_cut if total_n is None else min(total_n, n_cut)
     if n_run is not None and n_run < 8:
-        what = "the recording has" if n_run == total_n else "`duration_s` leaves"
+        what = f"{name} has" if n_run == total_n else "`duration_s` leaves"
         raise FogmonError(f"{what} {n_run} samples at {sample_rate_hz:g} Hz: an Allan deviation needs at least 8")
     window_s = config.window_s
     if window_s is None:

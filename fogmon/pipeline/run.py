@@ -27,12 +27,13 @@ from fogmon.block import Block, Event
 from fogmon.davar.result import DadevResult
 from fogmon.errors import FogmonError, FogmonWarning
 from fogmon.modelcheck import ModelBand
+from fogmon.pipeline.accel import AccelAnalysis, accel_channels
 from fogmon.pipeline.axis import AxisAnalysis
 from fogmon.pipeline.config import PipelineConfig, _check_axis_options, live_samples, window_and_hop
 from fogmon.pipeline.progress import ReplayProgress
 from fogmon.pipeline.reader import _ThreadedBlocks
 from fogmon.sim.model import SensorModel
-from fogmon.sinks.base import AxisSummary, Sink, StreamInfo, Summary
+from fogmon.sinks.base import AccelSummary, AxisSummary, Sink, StopRun, StreamInfo, Summary
 from fogmon.sources.base import Source
 from fogmon.sources.pacing import Pacer
 
@@ -58,7 +59,7 @@ class Pipeline:
         self.source, self.config = source, config
         self.sample_rate_hz = sample_rate_hz = float(source.sample_rate_hz)
         self.total_n = source.n_samples
-        self.window_s, self.hop_s = window_and_hop(config, sample_rate_hz, self.total_n)
+        self.window_s, self.hop_s = window_and_hop(config, sample_rate_hz, self.total_n, source.name)
         rotate_s = config.rotate_s
         self.piece_n = int(round(rotate_s * sample_rate_hz)) if rotate_s else None
         if self.piece_n is not None and self.piece_n < 1:
@@ -68,6 +69,7 @@ class Pipeline:
         self.summary = Summary(source.name, sample_rate_hz, self.window_s, self.hop_s)
         self.axes: tuple[str, ...] = ()
         self.analyses: list[AxisAnalysis] = []
+        self.accels: dict[str, list[AccelAnalysis]] = {}   # gyro axis ("": one axis) -> accelerometers following it
         self._set_axes(tuple(source.axes))  # checks taus, builds the model bands
         self.started = self.done = self.use_ref = False
         self.t_origin = math.nan      # recording time of the first sample (s), once it came
@@ -114,6 +116,8 @@ class Pipeline:
                     break
         except KeyboardInterrupt:
             self.summary.interrupted = True
+        except StopRun as e:       # an output can take no more: end as a stop signal does
+            self.summary.stopped = str(e)
         except BaseException:
             self.summary.failed = True
             raise
@@ -199,12 +203,25 @@ class Pipeline:
             self.summary.analysed += " - thermal drift"
         bands = {a.name: (a.band.lo_dph, a.band.median_dph, a.band.hi_dph) for a in self.analyses
                  if a.band is not None}
+        self._set_accels(tuple(first.aux))
         info = StreamInfo(self.source.name, sample_rate_hz, self.window_s, self.hop_s, m / sample_rate_hz, aux_names,
-                          self.summary.analysed, bands, self.config.model_alpha if bands else None, self.axes)
+                          self.summary.analysed, bands, self.config.model_alpha if bands else None, self.axes,
+                          tuple(self.summary.accels))
         for s in self.sinks:
             s.start(info)
         self.started = True
         self.summary.t_first_s = float(first.t_s[0])
+
+    def _set_accels(self, aux_names: tuple[str, ...]) -> None:
+        """One AccelAnalysis per accelerometer channel (``accel_<name>_g``; ``accels``
+        chooses), following the motion gate of the gyro axis of its name, else of the
+        first axis."""
+        self.accels = {}
+        for name, channel in accel_channels(aux_names, self.config.accels).items():
+            summary = self.summary.accels[name] = AccelSummary()
+            follows = name if name in self.axes else self.analyses[0].name
+            self.accels.setdefault(follows, []).append(AccelAnalysis(
+                name, channel, self.sample_rate_hz, self.window_s, self.hop_s, self.config.taus, summary))
 
     def block(self, b: Block, b_piece: int) -> None:
         """One block of piece ``b_piece``: each axis through the live methods, to the
@@ -215,6 +232,9 @@ class Pipeline:
         if channels or events:
             b = Block(b.t_s, b.rate_dph, b.valid, {**b.aux, **channels}, (*b.events, *events), b.axes)
         self._deliver(b, b_piece)
+        for accels in self.accels.values():
+            for acc in accels:
+                acc.push(b.aux, len(b))
         for a, p in zip(self.analyses, prepared, strict=True):
             self._analyse(a, *a.gate(b.t_s, p.rate_dph, p.valid, self._dispatch))
         self._send_counters()
@@ -239,6 +259,14 @@ class Pipeline:
             self._dispatch(analysis.named(analysis.window_checks(res, fit, t_end)))
         self._t_frames = float(t_end[-1])
 
+    def accel_frames(self, acc: AccelAnalysis, res: DadevResult) -> None:
+        """Completed windows of one accelerometer: fitted, handed to the sinks with their end times."""
+        fit = acc.fit(res)
+        t_end = self.t_origin + np.asarray(res.end_index, dtype=np.float64) / self.sample_rate_hz
+        for s in self.sinks:
+            s.accel_frames(res, fit, t_end, acc.name)
+        self._t_frames = float(t_end[-1])
+
     def close(self) -> None:
         """End of the run: the source closed, what a live reader still held and the
         motion gate's last samples analysed, the whole-run ADEV, the sinks finished."""
@@ -254,10 +282,7 @@ class Pipeline:
                 self._drain(backlog)
         for a in self.analyses:
             if a.motion is not None and ok:   # the samples the gate still holds
-                y, valid, ev = a.motion.flush()
-                self._dispatch(a.named(ev))
-                self._analyse(a, y, valid)
-                a.summary.motion_spans, a.summary.motion_samples = list(a.motion.spans), a.motion.samples_excluded
+                self._analyse(a, *a.flush_gate(self._dispatch))
         if ok:
             self._send_counters()
         summary.wall_s = time.monotonic() - self.wall0
@@ -273,6 +298,9 @@ class Pipeline:
                 if a.phases is not None:
                     a.summary.phases = a.phases.summary()
                 a.overall(self.summary.t_last_s, self.config.taus)
+            for accels in self.accels.values():
+                for acc in accels:
+                    acc.overall(self.summary.t_last_s, self.config.taus)
         finally:
             for s in sorted(self.sinks, key=lambda k: k.finish_order):
                 s.finish(summary)
@@ -287,11 +315,16 @@ class Pipeline:
             for b_piece, b in _at_seams([big], self.t_origin, self.sample_rate_hz, self.piece_n):
                 self._deliver(b, b_piece)
 
-    def _analyse(self, a: AxisAnalysis, y: np.ndarray, valid: np.ndarray) -> None:
-        """DAVAR, fits, jump and model-band events of axis ``a`` for its next samples."""
-        res = a.analyse(y, valid)
+    def _analyse(self, a: AxisAnalysis, y: np.ndarray, valid: np.ndarray, moved: np.ndarray | None) -> None:
+        """DAVAR, fits, jump and model-band events of axis ``a`` for its next samples
+        (``moved``: those the motion gate made invalid)."""
+        res = a.analyse(y, valid, moved)
         if len(res):
             self.frames(a, res)
+        for acc in self.accels.get(a.name, ()):
+            res = acc.analyse(a.moving)
+            if len(res):
+                self.accel_frames(acc, res)
 
     def _send_counters(self) -> None:
         """The counters to the sinks, once after the windows a block completed (if any)."""

@@ -31,28 +31,60 @@ row. The raw taps may be called from another thread than the pipeline's (the sou
 decoding thread, right after it decoded those bytes): the raw capture keeps being written
 even while the pipeline is slow, and holds exactly the input the source decoded and
 counted (a run of ``duration_s`` ends it with the run's last frame).
+
+One archive, one writer: the folder is locked (``flock`` of its lock file, which holds
+the writer's pid) before anything else, so a second writer gets a one-line error; a
+lock left by a process that died is free again (the kernel releases it).
+
+A write that fails (a full disk, a quota, an I/O error, a file-size limit) stops the
+archive, never with a traceback from the flush thread: every file it wrote ends on a
+whole row (a replay-log piece is cut back to its last whole row, a capture to its last
+flush; a piece left without data is removed; a Parquet piece keeps the parts written),
+so the archive replays; ``error`` is the one-line FogmonError naming the file and the
+free space, and the next ``block`` raises StopRun so that the run ends cleanly with its
+summary. Once ``SPACE_CHECK_S`` s of samples are on disk, the bytes per sample are
+measured (``bytes_per_sample``: samples and raw capture together) and a FogmonWarning
+says when the free space will not last the run (``duration_s``, else ``SPACE_WARN_S``).
 """
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import io
 import os
 import shutil
+import socket
 import threading
 import time
+import warnings
 from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
 from fogmon.block import Block
-from fogmon.errors import FogmonError
-from fogmon.formats.archive import CAN_CAPTURE, REPLAY_LOG, SERIAL_CAPTURE, find_pieces, piece_files, piece_path
-from fogmon.formats.capture import new_sidecar, write_sidecar
+from fogmon.errors import FogmonError, FogmonWarning
+from fogmon.formats.archive import (
+    CAN_CAPTURE,
+    LOCK,
+    REPLAY_LOG,
+    SERIAL_CAPTURE,
+    find_pieces,
+    piece_files,
+    piece_path,
+)
+from fogmon.formats.capture import SIDECAR_SUFFIX, new_sidecar, write_sidecar
 from fogmon.formats.replay_log import append_replay_rows, write_replay_header
-from fogmon.sinks.base import Sink, Summary
+from fogmon.outputs import free_bytes, write_failed
+from fogmon.sinks.base import Sink, StopRun, Summary
 from fogmon.sinks.parquet_pieces import ROW_GROUP_S, ParquetPieces
 from fogmon.sources.base import CaptureSource, Source
+
+#: recording time (s) on disk after which the bytes per sample are measured and the free
+#: space checked against the rest of the run
+SPACE_CHECK_S = 60.0
+#: without a run duration, warn when the free space lasts less than this (s): a day
+SPACE_WARN_S = 86400.0
 
 
 def replay_rows(block: Block) -> tuple[np.ndarray, int, int]:
@@ -89,20 +121,34 @@ class Archive(Sink):
 
     def __init__(self, directory: str, source: Source, flush_s: float = 0.5, clock=time.monotonic,
                  background_flush: bool = True, samples_format: str = "csv",
-                 row_group_s: float = ROW_GROUP_S) -> None:
+                 row_group_s: float = ROW_GROUP_S, duration_s: float | None = None) -> None:
         self.directory = os.fspath(directory)
-        self._created_dir = not os.path.isdir(self.directory)
+        self._created_dir = False
+        if not os.path.isdir(self.directory):
+            try:
+                os.mkdir(self.directory)     # in an existing folder: none above it is made
+                self._created_dir = True
+            except FileExistsError:
+                pass                         # made just now by another writer: the lock decides
+            except OSError as e:
+                raise FogmonError(f"`archive` {self.directory}: cannot create: {e.strerror}") from None
+        self._lock_fd: int | None = None
+        self._take_lock()
         try:
-            os.makedirs(self.directory, exist_ok=True)
-        except OSError as e:
-            raise FogmonError(f"`archive` {self.directory}: cannot create: {e.strerror}") from None
-        held = [p for name in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE) for p in find_pieces(self.directory, name)]
-        held += piece_files(self.directory)
-        if held:
-            raise FogmonError(f"`archive` {self.directory}: already holds an archive ({os.path.basename(held[0])}); "
-                              f"give a new folder")
-        if not os.access(self.directory, os.W_OK):
-            raise FogmonError(f"`archive` {self.directory}: cannot write there")
+            held = [p for name in (REPLAY_LOG, SERIAL_CAPTURE, CAN_CAPTURE) for p in find_pieces(self.directory, name)]
+            held += piece_files(self.directory)
+            if held:
+                raise FogmonError(f"`archive` {self.directory}: already holds an archive "
+                                  f"({os.path.basename(held[0])}); give a new folder")
+        except BaseException:
+            self._release_lock()
+            raise
+        self.error: FogmonError | None = None    # the write that failed: the archive stopped there
+        self._stop_sent = False
+        self.duration_s = duration_s
+        self.bytes_per_sample: float | None = None   # measured once SPACE_CHECK_S s are on disk
+        self._bytes_written = 0                  # bytes of samples and capture on disk
+        self._rows_on_disk = 0
         self.source = source
         self.flush_s = float(flush_s)
         self._clock = clock
@@ -117,6 +163,9 @@ class Archive(Sink):
         self._done = False
         self._csv_fd: int | None = None
         self._csv_buf = io.StringIO()
+        self._csv_rows = 0                       # rows in _csv_buf
+        self._csv_size = 0                       # bytes of the current replay-log piece on disk
+        self._csv_header = 0                     # of which its header
         self._aux_names: list[str] | None = None
         self._axes: tuple[str, ...] = ()
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, 1))
@@ -145,7 +194,42 @@ class Archive(Sink):
 
     def _flusher(self) -> None:
         while not self._closed.wait(self.flush_s):
-            self.flush()
+            self.flush()          # a failed write is noted (self.error), never raised here
+
+    # -- lock --------------------------------------------------------------------------
+    def _take_lock(self) -> None:
+        """Take the folder's lock (non-blocking) or raise a FogmonError naming its holder."""
+        path = os.path.join(self.directory, LOCK)
+        while True:
+            try:
+                fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as e:
+                raise FogmonError(f"`archive` {self.directory}: cannot write there: {e.strerror}") from None
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.read(fd, 200).decode("utf-8", "replace").strip() or "?"
+                os.close(fd)
+                raise FogmonError(f"`archive` {self.directory}: another fogmon (pid {holder}) is writing an archive "
+                                  f"there; give another folder") from None
+            try:   # the holder may have removed the file as it finished: lock the one in the folder
+                same = os.path.samestat(os.fstat(fd), os.stat(path))
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()} on {socket.gethostname()}\n".encode())
+        self._lock_fd = fd
+
+    def _release_lock(self) -> None:
+        if self._lock_fd is None:
+            return
+        with contextlib.suppress(OSError):
+            os.remove(os.path.join(self.directory, LOCK))
+        os.close(self._lock_fd)
+        self._lock_fd = None
 
     # -- decoded samples -------------------------------------------------------------
     def write(self, block: Block) -> None:
@@ -154,6 +238,11 @@ class Archive(Sink):
             self._write(block)
 
     def _write(self, block: Block) -> None:
+        if self.error is not None:
+            if not self._stop_sent:      # once: the pipeline ends the run, its summary printed
+                self._stop_sent = True
+                raise StopRun(f"the archive could not write: {self.error.message}")
+            return
         if self._aux_names is None and len(block):
             self._aux_names, self._axes = list(block.aux), block.axes
         aux_names = self._aux_names or []
@@ -164,22 +253,36 @@ class Archive(Sink):
                 self.counters["partial_samples_dropped"] = self.counters.get("partial_samples_dropped", 0) + partial
             if keep.any() and self._parquet is not None:
                 self._pieces.add(self.piece)
-                self._parquet.write(self.piece, aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
-                                    {k: block.aux[k][keep] for k in aux_names}, block.axes)
+                with self._guard(self._parquet_path):
+                    self._parquet.write(self.piece, aux_names, self._meta(), block.t_s[keep], block.rate_dph[keep],
+                                        {k: block.aux[k][keep] for k in aux_names}, block.axes)
                 self.counters["rows_written"] += int(keep.sum())
             elif keep.any():
                 if self._csv_fd is None:
-                    self._open_replay_log(aux_names)
-                append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
-                                   {k: block.aux[k][keep] for k in aux_names})
-                self.counters["rows_written"] += int(keep.sum())
+                    with self._guard(lambda: self.replay_log_path):
+                        self._open_replay_log(aux_names)
+                if self._csv_fd is not None:
+                    append_replay_rows(self._csv_buf, block.t_s[keep], block.rate_dph[keep],
+                                       {k: block.aux[k][keep] for k in aux_names})
+                    self._csv_rows += int(keep.sum())
+                    self.counters["rows_written"] += int(keep.sum())
         self._maybe_flush()
+
+    @property
+    def rows_on_disk(self) -> int:
+        """Rows of decoded samples handed to the OS (whole rows)."""
+        return self._rows_on_disk + (self._parquet.rows_on_disk if self._parquet is not None else 0)
+
+    def _parquet_path(self) -> str | None:
+        return self._parquet.path if self._parquet is not None else None
 
     def _open_replay_log(self, aux_names: list[str]) -> None:
         self.replay_log_path = os.path.join(self.directory, piece_path(REPLAY_LOG, self.piece))
         self._csv_fd = os.open(self.replay_log_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        self._csv_size = self._csv_rows = 0
         self._pieces.add(self.piece)
         write_replay_header(self._csv_buf, aux_names, self._meta(), self._axes)
+        self._csv_header = len(self._csv_buf.getvalue().encode("utf-8"))
 
     def _meta(self) -> dict:
         """The replay-log metadata of the current piece."""
@@ -189,7 +292,8 @@ class Archive(Sink):
     def _close_replay_log(self) -> None:
         self._flush()
         if self._parquet is not None:
-            self._parquet.end_piece()
+            with self._guard(self._parquet_path):
+                self._parquet.end_piece(write_held=self.error is None)
         if self._csv_fd is not None:
             os.close(self._csv_fd)
             self._csv_fd = None
@@ -210,21 +314,26 @@ class Archive(Sink):
         if self._pieces:
             n = len(self._pieces)
             partial = self.counters.get("partial_samples_dropped", 0)
-            summary.outputs.append(f"archive {self.directory} ({self.counters['rows_written']} samples"
+            rows = self.counters["rows_written"] if self.error is None else self.rows_on_disk
+            summary.outputs.append(f"archive {self.directory} ({rows} samples"
                                    + (f" in {n} pieces" if n > 1 else "")
                                    + (f"; {partial} with only some axes valid left out of the replay log, kept in "
-                                      f"the raw capture" if partial else "") + ")")
+                                      f"the raw capture" if partial else "")
+                                   + ("; INCOMPLETE: writing stopped at a failed write, every file ends on a whole "
+                                      "row" if self.error is not None else "") + ")")
 
     # -- raw capture taps (called by the source) --------------------------------------
     def raw(self, data: bytes) -> None:
         with self._lock:
-            self._append_raw(data)
+            with self._guard(lambda: self.capture_path):
+                self._append_raw(data)
             self.counters["raw_bytes"] += len(data)
             self._maybe_flush()
 
     def frame(self, msg) -> None:
         with self._lock:
-            self._append_frame(msg)
+            with self._guard(lambda: self.capture_path):
+                self._append_frame(msg)
             self.counters["raw_frames"] += 1
             self._maybe_flush()
 
@@ -234,10 +343,11 @@ class Archive(Sink):
         current byte offset of the serial capture piece, so a replay places the same gap
         (a CAN log carries its own timestamps)."""
         with self._lock:
-            if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
-                self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing_est),
-                                             "elapsed_s": float(elapsed_s)})
-                self._write_sidecar()
+            with self._guard(lambda: self.capture_path):
+                if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
+                    self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing_est),
+                                                 "elapsed_s": float(elapsed_s)})
+                    self._write_sidecar()
             self.flush()
 
     def placed(self, frame: int, missing: int, rule: int, wraps: int = 0) -> None:
@@ -246,7 +356,7 @@ class Archive(Sink):
         ``wraps`` of them whole counter wraps), which the bytes alone would not give again;
         recorded in the sidecar (``breaks``) at the current byte offset so a replay places
         the same (``missing_est`` too, for readers that know only outages)."""
-        with self._lock:
+        with self._lock, self._guard(lambda: self.capture_path):
             if self._spec_base is not None and self._spec_base.get("kind") == "serial" and self._open_capture():
                 self._spec["breaks"].append({"offset": self._cap_offset(), "missing_est": float(missing),
                                              "frame": int(frame), "missing": int(missing), "rule": int(rule),
@@ -274,8 +384,9 @@ class Archive(Sink):
             self._can_writer.on_message_received(msg)
 
     def _open_capture(self) -> bool:
-        """Make sure the current capture piece is open (False once the archive is closed)."""
-        if self._done or self._spec_base is None:   # closed, or a source without a raw capture
+        """Make sure the current capture piece is open (False once the archive is closed
+        or stopped by a failed write)."""
+        if self._done or self._spec_base is None or self.error is not None:   # closed, stopped, or no capture
             return False
         if self._cap_fd is not None:
             return True
@@ -300,10 +411,11 @@ class Archive(Sink):
         self._cut_pending = False
         if self._cap_fd is None:
             return
-        if self._can_writer is not None:
+        if self._can_writer is not None and self.error is None:
             self._can_writer.stop()              # writes the ASC end line into our buffer
         self._flush()
-        os.close(self._cap_fd)
+        if self._cap_fd is not None:             # (a failed write has closed it)
+            os.close(self._cap_fd)
         self._cap_fd = self._can_writer = None
 
     def _cap_offset(self) -> int:
@@ -326,27 +438,84 @@ class Archive(Sink):
 
     def _flush(self) -> None:
         self._last_flush = self._clock()
+        if self.error is not None:
+            return
         if self._csv_fd is not None:
             text = self._csv_buf.getvalue()
             if text:
-                _write_all(self._csv_fd, text.encode("utf-8"))
-                self._csv_buf = io.StringIO()
-        if self._cap_fd is None:
+                with self._guard(lambda: self.replay_log_path):
+                    data = text.encode("utf-8")
+                    _write_all(self._csv_fd, data)
+                    self._csv_size += len(data)
+                    self._bytes_written += len(data)
+                    self._rows_on_disk += self._csv_rows
+                    self._csv_buf, self._csv_rows = io.StringIO(), 0
+        if self._cap_fd is not None and self.error is None:
+            with self._guard(lambda: self.capture_path):
+                if self._can_writer is not None:
+                    data = self._can_text.getvalue().encode("ascii")
+                    self._can_text.seek(0)
+                    self._can_text.truncate()
+                else:
+                    data = bytes(self._cap_buf)
+                    self._cap_buf.clear()
+                if data:
+                    _write_all(self._cap_fd, data)
+                    self._cap_written += len(data)
+                    self._bytes_written += len(data)
+        if self.bytes_per_sample is None and self.error is None:
+            self._check_space()
+
+    # -- failed writes and free space ---------------------------------------------------
+    @contextlib.contextmanager
+    def _guard(self, path):
+        """A failed write in the block (``path()`` names the file) stops the archive
+        (``_fail``) instead of raising."""
+        try:
+            yield
+        except (OSError, FogmonError) as e:
+            self._fail(path() or self.directory, e)
+
+    def _fail(self, path: str, e: OSError | FogmonError) -> None:
+        """Note the first failed write and leave every file on a whole row: the current
+        replay log cut back to its last whole row, the capture to its last flush, a
+        file left without data removed (with its sidecar); nothing more is written."""
+        if self.error is None:
+            self.error = e if isinstance(e, FogmonError) else write_failed("`archive`", path, e)
+        self._csv_buf, self._csv_rows = io.StringIO(), 0
+        self._cap_buf.clear()
+        self._can_text.seek(0)
+        self._can_text.truncate()
+        if self._csv_fd is not None:
+            _cut(self._csv_fd, self.replay_log_path, self._csv_size, self._csv_header)
+            self._csv_fd = None
+        if self._cap_fd is not None and self.capture_path is not None:
+            _cut(self._cap_fd, self.capture_path, self._cap_written, 0)
+            self._cap_fd = self._can_writer = None
+
+    def _check_space(self) -> None:
+        """Once SPACE_CHECK_S s of samples are on disk: measure the bytes per sample and
+        warn when the free space will not last the rest of the run."""
+        rate = float(self.source.sample_rate_hz)
+        rows = self.rows_on_disk
+        if rows < SPACE_CHECK_S * rate:
             return
-        if self._can_writer is not None:
-            t = self._can_text.getvalue()
-            if t:
-                _write_all(self._cap_fd, t.encode("ascii"))
-                self._can_text.seek(0)
-                self._can_text.truncate()
-        elif self._cap_buf:
-            _write_all(self._cap_fd, bytes(self._cap_buf))
-            self._cap_written += len(self._cap_buf)
-            self._cap_buf.clear()
+        written = self._bytes_written + (self._parquet.bytes_on_disk if self._parquet is not None else 0)
+        self.bytes_per_sample = written / rows
+        free = free_bytes(self.directory)
+        if free is None:
+            return
+        lasts_s = free / (self.bytes_per_sample * rate)
+        left_s = self.duration_s - rows / rate if self.duration_s else SPACE_WARN_S
+        if lasts_s < left_s:
+            warnings.warn(f"`archive` {self.directory}: {free / 1e9:.3g} GB free hold {lasts_s / 3600:.3g} h more "
+                          f"at the measured {self.bytes_per_sample:.1f} bytes per sample ({rate:g} Hz), less than "
+                          f"the {left_s / 3600:.3g} h {'left of the run' if self.duration_s else 'of a day'}; the "
+                          f"run stops cleanly when the disk is full", FogmonWarning, stacklevel=2)
 
     def close(self) -> None:
         """Flush and close the files (idempotent); taps called later are ignored. A
-        folder this archive created and left empty is removed."""
+        folder this archive created and left empty is removed; the lock is released."""
         self._closed.set()
         with self._lock:
             if self._done:
@@ -354,7 +523,8 @@ class Archive(Sink):
             self._close_replay_log()
             self._close_capture()
             self._done = True
-        if self._created_dir and not self._pieces:
+        self._release_lock()
+        if self._created_dir:             # left empty (nothing arrived, or nothing could be written)
             with contextlib.suppress(OSError):
                 os.rmdir(self.directory)
 
@@ -370,3 +540,16 @@ def _write_all(fd: int, data: bytes) -> None:
     while view:
         n = os.write(fd, view)
         view = view[n:]
+
+
+def _cut(fd: int, path: str, size: int, empty: int) -> None:
+    """Cut file ``path`` (open as ``fd``) back to ``size`` bytes and close it; removed
+    (with a capture's sidecar) when that leaves no more than ``empty`` bytes (no data)."""
+    with contextlib.suppress(OSError):
+        os.ftruncate(fd, size)
+    with contextlib.suppress(OSError):
+        os.close(fd)
+    if size <= empty:
+        for p in (path, path + SIDECAR_SUFFIX):
+            with contextlib.suppress(OSError):
+                os.remove(p)

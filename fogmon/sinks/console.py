@@ -13,7 +13,7 @@ from typing import TextIO
 
 from fogmon.block import Event
 from fogmon.errors import render_names
-from fogmon.sinks.base import COEFFICIENTS, AxisSummary, Sink, Summary
+from fogmon.sinks.base import ACCEL_COEFFICIENTS, COEFFICIENTS, AccelSummary, AxisSummary, Sink, Summary
 from fogmon.stopping import stop_name
 from fogmon.window import default_window_s
 
@@ -26,7 +26,7 @@ def format_summary(s: Summary, flags: Mapping[str, str] | None = None) -> str:
     axes side by side (``axes_lines``). Parameters are named plainly, or as their flags
     in ``flags`` (parameter name -> flag)."""
     lines = []
-    state = f"interrupted ({stop_name()})" if s.interrupted else "done"
+    state = f"interrupted ({stop_name()})" if s.interrupted else f"stopped ({s.stopped})" if s.stopped else "done"
     lines.append(f"fogmon: {state}: {s.source_name}")
     lost = "invalid/lost on some axis" if s.axes else "invalid/lost"
     speed = f"{s.speed_x:,.0f}" if s.speed_x >= 10 else f"{s.speed_x:.2g}"   # a live run: about x1
@@ -41,6 +41,8 @@ def format_summary(s: Summary, flags: Mapping[str, str] | None = None) -> str:
               (["the `thermal` drift subtracted sample by sample"] if "thermal" in s.analysed else [])
         lines.append(f"  analysed: {s.analysed} (deg/h): {'; '.join(why)} (`raw_rate` for rate_dph itself)")
     lines += axes_lines(s) if s.axes else condition_lines(s, s) + result_lines(s, s)
+    if s.accels:
+        lines += accel_lines(s)
     if s.counters or s.event_counts:
         lines.append("")
         lines.append("Counters:")
@@ -72,10 +74,41 @@ def result_lines(x: AxisSummary, run: Summary) -> list[str]:
         check = model_check(a, f) if a is not None else None
         if check is not None:
             lines.append(check)
+    return lines + motion_effect_lines(x)
+
+
+def accel_lines(s: Summary) -> list[str]:
+    """The accelerometers of a run side by side: invalid samples and motion kept out, the
+    whole-run ADEV (micro-g) and the IEEE Std 1293 coefficients."""
+    acc = s.accels
+    lines = ["", f"Accelerometers {', '.join(acc)} (aux channels accel_<name>_g, analysed in micro-g; platform "
+                 f"motion as the gyro gate found it):",
+             "  invalid/lost samples: " + ", ".join(f"{a} {x.n_invalid}" for a, x in acc.items())
+             + ("; kept out as platform motion: " + ", ".join(f"{a} {x.motion_samples}" for a, x in acc.items())
+                if any(x.motion_samples for x in acc.values()) else "")]
+    done = {a: x.overall for a, x in acc.items() if x.overall is not None}
+    if not done:
+        return [*lines, "  no whole-run Allan deviation: no accelerometer has two valid samples in a row"]
+    first: AccelSummary = next(x for x in acc.values() if x.overall is not None)
+    conf = next(iter(done.values())).confidence
+    lines += ["", f"Accelerometer Allan deviation ({_span(first, s)}, {100 * conf:.1f} % confidence bounds), "
+                  f"adev_ug [lo_ug, hi_ug]:"]
+    lines += adev_axes_lines(done)
+    fits = {a: x.overall_fit for a, x in acc.items() if x.overall_fit is not None}
+    fit_conf = next(iter(fits.values())).noise.confidence if fits else conf
+    lines += ["", f"Accelerometer noise coefficients (IEEE Std 1293: velocity random walk, bias instability, "
+                  f"acceleration random walk; whole run, {100 * fit_conf:.1f} % intervals; n/i: not identifiable, "
+                  f"< its 95 % upper limit):"]
+    lines += coefficient_axes_lines(fits, ACCEL_COEFFICIENTS)
+    for a, x in acc.items():
+        if x.overall is not None and x.overall_fit is not None:
+            check = model_check(x.overall, x.overall_fit.noise)
+            if check is not None:
+                lines.append(check.replace("model check:", f"model check (accelerometer {a}):"))
     return lines
 
 
-def _span(x: AxisSummary, run: Summary) -> str:
+def _span(x: AxisSummary | AccelSummary, run: Summary) -> str:
     """The time span of the whole-run ADEV, s."""
     return f"{x.overall_first_s:.2f}..{run.t_last_s:.2f} s"
 
@@ -104,6 +137,8 @@ def axes_lines(s: Summary) -> list[str]:
             check = model_check(x.overall, x.overall_fit) if x.overall is not None and x.overall_fit else None
             if check is not None:
                 lines.append(check.replace("model check:", f"model check (axis {a}):"))
+    for a, x in axes.items():
+        lines += motion_effect_lines(x, a)
     return lines
 
 
@@ -111,39 +146,43 @@ def axes_lines(s: Summary) -> list[str]:
 AXIS_COLUMN = 28
 
 
-def adev_axes_lines(results: dict) -> list[str]:
+def adev_axes_lines(results: dict, rows=None) -> list[str]:
     """AdevResults of several axes (same taus) side by side: tau_s, then per axis
-    adev_dph [lo_dph, hi_dph]."""
+    adev_dph [lo_dph, hi_dph]; ``rows``: the indices shown (None: all)."""
     out = [f"  {'tau_s':>10} " + " ".join(f"{a:>{AXIS_COLUMN}}" for a in results)]
     tau_s = next(iter(results.values())).tau_s
-    for i in range(len(tau_s)):
+    for i in range(len(tau_s)) if rows is None else rows:
         cells = [(f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if _has_interval(r, i)
                   else f"{r.adev_dph[i]:.5g} [no interval]") if r.n_terms[i] else "no valid term"
                  for r in results.values()]
         out.append(f"  {tau_s[i]:10.4g} " + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
-    return out + _no_interval_note(results.values())
+    return out + _no_interval_note(results.values(), rows)
 
 
 def _has_interval(a, i: int) -> bool:
     return bool(math.isfinite(float(a.lo_dph[i])) and math.isfinite(float(a.hi_dph[i])))
 
 
-def _no_interval_note(results) -> list[str]:
-    """The footnote of ADEV tables with a tau printed without its interval (its EDF below
-    ``confidence.MIN_EDF``, where a chi-square interval can exclude its own estimate)."""
+def _no_interval_note(results, rows=None) -> list[str]:
+    """The footnote of ADEV tables with a tau (of ``rows``; None: all) printed without its
+    interval (its EDF below ``confidence.MIN_EDF``, where a chi-square interval can
+    exclude its own estimate)."""
     from fogmon.davar.confidence import MIN_EDF
 
-    if not any(r.n_terms[i] and not _has_interval(r, i) for r in results for i in range(len(r.tau_s))):
+    if not any(r.n_terms[i] and not _has_interval(r, i) for r in results
+               for i in (range(len(r.tau_s)) if rows is None else rows)):
         return []
     return [f"  no interval: EDF below {MIN_EDF:g} (less than one independent Allan term at that tau), where "
             f"the chi-square interval would not hold the estimate"]
 
 
-def coefficient_axes_lines(fits: dict) -> list[str]:
+def coefficient_axes_lines(fits: dict, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:
     """The five IEEE-952 coefficients of whole-record NoiseFits of several axes side by
-    side: name, unit, then per axis value [lo, hi] or n/i (< 95 % upper limit)."""
-    out = [f"  {'coefficient':<11} {'unit':<14}" + " ".join(f"{a:>{AXIS_COLUMN}}" for a in fits)]
-    for name, unit in COEFFICIENTS.items():
+    side: name, unit, then per axis value [lo, hi] or n/i (< 95 % upper limit); ``names``
+    (name -> unit) ACCEL_COEFFICIENTS for AccelFits."""
+    w = max(11, *(len(n) for n in names))
+    out = [f"  {'coefficient':<{w}} {'unit':<14}" + " ".join(f"{a:>{AXIS_COLUMN}}" for a in fits)]
+    for name, unit in names.items():
         cells = []
         for f in fits.values():
             c = getattr(f, name)
@@ -152,36 +191,39 @@ def coefficient_axes_lines(fits: dict) -> list[str]:
             else:
                 hi = float(c.hi)
                 cells.append(f"n/i (< {hi:.4g})" if math.isfinite(hi) else "n/i")
-        out.append(f"  {name:<11} {unit:<14}" + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
+        out.append(f"  {name:<{w}} {unit:<14}" + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
     return out
 
 
-def adev_lines(a) -> list[str]:
-    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms ("-" and a
-    footnote where a tau has no interval: EDF below 1)."""
-    out = [f"  {'tau_s':>10} {'adev_dph':>12} {'lo_dph':>12} {'hi_dph':>12} {'edf':>10} {'n_terms':>9}"]
-    for i in range(len(a.tau_s)):
+def adev_lines(a, unit: str = "dph", rows=None) -> list[str]:
+    """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms (``unit``
+    "ug" for an accelerometer's, in micro-g); ``rows``: the indices shown (None: all);
+    "-" and a footnote where a tau has no interval (EDF below 1)."""
+    out = [f"  {'tau_s':>10} {'adev_' + unit:>12} {'lo_' + unit:>12} {'hi_' + unit:>12} {'edf':>10} {'n_terms':>9}"]
+    for i in range(len(a.tau_s)) if rows is None else rows:
         if not a.n_terms[i]:
             out.append(f"  {a.tau_s[i]:10.4g}   no valid Allan term (the record is too short, or every term "
                        f"spans a gap or platform motion)")
             continue
         lo, hi = (f"{a.lo_dph[i]:12.5g}", f"{a.hi_dph[i]:12.5g}") if _has_interval(a, i) else (f"{'-':>12}",) * 2
         out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {lo} {hi} {a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
-    return out + _no_interval_note([a])
+    return out + _no_interval_note([a], rows)
 
 
-def coefficient_lines(f) -> list[str]:
+def coefficient_lines(f, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:
     """The five IEEE-952 coefficients of a whole-record NoiseFit with their intervals, or
-    "not identifiable" with the 95 % upper limit."""
+    "not identifiable" with the 95 % upper limit; ``names`` (name -> unit)
+    ACCEL_COEFFICIENTS for an AccelFit."""
     out = []
-    for name, unit in COEFFICIENTS.items():
+    w = max(9, *(len(n) for n in names))
+    for name, unit in names.items():
         c = getattr(f, name)
         if bool(c.identifiable):
-            out.append(f"  {name:<9} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
+            out.append(f"  {name:<{w}} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
         else:
             hi = float(c.hi)
             bound = f" (< {hi:.4g} {unit}, 95 % upper limit)" if math.isfinite(hi) else ""
-            out.append(f"  {name:<9}   not identifiable from this record{bound}")
+            out.append(f"  {name:<{w}}   not identifiable from this record{bound}")
     return out
 
 
@@ -233,6 +275,30 @@ def motion_lines(s: AxisSummary, run: Summary) -> list[str]:
         where = f"all are in the event log of {rrd[0]}" if rrd else "`rrd_path` keeps all of them in its event log"
         out.append(f"    ... and {len(spans) - MAX_MOTION_SPANS} more ({where})")
     return out
+
+
+def motion_effect_lines(x: AxisSummary, axis: str = "") -> list[str]:
+    """What keeping platform motion out changed (``axis``: its name in a multi-axis run):
+    the whole-run coefficients without and with the samples the motion gate kept out,
+    value [lo, hi] or n/i (< 95 % upper limit)."""
+    if x.fit_with_motion is None or x.overall_fit is None or x.overall is None:
+        return []
+    pct = 100.0 * x.motion_in_tail / max(x.overall.n_samples, 1)
+    where = f" (axis {axis})" if axis else ""
+    rows = []
+    for name, unit in COEFFICIENTS.items():
+        cells = []
+        for f in (x.overall_fit, x.fit_with_motion):
+            c = getattr(f, name)
+            cells.append(f"{float(c.value):.4g} [{float(c.lo):.4g}, {float(c.hi):.4g}]" if bool(c.identifiable)
+                         else f"n/i (< {float(c.hi):.4g})")
+        rows.append((name, unit, *cells))
+    w = max(len(r[k]) for r in rows for k in (2, 3)) + 2
+    return ["", f"IEEE-952 noise coefficients{where} without and with platform motion ({x.motion_in_tail} samples, "
+                f"{pct:.1f} %, kept out above; `keep_motion` analyses them; {100 * x.overall_fit.confidence:.1f} % "
+                f"intervals; n/i: not identifiable from this record, < its 95 % upper limit):",
+            f"  {'coefficient':<11} {'unit':<14}{'motion kept out':>{w}}{'motion analysed':>{w}}"] + \
+        [f"  {n:<11} {u:<14}{a:>{w}}{b:>{w}}" for n, u, a, b in rows]
 
 
 def _open_hint(output: str) -> str:

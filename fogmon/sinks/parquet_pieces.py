@@ -9,13 +9,15 @@ ends (rotation, end of run) its parts are joined into ``samples-NNNN.parquet`` (
 group per part, written as ``.tmp`` and renamed) and the parts folder is removed. A
 reader takes, per piece, the joined file when there is one, else the parts in order
 (fogmon.formats.archive.piece_files): a killed monitor's archive replays up to its last
-row group."""
+row group. A write that fails (a full disk) leaves no ``.tmp`` file: a part that could
+not be written is not there, a piece that could not be joined keeps its parts (the
+OSError is raised for the archive to report)."""
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 
-from fogmon.errors import FogmonError
 from fogmon.formats.archive import PARQUET_LOG, PARTS_SUFFIX, part_name, piece_path
 from fogmon.formats.parquet_log import schema, table
 
@@ -36,13 +38,17 @@ class ParquetPieces:
         self._buf: list = []
         self._held = 0
         self._parts = 0
+        self.rows_on_disk = 0        # rows in the part files written
+        self.bytes_on_disk = 0       # their size
+        self.path: str | None = None   # the file being written (for a message)
 
     def write(self, piece: int, aux_names, meta: dict, t_s, rate_dph, aux: dict, axes: tuple[str, ...] = ()) -> None:
         if self._piece != piece:
             self.end_piece()
             self._piece, self._parts = piece, 0
             self._schema = schema(aux_names, meta, axes=axes)
-            os.makedirs(self._parts_dir(), exist_ok=False)
+            self.path = self._parts_dir()
+            os.makedirs(self.path, exist_ok=False)
         tbl = table(self._schema, t_s, rate_dph, aux)
         while len(tbl):
             take = min(len(tbl), self.rows_per_group - self._held)
@@ -60,28 +66,48 @@ class ParquetPieces:
         import pyarrow as pa
         import pyarrow.parquet as pq
 
+        path = os.path.join(self._parts_dir(), part_name(self._parts + 1))
+        self.path = path
+        _written(lambda tmp: pq.write_table(pa.concat_tables(self._buf), tmp, compression="zstd"), path)
         self._parts += 1
-        path = os.path.join(self._parts_dir(), part_name(self._parts))
-        pq.write_table(pa.concat_tables(self._buf), path + ".tmp", compression="zstd")
-        os.replace(path + ".tmp", path)
+        self.rows_on_disk += self._held
+        self.bytes_on_disk += os.path.getsize(path)
         self._buf, self._held = [], 0
 
-    def end_piece(self) -> None:
-        """Write the rows held and join the current piece's parts (no-op without one)."""
+    def end_piece(self, write_held: bool = True) -> None:
+        """Write the rows held (unless not ``write_held``: after a failed write) and join
+        the current piece's parts (no-op without one). On an OSError the piece keeps
+        its parts and is done."""
         import pyarrow.parquet as pq
 
         if self._piece is None:
             return
-        if self._held:
-            self._write_part()
-        parts = self._parts_dir()
-        final = os.path.join(self.directory, piece_path(PARQUET_LOG, self._piece))
         try:
-            with pq.ParquetWriter(final + ".tmp", self._schema, compression="zstd") as w:
-                for i in range(1, self._parts + 1):
-                    w.write_table(pq.read_table(os.path.join(parts, part_name(i))))
-            os.replace(final + ".tmp", final)
-        except OSError as e:
-            raise FogmonError(f"{final}: cannot write: {e}") from None
-        shutil.rmtree(parts, ignore_errors=True)
-        self._piece = None
+            if self._held and write_held:
+                self._write_part()
+            parts = self._parts_dir()
+            final = os.path.join(self.directory, piece_path(PARQUET_LOG, self._piece))
+            if self._parts:
+                self.path = final
+
+                def join(tmp: str) -> None:
+                    with pq.ParquetWriter(tmp, self._schema, compression="zstd") as w:
+                        for i in range(1, self._parts + 1):
+                            w.write_table(pq.read_table(os.path.join(parts, part_name(i))))
+
+                _written(join, final)
+            shutil.rmtree(parts, ignore_errors=True)
+        finally:
+            self._piece, self._buf, self._held = None, [], 0
+
+
+def _written(write, path: str) -> None:
+    """``write(tmp)`` then rename ``tmp`` to ``path``; no ``tmp`` left on an error."""
+    tmp = path + ".tmp"
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        raise

@@ -18,7 +18,9 @@ class SourceOptions:
     ``can_message``, ``can_rate``, ``can_rate_unit``, ``can_temp``, ``can_counter``,
     ``can_valid``), the plausibility gate ``max_rate_dph`` (deg/h), for a replay log
     ``tolerate_bad_rows``, and for other recording formats (fogmon.sources.files: ROS bags,
-    ULogs, MDF4, LAS) ``topic``, ``channel``, ``time_channel``, ``rate_unit``. Files whose
+    ULogs, MDF4, LAS) ``topic``, ``channel``, ``time_channel``, ``rate_unit``, and for MDF4
+    ``accel_channels`` (accelerometer channels: a comma list, each ``CHANNEL`` (named x, y,
+    z in order) or ``AXIS=CHANNEL``). Files whose
     samples carry time stamps (fogmon.sources.files.timing): ``resample_hz`` (block means
     on a coarser uniform grid, Hz) and ``force_rate`` (use ``sample_rate_hz``, a DBC cycle
     time or a replay log's stated rate although the stamps say otherwise)."""
@@ -48,6 +50,7 @@ class SourceOptions:
     channel: str | None = None
     time_channel: str | None = None
     rate_unit: str | None = None
+    accel_channels: str | None = None
     resample_hz: float | None = None
     force_rate: bool = False
 

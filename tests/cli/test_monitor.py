@@ -8,10 +8,12 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers import REPO
+from helpers.doubles import archive_in
 from helpers.rrd import read_event_messages, read_scalars
 
 from fogmon.cli import main
@@ -20,10 +22,12 @@ from fogmon.sources.files.capture import open_raw_capture
 
 
 def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_path, capsys):
-    arch, rrd = tmp_path / "arch", tmp_path / "live.rrd"
-    rc = main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(arch),
+    runs, rrd = tmp_path / "runs", tmp_path / "live.rrd"
+    runs.mkdir()
+    rc = main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(runs),
                "--axis", "z", "--rrd", str(rrd), "--window-s", "0.512", "--hop-s", "0.128", "--no-progress"])
     assert rc == 0
+    arch = Path(archive_in(runs))                     # runs/fogmon-archive-YYYYmmddTHHMMSSZ
     out = capsys.readouterr().out
     # 2 s = 2000 samples; 1999 when the run's last frame is one of the bad ones (its slot is only
     # known to be lost from the next frame, which lies after the cut and is not read)
@@ -35,7 +39,7 @@ def test_monitor_fake_kvh_archives_and_logs_the_same_as_a_replay(fake_kvh, tmp_p
     # N of the fake device is 0.05 deg/sqrt(h): the whole-run fit finds it
     line = next(ln for ln in out.splitlines() if ln.strip().startswith("N_dpsh"))
     assert abs(float(line.split("=")[1].split()[0]) - 0.05) < 0.005
-    rrd = tmp_path / "live-0001.rrd"   # the first hourly piece (--rotate-s 3600)
+    assert not (tmp_path / "live-0001.rrd").exists()   # --rrd X writes X (pieces only with --rotate-s)
     t_live, live = read_scalars(str(rrd), "/dadev/log10_adev_dph")
     assert live.shape == (12, 8)      # (n - 512) // 128 + 1 windows; m = 1 .. 128
     t_rate, _ = read_scalars(str(rrd), "/rate/rate_dph")
@@ -86,14 +90,19 @@ def test_monitor_help(capsys):
 @pytest.mark.timeout(1200)
 def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    arch, rrd = tmp_path / "arch", tmp_path / "c.rrd"
+    runs, rrd = tmp_path / "runs", tmp_path / "c.rrd"
+    runs.mkdir()
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", fake_kvh, "--protocol", "kvh-a",
-                          "--axis", "z", "--archive", str(arch), "--rrd", str(rrd), "--window-s", "0.512",
+                          "--axis", "z", "--archive", str(runs), "--rrd", str(rrd), "--window-s", "0.512",
                           "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+    def csv() -> Path:
+        return Path(archive_in(runs), "samples-0001.csv")
+
     try:
         deadline = time.monotonic() + 600  # failure guard only (a cold numba compile under load): we wait for data
-        while not (arch / "samples-0001.csv").exists() or (arch / "samples-0001.csv").stat().st_size < 40_000:
+        while not csv().exists() or csv().stat().st_size < 40_000:
             assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else ""
             time.sleep(0.1)
         p.send_signal(signal.SIGINT)
@@ -104,11 +113,12 @@ def test_ctrl_c_stops_cleanly_with_summary_rrd_and_archive(fake_kvh, tmp_path):
     assert p.returncode == 0, err
     assert "fogmon: interrupted (Ctrl-C)" in out and "Traceback" not in err
     n = int(next(ln for ln in out.splitlines() if "samples at 1000 Hz" in ln).split()[0])
+    arch = Path(archive_in(runs))
     rec = read_replay_log(arch / "samples-0001.csv")  # complete rows only, readable
     raw = list(open_raw_capture(str(arch / "raw-0001.bin")).blocks())
     assert sum(len(b) for b in raw) == n            # what was read before the stop is archived and counted
     np.testing.assert_allclose(np.concatenate([b.t_s[b.valid] for b in raw]), rec.t_s, rtol=0, atol=1e-9)
-    t, _ = read_scalars(str(tmp_path / "c-0001.rrd"), "/rate/rate_dph")
+    t, _ = read_scalars(str(rrd), "/rate/rate_dph")
     assert len(t) > 0
 
 
@@ -116,10 +126,12 @@ def test_monitor_three_axis_kvh_archives_every_axis_and_replays_the_same(fake_kv
     """Issue 14: one port, one process, one archive: a three-axis KVH 1760 (a bad CRC every
     500th frame) monitored without --axis; the archive holds every axis exactly as the raw
     capture decodes it, and replaying the archive gives each axis's live DADEV."""
-    arch, rrd = tmp_path / "arch", tmp_path / "live.rrd"
+    runs, rrd = tmp_path / "runs", tmp_path / "live.rrd"
+    runs.mkdir()
     args = ["--window-s", "0.512", "--hop-s", "0.128", "--no-progress"]
-    assert main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(arch),
+    assert main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "2", "--archive", str(runs),
                  "--rrd", str(rrd), *args]) == 0
+    arch = Path(archive_in(runs))
     out = capsys.readouterr().out
     assert "IEEE-952 noise coefficients per axis" in out
     rec = read_replay_log(arch / "samples-0001.csv")
@@ -131,7 +143,7 @@ def test_monitor_three_axis_kvh_archives_every_axis_and_replays_the_same(fake_kv
     ok = np.concatenate([b.valid for b in rb]).all(axis=1)
     assert (~ok).sum() >= 2                                   # the bad-CRC frames: lost on every axis
     np.testing.assert_allclose(rec.rate_dph, rate[ok], rtol=1e-11)  # 12 significant digits in the CSV
-    live = {a: read_scalars(str(tmp_path / "live-0001.rrd"), f"/axis/{a}/dadev/log10_adev_dph") for a in rec.axes}
+    live = {a: read_scalars(str(rrd), f"/axis/{a}/dadev/log10_adev_dph") for a in rec.axes}
     assert all(v[1].shape == (12, 8) for v in live.values())
     assert main(["replay", str(arch), "--rrd", str(tmp_path / "replay.rrd"), *args, "--quiet"]) == 0
     for a, (t_live, adev_live) in live.items():

@@ -14,6 +14,7 @@ import uuid
 import numpy as np
 import pytest
 from helpers import REPO
+from helpers.doubles import archive_in
 
 from fogmon.cli import command_flags, main
 from fogmon.davar.batch import dadev, oadev
@@ -124,16 +125,15 @@ def test_replay_default_window_fits_duration(log, capsys):
 # ------------------------------------------------------------------ live runs
 def test_silent_can_bus_exits_1_with_one_line_and_leaves_nothing(tmp_path, capsys):
     ch = f"silent-{uuid.uuid4().hex}"
-    arch = tmp_path / "arch"
     rc = main(["monitor", "--can", ch, "--interface", "virtual", "--dbc", DBC, "--duration-s", "1",
-               "--archive", str(arch), "--no-progress"])
+               "--archive", str(tmp_path), "--no-progress"])
     cap = capsys.readouterr()
     assert rc == 1 and cap.out == ""
     line = cap.err.strip()
     assert len(cap.err.splitlines()) == 1
     assert line.startswith(f"fogmon monitor: nothing was received from CAN GYRO_RATE.rate (deg/s), 100 Hz on "
                            f"virtual:{ch} in ") and line.endswith(" s; no archive written")
-    assert not arch.exists()
+    assert not list(tmp_path.iterdir())
 
 
 def test_can_bus_with_only_foreign_frames_exits_1_naming_what_arrived(tmp_path, capsys):
@@ -142,7 +142,6 @@ def test_can_bus_with_only_foreign_frames_exits_1_naming_what_arrived(tmp_path, 
     import can
 
     ch = f"foreign-{uuid.uuid4().hex}"
-    arch = tmp_path / "arch"
     stop = threading.Event()
 
     def send():  # frames the DBC does not describe, until the monitor has finished
@@ -155,16 +154,17 @@ def test_can_bus_with_only_foreign_frames_exits_1_naming_what_arrived(tmp_path, 
     sender.start()
     try:
         rc = main(["monitor", "--can", ch, "--interface", "virtual", "--dbc", DBC, "--duration-s", "1",
-                   "--archive", str(arch), "--no-progress"])
+                   "--archive", str(tmp_path), "--no-progress"])
     finally:
         stop.set()
         sender.join(10)
+    arch = archive_in(tmp_path)
     cap = capsys.readouterr()
     assert rc == 1 and cap.out == "" and len(cap.err.splitlines()) == 1
     assert re.fullmatch(rf"fogmon monitor: no sample decoded from CAN GYRO_RATE\.rate \(deg/s\), 100 Hz on "
                         rf"virtual:{ch} in [\d.]+ s although [\d,]+ CAN frames arrived \(other_frames [\d,]+\): check "
                         rf"--protocol/--baud or --dbc/--can-message; the raw input is in {arch}\n", cap.err), cap.err
-    assert (arch / "frames-0001.asc").stat().st_size > 0
+    assert os.path.getsize(os.path.join(arch, "frames-0001.asc")) > 0
 
 
 def test_run_shorter_than_the_window_says_why():
@@ -178,13 +178,16 @@ def test_run_shorter_than_the_window_says_why():
 @pytest.mark.timeout(1200)
 def test_live_run_stopped_before_one_window_says_why(fake_kvh, tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    arch = tmp_path / "arch"
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", fake_kvh, "--protocol", "kvh-a",
-                          "--axis", "z", "--archive", str(arch), "--window-s", "600", "--no-progress"],
+                          "--axis", "z", "--archive", str(tmp_path), "--window-s", "600", "--no-progress"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+    def csv() -> str:
+        return os.path.join(archive_in(tmp_path), "samples-0001.csv")
+
     try:
         deadline = time.monotonic() + 600  # failure guard only (a cold numba compile under load): we wait for data
-        while not (arch / "samples-0001.csv").exists() or (arch / "samples-0001.csv").stat().st_size < 20_000:
+        while not os.path.exists(csv()) or os.path.getsize(csv()) < 20_000:
             assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else ""
             time.sleep(0.1)
         p.send_signal(signal.SIGINT)

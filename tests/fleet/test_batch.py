@@ -96,17 +96,17 @@ def test_batch_equals_replay_per_recording(fleet, local_run, capsys):
                                        rtol=1e-9, atol=0)
             assert row[f"identifiable_{c}"] == bool(co.identifiable)
         sel = rec_col == name
-        ends = np.concatenate(col.ends)
+        ends = np.concatenate(col.gyro.ends)
         assert sel.sum() == len(ends) == row["windows"]
         np.testing.assert_allclose(
             np.array(w["t_end_s"])[sel], s.t_first_s + ends / s.sample_rate_hz, rtol=0, atol=1e-9
         )
-        adev = np.concatenate(col.adev)
+        adev = np.concatenate(col.gyro.adev)
         for j, tau in enumerate(col.tau_s):
             np.testing.assert_allclose(np.array(w[tables.adev_column(tau)], float)[sel], adev[:, j], rtol=1e-9, atol=0)
         for c in tables.coefficient_columns():
             mine = np.array(w[c])[sel]
-            ref = np.concatenate([f[c] for f in col.fits])
+            ref = np.concatenate([f[c] for f in col.gyro.fits])
             if c.startswith("identifiable_"):
                 np.testing.assert_array_equal(mine, ref)
             else:
@@ -126,17 +126,48 @@ def test_chunks_tile_the_windows_and_samples():
 
 
 @pytest.mark.timeout(600)
-def test_bad_input_is_one_line_before_any_task(fleet, tmp_path, capsys):
+def test_unreadable_inputs_are_listed_and_the_readable_ones_analysed(fleet, tmp_path, capsys):
+    """Issue 32.8: one unreadable input among good ones: the good ones are analysed and
+    written, the bad one is named (stderr and recordings.parquet), exit 2; only bad
+    inputs: nothing written."""
     bad = tmp_path / "bad"
     bad.mkdir()
     shutil.copy(fleet / "a.csv", bad / "a.csv")
     (bad / "z.csv").write_text("# fogmon replay log v1\ntime_s,rate_dph\n0,1\n0.01,x\n")
     rc = main(["batch", str(bad), "--out", str(tmp_path / "out"), "--workers", "1", "--no-progress"])
     err = capsys.readouterr().err
-    assert rc == 2 and "z.csv: line 4, column rate_dph: not a number" in err and "Traceback" not in err
-    assert not (tmp_path / "out").exists()                   # nothing written
+    assert rc == 2 and "Traceback" not in err
+    assert "fogmon batch: error: z.csv: line 4, column rate_dph: not a number" in err
+    assert err.rstrip().endswith("1 of 2 inputs could not be read (named above and in "
+                                 f"{tmp_path / 'out' / 'recordings.parquet'}); the others are analysed")
+    rows = {r["recording"]: r for r in pq.read_table(tmp_path / "out" / "recordings.parquet").to_pylist()}
+    assert rows[str(bad / "a.csv")]["error"] == "" and rows[str(bad / "a.csv")]["windows"] > 0
+    assert "not a number" in rows[str(bad / "z.csv")]["error"]
+    (bad / "a.csv").unlink()
+    assert main(["batch", str(bad), "--out", str(tmp_path / "o3"), "--workers", "1", "--no-progress"]) == 2
+    assert capsys.readouterr().err.rstrip().endswith("no input could be read (1 named above): nothing analysed")
+    assert not (tmp_path / "o3").exists()                    # nothing written
     assert main(["batch", str(tmp_path / "nothing*.csv"), "--out", str(tmp_path / "o2")]) == 2
     assert "no file matches" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(300)
+def test_a_scheduler_without_workers_is_an_error_not_a_wait(fleet, tmp_path, capsys, monkeypatch):
+    """Issue 32.8: batch gives up with an error when the cluster has no worker (here: none
+    ever connected; the same wait ends a run whose workers all died)."""
+    from distributed import LocalCluster
+
+    import fogmon.cli.batch as batch
+
+    monkeypatch.setattr(batch, "NO_WORKER_S", 1.0)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+        addr = cluster.scheduler_address
+        rc = main(["batch", str(fleet / "a.csv"), "--out", str(tmp_path / "out"), "--scheduler", addr,
+                   "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err == (f"fogmon batch: error: --scheduler {addr}: no Dask worker in 1 s (start one with "
+                               f"`dask worker {addr}`)\n")
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.timeout(1200)

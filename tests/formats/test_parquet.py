@@ -7,11 +7,13 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from helpers import REPO
+from helpers.doubles import archive_in
 
 from fogmon.cli import main
 from fogmon.formats.archive import piece_files
@@ -145,14 +147,18 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
     data = memoryview(b"".join(encode_frame("a", i % 128, (0.0, 0.0, 1e-7 * rng.standard_normal()), temp_c=30)
                                for i in range(n_sent)))
     stop = threading.Event()
-    arch = tmp_path / "arch"
-    parts, raw = arch / "samples-0001.parquet.parts", arch / "raw-0001.bin"
+    runs = tmp_path / "runs"
+    runs.mkdir()
+
+    def files() -> tuple[Path, Path]:
+        arch = Path(archive_in(runs))
+        return arch / "samples-0001.parquet.parts", arch / "raw-0001.bin"
 
     def send():
         view = data
         # pyserial's open() flushes what the port held, after the descriptor shows in /proc:
         # a byte outside any frame, sent until the monitor has captured one, marks the flush done
-        while not (raw.exists() and raw.stat().st_size) and not stop.is_set():
+        while not (files()[1].exists() and files()[1].stat().st_size) and not stop.is_set():
             if has_open(p.pid, port):
                 os.write(master, b"\0")
             stop.wait(0.05)
@@ -162,7 +168,7 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
 
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     p = subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", port, "--protocol", "kvh-a",
-                          "--axis", "z", "--archive", str(arch), "--archive-format", "parquet",
+                          "--axis", "z", "--archive", str(runs), "--archive-format", "parquet",
                           "--row-group-s", str(rows / 1000), "--window-s", "0.512", "--no-progress", "--quiet"],
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
     sender = threading.Thread(target=send, daemon=True)
@@ -170,8 +176,8 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
     try:
         deadline = time.monotonic() + 500  # a guard against a hang (cold numba compile under load), not a timing
         # synchronise on data: every frame in the raw capture, four row groups on disk
-        while not (raw.exists() and raw.stat().st_size >= len(data) and raw.read_bytes().endswith(bytes(data))
-                   and len(list(parts.glob("*.parquet"))) == 4):
+        while not ((raw := files()[1]).exists() and raw.stat().st_size >= len(data)
+                   and raw.read_bytes().endswith(bytes(data)) and len(list(files()[0].glob("*.parquet"))) == 4):
             assert time.monotonic() < deadline and p.poll() is None, p.stderr.read() if p.poll() is not None else ""
             time.sleep(0.05)
         p.send_signal(signal.SIGKILL)
@@ -183,9 +189,10 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
         sender.join(timeout=10)
         os.close(master)
         os.close(slave)
-    files = piece_files(str(arch))
-    assert [os.path.basename(f) for f in files] == [f"part-00000{i}.parquet" for i in range(1, 5)]
-    rec = read_parquet_log(files)
+    arch, raw = Path(archive_in(runs)), files()[1]
+    pieces = piece_files(str(arch))
+    assert [os.path.basename(f) for f in pieces] == [f"part-00000{i}.parquet" for i in range(1, 5)]
+    rec = read_parquet_log(pieces)
     t_raw = np.concatenate([b.t_s[b.valid] for b in open_raw_capture(str(raw)).blocks()])
     assert len(t_raw) == n_sent and len(rec) == 4 * rows           # lost: 250 samples < one row group
     np.testing.assert_array_equal(rec.t_s, t_raw[:len(rec)])
@@ -195,10 +202,10 @@ def test_sigkilled_parquet_archive_loses_at_most_the_row_group_being_filled(tmp_
 
 
 def test_monitor_parquet_archive_joined_at_the_end(fake_kvh, tmp_path, capsys):
-    arch = tmp_path / "arch"
-    assert main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "1.5", "--archive", str(arch),
-                 "--archive-format", "parquet", "--row-group-s", "0.4", "--window-s", "0.256", "--no-progress",
-                 "--axis", "z", "--quiet"]) == 0
+    assert main(["monitor", "--serial", fake_kvh, "--protocol", "kvh-a", "--duration-s", "1.5", "--archive",
+                 str(tmp_path), "--archive-format", "parquet", "--row-group-s", "0.4", "--window-s", "0.256",
+                 "--no-progress", "--axis", "z", "--quiet"]) == 0
+    arch = Path(archive_in(tmp_path))
     assert sorted(os.listdir(arch)) == ["raw-0001.bin", "raw-0001.bin.json", "samples-0001.parquet"]
     pf = pq.ParquetFile(arch / "samples-0001.parquet")
     assert pf.metadata.num_row_groups == 4                            # 400 + 400 + 400 + the rest

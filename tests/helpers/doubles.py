@@ -81,3 +81,14 @@ def args_for(*argv: str) -> SourceOptions:
     p = argparse.ArgumentParser()
     add_source_arguments(p)
     return source_options(p.parse_args(list(argv)))
+
+
+def archive_in(parent) -> str:
+    """The archive folder `fogmon monitor --archive PARENT` made in PARENT: its one
+    ``fogmon-archive-*`` folder ("" before there is one)."""
+    import glob
+    import os
+
+    found = glob.glob(os.path.join(str(parent), "fogmon-archive-*"))
+    assert len(found) <= 1, found
+    return found[0] if found else ""

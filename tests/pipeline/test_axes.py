@@ -2,6 +2,7 @@
 summary equal a one-axis run of that axis (Block.axis) exactly; the console shows the
 axes side by side; a one-axis run prints what it printed before axes existed."""
 import io
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -212,6 +213,16 @@ ONE_AXIS_SUMMARY = "\n".join([
     '  model check: the fitted model agrees with the measured ADEV within chance at every tau (chi-square with'
      " each tau's EDF, family-wise 1 % over 11 taus; largest factor 1.10 at tau 5.12 s)",
     '',
+    'IEEE-952 noise coefficients without and with platform motion (415 samples, 3.5 %, kept out'
+     ' above; --keep-motion analyses them; 68.3 % intervals; n/i: not identifiable from this record,'
+     ' < its 95 % upper limit):',
+    '  coefficient unit                            motion kept out                  motion analysed',
+    '  Q_arcsec    arcsec                          n/i (< 0.04828)          0.2202 [0.1765, 0.2705]',
+    '  N_dpsh      deg/sqrt(h)           0.07983 [0.07932, 0.0804]       0.03936 [0.03138, 0.05414]',
+    '  B_dph       deg/h                             n/i (< 2.953)                    n/i (< 35.74)',
+    '  K_dphsh     deg/h/sqrt(h)                     n/i (< 116.1)  1.932e+04 [1.81e+04, 2.068e+04]',
+    '  R_dphh      deg/h^2                           n/i (< 978.1)  5.764e+06 [5.427e+06, 5.99e+06]',
+    '',
     'Counters:',
     '  frames_ok                12000',
     '  outliers_rejected        34',
@@ -245,19 +256,24 @@ def test_a_one_axis_run_prints_what_it_printed_before_axes():
     assert set(col.by_axis) == {""} and col.info.axes == () and s.axes == {}
 
 
-def test_replay_export_of_several_axes_asks_for_one_before_any_work(monkeypatch, tmp_path, capsys):
+def test_replay_export_of_several_axes_holds_the_largest_and_each_axis(monkeypatch, tmp_path, capsys):
     import fogmon.cli.replay as replay_cli
     from fogmon.cli import main
+    from fogmon.export import noise_density_rad
 
     t, rate, aux = three_axis_data()
     monkeypatch.setattr(replay_cli, "open_replay_source", lambda path, options: ListSource(t, rate, SIZES, FS,
                                                                                             aux=aux, axes=AXES))
     out = tmp_path / "imu.yaml"
-    assert main(["replay", "three.csv", "--export", "kalibr", str(out), "--no-progress"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].endswith("--export kalibr: three.csv has axes x, y, z and an export holds one gyro's fit: "
-                            "select one with --axis NAME") and len(err) == 1
-    assert not out.exists()
+    assert main(["replay", "three.csv", "--export", "kalibr", str(out), "--no-progress"]) == 0
+    assert "Wrote" in capsys.readouterr().out
+    yaml = out.read_text()
+    line = next(ln for ln in yaml.splitlines() if ln.startswith("gyroscope_noise_density:"))
+    n = {a: float(re.search(rf"#   axis {a}: N_dpsh ([0-9.e+-]+)", yaml).group(1)) for a in AXES}
+    largest = max(n, key=n.__getitem__)
+    assert f"(axis {largest}, the largest of x, y, z)" in line
+    assert float(line.split()[1]) == pytest.approx(noise_density_rad(n[largest]), rel=1e-5)
+    assert "accelerometer_noise_density" not in yaml.replace("#accelerometer_noise_density", "")   # none recorded
 
 
 MODEL3 = """

@@ -96,6 +96,6 @@ def test_tail_keeps_exactly_the_latest_samples():
         tail = _Tail(1000)
         for r, v in parts:
             tail.push(r, v)
-        got_r, got_v = tail.take()
+        got_r, got_v, _ = tail.take()
         np.testing.assert_array_equal(got_r, np.concatenate([p[0] for p in parts])[-1000:])
         np.testing.assert_array_equal(got_v, np.concatenate([p[1] for p in parts])[-1000:])

@@ -197,8 +197,7 @@ def test_cli_sim_bad_values_are_usage_errors(tmp_path, capsys, argv, message):
     ("/proc/o.csv", [], "--out /proc/o.csv: cannot write: No such file or directory"),
     ("{tmp}/like.csv", ["--like", "{tmp}/like.csv"], "--out {tmp}/like.csv: is the input {tmp}/like.csv; write to "
                                                     "another file"),
-    ("{tmp}/o.csv", ["--duration-s", "1e15"], "--out {tmp}/o.csv: 1e+17 samples take at least 4e+17 bytes, the "
-                                              "folder has "),
+    ("{tmp}/o.csv", ["--duration-s", "1e15"], "--out {tmp}/o.csv: 1e+17 more rows of "),
     ("{tmp}/o.csv", ["--scenario", "orbit", "--duration-s", "0.5"], "scenario orbit: duration_s 0.5 s holds fewer "
                                                                     "than 2 samples at sample_rate_hz 1 Hz"),
     ("{tmp}/o.csv", ["--scenario", "chamber", "--set", "plateaus_c=20,nan"], "scenario chamber: parameter plateaus_c: "
@@ -307,3 +306,37 @@ def test_noise_kind_is_refused_in_a_model_file_and_lines_are_checked(tmp_path):
     p.write_text(head + lines + 'freq_hz = [2.0, 3.0]\nsigma_dph = [1.0]\nbandwidth_hz = [0.1, 0.1]\n')
     with pytest.raises(FogmonError, match="one entry per line"):
         load_model(p)
+
+
+@pytest.mark.parametrize("term", ["N_dpsh", "B_dph"])
+def test_cli_sim_refuses_non_finite_output(tmp_path, capsys, term):
+    """Issue 32.8: numbers too large for float64 give inf: refused, nothing written."""
+    model = tmp_path / "m.toml"
+    noise = {"Q_arcsec": 0.0, "N_dpsh": 0.0, "B_dph": 0.0, "K_dphsh": 0.0, "R_dphh": 0.0, term: 1e308}
+    model.write_text("[sensor]\nsample_rate_hz = 10.0\nbias_dph = 0.0\n[noise]\n"
+                     + "".join(f"{k} = {v!r}\n" for k, v in noise.items()))
+    out = tmp_path / "o.csv"
+    assert main(["sim", "--model", str(model), "--out", str(out), "--duration-s", "10", "--seed", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon sim: error: --model {model}: the simulated rate is not finite at ") and \
+        err.endswith("nothing written\n") and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.toml"]
+
+
+def test_cli_sim_writes_what_its_suffix_says(tmp_path, capsys):
+    """Issue 32.8: --out x.parquet is a Parquet replay log (the same samples as x.csv);
+    another suffix is refused before any work."""
+    from fogmon.formats.parquet_log import read_parquet_log
+    from fogmon.formats.replay_log import read_replay_log
+
+    csv, parquet = tmp_path / "s.csv", tmp_path / "s.parquet"
+    for out in (csv, parquet):
+        assert main(["sim", "--model", EXAMPLE, "--out", str(out), "--duration-s", "20", "--seed", "4"]) == 0
+    a, b = read_replay_log(csv), read_parquet_log(str(parquet))
+    assert parquet.read_bytes()[:4] == b"PAR1" and len(a) == len(b) == 2000
+    assert abs(a.rate_dph - b.rate_dph).max() < 1e-9 * abs(a.rate_dph).max()   # the CSV's 12 digits
+    capsys.readouterr()
+    assert main(["sim", "--model", EXAMPLE, "--out", str(tmp_path / "s.txt"), "--duration-s", "20"]) == 2
+    assert capsys.readouterr().err == (f"fogmon sim: error: --out {tmp_path / 's.txt'}: name it .csv (replay log) "
+                                       f"or .parquet (Parquet replay log); fogmon writes no other format\n")
+    assert not (tmp_path / "s.txt").exists()

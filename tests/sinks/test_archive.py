@@ -11,10 +11,12 @@ import time
 
 import numpy as np
 import pytest
+from helpers.doubles import archive_in
 from helpers.fake_device import MAX_RATE_DPH, FakeKvh, frame_k, has_open, stream
 
 from fogmon.block import Block
 from fogmon.errors import FogmonError
+from fogmon.formats.archive import LOCK
 from fogmon.formats.replay_log import read_replay_log
 from fogmon.sinks.archive import Archive
 from fogmon.sources.files.capture import open_raw_capture
@@ -40,7 +42,7 @@ def block(k0, n, valid=None):
 def test_archive_writes_valid_samples_and_flushes_by_time(tmp_path):
     now = [0.0]
     a = Archive(str(tmp_path / "a"), FakeSource(), flush_s=0.5, clock=lambda: now[0], background_flush=False)
-    assert not os.listdir(a.directory)                           # files come with their first data
+    assert os.listdir(a.directory) == [LOCK]          # files come with their first data (the lock: its writer)
     a.write(block(0, 5, valid=[1, 1, 0, 1, 1]))
     assert a.replay_log_path.endswith("samples-0001.csv") and os.path.getsize(a.replay_log_path) == 0  # buffered
     now[0] = 0.6
@@ -79,6 +81,9 @@ def test_archive_that_received_nothing_leaves_no_folder(tmp_path):
 
 
 def monitor(link, archive, *extra, quiet=True):
+    """`fogmon monitor` of the fake KVH at ``link``, archiving into a new folder in
+    ``archive`` (made here; archive_in finds it)."""
+    os.makedirs(archive, exist_ok=True)
     return subprocess.Popen([sys.executable, "-m", "fogmon", "monitor", "--serial", link, "--protocol", "kvh-a",
                              "--axis", "z", "--kvh-rot", "rate", "--kvh-units", "deg", "--rate-hz", str(FS),
                              "--archive", archive, "--max-rate-dph", str(MAX_RATE_DPH),
@@ -118,12 +123,13 @@ def listened(sent, ks):
 
 def test_sigkill_loses_at_most_one_second(tmp_path):
     dev = FakeKvh(str(tmp_path), FS)
-    arch = str(tmp_path / "arch")
-    proc = monitor(dev.link, arch)
+    runs = str(tmp_path / "runs")
+    proc = monitor(dev.link, runs)
     try:
-        csv = os.path.join(arch, "samples-0001.csv")
+        def csv():
+            return os.path.join(archive_in(runs), "samples-0001.csv")
         # warm up until the first rows are on disk (imports and JIT compilation done), then 2 s more
-        t0, k = run_device(dev, proc, until=lambda: os.path.exists(csv) and os.path.getsize(csv) > 200)
+        t0, k = run_device(dev, proc, until=lambda: os.path.exists(csv()) and os.path.getsize(csv()) > 200)
         t_kill = time.monotonic() + 2.0
         run_device(dev, proc, until=lambda: time.monotonic() >= t_kill, t0=t0, k=k)
         os.kill(proc.pid, signal.SIGKILL)
@@ -132,7 +138,8 @@ def test_sigkill_loses_at_most_one_second(tmp_path):
         if proc.poll() is None:
             proc.kill()
         dev.close()
-    rec = read_replay_log(csv)                                   # no half-written row
+    arch = archive_in(runs)
+    rec = read_replay_log(csv())                                 # no half-written row
     ks = list(np.rint(rec.rate_dph / 3600).astype(int))
     sent = listened(dev.sent, ks)
     assert ks == sent[:len(ks)] and len(sent) - len(ks) <= FS     # a prefix, short by <= 1 s
@@ -146,8 +153,8 @@ def test_sigkill_loses_at_most_one_second(tmp_path):
 
 def test_monitor_duration_stops_by_itself(tmp_path):
     dev = FakeKvh(str(tmp_path), FS)
-    arch = str(tmp_path / "arch")
-    proc = monitor(dev.link, arch, "--duration-s", "1")
+    runs = str(tmp_path / "runs")
+    proc = monitor(dev.link, runs, "--duration-s", "1")
     try:
         run_device(dev, proc, until=lambda: proc.poll() is not None)
         out, err = proc.communicate(timeout=30)
@@ -156,7 +163,7 @@ def test_monitor_duration_stops_by_itself(tmp_path):
             proc.kill()
         dev.close()
     assert proc.returncode == 0, err
-    rec = read_replay_log(os.path.join(arch, "samples-0001.csv"))
+    rec = read_replay_log(os.path.join(archive_in(runs), "samples-0001.csv"))
     assert len(rec) == int(FS)                                   # 1 s of recording time
     ks = list(np.rint(rec.rate_dph / 3600).astype(int))
     assert ks == listened(dev.sent, ks)[:len(rec)]
@@ -174,11 +181,11 @@ def test_valid_samples_without_aux_are_counted_not_written(tmp_path):
 
 def test_monitor_unplug_replug_archives_every_sample_sent_while_connected(tmp_path):
     dev = FakeKvh(str(tmp_path), FS)
-    arch = str(tmp_path / "arch")
-    raw = os.path.join(arch, "raw-0001.bin")
-    proc = monitor(dev.link, arch)
+    runs = str(tmp_path / "runs")
+    proc = monitor(dev.link, runs)
 
     def received_all():        # the archive's raw capture (flushed <= 0.5 s) ends with the last frame sent
+        raw = os.path.join(archive_in(runs), "raw-0001.bin")
         if not os.path.exists(raw):
             return False
         with open(raw, "rb") as fh:
@@ -212,7 +219,7 @@ def test_monitor_unplug_replug_archives_every_sample_sent_while_connected(tmp_pa
             proc.kill()
         dev.close()
     assert proc.returncode == 0
-    rec = read_replay_log(os.path.join(arch, "samples-0001.csv"))
+    rec = read_replay_log(os.path.join(archive_in(runs), "samples-0001.csv"))
     ks = list(np.rint(rec.rate_dph / 3600).astype(int))
     n1 = sum(k <= dev.sent[n_before - 1] for k in ks)    # archived before the unplug
     assert ks == listened(dev.sent[:n_before], ks[:n1]) + listened(dev.sent[n_before:], ks[n1:])
@@ -320,9 +327,9 @@ def test_rotation_pieces_replay_alone_and_as_one_without_seams(tmp_path, monkeyp
 
 
 def run_to_rows(proc, dev, csv, rows):
-    """Feed the monitor until ``csv`` holds ``rows`` rows (synchronise on its output)."""
+    """Feed the monitor until ``csv()`` holds ``rows`` rows (synchronise on its output)."""
     def enough():
-        return os.path.exists(csv) and open(csv).read().count("\n") >= rows + 5
+        return os.path.exists(csv()) and open(csv()).read().count("\n") >= rows + 5
     return run_device(dev, proc, until=enough)
 
 
@@ -332,11 +339,12 @@ def test_sigterm_and_sighup_stop_the_monitor_cleanly(tmp_path, sig, name):
     from rerun.chunk import RrdReader
 
     dev = FakeKvh(str(tmp_path), FS)
-    arch, rrd = str(tmp_path / "arch"), str(tmp_path / "live.rrd")
-    proc = monitor(dev.link, arch, "--rrd", rrd, quiet=False)
+    runs, rrd = str(tmp_path / "runs"), str(tmp_path / "live.rrd")
+    proc = monitor(dev.link, runs, "--rrd", rrd, quiet=False)
     proc_out = ("", "")
     try:
-        csv = os.path.join(arch, "samples-0001.csv")
+        def csv():
+            return os.path.join(archive_in(runs), "samples-0001.csv")
         t0, k = run_to_rows(proc, dev, csv, 300)
         proc.send_signal(sig)
         run_device(dev, proc, until=lambda: proc.poll() is not None, t0=t0, k=k)
@@ -350,24 +358,24 @@ def test_sigterm_and_sighup_stop_the_monitor_cleanly(tmp_path, sig, name):
     assert f"fogmon: interrupted ({name})" in out and "Overall Allan deviation" in out
     line = next(line for line in out.splitlines() if f"samples at {FS:g} Hz" in line)
     n, lost = int(line.split()[0]), int(line.split("(")[1].split()[0])
-    rec = read_replay_log(csv)                                # flushed to the last sample processed
+    rec = read_replay_log(csv())                              # flushed to the last sample processed
     ks = list(np.rint(rec.rate_dph / 3600).astype(int))
     assert len(rec) == n - lost and ks == listened(dev.sent, ks)[:len(ks)]
-    piece = os.path.join(tmp_path, "live-0001.rrd")           # hourly pieces by default
-    assert sum(1 for _ in RrdReader(piece).stream()) > 0      # complete: a footer (else the warning fails)
+    assert not os.path.exists(os.path.join(tmp_path, "live-0001.rrd"))   # --rrd X writes X (pieces: --rotate-s)
+    assert sum(1 for _ in RrdReader(rrd).stream()) > 0        # complete: a footer (else the warning fails)
 
 
 def test_monitor_that_received_nothing_leaves_no_archive_or_rrd(tmp_path):
     dev = FakeKvh(str(tmp_path), FS)                          # plugged in, never sends
-    arch, rrd = tmp_path / "arch", tmp_path / "x.rrd"
-    proc = monitor(dev.link, str(arch), "--rrd", str(rrd), "--duration-s", "0.5")
+    runs, rrd = tmp_path / "runs", tmp_path / "x.rrd"
+    proc = monitor(dev.link, str(runs), "--rrd", str(rrd), "--duration-s", "0.5")
     try:
         proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
         dev.close()
-    assert sorted(os.listdir(tmp_path)) == []
+    assert sorted(os.listdir(tmp_path)) == ["runs"] and not os.listdir(runs)
 
 
 def test_can_capture_pieces_replay_as_one_frame_stream(tmp_path):

@@ -31,7 +31,7 @@ def pub(*parts: str) -> str:
 
 def same_adev(rec) -> None:
     """fogmon's ADEV of a gap-free recording equals allantools.oadev on the same values."""
-    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
+    res = fogmon.oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave", exclude_motion=False)
     ok = np.isfinite(res.adev_dph)
     taus, dev, _, _ = allantools.oadev(rec.rate_dph, rate=rec.sample_rate_hz, data_type="freq",
                                        taus=res.tau_s[ok])
@@ -238,3 +238,66 @@ def test_implausible_numbers_are_errors_not_allocations(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert math.isclose(read_recording(str(wrong), SourceOptions(force_rate=True)).sample_rate_hz, 100.0)
+
+
+def test_mdf4_channel_beyond_its_record_is_one_line_not_a_crash(tmp_path):
+    """A corrupt channel byte offset (found by validation/fuzz_readers.py) made asammdf's C
+    extension read out of bounds: the process died. The layout is checked first."""
+    import struct
+
+    import asammdf
+    src = pub("mdf", "canmod_imu_decoded_8s.mf4")
+    with asammdf.MDF(src) as mdf:
+        ch = mdf.groups[8].channels[0]
+        where = ch.address + 24 + 8 * ch.links_nr + 4       # cn_byte_offset: after header, links, 4 bytes
+    with open(src, "rb") as fh:
+        data = bytearray(fh.read())
+    data[where:where + 4] = struct.pack("<I", 1 << 20)
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(data))
+    for read in (lambda: file_info(str(bad)),
+                 lambda: open_replay_source(str(bad), SourceOptions(channel="AngularRateZ"))):
+        with pytest.raises(FogmonError, match=r"bad\.mf4: not a readable MDF file \(corrupt: channel 'time' of data "
+                                              r"group 8 ends at byte 1048584 of a 23-byte record\)"):
+            read()
+
+
+def test_mf4_can_log_with_a_corrupt_record_is_one_line_not_a_crash(tmp_path):
+    """asammdf decodes an MF4 CAN log while opening it (python-can's reader): a corrupt
+    channel killed the process there (fuzz_readers.py); the layout is checked first."""
+    import struct
+
+    import asammdf
+    src = os.path.join(CAN_DIR, "canmod_imu_8s.mf4")
+    with asammdf.MDF(src, process_bus_logging=False) as mdf:   # type: ignore[call-arg]
+        ch = mdf.groups[0].channels[0]
+        where = ch.address + 24 + 8 * ch.links_nr + 4
+    with open(src, "rb") as fh:
+        data = bytearray(fh.read())
+    data[where:where + 4] = struct.pack("<I", 1 << 20)
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(FogmonError, match=r"bad\.mf4: not a readable MDF file \(corrupt: channel .* of data group 0"):
+        open_replay_source(str(bad), SourceOptions(dbc=os.path.join(CAN_DIR, "canmod-gps.dbc"),
+                                                   can_rate="AngularRateZ"))
+
+
+def test_mdf4_record_larger_than_its_data_is_one_line_not_a_long_allocation(tmp_path):
+    """A flipped bit in a channel group's record size made asammdf allocate GBs and sit
+    for minutes (fuzz_readers.py): a record larger than the group's data is refused."""
+    import struct
+
+    import asammdf
+    src = pub("mdf", "canmod_imu_decoded_8s.mf4")
+    with asammdf.MDF(src) as mdf:
+        cg = mdf.groups[2].channel_group
+        where = cg.address + 24 + 8 * cg.links_nr + 24      # cg_data_bytes: after record id, cycles, flags
+    with open(src, "rb") as fh:
+        data = bytearray(fh.read())
+    assert struct.unpack("<I", data[where:where + 4]) == (22,)
+    data[where:where + 4] = struct.pack("<I", 1 << 30)
+    bad = tmp_path / "bad.mf4"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(FogmonError, match=r"bad\.mf4: not a readable MDF file \(corrupt: data group 2 has "
+                                          r"1073741824-byte records but its data blocks hold 176 bytes\)"):
+        file_info(str(bad))

@@ -39,7 +39,7 @@ def heatmap_height(axes: tuple[str, ...]) -> float:
 
 
 def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool = False,
-              axes: tuple[str, ...] = ()):
+              axes: tuple[str, ...] = (), accel_tab=None):
     """The default layout: rate (and error rate) over time beside one view per aux
     channel | current ADEV curve and DADEV heatmap | the five coefficient tracks (tall
     enough for their tick values, no legend: the title says what is drawn) and the
@@ -48,7 +48,8 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool
     ((x0, x1), (y0, y1)) in decades frames the ADEV-curve view; ``error_rate``: a view of
     rate_dph - 3600 x rot_dps beside the raw rate. With ``axes`` (several): the rates,
     ADEV curves and each coefficient's tracks of all axes overlaid in one view each, one
-    heatmap per axis side by side, the events of all."""
+    heatmap per axis side by side, the events of all. ``accel_tab`` (a container: the
+    accelerometers' views, fogmon.sinks.rerun.accel): the layout above and it as two tabs."""
     import rerun.blueprint as rrb
 
     of = f" of axes {', '.join(axes)}" if axes else ""
@@ -81,8 +82,9 @@ def blueprint(aux_names: Sequence[str] = (), curve_bounds=None, error_rate: bool
                     rrb.TextDocumentView(origin="/session", name="Session"))
     shares = [1, 1.2] if not axes else [1.1, *[0.7] * len(heat)]
     tracks = rrb.Vertical(rrb.Horizontal(*coefs[:3]), rrb.Horizontal(*coefs[3:], side, column_shares=[1, 1, 1.15]))
-    return rrb.Blueprint(rrb.Vertical(top, rrb.Horizontal(curve, *heat, column_shares=shares), tracks,
-                                      row_shares=list(ROW_SHARES)),
+    gyros = rrb.Vertical(top, rrb.Horizontal(curve, *heat, column_shares=shares), tracks,
+                         row_shares=list(ROW_SHARES), name="Gyros (IEEE Std 952)" if accel_tab is not None else None)
+    return rrb.Blueprint(gyros if accel_tab is None else rrb.Tabs(gyros, accel_tab, active_tab=0),
                          rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
                          collapse_panels=True)
 

@@ -3,7 +3,8 @@ tick labels on images nor colour bars: a log-log decade grid with labels in unit
 legend of coloured labels beside it, model bands as bars, marked tau spans, and a
 heatmap image with labelled rows, columns, a colour scale and a key for cells without
 a value. Used by the monitor's Rerun sink and the explain .rrd. Also the rounded y range
-that keeps a time-series view's tick values readable (``nice_range``).
+that keeps a time-series view's tick values readable (``nice_range``), and where a fitted
+model's curve is drawn (``model_span``, ``model_taus``).
 
 Coordinates: a log-log plot entity carries ``loglog_transform`` (x = log10 tau, y = log10
 value, y up; a child of the view's origin, as a view ignores its origin's own
@@ -307,3 +308,34 @@ def nice_range(lo: float, hi: float, max_steps: int = 6) -> tuple[float, float]:
         if round((b - a) / step) <= max_steps:
             return a, b
         step *= 10.0
+
+
+#: Model points per decade of tau drawn over the fitted range.
+MODEL_POINTS_PER_DECADE = 20
+
+
+def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> tuple[float, float] | None:
+    """(first, last) tau (s) the fit described: measured and not flagged as misfit; the
+    model is drawn only there (beyond, it extrapolates terms the fit never saw). None
+    when no tau was fitted."""
+    used = np.isfinite(np.asarray(adev_dph, dtype=np.float64)) & ~np.asarray(misfit, dtype=bool)
+    if not used.any():
+        return None
+    k = np.flatnonzero(used)
+    return float(tau_s[k[0]]), float(tau_s[k[-1]])
+
+
+def model_taus(tau_s: np.ndarray) -> np.ndarray:
+    """The taus (s) the model curve is drawn at: every tau of the grid and, between
+    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade); read-only,
+    computed once per tau grid (every window of a run has the same)."""
+    return _model_taus(tuple(np.asarray(tau_s, dtype=np.float64).tolist()))
+
+
+@lru_cache(maxsize=8)
+def _model_taus(tau: tuple[float, ...]) -> np.ndarray:
+    parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
+             for a, b in zip(tau[:-1], tau[1:], strict=True)]
+    out = np.concatenate([*parts, np.asarray(tau[-1:])])
+    out.flags.writeable = False
+    return out

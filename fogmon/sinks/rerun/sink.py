@@ -48,7 +48,7 @@ import time
 import uuid
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache, partial
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -57,8 +57,10 @@ from fogmon import startup, stopping
 from fogmon.block import Block, Event
 from fogmon.errors import FogmonError
 from fogmon.formats.archive import piece_path
+from fogmon.outputs import Output, check_outputs, write_failed
 from fogmon.sinks.base import COEFFICIENTS, Sink, StreamInfo
 from fogmon.sinks.rerun import plots as rp
+from fogmon.sinks.rerun.accel import AccelViews
 from fogmon.sinks.rerun.blueprint import CURVE, HEATMAP, TIMELINE, Y_RANGE, axis_path, blueprint, heatmap_height
 from fogmon.sinks.rerun.columns import (
     _Decimator,
@@ -69,6 +71,7 @@ from fogmon.sinks.rerun.columns import (
     _send_scalars,
     _send_texts,
 )
+from fogmon.sinks.rerun.plots import model_span, model_taus
 from fogmon.sinks.rerun.server import _check_listening, start_grpc_server, stop_process_group
 from fogmon.sinks.rerun.style import (
     BAND_COLOUR,
@@ -97,8 +100,6 @@ FLUSH_WALL_S = 1.0
 FLUSH_SAMPLES = 1 << 16
 #: At the end, wait at most this long (s) for Rerun to deliver everything.
 FLUSH_TIMEOUT_S = 30.0
-#: Model points per decade of tau drawn over the fitted range.
-MODEL_POINTS_PER_DECADE = 20
 #: More aux channels than this share two rows of small views (about 60 pixels tall), whose
 #: y ranges are rounded out (plots.nice_range) to at most AUX_STEPS steps: two labelled
 #: ticks. In one row (about 200 pixels) the data's own range is labelled.
@@ -108,33 +109,6 @@ UPPER_LIMIT = "upper_limit"
 _LEVELS = {"gap": "WARN", "crc_error": "WARN", "seq_gap": "WARN", "disconnect": "ERROR",
            "reconnect": "WARN", "coef_jump": "INFO", "implausible": "WARN", "bad_input": "WARN",
            "platform_motion": "WARN"}
-
-
-def model_span(tau_s: np.ndarray, adev_dph: np.ndarray, misfit: np.ndarray) -> tuple[float, float] | None:
-    """(first, last) tau (s) the fit described: measured and not flagged as misfit; the
-    model is drawn only there (beyond, it extrapolates terms the fit never saw). None
-    when no tau was fitted."""
-    used = np.isfinite(np.asarray(adev_dph, dtype=np.float64)) & ~np.asarray(misfit, dtype=bool)
-    if not used.any():
-        return None
-    k = np.flatnonzero(used)
-    return float(tau_s[k[0]]), float(tau_s[k[-1]])
-
-
-def model_taus(tau_s: np.ndarray) -> np.ndarray:
-    """The taus (s) the model curve is drawn at: every tau of the grid and, between
-    neighbours, log-spaced points (MODEL_POINTS_PER_DECADE per decade); read-only,
-    computed once per tau grid (every window of a run has the same)."""
-    return _model_taus(tuple(np.asarray(tau_s, dtype=np.float64).tolist()))
-
-
-@lru_cache(maxsize=8)
-def _model_taus(tau: tuple[float, ...]) -> np.ndarray:
-    parts = [np.geomspace(a, b, max(1, math.ceil(MODEL_POINTS_PER_DECADE * math.log10(b / a))) + 1)[:-1]
-             for a, b in zip(tau[:-1], tau[1:], strict=True)]
-    out = np.concatenate([*parts, np.asarray(tau[-1:])])
-    out.flags.writeable = False
-    return out
 
 
 def _adev_decades(rate_dph: np.ndarray, n_taus: int) -> tuple[int, int]:
@@ -201,9 +175,9 @@ class RerunSink(Sink):
         self.server_url: str | None = None
         self.rec: _Streams | None = None
         self.pieces: list[str] = []          # .rrd files written (one unless rotate)
+        self.error: FogmonError | None = None   # a .rrd that could not be written (removed)
         self._recording_id = str(uuid.uuid4())
         self._piece = 1
-        self._probe: str | None = None       # an empty file made to test --rrd, removed if no data came
         self._last_flush = time.monotonic()
         self._legend_sent = False
         self._band_alpha: float | None = None
@@ -215,11 +189,7 @@ class RerunSink(Sink):
         if rrd_path:
             self._check_rrd()
         if serve:
-            try:
-                self.server, self.server_url = start_grpc_server(bind, port)
-            except BaseException:
-                self._discard_probe()
-                raise
+            self.server, self.server_url = start_grpc_server(bind, port)
             print(f"fogmon: serving Rerun on {self.server_url} (open it with: rerun {self.server_url})",
                   file=sys.stderr)
 
@@ -228,27 +198,10 @@ class RerunSink(Sink):
         return piece_path(self.rrd_path, self._piece) if self.rotate_files else self.rrd_path
 
     def _check_rrd(self) -> None:
-        """Fail before the source is opened, not at the first sample."""
-        path = self._piece_path()
-        d = os.path.dirname(os.path.abspath(path))
-        try:
-            os.makedirs(d, exist_ok=True)
-        except OSError as e:
-            raise FogmonError(f"--rrd {self.rrd_path}: cannot create folder {d}: {e.strerror}") from None
-        if os.path.isdir(path):
-            raise FogmonError(f"--rrd {self.rrd_path}: is a folder, give a file name like out/run.rrd")
-        existed = os.path.exists(path)
-        try:
-            open(path, "ab").close()
-        except OSError as e:
-            raise FogmonError(f"--rrd {self.rrd_path}: cannot write: {e.strerror}") from None
-        self._probe = None if existed else path
-
-    def _discard_probe(self) -> None:
-        if self._probe is not None:
-            with contextlib.suppress(OSError):
-                os.remove(self._probe)
-            self._probe = None
+        """Fail before the source is opened, not at the first sample (fogmon.outputs: its
+        folder exists, it can be written; nothing is created)."""
+        assert self.rrd_path is not None, "called with --rrd only"
+        check_outputs([Output("`rrd_path`", self.rrd_path, pieces=self.rotate_files)])
 
     # -- set-up ---------------------------------------------------------------
     def start(self, info: StreamInfo) -> None:
@@ -257,6 +210,8 @@ class RerunSink(Sink):
         self.dec = _Decimator(self.step)
         self._styles = _styles(info.axes)      # keys: the axis names, "" for a one-axis stream
         self._heat = {a: _Heat() for a in self._styles}
+        self.accel = AccelViews(info.accels, info.tau_s) if info.accels else None
+        self._accel_legend_sent = False
 
     def _setup(self, first: Block) -> None:
         """Open the streams and send the blueprint; the first block frames the ADEV view."""
@@ -279,7 +234,10 @@ class RerunSink(Sink):
                 y_decs.append((math.floor(np.nanmin(band[np.isfinite(band)])),
                                math.ceil(np.nanmax(band[np.isfinite(band)]))))
         self._decades = (x_dec, (min(d[0] for d in y_decs), max(d[1] for d in y_decs)))
-        self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes)
+        if self.accel is not None:
+            self.accel.frame_from(first.aux)
+        self._blueprint = blueprint(info.aux_names, self._decades, error_rate, info.axes,
+                                    self.accel.tab() if self.accel is not None else None)
         self.rec = _Streams()
         live = [rr.GrpcSink(url) for url in (self.server_url, self.connect_url) if url]
         if live:
@@ -301,7 +259,6 @@ class RerunSink(Sink):
         self.rec.file.set_log_time_enabled(False)
         self.rec.file.save(path, default_blueprint=self._blueprint)
         self.pieces.append(path)
-        self._probe = None
 
     def _log_static(self, rec) -> None:
         """Series names and styles, the session text, the ADEV view's scale and grid."""
@@ -343,6 +300,8 @@ class RerunSink(Sink):
             f"sample rate: {info.sample_rate_hz:g} Hz\nwindow: {info.window_s:g} s, hop: {info.hop_s:g} s\n"
             f"taus: {len(tau)} from {tau[0]:.4g} to {tau[-1]:.4g} s" if len(tau) else
             f"source: {info.source_name}"), static=True)
+        if self.accel is not None:
+            self.accel.log_static(rec)
         x_dec, y_dec = self._decades
         rec.log(CURVE, rp.loglog_transform(), static=True)
         rp.log_decade_grid(rec, CURVE, x_dec, y_dec, "s", "deg/h")
@@ -435,6 +394,13 @@ class RerunSink(Sink):
         for i in range(len(t_end_s)):
             self._queue_curve(axis, float(t_end_s[i]), lx, dadev.adev_dph[i], dadev.lo_dph[i], dadev.hi_dph[i], tau,
                               misfit[i], dense, model[i])
+
+    def accel_frames(self, dadev, fit, t_end_s: np.ndarray, accel: str) -> None:
+        assert self.rec is not None and self.accel is not None, "the streams open with the first block"
+        self.accel.frames(self._queue, dadev, fit, t_end_s, accel)
+        if not self._accel_legend_sent:
+            self.accel.log_legend(self.rec, dadev.confidence)
+            self._accel_legend_sent = True
 
     def _queue_y_range(self, axis: str, name: str, t_end_s: np.ndarray, drawn: np.ndarray) -> None:
         """The rounded-out range (plots.nice_range) of everything coefficient ``name``'s
@@ -550,23 +516,22 @@ class RerunSink(Sink):
         if not (self.rotate_files and self.rec is not None and self.rec.file is not None):
             return
         self._flush(final=True)
-        _close_stream(self.rec.file)
+        if not self._close_file():
+            return
         self._piece = piece
         self._open_piece()
         self._log_static(self.rec.file)
-        self._legend_sent = False
+        self._legend_sent = self._accel_legend_sent = False
         for h in self._heat.values():
             h.scale_sent = False
 
     def finish(self, summary) -> None:
         """Flush everything, complete the .rrd, keep serving a replay's viewers until
         Ctrl-C, then stop the server; without any sample only clean up."""
-        if self.rec is None:
-            self._discard_probe()
-        else:
+        if self.rec is not None:
             self._flush(final=True)
             if self.rec.file is not None:
-                _close_stream(self.rec.file)
+                self._close_file()
             if self.pieces:
                 summary.outputs.append(self.pieces[0] if len(self.pieces) == 1 else
                                        f"{self.pieces[0]} .. {self.pieces[-1]} ({len(self.pieces)} pieces)")
@@ -577,6 +542,28 @@ class RerunSink(Sink):
                 _rerun_call(self.rec.live.disconnect)
         if self.server is not None:
             stop_process_group(self.server)
+
+    def _close_file(self) -> bool:
+        """Complete the current .rrd piece; False when it could not be written (a full
+        disk: Rerun's file writer stopped): then the piece is removed with a warning,
+        ``error`` says why (fogmon.outputs.write_failed) and no more is written to files."""
+        assert self.rec is not None and self.rec.file is not None, "a .rrd piece is open"
+        path = self.pieces[-1]
+        try:
+            self.rec.file.flush(timeout_sec=FLUSH_TIMEOUT_S)
+            ok = True
+        except RuntimeError as e:
+            ok = False
+            why = str(e).splitlines()[0]
+        _rerun_call(self.rec.file.disconnect)
+        self.rec.file = None
+        if not ok:
+            with contextlib.suppress(OSError):
+                os.remove(path)
+            self.pieces.remove(path)
+            self.error = write_failed("`rrd_path`", path, f"Rerun: {why}")
+            print(f"fogmon: warning: {path}: Rerun could not complete it ({why}); removed", file=sys.stderr)
+        return ok
 
     def _serve_until_stopped(self) -> None:
         print(f"fogmon: done; still serving {self.server_url} for viewers - press Ctrl-C to stop", file=sys.stderr)
@@ -598,12 +585,6 @@ def event_text(e: Event, of_axis: bool = False) -> str:
     axis, its kind (left out where the message starts with it in words) and message."""
     kind = "" if e.message.lower().startswith(e.kind.replace("_", " ")) else f"{e.kind}: "
     return f"{e.t_s:.2f} s  {f'axis {e.axis}: ' if of_axis else ''}{kind}{e.message}"
-
-
-def _close_stream(rec) -> None:
-    """Deliver everything (at most FLUSH_TIMEOUT_S) and close: an .rrd gets its footer."""
-    _rerun_call(rec.flush, timeout_sec=FLUSH_TIMEOUT_S)
-    _rerun_call(rec.disconnect)
 
 
 def _rerun_call(fn, **kwargs) -> None:

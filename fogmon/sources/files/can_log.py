@@ -61,6 +61,9 @@ def _messages(paths: list[str], first: str):
     log python-can cannot read."""
     kwargs = {"relative_timestamp": False} if len(paths) > 1 else {}
     for path in paths:
+        if path.lower().endswith(".mf4"):   # python-can reads it with asammdf: its layout checked first
+            from fogmon.sources.files.mdf import check_layout
+            check_layout(path)
         with reading(f"{path}: cannot read as a CAN log"):   # unknown suffix, unreadable header, ...
             reader = can.LogReader(path, **kwargs)
             it = iter(reader)

@@ -5,10 +5,12 @@ time stamps, span, unit); and ``quiet()``, which keeps third-party readers' own 
 from __future__ import annotations
 
 import contextlib
+import gc
 import io
 import logging
 import math
 import sys
+import traceback
 import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -94,6 +96,8 @@ def reading(what: str, silent: bool = True) -> Iterator[None]:
         except Exception as e:  # any library error on a corrupt file: one line, never a traceback
             text = (str(e).splitlines() or [""])[0][:200]
             why = f"{type(e).__name__}{': ' + text if text else ''}"
+            traceback.clear_frames(e.__traceback__)   # the library's half-built objects released here, inside
+            gc.collect()                              # quiet(): their clean-up errors are not printed
     if why is not None:
         raise FogmonError(f"{what} ({why})")
 

@@ -215,3 +215,21 @@ def dph_per_unit(unit: str | None, where: str) -> float:
         rates = ", ".join(k for k, (m, _) in DPH_PER_UNIT.items() if m == "rate")
         raise FogmonError(f"{where}: unit {unit!r} is not an angular rate fogmon knows ({rates}); give `rate_unit`")
     return DPH_PER_UNIT[name][1]
+
+
+def nearest_samples(t_from: np.ndarray, values: np.ndarray, t_at: np.ndarray) -> np.ndarray:
+    """``values`` (stamped ``t_from``, increasing) at the times ``t_at`` (increasing, same
+    clock): the sample nearest in time within half the median step of ``t_at``, else NaN
+    (an aux channel logged with its own stamps, e.g. an accelerometer beside a gyro)."""
+    t_from, t_at = np.asarray(t_from, dtype=np.float64), np.asarray(t_at, dtype=np.float64)
+    out = np.full(len(t_at), np.nan)
+    if len(t_from) == 0 or len(t_at) == 0:
+        return out
+    j = np.clip(np.searchsorted(t_from, t_at), 1, len(t_from) - 1) if len(t_from) > 1 else np.zeros(len(t_at), int)
+    if len(t_from) > 1:
+        j = np.where(np.abs(t_from[j - 1] - t_at) <= np.abs(t_from[j] - t_at), j - 1, j)
+    half = 0.5 * float(np.median(np.diff(t_at))) if len(t_at) > 1 else math.inf
+    ok = np.abs(t_from[j] - t_at) <= half
+    out[ok] = np.asarray(values, dtype=np.float64)[j[ok]]
+    return out
+

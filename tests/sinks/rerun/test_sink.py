@@ -39,7 +39,7 @@ def run_rrd(tmp_path_factory):
     r[20_000:20_050] = np.nan
     temp = 25 + 0.001 * np.arange(n)
     ev = [Event(100.0, "crc_error", "frame 42: bad CRC")]
-    path = str(tmp_path_factory.mktemp("rrd") / "sub" / "run.rrd")
+    path = str(tmp_path_factory.mktemp("rrd") / "run.rrd")
     src = ListSource(t, r, [7000] * 5 + [5000], sample_rate_hz, aux={"temp_c": temp}, events=ev)
     engine_out = Collect()
     summary = run_pipeline(src, _args(window_s=81.92, hop_s=10.24), sinks=[RerunSink(rrd_path=path), engine_out])
