@@ -146,17 +146,18 @@ def _report(group: list, single: bool, confidence: float) -> list[str]:
         rows = octave_subset(r0.m, int(r0.m[-1]))
     shown = "" if rows is None else f"; {len(rows)} of the {len(r0.tau_s)} taus shown, one per octave"
     what = ("Accelerometer " if accel else "") + "Allan deviation" + (" (micro-g" if accel else " (deg/h")
-    edf = "as stated" if group[0][0].edf is not None else "for the noise type the fit finds at each tau"
+    edf = "as stated" if group[0][0].edf is not None else "of the noise mixture the fit finds at each tau"
     lines = ["", f"{what}, {100 * confidence:.1f} % confidence bounds; EDF {edf}{shown}):"]
     terms = ("IEEE Std 1293 accelerometer noise coefficients" if accel else "IEEE-952 noise coefficients")
     if single:
         c, result, _, fit = group[0]
         lines += adev_lines(result, unit, rows)
-        lines += ["", f"{terms} (with intervals):"] + coefficient_lines(fit, names)
+        lines += ["", f"{terms} ({100 * confidence:.1f} % intervals):"] + coefficient_lines(fit, names)
         check = model_check(result, fit.noise if accel else fit)
         return lines + ([check] if check else [])
     lines += adev_axes_lines({c.axis: r for c, r, _, _ in group}, rows)
-    lines += ["", f"{terms} per axis (with intervals; n/i: not identifiable, < its 95 % upper limit):"]
+    lines += ["", f"{terms} per axis ({100 * confidence:.1f} % intervals; n/i: not identifiable, < its 95 % "
+                  f"upper limit):"]
     lines += coefficient_axes_lines({c.axis: f for c, _, _, f in group}, names)
     for c, r, _, f in group:
         check = model_check(r, f.noise if accel else f)

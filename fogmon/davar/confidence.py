@@ -1,13 +1,14 @@
 """Chi-square confidence intervals of the overlapping Allan deviation.
 
-sigma_hat^2 ~ sigma^2 chi2_nu / nu with nu from Greenhall & Riley's EDF algorithm
-(Greenhall 2004, overlapping ADEV: d = 2, F = S = m; the cases of
-``allantools.ci.edf_greenhall``, which tests/test_davar_theory_confidence.py checks it against,
-evaluated here so that a run needs neither allantools nor scipy.stats). The noise type alpha
-(S_y ~ f^alpha) per tau comes from the dominant IEEE-952 term (``ALPHA_OF_TERM``) or from
-the caller. When gaps remove terms, nu is scaled by the fraction of terms still valid.
-For the noise fit: the EDF of a noise mixture (``edf_mixture``) and the exact covariance
-of Allan variance estimates across taus (``avar_relative_covariance``).
+sigma_hat^2 ~ sigma^2 chi2_nu / nu with nu the EDF of the noise mixture the fitted
+IEEE-952 terms predict at each tau (``edf_mixture``: white angle, white rate, flicker,
+random walk and a deterministic rate ramp), or for a noise type alpha (S_y ~ f^alpha) the
+caller names, Greenhall & Riley's EDF (Greenhall 2004, overlapping ADEV: d = 2, F = S = m;
+the cases of ``allantools.ci.edf_greenhall``, which tests/davar/test_theory_confidence.py
+checks it against, evaluated here so that a run needs neither allantools nor scipy.stats).
+When gaps remove terms, nu is scaled by the fraction of terms still valid. For the noise
+fit: the exact covariance of Allan variance estimates across taus
+(``avar_relative_covariance``).
 """
 from __future__ import annotations
 
@@ -18,9 +19,6 @@ import numpy as np
 
 #: Two-sided confidence of every interval fogmon reports (1 sigma of a normal).
 CONFIDENCE = 0.683
-
-ALPHA_OF_TERM = np.array([2, 0, -1, -2, -2])
-"""Power-law exponent alpha of each IEEE-952 term Q, N, B, K, R (R treated as random walk)."""
 
 
 def edf_full(alpha, m, n_samples: int) -> np.ndarray:
@@ -44,6 +42,12 @@ def edf_effective(edf_gapless: np.ndarray, m: np.ndarray, n_samples: int, n_term
 
 MIX_ALPHAS = (2, 0, -1, -2)
 """Noise types of the mixture EDF (``edf_mixture``): white angle, white rate, flicker, random walk."""
+RAMP = len(MIX_ALPHAS)
+"""Index of the rate ramp (IEEE-952 R) among the mixture's classes, after the noise types:
+a deterministic ramp adds the same constant c to every Allan term, so its own part c^2 / 2
+of the Allan variance has no sampling variance; it only scales the mean of the noise's
+terms, c x mean(e), whose variance the matrices carry in the ramp's row (``mixture_matrices``)."""
+N_CLASSES = RAMP + 1
 _GRID_PER_M = 256  # above this m: F = inf and at most 6 x this many lags (Riemann sum)
 
 
@@ -143,8 +147,11 @@ def _mixture_rows(m: np.ndarray, n_samples: int) -> np.ndarray:
     """``mixture_matrices`` of factors ``m`` (all 2 m <= n_samples): C[k, l] = sum over lags
     j of (1 - |j|/M) rho_k(j) rho_l(j), rho the normalized autocorrelation of the
     overlapping Allan terms of noise types MIX_ALPHAS (M = n - 2m + 1 terms, lags up to 3m
-    as in Greenhall's BasicSum): the relative variance of the Allan variance of a mixture
-    with variance fractions f is 2 f'Cf / M. Every lag up to 3 _GRID_PER_M, beyond a
+    as in Greenhall's BasicSum), and in the ramp's row C[RAMP, k] = sum over lags of
+    (1 - |j|/M) rho_k(j) (M var(mean of the terms) / var(term)), C[RAMP, RAMP] = 0: the
+    relative variance of the Allan variance of a mixture with variance fractions f
+    (ramp included) is 2 f'Cf / M (c^2 var(mean e) = 2 f_R 2 sum_k f_k C[RAMP, k] / M
+    relative to the variance squared). Every lag up to 3 _GRID_PER_M, beyond a
     Riemann sum over 6 _GRID_PER_M + 1 lags (smooth ACFs). The lags of all m (each m's
     followed by its _SPIKES) are evaluated together (``_mixture_rho``)."""
     t, w, q = [], [], []
@@ -162,13 +169,52 @@ def _mixture_rows(m: np.ndarray, n_samples: int) -> np.ndarray:
     start = np.r_[0, np.cumsum(size)[:-1]]  # segments: the lags of m[0], its spikes, the lags of m[1], ...
     rho = _mixture_rho(m, np.concatenate(t), start)
     w_all, q_all = np.concatenate(w), np.concatenate(q)
-    c = np.empty((len(m), 4, 4))
+    c = np.zeros((len(m), N_CLASSES, N_CLASSES))
     c[:, 0, 0] = np.add.reduceat(w_all * q_all**2, start)[1::2]
+    c[:, 0, RAMP] = c[:, RAMP, 0] = np.add.reduceat(w_all * q_all, start)[1::2]
     for k in range(3):
         c[:, 0, k + 1] = c[:, k + 1, 0] = np.add.reduceat(w_all * q_all * rho[k], start)[1::2]
+        c[:, RAMP, k + 1] = c[:, k + 1, RAMP] = np.add.reduceat(w_all * rho[k], start)[0::2]
         for k2 in range(k, 3):
             c[:, k + 1, k2 + 1] = c[:, k2 + 1, k + 1] = np.add.reduceat(w_all * rho[k] * rho[k2], start)[0::2]
+    # flicker's terms correlate far beyond 3 m (rho ~ -0.36 / t^2, summing to ~0 over all lags):
+    # negligible in the squared sums, not in the ramp's linear one
+    terms = n_samples - 2 * m + 1
+    last = np.minimum(3 * m, terms - 1)  # the last lag summed above, and its grid step
+    lag0 = last + 0.5 * np.where(last <= 3 * _GRID_PER_M, 1.0, 2.0 * last / (6 * _GRID_PER_M))
+    tail = (_flicker_tail(m, m, terms, terms, lag0, terms - 0.5, -1.0)
+            + _flicker_tail(m, m, terms, terms, lag0, terms - 0.5, 1.0))
+    c[:, RAMP, 2] += tail / terms
+    c[:, 2, RAMP] = c[:, RAMP, 2]
     return c
+
+
+_TAIL_POINTS = 400  # geometric grid of ``_flicker_tail``
+_TAIL_EXACT = 300.0  # beyond this many factors the flicker correlation is taken as its asymptote
+
+
+def _flicker_tail(ma: np.ndarray, mb: np.ndarray, n_a: np.ndarray, n_b: np.ndarray, first: np.ndarray,
+                  last: np.ndarray | float, sign: float) -> np.ndarray:
+    """Sum over lags L = sign u, u from ``first`` to ``last`` (continuous; per pair), of
+    N(L) rho(L), rho the flicker cross-correlation of the Allan terms of factors ma at j and
+    mb at j + L, N the number of term pairs (``_pair_count``): trapezoid in ln u on
+    _TAIL_POINTS points, rho exact (Greenhall's phase autocovariance) up to _TAIL_EXACT x the
+    larger factor and its asymptote -2 ma^2 mb^2 / L^2 (over the terms' standard
+    deviations) beyond, where the exact form cancels catastrophically. 0 where last <= first."""
+    ma, mb = np.asarray(ma, dtype=np.float64), np.asarray(mb, dtype=np.float64)
+    first = np.asarray(first, dtype=np.float64)
+    last = np.broadcast_to(np.asarray(last, dtype=np.float64), first.shape)
+    ok = last > first
+    frac = np.linspace(0.0, 1.0, _TAIL_POINTS)
+    u = np.where(ok, first, 1.0)[:, None] * (np.where(ok, last / first, 1.0)[:, None] ** frac)
+    ma2, mb2 = ma[:, None], mb[:, None]
+    p, q = np.divmod(np.arange(9), 3)
+    t = sign * u[..., None] + (q * mb2[..., None] - p * ma2[..., None])
+    raw = ((_SECOND_DIFF[p] * _SECOND_DIFF[q]) * _phase_acv(t, -1)).sum(-1)
+    raw = np.where(u <= _TAIL_EXACT * np.maximum(ma2, mb2), raw, -2.0 * ma2**2 * mb2**2 / u**2)
+    sd = _term_sd(ma)[1] * _term_sd(mb)[1]
+    f = _pair_count(sign * u, np.asarray(n_a)[:, None], np.asarray(n_b)[:, None]) * raw / sd[:, None] * u
+    return np.where(ok, np.trapezoid(f, np.log(u), axis=1), 0.0)
 
 
 def _mixture_rho(m: np.ndarray, t: np.ndarray, start: np.ndarray) -> np.ndarray:
@@ -195,25 +241,32 @@ def _mixture_rho(m: np.ndarray, t: np.ndarray, start: np.ndarray) -> np.ndarray:
 
 def edf_mixture(fractions: np.ndarray, m, n_samples: int) -> np.ndarray:
     """EDF of overlapping Allan variances over ``n_samples`` gap-free rate samples whose
-    noise is a mixture: ``fractions`` (taus x 4) of the Allan variance at each m from
-    white angle, white rate, flicker and random-walk rate noise (MIX_ALPHAS). Exact for
-    Gaussian noise (the Allan terms' autocorrelation is the fraction-weighted sum of the
-    types'): exact discrete-time autocorrelations for white angle, white rate and random
-    walk up to m = 256, Greenhall's (F = inf) beyond and for flicker. NaN where 2 m > n."""
+    noise is a mixture: ``fractions`` (taus x 4, or x 5 with a rate ramp's share last) of
+    the Allan variance at each m from white angle, white rate, flicker and random-walk
+    rate noise (MIX_ALPHAS) and a deterministic rate ramp (RAMP). Exact for Gaussian
+    noise (the Allan terms' autocorrelation is the fraction-weighted sum of the types'):
+    exact discrete-time autocorrelations for white angle, white rate and random walk up
+    to m = 256, Greenhall's (F = inf) beyond and for flicker. NaN where 2 m > n."""
     m = np.atleast_1d(np.asarray(m, dtype=np.int64))
     return edf_mixture_from(fractions, mixture_matrices(m, n_samples), n_samples - 2 * m + 1)
+
+
+def with_ramp(fractions: np.ndarray) -> np.ndarray:
+    """Mixture fractions over the N_CLASSES classes: a ramp share of 0 added to 4 columns."""
+    f = np.asarray(fractions, dtype=np.float64)
+    return f if f.shape[-1] == N_CLASSES else np.concatenate([f, np.zeros(f.shape[:-1] + (1,))], axis=-1)
 
 
 def edf_mixture_from(fractions: np.ndarray, matrices: np.ndarray, n_terms_full: np.ndarray) -> np.ndarray:
     """``edf_mixture`` from precomputed ``mixture_matrices`` and gap-free term counts
     n - 2m + 1 (for repeated evaluation inside a fit)."""
-    f = np.asarray(fractions, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
+    f = with_ramp(fractions)
+    with np.errstate(invalid="ignore", divide="ignore"):
         return n_terms_full / np.einsum("ti,tij,tj->t", f, matrices, f)
 
 
 def mixture_matrices(m, n_samples: int) -> np.ndarray:
-    """The (len(m), 4, 4) matrices of ``edf_mixture`` (NaN where 2 m > n_samples)."""
+    """The (len(m), N_CLASSES, N_CLASSES) matrices of ``edf_mixture`` (NaN where 2 m > n_samples)."""
     return _mixture_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
@@ -235,7 +288,7 @@ def _cached_rows(cache: dict, keys: list, compute: Callable[[list], np.ndarray])
 @lru_cache(maxsize=256)
 def _mixture_matrices(m: tuple, n_samples: int) -> np.ndarray:
     ok = 2 * np.array(m, dtype=np.int64) <= n_samples
-    out = np.full((len(m), 4, 4), np.nan)
+    out = np.full((len(m), N_CLASSES, N_CLASSES), np.nan)
     if ok.any():
         keys = [(k, n_samples) for k in np.array(m)[ok].tolist()]
         out[ok] = _cached_rows(_MIX_CACHE, keys, lambda todo: _mixture_rows(
@@ -309,14 +362,16 @@ def _pair_lags(ma: np.ndarray, mb: np.ndarray, n_a: np.ndarray, n_b: np.ndarray
 
 
 def covariance_matrices(m, n_samples: int) -> np.ndarray:
-    """The (len(m), len(m), 4, 4) matrices C[k, l] = sum over lags of N(lag) rho_k(lag)
-    rho_l(lag) of every pair of averaging factors ``m`` (ma, mb) over ``n_samples``
-    gap-free rate samples (all 2 m <= n; cached per grid): for noise types MIX_ALPHAS,
-    rho the cross-correlation of the two factors' Allan terms, N the number of term
-    pairs at that lag. The relative covariance of the two Allan variances of a mixture is
-    2 g'Cg / (M_a M_b), g_k = sqrt(f_a,k f_b,k). Lags as ``_pair_lags`` (exact for the
-    white and random-walk polynomials); white angle noise correlates terms only at the
-    kink lags. All pairs are evaluated in one vectorised pass."""
+    """The (len(m), len(m), N_CLASSES, N_CLASSES) matrices C[k, l] = sum over lags of
+    N(lag) rho_k(lag) rho_l(lag) of every pair of averaging factors ``m`` (ma, mb) over
+    ``n_samples`` gap-free rate samples (all 2 m <= n; cached per grid): for noise types
+    MIX_ALPHAS, rho the cross-correlation of the two factors' Allan terms, N the number
+    of term pairs at that lag; in the ramp's row C[RAMP, k] = sum over lags of N(lag)
+    rho_k(lag) (the covariance of the two means of the terms, which the ramp's constants
+    multiply), C[RAMP, RAMP] = 0. The relative covariance of the two Allan variances of a
+    mixture is 2 g'Cg / (M_a M_b), g_k = sqrt(f_a,k f_b,k). Lags as ``_pair_lags`` (exact
+    for the white and random-walk polynomials); white angle noise correlates terms only
+    at the kink lags. All pairs are evaluated in one vectorised pass."""
     return _covariance_matrices(tuple(int(k) for k in np.atleast_1d(m)), int(n_samples))
 
 
@@ -330,14 +385,14 @@ def _covariance_matrices(m: tuple, n_samples: int) -> np.ndarray:
     keys = [(m[a], m[b], n_samples) for a, b in zip(ia, ib, strict=True)]
     c = _cached_rows(_PAIR_CACHE, keys, lambda todo: _cross_matrices(
         np.array([k[0] for k in todo], dtype=np.int64), np.array([k[1] for k in todo], dtype=np.int64), n_samples))
-    out = np.empty((len(m), len(m), 4, 4))
+    out = np.empty((len(m), len(m), N_CLASSES, N_CLASSES))
     out[ia, ib] = c
     out[ib, ia] = c
     return out
 
 
 def _cross_matrices(ma: np.ndarray, mb: np.ndarray, n_samples: int) -> np.ndarray:
-    """``covariance_matrices``' (4, 4) matrix of each pair of factors (ma[i], mb[i])."""
+    """``covariance_matrices``' matrix of each pair of factors (ma[i], mb[i])."""
     n_a, n_b = n_samples - 2 * ma + 1, n_samples - 2 * mb + 1
     pair, lag, w = _pair_lags(ma, mb, n_a, n_b)
     w = w * _pair_count(lag, n_a[pair], n_b[pair])
@@ -349,18 +404,29 @@ def _cross_matrices(ma: np.ndarray, mb: np.ndarray, n_samples: int) -> np.ndarra
     rho_q = np.bincount(inv, weights=np.tile(_SECOND_DIFF[p] * _SECOND_DIFF[q], len(ma)),
                         minlength=len(k_lag)) / 6.0
     w_q = _pair_count(k_lag, n_a[k_pair], n_b[k_pair])
-    c = np.empty((len(ma), 4, 4))
+    c = np.zeros((len(ma), N_CLASSES, N_CLASSES))
     c[:, 0, 0] = np.bincount(k_pair, weights=w_q * rho_q**2, minlength=len(ma))
+    c[:, 0, RAMP] = c[:, RAMP, 0] = np.bincount(k_pair, weights=w_q * rho_q, minlength=len(ma))
     scale = _term_sd(ma) * _term_sd(mb)
     rho = _term_xcov_raw(lag, ma[pair], mb[pair]) / scale[:, pair]
     rho_at_kinks = _term_xcov_raw(k_lag, ma[k_pair], mb[k_pair]) / scale[:, k_pair]
     for k in range(3):
         c[:, 0, k + 1] = c[:, k + 1, 0] = np.bincount(k_pair, weights=w_q * rho_q * rho_at_kinks[k],
                                                       minlength=len(ma))
+        c[:, RAMP, k + 1] = c[:, k + 1, RAMP] = np.bincount(pair, weights=w * rho[k], minlength=len(ma))
     for k in range(3):
         for k2 in range(k, 3):
             c[:, k + 1, k2 + 1] = c[:, k2 + 1, k + 1] = np.bincount(pair, weights=w * rho[k] * rho[k2],
                                                                     minlength=len(ma))
+    # flicker's long tail beyond the lags summed (see _mixture_rows)
+    lo = np.full(len(ma), np.inf)
+    hi = np.full(len(ma), -np.inf)
+    np.minimum.at(lo, pair, lag)
+    np.maximum.at(hi, pair, lag)
+    tail = (_flicker_tail(ma, mb, n_a, n_b, hi + 0.5, n_b - 0.5, 1.0)
+            + _flicker_tail(ma, mb, n_a, n_b, -lo + 0.5, n_a - 0.5, -1.0))
+    c[:, RAMP, 2] += tail
+    c[:, 2, RAMP] = c[:, RAMP, 2]
     return c
 
 
@@ -379,11 +445,12 @@ def _distinct_rows(group: np.ndarray, value: np.ndarray) -> tuple[np.ndarray, np
 def avar_relative_covariance(fractions: np.ndarray, matrices: np.ndarray, n_terms_full: np.ndarray) -> np.ndarray:
     """Covariance of overlapping Allan variance estimates across taus, relative to the
     product of their expectations (T x T; diagonal 2 / EDF), for Gaussian noise whose
-    Allan variance at each tau is split by ``fractions`` (T x 4, MIX_ALPHAS) over white
-    angle, white rate, flicker and random-walk rate noise: exact (it is a quadratic form
-    in the data: cov = 2 tr(A S B S)), from ``covariance_matrices`` and the gap-free term
-    counts n - 2 m + 1."""
-    f = np.asarray(fractions, dtype=np.float64)
+    Allan variance at each tau is split by ``fractions`` (T x 4, MIX_ALPHAS, or x 5 with a
+    deterministic rate ramp's share last) over white angle, white rate, flicker and
+    random-walk rate noise: exact (it is a quadratic form in the data plus the ramp's
+    linear one: cov = 2 tr(A S B S) + c_a c_b cov(mean e_a, mean e_b)), from
+    ``covariance_matrices`` and the gap-free term counts n - 2 m + 1."""
+    f = with_ramp(fractions)
     g = np.sqrt(f[:, None, :] * f[None, :, :])
     return 2.0 * np.einsum("abk,abkl,abl->ab", g, matrices, g) / np.outer(n_terms_full, n_terms_full)
 
@@ -394,10 +461,18 @@ def _quantiles(confidence: float) -> tuple[float, float]:
     return lo, 1.0 - lo
 
 
+MIN_EDF = 1.0
+"""Below this EDF a deviation gets no interval (``chi2_factors``: NaN bounds, printed as
+"-"): with EDF << 1 nearly all of chi-square's mass lies near 0, so both quantiles can
+fall below the EDF and the interval excludes its own estimate (an EDF of 0.07 gave
+21.341 [61.635, 1.3915e+12]); such a tau holds less than one independent Allan term."""
+
+
 def chi2_factors(edf: np.ndarray, confidence: float = CONFIDENCE) -> tuple[np.ndarray, np.ndarray]:
     """Interval factors (lo / sigma_hat, hi / sigma_hat) of a deviation with ``edf``
-    degrees of freedom at two-sided ``confidence`` (NIST SP1065 eq. 45); NaN where the
-    EDF is not positive. An EDF row broadcast over windows (the gap-free case) gives one
+    degrees of freedom at two-sided ``confidence`` (NIST SP1065 eq. 45); NaN (no
+    interval) where the EDF is below MIN_EDF or the interval would not hold the estimate
+    (factors not around 1). An EDF row broadcast over windows (the gap-free case) gives one
     row of factors, cached: streaming asks for the same row block after block."""
     edf = np.asarray(edf, dtype=np.float64)
     while edf.ndim > 1 and edf.strides[0] == 0 and edf.shape[0] > 1:
@@ -421,15 +496,18 @@ def _factors(edf: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray
     from scipy.special import gammaincinv  # imported here: scipy costs start-up time
 
     q_lo, q_hi = _quantiles(confidence)
-    ok = np.isfinite(edf) & (edf > 0)
+    ok = np.isfinite(edf) & (edf >= MIN_EDF)
     f_lo = np.full(edf.shape, np.nan)
     f_hi = np.full(edf.shape, np.nan)
     if ok.any():
         u, inv = np.unique(edf[ok], return_inverse=True)
-        with np.errstate(divide="ignore", over="ignore"):  # tiny EDF: hi is +inf
+        with np.errstate(divide="ignore", over="ignore"):
             # the chi2 quantile with u degrees of freedom at q is 2 gammaincinv(u / 2, q)
             f_lo[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_hi)))[inv]
             f_hi[ok] = np.sqrt(u / (2.0 * gammaincinv(u / 2.0, q_lo)))[inv]
+    excludes = ~((f_lo <= 1.0) & (f_hi >= 1.0))  # NaN too; a safeguard: at EDF >= 1 the quantiles straddle it
+    f_lo[excludes] = np.nan
+    f_hi[excludes] = np.nan
     return f_lo, f_hi
 
 

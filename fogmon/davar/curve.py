@@ -173,13 +173,12 @@ def _record_samples(tau, m, sample_rate_hz, n_terms, n_samples, said: list[str])
 
 
 def with_fit_intervals(result: AdevResult, fit, edf_stated: bool) -> AdevResult:
-    """``result`` with EDF and intervals for the noise type the fitted model says
-    dominates each tau (as replay's summary shows them), unless the EDF was stated."""
+    """``result`` with EDF and intervals for the noise mixture the fitted model predicts
+    at each tau (as replay's summary shows them), unless the EDF was stated."""
     if edf_stated or not np.all(np.isfinite(fit.avar_terms)):
         return result
-    from fogmon.davar.fit import dominant_alpha
-    alpha = dominant_alpha(fit.avar_terms, result.tau_s)
-    nu = edf_effective(edf_full(alpha, result.m, result.n_samples), result.m, result.n_samples,
-                       result.n_terms)
+    from fogmon.davar.fit import mixture_edf_row
+    nu = edf_effective(mixture_edf_row(fit.avar_terms, result.tau_s, result.m, result.n_samples), result.m,
+                       result.n_samples, result.n_terms)
     lo, hi = chi2_bounds(result.adev_dph, nu, result.confidence)
     return replace(result, edf=nu, lo_dph=lo, hi_dph=hi)

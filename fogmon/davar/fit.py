@@ -21,9 +21,10 @@ from statistics import NormalDist
 
 import numpy as np
 
-from fogmon.davar.confidence import ALPHA_OF_TERM, covariance_matrices, mixture_matrices
+from fogmon.davar.confidence import covariance_matrices, mixture_matrices
+from fogmon.davar.profile import fit_full, score_limits
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
-from fogmon.davar.scoring import fisher_scoring, fit_terms, mixture_edf
+from fogmon.davar.scoring import fisher_scoring, mixture_edf
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -47,8 +48,7 @@ TUKEY_C = 4.685
 _RTOL = 1e-9
 UPPER_CONFIDENCE = 0.95
 """One-sided confidence of every term's upper limit (``Coefficient.upper``)."""
-_UPPER_DEVIANCE = NormalDist().inv_cdf(UPPER_CONFIDENCE) ** 2  # 2.706: signed root at -1.645
-_UPPER_MODES = {"none": 0, "unidentified": 1, "all": 2}  # scoring.fit_terms' upper_mode
+_UPPER_Z = NormalDist().inv_cdf(UPPER_CONFIDENCE)  # 1.645
 
 
 @dataclass(frozen=True)
@@ -107,14 +107,6 @@ class NoiseFit:
     def coefficients(self) -> dict[str, Coefficient]:
         """Name (with unit) -> Coefficient, in the order Q, N, B, K, R."""
         return {n: getattr(self, n) for n in NAMES}
-
-
-def dominant_alpha(avar_terms: np.ndarray, tau_s: np.ndarray) -> np.ndarray:
-    """Noise type alpha per tau of the term that dominates sum_n A_n tau^n (0, white
-    rate noise, where the model is empty)."""
-    contrib = np.asarray(avar_terms)[..., None, :] * np.asarray(tau_s, dtype=np.float64)[:, None] ** POWERS
-    alpha = ALPHA_OF_TERM[np.argmax(contrib, axis=-1)]
-    return np.where(contrib.max(axis=-1) > 0, alpha, 0)
 
 
 def octave_subset(m, m_max: int) -> np.ndarray:
@@ -184,40 +176,62 @@ def _starts(n: int) -> list[np.ndarray]:
     return [np.ones(n)] + [((idx >= i) & (idx < i + k)).astype(np.float64) for i in first]
 
 
-def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
-             upper_limits: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class CurveFit:
+    """The fit of one Allan variance curve (``fit_curve``), over the 5 terms Q, N, B, K, R:
+    ``a`` the five-term estimate A_n ((deg/h)^2 s^-n; NaN when nothing could be fitted),
+    ``se`` its sandwich standard errors, ``identifiable`` (the term's 95 % profile
+    interval excludes zero), ``lo``/``hi`` its two-sided profile interval at
+    ``confidence`` (NaN where not computed), ``upper`` its one-sided UPPER_CONFIDENCE
+    upper limit (NaN where not computed), ``misfit`` the taus (of the curve given) the
+    five terms cannot describe."""
+
+    a: np.ndarray
+    se: np.ndarray
+    identifiable: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    upper: np.ndarray
+    misfit: np.ndarray
+    confidence: float
+
+
+_LIMITS = ("none", "unidentified", "all")
+
+
+def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFIDENCE,
+              limits: str = "all") -> CurveFit:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
-    On the taus of ``octave_subset`` (``scoring.fit_terms``): robust Fisher scoring with
+    On the taus of ``octave_subset`` (``profile.fit_full``): robust Fisher scoring with
     all five terms, iteratively reweighted by Tukey's biweight of the standardized log
     residuals z = ln(y / model) / sqrt(2 / nu + MISFIT_FLOOR^2) from each of the robust
     weight vectors of ``_starts`` (the least total Tukey loss wins, an earlier start ties;
     a start that rejects no tau ends the search; one keeping fewer than two taus has
     failed), with a model-inadequacy variance c2 (Paule-Mandel: the c2 >= 0 with
     sum rw r^2 / (v + c2) = degrees of freedom) where the kept taus' reduced chi-square
-    exceeds BIRGE_GATE, else 0; then backward elimination: while a fitted term's 95 %
-    interval reaches zero, the weakest one is dropped and the rest refitted. Returns
-    (A_n, standard error of A_n, misfit mask over ``tau_s``: taus the terms cannot
-    describe (robust weight 0, or for taus outside the subset the same Tukey rejection of
-    their residual from the model), one-sided UPPER_CONFIDENCE upper limit of A_n for
-    ``upper_limits`` "all" terms, the "unidentified" ones or "none" (NaN where not
-    computed): the c > A_n-hat (A_n-hat the estimate with term n added to the fitted
-    terms, which stay free >= 0) where the profile deviance of the extended
-    quasi-likelihood, rescaled by naive / sandwich variance of A_n at the profiled model
-    (the magnitude adjustment of an independence likelihood for the taus' correlation,
-    Chandler & Bate 2007, evaluated under the hypothesis A_n = c as in a score test),
-    rises by the squared 95 % normal quantile, found to 1e-3 relative
-    (``scoring.upper_limits``), never below the estimate); dropped terms have A_n = 0
-    and the standard error they would have if fitted alongside the others. A_n NaN (not
-    identifiable) when fewer than 2 usable taus or when the robust weights reject all
-    but one tau."""
+    exceeds BIRGE_GATE, else 0; the estimate is that of all five terms (a term the record
+    cannot tell from zero still takes what it explains, so the others do not absorb it).
+    Then for each term the generalized score test of A_n = c with every other term free
+    and refitted (``profile.score_limits``): identifiable when A_n = 0 is rejected at
+    IDENTIFY_Z (the 95 % two-sided interval excludes zero), the two-sided ``confidence``
+    interval and the one-sided UPPER_CONFIDENCE upper limit where the test's signed root
+    reaches the normal quantiles. ``limits``: "all" terms' limits, only the "unidentified"
+    ones' upper limit (the identification test for every term; ``lo``/``hi`` NaN), or
+    "none" (no test: ``identifiable`` from the sandwich A_n - IDENTIFY_Z se_n > 0). Nothing is
+    identifiable (A_n NaN) when fewer than 2 taus are usable or the robust weights reject
+    all but one tau."""
+    if limits not in _LIMITS:
+        raise ValueError(f"`limits` must be one of {', '.join(_LIMITS)}, got {limits!r}")
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
     misfit = np.zeros(len(tau), dtype=bool)
+    nan = np.full(5, np.nan)
+    failed = CurveFit(nan, nan, np.zeros(5, bool), nan, nan, nan, misfit, confidence)
     if ok.sum() < 2:
-        return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
+        return failed
     use = np.flatnonzero(ok)
     use = use[octave_subset(np.asarray(m)[use], n_samples // 4)]
     if len(use) < 2:
@@ -226,19 +240,42 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     m_int = np.asarray(m, dtype=np.int64)[use]
     x = tau[use][:, None] ** POWERS
     edf = _NoiseModel(tau[use], m_int, nt, n_samples)
-    found, a, se, rw, _, upper = fit_terms(
+    found, a, se, rw, c2 = fit_full(
         x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, np.array(_starts(len(y))), TUKEY_C, MISFIT_FLOOR**2,
-        BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER, _ROBUST_RTOL, _RTOL, _MAX_ITER, IDENTIFY_Z,
-        _UPPER_MODES[upper_limits], _UPPER_DEVIANCE)
+        BIRGE_GATE, _RW_TOL, _MAX_ROBUST_ITER, _ROBUST_RTOL, _RTOL, _MAX_ITER)
     if not found:  # the robust weights reject all taus: nothing is identifiable
-        return np.full(5, np.nan), np.full(5, np.nan), misfit, np.full(5, np.nan)
-    upper = np.maximum(upper, a)
+        return failed
     misfit[use] = rw == 0
     rest = np.setdiff1d(np.flatnonzero(ok), use)
     if len(rest):
         misfit[rest] = _misfit_outside(a, tau[rest], avar[rest], np.asarray(m, dtype=np.int64)[rest],
                                        np.asarray(n_terms)[rest], n_samples)
-    return a, se, misfit, upper
+    lo = hi = upper = nan
+    if limits == "none":
+        return CurveFit(a, se, a - IDENTIFY_Z * se > 0, lo, hi, upper, misfit, confidence)
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    both = limits == "all"
+    upper_z = sorted({z, _UPPER_Z}) if both else [_UPPER_Z]
+    s0, lower, up = score_limits(x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, se,
+                                 np.ones(5, dtype=bool), np.array([z] if both else []), np.array(upper_z),
+                                 _ROBUST_RTOL, _MAX_ITER)
+    ident = s0 > IDENTIFY_Z
+    at = {q: up[:, i] for i, q in enumerate(upper_z)}
+    upper = np.maximum(at[_UPPER_Z], a)
+    if both:
+        lo, hi = np.minimum(lower[:, 0], a), np.maximum(at[z], a)
+    else:
+        upper = np.where(ident, np.nan, upper)
+    return CurveFit(a, se, ident, lo, hi, upper, misfit, confidence)
+
+
+def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
+             upper_limits: str = "none") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``fit_curve`` as (A_n, standard error of A_n, misfit mask over ``tau_s``, one-sided
+    UPPER_CONFIDENCE upper limit of A_n for ``upper_limits`` "all" terms, the
+    "unidentified" ones or "none": NaN where not computed)."""
+    f = fit_curve(tau_s, avar, m, n_terms, n_samples, CONFIDENCE, upper_limits)
+    return f.a, f.se, f.misfit, f.upper
 
 
 _ANCHORS_PER_OCTAVE = 8  # exact EDFs of dense_grid_edf; log-log interpolation between
@@ -256,6 +293,20 @@ def dense_grid_edf(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.nd
     full = np.maximum(n_samples - 2 * m + 1, 1)
     nu_anchor = _NoiseModel(tau[anchor], m[anchor], full[anchor], n_samples)(a)
     return np.exp(np.interp(lg, lg[anchor], np.log(nu_anchor))) * (np.asarray(n_terms) / full)
+
+
+def mixture_edf_row(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_samples: int) -> np.ndarray:
+    """Gap-free EDF per tau of the Allan variances of ``n_samples`` samples whose noise is
+    the mixture the model ``a`` (A_n for ``tau``'s unit) predicts, its ramp deterministic
+    (``dense_grid_edf``); NaN where 2 m > n_samples: the EDF of the ADEV intervals."""
+    m = np.asarray(m, dtype=np.int64)
+    out = np.full(len(m), np.nan)
+    ok = 2 * m <= n_samples
+    if ok.any():
+        full = n_samples - 2 * m[ok] + 1
+        out[ok] = dense_grid_edf(np.asarray(a, dtype=np.float64), np.asarray(tau, dtype=np.float64)[ok], m[ok], full,
+                                 n_samples)
+    return out
 
 
 def _misfit_outside(a: np.ndarray, tau: np.ndarray, avar: np.ndarray, m: np.ndarray, n_terms: np.ndarray,
@@ -288,15 +339,28 @@ def quick_avar_terms(tau_s, avar, m, n_terms, n_samples: int) -> np.ndarray:
     return _scoring(x, np.ones(5, dtype=bool), avar[use], edf, np.ones(len(use)), rtol=_QUICK_RTOL)[0]
 
 
-def _coefficients(a: np.ndarray, se: np.ndarray, upper: np.ndarray, confidence: float) -> list[Coefficient]:
+def _coefficients(fits: list[CurveFit], confidence: float, windows: bool) -> list[Coefficient]:
+    """The five Coefficients of curve fits (one curve: scalars; ``windows``: arrays over
+    the windows, even of one). A term
+    not identifiable has value = lo = 0 and hi = its upper limit; an identified one its
+    estimate and profile interval, or where that was not computed (a DADEV window) the
+    sandwich interval A_n +- z se_n."""
     z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
-    value = avar_terms_to_coefficients(a)
-    lo = avar_terms_to_coefficients(np.maximum(a - z * se, 0.0))
-    ident = (a - IDENTIFY_Z * se > 0) & np.isfinite(a)
-    up = np.where(np.isnan(upper), np.nan, avar_terms_to_coefficients(np.where(np.isfinite(upper), upper, 0.0)))
-    up = np.where(np.isinf(upper), np.inf, up)
-    hi = np.where(ident, avar_terms_to_coefficients(np.where(np.isfinite(se), a + z * se, 0.0)), up)
-    return [Coefficient(*(v[..., i] if v.ndim > 1 else v[i].item() for v in (value, lo, hi, ident, up)))
+    a = np.array([f.a for f in fits])
+    se = np.array([f.se for f in fits])
+    ident = np.array([f.identifiable for f in fits]) & np.isfinite(a)
+    lo_a = np.array([f.lo for f in fits])
+    hi_a = np.array([f.hi for f in fits])
+    lo_a = np.where(np.isnan(lo_a), np.maximum(a - z * se, 0.0), lo_a)
+    hi_a = np.where(np.isnan(hi_a), a + z * se, hi_a)
+    upper = np.array([f.upper for f in fits])
+    conv = avar_terms_to_coefficients
+    value = np.where(ident, conv(np.where(np.isfinite(a), a, 0.0)), np.where(np.isfinite(a), 0.0, np.nan))
+    up = np.where(np.isfinite(upper), conv(np.where(np.isfinite(upper), upper, 0.0)), upper)
+    lo = np.where(ident, conv(np.where(np.isfinite(lo_a), lo_a, 0.0)), 0.0)
+    hi = np.where(ident, conv(np.where(np.isfinite(hi_a), hi_a, 0.0)), up)
+    hi = np.where(ident & np.isinf(hi_a), np.inf, hi)
+    return [Coefficient(*(v[:, i] if windows else v[0, i].item() for v in (value, lo, hi, ident, up)))
             for i in range(5)]
 
 
@@ -311,25 +375,29 @@ def _worst_ratio(model_adev: np.ndarray, adev: np.ndarray, misfit: np.ndarray) -
 def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) -> NoiseFit:
     """Fit IEEE-952 Q (arcsec), N (deg/sqrt(h)), B (deg/h), K (deg/h/sqrt(h)), R (deg/h^2)
     to an AdevResult (scalar coefficients) or to every window of a DadevResult (arrays
-    over windows: the coefficient time series). Intervals at ``confidence``; taus the
-    five terms cannot describe are down-weighted, flagged in ``misfit`` and left out of
+    over windows: the coefficient time series). Intervals at ``confidence`` from the
+    profile likelihood with every other term free (``fit_curve``); taus the five terms
+    cannot describe are down-weighted, flagged in ``misfit`` and left out of
     ``worst_ratio``. Every coefficient also carries its one-sided 95 % upper limit
-    ``upper`` (the ``hi`` of a term that is not identifiable); in a DadevResult fit only
-    where the term is not identifiable (NaN elsewhere: the windows need only the bound
-    they print, at a third of the cost)."""
+    ``upper`` (the ``hi`` of a term that is not identifiable). A DadevResult fit computes
+    the profile only for the identification test and the upper limits of the terms not
+    identifiable (NaN elsewhere); its identified terms get the sandwich interval A_n +-
+    z se_n of the five-term fit (the windows need only what they print, at a third of
+    the cost)."""
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
-        fits = [fit_avar(result.tau_s, avar[i], result.m, result.n_terms[i], n, "unidentified")
+        fits = [fit_curve(result.tau_s, avar[i], result.m, result.n_terms[i], n, confidence, "unidentified")
                 for i in range(len(result))]
-        a = np.array([f[0] for f in fits]).reshape(len(result), 5)
-        se = np.array([f[1] for f in fits]).reshape(len(result), 5)
-        misfit = np.array([f[2] for f in fits], dtype=bool).reshape(result.adev_dph.shape)
-        upper = np.array([f[3] for f in fits]).reshape(len(result), 5)
+        misfit = np.array([f.misfit for f in fits], dtype=bool).reshape(result.adev_dph.shape)
     else:
-        a, se, misfit, upper = fit_avar(result.tau_s, avar, result.m, result.n_terms, result.n_samples,
-                                       "all")
-    q, n_, b, k, r = _coefficients(a, se, upper, confidence)
+        fits = [fit_curve(result.tau_s, avar, result.m, result.n_terms, result.n_samples, confidence, "all")]
+        misfit = fits[0].misfit
+    shape = (len(fits), 5) if isinstance(result, DadevResult) else (5,)
+    a = np.array([f.a for f in fits]).reshape(shape)
+    se = np.array([f.se for f in fits]).reshape(shape)
+    upper = np.array([f.upper for f in fits]).reshape(shape)
+    q, n_, b, k, r = _coefficients(fits, confidence, isinstance(result, DadevResult))
     fit = NoiseFit(q, n_, b, k, r, avar_terms=a, avar_se=se, avar_upper=upper,
                    confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)

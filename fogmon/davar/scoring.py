@@ -1,17 +1,22 @@
 """Numba kernels of the IEEE-952 fit (fogmon/davar/fit.py): the Fisher-scoring iteration
 with the mixture-EDF weights and the small non-negative least-squares problems it solves
-(at most 5 columns, Lawson & Hanson with Householder least squares), the sandwich
-variances and the profile-likelihood upper limits, so that an iteration costs
-microseconds instead of a hundred of Python and scipy overhead."""
+(at most 5 columns, Lawson & Hanson with Householder least squares), its robust
+reweighting and the sandwich variances (the intervals' score tests: fogmon/davar/profile.py),
+so that an iteration costs microseconds instead of a hundred of Python and scipy overhead."""
 from __future__ import annotations
 
 import numpy as np
 
-from fogmon.jit import B1, BOOL, F1, F2, F3, F4, F8, I8, kernel
+from fogmon.jit import B1, BOOL, F1, F2, F3, F8, I8, kernel
 
-_CLASS = np.array([0, 1, 2, 3, 3])
-"""Noise class (confidence.MIX_ALPHAS) of each term Q, N, B, K, R (R counted as random walk)."""
+_CLASS = np.array([0, 1, 2, 3, 4])
+"""Class of each term Q, N, B, K, R in the mixture matrices: the noise types
+confidence.MIX_ALPHAS, then the deterministic ramp (confidence.RAMP)."""
+_N_CLASSES = 5  # confidence.N_CLASSES
 _EPS = 2.0**-52
+_MIN_RELVAR = 1e-12
+"""Floor of f'Cf (the relative variance of an Allan variance x M / 2): a model that is all
+ramp (no noise) would otherwise have an infinite EDF."""
 
 
 @kernel()
@@ -199,18 +204,18 @@ def nnls(a, b):
 
 @kernel(error_model="numpy")
 def mixture_fractions(x, a):
-    """Share (taus x 4) of each noise class (confidence.MIX_ALPHAS) in the model Allan
-    variance sum_n A_n tau^n per tau (rows of ``x``: tau^n): white rate noise where the
-    model is empty."""
+    """Share (taus x 5) of each class (``_CLASS``: the noise types, then the ramp) in the
+    model Allan variance sum_n A_n tau^n per tau (rows of ``x``: tau^n): white rate noise
+    where the model is empty."""
     t = x.shape[0]
-    f = np.zeros((t, 4))
+    f = np.zeros((t, _N_CLASSES))
     for i in range(t):
         total = 0.0
         for n in range(5):
             c = x[i, n] * a[n]
             total += c
             f[i, _CLASS[n]] += c
-        for u in range(4):
+        for u in range(_N_CLASSES):
             f[i, u] = f[i, u] / total if total > 0 else 0.0
         if not total > 0:
             f[i, 1] = 1.0
@@ -227,10 +232,10 @@ def mixture_edf(x, a, mats, full, gap_scale):
     f = mixture_fractions(x, a)
     for i in range(t):
         q = 0.0
-        for u in range(4):
-            for v in range(4):
+        for u in range(_N_CLASSES):
+            for v in range(_N_CLASSES):
                 q += f[i, u] * mats[i, u, v] * f[i, v]
-        nu[i] = full[i] / q * gap_scale[i]
+        nu[i] = full[i] / max(q, _MIN_RELVAR) * gap_scale[i]
     return nu
 
 
@@ -243,17 +248,19 @@ def mixture_correlation(x, a, cov):
     f = mixture_fractions(x, a)
     t = f.shape[0]
     c = np.empty((t, t))
-    g = np.empty(4)
+    g = np.empty(_N_CLASSES)
     for p in range(t):
         for q in range(p, t):
-            for k in range(4):
+            for k in range(_N_CLASSES):
                 g[k] = np.sqrt(f[p, k] * f[q, k])
             s = 0.0
-            for k in range(4):
-                for v in range(4):
+            for k in range(_N_CLASSES):
+                for v in range(_N_CLASSES):
                     s += g[k] * cov[p, q, k, v] * g[v]
             c[p, q] = s
             c[q, p] = s
+    for p in range(t):
+        c[p, p] = max(c[p, p], _MIN_RELVAR)
     sd = np.empty(t)
     for p in range(t):
         sd[p] = np.sqrt(c[p, p])
@@ -579,175 +586,3 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
         if all_kept:
             break
     return found, best_a, best_rw, best_c2
-
-
-@kernel(error_model="numpy", inline="always")
-def eql_deviance(y, model, nu, rw, c2):
-    """-2 x the extended quasi-likelihood (Nelder & Pregibon) of Allan variances ``y``
-    with means ``model`` and relative variances v = 2 / nu + c2, taken as independent
-    (gamma unit deviance): sum rw [(2 / v) (y / model - 1 - ln(y / model)) + ln v]."""
-    d = 0.0
-    for i in range(y.shape[0]):
-        v = 2.0 / nu[i] + c2
-        r = y[i] / model[i]
-        d += rw[i] * ((2.0 / v) * (r - 1.0 - np.log(r)) + np.log(v))
-    return d
-
-
-@kernel(error_model="numpy", inline="always")
-def profile(x, y, mats, full, gap_scale, rw, c2, a, terms, n, c, held, rtol, max_iter):
-    """Fisher scoring of the ``terms`` (mask) >= 0, with term ``n`` held at ``c`` when
-    ``held``, from ``a``: returns (EQL deviance, A) at convergence."""
-    cols = terms.copy()
-    a0 = _where(terms, a, np.empty(5))
-    if held:
-        cols[n] = False
-        a0[n] = c
-    a1, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, False, c2, rtol, max_iter)
-    return eql_deviance(y, model, nu, rw, c2), a1
-
-
-@kernel(error_model="numpy", inline="always")
-def term_variances(x, mats, full, gap_scale, cov, rw, c2, a, n):
-    """(naive, sandwich) variance of A_n (``sandwich_variances``) in the fit of the terms
-    a > 0 and n, at the model ``a``."""
-    cols = _positive(a, np.empty(5, np.bool_))
-    cols[n] = True
-    model = _model(x, a, 1e-300, np.empty(x.shape[0]))
-    naive, sand = sandwich_variances(x, model, mixture_correlation(x, a, cov), cols, rw,
-                                     mixture_edf(x, a, mats, full, gap_scale), c2)
-    k = 0
-    for j in range(n):
-        k += cols[j]
-    return naive[k], sand[k]
-
-
-@kernel(error_model="numpy", inline="always")
-def upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, rtol, max_iter):
-    """For each term n in ``which``: the c > A_n-hat (the estimate with n added to the
-    terms a > 0) where the rise of the profile deviance (``profile``) from its minimum,
-    rescaled by naive / sandwich variance of A_n at the profiled model, reaches
-    ``deviance``: bracketed by doubling steps from A_n-hat + its sandwich standard
-    error, then Illinois regula falsi to 1e-3 of the bracket's top (or of the step),
-    each profile warm-started from the last. inf where the variances vanish or no
-    bracket is found in 60 steps, NaN outside ``which``. One profile per loop pass (the
-    free estimate first), so that the scoring is compiled in once."""
-    upper = _filled(5, np.nan)
-    for n in range(5):
-        if not which[n]:
-            continue
-        upper[n] = np.inf
-        terms = _positive(a, np.empty(5, np.bool_))
-        terms[n] = True
-        start = a.copy()
-        d_min = a_n = lo = f_lo = hi = f_hi = step = c = 0.0
-        phase = doublings = steps = side = 0  # phase 0: the free estimate A_n-hat, 1: bracketing, 2: regula falsi
-        for _ in range(1 + 60 + 40):
-            d, start = profile(x, y, mats, full, gap_scale, rw, c2, start, terms, n, c, phase > 0, rtol, max_iter)
-            naive, sand = term_variances(x, mats, full, gap_scale, cov, rw, c2, start, n)
-            if phase == 0:
-                if not (sand > 0 and naive > 0):
-                    break
-                d_min, a_n, step = d, start[n], np.sqrt(sand)
-                lo, f_lo, hi = a_n, -deviance, a_n + step
-                phase, c = 1, hi
-                continue
-            f = naive / sand * (d - d_min) - deviance
-            if phase == 1:
-                if not f > 0:
-                    doublings += 1
-                    if doublings == 60:
-                        break
-                    lo, f_lo, hi = hi, f, hi + 2.0 * (hi - a_n)
-                    c = hi
-                    continue
-                f_hi, phase = f, 2
-            else:
-                steps += 1
-                if abs(f) < 1e-3:
-                    upper[n] = c
-                    break
-                if f > 0:
-                    hi, f_hi = c, f
-                    if side == 1:
-                        f_lo /= 2.0
-                    side = 1
-                else:
-                    lo, f_lo = c, f
-                    if side == -1:
-                        f_hi /= 2.0
-                    side = -1
-            if steps == 40 or hi - lo <= 1e-3 * max(hi, step):
-                upper[n] = hi
-                break
-            c = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
-            c = min(max(c, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-    return upper
-
-
-@kernel((F2, F1, F3, F1, F1, F4, F2, F8, F8, F8, F8, I8, F8, F8, I8, F8, I8, F8), error_model="numpy")
-def fit_terms(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw_tol, max_robust, robust_rtol,
-              rtol, max_iter, identify_z, upper_mode, deviance):
-    """The fit of fit.fit_avar on its taus, in one call: ``robust_scoring`` of the active
-    terms (all five at first) from the robust weights ``starts``, the winner scored to
-    ``rtol``; backward elimination: while a fitted term's A_n - ``identify_z`` se_n
-    reaches zero, the weakest (least A_n / se_n) is dropped and the rest refitted from
-    the last robust weights. Standard errors: sandwich (``sandwich_variances``, with the
-    exact correlation across taus ``mixture_correlation`` of the covariance matrices
-    ``cov``); a dropped term's as if fitted alongside the others. Upper limits
-    (``upper_limits``) of no term, the terms not identified or every term
-    (``upper_mode`` 0, 1, 2; NaN elsewhere). Returns (found, A, se, robust weights, c2,
-    upper); found False when every robust start failed."""
-    active = np.ones(5, np.bool_)
-    se = _filled(5, np.inf)
-    while True:
-        found, a, rw, c2 = robust_scoring(x, active, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
-                                          max_robust, robust_rtol, max_iter)
-        if not found:
-            return False, a, se, rw, c2, _filled(5, np.nan)
-        from_data = True
-        for j in range(5):
-            if active[j] and a[j] > 0:
-                from_data = False
-        a0 = np.zeros(5) if from_data else _where(active, a, np.empty(5))
-        a, model, nu = fisher_scoring(x, active, y, mats, full, gap_scale, rw, a0, from_data, c2, rtol, max_iter)
-        starts = np.empty((1, rw.shape[0]))
-        for i in range(rw.shape[0]):
-            starts[0, i] = rw[i]
-        free = _positive(a, np.empty(5, np.bool_))
-        se = _filled(5, np.inf)
-        corr = mixture_correlation(x, a, cov)
-        n_free = 0
-        for j in range(5):
-            n_free += free[j]
-        if n_free:
-            sand = sandwich_variances(x, model, corr, free, rw, nu, c2)[1]
-            k = 0
-            for j in range(5):
-                if free[j]:
-                    se[j] = np.sqrt(sand[k])
-                    k += 1
-        drop = -1
-        for j in range(5):
-            if free[j] and a[j] - identify_z * se[j] <= 0 and (drop < 0 or a[j] / se[j] < a[drop] / se[drop]):
-                drop = j
-        if drop < 0:
-            break
-        active[drop] = False
-    for n in range(5):
-        if not free[n]:
-            cols = free.copy()
-            cols[n] = True
-            k = 0
-            for j in range(n):
-                k += cols[j]
-            se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][k])
-    which = np.zeros(5, np.bool_)
-    any_upper = False
-    for n in range(5):
-        which[n] = upper_mode == 2 or (upper_mode == 1 and not free[n])
-        any_upper |= which[n]
-    upper = _filled(5, np.nan)
-    if any_upper:
-        upper = upper_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, which, deviance, robust_rtol, max_iter)
-    return True, a, se, rw, c2, upper

@@ -26,7 +26,7 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.davar import kernels
-from fogmon.davar.batch import _prepare, _samples, adev_edf, alpha_rows, gapless_edf, gapped_edf, row_alpha, statistics
+from fogmon.davar.batch import _prepare, _samples, adev_edf, edf_rows, gapless_edf, gapped_edf, statistics
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
 
@@ -40,8 +40,8 @@ class StreamingDadev:
     """Sliding-window overlapping ADEV of a rate stream sampled at ``sample_rate_hz`` (Hz) over
     windows of ``window_s`` (s), emitted every ``hop_s`` (s, default window_s / 4) once
     the first window is complete. ``alpha``: noise type per tau for the confidence
-    bounds (default: dominant term of an IEEE-952 fit, refreshed at most every
-    max(hop, window / 4) samples). ``reanchor``: samples between re-references (and,
+    bounds (Greenhall's EDF; default: the EDF of the noise mixture of a quick IEEE-952
+    fit, refreshed at most every max(hop, window / 4) samples). ``reanchor``: samples between re-references (and,
     with running sums, exact recomputes; default max(4 x window, 4096)); plus at most
     one early re-reference per buffer fill when most samples since the last one are
     large (the reference level came from a glitch)."""
@@ -82,7 +82,7 @@ class StreamingDadev:
         self._rec_n = np.zeros((nm, ring), dtype=np.int64)
         self._rec_h = np.zeros((nm, ring), dtype=np.int64)
         self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
-        self._alpha_prev = None  # noise-type state of the windows emitted so far, see batch.alpha_rows
+        self._edf_prev = None  # EDF state of the windows emitted so far, see batch.edf_rows
         self._stage_y = np.empty(STAGE)  # samples pushed but not yet in the engine (see push)
         self._stage_v = np.ones(STAGE, dtype=np.bool_)
         self._staged = 0
@@ -120,14 +120,13 @@ class StreamingDadev:
                              self.m, w)
             return self._result(ends, adev, edf, counts)
         ends, sums, counts = self.advance(rate_dph, valid)
-        alpha = self.alpha
-        if alpha is None:
-            alpha, self._alpha_prev = alpha_rows(sums, counts, ends, self.m, w, max(self.hop_n, w // 4),
-                                                 self._alpha_prev)
-        return self._frames(ends, sums, counts, alpha)
+        gapless = None
+        if self.alpha is None:
+            gapless, self._edf_prev = edf_rows(sums, counts, ends, self.m, w, max(self.hop_n, w // 4), self._edf_prev)
+        return self._frames(ends, sums, counts, self.alpha, gapless)
 
-    def _frames(self, ends, sums, counts, alpha) -> DadevResult:
-        adev, edf = adev_edf(sums, counts, self.m, self.window_n, alpha)
+    def _frames(self, ends, sums, counts, alpha, gapless=None) -> DadevResult:
+        adev, edf = adev_edf(sums, counts, self.m, self.window_n, alpha, gapless)
         return self._result(ends, adev, edf, counts)
 
     def _result(self, ends, adev, edf, counts) -> DadevResult:
@@ -220,7 +219,6 @@ class StreamingDadev:
             self.advance(np.zeros(0))  # the staged samples enter the engine (no window completes)
         n = min(self.n_pushed, self.window_n)
         sums, counts = kernels.window_sums_exact(self._pre, self._len - n, n, self.m)
-        alpha = self.alpha if self.alpha is not None else row_alpha(sums, counts, self.m, n)
-        adev, lo, hi, edf = statistics(sums, counts, self.m, n, alpha, self.confidence)
+        adev, lo, hi, edf = statistics(sums, counts, self.m, n, self.alpha, self.confidence)
         return AdevResult(self.m / self.sample_rate_hz, self.m, adev, lo, hi, edf, counts, self.sample_rate_hz, n,
                           self.confidence)

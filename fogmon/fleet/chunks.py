@@ -3,7 +3,7 @@
 The streaming engine's windows end at sample indices k * hop + W - 1 (k = 0, 1, ...,
 W the window and hop in samples, from the recording's first sample), and the noise type
 behind the confidence bounds is refitted on windows k = 0, s, 2s, ... with s =
-ceil(max(hop, W // 4) / hop) (fogmon.davar.batch.alpha_rows). A chunk that owns windows
+ceil(max(hop, W // 4) / hop) (fogmon.davar.batch.edf_rows). A chunk that owns windows
 k0 .. k1 - 1, with k0 a multiple of s, is fed samples k0 * hop .. (k1 - 1) * hop + W - 1:
 it overlaps the next chunk by W - hop samples (one window less one hop), its engine
 emits exactly the windows of the single pass with the same noise types, and each

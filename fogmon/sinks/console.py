@@ -69,7 +69,7 @@ def result_lines(x: AxisSummary, run: Summary) -> list[str]:
         lines += adev_lines(a)
     f = x.overall_fit
     if f is not None:
-        lines += ["", "IEEE-952 noise coefficients (whole run, with intervals):"]
+        lines += ["", f"IEEE-952 noise coefficients (whole run, {100 * f.confidence:.1f} % intervals):"]
         lines += coefficient_lines(f)
         check = model_check(a, f) if a is not None else None
         if check is not None:
@@ -95,9 +95,10 @@ def accel_lines(s: Summary) -> list[str]:
                   f"adev_ug [lo_ug, hi_ug]:"]
     lines += adev_axes_lines(done)
     fits = {a: x.overall_fit for a, x in acc.items() if x.overall_fit is not None}
-    lines += ["", "Accelerometer noise coefficients (IEEE Std 1293: velocity random walk, bias instability, "
-                  "acceleration random walk; whole run, with intervals; n/i: not identifiable, < its 95 % upper "
-                  "limit):"]
+    fit_conf = next(iter(fits.values())).noise.confidence if fits else conf
+    lines += ["", f"Accelerometer noise coefficients (IEEE Std 1293: velocity random walk, bias instability, "
+                  f"acceleration random walk; whole run, {100 * fit_conf:.1f} % intervals; n/i: not identifiable, "
+                  f"< its 95 % upper limit):"]
     lines += coefficient_axes_lines(fits, ACCEL_COEFFICIENTS)
     for a, x in acc.items():
         if x.overall is not None and x.overall_fit is not None:
@@ -128,8 +129,9 @@ def axes_lines(s: Summary) -> list[str]:
         lines += adev_axes_lines(done)
     fits = {a: x.overall_fit for a, x in axes.items() if x.overall_fit is not None}
     if fits:
-        lines += ["", "IEEE-952 noise coefficients per axis (whole run, with intervals; n/i: not identifiable "
-                      "from this record, < its 95 % upper limit):"]
+        conf = next(iter(fits.values())).confidence
+        lines += ["", f"IEEE-952 noise coefficients per axis (whole run, {100 * conf:.1f} % intervals; n/i: not "
+                      f"identifiable from this record, < its 95 % upper limit):"]
         lines += coefficient_axes_lines(fits)
         for a, x in axes.items():
             check = model_check(x.overall, x.overall_fit) if x.overall is not None and x.overall_fit else None
@@ -150,10 +152,28 @@ def adev_axes_lines(results: dict, rows=None) -> list[str]:
     out = [f"  {'tau_s':>10} " + " ".join(f"{a:>{AXIS_COLUMN}}" for a in results)]
     tau_s = next(iter(results.values())).tau_s
     for i in range(len(tau_s)) if rows is None else rows:
-        cells = [f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if r.n_terms[i] else "no valid term"
+        cells = [(f"{r.adev_dph[i]:.5g} [{r.lo_dph[i]:.4g}, {r.hi_dph[i]:.4g}]" if _has_interval(r, i)
+                  else f"{r.adev_dph[i]:.5g} [no interval]") if r.n_terms[i] else "no valid term"
                  for r in results.values()]
         out.append(f"  {tau_s[i]:10.4g} " + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
-    return out
+    return out + _no_interval_note(results.values(), rows)
+
+
+def _has_interval(a, i: int) -> bool:
+    return bool(math.isfinite(float(a.lo_dph[i])) and math.isfinite(float(a.hi_dph[i])))
+
+
+def _no_interval_note(results, rows=None) -> list[str]:
+    """The footnote of ADEV tables with a tau (of ``rows``; None: all) printed without its
+    interval (its EDF below ``confidence.MIN_EDF``, where a chi-square interval can
+    exclude its own estimate)."""
+    from fogmon.davar.confidence import MIN_EDF
+
+    if not any(r.n_terms[i] and not _has_interval(r, i) for r in results
+               for i in (range(len(r.tau_s)) if rows is None else rows)):
+        return []
+    return [f"  no interval: EDF below {MIN_EDF:g} (less than one independent Allan term at that tau), where "
+            f"the chi-square interval would not hold the estimate"]
 
 
 def coefficient_axes_lines(fits: dict, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:
@@ -177,16 +197,17 @@ def coefficient_axes_lines(fits: dict, names: Mapping[str, str] = COEFFICIENTS) 
 
 def adev_lines(a, unit: str = "dph", rows=None) -> list[str]:
     """An AdevResult as a table: tau_s, adev_dph, lo_dph, hi_dph, edf, n_terms (``unit``
-    "ug" for an accelerometer's, in micro-g); ``rows``: the indices shown (None: all)."""
+    "ug" for an accelerometer's, in micro-g); ``rows``: the indices shown (None: all);
+    "-" and a footnote where a tau has no interval (EDF below 1)."""
     out = [f"  {'tau_s':>10} {'adev_' + unit:>12} {'lo_' + unit:>12} {'hi_' + unit:>12} {'edf':>10} {'n_terms':>9}"]
     for i in range(len(a.tau_s)) if rows is None else rows:
         if not a.n_terms[i]:
             out.append(f"  {a.tau_s[i]:10.4g}   no valid Allan term (the record is too short, or every term "
                        f"spans a gap or platform motion)")
             continue
-        out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {a.lo_dph[i]:12.5g} {a.hi_dph[i]:12.5g} "
-                   f"{a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
-    return out
+        lo, hi = (f"{a.lo_dph[i]:12.5g}", f"{a.hi_dph[i]:12.5g}") if _has_interval(a, i) else (f"{'-':>12}",) * 2
+        out.append(f"  {a.tau_s[i]:10.4g} {a.adev_dph[i]:12.5g} {lo} {hi} {a.edf[i]:10.4g} {int(a.n_terms[i]):9d}")
+    return out + _no_interval_note([a], rows)
 
 
 def coefficient_lines(f, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:
@@ -274,8 +295,8 @@ def motion_effect_lines(x: AxisSummary, axis: str = "") -> list[str]:
         rows.append((name, unit, *cells))
     w = max(len(r[k]) for r in rows for k in (2, 3)) + 2
     return ["", f"IEEE-952 noise coefficients{where} without and with platform motion ({x.motion_in_tail} samples, "
-                f"{pct:.1f} %, kept out above; `keep_motion` analyses them; n/i: not identifiable from this record, "
-                f"< its 95 % upper limit):",
+                f"{pct:.1f} %, kept out above; `keep_motion` analyses them; {100 * x.overall_fit.confidence:.1f} % "
+                f"intervals; n/i: not identifiable from this record, < its 95 % upper limit):",
             f"  {'coefficient':<11} {'unit':<14}{'motion kept out':>{w}}{'motion analysed':>{w}}"] + \
         [f"  {n:<11} {u:<14}{a:>{w}}{b:>{w}}" for n, u, a, b in rows]
 
@@ -302,33 +323,31 @@ def no_windows_reason(s: Summary) -> str:
     )
 
 
-#: The fitted model is reported as not describing the record beyond this ADEV ratio.
-MODEL_RATIO_WARN = 1.5
-
-
 def model_check(a, fit) -> str | None:
-    """Lines comparing the fitted IEEE-952 model's ADEV with the measured one: the
-    largest ratio (either way) and its tau over the taus the fit describes (a warning
-    beyond MODEL_RATIO_WARN), then the taus the robust fit flagged (``fit.misfit``)."""
+    """Lines testing the fitted IEEE-952 model against the measured ADEV
+    (``fogmon.davar.adequacy.check_model``: chi-square with each tau's EDF, family-wise
+    over the taus): a WARNING naming every tau where the model departs beyond chance and
+    by how much, else the largest factor; then the taus the robust fit flagged
+    (``fit.misfit``)."""
     import numpy as np
 
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.asarray(fit.model_adev_dph(a.tau_s), dtype=float) / np.asarray(a.adev_dph, dtype=float)
-    misfit = np.asarray(fit.misfit, dtype=bool)
-    ok = np.isfinite(ratio) & (ratio > 0) & ~misfit
-    if not ok.any():
+    from fogmon.davar.adequacy import check_model
+
+    c = check_model(a, fit)
+    if c is None:
         return None
-    worst = np.where(ok, np.abs(np.log(np.where(ok, ratio, 1.0))), -1.0)
-    i = int(np.argmax(worst))
-    r = float(max(ratio[i], 1 / ratio[i]))
-    side = "above" if ratio[i] > 1 else "below"
-    where = "every tau" if not misfit.any() else f"the {int(ok.sum())} taus it describes"
-    if r <= MODEL_RATIO_WARN:
-        line = f"  model check: the fitted model is within a factor {r:.2f} of the measured ADEV at {where}"
+    misfit = np.asarray(fit.misfit, dtype=bool)
+    where = "every tau" if not misfit.any() else f"the {c.n_taus} taus it describes"
+    test = f"chi-square with each tau's EDF, family-wise {100 * c.level:g} % over {c.n_taus} taus"
+    if not c.departs:
+        line = (f"  model check: the fitted model agrees with the measured ADEV within chance at {where} ({test}; "
+                f"largest factor {c.worst_ratio:.2f} at tau {c.worst_tau_s:.4g} s)")
     else:
-        line = (f"  model check: WARNING the fitted model is {r:.3g}x {side} the measured ADEV at tau "
-                f"{a.tau_s[i]:.4g} s: the five IEEE-952 terms do not describe this record (periodic or "
-                f"vibration terms, non-stationarity) or the fit failed; read the coefficients with care")
+        taus = ", ".join(f"{t:.4g} s (model {max(r, 1 / r):.3g}x {'above' if r > 1 else 'below'}, p {p:.2g})"
+                         for t, r, p in zip(c.tau_s, c.ratio, c.p, strict=True))
+        line = (f"  model check: WARNING the fitted model departs from the measured ADEV beyond chance ({test}) at "
+                f"tau {taus}: the five IEEE-952 terms do not describe this record (periodic or vibration terms, "
+                f"non-stationarity) or the fit failed; read the coefficients with care")
     if misfit.any():
         taus = ", ".join(f"{t:.4g}" for t in np.asarray(a.tau_s)[misfit])
         line += (f"\n  model check: tau {taus} s not described by the five terms (vibration or periodic "

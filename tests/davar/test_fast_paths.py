@@ -12,7 +12,7 @@ from scipy.stats import chi2
 
 from fogmon.block import Block
 from fogmon.davar import kernels
-from fogmon.davar.batch import HOLD_Z, alpha_rows, dadev, oadev, row_alpha, statistics
+from fogmon.davar.batch import HOLD_Z, dadev, edf_rows, oadev, row_edf, statistics
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.streaming import STAGE, StreamingDadev
 
@@ -158,19 +158,23 @@ def test_oadev_tiles_equal_a_compensated_sum():
         assert res.adev_dph[k] == pytest.approx(np.sqrt(np.sum(np.sort(t * t)) / (2 * keep.sum())), rel=1e-9)
 
 
-def test_held_noise_type_is_refitted_when_the_curve_changes():
+def test_held_noise_mixture_is_refitted_when_the_curve_changes():
     rng = np.random.default_rng(5)
     w, hop = 4096, 512
     white = rng.normal(size=6 * w)
     walk = np.cumsum(rng.normal(size=6 * w)) * 0.3  # random walk dominates the long taus
     y = np.concatenate([white, white[:3 * w] + walk[:3 * w]])
     d = dadev(y, 1.0, w, hop, alpha=0)
-    alpha, _ = alpha_rows(d.n_terms * 2.0 * d.adev_dph**2, d.n_terms, d.end_index, d.m, w, w // 4)
+    edf, _ = edf_rows(d.n_terms * 2.0 * d.adev_dph**2, d.n_terms, d.end_index, d.m, w, w // 4)
     first, last = 0, len(d) - 1
     c = d.n_terms * 2.0 * d.adev_dph**2
-    np.testing.assert_array_equal(alpha[first], row_alpha(c[first], d.n_terms[first], d.m, w))
-    np.testing.assert_array_equal(alpha[last], row_alpha(c[last], d.n_terms[last], d.m, w))
-    assert alpha[last, -1] == -2 and alpha[first, -1] != -2
+    np.testing.assert_array_equal(edf[first], row_edf(c[first], d.n_terms[first], d.m, w)[0])
+    # held between refits: the last row is that of the last refit, on a window that holds the walk
+    refit = np.flatnonzero(np.any(edf[1:] != edf[:-1], axis=1)) + 1
+    assert len(refit) and d.end_index[refit[-1]] >= 6 * w
+    np.testing.assert_array_equal(edf[last], row_edf(c[refit[-1]], d.n_terms[refit[-1]], d.m, w)[0])
+    # the random walk's few EDF at the longest tau (white rate noise alone has about 1.5x more)
+    assert edf[last, -1] < 0.8 * edf[first, -1]
 
 
 def test_model_holds_is_the_z_test_at_every_tau_with_terms():

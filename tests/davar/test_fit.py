@@ -178,30 +178,33 @@ def test_nnls_is_never_given_a_column_without_information():
 
 def test_upper_limit_is_a_95_percent_bound_never_below_the_estimate():
     # RLG record: B, K, R unidentifiable; their printed bound (hi) is the one-sided 95 %
-    # upper limit, above the estimate each term gets when it is fitted with the others
-    from fogmon.davar import fit as fit_mod
-    from fogmon.davar.scoring import profile
+    # upper limit, above the estimate each term gets in the five-term fit
+    from fogmon.davar.theory import avar_terms_to_coefficients
     res = oadev(read_replay_log(RLG).rate_dph, 100.0)
     fit = fit_noise(res)
-    a = fit.avar_terms
+    estimate = avar_terms_to_coefficients(fit.avar_terms)
     for i, name in enumerate(NAMES):
         c = getattr(fit, name)
-        assert c.upper >= c.value and np.isfinite(c.upper), name
+        assert c.upper >= max(c.value, estimate[i]) and np.isfinite(c.upper), name
         if not c.identifiable:
             assert c.hi == c.upper and c.value == 0.0
             assert str(c) == f"not identifiable (< {c.upper:.4g}, 95 % upper limit)"
-            # the estimate of the term fitted alongside the identified ones is below its limit
-            use = fit_mod.octave_subset(res.m, res.n_samples // 4)
-            terms = a > 0
-            terms[i] = True
-            x = res.tau_s[use][:, None] ** fit_mod.POWERS
-            edf = fit_mod._NoiseModel(res.tau_s[use], res.m[use], res.n_terms[use], res.n_samples)
-            rw = (~fit.misfit[use]).astype(float)
-            _, a_in = profile(x, res.adev_dph[use] ** 2, edf.mats, edf.full, edf.gap_scale, rw, 0.0, a, terms, i,
-                              0.0, False, 1e-6, 50)
-            assert fit_mod.avar_terms_to_coefficients(a_in)[i] <= c.upper, name
         else:
-            assert c.hi < c.upper  # the 68.3 % interval's top is inside the 95 % one-sided limit
+            assert c.lo < c.value < c.hi < c.upper  # the 68.3 % interval's top is inside the 95 % one-sided limit
+
+
+def test_a_term_near_its_detection_limit_widens_the_others_intervals():
+    # K near its detection limit beside B: the five-term fit keeps K's share (B does not
+    # absorb it) and B's interval allows for it (issue 28: B's 95 % interval covered 63 %
+    # when an undetected K was fixed at zero)
+    from fogmon.sim.model import Noise, SensorModel
+    from fogmon.sim.simulate import simulate
+    model = SensorModel(100.0, noise=Noise(0.1, 0.01, 0.3, 3.0, 5.0))
+    res = oadev(simulate(model, duration_s=2**17 / 100.0, seed=1).rate_dph, 100.0)
+    fit = fit_noise(res, confidence=0.95)
+    assert not fit.K_dphsh.identifiable and fit.avar_terms[3] > 0
+    assert fit.B_dph.lo < 0.3 < fit.B_dph.hi
+    assert fit.K_dphsh.upper > 3.0 and fit.R_dphh.upper > 5.0
 
 
 def test_identification_does_not_depend_on_the_tau_grid():
@@ -215,7 +218,9 @@ def test_identification_does_not_depend_on_the_tau_grid():
     flags = {grid: tuple(bool(c.identifiable) for c in fit_noise(oadev(y, FS, taus=grid)).coefficients().values())
              for grid in ("octave", 10, "all")}
     assert flags["octave"] == flags[10] == flags["all"], flags
-    assert flags["octave"][1] and flags["octave"][2]  # N and B
+    # N; B (A_B / se 2.3) is not told from a random walk K that the score test keeps free
+    # beside it on 5.5 min (it was identified when K was first eliminated and then fixed at 0)
+    assert flags["octave"] == (False, True, False, False, False)
 
 
 @pytest.mark.slow
@@ -267,7 +272,7 @@ def test_sandwich_variances_match_numpy_linear_algebra():
 
 
 def test_mixture_correlation_is_the_normalised_relative_covariance():
-    from fogmon.davar.confidence import MIX_ALPHAS, avar_relative_covariance
+    from fogmon.davar.confidence import N_CLASSES, avar_relative_covariance
     from fogmon.davar.fit import _NoiseModel
     from fogmon.davar.scoring import mixture_correlation, mixture_fractions
     mixture_correlation, mixture_fractions = from_python(mixture_correlation), from_python(mixture_fractions)
@@ -275,7 +280,7 @@ def test_mixture_correlation_is_the_normalised_relative_covariance():
     edf = _NoiseModel(m / FS, m, 4096 - 2 * m + 1, 4096)
     for a in (np.array([1e-3, 1.0, 0.02, 1e-4, 0.0]), np.array([0.0, 0.0, 1.0, 0.0, 0.0]), np.zeros(5)):
         f = mixture_fractions(edf.x, a)
-        assert f.shape == (len(m), len(MIX_ALPHAS)) and np.allclose(f.sum(axis=1), 1.0)
+        assert f.shape == (len(m), N_CLASSES) and np.allclose(f.sum(axis=1), 1.0)
         cov = avar_relative_covariance(f, edf.cov, edf.full)
         assert np.allclose(mixture_correlation(edf.x, a, edf.cov), cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov))),
                            rtol=1e-12, atol=1e-14)

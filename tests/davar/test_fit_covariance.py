@@ -36,6 +36,30 @@ def test_relative_covariance_equals_the_exact_quadratic_form():
     np.testing.assert_allclose(got, ref, rtol=5e-4)  # measured 1.2e-4: midpoint error of the quadrature
 
 
+def test_a_rate_ramp_adds_only_its_cross_term_with_the_noise():
+    # y = mu + e, mu a ramp: q_m = y'A_m y has mean mu'A mu + tr(A S) and covariance
+    # 2 tr(A_a S A_b S) + 4 mu'A_a S A_b mu: the ramp's own part mu'A mu has no variance
+    n = 256
+    m = np.array([1, 2, 3, 7, 16, 30, 50, 64])
+    diff = np.eye(n, n + 1, 1) - np.eye(n, n + 1)
+    walk = np.tril(np.ones((n, n)))
+    parts = [diff @ diff.T, np.eye(n), 1e-3 * walk @ walk.T]
+    s = sum(parts)
+    mu = 0.01 * np.arange(n)
+    a = [_term_matrix(k, n).T @ _term_matrix(k, n) / (2.0 * (n - 2 * k + 1)) for k in m]
+    ramp = np.array([mu @ ak @ mu for ak in a])
+    mean = np.array([np.trace(ak @ s) for ak in a]) + ramp
+    b = [ak @ s for ak in a]
+    ref = (np.array([[2.0 * np.sum(bi * bj.T) for bj in b] for bi in b])
+           + 4.0 * np.array([[mu @ bi @ aj @ mu for aj in a] for bi in b])) / np.outer(mean, mean)
+    noise = np.array([[np.trace(ak @ p) for p in parts] for ak in a])
+    frac = np.column_stack([noise[:, 0], noise[:, 1], np.zeros(len(m)), noise[:, 2], ramp]) / mean[:, None]
+    assert frac[:, 4].max() > 0.5  # the ramp dominates the longest taus
+    got = avar_relative_covariance(frac, covariance_matrices(m, n), n - 2 * m + 1)
+    np.testing.assert_allclose(got, ref, rtol=5e-4)
+    np.testing.assert_allclose(edf_mixture(frac, m, n), 2.0 / np.diag(ref), rtol=5e-3)  # lags to 3 m only
+
+
 def _avars(y: np.ndarray, m: np.ndarray) -> np.ndarray:
     c = np.concatenate([np.zeros((len(y), 1)), np.cumsum(y, axis=1)], axis=1)
     return np.array([0.5 * np.mean(((c[:, 2 * k:] - 2 * c[:, k:-k] + c[:, :-2 * k]) / k) ** 2, axis=1)

@@ -83,14 +83,16 @@ def test_chi2_bounds_match_allantools():
     assert np.all(lo95 < lo) and np.all(hi95 > hi)
 
 
-def test_oadev_bounds_use_the_fitted_noise_type():
+def test_oadev_bounds_use_the_fitted_noise_mixture():
     rng = np.random.default_rng(1)
     y = rng.normal(size=200000) + np.cumsum(rng.normal(size=200000)) * 0.01
     res = oadev(y, 1.0, taus="octave")
-    explicit = oadev(y, 1.0, taus="octave", alpha=np.where(res.m < 300, 0, -2))
-    # white rate dominates short taus, random walk long ones: the fitted alpha picks them
-    assert np.allclose(res.edf[res.m < 64], explicit.edf[res.m < 64])
-    assert np.allclose(res.edf[res.m > 4000], explicit.edf[res.m > 4000])
+    # white rate dominates short taus, random walk long ones: the fitted mixture's EDF is
+    # white rate noise's exact discrete one there (Greenhall's continuous-time one is 13 %
+    # off at m = 1) and the random walk's at the longest taus
+    white = edf_mixture(np.tile([0.0, 1.0, 0.0, 0.0], (len(res.m), 1)), res.m, len(y))
+    np.testing.assert_allclose(res.edf[res.m < 32], white[res.m < 32], rtol=0.01)
+    np.testing.assert_allclose(res.edf[res.m > 4000], edf_full(-2, res.m[res.m > 4000], len(y)), rtol=0.01)
     tau, dev, err, n = allantools.oadev(y, rate=1.0, data_type="freq", taus=res.tau_s)
     assert np.all(res.lo_dph < dev) and np.all(dev < res.hi_dph)
 
@@ -127,6 +129,18 @@ def test_discrete_edf_matches_monte_carlo_where_greenhall_is_off(alpha, m, green
     assert edf_mixture(frac, [m], 2048)[0] == pytest.approx(mc, rel=0.08)  # MC: 2.6 % standard error
     g = edf_full(alpha, [m], 2048)[0]
     assert (g / mc - 1) * np.sign(greenhall_off) > abs(greenhall_off) / 2  # the error this fixes
+
+
+def test_oadev_intervals_use_the_mixture_edf_where_two_noise_types_meet():
+    # white angle and white rate noise equal at m = 8: the dominant type's Greenhall EDF
+    # (white angle: ~n / 1.94) was 1.4x the mixture's, white rate's 0.45x
+    rng = np.random.default_rng(4)
+    n, m = 2**16, 8
+    y = np.diff(rng.normal(size=n + 1) * np.sqrt(m / 3.0)) + rng.normal(size=n)
+    res = oadev(y, 1.0, taus=[1, 2, 4, 8, 16, 32, 64])
+    k = list(res.m).index(m)
+    assert res.edf[k] == pytest.approx(edf_mixture(np.array([[0.5, 0.5, 0.0, 0.0]]), [m], n)[0], rel=0.1)
+    assert edf_full(0, [m], n)[0] * 2 < res.edf[k] < edf_full(2, [m], n)[0] / 1.3
 
 
 def test_mixture_edf_matches_monte_carlo_of_white_angle_plus_white_rate():
@@ -187,5 +201,15 @@ def test_mixture_matrices_of_all_factors_at_once_equal_one_factor_at_a_time(m, n
 
     got = mixture_matrices(list(m) + [n], n)
     assert np.isnan(got[-1]).all()  # 2 m > n
-    for k, c in zip(m, got, strict=False):
-        np.testing.assert_allclose(c, _mixture_matrix_one(k, n), rtol=1e-12, atol=1e-12 * np.abs(c).max())
+    for k, c in zip(m, got, strict=False):  # the noise types' part (the ramp's row: test_davar_fit_covariance)
+        np.testing.assert_allclose(c[:4, :4], _mixture_matrix_one(k, n), rtol=1e-12, atol=1e-12 * np.abs(c).max())
+
+
+def test_no_interval_below_one_edf_and_none_that_excludes_its_estimate():
+    # issue 30: "16.48  21.341 [61.635, 1.3915e+12] edf 0.07"
+    lo, hi = chi2_bounds(np.array([21.341]), np.array([0.07]))
+    assert np.isnan(lo[0]) and np.isnan(hi[0])
+    edf = np.geomspace(1.0, 1e6, 200)
+    for conf in (0.5, 0.683, 0.9, 0.95, 0.99):
+        lo, hi = chi2_bounds(np.ones(len(edf)), edf, conf)
+        assert np.all((lo <= 1.0) & (hi >= 1.0))

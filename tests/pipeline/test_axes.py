@@ -111,7 +111,7 @@ def test_console_shows_the_axes_side_by_side(axes_run):
     assert "  invalid/lost samples per axis: x 60, y 10, z 10" in lines
     assert any(ln.startswith("  axis y: platform motion: 1 span(s)") for ln in lines)
     assert sum(ln.startswith("  axis ") and "model band" in ln for ln in lines) == 3
-    head = lines.index("IEEE-952 noise coefficients per axis (whole run, with intervals; n/i: not identifiable "
+    head = lines.index("IEEE-952 noise coefficients per axis (whole run, 68.3 % intervals; n/i: not identifiable "
                        "from this record, < its 95 % upper limit):")
     assert lines[head + 1].split() == ["coefficient", "unit", "x", "y", "z"]
     row = next(ln for ln in lines[head:] if ln.startswith("  N_dpsh"))
@@ -190,37 +190,38 @@ ONE_AXIS_SUMMARY = "\n".join([
     '',
     'Overall Allan deviation (0.00..119.99 s, 68.3 % confidence bounds):',
     '       tau_s     adev_dph       lo_dph       hi_dph        edf   n_terms',
-    '        0.01       47.806       47.454       48.166       9029     11537',
-    '        0.02       33.755       33.457       34.061       6247     11529',
-    '        0.04       23.917       23.638       24.207       3542     11513',
-    '        0.08       17.049       16.781       17.331       1928     11481',
-    '        0.16       12.455       12.187       12.742       1010     11417',
-    '        0.32       8.6615       8.4034        8.945      514.1     11289',
-    '        0.64       5.9629       5.7173       6.2432      259.3     11033',
-    '        1.28       4.1979       3.9547       4.4922        124     10521',
-    '        2.56       2.8871       2.6493        3.203      56.27      9497',
-    '        5.12       2.5216       2.2159       3.0028      22.34      7449',
-    '       10.24       1.6454         1.31       2.5239      5.291      3426',
+    '        0.01       47.806       47.425       48.197       7693     11537',
+    '        0.02       33.755       33.464       34.053       6589     11529',
+    '        0.04       23.917       23.654       24.189       4005     11513',
+    '        0.08       17.049       16.793       17.318       2112     11481',
+    '        0.16       12.455       12.194       12.734       1065     11417',
+    '        0.32       8.6615       8.4069       8.9409      528.7     11289',
+    '        0.64       5.9629        5.717       6.2436      258.6     11033',
+    '        1.28       4.1979       3.9542        4.493      123.4     10521',
+    '        2.56       2.8871       2.6484       3.2047      55.75      9497',
+    '        5.12       2.5216       2.2135       3.0089      21.91      7449',
+    '       10.24       1.6454       1.3057       2.5548      5.077      3426',
     '       20.48   no valid Allan term (the record is too short, or every term '
     'spans a gap or platform motion)',
     '',
-    'IEEE-952 noise coefficients (whole run, with intervals):',
-    '  Q_arcsec    not identifiable from this record (< 0.04882 arcsec, 95 % upper limit)',
-    '  N_dpsh    = 0.07993 deg/sqrt(h)  [0.07938, 0.08047]',
-    '  B_dph       not identifiable from this record (< 2.861 deg/h, 95 % upper limit)',
-    '  K_dphsh     not identifiable from this record (< 97.49 deg/h/sqrt(h), 95 % upper limit)',
-    '  R_dphh      not identifiable from this record (< 2000 deg/h^2, 95 % upper limit)',
-    '  model check: the fitted model is within a factor 1.19 of the measured ADEV at every tau',
+    'IEEE-952 noise coefficients (whole run, 68.3 % intervals):',
+    '  Q_arcsec    not identifiable from this record (< 0.04828 arcsec, 95 % upper limit)',
+    '  N_dpsh    = 0.07983 deg/sqrt(h)  [0.07932, 0.0804]',
+    '  B_dph       not identifiable from this record (< 2.953 deg/h, 95 % upper limit)',
+    '  K_dphsh     not identifiable from this record (< 116.1 deg/h/sqrt(h), 95 % upper limit)',
+    '  R_dphh      not identifiable from this record (< 978.1 deg/h^2, 95 % upper limit)',
+    '  model check: the fitted model agrees with the measured ADEV within chance at every tau (chi-square with'
+     " each tau's EDF, family-wise 1 % over 11 taus; largest factor 1.10 at tau 5.12 s)",
     '',
     'IEEE-952 noise coefficients without and with platform motion (415 samples, 3.5 %, kept out'
-     ' above; --keep-motion analyses them; n/i: not identifiable from this record, < its 95 % upper'
-     ' limit):',
+     ' above; --keep-motion analyses them; 68.3 % intervals; n/i: not identifiable from this record,'
+     ' < its 95 % upper limit):',
     '  coefficient unit                            motion kept out                  motion analysed',
-    '  Q_arcsec    arcsec                          n/i (< 0.04882)          0.1641 [0.1423, 0.1832]',
-    '  N_dpsh      deg/sqrt(h)          0.07993 [0.07938, 0.08047]       0.06023 [0.05463, 0.06536]',
-    '  B_dph       deg/h                             n/i (< 2.861)                    n/i (< 25.11)',
-    '  K_dphsh     deg/h/sqrt(h)                     n/i (< 97.49)  1.557e+04 [1.374e+04, 1.72e+04]',
-    '  R_dphh      deg/h^2                            n/i (< 2000)  6.055e+06 [5.82e+06, 6.281e+06]',
+    '  Q_arcsec    arcsec                          n/i (< 0.04828)          0.2202 [0.1765, 0.2705]',
+    '  N_dpsh      deg/sqrt(h)           0.07983 [0.07932, 0.0804]       0.03936 [0.03138, 0.05414]',
+    '  B_dph       deg/h                             n/i (< 2.953)                    n/i (< 35.74)',
+    '  K_dphsh     deg/h/sqrt(h)                     n/i (< 116.1)  1.932e+04 [1.81e+04, 2.068e+04]',
+    '  R_dphh      deg/h^2                           n/i (< 978.1)  5.764e+06 [5.427e+06, 5.99e+06]',
     '',
     'Counters:',
     '  frames_ok                12000',

@@ -161,15 +161,42 @@ def test_reference_rotation_is_subtracted_unless_raw_rate():
     assert s.motion_spans == [] and s.overall.adev_dph[-1] > 1e5   # ... unless asked: the 2.6e6 deg/h step
 
 
-def test_model_check_names_the_worst_tau():
+def test_adev_tables_print_no_interval_below_one_edf():
+    from types import SimpleNamespace
+
+    from fogmon.davar.confidence import chi2_bounds
+    from fogmon.sinks.console import adev_axes_lines, adev_lines
+
+    adev, edf = np.array([2.0, 21.341]), np.array([50.0, 0.07])
+    lo, hi = chi2_bounds(adev, edf)
+    a = SimpleNamespace(tau_s=np.array([1.0, 16.48]), adev_dph=adev, lo_dph=lo, hi_dph=hi, edf=edf,
+                        n_terms=np.array([100, 3]))
+    lines = adev_lines(a)
+    assert lines[2].split() == ["16.48", "21.341", "-", "-", "0.07", "3"]
+    assert lines[-1].startswith("  no interval: EDF below 1")
+    side = adev_axes_lines({"x": a, "y": a})
+    assert side[2].split() == ["16.48", "21.341", "[no", "interval]", "21.341", "[no", "interval]"]
+    assert side[-1] == lines[-1]
+    a.edf, a.lo_dph, a.hi_dph = np.array([50.0, 2.0]), *chi2_bounds(adev, np.array([50.0, 2.0]))
+    assert not adev_lines(a)[-1].startswith("  no interval")
+
+
+def test_model_check_is_a_chi_square_test_with_each_taus_edf():
     from types import SimpleNamespace
 
     from fogmon.sinks.console import model_check
 
-    a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]))
+    a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]),
+                        edf=np.array([1e4, 1e3, 4.0]))
     good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]), misfit=np.zeros(3, bool))
-    assert model_check(a, good) == ("  model check: the fitted model is within a factor 1.01 of the measured ADEV "
-                                    "at every tau")
-    bad = SimpleNamespace(model_adev_dph=lambda tau: np.full(3, 1.0), misfit=np.zeros(3, bool))
+    assert model_check(a, good) == ("  model check: the fitted model agrees with the measured ADEV within chance at "
+                                    "every tau (chi-square with each tau's EDF, family-wise 1 % over 3 taus; largest "
+                                    "factor 1.01 at tau 10 s)")
+    # 1.5x at an EDF of 4 is chance (the old fixed 1.5x threshold warned); 1.1x at an EDF of 1e4 is not
+    chance = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.32, 0.3]), misfit=np.zeros(3, bool))
+    assert "WARNING" not in model_check(a, chance)
+    bad = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.1, 0.32, 0.2]), misfit=np.zeros(3, bool))
     msg = model_check(a, bad)
-    assert msg.startswith("  model check: WARNING the fitted model is 5x above the measured ADEV at tau 100 s")
+    assert msg.startswith("  model check: WARNING the fitted model departs from the measured ADEV beyond chance "
+                          "(chi-square with each tau's EDF, family-wise 1 % over 3 taus) at tau 1 s (model 1.1x "
+                          "above, p ")

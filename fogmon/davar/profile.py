@@ -1,0 +1,161 @@
+"""Numba kernels of the IEEE-952 fit's intervals (fogmon/davar/fit.py): the full
+five-term fit and, for each term, the generalized score test of A_n = c with every other
+term free (>= 0) and refitted under it, so that a term near its detection limit widens
+the intervals of the terms it trades off with instead of being fixed at zero.
+
+The test (Boos 1992) belongs to the fit's own estimating equations, Fisher scoring's
+U_n = sum_i rw_i x_in (y_i - mu_i) / (v_i mu_i^2) (v = 2 / nu + c2 the relative variance
+of the Allan variance y at the model mu): with the other terms refitted under A_n = c,
+s(c) = naive_n U_n / sqrt(sandwich_n) - the one-step change of A_n over its sandwich
+standard error (``scoring.sandwich_variances``: the exact correlation of the Allan
+variances across taus), both evaluated under the hypothesis. s is about standard
+normal at the true A_n; it is positive where the record asks for more of the term. A
+limit is the c where s reaches a normal quantile. (The deviance of the extended
+quasi-likelihood, rescaled for the correlation, was used before: its ln v term, v
+depending on the terms through the EDF, made it too steep for a ramp beside a random
+walk, and its minimum is not that of Fisher scoring.)
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fogmon.davar.scoring import (
+    fisher_scoring,
+    mixture_correlation,
+    robust_scoring,
+    sandwich_variances,
+)
+from fogmon.jit import B1, F1, F2, F3, F4, F8, I8, kernel
+
+_ALL = np.ones(5, np.bool_)
+_MAX_BRACKET = 60  # doublings of the step above the estimate
+_MAX_ROOT = 40  # regula falsi steps
+
+
+@kernel(error_model="numpy")
+def signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, max_iter):
+    """(s(c), the terms refitted under A_n = c) for term ``n``: Fisher scoring of the other
+    terms (>= 0) from ``start`` with A_n held at ``c``, then the signed root of the
+    generalized score statistic (module docstring) over the terms > 0 and n."""
+    a0 = start.copy()
+    a0[n] = c
+    cols = _ALL.copy()
+    cols[n] = False
+    # from the data as model when nothing else is left (the estimate held only term n, tested at 0)
+    a1, model, nu = fisher_scoring(x, cols, y, mats, full, gap_scale, rw, a0, not np.any(a0 > 0), c2, rtol, max_iter)
+    u = 0.0
+    for i in range(x.shape[0]):
+        u += rw[i] * x[i, n] * (y[i] - model[i]) / ((2.0 / nu[i] + c2) * model[i] ** 2)
+    free = a1 > 0
+    free[n] = True
+    naive, sand = sandwich_variances(x, model, mixture_correlation(x, a1, cov), free, rw, nu, c2)
+    k = 0
+    for j in range(n):
+        k += free[j]
+    if not (naive[k] > 0 and sand[k] > 0):
+        return 0.0, a1
+    return naive[k] * u / np.sqrt(sand[k]), a1
+
+
+@kernel((F2, F1, F3, F1, F1, F4, F1, F8, F1, F1, B1, F1, F1, F8, I8), error_model="numpy")
+def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, lower_z, upper_z, rtol, max_iter):
+    """For each term n in ``which``: s(0) (``signed_score``; <= 0 when the estimate A_n is
+    0), and the limits: for each normal quantile z of ``lower_z`` the c in [0, A_n] where
+    s(c) = z (0 when s(0) <= z), for each z of ``upper_z`` (increasing) the c > A_n where
+    s(c) = -z (inf when no bracket is found in _MAX_BRACKET doublings). Brackets start at
+    A_n + its sandwich standard error ``se``; Illinois regula falsi to 1e-3 of the
+    bracket's top (of A_n below it); each fit is warm-started from the last. Returns
+    (s0 (5,), lower (5, len(lower_z)), upper (5, len(upper_z))), NaN outside ``which``."""
+    s0 = np.full(5, np.nan)
+    lower = np.full((5, lower_z.shape[0]), np.nan)
+    upper = np.full((5, upper_z.shape[0]), np.nan)
+    for n in range(5):
+        if not which[n]:
+            continue
+        a_n = a[n]
+        s0[n] = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, a, n, 0.0, rtol, max_iter)[0]
+        if not a_n > 0:  # the fit put the term at 0: the record does not ask for it
+            s0[n] = min(s0[n], 0.0)
+        for k in range(lower_z.shape[0]):
+            z = lower_z[k]
+            if not s0[n] > z:
+                lower[n, k] = 0.0
+                continue
+            lower[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, a, n, rtol, max_iter, z,
+                                0.0, s0[n] - z, a_n, -z, 1e-3 * a_n)
+        step = se[n] if se[n] > 0 and np.isfinite(se[n]) else max(a_n, 1e-300)
+        lo, s_lo, hi = a_n, 0.0, a_n + step
+        start = a.copy()
+        for k in range(upper_z.shape[0]):
+            z = upper_z[k]
+            if lo > a_n and not s_lo > -z:  # the last bracket's bottom is already past this quantile
+                lo, s_lo = a_n, 0.0
+            found = False
+            s_hi = 0.0
+            for _ in range(_MAX_BRACKET):
+                s_hi, start = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, hi, rtol, max_iter)
+                if s_hi < -z:
+                    found = True
+                    break
+                lo, s_lo, hi = hi, s_hi, hi + 2.0 * (hi - a_n)
+            if not found:
+                upper[n, k:] = np.inf
+                break
+            upper[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, -z,
+                                lo, s_lo + z, hi, s_hi + z, 1e-3 * hi)
+            lo, s_lo = upper[n, k], -z  # the next quantile's bracket starts at this limit
+    return s0, lower, upper
+
+
+@kernel(error_model="numpy")
+def _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, target, lo, f_lo, hi, f_hi, tol):
+    """The c in [lo, hi] where s(c) of term n crosses ``target``, given f = s - target at
+    both ends of opposite signs: Illinois regula falsi to ``tol`` (or |f| < 1e-3)."""
+    side = 0
+    c = 0.5 * (lo + hi)
+    for _ in range(_MAX_ROOT):
+        if hi - lo <= tol:
+            break
+        c = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+        c = min(max(c, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+        s, start = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, max_iter)
+        f = s - target
+        if abs(f) < 1e-3:
+            return c
+        if (f > 0) == (f_hi > 0):
+            hi, f_hi = c, f
+            if side == 1:
+                f_lo /= 2.0
+            side = 1
+        else:
+            lo, f_lo = c, f
+            if side == -1:
+                f_hi /= 2.0
+            side = -1
+    return c
+
+
+@kernel((F2, F1, F3, F1, F1, F4, F2, F8, F8, F8, F8, I8, F8, F8, I8), error_model="numpy")
+def fit_full(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw_tol, max_robust, robust_rtol, rtol,
+             max_iter):
+    """The five-term fit of fit.fit_avar on its taus: ``robust_scoring`` of all five terms
+    from the robust weights ``starts``, the winner scored to ``rtol``. Standard errors:
+    sandwich (``sandwich_variances`` with the exact correlation across taus of the
+    covariance matrices ``cov``) over the terms > 0; a term at 0 gets the one it would have
+    if fitted alongside them. Returns (found, A, se, robust weights, c2); found False when
+    every robust start failed."""
+    found, a, rw, c2 = robust_scoring(x, _ALL, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
+                                      max_robust, robust_rtol, max_iter)
+    se = np.full(5, np.inf)
+    if not found:
+        return False, a, se, rw, c2
+    a, model, nu = fisher_scoring(x, _ALL, y, mats, full, gap_scale, rw, a, not np.any(a > 0), c2, rtol, max_iter)
+    corr = mixture_correlation(x, a, cov)
+    for n in range(5):
+        cols = a > 0
+        cols[n] = True
+        k = 0
+        for j in range(n):
+            k += cols[j]
+        se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][k])
+    return True, a, se, rw, c2
