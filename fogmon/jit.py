@@ -18,6 +18,11 @@ Every numba kernel is made by ``kernel``: nopython and cached on disk (``cache=T
   kernel could not be saved (the cache is unusable): the run compiles only what it
   needs, as numba does.
 
+A kernel's cache entry is keyed by the sources of every kernel module (``_sources_digest``)
+besides numba's own key (the function's bytecode and its file's time stamp): numba
+keeps a kernel compiled with the code of kernels it calls in other modules, so an edit
+there alone (a ``git pull`` into an editable install) would load stale machine code.
+
 A numba cache that cannot be read or written (corrupt files, an install directory
 without write access, ``NUMBA_CACHE_DIR`` pointing nowhere usable) costs a compile in
 memory and one FogmonWarning, never the run.
@@ -25,7 +30,9 @@ memory and one FogmonWarning, never the run.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import importlib
+import importlib.util
 import sys
 import time
 import warnings
@@ -65,6 +72,7 @@ def kernel(*signatures: tuple, **options) -> Callable:
         if not signatures and "inline" not in options:
             options.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)
         disp = numba.njit(cache=True, **options)(fn)
+        _key_by_sources(disp)
         template = disp.get_call_template
 
         def get_call_template(args, kws):  # a call from another kernel: types, not constants
@@ -88,6 +96,32 @@ def kernel(*signatures: tuple, **options) -> Callable:
             disp._compile_for_args = first_compile_warms_up
         return disp
     return wrap
+
+
+_digest: list[str] = []
+
+
+def _sources_digest() -> str:
+    """SHA-256 of the source files of fogmon.jit and every kernel module (read once, when
+    the first kernel looks into the cache: after KERNEL_MODULES is final)."""
+    if not _digest:
+        h = hashlib.sha256()
+        for name in (__name__, *KERNEL_MODULES):
+            spec = importlib.util.find_spec(name)
+            origin = spec.origin if spec is not None else None
+            if origin:
+                with open(origin, "rb") as fh:
+                    h.update(fh.read())
+        _digest.append(h.hexdigest())
+    return _digest[0]
+
+
+def _key_by_sources(disp) -> None:
+    """``disp``'s cache entries keyed also by ``_sources_digest``."""
+    cache = getattr(disp, "_cache", None)
+    if isinstance(cache, caching.Cache):
+        key = cache._index_key
+        cache._index_key = lambda sig, codegen: (*key(sig, codegen), _sources_digest())  # type: ignore[method-assign]
 
 
 def declared() -> list[tuple[str, numba.core.registry.CPUDispatcher, tuple]]:

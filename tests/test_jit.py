@@ -143,3 +143,48 @@ def test_no_warm_up_when_the_cache_cannot_keep_kernels(tmp_path):
     # first() compiled in memory, second() not compiled ahead: it would be lost
     assert p.stdout.split() == ["2.0", "False", "0", "1", "False", "1"]
     assert p.stderr.count("FogmonWarning: numba cache unusable") == 1
+
+
+_CALLEE = '''
+from fogmon.jit import kernel
+
+
+@kernel()
+def step(x):
+    return x + {inc}
+'''
+
+_CALLER = '''
+from fogmon.jit import F8, kernel
+import dummy_callee
+
+
+@kernel((F8,))
+def outer(x):
+    return dummy_callee.step(x)
+'''
+
+_RUN_CALLER = """
+import sys
+sys.path.insert(0, {tmp!r})
+from fogmon import jit
+jit.KERNEL_MODULES = ("dummy_callee", "dummy_caller")
+import dummy_caller
+print(dummy_caller.outer(1.0))
+"""
+
+
+def test_an_edit_of_a_called_kernel_in_another_module_is_not_served_from_the_cache(tmp_path):
+    """numba keys a cached kernel by its own file only: the caller compiled with the old
+    callee would be loaded after an edit of the callee's module (a git pull into an
+    editable install). fogmon.jit keys every entry by all kernel modules' sources."""
+    (tmp_path / "dummy_caller.py").write_text(textwrap.dedent(_CALLER))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    out = []
+    for inc in (1.0, 2.0):
+        (tmp_path / "dummy_callee.py").write_text(textwrap.dedent(_CALLEE.format(inc=inc)))
+        p = subprocess.run([sys.executable, "-c", _RUN_CALLER.format(tmp=str(tmp_path))], capture_output=True,
+                           text=True, env=env)
+        assert p.returncode == 0, p.stderr
+        out.append(p.stdout.strip())
+    assert out == ["2.0", "3.0"]

@@ -144,12 +144,13 @@ def fit_full(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw
     covariance matrices ``cov``) over the terms > 0; a term at 0 gets the one it would have
     if fitted alongside them. Returns (found, A, se, robust weights, c2); found False when
     every robust start failed."""
-    found, a, rw, c2 = robust_scoring(x, _ALL, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
+    every = _ALL.copy()   # a writable mask: a global is a read-only array in numba (a second version)
+    found, a, rw, c2 = robust_scoring(x, every, y, mats, full, gap_scale, starts, tukey_c, floor2, gate, rw_tol,
                                       max_robust, robust_rtol, max_iter)
     se = np.full(5, np.inf)
     if not found:
         return False, a, se, rw, c2
-    a, model, nu = fisher_scoring(x, _ALL, y, mats, full, gap_scale, rw, a, not np.any(a > 0), c2, rtol, max_iter)
+    a, model, nu = fisher_scoring(x, every, y, mats, full, gap_scale, rw, a, not np.any(a > 0), c2, rtol, max_iter)
     corr = mixture_correlation(x, a, cov)
     for n in range(5):
         cols = a > 0
