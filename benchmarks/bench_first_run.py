@@ -24,9 +24,14 @@ the first runs are single runs (a first run happens once). The first run's compi
 the CPU time the warm-up line on stderr reports (``fogmon.jit``: the first run compiles
 every kernel of every command once). ``--lazy`` adds the same table with that warm-up
 switched off (each kernel compiled when a run first needs it, numba's own way): the
-alternative it was measured against.
+alternative it was measured against. ``--kernels`` adds where the compile goes: each
+declared kernel's compile CPU s (its callees included when it is the first to need them,
+in the warm-up's order) in a fresh process with an empty cache, at numba's default
+optimisation level (``NUMBA_OPT=3``) and at 1 and 0, with the part spent in LLVM (parsing,
+optimising and emitting the IR numba wrote; the rest is numba's typing and lowering in
+Python).
 
-    python benchmarks/bench_first_run.py [--runs 3] [--lazy]
+    python benchmarks/bench_first_run.py [--runs 3] [--lazy] [--kernels]
 
 Prints the load average before and after (the machine is shared).
 """
@@ -51,6 +56,49 @@ DBC = ROOT / "fogmon" / "data" / "gyro_example.dbc"
 #: the fogmon program, optionally with the warm-up switched off (``--lazy``)
 PROGRAM = ("import sys\nfrom fogmon import jit\njit.warm_up_on_first_use = {warm}\n"
            "from fogmon.cli import main\nsys.exit(main())\n")
+
+
+#: compiles every declared kernel, printing "name CPU-s LLVM-CPU-s" per kernel (numba's
+#: private code-library methods timed: parse + function passes, module passes, machine code)
+KERNELS = """
+import time
+from numba.core import codegen
+from fogmon import jit
+llvm = [0.0]
+def timed(f):
+    def g(*a, **k):
+        t = time.process_time()
+        try:
+            return f(*a, **k)
+        finally:
+            llvm[0] += time.process_time() - t
+    return g
+for name in ("add_ir_module", "_optimize_final_module", "_finalize_final_module"):
+    setattr(codegen.CPUCodeLibrary, name, timed(getattr(codegen.CPUCodeLibrary, name)))
+for name, d, s in jit.declared():
+    t, l0 = time.process_time(), llvm[0]
+    d.compile(s)
+    print(name.rsplit(".", 1)[1], time.process_time() - t, llvm[0] - l0, flush=True)
+"""
+
+
+def kernel_table(tmp: Path) -> None:
+    """Print each declared kernel's compile CPU s (LLVM's part in parentheses) at
+    ``NUMBA_OPT`` 3 (numba's default), 1 and 0, each in a fresh process and cache."""
+    cols = {}
+    for opt in ("3", "1", "0"):
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp / f"cache_opt{opt}"), "NUMBA_OPT": opt,
+               "PYTHONPATH": str(ROOT), "PYTHONWARNINGS": "ignore"}
+        p = subprocess.run([sys.executable, "-c", KERNELS], capture_output=True, text=True, env=env, cwd=ROOT)
+        if p.returncode:
+            raise SystemExit(f"kernel compile (NUMBA_OPT={opt}): exit {p.returncode}\n{p.stderr[-2000:]}")
+        cols[opt] = [(n, float(t), float(ll)) for n, t, ll in (line.split() for line in p.stdout.splitlines())]
+    print("compile CPU s per declared kernel, callees included where first needed (LLVM's part), "
+          "fresh process and cache per NUMBA_OPT (0: numba cannot cache the result):")
+    print(f"  {'kernel':22s}" + "".join(f" {'NUMBA_OPT=' + o:>16s}" for o in cols))
+    rows = list(zip(*cols.values(), strict=True))
+    for row in rows + [tuple(("total", sum(r[1] for r in c), sum(r[2] for r in c)) for c in cols.values())]:
+        print(f"  {row[0][0]:22s}" + "".join(f" {t:7.2f} ({ll:5.2f})" for _, t, ll in row))
 
 
 def write_can_log(path: Path, seconds: float = 600.0, rate_hz: float = 100.0) -> None:
@@ -138,6 +186,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="warm runs of each configuration (medians printed)")
     ap.add_argument("--lazy", action="store_true", help="also measure without the warm-up (numba's lazy compiles)")
+    ap.add_argument("--kernels", action="store_true",
+                    help="also print each kernel's compile CPU s at NUMBA_OPT 3, 1 and 0 (LLVM's part)")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
@@ -166,6 +216,8 @@ def main() -> None:
         if a.lazy:
             print("the same without the warm-up (each kernel compiled when a run first needs it):")
             table(configs, tmp / "cache_lazy", a.runs, False)
+        if a.kernels:
+            kernel_table(tmp)
         push, engine1, engine = hop1_ratio(a.runs)
         ratio = push / engine
         print(f"hop-1 push (alpha=0) {push / 1e6:.2f} M samples/CPU s, engine alone (advance) at hop 1024 "
