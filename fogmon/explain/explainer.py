@@ -129,7 +129,7 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     null = bootstrap(Replicas(stoch, t, aux, valid), grid, B, opt.seed, opt.alpha, opt.workers, progress, mapper)
     report("mismatch map and candidate effects", 0, 0)
     setting = Setting(t, aux, valid, grid, B, opt.seed, opt.alpha, opt.workers, opt.max_effects, progress, mapper)
-    state = Selection.start(setting, y0.copy(), stoch, null, baseline)
+    state = Selection.start(setting, y0, stoch, null, baseline)  # no one writes into a fit's residual
     # what `before` needs of the first round (its context is let go: memory)
     first_analysis, first_tests = state.fit.analysis, [light(c) for c in state.fit.cands]
     while not state.done:
