@@ -76,14 +76,22 @@ def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> 
 
 
 def _grid_arrays(rec: Recording):
-    blk = rec.to_block()
-    valid = blk.valid.copy()
-    t = blk.t_s
+    """Sample times (s), rate (deg/h), valid mask and gap-filled aux channels on the
+    recording's sample grid: a recording without time gaps lends its own arrays (explain
+    writes into none of them; a 1e7-sample copy is 80 MB each)."""
+    idx = rec.grid_index()
+    if len(idx) and int(idx[-1]) + 1 == len(idx) and rec.rate_dph.ndim == 1:
+        t, rate = np.asarray(rec.t_s, dtype=np.float64), np.asarray(rec.rate_dph, dtype=np.float64)
+        valid, channels = np.isfinite(rate), {k: np.asarray(a, dtype=np.float64) for k, a in rec.aux.items()}
+    else:
+        blk = rec.to_block()
+        t, rate, valid, channels = blk.t_s, blk.rate_dph, blk.valid.copy(), blk.aux
+    del idx
     aux = {}
-    for k, a in blk.aux.items():
+    for k, a in channels.items():
         ok = np.isfinite(a)
         aux[k] = a if ok.all() else np.interp(t, t[ok], a[ok])
-    return t, blk.rate_dph, valid, aux
+    return t, rate, valid, aux
 
 
 def deterministic_dph(model: SensorModel, t: np.ndarray, aux: dict, sample_rate_hz: float) -> np.ndarray:

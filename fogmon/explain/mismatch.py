@@ -287,28 +287,35 @@ def find_regions(z: np.ndarray, z_whole: np.ndarray, null: Null, grid: Grid) -> 
     return out
 
 
-def local_avar_ratio(y: np.ndarray, valid: np.ndarray, m: int, level: np.ndarray, smooth: int
+def local_avar_ratio(y: np.ndarray, valid: np.ndarray, m: int, level: np.ndarray | float, smooth: int
                      ) -> tuple[np.ndarray, np.ndarray]:
     """Matched time-domain scan at one tau: the Allan terms (mean of y over [i+m, i+2m)
     minus mean over [i, i+m))^2 / 2 for every start i, averaged over ``smooth``
     consecutive starts, divided by the model's Allan variance ``level`` at that tau (one
-    value per start). Returns (ratio, number of valid terms averaged), both length
-    n - 2m + 1; 1 means "as noisy as the model". Terms touching an invalid sample are
-    left out."""
+    value per start, or one for all). Returns (ratio, number of valid terms averaged),
+    both length n - 2m + 1; 1 means "as noisy as the model". Terms touching an invalid
+    sample are left out. Each record-length temporary is let go once used (memory)."""
     ok = valid & np.isfinite(y)
-    yy = np.where(ok, y, 0.0)
-    S = np.concatenate(([0.0], np.cumsum(yy)))
+    S = np.concatenate(([0.0], np.cumsum(np.where(ok, y, 0.0))))
     bad = np.concatenate(([0], np.cumsum(~ok)))
-    n = len(y)
-    i = np.arange(n - 2 * m + 1)
-    d = (S[i + 2 * m] - 2.0 * S[i + m] + S[i]) / m
-    good = (bad[i + 2 * m] - bad[i]) == 0
+    del ok
+    k = len(y) - 2 * m + 1
+    d = (S[2 * m:2 * m + k] - 2.0 * S[m:m + k] + S[:k]) / m
+    del S
+    good = (bad[2 * m:2 * m + k] - bad[:k]) == 0
+    del bad
     a = np.where(good, 0.5 * d * d / level, 0.0)
+    del d
     ca = np.concatenate(([0.0], np.cumsum(a)))
+    del a
     cg = np.concatenate(([0], np.cumsum(good)))
-    lo = np.clip(i - smooth // 2, 0, len(i))
-    hi = np.clip(i - smooth // 2 + smooth, 0, len(i))
+    del good
+    i = np.arange(k)
+    lo = np.clip(i - smooth // 2, 0, k)
+    hi = np.clip(i - smooth // 2 + smooth, 0, k)
+    del i
     cnt = cg[hi] - cg[lo]
+    del cg
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(cnt > 0, (ca[hi] - ca[lo]) / cnt, np.nan), cnt
 
@@ -333,7 +340,7 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
         m = int(grid.m_whole[j])
         if n - 2 * m + 1 < 1:
             return r
-        level = np.full(n - 2 * m + 1, float(np.exp(null.mu_whole[j])))
+        level: np.ndarray | float = float(np.exp(null.mu_whole[j]))
     else:
         j = int(np.argmin(np.abs(grid.tau_s - r.tau_peak_s)))
         m = int(grid.m[j])
@@ -344,8 +351,10 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
         t_terms = np.arange(n - 2 * m + 1) + m  # sample index at each term's centre
         centres = grid.starts + (grid.window_n - 1) / 2.0
         level = np.exp(np.interp(t_terms, centres[okw], mu[okw]))
+        del t_terms
     smooth = int(min(max(8 * m, n // 256, 16), max(grid.window_n // 2, 16)))
     ratio, _ = local_avar_ratio(y, valid, m, level, smooth)
+    del level
     t_lo, t_hi = r.t_start_s, r.t_end_s
     i = np.arange(len(ratio))
     start_s = grid.t0_s + i / sample_rate_hz

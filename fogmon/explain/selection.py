@@ -162,7 +162,8 @@ class Selection:
         if c.kind == lookalike.LAW:
             c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
         before, after = self.fit.analysis.score.value, v.trial.analysis.score.value
-        accepted = (*self.accepted, Accepted(c, v.bic_gain, v.why, before, after))
+        # what the report and the fitted model read of it: its design and held-out closure let go (memory)
+        accepted = (*self.accepted, Accepted(replace(c, design=None, heldout=None), v.bic_gain, v.why, before, after))
         if self.setting.progress:
             self.setting.progress(f"effect {len(accepted)}: {c.kind} (score {before:.3g} -> {after:.3g})", 0, 0)
         return replace(self, fit=v.trial, counts={**self.counts, c.kind: self.counts.get(c.kind, 0) + 1},
@@ -336,34 +337,54 @@ def _first_tier(c: Candidate) -> bool:
 def _heldout_mean(ctx: Context, X: np.ndarray) -> tuple[bool, str]:
     """Fit on one half of the record, predict the other: wherever the half-fit is itself
     significant (chi2 gain > 9) and predicts a visible effect in the other half
-    (expected chi2 > 9), the other half's chi-square must drop."""
-    n = ctx.n
-    half = np.arange(n) < n // 2
+    (expected chi2 > 9), the other half's chi-square must drop. Each half's arrays are
+    let go before the next are made (memory: a few record-length arrays per design column)."""
+    half = np.arange(ctx.n) < ctx.n // 2
     notes = []
     ok = True
-
-    def centred(m):  # each half gets its own intercept (the bias is free in each half)
-        v = ctx.valid & m
-        return (np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v)
-
     for fit_m, test_m, name in ((half, ~half, "second"), (~half, half, "first")):
-        yf, Xf, vf = centred(fit_m)
-        wf = Whittle(ctx.wh.S, n, vf)
-        fit = wf.gls(wf.fft(Xf), wf.fft(yf))
-        if fit.chi2_gain < 9.0:
+        beta = _half_fit(ctx, X, fit_m)
+        if beta is None:
             notes.append(f"{name} half: n/a (not determined by the other half)")
             continue
-        yt, Xt, vt = centred(test_m)
-        wt = Whittle(ctx.wh.S, n, vt)
-        XtF = wt.fft(Xt)
-        expected = wt.chi2(XtF @ fit.beta)
-        if expected < 9.0:
+        expected, g = _half_test(ctx, X, test_m, beta)
+        if g is None:
             notes.append(f"{name} half: n/a (effect not visible there)")
             continue
-        g = wt.gain_of(fit.beta, XtF, wt.fft(yt))
         notes.append(f"{name} half: chi2 drop {g:.1f} (expected {expected:.1f})")
         ok &= g > 0
     return ok, "; ".join(notes)
+
+
+def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residual and design on the half ``m``, each with its own intercept (the bias is
+    free in each half), 0 elsewhere, and that half's valid mask."""
+    v = ctx.valid & m
+    return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v
+
+
+def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray) -> np.ndarray | None:
+    """GLS coefficients of design ``X`` fitted on the half ``m``, None when that fit is
+    not itself significant (chi2 gain < 9)."""
+    y, Xc, v = _centred(ctx, X, m)
+    w = Whittle(ctx.wh.S, ctx.n, v)
+    XF = w.fft(Xc)
+    del Xc
+    fit = w.gls(XF, w.fft(y))
+    return None if fit.chi2_gain < 9.0 else fit.beta
+
+
+def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray) -> tuple[float, float | None]:
+    """The chi-square the effect ``X beta`` is expected to remove on the half ``m`` and
+    the drop it brings there (None when the expected one is below 9: not visible)."""
+    y, Xc, v = _centred(ctx, X, m)
+    w = Whittle(ctx.wh.S, ctx.n, v)
+    XF = w.fft(Xc)
+    del Xc
+    expected = w.chi2(XF @ beta)
+    if expected < 9.0:
+        return expected, None
+    return expected, w.gain_of(beta, XF, w.fft(y))
 
 
 def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:

@@ -44,8 +44,9 @@ def periodic(ctx: Context) -> Candidate | None:
     P[:3] = 0.0
     P[-1] = 0.0
     k = int(np.argmax(P))
+    peak_power = float(P[k])
+    del P  # record-length arrays are let go once used (memory)
     t = ctx.t_s
-    tr = t - t[0]
 
     def g(nu):
         return line_gain(ctx.wh.w, ctx.Yf, n, np.atleast_1d(nu))
@@ -70,7 +71,9 @@ def periodic(ctx: Context) -> Candidate | None:
     g3 = g(np.array([nu - h, nu, nu + h]))
     curv = (2 * g3[1] - g3[0] - g3[2]) / (h * ctx.sample_rate_hz / n) ** 2
     f = nu * ctx.sample_rate_hz / n
+    tr = t - t[0]
     X = np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
+    del tr
     fit = judged_gls(ctx, ctx.wh.fft(X))
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
@@ -80,7 +83,7 @@ def periodic(ctx: Context) -> Candidate | None:
     period = 1.0 / f
     se_amp = float(np.sqrt(np.mean(fit.se ** 2)))
     params = {"period_s": period, "amplitude_dph": amp, "phase_rad": phase}
-    ev = (f"periodogram line at {period:.6g} s (PSD-weighted power {P[k]:.3g}x the noise), "
+    ev = (f"periodogram line at {period:.6g} s (PSD-weighted power {peak_power:.3g}x the noise), "
           f"amplitude {estimate_text(amp, se_amp)} deg/h")
     return Candidate("periodic", params, {"period_s": se_f / f ** 2, "amplitude_dph": se_amp,
                                           "phase_rad": se_amp / max(amp, 1e-300)},
