@@ -25,6 +25,7 @@ The rule, applied by the forward selection (fogmon.explain.selection) in three p
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -48,18 +49,26 @@ def _gain(ctx: Context, X: np.ndarray) -> float:
     return ctx.wh.gls(ctx.wh.fft(X), ctx.Yf).chi2_gain
 
 
-def refusal(law: Candidate, cands: list[Candidate], ctx: Context) -> str | None:
+def refusal(law: Candidate, cands: list[Candidate], ctx: Context,
+            refit: Callable[[Candidate], Candidate | None] = lambda c: None) -> str | None:
     """Why the law ``law`` is a look-alike of a mean-type catalogue candidate of the round
-    that explains more (module docstring, 2), or None."""
+    that explains more (module docstring, 2), or None. A candidate kept without its
+    design (the selection's bounded memory) is fitted again by ``refit``."""
     if law.kind != LAW or law.design is None:
         return None
     pen = ctx.penalty
     g_law = _gain(ctx, law.design)
     for o in cands:
-        if o.kind == LAW or o.nature != "mean" or o.design is None or o.bic_gain(pen) <= 0:
+        if o.kind == LAW or o.nature != "mean" or o.bic_gain(pen) <= 0:
             continue
-        g_o = _gain(ctx, o.design)
-        joint = _gain(ctx, np.column_stack((law.design, o.design)))
+        design = o.design
+        if design is None:
+            again = refit(o)
+            if again is None or again.design is None:
+                continue
+            design = again.design
+        g_o = _gain(ctx, design)
+        joint = _gain(ctx, np.column_stack((law.design, design)))
         law_beyond, o_beyond = joint - g_o, joint - g_law
         if law_beyond > law.bar(pen):
             continue

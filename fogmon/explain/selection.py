@@ -181,7 +181,7 @@ class Selection:
         bg = c.bic_gain(ctx.penalty)
         if bg <= 0:
             return Verdict("stop", bg)
-        look = lookalike.refusal(c, self.fit.cands, ctx)
+        look = lookalike.refusal(c, self.fit.cands, ctx, lambda o: fitted(o.kind, ctx, self.fit.null.scan_bars))
         if look is not None:
             return Verdict("defer", bg, look)
         line = _inside_line(c, self.fit.cands, ctx.sample_rate_hz / ctx.n)

@@ -123,6 +123,24 @@ def test_a_tie_with_a_catalogue_kind_on_its_own_channel_keeps_the_catalogue():
     assert why is not None and why.startswith("a look-alike of scale_factor") and "catalogue's physics" in why
 
 
+def test_a_look_alike_kept_without_its_design_is_fitted_again_for_the_comparison():
+    """The selection keeps only each tier's best candidate whole (bounded memory): the
+    catalogue look-alike arrives without its design and is fitted again, so the rule
+    still holds (without the refit the law took the scale factor's place: the devset's
+    rate-table and thermal-chamber cases named aux_response)."""
+    from fogmon.explain.selection import fitted, light
+    n = 36000
+    rng = np.random.default_rng(10)
+    k = np.arange(n)
+    rot = np.where((k // 3000) % 2 == 1, 20.0, 0.0)
+    y = SIGMA * rng.standard_normal(n) + 3600.0 * rot * 30e-6
+    ctx = _ctx(y, {"rot_dps": rot})
+    law, sf = aux_response(ctx), light(scale_factor(ctx))
+    assert sf.design is None
+    why = lookalike.refusal(law, [law, sf], ctx, lambda o: fitted(o.kind, ctx, {}))
+    assert why is not None and why.startswith("a look-alike of scale_factor")
+
+
 def test_a_stepped_channel_is_judged_first_and_explains_the_step():
     n = 36000
     rng = np.random.default_rng(9)
