@@ -15,6 +15,7 @@ from fogmon.explain.candidates.base import (
     Candidate,
     Context,
     model_psd_full,
+    passband_part,
     periodogram,
     stoch_psd,
     white_rms_dpsh,
@@ -131,33 +132,39 @@ def noise_text(name: str, value: float, lo: float, hi: float, model_value: float
 
 
 #: an octave at the top of the band is the sensor's own low-pass when the record's mean
-#: periodogram there lies this many standard errors below both the model's PSD and the
-#: corrected one (1 / sqrt(periodogram values) each)
+#: periodogram there lies this many standard errors (1 / sqrt(periodogram values)) below
+#: the corrected PSD and below its own level in the octave under it
 ROLLOFF_Z = 4.0
 
 
 def passband_bins(bp: BinnedPeriodogram, S0: np.ndarray, S1: np.ndarray) -> np.ndarray:
     """The bins of ``bp`` the noise correction is judged on: all but the top octaves
-    (down from Nyquist, while each in turn) where the record rolls off below both the
-    model's PSD ``S0`` and the corrected ``S1`` by more than ROLLOFF_Z standard errors -
-    the sensor's own low-pass (a digital filter), which no IEEE-952 term describes: there
-    a white level read from the Allan deviation would be judged against what the filter
-    took away (a real MEMS record had its N 2.4 refused for the 10-50 Hz octaves)."""
+    (down from Nyquist, while each in turn) where the record rolls off - its mean
+    periodogram over the corrected PSD ``S1`` lies ROLLOFF_Z standard errors below 1 and
+    below that ratio in the octave under it - the sensor's own low-pass (a digital
+    filter), which no IEEE-952 term describes: there a white level read from the Allan
+    deviation would be judged against what the filter took away (a real MEMS record had
+    its N 2.35 refused for its 10-50 Hz octaves). A correction that is merely too large
+    leaves the ratio flat over the octaves and is judged on them all. ``S0`` (the
+    model's PSD) is not used for the choice: both deviances use the same bins."""
     keep = np.ones(len(bp.I), dtype=bool)
     f = bp.omega / (2.0 * np.pi)  # cycles per sample
-    hi = 0.5 + 1e-12
-    while hi > 4.0 / bp.n:
+    ratio = bp.count * bp.I / S1
+
+    def octave(hi: float) -> tuple[float, float]:
         band = (f >= hi / 2.0) & (f < hi)
         cnt = float(bp.count[band].sum())
-        if cnt < 16:
+        return cnt, (float(ratio[band].sum()) / cnt if cnt else 1.0)
+
+    hi = 0.5 + 1e-12
+    cnt, r = octave(hi)
+    while hi > 8.0 / bp.n and cnt >= 16:
+        cnt_b, r_b = octave(hi / 2.0)
+        if cnt_b < 16 or not (r < 1.0 - ROLLOFF_Z / np.sqrt(cnt)
+                              and r < r_b - ROLLOFF_Z * np.sqrt(1.0 / cnt + 1.0 / cnt_b)):
             break
-        lim = 1.0 - ROLLOFF_Z / np.sqrt(cnt)
-        r0 = float(np.sum((bp.count * bp.I / S0)[band])) / cnt
-        r1 = float(np.sum((bp.count * bp.I / S1)[band])) / cnt
-        if not (r0 < lim and r1 < lim):
-            break
-        keep[band] = False
-        hi /= 2.0
+        keep[(f >= hi / 2.0) & (f < hi)] = False
+        hi, cnt, r = hi / 2.0, cnt_b, r_b
     return keep
 
 
@@ -170,7 +177,7 @@ def noise(ctx: Context) -> Candidate | None:
     fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.sample_rate_hz, wr, model_psd_full(ctx))
     if not fit:
         return None
-    bp = periodogram(ctx)
+    bp = passband_part(ctx, periodogram(ctx))  # where the model's filters pass (as the GLS tests)
     new = _corrected(ctx.stoch, fit)
     S0 = stoch_psd(ctx, bp)
     S1 = model_psd(new, bp.omega, ctx.n, white_rms_dpsh(new, ctx))
@@ -188,7 +195,7 @@ def noise(ctx: Context) -> Candidate | None:
         halves = (slice(0, h), slice(h, 2 * h))
         for a, b in ((0, 1), (1, 0)):
             fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
-            bpb, bpa = periodogram(ctx, halves[b]), periodogram(ctx, halves[a])
+            bpb, bpa = (passband_part(ctx, periodogram(ctx, halves[i])) for i in (b, a))
             if not fa:
                 out.append((0.0, 0.0))
                 continue
@@ -207,8 +214,8 @@ def noise(ctx: Context) -> Candidate | None:
           "(95 % intervals): " + "; ".join(noise_text(k, *v) for k, v in fit.items()))
     if not keep.all():
         top = float(bp.omega[~keep].min() / (2.0 * np.pi) * ctx.sample_rate_hz)
-        ev += (f"; judged below {top:.3g} Hz: above it the record rolls off below the model and the correction "
-               f"alike (the sensor's own low-pass, which no IEEE-952 term describes)")
+        ev += (f"; judged below {top:.3g} Hz: above it the record rolls off below the correction (the sensor's "
+               f"own low-pass, which no IEEE-952 term describes)")
     return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
                      corrected_noise=new.noise)
 
