@@ -132,39 +132,35 @@ def noise_text(name: str, value: float, lo: float, hi: float, model_value: float
 
 
 #: an octave at the top of the band is the sensor's own low-pass when the record's mean
-#: periodogram there lies this many standard errors (1 / sqrt(periodogram values)) below
-#: the corrected PSD and below its own level in the octave under it
+#: periodogram there lies this many standard errors below both the model's PSD and the
+#: corrected one (1 / sqrt(periodogram values) each)
 ROLLOFF_Z = 4.0
 
 
 def passband_bins(bp: BinnedPeriodogram, S0: np.ndarray, S1: np.ndarray) -> np.ndarray:
     """The bins of ``bp`` the noise correction is judged on: all but the top octaves
-    (down from Nyquist, while each in turn) where the record rolls off - its mean
-    periodogram over the corrected PSD ``S1`` lies ROLLOFF_Z standard errors below 1 and
-    below that ratio in the octave under it - the sensor's own low-pass (a digital
-    filter), which no IEEE-952 term describes: there a white level read from the Allan
-    deviation would be judged against what the filter took away (a real MEMS record had
-    its N 2.35 refused for its 10-50 Hz octaves). A correction that is merely too large
-    leaves the ratio flat over the octaves and is judged on them all. ``S0`` (the
-    model's PSD) is not used for the choice: both deviances use the same bins."""
+    (down from Nyquist, while each in turn) where the record rolls off below both the
+    model's PSD ``S0`` and the corrected ``S1`` by more than ROLLOFF_Z standard errors -
+    the sensor's own low-pass (a digital filter), which no IEEE-952 term describes: there
+    a white level read from the Allan deviation would be judged against what the filter
+    took away (a real MEMS record had its N 2.35 refused for its 10-50 Hz octaves). A
+    correction that is merely too large is not below the model's PSD there and is judged
+    on every octave."""
     keep = np.ones(len(bp.I), dtype=bool)
     f = bp.omega / (2.0 * np.pi)  # cycles per sample
-    ratio = bp.count * bp.I / S1
-
-    def octave(hi: float) -> tuple[float, float]:
+    hi = 0.5 + 1e-12
+    while hi > 4.0 / bp.n:
         band = (f >= hi / 2.0) & (f < hi)
         cnt = float(bp.count[band].sum())
-        return cnt, (float(ratio[band].sum()) / cnt if cnt else 1.0)
-
-    hi = 0.5 + 1e-12
-    cnt, r = octave(hi)
-    while hi > 8.0 / bp.n and cnt >= 16:
-        cnt_b, r_b = octave(hi / 2.0)
-        if cnt_b < 16 or not (r < 1.0 - ROLLOFF_Z / np.sqrt(cnt)
-                              and r < r_b - ROLLOFF_Z * np.sqrt(1.0 / cnt + 1.0 / cnt_b)):
+        if cnt < 16:
             break
-        keep[(f >= hi / 2.0) & (f < hi)] = False
-        hi, cnt, r = hi / 2.0, cnt_b, r_b
+        lim = 1.0 - ROLLOFF_Z / np.sqrt(cnt)
+        r0 = float(np.sum((bp.count * bp.I / S0)[band])) / cnt
+        r1 = float(np.sum((bp.count * bp.I / S1)[band])) / cnt
+        if not (r0 < lim and r1 < lim):
+            break
+        keep[band] = False
+        hi /= 2.0
     return keep
 
 
@@ -214,8 +210,8 @@ def noise(ctx: Context) -> Candidate | None:
           "(95 % intervals): " + "; ".join(noise_text(k, *v) for k, v in fit.items()))
     if not keep.all():
         top = float(bp.omega[~keep].min() / (2.0 * np.pi) * ctx.sample_rate_hz)
-        ev += (f"; judged below {top:.3g} Hz: above it the record rolls off below the correction (the sensor's "
-               f"own low-pass, which no IEEE-952 term describes)")
+        ev += (f"; judged below {top:.3g} Hz: above it the record rolls off below the model and the correction "
+               f"alike (the sensor's own low-pass, which no IEEE-952 term describes)")
     return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
                      corrected_noise=new.noise)
 
