@@ -1,13 +1,16 @@
 """The report's warnings about what the record cannot establish (docs/formats.md):
-``record_too_short`` (model terms the record is too short to test) and
+``record_too_short`` (model terms the record is too short to test),
 ``nonstationary`` (excess left after the selection that is a burst of noise, which no
-stationary effect kind models)."""
+stationary effect kind models) and ``spikes`` (the spike test finds more than chance
+but no outlier effect was accepted: every spike is listed)."""
 from __future__ import annotations
 
 import numpy as np
 
 from fogmon.explain import detectors, mismatch
 from fogmon.explain.analysis import Analysis
+from fogmon.explain.candidates.base import Context
+from fogmon.explain.candidates.spikes import spike_evidence
 from fogmon.sim.model import SensorModel
 
 #: A slow model term the record cannot test: its share of the model's Allan variance at
@@ -118,3 +121,26 @@ def nonstationary_warnings(after: Analysis, y: np.ndarray, valid: np.ndarray, gr
                             f"{r.ratio:.3g}) is the bursts': without their spans the whole-record ADEV there is "
                             f"inside the null (largest |z| {z_left:.2f} < {thr:.2f})"})
     return out, named
+
+
+def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]]) -> tuple[list[dict], dict | None]:
+    """A ``spikes`` warning and the listing of every spike (times_s s, amplitudes_dph
+    deg/h, abs_z) when the spike test of the final residual (context ``ctx``) finds
+    samples beyond its 1 % family-wise threshold - more than chance - and no outlier
+    effect removed them; the text says why neither description was accepted (the
+    refusals of ``glitches`` and ``outliers``, and why the tail is not a population).
+    ([], None) when the test finds nothing beyond chance."""
+    ev = spike_evidence(ctx)
+    idx = ev.glitch_idx
+    if not len(idx):
+        return [], None
+    why = [f"{k}: {w}" for k, _, w in rejected if k in ("glitches", "outliers")]
+    if ev.not_population:
+        why.append(f"outliers: not a population: {ev.not_population}")
+    t0, t1 = float(ctx.t_s[0]), float(ctx.t_s[-1])
+    text = (f"the spike test finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest "
+            f"|z| {float(np.max(np.abs(ev.z[idx]))):.1f}), more than chance, but no outlier effect was accepted"
+            f" ({'; '.join(why) or 'no spike description passed its bar'}): every one is listed in the "
+            f"outliers file")
+    listing = {"times_s": ctx.t_s[idx], "amplitudes_dph": ev.amp[idx], "abs_z": np.abs(ev.z[idx])}
+    return [{"kind": "spikes", "t_start_s": t0, "t_end_s": t1, "text": text}], listing

@@ -13,7 +13,7 @@ from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, rescored
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, default_n_boot
-from fogmon.explain.caveats import nonstationary_warnings, too_short_warnings
+from fogmon.explain.caveats import nonstationary_warnings, spike_warnings, too_short_warnings
 from fogmon.explain.options import Options
 from fogmon.explain.replicas import Replicas
 from fogmon.explain.selection import Accepted, Selection, Setting, light
@@ -49,6 +49,9 @@ class Result:
     warnings: list[dict] = field(default_factory=list)
     #: the regions left after (of ``after``) that a ``nonstationary`` warning names
     nonstationary: list[mismatch.Region] = field(default_factory=list)
+    #: every spike a ``spikes`` warning names (times_s, amplitudes_dph, abs_z: arrays), when
+    #: the spike test finds more than chance and no outlier effect was accepted; else None
+    spikes: dict | None = None
 
     @property
     def deterministic_fit(self) -> np.ndarray:
@@ -153,8 +156,11 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
     after = replace(fit.analysis, regions=mismatch.locate(fit.analysis.regions, fit.y, valid, grid, fit.analysis.null))
     bursts, named = nonstationary_warnings(after, fit.y, valid, grid)
-    return Result(rec, model, fitted, grid, t, valid, y0, fit.y, before, after, accepted, state.rejections(), B,
-                  baseline, too_short_warnings(model, grid) + bursts, named)
+    rejections = state.rejections()
+    spikes, listing = ([], None) if any(a.cand.kind in ("outliers", "glitches") for a in accepted) else \
+        spike_warnings(fit.ctx, rejections)
+    return Result(rec, model, fitted, grid, t, valid, y0, fit.y, before, after, accepted, rejections, B,
+                  baseline, too_short_warnings(model, grid) + bursts + spikes, named, listing)
 
 
 def _fitted_model(model: SensorModel, stoch: SensorModel, accepted: tuple[Accepted, ...]) -> SensorModel:

@@ -353,9 +353,10 @@ class BinnedPeriodogram:
         self.n = n
         self.omega = 2.0 * np.pi * self.k / n
 
-    def deviance(self, S: np.ndarray, floor: float = 0.0) -> float:
-        """-2 ln(Whittle likelihood) (up to a constant) of PSD values S at the bins, S
-        floored at ``floor`` (a finite record's periodogram cannot follow a filter's
-        zero: leakage from the rest of the band fills it)."""
+    def deviance(self, S: np.ndarray, floor: float = 0.0, keep: np.ndarray | None = None) -> float:
+        """-2 ln(Whittle likelihood) (up to a constant) of PSD values S at the bins (only
+        the ``keep`` ones, when given), S floored at ``floor`` (a finite record's
+        periodogram cannot follow a filter's zero: leakage from the rest of the band fills it)."""
         S = np.maximum(S, max(floor, 1e-300))
-        return float(np.sum(self.count * (np.log(S) + self.I / S)))
+        terms = self.count * (np.log(S) + self.I / S)
+        return float(np.sum(terms if keep is None else terms[keep]))

@@ -293,17 +293,24 @@ def console_summary(rep: dict) -> str:
 def write_outliers(res: Result, path: str) -> int:
     """Every outlier of an accepted ``outliers`` effect as CSV (time_s in s, amplitude_dph
     = the spike removed in deg/h, abs_z = its robust spike-test |z|) under a commented
-    header; nothing is written when there is no such effect. Returns the rows written."""
+    header, or without one every spike a ``spikes`` warning names (``Result.spikes``);
+    nothing is written when there is neither. Returns the rows written."""
     held = [a.cand for a in res.accepted if a.cand.kind == "outliers"]
-    if not held:
+    if held:
+        lst = held[0].listing
+        assert lst is not None, "an outliers candidate carries its listing"
+        what = "outlier samples"
+        amp = "the spike removed (deg/h)"
+    elif res.spikes is not None:  # more than chance, no outlier effect: the `spikes` warning's list
+        lst, what, amp = res.spikes, "spikes beyond the spike test's threshold, no effect accepted", \
+            "the spike's GLS amplitude (deg/h), not removed"
+    else:
         _remove_stale_outliers(path)
         return 0
-    lst = held[0].listing
-    assert lst is not None, "an outliers candidate carries its listing"
     n = len(lst["times_s"])
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} outlier samples (none left out)\n"
-                 "# amplitude_dph: the spike removed (deg/h); abs_z: its robust spike-test |z|\n"
+        fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} {what} (none left out)\n"
+                 f"# amplitude_dph: {amp}; abs_z: its robust spike-test |z|\n"
                  "time_s,amplitude_dph,abs_z\n")
         for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist(), strict=True):
             fh.write(f"{t!r},{a:.9g},{z:.4g}\n")

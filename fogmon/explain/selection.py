@@ -209,8 +209,15 @@ class Selection:
         subtracted from the residual (same null); a noise-type one joins the stochastic
         model (a new bootstrap null)."""
         s, f = self.setting, self.fit
-        if _subtracted(c):
+        n0 = c.white_n0_dpsh
+        if _subtracted(c) and n0 is None:
             y, stoch, null = np.where(s.valid, f.y - c.rate, 0.0), f.stoch, f.null
+        elif _subtracted(c) and n0 is not None:  # spikes taken out and the white level they inflated refitted
+            y, stoch = np.where(s.valid, f.y - c.rate, 0.0), _white_refitted(f.stoch, n0)
+            if s.progress:
+                s.progress(f"bootstrap null with {c.kind} removed and N refitted: {s.n_boot} simulations", 0, 0)
+            null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
+                             s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
         else:
             y, stoch = f.y, _joined(f.stoch, c)
             if s.progress:
@@ -307,6 +314,11 @@ def _joined(stoch: SensorModel, c: Candidate) -> SensorModel:
     base = stoch if c.stoch_base is None else c.stoch_base
     noise = base.noise if c.white_n0_dpsh is None else replace(base.noise, N_dpsh=c.white_n0_dpsh)
     return SensorModel(stoch.sample_rate_hz, 0.0, noise, [*base.effects, c.effect()])
+
+
+def _white_refitted(stoch: SensorModel, n0: float) -> SensorModel:
+    """``stoch`` with its white level N0 = ``n0`` (deg/sqrt(h))."""
+    return SensorModel(stoch.sample_rate_hz, 0.0, replace(stoch.noise, N_dpsh=n0), stoch.effects)
 
 
 def tiers(cands: list[Candidate]) -> list[list[Candidate]]:

@@ -32,7 +32,7 @@ def assert_invariants(rep: dict, t0: float, t1: float, report_dir=None) -> None:
     assert isinstance(rep["warnings"], list)
     for w in rep["warnings"]:
         assert set(w) == WARNING_KEYS and w["kind"] in ("platform_motion", "record_too_short", "model_axis_missing",
-                                                        "nonstationary")
+                                                        "nonstationary", "spikes")
         assert t0 - 1e-6 <= w["t_start_s"] <= w["t_end_s"] <= t1 + 1e-6
 
 

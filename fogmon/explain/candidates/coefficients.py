@@ -15,11 +15,12 @@ from fogmon.explain.candidates.base import (
     Candidate,
     Context,
     model_psd_full,
+    passband_part,
     periodogram,
     stoch_psd,
     white_rms_dpsh,
 )
-from fogmon.explain.fitting import model_psd, rfft_omega
+from fogmon.explain.fitting import BinnedPeriodogram, model_psd, rfft_omega
 from fogmon.sim.model import Noise, SensorModel
 
 #: two-sided confidence of the intervals of the noise effect (and of "differs")
@@ -132,6 +133,39 @@ def noise_text(name: str, value: float, lo: float, hi: float, model_value: float
     return f"your {sym} is {value:.3g} {u} [{lo:.3g}, {hi:.3g}], not {model_value:.3g}"
 
 
+#: an octave at the top of the band is the sensor's own low-pass when the record's mean
+#: periodogram there lies this many standard errors below both the model's PSD and the
+#: corrected one (1 / sqrt(periodogram values) each)
+ROLLOFF_Z = 4.0
+
+
+def passband_bins(bp: BinnedPeriodogram, S0: np.ndarray, S1: np.ndarray) -> np.ndarray:
+    """The bins of ``bp`` the noise correction is judged on: all but the top octaves
+    (down from Nyquist, while each in turn) where the record rolls off below both the
+    model's PSD ``S0`` and the corrected ``S1`` by more than ROLLOFF_Z standard errors -
+    the sensor's own low-pass (a digital filter), which no IEEE-952 term describes: there
+    a white level read from the Allan deviation would be judged against what the filter
+    took away (a real MEMS record had its N 2.35 refused for its 10-50 Hz octaves). A
+    correction that is merely too large is not below the model's PSD there and is judged
+    on every octave."""
+    keep = np.ones(len(bp.I), dtype=bool)
+    f = bp.omega / (2.0 * np.pi)  # cycles per sample
+    hi = 0.5 + 1e-12
+    while hi > 4.0 / bp.n:
+        band = (f >= hi / 2.0) & (f < hi)
+        cnt = float(bp.count[band].sum())
+        if cnt < 16:
+            break
+        lim = 1.0 - ROLLOFF_Z / np.sqrt(cnt)
+        r0 = float(np.sum((bp.count * bp.I / S0)[band])) / cnt
+        r1 = float(np.sum((bp.count * bp.I / S1)[band])) / cnt
+        if not (r0 < lim and r1 < lim):
+            break
+        keep[band] = False
+        hi /= 2.0
+    return keep
+
+
 def noise(ctx: Context) -> Candidate | None:
     """The model's own Q, N, B, K are wrong (fit_coefficients): the terms whose model
     value lies outside the recording's 95 % interval, corrected; scored by the Whittle
@@ -141,12 +175,13 @@ def noise(ctx: Context) -> Candidate | None:
     fit = fit_coefficients(ctx.y, ctx.valid, ctx.stoch, ctx.sample_rate_hz, wr, model_psd_full(ctx))
     if not fit:
         return None
-    bp = periodogram(ctx)
+    bp = passband_part(ctx, periodogram(ctx))  # where the model's filters pass (as the GLS tests)
     new = _corrected(ctx.stoch, fit)
     S0 = stoch_psd(ctx, bp)
     S1 = model_psd(new, bp.omega, ctx.n, white_rms_dpsh(new, ctx))
     floor = LEAKAGE_FLOOR * float(np.median(S0))
-    gain = bp.deviance(S0, floor) - bp.deviance(S1, floor)
+    keep = passband_bins(bp, S0, S1)
+    gain = bp.deviance(S0, floor, keep) - bp.deviance(S1, floor, keep)
     params = {}
     for k, (v, lo, hi, _) in fit.items():
         params.update({k: v, f"{k}_lo": lo, f"{k}_hi": hi})
@@ -158,7 +193,7 @@ def noise(ctx: Context) -> Candidate | None:
         halves = (slice(0, h), slice(h, 2 * h))
         for a, b in ((0, 1), (1, 0)):
             fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
-            bpb, bpa = periodogram(ctx, halves[b]), periodogram(ctx, halves[a])
+            bpb, bpa = (passband_part(ctx, periodogram(ctx, halves[i])) for i in (b, a))
             if not fa:
                 out.append((0.0, 0.0))
                 continue
@@ -168,12 +203,17 @@ def noise(ctx: Context) -> Candidate | None:
                 s0 = model_psd(ctx.stoch, bb.omega, h, wr)
                 s1 = model_psd(na, bb.omega, h, white_rms_dpsh(na, ctx))
                 fl = LEAKAGE_FLOOR * float(np.median(s0))
-                gains.append(bb.deviance(s0, fl) - bb.deviance(s1, fl))
+                kb = passband_bins(bb, s0, s1)
+                gains.append(bb.deviance(s0, fl, kb) - bb.deviance(s1, fl, kb))
             out.append((float(gains[0]), float(gains[1])))
         return out  # (tested on the second half, on the first)
 
     ev = ("robust IEEE-952 fit of the residual's Allan deviation against the one the model predicts "
           "(95 % intervals): " + "; ".join(noise_text(k, *v) for k, v in fit.items()))
+    if not keep.all():
+        top = float(bp.omega[~keep].min() / (2.0 * np.pi) * ctx.sample_rate_hz)
+        ev += (f"; judged below {top:.3g} Hz: above it the record rolls off below the model and the correction "
+               f"alike (the sensor's own low-pass, which no IEEE-952 term describes)")
     return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
                      corrected_noise=new.noise)
 

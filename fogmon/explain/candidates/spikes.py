@@ -11,7 +11,8 @@ import numpy as np
 from scipy import stats
 
 from fogmon.explain import detectors
-from fogmon.explain.candidates.base import Candidate, Context
+from fogmon.explain.candidates.base import Candidate, Context, model_psd_full
+from fogmon.explain.candidates.coefficients import expected_avar
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, OUTLIER_QUANTILE_PROBS, SensorModel
 
@@ -141,6 +142,44 @@ def _not_population(law: detectors.Contamination | None, z: np.ndarray, tested: 
     return ""
 
 
+#: the white level is refitted with the spikes removed when the cleaned residual's
+#: shortest-tau Allan variance lies this many standard errors below the model's
+WHITE_REFIT_Z = 4.0
+
+
+def white_without(ctx: Context, rate: np.ndarray) -> float | None:
+    """The white level N0 (deg/sqrt(h)) the stochastic model takes once the spikes ``rate``
+    (deg/h) are taken out of the residual, or None (unchanged). A model whose N was read
+    from the record with its outliers in it (the baseline, or a datasheet measured so)
+    holds their variance as white noise: without them the record is quieter than that
+    model at every tau, and the map would count the removal against them. When the
+    cleaned residual's Allan variance at the shortest tau lies WHITE_REFIT_Z standard
+    errors below the model's, N^2 drops by that deficit in white units, at most by the
+    variance the spikes removed (never below a tenth of N)."""
+    v = ctx.valid
+    pair = v[1:] & v[:-1]
+    m = int(pair.sum())
+    if m < 16:
+        return None
+    y1 = np.where(v, ctx.y - rate, 0.0)
+    a_raw = 0.5 * float(np.mean(np.diff(ctx.y)[pair] ** 2))
+    a_clean = 0.5 * float(np.mean(np.diff(y1)[pair] ** 2))
+    a_model = float(expected_avar(model_psd_full(ctx), ctx.n, np.array([1]))[0])
+    if not a_model - a_clean > WHITE_REFIT_Z * a_model * math.sqrt(3.0 / m):
+        return None
+    drop = min(a_model - a_clean, a_raw - a_clean)
+    n_old = ctx.stoch.noise.N_dpsh
+    if drop <= 0 or n_old <= 0:
+        return None
+    return math.sqrt(max(n_old ** 2 - drop / (3600.0 * ctx.sample_rate_hz), (0.1 * n_old) ** 2))
+
+
+def _refit_note(n_old: float, n0: float | None) -> str:
+    return ("" if n0 is None else
+            f"; without them the record is quieter than the model: its white level N refitted "
+            f"{n_old:.4g} -> {n0:.4g} deg/sqrt(h) (the model's N held the outliers' variance)")
+
+
 def glitches(ctx: Context) -> Candidate | None:
     """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale, the
     model's own white-level profile divided out, Bonferroni threshold over all samples
@@ -164,8 +203,10 @@ def glitches(ctx: Context) -> Candidate | None:
             f"{int(ctx.valid.sum())} samples), largest |z| = {zmax:.1f}, amplitudes "
             f"{np.min(np.abs(amps)):.3g}..{np.max(np.abs(amps)):.3g} deg/h{pop}")
     se = {"amplitudes_dph": float(1.0 / math.sqrt(np.sum(ctx.wh.w)))}
-    return Candidate("glitches", {"times_s": times, "amplitudes_dph": amps}, se, gain, 2 * len(idx), text,
-                     rate, None)
+    n0 = white_without(ctx, rate)
+    text += _refit_note(ctx.stoch.noise.N_dpsh, n0)
+    return Candidate("glitches", {"times_s": times, "amplitudes_dph": amps}, se, gain,
+                     2 * len(idx) + (n0 is not None), text, rate, None, white_n0_dpsh=n0)
 
 
 #: the outlier search repeats the spike scan on the cleaned residual at most this often
@@ -217,8 +258,11 @@ def outliers(ctx: Context) -> Candidate | None:
             f"rate and amplitude distribution ({POPULATION_K} parameters) vs {ev.bic_glitches:.1f} listing "
             f"{len(ev.glitch_idx)} glitch(es) one by one; outliers replaced by the interpolation from their "
             f"neighbours plus the model's conditional noise")
+    n0 = white_without(ctx, rate)
+    text += _refit_note(ctx.stoch.noise.N_dpsh, n0)
     return Candidate("outliers", params, {"rate_per_h": math.sqrt(len(idx)) / hours}, law.gain / ev.sep,
-                     POPULATION_K, text, rate, None, functools.partial(_population_heldout, ctx, ev),
+                     POPULATION_K + (n0 is not None), text, rate, None,
+                     functools.partial(_population_heldout, ctx, ev), white_n0_dpsh=n0,
                      listing={"times_s": ctx.t_s[idx], "amplitudes_dph": a, "abs_z": first_z[idx]})
 
 
