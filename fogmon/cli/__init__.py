@@ -44,6 +44,7 @@ ALIASES = {
 NO_FLAG = frozenset({
     "rerun",                      # the Rerun viewer program (fogmon.sinks.rerun_sink)
     "exclude_motion",             # fogmon.oadev / dadev (fogmon.api); the commands' --keep-motion is its inverse
+    "limits",                     # fogmon.davar.fit.fit_curve (Python only: which intervals to compute)
 })
 
 

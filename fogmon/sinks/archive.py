@@ -445,10 +445,12 @@ class Archive(Sink):
             if text:
                 with self._guard(lambda: self.replay_log_path):
                     data = text.encode("utf-8")
-                    _write_all(self._csv_fd, data)
-                    self._csv_size += len(data)
-                    self._bytes_written += len(data)
-                    self._rows_on_disk += self._csv_rows
+                    try:
+                        _write_all(self._csv_fd, data)
+                    except OSError as e:   # keep the whole rows that reached the file before it failed
+                        self._count_written(data, data.rfind(b"\n", 0, getattr(e, "written", 0)) + 1)
+                        raise
+                    self._count_written(data, len(data))
                     self._csv_buf, self._csv_rows = io.StringIO(), 0
         if self._cap_fd is not None and self.error is None:
             with self._guard(lambda: self.capture_path):
@@ -465,6 +467,13 @@ class Archive(Sink):
                     self._bytes_written += len(data)
         if self.bytes_per_sample is None and self.error is None:
             self._check_space()
+
+    def _count_written(self, data: bytes, size: int) -> None:
+        """The first ``size`` bytes of the flushed ``data`` (whole lines) are on disk."""
+        header = self._csv_header if self._csv_size == 0 else 0   # the first flush begins with the header
+        self._csv_size += size
+        self._bytes_written += size
+        self._rows_on_disk += max(data.count(b"\n", min(header, size), size), 0)
 
     # -- failed writes and free space ---------------------------------------------------
     @contextlib.contextmanager
@@ -536,9 +545,17 @@ class Archive(Sink):
 
 
 def _write_all(fd: int, data: bytes) -> None:
+    """Write all of ``data``; an OSError carries ``written``, the bytes that reached the
+    file before it (a file-size limit or a full disk takes a partial write first)."""
     view = memoryview(data)
+    done = 0
     while view:
-        n = os.write(fd, view)
+        try:
+            n = os.write(fd, view)
+        except OSError as e:
+            e.written = done  # type: ignore[attr-defined]
+            raise
+        done += n
         view = view[n:]
 
 
