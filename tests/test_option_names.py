@@ -79,7 +79,7 @@ def test_a_flag_in_a_library_message_is_a_name():
     converted = ["errors.py", "export.py", "fleet", "sim", "methods", "modelcheck", "davar", "block.py",
                  "__init__.py", "outputs.py", "sinks/base.py", "sinks/console.py", "units.py", "motion.py",
                  "phases.py", "pipeline", "formats", "sources", "sinks/archive.py", "sinks/parquet_pieces.py",
-                 "stopping.py", "startup.py"]
+                 "stopping.py", "startup.py", "sinks/rerun/server.py", "explain/mismatch.py", "explain/axes.py"]
     flag = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
     bad = []
     for part in converted:
@@ -89,8 +89,12 @@ def test_a_flag_in_a_library_message_is_a_name():
             bad += [(str(path.relative_to(ROOT.parent)), flag.findall(n.value)) for n in ast.walk(tree)
                     if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docs
                     and flag.search(n.value)]
-    # events' texts, which the Rerun sink shows as is: an error counter's, a device's (dis)connection
+    # events' texts, which the Rerun sink shows as is: an error counter's, a device's (dis)connection;
+    # the rerun program's own command line (its options, not fogmon's)
     assert sorted(bad) == [("fogmon/errors.py", ["--max-rate-dph"]),
+                           ("fogmon/sinks/rerun/server.py", ["--bind"]),
+                           ("fogmon/sinks/rerun/server.py", ["--port"]),
+                           ("fogmon/sinks/rerun/server.py", ["--serve-grpc"]),
                            ("fogmon/sources/devices/can_bus.py", ["--can"]),
                            ("fogmon/sources/devices/can_bus.py", ["--interface"]),
                            ("fogmon/sources/devices/serial_port.py", ["--serial"])]

@@ -160,7 +160,7 @@ def one_axis_model(model: SensorModel, rec: Recording, axis: str | None = None) 
     name = axis or rec.meta.get("axis")
     if name not in model.axes:
         raise FogmonError(f"{rec.name}: one axis{f' ({name})' if name else ''}, but the model has [noise.<axis>] "
-                          f"tables for axes {', '.join(model.axes)}: pick one with --axis NAME")
+                          f"tables for axes {', '.join(model.axes)}: pick one with `axis` NAME")
     return model.for_axis(name)
 
 

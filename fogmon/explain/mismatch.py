@@ -72,7 +72,7 @@ def make_grid(n: int, sample_rate_hz: float, window_s: float | None = None, hop_
     A window longer than half the record is a FogmonError."""
     w = max(64, n // 8) if window_s is None else int(round(window_s * sample_rate_hz))
     if w < 16:
-        raise FogmonError(f"--window-s {window_s:g} s is shorter than 16 samples at {sample_rate_hz:g} Hz")
+        raise FogmonError(f"`window_s` {window_s:g} s is shorter than 16 samples at {sample_rate_hz:g} Hz")
     if 2 * w > n:
         raise FogmonError(
             f"{name}: {n / sample_rate_hz:g} s ({n} samples) is too short for the {w / sample_rate_hz:g} s map "

@@ -158,7 +158,7 @@ def test_one_axis_recording_takes_its_axis_of_a_multi_axis_model():
     model = SensorModel(FS, 1.0, NOISE, [], axis_noise={"x": NOISE, "y": replace_n(NOISE, 0.02)})
     assert one_axis_model(model, rec).noise.N_dpsh == 0.02
     rec.meta.pop("axis")
-    with pytest.raises(FogmonError, match="pick one with --axis NAME"):
+    with pytest.raises(FogmonError, match="pick one with axis NAME"):
         one_axis_model(model, rec)
     assert one_axis_model(SensorModel(FS, 1.0, NOISE, []), rec).noise == NOISE
 

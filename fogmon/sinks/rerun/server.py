@@ -40,7 +40,7 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
                 if proc.poll() is not None:
                     log.seek(0)
                     lines = _ANSI.sub("", log.read().decode(errors="replace")).strip().splitlines()
-                    raise FogmonError(f"--serve: rerun server on {bind}:{port} exited: "
+                    raise FogmonError(f"`serve`: rerun server on {bind}:{port} exited: "
                                       f"{lines[-1].strip() if lines else proc.returncode}")
                 try:
                     with socket.create_connection((host, port), timeout=0.2):
@@ -48,7 +48,7 @@ def start_grpc_server(bind: str, port: int, timeout_s: float = 10.0) -> tuple[su
                             return proc, f"rerun+http://{host}:{port}/proxy"
                 except OSError:
                     time.sleep(0.1)
-        raise FogmonError(f"--serve: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
+        raise FogmonError(f"`serve`: rerun server did not start listening on {bind}:{port} within {timeout_s:g} s")
     except BaseException:   # also Ctrl-C while waiting: leave no server behind
         stop_process_group(proc)
         raise
@@ -60,17 +60,17 @@ def check_port_free(bind: str, port: int) -> None:
         family, kind, proto, _, addr = socket.getaddrinfo(bind or None, port, type=socket.SOCK_STREAM,
                                                           flags=socket.AI_PASSIVE)[0]
     except socket.gaierror as e:
-        raise FogmonError(f"--bind {bind}: not an address to listen on ({e.strerror})") from None
+        raise FogmonError(f"`bind` {bind}: not an address to listen on ({e.strerror})") from None
     with socket.socket(family, kind, proto) as s:
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)   # as servers do: TIME_WAIT is no conflict
         try:
             s.bind(addr)
         except OSError as e:
             if e.errno == errno.EADDRINUSE:
-                raise FogmonError(f"--serve: port {port} on {bind} is already in use (another fogmon --serve or "
-                                  f"Rerun server/viewer; to send to a running viewer use --connect); stop it or "
-                                  f"give another --port") from None
-            raise FogmonError(f"--serve: cannot listen on {bind}:{port}: {e.strerror}") from None
+                raise FogmonError(f"`serve`: port {port} on {bind} is already in use (another fogmon `serve` or "
+                                  f"Rerun server/viewer; to send to a running viewer use `connect`); stop it or "
+                                  f"give another `port`") from None
+            raise FogmonError(f"`serve`: cannot listen on {bind}:{port}: {e.strerror}") from None
 
 
 def _rerun_binary() -> str:
@@ -80,7 +80,7 @@ def _rerun_binary() -> str:
 
     exe = os.environ.get("RERUN_CLI_PATH") or os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
     if not os.path.isfile(exe):
-        raise FogmonError(f"--serve: the rerun executable of rerun-sdk is missing ({exe})")
+        raise FogmonError(f"`serve`: the rerun executable of rerun-sdk is missing ({exe})")
     return exe
 
 
@@ -115,12 +115,12 @@ def _check_listening(url: str, timeout_s: float = 2.0) -> None:
     except ValueError:
         host = port = None
     if not host or not port:
-        raise FogmonError(f"--connect {url}: expected a URL like rerun+http://127.0.0.1:9876/proxy")
+        raise FogmonError(f"`connect` {url}: expected a URL like rerun+http://127.0.0.1:9876/proxy")
     try:
         socket.create_connection((host, port), timeout=timeout_s).close()
     except OSError:
-        raise FogmonError(f"--connect {url}: no Rerun viewer listening at {host}:{port} "
-                          f"(start one with `rerun`, or use --serve or --rrd)") from None
+        raise FogmonError(f"`connect` {url}: no Rerun viewer listening at {host}:{port} "
+                          f"(start one with `rerun`, or use `serve` or `rrd`)") from None
 
 
 def stop_process_group(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:

@@ -304,7 +304,7 @@ def test_serve_listens_only_where_asked(bind):
 def test_serve_on_a_busy_port_is_one_line_before_anything_starts(tmp_path):
     port = free_port()
     with socket.create_server(("127.0.0.1", port)):            # a stale server holds the port
-        with pytest.raises(FogmonError, match=f"--serve: port {port} on 127.0.0.1 is already in use"):
+        with pytest.raises(FogmonError, match=f"serve: port {port} on 127.0.0.1 is already in use"):
             RerunSink(rrd_path=str(tmp_path / "x.rrd"), serve=True, port=port)
         with pytest.raises(FogmonError, match="already in use"):
             RerunSink(serve=True, bind="0.0.0.0", port=port)    # the wildcard address conflicts too
