@@ -30,6 +30,7 @@ memory and one FogmonWarning, never the run.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import importlib
 import importlib.util
@@ -98,22 +99,17 @@ def kernel(*signatures: tuple, **options) -> Callable:
     return wrap
 
 
-_digest: list[str] = []
-
-
+@functools.cache
 def _sources_digest() -> str:
     """SHA-256 of the source files of fogmon.jit and every kernel module (read once, when
     the first kernel looks into the cache: after KERNEL_MODULES is final)."""
-    if not _digest:
-        h = hashlib.sha256()
-        for name in (__name__, *KERNEL_MODULES):
-            spec = importlib.util.find_spec(name)
-            origin = spec.origin if spec is not None else None
-            if origin:
-                with open(origin, "rb") as fh:
-                    h.update(fh.read())
-        _digest.append(h.hexdigest())
-    return _digest[0]
+    h = hashlib.sha256()
+    for name in (__name__, *KERNEL_MODULES):
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.origin:
+            with open(spec.origin, "rb") as fh:
+                h.update(fh.read())
+    return h.hexdigest()
 
 
 def _key_by_sources(disp) -> None:

@@ -473,7 +473,7 @@ class Archive(Sink):
         header = self._csv_header if self._csv_size == 0 else 0   # the first flush begins with the header
         self._csv_size += size
         self._bytes_written += size
-        self._rows_on_disk += max(data.count(b"\n", min(header, size), size), 0)
+        self._rows_on_disk += data.count(b"\n", min(header, size), size)
 
     # -- failed writes and free space ---------------------------------------------------
     @contextlib.contextmanager

@@ -31,7 +31,11 @@ def _read(path: str):
     import asammdf
     with reading(f"{path}: not a readable MDF file"):   # asammdf raises MdfException and plain errors
         mdf = asammdf.MDF(path)
-    _check_layout(mdf, path)
+    try:
+        _check_layout(mdf, path)
+    except FogmonError:
+        mdf.close()
+        raise
     return mdf
 
 
@@ -55,13 +59,11 @@ def _check_layout(mdf, path: str) -> None:
         record = int(cg.samples_byte_nr) + int(getattr(cg, "invalidation_bytes_nr", 0))
         held = sum(int(b.original_size) for b in getattr(group, "data_blocks", ()))
         if held and record > held:   # asammdf would allocate buffers of the record size (GB from a flipped bit)
-            mdf.close()
             raise FogmonError(f"{path}: not a readable MDF file (corrupt: data group {g} has {record}-byte records "
                               f"but its data blocks hold {held} bytes)")
         for ch in group.channels:
             end = int(ch.byte_offset) + (int(ch.bit_offset) + int(ch.bit_count) + 7) // 8
             if getattr(ch, "channel_type", 0) in IN_RECORD and end > record:
-                mdf.close()
                 raise FogmonError(f"{path}: not a readable MDF file (corrupt: channel {ch.name!r} of data group "
                                   f"{g} ends at byte {end} of a {record}-byte record)")
 
