@@ -135,6 +135,7 @@ def _report(group: list, single: bool, confidence: float) -> list[str]:
         adev_lines,
         coefficient_axes_lines,
         coefficient_lines,
+        contradiction_lines,
         model_check,
     )
 
@@ -153,12 +154,15 @@ def _report(group: list, single: bool, confidence: float) -> list[str]:
         c, result, _, fit = group[0]
         lines += adev_lines(result, unit, rows)
         lines += ["", f"{terms} ({100 * confidence:.1f} % intervals):"] + coefficient_lines(fit, names)
+        lines += [] if accel else contradiction_lines(fit)
         check = model_check(result, fit.noise if accel else fit)
         return lines + ([check] if check else [])
     lines += adev_axes_lines({c.axis: r for c, r, _, _ in group}, rows)
     lines += ["", f"{terms} per axis ({100 * confidence:.1f} % intervals; n/i: not identifiable, < its 95 % "
                   f"upper limit):"]
     lines += coefficient_axes_lines({c.axis: f for c, _, _, f in group}, names)
+    for c, _, _, f in group:
+        lines += [] if accel else [ln.replace("  ", f"  axis {c.axis}: ", 1) for ln in contradiction_lines(f)]
     for c, r, _, f in group:
         check = model_check(r, f.noise if accel else f)
         if check:

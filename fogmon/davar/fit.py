@@ -25,6 +25,7 @@ from fogmon.davar.confidence import covariance_matrices, mixture_matrices
 from fogmon.davar.profile import fit_full, score_limits
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.scoring import fisher_scoring, mixture_edf
+from fogmon.davar.termcheck import TermContradiction, contradictions
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -83,7 +84,11 @@ class NoiseFit:
     ``misfit`` (bool, shape of the fitted ``adev_dph``) marks the taus the robust fit
     rejected as not described by the five terms (periodic/vibration humps, steps);
     ``worst_ratio`` (>= 1, per window for a DADEV fit) is the largest factor between the
-    model and the measured ADEV over the taus not flagged (NaN when nothing was fitted)."""
+    model and the measured ADEV over the taus not flagged (NaN when nothing was fitted).
+    ``contradicted`` (a whole-curve fit): the terms whose own ADEV the measured ADEV
+    refutes (``termcheck``): a B, K or R there is not identifiable (its upper limit the
+    ADEV's bound), a Q there is band-limited white angle noise, not quantization
+    (``q_band_limited``); ``avar_terms`` and ``model_adev_dph`` stay the fit's estimate."""
 
     Q_arcsec: Coefficient
     N_dpsh: Coefficient
@@ -96,6 +101,13 @@ class NoiseFit:
     confidence: float
     misfit: np.ndarray
     worst_ratio: np.ndarray | float
+    contradicted: tuple[TermContradiction, ...] = ()
+
+    @property
+    def q_band_limited(self) -> bool:
+        """The Q term's 1/tau slope does not reach the shortest tau: white angle noise of
+        a band-limited (filtered, decimated) output, not a quantizer (``termcheck``)."""
+        return any(c.name == "Q_arcsec" for c in self.contradicted)
 
     def model_adev_dph(self, tau_s) -> np.ndarray:
         """Model Allan deviation (deg/h) at ``tau_s`` (s); shape (..., len(tau_s))."""
@@ -383,7 +395,8 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     the profile only for the identification test and the upper limits of the terms not
     identifiable (NaN elsewhere); its identified terms get the sandwich interval A_n +-
     z se_n of the five-term fit (the windows need only what they print, at a third of
-    the cost)."""
+    the cost). An AdevResult fit is then checked against the measured ADEV
+    (:func:`checked_against_adev`)."""
     avar = np.square(result.adev_dph)
     if isinstance(result, DadevResult):
         n = result.window_samples
@@ -401,4 +414,39 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     fit = NoiseFit(q, n_, b, k, r, avar_terms=a, avar_se=se, avar_upper=upper,
                    confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
-    return replace(fit, worst_ratio=worst if worst.ndim else float(worst))
+    if isinstance(result, DadevResult):
+        return replace(fit, worst_ratio=worst)
+    return checked_against_adev(replace(fit, worst_ratio=float(worst)), result)
+
+
+#: What the check against the measured ADEV does to a contradicted, identified term:
+#: B, K, R are no longer identified (``termcheck``); Q keeps its value (renamed).
+_DEMOTED = ("B_dph", "K_dphsh", "R_dphh")
+
+
+def checked_against_adev(fit: NoiseFit, result: AdevResult) -> NoiseFit:
+    """``fit`` (of the curve ``result``) with the identified terms whose own ADEV exceeds
+    the measured ADEV's upper bound (``termcheck.contradictions``, with each tau's EDF
+    the lesser of the ADEV's and that of the noise the fit describes) listed in
+    ``contradicted``; of them B, K and R not identifiable, with the upper limit the
+    lesser of the fit's and the ADEV's (``TermContradiction.limit``)."""
+    judged = tuple(n for n in ("Q_arcsec", *_DEMOTED) if bool(getattr(fit, n).identifiable))
+    if not judged:
+        return fit
+    # the lesser of the ADEV's EDF and that of the noise the fit describes: the ADEV's quick
+    # noise-type fit can take a filtered record for white noise (an EDF of 11,000 at 82 s
+    # where its flicker floor leaves ~30), and a check that overrides the fit must not be
+    # more confident than either
+    full = np.maximum(result.n_samples - 2 * np.asarray(result.m) + 1, 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edf_fit = mixture_edf_row(fit.avar_terms, result.tau_s, result.m, result.n_samples) * result.n_terms / full
+    edf = np.fmin(np.asarray(result.edf, dtype=float), edf_fit)
+    found = contradictions(result.tau_s, result.adev_dph, edf, fit.avar_terms, judged)
+    if not found:
+        return fit
+    for c in found:
+        if c.name in _DEMOTED:
+            old = getattr(fit, c.name)
+            up = min(float(old.upper), c.limit) if np.isfinite(old.upper) else c.limit
+            fit = replace(fit, **{c.name: Coefficient(0.0, 0.0, up, False, up)})  # type: ignore[arg-type]
+    return replace(fit, contradicted=tuple(found))

@@ -251,12 +251,63 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
             "threshold_abs_z_whole_record": round(res.before.null.threshold_whole, 3),
         },
     }
+    rep["record_fit"] = record_fit(res.recording)
     if res.baseline:
         nz = res.model.noise
         rep["baseline_model"] = {"bias_dph": res.model.bias_dph, "Q_arcsec": nz.Q_arcsec, "N_dpsh": nz.N_dpsh,
                                  "B_dph": nz.B_dph, "K_dphsh": nz.K_dphsh, "R_dphh": nz.R_dphh,
                                  "low_pass": baseline_low_pass(res.model)}
     return json_safe(rep)
+
+
+def record_fit(rec) -> dict | None:
+    """The record's own IEEE-952 coefficients, as ``fogmon replay`` prints them for the
+    same samples (``davar.record.whole_record_fit`` of the rate, or its error against
+    rot_dps, on the octave taus): per coefficient ``value`` (0 when not identifiable),
+    ``lo``/``hi`` (the interval at ``confidence``; [0, upper] when not identifiable),
+    ``identifiable``, ``upper`` (one-sided 95 % upper limit); ``q_is`` "quantization"
+    or "white angle noise" (``NoiseFit.q_band_limited``), ``contradicted`` (the terms the
+    measured ADEV refutes: name, the fit's value, tau_s, the term's and the measured ADEV
+    and its upper bound, deg/h, the ADEV's limit on the term). Not the baseline model,
+    which is explain's null (docs/explain.md, "The baseline and the record's fit"); None
+    when the record is too short for a whole-record ADEV."""
+    from fogmon.davar.record import whole_record_fit
+    from fogmon.errors import FogmonError
+
+    blk = rec.to_block()
+    y = blk.error_rate_dph
+    try:
+        _, fit = whole_record_fit(y, blk.valid & np.isfinite(y), rec.sample_rate_hz)
+    except FogmonError:
+        return None
+    out: dict = {"taus": "octave", "confidence": fit.confidence}
+    for name, c in fit.coefficients().items():
+        out[name] = {"value": float(c.value), "lo": float(c.lo), "hi": float(c.hi),
+                     "identifiable": bool(c.identifiable), "upper": float(c.upper)}
+    out["q_is"] = "white angle noise" if fit.q_band_limited else "quantization"
+    out["contradicted"] = [{"name": c.name, "value": c.value, "tau_s": c.tau_s, "term_adev_dph": c.term_adev_dph,
+                            "adev_dph": c.adev_dph, "bound_dph": c.bound_dph, "limit": c.limit}
+                           for c in fit.contradicted]
+    return out
+
+
+def record_fit_text(rf: dict) -> str:
+    """The record's fit (:func:`record_fit`) on one line, with units."""
+    from fogmon.units import coefficient_unit
+
+    cells = []
+    for name in ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"):
+        c, unit = rf[name], coefficient_unit(name)
+        short = name.split("_")[0]
+        if c["identifiable"]:
+            cells.append(f"{short} {c['value']:.4g} [{c['lo']:.4g}, {c['hi']:.4g}] {unit}")
+        elif c["upper"] is not None:
+            cells.append(f"{short} < {c['upper']:.4g} {unit}")
+    q = " (Q: white angle noise, not quantization)" if rf["q_is"] != "quantization" else ""
+    refuted = "".join(f"; {c['name']} {c['value']:.4g} refuted by the ADEV at {c['tau_s']:.4g} s"
+                      for c in rf["contradicted"] if c["name"] != "Q_arcsec")
+    return (f"record's IEEE-952 fit (as fogmon replay prints it, {100 * rf['confidence']:.1f} %): "
+            f"{'; '.join(cells)}{q}{refuted}")
 
 
 def write_report(rep: dict, path: str) -> None:
@@ -273,6 +324,16 @@ def console_summary(rep: dict) -> str:
     lp = (rep.get("baseline_model") or {}).get("low_pass")
     if lp:
         lines.insert(1, f"  baseline: {low_pass_text(lp)}")
+    bm = rep.get("baseline_model")
+    if bm:
+        from fogmon.units import coefficient_unit
+
+        terms = ", ".join(f"{n.split('_')[0]} {bm[n]:.4g} {coefficient_unit(n)}"
+                          for n in ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh") if bm[n])
+        lines.insert(1, f"  baseline model (explain's null, robust to effects: window medians, R = 0; not the "
+                        f"record's fit): {terms or 'no IEEE-952 term'}")
+    if rep.get("record_fit"):
+        lines.insert(1, f"  {record_fit_text(rep['record_fit'])}")
     for r in rep["mismatches"][:5]:
         lines.append("    - " + _region_text(r))
     if len(rep["mismatches"]) > 5:

@@ -165,11 +165,11 @@ class AxisAnalysis:
         return c
 
     def overall(self, t_last_s: float, taus: TauSpec) -> None:
-        """The whole-run ADEV and fit (of the latest OVERALL_MAX_SAMPLES samples, the last
-        at ``t_last_s``) into the summary; when the motion gate kept samples of them out,
-        also the fit with those samples in (``fit_with_motion``)."""
-        from fogmon.davar.batch import oadev
-        from fogmon.davar.fit import fit_noise
+        """The whole-run ADEV and fit (``whole_record_fit`` of the latest
+        OVERALL_MAX_SAMPLES samples, the last at ``t_last_s``) into the summary; when the
+        motion gate kept samples of them out, also the fit with those samples in
+        (``fit_with_motion``)."""
+        from fogmon.davar.record import whole_record_fit
 
         summary, sample_rate_hz = self.summary, self.sample_rate_hz
         del self.engine  # its window buffers are not needed for the whole-run ADEV: lower peak memory
@@ -177,16 +177,15 @@ class AxisAnalysis:
         if len(rate) < 8:
             return
         try:
-            summary.overall = oadev(rate, sample_rate_hz, taus=taus, valid=valid)
+            summary.overall, summary.overall_fit = whole_record_fit(rate, valid, sample_rate_hz, taus)
         except FogmonError as e:  # a run shorter than the window can be too short for every tau
             axis = f"axis {self.name}: " if self.name else ""
             warnings.warn(f"{axis}no whole-run Allan deviation: {e.message}", FogmonWarning, stacklevel=2)
             return
         summary.overall_first_s = t_last_s - (len(rate) - 1) / sample_rate_hz
-        summary.overall_fit = fit_noise(summary.overall)
         if moved.any():
             summary.motion_in_tail = int(np.count_nonzero(moved))
-            summary.fit_with_motion = fit_noise(oadev(rate, sample_rate_hz, taus=taus, valid=valid | moved))
+            summary.fit_with_motion = whole_record_fit(rate, valid | moved, sample_rate_hz, taus)[1]
 
 
 class _AuxFifo:

@@ -71,6 +71,7 @@ def result_lines(x: AxisSummary, run: Summary) -> list[str]:
     if f is not None:
         lines += ["", f"IEEE-952 noise coefficients (whole run, {100 * f.confidence:.1f} % intervals):"]
         lines += coefficient_lines(f)
+        lines += contradiction_lines(f)
         check = model_check(a, f) if a is not None else None
         if check is not None:
             lines.append(check)
@@ -133,6 +134,8 @@ def axes_lines(s: Summary) -> list[str]:
         lines += ["", f"IEEE-952 noise coefficients per axis (whole run, {100 * conf:.1f} % intervals; n/i: not "
                       f"identifiable from this record, < its 95 % upper limit):"]
         lines += coefficient_axes_lines(fits)
+        for a, f in fits.items():
+            lines += [ln.replace("  ", f"  axis {a}: ", 1) for ln in contradiction_lines(f)]
         for a, x in axes.items():
             check = model_check(x.overall, x.overall_fit) if x.overall is not None and x.overall_fit else None
             if check is not None:
@@ -219,11 +222,40 @@ def coefficient_lines(f, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:
     for name, unit in names.items():
         c = getattr(f, name)
         if bool(c.identifiable):
-            out.append(f"  {name:<{w}} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]")
+            tag = "  white angle noise, not quantization" if name == "Q_arcsec" and _q_band_limited(f) else ""
+            out.append(f"  {name:<{w}} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]{tag}")
         else:
             hi = float(c.hi)
             bound = f" (< {hi:.4g} {unit}, 95 % upper limit)" if math.isfinite(hi) else ""
             out.append(f"  {name:<{w}}   not identifiable from this record{bound}")
+    return out
+
+
+def _q_band_limited(f) -> bool:
+    return bool(getattr(f, "q_band_limited", False))
+
+
+def contradiction_lines(f) -> list[str]:
+    """A line per term of a whole-record NoiseFit that the measured ADEV contradicts
+    (``NoiseFit.contradicted``, fogmon.davar.termcheck): a Q that is band-limited white
+    angle noise, not quantization; a B, K or R printed as not identifiable, and why."""
+    out = []
+    for c in getattr(f, "contradicted", ()):
+        unit = COEFFICIENTS[c.name]
+        bound = (f"{c.adev_dph:.4g} deg/h (upper bound {c.bound_dph:.4g} deg/h at {100 * c.bound_confidence:.2f} %, "
+                 f"family-wise 5 % over the taus)")
+        if c.name == "Q_arcsec":
+            out.append(f"  {c.name}: white angle noise, not quantization: its 1/tau slope (own ADEV "
+                       f"{c.term_adev_dph:.4g} deg/h at tau {c.tau_s:.4g} s) does not reach the shortest taus, where "
+                       f"the ADEV is {bound}; a quantizer on the output would (it is white in angle up to Nyquist): "
+                       f"the output is band-limited (filtered or decimated: a sensor model's bandwidth effect) or the "
+                       f"slope is the far side of a narrowband signal; an output quantizer is < {c.limit:.4g} arcsec")
+        else:
+            what = {"B_dph": "flicker floor", "K_dphsh": "rate random walk", "R_dphh": "rate ramp"}[c.name]
+            out.append(f"  {c.name}: the fit's {c.value:.4g} {unit} is not identified: its {what} (own ADEV "
+                       f"{c.term_adev_dph:.4g} deg/h at tau {c.tau_s:.4g} s) lies above the measured ADEV there, "
+                       f"{bound}; the terms add in variance, so none exceeds the record's ADEV: the fit took a hump "
+                       f"(correlated noise, a transient) for a {what}; the ADEV bounds it: < {c.limit:.4g} {unit}")
     return out
 
 

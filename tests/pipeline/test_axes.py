@@ -216,12 +216,12 @@ ONE_AXIS_SUMMARY = "\n".join([
     'IEEE-952 noise coefficients without and with platform motion (415 samples, 3.5 %, kept out'
      ' above; --keep-motion analyses them; 68.3 % intervals; n/i: not identifiable from this record,'
      ' < its 95 % upper limit):',
-    '  coefficient unit                            motion kept out                  motion analysed',
-    '  Q_arcsec    arcsec                          n/i (< 0.04828)          0.2202 [0.1765, 0.2705]',
-    '  N_dpsh      deg/sqrt(h)           0.07983 [0.07932, 0.0804]       0.03936 [0.03138, 0.05414]',
-    '  B_dph       deg/h                             n/i (< 2.953)                    n/i (< 35.74)',
-    '  K_dphsh     deg/h/sqrt(h)                     n/i (< 116.1)  1.932e+04 [1.81e+04, 2.068e+04]',
-    '  R_dphh      deg/h^2                           n/i (< 978.1)  5.764e+06 [5.427e+06, 5.99e+06]',
+    '  coefficient unit                       motion kept out             motion analysed',
+    '  Q_arcsec    arcsec                     n/i (< 0.04828)     0.2202 [0.1765, 0.2705]',
+    '  N_dpsh      deg/sqrt(h)      0.07983 [0.07932, 0.0804]  0.03936 [0.03138, 0.05414]',
+    '  B_dph       deg/h                        n/i (< 2.953)               n/i (< 35.74)',
+    '  K_dphsh     deg/h/sqrt(h)                n/i (< 116.1)               n/i (< 68.08)',
+    '  R_dphh      deg/h^2                      n/i (< 978.1)                n/i (< 1042)',
     '',
     'Counters:',
     '  frames_ok                12000',

@@ -1,0 +1,89 @@
+"""The whole-record fit checked against the measured ADEV (fogmon.davar.termcheck): no
+identified term above the record's ADEV; a 1/tau slope that does not reach the shortest
+tau is white angle noise, not quantization (issue 28, items 7 and 8)."""
+
+import numpy as np
+import pytest
+
+from fogmon.davar.record import whole_record_fit
+from fogmon.davar.termcheck import contradictions
+from fogmon.davar.theory import coefficients_to_avar_terms
+from fogmon.sim.model import Effect, Noise, SensorModel
+from fogmon.sim.simulate import simulate
+from fogmon.sinks.console import coefficient_lines, contradiction_lines
+
+TAU = np.array([1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0])
+EDF = np.full(len(TAU), 20.0)
+
+
+def test_a_floor_above_the_measured_adev_is_contradicted_and_bounded():
+    adev = np.array([10.0, 8.0, 6.0, 5.0, 4.0, 3.0, 2.0])
+    a = coefficients_to_avar_terms(B_dph=5.0 / 0.664)      # a floor of 5 deg/h, the ADEV falls to 2
+    (c,) = contradictions(TAU, adev, EDF, a)
+    assert c.name == "B_dph" and c.tau_s == 64.0 and c.term_adev_dph == pytest.approx(5.0, rel=1e-3)
+    assert c.adev_dph == 2.0 and 2.0 < c.bound_dph < 5.0
+    assert c.limit == pytest.approx(c.bound_dph / 0.6643, rel=1e-3)   # the ADEV's bound on B
+
+
+def test_a_floor_under_the_measured_adev_is_not_contradicted():
+    adev = np.array([10.0, 8.0, 6.0, 5.0, 4.0, 3.0, 2.0])
+    assert contradictions(TAU, adev, EDF, coefficients_to_avar_terms(B_dph=2.0 / 0.664)) == []
+    # the bound is an upper confidence bound: a floor a little above a low-EDF point is chance
+    assert contradictions(TAU, adev, np.full(len(TAU), 3.0), coefficients_to_avar_terms(B_dph=2.5 / 0.664)) == []
+
+
+def test_a_floor_is_not_judged_below_a_low_pass_rising_adev():
+    # the ADEV rises from the shortest tau (a low-pass): the floor is judged from its peak on
+    adev = np.array([0.1, 0.4, 1.5, 3.3, 3.3, 3.2, 3.3])
+    assert contradictions(TAU, adev, EDF, coefficients_to_avar_terms(B_dph=3.3 / 0.664)) == []
+    # from the peak on it still is
+    adev = np.array([0.1, 0.4, 1.5, 3.3, 3.3, 3.2, 0.5])
+    (c,) = contradictions(TAU, adev, EDF, coefficients_to_avar_terms(B_dph=3.3 / 0.664))
+    assert c.tau_s == 64.0
+
+
+def test_a_filtered_flicker_floor_stays_identified():
+    m = SensorModel(100.0, noise=Noise(N_dpsh=0.01, B_dph=5.0), effects=[Effect("bandwidth", {"cutoff_hz": 1.0,
+                                                                                              "order": 4})])
+    adev, fit = whole_record_fit(simulate(m, duration_s=3000.0, seed=1).rate_dph, None, 100.0)
+    assert adev.adev_dph[0] < 0.1 * 0.664 * 5.0          # the filter: far below the floor at 0.01 s
+    assert fit.B_dph.identifiable and fit.contradicted == ()
+
+
+def test_n_is_not_judged():
+    adev = np.full(len(TAU), 0.1)
+    assert contradictions(TAU, adev, EDF, coefficients_to_avar_terms(N_dpsh=1.0)) == []
+
+
+def _fit(effects, seed=3):
+    rec = simulate(SensorModel(100.0, noise=Noise(Q_arcsec=1.0, N_dpsh=0.01), effects=effects),
+                   duration_s=600.0, seed=seed)
+    return whole_record_fit(rec.rate_dph, None, 100.0)[1]
+
+
+def test_a_quantized_output_keeps_its_quantization_name():
+    fit = _fit([])
+    assert fit.Q_arcsec.identifiable and not fit.q_band_limited and fit.contradicted == ()
+    assert "not quantization" not in "\n".join(coefficient_lines(fit))
+
+
+def test_a_filtered_output_has_white_angle_noise_not_quantization():
+    fit = _fit([Effect("bandwidth", {"cutoff_hz": 5.0, "order": 2})])
+    assert fit.Q_arcsec.identifiable and fit.q_band_limited
+    lines = "\n".join(coefficient_lines(fit) + contradiction_lines(fit))
+    assert "white angle noise, not quantization" in lines and "does not reach the shortest taus" in lines
+
+
+def test_a_hump_fitted_as_a_floor_is_not_printed_identified():
+    # white noise and a strong Gauss-Markov hump (tau_c 5 s, peak 37 deg/h at 9.5 s): the
+    # robust fit takes the hump's top for B and K and flags the taus beyond it, where the
+    # ADEV falls below that floor; the check refuses both and bounds them by the ADEV
+    m = SensorModel(100.0, noise=Noise(N_dpsh=0.5), effects=[Effect("markov", {"sigma_dph": 60.0, "tau_c_s": 5.0})])
+    rec = simulate(m, duration_s=5000.0, seed=5)
+    adev, fit = whole_record_fit(rec.rate_dph, None, 100.0)
+    assert {c.name for c in fit.contradicted} == {"B_dph", "K_dphsh"}
+    for c in fit.contradicted:
+        assert not getattr(fit, c.name).identifiable and float(getattr(fit, c.name).upper) <= c.limit
+        assert c.term_adev_dph > c.bound_dph > c.adev_dph
+    assert fit.N_dpsh.identifiable
+    assert "B_dph: the fit's 33.06 deg/h is not identified: its flicker floor" in "\n".join(contradiction_lines(fit))
