@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from fogmon.davar.fit import NAMES
 from fogmon.errors import FogmonError
@@ -83,6 +83,7 @@ class Term:
 
     value: float | None
     upper: bool
+    band_limited: bool = False  # Q only: a 1/tau slope that does not reach the shortest tau (NoiseFit.q_band_limited)
 
     @staticmethod
     def of(c) -> Term:
@@ -91,6 +92,10 @@ class Term:
             return Term(float(c.value), False)
         up = float(c.upper)
         return Term(up if math.isfinite(up) else None, True)
+
+    def q_label(self) -> str:
+        """What a Q term is called: a quantizer's 1/tau slope reaches the shortest tau."""
+        return "white angle noise Q (band-limited output, not quantization)" if self.band_limited else "quantization Q"
 
     def note(self, unit: str) -> str:
         if self.value is None:
@@ -104,7 +109,10 @@ def terms(fit) -> dict[str, Term]:
     of a sensor model's noise (fogmon.sim.model.Noise: the values as they stand); of an
     AccelFit (fogmon.davar.accel) its five coefficients by their names."""
     if hasattr(fit, "coefficients"):
-        return {name: Term.of(c) for name, c in fit.coefficients().items()}
+        out = {name: Term.of(c) for name, c in fit.coefficients().items()}
+        if getattr(fit, "q_band_limited", False):
+            out["Q_arcsec"] = replace(out["Q_arcsec"], band_limited=True)
+        return out
     return {name: Term(float(getattr(fit, name)), False) for name in NAMES}
 
 
@@ -219,7 +227,7 @@ def kalibr_yaml(fit: Gyros, source: str, sample_rate_hz: float | None, topic: st
                   (f" = {bias_instability_rad(b.value):.6g} rad/s" if b.value is not None else "") +
                   (f" (axis {a})" if len(gyros) > 1 else "") +
                   " (Kalibr models the bias as a pure random walk: B is not in its model)",
-                  "#   quantization Q " + q.note("arcsec") + ", rate ramp R " + r.note("deg/h^2")]
+                  "#   " + q.q_label() + " " + q.note("arcsec") + ", rate ramp R " + r.note("deg/h^2")]
     return "\n".join([*lines, "", *_topic_rate(topic, sample_rate_hz)]) + "\n"
 
 
@@ -340,7 +348,7 @@ def matlab_snippet(fit: Gyros, source: str, sample_rate_hz: float | None, topic:
     if gyros:
         lines += _matlab_call("params", "gyroparams", gyros)
         q, r = _largest(gyros, "Q_arcsec")[1], _largest(gyros, "R_dphh")[1]
-        lines.append(f"% not in gyroparams: quantization Q {q.note('arcsec')}, rate ramp R {r.note('deg/h^2')}")
+        lines.append(f"% not in gyroparams: {q.q_label()} {q.note('arcsec')}, rate ramp R {r.note('deg/h^2')}")
     if acc:
         lines += _matlab_call("accParams", "accelparams", acc)
     if sample_rate_hz:

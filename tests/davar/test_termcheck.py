@@ -87,3 +87,13 @@ def test_a_hump_fitted_as_a_floor_is_not_printed_identified():
         assert c.term_adev_dph > c.bound_dph > c.adev_dph
     assert fit.N_dpsh.identifiable
     assert "B_dph: the fit's 33.06 deg/h is not identified: its flicker floor" in "\n".join(contradiction_lines(fit))
+
+
+def test_exports_name_a_band_limited_q_as_white_angle_noise():
+    from fogmon.export import kalibr_yaml, matlab_snippet
+
+    filtered, quantized = _fit([Effect("bandwidth", {"cutoff_hz": 5.0, "order": 2})]), _fit([])
+    for export in (kalibr_yaml, matlab_snippet):
+        assert "white angle noise Q (band-limited output, not quantization)" in export(filtered, "rec.csv", 100.0)
+        text = export(quantized, "rec.csv", 100.0)
+        assert "quantization Q" in text and "white angle noise" not in text
