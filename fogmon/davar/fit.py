@@ -257,8 +257,8 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     both = limits == "all"
     upper_z = sorted({z, _UPPER_Z}) if both else [_UPPER_Z]
     s0, lower, up = score_limits(x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, se,
-                                 np.ones(5, dtype=bool), np.array([z] if both else []), np.array(upper_z),
-                                 _ROBUST_RTOL, _MAX_ITER)
+                                 np.ones(5, dtype=bool), IDENTIFY_Z, np.array([z] if both else []),
+                                 np.array(upper_z), _ROBUST_RTOL, _MAX_ITER)
     ident = s0 > IDENTIFY_Z
     at = {q: up[:, i] for i, q in enumerate(upper_z)}
     upper = np.maximum(at[_UPPER_Z], a)
