@@ -229,7 +229,8 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     and refitted (``profile.score_limits``): identifiable when A_n = 0 is rejected at
     IDENTIFY_Z (the 95 % two-sided interval excludes zero), the two-sided ``confidence``
     interval and the one-sided UPPER_CONFIDENCE upper limit where the test's signed root
-    reaches the normal quantiles. ``limits``: "all" terms' limits, only the "unidentified"
+    reaches the normal quantiles (the identified terms count in the test's variance at
+    least at their estimates). ``limits``: "all" terms' limits, only the "unidentified"
     ones' upper limit (the identification test for every term; ``lo``/``hi`` NaN), or
     "none" (no test: ``identifiable`` from the sandwich A_n - IDENTIFY_Z se_n > 0). Nothing is
     identifiable (A_n NaN) when fewer than 2 taus are usable or the robust weights reject
@@ -269,8 +270,8 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     both = limits == "all"
     upper_z = sorted({z, _UPPER_Z}) if both else [_UPPER_Z]
     s0, lower, up = score_limits(x, y, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, se,
-                                 np.ones(5, dtype=bool), np.array([z] if both else []), np.array(upper_z),
-                                 _ROBUST_RTOL, _MAX_ITER)
+                                 np.ones(5, dtype=bool), IDENTIFY_Z, np.array([z] if both else []),
+                                 np.array(upper_z), _ROBUST_RTOL, _MAX_ITER)
     ident = s0 > IDENTIFY_Z
     at = {q: up[:, i] for i, q in enumerate(upper_z)}
     upper = np.maximum(at[_UPPER_Z], a)

@@ -10,7 +10,18 @@ s(c) = naive_n U_n / sqrt(sandwich_n) - the one-step change of A_n over its sand
 standard error (``scoring.sandwich_variances``: the exact correlation of the Allan
 variances across taus), both evaluated under the hypothesis. s is about standard
 normal at the true A_n; it is positive where the record asks for more of the term. A
-limit is the c where s reaches a normal quantile. (The deviance of the extended
+limit is the c where s reaches a normal quantile.
+
+The variance is that of the refitted model, except that a term the record identifies
+(its s(0) > IDENTIFY_Z) enters it at least at its unconstrained estimate: a hypothesis
+may make the mean fit trade a term away (a rate ramp tested above its estimate pushed
+the random walk to 0 to stay under the longest taus' Allan variances), but it does not
+take that term's noise out of the record. A ramp's own Allan variance has no sampling
+variance, so with the random walk traded away the variance collapsed and the test
+became as steep as if the record had none: on 150 records of all five terms over 2.9 h
+(K 0.3, R 0.6) s(R true) had sd 1.32 and fell below -1.645 in 12 %, the upper limit of R
+below the truth in 12 % (in 7 of those 18 records the refit had put K at 0). With the
+unconstrained estimate as a floor: sd 0.88, 0.7 %. (The deviance of the extended
 quasi-likelihood, rescaled for the correlation, was used before: its ln v term, v
 depending on the terms through the EDF, made it too steep for a ramp beside a random
 walk, and its minimum is not that of Fisher scoring.)
@@ -20,8 +31,11 @@ from __future__ import annotations
 import numpy as np
 
 from fogmon.davar.scoring import (
+    _model,
+    avar_sd,
     fisher_scoring,
     mixture_correlation,
+    mixture_edf,
     robust_scoring,
     sandwich_variances,
 )
@@ -33,10 +47,13 @@ _MAX_ROOT = 40  # regula falsi steps
 
 
 @kernel(error_model="numpy")
-def signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, max_iter):
+def signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, max_iter, estimate, present):
     """(s(c), the terms refitted under A_n = c) for term ``n``: Fisher scoring of the other
     terms (>= 0) from ``start`` with A_n held at ``c``, then the signed root of the
-    generalized score statistic (module docstring) over the terms > 0 and n."""
+    generalized score statistic (module docstring) over the terms > 0 and n. A term of
+    ``present`` (mask: the terms the record identifies) that the refit lowers below its
+    value in ``estimate`` (the unconstrained fit) enters the variance (the sandwich's
+    standard deviations and correlation across taus) at that value."""
     a0 = start.copy()
     a0[n] = c
     cols = _ALL.copy()
@@ -48,7 +65,17 @@ def signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, ma
         u += rw[i] * x[i, n] * (y[i] - model[i]) / ((2.0 / nu[i] + c2) * model[i] ** 2)
     free = a1 > 0
     free[n] = True
-    naive, sand = sandwich_variances(x, model, mixture_correlation(x, a1, cov), free, rw, nu, c2)
+    noise = a1.copy()
+    squeezed = False
+    for j in range(5):
+        if j != n and present[j] and a1[j] < estimate[j]:
+            noise[j] = estimate[j]
+            squeezed = True
+    if squeezed:
+        sd = avar_sd(_model(x, noise, 1e-300, np.empty(x.shape[0])), mixture_edf(x, noise, mats, full, gap_scale), c2)
+    else:
+        sd = avar_sd(model, nu, c2)
+    naive, sand = sandwich_variances(x, model, mixture_correlation(x, noise, cov), free, rw, nu, c2, sd)
     k = 0
     for j in range(n):
         k += free[j]
@@ -57,31 +84,40 @@ def signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, ma
     return naive[k] * u / np.sqrt(sand[k]), a1
 
 
-@kernel((F2, F1, F3, F1, F1, F4, F1, F8, F1, F1, B1, F1, F1, F8, I8), error_model="numpy")
-def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, lower_z, upper_z, rtol, max_iter):
+@kernel((F2, F1, F3, F1, F1, F4, F1, F8, F1, F1, B1, F8, F1, F1, F8, I8), error_model="numpy")
+def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, identify_z, lower_z, upper_z, rtol,
+                 max_iter):
     """For each term n in ``which``: s(0) (``signed_score``; <= 0 when the estimate A_n is
-    0), and the limits: for each normal quantile z of ``lower_z`` the c in [0, A_n] where
-    s(c) = z (0 when s(0) <= z), for each z of ``upper_z`` (increasing) the c > A_n where
-    s(c) = -z (inf when no bracket is found in _MAX_BRACKET doublings). Brackets start at
-    A_n + its sandwich standard error ``se``; Illinois regula falsi to 1e-3 of the
-    bracket's top (of A_n below it); each fit is warm-started from the last. Returns
-    (s0 (5,), lower (5, len(lower_z)), upper (5, len(upper_z))), NaN outside ``which``."""
+    0; the record identifies the term when s(0) > ``identify_z``), and the limits: for
+    each normal quantile z of ``lower_z`` the c in [0, A_n] where s(c) = z (0 when s(0) <=
+    z), for each z of ``upper_z`` (increasing) the c > A_n where s(c) = -z (inf when no
+    bracket is found in _MAX_BRACKET doublings), the terms identified being present in
+    the variance of every s(c). Brackets start at A_n + its sandwich standard error
+    ``se``; Illinois regula falsi to 1e-3 of the bracket's top (of A_n below it); each fit
+    is warm-started from the last. Returns (s0 (5,), lower (5, len(lower_z)), upper (5,
+    len(upper_z))), NaN outside ``which``."""
     s0 = np.full(5, np.nan)
     lower = np.full((5, lower_z.shape[0]), np.nan)
     upper = np.full((5, upper_z.shape[0]), np.nan)
+    present = np.zeros(5, np.bool_)
+    for n in range(5):
+        if not which[n]:
+            continue
+        s0[n] = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, a, n, 0.0, rtol, max_iter, a, present)[0]
+        if not a[n] > 0:  # the fit put the term at 0: the record does not ask for it
+            s0[n] = min(s0[n], 0.0)
+    for n in range(5):
+        present[n] = s0[n] > identify_z
     for n in range(5):
         if not which[n]:
             continue
         a_n = a[n]
-        s0[n] = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, a, n, 0.0, rtol, max_iter)[0]
-        if not a_n > 0:  # the fit put the term at 0: the record does not ask for it
-            s0[n] = min(s0[n], 0.0)
         for k in range(lower_z.shape[0]):
             z = lower_z[k]
             if not s0[n] > z:
                 lower[n, k] = 0.0
                 continue
-            lower[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, a, n, rtol, max_iter, z,
+            lower[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, a, n, rtol, max_iter, a, present, z,
                                 0.0, s0[n] - z, a_n, -z, 1e-3 * a_n)
         step = se[n] if se[n] > 0 and np.isfinite(se[n]) else max(a_n, 1e-300)
         lo, s_lo, hi = a_n, 0.0, a_n + step
@@ -93,7 +129,8 @@ def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, lower_z
             found = False
             s_hi = 0.0
             for _ in range(_MAX_BRACKET):
-                s_hi, start = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, hi, rtol, max_iter)
+                s_hi, start = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, hi, rtol, max_iter,
+                                           a, present)
                 if s_hi < -z:
                     found = True
                     break
@@ -101,14 +138,15 @@ def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, lower_z
             if not found:
                 upper[n, k:] = np.inf
                 break
-            upper[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, -z,
+            upper[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, a, present, -z,
                                 lo, s_lo + z, hi, s_hi + z, 1e-3 * hi)
             lo, s_lo = upper[n, k], -z  # the next quantile's bracket starts at this limit
     return s0, lower, upper
 
 
 @kernel(error_model="numpy")
-def _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, target, lo, f_lo, hi, f_hi, tol):
+def _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, estimate, present, target, lo, f_lo, hi,
+          f_hi, tol):
     """The c in [lo, hi] where s(c) of term n crosses ``target``, given f = s - target at
     both ends of opposite signs: Illinois regula falsi to ``tol`` (or |f| < 1e-3)."""
     side = 0
@@ -118,7 +156,8 @@ def _root(x, y, mats, full, gap_scale, cov, rw, c2, start, n, rtol, max_iter, ta
             break
         c = (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
         c = min(max(c, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-        s, start = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, max_iter)
+        s, start = signed_score(x, y, mats, full, gap_scale, cov, rw, c2, start, n, c, rtol, max_iter, estimate,
+                                present)
         f = s - target
         if abs(f) < 1e-3:
             return c
@@ -152,11 +191,12 @@ def fit_full(x, y, mats, full, gap_scale, cov, starts, tukey_c, floor2, gate, rw
         return False, a, se, rw, c2
     a, model, nu = fisher_scoring(x, every, y, mats, full, gap_scale, rw, a, not np.any(a > 0), c2, rtol, max_iter)
     corr = mixture_correlation(x, a, cov)
+    sd = avar_sd(model, nu, c2)
     for n in range(5):
         cols = a > 0
         cols[n] = True
         k = 0
         for j in range(n):
             k += cols[j]
-        se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2)[1][k])
+        se[n] = np.sqrt(sandwich_variances(x, model, corr, cols, rw, nu, c2, sd)[1][k])
     return True, a, se, rw, c2

@@ -336,15 +336,25 @@ def symmetric_pinv(a):
     return out
 
 
+@kernel()
+def avar_sd(model, nu, c2):
+    """Standard deviations model sqrt(2 / nu + c2) of Allan variances of expectation
+    ``model`` and EDF ``nu`` (c2: model-inadequacy variance)."""
+    sd = np.empty(model.shape[0])
+    for i in range(model.shape[0]):
+        sd[i] = model[i] * np.sqrt(2.0 / nu[i] + c2)
+    return sd
+
+
 @kernel(error_model="numpy")
-def sandwich_variances(x, model, corr, cols, rw, nu, c2):
+def sandwich_variances(x, model, corr, cols, rw, nu, c2, sd):
     """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
     EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
     Naive: the inverse information of the independence likelihood, (X'WX)^-1 (columns
     scaled to unit norm; ``symmetric_pinv``). Sandwich: with the Allan variances'
-    standard deviations model sqrt(2 / nu + c2) (c2: model-inadequacy variance) and
-    their exact correlation across taus ``corr`` (applied to the inadequacy part too: a
-    misfit is smooth in tau)."""
+    standard deviations ``sd`` (model sqrt(2 / nu + c2) under the fitted mixture, c2 the
+    model-inadequacy variance) and their exact correlation across taus ``corr`` (applied
+    to the inadequacy part too: a misfit is smooth in tau)."""
     idx = np.empty(cols.shape[0], np.int64)
     t, k = x.shape[0], _nonzero(cols, idx)
     xs = np.empty((t, k))
@@ -356,13 +366,11 @@ def sandwich_variances(x, model, corr, cols, rw, nu, c2):
             scale[j] += x[i, idx[j]] ** 2
         scale[j] = np.sqrt(scale[j])
     for i in range(t):
-        v = 2.0 / nu[i] + c2
-        w = rw[i] / (v * model[i] ** 2)
-        sd = model[i] * np.sqrt(v)
+        w = rw[i] / ((2.0 / nu[i] + c2) * model[i] ** 2)
         for j in range(k):
             xs[i, j] = x[i, idx[j]] / scale[j]
             wx[i, j] = w * xs[i, j]
-            g[i, j] = wx[i, j] * sd
+            g[i, j] = wx[i, j] * sd[i]
     info = np.zeros((k, k))
     meat = np.zeros((k, k))
     for p in range(k):

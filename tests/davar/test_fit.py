@@ -263,7 +263,7 @@ def test_sandwich_variances_match_numpy_linear_algebra():
         info = xs.T @ wx
         bread = np.linalg.pinv(info)
         sand = bread @ (wx.T @ (np.outer(sd, sd) * corr) @ wx) @ bread
-        got = sandwich_variances(x, model, corr, cols, rw, nu, c2)
+        got = sandwich_variances(x, model, corr, cols, rw, nu, c2, sd)
         assert np.allclose(got[0], np.maximum(np.diag(bread), 0) / scale**2, rtol=1e-9, atol=0), trial
         assert np.allclose(got[1], np.maximum(np.diag(sand), 0) / scale**2, rtol=1e-9, atol=0), trial
         sym = (info + info.T) / 2
