@@ -25,7 +25,7 @@ from fogmon.davar.confidence import covariance_matrices, mixture_matrices
 from fogmon.davar.profile import fit_full, score_limits
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.scoring import fisher_scoring, mixture_edf
-from fogmon.davar.termcheck import TermContradiction, contradictions
+from fogmon.davar.termcheck import TermContradiction, contradictions, first_peak
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
 
 NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
@@ -334,17 +334,30 @@ def _misfit_outside(a: np.ndarray, tau: np.ndarray, avar: np.ndarray, m: np.ndar
 _QUICK_RTOL = 1e-3  # model convergence of quick_avar_terms
 
 
+def low_pass_taus(avar) -> int:
+    """How many of the shortest taus of the Allan variance curve ``avar`` (ascending tau)
+    lie below a low-pass's peak: the ADEV rises from the shortest tau and then stops
+    rising (``termcheck.first_peak``, at least two taus after the peak), else 0."""
+    peak = first_peak(np.asarray(avar, dtype=np.float64))
+    return peak if peak <= len(avar) - 3 else 0
+
+
 def quick_avar_terms(tau_s, avar, m, n_terms, n_samples: int) -> np.ndarray:
     """A_n >= 0 ((deg/h)^2 s^-n, n = -2..2) of a quick fit for the noise type of the
     confidence bounds: Fisher scoring of all five terms with the mixture-EDF weights on
     the taus of ``octave_subset``, to 1e-3 relative in the model, without the robust
     reweighting, elimination and intervals of ``fit_avar`` (~1 ms instead of 10-60 ms);
-    zeros when fewer than 2 taus are usable."""
+    zeros when fewer than 2 taus are usable. When the ADEV rises from the shortest tau and
+    then stops rising (a low-pass: ``termcheck.first_peak``, with at least two taus after
+    the peak), the taus before the peak are left out: no IEEE-952 term rises there, and
+    fitted they become a ramp R whose deterministic share made the EDF of a filtered
+    flicker floor 11,470 at 82 s of a 3000 s record (its flicker EDF ~ 40)."""
     tau = np.asarray(tau_s, dtype=np.float64)
     avar = np.asarray(avar, dtype=np.float64)
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
     use = np.flatnonzero(ok)
     use = use[octave_subset(np.asarray(m)[use], n_samples // 4)]
+    use = use[low_pass_taus(avar[use]):]
     if len(use) < 2:
         return np.zeros(5)
     edf = _NoiseModel(tau[use], np.asarray(m, dtype=np.int64)[use], np.asarray(n_terms)[use], n_samples)

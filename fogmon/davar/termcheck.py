@@ -47,14 +47,19 @@ CHECKED = ("Q_arcsec", "B_dph", "K_dphsh", "R_dphh")
 LONG_TAU = ("B_dph", "K_dphsh", "R_dphh")
 
 
-def _first_peak_tau(tau: np.ndarray, adev: np.ndarray) -> float:
-    """The tau (s) of the measured ADEV's first local maximum when it rises from the
-    shortest tau - a low-pass's signature (no IEEE-952 term rises there) - else the
-    shortest tau. ``tau`` ascending."""
+def first_peak(adev: np.ndarray) -> int:
+    """Index of the measured ADEV's first local maximum when it rises from the shortest
+    tau - a low-pass's signature (no IEEE-952 term rises there) - else 0. ``adev`` in
+    ascending tau."""
     k = 0
     while k + 1 < len(adev) and adev[k + 1] > adev[k]:
         k += 1
-    return float(tau[k])
+    return k
+
+
+def _first_peak_tau(tau: np.ndarray, adev: np.ndarray) -> float:
+    """The tau (s) of the ADEV's ``first_peak``. ``tau`` ascending."""
+    return float(tau[first_peak(adev)])
 
 
 @dataclass(frozen=True)

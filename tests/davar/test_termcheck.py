@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fogmon.davar.record import whole_record_fit
-from fogmon.davar.termcheck import contradictions
+from fogmon.davar.termcheck import contradictions, first_peak
 from fogmon.davar.theory import coefficients_to_avar_terms
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.simulate import simulate
@@ -97,3 +97,17 @@ def test_exports_name_a_band_limited_q_as_white_angle_noise():
         assert "white angle noise Q (band-limited output, not quantization)" in export(filtered, "rec.csv", 100.0)
         text = export(quantized, "rec.csv", 100.0)
         assert "quantization Q" in text and "white angle noise" not in text
+
+
+def test_a_filtered_record_gets_the_edf_of_its_noise_not_of_a_ramp():
+    # the ADEV rising from the shortest tau (a 1 Hz 4-pole low-pass) was fitted as a ramp R,
+    # whose deterministic share put the EDF at 81.92 s near 11,000; the flicker floor's is
+    # ~40 (60 records' spread: 45), and below the peak the EDF is no more than at the peak
+    m = SensorModel(100.0, noise=Noise(N_dpsh=0.01, B_dph=5.0), effects=[Effect("bandwidth", {"cutoff_hz": 1.0,
+                                                                                              "order": 4})])
+    adev, _ = whole_record_fit(simulate(m, duration_s=3000.0, seed=1).rate_dph, None, 100.0)
+    at = int(np.argmin(np.abs(adev.tau_s - 81.92)))
+    assert 25 < adev.edf[at] < 70
+    peak = first_peak(adev.adev_dph)
+    assert 4 <= peak <= 8                                   # 0.16-2.56 s: the filter's top
+    assert np.all(adev.edf[:peak] <= adev.edf[peak] + 1e-9)
