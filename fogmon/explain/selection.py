@@ -15,7 +15,7 @@ from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
-from fogmon.explain.fitting import Whittle
+from fogmon.explain.fitting import Whittle, low_band_flicker
 from fogmon.explain.replicas import Replicas
 from fogmon.sim.model import SensorModel
 
@@ -346,20 +346,22 @@ def _first_tier(c: Candidate) -> bool:
     return c.nature in ("mean", "white_level", "coefficients") or _subtracted(c)
 
 
-def _heldout_mean(ctx: Context, X: np.ndarray) -> tuple[bool, str]:
-    """Fit on one half of the record, predict the other: wherever the half-fit is itself
-    significant (chi2 gain > 9) and predicts a visible effect in the other half
-    (expected chi2 > 9), the other half's chi-square must drop. Each half's arrays are
-    let go before the next are made (memory: a few record-length arrays per design column)."""
+def _heldout_mean(ctx: Context, X: np.ndarray, S: np.ndarray) -> tuple[bool, str]:
+    """Fit on one half of the record, predict the other, both against the noise PSD
+    ``S`` that judged the effect on the whole record (``judged_psd``): wherever the
+    half-fit is itself significant (chi2 gain > 9) and predicts a visible effect in the
+    other half (expected chi2 > 9), the other half's chi-square must drop. Each half's
+    arrays are let go before the next are made (memory: a few record-length arrays per
+    design column)."""
     half = np.arange(ctx.n) < ctx.n // 2
     notes = []
     ok = True
     for fit_m, test_m, name in ((half, ~half, "second"), (~half, half, "first")):
-        beta = _half_fit(ctx, X, fit_m)
+        beta = _half_fit(ctx, X, fit_m, S)
         if beta is None:
             notes.append(f"{name} half: n/a (not determined by the other half)")
             continue
-        expected, g = _half_test(ctx, X, test_m, beta)
+        expected, g = _half_test(ctx, X, test_m, beta, S)
         if g is None:
             notes.append(f"{name} half: n/a (effect not visible there)")
             continue
@@ -375,22 +377,24 @@ def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np
     return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v
 
 
-def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray) -> np.ndarray | None:
-    """GLS coefficients of design ``X`` fitted on the half ``m``, None when that fit is
-    not itself significant (chi2 gain < 9)."""
+def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> np.ndarray | None:
+    """GLS coefficients of design ``X`` fitted on the half ``m`` against the noise PSD
+    ``S``, None when that fit is not itself significant (chi2 gain < 9)."""
     y, Xc, v = _centred(ctx, X, m)
-    w = Whittle(ctx.wh.S, ctx.n, v)
+    w = Whittle(S, ctx.n, v)
     XF = w.fft(Xc)
     del Xc
     fit = w.gls(XF, w.fft(y))
     return None if fit.chi2_gain < 9.0 else fit.beta
 
 
-def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray) -> tuple[float, float | None]:
+def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray,
+               S: np.ndarray) -> tuple[float, float | None]:
     """The chi-square the effect ``X beta`` is expected to remove on the half ``m`` and
-    the drop it brings there (None when the expected one is below 9: not visible)."""
+    the drop it brings there (None when the expected one is below 9: not visible),
+    against the noise PSD ``S``."""
     y, Xc, v = _centred(ctx, X, m)
-    w = Whittle(ctx.wh.S, ctx.n, v)
+    w = Whittle(S, ctx.n, v)
     XF = w.fft(Xc)
     del Xc
     expected = w.chi2(XF @ beta)
@@ -399,9 +403,19 @@ def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray) -> 
     return expected, w.gain_of(beta, XF, w.fft(y))
 
 
+def judged_psd(ctx: Context, c: Candidate) -> np.ndarray:
+    """The noise PSD a mean-type candidate ``c`` was judged against on the whole record
+    (``candidates.base.judged_gls``): the calibrated PSD raised at the slowest
+    frequencies by the flicker excess of the residual it leaves, when significant
+    (``fitting.low_band_flicker``; the sensor's own bias wander)."""
+    if c.rate is None:
+        return ctx.wh.S
+    return low_band_flicker(ctx.wh.S, ctx.Yf - ctx.wh.fft(c.rate), ctx.n)
+
+
 def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:
     if c.design is not None:
-        return _heldout_mean(ctx, c.design)
+        return _heldout_mean(ctx, c.design, judged_psd(ctx, c))
     if c.heldout is not None:
         res = c.heldout()
         ok = all(g > 0 for g, exp in res if exp >= 9.0)
