@@ -128,7 +128,7 @@ class Selection:
         ``null`` (``baseline``: the model was fitted from the recording, BASELINE_EXCLUDED)."""
         counts = {k: MAX_PER_KIND.get(k, 1) for k in BASELINE_EXCLUDED} if baseline else {}
         fit = setting.fit(y, stoch, null, counts, frozenset())
-        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset()))
+        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset(), fit.ctx.penalty))
 
     @property
     def done(self) -> bool:
@@ -166,8 +166,9 @@ class Selection:
         accepted = (*self.accepted, Accepted(replace(c, design=None, heldout=None), v.bic_gain, v.why, before, after))
         if self.setting.progress:
             self.setting.progress(f"effect {len(accepted)}: {c.kind} (score {before:.3g} -> {after:.3g})", 0, 0)
+        pending = _pending(v.trial.cands, self.refused, v.trial.ctx.penalty)
         return replace(self, fit=v.trial, counts={**self.counts, c.kind: self.counts.get(c.kind, 0) + 1},
-                       accepted=accepted, deferred={}, pending=_pending(v.trial.cands, self.refused))
+                       accepted=accepted, deferred={}, pending=pending)
 
     def judge(self, c: Candidate) -> Verdict:
         """What the search does with candidate ``c`` of the current round: stop when its
@@ -297,11 +298,11 @@ def light(c: Candidate) -> Candidate:
                      "rate": None, "design": None, "heldout": None, "listing": None, "stoch_base": None})
 
 
-def _pending(cands: list[Candidate], refused: AbstractSet[str]) -> tuple[tuple[Candidate, ...], ...]:
+def _pending(cands: list[Candidate], refused: AbstractSet[str], penalty: float) -> tuple[tuple[Candidate, ...], ...]:
     """A round's candidates to judge, tier by tier (``tiers``; empty tiers left out),
     without the kinds refused for good (each kind is fitted once per round, so nothing
     else needs skipping within it)."""
-    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands))
+    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands, penalty))
     return tuple(tier for tier in kept if tier)
 
 
@@ -321,21 +322,25 @@ def _white_refitted(stoch: SensorModel, n0: float) -> SensorModel:
     return SensorModel(stoch.sample_rate_hz, 0.0, replace(stoch.noise, N_dpsh=n0), stoch.effects)
 
 
-def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
+def tiers(cands: list[Candidate], penalty: float) -> list[list[Candidate]]:
     """Selection order: effects tied to time structure or an aux channel (mean-type,
     white-level) first; the broad spectral noise terms (markov, bandwidth) only when
     none of those passes - a spectral term can always soak up part of a deterministic
     signal's power, never the other way round. Corrected IEEE-952 coefficients (the
-    ``noise`` kind) compete in the first tier by BIC gain - every GLS test there assumes
-    the model's noise, so a wrong B or N can fake a step or a ramp - but never ahead of
-    a white-level effect: when an aux channel co-varies with the white level, the
-    physical effect is preferred over a corrected N."""
+    ``noise`` kind) are judged in the first tier, but behind every physical candidate
+    there that passes its bar (BIC gain > 0 with ``penalty``, the tier being judged
+    best gain first): a white-level effect, when an aux channel co-varies with the
+    white level; a mean-type effect, whose test is calibrated to the recording's noise
+    level and judged against its residual's own slow noise (a wrong B or N cannot fake
+    it, docs/explain.md item 5), while the corrected coefficients' Allan fit counts a
+    settling, a drift or a step as noise. Once the physical effect is in, the
+    correction is judged on what is left."""
     first = [c for c in cands if _first_tier(c)]
-    levels = [c for c in first if c.nature == "white_level"]
     coef = [c for c in first if c.nature == "coefficients"]
-    if coef and levels:  # the coefficient correction moves behind the last white-level candidate
+    physical = [c for c in first if c.nature != "coefficients" and c.bic_gain(penalty) > 0]
+    if coef and physical:  # the coefficient correction moves behind the last of them
         first = [c for c in first if c.nature != "coefficients"]
-        at = first.index(levels[-1]) + 1
+        at = first.index(physical[-1]) + 1
         first[at:at] = coef
     return [first, [c for c in cands if c not in first]]
 
