@@ -218,7 +218,9 @@ def build(case: RealCase, seed: int, data_dir: str = DEFAULT_DATA):
             n0 = model.noise.N_dpsh
             lvl = n0 + fx.white_level_dpsh(eff, t, aux)
             extra = np.sqrt(np.maximum(lvl ** 2 - n0 ** 2, 0.0))
-            rate += WhiteRate(fs, np.random.default_rng(seed)).generate(len(t), extra)
+            # a stream of its own: channels() draws the aux channels from default_rng(seed), and the same
+            # normals would make the noise's slow part a copy of vib_g's (a mean law the case never added)
+            rate += WhiteRate(fs, np.random.default_rng(seed + 1)).generate(len(t), extra)
         elif nature == "filter":
             rate = fx.BandwidthFilter(eff.params, fs).apply(rate)
     change = float(np.std(rate + det - (3600.0 * aux["rot_dps"] if "rot_dps" in aux else 0.0))
