@@ -129,8 +129,11 @@ def cases() -> list[RealCase]:
         ]
         out += [RealCase(f"real_{k}_{bg}", bg, (k,), Effect(k, {})) for k in CATALOGUE]
         out.append(RealCase(f"real_noise_{bg}", bg, ("noise",), model_n_factor=0.75))
+    # px4_quiet_z is 59 s long, two correlation times of the vibration level: at 0.1 s per g^2 the
+    # coefficient's standard error was 23 % of it (13.0 [7.2, 18.9], truth 9.8), the 25 % tolerance one
+    # standard error; at 0.2 the law still changes the raw std by under 3 %
     out += [RealCase("real_aux_rectification_px4_quiet_z", "px4_quiet_z", ("aux_response",), run="vibration",
-                     terms={"vib_g^2": 0.1}, physics={"vib_g^2": "vibration rectification"}),
+                     terms={"vib_g^2": 0.2}, physics={"vib_g^2": "vibration rectification"}),
             RealCase("real_aux_faraday_psins_rlg_z", "psins_rlg_z", ("aux_response",), run="coil",
                      terms={"mag_ut": 0.004}, physics={"mag_ut": "magnetic (Faraday) sensitivity"}),
             RealCase("real_bias_step_psins_rlg_z", "psins_rlg_z", ("bias_step",), Effect("bias_step", {}))]
