@@ -215,11 +215,15 @@ class Whittle:
         """Whittle chi-square of a transformed residual."""
         return float(np.sum(self.w * np.abs(Rf) ** 2))
 
-    def gain_of(self, beta: np.ndarray, Xf: np.ndarray, Yf: np.ndarray) -> float:
-        """Chi-square drop on Y when the fixed ``beta`` (fitted elsewhere) is removed:
-        positive when the effect predicts this data (held-out check)."""
-        pred = Xf.reshape(len(self.w), -1) @ beta
-        return self.chi2(Yf) - self.chi2(Yf - pred)
+    def chi2_left(self, Rf: np.ndarray, Nf: np.ndarray | None = None) -> float:
+        """Whittle chi-square of a transformed residual once the nuisance columns ``Nf``
+        (bins x q, transformed; none by default) and, with gaps, the mean over the valid
+        samples are fitted out of it."""
+        cols = [c for c in (None if self.ones is None else self.ones[:, None], Nf) if c is not None and c.size]
+        if not cols:
+            return self.chi2(Rf)
+        A, b = weighted_products(self.w, np.column_stack(cols), Rf)
+        return self.chi2(Rf) - float(b @ np.linalg.pinv(A, rcond=1e-12, hermitian=True) @ b)
 
 
 #: a scan of a slow effect's nonlinear parameter runs on about this many block means of the

@@ -355,18 +355,20 @@ def _heldout_mean(ctx: Context, X: np.ndarray, S: np.ndarray) -> tuple[bool, str
     """Fit on one half of the record, predict the other, both against the noise PSD
     ``S`` that judged the effect on the whole record (``judged_psd``): wherever the
     half-fit is itself significant (chi2 gain > 9) and predicts a visible effect in the
-    other half (expected chi2 > 9), the other half's chi-square must drop. Each half's
-    arrays are let go before the next are made (memory: a few record-length arrays per
-    design column)."""
+    other half (expected chi2 > 9), the other half's chi-square must drop. A design
+    column the fitting half does not hold (``_determined``: a thermal branch of falling
+    temperature in a half where it only rises) predicts nothing there: it is fitted
+    freely in the other half, as its mean is. Each half's arrays are let go before the
+    next are made (memory: a few record-length arrays per design column)."""
     half = np.arange(ctx.n) < ctx.n // 2
     notes = []
     ok = True
     for fit_m, test_m, name in ((half, ~half, "second"), (~half, half, "first")):
-        beta = _half_fit(ctx, X, fit_m, S)
-        if beta is None:
+        got = _half_fit(ctx, X, fit_m, S)
+        if got is None:
             notes.append(f"{name} half: n/a (not determined by the other half)")
             continue
-        expected, g = _half_test(ctx, X, test_m, beta, S)
+        expected, g = _half_test(ctx, X, test_m, *got, S)
         if g is None:
             notes.append(f"{name} half: n/a (effect not visible there)")
             continue
@@ -382,30 +384,48 @@ def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np
     return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v
 
 
-def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> np.ndarray | None:
-    """GLS coefficients of design ``X`` fitted on the half ``m`` against the noise PSD
-    ``S``, None when that fit is not itself significant (chi2 gain < 9)."""
+#: a design column holds less than this share of its energy (about its mean, over the
+#: whole record) in a half: that half does not determine its coefficient
+DETERMINED_SHARE = 1e-6
+
+
+def _determined(ctx: Context, X: np.ndarray, Xc: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Which columns of ``X`` the half (its centred design ``Xc``, valid mask ``v``) determines."""
+    whole = np.sum((X[ctx.valid] - X[ctx.valid].mean(axis=0)) ** 2, axis=0)
+    return np.sum(Xc[v] ** 2, axis=0) > DETERMINED_SHARE * whole
+
+
+def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """GLS coefficients of the columns of design ``X`` that the half ``m`` determines
+    (``_determined``), fitted there against the noise PSD ``S``, and which those are;
+    None when none is or that fit is not itself significant (chi2 gain < 9)."""
     y, Xc, v = _centred(ctx, X, m)
+    det = _determined(ctx, X, Xc, v)
+    if not det.any():
+        return None
     w = Whittle(S, ctx.n, v)
-    XF = w.fft(Xc)
+    XF = w.fft(Xc[:, det])
     del Xc
     fit = w.gls(XF, w.fft(y))
-    return None if fit.chi2_gain < 9.0 else fit.beta
+    return None if fit.chi2_gain < 9.0 else (fit.beta, det)
 
 
-def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray,
+def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray, det: np.ndarray,
                S: np.ndarray) -> tuple[float, float | None]:
-    """The chi-square the effect ``X beta`` is expected to remove on the half ``m`` and
-    the drop it brings there (None when the expected one is below 9: not visible),
-    against the noise PSD ``S``."""
+    """The chi-square the effect ``X[:, det] beta`` is expected to remove on the half
+    ``m`` and the drop it brings there (None when the expected one is below 9: not
+    visible), against the noise PSD ``S``, the other columns and the half's mean fitted
+    freely."""
     y, Xc, v = _centred(ctx, X, m)
     w = Whittle(S, ctx.n, v)
     XF = w.fft(Xc)
     del Xc
-    expected = w.chi2(XF @ beta)
+    pred, free = XF[:, det] @ beta, XF[:, ~det]
+    expected = w.chi2_left(pred, free)
     if expected < 9.0:
         return expected, None
-    return expected, w.gain_of(beta, XF, w.fft(y))
+    Yf = w.fft(y)
+    return expected, w.chi2_left(Yf, free) - w.chi2_left(Yf - pred, free)
 
 
 def judged_psd(ctx: Context, c: Candidate) -> np.ndarray:
