@@ -169,7 +169,12 @@ class Whittle:
     """Whittle GLS on an n-sample uniform record with noise PSD ``S`` at the rfft bins.
 
     ``valid`` marks usable samples: invalid ones are zeroed in the residual and in every
-    design column, so they carry no information."""
+    design column, so they carry no information. With gaps, the fits hold the record's
+    mean over the valid samples free (a nuisance column, the DFT of the valid mask,
+    profiled out): a zero-filled gap is otherwise a jump from the residual's level to 0
+    and back, which under a red (flicker) PSD weighs like data - a bias step added to a
+    real RLG record cut into 35 stationary pieces by the motion gate was fitted at half
+    its size, pulled towards the residual's mean level after it."""
 
     def __init__(self, S: np.ndarray, n: int, valid: np.ndarray | None = None):
         self.n = n
@@ -180,6 +185,8 @@ class Whittle:
             mult[-1] = 1.0
         self.w = mult / (n * S)
         self.valid = None if valid is None or valid.all() else valid
+        #: the DFT of the valid mask: the mean's nuisance column when there are gaps
+        self.ones = None if self.valid is None else np.fft.rfft(self.valid.astype(np.float64))
         #: values derived from S alone, computed once (detectors.kernel_length)
         self.memo: dict = {}
 
@@ -189,7 +196,14 @@ class Whittle:
 
     def gls(self, Xf: np.ndarray, Yf: np.ndarray) -> GlsFit:
         """Fit Y = X beta (both already transformed by :meth:`fft`; Xf is bins x p)."""
-        A, b = weighted_products(self.w, Xf.reshape(len(self.w), -1), Yf)
+        X = Xf.reshape(len(self.w), -1)
+        if self.ones is None:
+            A, b = weighted_products(self.w, X, Yf)
+        else:  # the mean profiled out (class docstring): the Schur complement of its column
+            A1, b1 = weighted_products(self.w, np.column_stack((self.ones, X)), Yf)
+            a00 = A1[0, 0] if A1[0, 0] > 0 else np.inf
+            A = A1[1:, 1:] - np.outer(A1[1:, 0], A1[0, 1:]) / a00
+            b = b1[1:] - A1[1:, 0] * b1[0] / a00
         try:
             cov = np.linalg.pinv(A, rcond=1e-12, hermitian=True)
         except np.linalg.LinAlgError:
@@ -201,11 +215,15 @@ class Whittle:
         """Whittle chi-square of a transformed residual."""
         return float(np.sum(self.w * np.abs(Rf) ** 2))
 
-    def gain_of(self, beta: np.ndarray, Xf: np.ndarray, Yf: np.ndarray) -> float:
-        """Chi-square drop on Y when the fixed ``beta`` (fitted elsewhere) is removed:
-        positive when the effect predicts this data (held-out check)."""
-        pred = Xf.reshape(len(self.w), -1) @ beta
-        return self.chi2(Yf) - self.chi2(Yf - pred)
+    def chi2_left(self, Rf: np.ndarray, Nf: np.ndarray | None = None) -> float:
+        """Whittle chi-square of a transformed residual once the nuisance columns ``Nf``
+        (bins x q, transformed; none by default) and, with gaps, the mean over the valid
+        samples are fitted out of it."""
+        cols = [c for c in (None if self.ones is None else self.ones[:, None], Nf) if c is not None and c.size]
+        if not cols:
+            return self.chi2(Rf)
+        A, b = weighted_products(self.w, np.column_stack(cols), Rf)
+        return self.chi2(Rf) - float(b @ np.linalg.pinv(A, rcond=1e-12, hermitian=True) @ b)
 
 
 #: a scan of a slow effect's nonlinear parameter runs on about this many block means of the

@@ -15,7 +15,7 @@ from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
-from fogmon.explain.fitting import Whittle
+from fogmon.explain.fitting import Whittle, low_band_flicker
 from fogmon.explain.replicas import Replicas
 from fogmon.sim.model import SensorModel
 
@@ -128,7 +128,7 @@ class Selection:
         ``null`` (``baseline``: the model was fitted from the recording, BASELINE_EXCLUDED)."""
         counts = {k: MAX_PER_KIND.get(k, 1) for k in BASELINE_EXCLUDED} if baseline else {}
         fit = setting.fit(y, stoch, null, counts, frozenset())
-        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset()))
+        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset(), fit.ctx.penalty))
 
     @property
     def done(self) -> bool:
@@ -166,8 +166,9 @@ class Selection:
         accepted = (*self.accepted, Accepted(replace(c, design=None, heldout=None), v.bic_gain, v.why, before, after))
         if self.setting.progress:
             self.setting.progress(f"effect {len(accepted)}: {c.kind} (score {before:.3g} -> {after:.3g})", 0, 0)
+        pending = _pending(v.trial.cands, self.refused, v.trial.ctx.penalty)
         return replace(self, fit=v.trial, counts={**self.counts, c.kind: self.counts.get(c.kind, 0) + 1},
-                       accepted=accepted, deferred={}, pending=_pending(v.trial.cands, self.refused))
+                       accepted=accepted, deferred={}, pending=pending)
 
     def judge(self, c: Candidate) -> Verdict:
         """What the search does with candidate ``c`` of the current round: stop when its
@@ -297,11 +298,11 @@ def light(c: Candidate) -> Candidate:
                      "rate": None, "design": None, "heldout": None, "listing": None, "stoch_base": None})
 
 
-def _pending(cands: list[Candidate], refused: AbstractSet[str]) -> tuple[tuple[Candidate, ...], ...]:
+def _pending(cands: list[Candidate], refused: AbstractSet[str], penalty: float) -> tuple[tuple[Candidate, ...], ...]:
     """A round's candidates to judge, tier by tier (``tiers``; empty tiers left out),
     without the kinds refused for good (each kind is fitted once per round, so nothing
     else needs skipping within it)."""
-    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands))
+    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands, penalty))
     return tuple(tier for tier in kept if tier)
 
 
@@ -321,21 +322,25 @@ def _white_refitted(stoch: SensorModel, n0: float) -> SensorModel:
     return SensorModel(stoch.sample_rate_hz, 0.0, replace(stoch.noise, N_dpsh=n0), stoch.effects)
 
 
-def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
+def tiers(cands: list[Candidate], penalty: float) -> list[list[Candidate]]:
     """Selection order: effects tied to time structure or an aux channel (mean-type,
     white-level) first; the broad spectral noise terms (markov, bandwidth) only when
     none of those passes - a spectral term can always soak up part of a deterministic
     signal's power, never the other way round. Corrected IEEE-952 coefficients (the
-    ``noise`` kind) compete in the first tier by BIC gain - every GLS test there assumes
-    the model's noise, so a wrong B or N can fake a step or a ramp - but never ahead of
-    a white-level effect: when an aux channel co-varies with the white level, the
-    physical effect is preferred over a corrected N."""
+    ``noise`` kind) are judged in the first tier, but behind every physical candidate
+    there that passes its bar (BIC gain > 0 with ``penalty``, the tier being judged
+    best gain first): a white-level effect, when an aux channel co-varies with the
+    white level; a mean-type effect, whose test is calibrated to the recording's noise
+    level and judged against its residual's own slow noise (a wrong B or N cannot fake
+    it, docs/explain.md item 5), while the corrected coefficients' Allan fit counts a
+    settling, a drift or a step as noise. Once the physical effect is in, the
+    correction is judged on what is left."""
     first = [c for c in cands if _first_tier(c)]
-    levels = [c for c in first if c.nature == "white_level"]
     coef = [c for c in first if c.nature == "coefficients"]
-    if coef and levels:  # the coefficient correction moves behind the last white-level candidate
+    physical = [c for c in first if c.nature != "coefficients" and c.bic_gain(penalty) > 0]
+    if coef and physical:  # the coefficient correction moves behind the last of them
         first = [c for c in first if c.nature != "coefficients"]
-        at = first.index(levels[-1]) + 1
+        at = first.index(physical[-1]) + 1
         first[at:at] = coef
     return [first, [c for c in cands if c not in first]]
 
@@ -346,20 +351,24 @@ def _first_tier(c: Candidate) -> bool:
     return c.nature in ("mean", "white_level", "coefficients") or _subtracted(c)
 
 
-def _heldout_mean(ctx: Context, X: np.ndarray) -> tuple[bool, str]:
-    """Fit on one half of the record, predict the other: wherever the half-fit is itself
-    significant (chi2 gain > 9) and predicts a visible effect in the other half
-    (expected chi2 > 9), the other half's chi-square must drop. Each half's arrays are
-    let go before the next are made (memory: a few record-length arrays per design column)."""
+def _heldout_mean(ctx: Context, X: np.ndarray, S: np.ndarray) -> tuple[bool, str]:
+    """Fit on one half of the record, predict the other, both against the noise PSD
+    ``S`` that judged the effect on the whole record (``judged_psd``): wherever the
+    half-fit is itself significant (chi2 gain > 9) and predicts a visible effect in the
+    other half (expected chi2 > 9), the other half's chi-square must drop. A design
+    column the fitting half does not hold (``_determined``: a thermal branch of falling
+    temperature in a half where it only rises) predicts nothing there: it is fitted
+    freely in the other half, as its mean is. Each half's arrays are let go before the
+    next are made (memory: a few record-length arrays per design column)."""
     half = np.arange(ctx.n) < ctx.n // 2
     notes = []
     ok = True
     for fit_m, test_m, name in ((half, ~half, "second"), (~half, half, "first")):
-        beta = _half_fit(ctx, X, fit_m)
-        if beta is None:
+        got = _half_fit(ctx, X, fit_m, S)
+        if got is None:
             notes.append(f"{name} half: n/a (not determined by the other half)")
             continue
-        expected, g = _half_test(ctx, X, test_m, beta)
+        expected, g = _half_test(ctx, X, test_m, *got, S)
         if g is None:
             notes.append(f"{name} half: n/a (effect not visible there)")
             continue
@@ -375,33 +384,63 @@ def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np
     return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v
 
 
-def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray) -> np.ndarray | None:
-    """GLS coefficients of design ``X`` fitted on the half ``m``, None when that fit is
-    not itself significant (chi2 gain < 9)."""
+#: a design column holds less than this share of its energy (about its mean, over the
+#: whole record) in a half: that half does not determine its coefficient
+DETERMINED_SHARE = 1e-6
+
+
+def _determined(ctx: Context, X: np.ndarray, Xc: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Which columns of ``X`` the half (its centred design ``Xc``, valid mask ``v``) determines."""
+    whole = np.sum((X[ctx.valid] - X[ctx.valid].mean(axis=0)) ** 2, axis=0)
+    return np.sum(Xc[v] ** 2, axis=0) > DETERMINED_SHARE * whole
+
+
+def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """GLS coefficients of the columns of design ``X`` that the half ``m`` determines
+    (``_determined``), fitted there against the noise PSD ``S``, and which those are;
+    None when none is or that fit is not itself significant (chi2 gain < 9)."""
     y, Xc, v = _centred(ctx, X, m)
-    w = Whittle(ctx.wh.S, ctx.n, v)
-    XF = w.fft(Xc)
+    det = _determined(ctx, X, Xc, v)
+    if not det.any():
+        return None
+    w = Whittle(S, ctx.n, v)
+    XF = w.fft(Xc[:, det])
     del Xc
     fit = w.gls(XF, w.fft(y))
-    return None if fit.chi2_gain < 9.0 else fit.beta
+    return None if fit.chi2_gain < 9.0 else (fit.beta, det)
 
 
-def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray) -> tuple[float, float | None]:
-    """The chi-square the effect ``X beta`` is expected to remove on the half ``m`` and
-    the drop it brings there (None when the expected one is below 9: not visible)."""
+def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray, det: np.ndarray,
+               S: np.ndarray) -> tuple[float, float | None]:
+    """The chi-square the effect ``X[:, det] beta`` is expected to remove on the half
+    ``m`` and the drop it brings there (None when the expected one is below 9: not
+    visible), against the noise PSD ``S``, the other columns and the half's mean fitted
+    freely."""
     y, Xc, v = _centred(ctx, X, m)
-    w = Whittle(ctx.wh.S, ctx.n, v)
+    w = Whittle(S, ctx.n, v)
     XF = w.fft(Xc)
     del Xc
-    expected = w.chi2(XF @ beta)
+    pred, free = XF[:, det] @ beta, XF[:, ~det]
+    expected = w.chi2_left(pred, free)
     if expected < 9.0:
         return expected, None
-    return expected, w.gain_of(beta, XF, w.fft(y))
+    Yf = w.fft(y)
+    return expected, w.chi2_left(Yf, free) - w.chi2_left(Yf - pred, free)
+
+
+def judged_psd(ctx: Context, c: Candidate) -> np.ndarray:
+    """The noise PSD a mean-type candidate ``c`` was judged against on the whole record
+    (``candidates.base.judged_gls``): the calibrated PSD raised at the slowest
+    frequencies by the flicker excess of the residual it leaves, when significant
+    (``fitting.low_band_flicker``; the sensor's own bias wander)."""
+    if c.rate is None:
+        return ctx.wh.S
+    return low_band_flicker(ctx.wh.S, ctx.Yf - ctx.wh.fft(c.rate), ctx.n)
 
 
 def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:
     if c.design is not None:
-        return _heldout_mean(ctx, c.design)
+        return _heldout_mean(ctx, c.design, judged_psd(ctx, c))
     if c.heldout is not None:
         res = c.heldout()
         ok = all(g > 0 for g, exp in res if exp >= 9.0)

@@ -38,6 +38,38 @@ def test_whittle_gls_with_white_psd_equals_ols_with_intercept():
     assert np.allclose(fit.cov, cov, rtol=1e-8)
 
 
+def test_whittle_gls_with_gaps_equals_ols_with_intercept_on_the_valid_samples():
+    rng = np.random.default_rng(1)
+    n = 2048
+    t = np.arange(n)
+    valid = np.ones(n, bool)
+    for a in (100, 600, 1200, 1900):
+        valid[a:a + 60] = False
+    X = np.column_stack((np.sin(0.01 * t), (t > 700).astype(float)))
+    y = X @ np.array([0.5, -0.2]) + rng.standard_normal(n) + 3.0
+    wh = Whittle(noise_psd(rfft_omega(n), 1.0, N_dpsh=1 / 60), n, valid)
+    fit = wh.gls(wh.fft(X), wh.fft(y))
+    A = np.column_stack((np.ones(valid.sum()), X[valid]))
+    ref, *_ = np.linalg.lstsq(A, y[valid], rcond=None)
+    assert np.allclose(fit.beta, ref[1:], atol=1e-10)
+    resid = y[valid] - A @ ref
+    assert fit.chi2_gain == pytest.approx(np.sum((y[valid] - y[valid].mean()) ** 2) - resid @ resid, rel=1e-9)
+
+
+def test_a_step_across_gaps_is_fitted_at_its_size_under_a_red_psd():
+    # the residual centred over the valid samples, zero in the gaps: without the mean held
+    # free, the gaps' jumps to 0 pulled the step towards the level after it
+    n = 4096
+    valid = np.ones(n, bool)
+    for a in range(150, n, 400):
+        valid[a:a + 40] = False
+    X = (np.arange(n) >= 1700).astype(float)
+    y = np.where(valid, 8.0 * X - np.mean(8.0 * X[valid]), 0.0)
+    S = noise_psd(rfft_omega(n), 1.0, N_dpsh=1 / 60, K_dphsh=60 * 0.05)  # a rate random walk
+    wh = Whittle(S, n, valid)
+    assert wh.gls(wh.fft(X), wh.fft(y)).beta[0] == pytest.approx(8.0, rel=1e-9)
+
+
 @pytest.mark.parametrize("sample_rate_hz", [1.0, 100.0, 1000.0])
 def test_psd_integrates_to_ieee952_allan_variance_at_tau0(sample_rate_hz):
     n = 1 << 14

@@ -99,6 +99,15 @@ class Candidate:
         return validate_effect(self.kind, self.params, "fitted effect")
 
 
+def varies(a: np.ndarray) -> bool:
+    """Whether channel ``a`` varies beyond float rounding: its finite values' range above
+    1e-9 of their largest magnitude (the mean of a channel held at 0.02 is 0.02 only to
+    1e-17; such a spread, regressed on, gives any slope with a tiny standard error)."""
+    f = np.asarray(a, dtype=float)
+    f = f[np.isfinite(f)]
+    return f.size > 1 and float(np.ptp(f)) > 1e-9 * float(np.max(np.abs(f)))
+
+
 def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
     """Rate (deg/h) of a mean-type effect with the given parameters on the context grid."""
     return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.sample_rate_hz)

@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 
 from fogmon.explain import detectors
-from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate
+from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate, varies
 from fogmon.explain.fitting import Coarse, coarse_block, weighted_products
 
 #: A periodic term's frequency search must find a line that chance (white residual,
@@ -213,7 +213,7 @@ def warm_up(ctx: Context) -> Candidate | None:
 def scale_factor(ctx: Context) -> Candidate | None:
     """Scale-factor error on rot_dps: symmetric, and with asymmetry (better BIC wins)."""
     rot = ctx.aux.get("rot_dps")
-    if rot is None or not np.nanstd(rot) > 0:
+    if rot is None or not varies(rot):
         return None
     c_ppm = unit_rate("scale_factor", {"ppm": 1.0, "asym_ppm": 0.0}, ctx)
     c_asym = unit_rate("scale_factor", {"ppm": 0.0, "asym_ppm": 1.0}, ctx)
@@ -248,7 +248,7 @@ def thermal_drift(ctx: Context) -> Candidate | None:
     at each temperature smoothing of THERMAL_SMOOTHING (one more parameter when it is not
     the simulator's default), the best BIC wins."""
     temp = ctx.aux.get("temp_c")
-    if temp is None or not np.nanstd(temp) > 0:
+    if temp is None or not varies(temp):
         return None
     best = None
     for smooth_s, diff_s in THERMAL_SMOOTHING:

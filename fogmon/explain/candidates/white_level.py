@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fogmon.explain.candidates.base import Candidate, Context, estimate_text, replace_white
+from fogmon.explain.candidates.base import Candidate, Context, estimate_text, replace_white, varies
 from fogmon.explain.fitting import avar1_of_psd, model_psd, rfft_omega
 
 
@@ -39,13 +39,15 @@ def _ols(x: np.ndarray, y: np.ndarray):
 
 def _white_level(ctx: Context, kind: str, channel: str) -> Candidate | None:
     a = ctx.aux.get(channel)
-    if a is None or not np.nanstd(a) > 0 or any(e.kind == kind for e in ctx.stoch.effects):
+    if a is None or not varies(a) or any(e.kind == kind for e in ctx.stoch.effects):
         return None
     seg = max(16, ctx.n // 2000)
     lev, nseg = _segment_levels(ctx, seg)
     if nseg < 20:
         return None
     x = np.nanmean(a[: nseg * seg].reshape(nseg, seg), axis=1)
+    if not varies(x):  # held over the record (but for gaps or its last samples): nothing to regress on
+        return None
     beta, se, s2 = _ols(x, lev)
     tstat = beta[1] / se[1] if se[1] > 0 else 0.0
     N0 = ctx.stoch.noise.N_dpsh
