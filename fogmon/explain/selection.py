@@ -128,7 +128,7 @@ class Selection:
         ``null`` (``baseline``: the model was fitted from the recording, BASELINE_EXCLUDED)."""
         counts = {k: MAX_PER_KIND.get(k, 1) for k in BASELINE_EXCLUDED} if baseline else {}
         fit = setting.fit(y, stoch, null, counts, frozenset())
-        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset()))
+        return cls(setting, fit, counts, pending=_pending(fit.cands, frozenset(), fit.ctx.penalty))
 
     @property
     def done(self) -> bool:
@@ -159,15 +159,15 @@ class Selection:
             return replace(out, contradicted=contradicted,
                            fit=replace(f, analysis=rescored(f.analysis, f.cands, f.ctx.penalty, contradicted)))
         assert v.trial is not None  # an accepted candidate comes with its trial
-        if c.kind == lookalike.LAW:
-            c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
+        c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
         before, after = self.fit.analysis.score.value, v.trial.analysis.score.value
         # what the report and the fitted model read of it: its design and held-out closure let go (memory)
         accepted = (*self.accepted, Accepted(replace(c, design=None, heldout=None), v.bic_gain, v.why, before, after))
         if self.setting.progress:
             self.setting.progress(f"effect {len(accepted)}: {c.kind} (score {before:.3g} -> {after:.3g})", 0, 0)
         return replace(self, fit=v.trial, counts={**self.counts, c.kind: self.counts.get(c.kind, 0) + 1},
-                       accepted=accepted, deferred={}, pending=_pending(v.trial.cands, self.refused))
+                       accepted=accepted, deferred={},
+                       pending=_pending(v.trial.cands, self.refused, v.trial.ctx.penalty))
 
     def judge(self, c: Candidate) -> Verdict:
         """What the search does with candidate ``c`` of the current round: stop when its
@@ -297,11 +297,11 @@ def light(c: Candidate) -> Candidate:
                      "rate": None, "design": None, "heldout": None, "listing": None, "stoch_base": None})
 
 
-def _pending(cands: list[Candidate], refused: AbstractSet[str]) -> tuple[tuple[Candidate, ...], ...]:
+def _pending(cands: list[Candidate], refused: AbstractSet[str], penalty: float) -> tuple[tuple[Candidate, ...], ...]:
     """A round's candidates to judge, tier by tier (``tiers``; empty tiers left out),
     without the kinds refused for good (each kind is fitted once per round, so nothing
     else needs skipping within it)."""
-    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands))
+    kept = (tuple(c for c in tier if c.kind not in refused) for tier in tiers(cands, penalty))
     return tuple(tier for tier in kept if tier)
 
 
@@ -321,7 +321,7 @@ def _white_refitted(stoch: SensorModel, n0: float) -> SensorModel:
     return SensorModel(stoch.sample_rate_hz, 0.0, replace(stoch.noise, N_dpsh=n0), stoch.effects)
 
 
-def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
+def tiers(cands: list[Candidate], penalty: float) -> list[list[Candidate]]:
     """Selection order: effects tied to time structure or an aux channel (mean-type,
     white-level) first; the broad spectral noise terms (markov, bandwidth) only when
     none of those passes - a spectral term can always soak up part of a deterministic
@@ -329,7 +329,9 @@ def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
     ``noise`` kind) compete in the first tier by BIC gain - every GLS test there assumes
     the model's noise, so a wrong B or N can fake a step or a ramp - but never ahead of
     a white-level effect: when an aux channel co-varies with the white level, the
-    physical effect is preferred over a corrected N."""
+    physical effect is preferred over a corrected N. A Gauss-Markov term with the larger
+    BIC gain (``penalty``: ln n) takes the noise kind's place, just before it
+    (``lookalike.ahead``)."""
     first = [c for c in cands if _first_tier(c)]
     levels = [c for c in first if c.nature == "white_level"]
     coef = [c for c in first if c.nature == "coefficients"]
@@ -337,7 +339,7 @@ def tiers(cands: list[Candidate]) -> list[list[Candidate]]:
         first = [c for c in first if c.nature != "coefficients"]
         at = first.index(levels[-1]) + 1
         first[at:at] = coef
-    return [first, [c for c in cands if c not in first]]
+    return list(lookalike.ahead(first, [c for c in cands if c not in first], penalty))
 
 
 def _first_tier(c: Candidate) -> bool:
