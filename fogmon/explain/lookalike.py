@@ -32,9 +32,9 @@ so the likelihood decides:
 
 4. **The one the data support more is judged first** (``ahead``): ``noise`` is judged in
    the first tier (a wrong coefficient fakes steps and ramps in its GLS tests), ``markov``
-   in the second; when markov's BIC gain is the larger it takes the noise kind's place
-   in the first tier, just before it (so the noise kind is still judged if markov is
-   refused).
+   in the second; when markov's BIC gain is the larger and the noise kind passes its
+   bar, markov takes the noise kind's place in the first tier, just before it (so the
+   noise kind is still judged if markov is refused).
 5. **The evidence names what was refused** (``explained``, as in 3): the other one, when
    it passed its bar before and no longer does after.
 """
@@ -69,10 +69,13 @@ def first(cands: list[Candidate], penalty: float) -> list[Candidate]:
 
 def ahead(first: list[Candidate], second: list[Candidate], penalty: float) -> tuple[list[Candidate], list[Candidate]]:
     """The selection's two tiers with ``markov`` moved from the second into the first,
-    just before ``noise``, when its BIC gain is the larger (module docstring, 4)."""
+    just before ``noise``, when its BIC gain is the larger (module docstring, 4) and the
+    selection reaches the noise kind: it and every candidate ahead of it pass their bar
+    (the first one that does not ends the tier; markov then stays in the second)."""
     mk = next((c for c in second if c.kind == "markov"), None)
     at = next((i for i, c in enumerate(first) if c.kind == "noise"), None)
-    if mk is None or at is None or not mk.bic_gain(penalty) > first[at].bic_gain(penalty):
+    if (mk is None or at is None or not mk.bic_gain(penalty) > first[at].bic_gain(penalty)
+            or not all(c.bic_gain(penalty) > 0 for c in first[:at + 1])):
         return first, second
     return [*first[:at], mk, *first[at:]], [c for c in second if c is not mk]
 

@@ -61,3 +61,12 @@ def test_the_accepted_kind_names_its_refused_rival():
     assert lookalike.explained(mk, [mk, nz_before], [nz_before], pen).evidence == "Whittle fit"
     step = Candidate("bias_step", {}, {}, gain=100.0, k=3, evidence="step")
     assert lookalike.explained(step, [step, nz_before], [nz_after], pen) is step
+
+
+def test_markov_stays_in_the_second_tier_when_the_noise_kind_is_below_its_bar():
+    pen = math.log(36000)
+    step = Candidate("bias_step", {}, {}, gain=12.0, k=2, evidence="")
+    nz = Candidate("noise", {}, {}, gain=-1500.0, k=2, evidence="")
+    mk = Candidate("markov", {}, {}, gain=2900.0, k=2, evidence="")
+    first, second = tiers([mk, step, nz], pen)
+    assert [c.kind for c in first] == ["bias_step", "noise"] and second == [mk]
