@@ -22,6 +22,21 @@ The rule, applied by the forward selection (fogmon.explain.selection) in three p
    or noise-type) that passed its bar before the law was accepted and no longer does
    after it is a look-alike the law explains; the accepted law's evidence says so with
    both BIC gains.
+
+A Gauss-Markov term (``markov``) and a wrong IEEE-952 coefficient (``noise``) are
+look-alikes too: both raise the residual's spectrum over the whole record. The Gauss-
+Markov term is a hump in the Allan deviation (rising ~ sqrt(tau), falling ~ 1/sqrt(tau)
+after tau ~ 1.9 tau_c), a wrong N a flat offset of the white slope, a wrong B or K a
+lasting rise; both are scored by the Whittle likelihood of the same binned periodogram,
+so the likelihood decides:
+
+4. **The one the data support more is judged first** (``ahead``): ``noise`` is judged in
+   the first tier (a wrong coefficient fakes steps and ramps in its GLS tests), ``markov``
+   in the second; when markov's BIC gain is the larger and the noise kind passes its
+   bar, markov takes the noise kind's place in the first tier, just before it (so the
+   noise kind is still judged if markov is refused).
+5. **The evidence names what was refused** (``explained``, as in 3): the other one, when
+   it passed its bar before and no longer does after.
 """
 from __future__ import annotations
 
@@ -34,6 +49,13 @@ from fogmon.explain.candidates.base import Candidate, Context
 from fogmon.sim.model import EFFECT_KINDS
 
 LAW = "aux_response"
+#: the kinds each accepted kind's evidence names as refused look-alikes (``explained``;
+#: the law: every catalogue kind)
+RIVALS = {"markov": ("noise",), "noise": ("markov",)}
+#: why the likelihood preferred the accepted kind over its rival (``explained``)
+_PREFERRED = {"markov": "a hump in the Allan deviation (a Gauss-Markov term) describes the residual better than "
+                       "corrected IEEE-952 slopes",
+              "noise": "corrected IEEE-952 slopes describe the residual better than a Gauss-Markov hump"}
 
 
 def first(cands: list[Candidate], penalty: float) -> list[Candidate]:
@@ -43,6 +65,19 @@ def first(cands: list[Candidate], penalty: float) -> list[Candidate]:
     if law is None or law.bic_gain(penalty) <= 0:
         return cands
     return [law, *(c for c in cands if c is not law)]
+
+
+def ahead(first: list[Candidate], second: list[Candidate], penalty: float) -> tuple[list[Candidate], list[Candidate]]:
+    """The selection's two tiers with ``markov`` moved from the second into the first,
+    just before ``noise``, when its BIC gain is the larger (module docstring, 4) and the
+    selection reaches the noise kind: it and every candidate ahead of it pass their bar
+    (the first one that does not ends the tier; markov then stays in the second)."""
+    mk = next((c for c in second if c.kind == "markov"), None)
+    at = next((i for i, c in enumerate(first) if c.kind == "noise"), None)
+    if (mk is None or at is None or not mk.bic_gain(penalty) > first[at].bic_gain(penalty)
+            or not all(c.bic_gain(penalty) > 0 for c in first[:at + 1])):
+        return first, second
+    return [*first[:at], mk, *first[at:]], [c for c in second if c is not mk]
 
 
 def _gain(ctx: Context, X: np.ndarray) -> float:
@@ -83,15 +118,21 @@ def refusal(law: Candidate, cands: list[Candidate], ctx: Context,
     return None
 
 
-def explained(law: Candidate, before: list[Candidate], after: list[Candidate], penalty: float) -> Candidate:
-    """``law`` with its evidence naming the catalogue look-alikes it explains (module
-    docstring, 3): candidates of ``before`` (the round it was accepted in) that passed
-    their bar, whose kind in ``after`` (the next round) no longer does."""
-    now = {c.kind: c.bic_gain(penalty) for c in after}
-    gone = [(c.kind, c.bic_gain(penalty), now.get(c.kind)) for c in before
-            if c.kind != LAW and c.bic_gain(penalty) > 0 and not now.get(c.kind, 0.0) > 0]
+def explained(c: Candidate, before: list[Candidate], after: list[Candidate], penalty: float) -> Candidate:
+    """``c`` with its evidence naming the look-alikes it explains (module docstring, 3 and
+    5): candidates of ``before`` (the round it was accepted in) of a kind it rivals (the
+    law: every catalogue kind; ``RIVALS``) that passed their bar, whose kind in ``after``
+    (the next round) no longer does."""
+    if c.kind != LAW and c.kind not in RIVALS:
+        return c
+    now = {o.kind: o.bic_gain(penalty) for o in after}
+    gone = [(o.kind, o.bic_gain(penalty), now.get(o.kind)) for o in before
+            if o.kind != c.kind and (c.kind == LAW or o.kind in RIVALS[c.kind])
+            and o.bic_gain(penalty) > 0 and not now.get(o.kind, 0.0) > 0]
     if not gone:
-        return law
-    text = "; ".join(f"{k} (BIC gain {b:.1f} before the law, {'not fitted' if a is None else f'{a:.1f}'} after)"
-                     for k, b, a in gone)
-    return replace(law, evidence=f"{law.evidence}. Look-alikes refused, explained by the law: {text}")
+        return c
+    text = "; ".join(f"{k} (BIC gain {b:.1f} before {'the law' if c.kind == LAW else c.kind}, "
+                     f"{'not fitted' if a is None else f'{a:.1f}'} after)" for k, b, a in gone)
+    if c.kind == LAW:
+        return replace(c, evidence=f"{c.evidence}. Look-alikes refused, explained by the law: {text}")
+    return replace(c, evidence=f"{c.evidence}. Look-alike refused: {text}: {_PREFERRED[c.kind]}")

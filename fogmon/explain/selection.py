@@ -159,8 +159,7 @@ class Selection:
             return replace(out, contradicted=contradicted,
                            fit=replace(f, analysis=rescored(f.analysis, f.cands, f.ctx.penalty, contradicted)))
         assert v.trial is not None  # an accepted candidate comes with its trial
-        if c.kind == lookalike.LAW:
-            c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
+        c = lookalike.explained(c, self.fit.cands, v.trial.cands, self.fit.ctx.penalty)
         before, after = self.fit.analysis.score.value, v.trial.analysis.score.value
         # what the report and the fitted model read of it: its design and held-out closure let go (memory)
         accepted = (*self.accepted, Accepted(replace(c, design=None, heldout=None), v.bic_gain, v.why, before, after))
@@ -334,7 +333,9 @@ def tiers(cands: list[Candidate], penalty: float) -> list[list[Candidate]]:
     level and judged against its residual's own slow noise (a wrong B or N cannot fake
     it, docs/explain.md item 5), while the corrected coefficients' Allan fit counts a
     settling, a drift or a step as noise. Once the physical effect is in, the
-    correction is judged on what is left."""
+    correction is judged on what is left. A Gauss-Markov term with the larger BIC gain
+    (``penalty``: ln n) takes the noise kind's place, just before it
+    (``lookalike.ahead``)."""
     first = [c for c in cands if _first_tier(c)]
     coef = [c for c in first if c.nature == "coefficients"]
     physical = [c for c in first if c.nature != "coefficients" and c.bic_gain(penalty) > 0]
@@ -342,7 +343,7 @@ def tiers(cands: list[Candidate], penalty: float) -> list[list[Candidate]]:
         first = [c for c in first if c.nature != "coefficients"]
         at = first.index(physical[-1]) + 1
         first[at:at] = coef
-    return [first, [c for c in cands if c not in first]]
+    return list(lookalike.ahead(first, [c for c in cands if c not in first], penalty))
 
 
 def _first_tier(c: Candidate) -> bool:
