@@ -29,9 +29,11 @@ declared kernel's compile CPU s (its callees included when it is the first to ne
 in the warm-up's order) in a fresh process with an empty cache, at numba's default
 optimisation level (``NUMBA_OPT=3``) and at 1 and 0, with the part spent in LLVM (parsing,
 optimising and emitting the IR numba wrote; the rest is numba's typing and lowering in
-Python).
+Python). ``--plain-fit`` adds the demo's warm run with the IEEE-952 fit's kernels
+(fogmon/davar/scoring.py, profile.py) run as plain Python, numba's ``py_func`` (the
+same code, nothing of the fit to compile): what the fit would cost without numba.
 
-    python benchmarks/bench_first_run.py [--runs 3] [--lazy] [--kernels]
+    python benchmarks/bench_first_run.py [--runs 3] [--lazy] [--kernels] [--plain-fit]
 
 Prints the load average before and after (the machine is shared).
 """
@@ -56,6 +58,19 @@ DBC = ROOT / "fogmon" / "data" / "gyro_example.dbc"
 #: the fogmon program, optionally with the warm-up switched off (``--lazy``)
 PROGRAM = ("import sys\nfrom fogmon import jit\njit.warm_up_on_first_use = {warm}\n"
            "from fogmon.cli import main\nsys.exit(main())\n")
+#: the fogmon program with the fit's kernels replaced by their Python functions (``--plain-fit``)
+PLAIN_FIT = """
+import sys
+import numba
+import fogmon.davar.fit as fit, fogmon.davar.profile as profile, fogmon.davar.scoring as scoring
+for mod in (fit, profile, scoring):
+    for name, f in list(vars(mod).items()):
+        if isinstance(f, numba.core.dispatcher.Dispatcher) and f.py_func.__module__ in (profile.__name__,
+                                                                                        scoring.__name__):
+            setattr(mod, name, f.py_func)
+from fogmon.cli import main
+sys.exit(main())
+"""
 
 
 #: compiles every declared kernel, printing "name CPU-s LLVM-CPU-s" per kernel (numba's
@@ -146,13 +161,14 @@ def hop1_ratio(runs: int) -> tuple[float, float, float]:
     return push, engine1, engine
 
 
-def run(args: list[str], cache: Path, warm_up: bool) -> tuple[float, float | None]:
+def run(args: list[str], cache: Path, warm_up: bool, program: str | None = None) -> tuple[float, float | None]:
     """(CPU s of ``fogmon ARGS`` in a child process with the numba cache ``cache``, the
-    compile CPU s its warm-up line reports or None)."""
+    compile CPU s its warm-up line reports or None); ``program`` in place of the fogmon
+    program."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(ROOT)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    p = subprocess.run([sys.executable, "-c", PROGRAM.format(warm=warm_up), *args], capture_output=True, text=True,
-                       env=env, cwd=ROOT)
+    p = subprocess.run([sys.executable, "-c", program or PROGRAM.format(warm=warm_up), *args], capture_output=True,
+                       text=True, env=env, cwd=ROOT)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if p.returncode:
         raise SystemExit(f"fogmon {' '.join(args)}: exit {p.returncode}\n{p.stderr[-2000:]}")
@@ -188,6 +204,8 @@ def main() -> None:
     ap.add_argument("--lazy", action="store_true", help="also measure without the warm-up (numba's lazy compiles)")
     ap.add_argument("--kernels", action="store_true",
                     help="also print each kernel's compile CPU s at NUMBA_OPT 3, 1 and 0 (LLVM's part)")
+    ap.add_argument("--plain-fit", action="store_true",
+                    help="also the demo's warm run with the fit's kernels run as plain Python (nothing to compile)")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp_dir:
         tmp = Path(tmp_dir)
@@ -213,6 +231,15 @@ def main() -> None:
         print(f"first run after an empty numba cache / warm run, CPU s (warm: medians of {a.runs}, interleaved); "
               f"the first row's first run fills the cache the others start from:")
         table(configs, tmp / "cache", a.runs, True)
+        if a.plain_fit:
+            demo = next(iter(configs.values()))
+            plain, compiled = [], []
+            for _ in range(a.runs):   # interleaved
+                plain.append(run(demo, tmp / "cache", True, PLAIN_FIT)[0])
+                compiled.append(run(demo, tmp / "cache", True)[0])
+            print(f"the README demo warm with the fit's kernels as plain Python (numba's py_func, nothing of the fit "
+                  f"compiled): {statistics.median(plain):.2f} CPU s against {statistics.median(compiled):.2f} "
+                  f"compiled (medians of {a.runs})")
         if a.lazy:
             print("the same without the warm-up (each kernel compiled when a run first needs it):")
             table(configs, tmp / "cache_lazy", a.runs, False)

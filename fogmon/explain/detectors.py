@@ -195,6 +195,11 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
     return n0, float(b[n0] / A[n0]), float(gain[k])
 
 
+#: samples' worth of Welch segments transformed at once by ``spectral_lines`` (memory: ~5
+#: copies of them, 8 bytes each)
+_WELCH_RUN = 2**20
+
+
 def spectral_lines(y: np.ndarray, sample_rate_hz: float, f_lo_hz: float, f_hi_hz: float,
                    min_ratio: float = 10.0) -> list[tuple[float, float]]:
     """Narrowband lines in ``y`` (deg/h) between f_lo_hz and f_hi_hz: local maxima of the
@@ -208,9 +213,20 @@ def spectral_lines(y: np.ndarray, sample_rate_hz: float, f_lo_hz: float, f_hi_hz
     ok = np.isfinite(x)
     if ok.sum() < 256:
         return []
-    x = np.where(ok, x - x[ok].mean(), 0.0)
+    mean = x[ok].mean()
+    x = np.where(ok, x, mean)
+    x -= mean   # (one record-length copy, not two)
     nperseg = min(len(x), max(256, int(2 ** math.ceil(math.log2(8 * sample_rate_hz / max(f_lo_hz, 1e-9))))))
-    f, p = welch(x, fs=sample_rate_hz, nperseg=nperseg)
+    # Welch's mean over all segments, taken over runs of them (welch copies its segments
+    # several times: ~5 x the record at once in one call)
+    step = nperseg - nperseg // 2   # welch's default overlap: half a segment
+    n_seg = (len(x) - nperseg) // step + 1
+    per_run = max(1, _WELCH_RUN // nperseg)
+    p = np.zeros(nperseg // 2 + 1)
+    for s0 in range(0, n_seg, per_run):
+        k = min(per_run, n_seg - s0)
+        f, pk = welch(x[s0 * step: (s0 + k - 1) * step + nperseg], fs=sample_rate_hz, nperseg=nperseg)
+        p += pk * (k / n_seg)   # (one run: the welch of the whole record, unchanged)
     band = (f >= f_lo_hz) & (f <= min(f_hi_hz, sample_rate_hz / 2)) & (f > 0)
     if band.sum() < 8:
         return []

@@ -191,6 +191,24 @@ def test_spectral_lines_finds_an_incoherent_resonance_and_nothing_in_white_noise
     assert all(abs(f - lines[0][0]) > 0.1 * lines[0][0] for f, _ in lines[1:])
 
 
+def test_spectral_lines_welch_over_runs_of_segments_is_the_welch_of_the_record(monkeypatch):
+    """The Welch PSD taken a run of segments at a time (memory) is the one welch call's,
+    to rounding: the same lines at the same ratios (one run: the same numbers)."""
+    from scipy.signal import lfilter
+
+    from fogmon.explain import detectors
+    sample_rate_hz, n = 100.0, 300_001
+    rng = np.random.default_rng(22)
+    r, w0 = 1 - np.pi * 3.3 / sample_rate_hz / 50, 2 * np.pi * 3.3 / sample_rate_hz
+    y = rng.normal(0.0, 1.0, n) + lfilter([1.0], [1.0, -2 * r * np.cos(w0), r * r], rng.normal(0.0, 0.05, n))
+    y[rng.integers(0, n, 300)] = np.nan
+    whole = detectors.spectral_lines(y, sample_rate_hz, 0.1, 49.0, min_ratio=4.0)
+    monkeypatch.setattr(detectors, "_WELCH_RUN", 2 ** 15)   # 4 segments of 8192 samples per run
+    runs = detectors.spectral_lines(y, sample_rate_hz, 0.1, 49.0, min_ratio=4.0)
+    assert whole and [f for f, _ in runs] == [f for f, _ in whole]
+    np.testing.assert_allclose([q for _, q in runs], [q for _, q in whole], rtol=1e-12)
+
+
 def test_band_rms_burst_names_a_band_limited_burst_and_not_stationary_noise():
     """White noise, 900 s at 20 Hz; a burst of 0.03-0.08 Hz noise over 60 s (6x the
     white noise's rms in that band, like the G ring's long-period ground motion): found in
