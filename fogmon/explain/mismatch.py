@@ -382,8 +382,8 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
 #: Power of the score's smooth maximum of its four figures (and of the axes' scores).
 SCORE_POWER = 8.0
 
-#: A score at or below this is within chance: above it happens by chance in well under 1 %
-#: of null records (:class:`Score`, docs/explain.md "The score").
+#: A score at or below this is within chance: no null record explained against its true
+#: model scored above it (0 of 129, validation/calibration.py; docs/explain.md "The null sweep").
 CHANCE_SCORE = 1.5
 
 
@@ -406,10 +406,10 @@ class Score:
     - ``tests``: the strongest matched test of a missing effect (every candidate of the
       catalogue fitted to the residual but a kind the map contradicted,
       analysis.matched_tests_figure), sqrt(LR statistic / BIC penalty k ln n).
-    Each is about 1 or below when the model explains the recording; above 1.5 happens
-    by chance in well under 1 % of records. (The whole-record ADEV test has too few
-    taus for a stable ratio; its findings are reported as mismatch regions and are
-    covered by the matched tests.)"""
+    Each is about 1 or below when the model explains the recording; no null record of
+    validation/calibration.py scored above 1.5 (0 of 129, docs/explain.md "The null
+    sweep"). (The whole-record ADEV test has too few taus for a stable ratio; its
+    findings are reported as mismatch regions and are covered by the matched tests.)"""
 
     rms_map: float
     max_map: float

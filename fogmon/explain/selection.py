@@ -242,7 +242,9 @@ def _below(c: Candidate, penalty: float, bars: Mapping[str, float]) -> str:
         return "below the BIC bar"
     if c.search_bar == bars.get(c.kind):
         return "below the chance bar of the model's own noise (its rate random walk, simulated)"
-    return ("below the feature search's chance bar" if c.kind == lookalike.LAW
+    if c.kind == lookalike.LAW:
+        return "below the feature search's chance bar"
+    return ("below the change-point search's chance bar" if c.kind == "bias_step"
             else "below the frequency search's chance bar")
 
 

@@ -10,7 +10,8 @@ from its first's by more than ``Z_CHANGED`` combined standard errors (each stand
 is half the 68.3 % interval; both estimates identifiable): |z| > 3 happens by chance with
 probability 0.27 % for one coefficient of one gyro. A run is "outside its model" when a
 sensor model was given and its explain score (before fitting effects) exceeds
-``SCORE_OUTSIDE`` (a null record exceeds 1.5 in well under 1 % of cases)."""
+``SCORE_OUTSIDE`` (no null record of validation/calibration.py exceeded 1.5 before
+fitting effects: 0 of 129, docs/explain.md "The null sweep")."""
 from __future__ import annotations
 
 import html

@@ -1,12 +1,17 @@
 """Issue 28.1: under a model with a rate random walk (K), the mean-type candidates' bars
 come from the model's own simulations (explain.scan_null), so a chance step or ramp of
-the walk is not named; without K nothing is simulated."""
+the walk is not named; without K nothing is simulated. The spectral tests read a walk
+without its line, and a change-point scan pays for the positions it searches."""
 import numpy as np
+from scipy.stats import chi2
 
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import whittle_context
 from fogmon.explain.bootstrap import bootstrap
-from fogmon.explain.explainer import explain, stochastic_part
+from fogmon.explain.candidates import CANDIDATES
+from fogmon.explain.candidates.base import bridged, periodogram
+from fogmon.explain.candidates.mean import chance_step_gain
+from fogmon.explain.explainer import deterministic_dph, explain, stochastic_part
 from fogmon.explain.options import Options
 from fogmon.explain.replicas import Replicas
 from fogmon.explain.scan_null import calibrated_kinds
@@ -44,3 +49,38 @@ def test_a_null_walk_names_nothing():
     rec = simulate(WALK, duration_s=N / FS, seed=0)
     res = explain(rec, WALK, Options(n_boot=20, workers=1))
     assert res.accepted == []
+
+
+def _context(model: SensorModel, seed: int):
+    rec = simulate(model, duration_s=2 ** 16 / model.sample_rate_hz if model.noise.K_dphsh else 2 ** 15, seed=seed)
+    t = np.asarray(rec.t_s, float)
+    y = rec.rate_dph - deterministic_dph(model, t, {}, float(model.sample_rate_hz))
+    return whittle_context(stochastic_part(model), {}, t, np.ones(len(t), bool), y - y.mean())
+
+
+def test_spectral_tests_read_a_walk_without_its_line():
+    ctx = whittle_context(stochastic_part(WALK), {}, np.arange(N) / FS, np.ones(N, bool),
+                          np.random.default_rng(1).standard_normal(N))
+    line = 0.3 * (np.arange(N) - N / 2) / N
+    assert np.allclose(bridged(ctx.y + line, ctx.valid), bridged(ctx.y, ctx.valid))
+    assert np.allclose(periodogram(ctx).I[:5], np.abs(np.fft.rfft(bridged(ctx.y, ctx.valid))[1:6]) ** 2 / N)
+    white = whittle_context(SensorModel(FS, 0.0, Noise(N_dpsh=0.02)), {}, ctx.t_s, ctx.valid, ctx.y)
+    assert np.allclose(periodogram(white).I[:5], np.abs(white.Yf[1:6]) ** 2 / N)  # no walk: the residual as it is
+
+
+def test_a_walks_excursion_does_not_pose_as_a_wrong_b():
+    # calibration.py's null record 2 (N 0.02, B 0.1, K 0.4 at 10 Hz, 1.8 h): the walk's wrap
+    # jump raised the lowest bins together and a B of 0.164 won a deviance of 36 over BIC's 11
+    ctx = _context(SensorModel(10.0, noise=Noise(0.0, 0.02, 0.1, 0.4)), 1_000_003 + 2)
+    c = CANDIDATES["noise"](ctx)
+    assert c is None or c.gain < c.bar(ctx.penalty)
+
+
+def test_a_step_search_pays_for_its_positions():
+    # calibration.py's null record 28 (N 0.05, B 0.2, R 1 at 1 Hz, 9 h): a chance step of the
+    # flicker beat BIC's 2 ln n (21.1 > 20.8), not the scan's chance bar
+    u = chance_step_gain(32113, 1e-3)
+    assert np.isclose(32113 * chi2.sf(u, 1), 1e-3) and u > 2 * np.log(2 ** 15)
+    ctx = _context(SensorModel(1.0, noise=Noise(0.0, 0.05, 0.2, 0.0, 1.0)), 1_000_003 + 28)
+    c = CANDIDATES["bias_step"](ctx)
+    assert c.gain > c.k * ctx.penalty and c.gain < c.bar(ctx.penalty)

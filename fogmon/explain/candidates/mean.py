@@ -9,6 +9,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+from scipy.stats import chi2
 
 from fogmon.explain import detectors
 from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate, varies
@@ -125,17 +126,30 @@ def _dirichlet(x: np.ndarray, n: int) -> np.ndarray:
     return np.exp(1j * np.pi * x * (n - 1) / n) * (n * np.sinc(x) / np.sinc(x / n))
 
 
+def chance_step_gain(positions: int, false_alarm: float) -> float:
+    """The chi-square gain u that the largest of a change-point scan over ``positions``
+    step times exceeds by chance with probability at most ``false_alarm`` (Bonferroni:
+    positions x P(chi-square 1 dof > u) = false_alarm). BIC's 2 ln n is that bar only when
+    the scan's statistics at neighbouring times are nearly the same (white noise); under
+    the model's coloured noise the GLS whitens a step towards a one-sample impulse, its
+    statistics at neighbouring times decorrelate, and the scan's maximum beats 2 ln n far
+    more often (1 Hz, 9 h records of N 0.05, B 0.2: 15 of 200 replicates; of N alone: 0)."""
+    return float(chi2.isf(false_alarm / max(positions, 1), 1))
+
+
 def bias_step(ctx: Context) -> Candidate | None:
-    """Best single bias step over 1 %..99 % of the record (exact GLS scan)."""
+    """Best single bias step over 1 %..99 % of the record (exact GLS scan); its bar is at
+    least :func:`chance_step_gain` over the positions scanned at SEARCH_FALSE_ALARM."""
     n = ctx.n
-    n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, int(0.01 * n), int(0.99 * n))
+    lo, hi = int(0.01 * n), int(0.99 * n)
+    n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, lo, hi)
     X = (np.arange(n) >= n0).astype(float)[:, None]
     fit = judged_gls(ctx, ctx.wh.fft(X))
     t_step = float(ctx.t_s[n0] - 0.5 / ctx.sample_rate_hz)
     params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
     ev = f"change-point scan: bias step of {estimate_text(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
     return Candidate("bias_step", params, {"step_dph": float(fit.se[0])}, fit.chi2_gain, 2, ev,
-                     X @ fit.beta, X)
+                     X @ fit.beta, X, search_bar=chance_step_gain(hi - lo, SEARCH_FALSE_ALARM))
 
 
 def _scan_1d(ctx: Context, make: Callable[[float, np.ndarray], np.ndarray], grid: np.ndarray, refine: int = 8,
