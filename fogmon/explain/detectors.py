@@ -181,15 +181,19 @@ def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float
     b -= b[0]
     d = d.real ** 2 + d.imag ** 2
     d *= S
+    del S   # before the transform: the memory peak of a 1e7-sample explain
     np.divide(1.0, d, out=d)  # C = 1 / (S |d|^2)
     d[0] = 0.0
     A = np.fft.irfft(d, n)
-    del d, S
+    del d
     A -= A[0]
     A *= -2.0  # A = 2 (cq[0] - cq)
     sl = slice(max(lo, 1), max(min(hi, n), max(lo, 1) + 1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        gain = np.where(A[sl] > 0, b[sl] ** 2 / A[sl], 0.0)
+    pos = A[sl] > 0
+    gain = np.square(b[sl])   # b^2 / A where A > 0, in place (memory: one array, not four)
+    np.divide(gain, A[sl], out=gain, where=pos)
+    gain[~pos] = 0.0
+    del pos
     k = int(np.argmax(gain))
     n0 = sl.start + k
     return n0, float(b[n0] / A[n0]), float(gain[k])

@@ -384,7 +384,10 @@ def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np
     """Residual and design on the half ``m``, each with its own intercept (the bias is
     free in each half), 0 elsewhere, and that half's valid mask."""
     v = ctx.valid & m
-    return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), np.where(v[:, None], X - X[v].mean(axis=0), 0.0), v
+    mean = np.array([X[v, j].mean() for j in range(X.shape[1])])   # column by column: no copy of X[v]
+    Xc = X - mean
+    Xc[~v] = 0.0
+    return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), Xc, v
 
 
 #: a design column holds less than this share of its energy (about its mean, over the
@@ -394,8 +397,8 @@ DETERMINED_SHARE = 1e-6
 
 def _determined(ctx: Context, X: np.ndarray, Xc: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Which columns of ``X`` the half (its centred design ``Xc``, valid mask ``v``) determines."""
-    whole = np.sum((X[ctx.valid] - X[ctx.valid].mean(axis=0)) ** 2, axis=0)
-    return np.sum(Xc[v] ** 2, axis=0) > DETERMINED_SHARE * whole
+    whole = np.array([np.var(X[ctx.valid, j]) * ctx.valid.sum() for j in range(X.shape[1])])
+    return np.einsum("ij,ij->j", Xc, Xc) > DETERMINED_SHARE * whole   # Xc is 0 outside v
 
 
 def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -407,8 +410,10 @@ def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> tupl
     if not det.any():
         return None
     w = Whittle(S, ctx.n, v)
-    XF = w.fft(Xc[:, det])
-    del Xc
+    Xs = Xc if det.all() else Xc[:, det]
+    del Xc   # one record-length design less at the FFT (the memory peak of a 1e7-sample explain)
+    XF = w.fft(Xs)
+    del Xs
     fit = w.gls(XF, w.fft(y))
     return None if fit.chi2_gain < 9.0 else (fit.beta, det)
 
