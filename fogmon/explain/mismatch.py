@@ -383,7 +383,7 @@ def _locate_one(r: Region, y: np.ndarray, valid: np.ndarray, grid: Grid, null: N
 SCORE_POWER = 8.0
 
 #: A score at or below this is within chance: no null record explained against its true
-#: model scored above it (0 of 129, validation/calibration.py; docs/explain.md "The null sweep").
+#: model scored above it (0 of 200, validation/calibration.py; docs/explain.md "The null sweep").
 CHANCE_SCORE = 1.5
 
 
@@ -407,7 +407,7 @@ class Score:
       catalogue fitted to the residual but a kind the map contradicted,
       analysis.matched_tests_figure), sqrt(LR statistic / BIC penalty k ln n).
     Each is about 1 or below when the model explains the recording; no null record of
-    validation/calibration.py scored above 1.5 (0 of 129, docs/explain.md "The null
+    validation/calibration.py scored above 1.5 (0 of 200, docs/explain.md "The null
     sweep"). (The whole-record ADEV test has too few taus for a stable ratio; its
     findings are reported as mismatch regions and are covered by the matched tests.)"""
 

@@ -11,7 +11,7 @@ is half the 68.3 % interval; both estimates identifiable): |z| > 3 happens by ch
 probability 0.27 % for one coefficient of one gyro. A run is "outside its model" when a
 sensor model was given and its explain score (before fitting effects) exceeds
 ``SCORE_OUTSIDE`` (no null record of validation/calibration.py exceeded 1.5 before
-fitting effects: 0 of 129, docs/explain.md "The null sweep")."""
+fitting effects: 0 of 200, docs/explain.md "The null sweep")."""
 from __future__ import annotations
 
 import html
