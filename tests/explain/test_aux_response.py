@@ -108,15 +108,19 @@ def test_a_real_bias_step_refuses_a_channel_that_only_partly_follows_it():
     assert why is not None and why.startswith("a look-alike of bias_step")
 
 
+def _switched_rotation():
+    """A context whose rotation switches between 0 and 20 deg/s, with a 30 ppm scale factor."""
+    n = 36000
+    rng = np.random.default_rng(10)
+    rot = np.where((np.arange(n) // 3000) % 2 == 1, 20.0, 0.0)
+    y = SIGMA * rng.standard_normal(n) + 3600.0 * rot * 30e-6
+    return _ctx(y, {"rot_dps": rot})
+
+
 def test_a_tie_with_a_catalogue_kind_on_its_own_channel_keeps_the_catalogue():
     """A rotation switched between 0 and one rate makes rot_dps^2 the same feature as
     rot_dps: the scale factor (the catalogue's physics on that channel) is kept."""
-    n = 36000
-    rng = np.random.default_rng(10)
-    k = np.arange(n)
-    rot = np.where((k // 3000) % 2 == 1, 20.0, 0.0)
-    y = SIGMA * rng.standard_normal(n) + 3600.0 * rot * 30e-6
-    ctx = _ctx(y, {"rot_dps": rot})
+    ctx = _switched_rotation()
     law, sf = aux_response(ctx), scale_factor(ctx)
     assert law.bic_gain(ctx.penalty) > 0 and sf.bic_gain(ctx.penalty) > 0
     why = lookalike.refusal(law, [law, sf], ctx)
@@ -129,12 +133,7 @@ def test_a_look_alike_kept_without_its_design_is_fitted_again_for_the_comparison
     still holds (without the refit the law took the scale factor's place: the devset's
     rate-table and thermal-chamber cases named aux_response)."""
     from fogmon.explain.selection import fitted, light
-    n = 36000
-    rng = np.random.default_rng(10)
-    k = np.arange(n)
-    rot = np.where((k // 3000) % 2 == 1, 20.0, 0.0)
-    y = SIGMA * rng.standard_normal(n) + 3600.0 * rot * 30e-6
-    ctx = _ctx(y, {"rot_dps": rot})
+    ctx = _switched_rotation()
     law, sf = aux_response(ctx), light(scale_factor(ctx))
     assert sf.design is None
     why = lookalike.refusal(law, [law, sf], ctx, lambda o: fitted(o.kind, ctx, {}))
