@@ -26,9 +26,8 @@ from fogmon.davar.profile import fit_full, score_limits
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.scoring import fisher_scoring, mixture_edf
 from fogmon.davar.termcheck import TermContradiction, contradictions, first_peak
-from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
+from fogmon.davar.theory import NAMES, POWERS, avar_terms_to_coefficients
 
-NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
 IDENTIFY_Z = 1.959964
 """A term is identifiable when A_n - IDENTIFY_Z * se(A_n) > 0 (95 % one-sided-ish)."""
 _MAX_ITER = 50

@@ -33,11 +33,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from fogmon.davar.theory import POWERS, avar_terms_to_coefficients
+from fogmon.davar.theory import NAMES, POWERS, avar_terms_to_coefficients
 
 #: Family-wise level of the check over the taus of one curve (one-sided upper bounds).
 CHECK_LEVEL = 0.05
-NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
 #: Terms the check judges (N is not: a low-pass lowers the shortest taus below its line).
 CHECKED = ("Q_arcsec", "B_dph", "K_dphsh", "R_dphh")
 

@@ -15,6 +15,10 @@ POWERS = np.array([-2, -1, 0, 1, 2])
 """Powers n of tau in sigma^2 = sum_n A_n tau^n, in the order Q, N, B, K, R."""
 
 
+#: The IEEE-952 coefficients in the order of POWERS (n = -2..2), with their units.
+NAMES = ("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh")
+
+
 def coefficients_to_avar_terms(Q_arcsec=0.0, N_dpsh=0.0, B_dph=0.0, K_dphsh=0.0, R_dphh=0.0) -> np.ndarray:
     """IEEE-952 coefficients -> A_n (deg/h)^2 s^-n for n = -2..2 (last axis)."""
     return np.stack(np.broadcast_arrays(
