@@ -428,13 +428,57 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
                    confidence=confidence, misfit=misfit, worst_ratio=np.nan)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
     if isinstance(result, DadevResult):
-        return replace(fit, worst_ratio=worst)
+        return windows_checked_against_adev(replace(fit, worst_ratio=worst), result)
     return checked_against_adev(replace(fit, worst_ratio=float(worst)), result)
 
 
 #: What the check against the measured ADEV does to a contradicted, identified term:
 #: B, K, R are no longer identified (``termcheck``); Q keeps its value (renamed).
 _DEMOTED = ("B_dph", "K_dphsh", "R_dphh")
+
+
+def windows_checked_against_adev(fit: NoiseFit, result: DadevResult) -> NoiseFit:
+    """The DADEV fit ``fit`` (arrays over the windows of ``result``) with each window's
+    identified B, K and R checked against that window's ADEV as ``checked_against_adev``
+    checks a whole curve: a contradicted one is not identifiable in that window (value =
+    lo = 0, hi = upper = the lesser of the fit's upper limit and the ADEV's). Q keeps its
+    value (its name is the whole curve's business); ``contradicted`` stays empty."""
+    ident = {n: np.asarray(getattr(fit, n).identifiable, dtype=bool) for n in _DEMOTED}
+    rows = np.flatnonzero(np.any([ident[n] for n in _DEMOTED], axis=0))
+    if not len(rows):
+        return fit
+    cols = {n: {a: np.array(getattr(getattr(fit, n), a), dtype=float) for a in ("value", "lo", "hi", "upper")}
+            for n in _DEMOTED}
+    edf = np.broadcast_to(result.edf, result.adev_dph.shape)
+    changed = False
+    for i in rows:
+        judged = tuple(n for n in _DEMOTED if ident[n][i])
+        for c in contradictions(result.tau_s, result.adev_dph[i], _check_edf(fit.avar_terms[i], edf[i],
+                                result.tau_s, result.m, result.n_terms[i], result.window_samples),
+                                fit.avar_terms[i], judged):
+            col, old = cols[c.name], float(cols[c.name]["upper"][i])
+            up = min(old, c.limit) if np.isfinite(old) else c.limit
+            col["value"][i] = col["lo"][i] = 0.0
+            col["hi"][i] = col["upper"][i] = up
+            ident[c.name][i] = False
+            changed = True
+    if not changed:
+        return fit
+    checked = {n: Coefficient(cols[n]["value"], cols[n]["lo"], cols[n]["hi"], ident[n], cols[n]["upper"])
+               for n in _DEMOTED}
+    return replace(fit, **checked)  # type: ignore[arg-type]
+
+
+def _check_edf(a: np.ndarray, edf: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.ndarray,
+               n_samples: int) -> np.ndarray:
+    """The EDF per tau the check against the measured ADEV uses: the lesser of the ADEV's
+    and that of the noise the fit ``a`` describes. The ADEV's quick noise-type fit can take
+    a filtered record for white noise (an EDF of 11,000 at 82 s where its flicker floor
+    leaves ~30), and a check that overrides the fit must not be more confident than either."""
+    full = np.maximum(n_samples - 2 * np.asarray(m) + 1, 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        edf_fit = mixture_edf_row(a, tau, m, n_samples) * n_terms / full
+    return np.fmin(np.asarray(edf, dtype=float), edf_fit)
 
 
 def checked_against_adev(fit: NoiseFit, result: AdevResult) -> NoiseFit:
@@ -446,14 +490,7 @@ def checked_against_adev(fit: NoiseFit, result: AdevResult) -> NoiseFit:
     judged = tuple(n for n in ("Q_arcsec", *_DEMOTED) if bool(getattr(fit, n).identifiable))
     if not judged:
         return fit
-    # the lesser of the ADEV's EDF and that of the noise the fit describes: the ADEV's quick
-    # noise-type fit can take a filtered record for white noise (an EDF of 11,000 at 82 s
-    # where its flicker floor leaves ~30), and a check that overrides the fit must not be
-    # more confident than either
-    full = np.maximum(result.n_samples - 2 * np.asarray(result.m) + 1, 1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        edf_fit = mixture_edf_row(fit.avar_terms, result.tau_s, result.m, result.n_samples) * result.n_terms / full
-    edf = np.fmin(np.asarray(result.edf, dtype=float), edf_fit)
+    edf = _check_edf(fit.avar_terms, result.edf, result.tau_s, result.m, result.n_terms, result.n_samples)
     found = contradictions(result.tau_s, result.adev_dph, edf, fit.avar_terms, judged)
     if not found:
         return fit

@@ -111,3 +111,28 @@ def test_a_filtered_record_gets_the_edf_of_its_noise_not_of_a_ramp():
     peak = first_peak(adev.adev_dph)
     assert 4 <= peak <= 8                                   # 0.16-2.56 s: the filter's top
     assert np.all(adev.edf[:peak] <= adev.edf[peak] + 1e-9)
+
+
+def test_every_dadev_window_is_checked_against_its_own_adev(monkeypatch):
+    # the 2-D diagram's per-window fits obey the same rule as the whole-record fit: the same
+    # Gauss-Markov hump in 5000 s windows; a window whose floor its ADEV refutes prints it
+    # as not identifiable, bounded by that window's ADEV; pure noise windows keep theirs
+    from fogmon.davar import fit as fit_module
+    from fogmon.davar.batch import dadev
+    from fogmon.davar.fit import fit_noise, windows_checked_against_adev
+
+    m = SensorModel(10.0, noise=Noise(N_dpsh=0.5), effects=[Effect("markov", {"sigma_dph": 60.0, "tau_c_s": 5.0})])
+    rec = simulate(m, duration_s=10000.0, seed=5)
+    res = dadev(rec.rate_dph, 10.0, 5000.0, 2500.0)
+    fit = fit_noise(res)
+    b = fit.B_dph
+    assert not np.any(b.identifiable)
+    assert np.all(np.asarray(b.value) == 0.0) and np.all(np.asarray(b.hi) == np.asarray(b.upper))
+    for i in range(len(res)):
+        assert float(b.upper[i]) <= 37.0   # under the hump's top, the ADEV's bound
+    clean = dadev(simulate(SensorModel(10.0, noise=Noise(N_dpsh=0.5, B_dph=3.0)), duration_s=10000.0,
+                           seed=5).rate_dph, 10.0, 5000.0, 2500.0)
+    monkeypatch.setattr(fit_module, "windows_checked_against_adev", lambda f, r: f)
+    unchecked = fit_noise(clean)
+    assert windows_checked_against_adev(unchecked, clean) is unchecked   # nothing refuted: the same fit
+    assert np.any(unchecked.B_dph.identifiable)
