@@ -20,9 +20,12 @@ in a temporary folder, empty at the start: what a new installation has):
    at hop 1 (what the push at hop 1 can at most reach).
 
 Warm figures are medians of ``--runs`` runs of each, interleaved (the machine is shared);
-the first runs are single runs (a first run happens once). The first run's compile is
-the CPU time the warm-up line on stderr reports (``fogmon.jit``: the first run compiles
-every kernel of every command once). ``--lazy`` adds the same table with that warm-up
+the first runs are single runs (a first run happens once). Where the install built the
+kernels ahead of time (``fogmon._kernels_aot``, fogmon/jit.py) no run compiles; ``--no-aot``
+adds the same table with that module switched off (``jit.use_ahead_of_time = False``: a
+machine where it could not be built), whose first run compiles: its compile is the CPU
+time the warm-up line on stderr reports (``fogmon.jit``: the first run compiles every
+kernel of every command once). ``--lazy`` adds the same table with that warm-up
 switched off (each kernel compiled when a run first needs it, numba's own way): the
 alternative it was measured against. ``--kernels`` adds where the compile goes: each
 declared kernel's compile CPU s (its callees included when it is the first to need them,
@@ -33,7 +36,7 @@ Python). ``--plain-fit`` adds the demo's warm run with the IEEE-952 fit's kernel
 (fogmon/davar/scoring.py, profile.py) run as plain Python, numba's ``py_func`` (the
 same code, nothing of the fit to compile): what the fit would cost without numba.
 
-    python benchmarks/bench_first_run.py [--runs 3] [--lazy] [--kernels] [--plain-fit]
+    python benchmarks/bench_first_run.py [--runs 3] [--no-aot] [--lazy] [--kernels] [--plain-fit]
 
 Prints the load average before and after (the machine is shared).
 """
@@ -55,17 +58,19 @@ ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "replay_logs" / "lasergyro_z_100hz.csv"
 ONE_HZ = ROOT / "replay_logs" / "sim_mwd_run_1hz.csv"
 DBC = ROOT / "fogmon" / "data" / "gyro_example.dbc"
-#: the fogmon program, optionally with the warm-up switched off (``--lazy``)
-PROGRAM = ("import sys\nfrom fogmon import jit\njit.warm_up_on_first_use = {warm}\n"
+#: the fogmon program, optionally without the kernels compiled ahead of time (``--no-aot``) and
+#: with the warm-up switched off (``--lazy``)
+PROGRAM = ("import sys\nfrom fogmon import jit\njit.warm_up_on_first_use = {warm}\njit.use_ahead_of_time = {aot}\n"
            "from fogmon.cli import main\nsys.exit(main())\n")
 #: the fogmon program with the fit's kernels replaced by their Python functions (``--plain-fit``)
 PLAIN_FIT = """
 import sys
 import numba
 import fogmon.davar.fit as fit, fogmon.davar.profile as profile, fogmon.davar.scoring as scoring
+from fogmon import jit
 for mod in (fit, profile, scoring):
     for name, f in list(vars(mod).items()):
-        if isinstance(f, numba.core.dispatcher.Dispatcher) and f.py_func.__module__ in (profile.__name__,
+        if isinstance(f, (numba.core.dispatcher.Dispatcher, jit.Kernel)) and f.py_func.__module__ in (profile.__name__,
                                                                                         scoring.__name__):
             setattr(mod, name, f.py_func)
 from fogmon.cli import main
@@ -161,14 +166,15 @@ def hop1_ratio(runs: int) -> tuple[float, float, float]:
     return push, engine1, engine
 
 
-def run(args: list[str], cache: Path, warm_up: bool, program: str | None = None) -> tuple[float, float | None]:
+def run(args: list[str], cache: Path, warm_up: bool, program: str | None = None,
+        aot: bool = True) -> tuple[float, float | None]:
     """(CPU s of ``fogmon ARGS`` in a child process with the numba cache ``cache``, the
     compile CPU s its warm-up line reports or None); ``program`` in place of the fogmon
-    program."""
+    program, ``aot`` False: without the kernels compiled ahead of time."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(ROOT)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    p = subprocess.run([sys.executable, "-c", program or PROGRAM.format(warm=warm_up), *args], capture_output=True,
-                       text=True, env=env, cwd=ROOT)
+    p = subprocess.run([sys.executable, "-c", program or PROGRAM.format(warm=warm_up, aot=aot), *args],
+                       capture_output=True, text=True, env=env, cwd=ROOT)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if p.returncode:
         raise SystemExit(f"fogmon {' '.join(args)}: exit {p.returncode}\n{p.stderr[-2000:]}")
@@ -176,16 +182,17 @@ def run(args: list[str], cache: Path, warm_up: bool, program: str | None = None)
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), float(m[1]) if m else None
 
 
-def table(configs: dict[str, list[str]], cache: Path, runs: int, warm_up: bool) -> dict[str, float]:
+def table(configs: dict[str, list[str]], cache: Path, runs: int, warm_up: bool, aot: bool = True) -> dict[str, float]:
     """Print first run / warm run per configuration (the first one first, into the empty
-    cache ``cache``); returns the ratios."""
+    cache ``cache``; ``aot`` False: without the kernels compiled ahead of time); returns
+    the ratios."""
     first, compiled = {}, {}
     for name, cmd in configs.items():
-        first[name], compiled[name] = run(cmd, cache, warm_up)
+        first[name], compiled[name] = run(cmd, cache, warm_up, aot=aot)
     warm: dict[str, list[float]] = {name: [] for name in configs}
     for _ in range(runs):
         for name, cmd in configs.items():
-            warm[name].append(run(cmd, cache, warm_up)[0])
+            warm[name].append(run(cmd, cache, warm_up, aot=aot)[0])
     ratios = {}
     print(f"  {'configuration':52s} {'first':>7s} {'warm':>15s} {'first/warm':>10s}  goal")
     for i, name in enumerate(configs):
@@ -201,7 +208,11 @@ def table(configs: dict[str, list[str]], cache: Path, runs: int, warm_up: bool) 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3, help="warm runs of each configuration (medians printed)")
-    ap.add_argument("--lazy", action="store_true", help="also measure without the warm-up (numba's lazy compiles)")
+    ap.add_argument("--no-aot", action="store_true",
+                    help="also measure without the kernels compiled ahead of time (the first run compiles them)")
+    ap.add_argument("--lazy", action="store_true",
+                    help="also measure without the module compiled ahead of time and without the warm-up "
+                         "(numba's lazy compiles)")
     ap.add_argument("--kernels", action="store_true",
                     help="also print each kernel's compile CPU s at NUMBA_OPT 3, 1 and 0 (LLVM's part)")
     ap.add_argument("--plain-fit", action="store_true",
@@ -227,10 +238,17 @@ def main() -> None:
             "explain sim_mwd_run_1hz.csv (1 Hz, 3 h)": ["explain", str(ONE_HZ), "--report", str(tmp / "ex.json"),
                                                         "--quiet"],
         }
+        from fogmon import jit
+
         print(f"load average {' '.join(f'{v:.1f}' for v in os.getloadavg())} (2 cores shared)")
+        built = "built and current" if jit.ahead_of_time() is not None else "NOT built (or stale): numba compiles"
         print(f"first run after an empty numba cache / warm run, CPU s (warm: medians of {a.runs}, interleaved); "
-              f"the first row's first run fills the cache the others start from:")
+              f"the first row's first run fills the cache the others start from; the kernels compiled ahead of "
+              f"time: {built}:")
         table(configs, tmp / "cache", a.runs, True)
+        if a.no_aot:
+            print("the same without the kernels compiled ahead of time (jit.use_ahead_of_time = False):")
+            table(configs, tmp / "cache_no_aot", a.runs, True, aot=False)
         if a.plain_fit:
             demo = next(iter(configs.values()))
             plain, compiled = [], []
@@ -242,7 +260,7 @@ def main() -> None:
                   f"compiled (medians of {a.runs})")
         if a.lazy:
             print("the same without the warm-up (each kernel compiled when a run first needs it):")
-            table(configs, tmp / "cache_lazy", a.runs, False)
+            table(configs, tmp / "cache_lazy", a.runs, False, aot=False)
         if a.kernels:
             kernel_table(tmp)
         push, engine1, engine = hop1_ratio(a.runs)

@@ -16,7 +16,8 @@ Every numba kernel is made by ``kernel``: nopython and cached on disk (``cache=T
   program), so the first run of any command compiles for all of them and no later
   command or option compiles again (a warm run pays nothing for this). Not when that
   kernel could not be saved (the cache is unusable): the run compiles only what it
-  needs, as numba does.
+  needs, as numba does; nor when the kernels compiled ahead of time (below) serve the
+  declared kernels (a call with other argument types compiles that version only).
 
 A kernel's cache entry is keyed by the sources of every kernel module (``_sources_digest``)
 besides numba's own key (the function's bytecode and its file's time stamp): numba
@@ -26,6 +27,15 @@ there alone (a ``git pull`` into an editable install) would load stale machine c
 A numba cache that cannot be read or written (corrupt files, an install directory
 without write access, ``NUMBA_CACHE_DIR`` pointing nowhere usable) costs a compile in
 memory and one FogmonWarning, never the run.
+
+Ahead of time: installing fogmon builds the declared kernels into one extension module,
+``fogmon._kernels_aot`` (setup.py, ``build_ahead_of_time``: numba.pycc, for the installing
+machine's CPU), so that no run compiles them. A call of a declared kernel from Python
+goes to that module's function when the module imports and its ``fingerprint`` matches
+this process's (the kernel modules' sources, numba's and numpy's versions, the CPU name
+and features: an edited kernel, an upgraded library or a copy on another CPU uses the
+numba path above); a kernel calling a declared kernel always uses numba's. An install
+that could not build it (no C compiler, numba.pycc gone) warns and works as above.
 """
 from __future__ import annotations
 
@@ -34,15 +44,17 @@ import functools
 import hashlib
 import importlib
 import importlib.util
+import os
 import sys
 import time
 import warnings
 from collections.abc import Callable
 
+import llvmlite.binding as llvm  # type: ignore[import-untyped]
 import numba
 import numpy as np
 from numba import types
-from numba.core import caching
+from numba.core import caching, codegen
 
 from fogmon import startup
 from fogmon.errors import FogmonWarning
@@ -58,17 +70,74 @@ B1 = types.Array(BOOL, 1, "C")
 
 #: False: no warm-up; each kernel is compiled when first needed (numba's own way)
 warm_up_on_first_use = True
+#: False: declared kernels run numba's code even when the ahead-of-time module is built
+use_ahead_of_time = True
+#: the extension module setup.py builds (``build_ahead_of_time``)
+AOT_MODULE = "fogmon._kernels_aot"
 
 _declared: list[tuple[numba.core.registry.CPUDispatcher, tuple]] = []
 _warmed_up = False
 
 
+class Kernel:
+    """A declared kernel as Python calls it: the ahead-of-time module's function when
+    ``ahead_of_time`` has it, else the numba dispatcher (``dispatcher``; every attribute
+    not defined here is the dispatcher's, and other kernels call the dispatcher)."""
+
+    def __init__(self, dispatcher, signature: tuple):
+        self.dispatcher = dispatcher
+        self._accepts = tuple(_accepts(t) for t in signature)
+        self._call: Callable | None = None
+        functools.update_wrapper(self, dispatcher.py_func)
+
+    def __call__(self, *args):
+        if self._call is None:
+            module = ahead_of_time()
+            self._call = getattr(module, self.dispatcher.py_func.__name__, self.dispatcher) if module else \
+                self.dispatcher
+        if self._call is not self.dispatcher and not (
+                len(args) == len(self._accepts) and all(ok(a) for ok, a in zip(self._accepts, args, strict=False))):
+            return self.dispatcher(*args)   # not the declared types: numba's path (the module's would misread them)
+        return self._call(*args)
+
+    def __getattr__(self, name: str):
+        return getattr(self.dispatcher, name)
+
+    def __reduce__(self):
+        return _kernel_named, (self.dispatcher.py_func.__module__, self.dispatcher.py_func.__name__)
+
+
+def _accepts(t) -> Callable[[object], bool]:
+    """Whether a Python argument has the numba type ``t`` of a declaration (or converts to
+    it as numba's dispatcher would, for scalars): the ahead-of-time code checks only an
+    array's item size."""
+    if isinstance(t, types.Array):
+        dtype, ndim = numba.np.numpy_support.as_dtype(t.dtype), t.ndim
+        return lambda a: (isinstance(a, np.ndarray) and a.dtype == dtype and a.ndim == ndim and a.flags.c_contiguous
+                          and a.flags.writeable)
+    if isinstance(t, types.Tuple | types.UniTuple):
+        items = tuple(_accepts(u) for u in t.types)
+        return lambda a: isinstance(a, tuple) and len(a) == len(items) and all(
+            ok(u) for ok, u in zip(items, a, strict=False))
+    if isinstance(t, types.Boolean):
+        return lambda a: isinstance(a, bool | np.bool_)
+    if isinstance(t, types.Integer):
+        return lambda a: isinstance(a, int | np.integer) and not isinstance(a, bool)
+    if isinstance(t, types.Float):
+        return lambda a: isinstance(a, float | int | np.floating | np.integer) and not isinstance(a, bool)
+    return lambda a: False
+
+
+def _kernel_named(module: str, name: str) -> Kernel:
+    return getattr(importlib.import_module(module), name)
+
+
 def kernel(*signatures: tuple, **options) -> Callable:
     """Decorator: ``numba.njit(cache=True, **options)`` (e.g. ``inline="always"``,
     ``fastmath``, ``error_model``) with the argument types ``signatures`` (tuples of
-    numba types, one per version). Without them the kernel is called only from other
-    kernels: it gets no Python entry point (numba's CPython and C wrappers, a compile of
-    their own per kernel)."""
+    numba types, one per version): a ``Kernel``. Without them the kernel is called only
+    from other kernels: the dispatcher, with no Python entry point (numba's CPython and
+    C wrappers, a compile of their own per kernel)."""
     def wrap(fn):
         if not signatures and "inline" not in options:
             options.update(no_cpython_wrapper=True, no_cfunc_wrapper=True)
@@ -89,12 +158,14 @@ def kernel(*signatures: tuple, **options) -> Callable:
                 t0 = time.process_time()
                 misses = sum(disp.stats.cache_misses.values())
                 out = compile_for_args(*args, **kws)
-                if not _warmed_up and warm_up_on_first_use and sum(disp.stats.cache_misses.values()) > misses:
+                if (not _warmed_up and warm_up_on_first_use and ahead_of_time() is None
+                        and sum(disp.stats.cache_misses.values()) > misses):
                     _warmed_up = True   # this kernel was compiled: so, once, are the others the cache lacks
                     if is_cached(disp, tuple(disp.typeof_pyval(a) for a in args)):  # (else the cache is unusable)
                         warm_up(_progress_line(t0))
                 return out
             disp._compile_for_args = first_compile_warms_up
+            return Kernel(disp, signatures[0]) if len(signatures) == 1 else disp
         return disp
     return wrap
 
@@ -157,6 +228,59 @@ def warm_up(report: Callable[[int, int, str | None], None] | None = None) -> int
     if report and todo:
         report(len(todo), len(todo), None)
     return len(todo)
+
+
+def fingerprint() -> int:
+    """What the ahead-of-time code depends on, as a 63-bit integer: the kernel modules'
+    sources, numba's and numpy's versions, the CPU's name and features (numba's own
+    settings of them, ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``, when given)."""
+    cpu = getattr(numba.config, "CPU_NAME", None) or llvm.get_host_cpu_name()
+    features = codegen.get_host_cpu_features()   # (NUMBA_CPU_FEATURES when given)
+    text = "\n".join((_sources_digest(), numba.__version__, np.__version__, cpu, features))
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little") >> 1
+
+
+@functools.cache
+def ahead_of_time():
+    """The ahead-of-time module (``AOT_MODULE``) when it is built, imports and was built
+    from this process's ``fingerprint``, else None (then numba compiles, as without it)."""
+    if not use_ahead_of_time:
+        return None
+    declared()   # every kernel module imported: their sources are final
+    try:
+        module = importlib.import_module(AOT_MODULE)
+        return module if module.fingerprint() == fingerprint() else None
+    except Exception:  # noqa: BLE001 - not built, or built for other libraries: numba's path
+        return None
+
+
+def build_ahead_of_time(path: str) -> None:
+    """Compile every declared kernel (each version's signature, numba's return type) into
+    the extension module file ``path`` (``AOT_MODULE``, for this machine's CPU) with
+    numba.pycc; the module's ``fingerprint()`` returns this process's. setup.py calls it
+    (needs a C compiler; numba compiles the kernels first, as a warm-up would)."""
+    from numba.pycc import CC
+
+    cc = CC(AOT_MODULE.rsplit(".", 1)[1], source_module=sys.modules[__name__])
+    cc.output_dir, cc.output_file = os.path.split(os.path.abspath(path))
+    cc.target_cpu = "host"
+    # the CPU's own features, as numba's JIT targets them (pycc takes the CPU model's: a virtual
+    # machine may lack some of them)
+    codegen.AOTCPUCodegen._customize_tm_features = lambda self: self._get_host_cpu_features()  # type: ignore
+    names = set()
+    for name, d, sig in declared():
+        short = name.rsplit(".", 1)[1]
+        if short in names:
+            raise RuntimeError(f"two declared kernels (or versions) named {short}: one entry per name")
+        names.add(short)
+        d.compile(sig)
+        args = ", ".join(f"a{i}" for i in range(len(sig)))
+        scope = {"k": d}
+        exec(f"def {short}({args}):\n    return k({args})\n", scope)   # the dispatcher's code, its options
+        cc.export(short, next(s for s in d.nopython_signatures if s.args == sig))(scope[short])
+    value = fingerprint()
+    cc.export("fingerprint", types.int64())(lambda: value)
+    cc.compile()
 
 
 def c_array(a, dtype) -> np.ndarray:

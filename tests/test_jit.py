@@ -1,7 +1,9 @@
 """fogmon.jit: every kernel compiled once for every configuration (issue 33): the call
 sites pass the declared argument types, a kernel called with a constant is not
 compiled again per value, a process that compiles a declared kernel also compiles every
-declared kernel the cache lacks (not when the cache cannot keep them)."""
+declared kernel the cache lacks (not when the cache cannot keep them); the module compiled
+ahead of time, when built, serves the declared kernels with numba's results and is not used
+when it is stale or the arguments are not the declared types."""
 from __future__ import annotations
 
 import os
@@ -10,6 +12,8 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+
+import pytest
 
 import fogmon
 from fogmon import jit
@@ -30,6 +34,7 @@ def test_kernel_modules_lists_every_module_with_kernels():
 _CONFIGURATIONS = """
 import numpy as np
 from fogmon import jit
+jit.use_ahead_of_time = False   # numba's versions (the module compiled ahead of time has the same declarations)
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
 from fogmon.davar.streaming import StreamingDadev
@@ -104,6 +109,7 @@ import numpy as np
 sys.path.insert(0, {tmp!r})
 from fogmon import jit, startup
 startup.own_process()
+jit.use_ahead_of_time = False
 jit.KERNEL_MODULES = ("dummy_kernels",)
 import dummy_kernels as d
 print(d.first(np.arange(3.0)))
@@ -168,6 +174,7 @@ _RUN_CALLER = """
 import sys
 sys.path.insert(0, {tmp!r})
 from fogmon import jit
+jit.use_ahead_of_time = False
 jit.KERNEL_MODULES = ("dummy_callee", "dummy_caller")
 import dummy_caller
 print(dummy_caller.outer(1.0))
@@ -188,3 +195,47 @@ def test_an_edit_of_a_called_kernel_in_another_module_is_not_served_from_the_cac
         assert p.returncode == 0, p.stderr
         out.append(p.stdout.strip())
     assert out == ["2.0", "3.0"]
+
+
+_AHEAD = """
+import numpy as np
+from fogmon import jit
+from fogmon.davar.batch import dadev
+from fogmon.davar.fit import fit_noise
+from fogmon.davar.kernels import reference_level
+
+jit.use_ahead_of_time = {aot}
+rng = np.random.default_rng(2)
+y = 5.0 + rng.standard_normal(40000) + np.cumsum(rng.standard_normal(40000)) * 1e-3
+y[1000:1020] = np.nan
+f = fit_noise(dadev(y, 100.0, 81.92, 20.48))
+print([np.asarray(getattr(c, k)).tolist() for c in f.coefficients().values() for k in ("value", "lo", "hi", "upper")])
+strided = np.arange(10.0)[::2]   # not the declared C-contiguous array: numba's path, not the module's
+print(reference_level(strided, np.ones(5, bool)), len(reference_level.dispatcher.signatures))
+print(jit.ahead_of_time() is not None)
+"""
+
+
+def test_the_module_compiled_ahead_of_time_gives_numbas_results():
+    if jit.ahead_of_time() is None:
+        pytest.skip("fogmon._kernels_aot is not built (or stale) in this install")
+    out = [subprocess.run([sys.executable, "-c", _AHEAD.format(aot=aot)], capture_output=True, text=True)
+           for aot in (True, False)]
+    assert all(p.returncode == 0 for p in out), out[0].stderr + out[1].stderr
+    with_aot, with_numba = (p.stdout.splitlines() for p in out)
+    assert with_aot[0] == with_numba[0]   # every coefficient and limit, bit for bit
+    # the strided array compiled numba's version for it (beside the declared one on numba's path)
+    assert (with_aot[1], with_numba[1]) == ("4.0 1", "4.0 2")
+    assert (with_aot[2], with_numba[2]) == ("True", "False")
+
+
+def test_a_stale_module_compiled_ahead_of_time_is_not_used(monkeypatch):
+    if jit.ahead_of_time() is None:
+        pytest.skip("fogmon._kernels_aot is not built (or stale) in this install")
+    monkeypatch.setattr(jit, "_sources_digest", lambda: "edited")   # a kernel module edited after the build
+    jit.ahead_of_time.cache_clear()
+    try:
+        assert jit.ahead_of_time() is None
+    finally:
+        monkeypatch.undo()
+        jit.ahead_of_time.cache_clear()

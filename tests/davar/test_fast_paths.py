@@ -194,6 +194,7 @@ def test_model_holds_is_the_z_test_at_every_tau_with_terms():
 
 _RUN = ("import numpy as np; from fogmon import jit; from fogmon.davar import kernels; "
         "jit.warm_up_on_first_use = False; "  # one kernel (the warm-up of all: tests/test_jit.py)
+        "jit.use_ahead_of_time = False; "  # numba's path, as on a machine where the module was not built
         "print(kernels.reference_level(np.array([3.0, 1.0, 2.0]), np.ones(3, dtype=bool)))")
 
 
