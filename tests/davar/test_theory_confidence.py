@@ -213,3 +213,53 @@ def test_no_interval_below_one_edf_and_none_that_excludes_its_estimate():
     for conf in (0.5, 0.683, 0.9, 0.95, 0.99):
         lo, hi = chi2_bounds(np.ones(len(edf)), edf, conf)
         assert np.all((lo <= 1.0) & (hi >= 1.0))
+
+
+def _exact_edf(structure, m: int, n: int) -> float:
+    """EDF 2 E^2 / var of the overlapping Allan variance at m of n Gaussian rate samples
+    whose phase X = cumsum(rate) has the structure function ``structure(t)`` =
+    var(X[i + t] - X[i]): the Allan terms' autocovariance at every lag k is
+    -1/2 sum_pq c_p c_q D(k + (q - p) m) (c = 1, -2, 1), and var(sum of M squared terms)
+    = 2 sum_k (M - |k|) r(k)^2, summed over all M lags: no approximation."""
+    big_m = n - 2 * m + 1
+    k = np.arange(big_m, dtype=np.float64)
+    c = np.array([1.0, -2.0, 1.0])
+    r = -0.5 * sum(c[p] * c[q] * structure(np.abs(k + (q - p) * m)) for p in range(3) for q in range(3))
+    w = 2.0 * (1.0 - k / big_m)
+    w[0] = 1.0
+    return big_m / np.sum(w * (r / r[0]) ** 2)
+
+
+def _ar1_structure(t: np.ndarray, var: float, a: float) -> np.ndarray:
+    """var(X[i + t] - X[i]) of the sum X of a stationary AR(1) of variance ``var``, coefficient ``a``."""
+    return var * (t * (1.0 + a) / (1.0 - a) - 2.0 * a * (1.0 - a**t) / (1.0 - a) ** 2)
+
+
+@pytest.mark.parametrize("m", [32, 64])
+def test_mixture_edf_is_exact_for_white_angle_plus_white_rate(m):
+    # five_100Hz_2.9h of validation/calibration.py at 0.32 and 0.64 s (Q 0.2 arcsec, N 0.005
+    # deg/sqrt(h), 100 Hz, 2^20 samples), where the two meet: the mixture EDF is the exact one
+    n, fs, q, white = 2**20, 100.0, 0.2, 60.0 * 0.005 * 10.0
+    exact = _exact_edf(lambda t: np.where(t > 0, 2.0 * (q * fs) ** 2, 0.0) + white**2 * t, m, n)
+    tau = m / fs
+    part = np.array([3.0 * q**2 / tau**2, white**2 / fs / tau, 0.0, 0.0])
+    assert edf_mixture(part[None] / part.sum(), [m], n)[0] == pytest.approx(exact, rel=1e-9)
+
+
+def test_mixture_edf_of_white_rate_plus_simulated_flicker_at_the_longest_tau():
+    # the simulator's flicker (a sum of Gauss-Markov terms, fogmon.sim.noise.Flicker) under
+    # white rate noise at m = n / 4, EDF ~3 (QNB_1kHz_17min of validation/calibration.py at
+    # 262 s, scaled): Greenhall's flicker in the mixture gives the process's exact EDF
+    import math
+
+    from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus
+
+    n, b, white = 2**14, 0.02, 60.0 * 0.00627
+    var = b**2 * math.log(2.0) / math.pi
+    taus = flicker_taus(1.0, default_flicker_tau_hi_s(1.0, n))
+    def structure(t):
+        return white**2 * t + sum(_ar1_structure(t, var, math.exp(-1.0 / tc)) for tc in taus)
+    for m in (n // 16, n // 4):
+        exact = _exact_edf(structure, m, n)
+        part = np.array([0.0, white**2 / m, 2.0 * math.log(2.0) / math.pi * b**2, 0.0])
+        assert edf_mixture(part[None] / part.sum(), [m], n)[0] == pytest.approx(exact, rel=0.005)
