@@ -473,14 +473,42 @@ def _tile_terms(pre, m, w, first, n, x_in, x_out, dn):
     return True
 
 
+@kernel()
+def _tile_diffs(pre, m, w, first, n, x_in, x_out, x_d, x_a, dn):
+    """``_tile_terms`` as the differences ``x_d`` = entering - leaving and the sums ``x_a``
+    = entering + leaving of the squared terms (what the plain sums read), the same values
+    as formed from its ``x_in`` and ``x_out`` (scratch here; not written on the fast
+    path). Returns as ``_tile_terms``."""
+    psum, bad = pre[0], pre[1]
+    a_in = first - 2 * m + 1
+    a_out = first - w
+    if bad[first + n] == bad[a_in] and bad[a_out + n - 1 + 2 * m] == bad[a_out]:
+        inv = 1.0 / m
+        p0, p1, p2 = psum[a_in:a_in + n], psum[a_in + m:a_in + m + n], psum[a_in + 2 * m:a_in + 2 * m + n]
+        q0, q1, q2 = psum[a_out:a_out + n], psum[a_out + m:a_out + m + n], psum[a_out + 2 * m:a_out + 2 * m + n]
+        for i in range(n):
+            t_in = ((p2[i] - p1[i]) - (p1[i] - p0[i])) * inv
+            t_out = ((q2[i] - q1[i]) - (q1[i] - q0[i])) * inv
+            s_in = t_in * t_in
+            s_out = t_out * t_out
+            x_d[i] = s_in - s_out
+            x_a[i] = s_in + s_out
+        return False
+    wrote = _tile_terms(pre, m, w, first, n, x_in, x_out, dn)
+    for i in range(n):
+        x_d[i] = x_in[i] - x_out[i]
+        x_a[i] = x_in[i] + x_out[i]
+    return wrote
+
+
 @kernel(fastmath=True)
-def _tile_totals(x_in, x_out, n):
-    """(sum of x_in - x_out, sum of x_in + x_out) over n samples, in any order (SIMD)."""
+def _tile_totals(x_d, x_a, n):
+    """(sum of x_d, sum of x_a) over n samples, in any order (SIMD)."""
     d = 0.0
     a = 0.0
     for i in range(n):
-        d += x_in[i] - x_out[i]
-        a += x_in[i] + x_out[i]
+        d += x_d[i]
+        a += x_a[i]
     return d, a
 
 
@@ -578,6 +606,8 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     start = max(first, w)
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
+    xd = np.empty((4, _TILE))  # entering - leaving squared terms
+    xa = np.empty((4, _TILE))  # entering + leaving
     dn = np.empty((4, _TILE), np.int64)
     # per tile sample, the sums and encoded counts per tau of the window it emits: the
     # layout of the output rows, so a dense tile's rows are copied (or, with ``full``,
@@ -585,6 +615,7 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     w_at = np.empty((_TILE, nm))
     n_at = np.empty((_TILE, nm), np.int64)
     tot = np.empty(4)
+    low = np.empty(4)
     grow = np.empty(4)
     bnd = np.empty(4)
     ks = np.empty(4, np.int64)
@@ -607,11 +638,13 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
             for j in range(4):
                 k = min(g + j, nm - 1)  # slots past the last tau repeat it
                 ks[j] = k
-                wrote[j] = _tile_terms(pre, ms[k], w, t0, n, xi[j], xo[j], dn[j])
+                wrote[j] = _tile_diffs(pre, ms[k], w, t0, n, xi[j], xo[j], xd[j], xa[j], dn[j])
                 has_dn |= wrote[j]
-                tot[j], mag = _tile_totals(xi[j], xo[j], n)
+                tot[j], mag = _tile_totals(xd[j], xa[j], n)
                 # rounding of the squares' differences, the tile sum and the emission scan
                 grow[j] = 3.0 * n * _EPS * mag
+                # below every window sum of the tile: the leaving terms sum to (mag - tot) / 2
+                low[j] = sum_s[k] + sum_c[k] - 0.5 * (mag - tot[j]) - grow[j]
                 plain &= _within(err[k] + grow[j], sum_s[k] + sum_c[k] + tot[j])
             if fixed and has_dn:  # counts change from here on
                 fixed = _unfix(out_counts, e_head, e_tile, cnt, n_at, g, n)
@@ -621,13 +654,16 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 if not wrote[j]:
                     dn[j, :n] = 0
             if plain and (has_dn or e_end > e_tile):  # the bound must also hold at every emitted window
-                for j in range(4):
-                    bnd[j] = err[ks[j]] + grow[j]
+                for j in range(4):  # (_scan_plain's chains start at the compensation c: its roundings)
+                    bnd[j] = err[ks[j]] + grow[j] + n * _EPS * abs(sum_c[ks[j]])
                 if dense:
-                    plain = _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s,
-                                        sum_c, cnt, w_at, n_at)
+                    # the least emitted sum is needed only when the bound does not hold at ``low``
+                    track = not (_within(bnd[0], low[0]) and _within(bnd[1], low[1]) and _within(bnd[2], low[2])
+                                 and _within(bnd[3], low[3]))
+                    plain = _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e_tile, e_end, emit_pos, ks, bnd,
+                                        sum_s, sum_c, cnt, w_at, n_at)
                 else:
-                    plain = _emit_plain(xi, xo, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
+                    plain = _emit_plain(xd, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
                                         cnt, out_sums, out_counts)
             if plain:
                 for j in range(4):
@@ -644,6 +680,8 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                         if fixed and n_k != cnt[k]:
                             fixed = _unfix(out_counts, e_head, e_tile, cnt, n_at, g, n)
                         sum_s[k], sum_c[k], cnt[k] = s, c, n_k
+                for j in range(4):  # the entering and leaving terms apart (TwoSum of their difference)
+                    _tile_terms(pre, ms[ks[j]], w, t0, n, xi[j], xo[j], dn[j])
                 if not has_dn:
                     dn[:, :n] = 0
                 _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at)
@@ -655,8 +693,10 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
         for k in range(nm):
             c_fix[0, k] = cnt[k] & _LOW
             huge |= cnt[k] >= _FLAG
-        if dense and to_adev and fixed and not huge:  # frame_stats reads the sums in w_at
+        if dense and fixed and not huge:  # the rows' sums as they are in w_at
             src = w_at[emit_pos[e_tile] - t0:emit_pos[e_end - 1] - t0 + 1]
+            if not to_adev:  # one flat copy (a row of nm leaves a scalar remainder per row)
+                out_sums[e_tile:e_end].reshape(src.size)[:] = src.reshape(src.size)
         elif dense:
             _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
         n_gapped += _rows_stats(to_adev, full, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
@@ -691,7 +731,7 @@ def _unfix(out_counts, e0, e1, cnt, n_at, k1, n):
 
 
 @kernel()
-def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, out_sums, out_counts):
+def _emit_plain(xd, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, out_sums, out_counts):
     """Write the windows emitted in a plain tile (running sums from the tile's start) and
     advance the valid-term counts over the tile. Returns False, changing no state, when
     an emitted window's sum is too small for the rounding bound ``bnd`` (per slot) of
@@ -705,10 +745,10 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
     for e in range(e0, e1):
         i1 = emit_pos[e] - t0 + 1
         for i in range(i0, i1):
-            p0 += xi[0, i] - xo[0, i]
-            p1 += xi[1, i] - xo[1, i]
-            p2 += xi[2, i] - xo[2, i]
-            p3 += xi[3, i] - xo[3, i]
+            p0 += xd[0, i]
+            p1 += xd[1, i]
+            p2 += xd[2, i]
+            p3 += xd[3, i]
             if has_dn:
                 n0 += dn[0, i]
                 n1 += dn[1, i]
@@ -734,38 +774,40 @@ def _emit_plain(xi, xo, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum
 
 
 @kernel()
-def _scan_plain(xi, xo, dn, has_dn, fixed, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
+def _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
     """``_emit_plain`` for a tile in which every sample from the first emission (e0 <
     e1) to the last emits (hop 1): the running sums at these samples go to ``w_at``,
     the counts to ``n_at`` (none while the counts are ``fixed`` and ``dn`` is zero; see
     ``_emit_rows``), by a branch-free scan of four independent chains, which also
-    track the least emitted sum per slot for the bound check."""
+    track the least emitted sum per slot for the bound check when ``track`` (else the
+    bound is known to hold at a lower bound of every window sum of the tile)."""
     k0, k1, k2, k3 = ks[0], ks[1], ks[2], ks[3]
     s0, s1, s2, s3 = sum_s[k0], sum_s[k1], sum_s[k2], sum_s[k3]
     c0, c1, c2, c3 = sum_c[k0], sum_c[k1], sum_c[k2], sum_c[k3]
     n0, n1, n2, n3 = cnt[k0], cnt[k1], cnt[k2], cnt[k3]
-    p0 = p1 = p2 = p3 = 0.0
+    # the chains start at the compensations: a window's sum is s + (c + its terms' changes)
+    p0, p1, p2, p3 = c0, c1, c2, c3
     i0 = emit_pos[e0] - t0
     i1 = emit_pos[e1 - 1] - t0 + 1
     for i in range(i0):
-        p0 += xi[0, i] - xo[0, i]
-        p1 += xi[1, i] - xo[1, i]
-        p2 += xi[2, i] - xo[2, i]
-        p3 += xi[3, i] - xo[3, i]
+        p0 += xd[0, i]
+        p1 += xd[1, i]
+        p2 += xd[2, i]
+        p3 += xd[3, i]
     # slices: a loop counter from 0 indexes them without wrap-around checks
-    x0, x1, x2, x3 = xi[0, i0:i1], xi[1, i0:i1], xi[2, i0:i1], xi[3, i0:i1]
-    o0, o1, o2, o3 = xo[0, i0:i1], xo[1, i0:i1], xo[2, i0:i1], xo[3, i0:i1]
+    x0, x1, x2, x3 = xd[0, i0:i1], xd[1, i0:i1], xd[2, i0:i1], xd[3, i0:i1]
     rows = w_at[i0:i1]
     m0 = m1 = m2 = m3 = np.inf
     for i in range(i1 - i0):
-        p0 += x0[i] - o0[i]
-        p1 += x1[i] - o1[i]
-        p2 += x2[i] - o2[i]
-        p3 += x3[i] - o3[i]
-        w0, w1, w2, w3 = s0 + (c0 + p0), s1 + (c1 + p1), s2 + (c2 + p2), s3 + (c3 + p3)
+        p0 += x0[i]
+        p1 += x1[i]
+        p2 += x2[i]
+        p3 += x3[i]
+        w0, w1, w2, w3 = s0 + p0, s1 + p1, s2 + p2, s3 + p3
         row = rows[i]
         row[k0], row[k1], row[k2], row[k3] = w0, w1, w2, w3
-        m0, m1, m2, m3 = min(m0, w0), min(m1, w1), min(m2, w2), min(m3, w3)
+        if track:
+            m0, m1, m2, m3 = min(m0, w0), min(m1, w1), min(m2, w2), min(m3, w3)
     if not (_within(bnd[0], m0) and _within(bnd[1], m1) and _within(bnd[2], m2) and _within(bnd[3], m3)):
         return False
     if has_dn:
@@ -1036,6 +1078,9 @@ def model_holds(model, sums, counts, m, hold_z):
     return True
 
 
+_ROWS = 16  # rows per flat loop of ``frame_stats`` (one counts row)
+
+
 @kernel((F2, I2, I1, F2), error_model="numpy")
 def frame_stats(sums, counts, full, adev):
     """One pass over windows (rows) x taus: adev = sqrt(sum / (2 count)) (NaN without
@@ -1054,10 +1099,24 @@ def frame_stats(sums, counts, full, adev):
             inv[i, k] = 1.0 / (2.0 * c[k])  # 1 / 0 = inf: NaN below
             n_gapped += c[k] != full[k]
     last = counts.shape[0] - 1
+    i0 = 0
     if last == 0:
         n_gapped *= nt
-    for i in range(nt):
+        # one counts row: rows in chunks of _ROWS, each one flat loop over _ROWS x nm
+        # entries (a row of nm leaves a scalar remainder per row: 1.8 x the time at 46 taus)
+        i0 = nt - nt % _ROWS
+        if i0 > 0:
+            rep = np.empty(_ROWS * nm)
+            for r in range(_ROWS):
+                rep[r * nm:(r + 1) * nm] = inv[0]
+            s_flat, a_flat = sums[:i0].reshape(i0 * nm), adev[:i0].reshape(i0 * nm)
+            for j0 in range(0, i0 * nm, _ROWS * nm):
+                s, a = s_flat[j0:j0 + _ROWS * nm], a_flat[j0:j0 + _ROWS * nm]
+                for j in range(_ROWS * nm):
+                    a[j] = np.sqrt(max(s[j], 0.0) * rep[j])
+    for i in range(i0, nt):
         iv, s, a_row = inv[min(i, last)], sums[i], adev[i]
         for k in range(nm):
             a_row[k] = np.sqrt(max(s[k], 0.0) * iv[k])
     return n_gapped
+
