@@ -154,12 +154,14 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     # before and after count the same tests
     before = rescored(first_analysis, first_tests, fit.ctx.penalty, state.contradicted)
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
-    after = replace(fit.analysis, regions=mismatch.locate(fit.analysis.regions, fit.y, valid, grid, fit.analysis.null))
-    bursts, named = nonstationary_warnings(after, fit.y, valid, grid)
+    y_after = fit.y
+    after = replace(fit.analysis,
+                    regions=mismatch.locate(fit.analysis.regions, y_after, valid, grid, fit.analysis.null))
+    bursts, named = nonstationary_warnings(after, y_after, valid, grid)
     rejections = state.rejections()
     spikes, listing = ([], None) if any(a.cand.kind in ("outliers", "glitches") for a in accepted) else \
         spike_warnings(fit.ctx, rejections)
-    return Result(rec, model, fitted, grid, t, valid, y0, fit.y, before, after, accepted, rejections, B,
+    return Result(rec, model, fitted, grid, t, valid, y0, y_after, before, after, accepted, rejections, B,
                   baseline, too_short_warnings(model, grid) + bursts + spikes, named, listing)
 
 

@@ -40,16 +40,20 @@ class Accepted:
 @dataclass(frozen=True, eq=False)
 class Fit:
     """The residual against the model with the effects accepted so far, and what judges
-    it: the residual ``y`` (deg/h, 0 where invalid), the stochastic model ``stoch``, its
-    bootstrap ``null``, the candidates' context ``ctx``, the candidates ``cands`` fitted
-    to it (best BIC first, ``candidates``) and the map's ``analysis``."""
+    it: the stochastic model ``stoch``, its bootstrap ``null``, the candidates' context
+    ``ctx`` (which holds the residual, ``y``), the candidates ``cands`` fitted to it
+    (best BIC first, ``candidates``) and the map's ``analysis``."""
 
-    y: np.ndarray
     stoch: SensorModel
     null: mismatch.Null
     ctx: Context
     cands: list[Candidate]
     analysis: Analysis
+
+    @property
+    def y(self) -> np.ndarray:
+        """The residual (deg/h, 0 where invalid; a new array, ``Context.residual``)."""
+        return self.ctx.residual()
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,14 +80,16 @@ class Setting:
 
     def fit(self, y: np.ndarray, stoch: SensorModel, null: mismatch.Null, counts: Mapping[str, int],
             contradicted: AbstractSet[str]) -> Fit:
-        """The residual ``y`` (deg/h) judged against ``stoch`` and its ``null``: the
-        context, the candidates (``counts``: kind -> times added) and the analysis (the
-        tests of the ``contradicted`` kinds not counted in its score)."""
-        ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
+        """The residual ``y`` (deg/h, 0 where invalid; taken over by the context, which
+        writes into it) judged against ``stoch`` and its ``null``: the context, the
+        candidates (``counts``: kind -> times added) and the analysis (the tests of the
+        ``contradicted`` kinds not counted in its score)."""
+        ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y, copy=False)
+        del y
         ctx.meta = dict(self.meta)
         cands = candidates(ctx, counts, null.scan_bars)
-        fit = Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
-        for key in ("spike_scan", "spikes"):  # record-length arrays, computed again if needed (memory)
+        fit = Fit(stoch, null, ctx, cands, analyse(ctx, null, self.grid, cands, contradicted))
+        for key in ("spike_scan", "spikes", "model_psd"):  # record-length arrays, computed again if needed (memory)
             ctx.cache.pop(key, None)
         return fit
 
@@ -191,6 +197,10 @@ class Selection:
         ok, note = _heldout(ctx, c)
         if not ok:
             return Verdict("reject", bg, f"failed the held-out check: {note}")
+        # judged: its design and held-out closure are not read again (a look-alike check
+        # fits a candidate without them again), so the trial's round is built without them
+        # (memory: a periodic design is two record-length columns)
+        c.design = c.heldout = None
         trial = self.trial(c)
         after = trial.analysis
         overfit = _new_deficit(current, after) if c.rate is None else None
@@ -211,19 +221,22 @@ class Selection:
         s, f = self.setting, self.fit
         n0 = c.white_n0_dpsh
         if _subtracted(c) and n0 is None:
-            y, stoch, null = np.where(s.valid, f.y - c.rate, 0.0), f.stoch, f.null
+            stoch, null = f.stoch, f.null
         elif _subtracted(c) and n0 is not None:  # spikes taken out and the white level they inflated refitted
-            y, stoch = np.where(s.valid, f.y - c.rate, 0.0), _white_refitted(f.stoch, n0)
+            stoch = _white_refitted(f.stoch, n0)
             if s.progress:
                 s.progress(f"bootstrap null with {c.kind} removed and N refitted: {s.n_boot} simulations", 0, 0)
             null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
                              s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
         else:
-            y, stoch = f.y, _joined(f.stoch, c)
+            stoch = _joined(f.stoch, c)
             if s.progress:
                 s.progress(f"bootstrap null with {c.kind} added: {s.n_boot} simulations", 0, 0)
             null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
                              s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
+        y = f.y   # a new array, taken over by the trial's context (which zeroes it where invalid)
+        if _subtracted(c):
+            y -= c.rate
         return s.fit(y, stoch, null, {**self.counts, c.kind: self.counts.get(c.kind, 0) + 1}, self.contradicted)
 
     def rejections(self) -> list[tuple[str, float, str]]:
