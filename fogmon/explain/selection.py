@@ -393,14 +393,20 @@ def _heldout_mean(ctx: Context, X: np.ndarray, S: np.ndarray) -> tuple[bool, str
     return ok, "; ".join(notes)
 
 
-def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Residual and design on the half ``m``, each with its own intercept (the bias is
-    free in each half), 0 elsewhere, and that half's valid mask."""
-    v = ctx.valid & m
-    mean = np.array([X[v, j].mean() for j in range(X.shape[1])])   # column by column: no copy of X[v]
-    Xc = X - mean
-    Xc[~v] = 0.0
-    return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), Xc, v
+def _centred(ctx: Context, X: np.ndarray, w: Whittle, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """DFTs (``w``: the Whittle GLS of the half, its valid samples ``v``) of the residual and
+    of the design's columns on the half, each less its mean there (the bias is free in
+    each half) and 0 elsewhere, and each column's energy about that mean there; a column
+    at a time (memory: no centred copy of the design)."""
+    Yf = w.fft(np.where(v, ctx.y - ctx.y[v].mean(), 0.0))
+    XF = np.empty((ctx.n // 2 + 1, X.shape[1]), dtype=np.complex128)
+    energy = np.empty(X.shape[1])
+    for j in range(X.shape[1]):
+        col = X[:, j] - X[v, j].mean()
+        col[~v] = 0.0
+        energy[j] = np.dot(col, col)
+        XF[:, j] = w.fft(col)
+    return Yf, XF, energy
 
 
 #: a design column holds less than this share of its energy (about its mean, over the
@@ -408,26 +414,28 @@ def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np
 DETERMINED_SHARE = 1e-6
 
 
-def _determined(ctx: Context, X: np.ndarray, Xc: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Which columns of ``X`` the half (its centred design ``Xc``, valid mask ``v``) determines."""
+def _determined(ctx: Context, X: np.ndarray, energy: np.ndarray) -> np.ndarray:
+    """Which columns of ``X`` a half determines (``energy``: each column's about its mean there)."""
     whole = np.array([np.var(X[ctx.valid, j]) * ctx.valid.sum() for j in range(X.shape[1])])
-    return np.einsum("ij,ij->j", Xc, Xc) > DETERMINED_SHARE * whole   # Xc is 0 outside v
+    return energy > DETERMINED_SHARE * whole
+
+
+def _half(ctx: Context, m: np.ndarray, S: np.ndarray) -> tuple[Whittle, np.ndarray]:
+    """The Whittle GLS of the half ``m`` against the noise PSD ``S`` and its valid samples."""
+    v = ctx.valid & m
+    return Whittle(S, ctx.n, v), v
 
 
 def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """GLS coefficients of the columns of design ``X`` that the half ``m`` determines
     (``_determined``), fitted there against the noise PSD ``S``, and which those are;
     None when none is or that fit is not itself significant (chi2 gain < 9)."""
-    y, Xc, v = _centred(ctx, X, m)
-    det = _determined(ctx, X, Xc, v)
+    w, v = _half(ctx, m, S)
+    Yf, XF, energy = _centred(ctx, X, w, v)
+    det = _determined(ctx, X, energy)
     if not det.any():
         return None
-    w = Whittle(S, ctx.n, v)
-    Xs = Xc if det.all() else Xc[:, det]
-    del Xc   # one record-length design less at the FFT (the memory peak of a 1e7-sample explain)
-    XF = w.fft(Xs)
-    del Xs
-    fit = w.gls(XF, w.fft(y))
+    fit = w.gls(XF if det.all() else XF[:, det], Yf)
     return None if fit.chi2_gain < 9.0 else (fit.beta, det)
 
 
@@ -437,15 +445,13 @@ def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray, det
     ``m`` and the drop it brings there (None when the expected one is below 9: not
     visible), against the noise PSD ``S``, the other columns and the half's mean fitted
     freely."""
-    y, Xc, v = _centred(ctx, X, m)
-    w = Whittle(S, ctx.n, v)
-    XF = w.fft(Xc)
-    del Xc
+    w, v = _half(ctx, m, S)
+    Yf, XF, _ = _centred(ctx, X, w, v)
     pred, free = XF[:, det] @ beta, XF[:, ~det]
+    del XF
     expected = w.chi2_left(pred, free)
     if expected < 9.0:
         return expected, None
-    Yf = w.fft(y)
     return expected, w.chi2_left(Yf, free) - w.chi2_left(Yf - pred, free)
 
 
