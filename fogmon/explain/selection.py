@@ -397,15 +397,18 @@ def _centred(ctx: Context, X: np.ndarray, w: Whittle, v: np.ndarray) -> tuple[np
     """DFTs (``w``: the Whittle GLS of the half, its valid samples ``v``) of the residual and
     of the design's columns on the half, each less its mean there (the bias is free in
     each half) and 0 elsewhere, and each column's energy about that mean there; a column
-    at a time (memory: no centred copy of the design)."""
+    at a time, each straight into its column of the result (memory: no centred or masked
+    copy of the design)."""
     Yf = w.fft(np.where(v, ctx.y - ctx.y[v].mean(), 0.0))
     XF = np.empty((ctx.n // 2 + 1, X.shape[1]), dtype=np.complex128)
     energy = np.empty(X.shape[1])
     for j in range(X.shape[1]):
         col = X[:, j] - X[v, j].mean()
-        col[~v] = 0.0
+        col[~v] = 0.0   # as w.fft masks it
+        if not np.isfinite(col).all():
+            np.nan_to_num(col, copy=False)
         energy[j] = np.dot(col, col)
-        XF[:, j] = w.fft(col)
+        np.fft.rfft(col, out=XF[:, j])
     return Yf, XF, energy
 
 
