@@ -30,16 +30,23 @@ class Analysis:
     null: mismatch.Null
 
 
-def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray, y: np.ndarray) -> Context:
+def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.ndarray, y: np.ndarray,
+                    copy: bool = True) -> Context:
     """The context of the candidates: the model PSD calibrated to the residual over the
     model's pass band (``in_passband``), and no weight outside it: an octave
     band holding a filter's zero would otherwise take its factor from bins where the
-    model is floored, and the bins next to them would show a false excess."""
+    model is floored, and the bins next to them would show a false excess. ``copy``
+    False: ``y`` becomes the context's residual (written into: 0 where not valid, its
+    first sample less the wrap spike below; memory: no record-length copy)."""
     n = len(y)
     omega = rfft_omega(n)
     S_model = model_psd(stoch, omega, n, white_level_rms_dpsh(stoch, t, ctx_aux))
     S = np.maximum(S_model, 1e-4 * np.median(S_model[1:]))  # a PSD near 0 must not give one bin all the weight
-    yy = np.where(valid, y, 0.0)
+    if copy:
+        yy = np.where(valid, y, 0.0)
+    else:
+        yy = y
+        yy[~valid] = 0.0
     Yf = np.fft.rfft(yy)
     keep = in_passband(stoch, omega)
     S_cal = np.full(len(S), np.inf)
@@ -49,10 +56,10 @@ def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.
     # (quantization) noise the angle mismatch there is a one-sample rate spike at index 0
     # that the GLS sees clearly: project it out (a nuisance regressor) before any test.
     amp0 = detectors.spike_at_start(wh, Yf)
-    yy = yy.copy()
+    first = float(yy[0])
     yy[0] -= amp0
-    Yf = Yf - amp0
-    ctx = Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), yy, stoch, wh, Yf)
+    Yf -= amp0
+    ctx = Context(t, ctx_aux, valid, float(stoch.sample_rate_hz), yy, stoch, wh, Yf, y_first=first)
     ctx.cache["model_psd"] = S_model
     return ctx
 
@@ -67,11 +74,12 @@ def matched_tests_figure(cands: list[Candidate], penalty: float, contradicted: A
                default=0.0)
 
 
-def analyse(y: np.ndarray, ctx: Context, null: mismatch.Null, grid: mismatch.Grid,
-            cands: list[Candidate], contradicted: AbstractSet[str]) -> Analysis:
-    """Map, regions and score of residual ``y`` (candidates: the matched tests run on it,
-    those of the ``contradicted`` kinds not counted, ``matched_tests_figure``)."""
-    cell, whole = mismatch.log_avar(np.where(ctx.valid, y, np.nan), ctx.valid, grid)
+def analyse(ctx: Context, null: mismatch.Null, grid: mismatch.Grid, cands: list[Candidate],
+            contradicted: AbstractSet[str]) -> Analysis:
+    """Map, regions and score of the context's residual (``Context.residual``; candidates:
+    the matched tests run on it, those of the ``contradicted`` kinds not counted,
+    ``matched_tests_figure``)."""
+    cell, whole = mismatch.log_avar(ctx.residual(np.nan), ctx.valid, grid)
     z, zw = mismatch.zscores(cell, whole, null)
     _, zs = spike_scan(ctx)  # (computed once per context)
     nv = int(ctx.valid.sum())

@@ -164,39 +164,66 @@ def spike_at_start(wh: Whittle, Yf: np.ndarray) -> float:
     return b / n / float(np.sum(wh.w))
 
 
+#: the step scan's spectra and gains are formed this many bins (samples) at a time (memory:
+#: no record-length temporaries beside the two transforms)
+STEP_CHUNK = 1 << 20
+
+
 def step_scan(wh: Whittle, Yf: np.ndarray, lo: int, hi: int) -> tuple[int, float, float]:
     """Best single bias step (column 1 for samples >= n0) with n0 in [lo, hi).
 
-    Returns (n0, step estimate in the residual's units, chi-square gain)."""
-    n = wh.n
-    d = 1.0 - np.exp((2j * np.pi / n) * np.arange(len(Yf)))
-    d[0] = 1.0
-    S = wh.S.copy()
-    S[0] = 1.0
-    Zb = Yf / S  # S may be inf (no weight): real division first, no inf / inf
-    Zb /= d
-    Zb[0] = 0.0
-    b = np.fft.irfft(Zb, n)
-    del Zb
+    Returns (n0, step estimate in the residual's units, chi-square gain). With d_k =
+    1 - e^(2 pi i k / n) and C_k = 1 / (S_k |d_k|^2), the GLS products of the step at
+    every n0 are b = irfft(Y / (S d)) - its value at 0 and A = 2 (c_0 - c), c =
+    irfft(C); the gain is b^2 / A. The spectra are formed a chunk of STEP_CHUNK bins
+    at a time and the gains of a chunk of positions at a time, each straight into the
+    transform's input (C as a complex array: a real one would be copied to complex):
+    at a 1e7-sample record, two record-length arrays beside the transforms' input and
+    output instead of five."""
+    n, nb = wh.n, len(Yf)
+    spec = np.empty(nb, dtype=np.complex128)
+    for k, d, S in _step_chunks(wh, nb):
+        z = Yf[k] / S  # S may be inf (no weight): real division first, no inf / inf
+        z /= d
+        spec[k] = z
+    spec[0] = 0.0
+    b = np.fft.irfft(spec, n)
     b -= b[0]
-    d = d.real ** 2 + d.imag ** 2
-    d *= S
-    del S   # before the transform: the memory peak of a 1e7-sample explain
-    np.divide(1.0, d, out=d)  # C = 1 / (S |d|^2)
-    d[0] = 0.0
-    A = np.fft.irfft(d, n)
-    del d
+    for k, d, S in _step_chunks(wh, nb):
+        m = d.real ** 2 + d.imag ** 2
+        m *= S
+        np.divide(1.0, m, out=m)  # C = 1 / (S |d|^2)
+        spec[k] = m
+    spec[0] = 0.0
+    A = np.fft.irfft(spec, n)
+    del spec
     A -= A[0]
     A *= -2.0  # A = 2 (cq[0] - cq)
-    sl = slice(max(lo, 1), max(min(hi, n), max(lo, 1) + 1))
-    pos = A[sl] > 0
-    gain = np.square(b[sl])   # b^2 / A where A > 0, in place (memory: one array, not four)
-    np.divide(gain, A[sl], out=gain, where=pos)
-    gain[~pos] = 0.0
-    del pos
-    k = int(np.argmax(gain))
-    n0 = sl.start + k
-    return n0, float(b[n0] / A[n0]), float(gain[k])
+    start = max(lo, 1)
+    stop = max(min(hi, n), start + 1)
+    best, n0 = -1.0, start
+    for a in range(start, stop, STEP_CHUNK):
+        sl = slice(a, min(a + STEP_CHUNK, stop))
+        pos = A[sl] > 0
+        gain = np.square(b[sl])   # b^2 / A where A > 0
+        np.divide(gain, A[sl], out=gain, where=pos)
+        gain[~pos] = 0.0
+        k = int(np.argmax(gain))
+        if gain[k] > best:
+            best, n0 = float(gain[k]), a + k
+    return n0, float(b[n0] / A[n0]), best
+
+
+def _step_chunks(wh: Whittle, nb: int):
+    """(bins, d, S) of the step scan's spectra, STEP_CHUNK bins at a time: d_k =
+    1 - e^(2 pi i k / n) and the PSD S_k, both 1 at bin 0 (left out)."""
+    for a in range(0, nb, STEP_CHUNK):
+        k = slice(a, min(a + STEP_CHUNK, nb))
+        d = 1.0 - np.exp((2j * np.pi / wh.n) * np.arange(k.start, k.stop))
+        S = wh.S[k].copy()
+        if a == 0:
+            d[0], S[0] = 1.0, 1.0
+        yield k, d, S
 
 
 #: samples' worth of Welch segments transformed at once by ``spectral_lines`` (memory: ~5

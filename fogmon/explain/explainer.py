@@ -110,6 +110,14 @@ def deterministic_dph(model: SensorModel, t: np.ndarray, aux: dict, sample_rate_
     return det
 
 
+def _residual(model: SensorModel, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, aux: dict,
+              sample_rate_hz: float) -> np.ndarray:
+    """The rate ``raw`` (deg/h) less the model's deterministic part and its mean over the
+    ``valid`` samples, 0 where not valid."""
+    y = raw - deterministic_dph(model, t, aux, sample_rate_hz)
+    return np.where(valid, y - np.nanmean(y[valid]), 0.0)
+
+
 def stochastic_part(model: SensorModel) -> SensorModel:
     """The model without bias, R ramp and mean-type effects: what the null simulates."""
     nz = replace(model.noise, R_dphh=0.0)
@@ -133,9 +141,6 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     if valid.sum() < MIN_STATIONARY_SHARE * n:
         raise FogmonError(f"{rec.name}: more than {100 * (1 - MIN_STATIONARY_SHARE):.0f} % of the sample grid is "
                           f"missing (gaps)")
-    y0 = raw - deterministic_dph(model, t, aux, sample_rate_hz)
-    del raw
-    y0 = np.where(valid, y0 - np.nanmean(y0[valid]), 0.0)
     B = opt.n_boot or default_n_boot(n)
     stoch = stochastic_part(model)
     report(f"bootstrap null: {B} simulations of the model like the recording", 0, 0)
@@ -143,7 +148,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     report("mismatch map and candidate effects", 0, 0)
     setting = Setting(t, aux, valid, grid, B, opt.seed, opt.alpha, opt.workers, opt.max_effects, progress,
                       mapper, rec.meta)
-    state = Selection.start(setting, y0.copy(), stoch, null, baseline)
+    # the residual before, taken over by the selection and formed again at the end (memory)
+    state = Selection.start(setting, _residual(model, t, raw, valid, aux, sample_rate_hz), stoch, null, baseline)
     # what `before` needs of the first round (its context is let go: memory)
     first_analysis, first_tests = state.fit.analysis, [light(c) for c in state.fit.cands]
     while not state.done:
@@ -152,14 +158,17 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     fitted = _fitted_model(model, fit.stoch, state.accepted)
     accepted = sorted(state.accepted, key=lambda a: -a.cand.gain)
     # before and after count the same tests
+    y0 = _residual(model, t, raw, valid, aux, sample_rate_hz)
     before = rescored(first_analysis, first_tests, fit.ctx.penalty, state.contradicted)
     before = replace(before, regions=mismatch.locate(before.regions, y0, valid, grid, before.null))
-    after = replace(fit.analysis, regions=mismatch.locate(fit.analysis.regions, fit.y, valid, grid, fit.analysis.null))
-    bursts, named = nonstationary_warnings(after, fit.y, valid, grid)
+    y_after = fit.y
+    after = replace(fit.analysis,
+                    regions=mismatch.locate(fit.analysis.regions, y_after, valid, grid, fit.analysis.null))
+    bursts, named = nonstationary_warnings(after, y_after, valid, grid)
     rejections = state.rejections()
     spikes, listing = ([], None) if any(a.cand.kind in ("outliers", "glitches") for a in accepted) else \
         spike_warnings(fit.ctx, rejections)
-    return Result(rec, model, fitted, grid, t, valid, y0, fit.y, before, after, accepted, rejections, B,
+    return Result(rec, model, fitted, grid, t, valid, y0, y_after, before, after, accepted, rejections, B,
                   baseline, too_short_warnings(model, grid) + bursts + spikes, named, listing)
 
 

@@ -127,20 +127,31 @@ def low_band_flicker(S: np.ndarray, Rf: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def weighted_products(w: np.ndarray, Xf: np.ndarray, Yf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def weighted_products(w: np.ndarray, Xf: np.ndarray, Yf: np.ndarray,
+                      lead: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A = Re(X^H diag(w) X) (p x p) and b = Re(X^H diag(w) Y) (p) of complex columns Xf
-    (bins x p) and Yf (bins), as sums of real products in numpy's own loops (a threaded
-    BLAS call on such thin products spends more time waking threads than multiplying,
-    up to 40x on a loaded machine)."""
-    nb, p = Xf.shape
-    cols = np.ascontiguousarray(Xf.T, dtype=np.complex128).view(np.float64).reshape(p, nb, 2)
-    yv = np.ascontiguousarray(Yf, dtype=np.complex128).view(np.float64).reshape(nb, 2)
+    (bins x p; ``lead``, when given, a column before them) and Yf (bins), as sums of real
+    products in numpy's own loops (a threaded BLAS call on such thin products spends more
+    time waking threads than multiplying, up to 40x on a loaded machine). The columns
+    are read two at a time (memory: no stacked or transposed copy of a record-length
+    design; each pair is copied again for the row after, which costs little beside the
+    products)."""
+    cols = ([] if lead is None else [lead]) + [Xf[:, j] for j in range(Xf.shape[1])]
+    p = len(cols)
+    yv = _real_pairs(Yf)
     A, b = np.empty((p, p)), np.empty(p)
     for i in range(p):
-        b[i] = np.einsum("k,kc,kc->", w, cols[i], yv)
-        for j in range(i + 1):
-            A[i, j] = A[j, i] = np.einsum("k,kc,kc->", w, cols[i], cols[j])
+        ci = _real_pairs(cols[i])
+        b[i] = np.einsum("k,kc,kc->", w, ci, yv)
+        for j in range(i):
+            A[i, j] = A[j, i] = np.einsum("k,kc,kc->", w, ci, _real_pairs(cols[j]))
+        A[i, i] = np.einsum("k,kc,kc->", w, ci, ci)
     return A, b
+
+
+def _real_pairs(z: np.ndarray) -> np.ndarray:
+    """Complex column ``z`` as a contiguous (bins x 2) array of its real and imaginary parts."""
+    return np.ascontiguousarray(z, dtype=np.complex128).view(np.float64).reshape(len(z), 2)
 
 
 @dataclass(frozen=True)
@@ -191,8 +202,14 @@ class Whittle:
         self.memo: dict = {}
 
     def fft(self, x: np.ndarray) -> np.ndarray:
-        """DFT (rfft) of one column or of the columns of a 2-D array (n x p)."""
-        return np.fft.rfft(_masked(x, self.valid), axis=0)
+        """DFT (rfft) of one column or of the columns of a 2-D array (n x p; column by
+        column: memory, one masked copy of a column at a time)."""
+        if np.ndim(x) == 1:
+            return np.fft.rfft(_masked(x, self.valid))
+        out = np.empty((self.n // 2 + 1, x.shape[1]), dtype=np.complex128)
+        for j in range(x.shape[1]):
+            out[:, j] = np.fft.rfft(_masked(x[:, j], self.valid))
+        return out
 
     def gls(self, Xf: np.ndarray, Yf: np.ndarray) -> GlsFit:
         """Fit Y = X beta (both already transformed by :meth:`fft`; Xf is bins x p)."""
@@ -200,7 +217,7 @@ class Whittle:
         if self.ones is None:
             A, b = weighted_products(self.w, X, Yf)
         else:  # the mean profiled out (class docstring): the Schur complement of its column
-            A1, b1 = weighted_products(self.w, np.column_stack((self.ones, X)), Yf)
+            A1, b1 = weighted_products(self.w, X, Yf, lead=self.ones)
             a00 = A1[0, 0] if A1[0, 0] > 0 else np.inf
             A = A1[1:, 1:] - np.outer(A1[1:, 0], A1[0, 1:]) / a00
             b = b1[1:] - A1[1:, 0] * b1[0] / a00
@@ -219,10 +236,10 @@ class Whittle:
         """Whittle chi-square of a transformed residual once the nuisance columns ``Nf``
         (bins x q, transformed; none by default) and, with gaps, the mean over the valid
         samples are fitted out of it."""
-        cols = [c for c in (None if self.ones is None else self.ones[:, None], Nf) if c is not None and c.size]
-        if not cols:
+        X = Nf.reshape(len(Rf), -1) if Nf is not None and Nf.size else np.zeros((len(Rf), 0), dtype=np.complex128)
+        if self.ones is None and not X.shape[1]:
             return self.chi2(Rf)
-        A, b = weighted_products(self.w, np.column_stack(cols), Rf)
+        A, b = weighted_products(self.w, X, Rf, lead=self.ones)
         return self.chi2(Rf) - float(b @ np.linalg.pinv(A, rcond=1e-12, hermitian=True) @ b)
 
 

@@ -47,7 +47,7 @@ class ScanGains:
     def __call__(self, r: np.ndarray) -> dict[str, float]:
         v = self.valid
         y = np.where(v, r - np.mean(r[v]), 0.0)
-        ctx = whittle_context(self.stoch, self.aux, self.t_s, v, y)
+        ctx = whittle_context(self.stoch, self.aux, self.t_s, v, y, copy=False)
         out = {}
         for kind in self.kinds:
             c = CANDIDATES[kind](ctx)

@@ -40,16 +40,20 @@ class Accepted:
 @dataclass(frozen=True, eq=False)
 class Fit:
     """The residual against the model with the effects accepted so far, and what judges
-    it: the residual ``y`` (deg/h, 0 where invalid), the stochastic model ``stoch``, its
-    bootstrap ``null``, the candidates' context ``ctx``, the candidates ``cands`` fitted
-    to it (best BIC first, ``candidates``) and the map's ``analysis``."""
+    it: the stochastic model ``stoch``, its bootstrap ``null``, the candidates' context
+    ``ctx`` (which holds the residual, ``y``), the candidates ``cands`` fitted to it
+    (best BIC first, ``candidates``) and the map's ``analysis``."""
 
-    y: np.ndarray
     stoch: SensorModel
     null: mismatch.Null
     ctx: Context
     cands: list[Candidate]
     analysis: Analysis
+
+    @property
+    def y(self) -> np.ndarray:
+        """The residual (deg/h, 0 where invalid; a new array, ``Context.residual``)."""
+        return self.ctx.residual()
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,14 +80,16 @@ class Setting:
 
     def fit(self, y: np.ndarray, stoch: SensorModel, null: mismatch.Null, counts: Mapping[str, int],
             contradicted: AbstractSet[str]) -> Fit:
-        """The residual ``y`` (deg/h) judged against ``stoch`` and its ``null``: the
-        context, the candidates (``counts``: kind -> times added) and the analysis (the
-        tests of the ``contradicted`` kinds not counted in its score)."""
-        ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y)
+        """The residual ``y`` (deg/h, 0 where invalid; taken over by the context, which
+        writes into it) judged against ``stoch`` and its ``null``: the context, the
+        candidates (``counts``: kind -> times added) and the analysis (the tests of the
+        ``contradicted`` kinds not counted in its score)."""
+        ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y, copy=False)
+        del y
         ctx.meta = dict(self.meta)
         cands = candidates(ctx, counts, null.scan_bars)
-        fit = Fit(y, stoch, null, ctx, cands, analyse(y, ctx, null, self.grid, cands, contradicted))
-        for key in ("spike_scan", "spikes"):  # record-length arrays, computed again if needed (memory)
+        fit = Fit(stoch, null, ctx, cands, analyse(ctx, null, self.grid, cands, contradicted))
+        for key in ("spike_scan", "spikes", "model_psd"):  # record-length arrays, computed again if needed (memory)
             ctx.cache.pop(key, None)
         return fit
 
@@ -191,6 +197,10 @@ class Selection:
         ok, note = _heldout(ctx, c)
         if not ok:
             return Verdict("reject", bg, f"failed the held-out check: {note}")
+        # judged: its design and held-out closure are not read again (a look-alike check
+        # fits a candidate without them again), so the trial's round is built without them
+        # (memory: a periodic design is two record-length columns)
+        c.design = c.heldout = None
         trial = self.trial(c)
         after = trial.analysis
         overfit = _new_deficit(current, after) if c.rate is None else None
@@ -211,19 +221,22 @@ class Selection:
         s, f = self.setting, self.fit
         n0 = c.white_n0_dpsh
         if _subtracted(c) and n0 is None:
-            y, stoch, null = np.where(s.valid, f.y - c.rate, 0.0), f.stoch, f.null
+            stoch, null = f.stoch, f.null
         elif _subtracted(c) and n0 is not None:  # spikes taken out and the white level they inflated refitted
-            y, stoch = np.where(s.valid, f.y - c.rate, 0.0), _white_refitted(f.stoch, n0)
+            stoch = _white_refitted(f.stoch, n0)
             if s.progress:
                 s.progress(f"bootstrap null with {c.kind} removed and N refitted: {s.n_boot} simulations", 0, 0)
             null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
                              s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
         else:
-            y, stoch = f.y, _joined(f.stoch, c)
+            stoch = _joined(f.stoch, c)
             if s.progress:
                 s.progress(f"bootstrap null with {c.kind} added: {s.n_boot} simulations", 0, 0)
             null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
                              s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
+        y = f.y   # a new array, taken over by the trial's context (which zeroes it where invalid)
+        if _subtracted(c):
+            y -= c.rate
         return s.fit(y, stoch, null, {**self.counts, c.kind: self.counts.get(c.kind, 0) + 1}, self.contradicted)
 
     def rejections(self) -> list[tuple[str, float, str]]:
@@ -380,14 +393,23 @@ def _heldout_mean(ctx: Context, X: np.ndarray, S: np.ndarray) -> tuple[bool, str
     return ok, "; ".join(notes)
 
 
-def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Residual and design on the half ``m``, each with its own intercept (the bias is
-    free in each half), 0 elsewhere, and that half's valid mask."""
-    v = ctx.valid & m
-    mean = np.array([X[v, j].mean() for j in range(X.shape[1])])   # column by column: no copy of X[v]
-    Xc = X - mean
-    Xc[~v] = 0.0
-    return np.where(v, ctx.y - ctx.y[v].mean(), 0.0), Xc, v
+def _centred(ctx: Context, X: np.ndarray, w: Whittle, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """DFTs (``w``: the Whittle GLS of the half, its valid samples ``v``) of the residual and
+    of the design's columns on the half, each less its mean there (the bias is free in
+    each half) and 0 elsewhere, and each column's energy about that mean there; a column
+    at a time, each straight into its column of the result (memory: no centred or masked
+    copy of the design)."""
+    Yf = w.fft(np.where(v, ctx.y - ctx.y[v].mean(), 0.0))
+    XF = np.empty((ctx.n // 2 + 1, X.shape[1]), dtype=np.complex128)
+    energy = np.empty(X.shape[1])
+    for j in range(X.shape[1]):
+        col = X[:, j] - X[v, j].mean()
+        col[~v] = 0.0   # as w.fft masks it
+        if not np.isfinite(col).all():
+            np.nan_to_num(col, copy=False)
+        energy[j] = np.dot(col, col)
+        np.fft.rfft(col, out=XF[:, j])
+    return Yf, XF, energy
 
 
 #: a design column holds less than this share of its energy (about its mean, over the
@@ -395,26 +417,28 @@ def _centred(ctx: Context, X: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np
 DETERMINED_SHARE = 1e-6
 
 
-def _determined(ctx: Context, X: np.ndarray, Xc: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Which columns of ``X`` the half (its centred design ``Xc``, valid mask ``v``) determines."""
+def _determined(ctx: Context, X: np.ndarray, energy: np.ndarray) -> np.ndarray:
+    """Which columns of ``X`` a half determines (``energy``: each column's about its mean there)."""
     whole = np.array([np.var(X[ctx.valid, j]) * ctx.valid.sum() for j in range(X.shape[1])])
-    return np.einsum("ij,ij->j", Xc, Xc) > DETERMINED_SHARE * whole   # Xc is 0 outside v
+    return energy > DETERMINED_SHARE * whole
+
+
+def _half(ctx: Context, m: np.ndarray, S: np.ndarray) -> tuple[Whittle, np.ndarray]:
+    """The Whittle GLS of the half ``m`` against the noise PSD ``S`` and its valid samples."""
+    v = ctx.valid & m
+    return Whittle(S, ctx.n, v), v
 
 
 def _half_fit(ctx: Context, X: np.ndarray, m: np.ndarray, S: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """GLS coefficients of the columns of design ``X`` that the half ``m`` determines
     (``_determined``), fitted there against the noise PSD ``S``, and which those are;
     None when none is or that fit is not itself significant (chi2 gain < 9)."""
-    y, Xc, v = _centred(ctx, X, m)
-    det = _determined(ctx, X, Xc, v)
+    w, v = _half(ctx, m, S)
+    Yf, XF, energy = _centred(ctx, X, w, v)
+    det = _determined(ctx, X, energy)
     if not det.any():
         return None
-    w = Whittle(S, ctx.n, v)
-    Xs = Xc if det.all() else Xc[:, det]
-    del Xc   # one record-length design less at the FFT (the memory peak of a 1e7-sample explain)
-    XF = w.fft(Xs)
-    del Xs
-    fit = w.gls(XF, w.fft(y))
+    fit = w.gls(XF if det.all() else XF[:, det], Yf)
     return None if fit.chi2_gain < 9.0 else (fit.beta, det)
 
 
@@ -424,15 +448,13 @@ def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray, det
     ``m`` and the drop it brings there (None when the expected one is below 9: not
     visible), against the noise PSD ``S``, the other columns and the half's mean fitted
     freely."""
-    y, Xc, v = _centred(ctx, X, m)
-    w = Whittle(S, ctx.n, v)
-    XF = w.fft(Xc)
-    del Xc
+    w, v = _half(ctx, m, S)
+    Yf, XF, _ = _centred(ctx, X, w, v)
     pred, free = XF[:, det] @ beta, XF[:, ~det]
+    del XF
     expected = w.chi2_left(pred, free)
     if expected < 9.0:
         return expected, None
-    Yf = w.fft(y)
     return expected, w.chi2_left(Yf, free) - w.chi2_left(Yf - pred, free)
 
 

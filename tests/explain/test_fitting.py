@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fogmon.davar.theory import adev_model
-from fogmon.explain import detectors
+from fogmon.explain import analysis, detectors
 from fogmon.explain.fitting import (
     BinnedPeriodogram,
     Whittle,
@@ -15,6 +15,7 @@ from fogmon.explain.fitting import (
     model_psd,
     noise_psd,
     rfft_omega,
+    weighted_products,
 )
 from fogmon.sim.model import Effect, Noise, SensorModel
 from fogmon.sim.noise import ar1_adev_exact, lowpass_adev_exact
@@ -154,6 +155,37 @@ def test_step_scan_matches_brute_force_gls():
     X = (np.arange(n) >= n0).astype(float)
     assert step == pytest.approx(wh.gls(wh.fft(X), Yf).beta[0], rel=1e-8)
 
+
+
+def test_step_scan_in_chunks_is_the_whole_scan(monkeypatch):
+    """The scan's spectra and gains formed a chunk at a time (memory) give the same step,
+    to the last bit, whatever the chunk (odd n, chunks not dividing it, inf PSD bins)."""
+    rng = np.random.default_rng(5)
+    n = 20001
+    y = rng.standard_normal(n) + 0.002 * np.cumsum(rng.standard_normal(n))
+    y[7000:] += 0.2
+    S = noise_psd(rfft_omega(n), 1.0, N_dpsh=1 / 60, K_dphsh=60 * 0.005)
+    S[-7:] = np.inf
+    wh = Whittle(S, n)
+    Yf = wh.fft(y)
+    whole = detectors.step_scan(wh, Yf, 200, n - 200)
+    for chunk in (97, 4096):
+        monkeypatch.setattr(detectors, "STEP_CHUNK", chunk)
+        assert detectors.step_scan(wh, Yf, 200, n - 200) == whole
+
+
+def test_gls_with_gaps_reads_the_design_a_column_pair_at_a_time():
+    """The mean's nuisance column passed beside the design (no stacked copy) gives the
+    products of the stacked design, to the last bit."""
+    rng = np.random.default_rng(6)
+    n = 3001
+    valid = rng.random(n) > 0.2
+    wh = Whittle(np.abs(rng.standard_normal(n // 2 + 1)) + 0.5, n, valid)
+    Xf, Yf = wh.fft(rng.standard_normal((n, 3))), wh.fft(rng.standard_normal(n))
+    A, b = weighted_products(wh.w, Xf, Yf, lead=wh.ones)
+    A1, b1 = weighted_products(wh.w, np.column_stack((wh.ones, Xf)), Yf)
+    assert np.array_equal(A, A1) and np.array_equal(b, b1)
+    assert np.array_equal(wh.fft(np.column_stack([np.arange(n), np.ones(n)]))[:, 0], wh.fft(np.arange(n)))
 
 def test_spike_scan_amplitude_equals_gls_with_a_delta_column():
     rng = np.random.default_rng(4)
@@ -314,3 +346,21 @@ def test_bias_wander_the_model_lacks_is_not_a_bias_step(seed):
     c, plain, bar = step_of(SensorModel(100.0, 0.0, Noise(N_dpsh=0.01),
                                         [Effect("bias_step", {"t_s": 123.0, "step_dph": 0.5})]))
     assert c.gain == pytest.approx(plain) and c.gain > bar and abs(c.params["t_s"] - 123.0) < 15.0
+
+
+def test_a_context_taking_its_residual_over_gives_it_back_to_the_last_bit():
+    """whittle_context(copy=False) writes into the residual (0 where not valid, the wrap
+    spike projected out of its first sample) instead of copying it (memory); the context
+    gives the residual as it was given, and the same fit as a copying one."""
+    rng = np.random.default_rng(7)
+    n = 4096
+    valid = np.ones(n, bool)
+    valid[1000:1100] = False
+    y = np.where(valid, np.cumsum(rng.standard_normal(n)) * 0.01 + rng.standard_normal(n), 0.0)
+    model = SensorModel(10.0, 0.0, Noise(Q_arcsec=0.5, N_dpsh=0.01), [])
+    t = np.arange(n) / 10.0
+    copied = analysis.whittle_context(model, {}, t, valid, y)
+    taken = analysis.whittle_context(model, {}, t, valid, y.copy(), copy=False)
+    assert np.array_equal(taken.y, copied.y) and np.array_equal(taken.Yf, copied.Yf)
+    assert taken.y[0] != y[0] and np.array_equal(taken.residual(), y)
+    assert np.array_equal(np.isnan(taken.residual(np.nan)), ~valid)

@@ -42,6 +42,17 @@ class Context:
     cache: dict = field(default_factory=dict, repr=False)
     #: the recording's metadata (``unit_<column>`` lines name aux channels' units)
     meta: dict = field(default_factory=dict, repr=False)
+    #: the residual's first sample as given (deg/h), when ``y``'s is not (the wrap spike
+    #: projected out there, analysis.whittle_context); None: ``y`` is the residual as given
+    y_first: float | None = None
+
+    def residual(self, fill: float = 0.0) -> np.ndarray:
+        """The residual as given (deg/h; ``fill`` where not valid): ``y`` with its first
+        sample restored (``y_first``); a new array."""
+        out = np.where(self.valid, self.y, fill)
+        if self.y_first is not None and len(out) and self.valid[0]:
+            out[0] = self.y_first
+        return out
 
     @property
     def n(self) -> int:

@@ -42,9 +42,11 @@ def expected_avar(S: np.ndarray, n: int, m: np.ndarray) -> np.ndarray:
     + 2 sum_{k<m} (m - k) r_k the variance of a sum of m samples - the same value as
     sum over the circle of S 2 sin^4(m w / 2) / (m^2 sin^2(w / 2)) / n, in O(n) for
     every m. Only the lags below 2 max(m) are summed (memory: a 1e7-sample record's
-    autocovariance is 80 MB)."""
+    autocovariance is 80 MB; the spectrum is built as the complex array the inverse
+    transform reads, not a real one it would copy)."""
     m = np.asarray(m, dtype=np.int64)
-    Sf = np.where(np.isfinite(S), S, 0.0)
+    Sf = np.zeros(len(S), dtype=np.complex128)
+    np.copyto(Sf.real, S, where=np.isfinite(S))
     Sf[0] = 0.0
     top = 2 * int(m.max()) if m.size else 1  # c0[j] and c1[j] are read for j < 2 m
     r = np.fft.irfft(Sf, n)[:top].copy()
