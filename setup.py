@@ -3,6 +3,7 @@ module of its numba kernels compiled ahead of time (fogmon/jit.py, ``build_ahead
 so that no run compiles them. Without it (no C compiler, numba.pycc unavailable) the
 install goes on with a warning and the first run compiles the kernels."""
 import os
+import shutil
 import sys
 import tempfile
 
@@ -20,9 +21,10 @@ class BuildKernels(build_ext):
         inplace, self.inplace = self.inplace, 0
         path = self.get_ext_fullpath(AOT_MODULE)   # in the build folder (copied in place when editable)
         self.inplace = inplace
+        cache = tempfile.mkdtemp(prefix="fogmon-build-")   # numba's cache of the build: not the source tree's
         try:
             os.makedirs(os.path.dirname(path), exist_ok=True)
-            os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="fogmon-build-")   # not the source tree's
+            os.environ["NUMBA_CACHE_DIR"] = cache
             sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
             from fogmon import jit
 
@@ -31,6 +33,8 @@ class BuildKernels(build_ext):
             self.warn(f"fogmon: the kernels were not compiled ahead of time ({type(e).__name__}: {e}); "
                       f"the first run compiles them")
             self.extensions = []
+        finally:
+            shutil.rmtree(cache, ignore_errors=True)
         super().run()
 
     def build_extension(self, ext):
