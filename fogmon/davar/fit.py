@@ -456,8 +456,8 @@ def windows_checked_against_adev(fit: NoiseFit, result: DadevResult) -> NoiseFit
         for c in contradictions(result.tau_s, result.adev_dph[i], _check_edf(fit.avar_terms[i], edf[i],
                                 result.tau_s, result.m, result.n_terms[i], result.window_samples),
                                 fit.avar_terms[i], judged):
-            col, old = cols[c.name], float(cols[c.name]["upper"][i])
-            up = min(old, c.limit) if np.isfinite(old) else c.limit
+            col = cols[c.name]
+            up = _demoted_upper(float(col["upper"][i]), c)
             col["value"][i] = col["lo"][i] = 0.0
             col["hi"][i] = col["upper"][i] = up
             ident[c.name][i] = False
@@ -467,6 +467,12 @@ def windows_checked_against_adev(fit: NoiseFit, result: DadevResult) -> NoiseFit
     checked = {n: Coefficient(cols[n]["value"], cols[n]["lo"], cols[n]["hi"], ident[n], cols[n]["upper"])
                for n in _DEMOTED}
     return replace(fit, **checked)  # type: ignore[arg-type]
+
+
+def _demoted_upper(upper: float, c: TermContradiction) -> float:
+    """The upper limit of a term ``c`` demotes: the lesser of the fit's ``upper`` (NaN:
+    not computed) and the measured ADEV's bound ``c.limit``."""
+    return min(upper, c.limit) if np.isfinite(upper) else c.limit
 
 
 def _check_edf(a: np.ndarray, edf: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.ndarray,
@@ -496,7 +502,6 @@ def checked_against_adev(fit: NoiseFit, result: AdevResult) -> NoiseFit:
         return fit
     for c in found:
         if c.name in _DEMOTED:
-            old = getattr(fit, c.name)
-            up = min(float(old.upper), c.limit) if np.isfinite(old.upper) else c.limit
+            up = _demoted_upper(float(getattr(fit, c.name).upper), c)
             fit = replace(fit, **{c.name: Coefficient(0.0, 0.0, up, False, up)})  # type: ignore[arg-type]
     return replace(fit, contradicted=tuple(found))
