@@ -79,7 +79,7 @@ def test_every_configuration_runs_the_declared_kernel_versions():
     assert p.returncode == 0, p.stderr
     assert "EXTRA" not in p.stdout, p.stdout
     used = {line.split()[0] for line in p.stdout.splitlines() if line.split()[1] != "0"}
-    assert {"fogmon.davar.kernels.stream_update", "fogmon.davar.kernels.stream_record",
+    assert {"fogmon.davar.running_sums.stream_update", "fogmon.davar.kernels.stream_record",
             "fogmon.davar.kernels.window_sums_exact", "fogmon.davar.profile.fit_full",
             "fogmon.motion._block_means"} <= used, p.stdout
 

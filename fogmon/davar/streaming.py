@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from fogmon.block import Block
-from fogmon.davar import kernels
+from fogmon.davar import kernels, running_sums
 from fogmon.davar.batch import _prepare, _samples, adev_edf, edf_rows, gapless_edf, gapped_edf, statistics
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.taus import tau_grid
@@ -81,7 +81,7 @@ class StreamingDadev:
         self._rec_c = np.zeros((nm, ring))
         self._rec_n = np.zeros((nm, ring), dtype=np.int64)
         self._rec_h = np.zeros((nm, ring), dtype=np.int64)
-        self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see kernels.stream_update
+        self._err = np.zeros(nm)  # bound of the rounding in (_s + _c), see running_sums.stream_update
         self._edf_prev = None  # EDF state of the windows emitted so far, see batch.edf_rows
         self._stage_y = np.empty(STAGE)  # samples pushed but not yet in the engine (see push)
         self._stage_v = np.ones(STAGE, dtype=np.bool_)
@@ -114,7 +114,7 @@ class StreamingDadev:
         w = self.window_n
         if self.alpha is not None and not self._recorded:
             # running sums and a fixed noise type: the kernel turns the sums into adev tile
-            # by tile while they are in the cache (see kernels.stream_update)
+            # by tile while they are in the cache (see running_sums.stream_update)
             ends, adev, counts, n_gapped = self._run(rate_dph, valid, True)
             edf = gapped_edf(gapless_edf(self.alpha, self.m, w), np.zeros(len(ends), np.int64), counts, n_gapped,
                              self.m, w)
@@ -146,7 +146,7 @@ class StreamingDadev:
     def _run(self, rate_dph, valid, to_adev: bool):
         """``advance``; with ``to_adev`` (running sums only) the kernel returns adev in
         place of the sums: (end_index, adev, counts, entries with gaps; see
-        kernels.stream_update)."""
+        running_sums.stream_update)."""
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
@@ -165,7 +165,7 @@ class StreamingDadev:
         full = w - 2 * self.m + 1  # gap-free term counts: with ``to_adev`` the kernel forms adev
         n_gapped = 0
         i = row = 0
-        spans = []  # running sums: row spans whose counts are all in their first row (see kernels.stream_update)
+        spans = []  # running sums: row spans whose counts are all in their first row (see running_sums.stream_update)
         while i < len(y):
             # re-anchor when the buffer is full, or once early when most samples since the
             # last re-reference are large (a reference level taken from a glitch)
@@ -193,7 +193,7 @@ class StreamingDadev:
                                       self._s, self._c, self._n, self._h, self._rec_s, self._rec_c, self._rec_n,
                                       self._rec_h, k0 + row, sums[row:row_end], counts[row:row_end])
             else:
-                fixed, gapped = kernels.stream_update(
+                fixed, gapped = running_sums.stream_update(
                     self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
                     ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end], to_adev, full)
                 n_gapped += gapped

@@ -93,7 +93,7 @@ def test_hop_1_counts_are_one_row_in_a_block_where_none_changes():
 @pytest.mark.parametrize("hop", [1, 5])
 def test_fixed_alpha_push_statistics_equal_batch_at_small_hops(hop):
     """With a fixed alpha at running-sum hops the kernel turns the sums into adev tile
-    by tile (kernels.stream_update's ``full``): adev, bounds, EDF and counts
+    by tile (running_sums.stream_update's ``full``): adev, bounds, EDF and counts
     equal the batch engine's, through gaps (a short one, and one longer than the
     blocks, whose windows keep the same reduced counts), a huge sample, and a large
     glitch whose leaving forces exact recomputes; adev equals the engine's own sums
