@@ -126,7 +126,7 @@ def batch_speedup() -> None:
     rec, model = one_axis(10_000_000)
     with tempfile.TemporaryDirectory() as d:
         path, model_path = Path(d) / "long.csv", Path(d) / "model.toml"
-        write_replay_log(str(path), rec)
+        write_replay_log(str(path), rec.t_s, rec.rate_dph, rec.aux, rec.meta)
         save_model(model, str(model_path))
         with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                           silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
