@@ -3,12 +3,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fogmon.davar.confidence import CONFIDENCE, chi2_factors
 
-__all__ = ["CONFIDENCE", "AdevResult", "DadevResult"]
+__all__ = ["CONFIDENCE", "AdevResult", "DadevResult", "WindowSums"]
 
 
 @dataclass(frozen=True)
@@ -34,6 +35,47 @@ class AdevResult:
 
 
 @dataclass(frozen=True)
+class WindowSums:
+    """Sums of squared overlapping terms ((deg/h)^2, T x M) and valid-term counts (T x M;
+    a read-only broadcast of one row when all windows have the same) of windows: what
+    a DadevResult's ``adev_dph`` is formed from when first read."""
+
+    sums: np.ndarray
+    counts: np.ndarray
+
+    def adev_dph(self, rows: slice = slice(None)) -> np.ndarray:
+        """adev (deg/h) = sqrt(sums / (2 counts)) of windows ``rows`` (NaN without terms)."""
+        from fogmon.davar import kernels  # the module that made these sums has loaded it
+        sums = self.sums[rows]
+        one_row = self.counts.strides[0] == 0
+        counts = self.counts[:1] if one_row else self.counts[rows]
+        adev = np.empty(sums.shape)
+        kernels.frame_stats(np.ascontiguousarray(sums), np.ascontiguousarray(counts, dtype=np.int64),
+                            np.zeros(sums.shape[1], np.int64), adev)
+        return adev
+
+
+_ADEV = "_adev_dph"  # where a DadevResult keeps its adev_dph (an array or WindowSums)
+
+
+class _FormedOnRead:
+    """The ``adev_dph`` field of DadevResult (a data descriptor; pickling, ``replace``
+    and the dataclass's __init__, __eq__ and __repr__ see a plain field): an array, or a
+    WindowSums given in its place and turned into the array when first read (then kept)."""
+
+    def __get__(self, obj, owner=None) -> np.ndarray:
+        if obj is None:
+            raise AttributeError("adev_dph")  # so the dataclass gives the field no default
+        value = obj.__dict__[_ADEV]
+        if isinstance(value, WindowSums):
+            value = obj.__dict__[_ADEV] = value.adev_dph()
+        return value
+
+    def __set__(self, obj, value) -> None:
+        obj.__dict__[_ADEV] = value
+
+
+@dataclass(frozen=True)
 class DadevResult:
     """Dynamic Allan deviation: one overlapping ADEV per window.
 
@@ -41,14 +83,18 @@ class DadevResult:
     sample, T), ``tau_s``/``m`` (M), ``adev_dph`` (deg/h), ``edf``, ``n_terms`` (T x M);
     ``sample_rate_hz`` (Hz), ``window_s``, ``hop_s`` (s), ``confidence``. The interval
     ``lo_dph``/``hi_dph`` (deg/h, T x M; chi-square at ``confidence`` for each entry's
-    EDF) is formed when first read: at small hops a push emits a window per sample and
-    most users read a few of them (``window(i)`` forms only row i's)."""
+    EDF) is formed when first read, and so is ``adev_dph`` when given as the windows'
+    :class:`WindowSums` (the streaming engine's push): at small hops a push emits a window
+    per sample and most users read a few of them (``window(i)`` forms only row i's)."""
 
     t_s: np.ndarray
     end_index: np.ndarray
     tau_s: np.ndarray
     m: np.ndarray
-    adev_dph: np.ndarray
+    if TYPE_CHECKING:  # what readers get (a descriptor field without a default is beyond mypy)
+        adev_dph: np.ndarray
+    else:
+        adev_dph: np.ndarray = _FormedOnRead()
     edf: np.ndarray
     n_terms: np.ndarray
     sample_rate_hz: float
@@ -81,8 +127,10 @@ class DadevResult:
 
     def window(self, i: int) -> AdevResult:
         """The ADEV of window ``i`` as an AdevResult."""
+        i = range(len(self))[i]
         f_lo, f_hi = self._factors
         r = i if len(f_lo) > 1 else 0
-        adev = self.adev_dph[i]
+        held = self.__dict__[_ADEV]  # not formed yet: row i's alone
+        adev = held.adev_dph(slice(i, i + 1))[0] if isinstance(held, WindowSums) else held[i]
         return AdevResult(self.tau_s, self.m, adev, adev * f_lo[r], adev * f_hi[r], self.edf[i], self.n_terms[i],
                           self.sample_rate_hz, self.window_samples, self.confidence)
