@@ -45,13 +45,13 @@ class WindowSums:
 
     def adev_dph(self, rows: slice = slice(None)) -> np.ndarray:
         """adev (deg/h) = sqrt(sums / (2 counts)) of windows ``rows`` (NaN without terms)."""
-        from fogmon.davar import kernels  # the module that made these sums has loaded it
-        sums = self.sums[rows]
-        one_row = self.counts.strides[0] == 0
-        counts = self.counts[:1] if one_row else self.counts[rows]
+        from fogmon.davar import kernels  # (numba: loaded by the engine that made these sums)
+        from fogmon.jit import c_array
+        sums = c_array(self.sums[rows], np.float64)
+        one_row = self.counts.strides[0] == 0  # a broadcast row: the kernel reads that row
+        counts = c_array(self.counts[:1] if one_row else self.counts[rows], np.int64)
         adev = np.empty(sums.shape)
-        kernels.frame_stats(np.ascontiguousarray(sums), np.ascontiguousarray(counts, dtype=np.int64),
-                            np.zeros(sums.shape[1], np.int64), adev)
+        kernels.frame_stats(sums, counts, np.zeros(sums.shape[1], np.int64), adev)
         return adev
 
 
