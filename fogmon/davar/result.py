@@ -34,22 +34,32 @@ class AdevResult:
     confidence: float = CONFIDENCE
 
 
-@dataclass(frozen=True)
 class WindowSums:
     """Sums of squared overlapping terms ((deg/h)^2, T x M) and valid-term counts (T x M;
-    a read-only broadcast of one row when all windows have the same) of windows: what
-    a DadevResult's ``adev_dph`` is formed from when first read."""
+    a read-only broadcast of one row when all windows have the same) of windows, handed
+    over by the engine that made them: what a DadevResult's ``adev_dph`` is formed from
+    when first read. The first read of all rows turns the sums into adev in place (no
+    new array; the sums are gone then); a read of some rows forms those alone."""
 
-    sums: np.ndarray
-    counts: np.ndarray
+    def __init__(self, sums: np.ndarray, counts: np.ndarray):
+        self._values = sums  # the sums; adev once ``_formed``
+        self._counts = counts
+        self._formed = False
 
     def adev_dph(self, rows: slice = slice(None)) -> np.ndarray:
         """adev (deg/h) = sqrt(sums / (2 counts)) of windows ``rows`` (NaN without terms)."""
         from fogmon.davar import kernels  # (numba: loaded by the engine that made these sums)
         from fogmon.jit import c_array
-        sums = c_array(self.sums[rows], np.float64)
-        one_row = self.counts.strides[0] == 0  # a broadcast row: the kernel reads that row
-        counts = c_array(self.counts[:1] if one_row else self.counts[rows], np.int64)
+        if self._formed:
+            return self._values[rows]
+        one_row = self._counts.strides[0] == 0  # a broadcast row: the kernels read that row
+        counts = c_array(self._counts[:1] if one_row else self._counts[rows], np.int64)
+        if rows == slice(None):
+            self._values = c_array(self._values, np.float64)
+            kernels.adev_in_place(self._values, counts)
+            self._formed = True
+            return self._values
+        sums = c_array(self._values[rows], np.float64)
         adev = np.empty(sums.shape)
         kernels.frame_stats(sums, counts, np.zeros(sums.shape[1], np.int64), adev)
         return adev

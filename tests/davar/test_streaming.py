@@ -1,5 +1,6 @@
 """StreamingDadev equals the batch engine at every window, in any block sizes, and does
 not drift."""
+import copy
 import dataclasses
 import pickle
 
@@ -130,8 +131,10 @@ def test_push_forms_adev_when_read_bit_identical_to_the_eager_statistics(hop, al
     (result.WindowSums): bit-identical to ``adev_edf``'s adev of the same sums (formed
     at once, as the push did before), through gaps, huge samples (+inf windows) and a
     large glitch; so are the EDF, the counts and the interval. ``window(i)`` forms row i
-    alone, the same values; a result pickled or rebuilt by ``dataclasses.replace``
-    before it was read reads the same; ``replace`` with an adev_dph array keeps it."""
+    alone, the same values, before and after the full read (which forms adev in place of
+    the sums); a result pickled, copied (sharing the sums) or rebuilt by
+    ``dataclasses.replace`` before it was read reads the same; ``replace`` with an
+    adev_dph array keeps it."""
     n, w = 12000, 1024
     y = rate(n, 21)
     valid = np.ones(n, bool)
@@ -148,18 +151,19 @@ def test_push_forms_adev_when_read_bit_identical_to_the_eager_statistics(hop, al
         if not len(res):
             continue
         again = pickle.loads(pickle.dumps(res))
+        twin = copy.copy(res)
         moved = dataclasses.replace(res, hop_s=res.hop_s)
         rows = range(0, len(res), max(1, len(res) // 7))
         wins = [res.window(r) for r in rows]  # before adev_dph is read: each row alone
         # (adev does not depend on the EDF: alpha=None's quick fits are checked elsewhere)
         adev, edf = adev_edf(sums, counts, res.m, w, 0 if alpha is None else alpha)
-        for got in (res, again, moved):
+        for got in (res, twin, again, moved):
             assert got.adev_dph.tobytes() == adev.tobytes()
         assert np.array_equal(res.n_terms, counts) and np.array_equal(res.end_index, ends)
         if alpha is not None:
             assert np.array_equal(res.edf, edf, equal_nan=True)
         for r, win in zip(rows, wins, strict=True):
-            assert win.adev_dph.tobytes() == adev[r].tobytes()
+            assert win.adev_dph.tobytes() == adev[r].tobytes() == twin.window(r).adev_dph.tobytes()
             for k in ("lo_dph", "hi_dph"):  # (a NaN's sign may differ: a NaN row times its factors)
                 assert np.array_equal(getattr(win, k), getattr(res, k)[r], equal_nan=True)
         checked += np.isinf(adev).any() + (counts < w - 2 * res.m + 1).any()
