@@ -1,6 +1,7 @@
 """Result types of the Allan-deviation engines (rate in deg/h, tau in s)."""
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING
@@ -39,15 +40,27 @@ class WindowSums:
     a read-only broadcast of one row when all windows have the same) of windows, handed
     over by the engine that made them: what a DadevResult's ``adev_dph`` is formed from
     when first read. The first read of all rows turns the sums into adev in place (no
-    new array; the sums are gone then); a read of some rows forms those alone."""
+    new array; the sums are gone then; one thread at a time); a read of some rows forms
+    those alone."""
 
     def __init__(self, sums: np.ndarray, counts: np.ndarray):
         self._values = sums  # the sums; adev once ``_formed``
         self._counts = counts
         self._formed = False
+        self._lock = threading.Lock()
+
+    def __getstate__(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if k != "_lock"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state, _lock=threading.Lock())
 
     def adev_dph(self, rows: slice = slice(None)) -> np.ndarray:
         """adev (deg/h) = sqrt(sums / (2 counts)) of windows ``rows`` (NaN without terms)."""
+        with self._lock:
+            return self._adev_dph(rows)
+
+    def _adev_dph(self, rows: slice) -> np.ndarray:
         from fogmon.davar import kernels  # (numba: loaded by the engine that made these sums)
         from fogmon.jit import c_array
         if self._formed:

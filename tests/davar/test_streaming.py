@@ -3,6 +3,8 @@ not drift."""
 import copy
 import dataclasses
 import pickle
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -132,9 +134,9 @@ def test_push_forms_adev_when_read_bit_identical_to_the_eager_statistics(hop, al
     at once, as the push did before), through gaps, huge samples (+inf windows) and a
     large glitch; so are the EDF, the counts and the interval. ``window(i)`` forms row i
     alone, the same values, before and after the full read (which forms adev in place of
-    the sums); a result pickled, copied (sharing the sums) or rebuilt by
-    ``dataclasses.replace`` before it was read reads the same; ``replace`` with an
-    adev_dph array keeps it."""
+    the sums); a result pickled, copied (sharing the sums: also read by four threads at
+    once) or rebuilt by ``dataclasses.replace`` before it was read reads the same;
+    ``replace`` with an adev_dph array keeps it."""
     n, w = 12000, 1024
     y = rate(n, 21)
     valid = np.ones(n, bool)
@@ -157,6 +159,14 @@ def test_push_forms_adev_when_read_bit_identical_to_the_eager_statistics(hop, al
         wins = [res.window(r) for r in rows]  # before adev_dph is read: each row alone
         # (adev does not depend on the EDF: alpha=None's quick fits are checked elsewhere)
         adev, edf = adev_edf(sums, counts, res.m, w, 0 if alpha is None else alpha)
+        if i == 1500 * 4:  # copies sharing this block's sums read by four threads at once
+            start = threading.Barrier(4)
+
+            def read(r, start=start):
+                start.wait()
+                return r.adev_dph.tobytes()
+            with ThreadPoolExecutor(4) as pool:
+                assert set(pool.map(read, [copy.copy(res) for _ in range(4)])) == {adev.tobytes()}
         for got in (res, twin, again, moved):
             assert got.adev_dph.tobytes() == adev.tobytes()
         assert np.array_equal(res.n_terms, counts) and np.array_equal(res.end_index, ends)
