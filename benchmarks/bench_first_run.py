@@ -17,7 +17,10 @@ in a temporary folder, empty at the start: what a new installation has):
    hop 1 (alpha=0) against the engine alone at hop 1024, samples per CPU s, best of
    ``--runs`` interleaved repeats (benchmarks/bench_davar.py's rows "push alpha=0,
    hop 1" and "engine alone (advance), hop 1024"; goal >= 0.25x), and the engine alone
-   at hop 1 (what the push at hop 1 can at most reach).
+   at hop 1 (what the push at hop 1 can at most reach). The push forms no adev: a
+   ``DadevResult`` forms it from the windows' sums when first read; the same push with
+   every window's adev read is printed beside it (bench_davar.py's row "push alpha=0,
+   hop 1, every adev read": what a reader of every window pays).
 
 Warm figures are medians of ``--runs`` runs of each, interleaved (the machine is shared);
 the first runs are single runs (a first run happens once). Where the install built the
@@ -147,10 +150,10 @@ def write_three_axis_log(path: Path, seconds: float = 1000.0, rate_hz: float = 1
     write_replay_log(path, np.arange(n) / rate_hz, rate, meta={"sample_rate_hz": rate_hz}, axes=("x", "y", "z"))
 
 
-def hop1_ratio(runs: int) -> tuple[float, float, float]:
-    """(push alpha=0 at hop 1, engine alone at hop 1, engine alone at hop 1024: samples
-    per CPU s, best of ``runs`` interleaved repeats), as benchmarks/bench_davar.py
-    measures them."""
+def hop1_ratio(runs: int) -> tuple[float, float, float, float]:
+    """(push alpha=0 at hop 1, the same with every window's adev read, engine alone at
+    hop 1, engine alone at hop 1024: samples per CPU s, best of ``runs`` interleaved
+    repeats), as benchmarks/bench_davar.py measures them."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_davar import BLOCK, N_TAUS, WINDOW, log_taus, stream
 
@@ -158,12 +161,13 @@ def hop1_ratio(runs: int) -> tuple[float, float, float]:
     y = 1000.0 + np.random.default_rng(0).normal(size=2_000_000)
     n_hop1 = WINDOW + 32 * BLOCK
     stream(y[:n_hop1], m, 1, 0)   # load the kernels
-    push = engine1 = engine = 0.0
+    push = read = engine1 = engine = 0.0
     for _ in range(runs):
         push = max(push, stream(y[:n_hop1], m, 1, 0))
+        read = max(read, stream(y[:n_hop1], m, 1, 0, read_adev=True))
         engine1 = max(engine1, stream(y[:n_hop1], m, 1, 0, "advance"))
         engine = max(engine, stream(y, m, 1024, 0, "advance"))
-    return push, engine1, engine
+    return push, read, engine1, engine
 
 
 def run(args: list[str], cache: Path, warm_up: bool, program: str | None = None,
@@ -263,12 +267,13 @@ def main() -> None:
             table(configs, tmp / "cache_lazy", a.runs, False, aot=False)
         if a.kernels:
             kernel_table(tmp)
-        push, engine1, engine = hop1_ratio(a.runs)
+        push, read, engine1, engine = hop1_ratio(a.runs)
         ratio = push / engine
         print(f"hop-1 push (alpha=0) {push / 1e6:.2f} M samples/CPU s, engine alone (advance) at hop 1024 "
               f"{engine / 1e6:.2f} M: {ratio:.3f}x  >= 0.25x: {'PASS' if ratio >= 0.25 else 'FAIL'} "
               f"(best of {a.runs}); the engine alone at hop 1 {engine1 / 1e6:.2f} M, the push "
-              f"{push / engine1:.2f}x that")
+              f"{push / engine1:.2f}x that; the push with every window's adev read (formed when read) "
+              f"{read / 1e6:.2f} M: {read / engine:.3f}x")
         print(f"load average {' '.join(f'{v:.1f}' for v in os.getloadavg())}")
 
 

@@ -50,7 +50,9 @@ ro.flags.writeable = False
 for hop_s, alpha in ((0.01, None), (0.01, 0), (0.16, None), (0.64, 0), (10.24, None)):
     e = StreamingDadev(100.0, 20.48, hop_s=hop_s, alpha=alpha)
     for i in range(0, len(y), 3000):
-        e.push(ro[i:i + 3000])
+        r = e.push(ro[i:i + 3000])
+        if len(r):  # adev formed when read: one row, then all (and the interval)
+            r.window(len(r) - 1), r.lo_dph
     e.advance(y[:5].astype(np.float32))
     e.push(y[:3])
     e.current()

@@ -165,33 +165,53 @@ def adev_edf(sums, counts, m, n_samples: int, alpha=None, gapless=None) -> tuple
     sums = np.asarray(sums, dtype=np.float64).reshape(-1, nm)
     counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
     m = np.ascontiguousarray(m, dtype=np.int64)
+    if alpha is None and gapless is None:
+        gapless = np.concatenate([np.empty((0, nm))] + [row_edf(s, c, m, n_samples)
+                                                      for s, c in zip(sums, counts, strict=True)])
+    # the result array allocated here (a numba kernel returning a new array pays ~2 us to box it)
+    adev = np.empty(sums.shape)
+    # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
+    one_row = counts[:1] if counts.strides[0] == 0 else counts
+    n_gapped = kernels.frame_stats(c_array(sums, np.float64), c_array(one_row, np.int64), n_samples - 2 * m + 1, adev)
+    edf = window_edf(counts, m, n_samples, alpha, gapless, n_gapped)
+    return adev.reshape(shape), edf.reshape(shape)
+
+
+def window_edf(counts, m, n_samples: int, alpha=None, gapless=None, n_gapped: int | None = None) -> np.ndarray:
+    """EDF per window x tau (T x M) of windows of ``n_samples`` with valid-term ``counts``
+    (T x M; a broadcast of one row when all windows have the same): the gap-free EDF per
+    tau (Greenhall's for the noise type ``alpha`` when given, else the rows ``gapless``,
+    see :func:`adev_edf`), the effective EDF where an entry has fewer terms than a
+    gap-free window. ``n_gapped``: the number of those entries when known
+    (``kernels.frame_stats`` counts them), else counted here."""
+    nm = len(m)
+    counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
+    m = np.ascontiguousarray(m, dtype=np.int64)
+    shape = counts.shape
+    if n_gapped is None:
+        full = n_samples - 2 * m + 1
+        if len(counts) and counts.strides[0] == 0:  # one row of counts for all windows
+            n_gapped = int(np.count_nonzero(counts[0] != full)) * len(counts)
+        else:
+            n_gapped = int(np.count_nonzero(counts != full))
     if alpha is not None:
         rows = np.asarray(alpha, dtype=np.int64)
         edf_row = functools.partial(gapless_edf, m=m, n_samples=n_samples)
     else:
-        if gapless is None:
-            gapless = np.concatenate([np.empty((0, nm))] + [row_edf(s, c, m, n_samples)
-                                                          for s, c in zip(sums, counts, strict=True)])
         rows = np.asarray(gapless, dtype=np.float64)
         edf_row = functools.partial(np.reshape, shape=(1, nm))
     if rows.ndim == 2 and (len(rows) == 1 or (len(rows) and rows.strides[0] == 0)):  # one row (edf_rows' view)
         rows = rows[0]
     if rows.ndim <= 1:  # one row for every window
         edf_runs = edf_row(rows)
-        run = np.zeros(len(sums), dtype=np.int64)
+        run = np.zeros(len(counts), dtype=np.int64)
     else:  # piecewise constant over windows: one EDF row per run
         rows = np.broadcast_to(rows, shape).reshape(-1, nm)
         new_run = np.ones(len(rows), dtype=bool)
         new_run[1:] = np.any(rows[1:] != rows[:-1], axis=1)
         run = np.cumsum(new_run) - 1
         edf_runs = np.concatenate([np.empty((0, nm)), *(edf_row(a) for a in rows[new_run])])
-    # the result array allocated here (a numba kernel returning a new array pays ~2 us to box it)
-    adev = np.empty(sums.shape)
-    # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
-    one_row = counts[:1] if counts.strides[0] == 0 else counts
-    n_gapped = kernels.frame_stats(c_array(sums, np.float64), c_array(one_row, np.int64), n_samples - 2 * m + 1, adev)
-    edf = gapped_edf(edf_runs, run, counts, n_gapped, m, n_samples)
-    return adev.reshape(shape), edf.reshape(shape)
+    return gapped_edf(edf_runs, run, counts, n_gapped, m, n_samples)
 
 
 def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE, gapless=None):

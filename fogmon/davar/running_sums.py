@@ -18,10 +18,9 @@ from fogmon.davar.kernels import (
     _no_gap_no_huge,
     _sq_term,
     _two_sum,
-    frame_stats,
     window_sum,
 )
-from fogmon.jit import BOOL, F1, F2, I1, I2, I8, kernel
+from fogmon.jit import F1, F2, I1, I2, I8, kernel
 
 _BOUND_RTOL = 1e-11  # largest rounding, relative to a window sum, the plain path may accumulate
 
@@ -105,9 +104,8 @@ def _put(out_sums, out_counts, e, k, s, n):
     out_counts[e, k] = n & _LOW
 
 
-@kernel((I8, I8, I8, I1, _PRE, F1, F1, I1, F1, I1, F2, I2, BOOL, I1))
-def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts, to_adev,
-                  full):
+@kernel((I8, I8, I8, I1, _PRE, F1, F1, I1, F1, I1, F2, I2))
+def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, out_sums, out_counts):
     """Running-sum update (hops below streaming.RECORD_MIN_HOP). Slide the window over
     buffer positions ``first .. first + n_new - 1`` (already appended; the buffer holds at
     least the ``w`` samples before ``first`` or starts at the record's first sample,
@@ -115,13 +113,10 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     term ending at each new sample enters and the term starting at the sample that left
     leaves. At the buffer positions ``emit_pos`` (increasing) the current sums and counts
     are written to the rows of ``out_sums``/``out_counts``. ``cnt`` holds encoded counts
-    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). ``to_adev``:
-    ``frame_stats`` with the gap-free term counts per tau ``full`` turns each tile's
-    rows, while they are in the cache, into adev (in ``out_sums``; ``full`` is not read
-    otherwise). Returns (fixed, entries with gaps: ``frame_stats``'s count, 0 without
-    ``to_adev``). ``fixed``: no count changed after the
-    first emitted row; then only row 0 of ``out_counts`` is sure to be written, and it
-    holds every row's counts (hop 1 without gaps writes no count per window).
+    (valid terms + _FLAG x huge-spanning terms, which add 0 to the sums). Returns
+    ``fixed``: no count changed after the first emitted row; then only row 0 of
+    ``out_counts`` is sure to be written, and it holds every row's counts (hop 1 without
+    gaps writes no count per window).
 
     Steady state runs in tiles of 4 taus x _TILE samples: a vectorised pass for the
     squared terms and a SIMD sum of the tile's change, added to the compensated window
@@ -149,17 +144,14 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                 e += 1
             p += 1
         e_head = e
-    n_gapped = _rows_stats(to_adev, full, out_sums[:e_head], out_counts[:e_head], out_sums, 0)
     start = max(first, w)
     xi = np.empty((4, _TILE))
     xo = np.empty((4, _TILE))
     xd = np.empty((4, _TILE))  # entering - leaving squared terms
     xa = np.empty((4, _TILE))  # entering + leaving
     dn = np.empty((4, _TILE), np.int64)
-    # per tile sample, the sums and encoded counts per tau of the window it emits: the
-    # layout of the output rows, so a dense tile's rows are copied (or, with ``full``,
-    # read by frame_stats) whole
-    w_at = np.empty((_TILE, nm))
+    # the emitted windows' sums are written straight into their rows of ``out_sums``;
+    # per tile sample, the encoded counts per tau of the window it emits
     n_at = np.empty((_TILE, nm), np.int64)
     tot = np.empty(4)
     low = np.empty(4)
@@ -168,7 +160,6 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
     ks = np.empty(4, np.int64)
     wrote = np.zeros(4, np.bool_)
     scratch = np.empty(w)
-    c_fix = np.empty((1, nm), np.int64)  # the counts of rows emitted while ``fixed``
     e_tile = e_head
     fixed = True  # no count changed since the first emitted row: dense tiles write no counts
     for t0 in range(start, stop, _TILE):
@@ -176,8 +167,8 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
         e_end = e_tile
         while e_end < emit_pos.shape[0] and emit_pos[e_end] < t0 + n:
             e_end += 1
-        # every sample from the tile's first emission to its last emits (hop 1): whole
-        # rows are written from w_at / n_at after the tile (see _scan_plain)
+        # every sample from the tile's first emission to its last emits (hop 1): the
+        # rows are scanned together (see _scan_plain)
         dense = e_end > e_tile and emit_pos[e_end - 1] - emit_pos[e_tile] == e_end - 1 - e_tile
         for g in range(0, nm, 4):
             has_dn = False
@@ -208,7 +199,7 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                     track = not (_within(bnd[0], low[0]) and _within(bnd[1], low[1]) and _within(bnd[2], low[2])
                                  and _within(bnd[3], low[3]))
                     plain = _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e_tile, e_end, emit_pos, ks, bnd,
-                                        sum_s, sum_c, cnt, w_at, n_at)
+                                        sum_s, sum_c, cnt, out_sums[e_tile:e_end], n_at)
                 else:
                     plain = _emit_plain(xd, dn, has_dn, n, t0, e_tile, e_end, emit_pos, ks, bnd, sum_s, sum_c,
                                         cnt, out_sums, out_counts)
@@ -231,35 +222,19 @@ def stream_update(first, n_new, w, ms, pre, sum_s, sum_c, cnt, err, emit_pos, ou
                     _tile_terms(pre, ms[ks[j]], w, t0, n, xi[j], xo[j], dn[j])
                 if not has_dn:
                     dn[:, :n] = 0
-                _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at)
+                _accumulate_exact(xi, xo, dn, n, t0, e_tile, e_end, emit_pos, ks, sum_s, sum_c, cnt, out_sums, n_at)
                 if not dense:
-                    _emit_rows(w_at, n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
+                    _emit_rows(n_at, g, ks[3] + 1, t0, e_tile, e_end, emit_pos, out_sums, out_counts, False,
                                cnt)
-        src = out_sums[e_tile:e_end]
         huge = False
         for k in range(nm):
-            c_fix[0, k] = cnt[k] & _LOW
             huge |= cnt[k] >= _FLAG
-        if dense and fixed and not huge:  # the rows' sums as they are in w_at
-            src = w_at[emit_pos[e_tile] - t0:emit_pos[e_end - 1] - t0 + 1]
-            if not to_adev:  # one flat copy (a row of nm leaves a scalar remainder per row)
-                out_sums[e_tile:e_end].reshape(src.size)[:] = src.reshape(src.size)
-        elif dense:
-            _emit_rows(w_at, n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
-        n_gapped += _rows_stats(to_adev, full, src, c_fix if fixed else out_counts[e_tile:e_end], out_sums, e_tile)
+        if dense and (huge or not fixed):  # the rows' +inf and counts (a dense tile wrote neither)
+            _emit_rows(n_at, 0, nm, t0, e_tile, e_end, emit_pos, out_sums, out_counts, fixed, cnt)
         e_tile = e_end
     if fixed and e_tile > 0:
         _unfix(out_counts, 0, 1, cnt, n_at, 0, 0)
-    return fixed, n_gapped
-
-
-@kernel()
-def _rows_stats(to_adev, full, sums, counts, out_adev, e0):
-    """``frame_stats`` of the windows' ``sums`` (rows) into rows e0 .. of ``out_adev``
-    (``to_adev``, ``full`` and return value: see ``stream_update``)."""
-    if not to_adev:
-        return 0
-    return frame_stats(sums, counts, full, out_adev[e0:e0 + sums.shape[0]])
+    return fixed
 
 
 @kernel()
@@ -321,9 +296,10 @@ def _emit_plain(xd, dn, has_dn, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, 
 
 
 @kernel()
-def _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, w_at, n_at):
+def _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e0, e1, emit_pos, ks, bnd, sum_s, sum_c, cnt, rows, n_at):
     """``_emit_plain`` for a tile in which every sample from the first emission (e0 <
-    e1) to the last emits (hop 1): the running sums at these samples go to ``w_at``,
+    e1) to the last emits (hop 1): the running sums at these samples go to their
+    windows' ``rows`` (rows e0 .. e1 - 1 of the output; +inf is set by ``_emit_rows``),
     the counts to ``n_at`` (none while the counts are ``fixed`` and ``dn`` is zero; see
     ``_emit_rows``), by a branch-free scan of four independent chains, which also
     track the least emitted sum per slot for the bound check when ``track`` (else the
@@ -343,7 +319,6 @@ def _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e0, e1, emit_pos, ks, bnd, 
         p3 += xd[3, i]
     # slices: a loop counter from 0 indexes them without wrap-around checks
     x0, x1, x2, x3 = xd[0, i0:i1], xd[1, i0:i1], xd[2, i0:i1], xd[3, i0:i1]
-    rows = w_at[i0:i1]
     m0 = m1 = m2 = m3 = np.inf
     for i in range(i1 - i0):
         p0 += x0[i]
@@ -373,23 +348,26 @@ def _scan_plain(xd, dn, has_dn, fixed, track, n, t0, e0, e1, emit_pos, ks, bnd, 
 
 
 @kernel()
-def _emit_rows(w_at, n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, fixed, cnt):
-    """Copy the windows emitted in a tile from ``w_at``/``n_at`` (sum and encoded count
-    per tau at the emitting sample's tile position) to their rows of ``out_sums`` and
-    ``out_counts``, taus k0 .. k1 - 1 (all of them: a whole row at a time, where
-    writing one tau's column of many rows would cost a cache line per value). ``fixed``:
-    every count is ``cnt`` (encoded), and none is written."""
+def _emit_rows(n_at, k0, k1, t0, e0, e1, emit_pos, out_sums, out_counts, fixed, cnt):
+    """Complete the rows of ``out_sums``/``out_counts`` of the windows emitted in a tile,
+    taus k0 .. k1 - 1 (all of them: a whole row at a time, where writing one tau's
+    column of many rows would cost a cache line per value), from the encoded counts
+    ``n_at`` (per tau at the emitting sample's tile position): +inf for the sums (already
+    in the rows) where a term spans a huge sample, and the counts of valid terms.
+    ``fixed``: every count is ``cnt`` (encoded), and none is written."""
     c_fix = cnt[k0:k1]
     for e in range(e0, e1):
         i = emit_pos[e] - t0
-        w_i, n_i, s_row, c_row = w_at[i, k0:k1], n_at[i, k0:k1], out_sums[e, k0:k1], out_counts[e, k0:k1]
+        n_i, s_row, c_row = n_at[i, k0:k1], out_sums[e, k0:k1], out_counts[e, k0:k1]
         if fixed:
             for k in range(k1 - k0):
-                s_row[k] = w_i[k] if c_fix[k] < _FLAG else np.inf
+                if c_fix[k] >= _FLAG:
+                    s_row[k] = np.inf
         else:
             for k in range(k1 - k0):
                 n = n_i[k]
-                s_row[k] = w_i[k] if n < _FLAG else np.inf
+                if n >= _FLAG:
+                    s_row[k] = np.inf
                 c_row[k] = n & _LOW
 
 
@@ -400,8 +378,9 @@ def _within(bound, window_sum):
 
 
 @kernel()
-def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, w_at, n_at):
-    """Term-by-term TwoSum accumulation of a tile, the emitted windows into ``w_at``/``n_at``."""
+def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt, out_sums, n_at):
+    """Term-by-term TwoSum accumulation of a tile, the emitted windows' sums into their
+    rows of ``out_sums`` (+inf is set by ``_emit_rows``), their encoded counts into ``n_at``."""
     for j in range(4):
         if j > 0 and ks[j] == ks[j - 1]:
             continue
@@ -416,7 +395,7 @@ def _accumulate_exact(xi, xo, dn, n, t0, e0, e1, emit_pos, ks, sum_s, sum_c, cnt
             c += r + de
             n_ += dn[j, i]
             if e < e1 and emit_pos[e] == t0 + i:
-                w_at[i, k] = s + c
+                out_sums[e, k] = s + c
                 n_at[i, k] = n_
                 e += 1
         sum_s[k] = s

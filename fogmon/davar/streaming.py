@@ -26,8 +26,8 @@ import numpy as np
 
 from fogmon.block import Block
 from fogmon.davar import kernels, running_sums
-from fogmon.davar.batch import _prepare, _samples, adev_edf, edf_rows, gapless_edf, gapped_edf, statistics
-from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
+from fogmon.davar.batch import _prepare, _samples, edf_rows, statistics, window_edf
+from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult, WindowSums
 from fogmon.davar.taus import tau_grid
 
 RECORD_MIN_HOP = 64  # samples; below it the window / hop records per tau would outgrow the buffer
@@ -97,7 +97,8 @@ class StreamingDadev:
     def push(self, rate_dph, valid=None) -> DadevResult:
         """Feed samples: an array of rate in deg/h (``valid`` mask optional, NaN is
         invalid) or a :class:`fogmon.block.Block` (its ``valid`` flags). Returns the
-        windows completed at hop boundaries inside this block (possibly zero rows);
+        windows completed at hop boundaries inside this block (possibly zero rows; their
+        adev formed when first read, see :class:`DadevResult`);
         ``end_index`` counts samples from the first push. A small array that completes
         no window is only staged (up to STAGE samples): same results, a few us per call."""
         if type(rate_dph) is np.ndarray and rate_dph.ndim == 1 and (
@@ -112,13 +113,6 @@ class StreamingDadev:
                                                np.zeros((0, len(self.m)), np.int64), 0)
                 return self._empty
         w = self.window_n
-        if self.alpha is not None and not self._recorded:
-            # running sums and a fixed noise type: the kernel turns the sums into adev tile
-            # by tile while they are in the cache (see running_sums.stream_update)
-            ends, adev, counts, n_gapped = self._run(rate_dph, valid, True)
-            edf = gapped_edf(gapless_edf(self.alpha, self.m, w), np.zeros(len(ends), np.int64), counts, n_gapped,
-                             self.m, w)
-            return self._result(ends, adev, edf, counts)
         ends, sums, counts = self.advance(rate_dph, valid)
         gapless = None
         if self.alpha is None:
@@ -126,14 +120,14 @@ class StreamingDadev:
         return self._frames(ends, sums, counts, self.alpha, gapless)
 
     def _frames(self, ends, sums, counts, alpha, gapless=None) -> DadevResult:
-        adev, edf = adev_edf(sums, counts, self.m, self.window_n, alpha, gapless)
-        return self._result(ends, adev, edf, counts)
-
-    def _result(self, ends, adev, edf, counts) -> DadevResult:
+        """The windows ending at ``ends``: their EDF now (from the counts), their adev when
+        first read (``WindowSums``: at hop 1 a push emits a window per sample, and most
+        readers read a few)."""
         w = self.window_n
+        edf = window_edf(counts, self.m, w, alpha, gapless)
         return DadevResult((ends - (w - 1) / 2.0) / self.sample_rate_hz, ends, self.m / self.sample_rate_hz, self.m,
-                           adev, edf, counts, self.sample_rate_hz, w / self.sample_rate_hz,
-                           self.hop_n / self.sample_rate_hz, self.confidence)
+                           WindowSums(sums, counts), edf, counts, self.sample_rate_hz,  # type: ignore[arg-type]
+                           w / self.sample_rate_hz, self.hop_n / self.sample_rate_hz, self.confidence)
 
     def advance(self, rate_dph, valid=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The engine alone: feed samples like :meth:`push` and return, for the windows
@@ -141,12 +135,6 @@ class StreamingDadev:
         (T x M), valid-term counts (T x M; at hops below RECORD_MIN_HOP a read-only
         broadcast of one row when every window has the same)); Allan variance = sums /
         (2 counts)."""
-        return self._run(rate_dph, valid, False)[:3]
-
-    def _run(self, rate_dph, valid, to_adev: bool):
-        """``advance``; with ``to_adev`` (running sums only) the kernel returns adev in
-        place of the sums: (end_index, adev, counts, entries with gaps; see
-        running_sums.stream_update)."""
         if isinstance(rate_dph, Block):
             rate_dph, valid = rate_dph.rate_dph, rate_dph.valid if valid is None else valid
         y, ok = _prepare(rate_dph, valid)
@@ -162,8 +150,6 @@ class StreamingDadev:
         # instead of faulting pages in afresh (glibc returns separate large arrays to the OS)
         block = np.empty((2, len(ends), len(self.m)))
         sums, counts = block[0], block[1].view(np.int64)
-        full = w - 2 * self.m + 1  # gap-free term counts: with ``to_adev`` the kernel forms adev
-        n_gapped = 0
         i = row = 0
         spans = []  # running sums: row spans whose counts are all in their first row (see running_sums.stream_update)
         while i < len(y):
@@ -193,10 +179,9 @@ class StreamingDadev:
                                       self._s, self._c, self._n, self._h, self._rec_s, self._rec_c, self._rec_n,
                                       self._rec_h, k0 + row, sums[row:row_end], counts[row:row_end])
             else:
-                fixed, gapped = running_sums.stream_update(
+                fixed = running_sums.stream_update(
                     self._len, take, w, self.m, self._pre, self._s, self._c, self._n, self._err,
-                    ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end], to_adev, full)
-                n_gapped += gapped
+                    ends[row:row_end] - self._base, sums[row:row_end], counts[row:row_end])
                 if fixed and row_end > row:
                     spans.append((row, row_end))
             self._len += take
@@ -210,7 +195,7 @@ class StreamingDadev:
                 counts[a + 1:b] = counts[a]
         n = self._base + self._len
         self._next_end = w - 1 + -(-(max(n, w - 1) - (w - 1)) // self.hop_n) * self.hop_n
-        return ends, sums, counts, n_gapped
+        return ends, sums, counts
 
     def current(self) -> AdevResult:
         """Overlapping ADEV of the current (possibly still filling) window, whatever the

@@ -1,10 +1,16 @@
 """StreamingDadev equals the batch engine at every window, in any block sizes, and does
 not drift."""
+import copy
+import dataclasses
+import pickle
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import pytest
 
 from fogmon.block import Block
-from fogmon.davar.batch import dadev, oadev
+from fogmon.davar.batch import adev_edf, dadev, oadev
 from fogmon.davar.streaming import StreamingDadev
 
 FS = 10.0
@@ -92,12 +98,11 @@ def test_hop_1_counts_are_one_row_in_a_block_where_none_changes():
 
 @pytest.mark.parametrize("hop", [1, 5])
 def test_fixed_alpha_push_statistics_equal_batch_at_small_hops(hop):
-    """With a fixed alpha at running-sum hops the kernel turns the sums into adev tile
-    by tile (running_sums.stream_update's ``full``): adev, bounds, EDF and counts
-    equal the batch engine's, through gaps (a short one, and one longer than the
-    blocks, whose windows keep the same reduced counts), a huge sample, and a large
-    glitch whose leaving forces exact recomputes; adev equals the engine's own sums
-    (``advance``, the same blocks)."""
+    """With a fixed alpha at running-sum hops adev, bounds, EDF and counts equal the
+    batch engine's, through gaps (a short one, and one longer than the blocks, whose
+    windows keep the same reduced counts), a huge sample, and a large glitch whose
+    leaving forces exact recomputes; adev equals the engine's own sums (``advance``,
+    the same blocks)."""
     n, w = 30000, 2048
     y = rate(n, 13)
     valid = np.ones(n, bool)
@@ -119,8 +124,62 @@ def test_fixed_alpha_push_statistics_equal_batch_at_small_hops(hop):
     adev = np.concatenate([fused.push(y[i:i + 4096], valid[i:i + 4096]).adev_dph for i in range(0, n, 4096)])
     sums, counts = (np.concatenate(x) for x in zip(*[plain.advance(y[i:i + 4096], valid[i:i + 4096])[1:]
                                                      for i in range(0, n, 4096)], strict=True))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        np.testing.assert_allclose(adev, np.sqrt(sums / (2.0 * counts)), rtol=1e-15)
+    assert adev.tobytes() == adev_edf(sums, counts, fused.m, w, -1)[0].tobytes()
+
+
+@pytest.mark.parametrize("hop,alpha", [(1, 0), (3, None), (64, 0), (100, None)])
+def test_push_forms_adev_when_read_bit_identical_to_the_eager_statistics(hop, alpha):
+    """A push's ``adev_dph`` is formed from its windows' sums when first read
+    (result.WindowSums): bit-identical to ``adev_edf``'s adev of the same sums (formed
+    at once, as the push did before), through gaps, huge samples (+inf windows) and a
+    large glitch; so are the EDF, the counts and the interval. ``window(i)`` forms row i
+    alone, the same values, before and after the full read (which forms adev in place of
+    the sums); a result pickled, copied (sharing the sums: also read by four threads at
+    once) or rebuilt by ``dataclasses.replace`` before it was read reads the same;
+    ``replace`` with an adev_dph array keeps it."""
+    n, w = 12000, 1024
+    y = rate(n, 21)
+    valid = np.ones(n, bool)
+    valid[3000:3002] = False
+    valid[5000:5400] = False
+    y[7000] += 3e7
+    y[8000] = np.inf
+    y[9500] = 5e9
+    lazy, plain = (StreamingDadev(1.0, w, taus=10, hop_s=hop, alpha=alpha) for _ in range(2))
+    checked = 0
+    for i in range(0, n, 1500):
+        res = lazy.push(y[i:i + 1500], valid[i:i + 1500])
+        ends, sums, counts = plain.advance(y[i:i + 1500], valid[i:i + 1500])
+        if not len(res):
+            continue
+        again = pickle.loads(pickle.dumps(res))
+        twin = copy.copy(res)
+        moved = dataclasses.replace(res, hop_s=res.hop_s)
+        rows = range(0, len(res), max(1, len(res) // 7))
+        wins = [res.window(r) for r in rows]  # before adev_dph is read: each row alone
+        # (adev does not depend on the EDF: alpha=None's quick fits are checked elsewhere)
+        adev, edf = adev_edf(sums, counts, res.m, w, 0 if alpha is None else alpha)
+        if i == 1500 * 4:  # copies sharing this block's sums read by four threads at once
+            start = threading.Barrier(4)
+
+            def read(r, start=start):
+                start.wait()
+                return r.adev_dph.tobytes()
+            with ThreadPoolExecutor(4) as pool:
+                assert set(pool.map(read, [copy.copy(res) for _ in range(4)])) == {adev.tobytes()}
+        for got in (res, twin, again, moved):
+            assert got.adev_dph.tobytes() == adev.tobytes()
+        assert np.array_equal(res.n_terms, counts) and np.array_equal(res.end_index, ends)
+        if alpha is not None:
+            assert np.array_equal(res.edf, edf, equal_nan=True)
+        for r, win in zip(rows, wins, strict=True):
+            assert win.adev_dph.tobytes() == adev[r].tobytes() == twin.window(r).adev_dph.tobytes()
+            for k in ("lo_dph", "hi_dph"):  # (a NaN's sign may differ: a NaN row times its factors)
+                assert np.array_equal(getattr(win, k), getattr(res, k)[r], equal_nan=True)
+        checked += np.isinf(adev).any() + (counts < w - 2 * res.m + 1).any()
+    assert checked >= 2  # windows with +inf and with gaps were among them
+    kept = dataclasses.replace(res, adev_dph=np.zeros_like(adev))
+    assert not kept.adev_dph.any() and not kept.window(0).adev_dph.any()
 
 
 def test_hop_longer_than_the_window():
