@@ -17,7 +17,8 @@ its eigenvalues for the mixture's noise types (white rate, flicker, random walk;
 angle noise, whose terms decorrelate within m samples, and the ramp enter as the
 constant and the non-central means they give), the quantiles of X by the Lugannani-Rice
 saddlepoint approximation (Kuonen 1999), and the spread of X about 1 rescaled to the
-exact variance 2 / EDF (the grid's own variance is within a few % of it).
+exact variance 2 / EDF (the grid's own variance is 0-10 % above it: white rate noise at
+m = n / 4 +9 %, flicker and random walk +0.1-1.2 %).
 """
 from __future__ import annotations
 
@@ -40,34 +41,31 @@ _BISECT = 52
 
 
 @lru_cache(maxsize=512)
-def _eigen_basis(m: int, n_samples: int) -> tuple[np.ndarray, float]:
+def _grid_rho(m: int, n_samples: int) -> np.ndarray:
     """The correlation (normalised at lag 0) of the Allan terms of factor m of each noise
-    type _ALPHAS at the grid lags k m / _PER_M, k = 0 .. L - 1 (3 x L), and the grid
-    step h in samples (L h = M, the gap-free term count)."""
+    type _ALPHAS (rows) at the lags k h, k = 0 .. L - 1, of a grid of L points with step h
+    = M / L samples over the M = n - 2 m + 1 terms: L = _PER_M per m, at most _MAX_POINTS
+    and at most M (then the terms themselves)."""
     terms = n_samples - 2 * m + 1
-    size = min(terms, max(1, int(round(terms * _PER_M / m))), _MAX_POINTS)  # or the terms themselves
-    h = terms / size
-    t = np.arange(size) * h / m
+    size = min(terms, max(1, int(round(terms * _PER_M / m))), _MAX_POINTS)
+    t = np.arange(size) * (terms / size) / m
     f = float(m) if m <= _GRID_PER_M else np.inf
-    rho = np.array([_sz(t, f, a) / _sz(np.zeros(1), f, a) for a in _ALPHAS])
-    return rho, h
+    return np.array([_sz(t, f, a) / _sz(np.zeros(1), f, a) for a in _ALPHAS])
 
 
 def _mixture_eigen(fractions: np.ndarray, m: int, n_samples: int) -> tuple[np.ndarray, np.ndarray, float]:
     """(lambda_k, omega_k = lambda_k beta_k^2, constant) of X for one tau's mixture
-    ``fractions`` (5 classes, summing to 1)."""
+    ``fractions`` (5 classes, summing to 1): X = const + (1 / L) sum_i (e_i + c)^2 over the
+    grid's L terms e_i (covariance: the fraction-weighted correlations), c^2 the ramp's share."""
     from scipy.linalg import eigh, toeplitz
 
-    rho, h = _eigen_basis(m, n_samples)
+    rho = _grid_rho(m, n_samples)
     size = rho.shape[1]
     col = np.asarray(fractions)[list(_SMOOTH)] @ rho
-    mu, v = eigh(toeplitz(col), driver="evd", check_finite=False)
-    mu = np.maximum(mu, 0.0)
-    lam = mu / size  # X = (1 / L) sum_i (e_i + c)^2 on the grid
-    c2 = float(fractions[_RAMP])
+    mu, v = eigh(toeplitz(col), driver="evd", check_finite=False)  # evd: 0.3 ms at 48 points
+    lam = np.maximum(mu, 0.0) / size
     proj = (v.sum(axis=0) ** 2) / size  # (v_k' 1)^2 / L: the share of the mean along v_k
-    omega = c2 * proj
-    return lam, omega, float(fractions[0])
+    return lam, float(fractions[_RAMP]) * proj, float(fractions[0])
 
 
 def _cgf(t: np.ndarray, lam: np.ndarray, omega: np.ndarray, const: float):
