@@ -30,7 +30,7 @@ binomial count: the tables print its 1-sd uncertainty; 1000 records per model (t
 default) put the 95 % band at 3 sd.
 
     python validation/calibration.py [--records N] [--only null|coverage|warning] [--jobs 2] [--seed 1]
-                                     [--save PREFIX]
+                                     [--save PREFIX] [--exact-shape]
 """
 from __future__ import annotations
 
@@ -148,9 +148,10 @@ def null_sweep(records: int, seed: int, jobs: int, save: str | None = None) -> b
 
 
 # ---------------------------------------------------------------- coverage sweep
-def coverage_record(job: tuple[int, int, int]) -> dict:
-    """What the whole-run fit of one record of model ``job[0]`` says against the truth."""
-    k, i, seed = job
+def coverage_record(job: tuple[int, int, int, bool]) -> dict:
+    """What the whole-run fit of one record of model ``job[0]`` says against the truth
+    (``job[3]``: also the ADEV intervals of the exact shape)."""
+    k, i, seed, shape = job
     case = MODELS[k]
     rec = _record(case, record_seed(seed, i))
     res = oadev(rec.rate_dph, case.sample_rate_hz, taus="octave")  # the pipeline's whole-run ADEV
@@ -160,12 +161,17 @@ def coverage_record(job: tuple[int, int, int]) -> dict:
             for c, f in fits.items()}
     f68 = fits[CONFIDENCES[0]]
     adev_cover = {c: _inside_interval(truth_adev, *chi2_bounds(res.adev_dph, res.edf, c)) for c in CONFIDENCES}
+    shape_cover = {}
+    if shape:  # the exact shape of the quick fit's mixture at the longest taus (fogmon.davar.shape)
+        for c in CONFIDENCES:
+            r = oadev(rec.rate_dph, case.sample_rate_hz, taus="octave", confidence=c, exact_shape=True)
+            shape_cover[c] = _inside_interval(truth_adev, r.lo_dph, r.hi_dph)
     check = model_check(res, f68) or ""
     return {"model": k, "ident": np.array([bool(getattr(f68, n).identifiable) for n in NAMES]),
             "value": np.array([float(getattr(f68, n).value) for n in NAMES]),
             "upper": np.array([float(getattr(f68, n).upper) for n in NAMES]),
             "cover": {c: _inside(case.truth, v[:, 0], v[:, 1]) for c, v in coef.items()},
-            "adev_cover": adev_cover, "tau_s": res.tau_s, "edf": res.edf,
+            "adev_cover": adev_cover, "shape_cover": shape_cover, "tau_s": res.tau_s, "edf": res.edf,
             "warning": "WARNING" in check, "warning_text": check}
 
 
@@ -178,16 +184,20 @@ def _inside_interval(truth, lo, hi) -> np.ndarray:
     return np.where(np.isfinite(lo) & np.isfinite(hi), _inside(truth, lo, hi), np.nan)
 
 
-def coverage_sweep(records: int, seed: int, jobs: int, items: set[str], save: str | None = None) -> bool:
+def coverage_sweep(records: int, seed: int, jobs: int, items: set[str], save: str | None = None,
+                   shape: bool = False) -> bool:
     """Interval coverage of the coefficients and of the per-tau ADEV, and the model-check
-    warning rate, over ``records`` records per model; True when within LIMITS."""
-    jobs_list = [(k, i, seed) for k in range(len(MODELS)) for i in range(records)]
+    warning rate, over ``records`` records per model; True when within LIMITS. ``shape``:
+    also the per-tau table of the exact-shape ADEV intervals (not part of the verdict)."""
+    jobs_list = [(k, i, seed, shape) for k in range(len(MODELS)) for i in range(records)]
     rows = _map(coverage_record, jobs_list, jobs)
     _save(save, "coverage", rows)
     ok = True
     if "coverage" in items:
         ok &= _coefficient_table(rows, records)
         ok &= _adev_table(rows, records)
+        if shape:
+            _adev_table(rows, records, "shape_cover")
     if "warning" in items:
         ok &= _warning_table(rows, records)
     return ok
@@ -222,10 +232,12 @@ def _coefficient_table(rows: list[dict], records: int) -> bool:
     return ok
 
 
-def _adev_table(rows: list[dict], records: int) -> bool:
+def _adev_table(rows: list[dict], records: int, key: str = "adev_cover") -> bool:
     tol = LIMITS["adev_tolerance"]
     sd = {lvl: np.sqrt(lvl * (1.0 - lvl) / records) for lvl in CONFIDENCES}
-    print(f"\nPer-tau ADEV intervals (the whole-run table): coverage of the 68.3 % and 95 % chi-square intervals "
+    what = ("chi-square intervals" if key == "adev_cover" else
+            "intervals of the exact shape (oadev(..., exact_shape=True), not in the verdict)")
+    print(f"\nPer-tau ADEV intervals (the whole-run table): coverage of the 68.3 % and 95 % {what} "
           f"of the exact expected ADEV, {records} records per model; 1 sd {100 * sd[0.683]:.1f} % at 68.3 %, "
           f"{100 * sd[0.95]:.1f} % at 95 %. '<-': more than {100 * tol:.0f} % from nominal; '<<': more than "
           f"{100 * tol:.0f} % + {ADEV_SD} sd (a departure beyond {100 * tol:.0f} % that the record count resolves): "
@@ -234,7 +246,7 @@ def _adev_table(rows: list[dict], records: int) -> bool:
     for k, case in enumerate(MODELS):
         mine = [r for r in rows if r["model"] == k]
         tau = mine[0]["tau_s"]
-        c = {lvl: np.nanmean(np.array([r["adev_cover"][lvl] for r in mine], dtype=float), axis=0)
+        c = {lvl: np.nanmean(np.array([r[key][lvl] for r in mine], dtype=float), axis=0)
              for lvl in CONFIDENCES}
         edf = np.median(np.array([r["edf"] for r in mine]), axis=0)
         off = np.zeros(len(tau), bool)
@@ -298,6 +310,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="run only this item (repeatable)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=1, help="seed of the records (default 1)")
+    p.add_argument("--exact-shape", action="store_true", help="also the per-tau table of the ADEV intervals "
+                   "of the exact shape at the longest taus (oadev(..., exact_shape=True))")
     p.add_argument("--save", metavar="PREFIX", help="also write each sweep's per-record results to "
                    "PREFIX.<sweep>.pkl")
     args = p.parse_args(argv)
@@ -305,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     ok = True
     if items & {"coverage", "warning"}:
-        ok &= coverage_sweep(args.records or 1000, args.seed, args.jobs, items, args.save)
+        ok &= coverage_sweep(args.records or 1000, args.seed, args.jobs, items, args.save, args.exact_shape)
     if "null" in items:
         ok &= null_sweep(args.records or 200, args.seed, args.jobs, args.save)
     print(f"\n{_verdict(ok)} ({', '.join(sorted(items))}; seed {args.seed}; {time.time() - t0:.0f} s)")

@@ -20,6 +20,7 @@ from fogmon.davar import kernels
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.fit import low_pass_taus, mixture_edf_row, quick_avar_terms
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
+from fogmon.davar.shape import shape_applies, shape_factors
 from fogmon.davar.taus import tau_grid
 from fogmon.davar.theory import POWERS
 from fogmon.errors import FogmonError
@@ -214,12 +215,43 @@ def window_edf(counts, m, n_samples: int, alpha=None, gapless=None, n_gapped: in
     return gapped_edf(edf_runs, run, counts, n_gapped, m, n_samples)
 
 
-def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE, gapless=None):
+def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE, gapless=None,
+               exact_shape: bool = False):
     """(adev_dph, lo_dph, hi_dph, edf) of :func:`adev_edf`, with the two-sided
-    ``confidence`` chi-square interval."""
+    ``confidence`` chi-square interval; with ``exact_shape``, for one window with the
+    mixture EDF (no ``alpha`` or ``gapless``), at the gap-free taus where few independent
+    terms remain (``shape.shape_applies``: M / m <= 16) the exact shape of the quick fit's
+    mixture instead (``shape.shape_factors``; off by default: see docs/davar.md,
+    "Calibration")."""
+    terms = None
+    if exact_shape and alpha is None and gapless is None and np.ndim(sums) == 1:
+        terms = _row_terms(sums, counts, m, n_samples)
+        gapless = _terms_edf(terms, m, n_samples, _avar(sums, counts))
     adev, edf = adev_edf(sums, counts, m, n_samples, alpha, gapless)
     lo, hi = chi2_bounds(adev, edf, confidence)
+    if terms is not None:
+        lo, hi = _shaped_bounds(terms, adev, lo, hi, edf, counts, m, n_samples, confidence)
     return adev, lo, hi, edf
+
+
+def _shaped_bounds(terms, adev, lo, hi, edf, counts, m, n_samples: int, confidence: float):
+    """``lo``, ``hi`` with the exact-shape interval (``shape.shape_factors``) of the
+    quick-fit ``terms``' mixture at the gap-free taus where it applies and chi-square gives an
+    interval (EDF >= confidence.MIN_EDF)."""
+    m = np.asarray(m, dtype=np.int64)
+    use = (shape_applies(m, n_samples) & (np.asarray(counts) == n_samples - 2 * m + 1) & np.isfinite(lo)
+           & np.isfinite(hi))
+    if not use.any():
+        return lo, hi
+    parts = m[use].astype(np.float64)[:, None] ** POWERS * np.asarray(terms, dtype=np.float64)  # Q, N, B, K, R
+    total = parts.sum(1, keepdims=True)
+    fractions = np.where(total > 0, parts / np.where(total > 0, total, 1.0), np.eye(5)[1])  # empty: white rate
+    f_lo, f_hi = shape_factors(fractions, m[use], n_samples, np.asarray(edf)[use], confidence)
+    lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
+    ok = np.isfinite(f_lo) & np.isfinite(f_hi)  # else chi-square's
+    at = np.flatnonzero(use)[ok]
+    lo[at], hi[at] = adev[at] * f_lo[ok], adev[at] * f_hi[ok]
+    return lo, hi
 
 
 def gapped_edf(edf_runs, run, counts, n_gapped: int, m, n_samples: int) -> np.ndarray:
@@ -238,18 +270,20 @@ def gapped_edf(edf_runs, run, counts, n_gapped: int, m, n_samples: int) -> np.nd
 
 
 def oadev(rate_dph, sample_rate_hz: float, taus="octave", valid=None, confidence: float = CONFIDENCE,
-          alpha=None) -> AdevResult:
+          alpha=None, exact_shape: bool = False) -> AdevResult:
     """Overlapping Allan deviation (deg/h) of a rate record ``rate_dph`` (deg/h) sampled at
     ``sample_rate_hz`` (Hz). ``taus``: see :func:`fogmon.davar.taus.tau_grid`. ``valid``: optional
     mask; NaN samples are invalid too. Bounds: chi-square at ``confidence`` with the EDF
     of the noise mixture a quick IEEE-952 fit predicts (``row_edf``), or Greenhall's EDF
-    for the noise type ``alpha`` when given (Stable32's)."""
+    for the noise type ``alpha`` when given (Stable32's). ``exact_shape``: at the taus with
+    few independent terms the exact shape of the mixture's Allan variance instead of
+    chi-square's (:func:`statistics`)."""
     y, ok = _prepare(rate_dph, valid)
     n = len(y)
     m = tau_grid(sample_rate_hz, n, taus)
     hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n)
-    adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence)
+    adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence, exact_shape=exact_shape)
     return AdevResult(m / sample_rate_hz, m, adev, lo, hi, edf, counts[0], float(sample_rate_hz), n, confidence)
 
 
