@@ -14,7 +14,9 @@ that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
    term of short correlation time (a ``markov`` effect) or white noise through a
    Butterworth low-pass of order 1..4 (a ``lowpass_noise`` effect), whichever fits best,
    N then being the unfiltered white floor - is fitted together with them, kept only
-   when it lowers the chi-square by more than chance;
+   when it lowers the chi-square by more than chance; a fit that lies above the
+   recording by more than chance at some tau is fitted again below it (FLOOR_ALPHA: an
+   effect only adds Allan variance);
 4. whole-record ADEV points at longer taus refine those terms while they stay
    consistent with them, but cannot add a term.
 
@@ -29,6 +31,7 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.optimize import minimize, nnls
+from scipy.stats import norm
 
 from fogmon.davar.batch import oadev
 from fogmon.davar.theory import POWERS, adev_model, avar_terms_to_coefficients
@@ -354,7 +357,7 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
     :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`) at
     the windows' taus, with the terms those robust points need
     (:func:`parsimonious_fit`; fitted again below the recording when it lies above it by
-    more than chance, FLOOR_Z), refined with the whole-record ADEV at longer taus, in
+    more than chance, FLOOR_ALPHA), refined with the whole-record ADEV at longer taus, in
     order, while each point stays within EXTEND_Z of the windows' fit. The long taus only
     refine: a term only they would need (what a periodic term, a drift or a step does
     there as well) is not added - it is left for the effects and the mismatch map to
@@ -370,7 +373,7 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
         return None if lowpass is None else lowpass_unit_avar(np.asarray(taus), sample_rate_hz, *lowpass)
 
     capped = _floor_violated(np.array(tau), np.array(av), np.array(edf), fit0, unit(tau))
-    if capped:  # the terms again, the model kept below the recording (FLOOR_Z)
+    if capped:  # the terms again, the model kept below the recording (FLOOR_ALPHA)
         optional = ("B", "K") if lowpass is not None and lowpass[0] == "lowpass_noise" else ("Q", "B", "K")
         _, fit0, terms = _best_terms(np.array(tau), np.array(av), np.array(edf), unit(tau), optional,
                                      cap=floor_caps(np.array(edf), FLOOR_CAP_Z))
@@ -390,22 +393,24 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
 
 #: The stationary noise lies below the recording at every tau: an effect (a vibration, a
 #: transient, a step) only adds Allan variance. A fit whose Allan variance lies above the
-#: window-median one by more than FLOOR_Z standard deviations (Wilson-Hilferty) at a tau
+#: window-median one at some tau by more than chance - a Wilson-Hilferty z below the
+#: FLOOR_ALPHA family-wise point over the taus (one-sided, Bonferroni: 3.17 for 13 taus) -
 #: has been pulled up by what no IEEE-952 term follows (a vehicle's sway, a level that
 #: rises towards Nyquist), and is fitted again with its Allan variance at most
 #: FLOOR_CAP_Z standard deviations above the recording's at every tau
 #: (:func:`floor_caps`); the recording's excess is then left to the effects and the
-#: mismatch map. (A cap at FLOOR_Z itself would let the fit sit at -3 standard deviations
+#: mismatch map. (A cap at the trigger itself would let the fit sit at -3 standard deviations
 #: at every long tau at once: psins_rlg_z, N 0.033 deg/sqrt(h) where its long taus read 0.019.)
-FLOOR_Z = 3.0
+FLOOR_ALPHA = 0.01
 FLOOR_CAP_Z = 1.0
 
 
 def _floor_violated(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float],
                     lowpass_unit: np.ndarray | None) -> bool:
-    """Whether ``fit`` lies above the Allan variance ``av`` by more than FLOOR_Z at some tau."""
+    """Whether ``fit`` lies above the Allan variance ``av`` by more than chance at some tau
+    (FLOOR_ALPHA family-wise over the taus)."""
     pred = model_avar(tau_s, fit, lowpass_unit)
-    return bool(np.any(pred > av * floor_caps(edf, FLOOR_Z)))
+    return bool(np.any(pred > av * floor_caps(edf, float(norm.isf(FLOOR_ALPHA / len(tau_s))))))
 
 
 def baseline_model(rec: Recording) -> SensorModel:
