@@ -372,11 +372,11 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
     def unit(taus):
         return None if lowpass is None else lowpass_unit_avar(np.asarray(taus), sample_rate_hz, *lowpass)
 
-    capped = _floor_violated(np.array(tau), np.array(av), np.array(edf), fit0, unit(tau))
+    capped = _floor_violated(np.array(tau), np.array(av), np.array(edf), fit0, unit(tau), sample_rate_hz)
     if capped:  # the terms again, the model kept below the recording (FLOOR_ALPHA)
         optional = ("B", "K") if lowpass is not None and lowpass[0] == "lowpass_noise" else ("Q", "B", "K")
         _, fit0, terms = _best_terms(np.array(tau), np.array(av), np.array(edf), unit(tau), optional,
-                                     cap=floor_caps(np.array(edf), FLOOR_CAP_Z))
+                                     cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz))
     for j in range(nw, len(whole.tau_s)):
         a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
         pred = float(model_avar(whole.tau_s[j:j + 1], fit0, unit(whole.tau_s[j:j + 1]))[0])
@@ -387,7 +387,7 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
         edf.append(e)
     fit = curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
                           terms=terms, lowpass_unit=unit(tau),
-                          cap=floor_caps(np.array(edf), FLOOR_CAP_Z) if capped else None)
+                          cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz) if capped else None)
     return fit, lowpass
 
 
@@ -405,12 +405,30 @@ FLOOR_ALPHA = 0.01
 FLOOR_CAP_Z = 1.0
 
 
+def _floor_judged(tau_s: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+    """The taus where the floor is judged: from 1 / (2 x LOWPASS_CUTOFF_FS[0]) samples on
+    (12.5). At shorter taus a sensor's low-pass (or a decimation filter: the ``bandwidth``
+    effect) may lower the Allan variance - an effect that removes variance - so a fit
+    above the recording there is no sign of a misfit (the G ring's decimation filter,
+    z -5.6 at its shortest tau; a dip between its humps at 8 samples)."""
+    return np.asarray(tau_s) * sample_rate_hz >= 0.5 / LOWPASS_CUTOFF_FS[0]
+
+
 def _floor_violated(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float],
-                    lowpass_unit: np.ndarray | None) -> bool:
-    """Whether ``fit`` lies above the Allan variance ``av`` by more than chance at some tau
-    (FLOOR_ALPHA family-wise over the taus)."""
-    pred = model_avar(tau_s, fit, lowpass_unit)
-    return bool(np.any(pred > av * floor_caps(edf, float(norm.isf(FLOOR_ALPHA / len(tau_s))))))
+                    lowpass_unit: np.ndarray | None, sample_rate_hz: float) -> bool:
+    """Whether ``fit`` lies above the Allan variance ``av`` by more than chance at some
+    judged tau (:func:`_floor_judged`; FLOOR_ALPHA family-wise over them)."""
+    judged = _floor_judged(tau_s, sample_rate_hz)
+    if not judged.any():
+        return False
+    pred = model_avar(tau_s, fit, lowpass_unit)[judged]
+    return bool(np.any(pred > av[judged] * floor_caps(edf[judged], float(norm.isf(FLOOR_ALPHA / judged.sum())))))
+
+
+def _floor_cap(tau_s: np.ndarray, edf: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+    """The refit's bound (model / data Allan variance) per tau: FLOOR_CAP_Z at the judged
+    taus, none at the others."""
+    return np.where(_floor_judged(tau_s, sample_rate_hz), floor_caps(edf, FLOOR_CAP_Z), np.inf)
 
 
 def baseline_model(rec: Recording) -> SensorModel:

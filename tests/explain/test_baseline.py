@@ -117,5 +117,5 @@ def test_baseline_stays_below_a_recording_whose_short_taus_hold_sway_and_a_high_
     blk = rec.to_block()
     tau, av, edf = robust_avar(blk.error_rate_dph, blk.valid, 100.0)
     first, _, low_pass = parsimonious_fit(tau, av, edf, 100.0)
-    assert low_pass is None and first["N_dpsh"] > 0.03 and _floor_violated(tau, av, edf, first, None)
+    assert low_pass is None and first["N_dpsh"] > 0.03 and _floor_violated(tau, av, edf, first, None, 100.0)
     assert baseline_model(rec).noise.N_dpsh == pytest.approx(0.02, rel=0.15)
