@@ -14,7 +14,9 @@ that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
    term of short correlation time (a ``markov`` effect) or white noise through a
    Butterworth low-pass of order 1..4 (a ``lowpass_noise`` effect), whichever fits best,
    N then being the unfiltered white floor - is fitted together with them, kept only
-   when it lowers the chi-square by more than chance;
+   when it lowers the chi-square by more than chance; a fit that lies above the
+   recording by more than chance at some tau is fitted again below it (FLOOR_ALPHA: an
+   effect only adds Allan variance);
 4. whole-record ADEV points at longer taus refine those terms while they stay
    consistent with them, but cannot add a term.
 
@@ -28,7 +30,8 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.optimize import nnls
+from scipy.optimize import minimize, nnls
+from scipy.stats import norm
 
 from fogmon.davar.batch import oadev
 from fogmon.davar.theory import POWERS, adev_model, avar_terms_to_coefficients
@@ -41,13 +44,15 @@ from fogmon.sim.noise import ar1_adev_exact, lowpass_adev_exact
 
 def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | None = None,
                     edf_cap: float = 50.0, ramp: bool = True, terms: tuple[str, ...] | None = None,
-                    lowpass_unit: np.ndarray | None = None) -> dict[str, float]:
+                    lowpass_unit: np.ndarray | None = None, cap: np.ndarray | None = None) -> dict[str, float]:
     """IEEE-952 coefficients (Q arcsec, N deg/sqrt(h), B deg/h, K deg/h/sqrt(h), R deg/h^2)
     minimizing sum_i w_i (model_avar_i / avar_i - 1)^2 over the taus, all A_n >= 0, with
     w_i = min(edf_i, edf_cap) / edf_cap: equal weight wherever the point is well
     determined, less at the few-EDF longest taus. With ``lowpass_unit`` (the Allan
     variance of a unit-variance low-pass term at each tau, :func:`lowpass_unit_avar`)
-    that term's variance is fitted with them and returned as ``lowpass_sigma_dph``."""
+    that term's variance is fitted with them and returned as ``lowpass_sigma_dph``.
+    With ``cap`` the model's Allan variance stays at most ``cap`` x the data's at each
+    tau (:func:`floor_caps`)."""
     ok = np.isfinite(adev_dph) & (adev_dph > 0)
     tau, av = np.asarray(tau_s)[ok], np.asarray(adev_dph)[ok] ** 2
     if edf is None:
@@ -66,12 +71,39 @@ def curve_noise_fit(tau_s: np.ndarray, adev_dph: np.ndarray, edf: np.ndarray | N
     scale = np.max(np.abs(X), axis=0)
     scale[scale == 0] = 1.0
     a, _ = nnls(X / scale, w)
+    if cap is not None:
+        # rows of X are cols / av * w: model / av <= cap is (X a)_i <= cap_i w_i
+        C, c = X / scale / w[:, None], np.asarray(cap, dtype=float)[ok]
+        if np.any(C @ a > c):
+            a = _capped_nnls(X / scale, w, C, c)
     a = a / scale
     coef = avar_terms_to_coefficients(a[:5])
     out = dict(zip(("Q_arcsec", "N_dpsh", "B_dph", "K_dphsh", "R_dphh"), map(float, coef), strict=True))
     if lowpass_unit is not None:
         out["lowpass_sigma_dph"] = math.sqrt(float(a[5]))
     return out
+
+
+def _capped_nnls(X: np.ndarray, w: np.ndarray, C: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """argmin ||X a - w||^2 over a >= 0 with C a <= c (a convex quadratic programme; a = 0
+    is feasible), by SLSQP."""
+    fin = np.isfinite(c)
+    cons = [{"type": "ineq", "fun": lambda a: c[fin] - C[fin] @ a, "jac": lambda a: -C[fin]}] if fin.any() else []
+    r = minimize(lambda a: float(np.sum((X @ a - w) ** 2)), np.zeros(X.shape[1]),
+                 jac=lambda a: 2.0 * X.T @ (X @ a - w), bounds=[(0.0, None)] * X.shape[1],
+                 constraints=cons, method="SLSQP", options={"ftol": 1e-12, "maxiter": 500})
+    return np.maximum(r.x, 0.0)
+
+
+def floor_caps(edf: np.ndarray, z: float) -> np.ndarray:
+    """Per tau the largest model / data Allan-variance ratio whose Wilson-Hilferty z
+    (:func:`_wh_z` of data / model, ``edf`` degrees of freedom) is still >= -``z``: a model
+    above it is noisier than the recording there by more than chance (inf when ``edf``
+    is too small to bound it)."""
+    v = 2.0 / (9.0 * np.maximum(np.asarray(edf, dtype=float), 0.5))
+    b = 1.0 - v - z * np.sqrt(v)
+    with np.errstate(divide="ignore"):
+        return np.where(b > 0, 1.0 / np.maximum(b, 1e-300) ** 3, np.inf)
 
 
 def model_avar(tau_s: np.ndarray, fit: dict[str, float], lowpass_unit: np.ndarray | None = None) -> np.ndarray:
@@ -171,16 +203,18 @@ def _lowpass_shapes(sample_rate_hz: float) -> list[tuple[str, tuple[float, float
 
 
 def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, lowpass_unit: np.ndarray | None = None,
-                optional: tuple[str, ...] = ("Q", "B", "K")) -> tuple[float, dict[str, float], tuple[str, ...]]:
+                optional: tuple[str, ...] = ("Q", "B", "K"), cap: np.ndarray | None = None
+                ) -> tuple[float, dict[str, float], tuple[str, ...]]:
     """(criterion, coefficients, terms) of the term set, N always and each of
     ``optional`` only if the data need it, with the least chi-square (:func:`fit_chi2`)
     + TERM_CHI2 per term; :func:`curve_noise_fit` with R = 0 and weights by the full
-    degrees of freedom, so that the fit and the chi-square that judges it agree."""
+    degrees of freedom, so that the fit and the chi-square that judges it agree; ``cap``:
+    :func:`curve_noise_fit`'s."""
     best = None
     for k in range(1 << len(optional)):
         terms = ("N",) + tuple(nm for i, nm in enumerate(optional) if k >> i & 1)
         fit = curve_noise_fit(tau_s, np.sqrt(av), edf, edf_cap=np.inf, ramp=False, terms=terms,
-                              lowpass_unit=lowpass_unit)
+                              lowpass_unit=lowpass_unit, cap=cap)
         crit = fit_chi2(av, edf, model_avar(tau_s, fit, lowpass_unit)) + TERM_CHI2 * len(terms)
         if best is None or crit < best[0]:
             best = (crit, fit, terms)
@@ -322,7 +356,8 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
     parameters but sigma), else None), fitted so that an effect does not inflate them:
     :func:`curve_noise_fit` to the window-median Allan variance (:func:`robust_avar`) at
     the windows' taus, with the terms those robust points need
-    (:func:`parsimonious_fit`), refined with the whole-record ADEV at longer taus, in
+    (:func:`parsimonious_fit`; fitted again below the recording when it lies above it by
+    more than chance, FLOOR_ALPHA), refined with the whole-record ADEV at longer taus, in
     order, while each point stays within EXTEND_Z of the windows' fit. The long taus only
     refine: a term only they would need (what a periodic term, a drift or a step does
     there as well) is not added - it is left for the effects and the mismatch map to
@@ -337,6 +372,11 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
     def unit(taus):
         return None if lowpass is None else lowpass_unit_avar(np.asarray(taus), sample_rate_hz, *lowpass)
 
+    capped = _floor_violated(np.array(tau), np.array(av), np.array(edf), fit0, unit(tau), sample_rate_hz)
+    if capped:  # the terms again, the model kept below the recording (FLOOR_ALPHA)
+        optional = ("B", "K") if lowpass is not None and lowpass[0] == "lowpass_noise" else ("Q", "B", "K")
+        _, fit0, terms = _best_terms(np.array(tau), np.array(av), np.array(edf), unit(tau), optional,
+                                     cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz))
     for j in range(nw, len(whole.tau_s)):
         a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
         pred = float(model_avar(whole.tau_s[j:j + 1], fit0, unit(whole.tau_s[j:j + 1]))[0])
@@ -346,8 +386,49 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
         av.append(a)
         edf.append(e)
     fit = curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
-                          terms=terms, lowpass_unit=unit(tau))
+                          terms=terms, lowpass_unit=unit(tau),
+                          cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz) if capped else None)
     return fit, lowpass
+
+
+#: The stationary noise lies below the recording at every tau: an effect (a vibration, a
+#: transient, a step) only adds Allan variance. A fit whose Allan variance lies above the
+#: window-median one at some tau by more than chance - a Wilson-Hilferty z below the
+#: FLOOR_ALPHA family-wise point over the taus (one-sided, Bonferroni: 3.17 for 13 taus) -
+#: has been pulled up by what no IEEE-952 term follows (a vehicle's sway, a level that
+#: rises towards Nyquist), and is fitted again with its Allan variance at most
+#: FLOOR_CAP_Z standard deviations above the recording's at every tau
+#: (:func:`floor_caps`); the recording's excess is then left to the effects and the
+#: mismatch map. (A cap at the trigger itself would let the fit sit at -3 standard deviations
+#: at every long tau at once: psins_rlg_z, N 0.033 deg/sqrt(h) where its long taus read 0.019.)
+FLOOR_ALPHA = 0.01
+FLOOR_CAP_Z = 1.0
+
+
+def _floor_judged(tau_s: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+    """The taus where the floor is judged: from 1 / (2 x LOWPASS_CUTOFF_FS[0]) samples on
+    (12.5). At shorter taus a sensor's low-pass (or a decimation filter: the ``bandwidth``
+    effect) may lower the Allan variance - an effect that removes variance - so a fit
+    above the recording there is no sign of a misfit (the G ring's decimation filter,
+    z -5.6 at its shortest tau; a dip between its humps at 8 samples)."""
+    return np.asarray(tau_s) * sample_rate_hz >= 0.5 / LOWPASS_CUTOFF_FS[0]
+
+
+def _floor_violated(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, fit: dict[str, float],
+                    lowpass_unit: np.ndarray | None, sample_rate_hz: float) -> bool:
+    """Whether ``fit`` lies above the Allan variance ``av`` by more than chance at some
+    judged tau (:func:`_floor_judged`; FLOOR_ALPHA family-wise over them)."""
+    judged = _floor_judged(tau_s, sample_rate_hz)
+    if not judged.any():
+        return False
+    pred = model_avar(tau_s, fit, lowpass_unit)[judged]
+    return bool(np.any(pred > av[judged] * floor_caps(edf[judged], float(norm.isf(FLOOR_ALPHA / judged.sum())))))
+
+
+def _floor_cap(tau_s: np.ndarray, edf: np.ndarray, sample_rate_hz: float) -> np.ndarray:
+    """The refit's bound (model / data Allan variance) per tau: FLOOR_CAP_Z at the judged
+    taus, none at the others."""
+    return np.where(_floor_judged(tau_s, sample_rate_hz), floor_caps(edf, FLOOR_CAP_Z), np.inf)
 
 
 def baseline_model(rec: Recording) -> SensorModel:

@@ -235,8 +235,11 @@ class Selection:
             null = bootstrap(Replicas(stoch, s.t_s, s.aux, s.valid), s.grid, s.n_boot,
                              s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
         y = f.y   # a new array, taken over by the trial's context (which zeroes it where invalid)
-        if _subtracted(c):
-            y -= c.rate
+        if _subtracted(c) and c.rate is not None:
+            # the residual stays centred over the valid samples, as the first one is (the model's bias
+            # takes the effect's mean): in a gapped record an offset, zeroed in the gaps, is gate-shaped
+            # low-frequency power the spectral candidates would fit
+            y -= c.rate - (np.mean(c.rate[s.valid]) if s.valid.any() else 0.0)
         return s.fit(y, stoch, null, {**self.counts, c.kind: self.counts.get(c.kind, 0) + 1}, self.contradicted)
 
     def rejections(self) -> list[tuple[str, float, str]]:

@@ -7,7 +7,14 @@ import pytest
 
 from fogmon.cli import main
 from fogmon.davar.theory import adev_model, markov_adev
-from fogmon.explain.baseline import baseline_model, curve_noise_fit, markov_unit_avar
+from fogmon.explain.baseline import (
+    _floor_violated,
+    baseline_model,
+    curve_noise_fit,
+    markov_unit_avar,
+    parsimonious_fit,
+    robust_avar,
+)
 from fogmon.explain.report import baseline_low_pass
 from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel
@@ -98,3 +105,17 @@ def test_a_filter_over_quantization_noise_is_left_to_the_bandwidth_effect():
                     [Effect("bandwidth", {"cutoff_hz": 8.25, "order": 4, "taps": []})])
     b = baseline_model(simulate(m, duration_s=900.0, seed=1))
     assert b.effects == [] and b.noise.Q_arcsec > 0
+
+
+def test_baseline_stays_below_a_recording_whose_short_taus_hold_sway_and_a_high_band():
+    """White noise N 0.02 deg/sqrt(h) beside a sway band at 3 Hz and a broad band at 35 Hz
+    (no IEEE-952 term follows either): the window-median fit takes N 0.038, above the
+    recording at the long taus by more than chance; refitted below it, N is the truth's."""
+    lines = [Effect("vibration_lines", {"freq_hz": [3.0], "sigma_dph": [25.0], "bandwidth_hz": [1.5]}),
+             Effect("vibration_lines", {"freq_hz": [35.0], "sigma_dph": [40.0], "bandwidth_hz": [25.0]})]
+    rec = simulate(SensorModel(100.0, 0.0, Noise(N_dpsh=0.02), lines), duration_s=1800.0, seed=3)
+    blk = rec.to_block()
+    tau, av, edf = robust_avar(blk.error_rate_dph, blk.valid, 100.0)
+    first, _, low_pass = parsimonious_fit(tau, av, edf, 100.0)
+    assert low_pass is None and first["N_dpsh"] > 0.03 and _floor_violated(tau, av, edf, first, None, 100.0)
+    assert baseline_model(rec).noise.N_dpsh == pytest.approx(0.02, rel=0.15)

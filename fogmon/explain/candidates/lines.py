@@ -65,10 +65,10 @@ def _fit_line(bp: BinnedPeriodogram, S: np.ndarray, floor: float, sample_rate_hz
     var0 = max(float(np.sum(bp.count[near] * np.maximum(bp.I[near] - S[near], 0.0)) / n), 1e-30)
     bw_lo, nyq = 2.0 * sample_rate_hz / n, sample_rate_hz / 2
 
-    def unpack(x):
+    def unpack(x):  # the exponents bounded: the simplex may wander far (OverflowError on gring_quiet_bjz)
         f = float(x[0])
-        bw = float(min(max(math.exp(x[1]), bw_lo), f / LINE_MIN_Q))  # narrowband: Q = f / bw
-        return f, math.sqrt(math.exp(x[2])), bw
+        bw = float(min(max(math.exp(min(x[1], math.log(nyq))), bw_lo), f / LINE_MIN_Q))  # narrowband: Q = f / bw
+        return f, math.sqrt(math.exp(min(x[2], 700.0))), bw
 
     def dev(x):
         f, sig, bw = unpack(x)
