@@ -37,8 +37,8 @@ lies below the normal, so a limit at the normal quantile came out low. On NBK_10
 of validation/calibration.py (Q 0, held at 0 in 75 % of the refits at the true N, rho
 about 0.87) s at the true N had mean -0.28 (sd 0.95, 200 records) and N's upper limit
 covered 91.0 % of 300 records (92.1 % of 1000); read through the boundary distribution,
-95.3 %. Where q's truth is above 0 but the refit holds it at 0, the shift is smaller: the
-rule errs high for an upper limit, low for a lower one. A term the record does not
+95.3 % (96.1 %). Where q's truth is above 0 but the refit holds it at 0, the shift is
+smaller: the rule errs high for an upper limit, low for a lower one. A term the record does not
 identify keeps the normal quantile: the upper limits of the terms identified in under
 half of a model's records already covered 97.7-100 % (300 records per model; few EDF at
 the long taus make s conservative), and the rule widened them further (QNB_1kHz_17min B
