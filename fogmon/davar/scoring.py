@@ -347,14 +347,12 @@ def avar_sd(model, nu, c2):
 
 
 @kernel(error_model="numpy")
-def sandwich_variances(x, model, corr, cols, rw, nu, c2, sd):
-    """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
-    EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
-    Naive: the inverse information of the independence likelihood, (X'WX)^-1 (columns
-    scaled to unit norm; ``symmetric_pinv``). Sandwich: with the Allan variances'
-    standard deviations ``sd`` (model sqrt(2 / nu + c2) under the fitted mixture, c2 the
-    model-inadequacy variance) and their exact correlation across taus ``corr`` (applied
-    to the inadequacy part too: a misfit is smooth in tau)."""
+def information_and_meat(x, model, corr, cols, rw, nu, c2, sd):
+    """(info, meat, scale) of the EDF-weighted estimator over the terms ``cols`` (mask over
+    the 5 columns of x, weights rw / ((2 / nu + c2) model^2)), the columns scaled to unit
+    norm (``scale``: their norms): info = X'WX, the information of the independence
+    likelihood, and meat = G' corr G (G = WX sd), the covariance of the scores with the
+    Allan variances' standard deviations ``sd`` and correlation across taus ``corr``."""
     idx = np.empty(cols.shape[0], np.int64)
     t, k = x.shape[0], _nonzero(cols, idx)
     xs = np.empty((t, k))
@@ -387,6 +385,20 @@ def sandwich_variances(x, model, corr, cols, rw, nu, c2, sd):
             info[q, p] = s_info
             meat[p, q] = s_meat
             meat[q, p] = s_meat
+    return info, meat, scale
+
+
+@kernel(error_model="numpy")
+def sandwich_variances(x, model, corr, cols, rw, nu, c2, sd):
+    """Variances of A over the terms ``cols`` (mask over the 5 columns of x) of the
+    EDF-weighted estimator (weights rw / ((2 / nu + c2) model^2)): (naive, sandwich).
+    Naive: the inverse information of the independence likelihood, (X'WX)^-1 (columns
+    scaled to unit norm; ``symmetric_pinv``). Sandwich: with the Allan variances'
+    standard deviations ``sd`` (model sqrt(2 / nu + c2) under the fitted mixture, c2 the
+    model-inadequacy variance) and their exact correlation across taus ``corr`` (applied
+    to the inadequacy part too: a misfit is smooth in tau); ``information_and_meat``."""
+    info, meat, scale = information_and_meat(x, model, corr, cols, rw, nu, c2, sd)
+    k = scale.shape[0]
     bread = symmetric_pinv(info)
     naive = np.empty(k)
     sand = np.empty(k)

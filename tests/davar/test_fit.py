@@ -284,3 +284,93 @@ def test_mixture_correlation_is_the_normalised_relative_covariance():
         cov = avar_relative_covariance(f, edf.cov, edf.full)
         assert np.allclose(mixture_correlation(edf.x, a, edf.cov), cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov))),
                            rtol=1e-12, atol=1e-14)
+
+
+def test_boundary_z_is_the_normal_quantile_of_the_boundary_null_distribution():
+    # a nuisance term held at its bound 0 (fogmon/davar/profile.py; issue 28: upper limits
+    # that cover when another term is near its detection limit):
+    # s = sqrt(1 - rho^2) Z1 + rho Z2 given Z2 < 0: CDF 2 Phi2(s, 0; rho)
+    from scipy.stats import multivariate_normal, norm
+
+    from fogmon.davar.profile import boundary_z
+    bz = from_python(boundary_z)
+    for rho in (0.05, 0.5, 0.87, 0.99):
+        bvn = multivariate_normal(cov=[[1.0, rho], [rho, 1.0]])
+        for s in (-4.0, -1.96, -1.645, -0.3, 0.0, 0.4, 1.5):
+            p = 2.0 * bvn.cdf([s, 0.0])
+            if 1e-6 < p < 1.0 - 1e-6:  # within scipy's reach
+                assert abs(bz(s, rho) - norm.ppf(p)) < 1e-5, (s, rho)
+    for s in (-2.0, 0.0, 1.0):  # no term at its bound (-1), or one that shifts s up: s as it is
+        assert bz(s, -1.0) == s and bz(s, -0.4) == s
+    assert abs(bz(-1.959964, 1.0) - norm.ppf(0.05)) < 1e-6  # rho 1: s <= 0, CDF 2 Phi(s)
+    assert bz(3.0, 0.999999) == 37.0  # finite beyond the doubles' reach
+
+
+def test_boundary_correlation_is_that_of_the_projected_scores():
+    # numpy: U* = U_nq - I_nq,G I_GG^-1 U_G, cov(U*) = P meat P', the largest corr over the terms not free
+    from fogmon.davar.profile import boundary_correlation
+    bc = from_python(boundary_correlation)
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        t = 9
+        x = np.exp(rng.normal(size=(t, 5)))
+        free = rng.random(5) < 0.5
+        n = trial % 5
+        free[n] = True
+        if free.all():
+            free[(n + 1) % 5] = False
+        model, nu, rw = np.exp(rng.normal(size=t)), rng.uniform(5, 500, t), rng.uniform(0.2, 1.0, t)
+        g = rng.normal(size=(t, t + 2))
+        cov = g @ g.T
+        corr = cov / np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
+        c2 = 0.01 * (trial % 2)
+        sd = model * np.sqrt(2.0 / nu + c2)
+        w = rw / ((2.0 / nu + c2) * model**2)
+        info = x.T @ (w[:, None] * x)
+        gx = (w * sd)[:, None] * x
+        meat = gx.T @ corr @ gx
+        others = [j for j in range(5) if free[j] and j != n]
+        want = -1.0
+        for q in range(5):
+            if free[q]:
+                continue
+            p = np.zeros((2, 5))
+            p[0, n] = p[1, q] = 1.0
+            if others:
+                p[:, others] -= info[np.ix_([n, q], others)] @ np.linalg.inv(info[np.ix_(others, others)])
+            c = p @ meat @ p.T
+            want = max(want, c[0, 1] / np.sqrt(c[0, 0] * c[1, 1]))
+        assert abs(bc(x, model, corr, free, n, rw, nu, c2, sd) - want) < 1e-7, trial
+
+
+def test_an_upper_limit_beside_a_term_held_at_its_bound_follows_the_boundary_rule():
+    # white rate noise N and a flicker floor B, exact, with the two shortest taus' Allan
+    # variance 3 % low: the data ask for a negative Q, which every refit holds at 0. N's
+    # one-sided 95 % upper limit is the c where the boundary distribution's quantile of
+    # s(c) is -1.645, above the c where s(c) itself is -1.645
+    from fogmon.davar import fit as F
+    from fogmon.davar.profile import boundary_z, fit_full, score_limits, signed_score
+    from fogmon.davar.theory import POWERS
+    res = exact_result(2**16, N_dpsh=0.02, B_dph=0.1)
+    avar = np.square(res.adev_dph)
+    avar[:2] *= 0.97
+    m = res.m
+    x = res.tau_s[:, None] ** POWERS
+    edf = F._NoiseModel(res.tau_s, m.astype(np.int64), res.n_terms, res.n_samples)
+    found, a, se, rw, c2 = fit_full(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, np.array(F._starts(len(m))),
+                                    F.TUKEY_C, F.MISFIT_FLOOR**2, F.BIRGE_GATE, F._RW_TOL, F._MAX_ROBUST_ITER,
+                                    F._ROBUST_RTOL, F._RTOL, F._MAX_ITER)
+    assert found and a[0] == 0.0 and a[1] > 0
+    s0, _, up = score_limits(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, se, np.ones(5, bool),
+                             F.IDENTIFY_Z, np.array([]), np.array([F._UPPER_Z]), F._ROBUST_RTOL, F._MAX_ITER)
+    present = s0 > F.IDENTIFY_Z
+    score = from_python(signed_score)
+
+    def at(c):
+        return score(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, 1, c, F._ROBUST_RTOL,
+                     F._MAX_ITER, a, present)
+
+    s, rho, refit = at(up[1, 0])
+    assert refit[0] == 0.0 and rho > 0.5  # Q held at its bound, its score correlated with N's
+    assert abs(from_python(boundary_z)(s, rho) + F._UPPER_Z) < 5e-3  # the root to 1e-3
+    assert s < -F._UPPER_Z - 0.1  # the normal quantile would have put the limit lower
