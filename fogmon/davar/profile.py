@@ -132,19 +132,32 @@ def boundary_correlation(x, model, corr, free, n, rw, nu, c2, sd):
             kn += cols[j] and j < n
             kq += cols[j] and j < q
         bread = symmetric_pinv(info)
-        sand = bread @ meat @ bread
         b00, b01, b11 = bread[kn, kn], bread[kn, kq], bread[kq, kq]
         det = b00 * b11 - b01 * b01
         if not det > 1e-12 * b00 * b11:
             continue
         i00, i01, i11 = b11 / det, -b01 / det, b00 / det  # B_nq^-1
-        s00, s01, s11 = sand[kn, kn], sand[kn, kq], sand[kq, kq]
+        s00, s01, s11 = _sandwich(bread, meat, kn, kn), _sandwich(bread, meat, kn, kq), _sandwich(bread, meat, kq, kq)
         c00 = i00 * (i00 * s00 + i01 * s01) + i01 * (i00 * s01 + i01 * s11)
         c11 = i01 * (i01 * s00 + i11 * s01) + i11 * (i01 * s01 + i11 * s11)
         c01 = i00 * (i01 * s00 + i11 * s01) + i01 * (i01 * s01 + i11 * s11)
         if c00 > 0 and c11 > 0:
             best = max(best, c01 / np.sqrt(c00 * c11))
     return best
+
+
+@kernel()
+def _sandwich(bread, meat, i, j):
+    """Entry (i, j) of bread @ meat @ bread (symmetric k x k) by plain loops: numba's
+    ``@`` calls BLAS through scipy, which the ahead-of-time build (setup.py) has not."""
+    k = bread.shape[0]
+    acc = 0.0
+    for a in range(k):
+        row = 0.0
+        for b in range(k):
+            row += meat[a, b] * bread[b, j]
+        acc += bread[i, a] * row
+    return acc
 
 
 @kernel(error_model="numpy")
