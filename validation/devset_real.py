@@ -13,10 +13,12 @@ ends at most 1.5 or at most the untouched record's own score against its model. 
 the untouched record with aux channels that act on nothing must get nothing.
 
 Run by validation/explain_devset.py (rows ``real_*``); the untouched models are fitted
-once and kept in $FOGMON_DEVSET_CACHE (default: the system's temporary folder).
+once per version of fogmon's sources and kept in $FOGMON_DEVSET_CACHE (default: the
+system's temporary folder).
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import tempfile
@@ -28,6 +30,7 @@ import numpy as np
 from devset_aux import channels, law_checks
 from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
+import fogmon
 from fogmon.explain.baseline import baseline_model
 from fogmon.explain.explainer import explain, without_motion
 from fogmon.explain.options import Options
@@ -46,7 +49,20 @@ from fogmon.sim.model import (
 )
 from fogmon.sim.simulate import simulate
 
-CACHE = Path(os.environ.get("FOGMON_DEVSET_CACHE", tempfile.gettempdir())) / "fogmon_devset_real"
+
+def _code_digest() -> str:
+    """A digest of fogmon's Python sources: the untouched models depend on explain's code,
+    so a cache made by other code is not read (a stale one judged the cases against the
+    previous baseline)."""
+    h = hashlib.sha256()
+    root = Path(fogmon.__file__).parent
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
+
+
+CACHE = Path(os.environ.get("FOGMON_DEVSET_CACHE", tempfile.gettempdir())) / f"fogmon_devset_real-{_code_digest()}"
 #: backgrounds: manifest name -> seconds used from the start (None: all)
 BACKGROUNDS = {"adis16405_x": 7200.0, "px4_quiet_z": None, "psins_rlg_z": None}
 
