@@ -60,8 +60,8 @@ from fogmon import startup
 from fogmon.errors import FogmonWarning
 
 #: the modules that define kernels (``warm_up`` imports them; tests/test_jit.py checks the list)
-KERNEL_MODULES = ("fogmon.davar.kernels", "fogmon.davar.running_sums", "fogmon.davar.scoring", "fogmon.davar.profile",
-                  "fogmon.motion")
+KERNEL_MODULES = ("fogmon.davar.kernels", "fogmon.davar.window_stats", "fogmon.davar.running_sums",
+                  "fogmon.davar.scoring", "fogmon.davar.profile", "fogmon.motion")
 
 # argument types of the declarations: scalars, C-contiguous 1-4 dimensional arrays
 F8, I8, BOOL, NONE = types.float64, types.int64, types.boolean, types.none

@@ -16,7 +16,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from fogmon.davar import kernels
+from fogmon.davar import kernels, window_stats
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.fit import low_pass_taus, mixture_edf_row, quick_avar_terms
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
@@ -106,9 +106,9 @@ def _model_holds(model, sums, counts, m) -> bool:
     """The quick-fit model curve ``model`` (``_model_curve``) still describes a window:
     |ln(avar / model)| <= HOLD_Z sqrt(2 / nu + 0.1^2) at every tau with terms, nu =
     n_terms / m (about the EDF of white rate noise, lower for the others: a loose test).
-    One numba call (``kernels.model_holds``): a dozen numpy calls on 46 values cost
+    One numba call (``window_stats.model_holds``): a dozen numpy calls on 46 values cost
     ~100 us on a loaded machine between engine blocks."""
-    return bool(kernels.model_holds(model, sums, c_array(counts, np.int64), m, HOLD_Z))
+    return bool(window_stats.model_holds(model, sums, c_array(counts, np.int64), m, HOLD_Z))
 
 
 def edf_rows(sums, counts, ends, m, n_samples: int, every: int, prev=None):
@@ -173,7 +173,8 @@ def adev_edf(sums, counts, m, n_samples: int, alpha=None, gapless=None) -> tuple
     adev = np.empty(sums.shape)
     # counts broadcast from one row (the streaming engine without gaps): the kernel reads that row
     one_row = counts[:1] if counts.strides[0] == 0 else counts
-    n_gapped = kernels.frame_stats(c_array(sums, np.float64), c_array(one_row, np.int64), n_samples - 2 * m + 1, adev)
+    n_gapped = window_stats.frame_stats(c_array(sums, np.float64), c_array(one_row, np.int64),
+                                        n_samples - 2 * m + 1, adev)
     edf = window_edf(counts, m, n_samples, alpha, gapless, n_gapped)
     return adev.reshape(shape), edf.reshape(shape)
 
@@ -184,7 +185,7 @@ def window_edf(counts, m, n_samples: int, alpha=None, gapless=None, n_gapped: in
     tau (Greenhall's for the noise type ``alpha`` when given, else the rows ``gapless``,
     see :func:`adev_edf`), the effective EDF where an entry has fewer terms than a
     gap-free window. ``n_gapped``: the number of those entries when known
-    (``kernels.frame_stats`` counts them), else counted here."""
+    (``window_stats.frame_stats`` counts them), else counted here."""
     nm = len(m)
     counts = np.asarray(counts, dtype=np.int64).reshape(-1, nm)
     m = np.ascontiguousarray(m, dtype=np.int64)
@@ -257,7 +258,7 @@ def _shaped_bounds(terms, adev, lo, hi, edf, counts, m, n_samples: int, confiden
 def gapped_edf(edf_runs, run, counts, n_gapped: int, m, n_samples: int) -> np.ndarray:
     """EDF per window x tau (windows ``run``'s rows of the gap-free ``edf_runs``; a
     read-only broadcast when one row holds for all and no entry has a gap) after
-    ``kernels.frame_stats``: its ``n_gapped`` entries with fewer terms than a gap-free
+    ``window_stats.frame_stats``: its ``n_gapped`` entries with fewer terms than a gap-free
     window get their effective EDF."""
     if n_gapped == 0 and len(edf_runs) == 1:
         return np.broadcast_to(edf_runs[0], (len(run), len(m)))

@@ -61,7 +61,7 @@ class WindowSums:
             return self._adev_dph(rows)
 
     def _adev_dph(self, rows: slice) -> np.ndarray:
-        from fogmon.davar import kernels  # (numba: loaded by the engine that made these sums)
+        from fogmon.davar import window_stats  # (numba: loaded by the engine that made these sums)
         from fogmon.jit import c_array
         if self._formed:
             return self._values[rows]
@@ -69,12 +69,12 @@ class WindowSums:
         counts = c_array(self._counts[:1] if one_row else self._counts[rows], np.int64)
         if rows == slice(None):
             self._values = c_array(self._values, np.float64)
-            kernels.adev_in_place(self._values, counts)
+            window_stats.adev_in_place(self._values, counts)
             self._formed = True
             return self._values
         sums = c_array(self._values[rows], np.float64)
         adev = np.empty(sums.shape)
-        kernels.frame_stats(sums, counts, np.zeros(sums.shape[1], np.int64), adev)
+        window_stats.frame_stats(sums, counts, np.zeros(sums.shape[1], np.int64), adev)
         return adev
 
 

@@ -11,7 +11,7 @@ import pytest
 from scipy.stats import chi2
 
 from fogmon.block import Block
-from fogmon.davar import kernels
+from fogmon.davar import window_stats
 from fogmon.davar.batch import HOLD_Z, dadev, edf_rows, oadev, row_edf, statistics
 from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.streaming import STAGE, StreamingDadev
@@ -189,7 +189,7 @@ def test_model_holds_is_the_z_test_at_every_tau_with_terms():
         use = n > 0
         with np.errstate(divide="ignore"):
             z = np.log(sums[use] / (2.0 * n[use]) / model[use]) / np.sqrt(2.0 * m[use] / n[use] + 0.01)
-        assert kernels.model_holds(model, sums, n, m, HOLD_Z) == bool(np.all(np.abs(z) <= HOLD_Z))
+        assert window_stats.model_holds(model, sums, n, m, HOLD_Z) == bool(np.all(np.abs(z) <= HOLD_Z))
 
 
 _RUN = ("import numpy as np; from fogmon import jit; from fogmon.davar import kernels; "
