@@ -1,0 +1,146 @@
+"""Rules for the mixture behind the EDF of the longest taus, compared on calibration records.
+
+The per-tau ADEV intervals (``validation/calibration.py``, "Per-tau ADEV intervals") take
+their EDF from the noise mixture of a quick IEEE-952 fit, its ramp R deterministic. At the
+longest taus that mixture decides the interval and is poorly known: a chance ramp where
+there is none (NBK) makes the interval too narrow, a chance random walk K beside a real
+ramp (NBR) too wide. This script scores alternative mixtures on the calibration's own
+records (same models, same seeds) so that a rule is measured before it enters the
+product. Not part of any verdict; docs/davar.md ("Calibration") quotes its tables.
+
+Rules (each with the chi-square shape, and with ``S`` the exact shape of
+``fogmon.davar.shape`` at the taus where it applies):
+
+- ``quick``: the product's (``fit.quick_avar_terms``' mixture).
+- ``ramp_id``: the ramp's share deterministic only when the whole-run fit
+  (``fit_noise``) identifies R, else counted as random-walk rate noise.
+- ``detrended``: ``ramp_id`` with K taken from the quick fit of the record with its
+  least-squares line removed (a ramp has no Allan variance there; a random walk keeps
+  most of its own: K's estimate no longer trades against R's).
+- ``true``: the simulator's model (the reference).
+
+    python validation/edf_rules.py [--records 200] [--models 2,3,4] [--last 6] [--seed 1] [--jobs 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from multiprocessing import Pool
+
+import numpy as np
+from scipy.stats import chi2
+
+from fogmon.davar.batch import oadev
+from fogmon.davar.confidence import edf_mixture_from, mixture_matrices
+from fogmon.davar.fit import fit_noise, quick_avar_terms
+from fogmon.davar.shape import shape_factors
+from fogmon.davar.theory import POWERS, avar_terms_to_coefficients, coefficients_to_avar_terms
+from fogmon.modelcheck.band import theory_adev_dph
+
+sys.path.insert(0, __file__.rsplit("/", 1)[0])
+from calibration import CONFIDENCES, MODELS, _record, record_seed  # noqa: E402
+
+RULES = ("quick", "ramp_id", "detrended", "true")
+K, R = 3, 4  # Q, N, B, K, R: the classes' order (confidence.MIX_ALPHAS, then the ramp)
+
+
+def fractions(a: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Share (taus x 5) of each term in the model Allan variance (white rate where empty)."""
+    parts = tau[:, None] ** POWERS * a
+    total = parts.sum(1, keepdims=True)
+    return np.where(total > 0, parts / np.where(total > 0, total, 1.0), np.eye(5)[1])
+
+
+def _ramp_random(f: np.ndarray) -> np.ndarray:
+    f = f.copy()
+    f[:, K] += f[:, R]
+    f[:, R] = 0.0
+    return f
+
+
+def _quick(res, n: int) -> np.ndarray:
+    return quick_avar_terms(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
+
+
+def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.ndarray]:
+    """(model index, tau_s, {rule: coverage (2 confidences x taus)}, [K identified, K of
+    the quick fit, K detrended (deg/h/sqrt(h))]) of one record."""
+    k, i, seed = job
+    case = MODELS[k]
+    rec = _record(case, record_seed(seed, i))
+    n = len(rec.rate_dph)
+    res = oadev(rec.rate_dph, case.sample_rate_hz, taus="octave")
+    truth = theory_adev_dph(case.model, res.m, case.sample_rate_hz, case.duration_s)
+    tau, m = res.tau_s, res.m
+    fit = fit_noise(res)
+    r_ident = bool(fit.R_dphh.identifiable)
+    a = _quick(res, n)
+    t_s = np.arange(n) / case.sample_rate_hz
+    line = np.polyval(np.polyfit(t_s, rec.rate_dph, 1), t_s)
+    a_detr = a.copy()
+    a_detr[K] = _quick(oadev(rec.rate_dph - line, case.sample_rate_hz, taus="octave"), n)[K]
+    mix = {"quick": fractions(a, tau),
+           "ramp_id": fractions(a, tau) if r_ident else _ramp_random(fractions(a, tau)),
+           "detrended": fractions(a_detr, tau) if r_ident else _ramp_random(fractions(a_detr, tau)),
+           "true": fractions(coefficients_to_avar_terms(*case.truth), tau)}
+    mats, full = mixture_matrices(m, n), n - 2 * m + 1
+    out = {}
+    for rule, f in mix.items():
+        edf = edf_mixture_from(f, mats, full)
+        for shaped in (False, True):
+            cover = []
+            for c in CONFIDENCES:
+                lo = res.adev_dph * np.sqrt(edf / chi2.ppf(0.5 + c / 2, edf))
+                hi = res.adev_dph * np.sqrt(edf / chi2.ppf(0.5 - c / 2, edf))
+                if shaped:
+                    f_lo, f_hi = shape_factors(f, m, n, edf, c)
+                    ok = np.isfinite(f_lo) & np.isfinite(f_hi)
+                    lo, hi = np.where(ok, res.adev_dph * f_lo, lo), np.where(ok, res.adev_dph * f_hi, hi)
+                cover.append((lo <= truth) & (truth <= hi))
+            out[rule + ("S" if shaped else "")] = np.array(cover)
+    k_dphsh = avar_terms_to_coefficients(np.array([a, a_detr]))[:, K]
+    return k, tau, out, np.array([float(fit.K_dphsh.identifiable), *k_dphsh])
+
+
+def _median(x: np.ndarray) -> str:
+    return f"{np.median(x):.3g}" if len(x) else "-"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--records", type=int, default=200, help="records per model")
+    p.add_argument("--models", default="0,1,2,3,4", help="indices into calibration.MODELS")
+    p.add_argument("--last", type=int, default=6, help="how many of the longest taus to print")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--jobs", type=int, default=2)
+    args = p.parse_args(argv)
+    ks = [int(s) for s in args.models.split(",")]
+    jobs = [(k, i, args.seed) for k in ks for i in range(args.records)]
+    if args.jobs > 1:
+        with Pool(args.jobs) as pool:
+            rows = pool.map(record_rules, jobs, chunksize=4)
+    else:
+        rows = [record_rules(j) for j in jobs]
+    print(f"Coverage (%) of the per-tau ADEV intervals at 68.3 / 95 % by EDF rule, {args.records} records per "
+          f"model, seed {args.seed} (S: the exact shape where it applies)")
+    names = [r + s for r in RULES for s in ("", "S")]
+    for k in ks:
+        mine = [r for r in rows if r[0] == k]
+        tau = mine[0][1]
+        ks_ = np.array([r[3] for r in mine])
+        ident = ks_[:, 0] > 0
+        print(f"\n{MODELS[k].name} (true K {MODELS[k].noise.K_dphsh:g} deg/h/sqrt(h)): K identified in "
+              f"{100 * ident.mean():.0f} %; K > 0 in the quick fit {100 * (ks_[:, 1] > 0).mean():.0f} %, detrended "
+              f"{100 * (ks_[:, 2] > 0).mean():.0f} %; median K quick / detrended where identified "
+              f"{_median(ks_[ident, 1])} / {_median(ks_[ident, 2])}, where not {_median(ks_[~ident, 1])} / "
+              f"{_median(ks_[~ident, 2])} ({(~ident).sum()} records)")
+        print(f"  {'tau_s':>7s}" + "".join(f"{nm:>13s}" for nm in names))
+        cover = {nm: 100.0 * np.mean([r[2][nm] for r in mine], axis=0) for nm in names}
+        for j in range(max(len(tau) - args.last, 0), len(tau)):
+            print(f"  {tau[j]:7.4g}" + "".join(f"  {cover[nm][0, j]:5.1f}/{cover[nm][1, j]:4.1f}" for nm in names))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
