@@ -15,7 +15,8 @@ from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
-from fogmon.explain.fitting import Whittle, low_band_flicker
+from fogmon.explain.candidates.base import centred, flicker_psd
+from fogmon.explain.fitting import Whittle
 from fogmon.explain.replicas import Replicas
 from fogmon.sim.model import SensorModel
 
@@ -216,8 +217,9 @@ class Selection:
 
     def trial(self, c: Candidate) -> Fit:
         """The fit with ``c`` added: a mean-type effect, or outliers replaced, is
-        subtracted from the residual (same null); a noise-type one joins the stochastic
-        model (a new bootstrap null)."""
+        subtracted from the residual (``candidates.base.centred``: it stays centred over
+        the valid samples; same null); a noise-type one joins the stochastic model (a new
+        bootstrap null)."""
         s, f = self.setting, self.fit
         n0 = c.white_n0_dpsh
         if _subtracted(c) and n0 is None:
@@ -236,10 +238,7 @@ class Selection:
                              s.seed + 7919 * (len(self.accepted) + 1), s.alpha, s.workers, s.progress, s.mapper)
         y = f.y   # a new array, taken over by the trial's context (which zeroes it where invalid)
         if _subtracted(c) and c.rate is not None:
-            # the residual stays centred over the valid samples, as the first one is (the model's bias
-            # takes the effect's mean): in a gapped record an offset, zeroed in the gaps, is gate-shaped
-            # low-frequency power the spectral candidates would fit
-            y -= c.rate - (np.mean(c.rate[s.valid]) if s.valid.any() else 0.0)
+            y -= centred(c.rate, s.valid)   # the residual stays centred over the valid samples
         return s.fit(y, stoch, null, {**self.counts, c.kind: self.counts.get(c.kind, 0) + 1}, self.contradicted)
 
     def rejections(self) -> list[tuple[str, float, str]]:
@@ -464,11 +463,12 @@ def _half_test(ctx: Context, X: np.ndarray, m: np.ndarray, beta: np.ndarray, det
 def judged_psd(ctx: Context, c: Candidate) -> np.ndarray:
     """The noise PSD a mean-type candidate ``c`` was judged against on the whole record
     (``candidates.base.judged_gls``): the calibrated PSD raised at the slowest
-    frequencies by the flicker excess of the residual it leaves, when significant
-    (``fitting.low_band_flicker``; the sensor's own bias wander)."""
+    frequencies by the flicker excess of the residual it leaves, taken out as the trial
+    takes it (``candidates.base.flicker_psd``: centred), when significant (the sensor's
+    own bias wander)."""
     if c.rate is None:
         return ctx.wh.S
-    return low_band_flicker(ctx.wh.S, ctx.Yf - ctx.wh.fft(c.rate), ctx.n)
+    return flicker_psd(ctx, c.rate)
 
 
 def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:

@@ -1,5 +1,5 @@
 """What every candidate shares: the ``Context`` it is fitted in, the fitted ``Candidate``,
-the GLS helpers of the mean-type kinds (``unit_rate``, ``judged_gls``) and the spectral
+the GLS helpers of the mean-type kinds (``unit_rate``, ``centred``, ``judged_gls``) and the spectral
 helpers of the noise-type ones (binned periodogram, the model's white level and pass
 band, ``replace_white``)."""
 from __future__ import annotations
@@ -124,15 +124,35 @@ def unit_rate(kind: str, params: dict, ctx: Context) -> np.ndarray:
     return fx.mean_rate_dph(validate_effect(kind, params, "candidate"), ctx.t_s, ctx.aux, ctx.sample_rate_hz)
 
 
-def judged_gls(ctx: Context, Xf: np.ndarray) -> GlsFit:
-    """Whittle GLS of the residual on the transformed design ``Xf``, judged against the
-    noise its own residual shows at the slowest frequencies: refitted with the PSD
-    raised there by that residual's significant flicker excess (low_band_flicker), so a
-    drift, step or settling that is significant only against a model PSD extrapolated
-    below its calibrated band - not against the sensor's own bias wander - loses that
-    significance (its gain, coefficients and standard errors are the refit's)."""
+def centred(rate: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """A mean-type effect's ``rate`` (deg/h) as it is taken out of the residual: less its
+    mean over the ``valid`` samples (a new array). The residual is centred over them
+    (the model's bias takes the effect's mean) and stays so wherever an effect is tried,
+    judged or accepted (``judged_gls``, ``flicker_psd``, ``Selection.trial``): in a
+    record cut into pieces an offset left, zeroed in the gaps, is gate-shaped
+    low-frequency power - a flicker excess, or a spectral term's gain."""
+    return rate - (np.mean(rate[valid]) if valid.any() else 0.0)
+
+
+def flicker_psd(ctx: Context, rate: np.ndarray) -> np.ndarray:
+    """The calibrated PSD raised at the slowest frequencies by the flicker excess the
+    residual shows once the mean-type effect ``rate`` (deg/h) is taken out (``centred``),
+    when significant (low_band_flicker); ``ctx.wh.S`` itself otherwise."""
+    return low_band_flicker(ctx.wh.S, ctx.Yf - ctx.wh.fft(centred(rate, ctx.valid)), ctx.n)
+
+
+def judged_gls(ctx: Context, X: np.ndarray, Xf: np.ndarray | None = None) -> GlsFit:
+    """Whittle GLS of the residual on the design ``X`` (n x p; ``Xf``: its transform,
+    ``ctx.wh.fft(X)`` when not given), judged against the noise its own residual shows
+    at the slowest frequencies: refitted with the PSD raised there by that residual's
+    significant flicker excess (``flicker_psd``), so a drift, step or settling that is
+    significant only against a model PSD extrapolated below its calibrated band - not
+    against the sensor's own bias wander - loses that significance (its gain,
+    coefficients and standard errors are the refit's)."""
+    if Xf is None:
+        Xf = ctx.wh.fft(X)
     fit = ctx.wh.gls(Xf, ctx.Yf)
-    S = low_band_flicker(ctx.wh.S, ctx.Yf - Xf.reshape(len(ctx.Yf), -1) @ fit.beta, ctx.n)
+    S = flicker_psd(ctx, X.reshape(ctx.n, -1) @ fit.beta)
     return fit if S is ctx.wh.S else Whittle(S, ctx.n, ctx.valid).gls(Xf, ctx.Yf)
 
 

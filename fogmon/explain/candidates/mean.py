@@ -75,7 +75,7 @@ def periodic(ctx: Context) -> Candidate | None:
     tr = t - t[0]
     X = np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
     del tr
-    fit = judged_gls(ctx, ctx.wh.fft(X))
+    fit = judged_gls(ctx, X)
     se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
     sa, ca = fit.beta
     amp = math.hypot(sa, ca)
@@ -144,7 +144,7 @@ def bias_step(ctx: Context) -> Candidate | None:
     lo, hi = int(0.01 * n), int(0.99 * n)
     n0, step, gain = detectors.step_scan(ctx.wh, ctx.Yf, lo, hi)
     X = (np.arange(n) >= n0).astype(float)[:, None]
-    fit = judged_gls(ctx, ctx.wh.fft(X))
+    fit = judged_gls(ctx, X)
     t_step = float(ctx.t_s[n0] - 0.5 / ctx.sample_rate_hz)
     params = {"t_s": t_step, "step_dph": float(fit.beta[0])}
     ev = f"change-point scan: bias step of {estimate_text(fit.beta[0], fit.se[0])} deg/h at t = {t_step:.6g} s"
@@ -194,7 +194,7 @@ def rate_ramp(ctx: Context) -> Candidate | None:
 
     t0, _ = _scan_1d(ctx, make, t[0] + T * np.linspace(0.0, 0.9, 16))
     X = make(t0, t)
-    fit = judged_gls(ctx, ctx.wh.fft(X))
+    fit = judged_gls(ctx, X)
     params = {"slope_dphh": float(fit.beta[0]), "t0_s": float(t0)}
     ev = f"trend regression: rate slope {estimate_text(fit.beta[0], fit.se[0])} deg/h^2 from t = {t0:.6g} s"
     return Candidate("rate_ramp", params, {"slope_dphh": float(fit.se[0])}, fit.chi2_gain, 2, ev, X @ fit.beta, X)
@@ -217,7 +217,7 @@ def warm_up(ctx: Context) -> Candidate | None:
     ltau, _ = _scan_1d(ctx, make, np.linspace(math.log(tau_lo), math.log(T / 2), 14),
                        slow=lambda lt: math.exp(lt) * ctx.sample_rate_hz >= 4 * b)
     X = make(ltau, t)
-    fit = judged_gls(ctx, ctx.wh.fft(X))
+    fit = judged_gls(ctx, X)
     tau = math.exp(ltau)
     params = {"amplitude_dph": float(fit.beta[0]), "tau_s": tau, "t0_s": t0}
     ev = f"settling fit: A = {estimate_text(fit.beta[0], fit.se[0])} deg/h, tau = {tau:.4g} s from t = {t0:.6g} s"
@@ -238,7 +238,7 @@ def scale_factor(ctx: Context) -> Candidate | None:
             best = (fit, X, names)
     assert best is not None  # the loop ran at least once
     _, X, names = best
-    fit = judged_gls(ctx, ctx.wh.fft(X))
+    fit = judged_gls(ctx, X)
     params = {"ppm": 0.0, "asym_ppm": 0.0}
     se = {}
     for i, nm in enumerate(names):
@@ -299,7 +299,7 @@ def _thermal_drift(ctx: Context, temp: np.ndarray, smooth_s: float, diff_s: floa
     assert best is not None  # the loop ran at least once
     _, _, names, label = best
     X = np.column_stack([cols[nm] for nm in names])
-    fit = judged_gls(ctx, np.column_stack([fcols[nm] for nm in names]))
+    fit = judged_gls(ctx, X, np.column_stack([fcols[nm] for nm in names]))
     v = dict(zip(names, fit.beta.tolist(), strict=True))
     s = dict(zip(names, fit.se.tolist(), strict=True))
     c1, c2 = v.get("k0_1", 0.0), v.get("k0_2", 0.0)
