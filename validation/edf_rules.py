@@ -17,6 +17,9 @@ Rules (each with the chi-square shape, and with ``S`` the exact shape of
 - ``detrended``: ``ramp_id`` with K taken from the quick fit of the record with its
   least-squares line removed (a ramp has no Allan variance there; a random walk keeps
   most of its own: K's estimate no longer trades against R's).
+- ``detr_exact``: ``detrended`` with the expected Allan variance of detrended white-rate
+  and random-walk noise in that fit (``detrend_factors``: at m = n / 4 a detrended random
+  walk keeps 0.47 of its Allan variance).
 - ``true``: the simulator's model (the reference).
 
     python validation/edf_rules.py [--records 200] [--models 2,3,4] [--last 6] [--seed 1] [--jobs 2]
@@ -33,7 +36,7 @@ from scipy.stats import chi2
 
 from fogmon.davar.batch import oadev
 from fogmon.davar.confidence import edf_mixture_from, mixture_matrices
-from fogmon.davar.fit import fit_noise, quick_avar_terms
+from fogmon.davar.fit import _NoiseModel, _scoring, fit_noise, low_pass_taus, octave_subset, quick_avar_terms
 from fogmon.davar.shape import shape_factors
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.modelcheck.band import theory_adev_dph
@@ -41,7 +44,7 @@ from fogmon.modelcheck.band import theory_adev_dph
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from calibration import CONFIDENCES, MODELS, _record, record_seed  # noqa: E402
 
-RULES = ("quick", "ramp_id", "detrended", "true")
+RULES = ("quick", "ramp_id", "detrended", "detr_exact", "true")
 K, R = 3, 4  # Q, N, B, K, R: the classes' order (confidence.MIX_ALPHAS, then the ramp)
 
 
@@ -63,6 +66,48 @@ def _quick(res, n: int) -> np.ndarray:
     return quick_avar_terms(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
 
 
+def detrend_factors(m, n: int) -> np.ndarray:
+    """(len(m), 2): E[Allan variance of n samples minus their least-squares line] / E[Allan
+    variance] at factors m, for white rate noise and for random-walk rate noise. Exact:
+    the line's slope b and the terms' signed mean are linear in the samples, the terms
+    shift by -b m^2, so the ratio needs E[b mean(d)] and E[b^2] (O(n) per m)."""
+    i = np.arange(n, dtype=np.float64)
+    w = (i - i.mean()) / np.sum((i - i.mean()) ** 2)  # slope = w . y
+    w_tail = np.cumsum(w[::-1])[::-1]  # a random walk's covariance min(i, l) + 1 as sums over steps
+    out = np.empty((len(m), 2))
+    for k, mm in enumerate(np.asarray(m, dtype=np.int64)):
+        n_terms = n - 2 * mm + 1
+        late = np.clip(np.minimum(n_terms - 1, i - mm) - np.maximum(0, i - 2 * mm + 1) + 1, 0, None)
+        early = np.clip(np.minimum(n_terms - 1, i) - np.maximum(0, i - mm + 1) + 1, 0, None)
+        v = (late - early) / n_terms  # mean of the terms = v . y
+        m2 = float(mm) ** 2
+        raw = 2.0 * mm  # white rate: E[mean d^2] of unit variance
+        out[k, 0] = (raw - 2 * m2 * (w @ v) + m2 * m2 * (w @ w)) / raw
+        v_tail = np.cumsum(v[::-1])[::-1]
+        raw = 2 * m2 * (2 * m2 + 1) / (6 * mm)  # random walk of unit steps
+        out[k, 1] = (raw - 2 * m2 * (w_tail @ v_tail) + m2 * m2 * (w_tail @ w_tail)) / raw
+    return out
+
+
+def _detrended_k(res_detr, n: int) -> float:
+    """A_K of the quick fit's method on the Allan variance of the detrended record with
+    the expected Allan variance of detrended white-rate and random-walk noise (their
+    columns scaled by ``detrend_factors``), no ramp."""
+    tau, avar, m, n_terms = res_detr.tau_s, res_detr.adev_dph**2, res_detr.m, res_detr.n_terms
+    use = np.flatnonzero((n_terms > 0) & np.isfinite(avar) & (avar > 0))
+    use = use[octave_subset(m[use], n // 4)]
+    use = use[low_pass_taus(avar[use]):]
+    if len(use) < 2:
+        return 0.0
+    x = tau[use][:, None] ** POWERS
+    g = detrend_factors(m[use], n)
+    x[:, 1] *= g[:, 0]
+    x[:, K] *= g[:, 1]
+    cols = np.array([True, True, True, True, False])
+    return float(_scoring(x, cols, avar[use], _NoiseModel(tau[use], m[use], n_terms[use], n), np.ones(len(use)),
+                          rtol=1e-3)[0][K])
+
+
 def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.ndarray]:
     """(model index, tau_s, {rule: coverage (2 confidences x taus)}, [K identified, K of
     the quick fit, K detrended (deg/h/sqrt(h))]) of one record."""
@@ -78,11 +123,14 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     a = _quick(res, n)
     t_s = np.arange(n) / case.sample_rate_hz
     line = np.polyval(np.polyfit(t_s, rec.rate_dph, 1), t_s)
-    a_detr = a.copy()
-    a_detr[K] = _quick(oadev(rec.rate_dph - line, case.sample_rate_hz, taus="octave"), n)[K]
+    res_detr = oadev(rec.rate_dph - line, case.sample_rate_hz, taus="octave")
+    a_detr, a_exact = a.copy(), a.copy()
+    a_detr[K] = _quick(res_detr, n)[K]
+    a_exact[K] = _detrended_k(res_detr, n)
     mix = {"quick": fractions(a, tau),
            "ramp_id": fractions(a, tau) if r_ident else _ramp_random(fractions(a, tau)),
            "detrended": fractions(a_detr, tau) if r_ident else _ramp_random(fractions(a_detr, tau)),
+           "detr_exact": fractions(a_exact, tau) if r_ident else _ramp_random(fractions(a_exact, tau)),
            "true": fractions(coefficients_to_avar_terms(*case.truth), tau)}
     mats, full = mixture_matrices(m, n), n - 2 * m + 1
     out = {}
@@ -99,7 +147,7 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
                     lo, hi = np.where(ok, res.adev_dph * f_lo, lo), np.where(ok, res.adev_dph * f_hi, hi)
                 cover.append((lo <= truth) & (truth <= hi))
             out[rule + ("S" if shaped else "")] = np.array(cover)
-    k_dphsh = avar_terms_to_coefficients(np.array([a, a_detr]))[:, K]
+    k_dphsh = avar_terms_to_coefficients(np.array([a, a_detr, a_exact]))[:, K]
     return k, tau, out, np.array([float(fit.K_dphsh.identifiable), *k_dphsh])
 
 
@@ -132,9 +180,10 @@ def main(argv: list[str] | None = None) -> int:
         ident = ks_[:, 0] > 0
         print(f"\n{MODELS[k].name} (true K {MODELS[k].noise.K_dphsh:g} deg/h/sqrt(h)): K identified in "
               f"{100 * ident.mean():.0f} %; K > 0 in the quick fit {100 * (ks_[:, 1] > 0).mean():.0f} %, detrended "
-              f"{100 * (ks_[:, 2] > 0).mean():.0f} %; median K quick / detrended where identified "
-              f"{_median(ks_[ident, 1])} / {_median(ks_[ident, 2])}, where not {_median(ks_[~ident, 1])} / "
-              f"{_median(ks_[~ident, 2])} ({(~ident).sum()} records)")
+              f"{100 * (ks_[:, 2] > 0).mean():.0f} %, detr_exact {100 * (ks_[:, 3] > 0).mean():.0f} %; median K "
+              f"quick / detrended / detr_exact where identified {_median(ks_[ident, 1])} / {_median(ks_[ident, 2])} / "
+              f"{_median(ks_[ident, 3])}, where not {_median(ks_[~ident, 1])} / {_median(ks_[~ident, 2])} / "
+              f"{_median(ks_[~ident, 3])} ({(~ident).sum()} records)")
         print(f"  {'tau_s':>7s}" + "".join(f"{nm:>13s}" for nm in names))
         cover = {nm: 100.0 * np.mean([r[2][nm] for r in mine], axis=0) for nm in names}
         for j in range(max(len(tau) - args.last, 0), len(tau)):
