@@ -35,7 +35,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from fogmon.davar.batch import oadev
-from fogmon.davar.confidence import edf_mixture_from, mixture_matrices
+from fogmon.davar.confidence import edf_mixture_from, mixture_matrices, term_fractions
 from fogmon.davar.fit import _NoiseModel, _scoring, fit_noise, low_pass_taus, octave_subset, quick_avar_terms
 from fogmon.davar.shape import shape_factors
 from fogmon.davar.theory import POWERS, avar_terms_to_coefficients, coefficients_to_avar_terms
@@ -46,13 +46,6 @@ from calibration import CONFIDENCES, MODELS, _record, record_seed  # noqa: E402
 
 RULES = ("quick", "ramp_id", "detrended", "detr_exact", "true")
 K, R = 3, 4  # Q, N, B, K, R: the classes' order (confidence.MIX_ALPHAS, then the ramp)
-
-
-def fractions(a: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """Share (taus x 5) of each term in the model Allan variance (white rate where empty)."""
-    parts = tau[:, None] ** POWERS * a
-    total = parts.sum(1, keepdims=True)
-    return np.where(total > 0, parts / np.where(total > 0, total, 1.0), np.eye(5)[1])
 
 
 def _ramp_random(f: np.ndarray) -> np.ndarray:
@@ -127,11 +120,10 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     a_detr, a_exact = a.copy(), a.copy()
     a_detr[K] = _quick(res_detr, n)[K]
     a_exact[K] = _detrended_k(res_detr, n)
-    mix = {"quick": fractions(a, tau),
-           "ramp_id": fractions(a, tau) if r_ident else _ramp_random(fractions(a, tau)),
-           "detrended": fractions(a_detr, tau) if r_ident else _ramp_random(fractions(a_detr, tau)),
-           "detr_exact": fractions(a_exact, tau) if r_ident else _ramp_random(fractions(a_exact, tau)),
-           "true": fractions(coefficients_to_avar_terms(*case.truth), tau)}
+    ramp_rule = (lambda f: f) if r_ident else _ramp_random
+    mix = {"quick": term_fractions(a, tau), "ramp_id": ramp_rule(term_fractions(a, tau)),
+           "detrended": ramp_rule(term_fractions(a_detr, tau)), "detr_exact": ramp_rule(term_fractions(a_exact, tau)),
+           "true": term_fractions(coefficients_to_avar_terms(*case.truth), tau)}
     mats, full = mixture_matrices(m, n), n - 2 * m + 1
     out = {}
     for rule, f in mix.items():

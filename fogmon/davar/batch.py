@@ -17,7 +17,7 @@ from functools import lru_cache
 import numpy as np
 
 from fogmon.davar import kernels, window_stats
-from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
+from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full, term_fractions
 from fogmon.davar.fit import low_pass_taus, mixture_edf_row, quick_avar_terms
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.shape import shape_applies, shape_factors
@@ -244,9 +244,7 @@ def _shaped_bounds(terms, adev, lo, hi, edf, counts, m, n_samples: int, confiden
            & np.isfinite(hi))
     if not use.any():
         return lo, hi
-    parts = m[use].astype(np.float64)[:, None] ** POWERS * np.asarray(terms, dtype=np.float64)  # Q, N, B, K, R
-    total = parts.sum(1, keepdims=True)
-    fractions = np.where(total > 0, parts / np.where(total > 0, total, 1.0), np.eye(5)[1])  # empty: white rate
+    fractions = term_fractions(terms, m[use])  # tau in sample periods, as the quick fit's terms
     f_lo, f_hi = shape_factors(fractions, m[use], n_samples, np.asarray(edf)[use], confidence)
     lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
     ok = np.isfinite(f_lo) & np.isfinite(f_hi)  # else chi-square's

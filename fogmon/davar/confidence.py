@@ -17,6 +17,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from fogmon.davar.theory import POWERS
+
 #: Two-sided confidence of every interval fogmon reports (1 sigma of a normal).
 CONFIDENCE = 0.683
 
@@ -255,6 +257,17 @@ def with_ramp(fractions: np.ndarray) -> np.ndarray:
     """Mixture fractions over the N_CLASSES classes: a ramp share of 0 added to 4 columns."""
     f = np.asarray(fractions, dtype=np.float64)
     return f if f.shape[-1] == N_CLASSES else np.concatenate([f, np.zeros(f.shape[:-1] + (1,))], axis=-1)
+
+
+def term_fractions(a, tau) -> np.ndarray:
+    """Mixture fractions (taus x N_CLASSES) of the IEEE-952 terms A_n ((deg/h)^2 s^-n, or
+    per sample period with ``tau`` in sample periods) at ``tau``: each term's share of the
+    model Allan variance sum_n A_n tau^n (Q, N, B, K, R are the classes MIX_ALPHAS, then
+    the ramp); white rate noise where the model is empty. (The kernels' own:
+    ``scoring.mixture_fractions``.)"""
+    parts = np.asarray(tau, dtype=np.float64)[:, None] ** POWERS * np.asarray(a, dtype=np.float64)
+    total = parts.sum(1, keepdims=True)
+    return np.where(total > 0, parts / np.where(total > 0, total, 1.0), np.eye(N_CLASSES)[1])
 
 
 def edf_mixture_from(fractions: np.ndarray, matrices: np.ndarray, n_terms_full: np.ndarray) -> np.ndarray:

@@ -222,13 +222,19 @@ def _best_terms(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, lowpass_unit
     return best
 
 
+def _optional_terms(kind: str | None) -> tuple[str, ...]:
+    """The IEEE-952 terms a fit beside a low-pass term ``kind`` (None: none) may add to N:
+    a Butterworth (``lowpass_noise``) is fitted without Q (LOWPASS_TAU_C_SAMPLES' note)."""
+    return ("B", "K") if kind == "lowpass_noise" else ("Q", "B", "K")
+
+
 def _search_shape(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, sample_rate_hz: float, kind: str,
                   bounds: tuple[float, float], shape_of: Callable[[float], dict]
                   ) -> tuple[float, dict[str, float], tuple[str, ...], str, dict] | None:
     """(criterion incl. LOWPASS_PARAMS[kind] x TERM_CHI2, coefficients, terms, kind, shape) of the
     best low-pass of one shape, or None when its best parameter is at an end of ``bounds``."""
 
-    optional = ("B", "K") if kind == "lowpass_noise" else ("Q", "B", "K")
+    optional = _optional_terms(kind)
 
     def trial(ln_x: float) -> tuple[float, dict[str, float], tuple[str, ...]]:
         unit = lowpass_unit_avar(tau_s, sample_rate_hz, kind, shape_of(math.exp(ln_x)))
@@ -374,7 +380,7 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
 
     capped = _floor_violated(np.array(tau), np.array(av), np.array(edf), fit0, unit(tau), sample_rate_hz)
     if capped:  # the terms again, the model kept below the recording (FLOOR_ALPHA)
-        optional = ("B", "K") if lowpass is not None and lowpass[0] == "lowpass_noise" else ("Q", "B", "K")
+        optional = _optional_terms(None if lowpass is None else lowpass[0])
         _, fit0, terms = _best_terms(np.array(tau), np.array(av), np.array(edf), unit(tau), optional,
                                      cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz))
     for j in range(nw, len(whole.tau_s)):
