@@ -16,8 +16,9 @@ numbers, whatever --jobs.
   samples): per model and coefficient how often it is identified, how often its 68.3 %
   and 95 % intervals (``fit_noise(..., confidence)``; a term not identifiable has the
   interval [0, its 95 % upper limit]) and its one-sided 95 % upper limit cover the
-  truth; per tau how often the ADEV's 68.3 % and 95 % chi-square intervals (its EDF)
-  cover the exact expected ADEV of the simulator (``modelcheck.band.theory_adev_dph``).
+  truth; per tau how often the ADEV's 68.3 % and 95 % intervals as ``oadev`` gives them
+  (its EDF; the exact shape at the longest taus) cover the exact expected ADEV of the
+  simulator (``modelcheck.band.theory_adev_dph``).
 - ``warning``: on the same records, how often the console's model check warns that the
   five terms do not describe the record (they are exact), and at which taus.
 
@@ -30,7 +31,7 @@ binomial count: the tables print its 1-sd uncertainty; 1000 records per model (t
 default) put the 95 % band at 3 sd.
 
     python validation/calibration.py [--records N] [--only null|coverage|warning] [--jobs 2] [--seed 1]
-                                     [--save PREFIX] [--exact-shape]
+                                     [--save PREFIX] [--chi2]
 """
 from __future__ import annotations
 
@@ -150,8 +151,8 @@ def null_sweep(records: int, seed: int, jobs: int, save: str | None = None) -> b
 # ---------------------------------------------------------------- coverage sweep
 def coverage_record(job: tuple[int, int, int, bool]) -> dict:
     """What the whole-run fit of one record of model ``job[0]`` says against the truth
-    (``job[3]``: also the ADEV intervals of the exact shape)."""
-    k, i, seed, shape = job
+    (``job[3]``: also the chi-square ADEV intervals with the same EDF)."""
+    k, i, seed, chi2 = job
     case = MODELS[k]
     rec = _record(case, record_seed(seed, i))
     res = oadev(rec.rate_dph, case.sample_rate_hz, taus="octave")  # the pipeline's whole-run ADEV
@@ -160,18 +161,18 @@ def coverage_record(job: tuple[int, int, int, bool]) -> dict:
     coef = {c: np.array([[float(getattr(f, n).lo), float(getattr(f, n).hi)] for n in NAMES])
             for c, f in fits.items()}
     f68 = fits[CONFIDENCES[0]]
-    adev_cover = {c: _inside_interval(truth_adev, *chi2_bounds(res.adev_dph, res.edf, c)) for c in CONFIDENCES}
-    shape_cover = {}
-    if shape:  # the exact shape of the quick fit's mixture at the longest taus (fogmon.davar.shape)
-        for c in CONFIDENCES:
-            r = oadev(rec.rate_dph, case.sample_rate_hz, taus="octave", confidence=c, exact_shape=True)
-            shape_cover[c] = _inside_interval(truth_adev, r.lo_dph, r.hi_dph)
+    adev_cover = {}  # the intervals the whole-run table prints (the exact shape at the longest taus)
+    for c in CONFIDENCES:
+        r = res if c == res.confidence else oadev(rec.rate_dph, case.sample_rate_hz, taus="octave", confidence=c)
+        adev_cover[c] = _inside_interval(truth_adev, r.lo_dph, r.hi_dph)
+    chi2_cover = ({c: _inside_interval(truth_adev, *chi2_bounds(res.adev_dph, res.edf, c)) for c in CONFIDENCES}
+                  if chi2 else {})
     check = model_check(res, f68) or ""
     return {"model": k, "ident": np.array([bool(getattr(f68, n).identifiable) for n in NAMES]),
             "value": np.array([float(getattr(f68, n).value) for n in NAMES]),
             "upper": np.array([float(getattr(f68, n).upper) for n in NAMES]),
             "cover": {c: _inside(case.truth, v[:, 0], v[:, 1]) for c, v in coef.items()},
-            "adev_cover": adev_cover, "shape_cover": shape_cover, "tau_s": res.tau_s, "edf": res.edf,
+            "adev_cover": adev_cover, "chi2_cover": chi2_cover, "tau_s": res.tau_s, "edf": res.edf,
             "warning": "WARNING" in check, "warning_text": check}
 
 
@@ -185,19 +186,19 @@ def _inside_interval(truth, lo, hi) -> np.ndarray:
 
 
 def coverage_sweep(records: int, seed: int, jobs: int, items: set[str], save: str | None = None,
-                   shape: bool = False) -> bool:
+                   chi2: bool = False) -> bool:
     """Interval coverage of the coefficients and of the per-tau ADEV, and the model-check
-    warning rate, over ``records`` records per model; True when within LIMITS. ``shape``:
-    also the per-tau table of the exact-shape ADEV intervals (not part of the verdict)."""
-    jobs_list = [(k, i, seed, shape) for k in range(len(MODELS)) for i in range(records)]
+    warning rate, over ``records`` records per model; True when within LIMITS. ``chi2``:
+    also the per-tau table of chi-square ADEV intervals with the same EDF (not part of the verdict)."""
+    jobs_list = [(k, i, seed, chi2) for k in range(len(MODELS)) for i in range(records)]
     rows = _map(coverage_record, jobs_list, jobs)
     _save(save, "coverage", rows)
     ok = True
     if "coverage" in items:
         ok &= _coefficient_table(rows, records)
         ok &= _adev_table(rows, records)
-        if shape:
-            _adev_table(rows, records, "shape_cover")
+        if chi2:
+            _adev_table(rows, records, "chi2_cover")
     if "warning" in items:
         ok &= _warning_table(rows, records)
     return ok
@@ -235,8 +236,8 @@ def _coefficient_table(rows: list[dict], records: int) -> bool:
 def _adev_table(rows: list[dict], records: int, key: str = "adev_cover") -> bool:
     tol = LIMITS["adev_tolerance"]
     sd = {lvl: np.sqrt(lvl * (1.0 - lvl) / records) for lvl in CONFIDENCES}
-    what = ("chi-square intervals" if key == "adev_cover" else
-            "intervals of the exact shape (oadev(..., exact_shape=True), not in the verdict)")
+    what = ("intervals (as oadev prints them)" if key == "adev_cover" else
+            "chi-square intervals with the same EDF (oadev(..., exact_shape=False), not in the verdict)")
     print(f"\nPer-tau ADEV intervals (the whole-run table): coverage of the 68.3 % and 95 % {what} "
           f"of the exact expected ADEV, {records} records per model; 1 sd {100 * sd[0.683]:.1f} % at 68.3 %, "
           f"{100 * sd[0.95]:.1f} % at 95 %. '<-': more than {100 * tol:.0f} % from nominal; '<<': more than "
@@ -310,8 +311,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="run only this item (repeatable)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=1, help="seed of the records (default 1)")
-    p.add_argument("--exact-shape", action="store_true", help="also the per-tau table of the ADEV intervals "
-                   "of the exact shape at the longest taus (oadev(..., exact_shape=True))")
+    p.add_argument("--chi2", action="store_true", help="also the per-tau table of chi-square ADEV intervals "
+                   "with the same EDF (oadev(..., exact_shape=False))")
     p.add_argument("--save", metavar="PREFIX", help="also write each sweep's per-record results to "
                    "PREFIX.<sweep>.pkl")
     args = p.parse_args(argv)
@@ -319,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     ok = True
     if items & {"coverage", "warning"}:
-        ok &= coverage_sweep(args.records or 1000, args.seed, args.jobs, items, args.save, args.exact_shape)
+        ok &= coverage_sweep(args.records or 1000, args.seed, args.jobs, items, args.save, args.chi2)
     if "null" in items:
         ok &= null_sweep(args.records or 200, args.seed, args.jobs, args.save)
     print(f"\n{_verdict(ok)} ({', '.join(sorted(items))}; seed {args.seed}; {time.time() - t0:.0f} s)")

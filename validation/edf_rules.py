@@ -1,7 +1,7 @@
 """Rules for the mixture behind the EDF of the longest taus, compared on calibration records.
 
 The per-tau ADEV intervals (``validation/calibration.py``, "Per-tau ADEV intervals") take
-their EDF from the noise mixture of a quick IEEE-952 fit, its ramp R deterministic. At the
+their EDF from the noise mixture of a quick IEEE-952 fit (``fogmon.davar.record_mixture``). At the
 longest taus that mixture decides the interval and is poorly known: a chance ramp where
 there is none (NBK) makes the interval too narrow, a chance random walk K beside a real
 ramp (NBR) too wide. This script scores alternative mixtures on the calibration's own
@@ -11,7 +11,8 @@ product. Not part of any verdict; docs/davar.md ("Calibration") quotes its table
 Rules (each with the chi-square shape, and with ``S`` the exact shape of
 ``fogmon.davar.shape`` at the taus where it applies):
 
-- ``quick``: the product's (``fit.quick_avar_terms``' mixture).
+- ``quick``: the quick fit's own mixture (``fit.quick_avar_terms``; the product's before
+  ``fogmon.davar.record_mixture``).
 - ``ramp_id``: the ramp's share deterministic only when the whole-run fit
   (``fit_noise``) identifies R, else counted as random-walk rate noise.
 - ``detrended``: ``ramp_id`` with K taken from the quick fit of the record with its
@@ -20,6 +21,8 @@ Rules (each with the chi-square shape, and with ``S`` the exact shape of
 - ``detr_exact``: ``detrended`` with the expected Allan variance of detrended white-rate
   and random-walk noise in that fit (``detrend_factors``: at m = n / 4 a detrended random
   walk keeps 0.47 of its Allan variance).
+- ``hybrid``: the product's (``fogmon.davar.record_mixture``): ``ramp_id``, and the
+  detrended record's K only where the fit identifies R but not K.
 - ``true``: the simulator's model (the reference).
 
     python validation/edf_rules.py [--records 200] [--models 2,3,4] [--last 6] [--seed 1] [--jobs 2]
@@ -44,7 +47,7 @@ from fogmon.modelcheck.band import theory_adev_dph
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from calibration import CONFIDENCES, MODELS, _record, record_seed  # noqa: E402
 
-RULES = ("quick", "ramp_id", "detrended", "detr_exact", "true")
+RULES = ("quick", "ramp_id", "detrended", "detr_exact", "hybrid", "true")
 K, R = 3, 4  # Q, N, B, K, R: the classes' order (confidence.MIX_ALPHAS, then the ramp)
 
 
@@ -123,6 +126,7 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     ramp_rule = (lambda f: f) if r_ident else _ramp_random
     mix = {"quick": term_fractions(a, tau), "ramp_id": ramp_rule(term_fractions(a, tau)),
            "detrended": ramp_rule(term_fractions(a_detr, tau)), "detr_exact": ramp_rule(term_fractions(a_exact, tau)),
+           "hybrid": ramp_rule(term_fractions(a_detr if r_ident and not fit.K_dphsh.identifiable else a, tau)),
            "true": term_fractions(coefficients_to_avar_terms(*case.truth), tau)}
     mats, full = mixture_matrices(m, n), n - 2 * m + 1
     out = {}

@@ -16,8 +16,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from fogmon.davar import kernels, window_stats
-from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full, term_fractions
+from fogmon.davar import kernels, record_mixture, window_stats
+from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.fit import low_pass_taus, mixture_edf_row, quick_avar_terms
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.shape import shape_applies, shape_factors
@@ -216,36 +216,63 @@ def window_edf(counts, m, n_samples: int, alpha=None, gapless=None, n_gapped: in
     return gapped_edf(edf_runs, run, counts, n_gapped, m, n_samples)
 
 
-def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE, gapless=None,
-               exact_shape: bool = False):
+def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = CONFIDENCE, gapless=None):
     """(adev_dph, lo_dph, hi_dph, edf) of :func:`adev_edf`, with the two-sided
-    ``confidence`` chi-square interval; with ``exact_shape``, for one window with the
-    mixture EDF (no ``alpha`` or ``gapless``), at the gap-free taus where few independent
-    terms remain (``shape.shape_applies``: M / m <= 16) the exact shape of the quick fit's
-    mixture instead (``shape.shape_factors``; off by default: see docs/davar.md,
-    "Calibration")."""
-    terms = None
-    if exact_shape and alpha is None and gapless is None and np.ndim(sums) == 1:
-        terms = _row_terms(sums, counts, m, n_samples)
-        gapless = _terms_edf(terms, m, n_samples, _avar(sums, counts))
+    ``confidence`` chi-square interval."""
     adev, edf = adev_edf(sums, counts, m, n_samples, alpha, gapless)
     lo, hi = chi2_bounds(adev, edf, confidence)
-    if terms is not None:
-        lo, hi = _shaped_bounds(terms, adev, lo, hi, edf, counts, m, n_samples, confidence)
     return adev, lo, hi, edf
 
 
-def _shaped_bounds(terms, adev, lo, hi, edf, counts, m, n_samples: int, confidence: float):
+def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums, counts, m, n_samples: int,
+                      confidence: float = CONFIDENCE, exact_shape: bool = True):
+    """(adev_dph, lo_dph, hi_dph, edf) of a whole record (rate ``y`` in deg/h at
+    ``sample_rate_hz``, valid ``ok``; one window's ``sums``, ``counts``): the EDF of the quick IEEE-952 fit's mixture
+    under ``record_mixture``'s rules (a ramp deterministic only where identified, beside
+    it a K not identified from the detrended record), capped below a low-pass's peak as
+    ``row_edf``; with ``exact_shape``, at the gap-free taus where few independent terms
+    remain (``shape.shape_applies``: M / m <= 16) the exact shape of that mixture's Allan
+    variance instead of chi-square's (docs/davar.md, "Calibration")."""
+    avar = _avar(sums, counts)
+    terms = _row_terms(sums, counts, m, n_samples)
+    ident = record_mixture.identified(np.asarray(m) / sample_rate_hz, avar, m, counts, n_samples)
+    k_detr = _detrended_k(y, ok, m, n_samples) if record_mixture.needs_detrended(ident) else None
+    fractions = record_mixture.fractions(terms, ident, m, k_detr)
+    gapless = record_mixture.edf_row(fractions, m, n_samples)
+    k = low_pass_taus(avar)
+    if k:
+        gapless[:k] = np.fmin(gapless[:k], gapless[k])
+    adev, edf = adev_edf(sums, counts, m, n_samples, None, gapless.reshape(1, -1))
+    lo, hi = chi2_bounds(adev, edf, confidence)
+    if exact_shape:
+        lo, hi = _shaped_bounds(fractions, adev, lo, hi, edf, counts, m, n_samples, confidence)
+    return adev, lo, hi, edf
+
+
+def _detrended_k(y: np.ndarray, ok: np.ndarray, m, n_samples: int) -> float | None:
+    """A_K (tau in sample periods) of the quick fit of the record ``y`` with the
+    least-squares line through its valid finite samples removed (None: fewer than 3)."""
+    use = ok & np.isfinite(y)
+    if np.count_nonzero(use) < 3:
+        return None
+    t = np.arange(len(y), dtype=np.float64)
+    slope, offset = np.polyfit(t[use], y[use], 1)
+    yd = c_array(np.where(np.isfinite(y), y - (slope * t + offset), y), np.float64)
+    hi_, lo_, bad = kernels.prefix_sums_dd(yd, ok, reference_level(yd, ok))
+    sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n_samples)
+    return float(_row_terms(sums[0], counts[0], m, n_samples)[record_mixture.K])
+
+
+def _shaped_bounds(fractions, adev, lo, hi, edf, counts, m, n_samples: int, confidence: float):
     """``lo``, ``hi`` with the exact-shape interval (``shape.shape_factors``) of the
-    quick-fit ``terms``' mixture at the gap-free taus where it applies and chi-square gives an
-    interval (EDF >= confidence.MIN_EDF)."""
+    mixture ``fractions`` (taus x classes) at the gap-free taus where it applies and
+    chi-square gives an interval (EDF >= confidence.MIN_EDF)."""
     m = np.asarray(m, dtype=np.int64)
     use = (shape_applies(m, n_samples) & (np.asarray(counts) == n_samples - 2 * m + 1) & np.isfinite(lo)
            & np.isfinite(hi))
     if not use.any():
         return lo, hi
-    fractions = term_fractions(terms, m[use])  # tau in sample periods, as the quick fit's terms
-    f_lo, f_hi = shape_factors(fractions, m[use], n_samples, np.asarray(edf)[use], confidence)
+    f_lo, f_hi = shape_factors(fractions[use], m[use], n_samples, np.asarray(edf)[use], confidence)
     lo, hi = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
     ok = np.isfinite(f_lo) & np.isfinite(f_hi)  # else chi-square's
     at = np.flatnonzero(use)[ok]
@@ -269,20 +296,23 @@ def gapped_edf(edf_runs, run, counts, n_gapped: int, m, n_samples: int) -> np.nd
 
 
 def oadev(rate_dph, sample_rate_hz: float, taus="octave", valid=None, confidence: float = CONFIDENCE,
-          alpha=None, exact_shape: bool = False) -> AdevResult:
+          alpha=None, exact_shape: bool = True) -> AdevResult:
     """Overlapping Allan deviation (deg/h) of a rate record ``rate_dph`` (deg/h) sampled at
     ``sample_rate_hz`` (Hz). ``taus``: see :func:`fogmon.davar.taus.tau_grid`. ``valid``: optional
-    mask; NaN samples are invalid too. Bounds: chi-square at ``confidence`` with the EDF
-    of the noise mixture a quick IEEE-952 fit predicts (``row_edf``), or Greenhall's EDF
-    for the noise type ``alpha`` when given (Stable32's). ``exact_shape``: at the taus with
-    few independent terms the exact shape of the mixture's Allan variance instead of
-    chi-square's (:func:`statistics`)."""
+    mask; NaN samples are invalid too. Bounds at ``confidence``: with the EDF of the
+    noise mixture a quick IEEE-952 fit predicts (:func:`record_statistics`; with
+    ``exact_shape`` the exact shape of its Allan variance at the taus with few
+    independent terms, else chi-square), or chi-square with Greenhall's EDF for the
+    noise type ``alpha`` when given (Stable32's)."""
     y, ok = _prepare(rate_dph, valid)
     n = len(y)
     m = tau_grid(sample_rate_hz, n, taus)
     hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n)
-    adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence, exact_shape=exact_shape)
+    if alpha is None:
+        adev, lo, hi, edf = record_statistics(y, ok, sample_rate_hz, sums[0], counts[0], m, n, confidence, exact_shape)
+    else:
+        adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence)
     return AdevResult(m / sample_rate_hz, m, adev, lo, hi, edf, counts[0], float(sample_rate_hz), n, confidence)
 
 

@@ -300,12 +300,18 @@ def dense_grid_edf(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.nd
     in log-log between them on denser grids: a mixture matrix costs ~12 ms per m, so the
     exact EDF of an "all" grid of 2^15 samples took 45 s; interpolated it is within 0.2 %
     of it (tests/test_davar_fit_covariance.py)."""
-    lg = np.log2(m)
-    anchor = np.union1d(np.unique(np.round(lg * _ANCHORS_PER_OCTAVE), return_index=True)[1], np.argmax(m))
-    anchor = anchor[np.argsort(m[anchor])]
+    anchor = edf_anchors(m)
     full = np.maximum(n_samples - 2 * m + 1, 1)
     nu_anchor = _NoiseModel(tau[anchor], m[anchor], full[anchor], n_samples)(a)
-    return np.exp(np.interp(lg, lg[anchor], np.log(nu_anchor))) * (np.asarray(n_terms) / full)
+    return np.exp(np.interp(np.log2(m), np.log2(m[anchor]), np.log(nu_anchor))) * (np.asarray(n_terms) / full)
+
+
+def edf_anchors(m: np.ndarray) -> np.ndarray:
+    """Indices (ascending m) of the factors ``m`` where a dense grid's EDF is computed
+    exactly (``dense_grid_edf``): up to _ANCHORS_PER_OCTAVE per octave and the largest."""
+    lg = np.log2(m)
+    anchor = np.union1d(np.unique(np.round(lg * _ANCHORS_PER_OCTAVE), return_index=True)[1], np.argmax(m))
+    return anchor[np.argsort(m[anchor])]
 
 
 def mixture_edf_row(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_samples: int) -> np.ndarray:

@@ -1,0 +1,81 @@
+"""The noise mixture behind a whole record's per-tau ADEV intervals (``batch.oadev``).
+
+The EDF (and the exact shape) of each tau's interval is that of the noise mixture the
+quick IEEE-952 fit (``fit.quick_avar_terms``) predicts. At the longest taus the interval
+hangs on two shares the record pins down poorly (docs/davar.md, "Calibration"):
+
+- A rate ramp R is deterministic: its share of the Allan variance has no sampling
+  variance. A chance-high Allan variance at the last taus, fitted as a ramp where there
+  is none, made the interval narrowest where the estimate was too high. So the ramp's
+  share counts as deterministic only when the record's fit identifies R (``identified``:
+  the test ``fit_noise`` reports), else as random-walk rate noise, which has about the
+  same Allan variance slope.
+- Beside an identified ramp, a random walk K that the record does not identify is a
+  share the fit trades against R, and even a few % of random walk lowers the EDF there
+  several-fold (the ramp's constant multiplies the Allan terms' mean, whose variance a
+  random walk makes large). Its estimate is then taken from the record with its
+  least-squares line removed (``batch.record_statistics``): a deterministic ramp has no Allan
+  variance there, so K no longer trades against R, while a real random walk keeps most
+  of its own.
+
+Measured on validation/calibration.py's records (200 per model, seed 1): a K not in the
+model was fitted > 0 beside a ramp in 43 % of the records (EDF 20-40 where the true one
+is 220-300, the 68.3 % interval covering 81-83 %), 20 % after the rule (70-72 %).
+Assumptions: Gaussian noise of the five terms, a ramp linear over the record.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fogmon.davar.confidence import MIX_ALPHAS, RAMP, edf_mixture_from, mixture_matrices, term_fractions
+from fogmon.davar.fit import edf_anchors, fit_curve
+
+K, R = 3, 4  # indices of K and R among the five IEEE-952 terms (Q, N, B, K, R)
+#: the random-walk rate noise class among the mixture's
+RANDOM_WALK = MIX_ALPHAS.index(-2)
+
+
+def identified(tau_s, avar, m, n_terms, n_samples: int) -> np.ndarray:
+    """Mask over the five IEEE-952 terms that the record's fit identifies (``fit.fit_curve``'s
+    test, the one ``fit_noise`` and ``fogmon replay`` report) for the Allan variance
+    ``avar`` (deg/h)^2 at ``tau_s`` (s)."""
+    return np.asarray(fit_curve(tau_s, avar, m, n_terms, n_samples, limits="unidentified").identifiable, dtype=bool)
+
+
+def fractions(terms, ident: np.ndarray, m, k_detrended: float | None = None) -> np.ndarray:
+    """Mixture fractions (taus x N_CLASSES) at factors ``m`` of the quick-fit ``terms``
+    (tau in sample periods) under the module's rules: the ramp's share deterministic only
+    when R is identified (``ident``), else random-walk rate noise; beside an identified
+    ramp a K not identified at ``k_detrended`` (A_K of the detrended record, when given)."""
+    a = np.array(terms, dtype=np.float64)
+    if ident[R] and not ident[K] and k_detrended is not None:
+        a[K] = k_detrended
+    f = term_fractions(a, np.asarray(m, dtype=np.float64))
+    if not ident[R]:
+        f = f.copy()
+        f[:, RANDOM_WALK] += f[:, RAMP]
+        f[:, RAMP] = 0.0
+    return f
+
+
+def edf_row(fractions_m: np.ndarray, m, n_samples: int) -> np.ndarray:
+    """Gap-free EDF per tau of the mixture ``fractions_m`` (taus x N_CLASSES) at factors
+    ``m`` over ``n_samples`` samples (``confidence.edf_mixture_from``): exact at
+    ``fit.edf_anchors``, interpolated in log-log between them (as ``fit.dense_grid_edf``);
+    NaN where 2 m > n_samples."""
+    m = np.asarray(m, dtype=np.int64)
+    out = np.full(len(m), np.nan)
+    ok = np.flatnonzero(2 * m <= n_samples)
+    if not len(ok):
+        return out
+    mo = m[ok]
+    anchor = edf_anchors(mo)
+    nu = edf_mixture_from(fractions_m[ok][anchor], mixture_matrices(mo[anchor], n_samples),
+                          n_samples - 2 * mo[anchor] + 1)
+    out[ok] = np.exp(np.interp(np.log2(mo), np.log2(mo[anchor]), np.log(nu)))
+    return out
+
+
+def needs_detrended(ident: np.ndarray) -> bool:
+    """Whether the rule takes K from the detrended record: R identified, K not."""
+    return bool(ident[R] and not ident[K])
