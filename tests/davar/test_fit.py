@@ -368,7 +368,7 @@ def test_an_upper_limit_beside_a_term_held_at_its_bound_follows_the_boundary_rul
 
     def at(c):
         return score(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, 1, c, F._ROBUST_RTOL,
-                     F._MAX_ITER, a, present)
+                     F._MAX_ITER, a, present, True)
 
     s, rho, refit = at(up[1, 0])
     assert refit[0] == 0.0 and rho > 0.5  # Q held at its bound, its score correlated with N's
