@@ -84,6 +84,49 @@ def find_spikes(z: np.ndarray, threshold: float, min_sep: int = 1) -> np.ndarray
     return np.array(sorted(chosen), dtype=np.int64)
 
 
+#: the step-down search stops after this many rescalings (each a local-scale pass, no FFT)
+STEP_DOWN_PASSES = 32
+
+
+def find_spikes_step_down(z: np.ndarray, threshold: float, min_sep: int = 1,
+                          block: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """Spikes beyond ``threshold`` against the robust scale of the noise *without* them:
+    :func:`find_spikes` on ``z`` (a spike scan's statistic, 0 where untested), then ``z``
+    rescaled by the local robust scale (:func:`local_scale`, the same ``block``) of the
+    tested samples a spike found does not light up (those under ``min_sep`` from it: the
+    matched filter's half-width, :func:`kernel_length`), and the search repeated until
+    it finds no new spike (at most STEP_DOWN_PASSES rescalings). The MAD of noise holding
+    a fraction f of spikes is inflated by about f (heavy-tailed noise: more), which hides
+    the spikes just beyond the threshold; the MAD of Gaussian noise cut at the threshold
+    is that of the whole noise (within 1e-6 at |z| 5), so a spike-free block keeps its scale.
+    A step-down: with nothing beyond the threshold at first, nothing changes (the
+    family-wise level under pure noise is the single test's). Returns (z rescaled, the
+    spikes' indices sorted)."""
+    idx = find_spikes(z, threshold, min_sep)
+    if not len(idx):
+        return z, idx
+    n = len(z)
+    tested = z != 0.0
+    found = np.zeros(n, dtype=bool)
+    out = z
+    for _ in range(STEP_DOWN_PASSES):
+        near = _within(idx, min_sep - 1, n)
+        if not (near & ~found).any():
+            break
+        found |= near
+        out = z / local_scale(z, tested & ~found, block)
+        idx = find_spikes(out, threshold, min_sep)
+    return out, idx
+
+
+def _within(idx: np.ndarray, sep: int, n: int) -> np.ndarray:
+    """Mask of the samples within ``sep`` of any index in ``idx``."""
+    d = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(d, np.maximum(idx - sep, 0), 1)
+    np.add.at(d, np.minimum(idx + sep + 1, n), -1)
+    return np.cumsum(d[:n]) > 0
+
+
 @dataclass(frozen=True)
 class Contamination:
     """Contaminated-Gaussian law of a standardised statistic z: (1 - eps) N(0, 1) +

@@ -42,7 +42,7 @@ def spike_scan(ctx: Context, y: np.ndarray | None = None) -> tuple[np.ndarray, n
     if y is None and "spike_scan" in ctx.cache:
         return ctx.cache["spike_scan"]
     sep = detectors.kernel_length(ctx.wh)
-    block = max(4096, 64 * sep)
+    block = _scale_block(sep)
     prof = white_profile(ctx.stoch, ctx)
     if prof is None:
         out = detectors.spike_scan(ctx.wh, ctx.Yf if y is None else ctx.wh.fft(y), block=block)
@@ -54,10 +54,17 @@ def spike_scan(ctx: Context, y: np.ndarray | None = None) -> tuple[np.ndarray, n
     return out
 
 
+def _scale_block(sep: int) -> int:
+    """Samples per block of the spike statistic's local robust scale: many matched-filter
+    half-widths ``sep`` (the z of neighbouring samples correlate over that length)."""
+    return max(4096, 64 * sep)
+
+
 @dataclass
 class SpikeEvidence:
     """The spike test of one residual and its two descriptions: ``glitch_idx`` (every
-    sample beyond the Bonferroni threshold, local maxima ``sep`` apart) with the BIC
+    sample beyond the Bonferroni threshold, local maxima ``sep`` apart, ``z`` scaled by
+    the robust scale of the noise without them: detectors.find_spikes_step_down) with the BIC
     gain of listing them one by one, and the contaminated-Gaussian ``law`` of all z
     (None: no tail) with the BIC gain of describing them as a population."""
 
@@ -96,7 +103,7 @@ def spike_evidence(ctx: Context) -> SpikeEvidence:
     amp, z = spike_scan(ctx)
     nv = int(ctx.valid.sum())
     thr = detectors.bonferroni_z(nv)
-    idx = detectors.find_spikes(z, thr, min_sep=sep)
+    z, idx = detectors.find_spikes_step_down(z, thr, min_sep=sep, block=_scale_block(sep))
     bic_g = float(np.sum(z[idx] ** 2)) - 2 * len(idx) * ctx.penalty if len(idx) else 0.0
     tested = ctx.valid & (z != 0.0)
     law = detectors.fit_contamination(z[tested])
@@ -181,9 +188,10 @@ def _refit_note(n_old: float, n0: float | None) -> str:
 
 
 def glitches(ctx: Context) -> Candidate | None:
-    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale, the
-    model's own white-level profile divided out, Bonferroni threshold over all samples
-    (1 % family-wise); every one listed (when an outlier population describes them better,
+    """Isolated spikes: GLS matched filter at every sample, robust (MAD) scale of the
+    noise without the spikes (a step-down: detectors.find_spikes_step_down), the model's
+    own white-level profile divided out, Bonferroni threshold over all samples (1 %
+    family-wise); every one listed (when an outlier population describes them better,
     :func:`outliers` has the larger BIC gain and is tried first)."""
     ev = spike_evidence(ctx)
     idx = ev.glitch_idx
