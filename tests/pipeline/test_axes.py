@@ -205,7 +205,7 @@ ONE_AXIS_SUMMARY = "\n".join([
     'spans a gap or platform motion)',
     '',
     'IEEE-952 noise coefficients (whole run, 68.3 % intervals):',
-    '  Q_arcsec    not identifiable from this record (< 0.04898 arcsec, 95 % upper limit)',
+    '  Q_arcsec    not identifiable from this record (< 0.04879 arcsec, 95 % upper limit)',
     '  N_dpsh    = 0.07983 deg/sqrt(h)  [0.07932, 0.08069]',
     '  B_dph       not identifiable from this record (< 2.962 deg/h, 95 % upper limit)',
     '  K_dphsh     not identifiable from this record (< 116.1 deg/h/sqrt(h), 95 % upper limit)',
@@ -217,7 +217,7 @@ ONE_AXIS_SUMMARY = "\n".join([
      ' above; --keep-motion analyses them; 68.3 % intervals; n/i: not identifiable from this record,'
      ' < its 95 % upper limit):',
     '  coefficient unit                       motion kept out             motion analysed',
-    '  Q_arcsec    arcsec                     n/i (< 0.04898)      0.2202 [0.175, 0.2807]',
+    '  Q_arcsec    arcsec                     n/i (< 0.04879)      0.2202 [0.175, 0.2807]',
     '  N_dpsh      deg/sqrt(h)     0.07983 [0.07932, 0.08069]  0.03936 [0.03935, 0.06463]',
     '  B_dph       deg/h                        n/i (< 2.962)               n/i (< 58.27)',
     '  K_dphsh     deg/h/sqrt(h)                n/i (< 116.1)               n/i (< 68.08)',
