@@ -55,14 +55,16 @@ class ScanGains:
         return out
 
 
-def scan_bars(gains: list[dict[str, float]], alpha: float) -> dict[str, float]:
+def scan_bars(gains: list[dict[str, float]], alpha: float) -> tuple[dict[str, float], dict[str, float]]:
     """kind -> the gain the replicates' ``gains`` (one dict per replicate) exceed with
-    probability alpha / (number of kinds), from a Gumbel law fitted to them."""
+    probability alpha / (number of kinds), from a Gumbel law fitted to them; and kind ->
+    that bar's Monte Carlo standard error (mismatch.Gumbel.isf_se)."""
     kinds = sorted({k for g in gains for k in g})
-    bars = {}
+    bars, se = {}, {}
     for kind in kinds:
         x = np.array([g.get(kind, np.nan) for g in gains], dtype=float)
         x = x[np.isfinite(x)]
         if len(x) >= MIN_GAINS:
-            bars[kind] = Gumbel.fit(x).isf(alpha / len(kinds))
-    return bars
+            law = Gumbel.fit(x)
+            bars[kind], se[kind] = law.isf(alpha / len(kinds)), law.isf_se(alpha / len(kinds))
+    return bars, se
