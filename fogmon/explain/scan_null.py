@@ -13,7 +13,14 @@ model's whole stochastic part, K, B, Q, N and the noise-type effects), and its b
 raised to the value a Gumbel law fitted to those gains exceeds with probability alpha /
 (number of such kinds): the model's own processes then name a chance step, ramp or
 settling no more often than that. Without K the GLS's law holds and nothing is
-simulated (no cost)."""
+simulated (no cost).
+
+A bar fitted to B replicate gains has the same Monte Carlo error as the map's
+threshold, larger at its alpha / 6 level (5.4 sd / sqrt(B) against 3.9 at the map's
+1 %), so a candidate whose gain lies near its bar is decided by the draw as much as by
+the data; the sequential test (bootstrap.settled, selection.bars_undecided) draws more
+replicates then, as it does for a borderline region: ``scan_bars`` gives each bar's
+standard error."""
 from __future__ import annotations
 
 import numpy as np
