@@ -18,8 +18,8 @@ mean-type candidates' gains, whose law sets their chance bars (``scan_null``).
 The sequential Monte Carlo test (``settled``): a fitted threshold or chance bar has a
 Monte Carlo standard error (``mismatch.Gumbel.isf_se``, the delta method under the
 Gumbel law: 3.92 sd / sqrt(B) at alpha 1 %, about 0.14 in z at B = 100). When a
-decision lies within ``SETTLE_SE`` of them (a region's or near miss's max |z|,
-``mismatch.undecided``; a candidate's gain at its chance bar,
+decision lies within ``SETTLE_SE`` of them (the map's or whole-record ADEV's largest
+|z|, ``mismatch.undecided``; a candidate's gain at its chance bar,
 ``selection.bars_undecided``), B more replicates are drawn (``extended``: the next
 seeds of the same SeedSequence stream, so B + B drawn in steps are the 2 B drawn at
 once) and the null refitted, up to ``MAX_GROWTH`` x B; a clear-cut decision draws

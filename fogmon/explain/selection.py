@@ -99,8 +99,8 @@ class Setting:
     def settled(self, stoch: SensorModel, null: mismatch.Null, maps: tuple[np.ndarray, np.ndarray], ctx: Context,
                 counts: Mapping[str, int]) -> tuple[mismatch.Null, list[Candidate]]:
         """The sequential Monte Carlo test (bootstrap.settled): ``null`` (of ``stoch``)
-        with more replicates while the map's regions (of the residual's ln avar ``maps``)
-        or a candidate's pass at its chance bar (``bars_undecided``) lie within its Monte
+        with more replicates while the map's family-wise test (of the residual's ln avar
+        ``maps``, mismatch.undecided) or a candidate's pass at its chance bar (``bars_undecided``) lie within its Monte
         Carlo error; and the candidates fitted in ``ctx`` against the null's bars. The
         grown null is kept by the fit (a mean-type effect's trial reuses it)."""
         def more(nl: mismatch.Null) -> mismatch.Null:
