@@ -75,11 +75,12 @@ def matched_tests_figure(cands: list[Candidate], penalty: float, contradicted: A
 
 
 def analyse(ctx: Context, null: mismatch.Null, grid: mismatch.Grid, cands: list[Candidate],
-            contradicted: AbstractSet[str]) -> Analysis:
-    """Map, regions and score of the context's residual (``Context.residual``; candidates:
-    the matched tests run on it, those of the ``contradicted`` kinds not counted,
-    ``matched_tests_figure``)."""
-    cell, whole = mismatch.log_avar(ctx.residual(np.nan), ctx.valid, grid)
+            contradicted: AbstractSet[str], maps: tuple[np.ndarray, np.ndarray] | None = None) -> Analysis:
+    """Map, regions and score of the context's residual (``Context.residual``; its ln avar
+    cells and whole-record taus ``maps`` when already taken, ``mismatch.log_avar``;
+    candidates: the matched tests run on it, those of the ``contradicted`` kinds not
+    counted, ``matched_tests_figure``)."""
+    cell, whole = maps if maps is not None else mismatch.log_avar(ctx.residual(np.nan), ctx.valid, grid)
     z, zw = mismatch.zscores(cell, whole, null)
     _, zs = spike_scan(ctx)  # (computed once per context)
     nv = int(ctx.valid.sum())

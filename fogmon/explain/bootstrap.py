@@ -14,6 +14,16 @@ up to 4e5, else 40) and the family-wise threshold comes from a Gumbel law fitted
 the replicates' max |z|, so 40 replicates give a usable 1 % threshold; replicates run
 on all cores. When the model holds a rate random walk, each replicate also gives the
 mean-type candidates' gains, whose law sets their chance bars (``scan_null``).
+
+The sequential Monte Carlo test (``settled``): a fitted threshold or chance bar has a
+Monte Carlo standard error (``mismatch.Gumbel.isf_se``, the delta method under the
+Gumbel law: 3.92 sd / sqrt(B) at alpha 1 %, about 0.14 in z at B = 100). When a
+decision lies within ``SETTLE_SE`` of them (the map's or whole-record ADEV's largest
+|z|, ``mismatch.undecided``; a candidate's gain at its chance bar,
+``selection.bars_undecided``), B more replicates are drawn (``extended``: the next
+seeds of the same SeedSequence stream, so B + B drawn in steps are the 2 B drawn at
+once) and the null refitted, up to ``MAX_GROWTH`` x B; a clear-cut decision draws
+nothing extra.
 """
 from __future__ import annotations
 
@@ -100,18 +110,63 @@ class _MapOf:
         return cells, whole, (self.scans(r) if self.scans is not None else {})
 
 
+def _replicate(replicas: Replicas, grid: mismatch.Grid, seeds: np.ndarray, workers: int, progress: Progress | None,
+               mapper: Mapper | None, stage: str = "bootstrap") -> list:
+    """(cells, whole, gains) of the replicates of ``seeds`` (``_MapOf``; the gains of the
+    candidates ``scan_null.calibrated_kinds`` names)."""
+    kinds = calibrated_kinds(replicas.stoch)
+    scans = ScanGains(replicas.stoch, replicas.t_s, replicas.aux, replicas.valid, kinds) if kinds else None
+    return map_replicates(replicas, seeds, _MapOf(grid, scans), workers, progress, stage, mapper)
+
+
+def _null_of(cells: np.ndarray, whole: np.ndarray, gains: tuple, alpha: float, seed: int) -> mismatch.Null:
+    null = mismatch.build_null(cells, whole, alpha)
+    bars, se = scan_bars(list(gains), alpha)
+    return replace(null, seed=seed, gains=gains, scan_bars=bars, scan_bar_se=se)
+
+
 def bootstrap(replicas: Replicas, grid: mismatch.Grid, n_boot: int, seed: int, alpha: float, workers: int,
               progress: Progress | None = None, mapper: Mapper | None = None) -> mismatch.Null:
     """Parametric bootstrap null: ``n_boot`` replicates of ``replicas`` (seeds from
     ``seed``) mapped on ``grid`` (by ``mapper``, else on ``workers`` processes), reported
     to ``progress`` replicate by replicate; with the chance bars of the candidates
     ``scan_null.calibrated_kinds`` names, measured on the same replicates."""
-    kinds = calibrated_kinds(replicas.stoch)
-    scans = ScanGains(replicas.stoch, replicas.t_s, replicas.aux, replicas.valid, kinds) if kinds else None
-    parts = map_replicates(replicas, replicate_seeds(seed, n_boot), _MapOf(grid, scans), workers, progress,
-                           mapper=mapper)
-    null = mismatch.build_null(np.array([p[0] for p in parts]), np.array([p[1] for p in parts]), alpha)
-    return replace(null, scan_bars=scan_bars([p[2] for p in parts], alpha)) if kinds else null
+    parts = _replicate(replicas, grid, replicate_seeds(seed, n_boot), workers, progress, mapper)
+    return _null_of(np.array([p[0] for p in parts]), np.array([p[1] for p in parts]),
+                    tuple(p[2] for p in parts), alpha, seed)
+
+
+def extended(null: mismatch.Null, replicas: Replicas, grid: mismatch.Grid, n_more: int, workers: int,
+             progress: Progress | None = None, mapper: Mapper | None = None) -> mismatch.Null:
+    """``null`` (a ``bootstrap`` of ``replicas`` on ``grid``) with ``n_more`` replicates
+    more: the next seeds of the same stream (``replicate_seeds(null.seed, B + n_more)``
+    starts with the B seeds ``null`` used), so the result is the bootstrap of B + n_more
+    replicates, whether drawn at once or in steps."""
+    b = null.n_replicates
+    assert null.cells is not None and null.whole is not None, "a null built by bootstrap()"
+    parts = _replicate(replicas, grid, replicate_seeds(null.seed, b + n_more)[b:], workers, progress, mapper,
+                       "bootstrap extension")
+    return _null_of(np.concatenate((null.cells, [p[0] for p in parts])),
+                    np.concatenate((null.whole, [p[1] for p in parts])),
+                    null.gains + tuple(p[2] for p in parts), null.alpha, null.seed)
+
+
+#: The sequential Monte Carlo test: a decision that lies within this many standard
+#: errors of its threshold's Monte Carlo estimate (mismatch.undecided, ``bars_undecided``) ...
+SETTLE_SE = 2.0
+#: ... draws the bootstrap's size again, up to this many times that size in all
+MAX_GROWTH = 4
+
+
+def settled(null: mismatch.Null, undecided: Callable[[mismatch.Null], bool], more: Callable[[mismatch.Null],
+            mismatch.Null], n_boot: int) -> mismatch.Null:
+    """The sequential Monte Carlo test: ``null`` (of ``n_boot`` replicates or more) grown
+    by ``more`` (``n_boot`` replicates more each time, ``extended``) while
+    ``undecided(null)`` says its Monte Carlo error may decide, up to ``MAX_GROWTH``
+    x ``n_boot`` replicates; a clear-cut decision draws nothing."""
+    while null.n_replicates < MAX_GROWTH * n_boot and undecided(null):
+        null = more(null)
+    return null
 
 
 def default_n_boot(n: int) -> int:

@@ -30,7 +30,8 @@ class Result:
     """What explain found: the grid's sample times ``t_s`` (s) and ``valid`` mask, the
     residual (deg/h) and its analysis before and after the ``accepted`` effects (largest
     gain first), the ``fitted`` model, the candidates ``rejected`` (kind, BIC gain, why),
-    the bootstrap size and the report's warnings."""
+    the size of the bootstrap the first map was judged with (``n_boot``, with the
+    sequential test's extra replicates) and the report's warnings."""
 
     recording: Recording
     model: SensorModel
@@ -168,7 +169,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
     rejections = state.rejections()
     spikes, listing = ([], None) if any(a.cand.kind in ("outliers", "glitches") for a in accepted) else \
         spike_warnings(fit.ctx, rejections)
-    return Result(rec, model, fitted, grid, t, valid, y0, y_after, before, after, accepted, rejections, B,
+    return Result(rec, model, fitted, grid, t, valid, y0, y_after, before, after, accepted, rejections,
+                  before.null.n_replicates,
                   baseline, too_short_warnings(model, grid) + bursts + spikes, named, listing)
 
 

@@ -13,7 +13,14 @@ model's whole stochastic part, K, B, Q, N and the noise-type effects), and its b
 raised to the value a Gumbel law fitted to those gains exceeds with probability alpha /
 (number of such kinds): the model's own processes then name a chance step, ramp or
 settling no more often than that. Without K the GLS's law holds and nothing is
-simulated (no cost)."""
+simulated (no cost).
+
+A bar fitted to B replicate gains has the same Monte Carlo error as the map's
+threshold, larger at its alpha / 6 level (5.4 sd / sqrt(B) against 3.9 at the map's
+1 %), so a candidate whose gain lies near its bar is decided by the draw as much as by
+the data; the sequential test (bootstrap.settled, selection.bars_undecided) draws more
+replicates then, as it does for a borderline region: ``scan_bars`` gives each bar's
+standard error."""
 from __future__ import annotations
 
 import numpy as np
@@ -55,14 +62,16 @@ class ScanGains:
         return out
 
 
-def scan_bars(gains: list[dict[str, float]], alpha: float) -> dict[str, float]:
+def scan_bars(gains: list[dict[str, float]], alpha: float) -> tuple[dict[str, float], dict[str, float]]:
     """kind -> the gain the replicates' ``gains`` (one dict per replicate) exceed with
-    probability alpha / (number of kinds), from a Gumbel law fitted to them."""
+    probability alpha / (number of kinds), from a Gumbel law fitted to them; and kind ->
+    that bar's Monte Carlo standard error (mismatch.Gumbel.isf_se)."""
     kinds = sorted({k for g in gains for k in g})
-    bars = {}
+    bars, se = {}, {}
     for kind in kinds:
         x = np.array([g.get(kind, np.nan) for g in gains], dtype=float)
         x = x[np.isfinite(x)]
         if len(x) >= MIN_GAINS:
-            bars[kind] = Gumbel.fit(x).isf(alpha / len(kinds))
-    return bars
+            law = Gumbel.fit(x)
+            bars[kind], se[kind] = law.isf(alpha / len(kinds)), law.isf_se(alpha / len(kinds))
+    return bars, se

@@ -13,7 +13,7 @@ import numpy as np
 
 from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
-from fogmon.explain.bootstrap import Mapper, Progress, bootstrap
+from fogmon.explain.bootstrap import MAX_GROWTH, SETTLE_SE, Mapper, Progress, bootstrap, extended, settled
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
 from fogmon.explain.candidates.base import centred, flicker_psd
 from fogmon.explain.fitting import Whittle
@@ -88,11 +88,52 @@ class Setting:
         ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y, copy=False)
         del y
         ctx.meta = dict(self.meta)
-        cands = candidates(ctx, counts, null.scan_bars)
-        fit = Fit(stoch, null, ctx, cands, analyse(ctx, null, self.grid, cands, contradicted))
+        maps = mismatch.log_avar(ctx.residual(np.nan), ctx.valid, self.grid)
+        null, cands = self.settled(stoch, null, maps, ctx, counts)
+        fit = Fit(stoch, null, ctx, cands, analyse(ctx, null, self.grid, cands, contradicted, maps))
         for key in ("spike_scan", "spikes", "model_psd"):  # record-length arrays, computed again if needed (memory)
             ctx.cache.pop(key, None)
         return fit
+
+
+    def settled(self, stoch: SensorModel, null: mismatch.Null, maps: tuple[np.ndarray, np.ndarray], ctx: Context,
+                counts: Mapping[str, int]) -> tuple[mismatch.Null, list[Candidate]]:
+        """The sequential Monte Carlo test (bootstrap.settled): ``null`` (of ``stoch``)
+        with more replicates while the map's family-wise test (of the residual's ln avar
+        ``maps``, mismatch.undecided) or a candidate's pass at its chance bar (``bars_undecided``) lie within its Monte
+        Carlo error; and the candidates fitted in ``ctx`` against the null's bars. The
+        grown null is kept by the fit (a mean-type effect's trial reuses it)."""
+        def more(nl: mismatch.Null) -> mismatch.Null:
+            if self.progress:
+                self.progress(f"bootstrap null undecided at {nl.n_replicates} simulations: "
+                              f"{self.n_boot} more", 0, 0)
+            return extended(nl, Replicas(stoch, self.t_s, self.aux, self.valid), self.grid, self.n_boot,
+                            self.workers, self.progress, self.mapper)
+
+        def map_undecided(nl: mismatch.Null) -> bool:
+            return mismatch.undecided(*mismatch.zscores(*maps, nl), nl, SETTLE_SE)
+
+        null = settled(null, map_undecided, more, self.n_boot)
+        cands = candidates(ctx, counts, null.scan_bars)
+        while null.n_replicates < MAX_GROWTH * self.n_boot and bars_undecided(cands, null, ctx.penalty):
+            null = settled(more(null), map_undecided, more, self.n_boot)
+            cands = candidates(ctx, counts, null.scan_bars)
+        return null, cands
+
+
+def bars_undecided(cands: list[Candidate], null: mismatch.Null, penalty: float) -> bool:
+    """Whether a candidate's gain lies within ``SETTLE_SE`` Monte Carlo standard errors of
+    the chance bar the null's replicates set for its kind (scan_null) while no other bar
+    of it (BIC's, its own search's) decides alone."""
+    for c in cands:
+        bar = null.scan_bars.get(c.kind)
+        if bar is None:
+            continue
+        band = SETTLE_SE * null.scan_bar_se[c.kind]
+        # c.search_bar is the higher of its own search's bar and the chance bar
+        if abs(c.gain - bar) < band and c.k * penalty < c.gain and c.search_bar < bar + band:
+            return True
+    return False
 
 
 @dataclass(frozen=True, eq=False)
