@@ -240,16 +240,18 @@ def build_null(cells: np.ndarray, whole: np.ndarray, alpha: float = 0.01) -> Nul
 
 
 def undecided(z: np.ndarray, z_whole: np.ndarray, null: Null, n_se: float) -> bool:
-    """Whether the Monte Carlo error of the null's thresholds may decide the family-wise
-    test of the map (``z``) or of the whole-record ADEV (``z_whole``): the family's
-    largest |z| lies within ``n_se`` standard errors (``Null.threshold_se``) of its
-    threshold (a region that more replicates could remove, or a near miss they could
-    make one). A family whose largest |z| is clear of that band is decided, whatever its
-    weaker regions: their extent is a detail of a mismatch already shown."""
+    """Whether the Monte Carlo error of the null's thresholds may decide that the map
+    (``z``) or the whole-record ADEV (``z_whole``) shows a mismatch: the family's largest
+    |z| lies above its threshold by less than ``n_se`` standard errors
+    (``Null.threshold_se``), a region that more replicates could remove. A near miss is
+    not confirmed (explain names nothing it has not shown beyond chance: more replicates
+    could only add a region the first draw did not need), nor a family whose largest
+    |z| is clear of that band, whatever its weaker regions: their extent is a detail of
+    a mismatch already shown."""
     for zz, thr, se in ((z, null.threshold, null.threshold_se), (z_whole, null.threshold_whole,
                                                                   null.threshold_whole_se)):
         a = np.abs(zz[np.isfinite(zz)])
-        if a.size and abs(float(a.max()) - thr) < n_se * se:
+        if a.size and thr <= float(a.max()) < thr + n_se * se:
             return True
     return False
 

@@ -122,16 +122,17 @@ class Setting:
 
 
 def bars_undecided(cands: list[Candidate], null: mismatch.Null, penalty: float) -> bool:
-    """Whether a candidate's gain lies within ``SETTLE_SE`` Monte Carlo standard errors of
-    the chance bar the null's replicates set for its kind (scan_null) while no other bar
-    of it (BIC's, its own search's) decides alone."""
+    """Whether a candidate's gain lies above the chance bar the null's replicates set for
+    its kind (scan_null) by less than ``SETTLE_SE`` Monte Carlo standard errors while no
+    other bar of it (BIC's, its own search's) decides alone: a pass that more replicates
+    could refuse (a refusal is not confirmed: it names nothing)."""
     for c in cands:
         bar = null.scan_bars.get(c.kind)
         if bar is None:
             continue
         band = SETTLE_SE * null.scan_bar_se[c.kind]
         # c.search_bar is the higher of its own search's bar and the chance bar
-        if abs(c.gain - bar) < band and c.k * penalty < c.gain and c.search_bar < bar + band:
+        if bar <= c.gain < bar + band and c.k * penalty < c.gain and c.search_bar < bar + band:
             return True
     return False
 

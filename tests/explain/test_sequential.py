@@ -75,13 +75,15 @@ def test_borderline_map_draws_more_clear_one_does_not(setup):
     z, zw = mismatch.zscores(*border, grown)
     assert [r.max_abs_z for r in mismatch.find_regions(z, zw, grown, grid)] == \
         [r.max_abs_z for r in mismatch.find_regions(*mismatch.zscores(*border, again), again, grid)]
-    # far beyond it, or nothing near it: decided with the replicates at hand
-    for clear in (_map_with_peak(null, null.threshold + 10.0), _map_with_peak(null, 0.0)):
+    # far beyond it, nothing near it, or a near miss just below it (not confirmed: it names
+    # nothing): decided with the replicates at hand
+    for clear in (_map_with_peak(null, null.threshold + 10.0), _map_with_peak(null, 0.0),
+                  _map_with_peak(null, null.threshold - 0.3 * null.threshold_se)):
         kept, steps = _settle(null, clear, replicas, grid)
         assert kept is null and steps == []
 
 
-def test_chance_bar_borderline_only_near_the_bar():
+def test_chance_bar_borderline_only_just_above_the_bar():
     rng = np.random.default_rng(2)
     gains = [{"bias_step": float(g)} for g in rng.gumbel(10.0, 2.0, 40)]
     bars, se = scan_bars(gains, 0.01)
@@ -97,4 +99,5 @@ def test_chance_bar_borderline_only_near_the_bar():
     bar, band = bars["bias_step"], SETTLE_SE * se["bias_step"]
     assert bars_undecided([Cand(bar + 0.5 * band)], null, 1.0)
     assert not bars_undecided([Cand(bar + 2.0 * band)], null, 1.0)
-    assert not bars_undecided([Cand(bar - 0.5 * band)], null, bar)   # BIC's bar decides alone
+    assert not bars_undecided([Cand(bar - 0.5 * band)], null, 1.0)   # a refusal is not confirmed
+    assert not bars_undecided([Cand(bar + 0.5 * band)], null, bar)   # BIC's bar decides alone
