@@ -76,7 +76,8 @@ def fit_coefficients(y: np.ndarray, valid: np.ndarray, stoch: SensorModel, sampl
     interact in the fit), or None when the ADEV cannot be fitted. ``S``: the model's PSD
     at the record's rfft bins, when the caller has it."""
     n = len(y)
-    r = oadev(np.where(valid, y, np.nan), sample_rate_hz, "octave", valid=valid)
+    # alpha=0: the intervals are not used here, and a noise type skips the mixture's fits
+    r = oadev(np.where(valid, y, np.nan), sample_rate_hz, "octave", valid=valid, alpha=0)
     a, se, _, up = fit_avar(r.tau_s, r.adev_dph ** 2, r.m, r.n_terms, n, "all")
     S = model_psd(stoch, rfft_omega(n), n, white_dpsh) if S is None else S
     ae, _, _, _ = fit_avar(r.tau_s, expected_avar(S, n, r.m), r.m, r.n_terms, n, "none")
