@@ -75,7 +75,12 @@ def _terms_edf(terms, m, n_samples: int, avar) -> np.ndarray:
     Allan variances gives an EDF of 6,380 at 0.01-0.04 s, the mixture 205,000; capped at
     the peak's, 0.64-1.28 s on a noisy flat top, 2,770 in the median record: conservative
     there, exact from the peak on)."""
-    edf = mixture_edf_row(terms, np.asarray(m, dtype=np.float64), m, n_samples)
+    return _capped_below_peak(mixture_edf_row(terms, np.asarray(m, dtype=np.float64), m, n_samples), avar)
+
+
+def _capped_below_peak(edf: np.ndarray, avar) -> np.ndarray:
+    """The EDF row (1, M) ``edf`` no higher at the taus below a low-pass's peak of the
+    Allan variance ``avar`` (``fit.low_pass_taus``) than at the peak (``_terms_edf``)."""
     k = low_pass_taus(avar)
     if k:
         edf = edf.copy()
@@ -238,11 +243,8 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
     ident = record_mixture.identified(np.asarray(m) / sample_rate_hz, avar, m, counts, n_samples)
     k_detr = _detrended_k(y, ok, m, n_samples) if record_mixture.needs_detrended(ident) else None
     fractions = record_mixture.fractions(terms, ident, m, k_detr)
-    gapless = record_mixture.edf_row(fractions, m, n_samples)
-    k = low_pass_taus(avar)
-    if k:
-        gapless[:k] = np.fmin(gapless[:k], gapless[k])
-    adev, edf = adev_edf(sums, counts, m, n_samples, None, gapless.reshape(1, -1))
+    gapless = _capped_below_peak(record_mixture.edf_row(fractions, m, n_samples), avar)
+    adev, edf = adev_edf(sums, counts, m, n_samples, None, gapless)
     lo, hi = chi2_bounds(adev, edf, confidence)
     if exact_shape:
         lo, hi = _shaped_bounds(fractions, adev, lo, hi, edf, counts, m, n_samples, confidence)

@@ -16,6 +16,7 @@ the correlation across taus (``fit_avar``). The iterations run in numba
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from statistics import NormalDist
 
@@ -299,19 +300,20 @@ def dense_grid_edf(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.nd
     exact (``_NoiseModel``) at up to _ANCHORS_PER_OCTAVE taus per octave and interpolated
     in log-log between them on denser grids: a mixture matrix costs ~12 ms per m, so the
     exact EDF of an "all" grid of 2^15 samples took 45 s; interpolated it is within 0.2 %
-    of it (tests/test_davar_fit_covariance.py)."""
-    anchor = edf_anchors(m)
+    of it (tests/davar/test_fit_covariance.py)."""
     full = np.maximum(n_samples - 2 * m + 1, 1)
-    nu_anchor = _NoiseModel(tau[anchor], m[anchor], full[anchor], n_samples)(a)
-    return np.exp(np.interp(np.log2(m), np.log2(m[anchor]), np.log(nu_anchor))) * (np.asarray(n_terms) / full)
+    nu = anchored_edf(m, lambda i: _NoiseModel(tau[i], m[i], full[i], n_samples)(a))
+    return nu * (np.asarray(n_terms) / full)
 
 
-def edf_anchors(m: np.ndarray) -> np.ndarray:
-    """Indices (ascending m) of the factors ``m`` where a dense grid's EDF is computed
-    exactly (``dense_grid_edf``): up to _ANCHORS_PER_OCTAVE per octave and the largest."""
+def anchored_edf(m: np.ndarray, edf_at: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """EDF per factor ``m`` from ``edf_at`` (the exact EDF at the given indices of ``m``)
+    evaluated at up to _ANCHORS_PER_OCTAVE factors per octave and the largest,
+    interpolated in log-log between them (``dense_grid_edf``)."""
     lg = np.log2(m)
     anchor = np.union1d(np.unique(np.round(lg * _ANCHORS_PER_OCTAVE), return_index=True)[1], np.argmax(m))
-    return anchor[np.argsort(m[anchor])]
+    anchor = anchor[np.argsort(m[anchor])]
+    return np.exp(np.interp(lg, lg[anchor], np.log(edf_at(anchor))))
 
 
 def mixture_edf_row(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_samples: int) -> np.ndarray:
