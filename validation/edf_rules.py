@@ -21,8 +21,9 @@ Rules (each with the chi-square shape, and with ``S`` the exact shape of
 - ``detr_exact``: ``detrended`` with the expected Allan variance of detrended white-rate
   and random-walk noise in that fit (``detrend_factors``: at m = n / 4 a detrended random
   walk keeps 0.47 of its Allan variance).
-- ``hybrid``: the product's (``fogmon.davar.record_mixture``): ``ramp_id``, and the
-  detrended record's K only where the fit identifies R but not K.
+- ``hybrid``: the product's (``fogmon.davar.record_mixture``): the ramp's share
+  deterministic only where the fit identifies R but not K, and then K from the
+  detrended record; else counted as random-walk rate noise.
 - ``true``: the simulator's model (the reference).
 
     python validation/edf_rules.py [--records 200] [--models 2,3,4] [--last 6] [--seed 1] [--jobs 2]
@@ -104,6 +105,10 @@ def _detrended_k(res_detr, n: int) -> float:
                           rtol=1e-3)[0][K])
 
 
+def _hybrid(a, a_detr, tau, deterministic: bool) -> np.ndarray:
+    return term_fractions(a_detr, tau) if deterministic else _ramp_random(term_fractions(a, tau))
+
+
 def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.ndarray]:
     """(model index, tau_s, {rule: coverage (2 confidences x taus)}, [K identified, K of
     the quick fit, K detrended (deg/h/sqrt(h))]) of one record."""
@@ -126,7 +131,7 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     ramp_rule = (lambda f: f) if r_ident else _ramp_random
     mix = {"quick": term_fractions(a, tau), "ramp_id": ramp_rule(term_fractions(a, tau)),
            "detrended": ramp_rule(term_fractions(a_detr, tau)), "detr_exact": ramp_rule(term_fractions(a_exact, tau)),
-           "hybrid": ramp_rule(term_fractions(a_detr if r_ident and not fit.K_dphsh.identifiable else a, tau)),
+           "hybrid": _hybrid(a, a_detr, tau, r_ident and not fit.K_dphsh.identifiable),
            "true": term_fractions(coefficients_to_avar_terms(*case.truth), tau)}
     mats, full = mixture_matrices(m, n), n - 2 * m + 1
     out = {}

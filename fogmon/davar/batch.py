@@ -233,15 +233,15 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
                       confidence: float = CONFIDENCE, exact_shape: bool = True):
     """(adev_dph, lo_dph, hi_dph, edf) of a whole record (rate ``y`` in deg/h at
     ``sample_rate_hz``, valid ``ok``; one window's ``sums``, ``counts``): the EDF of the quick IEEE-952 fit's mixture
-    under ``record_mixture``'s rules (a ramp deterministic only where identified, beside
-    it a K not identified from the detrended record), capped below a low-pass's peak as
+    under ``record_mixture``'s rules (a ramp deterministic only where the fit identifies R
+    and not K, K then from the detrended record), capped below a low-pass's peak as
     ``row_edf``; with ``exact_shape``, at the gap-free taus where few independent terms
     remain (``shape.shape_applies``: M / m <= 16) the exact shape of that mixture's Allan
     variance instead of chi-square's (docs/davar.md, "Calibration")."""
     avar = _avar(sums, counts)
     terms = _row_terms(sums, counts, m, n_samples)
     ident = record_mixture.identified(np.asarray(m) / sample_rate_hz, avar, m, counts, n_samples)
-    k_detr = _detrended_k(y, ok, m, n_samples) if record_mixture.needs_detrended(ident) else None
+    k_detr = _detrended_k(y, ok, m, n_samples) if record_mixture.deterministic_ramp(ident) else None
     fractions = record_mixture.fractions(terms, ident, m, k_detr)
     gapless = _capped_below_peak(record_mixture.edf_row(fractions, m, n_samples), avar)
     adev, edf = adev_edf(sums, counts, m, n_samples, None, gapless)

@@ -37,5 +37,7 @@ def test_the_rules_move_shares_not_totals():
     ident = np.array([False, True, True, False, True])
     f = record_mixture.fractions(a, ident, m, k_detrended=0.0)
     np.testing.assert_allclose(f, term_fractions(np.array([0.0, 1.0, 0.5, 0.0, 0.1]), m))
-    # both identified: the quick fit's own mixture
-    np.testing.assert_allclose(record_mixture.fractions(a, np.ones(5, dtype=bool), m, k_detrended=0.0), base)
+    # both identified: the quick fit's K, and the ramp's share counts as random walk
+    f = record_mixture.fractions(a, np.ones(5, dtype=bool), m, k_detrended=0.0)
+    np.testing.assert_allclose(f[:, RAMP], 0.0)
+    np.testing.assert_allclose(f[:, record_mixture.RANDOM_WALK], base[:, 3] + base[:, RAMP])
