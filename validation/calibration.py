@@ -15,7 +15,8 @@ numbers, whatever --jobs.
   ``oadev(rate, fs, taus="octave")`` and ``fit_noise`` of it, the same calls on the same
   samples): per model and coefficient how often it is identified, how often its 68.3 %
   and 95 % intervals (``fit_noise(..., confidence)``; a term not identifiable has the
-  interval [0, its 95 % upper limit]) and its one-sided 95 % upper limit cover the
+  interval [0, hi]: hi its 95 % upper limit, or its interval's upper end at that level
+  where higher) and its one-sided 95 % upper limit cover the
   truth; per tau how often the ADEV's 68.3 % and 95 % intervals as ``oadev`` gives them
   (its EDF; the exact shape at the longest taus) cover the exact expected ADEV of the
   simulator (``modelcheck.band.theory_adev_dph``).

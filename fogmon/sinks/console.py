@@ -192,8 +192,8 @@ def coefficient_axes_lines(fits: dict, names: Mapping[str, str] = COEFFICIENTS) 
             if bool(c.identifiable):
                 cells.append(f"{float(c.value):.4g} [{float(c.lo):.4g}, {float(c.hi):.4g}]")
             else:
-                hi = float(c.hi)
-                cells.append(f"n/i (< {hi:.4g})" if math.isfinite(hi) else "n/i")
+                up = float(c.upper)
+                cells.append(f"n/i (< {up:.4g})" if math.isfinite(up) else "n/i")
         out.append(f"  {name:<{w}} {unit:<14}" + " ".join(f"{c:>{AXIS_COLUMN}}" for c in cells))
     return out
 
@@ -225,8 +225,8 @@ def coefficient_lines(f, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:
             tag = "  white angle noise, not quantization" if name == "Q_arcsec" and _q_band_limited(f) else ""
             out.append(f"  {name:<{w}} = {float(c.value):.4g} {unit}  [{float(c.lo):.4g}, {float(c.hi):.4g}]{tag}")
         else:
-            hi = float(c.hi)
-            bound = f" (< {hi:.4g} {unit}, 95 % upper limit)" if math.isfinite(hi) else ""
+            up = float(c.upper)
+            bound = f" (< {up:.4g} {unit}, 95 % upper limit)" if math.isfinite(up) else ""
             out.append(f"  {name:<{w}}   not identifiable from this record{bound}")
     return out
 
@@ -323,7 +323,7 @@ def motion_effect_lines(x: AxisSummary, axis: str = "") -> list[str]:
         for f in (x.overall_fit, x.fit_with_motion):
             c = getattr(f, name)
             cells.append(f"{float(c.value):.4g} [{float(c.lo):.4g}, {float(c.hi):.4g}]" if bool(c.identifiable)
-                         else f"n/i (< {float(c.hi):.4g})")
+                         else f"n/i (< {float(c.upper):.4g})")
         rows.append((name, unit, *cells))
     w = max(len(r[k]) for r in rows for k in (2, 3)) + 2
     return ["", f"IEEE-952 noise coefficients{where} without and with platform motion ({x.motion_in_tail} samples, "
