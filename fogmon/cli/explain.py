@@ -12,6 +12,7 @@ from fogmon.cli.export_options import add_export_argument, export_request
 from fogmon.cli.helptext import set_epilog
 from fogmon.cli.source_options import add_reader_arguments, source_options
 from fogmon.cli.values import number, positive
+from fogmon.explain.options import MAX_GROWTH, SETTLE_SE
 from fogmon.export import write_export
 from fogmon.outputs import check_outputs, written
 
@@ -61,7 +62,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bootstrap", type=number(8, MAX_BOOTSTRAP, integer=True), default=default.n_boot,
                    metavar="REPLICATES",
                    help=f"bootstrap replicates of the model, 8..{MAX_BOOTSTRAP} (default: 100 up to 1e5 samples, "
-                   "60 up to 4e5, else 40)")
+                   f"60 up to 4e5, else 40); a decision that would name an effect and lies within {SETTLE_SE:g} "
+                   f"Monte Carlo standard errors of its threshold draws more, up to {MAX_GROWTH}x")
     p.add_argument("--alpha", type=number(0, 0.5, above=True), default=default.alpha,
                    metavar="PROBABILITY",
                    help=f"family-wise significance of the mismatch map, 0 < alpha <= 0.5 (default {default.alpha:g})")

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from fogmon.explain import mismatch
+from fogmon.explain.options import MAX_GROWTH
 from fogmon.explain.replicas import Replicas
 from fogmon.explain.scan_null import ScanGains, calibrated_kinds, scan_bars
 
@@ -149,13 +150,6 @@ def extended(null: mismatch.Null, replicas: Replicas, grid: mismatch.Grid, n_mor
     return _null_of(np.concatenate((null.cells, [p[0] for p in parts])),
                     np.concatenate((null.whole, [p[1] for p in parts])),
                     null.gains + tuple(p[2] for p in parts), null.alpha, null.seed)
-
-
-#: The sequential Monte Carlo test: a decision that lies within this many standard
-#: errors of its threshold's Monte Carlo estimate (mismatch.undecided, ``bars_undecided``) ...
-SETTLE_SE = 2.0
-#: ... draws the bootstrap's size again, up to this many times that size in all
-MAX_GROWTH = 4
 
 
 def settled(null: mismatch.Null, undecided: Callable[[mismatch.Null], bool], more: Callable[[mismatch.Null],

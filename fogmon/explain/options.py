@@ -5,6 +5,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: The sequential Monte Carlo test (``bootstrap.settled``): a decision that would name
+#: something and lies within this many standard errors of its threshold's Monte Carlo
+#: estimate (mismatch.undecided, ``selection.bars_undecided``) ...
+SETTLE_SE = 2.0
+#: ... draws the bootstrap's size again, up to this many times that size in all
+MAX_GROWTH = 4
+
 
 @dataclass(frozen=True)
 class Options:

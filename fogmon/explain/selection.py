@@ -13,10 +13,11 @@ import numpy as np
 
 from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
-from fogmon.explain.bootstrap import MAX_GROWTH, SETTLE_SE, Mapper, Progress, bootstrap, extended, settled
+from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, extended, settled
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
 from fogmon.explain.candidates.base import centred, flicker_psd
 from fogmon.explain.fitting import Whittle
+from fogmon.explain.options import MAX_GROWTH, SETTLE_SE
 from fogmon.explain.replicas import Replicas
 from fogmon.sim.model import SensorModel
 

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from fogmon.explain import mismatch
-from fogmon.explain.bootstrap import MAX_GROWTH, SETTLE_SE, bootstrap, extended, settled
+from fogmon.explain.bootstrap import bootstrap, extended, settled
+from fogmon.explain.options import MAX_GROWTH, SETTLE_SE
 from fogmon.explain.replicas import Replicas
 from fogmon.explain.scan_null import scan_bars
 from fogmon.explain.selection import bars_undecided
