@@ -57,7 +57,8 @@ class Coefficient:
     """One IEEE-952 coefficient (unit in the attribute name): estimate ``value``,
     interval ``lo``..``hi`` at the fit's confidence, ``identifiable`` False when the
     record cannot tell the term from zero (then ``value`` = ``lo`` = 0 and ``hi`` is
-    ``upper``: quote only that, as an upper limit). ``upper``: one-sided
+    ``upper``, or at a confidence above 90 % the profile interval's upper end where
+    higher: ``_coefficients``; quote only ``upper``, as an upper limit). ``upper``: one-sided
     UPPER_CONFIDENCE (95 %) upper limit of the coefficient, never below the term's
     estimate in a fit that includes it (every term of an AdevResult fit; in a DadevResult
     fit only where not identifiable, else NaN). Scalars for an AdevResult fit, arrays
