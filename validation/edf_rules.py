@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from multiprocessing import Pool
 
 import numpy as np
 from scipy.stats import chi2
@@ -46,7 +45,7 @@ from fogmon.davar.theory import POWERS, avar_terms_to_coefficients, coefficients
 from fogmon.modelcheck.band import theory_adev_dph
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from calibration import CONFIDENCES, MODELS, _record, record_seed  # noqa: E402
+from calibration import CONFIDENCES, MODELS, _map, _record, record_seed  # noqa: E402
 
 RULES = ("quick", "ramp_id", "detrended", "detr_exact", "hybrid", "true")
 K, R = 3, 4  # Q, N, B, K, R: the classes' order (confidence.MIX_ALPHAS, then the ramp)
@@ -166,11 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     ks = [int(s) for s in args.models.split(",")]
     jobs = [(k, i, args.seed) for k in ks for i in range(args.records)]
-    if args.jobs > 1:
-        with Pool(args.jobs) as pool:
-            rows = pool.map(record_rules, jobs, chunksize=4)
-    else:
-        rows = [record_rules(j) for j in jobs]
+    rows = _map(record_rules, jobs, args.jobs)
     print(f"Coverage (%) of the per-tau ADEV intervals at 68.3 / 95 % by EDF rule, {args.records} records per "
           f"model, seed {args.seed} (S: the exact shape where it applies)")
     names = [r + s for r in RULES for s in ("", "S")]

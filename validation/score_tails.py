@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from multiprocessing import Pool
 
 import numpy as np
 
@@ -28,7 +27,7 @@ from fogmon.davar.profile import fit_full, score_limits
 from fogmon.davar.theory import NAMES, POWERS, coefficients_to_avar_terms
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from calibration import MODELS, _record, record_seed  # noqa: E402
+from calibration import MODELS, _map, _record, record_seed  # noqa: E402
 
 Z_GRID = np.round(np.arange(0.05, 4.0 + 1e-9, 0.05), 2)
 TAILS = ((-1.96, "z<=-1.96", 0.025), (-1.645, "z<=-1.645", 0.05), (1.645, "z>=1.645", 0.05),
@@ -77,11 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     models = [int(k) for k in args.models.split(",")]
     t0 = time.time()
     jobs = [(k, i, args.seed) for k in models for i in range(args.records)]
-    if args.jobs > 1:
-        with Pool(args.jobs) as pool:
-            rows = pool.map(record_z, jobs, chunksize=4)
-    else:
-        rows = [record_z(j) for j in jobs]
+    rows = _map(record_z, jobs, args.jobs)
     print(f"The score test's z at the true coefficient, {args.records} records per model (seed {args.seed}); "
           f"a standard normal has {', '.join(f'P({name}) {100 * q:.1f} %' for _, name, q in TAILS)}")
     print(f"  {'model':<18} {'coef':<9} {'records':<15} {'n':>5} " + " ".join(f"{name:>10}" for _, name, _ in TAILS))
