@@ -8,8 +8,9 @@ at the truth for every term present in each record of ``calibration.MODELS`` (sa
 models, same seeds): ``score_limits`` over a grid of quantiles (0.05 .. 4 in steps of
 0.05, both sides), z(truth) the grid's last quantile whose limit the truth passes
 (resolution 0.05, towards 0). It prints, per model and term, the tail probabilities
-beside the normal's, for all records and split by whether the record identifies the
-term. Not part of any verdict; docs/davar.md ("Calibration") quotes it.
+beside the normal's and z's mean, standard deviation and skewness (a standard normal's:
+0, 1, 0), for all records and split by whether the record identifies the term. Not
+part of any verdict; docs/davar.md ("Calibration") quotes it.
 
     python validation/score_tails.py [--records 300] [--models 0,1] [--seed 1] [--jobs 2]
 """
@@ -79,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     rows = _map(record_z, jobs, args.jobs)
     print(f"The score test's z at the true coefficient, {args.records} records per model (seed {args.seed}); "
           f"a standard normal has {', '.join(f'P({name}) {100 * q:.1f} %' for _, name, q in TAILS)}")
-    print(f"  {'model':<18} {'coef':<9} {'records':<15} {'n':>5} " + " ".join(f"{name:>10}" for _, name, _ in TAILS))
+    print(f"  {'model':<18} {'coef':<9} {'records':<15} {'n':>5} " + " ".join(f"{name:>10}" for _, name, _ in TAILS)
+          + f" {'mean':>6} {'sd':>5} {'skew':>5}")
     for k in models:
         mine = [r for r in rows if r[0] == k]
         ident = np.array([r[1] for r in mine])
@@ -90,7 +92,10 @@ def main(argv: list[str] | None = None) -> int:
                                ("not identified", ~ident[:, j]))[:3 if split else 1]:
                 v = z[sel, j]
                 cells = " ".join(f"{100 * np.mean(v <= t if t < 0 else v >= t):9.1f}%" for t, _, _ in TAILS)
-                print(f"  {MODELS[k].name:<18} {NAMES[j]:<9} {label:<15} {sel.sum():5d} {cells}")
+                sd = v.std()
+                skew = np.mean((v - v.mean()) ** 3) / sd**3 if sd > 0 else np.nan
+                print(f"  {MODELS[k].name:<18} {NAMES[j]:<9} {label:<15} {sel.sum():5d} {cells}"
+                      f" {v.mean():6.2f} {sd:5.2f} {skew:5.2f}")
     print(f"({time.time() - t0:.0f} s)")
     return 0
 
