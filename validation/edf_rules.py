@@ -37,11 +37,12 @@ import sys
 import numpy as np
 from scipy.stats import chi2
 
+from fogmon.davar import record_mixture
 from fogmon.davar.batch import oadev
 from fogmon.davar.confidence import edf_mixture_from, mixture_matrices, term_fractions
 from fogmon.davar.fit import _NoiseModel, _scoring, fit_noise, low_pass_taus, octave_subset, quick_avar_terms
 from fogmon.davar.shape import shape_factors
-from fogmon.davar.theory import POWERS, avar_terms_to_coefficients, coefficients_to_avar_terms
+from fogmon.davar.theory import NAMES, POWERS, avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.modelcheck.band import theory_adev_dph
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
@@ -104,10 +105,6 @@ def _detrended_k(res_detr, n: int) -> float:
                           rtol=1e-3)[0][K])
 
 
-def _hybrid(a, a_detr, tau, deterministic: bool) -> np.ndarray:
-    return term_fractions(a_detr, tau) if deterministic else _ramp_random(term_fractions(a, tau))
-
-
 def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.ndarray]:
     """(model index, tau_s, {rule: coverage (2 confidences x taus)}, [K identified, K of
     the quick fit, K detrended (deg/h/sqrt(h))]) of one record."""
@@ -119,7 +116,8 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     truth = theory_adev_dph(case.model, res.m, case.sample_rate_hz, case.duration_s)
     tau, m = res.tau_s, res.m
     fit = fit_noise(res)
-    r_ident = bool(fit.R_dphh.identifiable)
+    ident = np.array([bool(getattr(fit, name).identifiable) for name in NAMES])
+    r_ident = bool(ident[R])
     a = _quick(res, n)
     t_s = np.arange(n) / case.sample_rate_hz
     line = np.polyval(np.polyfit(t_s, rec.rate_dph, 1), t_s)
@@ -130,7 +128,7 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     ramp_rule = (lambda f: f) if r_ident else _ramp_random
     mix = {"quick": term_fractions(a, tau), "ramp_id": ramp_rule(term_fractions(a, tau)),
            "detrended": ramp_rule(term_fractions(a_detr, tau)), "detr_exact": ramp_rule(term_fractions(a_exact, tau)),
-           "hybrid": _hybrid(a, a_detr, tau, r_ident and not fit.K_dphsh.identifiable),
+           "hybrid": record_mixture.fractions(a, ident, tau, a_detr[K]),
            "true": term_fractions(coefficients_to_avar_terms(*case.truth), tau)}
     mats, full = mixture_matrices(m, n), n - 2 * m + 1
     out = {}
