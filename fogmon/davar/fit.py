@@ -396,11 +396,14 @@ def _coefficients(fits: list[CurveFit], confidence: float, windows: bool) -> lis
     lo_a = np.where(np.isnan(lo_a), np.maximum(a - z * se, 0.0), lo_a)
     hi_a = np.where(np.isnan(hi_a), a + z * se, hi_a)
     conv = avar_terms_to_coefficients
+
+    def kept(v):  # the coefficients of A_n, inf and NaN kept
+        return np.where(np.isfinite(v), conv(np.where(np.isfinite(v), v, 0.0)), v)
+
     value = np.where(ident, conv(np.where(np.isfinite(a), a, 0.0)), np.where(np.isfinite(a), 0.0, np.nan))
-    up = np.where(np.isfinite(upper), conv(np.where(np.isfinite(upper), upper, 0.0)), upper)
+    up = kept(upper)
     lo = np.where(ident, conv(np.where(np.isfinite(lo_a), lo_a, 0.0)), 0.0)
-    hi = np.where(ident, conv(np.where(np.isfinite(hi_a), hi_a, 0.0)),
-                  np.where(np.isfinite(reach), conv(np.where(np.isfinite(reach), reach, 0.0)), reach))
+    hi = np.where(ident, conv(np.where(np.isfinite(hi_a), hi_a, 0.0)), kept(reach))
     hi = np.where(ident & np.isinf(hi_a), np.inf, hi)
     return [Coefficient(*(v[:, i] if windows else v[0, i].item() for v in (value, lo, hi, ident, up)))
             for i in range(5)]
