@@ -22,8 +22,9 @@ Rules (each with the chi-square shape, and with ``S`` the exact shape of
   and random-walk noise in that fit (``detrend_factors``: at m = n / 4 a detrended random
   walk keeps 0.47 of its Allan variance).
 - ``hybrid``: the product's (``fogmon.davar.record_mixture``): the ramp's share
-  deterministic only where the fit identifies R but not K, and then K from the
-  detrended record; else counted as random-walk rate noise.
+  deterministic only where the fit rejects R = 0 at ``DETERMINISTIC_Z`` and does not
+  identify K, and then K from the detrended record where its fit identifies K (else 0);
+  else counted as random-walk rate noise.
 - ``true``: the simulator's model (the reference).
 
     python validation/edf_rules.py [--records 200] [--models 2,3,4] [--last 6] [--seed 1] [--jobs 2]
@@ -61,6 +62,16 @@ def _ramp_random(f: np.ndarray) -> np.ndarray:
 
 def _quick(res, n: int) -> np.ndarray:
     return quick_avar_terms(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
+
+
+def _product(res, res_detr, a: np.ndarray, n: int, sample_rate_hz: float) -> np.ndarray:
+    """The product's mixture (``record_mixture``'s rules) at ``res.tau_s`` (s) of the quick-fit ``a``."""
+    deterministic = record_mixture.deterministic_ramp(
+        record_mixture.record_fit(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n))
+    # detrended_k's A_K is per sample period (tau in samples); a's tau is in s
+    k = (record_mixture.detrended_k(res_detr.tau_s, res_detr.adev_dph**2, res_detr.m, res_detr.n_terms, n)
+         * sample_rate_hz) if deterministic else None
+    return record_mixture.fractions(a, deterministic, res.tau_s, k)
 
 
 def detrend_factors(m, n: int) -> np.ndarray:
@@ -128,7 +139,7 @@ def record_rules(job: tuple[int, int, int]) -> tuple[int, np.ndarray, dict, np.n
     ramp_rule = (lambda f: f) if r_ident else _ramp_random
     mix = {"quick": term_fractions(a, tau), "ramp_id": ramp_rule(term_fractions(a, tau)),
            "detrended": ramp_rule(term_fractions(a_detr, tau)), "detr_exact": ramp_rule(term_fractions(a_exact, tau)),
-           "hybrid": record_mixture.fractions(a, ident, tau, a_detr[K]),
+           "hybrid": _product(res, res_detr, a, n, case.sample_rate_hz),
            "true": term_fractions(coefficients_to_avar_terms(*case.truth), tau)}
     mats, full = mixture_matrices(m, n), n - 2 * m + 1
     out = {}

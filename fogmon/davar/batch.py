@@ -233,16 +233,18 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
                       confidence: float = CONFIDENCE, exact_shape: bool = True):
     """(adev_dph, lo_dph, hi_dph, edf) of a whole record (rate ``y`` in deg/h at
     ``sample_rate_hz``, valid ``ok``; one window's ``sums``, ``counts``): the EDF of the quick IEEE-952 fit's mixture
-    under ``record_mixture``'s rules (a ramp deterministic only where the fit identifies R
-    and not K, K then from the detrended record), capped below a low-pass's peak as
+    under ``record_mixture``'s rules (a ramp deterministic only where the fit rejects R = 0
+    at ``record_mixture.DETERMINISTIC_Z`` and does not identify K, K then from the detrended
+    record), capped below a low-pass's peak as
     ``row_edf``; with ``exact_shape``, at the gap-free taus where few independent terms
     remain (``shape.shape_applies``: M / m <= 16) the exact shape of that mixture's Allan
     variance instead of chi-square's (docs/davar.md, "Calibration")."""
     avar = _avar(sums, counts)
     terms = _row_terms(sums, counts, m, n_samples)
-    ident = record_mixture.identified(np.asarray(m) / sample_rate_hz, avar, m, counts, n_samples)
-    k_detr = _detrended_k(y, ok, m, n_samples) if record_mixture.deterministic_ramp(ident) else None
-    fractions = record_mixture.fractions(terms, ident, m, k_detr)
+    tau_s = np.asarray(m) / sample_rate_hz
+    deterministic = record_mixture.deterministic_ramp(record_mixture.record_fit(tau_s, avar, m, counts, n_samples))
+    k_detr = _detrended_k(y, ok, tau_s, m, n_samples) if deterministic else None
+    fractions = record_mixture.fractions(terms, deterministic, m, k_detr)
     gapless = _capped_below_peak(record_mixture.edf_row(fractions, m, n_samples), avar)
     adev, edf = adev_edf(sums, counts, m, n_samples, None, gapless)
     lo, hi = chi2_bounds(adev, edf, confidence)
@@ -251,9 +253,9 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
     return adev, lo, hi, edf
 
 
-def _detrended_k(y: np.ndarray, ok: np.ndarray, m, n_samples: int) -> float | None:
-    """A_K (tau in sample periods) of the quick fit of the record ``y`` with the
-    least-squares line through its valid finite samples removed (None: fewer than 3)."""
+def _detrended_k(y: np.ndarray, ok: np.ndarray, tau_s, m, n_samples: int) -> float | None:
+    """``record_mixture.detrended_k`` of the record ``y`` with the least-squares line
+    through its valid finite samples removed (None: fewer than 3)."""
     use = ok & np.isfinite(y)
     if np.count_nonzero(use) < 3:
         return None
@@ -262,7 +264,7 @@ def _detrended_k(y: np.ndarray, ok: np.ndarray, m, n_samples: int) -> float | No
     yd = c_array(np.where(np.isfinite(y), y - (slope * t + offset), y), np.float64)
     hi_, lo_, bad = kernels.prefix_sums_dd(yd, ok, reference_level(yd, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n_samples)
-    return float(_row_terms(sums[0], counts[0], m, n_samples)[record_mixture.K])
+    return record_mixture.detrended_k(tau_s, _avar(sums[0], counts[0]), m, counts[0], n_samples)
 
 
 def _shaped_bounds(fractions, adev, lo, hi, edf, counts, m, n_samples: int, confidence: float):

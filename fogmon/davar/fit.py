@@ -194,7 +194,8 @@ class CurveFit:
     """The fit of one Allan variance curve (``fit_curve``), over the 5 terms Q, N, B, K, R:
     ``a`` the five-term estimate A_n ((deg/h)^2 s^-n; NaN when nothing could be fitted),
     ``se`` its sandwich standard errors, ``identifiable`` (the term's 95 % profile
-    interval excludes zero), ``lo``/``hi`` its two-sided profile interval at
+    interval excludes zero: ``score_z`` > IDENTIFY_Z, ``score_z`` the signed root of the
+    score test of A_n = 0, NaN where not computed), ``lo``/``hi`` its two-sided profile interval at
     ``confidence`` (NaN where not computed), ``upper`` its one-sided UPPER_CONFIDENCE
     upper limit (NaN where not computed), ``misfit`` the taus (of the curve given) the
     five terms cannot describe."""
@@ -207,6 +208,7 @@ class CurveFit:
     upper: np.ndarray
     misfit: np.ndarray
     confidence: float
+    score_z: np.ndarray
 
 
 _LIMITS = ("none", "unidentified", "all")
@@ -244,7 +246,7 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     ok = (np.asarray(n_terms) > 0) & np.isfinite(avar) & (avar > 0)
     misfit = np.zeros(len(tau), dtype=bool)
     nan = np.full(5, np.nan)
-    failed = CurveFit(nan, nan, np.zeros(5, bool), nan, nan, nan, misfit, confidence)
+    failed = CurveFit(nan, nan, np.zeros(5, bool), nan, nan, nan, misfit, confidence, nan)
     if ok.sum() < 2:
         return failed
     use = np.flatnonzero(ok)
@@ -267,7 +269,7 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
                                        np.asarray(n_terms)[rest], n_samples)
     lo = hi = upper = nan
     if limits == "none":
-        return CurveFit(a, se, a - IDENTIFY_Z * se > 0, lo, hi, upper, misfit, confidence)
+        return CurveFit(a, se, a - IDENTIFY_Z * se > 0, lo, hi, upper, misfit, confidence, nan)
     z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
     both = limits == "all"
     upper_z = sorted({z, _UPPER_Z}) if both else [_UPPER_Z]
@@ -281,7 +283,7 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
         lo, hi = np.minimum(lower[:, 0], a), np.maximum(at[z], a)
     else:
         upper = np.where(ident, np.nan, upper)
-    return CurveFit(a, se, ident, lo, hi, upper, misfit, confidence)
+    return CurveFit(a, se, ident, lo, hi, upper, misfit, confidence, s0)
 
 
 def fit_avar(tau_s, avar, m, n_terms, n_samples: int,

@@ -2,61 +2,83 @@
 
 The EDF (and the exact shape) of each tau's interval is that of the noise mixture the
 quick IEEE-952 fit (``fit.quick_avar_terms``) predicts. At the longest taus the interval
-hangs on two shares the record pins down poorly (docs/davar.md, "Calibration"):
+hangs on two shares the record pins down poorly (docs/davar.md, "Confidence intervals"
+and "Calibration"):
 
 - A rate ramp R is deterministic: its share of the Allan variance has no sampling
-  variance. A chance-high Allan variance at the last taus, fitted as a ramp where there
-  is none, made the interval narrowest where the estimate was too high. So the ramp's
-  share counts as deterministic only when the record's fit identifies R (``identified``:
-  the test ``fit_noise`` reports) and no random walk K beside it, else as random-walk
-  rate noise, which has about the same Allan variance slope. A random walk the record
-  shows draws trends of its own, which the ramp term absorbs: the fit cannot say which
-  part of the ramp's share is deterministic (all five terms over 2.9 h, below: of 400
-  records, the 15 whose 95 % interval missed at the last tau had, in the median, a ramp
-  1.6x the true one and an Allan variance 2.2x the truth there).
-- Beside an identified ramp, a random walk K that the record does not identify is a
-  share the fit trades against R, and even a few % of random walk lowers the EDF there
-  several-fold (the ramp's constant multiplies the Allan terms' mean, whose variance a
-  random walk makes large). Its estimate is then taken from the record with its
-  least-squares line removed (``batch.record_statistics``): a deterministic ramp has no Allan
-  variance there, so K no longer trades against R, while a real random walk keeps most
-  of its own.
+  variance, so reading it as a ramp narrows the interval several-fold. A chance-high
+  Allan variance at the last taus, fitted as a ramp, made the interval narrowest where
+  the estimate was too high (such records' 95 % intervals at the last tau covered
+  0-30 %). So the share counts as deterministic only where the record's fit rejects
+  R = 0 at DETERMINISTIC_Z (the test's variance is that of a random walk in R's place,
+  so this says "not a random walk's trend") and identifies no random walk K beside it,
+  else as random-walk rate noise, which has about the same Allan variance slope. A random
+  walk the record shows draws trends of its own, which the ramp term absorbs.
+- Beside a deterministic ramp, K is the share the EDF is most sensitive to: even a few %
+  of random walk lowers it several-fold (the ramp's constant multiplies the Allan terms'
+  mean, whose variance a random walk makes large), and the quick fit trades K against R.
+  K is then taken from the record with its least-squares line removed (a deterministic
+  ramp has no Allan variance there, a real random walk keeps most of its own), and only
+  where the fit of that record identifies K: a nonnegative estimate of a K the record
+  cannot tell from zero is above zero in about a quarter of records without any.
 
-Measured on validation/calibration.py's records (seed 1): N 0.05, B 0.2, R 1 over 9 h
-(no K; 200 records): K was fitted > 0 beside a ramp in 43 % of the records (EDF 20-40
-where the true one is 220-300, the 68.3 % interval covering 81-83 %), 20 % after the
-detrended rule (69-72.5 %). All five terms over 2.9 h, K 0.3, R 0.6 (1000 records, both
-identified in 37 %): the 95 % intervals at 1311 and 2621 s covered 90.0 and 89.6 % with
-the ramp deterministic beside an identified K, 93.7 and 93.8 % without (the 68.3 %
-ones 65.8 and 69.9 -> 69.4 and 74.1 %: conservative there, where a real ramp is counted
-as random). Assumptions: Gaussian noise of the five terms, a ramp linear over the record.
+Measured on validation/calibration.py's records (1000 per model, seed 3, a one-off script
+reading each record's saved sums): R read as deterministic in 59 records of all five
+terms over 22 min (R 5 deg/h^2 near its limit, K 3) at the identification's z 1.96,
+7 at 3.09; the 95 % intervals of all its records at 163.8 / 327.7 s covered 89.9 / 88.1 %, now 91.9 /
+91.2 % (seed 1: 92.1 / 91.2 -> 93.8 / 93.5 %). N 0.05, B 0.2, R 1 over 9 h (no K): K
+from the detrended record was above zero in 249 of 984 records, whose 68.3 % intervals
+at 1024-8192 s covered 76-88 % (the others 69-71 %); now 70.1-73.1 % over all records.
+Assumptions: Gaussian noise of the five terms, a ramp linear over the record.
 """
 from __future__ import annotations
+
+from statistics import NormalDist
 
 import numpy as np
 
 from fogmon.davar.confidence import MIX_ALPHAS, RAMP, edf_mixture_from, mixture_matrices, term_fractions
-from fogmon.davar.fit import anchored_edf, fit_curve
+from fogmon.davar.fit import CurveFit, anchored_edf, fit_curve, quick_avar_terms
 
 K, R = 3, 4  # indices of K and R among the five IEEE-952 terms (Q, N, B, K, R)
 #: the random-walk rate noise class among the mixture's
 RANDOM_WALK = MIX_ALPHAS.index(-2)
+DETERMINISTIC_Z = NormalDist().inv_cdf(0.999)
+"""The ramp's share counts as deterministic only where the test of R = 0 rejects at this
+signed root (one-sided 0.1 %, z 3.09), not at identification's 1.96: a ramp read as
+deterministic by chance leaves its record's longest-tau intervals covering 0-30 %, so the
+reading may be wrong in no more than about one record in a thousand."""
 
 
-def identified(tau_s, avar, m, n_terms, n_samples: int) -> np.ndarray:
-    """Mask over the five IEEE-952 terms that the record's fit identifies (``fit.fit_curve``'s
-    test, the one ``fit_noise`` and ``fogmon replay`` report) for the Allan variance
+def record_fit(tau_s, avar, m, n_terms, n_samples: int) -> CurveFit:
+    """The record's fit (``fit.fit_curve``; its identification test, the one ``fit_noise``
+    and ``fogmon replay`` report, and the test's ``score_z``) of the Allan variance
     ``avar`` (deg/h)^2 at ``tau_s`` (s)."""
-    return np.asarray(fit_curve(tau_s, avar, m, n_terms, n_samples, limits="unidentified").identifiable, dtype=bool)
+    return fit_curve(tau_s, avar, m, n_terms, n_samples, limits="unidentified")
 
 
-def fractions(terms, ident: np.ndarray, m, k_detrended: float | None = None) -> np.ndarray:
+def deterministic_ramp(fit: CurveFit) -> bool:
+    """Whether the ramp's share counts as deterministic, and K then comes from the
+    detrended record (``detrended_k``): R = 0 rejected at DETERMINISTIC_Z, K not identified."""
+    z = np.asarray(fit.score_z, dtype=np.float64)
+    return bool(np.isfinite(z[R]) and z[R] >= DETERMINISTIC_Z and not fit.identifiable[K])
+
+
+def detrended_k(tau_s, avar, m, n_terms, n_samples: int) -> float:
+    """A_K (tau in sample periods) beside a deterministic ramp, from the Allan variance
+    ``avar`` (deg/h)^2 at ``tau_s`` (s) of the record with its least-squares line removed:
+    the quick fit's where the fit of that record identifies K, else 0."""
+    if not record_fit(tau_s, avar, m, n_terms, n_samples).identifiable[K]:
+        return 0.0
+    return float(quick_avar_terms(np.asarray(m, dtype=np.float64), avar, m, n_terms, n_samples)[K])
+
+
+def fractions(terms, deterministic: bool, m, k_detrended: float | None = None) -> np.ndarray:
     """Mixture fractions (taus x N_CLASSES) at factors ``m`` of the quick-fit ``terms``
-    (tau in sample periods) under the module's rules: the ramp's share deterministic only
-    when R is identified and K is not (``ident``), else random-walk rate noise; beside such
-    a ramp K at ``k_detrended`` (A_K of the detrended record, when given)."""
+    (tau in sample periods) under the module's rules: the ramp's share ``deterministic``
+    (``deterministic_ramp``), with K at ``k_detrended`` when given; else random-walk rate
+    noise."""
     a = np.array(terms, dtype=np.float64)
-    deterministic = deterministic_ramp(ident)
     if deterministic and k_detrended is not None:
         a[K] = k_detrended
     f = term_fractions(a, np.asarray(m, dtype=np.float64))
@@ -81,9 +103,3 @@ def edf_row(fractions_m: np.ndarray, m, n_samples: int) -> np.ndarray:
     out[ok] = anchored_edf(mo, lambda i: edf_mixture_from(fo[i], mixture_matrices(mo[i], n_samples),
                                                           n_samples - 2 * mo[i] + 1))
     return out
-
-
-def deterministic_ramp(ident: np.ndarray) -> bool:
-    """Whether the ramp's share counts as deterministic, and K then comes from the
-    detrended record: R identified (``ident``), K not."""
-    return bool(ident[R] and not ident[K])
