@@ -22,6 +22,8 @@ def test_a_chance_random_walk_beside_a_ramp_does_not_set_the_edf():
     true_edf = edf_mixture(term_fractions(coefficients_to_avar_terms(0.0, 0.05, 0.2, 0.0, 2.0), res.tau_s), res.m, n)
     quick_edf = edf_mixture(term_fractions(quick, res.m), res.m, n)
     assert quick[record_mixture.K] > 0 and quick_edf[-1] < true_edf[-1] / 10  # the premise
+    fit = record_mixture.record_fit(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n)
+    assert record_mixture.deterministic_ramp(fit)  # so K comes from the detrended record
     assert true_edf[-1] / 1.5 < res.edf[-1] < true_edf[-1] * 1.5
 
 
