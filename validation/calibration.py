@@ -32,7 +32,10 @@ binomial count: the tables print its 1-sd uncertainty; 1000 records per model (t
 default) put the 95 % band at 3 sd.
 
     python validation/calibration.py [--records N] [--only null|coverage|warning] [--jobs 2] [--seed 1]
-                                     [--save PREFIX] [--chi2]
+                                     [--save PREFIX] [--chi2] [--held-out]
+
+``--held-out`` runs the same sweeps on ``HELD_OUT``: six models the rules were not
+developed on (docs/davar.md, "Calibration"), with the same verdict.
 """
 from __future__ import annotations
 
@@ -87,6 +90,17 @@ MODELS = (
     Case("NBR_1Hz_9h", Noise(0.0, 0.05, 0.2, 0.0, 1.0), 1.0, 15),
     # all five, a long record: K well above its limit, R near it
     Case("five_100Hz_2.9h", Noise(0.2, 0.005, 0.05, 0.3, 0.6), 100.0, 20),
+)
+HELD_OUT = (
+    # models the rules above were not developed on (2026-11-30): a navigation FOG's white
+    # rate noise and weak flicker at 1 kHz; a MEMS gyro's N, B, K; K and R both strong; a
+    # short fast Q, N, B record; all five terms at 1 Hz; white rate noise alone
+    Case("KVHlike_1kHz_35min", Noise(0.0, 0.0117, 0.05, 0.01, 0.0), 1000.0, 21),
+    Case("MEMS_NBK_100Hz_2.9h", Noise(0.0, 0.2, 5.0, 2.0, 0.0), 100.0, 20),
+    Case("NKR_10Hz_3.6h", Noise(0.0, 0.05, 0.0, 1.0, 3.0), 10.0, 17),
+    Case("QNB_400Hz_164s", Noise(0.5, 0.005, 0.01), 400.0, 16),
+    Case("five_1Hz_4.5h", Noise(1.0, 0.1, 0.5, 1.5, 4.0), 1.0, 14),
+    Case("N_50Hz_22min", Noise(0.0, 0.02), 50.0, 16),
 )
 CONFIDENCES = (0.683, 0.95)
 ADEV_SD = 2.0
@@ -316,7 +330,12 @@ def main(argv: list[str] | None = None) -> int:
                    "with the same EDF (oadev(..., exact_shape=False))")
     p.add_argument("--save", metavar="PREFIX", help="also write each sweep's per-record results to "
                    "PREFIX.<sweep>.pkl")
+    p.add_argument("--held-out", action="store_true", help="the sweeps on HELD_OUT's models instead of MODELS' "
+                   "(models the rules were not developed on)")
     args = p.parse_args(argv)
+    if args.held_out:
+        global MODELS
+        MODELS = HELD_OUT  # read by the sweeps and, through fork, by the workers
     items = set(args.only or ("null", "coverage", "warning"))
     t0 = time.time()
     ok = True

@@ -69,7 +69,7 @@ def _product(res, res_detr, a: np.ndarray, n: int, sample_rate_hz: float) -> np.
     deterministic = record_mixture.deterministic_ramp(
         record_mixture.record_fit(res.tau_s, res.adev_dph**2, res.m, res.n_terms, n))
     # detrended_k's A_K is per sample period (tau in samples); a's tau is in s
-    k = (record_mixture.detrended_k(res_detr.tau_s, res_detr.adev_dph**2, res_detr.m, res_detr.n_terms, n)
+    k = (record_mixture.detrended_k(res_detr.adev_dph**2, res_detr.m, res_detr.n_terms, n)
          * sample_rate_hz) if deterministic else None
     return record_mixture.fractions(a, deterministic, res.tau_s, k)
 

@@ -243,7 +243,7 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
     terms = _row_terms(sums, counts, m, n_samples)
     tau_s = np.asarray(m) / sample_rate_hz
     deterministic = record_mixture.deterministic_ramp(record_mixture.record_fit(tau_s, avar, m, counts, n_samples))
-    k_detr = _detrended_k(y, ok, tau_s, m, n_samples) if deterministic else None
+    k_detr = _detrended_k(y, ok, m, n_samples) if deterministic else None
     fractions = record_mixture.fractions(terms, deterministic, m, k_detr)
     gapless = _capped_below_peak(record_mixture.edf_row(fractions, m, n_samples), avar)
     adev, edf = adev_edf(sums, counts, m, n_samples, None, gapless)
@@ -253,7 +253,7 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
     return adev, lo, hi, edf
 
 
-def _detrended_k(y: np.ndarray, ok: np.ndarray, tau_s, m, n_samples: int) -> float | None:
+def _detrended_k(y: np.ndarray, ok: np.ndarray, m, n_samples: int) -> float | None:
     """``record_mixture.detrended_k`` of the record ``y`` with the least-squares line
     through its valid finite samples removed (None: fewer than 3)."""
     use = ok & np.isfinite(y)
@@ -264,7 +264,7 @@ def _detrended_k(y: np.ndarray, ok: np.ndarray, tau_s, m, n_samples: int) -> flo
     yd = c_array(np.where(np.isfinite(y), y - (slope * t + offset), y), np.float64)
     hi_, lo_, bad = kernels.prefix_sums_dd(yd, ok, reference_level(yd, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n_samples)
-    return record_mixture.detrended_k(tau_s, _avar(sums[0], counts[0]), m, counts[0], n_samples)
+    return record_mixture.detrended_k(_avar(sums[0], counts[0]), m, counts[0], n_samples)
 
 
 def _shaped_bounds(fractions, adev, lo, hi, edf, counts, m, n_samples: int, confidence: float):

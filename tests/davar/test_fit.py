@@ -363,12 +363,11 @@ def test_an_upper_limit_beside_a_term_held_at_its_bound_follows_the_boundary_rul
     assert found and a[0] == 0.0 and a[1] > 0
     s0, _, up = score_limits(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, se, np.ones(5, bool),
                              F.IDENTIFY_Z, np.array([]), np.array([F._UPPER_Z]), F._ROBUST_RTOL, F._MAX_ITER)
-    present = s0 > F.IDENTIFY_Z
     score = from_python(signed_score)
 
     def at(c):
         return score(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, 1, c, F._ROBUST_RTOL,
-                     F._MAX_ITER, a, present, True)
+                     F._MAX_ITER, a, True)
 
     s, rho, refit = at(up[1, 0])
     assert refit[0] == 0.0 and rho > 0.5  # Q held at its bound, its score correlated with N's
