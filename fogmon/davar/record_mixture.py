@@ -24,7 +24,7 @@ and "Calibration"):
   intervals (they over-cover); counting it only where identified (2026-11-30) made the
   intervals of records with a real K near its limit beside a strong ramp under-cover
   (K 1, R 3 over 3.6 h at 10 Hz: 87.0-88.7 % at 95 % at the three longest taus, 300
-  records; K 1.5, R 4 over 4.5 h at 1 Hz: 89.3 %), records the calibration's own models
+  records; K 1.5, R 4 over 4.5 h at 1 Hz: 89.3-91.3 %), records the calibration's own models
   did not contain. An interval that errs should err wide.
 
 Measured on validation/calibration.py's records (1000 per model, seed 3, a one-off script
