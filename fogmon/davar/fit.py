@@ -233,8 +233,8 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     IDENTIFY_Z (the 95 % two-sided interval excludes zero), the two-sided ``confidence``
     interval and the one-sided UPPER_CONFIDENCE upper limit where the test's signed root
     reaches the normal quantiles, read through the null distribution it has where the
-    refit holds another term at its bound 0 (``profile.boundary_z``; the identified terms
-    count in the test's variance at least at their estimates). ``limits``: "all" terms' limits, only the "unidentified"
+    refit holds another term at its bound 0 (``profile.boundary_z``; every other term
+    counts in a limit's variance at no less than its estimate). ``limits``: "all" terms' limits, only the "unidentified"
     ones' upper limit (the identification test for every term; ``lo``/``hi`` NaN), or
     "none" (no test: ``identifiable`` from the sandwich A_n - IDENTIFY_Z se_n > 0). Nothing is
     identifiable (A_n NaN) when fewer than 2 taus are usable or the robust weights reject

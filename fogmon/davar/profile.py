@@ -216,8 +216,8 @@ def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, identif
     each normal quantile z of ``lower_z`` the c in [0, A_n] where z(c) = z (0 when z(0) <=
     z), for each z of ``upper_z`` (increasing) the c > A_n where z(c) = -z (inf when no
     bracket is found in _MAX_BRACKET doublings), z(c) = ``boundary_z`` of s(c) for a term
-    identified, s(c) for one not (module docstring), the terms identified being present in
-    the variance of every s(c). Brackets start at A_n + its sandwich standard error
+    identified, s(c) for one not (module docstring), every other term counting in the
+    variance of each s(c) at no less than its estimate. Brackets start at A_n + its sandwich standard error
     ``se``; Illinois regula falsi to 1e-3 of the bracket's top (of A_n below it); each fit
     is warm-started from the last. Returns (s0 (5,), lower (5, len(lower_z)), upper (5,
     len(upper_z))), NaN outside ``which``."""

@@ -56,10 +56,10 @@ def test_a_ramp_is_deterministic_only_on_strong_evidence_and_without_k():
 
 def test_k_beside_a_ramp_is_the_detrended_records_estimate_identified_or_not():
     # K 1 deg/h/sqrt(h) beside a strong ramp R 3 deg/h^2 and N 0.05 over 2^17 samples at
-    # 10 Hz: the whole record's fit reads the ramp as deterministic and puts no K beside
-    # it. The detrended record's estimate counts even where that record does not identify
-    # K (counting it only where identified made such records' 95 % intervals at the last
-    # taus cover 87-89 %): a K of the size simulated, not 0
+    # 10 Hz: where the whole record's fit reads the ramp as deterministic (K not identified
+    # beside it), the detrended record's estimate counts even where that record does not
+    # identify K (counting it only where identified made such records' 95 % intervals at
+    # the last taus cover 87-91 %): a K of the size simulated, not 0
     from fogmon.davar.theory import coefficients_to_avar_terms
     fs, n = 10.0, 2**17
     truth = coefficients_to_avar_terms(0.0, 0.05, 0.0, 1.0, 3.0)[record_mixture.K] / fs  # per sample period
