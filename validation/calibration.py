@@ -299,8 +299,13 @@ def _warning_table(rows: list[dict], records: int) -> bool:
 def _map(fn, jobs_list: list, jobs: int) -> list:
     if jobs <= 1:
         return [fn(j) for j in jobs_list]
-    with Pool(jobs) as pool:
+    with Pool(jobs, initializer=_use_models, initargs=(MODELS,)) as pool:  # --held-out's set under spawn too
         return pool.map(fn, jobs_list, chunksize=1)
+
+
+def _use_models(models: tuple[Case, ...]) -> None:
+    global MODELS
+    MODELS = models
 
 
 def _save(path: str | None, item: str, rows: list) -> None:
@@ -334,8 +339,7 @@ def main(argv: list[str] | None = None) -> int:
                    "(models the rules were not developed on)")
     args = p.parse_args(argv)
     if args.held_out:
-        global MODELS
-        MODELS = HELD_OUT  # read by the sweeps and, through fork, by the workers
+        _use_models(HELD_OUT)  # read by the sweeps and, through _map's initializer, by the workers
     items = set(args.only or ("null", "coverage", "warning"))
     t0 = time.time()
     ok = True
