@@ -23,7 +23,7 @@ Rules (each with the chi-square shape, and with ``S`` the exact shape of
   walk keeps 0.47 of its Allan variance).
 - ``hybrid``: the product's (``fogmon.davar.record_mixture``): the ramp's share
   deterministic only where the fit rejects R = 0 at ``DETERMINISTIC_Z`` and does not
-  identify K, and then K from the detrended record where its fit identifies K (else 0);
+  identify K, and then K the detrended record's quick-fit estimate (identified or not);
   else counted as random-walk rate noise.
 - ``true``: the simulator's model (the reference).
 
