@@ -19,17 +19,19 @@ import importlib
 import math
 import os
 import re
+import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import ModuleType
 from typing import TypeVar
 
 import numpy as np
 
-from fogmon.errors import FogmonError
+from fogmon.errors import FogmonError, FogmonWarning
 from fogmon.formats.capture import SIDECAR_SUFFIX
 from fogmon.formats.recording import Recording, check_stated_rate
 from fogmon.formats.replay_log import read_replay_log
+from fogmon.sources import plausibility
 from fogmon.sources.base import Source
 from fogmon.sources.codecs.protocols import CODECS, PROTOCOLS, make_codec
 from fogmon.sources.files.capture import read_capture_sidecar
@@ -198,13 +200,33 @@ def read_recording(path: str | os.PathLike, opts: SourceOptions | None = None) -
         rec = read_replay_log(path)
         if not opts.force_rate:
             check_stated_rate(rec.meta, rec.t_s, rec.name)
-        return rec
+        return _plausible(rec, opts.max_rate_dph)
     if r is SIMULATION:
         raise FogmonError(f"{path}: a sensor model, not a recording (fogmon sim turns it into one)")
     mod = _module(r, path)
     if r.whole:
         return _guarded(r, path, lambda: mod.open_source(path, opts).to_recording())
     return _guarded(r, path, lambda: recording_of(mod.open_source(path, opts), path))
+
+
+def _plausible(rec: Recording, max_rate_dph: float | None) -> Recording:
+    """``rec`` without the samples whose rate (on any axis) is beyond the plausibility gate
+    (``plausibility.gate``: ``max_rate_dph`` deg/h, else the generic gate), as the
+    streaming replay makes them invalid: they become time gaps, counted in a FogmonWarning
+    (``implausible_samples``); a FogmonError when none is left."""
+    gate = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
+    rate, n = plausibility.gate(rec.rate_dph, gate)
+    if not n:
+        return rec
+    gated = np.isnan(rate) & ~np.isnan(rec.rate_dph)
+    keep = ~(gated if gated.ndim == 1 else gated.any(axis=1))
+    if not keep.any():
+        raise FogmonError(f"{rec.name}: no valid samples: every rate is beyond the plausibility gate "
+                          f"+-{gate:.6g} deg/h (`max_rate_dph`)")
+    warnings.warn(FogmonWarning(f"{rec.name}: {len(keep) - int(keep.sum())} sample(s) with a rate beyond the "
+                                f"plausibility gate +-{gate:.6g} deg/h left out as time gaps "
+                                f"({plausibility.COUNTER}; `max_rate_dph` sets the gate)"), stacklevel=2)
+    return replace(rec, t_s=rec.t_s[keep], rate_dph=rec.rate_dph[keep], aux={k: v[keep] for k, v in rec.aux.items()})
 
 
 def recording_of(source: Source, path: str) -> Recording:

@@ -341,3 +341,27 @@ def test_max_rate_dph_on_an_archive_folder_gates_its_replay_logs_without_decodin
     valid = np.concatenate([b.valid for b in src.blocks()])
     assert list(np.flatnonzero(~valid)) == list(np.flatnonzero(np.abs(r) > 50))
     assert src.counters["implausible_samples"] == int(np.count_nonzero(np.abs(r) > 50)) > 0
+
+
+def test_whole_file_commands_gate_a_replay_log_too(tmp_path, capsys):
+    """read_recording (explain, inorbit, updown, sim --like, thermal) gates a replay log as
+    the replay does: implausible samples become time gaps, counted in a warning; a record
+    with nothing plausible is one line, exit 2."""
+    from fogmon.sources.open import read_recording
+    from fogmon.sources.options import SourceOptions
+
+    t, r, sample_rate_hz = noisy()
+    r = r.copy()
+    r[100:105] = 1e9
+    write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": sample_rate_hz})
+    with pytest.warns(Warning, match=r"x.csv: 5 sample\(s\) with a rate beyond the plausibility gate"):
+        rec = read_recording(tmp_path / "x.csv")
+    assert len(rec) == len(t) - 5 and np.all(np.abs(rec.rate_dph) < 1e9)
+    with pytest.warns(Warning, match=r"x.csv: 6 sample\(s\)"):   # the gate the user sets
+        r[200] = 5000.0
+        write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": sample_rate_hz})
+        read_recording(tmp_path / "x.csv", SourceOptions(max_rate_dph=1000.0))
+    write_replay_log(tmp_path / "all.csv", t, np.full(len(t), 1e12), {}, {"sample_rate_hz": sample_rate_hz})
+    assert main(["inorbit", str(tmp_path / "all.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "all.csv: no valid samples: every rate is beyond the plausibility gate" in err
