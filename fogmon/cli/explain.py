@@ -146,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     if model is not None:
         model = one_axis_model(model, rec, args.axis)
     motion: list[dict] = []
+    as_recorded = rec
     if not args.keep_motion:
         progress("looking for platform motion")
         rec, motion = without_motion(rec)
@@ -154,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
         model = baseline_model(rec)
     res = explain(rec, model, _options(args), baseline=args.model is None, progress=progress)
     res.warnings[:0] = motion
+    res.record_fit = report.record_fit(as_recorded, args.keep_motion)
     progress(f"writing {args.report}")
     held = _write_outliers(res, outliers_csv)
     rep = report.build_report(res, args.recording, args.model, os.path.basename(outliers_csv) if held else "")

@@ -174,6 +174,7 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
     and the fitted multi-axis model (``fitted_model``). Stages go to ``progress``
     prefixed with the axis; bootstrap replicates run by ``mapper`` (explain)."""
     from fogmon.explain.baseline import baseline_model
+    from fogmon.explain.report import record_fit
 
     opt = options or Options()
     report = progress or (lambda stage, done, total: None)
@@ -188,7 +189,7 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
         def axis_progress(stage: str, done: int = 0, total: int = 0, a: str = a) -> None:
             report(f"axis {a}: {stage}", done, total)
 
-        one = with_other_rates(rec, a)
+        one = as_recorded = with_other_rates(rec, a)
         motion: list[dict] = []
         if not keep_motion:
             axis_progress("looking for platform motion")
@@ -200,6 +201,7 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
             m = models[a]
         res = explain(one, m, opt, baseline=model is None, progress=axis_progress, mapper=mapper)
         res.warnings[:0] = motion
+        res.record_fit = record_fit(as_recorded, keep_motion)
         results[a] = res
     common = common_causes(rec, results, opt.alpha)
     base = model if model is not None else SensorModel(rec.sample_rate_hz, 0.0, results[axes[0]].model.noise, [])

@@ -53,6 +53,9 @@ class Result:
     #: every spike a ``spikes`` warning names (times_s, amplitudes_dph, abs_z: arrays), when
     #: the spike test finds more than chance and no outlier effect was accepted; else None
     spikes: dict | None = None
+    #: the record's own fit as ``fogmon replay`` prints it (``report.record_fit`` of the
+    #: recording as recorded), set by the caller that had it; None: of ``recording``
+    record_fit: dict | None = None
 
     @property
     def deterministic_fit(self) -> np.ndarray:

@@ -251,7 +251,7 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
             "threshold_abs_z_whole_record": round(res.before.null.threshold_whole, 3),
         },
     }
-    rep["record_fit"] = record_fit(res.recording)
+    rep["record_fit"] = res.record_fit if res.record_fit is not None else record_fit(res.recording)
     if res.baseline:
         nz = res.model.noise
         rep["baseline_model"] = {"bias_dph": res.model.bias_dph, "Q_arcsec": nz.Q_arcsec, "N_dpsh": nz.N_dpsh,
@@ -260,24 +260,35 @@ def build_report(res: Result, recording_path: str, model_path: str | None, times
     return json_safe(rep)
 
 
-def record_fit(rec) -> dict | None:
-    """The record's own IEEE-952 coefficients, as ``fogmon replay`` prints them for the
-    same samples (``davar.record.whole_record_fit`` of the rate, or its error against
-    rot_dps, on the octave taus): per coefficient ``value`` (0 when not identifiable),
-    ``lo``/``hi`` (the interval at ``confidence``; [0, upper] when not identifiable),
-    ``identifiable``, ``upper`` (one-sided 95 % upper limit); ``q_is`` "quantization"
-    or "white angle noise" (``NoiseFit.q_band_limited``), ``contradicted`` (the terms the
-    measured ADEV refutes: name, the fit's value, tau_s, the term's and the measured ADEV
-    and its upper bound, deg/h, the ADEV's limit on the term). Not the baseline model,
-    which is explain's null (docs/explain.md, "The baseline and the record's fit"); None
-    when the record is too short for a whole-record ADEV."""
+def record_fit(rec, keep_motion: bool = False) -> dict | None:
+    """The record's own IEEE-952 coefficients exactly as ``fogmon replay`` prints them for
+    the recording ``rec`` as recorded (before explain keeps its platform motion out):
+    ``davar.record.whole_record_fit`` of the rate, or its error against rot_dps, on the
+    octave taus, over the latest ``pipeline.OVERALL_MAX_SAMPLES`` samples, with the samples
+    the live motion gate judges moving left out (``motion.gate_record``, the replay's
+    gate; none with ``keep_motion``, as ``--keep-motion``). Explain's own analysis keeps
+    out what the offline ``find_motion`` finds, bursts too (docs/motion.md), so its
+    ``platform_motion`` warnings can name more. Per coefficient ``value`` (0 when not
+    identifiable), ``lo``/``hi`` (the interval at ``confidence``; [0, upper] when not
+    identifiable), ``identifiable``, ``upper`` (one-sided 95 % upper limit); ``q_is``
+    "quantization" or "white angle noise" (``NoiseFit.q_band_limited``), ``contradicted``
+    (the terms the measured ADEV refutes: name, the fit's value, tau_s, the term's and the
+    measured ADEV and its upper bound, deg/h, the ADEV's limit on the term),
+    ``motion_samples`` (kept out by the gate). Not the baseline model, which is explain's
+    null (docs/explain.md, "The baseline and the record's fit"); None when the record is
+    too short for a whole-record ADEV."""
     from fogmon.davar.record import whole_record_fit
     from fogmon.errors import FogmonError
+    from fogmon.motion import gate_record
+    from fogmon.pipeline import OVERALL_MAX_SAMPLES
 
     blk = rec.to_block()
     y = blk.error_rate_dph
+    valid = blk.valid & np.isfinite(y)
+    gated = valid if keep_motion else gate_record(y, rec.sample_rate_hz, valid).valid
+    tail = slice(max(0, len(y) - OVERALL_MAX_SAMPLES), len(y))
     try:
-        _, fit = whole_record_fit(y, blk.valid & np.isfinite(y), rec.sample_rate_hz)
+        _, fit = whole_record_fit(y[tail], gated[tail], rec.sample_rate_hz)
     except FogmonError:
         return None
     out: dict = {"taus": "octave", "confidence": fit.confidence}
@@ -288,6 +299,7 @@ def record_fit(rec) -> dict | None:
     out["contradicted"] = [{"name": c.name, "value": c.value, "tau_s": c.tau_s, "term_adev_dph": c.term_adev_dph,
                             "adev_dph": c.adev_dph, "bound_dph": c.bound_dph, "limit": c.limit}
                            for c in fit.contradicted]
+    out["motion_samples"] = int(np.count_nonzero(valid[tail] & ~gated[tail]))
     return out
 
 
@@ -306,8 +318,10 @@ def record_fit_text(rf: dict) -> str:
     q = " (Q: white angle noise, not quantization)" if rf["q_is"] != "quantization" else ""
     refuted = "".join(f"; {c['name']} {c['value']:.4g} refuted by the ADEV at {c['tau_s']:.4g} s"
                       for c in rf["contradicted"] if c["name"] != "Q_arcsec")
-    return (f"record's IEEE-952 fit (as fogmon replay prints it, {100 * rf['confidence']:.1f} %): "
-            f"{'; '.join(cells)}{q}{refuted}")
+    moved = rf.get("motion_samples", 0)
+    gate = f", {moved} samples of platform motion kept out by its gate" if moved else ""
+    return (f"record's IEEE-952 fit (as fogmon replay prints it{gate}; {100 * rf['confidence']:.1f} % intervals, "
+            f"'<': 95 % upper limits): {'; '.join(cells)}{q}{refuted}")
 
 
 def write_report(rep: dict, path: str) -> None:

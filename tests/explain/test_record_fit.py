@@ -16,7 +16,7 @@ def test_explain_states_the_replays_whole_record_fit():
     n = len(rec.t_s)
     s = run_pipeline(ListSource(rec.t_s, rec.rate_dph, [n // 4] * 4, 100.0),
                      PipelineConfig(keep_motion=True, window_s=640.0), sinks=[])
-    rf = record_fit(rec)
+    rf = record_fit(rec, keep_motion=True)
     for name, c in s.overall_fit.coefficients().items():
         got = rf[name]
         assert got["identifiable"] == bool(c.identifiable), name
@@ -27,3 +27,20 @@ def test_explain_states_the_replays_whole_record_fit():
         ["B_dph", "K_dphsh"]
     text = record_fit_text(rf)
     assert f"B < {rf['B_dph']['upper']:.4g} deg/h" in text and "B_dph 33.06 refuted by the ADEV" in text
+
+
+def test_the_record_fit_keeps_out_what_the_replays_motion_gate_does():
+    """explain cuts motion out with the offline test (bursts too); the record fit it states
+    is still the replay's: the live gate's samples left out, the same coefficients."""
+    m = SensorModel(100.0, noise=Noise(N_dpsh=0.05, B_dph=0.5))
+    rec = simulate(m, duration_s=1200.0, seed=3)
+    t = rec.t_s
+    turn = (t >= 600.0) & (t < 630.0)
+    rec.rate_dph[turn] += 3600.0 * 50.0 * np.sin(2 * np.pi * (t[turn] - 600.0) / 30.0)   # a hand turn, deg/h
+    n = len(t)
+    s = run_pipeline(ListSource(t, rec.rate_dph, [n // 4] * 4, 100.0), PipelineConfig(window_s=300.0), sinks=[])
+    rf = record_fit(rec)
+    assert rf["motion_samples"] == s.motion_samples > turn.sum()
+    for name, c in s.overall_fit.coefficients().items():
+        assert np.allclose([rf[name]["value"], rf[name]["upper"]], [float(c.value), float(c.upper)], rtol=1e-12), name
+    assert "samples of platform motion kept out by its gate" in record_fit_text(rf)
