@@ -34,7 +34,8 @@ def add_source_arguments(parser: argparse.ArgumentParser, mode: str = "both") ->
                              f"dsp3000 {pl.KVH_DSP3000_MAX_ABS_DPH:,.0f} ({pl.KVH_DSP3000_FULL_SCALE_DPH / 3600:g} "
                              f"deg/s); lines, CAN and replay logs {pl.GENERIC_MAX_ABS_DPH:,.0f} "
                              f"({pl.GENERIC_MAX_ABS_DPH / 3600:,.0f} deg/s). Raw captures replay with the value "
-                             "their sidecar recorded unless given")
+                             "their sidecar recorded unless given. A sample beyond 1e8 deg/h (the Allan engine's "
+                             "ceiling) that a higher gate lets through makes the Allan terms spanning it inf")
     if replay:
         parser.add_argument("--tolerate-bad-rows", action="store_true", help="replay log: skip and count bad rows "
                        "instead of stopping at the first one")

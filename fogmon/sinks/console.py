@@ -171,12 +171,17 @@ def _no_interval_note(results, rows=None) -> list[str]:
     interval (its EDF below ``confidence.MIN_EDF``, where a chi-square interval can
     exclude its own estimate)."""
     from fogmon.davar.confidence import MIN_EDF
+    from fogmon.davar.kernels import CEILING_DPH
 
-    if not any(r.n_terms[i] and not _has_interval(r, i) for r in results
-               for i in (range(len(r.tau_s)) if rows is None else rows)):
-        return []
-    return [f"  no interval: EDF below {MIN_EDF:g} (less than one independent Allan term at that tau), where "
-            f"the chi-square interval would not hold the estimate"]
+    shown = [(r, i) for r in results for i in (range(len(r.tau_s)) if rows is None else rows) if r.n_terms[i]]
+    out = []
+    if any(not _has_interval(r, i) and math.isfinite(float(r.adev_dph[i])) for r, i in shown):
+        out.append(f"  no interval: EDF below {MIN_EDF:g} (less than one independent Allan term at that tau), "
+                   f"where the chi-square interval would not hold the estimate")
+    if any(not math.isfinite(float(r.adev_dph[i])) for r, i in shown):
+        out.append(f"  inf: an Allan term at that tau spans a sample beyond {CEILING_DPH:g} deg/h (the engine's "
+                   f"ceiling; a plausibility gate --max-rate-dph above it lets such samples through)")
+    return out
 
 
 def coefficient_axes_lines(fits: dict, names: Mapping[str, str] = COEFFICIENTS) -> list[str]:

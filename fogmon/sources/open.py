@@ -200,7 +200,7 @@ def read_recording(path: str | os.PathLike, opts: SourceOptions | None = None) -
         rec = read_replay_log(path)
         if not opts.force_rate:
             check_stated_rate(rec.meta, rec.t_s, rec.name)
-        return _plausible(rec, opts.max_rate_dph)
+        return _plausible(rec, opts.file_gate_dph)
     if r is SIMULATION:
         raise FogmonError(f"{path}: a sensor model, not a recording (fogmon sim turns it into one)")
     mod = _module(r, path)
@@ -209,12 +209,11 @@ def read_recording(path: str | os.PathLike, opts: SourceOptions | None = None) -
     return _guarded(r, path, lambda: recording_of(mod.open_source(path, opts), path))
 
 
-def _plausible(rec: Recording, max_rate_dph: float | None) -> Recording:
+def _plausible(rec: Recording, gate: float) -> Recording:
     """``rec`` without the samples whose rate (on any axis) is beyond the plausibility gate
-    (``plausibility.gate``: ``max_rate_dph`` deg/h, else the generic gate), as the
-    streaming replay makes them invalid: they become time gaps, counted in a FogmonWarning
-    (``implausible_samples``); a FogmonError when none is left."""
-    gate = plausibility.max_rate_dph(max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
+    ``gate`` (deg/h, ``SourceOptions.file_gate_dph``), as the streaming replay makes them
+    invalid: they become time gaps, counted in a FogmonWarning (``implausible_samples``);
+    a FogmonError when none is left."""
     rate, n = plausibility.gate(rec.rate_dph, gate)
     if not n:
         return rec

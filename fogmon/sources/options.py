@@ -69,8 +69,9 @@ class SourceOptions:
     @property
     def file_gate_dph(self) -> float:
         """The plausibility gate (deg/h) of a recording read from a file without a
-        device's range: ``max_rate_dph``, or the generic gate."""
-        return self.max_rate_dph or plausibility.GENERIC_MAX_ABS_DPH
+        device's range: ``max_rate_dph`` (checked: ``plausibility.max_rate_dph``), or the
+        generic gate."""
+        return plausibility.max_rate_dph(self.max_rate_dph, plausibility.GENERIC_MAX_ABS_DPH)
 
     def asks_decoding(self, axis: bool = True) -> bool:
         """Whether a decoder option other than the gate (and, with ``axis=False``, other

@@ -65,7 +65,9 @@ def gate(rate_dph: ArrayLike, max_abs_dph: float, valid: ArrayLike | None = None
 def max_rate_dph(value: float | None, default_dph: float) -> float:
     """The gate (deg/h) of a decoder: ``value`` (the option ``max_rate_dph``, or a capture
     sidecar's ``max_rate_dph``) when given, else the device's ``default_dph``. A value
-    that is not a finite number > 0 is a FogmonError."""
+    that is not a finite number > 0 is a FogmonError. (A gate above the DAVAR engine's
+    ceiling, ``davar.kernels.CEILING_DPH``, lets through samples that make the Allan terms
+    spanning them +inf.)"""
     if value is None:
         return float(default_dph)
     try:

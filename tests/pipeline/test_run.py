@@ -179,6 +179,11 @@ def test_adev_tables_print_no_interval_below_one_edf():
     assert side[-1] == lines[-1]
     a.edf, a.lo_dph, a.hi_dph = np.array([50.0, 2.0]), *chi2_bounds(adev, np.array([50.0, 2.0]))
     assert not adev_lines(a)[-1].startswith("  no interval")
+    # a sample beyond the engine's ceiling (a gate set above it): inf, and why, not "EDF below 1"
+    a.adev_dph, a.lo_dph, a.hi_dph = np.array([np.inf, 21.341]), *chi2_bounds(np.array([np.inf, 21.341]), a.edf)
+    note = adev_lines(a)[-1]
+    assert note.startswith("  inf: an Allan term at that tau spans a sample beyond 1e+08 deg/h") and \
+        not any(x.startswith("  no interval") for x in adev_lines(a))
 
 
 def test_model_check_is_a_chi_square_test_with_each_taus_edf():
