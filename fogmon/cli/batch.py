@@ -25,6 +25,9 @@ DEFAULT_CHUNK_SAMPLES = 1 << 24
 NO_WORKER_S = 60.0
 #: how often (s) waiting tasks check that the cluster still has a worker
 POLL_S = 2.0
+#: the address schemes of a Dask scheduler on the network (Dask's comm backends but
+#: inproc, which only a scheduler in this process has)
+SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
 
 EXAMPLES = """
 fogmon batch runs/ --out fleet/                          # every recording under runs/, on this machine
@@ -61,9 +64,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files, folders or globs")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder for windows.parquet and "
                         "recordings.parquet (created if needed; existing tables there are replaced)")
-    parser.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler (tcp://HOST:PORT; start "
-                        "one with `dask scheduler` and workers with `dask worker ADDRESS --nthreads 1`); the "
-                        "workers must see the input paths. Default: a local cluster of --workers processes")
+    parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS",
+                        help="a running Dask scheduler (tcp://HOST:PORT; start one with `dask scheduler` and "
+                        "workers with `dask worker ADDRESS --nthreads 1`); the workers must see the input paths. "
+                        "Default: a local cluster of --workers processes")
     parser.add_argument("--workers", type=number(1, 1024, integer=True), metavar="PROCESSES",
                         help=f"processes of the local cluster, one thread each (default: the machine's cores, "
                              f"{len(os.sched_getaffinity(0))} here)")
@@ -92,6 +96,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="no Dask progress bar")
     add_source_arguments(parser, mode="replay")
     add_reader_arguments(parser)
+
+
+def scheduler_address(text: str) -> str:
+    """argparse ``type=`` of --scheduler: a Dask scheduler address, [SCHEME://]HOST:PORT
+    with a scheme of ``SCHEMES`` and a port in 1..65535 (or the inproc:// address of a
+    scheduler in this process), checked before any work; a usage error otherwise."""
+    from distributed.comm import parse_address, parse_host_port
+
+    rule = "must be a Dask scheduler address tcp://HOST:PORT"
+    try:
+        scheme, loc = parse_address(text, strict=False)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{rule}, got {text!r}") from None
+    if scheme == "inproc":
+        return text
+    if scheme not in SCHEMES:
+        raise argparse.ArgumentTypeError(f"{rule} (scheme one of {', '.join(SCHEMES)}), got {text!r}")
+    try:
+        host, port = parse_host_port(loc)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{rule} (PORT missing or not a number), got {text!r}") from None
+    if not host or not 1 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"{rule} (a host and a port in 1..65535), got {text!r}")
+    return text
 
 
 def _options(args: argparse.Namespace) -> tuple[SourceOptions, PipelineConfig]:
@@ -143,7 +171,7 @@ def _client(args):
     if args.scheduler:
         try:
             client = Client(args.scheduler, timeout=30)
-        except (OSError, TimeoutError) as e:
+        except (OSError, TimeoutError, ValueError) as e:   # ValueError: an address Dask cannot use
             raise FogmonError(f"--scheduler {args.scheduler}: cannot connect: {e}") from None
         try:
             client.wait_for_workers(1, timeout=NO_WORKER_S)

@@ -170,6 +170,26 @@ def test_a_scheduler_without_workers_is_an_error_not_a_wait(fleet, tmp_path, cap
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize(("address", "why"), [
+    ("foo", "(PORT missing or not a number)"),
+    ("http://x:99999", "(scheme one of tcp, tls, ws, wss, ucx)"),
+    ("tcp://x:99999", "(a host and a port in 1..65535)"),
+    ("tcp://:8786", "(a host and a port in 1..65535)"),
+])
+def test_a_bad_scheduler_address_is_a_usage_error_before_any_work(fleet, tmp_path, capsys, monkeypatch, address, why):
+    """A --scheduler Dask cannot parse is one line naming the option and the value, exit
+    2, before the inputs are even listed (no traceback from distributed's parser)."""
+    import fogmon.fleet.inputs as inputs
+
+    monkeypatch.setattr(inputs, "expand_inputs", lambda *a: pytest.fail("work started"))
+    with pytest.raises(SystemExit) as e:
+        main(["batch", str(fleet / "a.csv"), "--out", str(tmp_path / "out"), "--scheduler", address])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err == (f"fogmon batch: error: argument --scheduler: must be a Dask scheduler "
+                                         f"address tcp://HOST:PORT {why}, got {address!r} (see fogmon batch --help)\n")
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.timeout(1200)
 def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_run, tmp_path):
     from distributed import Client
