@@ -63,7 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     set_epilog(parser, EXAMPLES, NOTES, EXIT_CODES)
     parser.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files, folders or globs")
     parser.add_argument("--out", required=True, metavar="DIR", help="folder for windows.parquet and "
-                        "recordings.parquet (created if needed; existing tables there are replaced)")
+                        "recordings.parquet (created if needed, outside the input folders; existing tables there are "
+                        "replaced)")
     parser.add_argument("--scheduler", type=scheduler_address, metavar="ADDRESS",
                         help="a running Dask scheduler (tcp://HOST:PORT; start one with `dask scheduler` and "
                         "workers with `dask worker ADDRESS --nthreads 1`); the workers must see the input paths. "
@@ -193,9 +194,10 @@ def _quiet_shutdown() -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fogmon.cli.output_options import check_command_outputs
-    from fogmon.fleet.inputs import expand_inputs
+    from fogmon.fleet.inputs import check_outside_inputs, expand_inputs
 
     paths = expand_inputs(args.inputs)
+    check_outside_inputs([("`out`", args.out, True), ("`report`", args.report, False)], args.inputs)
     check_command_outputs(args, paths)
     _check_model(args)
     source, config = _options(args)

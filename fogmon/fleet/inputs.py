@@ -35,6 +35,33 @@ def _walk(folder: str) -> list[str]:
     return out
 
 
+def input_folders(inputs: Sequence[str]) -> list[str]:
+    """The folders among ``inputs`` (given, or matched by a glob): those searched for
+    recordings (or read as one archive)."""
+    out: list[str] = []
+    for arg in inputs:
+        paths = sorted(glob.glob(arg, recursive=True)) if any(c in arg for c in "*?[") else [arg]
+        out += [p for p in paths if os.path.isdir(p)]
+    return out
+
+
+def check_outside_inputs(outputs: Sequence[tuple[str, str | None, bool]], inputs: Sequence[str]) -> None:
+    """FogmonError naming the output unless each output (``outputs``: (name, path,
+    whether a folder) triples, path None: not asked for) lies outside every input
+    folder: a later batch over that folder would search it and read the tables and the
+    report as recordings (and fail on them)."""
+    folders = [(f, os.path.realpath(f)) for f in input_folders(inputs)]
+    for name, path, is_folder in outputs:
+        if path is None:
+            continue
+        real = os.path.realpath(path if is_folder else os.path.dirname(os.path.abspath(path)))
+        for folder, real_folder in folders:
+            if real == real_folder or real.startswith(real_folder.rstrip(os.sep) + os.sep):
+                where = "is" if is_folder and real == real_folder else "is inside" if is_folder else "is in"
+                raise FogmonError(f"{name} {path}: {where} the input folder {folder}, where a later batch over it "
+                                  f"would read what is written as recordings; give a place outside it")
+
+
 def expand_inputs(inputs: Sequence[str]) -> list[str]:
     """The recordings, in order and each once: a glob gives its matches, a folder its
     recordings (``_walk``), a file itself. FogmonError naming the input when one gives

@@ -190,6 +190,31 @@ def test_a_bad_scheduler_address_is_a_usage_error_before_any_work(fleet, tmp_pat
     assert not (tmp_path / "out").exists()
 
 
+def test_outputs_inside_an_input_folder_are_refused_before_any_work(fleet, tmp_path, capsys, monkeypatch):
+    """`batch b --out b` wrote its tables among the recordings of b, so the next `batch b`
+    failed on them: an --out or --report in (or below) an input folder is one line naming
+    the option, exit 2, before any cluster starts; nothing is written."""
+    import fogmon.cli.batch as batch
+
+    monkeypatch.setattr(batch, "_client", lambda *a: pytest.fail("work started"))
+    b = tmp_path / "b"
+    b.mkdir()
+    shutil.copy(fleet / "a.csv", b / "a.csv")
+    (tmp_path / "elsewhere").symlink_to(b)
+    cases = [(["--out", str(b)], f"--out {b}: is the input folder {b}"),
+             (["--out", str(b / "fleet")], f"--out {b / 'fleet'}: is inside the input folder {b}"),
+             (["--out", str(tmp_path / "elsewhere" / "fleet")],
+              f"--out {tmp_path / 'elsewhere' / 'fleet'}: is inside the input folder {b}"),
+             (["--out", str(tmp_path / "out"), "--report", str(b / "fleet.html")],
+              f"--report {b / 'fleet.html'}: is in the input folder {b}")]
+    for inputs in ([str(b)], [str(tmp_path / "b*")]):          # a folder named, or matched by a glob
+        for opts, message in cases:
+            assert main(["batch", *inputs, *opts, "--no-progress"]) == 2
+            assert capsys.readouterr().err == (f"fogmon batch: error: {message}, where a later batch over it would "
+                                               f"read what is written as recordings; give a place outside it\n")
+    assert sorted(p.name for p in b.iterdir()) == ["a.csv"] and not (tmp_path / "out").exists()
+
+
 @pytest.mark.timeout(1200)
 def test_separate_scheduler_and_two_workers_give_identical_output(fleet, local_run, tmp_path):
     from distributed import Client
