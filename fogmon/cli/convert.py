@@ -8,6 +8,8 @@ import argparse
 import itertools
 import os
 
+import numpy as np
+
 from fogmon.cli.helptext import set_epilog
 from fogmon.errors import FogmonError
 
@@ -23,7 +25,11 @@ rate_<axis>_dph per axis, aux channels) as float64 in row groups of 65,536 rows,
 in its key-value metadata (key "fogmon", JSON) the replay-log metadata, the units, the
 source and, for a raw capture, its decoder options and counters. A multi-axis recording
 keeps its axes (--axis picks some); a sample time where some axis is invalid is left
-out (a row holds every axis) and counted."""
+out (a row holds every axis) and counted. Every sample not written is counted: invalid
+or lost ones (gaps, rows skipped with --tolerate-bad-rows, rates beyond the plausibility
+gate; they read back as time gaps) with the source's counters saying why, on the console
+and in a Parquet output's counters. An output without any sample is refused (exit 2,
+no file)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,21 +58,34 @@ def run(args: argparse.Namespace) -> int:
         raise FogmonError(f"{args.input}: an endless source (a sensor model) cannot be converted; "
                           f"use `fogmon sim --out`")
     try:
-        n, without_aux, partial = _convert(source, args.input, args.output)
+        n, invalid, without_aux, partial = _convert(source, args.input, args.output)
     finally:
         source.close()
     print(f"fogmon convert: wrote {n} samples at {source.sample_rate_hz:g} Hz from {source.name} to {args.output}"
+          + (f"; {invalid} invalid or lost samples left out{_why(source.counters)}" if invalid else "")
           + (f"; {without_aux} valid samples without aux values (not yet known) left out" if without_aux else "")
           + (f"; {partial} samples with only some axes valid left out" if partial else ""))
     return 0
 
 
-def _convert(source, input_path: str, output: str) -> tuple[int, int, int]:
+#: the source counters that say why samples of the grid are invalid or lost (docs/sources.md, Counters)
+LOSS_COUNTERS = ("samples_missing", "skipped_rows", "invalid_samples", "implausible_samples")
+
+
+def _why(counters: dict) -> str:
+    """" (samples_missing 3, implausible_samples 5)": the source's nonzero loss counters."""
+    named = [f"{k} {counters[k]}" for k in LOSS_COUNTERS if counters.get(k)]
+    return f" ({', '.join(named)})" if named else ""
+
+
+def _convert(source, input_path: str, output: str) -> tuple[int, int, int, int]:
     """Write ``source``'s valid samples to ``output`` (a Parquet log for .parquet, else
     a replay-log CSV; fogmon.formats.log_writer); after the first block, the free space
     is checked against the source's samples at the bytes per row measured on it; no
-    half-written output on any error. Returns the samples written, the valid samples left
-    out without aux values and those left out with only some axes valid."""
+    half-written output on any error, and none without a sample (FogmonError saying
+    why). Returns the samples written and those left out: invalid or lost (no axis
+    valid: time gaps in the output), valid without aux values, with only some axes
+    valid; a Parquet output keeps these counts with the source's counters."""
     from fogmon.formats.capture import read_sidecar
     from fogmon.formats.log_writer import LogWriter
     from fogmon.outputs import check_space
@@ -79,24 +98,32 @@ def _convert(source, input_path: str, output: str) -> tuple[int, int, int]:
     side = read_sidecar(input_path) if os.path.isfile(input_path) else None
     extra = {"source": source.name, **({"sidecar": side} if side else {})}
     w = LogWriter(output, aux_names, _replay_meta(source), axes, extra, name="OUT")
-    without_aux = partial = seen = 0
+    without_aux = partial = seen = invalid = 0
     try:
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep, b_partial, b_without_aux = replay_rows(b)
             without_aux += b_without_aux
             partial += b_partial
+            invalid += len(b) - int(np.count_nonzero(keep)) - b_without_aux - b_partial
             seen += len(b)
             w.write(b.t_s[keep], b.rate_dph[keep], {k: a[keep] for k, a in b.aux.items()})
             if w.rows and seen == len(b):       # the first block: will the rest fit?
                 left = max(source.n_samples - seen, 0) * w.rows / seen
                 check_space("OUT", output, left * w.bytes_per_row,
                             f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")
-        w.close(counters={**source.counters, "rows_without_aux": without_aux,
-                          **({"partial_samples_dropped": partial} if axes else {})})
+        if not w.rows:
+            gate = "; `max_rate_dph` sets the plausibility gate" if source.counters.get("implausible_samples") else ""
+            why = [f"{n} {what}" for n, what in ((invalid, f"invalid or lost{_why(source.counters)}"),
+                                                (without_aux, "without aux values"),
+                                                (partial, "with only some axes valid")) if n]
+            raise FogmonError(f"{input_path}: no sample to write, nothing written to OUT {output}: of {seen} "
+                              f"samples, {', '.join(why) or 'none'}{gate}")
+        w.close(counters={**source.counters, "rows_written": w.rows, "invalid_samples_left_out": invalid,
+                          "rows_without_aux": without_aux, **({"partial_samples_dropped": partial} if axes else {})})
     except BaseException:
         w.abort()   # no half-written output
         raise
-    return w.rows, without_aux, partial
+    return w.rows, invalid, without_aux, partial
 
 
 def _replay_meta(source) -> dict[str, str]:

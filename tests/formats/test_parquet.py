@@ -101,6 +101,51 @@ def test_bad_parquet_input_is_one_line(tmp_path, capsys):
     assert "junk.parquet: not a readable Parquet file" in capsys.readouterr().err
 
 
+def _log_with(path, bad: dict[int, str], n=2000):
+    """A replay log of ``n`` samples at 100 Hz whose rows ``bad`` (index -> rate text) are bad."""
+    rate = np.random.default_rng(1).normal(0, 3, n)
+    path.write_text("# sample_rate_hz: 100\ntime_s,rate_dph\n"
+                    + "".join(f"{i / 100:.2f},{bad.get(i, f'{v:.4f}')}\n" for i, v in enumerate(rate)))
+
+
+def test_convert_counts_every_sample_it_leaves_out(tmp_path, capsys):
+    """Implausible samples (beyond the plausibility gate) and bad rows skipped with
+    --tolerate-bad-rows are not written (a replay log holds valid samples only): each
+    count is printed with its reason and kept in a Parquet output's counters, and the
+    output reads back with those samples as a time gap."""
+    src = tmp_path / "some.csv"
+    _log_with(src, {100: "1e9", 101: "1e9", 102: "1e9", 103: "1e9", 104: "1e9", 500: "nan"})
+    for out in (tmp_path / "o.parquet", tmp_path / "o.csv"):
+        assert main(["convert", str(src), str(out), "--tolerate-bad-rows"]) == 0
+        assert capsys.readouterr().out == (f"fogmon convert: wrote 1994 samples at 100 Hz from replay log some.csv "
+                                           f"to {out}; 6 invalid or lost samples left out (samples_missing 1, "
+                                           f"skipped_rows 1, implausible_samples 5)\n")
+        back = ReplayLogSource(str(out)) if out.suffix == ".csv" else ParquetLogSource(str(out))
+        blocks = _blocks(back)
+        assert sum(len(b) for b in blocks) == 2000 and sum(int(np.count_nonzero(~b.valid)) for b in blocks) == 6
+    counters = __import__("json").loads(pq.ParquetFile(tmp_path / "o.parquet").metadata.metadata[META_KEY])["counters"]
+    assert {k: counters[k] for k in ("rows_written", "invalid_samples_left_out", "implausible_samples",
+                                     "skipped_rows", "samples_missing")} == {
+        "rows_written": 1994, "invalid_samples_left_out": 6, "implausible_samples": 5, "skipped_rows": 1,
+        "samples_missing": 1}
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_convert_refuses_an_output_without_samples(tmp_path, capsys, suffix):
+    """Every rate implausible: one line saying why, exit 2, and no output file (not even
+    a header-only one that `fogmon replay` would refuse), no temporary file left."""
+    src = tmp_path / "huge.csv"
+    _log_with(src, {i: "1e12" for i in range(300)}, n=300)
+    out = tmp_path / f"o{suffix}"
+    assert main(["convert", str(src), str(out)]) == 2
+    assert capsys.readouterr().err == (f"fogmon convert: error: {src}: no sample to write, nothing written to OUT "
+                                       f"{out}: of 300 samples, 300 invalid or lost (implausible_samples 300); "
+                                       f"--max-rate-dph sets the plausibility gate\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["huge.csv"]
+    assert main(["convert", str(src), str(out), "--max-rate-dph", "1e13"]) == 0     # a gate that lets them through
+    assert len(read_replay_log(out).t_s) == 300
+
+
 def test_convert_raw_capture_keeps_its_sidecar_facts(tmp_path, capsys):
     from fogmon.sources.codecs.kvh import encode_frame
     raw = tmp_path / "raw.bin"
