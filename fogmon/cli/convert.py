@@ -80,8 +80,8 @@ def _why(counters: dict) -> str:
 
 def _convert(source, input_path: str, output: str) -> tuple[int, int, int, int]:
     """Write ``source``'s valid samples to ``output`` (a Parquet log for .parquet, else
-    a replay-log CSV; fogmon.formats.log_writer); after the first block, the free space
-    is checked against the source's samples at the bytes per row measured on it; no
+    a replay-log CSV; fogmon.formats.log_writer); after the first block that writes rows,
+    the free space is checked against the source's samples at the bytes per row measured on it; no
     half-written output on any error, and none without a sample (FogmonError saying
     why). Returns the samples written and those left out: invalid or lost (no axis
     valid: time gaps in the output), valid without aux values, with only some axes
@@ -99,6 +99,7 @@ def _convert(source, input_path: str, output: str) -> tuple[int, int, int, int]:
     extra = {"source": source.name, **({"sidecar": side} if side else {})}
     w = LogWriter(output, aux_names, _replay_meta(source), axes, extra, name="OUT")
     without_aux = partial = seen = invalid = 0
+    sized = False
     try:
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep, b_partial, b_without_aux = replay_rows(b)
@@ -107,7 +108,8 @@ def _convert(source, input_path: str, output: str) -> tuple[int, int, int, int]:
             invalid += len(b) - int(np.count_nonzero(keep)) - b_without_aux - b_partial
             seen += len(b)
             w.write(b.t_s[keep], b.rate_dph[keep], {k: a[keep] for k, a in b.aux.items()})
-            if w.rows and seen == len(b):       # the first block: will the rest fit?
+            if w.rows and not sized:            # the first block with rows: will the rest fit?
+                sized = True
                 left = max(source.n_samples - seen, 0) * w.rows / seen
                 check_space("OUT", output, left * w.bytes_per_row,
                             f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")

@@ -146,6 +146,21 @@ def test_convert_refuses_an_output_without_samples(tmp_path, capsys, suffix):
     assert len(read_replay_log(out).t_s) == 300
 
 
+def test_convert_checks_the_space_after_a_first_block_without_valid_samples(tmp_path, capsys, monkeypatch):
+    """The free space is checked at the first block that writes rows (here the second:
+    the first 8192 rates are implausible), not only when the very first block does."""
+    import fogmon.outputs
+
+    src = tmp_path / "late.csv"
+    _log_with(src, {i: "1e12" for i in range(9000)}, n=20_000)
+    monkeypatch.setattr(fogmon.outputs, "free_bytes", lambda path: 1000)
+    out = tmp_path / "o.csv"
+    assert main(["convert", str(src), str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon convert: error: OUT {out}: ") and " more rows of " in err and err.count("\n") == 1
+    assert not out.exists()
+
+
 def test_convert_raw_capture_keeps_its_sidecar_facts(tmp_path, capsys):
     from fogmon.sources.codecs.kvh import encode_frame
     raw = tmp_path / "raw.bin"
