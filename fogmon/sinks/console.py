@@ -167,9 +167,10 @@ def _has_interval(a, i: int) -> bool:
 
 
 def _no_interval_note(results, rows=None) -> list[str]:
-    """The footnote of ADEV tables with a tau (of ``rows``; None: all) printed without its
+    """The footnotes of ADEV tables: a tau (of ``rows``; None: all) printed without its
     interval (its EDF below ``confidence.MIN_EDF``, where a chi-square interval can
-    exclude its own estimate)."""
+    exclude its own estimate), an ADEV of inf (a sample beyond the engine's ceiling), a
+    record whose rate never changes."""
     from fogmon.davar.confidence import MIN_EDF
     from fogmon.davar.kernels import CEILING_DPH
 
@@ -181,6 +182,9 @@ def _no_interval_note(results, rows=None) -> list[str]:
     if any(not math.isfinite(float(r.adev_dph[i])) for r, i in shown):
         out.append(f"  inf: an Allan term at that tau spans a sample beyond {CEILING_DPH:g} deg/h (the engine's "
                    f"ceiling; a plausibility gate --max-rate-dph above it lets such samples through)")
+    if shown and all(float(r.adev_dph[i]) == 0.0 for r, i in shown):
+        out.append("  the rate never changes (every Allan deviation is 0): a stuck or saturated output, not a "
+                   "sensor's noise; no coefficient can be fitted")
     return out
 
 

@@ -184,6 +184,8 @@ def test_adev_tables_print_no_interval_below_one_edf():
     note = adev_lines(a)[-1]
     assert note.startswith("  inf: an Allan term at that tau spans a sample beyond 1e+08 deg/h") and \
         not any(x.startswith("  no interval") for x in adev_lines(a))
+    a.adev_dph, a.lo_dph, a.hi_dph = np.zeros(2), np.zeros(2), np.zeros(2)     # a stuck output
+    assert adev_lines(a)[-1].startswith("  the rate never changes (every Allan deviation is 0)")
 
 
 def test_model_check_is_a_chi_square_test_with_each_taus_edf():
