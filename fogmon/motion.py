@@ -62,10 +62,13 @@ MIN_WARMUP_BLOCKS = 16
 class MotionSpan:
     """A stretch of platform motion: recording time ``t_start_s`` .. ``t_end_s`` (s) and
     the largest departure of a block-mean rate, or of a burst's samples, from its
-    reference, ``peak_dph`` (deg/h)."""
+    reference, ``peak_dph`` (deg/h). ``level_change``: the live gate's span ended when the
+    rate was found to hold a new level (a step of the rate, such as a bias change, that
+    the causal gate can tell from motion only once it has held for REFERENCE_S / 2)."""
     t_start_s: float
     t_end_s: float
     peak_dph: float
+    level_change: bool = False
 
 
 def block_samples(sample_rate_hz: float) -> int:
@@ -410,6 +413,7 @@ class MotionGate:
         self._moved = np.empty(0, dtype=bool)
         self._judged = 0                   # samples at the buffer's start already judged
         self._span: list[float] | None = None      # open span: [t_start_s, t_end_s, peak_dph]
+        self._stepped = False              # the open span's rate has settled at a new level
         self._quiet_blocks = 0             # non-moving blocks since the open span's last moving one
         self._mask_next = False            # the block after a span is margin
         self.spans: list[MotionSpan] = []  # closed spans, for the run's summary
@@ -515,6 +519,7 @@ class MotionGate:
         if moving and self._steady():                 # a bias change: the new level is the reference
             self._ref.reset(self._recent.values())
             moving = False
+            self._stepped = self._span is not None
         out: list[Event] = []
         if moving:
             self._mask(max(0, a - m), a + m)            # this block and the one before it
@@ -556,8 +561,12 @@ class MotionGate:
     def _close(self, t_s: float) -> Event:
         assert self._span is not None, "called with a span open"
         a, b, peak = self._span
-        self.spans.append(MotionSpan(a, b, peak))
-        self._span = None
+        self.spans.append(MotionSpan(a, b, peak, self._stepped))
+        self._span, stepped, self._stepped = None, self._stepped, False
+        if stepped:
+            return Event(t_s, "platform_motion", f"platform motion ended: {a:.3f} .. {b:.3f} s, peak {peak:.4g} deg/h "
+                         f"from the reference; the rate has held a new level since: a step (a bias change), not "
+                         f"necessarily motion, kept out until it had held for {REFERENCE_S / 2:g} s")
         return Event(t_s, "platform_motion", f"platform motion ended: {a:.3f} .. {b:.3f} s, "
                      f"peak {peak:.4g} deg/h from the reference")
 

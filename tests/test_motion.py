@@ -92,6 +92,19 @@ def test_live_gate_keeps_a_turn_out_of_the_analysis():
     assert [e.kind for e in events] == ["platform_motion"] * 2
     (span,) = gate.spans
     assert abs(span.t_start_s - 600.0) < 2 * block / FS and abs(span.t_end_s - 630.0) < 2 * block / FS
+    assert not span.level_change and "new level" not in events[-1].message
+
+
+def test_live_gate_says_when_a_span_ended_in_a_new_level():
+    """A step of the rate that holds (a bias change) is kept out until it has held for
+    REFERENCE_S / 2 (the causal gate cannot tell it sooner); the span says it ended so."""
+    t, r = stationary(3)
+    r = r + np.where(t >= 600.0, 3600.0 * 5.0, 0.0)
+    gate, _, v, events = run_gate(t, r, np.ones(len(t), bool), [4096] * 43 + [len(t) - 4096 * 43])
+    (span,) = gate.spans
+    assert span.level_change and abs(span.t_start_s - 600.0) < 1.0
+    assert REFERENCE_S / 2 - 5.0 < span.t_end_s - span.t_start_s < REFERENCE_S / 2 + 30.0
+    assert "the rate has held a new level since: a step" in events[-1].message and v[t > span.t_end_s + 1.0].all()
 
 
 def hand_turn(t, t0):

@@ -306,9 +306,15 @@ def motion_lines(s: AxisSummary, run: Summary) -> list[str]:
     MAX_MOTION_SPANS and where the rest are); ``run`` the whole run's summary."""
     spans = s.motion_spans
     pct = 100.0 * s.motion_samples / max(run.n_samples, 1)
+    from fogmon.motion import REFERENCE_S
+
+    steps = sum(m.level_change for m in spans)
+    step_note = (f"; {steps} ended in a new level the rate held: a step, such as a bias change, which the live "
+                 f"gate cannot tell from motion until it has held for {REFERENCE_S / 2:g} s" if steps else "")
     out = [f"  platform motion: {len(spans)} span(s), {s.motion_samples} samples ({pct:.1f} %) kept out of "
-           f"DAVAR and the fits (`keep_motion` analyses them; docs/motion.md):"]
-    shown = [f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s (peak {m.peak_dph:.3g} deg/h)" for m in spans[:MAX_MOTION_SPANS]]
+           f"DAVAR and the fits (`keep_motion` analyses them; docs/motion.md){step_note}:"]
+    shown = [f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s (peak {m.peak_dph:.3g} deg/h"
+             f"{', then a new level: a step' if m.level_change else ''})" for m in spans[:MAX_MOTION_SPANS]]
     for i in range(0, len(shown), 3):
         out.append("    " + ", ".join(shown[i:i + 3]))
     if len(spans) > MAX_MOTION_SPANS:
