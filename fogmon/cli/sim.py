@@ -75,7 +75,7 @@ def _first_seconds(rec, duration_s: float):
     if not keep.any():
         raise FogmonError(f"--duration-s {duration_s:g} is shorter than one sample of {rec.name}")
     return Recording(rec.t_s[keep], rec.rate_dph[keep], {k: v[keep] for k, v in rec.aux.items()},
-                     dict(rec.meta), rec.path, axes=rec.axes)
+                     dict(rec.meta), rec.path, axes=rec.axes, line_of=rec.line_of)  # a prefix: the same lines
 
 
 def run(args) -> int:

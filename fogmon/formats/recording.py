@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +35,8 @@ class Recording:
     channels by column name, ``meta`` from ``# key: value`` lines, and how many bad
     rows were skipped when reading tolerantly. Several axes: ``axes`` names them and
     ``rate_dph`` has one column per axis (aux as in fogmon.block); ``for_axis(name)``
-    is the one-axis recording every one-axis analysis takes."""
+    is the one-axis recording every one-axis analysis takes. ``line_of(i)``, where the
+    reader knows it, is the file line of sample ``i`` (error messages name it)."""
 
     t_s: np.ndarray
     rate_dph: np.ndarray
@@ -43,6 +45,7 @@ class Recording:
     path: str | None = None
     skipped_rows: int = 0
     axes: tuple[str, ...] = ()
+    line_of: Callable[[int], int] | None = field(default=None, repr=False, compare=False)
 
     @property
     def name(self) -> str:
@@ -61,8 +64,23 @@ class Recording:
         return len(self.t_s)
 
     def grid_index(self) -> np.ndarray:
-        """Index of every sample on the uniform grid t0 + k / fs (``grid_positions``)."""
-        return grid_positions(self.t_s, float(self.t_s[0]) if len(self.t_s) else 0.0, self.sample_rate_hz, self.name)
+        """Index of every sample on the uniform grid t0 + k / fs (``grid_positions``),
+        checked: a sample off the grid, or a grid more than MAX_MISSING_RATIO times
+        longer than the samples present (``check_grid_length``), is a FogmonError naming
+        the file's line where ``line_of`` knows it."""
+        idx = grid_positions(self.t_s, float(self.t_s[0]) if len(self.t_s) else 0.0, self.sample_rate_hz, self.name,
+                             line_of=self.line_of)
+        if len(idx):
+            check_grid_length(int(idx[-1]) + 1, len(idx), self.name, jump=self._largest_jump(idx))
+        return idx
+
+    def _largest_jump(self, idx: np.ndarray) -> Callable[[], tuple[int | None, float]]:
+        """(file line or None, s) of the largest time step between samples on grid ``idx``."""
+        def jump() -> tuple[int | None, float]:
+            i = int(np.argmax(np.diff(idx))) + 1 if len(idx) > 1 else 0
+            step = float(self.t_s[i] - self.t_s[i - 1]) if i else 0.0
+            return (self.line_of(i) if self.line_of else None), step
+        return jump
 
     def axis_names(self) -> tuple[str, ...]:
         """The axes to analyse: ``axes``, or ("",) for a one-axis recording."""
@@ -78,14 +96,13 @@ class Recording:
             raise FogmonError(f"{self.name}: no axis {name!r} (axes: {', '.join(self.axes)})")
         j = self.axes.index(name)
         return Recording(self.t_s, self.rate_dph[:, j], axis_aux(self.aux, self.axes, name),
-                         {**self.meta, "axis": name}, self.path, self.skipped_rows)
+                         {**self.meta, "axis": name}, self.path, self.skipped_rows, line_of=self.line_of)
 
     def to_block(self) -> Block:
         """The recording on its uniform sample grid: missing samples (time gaps) become
         invalid placeholders (rate and aux NaN), so gaps are never joined."""
         idx = self.grid_index()
         n = int(idx[-1]) + 1 if len(idx) else 0
-        check_grid_length(n, len(idx), self.name)
         sample_rate_hz = self.sample_rate_hz
         t = self.t_s[0] + np.arange(n) / sample_rate_hz if n else np.zeros(0)
         if n == len(idx):
@@ -124,14 +141,20 @@ def sample_rate_from(meta: dict, t_s: np.ndarray, name: str) -> float:
     return 1.0 / step
 
 
-def check_grid_length(n_grid: int, n_present: int, name: str, field: str = "time_s") -> None:
+def check_grid_length(n_grid: int, n_present: int, name: str, field: str = "time_s",
+                      jump: Callable[[], tuple[int | None, float]] | None = None) -> None:
     """A FogmonError when a grid of ``n_grid`` samples would hold more than
     MAX_MISSING_RATIO times the ``n_present`` samples a file has in gaps: a corrupt time
-    stamp or rate, not an outage (checked before any array of that length is made)."""
+    stamp or rate, not an outage (checked before any array of that length is made).
+    ``jump()``, called only then, gives the file line (or None) where the largest time
+    step ends and that step in s, for the message."""
     if n_grid - n_present > MAX_MISSING_RATIO * max(n_present, 1):
-        raise FogmonError(f"{name}: column {field}: the time stamps span {n_grid:.4g} sample periods for "
-                          f"{n_present} samples (more than {MAX_MISSING_RATIO} times as many missing as present): a "
-                          f"corrupt time stamp or sample rate, not a gap")
+        line, step = jump() if jump is not None else (None, 0.0)
+        at = f"line {line}, column {field}" if line is not None else f"column {field}"
+        largest = f"; {field} jumps by {step:.6g} s at this line" if line is not None and step > 0 else ""
+        raise FogmonError(f"{name}: {at}: the time stamps span {n_grid:.4g} sample periods for "
+                          f"{n_present} samples (more than {MAX_MISSING_RATIO} times as many missing as present"
+                          f"{largest}): a corrupt time stamp or sample rate, not a gap")
 
 
 def check_stated_rate(meta: dict, t_s: np.ndarray, name: str) -> None:

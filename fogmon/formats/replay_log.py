@@ -310,7 +310,19 @@ def read_replay_log(path: str | os.PathLike, tolerate: bool = False) -> Recordin
         raise FogmonError(f"{reader.name}: no data rows")
     whole = {c: np.concatenate(v) for c, v in cols.items()}
     return Recording(t_s=whole.pop("time_s"), rate_dph=whole.pop("rate_dph"), aux=whole, meta=reader.meta,
-                     path=reader.path, skipped_rows=skipped, axes=reader.axes)
+                     path=reader.path, skipped_rows=skipped, axes=reader.axes,
+                     line_of=functools.partial(_line_of_row, reader))
+
+
+def _line_of_row(reader: ReplayLogReader, i: int) -> int:
+    """The file line of row ``i`` of the log ``reader`` reads (for an error message: the
+    chunks' text is not kept, so the file is read again up to that row)."""
+    seen = 0
+    for rows in reader.chunks():
+        if i < seen + len(rows):
+            return rows.line_of(i - seen)
+        seen += len(rows)
+    raise IndexError(f"{reader.name}: no row {i}")
 
 
 def write_replay_log(path: str | os.PathLike, t_s, rate_dph, aux: dict | None = None,

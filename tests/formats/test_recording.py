@@ -59,8 +59,54 @@ def test_time_gaps_become_invalid_placeholders(tmp_path):
 
 def test_off_grid_sample_is_an_error(tmp_path):
     p = _write(tmp_path, "# sample_rate_hz: 10\ntime_s,rate_dph\n0,1\n0.1,2\n0.25,3\n")
-    with pytest.raises(FogmonError, match="periods off the 10 Hz grid"):
+    with pytest.raises(FogmonError, match="^r.csv: line 5, column time_s: sample at time_s=0.25 is 0.50 sample "
+                                          "periods off the 10 Hz grid"):
         read_replay_log(p).to_block()
+
+
+def _log_with(tmp_path, edit, n=3000):
+    """A 100 Hz one-axis log of ``n`` rows (data from line 3) with ``edit(rows)`` applied."""
+    rows = [f"{k / 100:.2f},1.5,20" for k in range(n)]
+    edit(rows)
+    return _write(tmp_path, "# sample_rate_hz: 100\ntime_s,rate_dph,temp_c\n" + "\n".join(rows) + "\n")
+
+
+def test_whole_file_reader_names_the_line_as_the_streaming_one(tmp_path):
+    """read_replay_log (sim --like, explain, updown, ...) and ReplayLogSource (replay,
+    convert) name the same line of an off-grid sample and of a corrupt time-stamp jump,
+    also after comment lines and rows skipped by a tolerant read, and of one axis."""
+    from fogmon.sources.files.replay_log import ReplayLogSource
+
+    def off_grid(rows):
+        rows.insert(1000, "# a comment line")
+        rows[2000] = "x,1,1"                           # skipped when tolerating
+        rows[2500] = rows[2500].replace("24.99,", "24.995,")     # row 2499 after the comment
+
+    def jump(rows):
+        rows[1500:] = [f"{1e6 + k / 100:.2f},1.5,20" for k in range(1500, len(rows))]
+
+    for edit, line, what in ((off_grid, 2503, "sample at time_s=24.995 is 0.50 sample periods off the 100 Hz "
+                                               "grid (is sample_rate_hz right?)"),
+                             (jump, 1503, "the time stamps span 1e+08 sample periods for 3000 samples (more than "
+                                          "100 times as many missing as present; time_s jumps by 1e+06 s at "
+                                          "this line): a corrupt time stamp or sample rate, not a gap")):
+        p = _log_with(tmp_path, edit)
+        want = f"r.csv: line {line}, column time_s: {what}"
+        tolerate = edit is off_grid
+        with pytest.raises(FogmonError) as streamed:
+            ReplayLogSource(str(p), tolerate=tolerate, chunk_bytes=4096)
+        rec = read_replay_log(p, tolerate=tolerate)
+        for call in (rec.grid_index, rec.to_block, rec.for_axis("").grid_index):
+            with pytest.raises(FogmonError) as whole:
+                call()
+            assert str(whole.value) == str(streamed.value) == want
+
+
+def test_line_of_survives_pickling(tmp_path):
+    import pickle
+    p = _log_with(tmp_path, lambda rows: rows.insert(10, "# note"), n=50)
+    rec = pickle.loads(pickle.dumps(read_replay_log(p)))
+    assert rec.line_of(0) == 3 and rec.line_of(10) == 14
 
 
 # -- the chunked reader: results and errors do not depend on where chunks are cut -------

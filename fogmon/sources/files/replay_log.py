@@ -8,6 +8,7 @@ import math
 import os
 from collections import deque
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -62,6 +63,7 @@ class ReplayLogSource(OfflineSource):
         last = -1
         rows_read = 0
         first: list[np.ndarray] = []   # the first RATE_SAMPLES time stamps: the stated rate's check
+        jump: tuple[int, Any, int, float] = (0, None, 0, 0.0)  # largest grid step: (step, rows, row, s)
         for rows in reader.chunks():  # the checking pass
             if not len(rows):
                 continue
@@ -72,11 +74,18 @@ class ReplayLogSource(OfflineSource):
                 if not force_rate and rows_read + len(rows) >= min(RATE_SAMPLES, 3):
                     check_stated_rate(self.meta, np.concatenate(first), reader.name)
             rows_read += len(rows)
-            last = int(grid_positions(rows.t_s, t0, self.sample_rate_hz, reader.name, last, rows.line_of)[-1])
+            idx = grid_positions(rows.t_s, t0, self.sample_rate_hz, reader.name, last, rows.line_of)
+            d = np.diff(idx, prepend=last if last >= 0 else idx[0])
+            i = int(np.argmax(d))
+            if d[i] > jump[0]:
+                jump = (int(d[i]), rows, i, float(rows.t_s[i] - (rows.t_s[i - 1] if i else t_last)))
+            last = int(idx[-1])
             t_last = float(rows.t_s[-1])
         if t0 is None:
             raise FogmonError(f"{reader.name}: no data rows")
-        check_grid_length(last + 1, rows_read, reader.name)
+        _, at, i, step = jump
+        check_grid_length(last + 1, rows_read, reader.name,
+                          jump=lambda: (at.line_of(i) if at is not None and at.line_of else None, step))
         self.t_first_s: float = t0
         self.t_last_s, self.n_samples = t_last, last + 1
         self.counters = {"samples": 0, "samples_missing": 0, "seq_gaps": 0, "skipped_rows": 0,
