@@ -109,7 +109,8 @@ def run(args) -> int:
         _check_axis(args.axis, sim_axes)
         meta["axis"] = args.axis
     info: dict = {}
-    blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info, axes=axes)
+    blocks = iter_simulate(model, duration, like, aux, seed, aux_t, meta_out=info, axes=axes,
+                           where=f"`model` {args.model}")
     if args.axis:
         blocks = (b.axis(args.axis) for b in blocks)
     n = _write(args.out, blocks, meta, info, n_expected, args.model)

@@ -133,11 +133,13 @@ class _Plan:
         return t, aux, present
 
 
-def _check_aux(model: SensorModel, have: set[str], axis: str = "", rates: tuple[str, ...] = ()) -> None:
-    """FogmonError when an effect of ``model`` needs an aux channel not in ``have``
-    (the channels axis ``axis`` sees; "" for a one-axis run) or, for an ``aux_response``,
-    a channel neither there nor a rate column of another simulated axis (``rates``:
-    the simulated axes) - or the axis's own rate column."""
+def _check_aux(model: SensorModel, have: set[str], axis: str = "", rates: tuple[str, ...] = (),
+               where: str = "model") -> None:
+    """FogmonError when an effect of ``model`` (named ``where`` in messages: its file)
+    needs an aux channel not in ``have`` (the channels axis ``axis`` sees; "" for a
+    one-axis run) or, for an ``aux_response``, a channel neither there nor a rate column
+    of another simulated axis (``rates``: the simulated axes) - or the axis's own rate
+    column."""
     on = f" on axis {axis}" if axis else ""
     for i, e in enumerate(model.effects):
         need = [EFFECT_KINDS[e.kind].aux] if EFFECT_KINDS[e.kind].aux else []
@@ -145,11 +147,11 @@ def _check_aux(model: SensorModel, have: set[str], axis: str = "", rates: tuple[
             need = [c for c in channels_of(e.params["terms"]) if other_axis(c) not in rates]
             own = f"rate_{axis}_dph"
             if axis and any(own in parse_feature(t["feature"]).names for t in e.params["terms"]):
-                raise FogmonError(f"model effect #{i + 1} (aux_response){on} reads {own}, the axis's own rate: a "
-                                  f"feature is an aux channel or another axis's rate")
+                raise FogmonError(f"{where}: [[effect]] #{i + 1} (aux_response){on} reads {own}, the axis's own "
+                                  f"rate: a feature is an aux channel or another axis's rate")
         for c in need:
             if c not in have:
-                raise FogmonError(f"model effect #{i + 1} ({e.kind}){on} needs the aux channel {c!r}, which the "
+                raise FogmonError(f"{where}: [[effect]] #{i + 1} ({e.kind}){on} needs the aux channel {c!r}, which the "
                                   f"input lacks (have: {', '.join(sorted(have)) or 'none'}); simulate `like` a "
                                   f"recording with that column or use a `scenario`")
 
@@ -246,14 +248,14 @@ def simulated_axes(model: SensorModel, like: Recording | None = None, axes: tupl
 
 
 def _axis_parts(model: SensorModel, plan: _Plan, ss: np.random.SeedSequence, axes: tuple[str, ...],
-                named: tuple[str, ...]) -> list[_Parts]:
+                named: tuple[str, ...], where: str = "model") -> list[_Parts]:
     """One _Parts per axis of ``axes``: its one-axis model, its own child of ``ss``, the
     aux channels it sees (``axis_aux`` among every axis ``named`` by model, input or caller)."""
     parts = []
     for a, child in zip(axes, ss.spawn(len(axes)), strict=True):
         one = model.for_axis(a)
         view = functools.partial(axis_aux, axes=named, name=a)
-        _check_aux(one, set(view(plan.src_aux)), a, axes)
+        _check_aux(one, set(view(plan.src_aux)), a, axes, where)
         parts.append(_Parts(one, plan, [np.random.default_rng(c) for c in child.spawn(4 + len(one.effects))], view,
                             axes))
     return parts
@@ -262,13 +264,15 @@ def _axis_parts(model: SensorModel, plan: _Plan, ss: np.random.SeedSequence, axe
 def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Recording | None = None,
                   aux: dict | None = None, seed: int | None = None, aux_t_s=None,
                   chunk_samples: int = CHUNK_SAMPLES, meta_out: dict | None = None,
-                  axes: tuple[str, ...] = ()) -> Iterator[Block]:
+                  axes: tuple[str, ...] = (), where: str = "model") -> Iterator[Block]:
     """Yield the simulation as Blocks of at most ``chunk_samples`` samples (t_s in s,
     rate_dph in deg/h, aux channels). Infinite when neither a duration, a recording nor
     aux channels bound it. ``meta_out`` (a dict) receives sample_rate_hz and seed.
     Several axes (``simulated_axes``; ``axes`` names them when neither the model nor
-    ``like`` does): Blocks with ``axes`` and one rate column per axis."""
-    model = validate_model(model)
+    ``like`` does): Blocks with ``axes`` and one rate column per axis. ``where`` names
+    the model in error messages (its file); the model is checked against its input when
+    the first block is asked for, before anything is simulated."""
+    model = validate_model(model, where)
     if seed is not None and not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise FogmonError(f"seed must be a non-negative integer, got {seed!r}")
     plan = _Plan(model, duration_s, like, aux, aux_t_s)
@@ -278,9 +282,9 @@ def iter_simulate(model: SensorModel, duration_s: float | None = None, like: Rec
         meta_out.update(sample_rate_hz=f"{plan.sample_rate_hz:g}", seed=str(ss.entropy))
     if sim_axes:
         named = tuple(dict.fromkeys((*sim_axes, *(like.axes if like is not None else ()), *axes)))
-        parts = _axis_parts(model, plan, ss, sim_axes, named)
+        parts = _axis_parts(model, plan, ss, sim_axes, named, where)
     else:
-        _check_aux(model, set(plan.src_aux))
+        _check_aux(model, set(plan.src_aux), where=where)
         parts = [_Parts(model, plan, [np.random.default_rng(s) for s in ss.spawn(4 + len(model.effects))])]
     k0 = 0
     cross = _CrossRates(sim_axes, max(p.back for p in parts)) if any(p.cross for p in parts) else None

@@ -103,6 +103,18 @@ def test_cli_errors_are_one_line_exit_2(tmp_path, capsys, argv, needle):
     assert err.strip().count("\n") == 0 and needle in err, err
 
 
+def test_cli_missing_aux_channel_names_the_model_file(tmp_path, capsys):
+    model = tmp_path / "m.toml"
+    save_model(MWD, model)
+    assert cli_main(["sim", "--model", str(model), "--out", str(tmp_path / "o.csv"), "--duration-s", "10"]) == 2
+    assert capsys.readouterr().err == (f"fogmon sim: error: --model {model}: [[effect]] #1 (thermal_drift) needs the "
+                                       f"aux channel 'temp_c', which the input lacks (have: none); simulate --like a "
+                                       f"recording with that column or use a --scenario\n")
+    assert not (tmp_path / "o.csv").exists()
+    with pytest.raises(FogmonError, match=r"^m.toml: \[\[effect\]\] #1 \(thermal_drift\) needs the aux channel"):
+        next(SimulatedSource(str(model), duration_s=10.0).blocks())
+
+
 def test_simulated_source_streams_the_same_numbers():
     m = SensorModel(100.0, 0.0, Noise(N_dpsh=0.05, B_dph=0.01))
     src = SimulatedSource(m, duration_s=50.0, seed=9)

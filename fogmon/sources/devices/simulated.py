@@ -50,7 +50,8 @@ class SimulatedSource(OfflineSource):
         self.meta: dict = {}
         seed = self.seed
         chunk = max(1, int(round(PACED_BLOCK_S * self.sample_rate_hz * speed))) if speed else CHUNK_SAMPLES
-        self._it = iter_simulate(model, duration_s, like, aux, seed, aux_t_s, chunk_samples=chunk, meta_out=self.meta)
+        self._it = iter_simulate(model, duration_s, like, aux, seed, aux_t_s, chunk_samples=chunk, meta_out=self.meta,
+                                 where=what)
         self._pacer = Pacer(speed)
         self.counters = {"samples": 0, "blocks": 0, "samples_missing": 0}
         self._closed = False
