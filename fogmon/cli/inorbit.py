@@ -39,9 +39,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from fogmon.formats.recording import pick_axes
+    from fogmon.methods.inorbit import ARW_MIN_SAMPLES
     from fogmon.sources.open import read_recording
 
     rec = read_recording(args.recording, source_options(args))
+    if len(rec) < ARW_MIN_SAMPLES:
+        raise FogmonError(f"{args.recording}: {len(rec)} samples are too few for the in-orbit evaluation (the angle "
+                          f"random walk from first differences needs >= {ARW_MIN_SAMPLES})")
     if args.period_s * rec.sample_rate_hz < 2:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
     for axis in pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names():

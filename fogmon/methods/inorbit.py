@@ -21,6 +21,8 @@ ORBIT_PERIOD_S = 5580.0
 #: The iterated k-sigma Pauta criterion keeps a nonzero share of Gaussian data only for
 #: k > sqrt(3) (the truncated-normal std factor tends to a / sqrt(3) as a -> 0).
 PAUTA_K_MIN = math.sqrt(3.0)
+#: Fewest samples ``arw_from_differences`` reads a white-rate level from.
+ARW_MIN_SAMPLES = 100
 
 
 def _truncated_std_factor(a: float) -> float:
@@ -67,8 +69,9 @@ def arw_from_differences(rate_dph, sample_rate_hz: float, k: float = 3.0) -> Dif
     sigma^2 for white rate noise, corrected for the Pauta truncation; N = sigma /
     (60 sqrt(fs)). Valid when white rate noise dominates at tau0 (Q negligible)."""
     y = np.asarray(rate_dph, float)
-    if len(y) < 100:
-        raise FogmonError(f"arw_from_differences: {len(y)} samples are too few (need >= 100)")
+    if len(y) < ARW_MIN_SAMPLES:
+        raise FogmonError(f"{len(y)} samples are too few for the angle random walk from first differences "
+                          f"(need >= {ARW_MIN_SAMPLES})")
     d = np.diff(y)
     keep = pauta_mask(d, k)
     sigma = d[keep].std(ddof=1) / pauta_consistency(k) / math.sqrt(2.0)
@@ -84,7 +87,7 @@ def cycle_bias_instability(t_s, rate_dph, period_s: float = ORBIT_PERIOD_S) -> t
     k = np.floor((t - t[0]) / period_s).astype(np.int64)
     ncyc = int((t[-1] - t[0]) // period_s)
     if ncyc < 2:
-        raise FogmonError(f"cycle_bias_instability: the record holds {ncyc} complete {period_s:g} s cycles; need >= 2")
+        raise FogmonError(f"the record holds {ncyc} complete {period_s:g} s cycles (`period_s`); need >= 2")
     sel = k < ncyc
     means = np.bincount(k[sel], weights=y[sel]) / np.bincount(k[sel])
     return float(means.std(ddof=1)), ncyc

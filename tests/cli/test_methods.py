@@ -174,3 +174,20 @@ def test_inorbit_bad_values_are_usage_errors(updown, capsys, argv, message):
 def test_inorbit_period_shorter_than_two_samples(updown, capsys):
     assert main(["inorbit", str(updown[0]), "--period-s", "0.15"]) == 2
     assert capsys.readouterr().err == "fogmon inorbit: error: --period-s 0.15 s is shorter than 2 samples at 10 Hz\n"
+
+
+def _short(tmp_path, n=3):
+    p = tmp_path / "short.csv"
+    write_replay_log(p, np.arange(n) / 10.0, np.random.default_rng(3).normal(0, 1, n), meta={"sample_rate_hz": 10})
+    return p
+
+
+def test_inorbit_too_short_a_recording_names_the_file(tmp_path, capsys):
+    p = _short(tmp_path)
+    assert main(["inorbit", str(p)]) == 2
+    assert capsys.readouterr().err == (f"fogmon inorbit: error: {p}: 3 samples are too few for the in-orbit "
+                                       f"evaluation (the angle random walk from first differences needs >= 100)\n")
+    assert main(["inorbit", str(_short(tmp_path, 150))]) == 0     # long enough: no function names in its notes
+    assert ("  bias instability: not available (the record holds 0 complete 5580 s cycles (--period-s); need >= 2)"
+            in capsys.readouterr().out.splitlines())
+
