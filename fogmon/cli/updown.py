@@ -31,8 +31,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_reader_arguments(p, axis=True)
 
 
-def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
-    from fogmon.davar.batch import oadev
+#: fewest samples a record may have: the Allan deviation that gives each mean's uncertainty
+#: needs at least 4 (fogmon.davar.taus.tau_grid)
+MIN_SAMPLES = 4
+
+
+def _read(option: str, path: str, args):
+    """The one-gyro recording ``option`` (``--up``/``--down``) names, checked before any
+    work: one axis, its time base on the sample grid, enough samples."""
     from fogmon.sources.open import read_recording
 
     rec = read_recording(path, source_options(args))
@@ -41,11 +47,21 @@ def _mean_and_sigma(path: str, args) -> tuple[float, float, str]:
             raise FogmonError(f"{path}: has axes {', '.join(rec.axes)}; up/down calibrates one gyro: give --axis "
                               f"NAME (the axis pointing up and down)")
         rec = rec.for_axis(args.axis)
+    rec.grid_index()                               # off-grid samples, corrupt time stamps: named by line
+    if len(rec) < MIN_SAMPLES:
+        raise FogmonError(f"{option} {path}: {len(rec)} samples are too few for the uncertainty of its mean (an "
+                          f"Allan deviation needs at least {MIN_SAMPLES})")
+    return rec
+
+
+def _mean_and_sigma(rec) -> tuple[float, float]:
+    from fogmon.davar.batch import oadev
+
     res = oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
     ok = np.isfinite(res.adev_dph)
     # std of the mean of the record ~ ADEV at the longest reliable tau (conservative)
     sigma = float(res.adev_dph[ok][-1]) if ok.any() else float(np.std(rec.rate_dph) / math.sqrt(len(rec)))
-    return float(np.mean(rec.rate_dph)), sigma, rec.name
+    return float(np.mean(rec.rate_dph)), sigma
 
 
 def run(args) -> int:
@@ -53,12 +69,13 @@ def run(args) -> int:
 
     if os.path.exists(args.up) and os.path.exists(args.down) and os.path.samefile(args.up, args.down):
         raise FogmonError(f"--up {args.up} and --down {args.down} are the same file")
-    up, s_up, n_up = _mean_and_sigma(args.up, args)
-    down, s_down, n_down = _mean_and_sigma(args.down, args)
+    rec_up, rec_down = _read("--up", args.up, args), _read("--down", args.down, args)
+    up, s_up = _mean_and_sigma(rec_up)
+    down, s_down = _mean_and_sigma(rec_down)
     r = updown_calibration(up, down, args.lat_deg, max(s_up, s_down), (f"--up {args.up}", f"--down {args.down}"))
     print(f"up/down Earth-rate calibration at latitude {args.lat_deg:g} deg "
           f"(vertical Earth rate {r['earth_vertical_dph']:.4f} deg/h)")
-    print(f"  mean output: up ({n_up}) {up:+.5f} deg/h, down ({n_down}) {down:+.5f} deg/h")
-    print(f"  bias              {r['bias_dph']:+.5f} +/- {r['bias_sigma_dph']:.2g} deg/h")
-    print(f"  scale-factor error {r['scale_factor_ppm']:+.1f} +/- {r['scale_factor_sigma_ppm']:.2g} ppm")
+    print(f"  mean output: up ({rec_up.name}) {up:+.5f} deg/h, down ({rec_down.name}) {down:+.5f} deg/h")
+    print(f"  bias              {r['bias_dph']:+.5f} +/- {r['bias_sigma_dph']:.2g} deg/h (1 sigma)")
+    print(f"  scale-factor error {r['scale_factor_ppm']:+.1f} +/- {r['scale_factor_sigma_ppm']:.2g} ppm (1 sigma)")
     return 0

@@ -61,8 +61,10 @@ def test_inorbit_and_updown(tmp_path, capsys):
     )
     assert main(["updown", "--up", str(up), "--down", str(down), "--lat-deg", str(lat)]) == 0
     out = capsys.readouterr().out
-    bias, bias_sd = map(float, re.search(r"bias +([-+\d.]+) \+/- ([\d.e-]+) deg/h", out).groups())
-    sf, sf_sd = map(float, re.search(r"scale-factor error ([-+\d.]+) \+/- ([\d.e-]+) ppm", out).groups())
+    bias, bias_sd = map(float, re.search(r"bias +([-+\d.]+) \+/- ([\d.e-]+) deg/h \(1 sigma\)$", out,
+                                         re.M).groups())
+    sf, sf_sd = map(float, re.search(r"scale-factor error ([-+\d.]+) \+/- ([\d.e+-]+) ppm \(1 sigma\)$", out,
+                                     re.M).groups())
     assert abs(bias - 1.0) < 4 * bias_sd and abs(sf - 200.0) < 4 * sf_sd and sf_sd < 20
 
 
@@ -190,4 +192,27 @@ def test_inorbit_too_short_a_recording_names_the_file(tmp_path, capsys):
     assert main(["inorbit", str(_short(tmp_path, 150))]) == 0     # long enough: no function names in its notes
     assert ("  bias instability: not available (the record holds 0 complete 5580 s cycles (--period-s); need >= 2)"
             in capsys.readouterr().out.splitlines())
+
+
+@pytest.mark.parametrize("option", ["--up", "--down"])
+def test_updown_too_short_a_recording_names_the_option_and_file(updown, tmp_path, capsys, option):
+    p = _short(tmp_path)
+    files = {"--up": str(updown[0]), "--down": str(updown[1]), option: str(p)}
+    assert main(["updown", *[a for kv in files.items() for a in kv], "--lat-deg", "45"]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == (f"fogmon updown: error: {option} {p}: 3 samples are too few for the "
+                                         f"uncertainty of its mean (an Allan deviation needs at least 4)\n")
+
+
+def test_updown_off_grid_sample_names_its_line(updown, tmp_path, capsys):
+    lines = updown[0].read_text().splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(lines) if ln[0].isdigit()) + 500   # the 501st data row
+    t, rest = lines[k].split(",", 1)
+    lines[k] = f"{float(t) + 0.05!r},{rest}"                               # half a period off the 10 Hz grid
+    p = tmp_path / "up.csv"
+    p.write_text("".join(lines))
+    assert main(["updown", "--up", str(p), "--down", str(updown[1]), "--lat-deg", "45"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"fogmon updown: error: up.csv: line {k + 1}, column time_s: sample at time_s=") and \
+        "0.50 sample periods off the 10 Hz grid" in err and err.count("\n") == 1
 
