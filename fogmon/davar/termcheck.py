@@ -67,8 +67,10 @@ class TermContradiction:
     ``value`` (that unit); at ``tau_s`` (s, where its excess is largest) its own ADEV
     ``term_adev_dph`` above the measured ``adev_dph`` and that one's one-sided upper bound
     ``bound_dph`` (deg/h) at ``bound_confidence``; ``limit`` (the name's unit): the
-    largest value of the term whose own ADEV stays under the bound at every tau;
-    ``shortest_tau_s``: the curve's shortest tau with an interval."""
+    largest value of the term whose own ADEV stays under the bound at every tau, an
+    upper limit at ``limit_confidence`` (1 - the check's family-wise level: the term is
+    above it only if some tau's bound fails); ``shortest_tau_s``: the curve's shortest
+    tau with an interval."""
 
     name: str
     value: float
@@ -79,6 +81,7 @@ class TermContradiction:
     bound_confidence: float
     limit: float
     shortest_tau_s: float
+    limit_confidence: float = 1.0 - CHECK_LEVEL
 
 
 def contradictions(tau_s, adev_dph, edf, avar_terms, judged=CHECKED,
@@ -116,7 +119,7 @@ def contradictions(tau_s, adev_dph, edf, avar_terms, judged=CHECKED,
                 if c is not None:
                     found[i], changed = c, True
     level_each = 1.0 - level / int(ok.sum())
-    return [replace(found[i], bound_confidence=level_each) for i in sorted(found)]
+    return [replace(found[i], bound_confidence=level_each, limit_confidence=1.0 - level) for i in sorted(found)]
 
 
 def _judge(i: int, tau: np.ndarray, adev: np.ndarray, bound: np.ndarray, parts: np.ndarray, unfiltered: np.ndarray,

@@ -251,20 +251,23 @@ def contradiction_lines(f) -> list[str]:
     out = []
     for c in getattr(f, "contradicted", ()):
         unit = COEFFICIENTS[c.name]
+        level = f"{100 * c.limit_confidence:g} % upper limit"
         bound = (f"{c.adev_dph:.4g} deg/h (upper bound {c.bound_dph:.4g} deg/h at {100 * c.bound_confidence:.2f} %, "
-                 f"family-wise 5 % over the taus)")
+                 f"family-wise {100 * (1 - c.limit_confidence):g} % over the taus)")
         if c.name == "Q_arcsec":
             out.append(f"  {c.name}: white angle noise, not quantization: its 1/tau slope (own ADEV "
                        f"{c.term_adev_dph:.4g} deg/h at tau {c.tau_s:.4g} s) does not reach the shortest taus, where "
                        f"the ADEV is {bound}; a quantizer on the output would (it is white in angle up to Nyquist): "
                        f"the output is band-limited (filtered or decimated: a sensor model's bandwidth effect) or the "
-                       f"slope is the far side of a narrowband signal; an output quantizer is < {c.limit:.4g} arcsec")
+                       f"slope is the far side of a narrowband signal; an output quantizer is < {c.limit:.4g} arcsec "
+                       f"({level})")
         else:
             what = {"B_dph": "flicker floor", "K_dphsh": "rate random walk", "R_dphh": "rate ramp"}[c.name]
             out.append(f"  {c.name}: the fit's {c.value:.4g} {unit} is not identified: its {what} (own ADEV "
                        f"{c.term_adev_dph:.4g} deg/h at tau {c.tau_s:.4g} s) lies above the measured ADEV there, "
                        f"{bound}; the terms add in variance, so none exceeds the record's ADEV: the fit took a hump "
-                       f"(correlated noise, a transient) for a {what}; the ADEV bounds it: < {c.limit:.4g} {unit}")
+                       f"(correlated noise, a transient) for a {what}; the ADEV bounds it: < {c.limit:.4g} {unit} "
+                       f"({level})")
     return out
 
 

@@ -2,6 +2,8 @@
 identified term above the record's ADEV; a 1/tau slope that does not reach the shortest
 tau is white angle noise, not quantization (issue 28, items 7 and 8)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -23,6 +25,10 @@ def test_a_floor_above_the_measured_adev_is_contradicted_and_bounded():
     assert c.name == "B_dph" and c.tau_s == 64.0 and c.term_adev_dph == pytest.approx(5.0, rel=1e-3)
     assert c.adev_dph == 2.0 and 2.0 < c.bound_dph < 5.0
     assert c.limit == pytest.approx(c.bound_dph / 0.6643, rel=1e-3)   # the ADEV's bound on B
+    # each tau's bound at 1 - 5 % / 7, so all seven hold at 95 %: the limit is a 95 % upper limit
+    assert c.bound_confidence == pytest.approx(1 - 0.05 / 7) and c.limit_confidence == pytest.approx(0.95)
+    (c,) = contradictions(TAU, adev, EDF, a, level=0.01)
+    assert c.limit_confidence == pytest.approx(0.99)
 
 
 def test_a_floor_under_the_measured_adev_is_not_contradicted():
@@ -72,6 +78,9 @@ def test_a_filtered_output_has_white_angle_noise_not_quantization():
     assert fit.Q_arcsec.identifiable and fit.q_band_limited
     lines = "\n".join(coefficient_lines(fit) + contradiction_lines(fit))
     assert "white angle noise, not quantization" in lines and "does not reach the shortest taus" in lines
+    # the bound on an output quantizer states its level
+    assert re.search(r"family-wise 5 % over the taus\).*an output quantizer is < \S+ arcsec \(95 % upper limit\)$",
+                     lines, re.M)
 
 
 def test_a_hump_fitted_as_a_floor_is_not_printed_identified():
@@ -86,7 +95,9 @@ def test_a_hump_fitted_as_a_floor_is_not_printed_identified():
         assert not getattr(fit, c.name).identifiable and float(getattr(fit, c.name).upper) <= c.limit
         assert c.term_adev_dph > c.bound_dph > c.adev_dph
     assert fit.N_dpsh.identifiable
-    assert "B_dph: the fit's 33.06 deg/h is not identified: its flicker floor" in "\n".join(contradiction_lines(fit))
+    lines = contradiction_lines(fit)
+    assert "B_dph: the fit's 33.06 deg/h is not identified: its flicker floor" in "\n".join(lines)
+    assert all(re.search(r"the ADEV bounds it: < \S+ \S+ \(95 % upper limit\)$", ln) for ln in lines), lines
 
 
 def test_exports_name_a_band_limited_q_as_white_angle_noise():
