@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "first tau)")
     p.add_argument("--record-s", type=positive, metavar="SECONDS", help="length of that record, s (default: from "
                    "n_terms or the file's format, else assumed 4 x the largest tau)")
-    p.add_argument("--confidence", type=number(0, 1, above=True), default=0.683, metavar="PROBABILITY",
+    p.add_argument("--confidence", type=number(0, 1, above=True, below=True), default=0.683, metavar="PROBABILITY",
                    help="two-sided confidence of the intervals, 0 < PROBABILITY < 1 (default 0.683 = 1 sigma)")
     add_export_argument(p)
 
@@ -55,8 +55,6 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.errors import FogmonError
     from fogmon.formats.curves import read_curves
 
-    if not args.confidence < 1:
-        raise FogmonError(f"--confidence must be below 1, got {args.confidence:g}")
     check_command_outputs(args)
     export = export_request(args, [args.curve])
     cf = read_curves(args.curve)

@@ -6,9 +6,10 @@ import argparse
 import math
 
 
-def number(lo: float | None = None, hi: float | None = None, *, integer: bool = False, above: bool = False):
+def number(lo: float | None = None, hi: float | None = None, *, integer: bool = False, above: bool = False,
+           below: bool = False):
     """argparse ``type=``: a finite float (an int with ``integer``) with lo <= v <= hi
-    (lo < v with ``above``); None leaves a side open."""
+    (lo < v with ``above``, v < hi with ``below``); None leaves a side open."""
     kind = "an integer" if integer else "a finite number"
 
     def fmt(v: float) -> str:
@@ -16,11 +17,11 @@ def number(lo: float | None = None, hi: float | None = None, *, integer: bool = 
             return f"{v:g}"
         return f"{int(v):,}" if abs(v) >= 100_000 else str(int(v))
 
-    if lo is not None and hi is not None and not above:
+    if lo is not None and hi is not None and not above and not below:
         rule = f"{kind} in {fmt(lo)}..{fmt(hi)}"
     else:
         bounds = ([f"{'>' if above else '>='} {fmt(lo)}"] if lo is not None else []) + \
-            ([f"<= {fmt(hi)}"] if hi is not None else [])
+            ([f"{'<' if below else '<='} {fmt(hi)}"] if hi is not None else [])
         rule = f"{kind} {' and '.join(bounds)}".strip()
 
     def parse(text: str):
@@ -28,7 +29,9 @@ def number(lo: float | None = None, hi: float | None = None, *, integer: bool = 
             v = int(text) if integer else float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}") from None
-        if not (math.isfinite(v) and (lo is None or (v > lo if above else v >= lo)) and (hi is None or v <= hi)):
+        in_lo = lo is None or (v > lo if above else v >= lo)
+        in_hi = hi is None or (v < hi if below else v <= hi)
+        if not (math.isfinite(v) and in_lo and in_hi):
             raise argparse.ArgumentTypeError(f"must be {rule}, got {text!r}")
         return v
 

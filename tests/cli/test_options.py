@@ -217,3 +217,25 @@ def test_monitor_bad_port_values_are_usage_errors(capsys, argv, message):
     err = capsys.readouterr().err
     assert err.startswith(f"fogmon monitor: error: {message}") and err.endswith(" (see fogmon monitor --help)\n")
     assert err.count("\n") == 1
+
+
+@pytest.mark.parametrize("value", ["0", "1", "1.5", "-0.2", "nan"])
+def test_fit_confidence_range_is_one_message_for_both_ends(capsys, value):
+    """0 and 1 are refused alike, by the rule that says what is accepted (0 < p < 1)."""
+    with pytest.raises(SystemExit) as e:
+        main(["fit", "curve.csv", "--confidence", value])
+    assert e.value.code == 2
+    assert capsys.readouterr().err == (f"fogmon fit: error: argument --confidence: must be a finite number > 0 and "
+                                       f"< 1, got '{value}' (see fogmon fit --help)\n")
+
+
+def test_number_open_at_both_ends():
+    import argparse
+
+    from fogmon.cli.values import number
+    p = number(0, 1, above=True, below=True)
+    assert p("0.5") == 0.5 and p("1e-9") == 1e-9
+    for bad in ("0", "1"):
+        with pytest.raises(argparse.ArgumentTypeError, match="> 0 and < 1"):
+            p(bad)
+    assert number(0, 1)("1") == 1.0 and number(0, 1, below=True)("0") == 0.0   # closed ends stay closed
