@@ -187,7 +187,8 @@ def _g(x: float | None) -> str:
 
 def _header(source: str, sample_rate_hz: float | None) -> list[str]:
     return [f"# fogmon noise fit of {source}",
-            f"# sample rate {sample_rate_hz:g} Hz" if sample_rate_hz else "# sample rate unknown (a fitted curve)"]
+            f"# sample rate {sample_rate_hz:g} Hz" if sample_rate_hz else
+            "# sample rate not stated by the source (a fitted curve): no IMU rate is written"]
 
 
 def _topic_rate(topic: str | None, sample_rate_hz: float | None, quote: bool = False) -> list[str]:

@@ -82,11 +82,13 @@ def run(args: argparse.Namespace) -> int:
     if export:
         gyros = {c.axis: f for c, _, _, f in fits if c.sensor == "gyro"}
         accels = {c.axis or "-": f for c, _, _, f in fits if c.sensor == "accel"}
+        # a rate the fit assumed (1 / the first tau) is said as assumed, never written as the IMU's update_rate
+        assumed = "" if rate else f", the fit assuming {r0.sample_rate_hz:g} Hz (1 / the first tau; --rate-hz sets it)"
         write_export(*export, gyros.get("") if list(gyros) == [""] else gyros or None,
-                     f"the curve{'s' if len(cf.files) > 1 else ''} {args.curve} ({cf.fmt})",
+                     f"the curve{'s' if len(cf.files) > 1 else ''} {args.curve} ({cf.fmt}){assumed}",
                      rate, None, accels)
         lines.append(f"Wrote {export[1]} ({export[0]} export of the fit"
-                     f"{'' if rate else '; update_rate left out: the sample rate is not known'})")
+                     f"{'' if rate else '; update_rate left out: the sample rate was assumed, not stated'})")
     print("\n".join(lines))
     return 0
 

@@ -142,8 +142,14 @@ def test_allan_variance_ros_output_is_read_and_fitted(tmp_path, capsys):
     assert re.search(r"^accelerometer_noise_density: \d", yaml, re.M) and "# X Velocity Random Walk:" in yaml
     assert re.search(r"^update_rate: 10\.0 ", yaml, re.M)
     assert main(["fit", str(path), "--export", "kalibr", str(out)]) == 0     # no rate: none written, nor null
-    assert "update_rate left out" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "update_rate left out: the sample rate was assumed, not stated" in printed
     assert not re.search(r"^update_rate", out.read_text(), re.M) and "null" not in out.read_text()
+    # the console's assumed rate is the one the export names as the fit's assumption
+    rate = re.search(r"assumed: sample rate (\S+) Hz \(1 / the first tau", printed).group(1)
+    head = out.read_text().splitlines()[:2]
+    assert head[0].endswith(f", the fit assuming {rate} Hz (1 / the first tau; --rate-hz sets it)"), head
+    assert head[1] == "# sample rate not stated by the source (a fitted curve): no IMU rate is written"
 
 
 def test_a_rate_that_contradicts_n_terms_is_refused_with_the_rate_they_fit(tmp_path, capsys):
