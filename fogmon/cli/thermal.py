@@ -58,18 +58,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "(default: an empty model at the recording's sample rate)")
     p.add_argument("--out-model", metavar="CALIBRATED.toml", help="write the model with the thermal_drift effect")
     p.add_argument("--out-corrected", metavar="CORRECTED.csv",
-                   help="write the recording with the predicted drift removed")
+                   help="write the recording with the predicted drift removed: CORRECTED.csv (replay log), or "
+                   "CORRECTED.parquet for a Parquet replay log")
     add_reader_arguments(p, axis=True)
 
 
 def run(args) -> int:
     from fogmon.cli.output_options import check_command_outputs
+    from fogmon.formats.log_writer import check_log_suffix
     from fogmon.formats.recording import pick_axes
-    from fogmon.formats.replay_log import write_replay_log
     from fogmon.sim.model import Noise, SensorModel, load_model, save_model
     from fogmon.sources.open import read_recording
 
     check_command_outputs(args)
+    if args.out_corrected:
+        check_log_suffix("`out_corrected`", args.out_corrected)
     base = load_model(args.model) if args.model else None
     rec = read_recording(args.recording, source_options(args))
     axes = pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names()
@@ -89,15 +92,28 @@ def run(args) -> int:
         print(f"wrote {args.out_model}")
     if args.out_corrected:
         note = {"corrected": f"thermal_drift removed by fogmon thermal from {rec.name}"}
-        with written(args.out_corrected, "`out_corrected`") as tmp:
-            if len(axes) == 1:      # a one-axis recording, or one axis picked: a one-axis log
-                one = recs[axes[0]]
-                write_replay_log(tmp, one.t_s, corrected[axes[0]], one.aux, {**one.meta, **note})
-            else:
-                write_replay_log(tmp, rec.t_s, np.column_stack([corrected[a] for a in axes]),
-                                 select_aux(rec.aux, rec.axes, axes), {**rec.meta, **note}, axes=axes)
+        if len(axes) == 1:      # a one-axis recording, or one axis picked: a one-axis log
+            one = recs[axes[0]]
+            _write_log(args.out_corrected, one.t_s, corrected[axes[0]], one.aux, {**one.meta, **note})
+        else:
+            _write_log(args.out_corrected, rec.t_s, np.column_stack([corrected[a] for a in axes]),
+                       select_aux(rec.aux, rec.axes, axes), {**rec.meta, **note}, axes)
         print(f"wrote {args.out_corrected}")
     return 0
+
+
+def _write_log(path: str, t_s, rate_dph, aux: dict, meta: dict, axes: tuple[str, ...] = ()) -> None:
+    """The corrected recording as a replay log ``path`` in the format its suffix names
+    (.csv or .parquet, as `fogmon sim` and `fogmon convert` write): complete or not at all."""
+    from fogmon.formats.log_writer import LogWriter
+
+    w = LogWriter(path, list(aux), meta, axes, name="`out_corrected`")
+    try:
+        w.write(t_s, rate_dph, aux)
+        w.close()
+    except BaseException:
+        w.abort()
+        raise
 
 
 def _filters(args, base, axis: str, rec) -> tuple[float | None, float | None, str]:

@@ -216,3 +216,22 @@ def test_updown_off_grid_sample_names_its_line(updown, tmp_path, capsys):
     assert err.startswith(f"fogmon updown: error: up.csv: line {k + 1}, column time_s: sample at time_s=") and \
         "0.50 sample periods off the 10 Hz grid" in err and err.count("\n") == 1
 
+
+@pytest.mark.parametrize("name", ["corr.txt", "corr"])
+def test_thermal_out_corrected_suffix_is_checked_first(chamber, tmp_path, capsys, name):
+    out = tmp_path / name
+    assert main(["thermal", str(chamber), "--out-corrected", str(out)]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == (f"fogmon thermal: error: --out-corrected {out}: name it .csv (replay log) "
+                                         f"or .parquet (Parquet replay log); fogmon writes no other format\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_thermal_out_corrected_parquet_is_a_parquet_replay_log(chamber, tmp_path, capsys):
+    csv, pq = tmp_path / "corr.csv", tmp_path / "corr.parquet"
+    assert main(["thermal", str(chamber), "--out-corrected", str(csv)]) == 0
+    assert main(["thermal", str(chamber), "--out-corrected", str(pq)]) == 0
+    a, b = read_replay_log(csv), read_replay_log(pq)
+    assert pq.read_bytes()[:4] == b"PAR1" and b.meta["corrected"] == a.meta["corrected"]
+    np.testing.assert_allclose(b.rate_dph, a.rate_dph, rtol=1e-11)   # the CSV keeps 12 digits
+    np.testing.assert_array_equal(b.aux["temp_c"], read_replay_log(chamber).aux["temp_c"])
