@@ -225,7 +225,10 @@ def _plausible(rec: Recording, gate: float) -> Recording:
     warnings.warn(FogmonWarning(f"{rec.name}: {len(keep) - int(keep.sum())} sample(s) with a rate beyond the "
                                 f"plausibility gate +-{gate:.6g} deg/h left out as time gaps "
                                 f"({plausibility.COUNTER}; `max_rate_dph` sets the gate)"), stacklevel=2)
-    return replace(rec, t_s=rec.t_s[keep], rate_dph=rec.rate_dph[keep], aux={k: v[keep] for k, v in rec.aux.items()})
+    kept, file_line = np.flatnonzero(keep), rec.line_of
+    line_of = (lambda i: file_line(int(kept[i]))) if file_line is not None else None  # noqa: E731
+    return replace(rec, t_s=rec.t_s[keep], rate_dph=rec.rate_dph[keep], aux={k: v[keep] for k, v in rec.aux.items()},
+                   line_of=line_of)
 
 
 def recording_of(source: Source, path: str) -> Recording:

@@ -357,6 +357,7 @@ def test_whole_file_commands_gate_a_replay_log_too(tmp_path, capsys):
     with pytest.warns(Warning, match=r"x.csv: 5 sample\(s\) with a rate beyond the plausibility gate"):
         rec = read_recording(tmp_path / "x.csv")
     assert len(rec) == len(t) - 5 and np.all(np.abs(rec.rate_dph) < 1e9)
+    assert rec.line_of(100) == 109    # the sample after the 5 gated still names its own line (3 header lines)
     with pytest.warns(Warning, match=r"x.csv: 6 sample\(s\)"):   # the gate the user sets
         r[200] = 5000.0
         write_replay_log(tmp_path / "x.csv", t, r, {}, {"sample_rate_hz": sample_rate_hz})
