@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import functools
 import importlib
+import os
 import sys
 import warnings
 from collections.abc import Iterable
@@ -137,7 +138,26 @@ def _one_line_warnings(command: str, show):
     return showwarning
 
 
+#: the exit status of a command whose output's reader went away (`fogmon ... | head`):
+#: what a shell reports for a program killed by SIGPIPE, 128 + 13
+BROKEN_PIPE_EXIT = 141
+
+
 def main(argv: list[str] | None = None) -> int:
+    """The fogmon program: run the command ``argv`` (None: the process's arguments);
+    the exit status (0 done, 2 a user's mistake, BROKEN_PIPE_EXIT when the console's
+    reader closed its end, as `| head` does: no traceback; outputs are complete or not
+    written either way)."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # the interpreter flushes stdout at exit again: point it at /dev/null first
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return BROKEN_PIPE_EXIT
+
+
+def _main(argv: list[str] | None) -> int:
     if argv is None:   # the fogmon program itself, not a caller's process (fogmon.startup)
         startup.own_process()
     argv = sys.argv[1:] if argv is None else list(argv)

@@ -65,3 +65,23 @@ def test_no_command_is_one_line_too(capsys):
         main([])
     assert capsys.readouterr().err == ("fogmon: error: the following arguments are required: COMMAND "
                                        "(see fogmon --help)\n")
+
+
+def test_a_closed_pipe_is_an_exit_status_not_a_traceback():
+    """`fogmon ... | head`: the reader closes its end; the program ends with 141 (what a
+    shell shows for SIGPIPE), no traceback on stderr."""
+    import os
+    import subprocess
+    import sys
+
+    from fogmon.cli import BROKEN_PIPE_EXIT
+
+    BUNDLED = os.path.join(os.path.dirname(__file__), "..", "..", "replay_logs", "sim_in_orbit_1hz.csv")
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        p = subprocess.run([sys.executable, "-m", "fogmon", "info", str(BUNDLED)], stdout=w,
+                           stderr=subprocess.PIPE, text=True, timeout=300)
+    finally:
+        os.close(w)
+    assert p.returncode == BROKEN_PIPE_EXIT and "Traceback" not in p.stderr
