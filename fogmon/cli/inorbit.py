@@ -48,7 +48,10 @@ def run(args) -> int:
                           f"random walk from first differences needs >= {ARW_MIN_SAMPLES})")
     if args.period_s * rec.sample_rate_hz < 2:
         raise FogmonError(f"--period-s {args.period_s:g} s is shorter than 2 samples at {rec.sample_rate_hz:g} Hz")
-    for axis in pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names():
+    axes = pick_axes(rec.axes, args.axis, rec.name) or rec.axis_names()
+    for axis in axes:
+        rec.for_axis(axis).check_changes()    # a stuck axis: before any output
+    for axis in axes:
         for line in evaluate(rec.for_axis(axis), args.period_s, args.pauta_k):
             print(f"{axis}: {line}" if axis else line)
     return 0

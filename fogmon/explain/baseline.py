@@ -437,16 +437,6 @@ def _floor_cap(tau_s: np.ndarray, edf: np.ndarray, sample_rate_hz: float) -> np.
     return np.where(_floor_judged(tau_s, sample_rate_hz), floor_caps(edf, FLOOR_CAP_Z), np.inf)
 
 
-def check_changes(rec: Recording) -> None:
-    """FogmonError when the rate of ``rec`` never changes (a stuck or saturated output:
-    no noise to fit or explain)."""
-    y = np.asarray(rec.rate_dph, dtype=np.float64)
-    y = y[np.isfinite(y)]
-    if len(y) > 1 and float(np.min(y)) == float(np.max(y)):
-        raise FogmonError(f"{rec.name}: the rate is {y[0]:g} deg/h at every one of its {len(y)} samples: a stuck or "
-                          f"saturated output has no noise to explain")
-
-
 def baseline_model(rec: Recording) -> SensorModel:
     """Stationary IEEE-952 model fitted to ``rec`` robustly (:func:`robust_noise_fit` of
     :func:`aux_projected`), with the sensor's low-pass-filtered white noise as a
@@ -456,7 +446,7 @@ def baseline_model(rec: Recording) -> SensorModel:
     ok = blk.valid & np.isfinite(y)
     if ok.sum() < 64:
         raise FogmonError(f"{rec.name}: too few valid samples ({int(ok.sum())}) to fit a baseline model")
-    check_changes(rec)
+    rec.check_changes()
     vals, lowpass = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok,
                                      rec.sample_rate_hz)
     sigma = vals.pop("lowpass_sigma_dph", 0.0)

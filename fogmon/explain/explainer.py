@@ -12,7 +12,6 @@ import numpy as np
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, rescored
-from fogmon.explain.baseline import check_changes
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, default_n_boot
 from fogmon.explain.caveats import nonstationary_warnings, spike_warnings, too_short_warnings
 from fogmon.explain.options import Options
@@ -73,7 +72,7 @@ def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> 
     missing for a model effect, recording shorter than the map window; and a rate that
     never changes (a stuck output: no noise to compare with any model)."""
     fs_r, fs_m = rec.sample_rate_hz, float(model.sample_rate_hz)
-    check_changes(rec)
+    rec.check_changes()
     if abs(fs_r - fs_m) > 1e-3 * fs_m:
         raise FogmonError(f"{rec.name}: sample rate {fs_r:g} Hz does not match the model's "
                           f"[sensor] sample_rate_hz = {fs_m:g} Hz")

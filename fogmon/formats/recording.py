@@ -82,6 +82,15 @@ class Recording:
             return (self.line_of(i) if self.line_of else None), step
         return jump
 
+    def check_changes(self) -> None:
+        """FogmonError when the rate never changes (a stuck or saturated output: no noise
+        to fit, explain or evaluate)."""
+        y = np.asarray(self.rate_dph, dtype=np.float64)
+        y = y[np.isfinite(y)]
+        if len(y) > 1 and float(np.min(y)) == float(np.max(y)):
+            raise FogmonError(f"{self.name}: the rate is {y[0]:g} deg/h at every one of its {len(y)} samples: a "
+                              f"stuck or saturated output has no noise to analyse")
+
     def axis_names(self) -> tuple[str, ...]:
         """The axes to analyse: ``axes``, or ("",) for a one-axis recording."""
         return self.axes or ("",)

@@ -51,6 +51,11 @@ def test_inorbit_and_updown(tmp_path, capsys):
     assert main(["inorbit", str(p)]) == 0
     out = capsys.readouterr().out
     assert "N = 0.01" in out and "3 per-cycle means" in out
+    stuck = tmp_path / "stuck.csv"            # a stuck output: refused, not N = 0 and NaN bands
+    write_replay_log(stuck, t[:1000], np.full(1000, 5.0), meta={"sample_rate_hz": sample_rate_hz})
+    assert main(["inorbit", str(stuck)]) == 2
+    assert capsys.readouterr().err.strip().endswith("stuck.csv: the rate is 5 deg/h at every one of its 1000 "
+                                                    "samples: a stuck or saturated output has no noise to analyse")
     lat, v = 45.0, 15.041067 * np.sin(np.radians(45.0))
     up, down = tmp_path / "up.csv", tmp_path / "down.csv"
     write_replay_log(

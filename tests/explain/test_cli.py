@@ -148,7 +148,7 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
     stuck = tmp_path / "stuck.csv"                  # a stuck output: no noise, against a model or a baseline
     write_replay_log(stuck, np.arange(20000) / FS, np.full(20000, 5.0), {}, {"sample_rate_hz": FS})
     for more in ([], ["--model", str(model)]):
-        assert "the rate is 5 deg/h at every one of its 20000 samples" in _err(
+        assert "the rate is 5 deg/h at every one of its 20000 samples: a stuck or saturated output" in _err(
             capsys, ["explain", str(stuck), "--report", rep, *more])
     assert not (tmp_path / "r.json").exists()
 
