@@ -143,7 +143,7 @@ def _calibrate(rec, args, smooth_s: float | None, diff_step_s: float | None, sou
     from fogmon.methods.thermal import calibrate_thermal, correct_thermal, drift_peak_to_peak
 
     T = rec.aux["temp_c"]
-    cal = calibrate_thermal(rec.t_s, rec.rate_dph, T, args.degree, smooth_s, diff_step_s)
+    cal = calibrate_thermal(rec.t_s, rec.rate_dph, T, args.degree, smooth_s, diff_step_s, where=rec.name)
     corrected = correct_thermal(rec.t_s, rec.rate_dph, T, cal.effect)
     before = drift_peak_to_peak(rec.t_s, rec.rate_dph, args.average_s)
     after = drift_peak_to_peak(rec.t_s, corrected, args.average_s)

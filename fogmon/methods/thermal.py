@@ -95,7 +95,7 @@ def filter_candidates(duration_s: float, sample_rate_hz: float, smooth_s: float 
 
 
 def choose_filters(t_s, rate_dph, temp_c, degree: int = 2, smooth_s: float | None = None,
-                   diff_step_s: float | None = None) -> tuple[float, float, int]:
+                   diff_step_s: float | None = None, where: str = "the record") -> tuple[float, float, int]:
     """(smooth_s, diff_step_s, number of candidates): the given values, and for a value
     not given the candidate with the least residual of the thermal fit (all candidates
     fitted on the same samples)."""
@@ -105,7 +105,7 @@ def choose_filters(t_s, rate_dph, temp_c, degree: int = 2, smooth_s: float | Non
     duration = float(t[-1] - t[0])
     pairs = filter_candidates(duration, _rate_hz(t), smooth_s, diff_step_s)
     if not pairs:
-        raise FogmonError(f"calibrate_thermal: a {duration:g} s record is too short to choose `smooth_s` and "
+        raise FogmonError(f"{where}: a {duration:g} s record is too short to choose `smooth_s` and "
                           f"`diff_step_s` (their settling may take at most {MAX_SETTLE_FRACTION:g} of it); give both")
     skip = max(s + 2 * h for s, h in pairs)
     use = (t >= t[0] + skip) & np.isfinite(y) & np.isfinite(T)
@@ -120,28 +120,30 @@ def choose_filters(t_s, rate_dph, temp_c, degree: int = 2, smooth_s: float | Non
 
 
 def calibrate_thermal(t_s, rate_dph, temp_c, degree: int = 2, smooth_s: float | None = None,
-                      diff_step_s: float | None = None, skip_s: float | None = None) -> ThermalCalibration:
+                      diff_step_s: float | None = None, skip_s: float | None = None,
+                      where: str = "the record") -> ThermalCalibration:
     """Least-squares thermal model of a rate record (deg/h) against temperature (deg C).
 
     ``degree``: degree of the K0(T) polynomial (its constant term absorbs the bias).
     ``smooth_s``, ``diff_step_s``: the derivative filters (s); one not given is chosen by
     ``choose_filters``. ``skip_s``: leading seconds left out while the derivative filters
     fill (default smooth_s + 2 diff_step_s). A branch (K1/K2 pos or neg) the record never
-    visits is fitted as 0 with an infinite standard error."""
+    visits is fitted as 0 with an infinite standard error. ``where`` names the record in
+    error messages (its file)."""
     t = np.asarray(t_s, float)
     y = np.asarray(rate_dph, float)
     T = np.asarray(temp_c, float)
     if not (len(t) == len(y) == len(T)):
-        raise FogmonError("calibrate_thermal: time, rate and temperature lengths differ")
+        raise FogmonError(f"{where}: time, rate and temperature lengths differ")
     if len(t) < 2 or not t[-1] > t[0]:
-        raise FogmonError(f"calibrate_thermal: {len(t)} samples do not span any time")
-    smooth_s, diff_step_s, n_candidates = choose_filters(t, y, T, degree, smooth_s, diff_step_s)
+        raise FogmonError(f"{where}: {len(t)} samples do not span any time")
+    smooth_s, diff_step_s, n_candidates = choose_filters(t, y, T, degree, smooth_s, diff_step_s, where)
     skip = smooth_s + 2 * diff_step_s if skip_s is None else skip_s
     X = _design(*temperature_derivatives(t, T, smooth_s, diff_step_s), degree)
     use = (t >= t[0] + skip) & np.isfinite(y) & np.isfinite(T)
     X, yy = X[use], y[use]
     if len(yy) < X.shape[1] * 10:
-        raise FogmonError(f"calibrate_thermal: {len(yy)} usable samples are too few for {X.shape[1]} coefficients")
+        raise FogmonError(f"{where}: {len(yy)} usable samples are too few for {X.shape[1]} coefficients")
     scale, live, b, W, resid = _lstsq(X, yy)
     fs = _rate_hz(t)
     grid = np.round((t[use] - t[0]) * fs).astype(np.int64)
