@@ -55,9 +55,13 @@ def _read(option: str, path: str, args):
 
 
 def _mean_and_sigma(rec) -> tuple[float, float]:
+    """The record's mean rate and its 1-sigma (deg/h): the ADEV at the longest tau with a
+    value, on the sample grid (time gaps stay gaps: the Allan terms spanning one are left
+    out, never joined across it)."""
     from fogmon.davar.batch import oadev
 
-    res = oadev(rec.rate_dph, rec.sample_rate_hz, taus="octave")
+    blk = rec.to_block()
+    res = oadev(blk.rate_dph, rec.sample_rate_hz, taus="octave", valid=blk.valid)
     ok = np.isfinite(res.adev_dph)
     # std of the mean of the record ~ ADEV at the longest reliable tau (conservative)
     sigma = float(res.adev_dph[ok][-1]) if ok.any() else float(np.std(rec.rate_dph) / math.sqrt(len(rec)))
