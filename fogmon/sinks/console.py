@@ -181,7 +181,7 @@ def _no_interval_note(results, rows=None) -> list[str]:
                    f"where the chi-square interval would not hold the estimate")
     if any(not math.isfinite(float(r.adev_dph[i])) for r, i in shown):
         out.append(f"  inf: an Allan term at that tau spans a sample beyond {CEILING_DPH:g} deg/h (the engine's "
-                   f"ceiling; a plausibility gate --max-rate-dph above it lets such samples through)")
+                   f"ceiling; a plausibility gate `max_rate_dph` above it lets such samples through)")
     if shown and all(float(r.adev_dph[i]) == 0.0 for r, i in shown):
         out.append("  the rate never changes (every Allan deviation is 0): a stuck or saturated output, not a "
                    "sensor's noise; no coefficient can be fitted")
