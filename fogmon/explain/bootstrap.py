@@ -115,7 +115,7 @@ def _replicate(replicas: Replicas, grid: mismatch.Grid, seeds: np.ndarray, worke
                mapper: Mapper | None, stage: str = "bootstrap") -> list:
     """(cells, whole, gains) of the replicates of ``seeds`` (``_MapOf``; the gains of the
     candidates ``scan_null.calibrated_kinds`` names)."""
-    kinds = calibrated_kinds(replicas.stoch)
+    kinds = calibrated_kinds(replicas.stoch, float(replicas.t_s[-1] - replicas.t_s[0]))
     scans = ScanGains(replicas.stoch, replicas.t_s, replicas.aux, replicas.valid, kinds) if kinds else None
     return map_replicates(replicas, seeds, _MapOf(grid, scans), workers, progress, stage, mapper)
 

@@ -299,7 +299,7 @@ def _below(c: Candidate, penalty: float, bars: Mapping[str, float]) -> str:
     if c.search_bar <= c.k * penalty:
         return "below the BIC bar"
     if c.search_bar == bars.get(c.kind):
-        return "below the chance bar of the model's own noise (its rate random walk, simulated)"
+        return "below the chance bar of the model's own noise (its rate random walk or flicker, simulated)"
     if c.kind == lookalike.LAW:
         return "below the feature search's chance bar"
     return ("below the change-point search's chance bar" if c.kind == "bias_step"

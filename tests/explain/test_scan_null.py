@@ -24,9 +24,11 @@ N = 4096
 WALK = SensorModel(FS, 0.0, Noise(N_dpsh=0.02, B_dph=0.1, K_dphsh=2.0))
 
 
-def test_only_a_model_with_k_calibrates_the_mean_type_kinds():
-    assert calibrated_kinds(SensorModel(FS, 0.0, Noise(N_dpsh=0.02, B_dph=0.1))) == ()
-    kinds = calibrated_kinds(WALK)
+def test_a_model_with_k_or_dominant_flicker_calibrates_the_mean_type_kinds():
+    flicker = SensorModel(FS, 0.0, Noise(N_dpsh=0.02, B_dph=0.1))   # B's floor meets N's ADEV at about 330 s
+    assert calibrated_kinds(flicker, 40.0) == ()                    # white noise dominates at 10 s
+    assert calibrated_kinds(flicker, 4000.0) == calibrated_kinds(WALK, 40.0)   # flicker dominates at 1000 s
+    kinds = calibrated_kinds(WALK, 40.0)
     assert "bias_step" in kinds and "rate_ramp" in kinds
     assert all(EFFECT_KINDS[k].nature == "mean" for k in kinds)
 
@@ -49,6 +51,16 @@ def test_a_null_walk_names_nothing():
     rec = simulate(WALK, duration_s=N / FS, seed=0)
     res = explain(rec, WALK, Options(n_boot=20, workers=1))
     assert res.accepted == []
+
+
+def test_a_null_flicker_record_names_no_ramp_or_step():
+    """N, B, R at 2 Hz over 6 h: flicker holds ~98 % of the Allan variance at T / 4, and its
+    chance excursions beat BIC's bar as a ramp or a step (2 of 25 such records named one,
+    found by an outside check); with the simulated bars, nothing."""
+    model = SensorModel(2.0, 0.1, Noise(N_dpsh=0.01, B_dph=0.1, R_dphh=2.0))
+    rec = simulate(model, duration_s=6 * 3600.0, seed=3005)   # names a rate ramp with BIC's bar alone
+    res = explain(rec, model, Options(workers=1))
+    assert [a.cand.kind for a in res.accepted] == []
 
 
 def _context(model: SensorModel, seed: int):
