@@ -72,7 +72,6 @@ def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> 
     missing for a model effect, recording shorter than the map window; and a rate that
     never changes (a stuck output: no noise to compare with any model)."""
     fs_r, fs_m = rec.sample_rate_hz, float(model.sample_rate_hz)
-    rec.check_changes()
     if abs(fs_r - fs_m) > 1e-3 * fs_m:
         raise FogmonError(f"{rec.name}: sample rate {fs_r:g} Hz does not match the model's "
                           f"[sensor] sample_rate_hz = {fs_m:g} Hz")
@@ -82,6 +81,7 @@ def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> 
             if c and c not in rec.aux:
                 raise FogmonError(f"model effect #{i + 1} ({e.kind}) needs the aux channel {c!r}, which "
                                   f"{rec.name} lacks (columns: {', '.join(['time_s', 'rate_dph', *rec.aux])})")
+    rec.check_changes()   # after the model's own checks: those name what to fix in the model or the file
 
 
 def _grid_arrays(rec: Recording):
