@@ -307,10 +307,10 @@ def phase_lines(ph: dict) -> list[str]:
 def motion_lines(s: AxisSummary, run: Summary) -> list[str]:
     """The platform-motion spans kept out of the analysis (all, or the first
     MAX_MOTION_SPANS and where the rest are); ``run`` the whole run's summary."""
-    spans = s.motion_spans
-    pct = 100.0 * s.motion_samples / max(run.n_samples, 1)
     from fogmon.motion import REFERENCE_S
 
+    spans = s.motion_spans
+    pct = 100.0 * s.motion_samples / max(run.n_samples, 1)
     steps = sum(m.level_change for m in spans)
     step_note = (f"; {steps} ended in a new level the rate held: a step, such as a bias change, which the live "
                  f"gate cannot tell from motion until it has held for {REFERENCE_S / 2:g} s" if steps else "")
