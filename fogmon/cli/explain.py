@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.explain import report
     from fogmon.explain.axes import one_axis_model
     from fogmon.explain.baseline import baseline_model
-    from fogmon.explain.explainer import explain, without_motion
+    from fogmon.explain.explainer import check_inputs, explain, without_motion
     from fogmon.sim.model import load_model
     from fogmon.sources.open import read_recording
 
@@ -145,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_axes(args, rec, model, progress, export is not None)
     if model is not None:
         model = one_axis_model(model, rec, args.axis)
+        check_inputs(rec, model, args.window_s, where=f"`model` {args.model}")   # before any work, naming the file
     motion: list[dict] = []
     as_recorded = rec
     if not args.keep_motion:

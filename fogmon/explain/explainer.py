@@ -67,10 +67,11 @@ class Result:
         return out
 
 
-def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> None:
+def check_inputs(rec: Recording, model: SensorModel, window_s: float | None, where: str = "model") -> None:
     """One-line errors for the bad inputs of issue 6: sample-rate mismatch, aux channel
-    missing for a model effect, recording shorter than the map window; and a rate that
-    never changes (a stuck output: no noise to compare with any model)."""
+    missing for a model effect (``where``: the model's name in the message, its file),
+    recording shorter than the map window; and a rate that never changes (a stuck output:
+    no noise to compare with any model)."""
     fs_r, fs_m = rec.sample_rate_hz, float(model.sample_rate_hz)
     if abs(fs_r - fs_m) > 1e-3 * fs_m:
         raise FogmonError(f"{rec.name}: sample rate {fs_r:g} Hz does not match the model's "
@@ -79,7 +80,7 @@ def check_inputs(rec: Recording, model: SensorModel, window_s: float | None) -> 
         need = channels_of(e.params["terms"]) if e.kind == "aux_response" else [EFFECT_KINDS[e.kind].aux]
         for c in need:
             if c and c not in rec.aux:
-                raise FogmonError(f"model effect #{i + 1} ({e.kind}) needs the aux channel {c!r}, which "
+                raise FogmonError(f"{where}: [[effect]] #{i + 1} ({e.kind}) needs the aux channel {c!r}, which "
                                   f"{rec.name} lacks (columns: {', '.join(['time_s', 'rate_dph', *rec.aux])})")
     rec.check_changes()   # after the model's own checks: those name what to fix in the model or the file
 

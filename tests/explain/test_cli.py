@@ -141,7 +141,8 @@ def test_bad_inputs_give_one_line_errors(tmp_path, capsys):
     mt = tmp_path / "thermal.toml"
     save_model(SensorModel(FS, 0.0, NOISE, [Effect("thermal_drift", {"k0_poly_dph": [], "k1_pos": 1.0, "k1_neg": 1.0,
                                                                       "k2_pos": 0.0, "k2_neg": 0.0})]), mt)
-    assert "needs the aux channel 'temp_c'" in _err(capsys, ["explain", str(rec), "--model", str(mt), "--report", rep])
+    assert f"--model {mt}: [[effect]] #1 (thermal_drift) needs the aux channel 'temp_c'" in _err(
+        capsys, ["explain", str(rec), "--model", str(mt), "--report", rep])
     assert "too short for the 1000 s map window" in _err(
         capsys, ["explain", str(rec), "--model", str(model), "--report", rep, "--window-s", "1000"])
     assert "no such file" in _err(capsys, ["explain", str(tmp_path / "nope.csv"), "--report", rep])
