@@ -97,10 +97,9 @@ def _convert(source, input_path: str, output: str) -> tuple[int, int, int, int]:
     axes = first.axes if first is not None else source.axes
     side = read_sidecar(input_path) if os.path.isfile(input_path) else None
     extra = {"source": source.name, **({"sidecar": side} if side else {})}
-    w = LogWriter(output, aux_names, _replay_meta(source), axes, extra, name="OUT")
     without_aux = partial = seen = invalid = 0
     sized = False
-    try:
+    with LogWriter(output, aux_names, _replay_meta(source), axes, extra, name="OUT") as w:   # no half-written output
         for b in itertools.chain([first] if first is not None else [], blocks):
             keep, b_partial, b_without_aux = replay_rows(b)
             without_aux += b_without_aux
@@ -122,9 +121,6 @@ def _convert(source, input_path: str, output: str) -> tuple[int, int, int, int]:
                               f"samples, {', '.join(why) or 'none'}{gate}")
         w.close(counters={**source.counters, "rows_written": w.rows, "invalid_samples_left_out": invalid,
                           "rows_without_aux": without_aux, **({"partial_samples_dropped": partial} if axes else {})})
-    except BaseException:
-        w.abort()   # no half-written output
-        raise
     return w.rows, invalid, without_aux, partial
 
 

@@ -174,8 +174,7 @@ def _write(out: str, blocks, meta: dict, info: dict, n_expected: float, model_pa
     with np.errstate(over="ignore", invalid="ignore"):   # inf is refused below, by name, not warned about
         first = next(blocks)
         meta = {"sample_rate_hz": info["sample_rate_hz"], **meta}
-        w = LogWriter(out, list(first.aux), meta, first.axes, name="`out`")
-        try:
+        with LogWriter(out, list(first.aux), meta, first.axes, name="`out`") as w:   # no half-written replay log
             for i, b in enumerate(itertools.chain([first], blocks)):
                 v = present_samples(b)
                 _check_finite(b.t_s[v], b.rate_dph[v], model_path)
@@ -184,10 +183,6 @@ def _write(out: str, blocks, meta: dict, info: dict, n_expected: float, model_pa
                     left = n_expected - w.rows
                     check_space("`out`", out, left * w.bytes_per_row,
                                 f"{left:.3g} more rows of {w.bytes_per_row:.1f} bytes (measured on the first {w.rows})")
-            w.close()
-        except BaseException:
-            w.abort()   # no half-written replay log
-            raise
     return w.rows
 
 

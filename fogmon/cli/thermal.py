@@ -107,13 +107,8 @@ def _write_log(path: str, t_s, rate_dph, aux: dict, meta: dict, axes: tuple[str,
     (.csv or .parquet, as `fogmon sim` and `fogmon convert` write): complete or not at all."""
     from fogmon.formats.log_writer import LogWriter
 
-    w = LogWriter(path, list(aux), meta, axes, name="`out_corrected`")
-    try:
+    with LogWriter(path, list(aux), meta, axes, name="`out_corrected`") as w:
         w.write(t_s, rate_dph, aux)
-        w.close()
-    except BaseException:
-        w.abort()
-        raise
 
 
 def _filters(args, base, axis: str, rec) -> tuple[float | None, float | None, str]:

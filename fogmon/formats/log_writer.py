@@ -39,7 +39,9 @@ class LogWriter:
     """Replay log ``path`` (``name``: how messages name it) with columns time_s, the
     rate (one column per axis of ``axes``) and ``aux_names``, metadata ``meta`` (and,
     Parquet only, ``extra`` in its ``fogmon`` metadata). ``write`` appends rows,
-    ``close`` completes the file, ``abort`` removes it."""
+    ``close`` completes the file, ``abort`` removes it. As a context manager: closed at
+    the end of the block (unless closed in it, e.g. with counters), aborted when the block
+    raises: complete or not written."""
 
     def __init__(self, path: str, aux_names: Sequence[str], meta: dict, axes: tuple[str, ...] = (),
                  extra: dict | None = None, name: str = "") -> None:
@@ -62,6 +64,15 @@ class LogWriter:
         except OSError as e:
             self.abort()
             raise write_failed(name, self.path, e) from None
+
+    def __enter__(self) -> LogWriter:
+        return self
+
+    def __exit__(self, kind, value, traceback) -> None:
+        if kind is None:
+            self.close()
+        else:
+            self.abort()
 
     @property
     def bytes_per_row(self) -> float:
