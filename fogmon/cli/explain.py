@@ -226,7 +226,8 @@ def _run_axes(args: argparse.Namespace, rec, model, progress, export: bool) -> i
                    **{f"`report` (its axis {a} outliers list)": p for a, p in held.items()},
                    "`rrd`": args.rrd, "`out_model`": args.out_model, "`out_corrected`": args.out_corrected},
                   inputs=[args.recording, args.model, getattr(args, "dbc", None)])
-    ares = explain_axes(rec, model, _options(args), keep_motion=args.keep_motion, progress=progress)
+    ares = explain_axes(rec, model, _options(args), keep_motion=args.keep_motion, progress=progress,
+                        where=f"`model` {args.model}")
     progress(f"writing {args.report}")
     times = {a: os.path.basename(held[a]) for a, res in ares.results.items() if _write_outliers(res, held[a])}
     rep = build_axes_report(ares, args.recording, args.model, times)

@@ -29,7 +29,7 @@ from scipy.stats import norm
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.bootstrap import Mapper, Progress
-from fogmon.explain.explainer import Result, explain, without_motion
+from fogmon.explain.explainer import Result, check_inputs, explain, without_motion
 from fogmon.explain.options import Options
 from fogmon.formats.recording import Recording
 from fogmon.sim.features import Feature, other_axis, parse_feature
@@ -167,12 +167,14 @@ def one_axis_model(model: SensorModel, rec: Recording, axis: str | None = None) 
 # ---------------------------------------------------------------- explain
 def explain_axes(rec: Recording, model: SensorModel | None, options: Options | None = None,
                  keep_motion: bool = False, progress: Progress | None = None,
-                 mapper: Mapper | None = None) -> AxesResult:
+                 mapper: Mapper | None = None, where: str = "model") -> AxesResult:
     """Explain every axis of the multi-axis ``rec`` against its model (``axis_models``;
     ``model`` None: a stationary baseline fitted from each axis), platform motion kept
     out of each axis unless ``keep_motion``; then the common causes (``common_causes``)
-    and the fitted multi-axis model (``fitted_model``). Stages go to ``progress``
-    prefixed with the axis; bootstrap replicates run by ``mapper`` (explain)."""
+    and the fitted multi-axis model (``fitted_model``). Every axis's inputs are checked
+    before any work (``check_inputs``, ``where`` naming the model, e.g. its file). Stages
+    go to ``progress`` prefixed with the axis; bootstrap replicates run by ``mapper``
+    (explain)."""
     from fogmon.explain.baseline import baseline_model
     from fogmon.explain.report import record_fit
 
@@ -182,6 +184,8 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
         model = validate_model(model)
         models, warnings = axis_models(rec, model)
         axes = list(models)
+        for a in axes:
+            check_inputs(with_other_rates(rec, a), models[a], opt.window_s, where=where)
     else:
         axes, warnings = list(rec.axis_names()), []
     results: dict[str, Result] = {}

@@ -179,6 +179,27 @@ def test_axis_option_picks_one_axis_and_gives_the_one_axis_report(tmp_path, monk
     assert (tmp_path / "rep.png").exists() and not (tmp_path / "rep.y.png").exists()
 
 
+def test_missing_aux_channel_names_the_model_file_before_any_work(tmp_path, monkeypatch, capsys):
+    import fogmon.explain.axes
+
+    rec = three_axis_recording([])
+    rec.aux.pop("temp_c")
+    monkeypatch.setattr(fogmon.explain.axes, "without_motion", lambda one: pytest.fail("work before the check"))
+    model = tmp_path / "thermal.toml"
+    model.write_text("[sensor]\nsample_rate_hz = 10.0\nbias_dph = 1.0\n[noise]\nQ_arcsec = 0.0\nN_dpsh = 0.01\n"
+                     "B_dph = 0.01\nK_dphsh = 0.0\nR_dphh = 0.0\n"
+                     "[[effect]]\nkind = \"thermal_drift\"\naxes = [\"z\"]\nk0_poly_dph = []\nk1_pos = 1.0\n"
+                     "k1_neg = 1.0\nk2_pos = 0.0\nk2_neg = 0.0\n")
+    import fogmon.sources.open
+
+    monkeypatch.setattr(fogmon.sources.open, "read_recording", lambda path, opts=None: rec)
+    rc = main(["explain", str(tmp_path / "three.csv"), "--model", str(model), "--report", str(tmp_path / "r.json"),
+               "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "Traceback" not in err
+    assert f"--model {model}: [[effect]] #1 (thermal_drift) needs the aux channel 'temp_c'" in err
+
+
 def _fake_result(t, residual, kind="thermal_drift"):
     """What common_causes reads of an explain Result: grid, residual before the fit,
     mismatch regions (none: every octave tau is tested) and the accepted effect."""
