@@ -8,8 +8,10 @@ PSD. A rate random walk (K) is not stationary: its chance excursions look like s
 ramps and settlings far more often than the K part of the PSD says (a 100 Hz,
 2^17-sample record of issue 28's five-term model beats BIC's bar with a chance step in
 about half of its simulations); so does flicker where it holds the record's longest
-taus (N, B, R at 2 Hz over 6 h named a chance ramp or step in 2 of 25 records). So when
-the model holds K, or flicker dominant at a quarter of the record (``calibrated_kinds``),
+taus (N, B, R at 2 Hz over 6 h named a chance ramp or step in 2 of 25 records), and a
+Gauss-Markov term whose correlation time is not short beside the record (tau_c 5000 s
+in 1 h at 10 Hz: 9 of 16). So when the model holds K, or its Allan variance at a quarter
+of the record falls slower than tau^-1/2 (``calibrated_kinds``),
 each mean-type kind's gain is also measured on every bootstrap replicate (the same
 draws as the map's null: the model's whole stochastic part, K, B, Q, N and the
 noise-type effects), and its bar is
@@ -29,30 +31,53 @@ from __future__ import annotations
 
 import numpy as np
 
-from fogmon.davar.theory import POWERS, coefficients_to_avar_terms
 from fogmon.explain.analysis import whittle_context
 from fogmon.explain.candidates import CANDIDATES
+from fogmon.explain.fitting import model_psd
 from fogmon.explain.mismatch import Gumbel
 from fogmon.sim.model import EFFECT_KINDS, SensorModel
 
 #: fewer finite null gains than this give no bar (a Gumbel fit needs a spread)
 MIN_GAINS = 8
-#: flicker's share of the model's Allan variance at a quarter of the record from which
-#: its bars are simulated too
-LONG_MEMORY_SHARE = 0.5
+#: the log-log slope of the model's Allan variance at a quarter of the record from which
+#: its bars are simulated too: flicker holding half of it beside white noise (the slope
+#: is minus white noise's share), a Gauss-Markov term not short beside the record
+LONG_MEMORY_SLOPE = -0.5
 
 
 def calibrated_kinds(stoch: SensorModel, duration_s: float) -> tuple[str, ...]:
     """The candidate kinds whose bar comes from the replicates: the mean-type ones when
-    ``stoch`` holds a rate random walk (K > 0), or flicker (B) that holds at least
-    LONG_MEMORY_SHARE of its Allan variance at a quarter of the record's ``duration_s``
-    (the longest tau its fit uses), else none."""
-    nz = stoch.noise
-    parts = coefficients_to_avar_terms(nz.Q_arcsec, nz.N_dpsh, nz.B_dph, nz.K_dphsh) * \
-        (duration_s / 4.0) ** POWERS
-    if not (nz.K_dphsh > 0 or parts[2] > LONG_MEMORY_SHARE * parts.sum()):
+    ``stoch`` holds a rate random walk (K > 0), or when its Allan variance at a quarter
+    of the record's ``duration_s`` (the longest tau its fit uses) falls slower than
+    tau^LONG_MEMORY_SLOPE (``allan_slope``: dominant flicker, a Gauss-Markov term whose
+    correlation time is not short beside the record), else none."""
+    n = int(round(duration_s * float(stoch.sample_rate_hz))) + 1
+    if not (stoch.noise.K_dphsh > 0 or allan_slope(stoch, duration_s / 4.0, n) >= LONG_MEMORY_SLOPE):
         return ()
     return tuple(k for k in CANDIDATES if EFFECT_KINDS[k].nature == "mean")
+
+
+def allan_slope(stoch: SensorModel, tau_s: float, n: int) -> float:
+    """d ln(Allan variance) / d ln(tau) at ``tau_s`` (s) of the stochastic model ``stoch``
+    over an ``n``-sample record, from its PSD (``fitting.model_psd``: the IEEE-952 terms,
+    Gauss-Markov and low-pass noise, vibration lines, bandwidth filters) through the Allan
+    filter of m-sample averages, 2 sin^4(m w / 2) / (m sin(w / 2))^2 (sin^4 at its mean
+    3 / 8 beyond 20 of its periods), half an octave either side of ``tau_s``: -2 for Q,
+    -1 for N, 0 for flicker, +1 for K, for a Gauss-Markov term +1 well below its
+    correlation time and -1 well above it."""
+    fs = float(stoch.sample_rate_hz)
+    avar = []
+    for m in (tau_s * fs * 2.0 ** -0.25, tau_s * fs * 2.0 ** 0.25):
+        m = max(m, 1.0)
+        edge = min(40.0 * np.pi / m, np.pi)
+        total = 0.0
+        for w, sin4 in ((np.geomspace(1e-4 / m, edge, 4000), None), (np.geomspace(edge, np.pi, 400), 0.375)):
+            if w[0] >= w[-1]:
+                continue
+            kernel = 2.0 * (np.sin(m * w / 2.0) ** 4 if sin4 is None else sin4) / (m * np.sin(w / 2.0)) ** 2
+            total += np.trapezoid(model_psd(stoch, w, n) * kernel * w, np.log(w))
+        avar.append(total)
+    return float(np.log(avar[1] / avar[0]) / np.log(2.0 ** 0.5))
 
 
 class ScanGains:

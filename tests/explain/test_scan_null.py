@@ -3,8 +3,10 @@ come from the model's own simulations (explain.scan_null), so a chance step or r
 the walk is not named; without K nothing is simulated. The spectral tests read a walk
 without its line, and a change-point scan pays for the positions it searches."""
 import numpy as np
+import pytest
 from scipy.stats import chi2
 
+from fogmon.davar.theory import markov_adev
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import whittle_context
 from fogmon.explain.bootstrap import bootstrap
@@ -14,9 +16,9 @@ from fogmon.explain.candidates.mean import chance_step_gain
 from fogmon.explain.explainer import deterministic_dph, explain, stochastic_part
 from fogmon.explain.options import Options
 from fogmon.explain.replicas import Replicas
-from fogmon.explain.scan_null import calibrated_kinds
+from fogmon.explain.scan_null import allan_slope, calibrated_kinds
 from fogmon.explain.selection import candidates
-from fogmon.sim.model import EFFECT_KINDS, Noise, SensorModel
+from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel
 from fogmon.sim.simulate import simulate
 
 FS = 10.0
@@ -60,6 +62,34 @@ def test_a_null_flicker_record_names_no_ramp_or_step():
     model = SensorModel(2.0, 0.1, Noise(N_dpsh=0.01, B_dph=0.1, R_dphh=2.0))
     rec = simulate(model, duration_s=6 * 3600.0, seed=3005)   # names a rate ramp with BIC's bar alone
     res = explain(rec, model, Options(workers=1))
+    assert [a.cand.kind for a in res.accepted] == []
+
+
+MARKOV_LONG = SensorModel(10.0, 0.0, Noise(N_dpsh=0.01, B_dph=0.005),
+                          [Effect("markov", {"tau_c_s": 5000.0, "sigma_dph": 0.5})])
+
+
+def test_a_markov_term_long_beside_the_record_calibrates_the_mean_type_kinds():
+    """A Gauss-Markov term walks within a record shorter than its correlation time: the
+    slope of the model's Allan variance at T / 4 (allan_slope, theory's markov_adev for
+    the term alone) decides, not the term's kind."""
+    short = SensorModel(10.0, 0.0, Noise(N_dpsh=0.01), [Effect("markov", {"tau_c_s": 10.0, "sigma_dph": 0.3})])
+    for model, tau_c in ((short, 10.0), (MARKOV_LONG, 5000.0)):
+        alone = SensorModel(10.0, 0.0, Noise(), model.effects)
+        tau = 900.0 * np.array([2 ** -0.25, 2 ** 0.25])
+        theory = np.log(markov_adev(tau, model.effects[0].params["sigma_dph"], tau_c)) * 2
+        assert abs(allan_slope(alone, 900.0, 36001) - (theory[1] - theory[0]) / np.log(2 ** 0.5)) < 1e-3
+    assert allan_slope(SensorModel(10.0, 0.0, Noise(N_dpsh=0.01)), 900.0, 36001) == pytest.approx(-1.0, abs=1e-3)
+    assert calibrated_kinds(short, 3600.0) == ()
+    assert calibrated_kinds(MARKOV_LONG, 3600.0) == calibrated_kinds(WALK, 40.0)
+
+
+def test_a_null_record_of_a_long_markov_term_names_no_ramp():
+    """N, B and a Gauss-Markov term of tau_c 5000 s over 1 h at 10 Hz: an outside check
+    named a chance ramp, step or settling on 9 of 16 records (the bars not simulated:
+    no K, no flicker), 1 periodic and 1 glitch in 20 with them."""
+    rec = simulate(MARKOV_LONG, duration_s=3600.0, seed=701)   # names a rate ramp with BIC's bar alone
+    res = explain(rec, MARKOV_LONG, Options(workers=1))
     assert [a.cand.kind for a in res.accepted] == []
 
 
