@@ -518,10 +518,11 @@ def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:
     if c.design is not None:
         return _heldout_mean(ctx, c.design, judged_psd(ctx, c))
     if c.heldout is not None:
-        res = c.heldout()
-        ok = all(g > 0 for g, exp in res if exp >= 9.0)
-        return ok, "; ".join(f"{h} half: chi2 drop {g:.1f} (expected {e:.1f})"
-                             for h, (g, e) in zip(("second", "first"), res, strict=True))
+        res = c.heldout()   # (drop, expected[, how it was predicted]) on the second half, on the first
+        ok = all(r[0] > 0 for r in res if r[1] >= 9.0)
+        return ok, "; ".join(f"{h} half: chi2 drop {r[0]:.1f} (expected {r[1]:.1f}"
+                             + (f"; {r[2]})" if len(r) > 2 else ")")
+                             for h, r in zip(("second", "first"), res, strict=True))
     return True, "n/a (spectral or spike fit on the whole record)"
 
 

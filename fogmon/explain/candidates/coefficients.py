@@ -169,6 +169,10 @@ def passband_bins(bp: BinnedPeriodogram, S0: np.ndarray, S1: np.ndarray) -> np.n
     return keep
 
 
+#: the held-out note of a half that corrects nothing on its own (``noise``'s held-out check)
+WHOLE_RECORD_NOTE = "the whole record's correction: the other half alone corrects nothing"
+
+
 def noise(ctx: Context) -> Candidate | None:
     """The model's own Q, N, B, K are wrong (fit_coefficients): the terms whose model
     value lies outside the recording's 95 % interval, corrected; scored by the Whittle
@@ -191,16 +195,20 @@ def noise(ctx: Context) -> Candidate | None:
     se = {k: (hi - lo) / (2 * 1.959964) for k, (v, lo, hi, _) in fit.items()}
 
     def heldout():
+        # A half whose own fit corrects nothing predicts with the whole record's correction
+        # (a wrong coefficient is stationary: what lowers the deviance of one half must
+        # lower the other's), judged wherever it lowers its own half's deviance by 9 or
+        # more. Before, such a half predicted nothing and was skipped, so a correction that
+        # neither half finds on its own passed: a settling at 3000 s of a 7200 s record was
+        # named "your B is 0.139 deg/h, not 0.02" (both halves "chi2 drop 0.0 (expected 0.0)"),
+        # though the whole record's B raises the second half's deviance.
         out = []
         h = ctx.n // 2
         halves = (slice(0, h), slice(h, 2 * h))
         for a, b in ((0, 1), (1, 0)):
             fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
             bpb, bpa = (passband_part(ctx, periodogram(ctx, halves[i])) for i in (b, a))
-            if not fa:
-                out.append((0.0, 0.0))
-                continue
-            na = _corrected(ctx.stoch, fa)
+            na = _corrected(ctx.stoch, fa) if fa else new
             gains = []
             for bb in (bpb, bpa):
                 s0 = model_psd(ctx.stoch, bb.omega, h, wr)
@@ -208,7 +216,8 @@ def noise(ctx: Context) -> Candidate | None:
                 fl = LEAKAGE_FLOOR * float(np.median(s0))
                 kb = passband_bins(bb, s0, s1)
                 gains.append(bb.deviance(s0, fl, kb) - bb.deviance(s1, fl, kb))
-            out.append((float(gains[0]), float(gains[1])))
+            out.append((float(gains[0]), float(gains[1])) if fa else
+                       (float(gains[0]), float(gains[1]), WHOLE_RECORD_NOTE))
         return out  # (tested on the second half, on the first)
 
     ev = ("robust IEEE-952 fit of the residual's Allan deviation against the one the model predicts "
