@@ -144,3 +144,25 @@ def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]]) -> tupl
             f"outliers file")
     listing = {"times_s": ctx.t_s[idx], "amplitudes_dph": ev.amp[idx], "abs_z": np.abs(ev.z[idx])}
     return [{"kind": "spikes", "t_start_s": t0, "t_end_s": t1, "text": text}], listing
+
+
+def lookalike_warnings(accepted, model: SensorModel, grid: mismatch.Grid) -> list[dict]:
+    """A ``lookalike`` warning (spanning the record of ``grid``) for each accepted
+    effect whose refused look-alike the record cannot tell from it (``Candidate.tie``,
+    fogmon.explain.lookalike): both descriptions, with their BIC gains."""
+    from fogmon.explain.report import NOISE_UNIT, effect_summary
+
+    noise = {k: getattr(model.noise, k) for k in NOISE_UNIT}
+    out = []
+    for a in accepted:
+        tie = a.cand.tie
+        if tie is None:
+            continue
+        named, other = (effect_summary(k, p, noise) for k, p in ((a.cand.kind, a.cand.params),
+                                                                   (tie["kind"], tie["params"])))
+        out.append({"kind": "lookalike", "t_start_s": grid.t0_s, "t_end_s": grid.t0_s + grid.n / grid.sample_rate_hz,
+                    "text": f"two descriptions fit the residual equally well (BIC gains {tie['own_bic_gain']:.2f} "
+                            f"and {tie['bic_gain']:.2f}): {named}; or {other}. The record cannot tell them apart: "
+                            f"the first is named for its larger gain; a longer record decides"})
+    return out
+

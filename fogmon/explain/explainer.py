@@ -13,7 +13,7 @@ from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, rescored
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, default_n_boot
-from fogmon.explain.caveats import nonstationary_warnings, spike_warnings, too_short_warnings
+from fogmon.explain.caveats import lookalike_warnings, nonstationary_warnings, spike_warnings, too_short_warnings
 from fogmon.explain.options import Options
 from fogmon.explain.replicas import Replicas
 from fogmon.explain.selection import Accepted, Selection, Setting, light
@@ -177,7 +177,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
         spike_warnings(fit.ctx, rejections)
     return Result(rec, model, fitted, grid, t, valid, y0, y_after, before, after, accepted, rejections,
                   before.null.n_replicates,
-                  baseline, too_short_warnings(model, grid) + bursts + spikes, named, listing)
+                  baseline, too_short_warnings(model, grid) + lookalike_warnings(accepted, model, grid)
+                  + bursts + spikes, named, listing)
 
 
 def _fitted_model(model: SensorModel, stoch: SensorModel, accepted: tuple[Accepted, ...]) -> SensorModel:

@@ -36,7 +36,14 @@ so the likelihood decides:
    bar, markov takes the noise kind's place in the first tier, just before it (so the
    noise kind is still judged if markov is refused).
 5. **The evidence names what was refused** (``explained``, as in 3): the other one, when
-   it passed its bar before and no longer does after.
+   it passed its bar before and no longer does after; when the two BIC gains lie less
+   than TIE_BIC apart the likelihood does not prefer either (Kass & Raftery 1995: a BIC
+   difference below 2 is "not worth more than a bare mention"), and the evidence and a
+   ``lookalike`` warning say the record cannot tell them apart (``tie``). A Gauss-Markov
+   term of tau_c 60 s, sigma 0.25 deg/h beside N 0.02 deg/sqrt(h), B 0.02 deg/h over 2 h
+   at 10 Hz was named "your B is 0.195 deg/h [0.154, 0.229], not 0.02" (BIC gains 134.35
+   against markov's 134.3), described as "corrected IEEE-952 slopes describe the residual
+   better".
 """
 from __future__ import annotations
 
@@ -52,6 +59,8 @@ LAW = "aux_response"
 #: the kinds each accepted kind's evidence names as refused look-alikes (``explained``;
 #: the law: every catalogue kind)
 RIVALS = {"markov": ("noise",), "noise": ("markov",)}
+#: BIC gains of an accepted kind and its refused rival closer than this: a tie (``explained``)
+TIE_BIC = 2.0
 #: why the likelihood preferred the accepted kind over its rival (``explained``)
 _PREFERRED = {"markov": "a hump in the Allan deviation (a Gauss-Markov term) describes the residual better than "
                        "corrected IEEE-952 slopes",
@@ -135,4 +144,12 @@ def explained(c: Candidate, before: list[Candidate], after: list[Candidate], pen
                      f"{'not fitted' if a is None else f'{a:.1f}'} after)" for k, b, a in gone)
     if c.kind == LAW:
         return replace(c, evidence=f"{c.evidence}. Look-alikes refused, explained by the law: {text}")
+    own = c.bic_gain(penalty)
+    kind, gain, _ = max(gone, key=lambda g: g[1])
+    if own - gain < TIE_BIC:
+        rival = next(o for o in before if o.kind == kind)
+        return replace(c, evidence=f"{c.evidence}. Look-alike refused: {text}: the record cannot tell them apart "
+                                   f"(BIC gains {own:.2f} and {gain:.2f}, less than {TIE_BIC:g} apart); "
+                                   f"{c.kind} is named for its larger gain",
+                       tie={"kind": kind, "params": dict(rival.params), "bic_gain": gain, "own_bic_gain": own})
     return replace(c, evidence=f"{c.evidence}. Look-alike refused: {text}: {_PREFERRED[c.kind]}")

@@ -3,6 +3,7 @@
 decides which is judged first (``lookalike.ahead``), and the accepted one's evidence names
 the other as a refused look-alike (``lookalike.explained``)."""
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -70,3 +71,30 @@ def test_markov_stays_in_the_second_tier_when_the_noise_kind_is_below_its_bar():
     mk = Candidate("markov", {}, {}, gain=2900.0, k=2, evidence="")
     first, second = tiers([mk, step, nz], pen)
     assert [c.kind for c in first] == ["bias_step", "noise"] and second == [mk]
+
+
+def test_rivals_whose_gains_lie_less_than_2_apart_are_a_tie_the_report_warns_of():
+    from types import SimpleNamespace
+
+    from fogmon.explain import mismatch
+    from fogmon.explain.caveats import lookalike_warnings
+
+    pen = math.log(72000)
+    nz = Candidate("noise", {"B_dph": 0.195, "B_dph_lo": 0.154, "B_dph_hi": 0.229}, {}, gain=134.35 + 2 * pen, k=2,
+                   evidence="fit")
+    mk_before = Candidate("markov", {"sigma_dph": 0.268, "tau_c_s": 66.3}, {}, gain=134.26 + 2 * pen, k=2, evidence="")
+    mk_after = Candidate("markov", {}, {}, gain=2 * pen - 19.4, k=2, evidence="")
+    told = lookalike.explained(nz, [nz, mk_before], [mk_after], pen)
+    assert "the record cannot tell them apart (BIC gains 134.35 and 134.26, less than 2 apart)" in told.evidence
+    assert told.tie == {"kind": "markov", "params": mk_before.params, "bic_gain": mk_before.bic_gain(pen),
+                        "own_bic_gain": nz.bic_gain(pen)}
+    grid = mismatch.make_grid(72000, 10.0)
+    model = SensorModel(10.0, 0.0, Noise(N_dpsh=0.02, B_dph=0.02), [])
+    (w,) = lookalike_warnings([SimpleNamespace(cand=told)], model, grid)
+    assert w["kind"] == "lookalike" and (w["t_start_s"], w["t_end_s"]) == (0.0, 7200.0)
+    assert "your B is 0.195 deg/h [0.154, 0.229], not 0.02; or Gauss-Markov noise 0.268 deg/h" in w["text"]
+    # 2 or more apart: the likelihood prefers the accepted one, no tie
+    far = replace(mk_before, gain=nz.gain - 2.0)
+    told = lookalike.explained(nz, [nz, far], [mk_after], pen)
+    assert told.tie is None and "describe the residual better" in told.evidence
+    assert lookalike_warnings([SimpleNamespace(cand=told)], model, grid) == []

@@ -93,6 +93,9 @@ class Candidate:
     #: the gain a chance maximum of the candidate's own search exceeds with probability
     #: SEARCH_FALSE_ALARM (a periodic term's frequency search): the bar when above BIC's
     search_bar: float = 0.0
+    #: a refused look-alike the record cannot tell from this effect (lookalike.explained):
+    #: {"kind", "params", "bic_gain", "own_bic_gain"}; None when there is none
+    tie: dict | None = None
 
     @property
     def nature(self) -> str:
