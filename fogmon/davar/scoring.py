@@ -540,9 +540,10 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
     ``tukey_c``) of z = ln(y / model) / sqrt(2 / nu + floor2), with the Paule-Mandel
     excess variance (``gate``), until the weights move less than ``rw_tol`` and c2 by
     less than 1e-3 of itself (at most ``max_robust`` rounds); keeps the start with the
-    least Tukey loss (an earlier one wins ties), stops at a start that rejects no tau.
-    Returns (found, A, robust weights, c2) of the winner (found False: every start
-    kept fewer than two taus)."""
+    least Tukey loss (an earlier one wins ties), stops at a start that ends rejecting no
+    tau (not at one that failed: its weights kept fewer than two taus). Returns (found,
+    A, robust weights, c2) of the winner (found False: every start kept fewer than two
+    taus)."""
     t = y.shape[0]
     best_a = np.zeros(5)
     best_rw = np.zeros(t)
@@ -600,6 +601,10 @@ def robust_scoring(x, cols, y, mats, full, gap_scale, starts, tukey_c, floor2, g
         if total_loss < best_loss - 1e-9:
             best_a, best_rw, best_c2, best_loss = a, rw, c2, total_loss
             found = True
+        if not total_loss < np.inf:
+            # a failed start (its weights kept fewer than two taus; ``rw`` is still the start's
+            # own, all ones for the first) rejected everything: it must not end the search
+            continue
         all_kept = True
         for i in range(t):
             all_kept &= rw[i] > 0

@@ -123,6 +123,26 @@ def test_a_sinusoid_hump_on_white_noise_is_flagged_and_n_survives():
     assert fit.N_dpsh.value == pytest.approx(N, rel=0.05) and fit.worst_ratio < 2.0
 
 
+def test_a_failed_first_start_does_not_end_the_robust_search():
+    """White noise through a Chebyshev low-pass (6 poles, 1 dB ripple, 0.1 x Nyquist at
+    1 kHz): from all taus the scoring lands on a flat floor that keeps fewer than two
+    taus, a failed start whose weights were still the start's own (none rejected), which
+    ended the search: every coefficient NaN, `fogmon replay` printed "not identifiable"
+    for all five with no limit. The half-grid starts find the white noise."""
+    import scipy.signal as sg
+
+    from fogmon.sinks.console import coefficient_lines
+
+    sos = sg.cheby1(6, 1.0, 0.1, output="sos")
+    x = sg.sosfilt(sos, np.random.default_rng(1).normal(0.0, 19.0, 2**18 + 2000))[2000:]
+    fit = fit_noise(oadev(x, 1000.0, taus="octave"))
+    # the white level behind the filter: 19 deg/h per sample at 1 kHz is N 0.01 deg/sqrt(h),
+    # times the filter's DC gain 10^(-1/20) (an even-order Chebyshev I starts at its ripple's low)
+    assert fit.N_dpsh.identifiable and fit.N_dpsh.value == pytest.approx(0.01 * 10 ** (-1 / 20), rel=0.03)
+    assert all(np.isfinite(c.upper) for c in fit.coefficients().values())
+    assert "not identifiable from this record\n" not in "\n".join(coefficient_lines(fit)) + "\n"
+
+
 def glitched_white_record():
     """MEMS-like white rate noise at 100 Hz with a 1e6 deg/h glitch beside a short gap: the
     five taus' robust weights end up rejecting all but one tau."""
