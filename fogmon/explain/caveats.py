@@ -10,6 +10,7 @@ import numpy as np
 from fogmon.explain import detectors, mismatch
 from fogmon.explain.analysis import Analysis
 from fogmon.explain.candidates.base import Context
+from fogmon.explain.candidates.coefficients import NOISE_UNIT, effect_summary
 from fogmon.explain.candidates.spikes import spike_evidence
 from fogmon.sim.model import SensorModel
 
@@ -150,8 +151,6 @@ def lookalike_warnings(accepted, model: SensorModel, grid: mismatch.Grid) -> lis
     """A ``lookalike`` warning (spanning the record of ``grid``) for each accepted
     effect whose refused look-alike the record cannot tell from it (``Candidate.tie``,
     fogmon.explain.lookalike): both descriptions, with their BIC gains."""
-    from fogmon.explain.report import NOISE_UNIT, effect_summary
-
     noise = {k: getattr(model.noise, k) for k in NOISE_UNIT}
     out = []
     for a in accepted:

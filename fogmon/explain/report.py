@@ -19,12 +19,12 @@ from dataclasses import replace
 import numpy as np
 
 from fogmon.explain.baseline import low_pass_index
-from fogmon.explain.candidates.coefficients import NOISE_UNIT, noise_text
+from fogmon.explain.candidates.coefficients import NOISE_UNIT, effect_summary
 from fogmon.explain.detectors import spectral_lines, tau_band_hz
 from fogmon.explain.explainer import Result
 from fogmon.explain.mismatch import CHANCE_SCORE
 from fogmon.formats.replay_log import write_replay_log
-from fogmon.sim.model import EFFECT_KINDS, Effect, SensorModel, save_model
+from fogmon.sim.model import Effect, SensorModel, save_model
 from fogmon.sim.noise import lowpass_impulse
 
 
@@ -51,16 +51,6 @@ def _region_text(r: dict) -> str:
     kind = "noisier than the model" if r["sign"] == "excess" else "quieter than the model"
     return (f"{where}, tau {r['tau_min_s']:.4g}..{r['tau_max_s']:.4g} s: recording {kind} "
             f"(ADEV ratio {r['ratio']:.3g}, max |z| {r['max_abs_z']:.3g}, p = {r['p_value']:.2g})")
-
-
-def effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
-    """One phrase with the numbers of an effect: its kind's own summary
-    (fogmon.sim.model.EFFECT_KINDS); a ``noise`` effect also names the model's values it
-    corrects (``model``: the model's [noise])."""
-    if kind == "noise" and model is not None:
-        return "wrong noise coefficients: " + "; ".join(
-            noise_text(k, p[k], p[f"{k}_lo"], p[f"{k}_hi"], model[k]) for k in NOISE_UNIT if k in p)
-    return EFFECT_KINDS[kind].summarize(kind, p) if kind in EFFECT_KINDS else kind
 
 
 def _model_noise(res: Result) -> dict:

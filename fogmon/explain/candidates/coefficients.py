@@ -21,7 +21,7 @@ from fogmon.explain.candidates.base import (
     white_rms_dpsh,
 )
 from fogmon.explain.fitting import BinnedPeriodogram, model_psd, rfft_omega
-from fogmon.sim.model import Noise, SensorModel
+from fogmon.sim.model import EFFECT_KINDS, Noise, SensorModel
 
 #: two-sided confidence of the intervals of the noise effect (and of "differs")
 NOISE_CONFIDENCE = 0.95
@@ -229,3 +229,12 @@ def noise(ctx: Context) -> Candidate | None:
     return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
                      corrected_noise=new.noise)
 
+
+def effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
+    """One phrase with the numbers of an effect: its kind's own summary
+    (fogmon.sim.model.EFFECT_KINDS); a ``noise`` effect also names the model's values it
+    corrects (``model``: the model's [noise])."""
+    if kind == "noise" and model is not None:
+        return "wrong noise coefficients: " + "; ".join(
+            noise_text(k, p[k], p[f"{k}_lo"], p[f"{k}_hi"], model[k]) for k in NOISE_UNIT if k in p)
+    return EFFECT_KINDS[kind].summarize(kind, p) if kind in EFFECT_KINDS else kind
