@@ -194,8 +194,8 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
     peak = np.repeat(moved, m)              # per sample: the departure that flagged it
     ref_all = np.full(nb, np.nan)
     ref_all[idx] = ref
-    spread = float(np.quantile(_trimmed_sigma(y[idx] - mu[:, None]), QUIET_QUANTILE))
-    burst = _burst_departure(y, ref_all, max(K_OUTLIER * sigma_1, K_BLOCK * spread))
+    spread = float(np.quantile(_spreads(y[idx], mu), QUIET_QUANTILE))
+    burst = _burst_departure(y, ref_all, _burst_limit(sigma_1, spread))
     peak = np.where(peak > 0, peak, burst)       # a burst's samples, where no block mean moved
     dt, t0 = 1.0 / sample_rate_hz, float(t_s[0])
     out = []
@@ -228,6 +228,44 @@ def _burst_departure(y: np.ndarray, ref: np.ndarray, limit: float) -> np.ndarray
         med = median_filter(np.nan_to_num(d, nan=0.0), size=BURST_N, mode="nearest")
         out = np.where(med > limit, med, out)
     return out
+
+
+def _spreads(y: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Each block's robust spread of a sample about its block mean (deg/h; blocks x
+    samples ``y``, NaN = none)."""
+    return _trimmed_sigma(y - means[:, None]) if len(means) else np.empty(0)
+
+
+def _peaks(y: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Each block's largest departure of a sample from its block mean (deg/h; 0 for a
+    block without samples): a burst needs more than the burst limit less the mean's own
+    departure (the live gate's cheap pre-test)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nan_to_num(np.nanmax(np.abs(y - means[:, None]), axis=1), nan=0.0) if len(means) else np.empty(0)
+
+
+def _burst_limit(sigma_1: float, spread: float) -> float:
+    """The departure (deg/h) of a burst's samples (``find_motion``, the live gate): beyond
+    K_OUTLIER x the noise of one sample and K_BLOCK x the quiet spread of a sample about
+    its block mean (a low-pass sensor's sample-to-sample differences understate its noise)."""
+    return max(K_OUTLIER * sigma_1, K_BLOCK * spread)
+
+
+def _block_burst(x: np.ndarray, ref: float, limit: float) -> float:
+    """The live gate's burst test of one block's samples ``x`` (deg/h, NaN = none) against
+    its reference ``ref``: the largest median departure of BURST_N consecutive samples on
+    one side beyond ``limit`` (a burst: more than half of them depart), else 0."""
+    if not (np.isfinite(limit) and limit > 0 and np.isfinite(ref)) or len(x) < BURST_N:
+        return 0.0
+    d = np.nan_to_num(x - ref, nan=0.0)
+    best = 0.0
+    for side in (d, -d):
+        med = np.median(np.lib.stride_tricks.sliding_window_view(side, BURST_N), axis=1)
+        top = float(med.max())
+        if top > limit:
+            best = max(best, top)
+    return best
 
 
 def _reference_blocks(sample_rate_hz: float) -> int:
@@ -352,6 +390,8 @@ class _Startup:
     idx: np.ndarray
     sig: np.ndarray
     means: np.ndarray
+    spreads: np.ndarray
+    peaks: np.ndarray
     sigma_1: float
     limit: float
     ref: float
@@ -361,11 +401,14 @@ class _Startup:
         y, enough, sig = _blocks(rate_dph, valid, m)
         idx = np.flatnonzero(enough)
         if len(idx) < 4:
-            return cls(idx, sig, _block_means(y[idx], np.nan), float("nan"), float("nan"), float("nan"))
+            means = _block_means(y[idx], np.nan)
+            return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), float("nan"),
+                       float("nan"), float("nan"))
         sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
         means = _block_means(y[idx], sigma_1 if sigma_1 > 0 else np.nan)
         limit = _limit(sigma_1, _quiet_scatter(means))
-        return cls(idx, sig, means, sigma_1, limit, densest_level(means, limit / 2.0))
+        return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), sigma_1, limit,
+                   densest_level(means, limit / 2.0))
 
 
 class MotionGate:
@@ -397,12 +440,14 @@ class MotionGate:
         n_hist = max(self.warmup, int(self.HISTORY_S * sample_rate_hz / self.m))
         self._sig = _Window(n_hist)
         self._means = _Window(n_hist)
+        self._spreads = _Window(n_hist)
         n_ref = _reference_blocks(sample_rate_hz) // 2 + 1
         self._ref = _RunningMedian(n_ref)
         self._recent = _Window(n_ref)      # every block mean judged: a steady new level
         self._gap = _merge_blocks(sample_rate_hz)
         self._limit = float("nan")
         self._sigma_1 = float("nan")
+        self._burst_limit = float("nan")
         self._n_judged = 0
         self._warm = False
         self._seen = 0                     # start-up: complete blocks looked at, of them with enough samples
@@ -473,9 +518,12 @@ class MotionGate:
             return []
         start = _Startup.of(self._y[:n], self._v[:n], self.m)
         self._sigma_1, self._limit = start.sigma_1, start.limit
+        if len(start.idx) >= 4:
+            self._burst_limit = _burst_limit(start.sigma_1, float(np.quantile(start.spreads, QUIET_QUANTILE)))
         events: list[Event] = []
-        for k, mean in zip(start.idx, start.means, strict=True):
-            events += self._judge(int(k) * self.m, float(start.sig[k]), float(mean), start.ref)
+        for k, mean, spread, peak in zip(start.idx, start.means, start.spreads, start.peaks, strict=True):
+            events += self._judge(int(k) * self.m, float(start.sig[k]), float(mean), float(spread), float(peak),
+                                  start.ref)
         self._n_judged = len(start.idx)
         self._judged = n
         return events
@@ -490,29 +538,37 @@ class MotionGate:
             return []
         y, enough, sig = _blocks(self._y[a:a + nb * m], self._v[a:a + nb * m], m)
         events: list[Event] = []
-        means, first, sigma = np.empty(0), 0, float("nan")
+        means, spreads, peaks, first, sigma = np.empty(0), np.empty(0), np.empty(0), 0, float("nan")
         for k in np.flatnonzero(enough).tolist():
             if k - first >= len(means) or not _same(sigma, self._sigma_1):
                 sigma, first = self._sigma_1, k
                 means = _block_means(y[k:k + self.RESCALE_BLOCKS], sigma if sigma > 0 else np.nan)
+                spreads = _spreads(y[k:k + self.RESCALE_BLOCKS], means)
+                peaks = _peaks(y[k:k + self.RESCALE_BLOCKS], means)
             ref = self._ref.median() if len(self._ref) else float("nan")
-            events += self._judge(a + k * m, float(sig[k]), float(means[k - first]), ref)
+            events += self._judge(a + k * m, float(sig[k]), float(means[k - first]), float(spreads[k - first]),
+                                  float(peaks[k - first]), ref)
             self._n_judged += 1
             if self._n_judged % self.RESCALE_BLOCKS == 0:
                 self._sigma_1 = float(np.quantile(self._sig.values(), QUIET_QUANTILE))
+                self._burst_limit = _burst_limit(self._sigma_1, float(np.quantile(self._spreads.values(),
+                                                                                 QUIET_QUANTILE)))
                 if len(self._means) >= 4:
                     self._limit = _limit(self._sigma_1, _quiet_scatter(self._means.values()))
         self._judged = a + nb * m
         return events
 
-    def _judge(self, a: int, sig: float, mean: float, ref: float) -> list[Event]:
+    def _judge(self, a: int, sig: float, mean: float, spread: float, peak: float, ref: float) -> list[Event]:
         """Judge the block of samples a .. a+m of the buffer (sample sigma ``sig``, robust
-        mean ``mean`` and reference ``ref``, deg/h; NaN: none); the block before it is
-        still held."""
+        mean ``mean``, spread about it ``spread``, largest departure of a sample from it
+        ``peak`` and reference ``ref``, deg/h; NaN: none): it moves when its mean departs
+        beyond the limit or its samples hold a burst (``_block_burst``); the block before
+        it is still held."""
         m = self.m
         t0, t1 = float(self._t[a]), float(self._t[a + m - 1])
         self._sig.append(sig)
         self._means.append(mean)
+        self._spreads.append(spread)
         self._recent.append(mean)
         dev = abs(mean - ref)
         moving = bool(dev > self._limit)              # NaN limit or reference: never
@@ -520,6 +576,10 @@ class MotionGate:
             self._ref.reset(self._recent.values())
             moving = False
             self._stepped = self._span is not None
+        elif not moving and peak + dev > self._burst_limit:   # a burst its mean averages out (a turn at 10 Hz)
+            burst = _block_burst(np.where(self._v[a:a + m], self._y[a:a + m], np.nan), ref, self._burst_limit)
+            if burst > 0:
+                dev, moving = burst, True
         out: list[Event] = []
         if moving:
             self._mask(max(0, a - m), a + m)            # this block and the one before it

@@ -183,6 +183,43 @@ def test_short_sway_bursts_are_motion_and_outlier_pairs_are_not():
         assert s.t_start_s <= t0 + 0.05 and s.t_end_s >= t0 + 0.3 and s.t_end_s - s.t_start_s < 1.5
 
 
+@pytest.mark.parametrize("t0", [0.0, 1000.0])
+def test_live_gate_finds_a_turn_shorter_than_half_a_block(t0):
+    """At 10 Hz a block is 32 samples (3.2 s): a 90 deg turn at 60 deg/s for 1.5 s leaves
+    the block's median at rest, and its samples used to be left out of the block mean as
+    glitches (the fit took the turn: Q 731.9 arcsec, N 22x the truth)."""
+    from fogmon.motion import gate_record
+
+    rec = simulate(SensorModel(10.0, 0.0, Noise(N_dpsh=0.01, B_dph=0.2)), duration_s=2000.0, seed=4)
+    r = rec.rate_dph + np.where((rec.t_s >= t0) & (rec.t_s < t0 + 1.5), 60.0 * 3600.0, 0.0)
+    gated = gate_record(r, 10.0)
+    (span,) = gated.spans
+    assert span.t_start_s <= t0 and span.t_end_s >= t0 + 1.5 and span.t_end_s - span.t_start_s < 12.0
+    assert not gated.valid[(rec.t_s >= t0) & (rec.t_s < t0 + 1.5)].any()
+
+
+def test_live_gate_finds_short_sway_bursts_and_leaves_outlier_pairs():
+    """The live gate's burst test: the sway cycles of the offline test above, and pairs of
+    adjacent 1e5 deg/h outliers that stay outliers."""
+    from fogmon.motion import gate_record
+
+    t, r = stationary(7)
+    sigma = float(robust_sigma_of_diffs(r[None, :])[0])
+    r = r.copy()
+    starts = (300.0, 900.0, 1500.0)
+    for t0 in starts:
+        cycle = (t >= t0) & (t < t0 + 1.0 / 3.0)
+        r[cycle] += 20.0 * sigma * np.sin(2 * np.pi * 3.0 * (t[cycle] - t0))
+    rng = np.random.default_rng(3)
+    pairs = rng.choice(np.flatnonzero((t > 1600.0) & (t < 1790.0)), 20, replace=False)
+    r[pairs] += 1e5
+    r[pairs + 1] += 1e5
+    spans = gate_record(r, FS).spans
+    assert len(spans) == len(starts)
+    for s, t0 in zip(spans, starts, strict=True):
+        assert s.t_start_s <= t0 + 0.05 and s.t_end_s >= t0 + 0.3 and s.t_end_s - s.t_start_s < 1.5
+
+
 def test_history_window_is_the_last_n_values_in_order():
     from collections import deque
 
