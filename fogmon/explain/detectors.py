@@ -68,8 +68,12 @@ def local_scale(z: np.ndarray, valid: np.ndarray | None, block: int = 4096) -> n
 
 def find_spikes(z: np.ndarray, threshold: float, min_sep: int = 1) -> np.ndarray:
     """Sample indices of spikes: local maxima of |z| above ``threshold``, strongest first,
-    each suppressing the samples within ``min_sep`` of it (a spike lights up its
-    neighbours when the noise is blue); every one found (no cap), sorted by index."""
+    each suppressing the samples closer than ``min_sep`` to it (a spike lights up its
+    neighbours when the noise is blue: ``min_sep`` is the matched filter's half-width,
+    :func:`kernel_length`, the first lag its response falls below 1/e, so the sample at
+    ``min_sep`` is not lit up - and in white noise, ``min_sep`` 1, each sample beyond the
+    threshold is its own spike: two adjacent outliers are two spikes, not one);
+    every one found (no cap), sorted by index."""
     a = np.abs(z)
     cand = np.flatnonzero(a > threshold)
     if not len(cand):
@@ -80,7 +84,7 @@ def find_spikes(z: np.ndarray, threshold: float, min_sep: int = 1) -> np.ndarray
     for i in cand.tolist():
         if not taken[i]:
             chosen.append(i)
-            taken[max(i - min_sep, 0): i + min_sep + 1] = True
+            taken[max(i - min_sep + 1, 0): i + min_sep] = True
     return np.array(sorted(chosen), dtype=np.int64)
 
 
