@@ -373,6 +373,17 @@ def no_windows_reason(s: Summary) -> str:
     )
 
 
+def _factor(x: float) -> str:
+    """A factor >= 1 at 3 significant digits, or at as many more (up to 6) as it takes not
+    to print "1" for a factor that is not 1 (a departure of 0.4 % at an EDF of 1e5 is beyond
+    chance, and "model 1x below" would say there is none)."""
+    for d in range(3, 7):
+        text = f"{x:.{d}g}"
+        if float(text) != 1.0 or x == 1.0:
+            return text
+    return text
+
+
 def model_check(a, fit) -> str | None:
     """Lines testing the fitted IEEE-952 model against the measured ADEV
     (``fogmon.davar.adequacy.check_model``: chi-square with each tau's EDF, family-wise
@@ -393,7 +404,7 @@ def model_check(a, fit) -> str | None:
         line = (f"  model check: the fitted model agrees with the measured ADEV within chance at {where} ({test}; "
                 f"largest factor {c.worst_ratio:.2f} at tau {c.worst_tau_s:.4g} s)")
     else:
-        taus = ", ".join(f"{t:.4g} s (model {max(r, 1 / r):.3g}x {'above' if r > 1 else 'below'}, p {p:.2g})"
+        taus = ", ".join(f"{t:.4g} s (model {_factor(max(r, 1 / r))}x {'above' if r > 1 else 'below'}, p {p:.2g})"
                          for t, r, p in zip(c.tau_s, c.ratio, c.p, strict=True))
         line = (f"  model check: WARNING the fitted model departs from the measured ADEV beyond chance ({test}) at "
                 f"tau {taus}: the five IEEE-952 terms do not describe this record (periodic or vibration terms, "

@@ -207,3 +207,8 @@ def test_model_check_is_a_chi_square_test_with_each_taus_edf():
     assert msg.startswith("  model check: WARNING the fitted model departs from the measured ADEV beyond chance "
                           "(chi-square with each tau's EDF, family-wise 1 % over 3 taus) at tau 1 s (model 1.1x "
                           "above, p ")
+    # a departure below 0.5 % at a huge EDF (a ramp-dominated tau) is beyond chance: its factor is
+    # printed with the digits that show it, not as "1x"
+    a.edf = np.array([1e6, 1e3, 4.0])
+    small = SimpleNamespace(model_adev_dph=lambda tau: np.array([0.996, 0.32, 0.2]), misfit=np.zeros(3, bool))
+    assert "at tau 1 s (model 1.004x below, p " in model_check(a, small)
