@@ -89,7 +89,10 @@ class NoiseFit:
     ``contradicted`` (a whole-curve fit): the terms whose own ADEV the measured ADEV
     refutes (``termcheck``): a B, K or R there is not identifiable (its upper limit the
     ADEV's bound), a Q there is band-limited white angle noise, not quantization
-    (``q_band_limited``); ``avar_terms`` and ``model_adev_dph`` stay the fit's estimate."""
+    (``q_band_limited``); ``avar_terms`` and ``model_adev_dph`` stay the fit's estimate.
+    ``quantized_count_arcsec`` (a whole-record fit, ``davar.record``): the angle count of
+    an output whose samples lie on a lattice, where a white quantizer of that count would
+    break the ADEV's bound on Q, so the bound does not hold for it (NaN otherwise)."""
 
     Q_arcsec: Coefficient
     N_dpsh: Coefficient
@@ -103,6 +106,7 @@ class NoiseFit:
     misfit: np.ndarray
     worst_ratio: np.ndarray | float
     contradicted: tuple[TermContradiction, ...] = ()
+    quantized_count_arcsec: float = float("nan")
 
     @property
     def q_band_limited(self) -> bool:

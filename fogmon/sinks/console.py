@@ -249,6 +249,12 @@ def contradiction_lines(f) -> list[str]:
     (``NoiseFit.contradicted``, fogmon.davar.termcheck): a Q that is band-limited white
     angle noise, not quantization; a B, K or R printed as not identifiable, and why."""
     out = []
+    count = float(getattr(f, "quantized_count_arcsec", math.nan))
+    if math.isfinite(count):
+        out.append(f"  Q_arcsec: the output is quantized: its samples lie on a lattice of {count:.4g} arcsec of angle "
+                   f"per sample (a white quantizer of that count: Q = {count / math.sqrt(12.0):.4g} arcsec); the 1/tau "
+                   f"slope does not reach the shortest taus because the quantization error is not white when the "
+                   f"angle moves less than a count per sample, so the ADEV does not bound the quantizer")
     for c in getattr(f, "contradicted", ()):
         unit = COEFFICIENTS[c.name]
         level = f"{100 * c.limit_confidence:g} % upper limit"

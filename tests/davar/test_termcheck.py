@@ -83,6 +83,27 @@ def test_a_filtered_output_has_white_angle_noise_not_quantization():
                      lines, re.M)
 
 
+def test_a_counter_output_whose_angle_moves_less_than_a_count_is_quantized_not_bounded():
+    """A 2-arcsec angle counter read at 100 Hz while the angle moves ~0.06 arcsec per
+    sample: its quantization error is not white (Q of a white quantizer 0.577 arcsec), so
+    the ADEV's bound on an output quantizer (a few tenths of an arcsec) does not hold; the
+    fit says the output is quantized instead of "white angle noise, not quantization"."""
+    from fogmon.davar.record import lattice_step_dph
+
+    fs, count = 100.0, 2.0
+    rate = np.random.default_rng(3).normal(0.0, 0.6 * np.sqrt(fs), 2 ** 18)        # N 0.01 deg/sqrt(h)
+    angle = np.floor(np.cumsum(rate / fs) / count) * count                           # arcsec
+    counted = np.diff(angle) * fs                                                    # deg/h
+    assert lattice_step_dph(counted) == pytest.approx(count * fs)
+    assert np.isnan(lattice_step_dph(rate))
+    fit = whole_record_fit(counted, None, fs)[1]
+    assert fit.Q_arcsec.identifiable and not fit.q_band_limited
+    assert fit.quantized_count_arcsec == pytest.approx(count)
+    lines = "\n".join(coefficient_lines(fit) + contradiction_lines(fit))
+    assert "not quantization" not in lines and "an output quantizer is <" not in lines
+    assert "the output is quantized: its samples lie on a lattice of 2 arcsec of angle per sample" in lines
+
+
 def test_a_hump_fitted_as_a_floor_is_not_printed_identified():
     # white noise and a strong Gauss-Markov hump (tau_c 5 s, peak 37 deg/h at 9.5 s): the
     # robust fit takes the hump's top for B and K and flags the taus beyond it, where the
