@@ -124,26 +124,34 @@ def nonstationary_warnings(after: Analysis, y: np.ndarray, valid: np.ndarray, gr
     return out, named
 
 
-def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]]) -> tuple[list[dict], dict | None]:
+def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]],
+                   accepted: list[str] | tuple[str, ...] = ()) -> tuple[list[dict], dict | None]:
     """A ``spikes`` warning and the listing of every spike (times_s s, amplitudes_dph
     deg/h, abs_z) when the spike test of the final residual (context ``ctx``) finds
-    samples beyond its 1 % family-wise threshold - more than chance - and no outlier
-    effect removed them; the text says why neither description was accepted (the
-    refusals of ``glitches`` and ``outliers``, and why the tail is not a population).
-    ([], None) when the test finds nothing beyond chance."""
+    samples beyond its 1 % family-wise threshold - more than chance: when no outlier
+    effect was accepted, the text says why neither description was (the refusals of
+    ``glitches`` and ``outliers``, and why the tail is not a population); when one was
+    (``accepted``: the kinds), that these are left after it. ([], None) when the test
+    finds nothing beyond chance."""
     ev = spike_evidence(ctx)
     idx = ev.glitch_idx
     if not len(idx):
         return [], None
+    t0, t1 = float(ctx.t_s[0]), float(ctx.t_s[-1])
+    listing = {"times_s": ctx.t_s[idx], "amplitudes_dph": ev.amp[idx], "abs_z": np.abs(ev.z[idx])}
+    if accepted:
+        text = (f"after the accepted {' and '.join(accepted)} effect, the spike test of the final residual still "
+                f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest |z| "
+                f"{float(np.max(np.abs(ev.z[idx]))):.1f}), more than chance: every one is listed in the outliers file"
+                + (" after the outliers" if "outliers" in accepted else ""))
+        return [{"kind": "spikes", "t_start_s": t0, "t_end_s": t1, "text": text}], listing
     why = [f"{k}: {w}" for k, _, w in rejected if k in ("glitches", "outliers")]
     if ev.not_population:
         why.append(f"outliers: not a population: {ev.not_population}")
-    t0, t1 = float(ctx.t_s[0]), float(ctx.t_s[-1])
     text = (f"the spike test finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest "
             f"|z| {float(np.max(np.abs(ev.z[idx]))):.1f}), more than chance, but no outlier effect was accepted"
             f" ({'; '.join(why) or 'no spike description passed its bar'}): every one is listed in the "
             f"outliers file")
-    listing = {"times_s": ctx.t_s[idx], "amplitudes_dph": ev.amp[idx], "abs_z": np.abs(ev.z[idx])}
     return [{"kind": "spikes", "t_start_s": t0, "t_end_s": t1, "text": text}], listing
 
 

@@ -173,8 +173,8 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                     regions=mismatch.locate(fit.analysis.regions, y_after, valid, grid, fit.analysis.null))
     bursts, named = nonstationary_warnings(after, y_after, valid, grid)
     rejections = state.rejections()
-    spikes, listing = ([], None) if any(a.cand.kind in ("outliers", "glitches") for a in accepted) else \
-        spike_warnings(fit.ctx, rejections)
+    spikes, listing = spike_warnings(fit.ctx, rejections, [a.cand.kind for a in accepted
+                                                           if a.cand.kind in ("outliers", "glitches")])
     return Result(rec, model, fitted, grid, t, valid, y0, y_after, before, after, accepted, rejections,
                   before.null.n_replicates,
                   baseline, too_short_warnings(model, grid) + lookalike_warnings(accepted, model, grid)

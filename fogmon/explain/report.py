@@ -358,23 +358,33 @@ def console_summary(rep: dict) -> str:
 def write_outliers(res: Result, path: str) -> int:
     """Every outlier of an accepted ``outliers`` effect as CSV (time_s in s, amplitude_dph
     = the spike removed in deg/h, abs_z = its robust spike-test |z|) under a commented
-    header, or without one every spike a ``spikes`` warning names (``Result.spikes``);
-    nothing is written when there is neither. Returns the rows written."""
+    header, then every spike a ``spikes`` warning names (``Result.spikes``: left in the
+    final residual, not removed); without an outliers effect those spikes alone; nothing
+    is written when there is neither. Returns the rows written."""
     held = [a.cand for a in res.accepted if a.cand.kind == "outliers"]
     if held:
         lst = held[0].listing
         assert lst is not None, "an outliers candidate carries its listing"
-        what = "outlier samples"
+        what = f"{len(lst['times_s'])} outlier samples"
         amp = "the spike removed (deg/h)"
+        if res.spikes is not None:   # left after the population: listed after its outliers
+            left = len(res.spikes["times_s"])
+            what = (f"{len(lst['times_s'])} outlier samples, then the {left} spike(s) the final residual still "
+                    f"holds beyond the spike test's threshold (not removed; the `spikes` warning)")
+            lst = {k: np.concatenate([lst[k], res.spikes[k]]) for k in ("times_s", "amplitudes_dph", "abs_z")}
+            amp += " or, for the spikes left, its GLS amplitude (deg/h)"
     elif res.spikes is not None:  # more than chance, no outlier effect: the `spikes` warning's list
-        lst, what, amp = res.spikes, "spikes beyond the spike test's threshold, no effect accepted", \
-            "the spike's GLS amplitude (deg/h), not removed"
+        lst, amp = res.spikes, "the spike's GLS amplitude (deg/h), not removed"
+        after = any(a.cand.kind == "glitches" for a in res.accepted)
+        what = (f"{len(lst['times_s'])} spikes " + ("the final residual still holds beyond the spike test's "
+                                                     "threshold after the glitches" if after else
+                                                     "beyond the spike test's threshold, no effect accepted"))
     else:
         _remove_stale_outliers(path)
         return 0
     n = len(lst["times_s"])
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
-        fh.write(f"# fogmon explain outliers of {res.recording.name}: all {n} {what} (none left out)\n"
+        fh.write(f"# fogmon explain outliers of {res.recording.name}: all {what} (none left out)\n"
                  f"# amplitude_dph: {amp}; abs_z: its robust spike-test |z|\n"
                  "time_s,amplitude_dph,abs_z\n")
         for t, a, z in zip(lst["times_s"].tolist(), lst["amplitudes_dph"].tolist(), lst["abs_z"].tolist(), strict=True):

@@ -104,3 +104,36 @@ def test_adjacent_spikes_in_white_noise_are_each_listed():
     assert len(glitch) == 1, rep["effects"]
     assert sorted(np.round(np.array(glitch[0]["params"]["times_s"]) * FS).astype(int)) == sorted(hit.tolist())
     assert rep["score_after"] < 1.5 and not any(w["kind"] in ("spikes", "nonstationary") for w in rep["warnings"])
+
+
+def test_spikes_left_after_an_accepted_outlier_effect_are_warned_of_and_listed(tmp_path):
+    """The spike test runs on the final residual whatever was accepted: spikes it still
+    finds after a glitches or outliers effect get a `spikes` warning that says so, and
+    are listed (after the outliers, when an outliers effect holds the file)."""
+    from types import SimpleNamespace
+
+    from fogmon.explain.analysis import whittle_context
+    from fogmon.explain.caveats import spike_warnings
+
+    rng = np.random.default_rng(5)
+    n = 2 ** 14
+    y = rng.standard_normal(n) * SIGMA
+    y[[1000, 5000, 9000]] += 30 * SIGMA
+    t = np.arange(n) / FS
+    model = SensorModel(FS, 0.0, Noise(N_dpsh=N_CLEAN))
+    ctx = whittle_context(model, {}, t, np.ones(n, bool), y)
+    (w,), listing = spike_warnings(ctx, [], ["outliers"])
+    assert w["kind"] == "spikes" and w["text"].startswith("after the accepted outliers effect, the spike test of the "
+                                                         "final residual still finds 3 sample(s) beyond |z| = ")
+    assert w["text"].endswith("listed in the outliers file after the outliers")
+    np.testing.assert_allclose(listing["times_s"], t[[1000, 5000, 9000]])
+    held = {"times_s": np.array([1.0, 2.0]), "amplitudes_dph": np.array([5.0, 6.0]), "abs_z": np.array([9.0, 8.0])}
+    outliers = SimpleNamespace(cand=SimpleNamespace(kind="outliers", listing=held))
+    res = SimpleNamespace(accepted=[outliers], spikes=listing, recording=SimpleNamespace(name="r.csv"))
+    path = tmp_path / "r.outliers.csv"
+    assert write_outliers(res, str(path)) == 5
+    lines = path.read_text().splitlines()
+    assert lines[0] == ("# fogmon explain outliers of r.csv: all 2 outlier samples, then the 3 spike(s) the final "
+                        "residual still holds beyond the spike test's threshold (not removed; the `spikes` warning) "
+                        "(none left out)")
+    assert [float(ln.split(",")[0]) for ln in lines[3:]] == [1.0, 2.0, *t[[1000, 5000, 9000]]]

@@ -26,13 +26,16 @@ def assert_invariants(rep: dict, t0: float, t1: float, report_dir=None) -> None:
         if e["kind"] == "outliers" and report_dir is not None:
             with open(os.path.join(report_dir, e["params"]["times_file"])) as fh:
                 rows = [line for line in fh if line.strip() and not line.startswith("#")]
-            assert rows[0].strip() == "time_s,amplitude_dph,abs_z" and len(rows) - 1 == e["params"]["count"] > 0
+            left = [w for w in rep["warnings"] if w["kind"] == "spikes"]
+            listed = e["params"]["count"] + (int(re.search(r"finds (\d+) sample", left[0]["text"]).group(1))
+                                             if left else 0)
+            assert rows[0].strip() == "time_s,amplitude_dph,abs_z" and len(rows) - 1 == listed > 0
     for r in rep["mismatches"] + rep["mismatches_after"]:
         assert t0 - 1e-6 <= r["t_start_s"] <= r["t_peak_s"] <= r["t_end_s"] <= t1 + 1e-6, r
     assert isinstance(rep["warnings"], list)
     for w in rep["warnings"]:
         assert set(w) == WARNING_KEYS and w["kind"] in ("platform_motion", "record_too_short", "model_axis_missing",
-                                                        "nonstationary", "spikes")
+                                                        "nonstationary", "spikes", "lookalike")
         assert t0 - 1e-6 <= w["t_start_s"] <= w["t_end_s"] <= t1 + 1e-6
 
 
