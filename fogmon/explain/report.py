@@ -370,7 +370,7 @@ def write_outliers(res: Result, path: str) -> int:
         if res.spikes is not None:   # left after the population: listed after its outliers
             left = len(res.spikes["times_s"])
             what = (f"{len(lst['times_s'])} outlier samples, then the {left} spike(s) the final residual still "
-                    f"holds beyond the spike test's threshold (not removed; the `spikes` warning)")
+                    f"holds beyond the spike test's threshold (not removed; the spikes warning)")
             lst = {k: np.concatenate([lst[k], res.spikes[k]]) for k in ("times_s", "amplitudes_dph", "abs_z")}
             amp += " or, for the spikes left, its GLS amplitude (deg/h)"
     elif res.spikes is not None:  # more than chance, no outlier effect: the `spikes` warning's list

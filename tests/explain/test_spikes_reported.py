@@ -134,6 +134,6 @@ def test_spikes_left_after_an_accepted_outlier_effect_are_warned_of_and_listed(t
     assert write_outliers(res, str(path)) == 5
     lines = path.read_text().splitlines()
     assert lines[0] == ("# fogmon explain outliers of r.csv: all 2 outlier samples, then the 3 spike(s) the final "
-                        "residual still holds beyond the spike test's threshold (not removed; the `spikes` warning) "
+                        "residual still holds beyond the spike test's threshold (not removed; the spikes warning) "
                         "(none left out)")
     assert [float(ln.split(",")[0]) for ln in lines[3:]] == [1.0, 2.0, *t[[1000, 5000, 9000]]]
