@@ -255,7 +255,10 @@ def _burst_limit(sigma_1: float, spread: float) -> float:
 def _block_burst(x: np.ndarray, ref: float, limit: float) -> float:
     """The live gate's burst test of one block's samples ``x`` (deg/h, NaN = none) against
     its reference ``ref``: the largest median departure of BURST_N consecutive samples on
-    one side beyond ``limit`` (a burst: more than half of them depart), else 0."""
+    one side beyond ``limit`` (a burst: more than half of them depart), else 0. The rule of
+    ``_burst_departure``, but only over windows inside the block: its edge padding
+    ("nearest") would make a burst of an outlier pair at every block edge, where the
+    offline test pads only the record's two ends."""
     if not (np.isfinite(limit) and limit > 0 and np.isfinite(ref)) or len(x) < BURST_N:
         return 0.0
     d = np.nan_to_num(x - ref, nan=0.0)

@@ -162,10 +162,18 @@ def test_explain_leaves_platform_motion_out_and_warns():
         without_motion(moving)
 
 
-def test_short_sway_bursts_are_motion_and_outlier_pairs_are_not():
+def _gate_spans(t, r):
+    from fogmon.motion import gate_record
+
+    return gate_record(r, FS).spans
+
+
+@pytest.mark.parametrize("spans_of", [lambda t, r: find_motion(t, r, np.ones(len(t), bool), FS), _gate_spans],
+                         ids=["offline", "live"])
+def test_short_sway_bursts_are_motion_and_outlier_pairs_are_not(spans_of):
     """Bursts shorter than a test block (a half cycle of 3 Hz sway, 0.15 s) average out
-    of the block means; the burst test finds them. Pairs of adjacent outliers stay
-    outliers."""
+    of the block means; the burst test finds them, offline (``find_motion``) and in the
+    live gate. Pairs of adjacent outliers stay outliers."""
     t, r = stationary(7)
     sigma = float(robust_sigma_of_diffs(r[None, :])[0])    # noise of one sample (deg/h)
     r = r.copy()
@@ -177,7 +185,7 @@ def test_short_sway_bursts_are_motion_and_outlier_pairs_are_not():
     pairs = rng.choice(np.flatnonzero((t > 1600.0) & (t < 1790.0)), 20, replace=False)
     r[pairs] += 1e5
     r[pairs + 1] += 1e5
-    spans = find_motion(t, r, np.ones(len(t), bool), FS)
+    spans = spans_of(t, r)
     assert len(spans) == len(starts)
     for s, t0 in zip(spans, starts, strict=True):
         assert s.t_start_s <= t0 + 0.05 and s.t_end_s >= t0 + 0.3 and s.t_end_s - s.t_start_s < 1.5
@@ -196,28 +204,6 @@ def test_live_gate_finds_a_turn_shorter_than_half_a_block(t0):
     (span,) = gated.spans
     assert span.t_start_s <= t0 and span.t_end_s >= t0 + 1.5 and span.t_end_s - span.t_start_s < 12.0
     assert not gated.valid[(rec.t_s >= t0) & (rec.t_s < t0 + 1.5)].any()
-
-
-def test_live_gate_finds_short_sway_bursts_and_leaves_outlier_pairs():
-    """The live gate's burst test: the sway cycles of the offline test above, and pairs of
-    adjacent 1e5 deg/h outliers that stay outliers."""
-    from fogmon.motion import gate_record
-
-    t, r = stationary(7)
-    sigma = float(robust_sigma_of_diffs(r[None, :])[0])
-    r = r.copy()
-    starts = (300.0, 900.0, 1500.0)
-    for t0 in starts:
-        cycle = (t >= t0) & (t < t0 + 1.0 / 3.0)
-        r[cycle] += 20.0 * sigma * np.sin(2 * np.pi * 3.0 * (t[cycle] - t0))
-    rng = np.random.default_rng(3)
-    pairs = rng.choice(np.flatnonzero((t > 1600.0) & (t < 1790.0)), 20, replace=False)
-    r[pairs] += 1e5
-    r[pairs + 1] += 1e5
-    spans = gate_record(r, FS).spans
-    assert len(spans) == len(starts)
-    for s, t0 in zip(spans, starts, strict=True):
-        assert s.t_start_s <= t0 + 0.05 and s.t_end_s >= t0 + 0.3 and s.t_end_s - s.t_start_s < 1.5
 
 
 def test_history_window_is_the_last_n_values_in_order():

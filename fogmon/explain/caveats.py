@@ -19,6 +19,11 @@ from fogmon.sim.model import SensorModel
 UNTESTABLE_SHARE = 0.1
 
 
+def _span(grid: mismatch.Grid) -> tuple[float, float]:
+    """The record's span (s) on ``grid``: its first sample to one sample interval past its last."""
+    return grid.t0_s, grid.t0_s + grid.n / grid.sample_rate_hz
+
+
 def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
     """``record_too_short`` warnings (docs/formats.md): a map with fewer than 3 taus
     (window too short to show how the mismatch depends on tau), and model terms the
@@ -27,8 +32,8 @@ def too_short_warnings(model: SensorModel, grid: mismatch.Grid) -> list[dict]:
     periods, a Gauss-Markov correlation time beyond duration / 4."""
     from fogmon.davar.theory import coefficients_to_avar_terms
 
-    t0, t1 = grid.t0_s, grid.t0_s + grid.n / grid.sample_rate_hz
-    dur = grid.n / grid.sample_rate_hz
+    t0, t1 = _span(grid)
+    dur = t1 - t0
     tau_max = float(grid.tau_whole_s[-1])
     out = []
 
@@ -137,22 +142,21 @@ def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]],
     idx = ev.glitch_idx
     if not len(idx):
         return [], None
-    t0, t1 = float(ctx.t_s[0]), float(ctx.t_s[-1])
     listing = {"times_s": ctx.t_s[idx], "amplitudes_dph": ev.amp[idx], "abs_z": np.abs(ev.z[idx])}
+    found = (f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest |z| "
+             f"{float(np.max(listing['abs_z'])):.1f}), more than chance")
     if accepted:
         text = (f"after the accepted {' and '.join(accepted)} effect, the spike test of the final residual still "
-                f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest |z| "
-                f"{float(np.max(np.abs(ev.z[idx]))):.1f}), more than chance: every one is listed in the outliers file"
+                f"{found}: every one is listed in the outliers file"
                 + (" after the outliers" if "outliers" in accepted else ""))
-        return [{"kind": "spikes", "t_start_s": t0, "t_end_s": t1, "text": text}], listing
-    why = [f"{k}: {w}" for k, _, w in rejected if k in ("glitches", "outliers")]
-    if ev.not_population:
-        why.append(f"outliers: not a population: {ev.not_population}")
-    text = (f"the spike test finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest "
-            f"|z| {float(np.max(np.abs(ev.z[idx]))):.1f}), more than chance, but no outlier effect was accepted"
-            f" ({'; '.join(why) or 'no spike description passed its bar'}): every one is listed in the "
-            f"outliers file")
-    return [{"kind": "spikes", "t_start_s": t0, "t_end_s": t1, "text": text}], listing
+    else:
+        why = [f"{k}: {w}" for k, _, w in rejected if k in ("glitches", "outliers")]
+        if ev.not_population:
+            why.append(f"outliers: not a population: {ev.not_population}")
+        text = (f"the spike test {found}, but no outlier effect was accepted"
+                f" ({'; '.join(why) or 'no spike description passed its bar'}): every one is listed in the "
+                f"outliers file")
+    return [{"kind": "spikes", "t_start_s": float(ctx.t_s[0]), "t_end_s": float(ctx.t_s[-1]), "text": text}], listing
 
 
 def lookalike_warnings(accepted, model: SensorModel, grid: mismatch.Grid) -> list[dict]:
@@ -167,7 +171,8 @@ def lookalike_warnings(accepted, model: SensorModel, grid: mismatch.Grid) -> lis
             continue
         named, other = (effect_summary(k, p, noise) for k, p in ((a.cand.kind, a.cand.params),
                                                                    (tie["kind"], tie["params"])))
-        out.append({"kind": "lookalike", "t_start_s": grid.t0_s, "t_end_s": grid.t0_s + grid.n / grid.sample_rate_hz,
+        t0, t1 = _span(grid)
+        out.append({"kind": "lookalike", "t_start_s": t0, "t_end_s": t1,
                     "text": f"two descriptions fit the residual equally well (BIC gains {tie['own_bic_gain']:.2f} "
                             f"and {tie['bic_gain']:.2f}): {named}; or {other}. The record cannot tell them apart: "
                             f"the first is named for its larger gain; a longer record decides"})
