@@ -518,10 +518,11 @@ def _heldout(ctx: Context, c: Candidate) -> tuple[bool, str]:
     if c.design is not None:
         return _heldout_mean(ctx, c.design, judged_psd(ctx, c))
     if c.heldout is not None:
-        res = c.heldout()   # (drop, expected[, how it was predicted]) on the second half, on the first
-        ok = all(r[0] > 0 for r in res if r[1] >= 9.0)
+        # on the second half, on the first: (drop, expected[, how it was predicted[, least drop that passes]])
+        res = c.heldout()
+        ok = all(r[0] > (r[3] if len(r) > 3 else 0.0) for r in res if r[1] >= 9.0)
         return ok, "; ".join(f"{h} half: chi2 drop {r[0]:.1f} (expected {r[1]:.1f}"
-                             + (f"; {r[2]})" if len(r) > 2 else ")")
+                             + (f"; {r[2]})" if len(r) > 2 and r[2] else ")")
                              for h, r in zip(("second", "first"), res, strict=True))
     return True, "n/a (spectral or spike fit on the whole record)"
 

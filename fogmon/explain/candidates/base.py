@@ -164,6 +164,11 @@ def estimate_text(x: float, se: float) -> str:
     return f"{x:.4g} +- {se:.2g}"
 
 
+#: the held-out note of a half whose own fit finds nothing, so that it predicts with the
+#: whole record's fit (the held-out checks of ``noise`` and ``markov``)
+WHOLE_RECORD_NOTE = "the whole record's fit: the other half alone finds nothing"
+
+
 def periodogram(ctx: Context, part: slice | None = None) -> BinnedPeriodogram:
     """Binned periodogram of the residual (computed once per context), or of ``part`` of it;
     when the model holds a rate random walk, of the residual without its line (``bridged``)."""

@@ -2,6 +2,7 @@
 the terms the recording's Allan deviation puts outside their 95 % interval, corrected."""
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -12,6 +13,7 @@ from fogmon.davar.fit import IDENTIFY_Z, fit_avar
 from fogmon.davar.theory import avar_terms_to_coefficients, coefficients_to_avar_terms
 from fogmon.explain.candidates.base import (
     LEAKAGE_FLOOR,
+    WHOLE_RECORD_NOTE,
     Candidate,
     Context,
     model_psd_full,
@@ -169,10 +171,6 @@ def passband_bins(bp: BinnedPeriodogram, S0: np.ndarray, S1: np.ndarray) -> np.n
     return keep
 
 
-#: the held-out note of a half that corrects nothing on its own (``noise``'s held-out check)
-WHOLE_RECORD_NOTE = "the whole record's correction: the other half alone corrects nothing"
-
-
 def noise(ctx: Context) -> Candidate | None:
     """The model's own Q, N, B, K are wrong (fit_coefficients): the terms whose model
     value lies outside the recording's 95 % interval, corrected; scored by the Whittle
@@ -201,23 +199,27 @@ def noise(ctx: Context) -> Candidate | None:
         # more. Before, such a half predicted nothing and was skipped, so a correction that
         # neither half finds on its own passed: a settling at 3000 s of a 7200 s record was
         # named "your B is 0.139 deg/h, not 0.02" (both halves "chi2 drop 0.0 (expected 0.0)"),
-        # though the whole record's B raises the second half's deviance.
+        # though the whole record's B raises the second half's deviance. And the whole
+        # record's correction must lower the two halves' deviance alike (``_unbalanced``).
         out = []
         h = ctx.n // 2
         halves = (slice(0, h), slice(h, 2 * h))
+        bps = [passband_part(ctx, periodogram(ctx, p)) for p in halves]
+        apart = _unbalanced(ctx, bps, new, wr)
         for a, b in ((0, 1), (1, 0)):
             fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
-            bpb, bpa = (passband_part(ctx, periodogram(ctx, halves[i])) for i in (b, a))
             na = _corrected(ctx.stoch, fa) if fa else new
             gains = []
-            for bb in (bpb, bpa):
+            for bb in (bps[b], bps[a]):
                 s0 = model_psd(ctx.stoch, bb.omega, h, wr)
                 s1 = model_psd(na, bb.omega, h, white_rms_dpsh(na, ctx))
                 fl = LEAKAGE_FLOOR * float(np.median(s0))
                 kb = passband_bins(bb, s0, s1)
                 gains.append(bb.deviance(s0, fl, kb) - bb.deviance(s1, fl, kb))
-            out.append((float(gains[0]), float(gains[1])) if fa else
-                       (float(gains[0]), float(gains[1]), WHOLE_RECORD_NOTE))
+            note = WHOLE_RECORD_NOTE if not fa else ""
+            if apart:
+                note = "; ".join(x for x in (note, apart) if x)
+            out.append((float(gains[0]), float(gains[1]), note, math.inf if apart else 0.0))
         return out  # (tested on the second half, on the first)
 
     ev = ("robust IEEE-952 fit of the residual's Allan deviation against the one the model predicts "
@@ -228,6 +230,40 @@ def noise(ctx: Context) -> Candidate | None:
                f"alike (the sensor's own low-pass, which no IEEE-952 term describes)")
     return Candidate("noise", params, se, float(gain), len(fit), ev, heldout=heldout,
                      corrected_noise=new.noise)
+
+
+#: the whole record's correction is refused when the two halves' deviance drops under it
+#: differ beyond chance (|z| above this: two-sided 0.001) and by more than BALANCE_FACTOR
+STATIONARY_Z = 3.29
+BALANCE_FACTOR = 4.0
+
+
+def _unbalanced(ctx: Context, halves: list[BinnedPeriodogram], new: SensorModel, wr: float) -> str:
+    """A note when the whole record's correction ``new`` lowers the two halves' deviance
+    (``halves``: their binned periodograms over the pass band) unequally beyond chance,
+    "" otherwise. A wrong coefficient is stationary: with the corrected PSD S1 the true
+    one, each half's drop sum c (I (1/S0 - 1/S1) - ln r) (r = S1 / S0, c the bin's count)
+    has mean sum c (r - 1 - ln r) and variance sum c (r - 1)^2, the same in both halves;
+    refused when the drops differ by more than STATIONARY_Z standard deviations of the
+    difference and the larger is more than BALANCE_FACTOR times the smaller (at large
+    gains a small level difference between the halves is already many standard
+    deviations: a stationary wrong N, 0.03 deg/sqrt(h) for 0.02, gave drops 14700 and
+    16134, z -4.5). A drift is not stationary: a warm-up of 5 deg/h (tau 300 s) plus 5
+    deg/h (tau 3000 s) over 3 h at 10 Hz had been named "your K is 0.547, not 0"."""
+    h = ctx.n // 2
+    drops, var = [], 0.0
+    for bp in halves:
+        s0 = model_psd(ctx.stoch, bp.omega, h, wr)
+        s1 = model_psd(new, bp.omega, h, white_rms_dpsh(new, ctx))
+        fl = LEAKAGE_FLOOR * float(np.median(s0))
+        drops.append(bp.deviance(s0, fl) - bp.deviance(s1, fl))
+        var += float(np.sum(bp.count * (np.maximum(s1, fl) / np.maximum(s0, fl) - 1.0) ** 2))
+    z = (drops[0] - drops[1]) / math.sqrt(var) if var > 0 else 0.0
+    lo, hi = sorted(drops)
+    if abs(z) > STATIONARY_Z and hi > BALANCE_FACTOR * max(lo, 0.0):
+        return (f"the whole record's correction lowers the halves' deviance by {drops[0]:.1f} and {drops[1]:.1f} "
+                f"(z {z:+.1f}): not stationary")
+    return ""
 
 
 def effect_summary(kind: str, p: dict, model: dict | None = None) -> str:
