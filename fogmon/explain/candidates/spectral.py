@@ -124,8 +124,9 @@ def _markov_heldout(ctx: Context, grid: np.ndarray, tc: float, v: float) -> list
         elif fit_b is None:
             out.append((drop, own_a, "the tested half alone finds nothing", 0.0))
         else:
-            out.append((drop, own_a, f"its own fit there {fit_b[0]:.1f}, less {STATIONARY_LOSS}",
-                        fit_b[0] - STATIONARY_LOSS))
+            bar = fit_b[0] - STATIONARY_LOSS
+            note = f"needs above {bar:.1f}: that half's own fit {fit_b[0]:.1f} less {STATIONARY_LOSS}"
+            out.append((drop, own_a, note, bar))
     return out
 
 
