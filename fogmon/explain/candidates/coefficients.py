@@ -205,20 +205,18 @@ def noise(ctx: Context) -> Candidate | None:
         h = ctx.n // 2
         halves = (slice(0, h), slice(h, 2 * h))
         bps = [passband_part(ctx, periodogram(ctx, p)) for p in halves]
-        apart = _unbalanced(ctx, bps, new, wr)
+        s0s = [model_psd(ctx.stoch, bp.omega, h, wr) for bp in bps]
+        apart = _unbalanced(ctx, bps, s0s, new)
         for a, b in ((0, 1), (1, 0)):
             fa = fit_coefficients(ctx.y[halves[a]], ctx.valid[halves[a]], ctx.stoch, ctx.sample_rate_hz, wr)
             na = _corrected(ctx.stoch, fa) if fa else new
             gains = []
-            for bb in (bps[b], bps[a]):
-                s0 = model_psd(ctx.stoch, bb.omega, h, wr)
+            for bb, s0 in ((bps[b], s0s[b]), (bps[a], s0s[a])):
                 s1 = model_psd(na, bb.omega, h, white_rms_dpsh(na, ctx))
                 fl = LEAKAGE_FLOOR * float(np.median(s0))
                 kb = passband_bins(bb, s0, s1)
                 gains.append(bb.deviance(s0, fl, kb) - bb.deviance(s1, fl, kb))
-            note = WHOLE_RECORD_NOTE if not fa else ""
-            if apart:
-                note = "; ".join(x for x in (note, apart) if x)
+            note = "; ".join(x for x in ("" if fa else WHOLE_RECORD_NOTE, apart) if x)
             out.append((float(gains[0]), float(gains[1]), note, math.inf if apart else 0.0))
         return out  # (tested on the second half, on the first)
 
@@ -238,9 +236,10 @@ STATIONARY_Z = 3.29
 BALANCE_FACTOR = 4.0
 
 
-def _unbalanced(ctx: Context, halves: list[BinnedPeriodogram], new: SensorModel, wr: float) -> str:
+def _unbalanced(ctx: Context, halves: list[BinnedPeriodogram], psd: list[np.ndarray], new: SensorModel) -> str:
     """A note when the whole record's correction ``new`` lowers the two halves' deviance
-    (``halves``: their binned periodograms over the pass band) unequally beyond chance,
+    (``halves``: their binned periodograms over the pass band, ``psd`` the current model's
+    PSD at their bins) unequally beyond chance,
     "" otherwise. A wrong coefficient is stationary: with the corrected PSD S1 the true
     one, each half's drop sum c (I (1/S0 - 1/S1) - ln r) (r = S1 / S0, c the bin's count)
     has mean sum c (r - 1 - ln r) and variance sum c (r - 1)^2, the same in both halves;
@@ -252,8 +251,7 @@ def _unbalanced(ctx: Context, halves: list[BinnedPeriodogram], new: SensorModel,
     deg/h (tau 3000 s) over 3 h at 10 Hz had been named "your K is 0.547, not 0"."""
     h = ctx.n // 2
     drops, var = [], 0.0
-    for bp in halves:
-        s0 = model_psd(ctx.stoch, bp.omega, h, wr)
+    for bp, s0 in zip(halves, psd, strict=True):
         s1 = model_psd(new, bp.omega, h, white_rms_dpsh(new, ctx))
         fl = LEAKAGE_FLOOR * float(np.median(s0))
         drops.append(bp.deviance(s0, fl) - bp.deviance(s1, fl))
