@@ -8,7 +8,8 @@ The test, on blocks of ``block_samples(sample_rate_hz)`` samples: a block moves 
 rate departs from the local reference (a running median of block means over
 ``REFERENCE_S``) by more than both
 
-- ``K_BLOCK`` x the block-to-block scatter of a quiet block mean (so it is not chance),
+- ``K_BLOCK`` x the scatter of a quiet block mean (so it is not chance): block to block,
+  or about its reference where the rate wanders on its own (a rate random walk),
 - ``K_SAMPLE`` x the noise of a single sample (so it is not a slow wander or a small
   sway that the noise analysis models itself: vibration lines, bias instability).
 
@@ -154,6 +155,40 @@ def _quiet_scatter(means: np.ndarray) -> float:
     return float(np.quantile(np.abs(np.diff(means)), QUIET_QUANTILE)) / 0.3186 / np.sqrt(2.0)
 
 
+def _quiet_departure(dev: np.ndarray) -> float:
+    """Quiet scatter (deg/h) of a block mean's departure from its reference, from the same
+    low quantile of the departures ``dev`` (NaN: none). Where the rate wanders on its
+    own (a rate random walk, a ramp the causal reference lags) a block departs from its
+    reference far more than block-to-block steps suggest; that wander is the sensor's
+    noise, not motion (NaN without departures)."""
+    d = np.abs(dev[np.isfinite(dev)])
+    return float(np.quantile(d, QUIET_QUANTILE)) / 0.3186 if len(d) else float("nan")
+
+
+def _quiet_scale(means: np.ndarray, dev: np.ndarray, n_ref: int) -> tuple[float, float]:
+    """(scale, wander), deg/h. ``scale``: what a block mean's departure from its reference
+    is judged against, the larger of the block-to-block scatter s_block of quiet block
+    ``means`` and the quiet scatter s_dev of their departures ``dev`` from their
+    references (medians of ``n_ref`` block means). ``wander``: the part of s_dev that
+    white noise does not explain (it departs by s_block^2 (1 + pi / (2 n_ref)), the
+    reference's own noise included): where the rate wanders on its own (a rate random
+    walk, a ramp the causal reference lags) a block departs from its reference by more
+    than block-to-block steps suggest, and that wander is the sensor's noise, not
+    motion."""
+    s_block, s_dev = _quiet_scatter(means), _quiet_departure(dev)
+    white = s_block * np.sqrt(1.0 + np.pi / (2.0 * max(n_ref, 1)))
+    wander = float(np.sqrt(s_dev**2 - white**2)) if s_dev > white else 0.0
+    return float(np.nanmax([s_block, s_dev])), wander
+
+
+def _level(median: np.ndarray | float, ref: np.ndarray | float, allowance: float) -> np.ndarray:
+    """A block's level (deg/h) for the burst test: its ``median``, as far from its
+    reference ``ref`` as the rate's own wander takes it (``allowance``: K_BLOCK x the
+    wander of ``_quiet_scale``). A burst shorter than half a block does not move the
+    median; a rate that wanders on its own takes it along."""
+    return np.asarray(ref + np.clip(np.asarray(median) - ref, -allowance, allowance))
+
+
 def _limit(sigma_1: float, s_block: float) -> float:
     """Departure (deg/h) beyond which a block mean moves; NaN when the noise is unknown
     or zero (a constant signal cannot be judged)."""
@@ -184,18 +219,22 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
         return []
     sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
     mu = _block_means(y[idx], sigma_1)
-    limit = _limit(sigma_1, _quiet_scatter(mu))
+    n_ref = _reference_blocks(sample_rate_hz)
+    ref = median_filter(mu, size=n_ref, mode="mirror")   # the first block is judged too
+    dev = np.abs(mu - ref)
+    h = (n_ref // 2 + 1) | 1                    # the scale: departures from the median of the h
+    hh = h // 2                                 # blocks before, as the live gate's reference
+    scale, wander = _quiet_scale(mu, mu[h:] - median_filter(mu, size=h)[hh:len(mu) - hh - 1], h)
+    limit = _limit(sigma_1, scale)
     if not np.isfinite(limit):
         return []
-    ref = median_filter(mu, size=_reference_blocks(sample_rate_hz), mode="mirror")   # the first block is judged too
-    dev = np.abs(mu - ref)
     moved = np.zeros(nb)
     moved[idx] = np.where(dev > limit, dev, 0.0)
     peak = np.repeat(moved, m)              # per sample: the departure that flagged it
     ref_all = np.full(nb, np.nan)
     ref_all[idx] = ref
     spread = float(np.quantile(_spreads(y[idx], mu), QUIET_QUANTILE))
-    burst = _burst_departure(y, ref_all, _burst_limit(sigma_1, spread))
+    burst = _burst_departure(y, ref_all, K_BLOCK * wander, _burst_limit(sigma_1, spread))
     peak = np.where(peak > 0, peak, burst)       # a burst's samples, where no block mean moved
     dt, t0 = 1.0 / sample_rate_hz, float(t_s[0])
     out = []
@@ -207,20 +246,23 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
     return out
 
 
-def _burst_departure(y: np.ndarray, ref: np.ndarray, limit: float) -> np.ndarray:
+def _burst_departure(y: np.ndarray, ref: np.ndarray, allowance: float, limit: float) -> np.ndarray:
     """Per sample of ``y`` (blocks x samples, deg/h; ``ref`` each block's reference, NaN
     = none): the median departure (deg/h) of the BURST_N samples centred on it from the
-    nearest of the references of its block and the two beside it, where that median is
-    beyond ``limit`` on one side of all three (more than half of them depart: a burst),
-    else 0. One or two extreme samples never make a burst; taking the nearest reference
-    keeps a level change inside a block (a bias step) from looking like one."""
+    nearest of the references of its block and the two beside it and its block's level
+    (``_level``), where that median departure is beyond ``limit`` on one side of all four
+    (more than half of them depart: a burst), else 0. One or two extreme samples never
+    make a burst; taking the nearest level keeps a level change inside a block (a bias
+    step) from looking like one, and a rate that wanders on its own (a rate random walk)
+    too."""
     from scipy.ndimage import median_filter
 
     if not np.isfinite(limit) or limit <= 0:
         return np.zeros(y.size)
-    near = np.stack([ref, np.r_[ref[:1], ref[:-1]], np.r_[ref[1:], ref[-1:]]])
     with warnings.catch_warnings():          # blocks with no reference (gaps): never a burst
         warnings.simplefilter("ignore", RuntimeWarning)
+        near = np.stack([ref, np.r_[ref[:1], ref[:-1]], np.r_[ref[1:], ref[-1:]],
+                         _level(np.nanmedian(y, axis=1), ref, allowance)])
         hi, lo = np.nanmax(near, axis=0), np.nanmin(near, axis=0)
     x = y.ravel()
     out = np.zeros(x.size)
@@ -252,18 +294,19 @@ def _burst_limit(sigma_1: float, spread: float) -> float:
     return max(K_OUTLIER * sigma_1, K_BLOCK * spread)
 
 
-def _block_burst(x: np.ndarray, ref: float, limit: float) -> float:
+def _block_burst(x: np.ndarray, ref: float, allowance: float, limit: float) -> float:
     """The live gate's burst test of one block's samples ``x`` (deg/h, NaN = none) against
-    its reference ``ref``: the largest median departure of BURST_N consecutive samples on
-    one side beyond ``limit`` (a burst: more than half of them depart), else 0. The rule of
+    the nearer of its reference ``ref`` and its level (``_level``): the largest median
+    departure of BURST_N consecutive samples on one side beyond ``limit`` (a burst: more
+    than half of them depart), else 0. The rule of
     ``_burst_departure``, but only over windows inside the block: its edge padding
     ("nearest") would make a burst of an outlier pair at every block edge, where the
     offline test pads only the record's two ends."""
     if not (np.isfinite(limit) and limit > 0 and np.isfinite(ref)) or len(x) < BURST_N:
         return 0.0
-    d = np.nan_to_num(x - ref, nan=0.0)
+    level = float(_level(np.nanmedian(x), ref, allowance))
     best = 0.0
-    for side in (d, -d):
+    for side in (np.nan_to_num(x - max(ref, level), nan=0.0), np.nan_to_num(min(ref, level) - x, nan=0.0)):
         med = np.median(np.lib.stride_tricks.sliding_window_view(side, BURST_N), axis=1)
         top = float(med.max())
         if top > limit:
@@ -386,7 +429,7 @@ def densest_level(means: np.ndarray, half_width: float) -> float:
 class _Startup:
     """The live gate's start-up judgement of its first blocks: the blocks with enough
     samples (``idx``), each block's sample sigma (``sig``) and the robust means of those
-    (``means``), the quiet scales (``sigma_1``, ``limit``, deg/h) from them and their
+    (``means``), the quiet scales (``sigma_1``, ``wander``, ``limit``, deg/h) from them, their
     reference ``ref`` (deg/h): the level most of their means agree on (NaN with fewer
     than 4 blocks: nothing is judged)."""
 
@@ -396,6 +439,7 @@ class _Startup:
     spreads: np.ndarray
     peaks: np.ndarray
     sigma_1: float
+    wander: float
     limit: float
     ref: float
 
@@ -406,12 +450,13 @@ class _Startup:
         if len(idx) < 4:
             means = _block_means(y[idx], np.nan)
             return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), float("nan"),
-                       float("nan"), float("nan"))
+                       float("nan"), float("nan"), float("nan"))
         sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
         means = _block_means(y[idx], sigma_1 if sigma_1 > 0 else np.nan)
-        limit = _limit(sigma_1, _quiet_scatter(means))
-        return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), sigma_1, limit,
-                   densest_level(means, limit / 2.0))
+        ref = densest_level(means, _limit(sigma_1, _quiet_scatter(means)) / 2.0)
+        scale, wander = _quiet_scale(means, means - ref, len(means))
+        return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), sigma_1, wander,
+                   _limit(sigma_1, scale), ref)
 
 
 class MotionGate:
@@ -429,26 +474,31 @@ class MotionGate:
     is judged as it completes, held back by at most two blocks: its reference is the
     median of the non-moving block means of the last REFERENCE_S / 2; the quiet scales
     are low quantiles over the last ``HISTORY_S``, refreshed every ``RESCALE_BLOCKS``
-    blocks. A departure that holds as a steady level (every block mean of the last
+    blocks or ``RESCALE_S``, whichever comes first (a 1 Hz gate's blocks are 32 s). A
+    departure that holds as a steady level (every block mean of the last
     REFERENCE_S / 2 within the limit of their median) is a bias change, not motion: it
     becomes the reference. The decisions do not depend on how the samples are cut into
     pushes."""
 
     HISTORY_S = 3600.0
     RESCALE_BLOCKS = 64
+    RESCALE_S = 300.0
 
     def __init__(self, sample_rate_hz: float) -> None:
         self.m = block_samples(sample_rate_hz)
         self.warmup = warmup_blocks(sample_rate_hz)
+        self._rescale = min(self.RESCALE_BLOCKS, max(1, int(self.RESCALE_S * sample_rate_hz / self.m)))
         n_hist = max(self.warmup, int(self.HISTORY_S * sample_rate_hz / self.m))
         self._sig = _Window(n_hist)
         self._means = _Window(n_hist)
+        self._devs = _Window(n_hist)       # each judged block mean's departure from its reference
         self._spreads = _Window(n_hist)
         n_ref = _reference_blocks(sample_rate_hz) // 2 + 1
         self._ref = _RunningMedian(n_ref)
         self._recent = _Window(n_ref)      # every block mean judged: a steady new level
         self._gap = _merge_blocks(sample_rate_hz)
         self._limit = float("nan")
+        self._wander = 0.0                 # deg/h: the rate's own wander of a block's level (_quiet_scale)
         self._sigma_1 = float("nan")
         self._burst_limit = float("nan")
         self._n_judged = 0
@@ -520,7 +570,7 @@ class MotionGate:
         if n < self.m:
             return []
         start = _Startup.of(self._y[:n], self._v[:n], self.m)
-        self._sigma_1, self._limit = start.sigma_1, start.limit
+        self._sigma_1, self._wander, self._limit = start.sigma_1, start.wander, start.limit
         if len(start.idx) >= 4:
             self._burst_limit = _burst_limit(start.sigma_1, float(np.quantile(start.spreads, QUIET_QUANTILE)))
         events: list[Event] = []
@@ -533,7 +583,7 @@ class MotionGate:
 
     def _judge_blocks(self) -> list[Event]:
         """Judge the complete blocks not judged yet, in order, each against the running
-        reference; the scales refreshed every RESCALE_BLOCKS blocks (a block's robust mean
+        reference; the scales refreshed every RESCALE_BLOCKS blocks or RESCALE_S (a block's robust mean
         uses the sample noise known before it)."""
         m, a = self.m, self._judged
         nb = (len(self._y) - a) // m
@@ -552,12 +602,13 @@ class MotionGate:
             events += self._judge(a + k * m, float(sig[k]), float(means[k - first]), float(spreads[k - first]),
                                   float(peaks[k - first]), ref)
             self._n_judged += 1
-            if self._n_judged % self.RESCALE_BLOCKS == 0:
+            if self._n_judged % self._rescale == 0:
                 self._sigma_1 = float(np.quantile(self._sig.values(), QUIET_QUANTILE))
                 self._burst_limit = _burst_limit(self._sigma_1, float(np.quantile(self._spreads.values(),
                                                                                  QUIET_QUANTILE)))
                 if len(self._means) >= 4:
-                    self._limit = _limit(self._sigma_1, _quiet_scatter(self._means.values()))
+                    scale, self._wander = _quiet_scale(self._means.values(), self._devs.values(), self._ref.n)
+                    self._limit = _limit(self._sigma_1, scale)
         self._judged = a + nb * m
         return events
 
@@ -580,9 +631,12 @@ class MotionGate:
             moving = False
             self._stepped = self._span is not None
         elif not moving and peak + dev > self._burst_limit:   # a burst its mean averages out (a turn at 10 Hz)
-            burst = _block_burst(np.where(self._v[a:a + m], self._y[a:a + m], np.nan), ref, self._burst_limit)
+            burst = _block_burst(np.where(self._v[a:a + m], self._y[a:a + m], np.nan), ref,
+                                 K_BLOCK * self._wander, self._burst_limit)
             if burst > 0:
                 dev, moving = burst, True
+        if not moving:
+            self._devs.append(dev)                    # the quiet departures, for the scale
         out: list[Event] = []
         if moving:
             self._mask(max(0, a - m), a + m)            # this block and the one before it

@@ -206,6 +206,34 @@ def test_live_gate_finds_a_turn_shorter_than_half_a_block(t0):
     assert not gated.valid[(rec.t_s >= t0) & (rec.t_s < t0 + 1.5)].any()
 
 
+@pytest.mark.parametrize("fs, k_dphsh, duration_s", [(1.0, 30.0, 4 * 3600.0), (100.0, 100.0, 2**20 / 100.0)])
+def test_a_rate_random_walk_is_not_motion(fs, k_dphsh, duration_s):
+    """A rate whose random walk wanders far beyond its sample noise (K / N 3000-10000 per
+    hour) departs from a 150 s reference by more than block-to-block steps suggest: the
+    gate used to keep 26-45 % (1 Hz) and 29-42 % (100 Hz) of such records out as motion
+    (the reference frozen while "moving", the burst test judging the wandered block
+    against it); the departures' own quiet scatter now sets the scale."""
+    from fogmon.motion import gate_record
+
+    for seed in range(3):
+        rate = simulate(SensorModel(fs, 0.0, Noise(N_dpsh=0.01, K_dphsh=k_dphsh)), duration_s=duration_s,
+                        seed=seed).rate_dph
+        assert gate_record(rate, fs).spans == []
+        assert find_motion(np.arange(len(rate)) / fs, rate, np.ones(len(rate), bool), fs) == []
+
+
+def test_a_turn_in_a_wandering_rate_is_still_found():
+    from fogmon.motion import gate_record
+
+    rec = simulate(SensorModel(1.0, 0.0, Noise(N_dpsh=0.01, K_dphsh=30.0)), duration_s=4 * 3600.0, seed=0)
+    turn = (rec.t_s >= 7200.0) & (rec.t_s < 7230.0)       # 3 deg/s for 30 s
+    r = rec.rate_dph + np.where(turn, 3.0 * 3600.0, 0.0)
+    (span,) = gate_record(r, 1.0).spans
+    assert span.t_start_s <= 7200.0 and span.t_end_s >= 7229.0
+    (span,) = find_motion(rec.t_s, r, np.ones(len(r), bool), 1.0)
+    assert span.t_start_s <= 7200.0 and span.t_end_s >= 7229.0
+
+
 def test_history_window_is_the_last_n_values_in_order():
     from collections import deque
 
