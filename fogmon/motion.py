@@ -189,6 +189,19 @@ def _level(median: np.ndarray | float, ref: np.ndarray | float, allowance: float
     return np.asarray(ref + np.clip(np.asarray(median) - ref, -allowance, allowance))
 
 
+def _departures(means: np.ndarray, h: int) -> np.ndarray:
+    """Each block mean's departure (deg/h) from the median of the ``h`` block ``means``
+    before it, as the live gate's reference; while fewer than ``h`` came before (a
+    start-up shorter than the reference), of all of them from the 5th block on."""
+    ref = _RunningMedian(h)
+    out = np.full(len(means), np.nan)
+    for i, x in enumerate(means.tolist()):
+        if len(ref) >= min(h, 4):
+            out[i] = x - ref.median()
+        ref.push(x)
+    return out
+
+
 def _limit(sigma_1: float, s_block: float) -> float:
     """Departure (deg/h) beyond which a block mean moves; NaN when the noise is unknown
     or zero (a constant signal cannot be judged)."""
@@ -222,9 +235,8 @@ def find_motion(t_s: np.ndarray, rate_dph: np.ndarray, valid: np.ndarray, sample
     n_ref = _reference_blocks(sample_rate_hz)
     ref = median_filter(mu, size=n_ref, mode="mirror")   # the first block is judged too
     dev = np.abs(mu - ref)
-    h = (n_ref // 2 + 1) | 1                    # the scale: departures from the median of the h
-    hh = h // 2                                 # blocks before, as the live gate's reference
-    scale, wander = _quiet_scale(mu, mu[h:] - median_filter(mu, size=h)[hh:len(mu) - hh - 1], h)
+    h = n_ref // 2 + 1                          # the scale: departures as the live gate's
+    scale, wander = _quiet_scale(mu, _departures(mu, h), h)
     limit = _limit(sigma_1, scale)
     if not np.isfinite(limit):
         return []
@@ -431,7 +443,8 @@ class _Startup:
     samples (``idx``), each block's sample sigma (``sig``) and the robust means of those
     (``means``), the quiet scales (``sigma_1``, ``wander``, ``limit``, deg/h) from them, their
     reference ``ref`` (deg/h): the level most of their means agree on (NaN with fewer
-    than 4 blocks: nothing is judged)."""
+    than 4 blocks: nothing is judged), and each mean's departure from the median of the
+    ``h`` before it (``devs``, deg/h; the scale's, as the running gate's)."""
 
     idx: np.ndarray
     sig: np.ndarray
@@ -442,21 +455,23 @@ class _Startup:
     wander: float
     limit: float
     ref: float
+    devs: np.ndarray
 
     @classmethod
-    def of(cls, rate_dph: np.ndarray, valid: np.ndarray, m: int) -> _Startup:
+    def of(cls, rate_dph: np.ndarray, valid: np.ndarray, m: int, h: int) -> _Startup:
         y, enough, sig = _blocks(rate_dph, valid, m)
         idx = np.flatnonzero(enough)
         if len(idx) < 4:
             means = _block_means(y[idx], np.nan)
             return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), float("nan"),
-                       float("nan"), float("nan"), float("nan"))
+                       float("nan"), float("nan"), float("nan"), np.empty(0))
         sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
         means = _block_means(y[idx], sigma_1 if sigma_1 > 0 else np.nan)
         ref = densest_level(means, _limit(sigma_1, _quiet_scatter(means)) / 2.0)
-        scale, wander = _quiet_scale(means, means - ref, len(means))
+        devs = _departures(means, h)
+        scale, wander = _quiet_scale(means, devs, h)
         return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), sigma_1, wander,
-                   _limit(sigma_1, scale), ref)
+                   _limit(sigma_1, scale), ref, devs)
 
 
 class MotionGate:
@@ -559,7 +574,7 @@ class MotionGate:
             if self._seen >= 4 * self.warmup:
                 return self._seen * m
             if enough and self._seen_enough >= self.warmup:
-                start = _Startup.of(self._y[:self._seen * m], self._v[:self._seen * m], m)
+                start = _Startup.of(self._y[:self._seen * m], self._v[:self._seen * m], m, self._ref.n)
                 if not abs(start.means[-1] - start.ref) > start.limit:   # NaN: cannot judge, start
                     return self._seen * m
         return 0
@@ -569,7 +584,7 @@ class MotionGate:
         self._warm = True
         if n < self.m:
             return []
-        start = _Startup.of(self._y[:n], self._v[:n], self.m)
+        start = _Startup.of(self._y[:n], self._v[:n], self.m, self._ref.n)
         self._sigma_1, self._wander, self._limit = start.sigma_1, start.wander, start.limit
         if len(start.idx) >= 4:
             self._burst_limit = _burst_limit(start.sigma_1, float(np.quantile(start.spreads, QUIET_QUANTILE)))
@@ -578,6 +593,9 @@ class MotionGate:
             events += self._judge(int(k) * self.m, float(start.sig[k]), float(mean), float(spread), float(peak),
                                   start.ref)
         self._n_judged = len(start.idx)
+        self._devs = _Window(self._devs.n)            # the scale's departures: from the h blocks before
+        for d in start.devs[np.isfinite(start.devs)].tolist():
+            self._devs.append(d)
         self._judged = n
         return events
 
