@@ -156,11 +156,8 @@ def _quiet_scatter(means: np.ndarray) -> float:
 
 
 def _quiet_departure(dev: np.ndarray) -> float:
-    """Quiet scatter (deg/h) of a block mean's departure from its reference, from the same
-    low quantile of the departures ``dev`` (NaN: none). Where the rate wanders on its
-    own (a rate random walk, a ramp the causal reference lags) a block departs from its
-    reference far more than block-to-block steps suggest; that wander is the sensor's
-    noise, not motion (NaN without departures)."""
+    """Quiet scatter (deg/h) of a block mean's departure from its reference: the same low
+    quantile of the departures ``dev`` (NaN entries ignored; NaN without any)."""
     d = np.abs(dev[np.isfinite(dev)])
     return float(np.quantile(d, QUIET_QUANTILE)) / 0.3186 if len(d) else float("nan")
 
@@ -506,7 +503,7 @@ class MotionGate:
         n_hist = max(self.warmup, int(self.HISTORY_S * sample_rate_hz / self.m))
         self._sig = _Window(n_hist)
         self._means = _Window(n_hist)
-        self._devs = _Window(n_hist)       # each judged block mean's departure from its reference
+        self._devs = _Window(n_hist)       # departures of the non-moving block means (start-up: _departures)
         self._spreads = _Window(n_hist)
         n_ref = _reference_blocks(sample_rate_hz) // 2 + 1
         self._ref = _RunningMedian(n_ref)
