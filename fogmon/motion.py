@@ -641,6 +641,7 @@ class MotionGate:
         self._recent.append(mean)
         dev = abs(mean - ref)
         moving = bool(dev > self._limit)              # NaN limit or reference: never
+        in_burst = False
         if moving and self._steady():                 # a bias change: the new level is the reference
             self._ref.reset(self._recent.values())
             moving = False
@@ -649,7 +650,7 @@ class MotionGate:
             burst = _block_burst(np.where(self._v[a:a + m], self._y[a:a + m], np.nan), ref,
                                  K_BLOCK * self._wander, self._burst_limit)
             if burst > 0:
-                dev, moving = burst, True
+                dev, moving, in_burst = burst, True, True
         if not moving:
             self._devs.append(dev)                    # the quiet departures, for the scale
         out: list[Event] = []
@@ -657,9 +658,10 @@ class MotionGate:
             self._mask(max(0, a - m), a + m)            # this block and the one before it
             if self._span is None:
                 self._span = [float(self._t[max(0, a - m)]), t1, dev]
-                out.append(Event(t0, "platform_motion",
-                                 f"platform motion: the rate leaves its reference by {dev:.4g} deg/h "
-                                 f"(limit {self._limit:.3g} deg/h); kept out of the noise analysis"))
+                what = (f"a burst of samples leaves the block's level by {dev:.4g} deg/h (burst limit "
+                        f"{self._burst_limit:.3g} deg/h)" if in_burst else
+                        f"the rate leaves its reference by {dev:.4g} deg/h (limit {self._limit:.3g} deg/h)")
+                out.append(Event(t0, "platform_motion", f"platform motion: {what}; kept out of the noise analysis"))
             else:
                 self._span[1], self._span[2] = t1, max(self._span[2], dev)
             self._quiet_blocks, self._mask_next = 0, True

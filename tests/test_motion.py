@@ -234,6 +234,31 @@ def test_a_turn_in_a_wandering_rate_is_still_found():
     assert span.t_start_s <= 7200.0 and span.t_end_s >= 7229.0
 
 
+def test_every_motion_event_departs_beyond_the_limit_it_names():
+    """A span's first event names the departure and the limit it passed: a block mean's
+    (the block limit) or a burst's samples' (the burst limit). Where the rate wanders the
+    block limit can exceed the burst limit, and a burst's event named the block limit it
+    had not passed."""
+    import re
+    from pathlib import Path
+
+    from fogmon.formats.replay_log import read_replay_log
+
+    rec = read_replay_log(Path(__file__).resolve().parent.parent / "replay_logs" / "lasergyro_z_100hz.csv")
+    wander = simulate(SensorModel(1.0, 0.0, Noise(N_dpsh=0.01, K_dphsh=30.0)), duration_s=4 * 3600.0, seed=0)
+    turn = (wander.t_s >= 7200.0) & (wander.t_s < 7230.0)
+    events = []
+    for rate, fs in ((rec.rate_dph, rec.sample_rate_hz), (wander.rate_dph + np.where(turn, 10.0, 0.0), 1.0)):
+        gate = MotionGate(fs)
+        events += gate.push(np.arange(len(rate)) / fs, rate, np.isfinite(rate)).events + gate.flush().events
+    starts = [e.message for e in events if "kept out" in e.message]
+    assert len(starts) >= 30 and any("burst limit" in m for m in starts)
+    named = re.compile(r"by ([0-9.e+]+) deg/h \((?:burst )?limit ([0-9.e+]+) deg/h")
+    for m in starts:
+        dev, limit = (float(v) for v in named.search(m).groups())
+        assert dev > limit, m
+
+
 def test_history_window_is_the_last_n_values_in_order():
     from collections import deque
 
