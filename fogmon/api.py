@@ -39,7 +39,7 @@ dadev.__doc__ = f"{dadev.__doc__}\n\n{batch.dadev.__doc__}"
 
 def _gate(rate_dph, sample_rate_hz: float, valid) -> np.ndarray | None:
     """``valid`` with platform motion made invalid; a FogmonWarning when any was."""
-    from fogmon.motion import gate_record
+    from fogmon.motion_gate import gate_record
 
     y = np.asarray(rate_dph, dtype=np.float64)
     if y.ndim != 1 or (valid is not None and np.shape(valid) != y.shape):

@@ -5,7 +5,7 @@ import pytest
 import fogmon
 from fogmon.davar import batch
 from fogmon.errors import FogmonWarning
-from fogmon.motion import gate_record
+from fogmon.motion_gate import gate_record
 from fogmon.sim.model import Noise, SensorModel
 from fogmon.sim.simulate import simulate
 

@@ -85,7 +85,7 @@ def _every_import(path: Path, root: Path = ROOT) -> list[tuple[int, str]]:
 LAYERS = [
     ("core", {"errors", "units", "block", "window", "stopping", "startup", "outputs", "jit"}),
     ("formats", {"formats"}),
-    ("analysis", {"davar", "sim", "motion", "phases", "api"}),
+    ("analysis", {"davar", "sim", "motion", "motion_gate", "phases", "api"}),
     ("sources", {"sources"}),
     ("sinks", {"sinks"}),
     ("explain", {"explain"}),

@@ -38,7 +38,8 @@ jit.use_ahead_of_time = False   # numba's versions (the module compiled ahead of
 from fogmon.davar.batch import dadev, oadev
 from fogmon.davar.fit import fit_noise
 from fogmon.davar.streaming import StreamingDadev
-from fogmon.motion import MotionGate, find_motion
+from fogmon.motion import find_motion
+from fogmon.motion_gate import MotionGate
 
 rng = np.random.default_rng(1)
 y = 10.0 + rng.standard_normal(20000)

@@ -27,7 +27,8 @@ from multiprocessing import Pool
 
 import numpy as np
 
-from fogmon.motion import find_motion, gate_record
+from fogmon.motion import find_motion
+from fogmon.motion_gate import gate_record
 from fogmon.sim.model import Noise, SensorModel
 from fogmon.sim.simulate import simulate
 

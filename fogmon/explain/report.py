@@ -255,7 +255,7 @@ def record_fit(rec, keep_motion: bool = False) -> dict | None:
     the recording ``rec`` as recorded (before explain keeps its platform motion out):
     ``davar.record.whole_record_fit`` of the rate, or its error against rot_dps, on the
     octave taus, over the latest ``pipeline.OVERALL_MAX_SAMPLES`` samples, with the samples
-    the live motion gate judges moving left out (``motion.gate_record``, the replay's
+    the live motion gate judges moving left out (``motion_gate.gate_record``, the replay's
     gate; none with ``keep_motion``, as ``--keep-motion``). Explain's own analysis keeps
     out what the offline ``find_motion`` finds, bursts too (docs/motion.md), so its
     ``platform_motion`` warnings can name more. Per coefficient ``value`` (0 when not
@@ -269,7 +269,7 @@ def record_fit(rec, keep_motion: bool = False) -> dict | None:
     too short for a whole-record ADEV."""
     from fogmon.davar.record import whole_record_fit
     from fogmon.errors import FogmonError
-    from fogmon.motion import gate_record
+    from fogmon.motion_gate import gate_record
     from fogmon.pipeline import OVERALL_MAX_SAMPLES
 
     blk = rec.to_block()

@@ -332,12 +332,12 @@ class MotionResult:
 
 
 def motion_pass(plan: Plan, source: SourceOptions, config: PipelineConfig, axis: str = "") -> MotionResult:
-    """Run the pipeline's platform-motion gate (fogmon.motion.MotionGate) over the whole
+    """Run the pipeline's platform-motion gate (fogmon.motion_gate.MotionGate) over the whole
     recording (its axis ``axis``; "": a one-axis recording), block by block as `fogmon
     replay` does (on rate_dph - 3600 x rot_dps unless ``config.raw_rate``), and record
     which samples it made invalid, so that chunks analysed separately see exactly the
     same samples."""
-    from fogmon.motion import MotionGate
+    from fogmon.motion_gate import MotionGate
 
     out = MotionResult(plan.path)
     try:

@@ -48,7 +48,7 @@ class AxisAnalysis:
     def __init__(self, name: str, sample_rate_hz: float, window_s: float, hop_s: float, config: PipelineConfig,
                  summary: AxisSummary) -> None:
         from fogmon.davar.streaming import StreamingDadev
-        from fogmon.motion import MotionGate
+        from fogmon.motion_gate import MotionGate
 
         self.name, self.summary, self.sample_rate_hz = name, summary, sample_rate_hz
         self.engine = StreamingDadev(sample_rate_hz, window_s, taus=config.taus, hop_s=hop_s)  # checks taus
