@@ -26,6 +26,7 @@ from fogmon.davar.confidence import covariance_matrices, mixture_matrices
 from fogmon.davar.profile import fit_full, score_limits
 from fogmon.davar.result import CONFIDENCE, AdevResult, DadevResult
 from fogmon.davar.scoring import fisher_scoring, mixture_edf
+from fogmon.davar.taus import anchors
 from fogmon.davar.termcheck import TermContradiction, contradictions, first_peak
 from fogmon.davar.theory import NAMES, POWERS, avar_terms_to_coefficients
 
@@ -299,12 +300,9 @@ def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
     return f.a, f.se, f.misfit, f.upper
 
 
-_ANCHORS_PER_OCTAVE = 8  # exact EDFs of dense_grid_edf; log-log interpolation between
-
-
 def dense_grid_edf(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.ndarray, n_samples: int) -> np.ndarray:
     """EDF per tau of the Allan variances of the noise mixture the model ``a`` predicts,
-    exact (``_NoiseModel``) at up to _ANCHORS_PER_OCTAVE taus per octave and interpolated
+    exact (``_NoiseModel``) at up to taus.ANCHORS_PER_OCTAVE taus per octave and interpolated
     in log-log between them on denser grids: a mixture matrix costs ~12 ms per m, so the
     exact EDF of an "all" grid of 2^15 samples took 45 s; interpolated it is within 0.2 %
     of it (tests/davar/test_fit_covariance.py)."""
@@ -315,11 +313,10 @@ def dense_grid_edf(a: np.ndarray, tau: np.ndarray, m: np.ndarray, n_terms: np.nd
 
 def anchored_edf(m: np.ndarray, edf_at: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
     """EDF per factor ``m`` from ``edf_at`` (the exact EDF at the given indices of ``m``)
-    evaluated at up to _ANCHORS_PER_OCTAVE factors per octave and the largest,
-    interpolated in log-log between them (``dense_grid_edf``)."""
+    evaluated at the factors ``taus.anchors`` picks, interpolated in log-log between them
+    (``dense_grid_edf``)."""
     lg = np.log2(m)
-    anchor = np.union1d(np.unique(np.round(lg * _ANCHORS_PER_OCTAVE), return_index=True)[1], np.argmax(m))
-    anchor = anchor[np.argsort(m[anchor])]
+    anchor = anchors(m)
     return np.exp(np.interp(lg, lg[anchor], np.log(edf_at(anchor))))
 
 

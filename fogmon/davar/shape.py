@@ -27,6 +27,7 @@ from functools import lru_cache
 import numpy as np
 
 from fogmon.davar.confidence import _GRID_PER_M, _sz
+from fogmon.davar.taus import anchors
 
 SHAPE_RATIO = 16.0
 """Taus with M / m above this (M = n - 2 m + 1 terms) keep the chi-square shape: there
@@ -121,19 +122,37 @@ def shape_factors(fractions: np.ndarray, m, n_samples: int, edf: np.ndarray, con
     """Interval factors (lo / sigma_hat, hi / sigma_hat) of a deviation at two-sided
     ``confidence`` per tau from the exact shape of X for the mixture ``fractions`` (taus
     x 5: confidence.MIX_ALPHAS then the ramp) at the taus where ``shape_applies``, its
-    variance 2 / ``edf``; NaN elsewhere (and where the lower quantile is not above 0)."""
+    variance 2 / ``edf``; NaN elsewhere (and where the lower quantile is not above 0).
+    The shape (the quantiles in standard deviations) is exact at the factors
+    ``taus.anchors`` picks and interpolated in log m between them: 4 ms per tau exactly,
+    so an "all" grid of 2^15 samples took 26 s for its 6372 shaped taus; interpolated,
+    0.3 s and its factors within 0.3 % of the exact ones (tests/davar/test_shape.py),
+    below the grid's own step in L (module docstring)."""
     m = np.asarray(m, dtype=np.int64)
     edf = np.asarray(edf, dtype=np.float64)
     tail = min(confidence, 1.0 - confidence) / 2.0
     q = np.array([tail, 1.0 - tail])
     f_lo = np.full(len(m), np.nan)
     f_hi = np.full(len(m), np.nan)
-    for i in np.flatnonzero(shape_applies(m, n_samples) & np.isfinite(edf) & (edf > 0)):
+    idx = np.flatnonzero(shape_applies(m, n_samples) & np.isfinite(edf) & (edf > 0))
+    if not len(idx):
+        return f_lo, f_hi
+    # the standardized quantiles (X - 1) / sd(X), exact at the anchors, interpolated in log m between
+    at = idx[anchors(m[idx])]
+    g = np.full((len(at), 2), np.nan)
+    for k, i in enumerate(at):
         lam, omega, const = _mixture_eigen(np.asarray(fractions[i], dtype=np.float64), int(m[i]), n_samples)
         var = float((2.0 * lam**2 + 4.0 * lam * omega).sum())
-        if not var > 0:
-            continue
-        x = 1.0 + np.sqrt(2.0 / edf[i] / var) * (quantiles(lam, omega, const, q) - 1.0)
-        if x[0] > 0:
-            f_lo[i], f_hi[i] = 1.0 / np.sqrt(x[1]), 1.0 / np.sqrt(x[0])
+        if var > 0:
+            g[k] = (quantiles(lam, omega, const, q) - 1.0) / np.sqrt(var)
+    good = np.isfinite(g[:, 0])
+    if not good.any():
+        return f_lo, f_hi
+    lg = np.log2(m[idx])
+    lg_at = np.log2(m[at[good]])
+    x_lo = 1.0 + np.sqrt(2.0 / edf[idx]) * np.interp(lg, lg_at, g[good, 0])
+    x_hi = 1.0 + np.sqrt(2.0 / edf[idx]) * np.interp(lg, lg_at, g[good, 1])
+    ok = x_lo > 0
+    f_lo[idx[ok]], f_hi[idx[ok]] = 1.0 / np.sqrt(x_hi[ok]), 1.0 / np.sqrt(x_lo[ok])
+    f_lo[at[~good]] = f_hi[at[~good]] = np.nan  # an anchor without a shape keeps chi-square's
     return f_lo, f_hi

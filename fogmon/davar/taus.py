@@ -15,6 +15,22 @@ _DECADE_STEPS = (1, 2, 4)
 MAX_PER_DECADE = 32
 
 
+ANCHORS_PER_OCTAVE = 8
+"""Per-tau statistics that cost milliseconds per tau (an EDF's mixture matrices, the exact
+interval shape) are computed exactly at up to this many factors per octave and
+interpolated in log m between them on denser grids (``anchors``)."""
+
+
+def anchors(m) -> np.ndarray:
+    """Indices into the factors ``m`` (> 0) at which a dense grid's per-tau statistic is
+    computed exactly, ordered by m: the first factor of each 1 / ANCHORS_PER_OCTAVE of an
+    octave and the largest. On a grid no denser than that every factor is its own anchor."""
+    m = np.asarray(m)
+    lg = np.log2(m)
+    at = np.union1d(np.unique(np.round(lg * ANCHORS_PER_OCTAVE), return_index=True)[1], np.argmax(m))
+    return at[np.argsort(m[at], kind="stable")]
+
+
 def check_per_decade(k: int) -> int:
     """``k`` taus per decade if 1 <= k <= MAX_PER_DECADE, else a FogmonError telling how
     to ask for one tau of k s instead."""
