@@ -8,6 +8,15 @@ is below ``level`` / (number of taus tested) (Bonferroni: the family-wise level 
 whatever the correlation between taus, which is strong, so the real level is lower).
 Taus the robust fit flagged as not described by the five terms (``NoiseFit.misfit``) are
 reported by the fit itself and are not tested again.
+
+The model tested is the one the EDF describes (``NoiseFit.check_adev_dph``). Where the
+record's ADEV took a rate ramp as deterministic (``AdevResult.ramp_k``: EDF 0.25-0.8
+million at the longest taus of N 0.01 deg/sqrt(h), B 0.02 deg/h, R 20 deg/h^2 at 10 Hz
+over 2 h) the five-term fit's chance K (e.g. A_K 2.9e-5 +- 3.0e-5 (deg/h)^2 s^-1) had
+weighted those taus as if their EDF were 850-1450, and missed them by 0.4-1 %: the check
+warned on 19 of 400 such exact records (1.8 h) against its 1 %. It tests the fit with K
+held at the ADEV's and the other terms refitted: 2 of 400
+(validation/model_check_false_alarms.py; docs/davar.md).
 """
 from __future__ import annotations
 
@@ -55,7 +64,7 @@ def check_model(result, fit, level: float = MODEL_CHECK_LEVEL) -> ModelCheck | N
     ``result`` (an AdevResult: ``tau_s``, ``adev_dph``, ``edf``) at every tau with a finite
     measurement, EDF and model that the fit did not flag; None when no tau qualifies."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        model = np.asarray(fit.model_adev_dph(result.tau_s), dtype=float)
+        model = np.asarray(fit.check_adev_dph(result.tau_s), dtype=float)
         adev = np.asarray(result.adev_dph, dtype=float)
         edf = np.asarray(result.edf, dtype=float)
         ratio = model / adev

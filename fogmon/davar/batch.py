@@ -231,14 +231,16 @@ def statistics(sums, counts, m, n_samples: int, alpha=None, confidence: float = 
 
 def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums, counts, m, n_samples: int,
                       confidence: float = CONFIDENCE, exact_shape: bool = True):
-    """(adev_dph, lo_dph, hi_dph, edf) of a whole record (rate ``y`` in deg/h at
+    """(adev_dph, lo_dph, hi_dph, edf, ramp_k) of a whole record (rate ``y`` in deg/h at
     ``sample_rate_hz``, valid ``ok``; one window's ``sums``, ``counts``): the EDF of the quick IEEE-952 fit's mixture
     under ``record_mixture``'s rules (a ramp deterministic only where the fit rejects R = 0
     at ``record_mixture.DETERMINISTIC_Z`` and does not identify K, K then from the detrended
     record), capped below a low-pass's peak as
     ``row_edf``; with ``exact_shape``, at the gap-free taus where few independent terms
     remain (``shape.shape_applies``: M / m <= 16) the exact shape of that mixture's Allan
-    variance instead of chi-square's (docs/davar.md, "Calibration")."""
+    variance instead of chi-square's (docs/davar.md, "Calibration"). ``ramp_k``: the
+    detrended record's A_K ((deg/h)^2 s^-1) where the ramp counts as deterministic, else NaN
+    (``AdevResult.ramp_k``)."""
     avar = _avar(sums, counts)
     terms = _row_terms(sums, counts, m, n_samples)
     tau_s = np.asarray(m) / sample_rate_hz
@@ -250,7 +252,8 @@ def record_statistics(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float, sums
     lo, hi = chi2_bounds(adev, edf, confidence)
     if exact_shape:
         lo, hi = _shaped_bounds(fractions, adev, lo, hi, edf, counts, m, n_samples, confidence)
-    return adev, lo, hi, edf
+    ramp_k = k_detr * sample_rate_hz if k_detr is not None else np.nan  # tau in sample periods -> in s
+    return adev, lo, hi, edf, ramp_k
 
 
 def _detrended_k(y: np.ndarray, ok: np.ndarray, m, n_samples: int) -> float | None:
@@ -313,11 +316,14 @@ def oadev(rate_dph, sample_rate_hz: float, taus="octave", valid=None, confidence
     m = tau_grid(sample_rate_hz, n, taus)
     hi_, lo_, bad = kernels.prefix_sums_dd(y, ok, reference_level(y, ok))
     sums, counts = kernels.window_sums(hi_, lo_, bad, m, np.zeros(1, np.int64), n)
+    ramp_k = np.nan
     if alpha is None:
-        adev, lo, hi, edf = record_statistics(y, ok, sample_rate_hz, sums[0], counts[0], m, n, confidence, exact_shape)
+        adev, lo, hi, edf, ramp_k = record_statistics(y, ok, sample_rate_hz, sums[0], counts[0], m, n, confidence,
+                                                      exact_shape)
     else:
         adev, lo, hi, edf = statistics(sums[0], counts[0], m, n, alpha, confidence)
-    return AdevResult(m / sample_rate_hz, m, adev, lo, hi, edf, counts[0], float(sample_rate_hz), n, confidence)
+    return AdevResult(m / sample_rate_hz, m, adev, lo, hi, edf, counts[0], float(sample_rate_hz), n, confidence,
+                      float(ramp_k))
 
 
 def dadev(rate_dph, sample_rate_hz: float, window_s: float, hop_s: float | None = None, taus="octave",

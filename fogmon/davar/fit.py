@@ -30,6 +30,7 @@ from fogmon.davar.taus import anchors
 from fogmon.davar.termcheck import TermContradiction, contradictions, first_peak
 from fogmon.davar.theory import NAMES, POWERS, avar_terms_to_coefficients
 
+_K = NAMES.index("K_dphsh")  # the random walk's column
 IDENTIFY_Z = 1.959964
 """A term is identifiable when A_n - IDENTIFY_Z * se(A_n) > 0 (95 % one-sided-ish)."""
 _MAX_ITER = 50
@@ -93,7 +94,10 @@ class NoiseFit:
     (``q_band_limited``); ``avar_terms`` and ``model_adev_dph`` stay the fit's estimate.
     ``quantized_count_arcsec`` (a whole-record fit, ``davar.record``): the angle count of
     an output whose samples lie on a lattice, where a white quantizer of that count would
-    break the ADEV's bound on Q, so the bound does not hold for it (NaN otherwise)."""
+    break the ADEV's bound on Q, so the bound does not hold for it (NaN otherwise).
+    ``check_terms`` (a whole-curve fit whose ADEV took a rate ramp as deterministic,
+    ``AdevResult.ramp_k``): the A_n the model check tests, the fit with K held at the
+    ADEV's (``check_adev_dph``); None: ``avar_terms``."""
 
     Q_arcsec: Coefficient
     N_dpsh: Coefficient
@@ -108,6 +112,7 @@ class NoiseFit:
     worst_ratio: np.ndarray | float
     contradicted: tuple[TermContradiction, ...] = ()
     quantized_count_arcsec: float = float("nan")
+    check_terms: np.ndarray | None = None
 
     @property
     def q_band_limited(self) -> bool:
@@ -121,6 +126,13 @@ class NoiseFit:
         x = tau[..., None] ** POWERS
         return np.sqrt(np.einsum("...n,tn->...t", self.avar_terms, np.atleast_2d(x)).reshape(
             self.avar_terms.shape[:-1] + tau.shape))
+
+    def check_adev_dph(self, tau_s) -> np.ndarray:
+        """The Allan deviation (deg/h) at ``tau_s`` (s) of the model the check against the
+        measured ADEV tests (``check_terms``, else ``model_adev_dph``): one curve."""
+        if self.check_terms is None:
+            return self.model_adev_dph(tau_s)
+        return np.sqrt(np.asarray(tau_s, dtype=np.float64)[:, None] ** POWERS @ self.check_terms)
 
     def coefficients(self) -> dict[str, Coefficient]:
         """Name (with unit) -> Coefficient, in the order Q, N, B, K, R."""
@@ -203,7 +215,8 @@ class CurveFit:
     score test of A_n = 0, NaN where not computed), ``lo``/``hi`` its two-sided profile interval at
     ``confidence`` (NaN where not computed), ``upper`` its one-sided UPPER_CONFIDENCE
     upper limit (NaN where not computed), ``misfit`` the taus (of the curve given) the
-    five terms cannot describe."""
+    five terms cannot describe; ``a_check`` the terms the model check tests where the
+    curve's EDF took a ramp as deterministic (``fit_curve``'s ``ramp_k``), else None."""
 
     a: np.ndarray
     se: np.ndarray
@@ -214,13 +227,14 @@ class CurveFit:
     misfit: np.ndarray
     confidence: float
     score_z: np.ndarray
+    a_check: np.ndarray | None = None
 
 
 _LIMITS = ("none", "unidentified", "all")
 
 
 def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFIDENCE,
-              limits: str = "all") -> CurveFit:
+              limits: str = "all", ramp_k: float = np.nan) -> CurveFit:
     """Fit A_n >= 0 to one Allan variance curve (deg/h)^2 over ``tau_s`` (s) with averaging
     factors ``m`` and valid-term counts ``n_terms`` of a record of ``n_samples`` samples.
 
@@ -243,7 +257,10 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     ones' upper limit (the identification test for every term; ``lo``/``hi`` NaN), or
     "none" (no test: ``identifiable`` from the sandwich A_n - IDENTIFY_Z se_n > 0). Nothing is
     identifiable (A_n NaN) when fewer than 2 taus are usable or the robust weights reject
-    all but one tau."""
+    all but one tau. ``ramp_k`` (finite: the curve's EDF took its rate ramp as
+    deterministic beside a random walk of A_K = ramp_k, ``AdevResult.ramp_k``): ``a_check``
+    is the fit with K held there and the other terms refitted, the model that EDF
+    describes, for the model check (``adequacy.check_model``)."""
     if limits not in _LIMITS:
         raise ValueError(f"`limits` must be one of {', '.join(_LIMITS)}, got {limits!r}")
     tau = np.asarray(tau_s, dtype=np.float64)
@@ -268,13 +285,21 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
     if not found:  # the robust weights reject all taus: nothing is identifiable
         return failed
     misfit[use] = rw == 0
+    a_check = None
+    if np.isfinite(ramp_k):
+        held = a.copy()
+        held[_K] = max(float(ramp_k), 0.0)
+        cols = np.ones(5, dtype=bool)
+        cols[_K] = False
+        a_check = fisher_scoring(x, cols, y, edf.mats, edf.full, edf.gap_scale, rw, held, False, c2, _RTOL,
+                                 _MAX_ITER)[0]
     rest = np.setdiff1d(np.flatnonzero(ok), use)
     if len(rest):
         misfit[rest] = _misfit_outside(a, tau[rest], avar[rest], np.asarray(m, dtype=np.int64)[rest],
                                        np.asarray(n_terms)[rest], n_samples)
     lo = hi = upper = nan
     if limits == "none":
-        return CurveFit(a, se, a - IDENTIFY_Z * se > 0, lo, hi, upper, misfit, confidence, nan)
+        return CurveFit(a, se, a - IDENTIFY_Z * se > 0, lo, hi, upper, misfit, confidence, nan, a_check)
     z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
     both = limits == "all"
     upper_z = sorted({z, _UPPER_Z}) if both else [_UPPER_Z]
@@ -288,7 +313,7 @@ def fit_curve(tau_s, avar, m, n_terms, n_samples: int, confidence: float = CONFI
         lo, hi = np.minimum(lower[:, 0], a), np.maximum(at[z], a)
     else:
         upper = np.where(ident, np.nan, upper)
-    return CurveFit(a, se, ident, lo, hi, upper, misfit, confidence, s0)
+    return CurveFit(a, se, ident, lo, hi, upper, misfit, confidence, s0, a_check)
 
 
 def fit_avar(tau_s, avar, m, n_terms, n_samples: int,
@@ -440,7 +465,8 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
                 for i in range(len(result))]
         misfit = np.array([f.misfit for f in fits], dtype=bool).reshape(result.adev_dph.shape)
     else:
-        fits = [fit_curve(result.tau_s, avar, result.m, result.n_terms, result.n_samples, confidence, "all")]
+        fits = [fit_curve(result.tau_s, avar, result.m, result.n_terms, result.n_samples, confidence, "all",
+                          result.ramp_k)]
         misfit = fits[0].misfit
     shape = (len(fits), 5) if isinstance(result, DadevResult) else (5,)
     a = np.array([f.a for f in fits]).reshape(shape)
@@ -448,7 +474,7 @@ def fit_noise(result: AdevResult | DadevResult, confidence: float = CONFIDENCE) 
     upper = np.array([f.upper for f in fits]).reshape(shape)
     q, n_, b, k, r = _coefficients(fits, confidence, isinstance(result, DadevResult))
     fit = NoiseFit(q, n_, b, k, r, avar_terms=a, avar_se=se, avar_upper=upper,
-                   confidence=confidence, misfit=misfit, worst_ratio=np.nan)
+                   confidence=confidence, misfit=misfit, worst_ratio=np.nan, check_terms=fits[0].a_check)
     worst = _worst_ratio(fit.model_adev_dph(result.tau_s), result.adev_dph, misfit)
     if isinstance(result, DadevResult):
         return windows_checked_against_adev(replace(fit, worst_ratio=worst), result)

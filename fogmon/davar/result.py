@@ -21,7 +21,10 @@ class AdevResult:
     ``adev_dph`` (deg/h; NaN where no valid term), ``lo_dph``/``hi_dph`` (two-sided
     ``confidence`` interval, deg/h), ``edf`` (equivalent degrees of freedom), ``n_terms``
     (valid overlapping terms). Scalars: ``sample_rate_hz`` (Hz), ``n_samples`` (samples in the
-    record, valid or not), ``confidence`` (CONFIDENCE = 1 sigma)."""
+    record, valid or not), ``confidence`` (CONFIDENCE = 1 sigma), ``ramp_k``: where the EDF
+    took the record's rate ramp as deterministic (``batch.record_statistics``), the random
+    walk it took beside it, A_K ((deg/h)^2 s^-1, from the detrended record); NaN where it
+    took the ramp as random-walk noise or has no ramp reading (DADEV windows, Greenhall's EDF)."""
 
     tau_s: np.ndarray
     m: np.ndarray
@@ -33,6 +36,7 @@ class AdevResult:
     sample_rate_hz: float
     n_samples: int
     confidence: float = CONFIDENCE
+    ramp_k: float = float("nan")
 
 
 class WindowSums:

@@ -195,14 +195,14 @@ def test_model_check_is_a_chi_square_test_with_each_taus_edf():
 
     a = SimpleNamespace(tau_s=np.array([1.0, 10.0, 100.0]), adev_dph=np.array([1.0, 0.32, 0.2]),
                         edf=np.array([1e4, 1e3, 4.0]))
-    good = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]), misfit=np.zeros(3, bool))
+    good = SimpleNamespace(check_adev_dph=lambda tau: np.array([1.0, 0.31623, 0.2]), misfit=np.zeros(3, bool))
     assert model_check(a, good) == ("  model check: the fitted model agrees with the measured ADEV within chance at "
                                     "every tau (chi-square with each tau's EDF, family-wise 1 % over 3 taus; largest "
                                     "factor 1.01 at tau 10 s)")
     # 1.5x at an EDF of 4 is chance (the old fixed 1.5x threshold warned); 1.1x at an EDF of 1e4 is not
-    chance = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.0, 0.32, 0.3]), misfit=np.zeros(3, bool))
+    chance = SimpleNamespace(check_adev_dph=lambda tau: np.array([1.0, 0.32, 0.3]), misfit=np.zeros(3, bool))
     assert "WARNING" not in model_check(a, chance)
-    bad = SimpleNamespace(model_adev_dph=lambda tau: np.array([1.1, 0.32, 0.2]), misfit=np.zeros(3, bool))
+    bad = SimpleNamespace(check_adev_dph=lambda tau: np.array([1.1, 0.32, 0.2]), misfit=np.zeros(3, bool))
     msg = model_check(a, bad)
     assert msg.startswith("  model check: WARNING the fitted model departs from the measured ADEV beyond chance "
                           "(chi-square with each tau's EDF, family-wise 1 % over 3 taus) at tau 1 s (model 1.1x "
@@ -210,5 +210,5 @@ def test_model_check_is_a_chi_square_test_with_each_taus_edf():
     # a departure below 0.5 % at a huge EDF (a ramp-dominated tau) is beyond chance: its factor is
     # printed with the digits that show it, not as "1x"
     a.edf = np.array([1e6, 1e3, 4.0])
-    small = SimpleNamespace(model_adev_dph=lambda tau: np.array([0.996, 0.32, 0.2]), misfit=np.zeros(3, bool))
+    small = SimpleNamespace(check_adev_dph=lambda tau: np.array([0.996, 0.32, 0.2]), misfit=np.zeros(3, bool))
     assert "at tau 1 s (model 1.004x below, p " in model_check(a, small)
