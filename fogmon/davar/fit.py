@@ -122,21 +122,24 @@ class NoiseFit:
 
     def model_adev_dph(self, tau_s) -> np.ndarray:
         """Model Allan deviation (deg/h) at ``tau_s`` (s); shape (..., len(tau_s))."""
-        tau = np.asarray(tau_s, dtype=np.float64)
-        x = tau[..., None] ** POWERS
-        return np.sqrt(np.einsum("...n,tn->...t", self.avar_terms, np.atleast_2d(x)).reshape(
-            self.avar_terms.shape[:-1] + tau.shape))
+        return _model_adev_dph(self.avar_terms, tau_s)
 
     def check_adev_dph(self, tau_s) -> np.ndarray:
         """The Allan deviation (deg/h) at ``tau_s`` (s) of the model the check against the
-        measured ADEV tests (``check_terms``, else ``model_adev_dph``): one curve."""
-        if self.check_terms is None:
-            return self.model_adev_dph(tau_s)
-        return np.sqrt(np.asarray(tau_s, dtype=np.float64)[:, None] ** POWERS @ self.check_terms)
+        measured ADEV tests (``check_terms``, else ``model_adev_dph``)."""
+        return _model_adev_dph(self.avar_terms if self.check_terms is None else self.check_terms, tau_s)
 
     def coefficients(self) -> dict[str, Coefficient]:
         """Name (with unit) -> Coefficient, in the order Q, N, B, K, R."""
         return {n: getattr(self, n) for n in NAMES}
+
+
+def _model_adev_dph(avar_terms: np.ndarray, tau_s) -> np.ndarray:
+    """Allan deviation (deg/h) of the terms ``avar_terms`` (A_n, last axis) at ``tau_s``
+    (s); shape (..., len(tau_s))."""
+    tau = np.asarray(tau_s, dtype=np.float64)
+    x = tau[..., None] ** POWERS
+    return np.sqrt(np.einsum("...n,tn->...t", avar_terms, np.atleast_2d(x)).reshape(avar_terms.shape[:-1] + tau.shape))
 
 
 def octave_subset(m, m_max: int) -> np.ndarray:

@@ -35,10 +35,11 @@ depending on the terms through the EDF, made it too steep for a ramp beside a ra
 walk, and its minimum is not that of Fisher scoring.)
 
 The floor (2026-12-01) is what the record is sure of: a term's estimate less one sandwich
-standard error (at least 0), except the random walk K, whose floor is its estimate: beside
-a ramp K's estimate is already low (the ramp takes part of its trends: median 0.71 for a
-true 1 over 3.6 h at 10 Hz beside R 3, 0 for a true 1.5 beside R 4), while the others'
-nonnegative estimates err high where they are near 0. With every estimate as the floor
+standard error (at least 0), except the random walk K, whose floor is its estimate. Beside
+a strong ramp the precision of R hangs on K (a random walk's realized trend is part of the
+ramp's estimate), and K's estimate there does not err high (median 0.84 for a true 1 over
+3.6 h at 10 Hz beside R 3, 1.51 for a true 1.5 over 4.5 h at 1 Hz beside R 4; 300 records
+each), while a near-zero B or R's nonnegative estimate does. With every estimate as the floor
 the 95 % intervals of five_100Hz_22min K and five_100Hz_2.9h K covered 97.5 and 97.1 %
 (validation/calibration.py, 1000 records per model): a chance B or R counted as sure
 noise. Now 96.9 and 96.0 %; the R of NBR_1Hz_9h and five_100Hz_2.9h (98.3 -> 97.9 %,
@@ -82,14 +83,15 @@ from fogmon.davar.scoring import (
     sandwich_variances,
     symmetric_pinv,
 )
+from fogmon.davar.theory import NAMES
 from fogmon.jit import B1, F1, F2, F3, F4, F8, I8, kernel
 
 _ALL = np.ones(5, np.bool_)
 _MAX_BRACKET = 60  # doublings of the step above the estimate
 _MAX_ROOT = 40  # regula falsi steps
 _Z_CAP = 37.0
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(24)
-_K = 3  # the random walk among the five terms (Q, N, B, K, R)  # Gauss-Legendre nodes and weights on [-1, 1]
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(24)  # Gauss-Legendre nodes and weights on [-1, 1]
+_K = NAMES.index("K_dphsh")  # the random walk's column
 
 
 @kernel(error_model="numpy")
