@@ -88,6 +88,7 @@ from fogmon.jit import B1, F1, F2, F3, F4, F8, I8, kernel
 
 _ALL = np.ones(5, np.bool_)
 _MAX_BRACKET = 60  # doublings of the step above the estimate
+_MIN_STEP = 1e-6  # the first step above the estimate, at least this fraction of it
 _MAX_ROOT = 40  # regula falsi steps
 _Z_CAP = 37.0
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(24)  # Gauss-Legendre nodes and weights on [-1, 1]
@@ -234,7 +235,7 @@ def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, identif
     bracket is found in _MAX_BRACKET doublings), z(c) = ``boundary_z`` of s(c) for a term
     identified, s(c) for one not (module docstring), every other term counting in the
     variance of each s(c) at no less than its floor (``_floor``). Brackets start at A_n + its sandwich standard error
-    ``se``; Illinois regula falsi to 1e-3 of the bracket's top (of A_n below it); each fit
+    ``se`` (at least _MIN_STEP A_n); Illinois regula falsi to 1e-3 of the bracket's top (of A_n below it); each fit
     is warm-started from the last. Returns (s0 (5,), lower (5, len(lower_z)), upper (5,
     len(upper_z))), NaN outside ``which``."""
     s0 = np.full(5, np.nan)
@@ -262,7 +263,9 @@ def score_limits(x, y, mats, full, gap_scale, cov, rw, c2, a, se, which, identif
                 continue
             lower[n, k] = _root(x, y, mats, full, gap_scale, cov, rw, c2, a, n, rtol, max_iter, fl, present, z,
                                 0.0, z0 - z, a_n, -z, 1e-3 * a_n)
-        step = se[n] if se[n] > 0 and np.isfinite(se[n]) else max(a_n, 1e-300)
+        # a standard error below A_n's float resolution (a degenerate sandwich: a pure-Q
+        # fit of the G ring laser, se / A 1e-19) would leave the bracket at A_n for ever
+        step = max(se[n], _MIN_STEP * a_n) if se[n] > 0 and np.isfinite(se[n]) else max(a_n, 1e-300)
         lo, s_lo, hi = a_n, 0.0, a_n + step
         start = a.copy()
         for k in range(upper_z.shape[0]):

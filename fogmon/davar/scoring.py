@@ -350,21 +350,32 @@ def avar_sd(model, nu, c2):
 def information_and_meat(x, model, corr, cols, rw, nu, c2, sd):
     """(info, meat, scale) of the EDF-weighted estimator over the terms ``cols`` (mask over
     the 5 columns of x, weights rw / ((2 / nu + c2) model^2)), the columns scaled to unit
-    norm (``scale``: their norms): info = X'WX, the information of the independence
-    likelihood, and meat = G' corr G (G = WX sd), the covariance of the scores with the
-    Allan variances' standard deviations ``sd`` and correlation across taus ``corr``."""
+    weighted norm (``scale``: their norms sqrt(sum w x^2), as ``fisher_scoring`` scales
+    them; the plain norm where that is 0), so that info has a unit diagonal and
+    ``symmetric_pinv``'s cut-off compares correlations, not units: with the plain norms a
+    pure-Q fit beside a tiny R (the G ring laser) had info's eigenvalues 1e17 apart, and
+    the pseudo-inverse zeroed Q's, a standard error of 1e-19 A_Q. info = X'WX, the
+    information of the independence likelihood, and meat = G' corr G (G = WX sd), the
+    covariance of the scores with the Allan variances' standard deviations ``sd`` and
+    correlation across taus ``corr``."""
     idx = np.empty(cols.shape[0], np.int64)
     t, k = x.shape[0], _nonzero(cols, idx)
     xs = np.empty((t, k))
     wx = np.empty((t, k))
     g = np.empty((t, k))
     scale = np.zeros(k)
-    for j in range(k):
-        for i in range(t):
-            scale[j] += x[i, idx[j]] ** 2
-        scale[j] = np.sqrt(scale[j])
+    weight = np.empty(t)
     for i in range(t):
-        w = rw[i] / ((2.0 / nu[i] + c2) * model[i] ** 2)
+        weight[i] = rw[i] / ((2.0 / nu[i] + c2) * model[i] ** 2)
+    for j in range(k):
+        plain = 0.0
+        for i in range(t):
+            plain += x[i, idx[j]] ** 2
+            if weight[i] > 0 and np.isfinite(weight[i]):
+                scale[j] += weight[i] * x[i, idx[j]] ** 2
+        scale[j] = np.sqrt(scale[j]) if scale[j] > 0 and np.isfinite(scale[j]) else np.sqrt(plain)
+    for i in range(t):
+        w = weight[i]
         for j in range(k):
             xs[i, j] = x[i, idx[j]] / scale[j]
             wx[i, j] = w * xs[i, j]

@@ -363,6 +363,34 @@ def test_boundary_correlation_is_that_of_the_projected_scores():
         assert abs(bc(x, model, corr, free, n, rw, nu, c2, sd) - want) < 1e-7, trial
 
 
+def test_an_upper_limit_is_found_when_the_standard_error_is_below_the_estimates_resolution():
+    # a degenerate sandwich (the G ring laser's pure-Q fit: se / A_Q 1e-19) once started the
+    # bracket at A_n + se == A_n, so no step ever left the estimate and the interval read
+    # [lo, inf]; the bracket now starts at least 1e-6 A_n above it
+    from fogmon.davar import fit as F
+    from fogmon.davar.profile import fit_full, score_limits
+    from fogmon.davar.theory import POWERS
+    res = exact_result(2**16, Q_arcsec=0.5, N_dpsh=0.002)
+    avar = np.square(res.adev_dph)
+    x = res.tau_s[:, None] ** POWERS
+    edf = F._NoiseModel(res.tau_s, res.m.astype(np.int64), res.n_terms, res.n_samples)
+    found, a, se, rw, c2 = fit_full(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, np.array(F._starts(len(x))),
+                                    F.TUKEY_C, F.MISFIT_FLOOR**2, F.BIRGE_GATE, F._RW_TOL, F._MAX_ROBUST_ITER,
+                                    F._ROBUST_RTOL, F._RTOL, F._MAX_ITER)
+    assert found and a[0] > 0
+
+    def upper(se_q):
+        se_ = se.copy()
+        se_[0] = se_q
+        return score_limits(x, avar, edf.mats, edf.full, edf.gap_scale, edf.cov, rw, c2, a, se_, np.ones(5, bool),
+                            F.IDENTIFY_Z, np.array([]), np.array([1.0, F._UPPER_Z]), F._ROBUST_RTOL,
+                            F._MAX_ITER)[2][0]
+
+    fine, tiny = upper(se[0]), upper(1e-19 * a[0])
+    assert np.all(np.isfinite(fine)) and np.all(fine > a[0])
+    np.testing.assert_allclose(tiny, fine, rtol=3e-3)   # each root to 1e-3 of its bracket
+
+
 def test_an_upper_limit_beside_a_term_held_at_its_bound_follows_the_boundary_rule():
     # white rate noise N and a flicker floor B, exact, with the two shortest taus' Allan
     # variance 3 % low: the data ask for a negative Q, which every refit holds at 0. N's
