@@ -45,8 +45,9 @@ import numpy as np
 
 from fogmon.davar.confidence import MIX_ALPHAS, RAMP, edf_mixture_from, mixture_matrices, term_fractions
 from fogmon.davar.fit import CurveFit, anchored_edf, fit_curve, quick_avar_terms
+from fogmon.davar.theory import NAMES
 
-K, R = 3, 4  # indices of K and R among the five IEEE-952 terms (Q, N, B, K, R)
+K, R = NAMES.index("K_dphsh"), NAMES.index("R_dphh")  # the random walk's and the ramp's columns
 #: the random-walk rate noise class among the mixture's
 RANDOM_WALK = MIX_ALPHAS.index(-2)
 DETERMINISTIC_Z = NormalDist().inv_cdf(0.999)
