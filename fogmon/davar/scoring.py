@@ -352,12 +352,10 @@ def information_and_meat(x, model, corr, cols, rw, nu, c2, sd):
     the 5 columns of x, weights rw / ((2 / nu + c2) model^2)), the columns scaled to unit
     weighted norm (``scale``: their norms sqrt(sum w x^2), as ``fisher_scoring`` scales
     them; the plain norm where that is 0), so that info has a unit diagonal and
-    ``symmetric_pinv``'s cut-off compares correlations, not units: with the plain norms a
-    pure-Q fit beside a tiny R (the G ring laser) had info's eigenvalues 1e17 apart, and
-    the pseudo-inverse zeroed Q's, a standard error of 1e-19 A_Q. info = X'WX, the
-    information of the independence likelihood, and meat = G' corr G (G = WX sd), the
-    covariance of the scores with the Allan variances' standard deviations ``sd`` and
-    correlation across taus ``corr``."""
+    ``symmetric_pinv``'s cut-off compares correlations, not units (docs/davar.md, "Noise
+    fit"): info = X'WX, the information of the independence likelihood, and meat = G'
+    corr G (G = WX sd), the covariance of the scores with the Allan variances' standard
+    deviations ``sd`` and correlation across taus ``corr``."""
     idx = np.empty(cols.shape[0], np.int64)
     t, k = x.shape[0], _nonzero(cols, idx)
     xs = np.empty((t, k))
