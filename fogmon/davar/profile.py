@@ -34,19 +34,14 @@ quasi-likelihood, rescaled for the correlation, was used before: its ln v term, 
 depending on the terms through the EDF, made it too steep for a ramp beside a random
 walk, and its minimum is not that of Fisher scoring.)
 
-The floor (2026-12-01) is what the record is sure of: a term's estimate less one sandwich
-standard error (at least 0), except the random walk K, whose floor is its estimate. Beside
-a strong ramp the precision of R hangs on K (a random walk's realized trend is part of the
-ramp's estimate), and K's estimate there does not err high (median 0.84 for a true 1 over
-3.6 h at 10 Hz beside R 3, 1.51 for a true 1.5 over 4.5 h at 1 Hz beside R 4; 300 records
-each), while a near-zero B or R's nonnegative estimate does. With every estimate as the floor
-the 95 % intervals of five_100Hz_22min K and five_100Hz_2.9h K covered 97.5 and 97.1 %
-(validation/calibration.py, 1000 records per model): a chance B or R counted as sure
-noise. Now 96.9 and 96.0 %; the R of NBR_1Hz_9h and five_100Hz_2.9h (98.3 -> 97.9 %,
-97.6 %) still over-cover, as a chance K there is not told from a real one. On the held-out
-models NKR_10Hz_3.6h K 97.3 -> 96.7 %, R 96.3 -> 96.0 %, five_1Hz_4.5h B 97.3 -> 97.0 %,
-R 96.3 %. Counting K's noise at its estimate less a standard error too takes those two R
-cells to 86 % (docs/davar.md, "Calibration").
+The floor is what the record is sure of: a term's estimate less one sandwich standard
+error (at least 0), except the random walk K, whose floor is its estimate. Beside a strong
+ramp the precision of R hangs on K (a random walk's realized trend is part of the ramp's
+estimate) and K's estimate there does not err high, while a near-zero B or R's
+nonnegative estimate does: with every estimate as the floor a chance B or R counted as
+sure noise (K's 95 % intervals over-covered), and with K's floor lowered too R's
+intervals on the held-out K-and-R models covered 86 % (the coverage numbers:
+docs/davar.md, "Calibration").
 
 A nuisance term at its bound (Self & Liang 1987). Where the refit under A_n = c holds
 another term q at 0 because the data ask for less, s is the score with q fixed, not

@@ -363,6 +363,27 @@ def test_boundary_correlation_is_that_of_the_projected_scores():
         assert abs(bc(x, model, corr, free, n, rw, nu, c2, sd) - want) < 1e-7, trial
 
 
+def test_sandwich_variances_of_columns_of_very_different_weight_match_the_plain_inverse():
+    # Q (tau^-2) beside a tiny R (tau^2) over 0.05 .. 1638 s, the seven shortest taus
+    # flagged (robust weight 0), weighted by a Q-dominated model: the G ring laser's fit.
+    # With columns at unit plain norm (Q's set by the flagged 0.05 s) X'WX's eigenvalues
+    # were 1e17 apart and the pseudo-inverse zeroed Q's variance (1e-35 of the truth)
+    from fogmon.davar.scoring import sandwich_variances
+    from fogmon.davar.theory import POWERS
+    tau = 0.05 * 2.0 ** np.arange(16)
+    x = tau[:, None] ** POWERS
+    model = 7.1e-9 * tau**-2.0 + 3.9e-22 * tau**2.0
+    nu, rw, c2 = np.full(16, 100.0), np.where(tau > 5.0, 1.0, 0.0), 0.015
+    cols = np.array([True, False, False, False, True])
+    sd = model * np.sqrt(2.0 / nu + c2)
+    naive, sand = from_python(sandwich_variances)(x, model, np.eye(16), cols, rw, nu, c2, sd)
+    xc = x[:, cols]
+    info = xc.T @ ((rw / ((2.0 / nu + c2) * model**2))[:, None] * xc)
+    want = np.diag(np.linalg.inv(info))
+    np.testing.assert_allclose(naive, want, rtol=1e-6)
+    np.testing.assert_allclose(sand, want, rtol=1e-6)   # independent taus with the model's sd: meat = info
+
+
 def test_an_upper_limit_is_found_when_the_standard_error_is_below_the_estimates_resolution():
     # a degenerate sandwich (the G ring laser's pure-Q fit: se / A_Q 1e-19) once started the
     # bracket at A_n + se == A_n, so no step ever left the estimate and the interval read
