@@ -160,8 +160,10 @@ def irregular_message(timing: Timing, where: str) -> str:
     """Why an irregular series is refused and the resampling that fixes it."""
     hint = timing.resample_hint_hz()
     odd = (timing.gaps + timing.bursts) / (timing.n - 1)
-    return (f"{where}: irregular time stamps: {timing.describe()} ({odd:.0%} of the steps are gaps or under half a "
-            f"period): the Allan deviation would keep few whole terms; "
+    why = ("no uniform grid holds the samples at their stamps: samples would sit at the wrong times and every "
+           "tau there would be off" if timing.drifting else
+           f"{odd:.0%} of the steps are gaps or under half a period: the Allan deviation would keep few whole terms")
+    return (f"{where}: irregular time stamps: {timing.describe()}; {why}; "
             f"give `resample_hz` (block means on a coarser grid, e.g. {_nice(hint)}; docs/readers.md)")
 
 

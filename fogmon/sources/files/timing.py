@@ -20,7 +20,10 @@ three steps:
    counter allows (d - 1 + j M).
 3. the rate: 1 / the least-squares slope of the stamps over their grid indices (a gap
    that is not a whole number of periods, a device restarting at another phase, moves
-   one segment, not the slope), and steps 2-3 once more with that period.
+   one segment, not the slope), and steps 2-3 once more with that period. A sample
+   stamped more than half a period after the floor of its neighbours' lags (a delayed
+   one: a buffered burst, an early flush before a slow topic's first regular sample)
+   says when it was logged, not when it was sampled: it does not enter the slope.
 
 Stamps that are not finite, repeated or going backwards are an error naming the sample
 and the field; so are gaps beyond what the file can mean (the stamps spanning more than
@@ -29,9 +32,13 @@ and the field; so are gaps beyond what the file can mean (the stamps spanning mo
 
 A series with many gaps or steps under half a period (more than
 ``IRREGULAR_GAP_FRACTION`` of its steps, and more than ``IRREGULAR_MIN``: a topic logged at alternating steps, a lossy
-logger) leaves the Allan deviation few whole terms or no grid; it is refused with the
-resampling that fixes it (``resample_hz``): block means on a coarser uniform grid
-(``block_means``)."""
+logger) leaves the Allan deviation few whole terms or no grid; so does one whose
+stamps keep no one rate (``drift``: over some ``DRIFT_WINDOW`` samples the floor of
+the lags moves by more than ``RATE_TOLERANCE`` of them, i.e. the local rate is more
+than 1 % off the grid's, where a stated rate would be refused: a device clock that
+wanders, a logger that drops samples in runs the grid cannot tell from jitter). Such a
+series is refused with the resampling that fixes it (``resample_hz``): block means on
+a coarser uniform grid (``block_means``), placed by the stamps themselves."""
 from __future__ import annotations
 
 import math
@@ -58,6 +65,8 @@ RATE_TOLERANCE = 0.01
 #: a nominal rate within this fraction of the stamps' is taken as it is (the stamps' own
 #: resolution: a log stamped at exactly 100 Hz gives 100 Hz, not 99.99999999 Hz)
 RATE_SNAP = 1e-5
+#: samples over which the local rate is compared with the grid's (``drift``)
+DRIFT_WINDOW = 256
 
 
 @dataclass(frozen=True)
@@ -79,6 +88,13 @@ class Timing:
     jitter_s: float
     runs_p99: int = 0
     stretchy: bool = False
+    drift: float = 0.0
+
+    @property
+    def drifting(self) -> bool:
+        """The stamps keep no one rate: the lags' floor moves by more than RATE_TOLERANCE
+        of the samples over some DRIFT_WINDOW of them (``drift``, periods per sample)."""
+        return self.drift > RATE_TOLERANCE
 
     @property
     def mean_rate_hz(self) -> float:
@@ -89,7 +105,7 @@ class Timing:
     def irregular(self) -> bool:
         """More gaps and bursts than IRREGULAR_GAP_FRACTION of the steps and IRREGULAR_MIN."""
         odd = self.gaps + self.bursts
-        return odd > IRREGULAR_MIN and odd > IRREGULAR_GAP_FRACTION * max(self.n - 1, 1)
+        return self.drifting or (odd > IRREGULAR_MIN and odd > IRREGULAR_GAP_FRACTION * max(self.n - 1, 1))
 
     def resample_hint_hz(self) -> float:
         """A coarser rate whose blocks nearly all hold a sample whatever their phase and
@@ -106,6 +122,8 @@ class Timing:
             parts.append(f"{self.bursts} steps under half a period")
         if self.stretchy:
             parts.append("steps of a fraction of a period more (only whole periods counted as gaps)")
+        if self.drifting:
+            parts.append(f"the local rate {self.drift:.1%} off the grid's somewhere (over {DRIFT_WINDOW} samples)")
         return ", ".join(parts)
 
 
@@ -134,6 +152,31 @@ def _slope(idx: np.ndarray, t: np.ndarray) -> float:
     """The least-squares slope of ``t`` over ``idx`` (s per grid period)."""
     k = idx - idx.mean()
     return float(np.dot(k, t - t.mean()) / np.dot(k, k))
+
+
+def _floor(res: np.ndarray) -> np.ndarray:
+    """The floor of the lags ``res`` (periods): their minimum over each sample and the
+    LOOKAHEAD - 1 after it (the stamps' least delay there)."""
+    return minimum_filter1d(res, LOOKAHEAD, mode="nearest", origin=-(LOOKAHEAD // 2))
+
+
+def _grid_slope(idx: np.ndarray, t: np.ndarray, period: float) -> float:
+    """The stamps' period (s): the least-squares slope of ``t`` over ``idx`` without the
+    delayed samples (more than half a period above the floor of the lags about the
+    ``period``'s grid), unless fewer than two are left."""
+    res = (t - t[0]) / period - idx
+    on = res - _floor(res) <= 0.5
+    return _slope(idx[on], t[on]) if np.count_nonzero(on) >= 2 else _slope(idx, t)
+
+
+def _drift(idx: np.ndarray, t: np.ndarray, period: float) -> float:
+    """The largest move of the lags' floor over DRIFT_WINDOW samples (or the series, if
+    shorter), per sample (periods per sample): 0 where the stamps keep the grid's rate."""
+    w = min(DRIFT_WINDOW, len(t) - 1)
+    if w < 1:
+        return 0.0
+    low = _floor((t - t[0]) / period - idx)
+    return float(np.max(np.abs(low[w:] - low[:-w]))) / w
 
 
 def grid_index(t_s, where: str, time_field: str, seq=None, modulus: int | None = None,
@@ -171,7 +214,7 @@ def grid_index(t_s, where: str, time_field: str, seq=None, modulus: int | None =
     for _ in range(2):
         gaps = _gaps(_rises(t, period), stretchy, seq_a, modulus)
         idx = np.arange(len(t)) + np.cumsum(gaps)
-        period = _slope(idx, t)
+        period = _grid_slope(idx, t, period)
     missing_runs = gaps[gaps > 0]
     res = (t - t[0]) / period - idx
     timing = Timing(n=len(t), span_s=span, median_step_s=med, rate_hz=1.0 / period,
@@ -180,7 +223,7 @@ def grid_index(t_s, where: str, time_field: str, seq=None, modulus: int | None =
                     bursts=int(np.count_nonzero(step < 0.5 * period)),
                     jitter_s=float(1.4826 * np.median(np.abs(np.diff(res) - np.median(np.diff(res)))) * period),
                     runs_p99=int(np.percentile(missing_runs, 99)) if len(missing_runs) else 0,
-                    stretchy=bool(stretchy))
+                    stretchy=bool(stretchy), drift=_drift(idx, t, period))
     return idx, timing
 
 
