@@ -274,7 +274,9 @@ def _burst_departure(y: np.ndarray, ref: np.ndarray, allowance: float, limit: fl
     x = y.ravel()
     out = np.zeros(x.size)
     for d in (x - np.repeat(hi, y.shape[1]), np.repeat(lo, y.shape[1]) - x):
-        med = median_filter(np.nan_to_num(d, nan=0.0), size=BURST_N, mode="nearest")
+        # "mirror" (d c b | a b c d): the record's first and last samples enter each window once, so an
+        # extreme one at an end is one sample of five there too, never a burst ("nearest" repeated it)
+        med = median_filter(np.nan_to_num(d, nan=0.0), size=BURST_N, mode="mirror")
         out = np.where(med > limit, med, out)
     return out
 

@@ -35,6 +35,19 @@ def test_glitches_and_gaps_are_not_motion():
     assert find_motion(t, r, valid, FS) == []
 
 
+@pytest.mark.parametrize("where", [0, -1, -2])
+def test_one_or_two_extreme_samples_at_an_end_of_the_record_are_no_burst(where):
+    """An outside check (2026-12-01): a real ROS bag whose last sample is 4x its
+    neighbours was "platform motion over 100 % of the record", the burst test's edge
+    padding having repeated that sample into a window of five."""
+    t, r = stationary(12, duration_s=120.0)
+    r = r.copy()
+    r[where] += 1e6
+    if where == -2:
+        r[-1] -= 1e6
+    assert find_motion(t, r, np.ones(len(t), bool), FS) == []
+
+
 def test_a_turntable_segment_is_found_to_a_block():
     t, r = stationary(3)
     turn = (t >= 600.0) & (t < 630.0)
