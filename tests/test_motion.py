@@ -174,6 +174,14 @@ def test_explain_leaves_platform_motion_out_and_warns():
                        {"sample_rate_hz": "100"}, "hand.csv")
     with pytest.raises(FogmonError, match=r"hand.csv: platform motion over 7\d % of the record .*--keep-motion"):
         without_motion(moving)
+    # gaps and motion together leave too little (an outside check's ROS bag: 7 % gaps, 65 % motion, once
+    # refused as "more than 70 % of the sample grid is missing (gaps)", named "imu:" after its topic)
+    present = (t < 100.0) | (t >= 300.0)
+    both = Recording(t[present], (r + 3600.0 * 50.0 * np.sin(2 * np.pi * t / 7.0) * (t > 440))[present], {},
+                     {"sample_rate_hz": "100"}, "/data/run.bag topic /ardrone/imu")
+    with pytest.raises(FogmonError, match=r"^run\.bag topic /ardrone/imu: platform motion over 5\d % of the record "
+                                          r"and gaps over 22 % .*30 % of the sample grid"):
+        without_motion(both)
 
 
 def _gate_spans(t, r):

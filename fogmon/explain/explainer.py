@@ -208,13 +208,16 @@ def without_motion(rec: Recording) -> tuple[Recording, list[dict]]:
     if not spans:
         return rec, []
     keep = ~motion_mask(rec.t_s, spans)
-    share = 1.0 - keep.sum() / len(keep)
+    n_grid = int(rec.grid_index()[-1]) + 1        # the sample grid, gaps included (explain's own test)
+    moving, missing = (len(keep) - keep.sum()) / n_grid, 1.0 - len(keep) / n_grid
     what = "the rate minus 3600 x rot_dps" if "rot_dps" in rec.aux else "the rate"
-    if keep.sum() < MIN_STATIONARY_SHARE * len(keep):
-        raise FogmonError(f"{rec.name}: platform motion over {100 * share:.0f} % of the record ("
+    if keep.sum() < MIN_STATIONARY_SHARE * n_grid:
+        raise FogmonError(f"{rec.name}: platform motion over {100 * moving:.0f} % of the record"
+                          + (f" and gaps over {100 * missing:.0f} %" if missing >= 0.005 else "") + " ("
                           + ", ".join(f"{m.t_start_s:.2f}..{m.t_end_s:.2f} s" for m in spans[:5])
                           + (f" and {len(spans) - 5} more" if len(spans) > 5 else "")
-                          + "): too little stationary data to explain; fogmon replay shows it, "
+                          + f"): too little stationary data to explain (it needs "
+                            f"{100 * MIN_STATIONARY_SHARE:.0f} % of the sample grid); fogmon replay shows it, "
                             "--keep-motion analyses it as recorded")
     warnings = [{"kind": "platform_motion", "t_start_s": m.t_start_s, "t_end_s": m.t_end_s,
                  "text": f"{what} moves up to {m.peak_dph:.4g} deg/h from its reference, far beyond the sensor's "

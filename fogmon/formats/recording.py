@@ -14,6 +14,9 @@ import numpy as np
 from fogmon.block import Block, axis_aux, is_axis_name, parse_axes
 from fogmon.errors import FogmonError
 
+#: a reader's name of what it read: "FILE topic T", "FILE message M", "FILE channel C", "FILE curve C"
+_PART = re.compile(r"^(.*?)( (?:topic|message|channel|curve) .*)$", re.DOTALL)
+
 #: the rate column of one axis of a multi-axis log
 _AXIS_RATE = re.compile(r"rate_(.*)_dph")
 #: without ``sample_rate_hz`` metadata the rate is 1 / the median interval of this many
@@ -49,7 +52,12 @@ class Recording:
 
     @property
     def name(self) -> str:
-        return os.path.basename(self.path) if self.path else "<memory>"
+        """The file's name, and the part of it read (a reader's "FILE topic /imu/data"):
+        "imu_data.bag topic /imu/data" (a topic's slashes are not the file's folders)."""
+        if not self.path:
+            return "<memory>"
+        m = _PART.match(self.path)
+        return os.path.basename(m.group(1)) + m.group(2) if m else os.path.basename(self.path)
 
     @property
     def sample_rate_hz(self) -> float:

@@ -16,8 +16,10 @@ def _segment_levels(ctx: Context, seg: int):
     d = np.diff(y)
     nseg = (len(d)) // seg
     d = d[: nseg * seg].reshape(nseg, seg)
-    with np.errstate(invalid="ignore"):
-        av1 = np.nanmean(d ** 2, axis=1) / 2.0
+    ok = np.isfinite(d)
+    n_ok = ok.sum(axis=1)                  # a segment without a valid pair (a gap, motion): NaN, silently
+    with np.errstate(invalid="ignore", divide="ignore"):
+        av1 = np.where(n_ok > 0, np.where(ok, d, 0.0) ** 2 @ np.ones(seg) / n_ok, np.nan) / 2.0
     w = rfft_omega(4096)
     stoch_noN = replace_white(ctx.stoch, 0.0)
     c_other = avar1_of_psd(model_psd(stoch_noN, w, ctx.n), 4096)
