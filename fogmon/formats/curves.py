@@ -197,6 +197,13 @@ def _allan_variance_ros(path: str, lines: list[str]) -> CurveFile:
         at.append(i)
     a = np.array(rows)
     tau = a[:, 0]
+    # no value: NaN (0/0) or a zero (sqrt(-0)), as allan_variance_ros writes where a tau has too few bins;
+    # anything else not > 0 is a bad cell
+    wrong = np.argwhere(np.isinf(a[:, 1:]) | (a[:, 1:] < 0))
+    if len(wrong):
+        r, j = wrong[0]
+        raise FogmonError(f"{path}: line {at[r]}, column {'_'.join(AVR_COLUMNS[j])}: must be > 0 (or nan or 0 "
+                          f"where allan_variance_ros has no value), got {float(a[r, 1 + j])!r}")
     ok = np.all(np.isfinite(a[:, 1:]) & (a[:, 1:] > 0), axis=1)
     bad_tau = np.flatnonzero(~(np.isfinite(tau) & (tau > 0)))
     if len(bad_tau):
@@ -258,8 +265,9 @@ def _csv_header(cols: list[str], path: str, i: int) -> list[str]:
     """The header's columns, checked: tau_s and one ADEV column, optionally edf or n_terms."""
     adev = [c for c in cols if c in CSV_ADEV]
     if "tau_s" not in cols or len(adev) != 1:
-        need = "tau_s" if "tau_s" not in cols else "adev_dph" if not adev else f"one ADEV column, not {', '.join(adev)}"
-        raise FogmonError(f"{path}: line {i}: header has no column {need} (columns: tau_s,adev_dph "
+        what = (f"no column {'tau_s' if 'tau_s' not in cols else 'adev_dph'}" if "tau_s" not in cols or not adev
+                else f"{len(adev)} ADEV columns ({', '.join(adev)}), a curve file holds one")
+        raise FogmonError(f"{path}: line {i}: header has {what} (columns: tau_s,adev_dph "
                           f"and optionally edf or n_terms; adev_ug or adev_mps2 for an accelerometer)")
     known = ("tau_s", *CSV_ADEV, "edf", "n_terms")
     unknown = [c for c in cols if c not in known]

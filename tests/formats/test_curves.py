@@ -178,3 +178,20 @@ def test_accelerometer_csv_curve_gives_ieee_1293_terms(tmp_path, capsys):
     text = capsys.readouterr().out
     vrw = float(re.search(r"VRW_mpsph += (\S+) m/s/sqrt\(h\)", text).group(1))
     assert vrw == pytest.approx(0.06, rel=1e-3) and "adev_ug" in text
+
+
+def test_a_bad_cell_of_an_allan_variance_ros_file_and_two_adev_columns_are_named(tmp_path, capsys):
+    """An outside check (2026-12-01): a negative ADEV in an allan_variance_ros file was
+    reported as a missing value with no column; a CSV with two ADEV columns got a garbled
+    sentence."""
+    path = tmp_path / "allan_variance.csv"
+    rows = [f"{0.1 * k:.1f} 1e-3 1e-3 1e-3 1e-5 1e-5 1e-5" for k in range(1, 9)]
+    rows[3] = "0.4 -0.001048849 1e-3 1e-3 1e-5 1e-5 1e-5"
+    path.write_text("\n".join(rows) + "\n")
+    assert main(["fit", str(path), "--rate-hz", "10"]) == 2
+    err = capsys.readouterr().err
+    assert "line 4, column accel_x: must be > 0" in err and "-0.001048849" in err and len(err.splitlines()) == 1
+    both = tmp_path / "both.csv"
+    both.write_text("tau_s,adev_dph,adev_ug\n0.1,1,1\n0.2,0.7,0.7\n")
+    assert main(["fit", str(both)]) == 2
+    assert "line 1: header has 2 ADEV columns (adev_dph, adev_ug), a curve file holds one" in capsys.readouterr().err
