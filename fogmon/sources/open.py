@@ -170,6 +170,27 @@ def _guarded(r: Reader, path: str, call: Callable[[], T]) -> T:
     raise AssertionError("unreachable")
 
 
+#: what a replay log (CSV or Parquet) reads of the options: it holds its own time stamps, rates in deg/h and
+#: stated rate (docs/formats.md); every other reader option given for it is a mistake, not ignored
+_REPLAY_LOG_TAKES = frozenset({"axis", "max_rate_dph", "force_rate", "tolerate_bad_rows"})
+_READER_FIELDS = ("protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "kvh_accel", "columns", "dbc", "can_message",
+                  "can_rate", "can_rate_unit", "can_temp", "can_counter", "can_valid", "topic", "channel",
+                  "time_channel", "rate_unit", "accel_channels", "resample_hz")
+
+
+def _check_applies(r: Reader, path: str, opts: SourceOptions) -> None:
+    """A FogmonError when options given do not apply to a replay log ``path`` (found by an
+    outside check: `topic`, `channel`, `dbc`, `protocol` on a replay log were silently
+    ignored)."""
+    if r not in (REPLAY_LOG, PARQUET_LOG):
+        return
+    given = [f for f in _READER_FIELDS if f not in _REPLAY_LOG_TAKES and getattr(opts, f) is not None]
+    if given:
+        raise FogmonError(f"{path}: a {r.what} (time_s and rate columns in deg/h, its own sample_rate_hz; "
+                          f"docs/formats.md): " + ", ".join(f"`{f}`" for f in given)
+                          + f" do{'es' if len(given) == 1 else ''} not apply to it")
+
+
 def open_replay_source(path: str | os.PathLike, opts: SourceOptions | None = None) -> Source:
     """A source replaying ``path``: a replay-log CSV or Parquet log, a raw serial capture
     (protocol from ``protocol`` or its ``.json`` sidecar), a CAN log (.asc .blf .trc
@@ -181,6 +202,7 @@ def open_replay_source(path: str | os.PathLike, opts: SourceOptions | None = Non
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
     r = reader_for(path, opts)
+    _check_applies(r, path, opts)
     mod = _module(r, path)
     return _guarded(r, path, lambda: mod.open_source(path, opts))
 
@@ -196,6 +218,7 @@ def read_recording(path: str | os.PathLike, opts: SourceOptions | None = None) -
     if not os.path.exists(path):
         raise FogmonError(f"{path}: no such file")
     r = reader_for(path, opts)
+    _check_applies(r, path, opts)
     if r in (REPLAY_LOG, PARQUET_LOG):
         rec = read_replay_log(path)
         if not opts.force_rate:

@@ -5,6 +5,8 @@ and whose logger drops samples, a slow topic with an early first sample, and a r
 whose jittered steps have a median away from their mean."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -65,3 +67,15 @@ def test_a_replay_log_whose_steps_have_a_skewed_median_reads_at_its_rate(stated,
     assert main(["replay", str(path), "--rrd", str(tmp_path / "o.rrd"), "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "3000 samples at 90.909" in out and "(0 invalid/lost)" in out
+
+
+def test_reader_options_that_do_not_apply_to_a_replay_log_are_an_error(capsys):
+    """An outside check (2026-12-01): `--time-channel`, `--channel` (and `--topic`, `--dbc`,
+    `--protocol`, `--rate-hz`) on a replay log were accepted and ignored."""
+    log = os.path.join(os.path.dirname(__file__), "..", "..", "replay_logs", "sim_in_orbit_1hz.csv")
+    for extra, flag in ((["--time-channel", "T"], "--time-channel"), (["--rate-hz", "2"], "--rate-hz"),
+                        (["--topic", "/imu", "--protocol", "kvh-a"], "--protocol, --topic")):
+        assert main(["replay", log, *extra, "--duration-s", "10", "--no-progress", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert f"a replay log (time_s and rate columns in deg/h, its own sample_rate_hz; docs/formats.md): {flag} " \
+               f"do" in err and len(err.strip().splitlines()) == 1
