@@ -26,8 +26,9 @@ from fogmon.motion import (
     _limit,
     _merge_blocks,
     _quiet_scale,
-    _quiet_scatter,
     _reference_blocks,
+    _rest_blocks,
+    _rest_steps,
     _RunningMedian,
     _spreads,
     block_samples,
@@ -148,6 +149,7 @@ class _Startup:
     limit: float
     ref: float
     devs: np.ndarray
+    spread_q: float = float("nan")
 
     @classmethod
     def of(cls, rate_dph: np.ndarray, valid: np.ndarray, m: int, h: int) -> _Startup:
@@ -159,11 +161,21 @@ class _Startup:
                        float("nan"), float("nan"), float("nan"), np.empty(0))
         sigma_1 = float(np.quantile(sig[idx], QUIET_QUANTILE))
         means = _block_means(y[idx], sigma_1 if sigma_1 > 0 else np.nan)
-        ref = densest_level(means, _limit(sigma_1, _quiet_scatter(means)) / 2.0)
+        spreads = _spreads(y[idx], means)
         devs = _departures(means, h)
-        scale, wander = _quiet_scale(means, devs, h)
-        return cls(idx, sig, means, _spreads(y[idx], means), _peaks(y[idx], means), sigma_1, wander,
-                   _limit(sigma_1, scale), ref, devs)
+        rest = _rest_blocks(means, sig[idx], m, h)
+        if rest is None:
+            scale, wander = _quiet_scale(means, devs, h)
+            spread_q = float(np.quantile(spreads, QUIET_QUANTILE))
+        else:                               # motion over most of the start-up: the rest's scales
+            sigma_1 = float(np.quantile(sig[idx][rest[0]], QUIET_QUANTILE))
+            devs = rest[1]
+            scale, wander = _quiet_scale(_rest_steps(means, rest[0]), devs, h)
+            spread_q = float(np.quantile(spreads[rest[0]], QUIET_QUANTILE))
+        limit = _limit(sigma_1, scale)
+        ref = densest_level(means if rest is None else means[rest[0]], limit / 2.0)
+        return cls(idx, sig, means, spreads, _peaks(y[idx], means), sigma_1, wander,
+                   limit, ref, devs, spread_q)
 
 
 class MotionGate:
@@ -279,7 +291,7 @@ class MotionGate:
         start = _Startup.of(self._y[:n], self._v[:n], self.m, self._ref.n)
         self._sigma_1, self._wander, self._limit = start.sigma_1, start.wander, start.limit
         if len(start.idx) >= 4:
-            self._burst_limit = _burst_limit(start.sigma_1, float(np.quantile(start.spreads, QUIET_QUANTILE)))
+            self._burst_limit = _burst_limit(start.sigma_1, start.spread_q)
         events: list[Event] = []
         for k, mean, spread, peak in zip(start.idx, start.means, start.spreads, start.peaks, strict=True):
             events += self._judge(int(k) * self.m, float(start.sig[k]), float(mean), float(spread), float(peak),
@@ -313,11 +325,15 @@ class MotionGate:
                                   float(peaks[k - first]), ref)
             self._n_judged += 1
             if self._n_judged % self._rescale == 0:
-                self._sigma_1 = float(np.quantile(self._sig.values(), QUIET_QUANTILE))
-                self._burst_limit = _burst_limit(self._sigma_1, float(np.quantile(self._spreads.values(),
-                                                                                 QUIET_QUANTILE)))
+                means_h, sig_h, spreads_h = self._means.values(), self._sig.values(), self._spreads.values()
+                rest = _rest_blocks(means_h, sig_h, m, self._ref.n) if len(means_h) >= 4 else None
+                if rest is not None:          # motion over most of the history: the rest's scales
+                    sig_h, spreads_h = sig_h[rest[0]], spreads_h[rest[0]]
+                self._sigma_1 = float(np.quantile(sig_h, QUIET_QUANTILE))
+                self._burst_limit = _burst_limit(self._sigma_1, float(np.quantile(spreads_h, QUIET_QUANTILE)))
                 if len(self._means) >= 4:
-                    scale, self._wander = _quiet_scale(self._means.values(), self._devs.values(), self._ref.n)
+                    scale, self._wander = (_quiet_scale(means_h, self._devs.values(), self._ref.n) if rest is None
+                                           else _quiet_scale(_rest_steps(means_h, rest[0]), rest[1], self._ref.n))
                     self._limit = _limit(self._sigma_1, scale)
         self._judged = a + nb * m
         return events
