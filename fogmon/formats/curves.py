@@ -114,6 +114,7 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
     folder, name, sim = os.path.dirname(path), m.group("name"), m.group("sim") or ""
     curves: list[Curve] = []
     files: list[str] = []
+    absent: list[str] = []
     rate = None
     record_m = None
     for kind, sensor, scale, unit in (("gyr", "gyro", IMU_UTILS_DPH, "deg/h (57.3 deg/rad)"),
@@ -133,6 +134,7 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
         for axis in "xyz":
             f = stem + f"{axis}.txt"
             if not os.path.exists(f):
+                absent.append(os.path.basename(f))
                 continue
             adev = _column(f, f"adev ({unit})")
             if len(adev) != len(tau):
@@ -147,6 +149,9 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
              "m/s^2 to micro-g (/ 9.80665e-6)"]
     if sim:
         notes.append("imu_utils sim_ files: these are imu_utils's own fitted curves, not measured ADEVs")
+    if absent:
+        which = "that axis is" if len(absent) == 1 else "those axes are"
+        notes.append(f"imu_utils: no {', '.join(absent)} beside the tau file: {which} not fitted")
     return CurveFile("imu_utils", tuple(files), curves, "overlapping", rate, record_m, notes)
 
 

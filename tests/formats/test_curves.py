@@ -195,3 +195,15 @@ def test_a_bad_cell_of_an_allan_variance_ros_file_and_two_adev_columns_are_named
     both.write_text("tau_s,adev_dph,adev_ug\n0.1,1,1\n0.2,0.7,0.7\n")
     assert main(["fit", str(both)]) == 2
     assert "line 1: header has 2 ADEV columns (adev_dph, adev_ug), a curve file holds one" in capsys.readouterr().err
+
+
+def test_an_imu_utils_set_without_one_axis_file_says_so(tmp_path, capsys):
+    """An outside check (2026-12-01): without data_<name>_gyr_y.txt the set was fitted with
+    five curves and no word about the sixth."""
+    import shutil
+    src = os.path.join(os.path.dirname(__file__), "..", "data", "public", "imu_utils")
+    for f in os.listdir(src):
+        if f.startswith("data_16448_") and f != "data_16448_gyr_y.txt":
+            shutil.copy(os.path.join(src, f), tmp_path / f)
+    assert main(["fit", str(tmp_path / "data_16448_gyr_t.txt")]) == 0
+    assert "imu_utils: no data_16448_gyr_y.txt beside the tau file: that axis is not fitted" in capsys.readouterr().out
