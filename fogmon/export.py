@@ -21,7 +21,7 @@ only for a ROS source."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 from fogmon.davar.fit import NAMES
@@ -383,18 +383,24 @@ WRITERS = {"kalibr": kalibr_yaml, "ros": ros_yaml, "matlab": matlab_snippet}
 
 
 def write_export(kind: str, path: str, fit: Gyros, source: str, sample_rate_hz: float | None,
-                 topic: str | None = None, accels: Mapping[str, object] | None = None) -> None:
+                 topic: str | None = None, accels: Mapping[str, object] | None = None,
+                 notes: Sequence[str] = ()) -> None:
     """Write ``fit`` (a whole-record NoiseFit, or axis name -> NoiseFit) and ``accels``
     (accelerometer name -> AccelFit) to ``path`` in format ``kind`` (FORMATS);
     ``sample_rate_hz`` None when the record's rate is not known, ``topic`` the ROS topic
-    of a ROS source; complete or not at all (a disk error is a FogmonError naming the
-    file)."""
+    of a ROS source; ``notes``: what the reader of the file must know of the record (one
+    comment line each, after the header: platform motion kept out); complete or not at
+    all (a disk error is a FogmonError naming the file)."""
     if isinstance(fit, Mapping):
         fit = {a: f for a, f in fit.items() if f is not None} or None
     accels = {a: f for a, f in (accels or {}).items() if f is not None}
     if fit is None and not accels:
         raise FogmonError(f"`export` {kind} {path}: no noise fit to export (the record gave no Allan deviation)")
     text = WRITERS[kind](fit, source, sample_rate_hz, topic, accels)
+    if notes:
+        mark = "%" if kind == "matlab" else "#"
+        head, rest = text.split("\n", 2)[:2], text.split("\n", 2)[2:]
+        text = "\n".join([*head, *(f"{mark} {n}" for n in notes), *rest])
     with written(path, f"`export` {kind}") as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.write(text)
 

@@ -230,3 +230,17 @@ def test_ros_and_matlab_accelerometer_outputs():
     assert float(vals["NoiseDensity"]) == pytest.approx(0.2 / 60, rel=1e-15)
     assert float(vals["BiasInstability"]) == pytest.approx(50e-6 * 9.80665, rel=1e-15)
     assert float(vals["RandomWalk"]) == pytest.approx(10 / 216000, rel=1e-15)
+
+
+@pytest.mark.parametrize("fmt, mark", [("kalibr", "#"), ("matlab", "%")])
+def test_a_replay_export_says_how_much_platform_motion_was_kept_out(fmt, mark, tmp_path, capsys):
+    """An outside check (2026-12-01): a ROS bag 83 % in motion on axis z was exported with
+    its numbers from the rest and nothing in the file said so."""
+    import os
+    bag = os.path.join(os.path.dirname(__file__), "data", "public", "ros1", "jackal_imu_50hz_20s.bag")
+    out = tmp_path / f"imu.{fmt}"
+    assert main(["replay", bag, "--axis", "z", "--export", fmt, str(out), "--rrd", str(tmp_path / "r.rrd"),
+                 "--no-progress", "--quiet"]) == 0
+    lines = out.read_text().splitlines()
+    assert re.fullmatch(rf"{mark} platform motion kept out before the fit: \d+ samples \(\d+\.\d %\); the numbers "
+                        r"describe the rest \(docs/motion\.md\)", lines[2]), lines[:3]
