@@ -248,10 +248,9 @@ def _chance_ratio(k: int, stretches: float) -> float:
     probability STRETCH_ALPHA / ``stretches`` (Bonferroni over the roughly independent
     stretches searched): sqrt(k / x), x that chi-square(k) quantile from its lower tail,
     x = 2 (p Gamma(k / 2 + 1))^(2 / k) (the CDF's leading term) up to k = 10, Wilson-Hilferty's
-    cube root above.
-    The quietest of many stretches of a rate random walk (block means that step by
-    themselves) is that quiet by chance: without this bound the rule fired on 15 of 100
-    records of N 0.01, K 30 at 1 Hz and kept up to 38 % of one out."""
+    cube root above. The quietest of many stretches of a rate random walk (block means
+    that step by themselves) is that quiet by chance (docs/motion.md has what the rule did
+    without this bound)."""
     p = STRETCH_ALPHA / max(stretches, 1.0)
     if k <= 10:
         x = 2.0 * math.exp((math.log(p) + math.lgamma(k / 2.0 + 1.0)) * 2.0 / k)
@@ -264,8 +263,7 @@ def _rest_steps(means: np.ndarray, rest: np.ndarray) -> np.ndarray:
     """The block means of the rest blocks, as pairs of neighbours (for ``_quiet_scatter``:
     a step is taken only between two neighbouring rest blocks): the means with NaN
     between runs."""
-    out = np.where(rest, means, np.nan)
-    return out
+    return np.where(rest, means, np.nan)
 
 
 def _level(median: np.ndarray | float, ref: np.ndarray | float, allowance: float) -> np.ndarray:
