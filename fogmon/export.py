@@ -399,8 +399,8 @@ def write_export(kind: str, path: str, fit: Gyros, source: str, sample_rate_hz: 
     text = WRITERS[kind](fit, source, sample_rate_hz, topic, accels)
     if notes:
         mark = "%" if kind == "matlab" else "#"
-        head, rest = text.split("\n", 2)[:2], text.split("\n", 2)[2:]
-        text = "\n".join([*head, *(f"{mark} {n}" for n in notes), *rest])
+        parts = text.split("\n", 2)            # the header's two lines, then the rest
+        text = "\n".join([*parts[:2], *(f"{mark} {n}" for n in notes), *parts[2:]])
     with written(path, f"`export` {kind}") as tmp, open(tmp, "w", encoding="utf-8") as fh:
         fh.write(text)
 

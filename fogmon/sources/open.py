@@ -170,12 +170,11 @@ def _guarded(r: Reader, path: str, call: Callable[[], T]) -> T:
     raise AssertionError("unreachable")
 
 
-#: what a replay log (CSV or Parquet) reads of the options: it holds its own time stamps, rates in deg/h and
-#: stated rate (docs/formats.md); every other reader option given for it is a mistake, not ignored
-_REPLAY_LOG_TAKES = frozenset({"axis", "max_rate_dph", "force_rate", "tolerate_bad_rows"})
-_READER_FIELDS = ("protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "kvh_accel", "columns", "dbc", "can_message",
-                  "can_rate", "can_rate_unit", "can_temp", "can_counter", "can_valid", "topic", "channel",
-                  "time_channel", "rate_unit", "accel_channels", "resample_hz")
+#: the reader options a replay log (CSV or Parquet) does not take: it holds its own time stamps, rates in deg/h
+#: and stated rate (docs/formats.md) and reads only axis, max_rate_dph, force_rate and tolerate_bad_rows
+_NOT_FOR_REPLAY_LOGS = ("protocol", "sample_rate_hz", "kvh_rot", "kvh_units", "kvh_accel", "columns", "dbc",
+                        "can_message", "can_rate", "can_rate_unit", "can_temp", "can_counter", "can_valid", "topic",
+                        "channel", "time_channel", "rate_unit", "accel_channels", "resample_hz")
 
 
 def _check_applies(r: Reader, path: str, opts: SourceOptions) -> None:
@@ -184,7 +183,7 @@ def _check_applies(r: Reader, path: str, opts: SourceOptions) -> None:
     ignored)."""
     if r not in (REPLAY_LOG, PARQUET_LOG):
         return
-    given = [f for f in _READER_FIELDS if f not in _REPLAY_LOG_TAKES and getattr(opts, f) is not None]
+    given = [f for f in _NOT_FOR_REPLAY_LOGS if getattr(opts, f) is not None]
     if given:
         raise FogmonError(f"{path}: a {r.what} (time_s and rate columns in deg/h, its own sample_rate_hz; "
                           f"docs/formats.md): " + ", ".join(f"`{f}`" for f in given)

@@ -16,10 +16,8 @@ def _segment_levels(ctx: Context, seg: int):
     d = np.diff(y)
     nseg = (len(d)) // seg
     d = d[: nseg * seg].reshape(nseg, seg)
-    ok = np.isfinite(d)
-    n_ok = ok.sum(axis=1)                  # a segment without a valid pair (a gap, motion): NaN, silently
-    with np.errstate(invalid="ignore", divide="ignore"):
-        av1 = np.where(n_ok > 0, np.where(ok, d, 0.0) ** 2 @ np.ones(seg) / n_ok, np.nan) / 2.0
+    n_ok = np.isfinite(d).sum(axis=1)      # a segment without a valid pair (a gap, motion): NaN, silently
+    av1 = np.where(n_ok > 0, np.nansum(d ** 2, axis=1) / np.maximum(n_ok, 1), np.nan) / 2.0
     w = rfft_omega(4096)
     stoch_noN = replace_white(ctx.stoch, 0.0)
     c_other = avar1_of_psd(model_psd(stoch_noN, w, ctx.n), 4096)
