@@ -144,7 +144,10 @@ def test_fit_with_stated_edf_and_without_either_says_what_it_assumed(record, tmp
     ("tau_s,adev_dph\n1,2\n1,3\n", "line 3, column tau_s: 1 is not above the previous tau"),
     ("tau_s,adev_dph,n_terms\n1,2,10\n2,3,2.5\n", "line 3, column n_terms: must be a whole number >= 1"),
     ("tau_s,adev_dph\n1,-2\n2,3\n", "line 2, column adev_dph: must be a finite number > 0"),
-    ("tau_s,adev_dph\n0.01,2\n0.015,3\n", "tau_s 0.015 s is not a whole multiple of the sample period"),
+    ("tau_s,adev_dph\n0.01,2\n0.015,3\n", "line 3, column tau_s: tau_s 0.015 s is not a whole multiple of the "
+                                          "sample period"),
+    ("# c\ntau_s,adev_dph,n_terms\n0.01,2,100\n0.02,1,97\n\n0.04,1,500\n",
+     "line 6, column n_terms: the sample rate 100 Hz (assumed: 1 / the first tau) contradicts n_terms"),
 ])
 def test_bad_curve_is_one_line_naming_file_line_and_column(tmp_path, capsys, content, message):
     curve = tmp_path / "c.csv"

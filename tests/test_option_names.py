@@ -122,6 +122,7 @@ def test_library_messages_reach_the_user_with_the_commands_flags(tmp_path, capsy
     assert "(4 x the largest tau; an n_terms column or --record-s sets it)\n" in out
     curve.write_text("tau_s,adev_dph\n0.01,1\n0.015,0.7\n")
     assert main(["fit", str(curve)]) == 2
-    assert capsys.readouterr().err == (f"fogmon fit: error: {curve}: tau_s 0.015 s is not a whole multiple of the "
+    assert capsys.readouterr().err == (f"fogmon fit: error: {curve}: line 3, column tau_s: tau_s 0.015 s is not a "
+                                       "whole multiple of the "
                                        "sample period 0.01 s (1.5 periods, more than 1e-05 from a whole number; "
                                        "give the record's sample rate with --rate-hz)\n")

@@ -52,6 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from fogmon.cli import render
     from fogmon.cli.output_options import check_command_outputs
+    from fogmon.davar.curve import CurveRowError
     from fogmon.errors import FogmonError
     from fogmon.formats.curves import read_curves
 
@@ -66,7 +67,9 @@ def run(args: argparse.Namespace) -> int:
             fits.append(_fit(c, cf, rate, n, args.confidence))
         except FogmonError as e:
             what = f" ({c.sensor} {c.axis})" if c.axis else ""
-            raise FogmonError(f"{args.curve}{what}: {e.message}") from None
+            where = (f"{c.rows[e.index]}, column {e.column}{what}" if isinstance(e, CurveRowError) and c.rows
+                     else f"{args.curve}{what}")
+            raise FogmonError(f"{where}: {e.message}") from None
     r0 = fits[0][1]
     said += [s for s in fits[0][2] if s not in said]
     lines = [f"fogmon fit: {args.curve} ({cf.fmt}{', ' + str(len(cf.files)) + ' files' if len(cf.files) > 1 else ''}): "

@@ -32,6 +32,17 @@ from fogmon.davar.confidence import chi2_bounds, edf_effective, edf_full
 from fogmon.davar.result import CONFIDENCE, AdevResult
 from fogmon.errors import FogmonError
 
+
+class CurveRowError(FogmonError):
+    """A FogmonError about one tau of a curve: ``index`` (0-based, in the order given) and
+    the ``column`` it is about ("tau_s", "n_terms"), so that a reader that knows the
+    file's lines can name the line."""
+
+    def __init__(self, message: str, index: int, column: str):
+        super().__init__(message)
+        self.index, self.column = index, column
+
+
 #: a tau further than this (relative) from a whole multiple of the sample period is refused
 #: (imu_utils's taus are multiples of the period measured from the stamps: 0.009999989 s at 100 Hz)
 M_TOLERANCE = 1e-5
@@ -105,15 +116,16 @@ def _check_terms(tau, m, n_terms, full, n_samples: int, sample_rate_hz: float, r
                 f"Hz (2 terms fewer per sample period)")
     if np.any(missing < 0):
         i = int(np.argmax(missing < 0))
-        raise FogmonError(f"n_terms {int(n_terms[i])} at tau {tau[i]:.10g} s is {int(-missing[i])} more than the "
-                          f"{int(full[i])} overlapping terms (N - 2 m + 1, m = {int(m[i])}) a record of {n_samples} "
-                          f"samples has: the record is longer, or {rate} is wrong{fits}")
+        raise CurveRowError(f"n_terms {int(n_terms[i])} at tau {tau[i]:.10g} s is {int(-missing[i])} more than the "
+                            f"{int(full[i])} overlapping terms (N - 2 m + 1, m = {int(m[i])}) a record of "
+                            f"{n_samples} samples has: the record is longer, or {rate} is wrong{fits}", i, "n_terms")
     fell = np.flatnonzero(np.diff(missing) < 0)
     if len(fell):
         i = int(fell[0])
-        raise FogmonError(f"{rate} contradicts n_terms: at tau {tau[i]:.10g} s (m = {int(m[i])}) {int(missing[i])} "
-                          f"terms are missing from a gap-free record's, at {tau[i + 1]:.10g} s (m = {int(m[i + 1])}) "
-                          f"only {int(missing[i + 1])}, and gaps can only remove more terms at a longer tau{fits}")
+        raise CurveRowError(f"{rate} contradicts n_terms: at tau {tau[i]:.10g} s (m = {int(m[i])}) "
+                            f"{int(missing[i])} terms are missing from a gap-free record's, at {tau[i + 1]:.10g} s "
+                            f"(m = {int(m[i + 1])}) only {int(missing[i + 1])}, and gaps can only remove more terms "
+                            f"at a longer tau{fits}", i + 1, "n_terms")
 
 
 def _curve_arrays(tau_s, adev_dph) -> tuple[np.ndarray, np.ndarray]:
@@ -137,9 +149,9 @@ def _averaging_factors(tau: np.ndarray, sample_rate_hz: float) -> np.ndarray:
     off = np.abs(k - m) / np.maximum(k, 1.0)
     if m[0] < 1 or off.max() > M_TOLERANCE:
         i = int(np.argmax(off)) if m[0] >= 1 else 0
-        raise FogmonError(f"tau_s {tau[i]:.10g} s is not a whole multiple of the sample period "
-                          f"{1 / sample_rate_hz:.10g} s ({k[i]:.7g} periods, more than {M_TOLERANCE:g} from a whole "
-                          f"number; give the record's sample rate with `sample_rate_hz`)")
+        raise CurveRowError(f"tau_s {tau[i]:.10g} s is not a whole multiple of the sample period "
+                            f"{1 / sample_rate_hz:.10g} s ({k[i]:.7g} periods, more than {M_TOLERANCE:g} from a whole "
+                            f"number; give the record's sample rate with `sample_rate_hz`)", i, "tau_s")
     return m
 
 
@@ -166,9 +178,9 @@ def _record_samples(tau, m, sample_rate_hz, n_terms, n_samples, said: list[str])
                         f"the largest tau; an n_terms column or `n_samples` sets it)")
     n_samples = int(n_samples)
     if 2 * m[-1] > n_samples:
-        raise FogmonError(f"the largest tau {tau[-1]:.10g} s needs a record of at least "
-                          f"{2 * m[-1] / sample_rate_hz:.10g} s ({2 * m[-1]} samples), not "
-                          f"{n_samples / sample_rate_hz:.10g} s ({n_samples} samples)")
+        raise CurveRowError(f"the largest tau {tau[-1]:.10g} s needs a record of at least "
+                            f"{2 * m[-1] / sample_rate_hz:.10g} s ({2 * m[-1]} samples), not "
+                            f"{n_samples / sample_rate_hz:.10g} s ({n_samples} samples)", len(tau) - 1, "tau_s")
     return n_samples
 
 

@@ -54,6 +54,8 @@ class Curve:
     adev: np.ndarray
     n_terms: np.ndarray | None = None
     edf: np.ndarray | None = None
+    #: where each tau stands in the files ("FILE: line L"; empty: not known)
+    rows: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -125,8 +127,8 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
                 raise FogmonError(f"{path}: imu_utils's tau file {stem}t.txt is missing (the taus of its _x, _y, "
                                   f"_z files)")
             continue
-        tau = _column(stem + "t.txt", "tau_s")
-        _check_taus(stem + "t.txt", tau)
+        tau, tau_lines = _column(stem + "t.txt", "tau_s")
+        _check_taus(stem + "t.txt", tau, tau_lines)
         files.append(stem + "t.txt")
         k = np.rint(tau / tau[0])
         rate = 1.0 / float(tau[0])
@@ -136,11 +138,12 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
             if not os.path.exists(f):
                 absent.append(os.path.basename(f))
                 continue
-            adev = _column(f, f"adev ({unit})")
+            adev, _ = _column(f, f"adev ({unit})")
             if len(adev) != len(tau):
                 raise FogmonError(f"{f}: {len(adev)} values for the {len(tau)} taus of {stem}t.txt")
             files.append(f)
-            curves.append(Curve(sensor, axis, tau, adev * scale))
+            curves.append(Curve(sensor, axis, tau, adev * scale,
+                                rows=tuple(f"{stem}t.txt: line {i}" for i in tau_lines)))
     if not curves:
         raise FogmonError(f"{path}: no imu_utils axis file (data_{name}_{sim}<gyr|acc>_<x|y|z>.txt) beside it")
     notes = ["imu_utils: fully overlapping estimator; taus are multiples of the mean sample period measured from "
@@ -155,9 +158,9 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
     return CurveFile("imu_utils", tuple(files), curves, "overlapping", rate, record_m, notes)
 
 
-def _column(path: str, what: str) -> np.ndarray:
-    """One number per line (blank lines skipped), each finite and > 0."""
-    vals = []
+def _column(path: str, what: str) -> tuple[np.ndarray, list[int]]:
+    """One number per line (blank lines skipped), each finite and > 0; and their lines."""
+    vals, at = [], []
     for i, raw in enumerate(_text_lines(path), 1):
         s = raw.strip()
         if not s:
@@ -169,15 +172,16 @@ def _column(path: str, what: str) -> np.ndarray:
         if not (math.isfinite(x) and x > 0):
             raise FogmonError(f"{path}: line {i}, {what}: must be a finite number > 0, got {s[:40]!r}")
         vals.append(x)
+        at.append(i)
     if len(vals) < 2:
         raise FogmonError(f"{path}: needs at least 2 values, one per line ({what})")
-    return np.array(vals)
+    return np.array(vals), at
 
 
-def _check_taus(path: str, tau: np.ndarray) -> None:
+def _check_taus(path: str, tau: np.ndarray, at: list[int]) -> None:
     bad = np.flatnonzero(np.diff(tau) <= 0)
     if len(bad):
-        raise FogmonError(f"{path}: line {bad[0] + 2}, tau_s: {tau[bad[0] + 1]:.10g} is not above the previous tau "
+        raise FogmonError(f"{path}: line {at[bad[0] + 1]}, tau_s: {tau[bad[0] + 1]:.10g} is not above the previous tau "
                           f"({tau[bad[0]]:.10g}): taus must increase")
 
 
@@ -230,7 +234,9 @@ def _allan_variance_ros(path: str, lines: list[str]) -> CurveFile:
     if ok.sum() < 2:
         raise FogmonError(f"{path}: fewer than 2 rows with values")
     tau_ok = tau[ok]
-    curves = [Curve(sensor, axis, tau_ok, a[ok, 1 + j] * (UG_PER_G / G0_MPS2 if sensor == "accel" else 3600.0))
+    rows_ok = tuple(f"{path}: line {i}" for i, good in zip(at, ok, strict=True) if good)
+    curves = [Curve(sensor, axis, tau_ok, a[ok, 1 + j] * (UG_PER_G / G0_MPS2 if sensor == "accel" else 3600.0),
+                    rows=rows_ok)
               for j, (sensor, axis) in enumerate(AVR_COLUMNS)]
     no_value = float(tau[int(np.argmax(~ok))]) if not ok.all() else None
     return CurveFile("allan_variance_ros", (path,), curves, "non-overlapping", notes=notes, no_value_tau_s=no_value)
@@ -241,6 +247,7 @@ def _csv(path: str, lines: list[str]) -> CurveFile:
     """One curve of a CSV file (the module docstring)."""
     cols: list[str] | None = None
     rows: list[list[float]] = []
+    at: list[int] = []
     for i, raw in enumerate(lines, 1):
         s = raw.strip()
         if not s or s.startswith("#"):
@@ -255,6 +262,7 @@ def _csv(path: str, lines: list[str]) -> CurveFile:
             raise FogmonError(f"{path}: line {i}, column tau_s: {row[t]:g} is not above the "
                               f"previous tau ({rows[-1][t]:g}): taus must increase")
         rows.append(row)
+        at.append(i)
     if cols is None or len(rows) < 2:
         raise FogmonError(f"{path}: needs a header (tau_s,adev_dph[,edf|n_terms]; adev_ug or adev_mps2 for an "
                           f"accelerometer) and at least 2 rows")
@@ -263,7 +271,7 @@ def _csv(path: str, lines: list[str]) -> CurveFile:
     adev_col = next(n for n in cols if n in CSV_ADEV)
     sensor, scale = CSV_ADEV[adev_col]
     return CurveFile("csv", (path,), [Curve(sensor, "", c["tau_s"], c[adev_col] * scale, c.get("n_terms"),
-                                            c.get("edf"))])
+                                            c.get("edf"), tuple(f"{path}: line {i}" for i in at))])
 
 
 def _csv_header(cols: list[str], path: str, i: int) -> list[str]:

@@ -89,6 +89,7 @@ def test_imu_utils_taus_accept_the_nominal_rate_to_1e_5_but_not_a_wrong_one(caps
     a3 = os.path.join(IMU_UTILS, "data_A3_gyr_t.txt")             # 400 Hz nominal, 384 Hz measured
     assert main(["fit", a3, "--rate-hz", "400"]) == 2
     err = capsys.readouterr().err
+    assert "data_A3_gyr_t.txt: line 5, column tau_s (gyro x): tau_s" in err    # the tau furthest off the grid
     assert "is not a whole multiple of the sample period 0.0025 s" in err and len(err.splitlines()) == 1
     assert main(["fit", a3]) == 0                                  # the rate the file gives: 1 / its first tau
     assert "at 384.0131909 Hz" in capsys.readouterr().out
@@ -162,7 +163,8 @@ def test_a_rate_that_contradicts_n_terms_is_refused_with_the_rate_they_fit(tmp_p
     assert "--rate-hz 200 Hz contradicts n_terms" in err and "fit 100 Hz" in err and len(err.splitlines()) == 1
     assert main(["fit", str(curve), "--rate-hz", "100", "--record-s", "100"]) == 2
     err = capsys.readouterr().err         # whole numbers, every digit: not "2.58096e+06 ... the 2.58096e+06"
-    assert "n_terms 2580959 at tau 0.01 s is 2570960 more than the 9999 overlapping terms" in err
+    assert f"{curve}: line 2, column n_terms: n_terms 2580959 at tau 0.01 s is 2570960 more than the 9999 " \
+           "overlapping terms" in err
     assert main(["fit", str(curve), "--rate-hz", "100"]) == 0
     with pytest.raises(FogmonError, match="contradicts n_terms"):
         adev_from_curve([0.01, 0.02], [1.0, 0.7], sample_rate_hz=300.0, n_terms=[1000, 998])
