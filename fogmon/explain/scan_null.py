@@ -14,10 +14,12 @@ in 1 h at 10 Hz: 9 of 16). So when the model holds K, or its Allan variance at a
 of the record falls slower than tau^-1/2 (``calibrated_kinds``),
 each mean-type kind's gain is also measured on every bootstrap replicate (the same
 draws as the map's null: the model's whole stochastic part, K, B, Q, N and the
-noise-type effects), and its bar is
-raised to the value a Gumbel law fitted to those gains exceeds with probability alpha /
-(number of such kinds): the model's own processes then name a chance step, ramp or
-settling no more often than that. Otherwise the GLS's law is taken to hold and nothing
+noise-type effects), as its excess over the candidate's own search bar (0 for a kind
+without a search; a periodic term's bar is its octave's, so the excess puts a line in
+any octave on one scale), and its bar (``Candidate.chance_bar``) is that search bar
+raised by the excess a Gumbel law fitted to those excesses exceeds with probability
+alpha / (number of such kinds): the model's own processes then name a chance step, ramp,
+settling or line no more often than that. Otherwise the GLS's law is taken to hold and nothing
 is simulated (no cost: a 1e6-sample record whose flicker holds 23 % there took 41.8 s
 instead of 8.3 with its bars simulated).
 
@@ -81,10 +83,11 @@ def allan_slope(stoch: SensorModel, tau_s: float, n: int) -> float:
 
 
 class ScanGains:
-    """The chi-square gain of each of ``kinds`` fitted to a replicate of the stochastic
-    model ``stoch`` (deg/h, NaN where not valid), prepared like explain's residual (mean
-    over the valid samples removed, 0 where not valid); NaN for a kind not applicable.
-    Picklable (runs in the bootstrap's workers)."""
+    """The chi-square gain of each of ``kinds`` less its own search bar
+    (``Candidate.search_bar``), fitted to a replicate of the stochastic model ``stoch``
+    (deg/h, NaN where not valid), prepared like explain's residual (mean over the valid
+    samples removed, 0 where not valid); NaN for a kind not applicable. Picklable (runs
+    in the bootstrap's workers)."""
 
     def __init__(self, stoch: SensorModel, t_s: np.ndarray, aux: dict, valid: np.ndarray, kinds: tuple[str, ...]):
         self.stoch, self.t_s, self.aux, self.valid, self.kinds = stoch, t_s, aux, valid, kinds
@@ -96,12 +99,12 @@ class ScanGains:
         out = {}
         for kind in self.kinds:
             c = CANDIDATES[kind](ctx)
-            out[kind] = float(c.gain) if c is not None else float("nan")
+            out[kind] = float(c.gain - c.search_bar) if c is not None else float("nan")
         return out
 
 
 def scan_bars(gains: list[dict[str, float]], alpha: float) -> tuple[dict[str, float], dict[str, float]]:
-    """kind -> the gain the replicates' ``gains`` (one dict per replicate) exceed with
+    """kind -> the excess gain the replicates' ``gains`` (one dict per replicate) exceed with
     probability alpha / (number of kinds), from a Gumbel law fitted to them; and kind ->
     that bar's Monte Carlo standard error (mismatch.Gumbel.isf_se)."""
     kinds = sorted({k for g in gains for k in g})

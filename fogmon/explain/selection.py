@@ -131,9 +131,9 @@ def bars_undecided(cands: list[Candidate], null: mismatch.Null, penalty: float) 
         bar = null.scan_bars.get(c.kind)
         if bar is None:
             continue
+        bar = c.search_bar + bar  # the null's bar is an excess over the search's own (scan_null)
         band = SETTLE_SE * null.scan_bar_se[c.kind]
-        # c.search_bar is the higher of its own search's bar and the chance bar
-        if bar <= c.gain < bar + band and c.k * penalty < c.gain and c.search_bar < bar + band:
+        if bar <= c.gain < bar + band and c.bic_bar(penalty) < c.gain and c.search_bar < bar + band:
             return True
     return False
 
@@ -296,10 +296,10 @@ class Selection:
 
 def _below(c: Candidate, penalty: float, bars: Mapping[str, float]) -> str:
     """Which bar the candidate ``c`` stayed below."""
-    if c.search_bar <= c.k * penalty:
-        return "below the BIC bar"
-    if c.search_bar == bars.get(c.kind):
+    if c.chance_bar > max(c.search_bar, c.bic_bar(penalty)):
         return "below the chance bar of the model's own noise (its rate random walk or flicker, simulated)"
+    if c.search_bar <= c.bic_bar(penalty):
+        return "below the BIC bar"
     if c.kind == lookalike.LAW:
         return "below the feature search's chance bar"
     return ("below the change-point search's chance bar" if c.kind == "bias_step"
@@ -335,11 +335,11 @@ def candidates(ctx: Context, counts: Mapping[str, int], bars: Mapping[str, float
 
 
 def fitted(kind: str, ctx: Context, bars: Mapping[str, float]) -> Candidate | None:
-    """Candidate ``kind`` fitted to the context's residual (``CANDIDATES``), its bar
-    raised to the null's chance bar for the kind (``bars``: scan_null), if any."""
+    """Candidate ``kind`` fitted to the context's residual (``CANDIDATES``) with the null's
+    chance bar for the kind (``bars``: scan_null, an excess over its own search's bar), if any."""
     c = CANDIDATES[kind](ctx)
-    if c is not None and bars.get(kind, 0.0) > c.search_bar:
-        c = replace(c, search_bar=float(bars[kind]))
+    if c is not None and kind in bars:
+        c = replace(c, chance_bar=c.search_bar + float(bars[kind]))
     return c
 
 

@@ -44,8 +44,9 @@ def test_the_walk_raises_the_bars_of_steps_and_ramps_above_bic():
     ctx = whittle_context(stochastic_part(WALK), {}, t, valid, y)
     by_kind = {c.kind: c for c in candidates(ctx, {}, null.scan_bars)}
     for kind in ("bias_step", "rate_ramp"):
-        assert null.scan_bars[kind] > by_kind[kind].k * ctx.penalty
-        assert by_kind[kind].search_bar == null.scan_bars[kind]
+        c = by_kind[kind]   # the null's bar is an excess over the kind's own search bar (0 for a ramp)
+        assert c.chance_bar == c.search_bar + null.scan_bars[kind]
+        assert c.chance_bar > c.k * ctx.penalty and c.bar(ctx.penalty) == c.chance_bar
 
 
 def test_a_null_walk_names_nothing():

@@ -92,10 +92,13 @@ def test_chance_bar_borderline_only_just_above_the_bar():
                          40, 0.01, bars, se)
 
     class Cand:
-        kind, k = "bias_step", 2
+        kind, k, search_bar = "bias_step", 2, 0.0   # the null's bar: an excess over this search bar
 
         def __init__(self, gain):
-            self.gain, self.search_bar = gain, bars["bias_step"]
+            self.gain = gain
+
+        def bic_bar(self, penalty):
+            return self.k * penalty
 
     bar, band = bars["bias_step"], SETTLE_SE * se["bias_step"]
     assert bars_undecided([Cand(bar + 0.5 * band)], null, 1.0)

@@ -93,6 +93,12 @@ class Candidate:
     #: the gain a chance maximum of the candidate's own search exceeds with probability
     #: SEARCH_FALSE_ALARM (a periodic term's frequency search): the bar when above BIC's
     search_bar: float = 0.0
+    #: ``search_bar`` is the search's false-alarm law over every value it scans, BIC's
+    #: k ln n not applied on top (the periodic term's octave bars)
+    search_calibrated: bool = False
+    #: the bar the model's own noise sets, simulated (scan_null: ``search_bar`` raised by
+    #: the replicates' chance excess over it); 0: none
+    chance_bar: float = 0.0
     #: a refused look-alike the record cannot tell from this effect (lookalike.explained):
     #: {"kind", "params", "bic_gain", "own_bic_gain"}; None when there is none
     tie: dict | None = None
@@ -101,9 +107,14 @@ class Candidate:
     def nature(self) -> str:
         return EFFECT_KINDS[self.kind].nature
 
+    def bic_bar(self, penalty: float) -> float:
+        """BIC's bar k ln n, 0 for a search whose own law is its bar (``search_calibrated``)."""
+        return 0.0 if self.search_calibrated else self.k * penalty
+
     def bar(self, penalty: float) -> float:
-        """The bar its gain must pass: BIC's k ln n, or ``search_bar`` when that is higher."""
-        return max(self.k * penalty, self.search_bar)
+        """The bar its gain must pass: the highest of BIC's (``bic_bar``), its search's
+        (``search_bar``) and the simulated one (``chance_bar``)."""
+        return max(self.bic_bar(penalty), self.search_bar, self.chance_bar)
 
     def bic_gain(self, penalty: float) -> float:
         """The gain above the bar (``bar``)."""

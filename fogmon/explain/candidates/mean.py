@@ -15,36 +15,75 @@ from fogmon.explain import detectors
 from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate, varies
 from fogmon.explain.fitting import Coarse, coarse_block, weighted_products
 
-#: A periodic term's frequency search must find a line that chance (white residual,
-#: the model true) beats with this probability only. BIC's 3 ln n alone is about the 2 %
-#: point at 12000 samples (Baluev's law below; 6 of 300 white-noise records measured), and
-#: the held-out check cannot refute such a peak: selected as the whole record's maximum,
-#: it is a coherent sum of both halves, so each half predicts the other at its frequency.
+#: A periodic term's frequency search must find a line that chance (the residual the
+#: model's noise, the model true) beats with this probability only. BIC's 3 ln n alone is
+#: about the 2 % point at 12000 samples (Baluev's law below; 6 of 300 white-noise records
+#: measured), and the held-out check cannot refute such a peak: selected as the whole
+#: record's maximum, it is a coherent sum of both halves, so each half predicts the other
+#: at its frequency.
 SEARCH_FALSE_ALARM = 1e-3
+#: the lowest DFT bin searched (periods up to a third of the record)
+LOWEST_BIN = 3
 
 
-def chance_line_gain(n: int, false_alarm: float) -> float:
-    """The chi-square gain u that the largest of a continuous frequency search over the
-    whole band of an n-sample record (two degrees of freedom per frequency) exceeds by
-    chance with probability ``false_alarm``: Baluev (2008, MNRAS 385, 1279) for even
-    sampling, P(max > u) = (n/2) sqrt(pi/3) sqrt(u/2) exp(-u/2), solved by fixed point."""
-    u = 2.0 * math.log(n / 2.0 / false_alarm)
-    for _ in range(20):
-        u = 2.0 * math.log(n / 2.0 * math.sqrt(math.pi / 3.0) * math.sqrt(u / 2.0) / false_alarm)
+def chance_band_gain(bins: float, false_alarm: float) -> float:
+    """The chi-square gain u that the largest of a continuous frequency search over a band
+    of ``bins`` DFT bins (two degrees of freedom per frequency) exceeds by chance with
+    probability ``false_alarm``: Baluev (2008, MNRAS 385, 1279) for even sampling,
+    P(max > u) = (1 + bins sqrt(pi/3) sqrt(u/2)) exp(-u/2) (the 1: a single frequency's
+    chi-square law, what a band of few bins tends to), solved by fixed point."""
+    u = 2.0 * math.log((1.0 + bins) / false_alarm)
+    for _ in range(30):
+        u = 2.0 * math.log((1.0 + bins * math.sqrt(math.pi / 3.0) * math.sqrt(u / 2.0)) / false_alarm)
     return u
 
 
+def octave_bands(n: int) -> list[tuple[int, int]]:
+    """The periodic search's bands: octaves of DFT bins [LOWEST_BIN 2^j, LOWEST_BIN
+    2^(j+1)) up to the last bin below Nyquist, as (first, end)."""
+    top = (n + 1) // 2  # not the Nyquist bin of an even n (one real degree of freedom)
+    out, lo = [], LOWEST_BIN
+    while lo < top:
+        out.append((lo, min(2 * lo, top)))
+        lo *= 2
+    return out
+
+
+def octave_bars(n: int, false_alarm: float) -> list[float]:
+    """Each octave band's (``octave_bands``) chance bar: ``false_alarm`` shared equally
+    among the octaves (a weighted Bonferroni: the whole search's false-alarm rate is at
+    most ``false_alarm`` by Baluev's law), each searched over its own bins
+    (:func:`chance_band_gain`)."""
+    bands = octave_bands(n)
+    return [chance_band_gain(hi - lo, false_alarm / len(bands)) for lo, hi in bands]
+
+
+def strongest_line(P: np.ndarray, n: int, false_alarm: float) -> tuple[int, float]:
+    """The bin of the PSD-weighted periodogram ``P`` (|Y|^2 / (n S), half a sinusoid's
+    chi-square gain at a bin) whose gain 2 P lies furthest above its octave's chance bar
+    (``octave_bars``), and that bar."""
+    best, bar, excess = LOWEST_BIN, math.inf, -math.inf
+    for (lo, hi), u in zip(octave_bands(n), octave_bars(n, false_alarm), strict=True):
+        k = lo + int(np.argmax(P[lo:hi]))
+        if 2.0 * float(P[k]) - u > excess:
+            best, bar, excess = k, u, 2.0 * float(P[k]) - u
+    return best, bar
+
+
 def periodic(ctx: Context) -> Candidate | None:
-    """Strongest line of the PSD-weighted periodogram (periods 3 samples .. duration/3),
-    frequency refined within a bin of it to the maximum of the GLS chi-square of a
-    sinusoid (:func:`line_gain`: on a grid of LINE_STEPS_PER_BIN points per bin, then
-    golden section), then fitted by the calibrated GLS; its bar is at least
-    :func:`chance_line_gain` at SEARCH_FALSE_ALARM."""
+    """The line of the PSD-weighted periodogram (periods 2 samples .. duration / 3)
+    furthest above its octave's chance bar (``strongest_line``: the search's false-alarm
+    rate SEARCH_FALSE_ALARM shared among the octaves, so a slow line needs far less gain
+    than one among the record's many fast frequencies), frequency refined within a bin of
+    it to the maximum of the GLS chi-square of a sinusoid (:func:`line_gain`: on a grid
+    of LINE_STEPS_PER_BIN points per bin, then golden section), then fitted by the
+    calibrated GLS; its bar is that octave's chance bar, BIC's 3 ln n not on top
+    (``Candidate.search_calibrated``: the search's own law sets its false-alarm rate)."""
     n = ctx.n
+    if n < 4 * LOWEST_BIN:
+        return None
     P = np.abs(ctx.Yf) ** 2 / (n * ctx.wh.S)
-    P[:3] = 0.0
-    P[-1] = 0.0
-    k = int(np.argmax(P))
+    k, search_bar = strongest_line(P, n, SEARCH_FALSE_ALARM)
     peak_power = float(P[k])
     del P  # record-length arrays are let go once used (memory)
     t = ctx.t_s
@@ -88,7 +127,7 @@ def periodic(ctx: Context) -> Candidate | None:
           f"amplitude {estimate_text(amp, se_amp)} deg/h")
     return Candidate("periodic", params, {"period_s": se_f / f ** 2, "amplitude_dph": se_amp,
                                           "phase_rad": se_amp / max(amp, 1e-300)},
-                     fit.chi2_gain, 3, ev, X @ fit.beta, X, search_bar=chance_line_gain(n, SEARCH_FALSE_ALARM))
+                     fit.chi2_gain, 3, ev, X @ fit.beta, X, search_bar=search_bar, search_calibrated=True)
 
 
 #: the frequency of a periodic term is searched on this many points per DFT bin (then golden section)
