@@ -129,6 +129,7 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
             continue
         tau, tau_lines = _column(stem + "t.txt", "tau_s")
         _check_taus(stem + "t.txt", tau, tau_lines)
+        tau_rows = _rows(stem + "t.txt", tau_lines)
         files.append(stem + "t.txt")
         k = np.rint(tau / tau[0])
         rate = 1.0 / float(tau[0])
@@ -142,8 +143,7 @@ def _imu_utils(path: str, m: re.Match) -> CurveFile:
             if len(adev) != len(tau):
                 raise FogmonError(f"{f}: {len(adev)} values for the {len(tau)} taus of {stem}t.txt")
             files.append(f)
-            curves.append(Curve(sensor, axis, tau, adev * scale,
-                                rows=tuple(f"{stem}t.txt: line {i}" for i in tau_lines)))
+            curves.append(Curve(sensor, axis, tau, adev * scale, rows=tau_rows))
     if not curves:
         raise FogmonError(f"{path}: no imu_utils axis file (data_{name}_{sim}<gyr|acc>_<x|y|z>.txt) beside it")
     notes = ["imu_utils: fully overlapping estimator; taus are multiples of the mean sample period measured from "
@@ -176,6 +176,11 @@ def _column(path: str, what: str) -> tuple[np.ndarray, list[int]]:
     if len(vals) < 2:
         raise FogmonError(f"{path}: needs at least 2 values, one per line ({what})")
     return np.array(vals), at
+
+
+def _rows(path: str, lines: list[int]) -> tuple[str, ...]:
+    """Where each value stands (``Curve.rows``): "FILE: line L" for each of ``lines``."""
+    return tuple(f"{path}: line {i}" for i in lines)
 
 
 def _check_taus(path: str, tau: np.ndarray, at: list[int]) -> None:
@@ -234,7 +239,7 @@ def _allan_variance_ros(path: str, lines: list[str]) -> CurveFile:
     if ok.sum() < 2:
         raise FogmonError(f"{path}: fewer than 2 rows with values")
     tau_ok = tau[ok]
-    rows_ok = tuple(f"{path}: line {i}" for i, good in zip(at, ok, strict=True) if good)
+    rows_ok = _rows(path, [i for i, good in zip(at, ok, strict=True) if good])
     curves = [Curve(sensor, axis, tau_ok, a[ok, 1 + j] * (UG_PER_G / G0_MPS2 if sensor == "accel" else 3600.0),
                     rows=rows_ok)
               for j, (sensor, axis) in enumerate(AVR_COLUMNS)]
@@ -271,7 +276,7 @@ def _csv(path: str, lines: list[str]) -> CurveFile:
     adev_col = next(n for n in cols if n in CSV_ADEV)
     sensor, scale = CSV_ADEV[adev_col]
     return CurveFile("csv", (path,), [Curve(sensor, "", c["tau_s"], c[adev_col] * scale, c.get("n_terms"),
-                                            c.get("edf"), tuple(f"{path}: line {i}" for i in at))])
+                                            c.get("edf"), _rows(path, at))])
 
 
 def _csv_header(cols: list[str], path: str, i: int) -> list[str]:
