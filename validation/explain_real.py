@@ -16,7 +16,8 @@ fitted from the recording) and `fogmon replay` (console summary), then
   coefficient-jump events;
 - checks, each PASS/FAIL with its numbers: every effect lowered the score; no list cut
   (every cluster of raw samples beyond 8 MAD is a listed glitch, an outlier listed in
-  the file an `outliers` effect names, or inside a platform_motion warning, and each
+  the file an `outliers` effect names, a spike a `spikes` warning lists in the outliers
+  file, or inside a platform_motion warning, and each
   list holds as many as its effect counts); regions
   inside the record; a known transient located (a region, or the platform_motion warning
   of a transient that moved the platform, holding its time, shorter than 20 % of the
@@ -128,24 +129,30 @@ def effect_text(e: dict) -> str:
     return f"{e['kind']} ({what}): score {e['score_before']:.3g} -> {e['score_after']:.3g}"
 
 
-def outlier_listing(rep: dict, report_dir: Path) -> tuple[np.ndarray, int, int]:
+def outlier_listing(rep: dict, report: Path) -> tuple[np.ndarray, int, int, np.ndarray]:
     """(times of every outlier listed in the files the report's ``outliers`` effects
-    name, rows read, outliers the effects count)."""
+    name, rows read, outliers the effects count, times of the spikes a ``spikes`` warning
+    lists in the report's outliers file when no outliers effect holds it)."""
+    def rows(f: Path) -> np.ndarray:
+        return np.atleast_1d(np.loadtxt(f, delimiter=",", comments="#", skiprows=3, usecols=0))
     times, counted = [], 0
     for e in rep["effects"]:
         if e["kind"] == "outliers":
             counted += int(e["params"]["count"])
-            f = report_dir / e["params"]["times_file"]
+            f = report.parent / e["params"]["times_file"]
             if e["params"]["times_file"] and f.is_file():
-                times.append(np.atleast_1d(np.loadtxt(f, delimiter=",", comments="#", skiprows=3, usecols=0)))
+                times.append(rows(f)[:counted])
     t = np.concatenate(times) if times else np.zeros(0)
-    return t, len(t), counted
+    warned = np.zeros(0)
+    if not times and any(w["kind"] == "spikes" for w in rep.get("warnings", [])):
+        warned = rows(report.with_suffix(".outliers.csv"))
+    return t, len(t), counted, warned
 
 
 def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndarray, sample_rate_hz: float,
-           report_dir: Path) -> list:
-    """[(name, passed, numbers)] for one recording (``report_dir``: where the report and
-    the outliers file it names are)."""
+           report: Path) -> list:
+    """[(name, passed, numbers)] for one recording (``report``: the report's path, beside
+    it the outliers file)."""
     out = []
     t0, t1 = float(rec_t[0]), float(rec_t[-1]) + 1.0 / sample_rate_hz
     dur = t1 - t0
@@ -163,7 +170,7 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
     warns = [w for w in rep.get("warnings", []) if w.get("kind") == "platform_motion"]
     tol = GLITCH_TOL_SAMPLES / sample_rate_hz
     # an outlier population accounts for a cluster when its file lists an outlier there
-    o_times, o_rows, o_count = outlier_listing(rep, report_dir)
+    o_times, o_rows, o_count, w_times = outlier_listing(rep, report)
 
     def at(ts, a, b):
         return bool(np.any((ts >= a - tol) & (ts <= b + tol)))
@@ -173,15 +180,18 @@ def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndar
 
     by_glitch = sum(at(times, a, b) for a, b in clusters)
     by_outlier = sum(at(o_times, a, b) for a, b in clusters)
+    by_warning = sum(at(w_times, a, b) for a, b in clusters)
     by_motion = sum(in_motion(a, b) for a, b in clusters)
-    lost = sum(not (at(times, a, b) or at(o_times, a, b) or in_motion(a, b)) for a, b in clusters)
+    lost = sum(not (at(times, a, b) or at(o_times, a, b) or at(w_times, a, b) or in_motion(a, b))
+               for a, b in clusters)
     pop = (f"; outliers listed in the file {o_rows}, counted by the effect {o_count}"
            if any(e["kind"] == "outliers" for e in effects) else "")
-    out.append(("no list cut: every raw > 8 MAD outlier cluster is a listed glitch, a listed outlier or in a "
-                "platform_motion warning",
+    out.append(("no list cut: every raw > 8 MAD outlier cluster is a listed glitch, a listed outlier, a listed "
+                "spike or in a platform_motion warning",
                 lost == 0 and len(times) == stated and o_rows == o_count,
                 f"{n_out} raw samples beyond {OUTLIER_MADS:g} x {scale} in {len(clusters)} cluster(s): "
                 f"{by_glitch} at a listed glitch (+-{GLITCH_TOL_SAMPLES} samples), {by_outlier} at a listed outlier, "
+                f"{by_warning} at a spike a spikes warning lists, "
                 f"{by_motion} in a motion warning, {lost} unaccounted; glitches listed {len(times)}, counted in the "
                 f"evidence {stated}{pop}"))
 
@@ -317,7 +327,7 @@ def run_one(entry: dict, path: Path, tmp: Path) -> bool:
     passed = rp.returncode == 0
     if not passed:
         print("  [FAIL] fogmon replay runs")
-    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, sample_rate_hz, report.parent)
+    results = checks(entry, rep, blk.t_s, blk.rate_dph, blk.valid, sample_rate_hz, report)
     for name, ok, numbers in results:
         print(f"  [{'PASS' if ok else 'FAIL'}] {name}: {numbers}")
         passed &= ok

@@ -11,7 +11,7 @@ from fogmon.explain import detectors, mismatch
 from fogmon.explain.analysis import Analysis
 from fogmon.explain.candidates.base import Context
 from fogmon.explain.candidates.coefficients import NOISE_UNIT, effect_summary
-from fogmon.explain.candidates.spikes import spike_evidence
+from fogmon.explain.candidates.spikes import shoulder_text, spike_evidence
 from fogmon.sim.model import SensorModel
 
 #: A slow model term the record cannot test: its share of the model's Allan variance at
@@ -136,27 +136,45 @@ def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]],
     samples beyond its 1 % family-wise threshold - more than chance: when no outlier
     effect was accepted, the text says why neither description was (the refusals of
     ``glitches`` and ``outliers``, and why the tail is not a population); when one was
-    (``accepted``: the kinds), that these are left after it. ([], None) when the test
-    finds nothing beyond chance."""
+    (``accepted``: the kinds), that these are left after it; where the noise's broad
+    shoulder sets the threshold (candidates.spikes.shoulder_law), the samples beyond a
+    Gaussian noise's threshold are listed too and the text says they are that law's
+    chance extremes. ([], None) when nothing lies beyond a Gaussian noise's threshold."""
     ev = spike_evidence(ctx)
     idx = ev.glitch_idx
-    if not len(idx):
+    if not len(idx) and not len(ev.shoulder_idx):
         return [], None
-    listing = {"times_s": ctx.t_s[idx], "amplitudes_dph": ev.amp[idx], "abs_z": np.abs(ev.z[idx])}
-    found = (f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise; largest |z| "
-             f"{float(np.max(listing['abs_z'])):.1f}), more than chance")
+    shown = np.union1d(idx, ev.shoulder_idx)
+    listing = {"times_s": ctx.t_s[shown], "amplitudes_dph": ev.amp[shown], "abs_z": np.abs(ev.z[shown])}
+    largest = float(np.max(listing["abs_z"]))
+    found = (f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise{shoulder_text(ev)}; "
+             f"largest |z| {largest:.1f}), more than chance")
+    if not len(idx):
+        assert ev.shoulder is not None
+        law = ev.shoulder
+        text = (f"the noise is heavier-tailed than the model's Gaussian: the spike test's statistic is a broad "
+                f"shoulder ({100 * law.eps:.3g} % of samples {law.s:.3g}x wider than the rest), which no "
+                f"catalogue effect describes; the {len(shown)} sample(s) beyond a Gaussian noise's 1 % family-wise "
+                f"|z| = {ev.gauss_thr:.2f} (largest {largest:.1f}) lie within that law's own, |z| = {ev.thr:.2f}, so "
+                f"none is named a glitch: every one is listed in the outliers file")
+        return [_spikes_warning(ctx, text)], listing
+    listed = ("every one is listed in the outliers file" if not len(ev.shoulder_idx) else
+              f"the outliers file lists all {len(shown)} beyond a Gaussian noise's |z| = {ev.gauss_thr:.2f}, the "
+              f"shoulder's chance extremes among them")
     if accepted:
         text = (f"after the accepted {' and '.join(accepted)} effect, the spike test of the final residual still "
-                f"{found}: every one is listed in the outliers file"
-                + (" after the outliers" if "outliers" in accepted else ""))
+                f"{found}: {listed}" + (" after the outliers" if "outliers" in accepted else ""))
     else:
         why = [f"{k}: {w}" for k, _, w in rejected if k in ("glitches", "outliers")]
         if ev.not_population:
             why.append(f"outliers: not a population: {ev.not_population}")
         text = (f"the spike test {found}, but no outlier effect was accepted"
-                f" ({'; '.join(why) or 'no spike description passed its bar'}): every one is listed in the "
-                f"outliers file")
-    return [{"kind": "spikes", "t_start_s": float(ctx.t_s[0]), "t_end_s": float(ctx.t_s[-1]), "text": text}], listing
+                f" ({'; '.join(why) or 'no spike description passed its bar'}): {listed}")
+    return [_spikes_warning(ctx, text)], listing
+
+
+def _spikes_warning(ctx: Context, text: str) -> dict:
+    return {"kind": "spikes", "t_start_s": float(ctx.t_s[0]), "t_end_s": float(ctx.t_s[-1]), "text": text}
 
 
 def lookalike_warnings(accepted, model: SensorModel, grid: mismatch.Grid) -> list[dict]:

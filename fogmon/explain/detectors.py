@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special, stats
+from scipy import optimize, special, stats
 
 from fogmon.explain.fitting import Whittle
 
@@ -155,6 +155,16 @@ class Contamination:
     def z_even(self) -> float:
         """|z| where a sample is as likely contaminated as clean (posterior 1/2)."""
         return math.sqrt(2.0 * math.log((1.0 - self.eps) * self.s / self.eps) / (1.0 - 1.0 / self.s ** 2))
+
+    def bonferroni_z(self, n_tests: int, alpha: float = 0.01) -> float:
+        """Two-sided |z| threshold with family-wise error ``alpha`` over ``n_tests`` when
+        z follows this law: (1 - eps) P(|Z| > t) + eps P(|Z| > t / s) = alpha / n_tests."""
+        target = alpha / max(n_tests, 1)
+        def excess(t: float) -> float:
+            return 2.0 * ((1.0 - self.eps) * stats.norm.sf(t) + self.eps * stats.norm.sf(t / self.s)) - target
+        lo = bonferroni_z(n_tests, alpha)
+        hi = max(self.s, 1.0) * (lo + 2.0)
+        return float(optimize.brentq(excess, lo, hi)) if excess(lo) > 0 else lo
 
 
 def fit_contamination(z: np.ndarray, iterations: int = 100) -> Contamination | None:

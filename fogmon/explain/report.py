@@ -370,15 +370,16 @@ def write_outliers(res: Result, path: str) -> int:
         if res.spikes is not None:   # left after the population: listed after its outliers
             left = len(res.spikes["times_s"])
             what = (f"{len(lst['times_s'])} outlier samples, then the {left} spike(s) the final residual still "
-                    f"holds beyond the spike test's threshold (not removed; the spikes warning)")
+                    f"holds beyond a Gaussian noise's 1 % family-wise spike threshold (not removed; the spikes "
+                    f"warning)")
             lst = {k: np.concatenate([lst[k], res.spikes[k]]) for k in ("times_s", "amplitudes_dph", "abs_z")}
             amp += " or, for the spikes left, its GLS amplitude (deg/h)"
     elif res.spikes is not None:  # more than chance, no outlier effect: the `spikes` warning's list
         lst, amp = res.spikes, "the spike's GLS amplitude (deg/h), not removed"
         after = any(a.cand.kind == "glitches" for a in res.accepted)
-        what = (f"{len(lst['times_s'])} spikes " + ("the final residual still holds beyond the spike test's "
-                                                     "threshold after the glitches" if after else
-                                                     "beyond the spike test's threshold, no effect accepted"))
+        what = (f"{len(lst['times_s'])} spikes " + ("the final residual still holds " if after else "")
+                + "beyond a Gaussian noise's 1 % family-wise spike threshold"
+                + (" after the glitches" if after else ", no effect accepted"))
     else:
         _remove_stale_outliers(path)
         return 0

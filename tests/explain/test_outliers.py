@@ -56,6 +56,21 @@ def test_contamination_fit_finds_a_rare_wide_component_and_not_in_normal_data():
     assert 3.0 < law.z_even < 6.0 and law.gain > 1000
 
 
+def test_a_laws_family_wise_threshold_holds_its_level():
+    """Contamination.bonferroni_z: N(0, 1)'s threshold when the law is N(0, 1); for a
+    shoulder, the |z| that 1 % of records of n samples drawn from the law exceed."""
+    assert detectors.Contamination(1e-12, 1.5, 0.0).bonferroni_z(10_000) == pytest.approx(
+        detectors.bonferroni_z(10_000), abs=1e-6)
+    law = detectors.Contamination(0.05, 2.0, 0.0)
+    n, records = 1000, 10_000
+    thr = law.bonferroni_z(n, alpha=0.05)
+    rng = np.random.default_rng(3)
+    z = rng.standard_normal((records, n)) * np.where(rng.random((records, n)) < law.eps, law.s, 1.0)
+    exceeded = np.mean(np.abs(z).max(axis=1) > thr)
+    assert thr > detectors.bonferroni_z(n, alpha=0.05) + 2.0
+    assert exceeded == pytest.approx(0.05, abs=0.007)   # 3 sd of the share: 0.0066
+
+
 def test_outlier_kind_is_simulated_as_a_poisson_spike_process():
     eff = heavy_tailed(3600.0)                  # 0.1 per sample at 10 Hz
     model = SensorModel(FS, 0.0, Noise(), [eff])

@@ -134,6 +134,34 @@ def test_spikes_left_after_an_accepted_outlier_effect_are_warned_of_and_listed(t
     assert write_outliers(res, str(path)) == 5
     lines = path.read_text().splitlines()
     assert lines[0] == ("# fogmon explain outliers of r.csv: all 2 outlier samples, then the 3 spike(s) the final "
-                        "residual still holds beyond the spike test's threshold (not removed; the spikes warning) "
+                        "residual still holds beyond a Gaussian noise's 1 % family-wise spike threshold (not removed; "
+                        "the spikes warning) "
                         "(none left out)")
     assert [float(ln.split(",")[0]) for ln in lines[3:]] == [1.0, 2.0, *t[[1000, 5000, 9000]]]
+
+
+def test_a_broad_shouldered_noise_names_no_glitch_and_lists_its_extremes(tmp_path):
+    """A noise heavier-shouldered than Gaussian (4 % of samples 1.8x wider, the model's N
+    its whole variance) has samples beyond N(0, 1)'s 1 % family-wise threshold by its
+    own law: no glitch is named, a `spikes` warning says why and lists them; far spikes
+    on top of that noise are still glitches."""
+    n = 2 ** 15
+    rng = np.random.default_rng(1001)
+    y = rng.standard_normal(n) * SIGMA
+    hit = rng.random(n) < 0.04
+    y[hit] *= 1.8
+    model = SensorModel(FS, 0.0, Noise(N_dpsh=N_CLEAN * (0.96 + 0.04 * 1.8 ** 2) ** 0.5))
+    t = np.arange(n) / FS
+    res = explain(Recording(t, y, {}, {"sample_rate_hz": "100"}), model, Options(n_boot=20, seed=2, workers=1))
+    rep = build_report(res, "s.csv", None)
+    assert_invariants(rep, 0.0, n / FS)
+    assert not any(e["kind"] in ("glitches", "outliers") for e in rep["effects"]), rep["effects"]
+    warn = [w for w in rep["warnings"] if w["kind"] == "spikes"]
+    assert len(warn) == 1 and warn[0]["text"].startswith("the noise is heavier-tailed than the model's Gaussian")
+    n_listed = write_outliers(res, str(tmp_path / "s.outliers.csv"))
+    assert n_listed == len(res.spikes["times_s"]) > 0
+    y[[3000, 20000]] += 14 * SIGMA
+    res = explain(Recording(t, y, {}, {"sample_rate_hz": "100"}), model, Options(n_boot=20, seed=2, workers=1))
+    glitch = [e for e in build_report(res, "s.csv", None)["effects"] if e["kind"] == "glitches"]
+    assert len(glitch) == 1 and sorted(np.round(np.array(glitch[0]["params"]["times_s"]) * FS)) == [3000, 20000]
+    assert "under the noise's own broad-shouldered law" in glitch[0]["evidence"]
