@@ -395,3 +395,8 @@ class BinnedPeriodogram:
         S = np.maximum(S, max(floor, 1e-300))
         terms = self.count * (np.log(S) + self.I / S)
         return float(np.sum(terms if keep is None else terms[keep]))
+
+    def deviances(self, S: np.ndarray, floor: float = 0.0) -> np.ndarray:
+        """:meth:`deviance` of each row of ``S`` (models x bins), over all bins."""
+        S = np.maximum(S, max(floor, 1e-300))
+        return (self.count * (np.log(S) + self.I / S)).sum(axis=1)

@@ -76,28 +76,30 @@ def _markov_se(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray, grid: np.nda
         P = shape(u)
         return bp.deviance(S0 + _newton_variance(bp, S0, P) * P, floor)
 
-    def dev_v(w: float) -> float:        # profiled over the correlation time
-        devs = [bp.deviance(S0 + w * shape(math.log(t)), floor) for t in grid]
-        j = int(np.argmin(devs))
-        a, b = math.log(grid[max(j - 1, 0)]), math.log(grid[min(j + 1, len(grid) - 1)])
-        res = optimize.minimize_scalar(lambda u: bp.deviance(S0 + w * shape(u), floor), bounds=(a, b),
-                                       method="bounded", options={"xatol": 1e-3})
-        return min(float(res.fun), devs[j])
+    shapes = np.array([shape(math.log(t)) for t in grid])
+
+    def dev_v(w: float) -> float:        # profiled over the correlation time (the grid's log-
+        d = bp.deviances(S0 + w * shapes, floor)   # even points, a parabola through the least)
+        j = int(np.argmin(d))
+        if 0 < j < len(d) - 1:
+            curv = d[j + 1] - 2.0 * d[j] + d[j - 1]
+            if curv > 0:
+                return float(d[j] - (d[j + 1] - d[j - 1]) ** 2 / (8.0 * curv))
+        return float(d[j])
 
     d_min = dev_tc(math.log(tc))
-    u_ends = [_crossing(dev_tc, math.log(tc), end, d_min + 1.0) for end in (u_lo, u_hi)]
+    u_ends = [_crossing(dev_tc, math.log(tc), end, d_min + 1.0, 1e-3) for end in (u_lo, u_hi)]
     r = math.sqrt(v)                     # sigma, profiled over the variance v = sigma^2
-    s_hi_bound = r * 8.0
-    s_ends = [_crossing(lambda x: dev_v(x * x), r, end, d_min + 1.0) for end in (0.0, s_hi_bound)]
+    s_ends = [_crossing(lambda x: dev_v(x * x), r, end, d_min + 1.0, 1e-3 * r) for end in (0.0, 8.0 * r)]
     return (s_ends[1] - s_ends[0]) / 2.0, (math.exp(u_ends[1]) - math.exp(u_ends[0])) / 2.0
 
 
-def _crossing(f, x0: float, end: float, level: float) -> float:
+def _crossing(f, x0: float, end: float, level: float, xtol: float) -> float:
     """Where ``f`` (at its least near ``x0``) rises to ``level`` between ``x0`` and
-    ``end``, or ``end`` when it does not."""
+    ``end`` (to ``xtol``), or ``end`` when it does not."""
     if f(end) <= level:
         return end
-    return float(optimize.brentq(lambda x: f(x) - level, x0, end, xtol=1e-6 * max(abs(x0), 1e-300)))
+    return float(optimize.brentq(lambda x: f(x) - level, x0, end, xtol=xtol))
 
 
 def _markov_fit(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray,
@@ -118,13 +120,18 @@ def _markov_fit(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray,
     best = max((f for f in fits if f is not None), default=None, key=lambda f: f[0])
     if best is None or best[1] >= grid[-1] or best[1] <= grid[0]:
         return None
-    # the correlation time between the grid's neighbours (its steps are ~20 % wide: a
-    # step's worth of error in tau_c moved sigma by more than its standard error)
+    # the correlation time between the grid's log-even neighbours (its steps are ~20 %
+    # wide: a step's worth of error in tau_c moved sigma by more than its standard error):
+    # the vertex of the parabola through the three gains
     i = int(np.searchsorted(grid, best[1]))
-    res = optimize.minimize_scalar(lambda u: -(fit(math.exp(u)) or (-np.inf,))[0],
-                                   bounds=(math.log(grid[i - 1]), math.log(grid[i + 1])),
-                                   method="bounded", options={"xatol": 1e-3})
-    fine = fit(math.exp(float(res.x)))
+    lo, hi = fits[i - 1], fits[i + 1]
+    if lo is None or hi is None:
+        return best
+    curv = lo[0] - 2.0 * best[0] + hi[0]
+    if not curv < 0:
+        return best
+    step = math.log(grid[i + 1] / grid[i])
+    fine = fit(best[1] * math.exp(step * 0.5 * (lo[0] - hi[0]) / curv))
     return fine if fine is not None and fine[0] > best[0] else best
 
 
