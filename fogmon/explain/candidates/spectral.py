@@ -87,16 +87,18 @@ def _markov_se(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray, grid: np.nda
                 return float(d[j] - (d[j + 1] - d[j - 1]) ** 2 / (8.0 * curv))
         return float(d[j])
 
-    d_min = dev_tc(math.log(tc))
-    u_ends = [_crossing(dev_tc, math.log(tc), end, d_min + 1.0, 1e-3) for end in (u_lo, u_hi)]
+    u_ends = [_crossing(dev_tc, math.log(tc), end, 1e-3) for end in (u_lo, u_hi)]
     r = math.sqrt(v)                     # sigma, profiled over the variance v = sigma^2
-    s_ends = [_crossing(lambda x: dev_v(x * x), r, end, d_min + 1.0, 1e-3 * r) for end in (0.0, 8.0 * r)]
+    s_ends = [_crossing(lambda x: dev_v(x * x), r, end, 1e-3 * r) for end in (0.0, 8.0 * r)]
     return (s_ends[1] - s_ends[0]) / 2.0, (math.exp(u_ends[1]) - math.exp(u_ends[0])) / 2.0
 
 
-def _crossing(f, x0: float, end: float, level: float, xtol: float) -> float:
-    """Where ``f`` (at its least near ``x0``) rises to ``level`` between ``x0`` and
-    ``end`` (to ``xtol``), or ``end`` when it does not."""
+def _crossing(f, x0: float, end: float, xtol: float) -> float:
+    """Where the deviance profile ``f`` rises 1 above its value at the estimate ``x0``
+    between ``x0`` and ``end`` (to ``xtol``), or ``end`` when it does not. (Each profile
+    is read against its own value at the estimate: the two profiles' approximations of
+    the least differ by a little, and a real profile can be flat or rough there.)"""
+    level = f(x0) + 1.0
     if f(end) <= level:
         return end
     return float(optimize.brentq(lambda x: f(x) - level, x0, end, xtol=xtol))
