@@ -131,22 +131,27 @@ def effect_text(e: dict) -> str:
 
 def outlier_listing(rep: dict, report: Path) -> tuple[np.ndarray, int, int, np.ndarray]:
     """(times of every outlier listed in the files the report's ``outliers`` effects
-    name, rows read, outliers the effects count, times of the spikes a ``spikes`` warning
-    lists in the report's outliers file when no outliers effect holds it)."""
-    def rows(f: Path) -> np.ndarray:
-        return np.atleast_1d(np.loadtxt(f, delimiter=",", comments="#", skiprows=3, usecols=0))
-    times, counted = [], 0
+    name, how many rows they hold, outliers the effects count, times of the spikes a
+    ``spikes`` warning lists: after the outliers in an effect's file, whose header says
+    how many, or alone in the report's outliers file)."""
+    def rows(f: Path) -> tuple[np.ndarray, int]:
+        head = f.read_text(encoding="utf-8").split("\n", 1)[0]
+        left = re.search(r"then the (\d+) spike", head)
+        t = np.atleast_1d(np.loadtxt(f, delimiter=",", comments="#", skiprows=3, usecols=0))
+        return t, int(left.group(1)) if left else 0
+    times, warned, counted = [], [], 0
     for e in rep["effects"]:
         if e["kind"] == "outliers":
             counted += int(e["params"]["count"])
             f = report.parent / e["params"]["times_file"]
             if e["params"]["times_file"] and f.is_file():
-                times.append(rows(f)[:counted])
-    t = np.concatenate(times) if times else np.zeros(0)
-    warned = np.zeros(0)
+                t, left = rows(f)
+                times.append(t[:len(t) - left])
+                warned.append(t[len(t) - left:])
     if not times and any(w["kind"] == "spikes" for w in rep.get("warnings", [])):
-        warned = rows(report.with_suffix(".outliers.csv"))
-    return t, len(t), counted, warned
+        warned.append(rows(report.with_suffix(".outliers.csv"))[0])
+    t = np.concatenate(times) if times else np.zeros(0)
+    return t, len(t), counted, np.concatenate(warned) if warned else np.zeros(0)
 
 
 def checks(entry: dict, rep: dict, rec_t: np.ndarray, y: np.ndarray, ok: np.ndarray, sample_rate_hz: float,

@@ -147,8 +147,6 @@ def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]],
     shown = np.union1d(idx, ev.shoulder_idx)
     listing = {"times_s": ctx.t_s[shown], "amplitudes_dph": ev.amp[shown], "abs_z": np.abs(ev.z[shown])}
     largest = float(np.max(listing["abs_z"]))
-    found = (f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise{shoulder_text(ev)}; "
-             f"largest |z| {largest:.1f}), more than chance")
     if not len(idx):
         assert ev.shoulder is not None
         law = ev.shoulder
@@ -158,6 +156,8 @@ def spike_warnings(ctx: Context, rejected: list[tuple[str, float, str]],
                 f"|z| = {ev.gauss_thr:.2f} (largest {largest:.1f}) lie within that law's own, |z| = {ev.thr:.2f}, so "
                 f"none is named a glitch: every one is listed in the outliers file")
         return [_spikes_warning(ctx, text)], listing
+    found = (f"finds {len(idx)} sample(s) beyond |z| = {ev.thr:.2f} (1 % family-wise{shoulder_text(ev)}; "
+             f"largest |z| {largest:.1f}), more than chance")
     listed = ("every one is listed in the outliers file" if not len(ev.shoulder_idx) else
               f"the outliers file lists all {len(shown)} beyond a Gaussian noise's |z| = {ev.gauss_thr:.2f}, the "
               f"shoulder's chance extremes among them")

@@ -392,11 +392,13 @@ class BinnedPeriodogram:
         """-2 ln(Whittle likelihood) (up to a constant) of PSD values S at the bins (only
         the ``keep`` ones, when given), S floored at ``floor`` (a finite record's
         periodogram cannot follow a filter's zero: leakage from the rest of the band fills it)."""
-        S = np.maximum(S, max(floor, 1e-300))
-        terms = self.count * (np.log(S) + self.I / S)
+        terms = self._terms(S, floor)
         return float(np.sum(terms if keep is None else terms[keep]))
 
     def deviances(self, S: np.ndarray, floor: float = 0.0) -> np.ndarray:
         """:meth:`deviance` of each row of ``S`` (models x bins), over all bins."""
+        return self._terms(S, floor).sum(axis=1)
+
+    def _terms(self, S: np.ndarray, floor: float) -> np.ndarray:
         S = np.maximum(S, max(floor, 1e-300))
-        return (self.count * (np.log(S) + self.I / S)).sum(axis=1)
+        return self.count * (np.log(S) + self.I / S)

@@ -82,9 +82,9 @@ def _markov_se(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray, grid: np.nda
         d = bp.deviances(S0 + w * shapes, floor)   # even points, a parabola through the least)
         j = int(np.argmin(d))
         if 0 < j < len(d) - 1:
-            curv = d[j + 1] - 2.0 * d[j] + d[j - 1]
-            if curv > 0:
-                return float(d[j] - (d[j + 1] - d[j - 1]) ** 2 / (8.0 * curv))
+            vertex = _parabola_vertex(d[j - 1], d[j], d[j + 1])
+            if vertex is not None:
+                return vertex[1]
         return float(d[j])
 
     u_ends = [_crossing(dev_tc, math.log(tc), end, 1e-3) for end in (u_lo, u_hi)]
@@ -127,14 +127,20 @@ def _markov_fit(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray,
     # the vertex of the parabola through the three gains
     i = int(np.searchsorted(grid, best[1]))
     lo, hi = fits[i - 1], fits[i + 1]
-    if lo is None or hi is None:
+    vertex = None if lo is None or hi is None else _parabola_vertex(-lo[0], -best[0], -hi[0])
+    if vertex is None:
         return best
-    curv = lo[0] - 2.0 * best[0] + hi[0]
-    if not curv < 0:
-        return best
-    step = math.log(grid[i + 1] / grid[i])
-    fine = fit(best[1] * math.exp(step * 0.5 * (lo[0] - hi[0]) / curv))
+    fine = fit(best[1] * (grid[i + 1] / grid[i]) ** vertex[0])
     return fine if fine is not None and fine[0] > best[0] else best
+
+
+def _parabola_vertex(ym: float, y0: float, yp: float) -> tuple[float, float] | None:
+    """The least of the parabola through (-1, ym), (0, y0), (1, yp): its abscissa (in
+    steps) and value, or None when the three points are not convex."""
+    curv = ym - 2.0 * y0 + yp
+    if not curv > 0:
+        return None
+    return 0.5 * (ym - yp) / curv, float(y0 - (yp - ym) ** 2 / (8.0 * curv))
 
 
 def _markov_gain(ctx: Context, bp: BinnedPeriodogram, S0: np.ndarray, tc: float, v: float) -> float:

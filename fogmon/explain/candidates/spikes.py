@@ -162,13 +162,13 @@ def _shoulder(law: detectors.Contamination | None, z: np.ndarray, tested: np.nda
     if not shoulder_law(law, sep, penalty):
         return None
     assert law is not None
+    thr = law.bonferroni_z(nv)
     for _ in range(SHOULDER_REFITS):
-        inner = detectors.fit_contamination(z[tested & (np.abs(z) <= law.bonferroni_z(nv))])
-        if not shoulder_law(inner, sep, penalty) or inner is None:
+        inner = detectors.fit_contamination(z[tested & (np.abs(z) <= thr)])
+        if inner is None or not shoulder_law(inner, sep, penalty):
             break
-        done = abs(inner.bonferroni_z(nv) - law.bonferroni_z(nv)) < 0.01
-        law = inner
-        if done:
+        law, thr_was, thr = inner, thr, inner.bonferroni_z(nv)
+        if abs(thr - thr_was) < 0.01:
             break
     return law
 
