@@ -10,9 +10,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from fogmon.explain import detectors, mismatch
-from fogmon.explain.candidates.base import Candidate, Context, in_passband, white_level_rms_dpsh
+from fogmon.explain.candidates.base import Candidate, Context, calibrated_psd, white_level_rms_dpsh
 from fogmon.explain.candidates.spikes import spike_scan
-from fogmon.explain.fitting import Whittle, calibrate_psd, model_psd, rfft_omega
+from fogmon.explain.fitting import Whittle, model_psd, rfft_omega
 from fogmon.sim.model import SensorModel
 
 
@@ -41,17 +41,13 @@ def whittle_context(stoch: SensorModel, ctx_aux: dict, t: np.ndarray, valid: np.
     n = len(y)
     omega = rfft_omega(n)
     S_model = model_psd(stoch, omega, n, white_level_rms_dpsh(stoch, t, ctx_aux))
-    S = np.maximum(S_model, 1e-4 * np.median(S_model[1:]))  # a PSD near 0 must not give one bin all the weight
     if copy:
         yy = np.where(valid, y, 0.0)
     else:
         yy = y
         yy[~valid] = 0.0
     Yf = np.fft.rfft(yy)
-    keep = in_passband(stoch, omega)
-    S_cal = np.full(len(S), np.inf)
-    S_cal[keep] = calibrate_psd(S[keep], Yf[keep], n)  # a low-pass's pass band: the bins 0..K
-    wh = Whittle(S_cal, n, valid)
+    wh = Whittle(calibrated_psd(stoch, S_model, Yf, n), n, valid)
     # The circular DFT joins the record's last sample to its first; for blue
     # (quantization) noise the angle mismatch there is a one-sample rate spike at index 0
     # that the GLS sees clearly: project it out (a nuisance regressor) before any test.

@@ -195,6 +195,8 @@ class Whittle:
         if n % 2 == 0:
             mult[-1] = 1.0
         self.w = mult / (n * S)
+        #: how often each rfft bin counts in a sum over the full DFT (0 for the mean's bin 0)
+        self.mult = mult
         self.valid = None if valid is None or valid.all() else valid
         #: the DFT of the valid mask: the mean's nuisance column when there are gaps
         self.ones = None if self.valid is None else np.fft.rfft(self.valid.astype(np.float64))
@@ -227,6 +229,30 @@ class Whittle:
             cov = np.full_like(A, np.nan)
         beta = cov @ b
         return GlsFit(beta, cov, float(b @ beta))
+
+    def weights(self, Xf: np.ndarray, cov: np.ndarray) -> np.ndarray:
+        """The estimator of :meth:`gls` (its covariance ``cov``, of Xf) as weights in time:
+        a (p x n) with beta = a @ y for the residual y (0 where not valid; a is 0 there),
+        the mean profiled out as in :meth:`gls`. sum_k w_k Re(conj(X_k) Y_k) is
+        irfft(X_k / S_k) . y (w_k = mult_k / (n S_k), bin 0 unweighted)."""
+        X = Xf.reshape(len(self.w), -1)
+        inv_s = np.where(self.w > 0, 1.0 / self.S, 0.0)
+        g = np.fft.irfft(X * inv_s[:, None], self.n, axis=0).T
+        if self.ones is not None:
+            A1, _ = weighted_products(self.w, X, np.zeros(len(self.w), dtype=np.complex128), lead=self.ones)
+            if A1[0, 0] > 0:
+                g = g - np.outer(A1[1:, 0] / A1[0, 0], np.fft.irfft(self.ones * inv_s, self.n))
+        a = cov @ g
+        if self.valid is not None:
+            a[:, ~self.valid] = 0.0
+        return a
+
+    def circulant_covs(self, a: np.ndarray, *psds: np.ndarray) -> list[np.ndarray]:
+        """Covariance (p x p) of the functionals a @ y (a: p x n) of noise of each PSD in
+        ``psds`` (at the rfft bins) as the Whittle likelihood takes it (the record circular,
+        bins independent; bin 0, the mean, left out): sum_k mult_k S_k A_k conj(A_k)' / n."""
+        Af = np.fft.rfft(a, axis=1)
+        return [((Af * (self.mult * np.where(self.mult > 0, S, 0.0))) @ Af.conj().T).real / self.n for S in psds]
 
     def chi2(self, Rf: np.ndarray) -> float:
         """Whittle chi-square of a transformed residual."""

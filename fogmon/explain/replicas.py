@@ -28,6 +28,7 @@ import math
 import numpy as np
 from scipy import fft as sfft
 
+from fogmon.explain.fitting import noise_psd, rfft_omega
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, SensorModel
 from fogmon.sim.noise import default_flicker_tau_hi_s, flicker_taus, white_std_dph
@@ -63,6 +64,9 @@ class Replicas:
             self.white_sd = white_std_dph(np.maximum(level, 0.0), fs)
             white_var = 0.0
         q2 = (float(nz.Q_arcsec) * fs) ** 2
+        #: the law's terms as ``law_psd`` reads them
+        self.ar1, self.Q_arcsec, self.K_dphsh = ar1, float(nz.Q_arcsec), float(nz.K_dphsh)
+        self.white_var_mean = white_var if self.white_sd is None else float(np.mean(self.white_sd ** 2))
         self.L = L = _even_fast_len(max(2 * (n - 1), 2))
         self.sqrt_lambda = _embedding_sqrt_eigenvalues(L, fs, white_var, q2, ar1)
         self.k_step = float(nz.K_dphsh) / 60.0 * math.sqrt(1.0 / fs)
@@ -94,6 +98,35 @@ class Replicas:
             rate = fx.BandwidthFilter(e.params, self.sample_rate_hz).apply(rate)
         rate[~self.valid] = np.nan
         return rate
+
+    def functional_cov(self, a: np.ndarray) -> np.ndarray:
+        """The exact covariance (p x p) of the functionals a @ r of a draw r (a: p x n, 0
+        where not valid) under the Gaussian terms of the law: the stationary ones through
+        the circulant embedding the draws use (a zero-padded to L: a' Sigma a = sum over
+        the L bins of lambda |A|^2 / L), a white level that varies (sum a^2 sd^2)
+        and the rate random walk (a cumulative sum from 0: k_step^2 sum_s (sum_t>=s a_t)^2).
+        The other noise-type effects and the bandwidth filters are left out."""
+        a = np.atleast_2d(np.asarray(a, dtype=np.float64))
+        V = np.zeros((a.shape[0], a.shape[0]))
+        if self.sqrt_lambda is not None:
+            Af = np.fft.rfft(a, self.L, axis=1)
+            mult = np.full(Af.shape[1], 2.0)
+            mult[0] = mult[-1] = 1.0
+            lam = self.sqrt_lambda.astype(np.float64) ** 2 * (2.0 / self.L)  # float32's 1e-7 is plenty here
+            V += ((Af * (mult * lam)) @ Af.conj().T).real / self.L
+        if self.white_sd is not None:
+            V += (a * self.white_sd ** 2) @ a.T
+        if self.k_step:
+            tails = np.cumsum(a[:, ::-1], axis=1)[:, ::-1]
+            V += self.k_step ** 2 * (tails @ tails.T)
+        return V
+
+    def law_psd(self, n: int) -> np.ndarray:
+        """The PSD ((deg/h)^2 per unit normalized frequency) of the terms ``functional_cov``
+        counts at the rfft bins of ``n`` samples, as a Whittle fit takes it
+        (``fitting.noise_psd``; a varying white level at its mean square); +inf at bin 0."""
+        S = noise_psd(rfft_omega(n), self.sample_rate_hz, self.Q_arcsec, 0.0, self.K_dphsh, tuple(self.ar1))
+        return S + self.white_var_mean
 
     def _buffer(self, name: str, size: int) -> np.ndarray:
         """A float32 work array kept between draws (not pickled): the allocations of a

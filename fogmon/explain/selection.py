@@ -15,10 +15,11 @@ from fogmon.explain import lookalike, mismatch
 from fogmon.explain.analysis import Analysis, analyse, rescored, whittle_context
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, extended, settled
 from fogmon.explain.candidates import CANDIDATES, Candidate, Context
-from fogmon.explain.candidates.base import centred, flicker_psd
+from fogmon.explain.candidates.base import EXACT_LAW, LONG_MEMORY, centred, flicker_psd
 from fogmon.explain.fitting import Whittle
 from fogmon.explain.options import MAX_GROWTH, SETTLE_SE
 from fogmon.explain.replicas import Replicas
+from fogmon.explain.scan_null import calibrated_kinds
 from fogmon.sim.model import SensorModel
 
 #: how many times a kind may be added (several spectral lines are common)
@@ -89,10 +90,12 @@ class Setting:
         ctx = whittle_context(stoch, self.aux, self.t_s, self.valid, y, copy=False)
         del y
         ctx.meta = dict(self.meta)
+        ctx.cache[LONG_MEMORY] = bool(calibrated_kinds(stoch, float(self.t_s[-1] - self.t_s[0])))
         maps = mismatch.log_avar(ctx.residual(np.nan), ctx.valid, self.grid)
         null, cands = self.settled(stoch, null, maps, ctx, counts)
         fit = Fit(stoch, null, ctx, cands, analyse(ctx, null, self.grid, cands, contradicted, maps))
-        for key in ("spike_scan", "spikes", "model_psd"):  # record-length arrays, computed again if needed (memory)
+        # record-length arrays, computed again if needed (memory)
+        for key in ("spike_scan", "spikes", "model_psd", EXACT_LAW):
             ctx.cache.pop(key, None)
         return fit
 

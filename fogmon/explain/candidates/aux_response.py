@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from fogmon.explain.candidates.base import Candidate, Context
+from fogmon.explain.candidates.base import Candidate, Context, exact_cov_fit, exact_law
 from fogmon.explain.candidates.mean import SEARCH_FALSE_ALARM
 from fogmon.explain.fitting import MIN_BAND_BINS, low_band_flicker
 from fogmon.explain.physics import physics_of
@@ -232,6 +232,9 @@ def aux_response(ctx: Context) -> Candidate | None:
     se = np.sqrt(np.maximum(np.diag(cov), 0.0)) / lib.scale[sel]
     feats = [lib.features[j] for j in sel]
     X = np.column_stack([feature_values(f, ctx.t_s, ctx.aux, SMOOTH_S, DIFF_STEP_S) for f in feats])
+    if exact_law(ctx) is not None:  # long memory: the errors of the design's GLS under the model's law
+        Xf = ctx.wh.fft(X)
+        se = exact_cov_fit(ctx, ctx.wh.gls(Xf, ctx.Yf), ctx.wh, Xf).se
     law = X @ coef
     offset = -float(np.mean(law[ctx.valid]))
     meta = getattr(ctx, "meta", {})

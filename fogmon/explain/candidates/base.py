@@ -15,11 +15,13 @@ from fogmon.explain.fitting import (
     BinnedPeriodogram,
     GlsFit,
     Whittle,
+    calibrate_psd,
     filter_gain2,
     low_band_flicker,
     model_psd,
     rfft_omega,
 )
+from fogmon.explain.replicas import Replicas
 from fogmon.sim import effects as fx
 from fogmon.sim.model import EFFECT_KINDS, Effect, Noise, SensorModel, validate_effect
 
@@ -162,12 +164,82 @@ def judged_gls(ctx: Context, X: np.ndarray, Xf: np.ndarray | None = None) -> Gls
     significant flicker excess (``flicker_psd``), so a drift, step or settling that is
     significant only against a model PSD extrapolated below its calibrated band - not
     against the sensor's own bias wander - loses that significance (its gain,
-    coefficients and standard errors are the refit's)."""
+    coefficients and standard errors are the refit's). Where the model's noise has long
+    memory, its covariance is the estimator's under the model's law (``exact_cov_fit``)."""
+    return judged_whittle(ctx, X, Xf)[0]
+
+
+def judged_whittle(ctx: Context, X: np.ndarray, Xf: np.ndarray | None = None) -> tuple[GlsFit, Whittle]:
+    """``judged_gls`` and the Whittle GLS it was fitted by (``ctx.wh``, or the raised PSD's)."""
     if Xf is None:
         Xf = ctx.wh.fft(X)
-    fit = ctx.wh.gls(Xf, ctx.Yf)
+    wh = ctx.wh
+    fit = wh.gls(Xf, ctx.Yf)
     S = flicker_psd(ctx, X.reshape(ctx.n, -1) @ fit.beta)
-    return fit if S is ctx.wh.S else Whittle(S, ctx.n, ctx.valid).gls(Xf, ctx.Yf)
+    if S is not wh.S:
+        wh = Whittle(S, ctx.n, ctx.valid)
+        fit = wh.gls(Xf, ctx.Yf)
+    return (fit if exact_law(ctx) is None else exact_cov_fit(ctx, fit, wh, Xf)), wh
+
+
+#: ``Context.cache`` keys: LONG_MEMORY True marks the record's own context (not a bootstrap
+#: replicate's) when its model's noise has long memory (scan_null.calibrated_kinds); the
+#: mean-type fits' standard errors are then those of their estimator under the model's law
+#: (``exact_cov_fit``), held under EXACT_LAW while in use (``exact_law``)
+LONG_MEMORY, EXACT_LAW = "long_memory", "exact_law"
+
+
+def exact_law(ctx: Context) -> Replicas | None:
+    """The law of the context's stochastic model (``replicas.Replicas``) when its errors
+    are to be exact (``LONG_MEMORY``), built once per context (and again after a
+    selection round lets it go: memory), else None."""
+    if not ctx.cache.get(LONG_MEMORY):
+        return None
+    if EXACT_LAW not in ctx.cache:
+        ctx.cache[EXACT_LAW] = Replicas(ctx.stoch, ctx.t_s, ctx.aux, ctx.valid)
+    return ctx.cache[EXACT_LAW]
+
+
+def exact_cov_fit(ctx: Context, fit: GlsFit, wh: Whittle, Xf: np.ndarray) -> GlsFit:
+    """``fit`` (of the design ``Xf`` to the context's residual by ``wh``) with the covariance
+    its estimator has under the model's law (``exact_law``) rather than the one the Whittle
+    likelihood states. That likelihood takes the record as circular with independent DFT
+    bins; a rate random walk's wrap jump and the leakage of a steep (flicker) PSD break
+    that, and the stated errors of steps, ramps and settlings were 1.4-5.7x too small
+    (docs/explain.md, "Standard errors under long memory"); with gaps the stated covariance
+    is not even the circular one. The estimator is linear, beta = a @ y
+    (``Whittle.weights``), so its covariance under the law's Gaussian terms is exact
+    (``Replicas.functional_cov``, E). The model's other terms count as the Whittle fit
+    counts them (``Whittle.circulant_covs`` of the model's PSD less that of the law's
+    terms, ``Replicas.law_psd``); each coefficient's row and column are scaled by the
+    record's noise level against the model's as its weights see it (the model's PSD
+    calibrated to the residual less the fitted effect, ``calibrated_psd``, over the model's
+    own: the effect's power is not noise); and a PSD the fit raised for the residual's own
+    flicker excess (``flicker_psd``) adds what it raised, as the fit counts it."""
+    law = exact_law(ctx)
+    assert law is not None
+    a = wh.weights(Xf, fit.cov)
+    S_model = model_psd_full(ctx)
+    S_rec = calibrated_psd(ctx.stoch, S_model, ctx.Yf - Xf.reshape(len(ctx.Yf), -1) @ fit.beta, ctx.n)
+    model, terms, record, used, base = wh.circulant_covs(a, S_model, law.law_psd(wh.n), S_rec, wh.S, ctx.wh.S)
+    cov = law.functional_cov(a) + model - terms
+    with np.errstate(divide="ignore", invalid="ignore"):
+        level = np.sqrt(np.diag(record) / np.diag(model))
+    if not (np.all(np.isfinite(level)) and np.all(np.diag(cov) > 0)):
+        return fit
+    return GlsFit(fit.beta, cov * np.outer(level, level) + (used - base), fit.chi2_gain)
+
+
+def calibrated_psd(stoch: SensorModel, S_model: np.ndarray, Yf: np.ndarray, n: int) -> np.ndarray:
+    """The model's PSD ``S_model`` (at the rfft bins of ``n`` samples) floored at
+    LEAKAGE_FLOOR x its median and calibrated to the transformed residual ``Yf`` per octave
+    band (``fitting.calibrate_psd``) over the model's pass band (``in_passband``), +inf
+    outside it: the PSD of the candidates' fits (analysis.whittle_context)."""
+    S = np.maximum(S_model, LEAKAGE_FLOOR * np.median(S_model[1:]))  # a PSD near 0 must not give one bin all the weight
+    keep = in_passband(stoch, rfft_omega(n))
+    out = np.full(len(S), np.inf)
+    out[keep] = calibrate_psd(S[keep], Yf[keep], n)  # a low-pass's pass band: the bins 0..K
+    return out
 
 
 def estimate_text(x: float, se: float) -> str:

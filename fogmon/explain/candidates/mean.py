@@ -12,7 +12,17 @@ import numpy as np
 from scipy.stats import chi2
 
 from fogmon.explain import detectors
-from fogmon.explain.candidates.base import Candidate, Context, estimate_text, judged_gls, unit_rate, varies
+from fogmon.explain.candidates.base import (
+    Candidate,
+    Context,
+    estimate_text,
+    exact_cov_fit,
+    exact_law,
+    judged_gls,
+    judged_whittle,
+    unit_rate,
+    varies,
+)
 from fogmon.explain.fitting import Coarse, coarse_block, weighted_products
 
 #: A periodic term's frequency search must find a line that chance (the residual the
@@ -107,27 +117,39 @@ def periodic(ctx: Context) -> Candidate | None:
             d = a + r * (b - a)
             gd = float(g(d)[0])
     nu = c if gc > gd else d
-    h = 0.02
-    g3 = g(np.array([nu - h, nu, nu + h]))
-    curv = (2 * g3[1] - g3[0] - g3[2]) / (h * ctx.sample_rate_hz / n) ** 2
     f = nu * ctx.sample_rate_hz / n
     tr = t - t[0]
     X = np.column_stack((np.sin(2 * np.pi * f * tr), np.cos(2 * np.pi * f * tr)))
-    del tr
-    fit = judged_gls(ctx, X)
-    se_f = math.sqrt(2.0 / curv) if curv > 0 else float("nan")
+    Xf = ctx.wh.fft(X)
+    fit, wh = judged_whittle(ctx, X, Xf)
     sa, ca = fit.beta
+    # the errors with the frequency free: the fit linearised in f, the sinusoid's derivative
+    # (deg/h per Hz) a third column (Gauss-Newton: the Fisher information with all three
+    # free), under the PSD the line was judged against
+    Xf3 = np.column_stack((Xf, wh.fft(2 * np.pi * tr * (sa * X[:, 1] - ca * X[:, 0]))))
+    del tr
+    fit3 = wh.gls(Xf3, ctx.Yf)
+    cov = (fit3 if exact_law(ctx) is None else exact_cov_fit(ctx, fit3, wh, Xf3)).cov
     amp = math.hypot(sa, ca)
     # A sin(2 pi f (t - t0) + ph0) = A sin(2 pi f t + phase) with phase = ph0 - 2 pi f t0
     phase = math.remainder(math.atan2(ca, sa) - 2 * np.pi * f * t[0], 2 * np.pi)
     period = 1.0 / f
-    se_amp = float(np.sqrt(np.mean(fit.se ** 2)))
+    amp_ = max(amp, 1e-300)
+    se_f, se_amp, se_phase = (_delta_se(cov, g) for g in (
+        (0.0, 0.0, 1.0), (sa / amp_, ca / amp_, 0.0), (-ca / amp_ ** 2, sa / amp_ ** 2, -2 * np.pi * t[0])))
     params = {"period_s": period, "amplitude_dph": amp, "phase_rad": phase}
     ev = (f"periodogram line at {period:.6g} s (PSD-weighted power {peak_power:.3g}x the noise), "
           f"amplitude {estimate_text(amp, se_amp)} deg/h")
-    return Candidate("periodic", params, {"period_s": se_f / f ** 2, "amplitude_dph": se_amp,
-                                          "phase_rad": se_amp / max(amp, 1e-300)},
+    return Candidate("periodic", params, {"period_s": se_f / f ** 2, "amplitude_dph": se_amp, "phase_rad": se_phase},
                      fit.chi2_gain, 3, ev, X @ fit.beta, X, search_bar=search_bar, search_calibrated=True)
+
+
+def _delta_se(cov: np.ndarray, grad: tuple[float, ...]) -> float:
+    """Standard error of a function of the coefficients whose covariance is ``cov``, by its
+    gradient ``grad`` (delta method); NaN where that is not a positive number."""
+    g = np.asarray(grad)
+    v = float(g @ cov @ g)
+    return math.sqrt(v) if np.isfinite(v) and v > 0 else float("nan")
 
 
 #: the frequency of a periodic term is searched on this many points per DFT bin (then golden section)
