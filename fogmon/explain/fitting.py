@@ -250,9 +250,11 @@ class Whittle:
     def circulant_covs(self, a: np.ndarray, *psds: np.ndarray) -> list[np.ndarray]:
         """Covariance (p x p) of the functionals a @ y (a: p x n) of noise of each PSD in
         ``psds`` (at the rfft bins) as the Whittle likelihood takes it (the record circular,
-        bins independent; bin 0, the mean, left out): sum_k mult_k S_k A_k conj(A_k)' / n."""
+        bins independent; bin 0, the mean, and bins where S is not finite, outside a
+        filter's pass band, left out): sum_k mult_k S_k A_k conj(A_k)' / n."""
         Af = np.fft.rfft(a, axis=1)
-        return [((Af * (self.mult * np.where(self.mult > 0, S, 0.0))) @ Af.conj().T).real / self.n for S in psds]
+        return [((Af * (self.mult * np.where((self.mult > 0) & np.isfinite(S), S, 0.0))) @ Af.conj().T).real / self.n
+                for S in psds]
 
     def chi2(self, Rf: np.ndarray) -> float:
         """Whittle chi-square of a transformed residual."""

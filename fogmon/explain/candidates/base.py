@@ -192,8 +192,10 @@ LONG_MEMORY, EXACT_LAW = "long_memory", "exact_law"
 def exact_law(ctx: Context) -> Replicas | None:
     """The law of the context's stochastic model (``replicas.Replicas``) when its errors
     are to be exact (``LONG_MEMORY``), built once per context (and again after a
-    selection round lets it go: memory), else None."""
-    if not ctx.cache.get(LONG_MEMORY):
+    selection round lets it go: memory), else None; None too for a model with a
+    ``bandwidth`` filter (the law filters every term, which ``Replicas.functional_cov``
+    does not follow: such a record keeps the Whittle errors)."""
+    if not ctx.cache.get(LONG_MEMORY) or any(EFFECT_KINDS[e.kind].nature == "filter" for e in ctx.stoch.effects):
         return None
     if EXACT_LAW not in ctx.cache:
         ctx.cache[EXACT_LAW] = Replicas(ctx.stoch, ctx.t_s, ctx.aux, ctx.valid)
