@@ -73,6 +73,7 @@ class Replicas:
         self.others = [e for e in stoch.effects if EFFECT_KINDS[e.kind].nature == "noise" and e.kind != "markov"]
         self.filters = [e for e in stoch.effects if EFFECT_KINDS[e.kind].nature == "filter"]
         self._buffers: dict[str, np.ndarray] = {}
+        self._law_psd: np.ndarray | None = None
 
     def draw(self, seed: int) -> np.ndarray:
         """One replicate (deg/h, NaN where not valid), reproducible from ``seed``."""
@@ -121,12 +122,14 @@ class Replicas:
             V += self.k_step ** 2 * (tails @ tails.T)
         return V
 
-    def law_psd(self, n: int) -> np.ndarray:
+    def law_psd(self) -> np.ndarray:
         """The PSD ((deg/h)^2 per unit normalized frequency) of the terms ``functional_cov``
-        counts at the rfft bins of ``n`` samples, as a Whittle fit takes it
-        (``fitting.noise_psd``; a varying white level at its mean square); +inf at bin 0."""
-        S = noise_psd(rfft_omega(n), self.sample_rate_hz, self.Q_arcsec, 0.0, self.K_dphsh, tuple(self.ar1))
-        return S + self.white_var_mean
+        counts at the rfft bins of the grid, as a Whittle fit takes it (``fitting.noise_psd``;
+        a varying white level at its mean square); +inf at bin 0. Computed once."""
+        if self._law_psd is None:
+            S = noise_psd(rfft_omega(self.n), self.sample_rate_hz, self.Q_arcsec, 0.0, self.K_dphsh, tuple(self.ar1))
+            self._law_psd = S + self.white_var_mean
+        return self._law_psd
 
     def _buffer(self, name: str, size: int) -> np.ndarray:
         """A float32 work array kept between draws (not pickled): the allocations of a
@@ -136,7 +139,7 @@ class Replicas:
         return self._buffers[name]
 
     def __getstate__(self) -> dict:
-        return {**self.__dict__, "_buffers": {}}
+        return {**self.__dict__, "_buffers": {}, "_law_psd": None}
 
 
 def _even_fast_len(m: int) -> int:

@@ -223,7 +223,7 @@ def exact_cov_fit(ctx: Context, fit: GlsFit, wh: Whittle, Xf: np.ndarray) -> Gls
     a = wh.weights(Xf, fit.cov)
     S_model = model_psd_full(ctx)
     S_rec = calibrated_psd(ctx.stoch, S_model, ctx.Yf - Xf.reshape(len(ctx.Yf), -1) @ fit.beta, ctx.n)
-    model, terms, record, used, base = wh.circulant_covs(a, S_model, law.law_psd(wh.n), S_rec, wh.S, ctx.wh.S)
+    model, terms, record, used, base = wh.circulant_covs(a, S_model, law.law_psd(), S_rec, wh.S, ctx.wh.S)
     cov = law.functional_cov(a) + model - terms
     with np.errstate(divide="ignore", invalid="ignore"):
         level = np.sqrt(np.diag(record) / np.diag(model))
