@@ -11,6 +11,9 @@ numbers, whatever --jobs.
   ``explain`` with the command's defaults, one bootstrap worker per job): how often an
   effect is named (the false-effect rate), how often platform motion is reported, and
   the score's null distribution (score_after, what the verdict reads; score_before too).
+  With ``--baseline``: ``fogmon explain`` without ``--model`` (the baseline fitted from
+  each record, docs/explain.md "The baseline"), the records simulated with R = 0 (without
+  a model a drift is the ``rate_ramp`` effect's to name, so the stationary null has none).
 - ``coverage``: the whole-run fit that ``fogmon replay`` prints (the pipeline's
   ``oadev(rate, fs, taus="octave")`` and ``fit_noise`` of it, the same calls on the same
   samples): per model and coefficient how often it is identified, how often its 68.3 %
@@ -32,7 +35,7 @@ binomial count: the tables print its 1-sd uncertainty; 1000 records per model (t
 default) put the 95 % band at 3 sd.
 
     python validation/calibration.py [--records N] [--only null|coverage|warning] [--jobs 2] [--seed 1]
-                                     [--save PREFIX] [--chi2] [--held-out]
+                                     [--save PREFIX] [--chi2] [--held-out] [--baseline]
 
 ``--held-out`` runs the same sweeps on ``HELD_OUT``: six models the rules were not
 developed on (docs/davar.md, "Calibration"), with the same verdict.
@@ -43,7 +46,7 @@ import argparse
 import pickle
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from multiprocessing import Pool
 
 import numpy as np
@@ -121,28 +124,39 @@ def _record(case: Case, seed: int):
 
 
 # ---------------------------------------------------------------- null sweep
-def null_record(job: tuple[int, int]) -> tuple[int, float, float, int, str]:
-    """(model index, score_before, score_after, motion spans, effects named) of null record ``job`` = (i, seed)."""
-    from fogmon.explain.explainer import Options, explain, without_motion
+def null_record(job: tuple[int, int, bool]) -> tuple[int, float, float, int, str]:
+    """(model index, score_before, score_after, motion spans, effects named) of null record ``job`` =
+    (i, seed, baseline): explained against the true model, or with ``baseline`` against the
+    baseline fitted from the record (no ``--model``; the record simulated with R = 0)."""
+    from fogmon.explain.explainer import Options, explain, explain_without_model, without_motion
 
-    i, seed = job
+    i, seed, baseline = job
     k = i % len(MODELS)
-    case = MODELS[k]
+    case = _stationary(MODELS[k]) if baseline else MODELS[k]
     rec, motion = without_motion(_record(case, record_seed(seed, i)))
-    res = explain(rec, case.model, Options(workers=1))
+    res = explain_without_model(rec, Options(workers=1)) if baseline else explain(rec, case.model, Options(workers=1))
     return k, res.before.score.value, res.after.score.value, len(motion), ",".join(a.cand.kind for a in res.accepted)
 
 
-def null_sweep(records: int, seed: int, jobs: int, save: str | None = None) -> bool:
-    """The false-effect rate and the score's null distribution; True when within LIMITS."""
-    rows = _map(null_record, [(i, seed) for i in range(records)], jobs)
-    _save(save, "null", rows)
+def _stationary(case: Case) -> Case:
+    """``case`` without its rate ramp R: the baseline's null (without ``--model``) is
+    stationary noise, a drift being the ``rate_ramp`` effect's to name."""
+    return Case(case.name, replace(case.noise, R_dphh=0.0), case.sample_rate_hz, case.log2_n)
+
+
+def null_sweep(records: int, seed: int, jobs: int, save: str | None = None, baseline: bool = False) -> bool:
+    """The false-effect rate and the score's null distribution; True when within LIMITS.
+    ``baseline``: explained without a model (the baseline fitted from each record, R = 0)."""
+    rows = _map(null_record, [(i, seed, baseline) for i in range(records)], jobs)
+    _save(save, "null-baseline" if baseline else "null", rows)
     k = np.array([r[0] for r in rows])
     before = np.array([r[1] for r in rows])
     after = np.array([r[2] for r in rows])
     motion = np.array([r[3] for r in rows])
     named = np.array([bool(r[4]) for r in rows])
-    print(f"\nNull sweep: fogmon explain --model <the true model> on {records} records "
+    against = ("no --model (the baseline fitted from each record; records simulated with R = 0)" if baseline
+               else "--model <the true model>")
+    print(f"\nNull sweep: fogmon explain {against} on {records} records "
           f"(score: score_after; effects named = false effects)")
     print(f"  {'model':<18} {'records':>7} {'effects':>8} {'motion':>7} {'>1.5':>6} {'median':>7} {'q90':>6} "
           f"{'q99':>6} {'max':>6}  {'before>1.5':>10}  effects named")
@@ -335,6 +349,9 @@ def main(argv: list[str] | None = None) -> int:
                    "with the same EDF (oadev(..., exact_shape=False))")
     p.add_argument("--save", metavar="PREFIX", help="also write each sweep's per-record results to "
                    "PREFIX.<sweep>.pkl")
+    p.add_argument("--baseline", action="store_true", help="the null sweep without --model: explain against "
+                   "the baseline fitted from each record, the records simulated with R = 0 (a drift is an effect "
+                   "there)")
     p.add_argument("--held-out", action="store_true", help="the sweeps on HELD_OUT's models instead of MODELS' "
                    "(models the rules were not developed on)")
     args = p.parse_args(argv)
@@ -346,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
     if items & {"coverage", "warning"}:
         ok &= coverage_sweep(args.records or 1000, args.seed, args.jobs, items, args.save, args.chi2)
     if "null" in items:
-        ok &= null_sweep(args.records or 200, args.seed, args.jobs, args.save)
+        ok &= null_sweep(args.records or 200, args.seed, args.jobs, args.save, args.baseline)
     print(f"\n{_verdict(ok)} ({', '.join(sorted(items))}; seed {args.seed}; {time.time() - t0:.0f} s)")
     return 0 if ok else 1
 

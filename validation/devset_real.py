@@ -33,8 +33,7 @@ from devset_aux import channels, law_checks
 from real_recordings import DEFAULT_DATA, data_path, load_manifest
 
 import fogmon
-from fogmon.explain.baseline import baseline_model
-from fogmon.explain.explainer import explain, without_motion
+from fogmon.explain.explainer import explain, explain_without_model, without_motion
 from fogmon.explain.options import Options
 from fogmon.formats.recording import Recording
 from fogmon.formats.replay_log import read_replay_log
@@ -113,7 +112,7 @@ def untouched_model(name: str, rec: Recording) -> tuple[SensorModel, float, froz
     path = CACHE / f"{name}.toml"
     if not path.exists():
         CACHE.mkdir(parents=True, exist_ok=True)
-        res = explain(rec, baseline_model(rec), Options(seed=7), baseline=True)
+        res = explain_without_model(rec, Options(seed=7))
         save_model(replace(res.fitted, meta={"untouched_effects": ",".join(a.cand.kind for a in res.accepted)}),
                    path)
     model = load_model(path)

@@ -50,8 +50,7 @@ import devset_real
 import numpy as np
 
 from fogmon.explain.axes import explain_axes
-from fogmon.explain.baseline import baseline_model
-from fogmon.explain.explainer import explain
+from fogmon.explain.explainer import explain, explain_without_model
 from fogmon.explain.options import Options
 from fogmon.explain.report import build_report
 from fogmon.formats.recording import recording_from_arrays
@@ -436,8 +435,8 @@ def run_case(case: Case, seed: int, verbose: bool = False) -> dict:
     rec, base, truth = build(case, seed)
     peak, change = concealment(case, rec, base, truth, seed)
     t0 = time.perf_counter()
-    model = baseline_model(rec) if case.baseline else base
-    res = explain(rec, model, Options(seed=seed + 100), baseline=case.baseline)
+    res = (explain_without_model(rec, Options(seed=seed + 100)) if case.baseline
+           else explain(rec, base, Options(seed=seed + 100)))
     dt = time.perf_counter() - t0
     truth_kinds = sorted([e.kind for e in case.effects] + (["noise"] if case.model_noise else []))
     found_kinds = sorted({a.cand.kind for a in res.accepted})

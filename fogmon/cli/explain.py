@@ -126,8 +126,7 @@ def run(args: argparse.Namespace) -> int:
     from fogmon.cli.output_options import check_command_outputs
     from fogmon.explain import report
     from fogmon.explain.axes import one_axis_model
-    from fogmon.explain.baseline import baseline_model
-    from fogmon.explain.explainer import check_inputs, explain, without_motion
+    from fogmon.explain.explainer import check_inputs, explain, explain_without_model, without_motion
     from fogmon.sim.model import load_model
     from fogmon.sources.open import read_recording
 
@@ -151,10 +150,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.keep_motion:
         progress("looking for platform motion")
         rec, motion = without_motion(rec)
-    if model is None:
-        progress("fitting a stationary IEEE-952 baseline model to the recording")
-        model = baseline_model(rec)
-    res = explain(rec, model, _options(args), baseline=args.model is None, progress=progress)
+    res = (explain(rec, model, _options(args), progress=progress) if model is not None
+           else explain_without_model(rec, _options(args), progress))
     res.warnings[:0] = motion
     res.record_fit = report.record_fit(as_recorded, args.keep_motion)
     progress(f"writing {args.report}")

@@ -29,7 +29,7 @@ from scipy.stats import norm
 from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.bootstrap import Mapper, Progress
-from fogmon.explain.explainer import Result, check_inputs, explain, without_motion
+from fogmon.explain.explainer import Result, check_inputs, explain, explain_without_model, without_motion
 from fogmon.explain.options import Options
 from fogmon.formats.recording import Recording
 from fogmon.sim.features import Feature, other_axis, parse_feature
@@ -175,7 +175,6 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
     before any work (``check_inputs``, ``where`` naming the model, e.g. its file). Stages
     go to ``progress`` prefixed with the axis; bootstrap replicates run by ``mapper``
     (explain)."""
-    from fogmon.explain.baseline import baseline_model
     from fogmon.explain.report import record_fit
 
     opt = options or Options()
@@ -198,12 +197,8 @@ def explain_axes(rec: Recording, model: SensorModel | None, options: Options | N
         if not keep_motion:
             axis_progress("looking for platform motion")
             one, motion = without_motion(one)
-        if model is None:
-            axis_progress("fitting a stationary IEEE-952 baseline model to the axis")
-            m = baseline_model(one)
-        else:
-            m = models[a]
-        res = explain(one, m, opt, baseline=model is None, progress=axis_progress, mapper=mapper)
+        res = (explain_without_model(one, opt, axis_progress, mapper) if model is None
+               else explain(one, models[a], opt, progress=axis_progress, mapper=mapper))
         res.warnings[:0] = motion
         res.record_fit = record_fit(as_recorded, keep_motion)
         results[a] = res

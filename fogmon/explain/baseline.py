@@ -18,7 +18,11 @@ that an effect cannot inflate it (issue 11; docs/explain.md, "The baseline"):
    recording by more than chance at some tau is fitted again below it (FLOOR_ALPHA: an
    effect only adds Allan variance);
 4. whole-record ADEV points at longer taus refine those terms while they stay
-   consistent with them, but cannot add a term.
+   consistent with them, but cannot add a term;
+5. a second model adds the rate random walk K those longer taus show when the windows
+   cannot refute it (:func:`baseline_models`): the record cannot tell its realisation
+   from a drift, so explain judges named effects against both
+   (``explainer.explain_without_model``).
 
 Bias: the mean rate (deg/h). No effects but that filtered white noise: explaining
 against this model asks "what in this recording is not stationary IEEE-952 noise, as
@@ -355,7 +359,7 @@ def aux_projected(y: np.ndarray, ok: np.ndarray, t_s: np.ndarray, aux: dict, sam
 
 
 def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
-                     ) -> tuple[dict[str, float], tuple[str, dict] | None]:
+                     ) -> tuple[dict[str, float], tuple[str, dict] | None, dict[str, float] | None]:
     """IEEE-952 Q, N, B, K (R = 0: a drift is the rate_ramp effect's) of the recording's
     stationary noise and, when the sensor's low-pass shows, the term of its filtered
     white noise (``lowpass_sigma_dph`` in the coefficients, and (effect kind, its
@@ -367,7 +371,9 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
     order, while each point stays within EXTEND_Z of the windows' fit. The long taus only
     refine: a term only they would need (what a periodic term, a drift or a step does
     there as well) is not added - it is left for the effects and the mismatch map to
-    judge."""
+    judge. Third: the same fit with a rate random walk K that only the long taus show
+    (:func:`_walk_from_long_taus`), or None: the alternative null a drift is judged
+    against (:func:`baseline_models`)."""
     whole = oadev(y, sample_rate_hz, taus="octave", valid=ok, alpha=0)
     tau_w, av_w, edf_w = robust_avar(y, ok, sample_rate_hz)
     nw = len(tau_w)
@@ -383,18 +389,59 @@ def robust_noise_fit(y: np.ndarray, ok: np.ndarray, sample_rate_hz: float
         optional = _optional_terms(None if lowpass is None else lowpass[0])
         _, fit0, terms = _best_terms(np.array(tau), np.array(av), np.array(edf), unit(tau), optional,
                                      cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz))
-    for j in range(nw, len(whole.tau_s)):
-        a, e = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
-        pred = float(model_avar(whole.tau_s[j:j + 1], fit0, unit(whole.tau_s[j:j + 1]))[0])
-        if not (np.isfinite(a) and pred > 0) or _wh_z(a / pred, e) > EXTEND_Z:
-            break
-        tau.append(float(whole.tau_s[j]))
-        av.append(a)
-        edf.append(e)
-    fit = curve_noise_fit(np.array(tau), np.sqrt(np.array(av)), np.array(edf), edf_cap=np.inf, ramp=False,
-                          terms=terms, lowpass_unit=unit(tau),
-                          cap=_floor_cap(np.array(tau), np.array(edf), sample_rate_hz) if capped else None)
-    return fit, lowpass
+    walk = None if "K" in terms else _walk_from_long_taus(np.array(tau), np.array(av), np.array(edf), whole, nw,
+                                                            fit0, terms, unit, sample_rate_hz)
+    cap = _floor_cap if capped else None
+
+    def refined(fit: dict[str, float], terms: tuple[str, ...]) -> dict[str, float]:
+        t, a, e = list(tau), list(av), list(edf)
+        for j in range(nw, len(whole.tau_s)):
+            aj, ej = float(whole.adev_dph[j]) ** 2, float(whole.edf[j])
+            pred = float(model_avar(whole.tau_s[j:j + 1], fit, unit(whole.tau_s[j:j + 1]))[0])
+            if not (np.isfinite(aj) and pred > 0) or _wh_z(aj / pred, ej) > EXTEND_Z:
+                break
+            t.append(float(whole.tau_s[j]))
+            a.append(aj)
+            e.append(ej)
+        return curve_noise_fit(np.array(t), np.sqrt(np.array(a)), np.array(e), edf_cap=np.inf, ramp=False,
+                               terms=terms, lowpass_unit=unit(t),
+                               cap=None if cap is None else cap(np.array(t), np.array(e), sample_rate_hz))
+    return refined(fit0, terms), lowpass, None if walk is None else refined(*walk)
+
+
+def _walk_from_long_taus(tau_s: np.ndarray, av: np.ndarray, edf: np.ndarray, whole, nw: int,
+                         fit: dict[str, float], terms: tuple[str, ...], unit: Callable, sample_rate_hz: float
+                         ) -> tuple[dict[str, float], tuple[str, ...]] | None:
+    """(coefficients, terms) with a rate random walk K added, or None: the windows' taus
+    (up to duration / 32) are too short to see a K that the whole record's long taus show,
+    and a walk left out of the null is then named as the ramps, warm-ups and steps its
+    realisation looks like. K joins when the fit with it, over the windows' points and
+    every whole-record point beyond them, (1) lowers the chi-square (:func:`fit_chi2`) by
+    more than TERM_CHI2, (2) follows every long point within EXTEND_Z (a walk explains
+    them all; a drift's tau^+1 rise or a periodic term's hump is left to the effects) and
+    (3) stays below the window-median Allan variance (FLOOR_ALPHA, as the windows' fit):
+    an effect confined to some windows (a step) raises the long taus but not the
+    windows' medians, which then refuse a walk as large as the step."""
+    long = [j for j in range(nw, len(whole.tau_s))
+            if np.isfinite(whole.adev_dph[j]) and whole.adev_dph[j] > 0 and whole.edf[j] > 0]
+    if not long:
+        return None
+    t_all = np.concatenate((tau_s, whole.tau_s[long]))
+    a_all = np.concatenate((av, whole.adev_dph[long] ** 2))
+    e_all = np.concatenate((edf, whole.edf[long]))
+    with_k = (*terms, "K")
+    fit_k = curve_noise_fit(t_all, np.sqrt(a_all), e_all, edf_cap=np.inf, ramp=False, terms=with_k,
+                            lowpass_unit=unit(t_all))
+    pred_k = model_avar(t_all, fit_k, unit(t_all))
+    if not fit_k["K_dphsh"] > 0 or fit_chi2(a_all, e_all, model_avar(t_all, fit, unit(t_all))) - fit_chi2(
+            a_all, e_all, pred_k) <= TERM_CHI2:
+        return None
+    n = len(tau_s)
+    if any(abs(_wh_z(a / p, e)) > EXTEND_Z for a, p, e in zip(a_all[n:], pred_k[n:], e_all[n:], strict=True)):
+        return None
+    if _floor_violated(tau_s, av, edf, fit_k, unit(tau_s), sample_rate_hz):
+        return None
+    return fit_k, with_k
 
 
 #: The stationary noise lies below the recording at every tau: an effect (a vibration, a
@@ -441,18 +488,31 @@ def baseline_model(rec: Recording) -> SensorModel:
     """Stationary IEEE-952 model fitted to ``rec`` robustly (:func:`robust_noise_fit` of
     :func:`aux_projected`), with the sensor's low-pass-filtered white noise as a
     ``markov`` or ``lowpass_noise`` effect when the fit found it; bias the mean rate (deg/h)."""
+    return baseline_models(rec)[0]
+
+
+def baseline_models(rec: Recording) -> tuple[SensorModel, SensorModel | None]:
+    """:func:`baseline_model` and, when the whole record's long taus show a rate random
+    walk the windows are too short to see (:func:`_walk_from_long_taus`), the same
+    model with that walk's K (else None): the record cannot tell such a walk's
+    realisation from a drift (a ramp, a warm-up, a step), so a drift named against the
+    first is judged against the second too (``explainer.explain_without_model``)."""
     blk = rec.to_block()
     y = blk.error_rate_dph
     ok = blk.valid & np.isfinite(y)
     if ok.sum() < 64:
         raise FogmonError(f"{rec.name}: too few valid samples ({int(ok.sum())}) to fit a baseline model")
     rec.check_changes()
-    vals, lowpass = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok,
-                                     rec.sample_rate_hz)
-    sigma = vals.pop("lowpass_sigma_dph", 0.0)
-    if not (any(vals.values()) or sigma):
-        raise FogmonError(f"{rec.name}: no IEEE-952 noise term found for a baseline model")
-    effects = [] if lowpass is None or not sigma else [Effect(lowpass[0], {**lowpass[1], "sigma_dph": sigma})]
-    model = SensorModel(rec.sample_rate_hz, float(np.mean(y[ok])), Noise(**vals), effects,
-                        {"origin": f"fogmon explain baseline fitted from {rec.name}"})
-    return validate_model(model)
+    vals, lowpass, walk = robust_noise_fit(aux_projected(y, ok, blk.t_s, blk.aux, rec.sample_rate_hz), ok,
+                                           rec.sample_rate_hz)
+    bias = float(np.mean(y[ok]))
+
+    def model(vals: dict[str, float]) -> SensorModel:
+        vals = dict(vals)
+        sigma = vals.pop("lowpass_sigma_dph", 0.0)
+        if not (any(vals.values()) or sigma):
+            raise FogmonError(f"{rec.name}: no IEEE-952 noise term found for a baseline model")
+        effects = [] if lowpass is None or not sigma else [Effect(lowpass[0], {**lowpass[1], "sigma_dph": sigma})]
+        return validate_model(SensorModel(rec.sample_rate_hz, bias, Noise(**vals), effects,
+                                          {"origin": f"fogmon explain baseline fitted from {rec.name}"}))
+    return model(vals), None if walk is None else model(walk)

@@ -1,8 +1,9 @@
 """The report's warnings about what the record cannot establish (docs/formats.md):
 ``record_too_short`` (model terms the record is too short to test),
 ``nonstationary`` (excess left after the selection that is a burst of noise, which no
-stationary effect kind models) and ``spikes`` (the spike test finds more than chance
-but no outlier effect was accepted: every spike is listed)."""
+stationary effect kind models), ``spikes`` (the spike test finds more than chance
+but no outlier effect was accepted: every spike is listed) and ``lookalike`` (two
+descriptions the record cannot tell apart)."""
 from __future__ import annotations
 
 import numpy as np
@@ -196,3 +197,19 @@ def lookalike_warnings(accepted, model: SensorModel, grid: mismatch.Grid) -> lis
                             f"the first is named for its larger gain; a longer record decides"})
     return out
 
+
+
+def walk_lookalike_warnings(drifts: list, walk: SensorModel, grid: mismatch.Grid) -> list[dict]:
+    """A ``lookalike`` warning for each effect ``drifts`` (accepted against the baseline
+    without a rate random walk, refused against ``walk``, the baseline with the walk
+    its long taus show): both descriptions; the walk is named (docs/explain.md, "The
+    baseline", item 5)."""
+    noise = {k: getattr(walk.noise, k) for k in NOISE_UNIT}
+    t0, t1 = _span(grid)
+    k = walk.noise.K_dphsh
+    return [{"kind": "lookalike", "t_start_s": t0, "t_end_s": t1,
+             "text": f"two descriptions fit the record: a rate random walk K {k:.4g} deg/h/sqrt(h) in the baseline "
+                     f"(the whole record's long taus show it, its windows are too short to refute it); or, against "
+                     f"a baseline without it, {effect_summary(a.cand.kind, a.cand.params, noise)}. The record "
+                     f"cannot tell a walk's realisation from such a drift: the walk is named, the drift is not; a "
+                     f"longer record decides"} for a in drifts]

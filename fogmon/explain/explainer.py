@@ -13,7 +13,13 @@ from fogmon.errors import FogmonError
 from fogmon.explain import mismatch
 from fogmon.explain.analysis import Analysis, rescored
 from fogmon.explain.bootstrap import Mapper, Progress, bootstrap, default_n_boot
-from fogmon.explain.caveats import lookalike_warnings, nonstationary_warnings, spike_warnings, too_short_warnings
+from fogmon.explain.caveats import (
+    lookalike_warnings,
+    nonstationary_warnings,
+    spike_warnings,
+    too_short_warnings,
+    walk_lookalike_warnings,
+)
 from fogmon.explain.options import Options
 from fogmon.explain.replicas import Replicas
 from fogmon.explain.selection import Accepted, Selection, Setting, light
@@ -179,6 +185,36 @@ def explain(rec: Recording, model: SensorModel, options: Options | None = None,
                   before.null.n_replicates,
                   baseline, too_short_warnings(model, grid) + lookalike_warnings(accepted, model, grid)
                   + bursts + spikes, named, listing)
+
+
+def explain_without_model(rec: Recording, options: Options | None = None, progress: Progress | None = None,
+                          mapper: Mapper | None = None) -> Result:
+    """``explain`` against the baseline fitted from ``rec`` (`fogmon explain` without
+    ``--model``). When the whole record's long taus also allow a rate random walk the
+    baseline's windows cannot see (``baseline.baseline_models``) and effects named
+    against the baseline are refused against the baseline with that walk, the record
+    cannot tell the walk's realisation from those drifts: the result against the walk,
+    with a ``lookalike`` warning per refused effect naming it (docs/explain.md, "The
+    baseline", item 5)."""
+    from fogmon.explain.baseline import baseline_models
+
+    def report(stage: str) -> None:
+        if progress is not None:
+            progress(stage, 0, 0)
+
+    report("fitting a stationary IEEE-952 baseline model to the recording")
+    base, walk = baseline_models(rec)
+    res = explain(rec, base, options, baseline=True, progress=progress, mapper=mapper)
+    if walk is None or not res.accepted:
+        return res
+    report(f"judging the effects against a rate random walk K {walk.noise.K_dphsh:.4g} deg/h/sqrt(h) too")
+    alt = explain(rec, walk, options, baseline=True, progress=progress, mapper=mapper)
+    kept = {a.cand.kind for a in alt.accepted}
+    drifts = [a for a in res.accepted if a.cand.kind not in kept]
+    if not drifts:
+        return res
+    alt.warnings.extend(walk_lookalike_warnings(drifts, walk, alt.grid))
+    return alt
 
 
 def _fitted_model(model: SensorModel, stoch: SensorModel, accepted: tuple[Accepted, ...]) -> SensorModel:

@@ -10,11 +10,13 @@ from fogmon.davar.theory import adev_model, markov_adev
 from fogmon.explain.baseline import (
     _floor_violated,
     baseline_model,
+    baseline_models,
     curve_noise_fit,
     markov_unit_avar,
     parsimonious_fit,
     robust_avar,
 )
+from fogmon.explain.explainer import Options, explain_without_model
 from fogmon.explain.report import baseline_low_pass
 from fogmon.formats.replay_log import write_replay_log
 from fogmon.sim.model import Effect, Noise, SensorModel
@@ -119,3 +121,36 @@ def test_baseline_stays_below_a_recording_whose_short_taus_hold_sway_and_a_high_
     first, _, low_pass = parsimonious_fit(tau, av, edf, 100.0)
     assert low_pass is None and first["N_dpsh"] > 0.03 and _floor_violated(tau, av, edf, first, None, 100.0)
     assert baseline_model(rec).noise.N_dpsh == pytest.approx(0.02, rel=0.15)
+
+
+# issue 28's five-term model without its ramp: a rate random walk K = 3 deg/h/sqrt(h) over
+# 22 min, which the windows' taus (up to 41 s) barely see but the whole record's long taus do
+_WALK = SensorModel(100.0, 0.0, Noise(Q_arcsec=0.1, N_dpsh=0.01, B_dph=0.3, K_dphsh=3.0), [])
+
+
+def test_the_long_taus_offer_a_rate_random_walk_the_windows_cannot_see():
+    for s in range(3):
+        base, walk = baseline_models(simulate(_WALK, duration_s=1310.72, seed=s))
+        assert base.noise.K_dphsh == 0.0 and walk is not None
+        assert 1.0 < walk.noise.K_dphsh < 6.0  # 2.27, 2.02, 1.33
+        assert walk.noise.N_dpsh == pytest.approx(base.noise.N_dpsh, rel=0.05)
+
+
+def test_no_walk_is_offered_for_a_step_the_windows_refuse():
+    m = SensorModel(10.0, 0.0, Noise(N_dpsh=0.02), [Effect("bias_step", {"t_s": 3000.0, "step_dph": 0.1})])
+    for s in range(3):  # the step raises the long taus as a walk would; the windows' medians refuse that walk
+        assert baseline_models(simulate(m, duration_s=6553.0, seed=s))[1] is None
+
+
+def test_explain_without_model_names_no_ramp_in_a_rate_random_walk():
+    rec = simulate(_WALK, duration_s=1310.72, seed=7 * 1_000_003 + 7)  # named a rate_ramp before
+    res = explain_without_model(rec, Options(workers=1))
+    assert res.accepted == [] and res.model.noise.K_dphsh > 0
+    assert [w["kind"] for w in res.warnings] == ["lookalike"] and "rate ramp" in res.warnings[0]["text"]
+
+
+def test_a_step_a_walk_could_make_is_reported_as_a_lookalike():
+    m = SensorModel(10.0, 0.0, Noise(N_dpsh=0.02), [Effect("bias_step", {"t_s": 3000.0, "step_dph": 0.3})])
+    res = explain_without_model(simulate(m, duration_s=6553.6, seed=0), Options(workers=1))
+    assert res.accepted == [] and res.model.noise.K_dphsh > 0  # K 0.18 from the long taus
+    assert [w["kind"] for w in res.warnings] == ["lookalike"] and "bias step" in res.warnings[0]["text"]
